@@ -1,5 +1,6 @@
 // rcan — the RCAN command-line tool. Verbs register themselves (see cli.h).
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <iostream>
@@ -53,7 +54,10 @@ Result<std::string> read_file(const std::string& path) {
 }
 
 void print_error_body(const Error& err, std::string_view reply_to) {
-  std::cout << json::dump(error_body(err, reply_to, 0)) << "\n";
+  auto now_ms = std::chrono::duration_cast<std::chrono::milliseconds>(
+                    std::chrono::system_clock::now().time_since_epoch())
+                    .count();
+  std::cout << json::dump(error_body(err, reply_to, now_ms)) << "\n";
 }
 
 Options::Options(const Args& args, const std::vector<std::string>& flags,
