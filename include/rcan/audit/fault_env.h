@@ -1,0 +1,76 @@
+// FaultInjectionEnv — an Env that fails on purpose (tests only; cf. LevelDB
+// db/fault_injection_test.cc).
+//
+// It forwards to a base Env and remembers, per file written through it, how many bytes
+// were durable (covered by a sync or a synced write). Two faults:
+//   * fail_after(n): the n-th mutating operation from now (append, sync, create,
+//     rename, remove, truncate, synced write) and every later one fails without taking
+//     effect — the process "dies" there. An append chosen as the failing operation can
+//     be torn: half of its bytes reach the file before it fails (set_torn_appends).
+//   * drop_unsynced(): after the owner of the Env is gone, cuts every tracked file back
+//     to its durable length (keeping `keep_fraction` of the unsynced tail to model a
+//     torn page), and deletes files created since the last sync_dir of their directory.
+// `*base` must outlive this object.
+#pragma once
+
+#include <map>
+#include <mutex>
+#include <set>
+
+#include "rcan/audit/env.h"
+
+namespace rcan::audit {
+
+class FaultInjectionEnv : public Env {
+ public:
+  explicit FaultInjectionEnv(Env* base);
+
+  // Operation `n` (1-based, counting from this call) and all later mutations fail.
+  // n == 0 disables injection.
+  void fail_after(uint64_t n);
+  void set_torn_appends(bool torn) { torn_appends_ = torn; }
+  bool failed() const;
+  uint64_t mutations() const;  // mutating operations seen so far
+  // Simulates the machine losing power; see above. Call with no writer running.
+  Status drop_unsynced(double keep_fraction = 0.0);
+
+  Result<std::unique_ptr<WritableFile>> open_appendable(const std::string& path) override;
+  Result<std::string> read_file(const std::string& path) override;
+  Result<std::string> read_range(const std::string& path, uint64_t offset, size_t n) override;
+  Result<uint64_t> file_size(const std::string& path) override;
+  bool exists(const std::string& path) override;
+  Result<std::vector<std::string>> children(const std::string& dir) override;
+  Status create_dir(const std::string& dir) override;
+  Status sync_dir(const std::string& dir) override;
+  Status remove_file(const std::string& path) override;
+  Status rename_file(const std::string& from, const std::string& to) override;
+  Status truncate_file(const std::string& path, uint64_t size) override;
+  Status write_file_synced(const std::string& path, std::string_view data) override;
+  Result<int> lock_file(const std::string& path) override;
+  void unlock_file(int handle) override;
+  int64_t now_ms() override;
+
+  // Internal (used by the file wrapper).
+  Status before_mutation(const std::string& what);
+  void note_appended(const std::string& path, uint64_t n);
+  void note_synced(const std::string& path);
+  bool torn_appends() const { return torn_appends_; }
+  bool is_failing_now();
+
+ private:
+  struct FileState {
+    uint64_t size = 0;
+    uint64_t durable = 0;
+  };
+  Env* base_;
+  mutable std::mutex mu_;
+  uint64_t ops_ = 0;
+  uint64_t fail_at_ = 0;  // absolute op number; 0 = never
+  bool failed_ = false;
+  bool just_tripped_ = false;
+  bool torn_appends_ = false;
+  std::map<std::string, FileState> files_;
+  std::set<std::string> new_files_;  // created, directory not yet synced
+};
+
+}  // namespace rcan::audit

@@ -1,0 +1,1027 @@
+#include "rcan/audit/audit_log.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <thread>
+
+#include "audit/segment.h"
+#include "rcan/audit/secret.h"
+#include "rcan/hash.h"
+
+namespace rcan::audit {
+
+using internal::IndexEntry;
+using internal::IndexHeader;
+
+namespace {
+
+Error unavailable(std::string msg) { return Error(ErrorCode::kAuditUnavailable, std::move(msg)); }
+
+// A segment the log knows about. Sealed segments have either `mem` (index not yet on
+// disk) or `header` (index file loaded).
+struct Segment {
+  uint64_t id = 0;
+  uint64_t first_seq = 0;
+  uint64_t last_seq = 0;
+  int64_t min_ts = 0;
+  int64_t max_ts = 0;
+  uint64_t bytes = 0;
+  std::optional<IndexHeader> header;
+  std::shared_ptr<const std::vector<IndexEntry>> mem;
+};
+
+struct Pending {
+  json::Object obj;
+  int64_t ts = 0;
+  uint64_t mid_hash = 0;
+  uint64_t wm_hash = 0;
+  bool has_wm = false;
+  AuditLog::Callback done;
+  Receipt receipt;
+};
+
+IndexEntry make_entry(uint64_t seq, uint64_t offset, uint64_t len, int64_t ts,
+                      const std::string& mid, const std::optional<std::string>& wm) {
+  IndexEntry e;
+  e.seq = seq;
+  e.offset = offset;
+  e.len = len;
+  e.ts = ts;
+  e.mid_hash = internal::fnv1a64(mid);
+  if (wm) {
+    e.has_wm = true;
+    e.wm_hash = internal::fnv1a64(*wm);
+  }
+  return e;
+}
+
+}  // namespace
+
+class AuditLog::Impl {
+ public:
+  Impl(std::string dir, AuditOptions opts) : dir_(std::move(dir)), opts_(std::move(opts)) {
+    env_ = opts_.env ? opts_.env : Env::posix();
+  }
+
+  ~Impl() {
+    if (writer_.joinable()) {
+      {
+        std::lock_guard<std::mutex> l(mu_);
+        stop_ = true;
+      }
+      cv_.notify_all();
+      writer_.join();
+    }
+    if (indexer_.joinable()) indexer_.join();
+    if (file_) {
+      (void)file_->close();
+      if (!failed_.load() && opened_) {
+        // Clean shutdown marker: the next open() skips the unclean-shutdown record.
+        if (env_->write_file_synced(path("CLEAN"), std::to_string(next_seq_ - 1)).ok())
+          (void)env_->sync_dir(dir_);
+      }
+    }
+    if (lock_ >= 0) env_->unlock_file(lock_);
+    secure_wipe(opts_.secret.data(), opts_.secret.size());
+  }
+
+  std::string path(const std::string& name) const { return dir_ + "/" + name; }
+  std::string seg_path(uint64_t id) const { return path(internal::segment_file_name(id)); }
+  std::string idx_path(uint64_t id) const { return path(internal::index_file_name(id)); }
+
+  Status open();
+  void submit(AuditEntry entry, Callback done);
+  Status export_range(int64_t from, int64_t to, const LineSink& sink) const;
+  Result<std::vector<std::string>> find(bool watermark, std::string_view key) const;
+  Result<std::string> get(uint64_t seq) const;
+  AuditStats stats() const;
+  const std::string& dir() const { return dir_; }
+
+ private:
+  struct Snapshot {
+    std::vector<Segment> sealed;
+    uint64_t active_id = 0;
+    uint64_t active_durable = 0;
+    std::vector<IndexEntry> active;  // entries up to active_durable
+  };
+
+  Status load_sealed(uint64_t id, Segment* seg);
+  Status rebuild_index(uint64_t id, Segment* seg);
+  Status recover_active(uint64_t id, bool clean);
+  Status write_records(std::vector<AuditEntry> entries);
+  json::Object system_object(AuditEntry e);
+  Status rotate();
+  Status apply_retention();
+  void writer_loop();
+  void fail_all(std::vector<Pending>& items, const Error& err);
+  Snapshot snapshot() const;
+  Result<std::string> read_line(uint64_t seg_id, const IndexEntry& e) const;
+  Result<std::vector<IndexEntry>> entries_of(const Segment& s) const;
+  void start_indexer(uint64_t id, std::shared_ptr<const std::vector<IndexEntry>> entries);
+
+  std::string dir_;
+  AuditOptions opts_;
+  Env* env_ = nullptr;
+  int lock_ = -1;
+  bool opened_ = false;
+
+  // Writer state (writer thread only, or open() before the thread starts).
+  std::unique_ptr<WritableFile> file_;
+  uint64_t next_seq_ = 1;
+  std::string last_hash_;
+  uint64_t active_bytes_ = 0;
+  int64_t last_sync_ms_ = 0;
+  std::atomic<uint64_t> groups_{0};
+  std::atomic<uint64_t> syncs_{0};
+
+  // Queue.
+  mutable std::mutex mu_;
+  std::condition_variable cv_;
+  std::deque<Pending> queue_;
+  bool stop_ = false;
+  std::atomic<bool> failed_{false};
+  Error fail_error_;
+  std::thread writer_;
+  std::thread indexer_;
+
+  // Published (durable) state, read by queries. Guarded by state_mu_.
+  mutable std::mutex state_mu_;
+  std::vector<Segment> sealed_;
+  uint64_t active_id_ = 0;
+  uint64_t durable_offset_ = 0;
+  uint64_t durable_seq_ = 0;
+  std::string durable_hash_;
+  std::vector<IndexEntry> active_index_;
+  mutable std::atomic<int> readers_{0};
+};
+
+// ---------------------------------------------------------------- open / recovery
+
+Status AuditLog::Impl::open() {
+  if (opts_.secret.size() < kMinSecretBytes)
+    return unavailable("audit chain secret missing or shorter than 16 bytes");
+  Status s = env_->create_dir(dir_);
+  if (!s.ok()) return s;
+  auto lock = env_->lock_file(path("LOCK"));
+  if (!lock.ok()) return lock.error();
+  lock_ = *lock;
+
+  bool clean = false;
+  if (env_->exists(path("CLEAN"))) {
+    clean = true;
+    s = env_->remove_file(path("CLEAN"));
+    if (!s.ok()) return s;
+    s = env_->sync_dir(dir_);
+    if (!s.ok()) return s;
+  }
+
+  auto ids = internal::segment_ids(env_, dir_);
+  if (!ids.ok()) return ids.error();
+  if (ids->empty()) {
+    active_id_ = 1;
+    auto f = env_->open_appendable(seg_path(1));
+    if (!f.ok()) return f.error();
+    file_ = std::move(*f);
+    s = env_->sync_dir(dir_);
+    if (!s.ok()) return s;
+    AuditEntry genesis;
+    genesis.kind = "checkpoint";
+    genesis.event = "AUDIT_CHECKPOINT";
+    genesis.segment = 1;
+    genesis.detail.set("genesis", true);
+    s = write_records({genesis});
+    if (!s.ok()) return s;
+  } else {
+    for (size_t i = 0; i + 1 < ids->size(); ++i) {
+      Segment seg;
+      s = load_sealed((*ids)[i], &seg);
+      if (!s.ok()) return s;
+      if (!sealed_.empty() && seg.first_seq != sealed_.back().last_seq + 1)
+        return unavailable("audit log: segment " + internal::segment_file_name(seg.id) +
+                           " does not continue the chain (wrong segment link at seq " +
+                           std::to_string(seg.first_seq) + ")");
+      sealed_.push_back(std::move(seg));
+    }
+    s = recover_active(ids->back(), clean);
+    if (!s.ok()) return s;
+  }
+  opened_ = true;
+  writer_ = std::thread([this] { writer_loop(); });
+  return Status::Ok();
+}
+
+Status AuditLog::Impl::load_sealed(uint64_t id, Segment* seg) {
+  seg->id = id;
+  auto size = env_->file_size(seg_path(id));
+  if (!size.ok()) return size.error();
+  seg->bytes = *size;
+  auto h = internal::read_index_header(env_, idx_path(id));
+  if (!h) return rebuild_index(id, seg);
+  seg->header = h;
+  seg->first_seq = h->first_seq;
+  seg->last_seq = h->last_seq;
+  seg->min_ts = h->min_ts;
+  seg->max_ts = h->max_ts;
+  return Status::Ok();
+}
+
+// Rebuilds a sealed segment's index by reading it (after a crash between rotation and
+// the index write, or when the index file is damaged). The segment's chain is verified
+// on the way: a sealed segment was fully synced, so any defect is corruption.
+Status AuditLog::Impl::rebuild_index(uint64_t id, Segment* seg) {
+  std::vector<IndexEntry> entries;
+  Error err;
+  bool bad = false;
+  Status s = internal::for_each_line(
+      env_, seg_path(id), UINT64_MAX,
+      [&](uint64_t off, std::string_view line) {
+        auto v = json::parse(line, internal::record_parse_options());
+        auto k = v.ok() ? internal::record_keys(*v) : std::nullopt;
+        if (!k || (!entries.empty() && k->seq != entries.back().seq + 1)) {
+          bad = true;
+          err = unavailable("audit log: sealed segment " + internal::segment_file_name(id) +
+                            " is damaged at offset " + std::to_string(off));
+          return false;
+        }
+        entries.push_back(make_entry(k->seq, off, line.size(), k->ts, k->message_id, k->watermark));
+        return true;
+      },
+      [&](uint64_t off, std::string_view) {
+        bad = true;
+        err = unavailable("audit log: sealed segment " + internal::segment_file_name(id) +
+                          " ends with a torn line at offset " + std::to_string(off));
+      });
+  if (!s.ok()) return s;
+  if (bad) return err;
+  if (entries.empty())
+    return unavailable("audit log: sealed segment " + internal::segment_file_name(id) + " is empty");
+  std::string data = internal::build_index(entries);
+  s = env_->write_file_synced(idx_path(id) + ".tmp", data);
+  if (s.ok()) s = env_->rename_file(idx_path(id) + ".tmp", idx_path(id));
+  if (s.ok()) s = env_->sync_dir(dir_);
+  if (!s.ok()) return s;
+  auto h = internal::read_index_header(env_, idx_path(id));
+  if (!h) return unavailable("audit log: cannot read back index " + idx_path(id));
+  seg->header = h;
+  seg->first_seq = h->first_seq;
+  seg->last_seq = h->last_seq;
+  seg->min_ts = h->min_ts;
+  seg->max_ts = h->max_ts;
+  return Status::Ok();
+}
+
+Status AuditLog::Impl::recover_active(uint64_t id, bool clean) {
+  const std::string p = seg_path(id);
+  active_id_ = id;
+
+  // The chain head before this segment: the last record of the previous segment.
+  uint64_t prev_seq = 0;
+  std::string prev_hash;
+  if (!sealed_.empty()) {
+    const Segment& prev = sealed_.back();
+    uint64_t size = prev.bytes;
+    uint64_t from = size > (8u << 20) ? size - (8u << 20) : 0;
+    auto tail = env_->read_range(seg_path(prev.id), from, static_cast<size_t>(size - from));
+    if (!tail.ok()) return tail.error();
+    std::string_view t(*tail);
+    if (t.empty() || t.back() != '\n')
+      return unavailable("audit log: sealed segment " + internal::segment_file_name(prev.id) +
+                         " does not end with a complete record");
+    t.remove_suffix(1);
+    size_t nl = t.rfind('\n');
+    std::string_view last = nl == std::string_view::npos ? t : t.substr(nl + 1);
+    auto v = json::parse(last, internal::record_parse_options());
+    if (!v.ok() || !v->is_object())
+      return unavailable("audit log: last record of " + internal::segment_file_name(prev.id) +
+                         " is malformed");
+    auto chk = check_record(v->as_object(), opts_.secret);
+    auto k = internal::record_keys(*v);
+    if (!k) return unavailable("audit log: last record of previous segment has no seq");
+    if (!chk.hmac_ok)
+      return unavailable("audit log: hmac mismatch at seq " + std::to_string(k->seq) +
+                         " (wrong chain secret or tampering); refusing to open");
+    prev_seq = k->seq;
+    prev_hash = chk.record_hash;
+  }
+
+  uint64_t expected = prev_seq + 1;
+  std::string link = prev_hash;
+  uint64_t good_end = 0;
+  uint64_t good_count = 0;
+  std::string torn_reason;
+  Error corrupt;
+  bool is_corrupt = false;
+  std::vector<IndexEntry> entries;
+
+  Status s = internal::for_each_line(
+      env_, p, UINT64_MAX,
+      [&](uint64_t off, std::string_view line) {
+        if (line.find('\0') != std::string_view::npos) {
+          torn_reason = "NUL bytes in record at offset " + std::to_string(off);
+          return false;
+        }
+        auto v = json::parse(line, internal::record_parse_options());
+        if (!v.ok() || !v->is_object()) {
+          torn_reason = "unparseable record at offset " + std::to_string(off);
+          return false;
+        }
+        auto k = internal::record_keys(*v);
+        if (!k) {
+          torn_reason = "record without seq at offset " + std::to_string(off);
+          return false;
+        }
+        // From here on the line is well formed: a defect is corruption, not a torn write.
+        auto fail = [&](const std::string& why) {
+          is_corrupt = true;
+          corrupt = unavailable("audit log: " + why + " at seq " + std::to_string(k->seq) + " in " +
+                                internal::segment_file_name(id) +
+                                " (wrong chain secret or tampering); refusing to open — run "
+                                "`rcan audit verify --data-dir`");
+          return false;
+        };
+        if (good_count == 0) {
+          const json::Value* seg = v->get("segment");
+          if (k->kind != "checkpoint" || !seg || !seg->is_int() ||
+              seg->as_int() != static_cast<int64_t>(id))
+            return fail("wrong segment link (segment does not open with its checkpoint)");
+          if (prev_seq == 0 && id != 1) {
+            // Earlier segments removed by retention: the checkpoint anchors the chain.
+            expected = k->seq;
+            const json::Value* ph = v->get("prev_hash");
+            link = ph && ph->is_string() ? ph->as_string() : std::string();
+          }
+        }
+        if (k->seq != expected) return fail("seq gap (expected " + std::to_string(expected) + ")");
+        const json::Value* ph = v->get("prev_hash");
+        bool link_ok = link.empty() ? (ph && ph->is_null())
+                                    : (ph && ph->is_string() && ph->as_string() == link);
+        if (!link_ok) return fail("prev_hash mismatch");
+        auto chk = check_record(v->as_object(), opts_.secret);
+        if (!chk.hmac_ok) return fail("hmac mismatch");
+        entries.push_back(make_entry(k->seq, off, line.size(), k->ts, k->message_id, k->watermark));
+        link = chk.record_hash;
+        expected = k->seq + 1;
+        good_end = off + line.size() + 1;
+        ++good_count;
+        return true;
+      },
+      [&](uint64_t off, std::string_view) {
+        if (torn_reason.empty())
+          torn_reason = "incomplete last record at offset " + std::to_string(off);
+      });
+  if (!s.ok()) return s;
+  if (is_corrupt) return corrupt;
+
+  auto size = env_->file_size(p);
+  if (!size.ok()) return size.error();
+  uint64_t cut = *size - good_end;
+  std::string quarantine;
+  if (cut > 0) {
+    auto tail = env_->read_range(p, good_end, static_cast<size_t>(cut));
+    if (!tail.ok()) return tail.error();
+    quarantine = internal::segment_file_name(id) + ".torn-" + std::to_string(good_end);
+    s = env_->write_file_synced(path(quarantine), *tail);
+    if (s.ok()) s = env_->truncate_file(p, good_end);
+    if (s.ok()) s = env_->sync_dir(dir_);
+    if (!s.ok()) return s;
+  }
+
+  next_seq_ = expected;
+  last_hash_ = link;
+  active_bytes_ = good_end;
+  {
+    std::lock_guard<std::mutex> l(state_mu_);
+    active_index_ = std::move(entries);
+    durable_offset_ = good_end;
+    durable_seq_ = expected - 1;
+    durable_hash_ = link;
+  }
+  auto f = env_->open_appendable(p);
+  if (!f.ok()) return f.error();
+  file_ = std::move(*f);
+
+  std::vector<AuditEntry> records;
+  if (good_count == 0) {
+    // The segment lost (or never got) its opening checkpoint.
+    if (id != 1 && prev_seq == 0)
+      return unavailable("audit log: active segment " + internal::segment_file_name(id) +
+                         " is empty and no earlier segment anchors the chain");
+    AuditEntry cp;
+    cp.kind = "checkpoint";
+    cp.event = "AUDIT_CHECKPOINT";
+    cp.segment = id;
+    if (id == 1) {
+      cp.detail.set("genesis", true);
+    } else {
+      cp.detail.set("prev_segment", static_cast<int64_t>(sealed_.back().id));
+      cp.detail.set("prev_last_seq", static_cast<int64_t>(prev_seq));
+      cp.detail.set("prev_last_hash", prev_hash);
+    }
+    records.push_back(std::move(cp));
+  }
+  if (cut > 0 || !clean) {
+    AuditEntry rec;
+    rec.kind = "recovery";
+    rec.event = "AUDIT_RECOVERY";
+    rec.outcome = cut > 0 ? "repaired" : "ok";
+    rec.reason = cut > 0 ? "torn tail cut after unclean shutdown"
+                         : "unclean shutdown; log intact";
+    rec.detail.set("unclean_shutdown", !clean);
+    rec.detail.set("segment", static_cast<int64_t>(id));
+    rec.detail.set("last_good_seq", static_cast<int64_t>(next_seq_ - 1));
+    rec.detail.set("bytes_cut", static_cast<int64_t>(cut));
+    if (cut > 0) {
+      rec.detail.set("cut_at_offset", static_cast<int64_t>(good_end));
+      rec.detail.set("torn_reason", torn_reason);
+      rec.detail.set("quarantine_file", quarantine);
+    }
+    records.push_back(std::move(rec));
+  }
+  if (!records.empty()) return write_records(std::move(records));
+  return Status::Ok();
+}
+
+// ---------------------------------------------------------------- writing
+
+json::Object AuditLog::Impl::system_object(AuditEntry e) {
+  e.principal = opts_.system_principal;
+  e.ruri = opts_.robot_ruri;
+  e.sender_type = "system";
+  if (e.timestamp_ms == 0) e.timestamp_ms = env_->now_ms();
+  if (e.message_id.empty()) e.message_id = new_uuid();
+  if (e.outcome.empty()) e.outcome = "ok";
+  return to_object(e);
+}
+
+// Seals, writes and syncs records synchronously (open(), rotation; writer context).
+Status AuditLog::Impl::write_records(std::vector<AuditEntry> entries) {
+  std::string buf;
+  std::vector<IndexEntry> idx;
+  for (auto& e : entries) {
+    AuditEntry copy = e;
+    json::Object obj = system_object(std::move(copy));
+    int64_t ts = obj.find("timestamp_ms")->as_int();
+    std::string mid = obj.find("message_id")->as_string();
+    SealedRecord r = seal(std::move(obj), next_seq_, last_hash_, opts_.secret);
+    idx.push_back(make_entry(r.seq, active_bytes_ + buf.size(), r.line.size(), ts, mid, {}));
+    buf += r.line;
+    buf += '\n';
+    ++next_seq_;
+    last_hash_ = r.record_hash;
+  }
+  Status s = file_->append(buf);
+  if (s.ok()) s = file_->sync();
+  if (!s.ok()) return s;
+  active_bytes_ += buf.size();
+  ++syncs_;
+  std::lock_guard<std::mutex> l(state_mu_);
+  active_index_.insert(active_index_.end(), idx.begin(), idx.end());
+  durable_offset_ = active_bytes_;
+  durable_seq_ = next_seq_ - 1;
+  durable_hash_ = last_hash_;
+  return Status::Ok();
+}
+
+void AuditLog::Impl::submit(AuditEntry entry, Callback done) {
+  if (entry.timestamp_ms == 0) entry.timestamp_ms = env_->now_ms();
+  Status v = validate(entry);
+  if (!v.ok()) {
+    done(v.error());
+    return;
+  }
+  if (!entry.kind.empty() || entry.segment) {
+    done(Error(ErrorCode::kSchemaValidationFailed, "audit entry: kind and segment are reserved",
+               "kind"));
+    return;
+  }
+  Pending p;
+  p.ts = entry.timestamp_ms;
+  p.mid_hash = internal::fnv1a64(entry.message_id);
+  if (entry.watermark_token) {
+    p.has_wm = true;
+    p.wm_hash = internal::fnv1a64(*entry.watermark_token);
+  }
+  p.obj = to_object(entry);
+  p.done = std::move(done);
+  {
+    std::unique_lock<std::mutex> l(mu_);
+    if (stop_ || failed_.load()) {
+      Error e = failed_.load() ? fail_error_ : unavailable("audit log is closed");
+      l.unlock();
+      p.done(e);
+      return;
+    }
+    queue_.push_back(std::move(p));
+  }
+  cv_.notify_one();
+}
+
+void AuditLog::Impl::fail_all(std::vector<Pending>& items, const Error& err) {
+  for (auto& p : items) p.done(err);
+  items.clear();
+}
+
+void AuditLog::Impl::writer_loop() {
+  std::vector<Pending> batch;
+  std::vector<Pending> awaiting;  // written, waiting for the covering sync
+  std::vector<IndexEntry> unsynced_idx;
+  std::string buf;
+  for (;;) {
+    bool stopping = false;
+    {
+      std::unique_lock<std::mutex> l(mu_);
+      for (;;) {
+        if (!queue_.empty() || stop_) break;
+        if (!awaiting.empty()) {
+          auto deadline = std::chrono::steady_clock::now() +
+                          std::chrono::milliseconds(std::max(0, opts_.sync_interval_ms));
+          if (cv_.wait_until(l, deadline) == std::cv_status::timeout) break;
+        } else {
+          cv_.wait(l);
+        }
+      }
+      stopping = stop_;
+      size_t n = std::min(queue_.size(), opts_.max_group_records);
+      for (size_t i = 0; i < n; ++i) {
+        batch.push_back(std::move(queue_.front()));
+        queue_.pop_front();
+      }
+      if (stopping && queue_.empty() && batch.empty() && awaiting.empty()) return;
+    }
+    if (failed_.load()) {
+      fail_all(batch, fail_error_);
+      fail_all(awaiting, fail_error_);
+      if (stopping) {
+        std::lock_guard<std::mutex> l(mu_);
+        if (queue_.empty()) return;
+      }
+      continue;
+    }
+    Status s;
+    if (!batch.empty()) {
+      buf.clear();
+      for (auto& p : batch) {
+        SealedRecord r = seal(std::move(p.obj), next_seq_, last_hash_, opts_.secret);
+        IndexEntry e;
+        e.seq = r.seq;
+        e.offset = active_bytes_ + buf.size();
+        e.len = r.line.size();
+        e.ts = p.ts;
+        e.mid_hash = p.mid_hash;
+        e.wm_hash = p.wm_hash;
+        e.has_wm = p.has_wm;
+        unsynced_idx.push_back(e);
+        p.receipt.seq = r.seq;
+        p.receipt.timestamp_ms = p.ts;
+        p.receipt.hmac = std::move(r.hmac);
+        p.receipt.record_hash = r.record_hash;
+        buf += r.line;
+        buf += '\n';
+        ++next_seq_;
+        last_hash_ = std::move(r.record_hash);
+      }
+      s = file_->append(buf);
+      if (s.ok()) active_bytes_ += buf.size();
+      for (auto& p : batch) awaiting.push_back(std::move(p));
+      batch.clear();
+      ++groups_;
+    }
+    bool do_sync = false;
+    if (s.ok() && !awaiting.empty()) {
+      int64_t now = env_->now_ms();
+      do_sync = opts_.sync_policy == SyncPolicy::kPerGroup || stopping ||
+                now - last_sync_ms_ >= opts_.sync_interval_ms;
+      {
+        // Interval policy: keep collecting while more work is queued and time remains.
+        std::lock_guard<std::mutex> l(mu_);
+        if (opts_.sync_policy == SyncPolicy::kInterval && !queue_.empty() && !stopping &&
+            now - last_sync_ms_ < opts_.sync_interval_ms)
+          do_sync = false;
+      }
+      if (do_sync) {
+        s = file_->sync();
+        last_sync_ms_ = env_->now_ms();
+        ++syncs_;
+      }
+    }
+    if (!s.ok()) {
+      {
+        std::lock_guard<std::mutex> l(mu_);
+        fail_error_ = unavailable("audit log failed: " + s.error().message);
+        failed_.store(true);
+      }
+      fail_all(awaiting, fail_error_);
+      unsynced_idx.clear();
+      continue;
+    }
+    if (do_sync) {
+      {
+        std::lock_guard<std::mutex> l(state_mu_);
+        active_index_.insert(active_index_.end(), unsynced_idx.begin(), unsynced_idx.end());
+        durable_offset_ = active_bytes_;
+        durable_seq_ = next_seq_ - 1;
+        durable_hash_ = last_hash_;
+      }
+      unsynced_idx.clear();
+      for (auto& p : awaiting) p.done(std::move(p.receipt));
+      awaiting.clear();
+      if (active_bytes_ >= opts_.max_segment_bytes) {
+        Status r = rotate();
+        if (!r.ok()) {
+          std::lock_guard<std::mutex> l(mu_);
+          fail_error_ = unavailable("audit log failed during rotation: " + r.error().message);
+          failed_.store(true);
+        }
+      }
+    }
+  }
+}
+
+// ---------------------------------------------------------------- rotation / retention
+
+void AuditLog::Impl::start_indexer(uint64_t id,
+                                   std::shared_ptr<const std::vector<IndexEntry>> entries) {
+  if (indexer_.joinable()) indexer_.join();
+  indexer_ = std::thread([this, id, entries] {
+    std::string data = internal::build_index(*entries);
+    Status s = env_->write_file_synced(idx_path(id) + ".tmp", data);
+    if (s.ok()) s = env_->rename_file(idx_path(id) + ".tmp", idx_path(id));
+    if (s.ok()) s = env_->sync_dir(dir_);
+    if (!s.ok()) return;  // rebuilt from the segment at the next open()
+    auto h = internal::read_index_header(env_, idx_path(id));
+    if (!h) return;
+    std::lock_guard<std::mutex> l(state_mu_);
+    for (auto& seg : sealed_) {
+      if (seg.id == id) {
+        seg.header = h;
+        seg.mem.reset();
+      }
+    }
+  });
+}
+
+Status AuditLog::Impl::rotate() {
+  Segment done;
+  std::shared_ptr<const std::vector<IndexEntry>> entries;
+  {
+    std::lock_guard<std::mutex> l(state_mu_);
+    done.id = active_id_;
+    done.bytes = active_bytes_;
+    if (active_index_.empty()) return Status::Ok();
+    done.first_seq = active_index_.front().seq;
+    done.last_seq = active_index_.back().seq;
+    done.min_ts = done.max_ts = active_index_.front().ts;
+    for (const auto& e : active_index_) {
+      done.min_ts = std::min(done.min_ts, e.ts);
+      done.max_ts = std::max(done.max_ts, e.ts);
+    }
+    entries = std::make_shared<const std::vector<IndexEntry>>(std::move(active_index_));
+    done.mem = entries;
+  }
+  Status s = file_->close();
+  if (!s.ok()) return s;
+  uint64_t new_id = done.id + 1;
+  auto f = env_->open_appendable(seg_path(new_id));
+  if (!f.ok()) return f.error();
+  s = env_->sync_dir(dir_);
+  if (!s.ok()) return s;
+  file_ = std::move(*f);
+  uint64_t prev_last = next_seq_ - 1;
+  std::string prev_hash = last_hash_;
+  {
+    std::lock_guard<std::mutex> l(state_mu_);
+    sealed_.push_back(done);
+    active_id_ = new_id;
+    active_index_.clear();
+    durable_offset_ = 0;
+  }
+  active_bytes_ = 0;
+  start_indexer(done.id, entries);
+
+  AuditEntry cp;
+  cp.kind = "checkpoint";
+  cp.event = "AUDIT_CHECKPOINT";
+  cp.segment = new_id;
+  cp.detail.set("prev_segment", static_cast<int64_t>(done.id));
+  cp.detail.set("prev_last_seq", static_cast<int64_t>(prev_last));
+  cp.detail.set("prev_last_hash", prev_hash);
+  s = write_records({cp});
+  if (!s.ok()) return s;
+  return apply_retention();
+}
+
+Status AuditLog::Impl::apply_retention() {
+  if (opts_.retention_max_bytes == 0 && opts_.retention_max_age_ms == 0) return Status::Ok();
+  if (readers_.load() > 0) return Status::Ok();  // an export is reading; try next rotation
+  std::vector<Segment> victims;
+  {
+    std::lock_guard<std::mutex> l(state_mu_);
+    uint64_t total = active_bytes_;
+    for (const auto& s : sealed_) total += s.bytes;
+    int64_t now = env_->now_ms();
+    // Never remove the newest sealed segment: it anchors the active one after a crash.
+    for (size_t i = 0; i + 1 < sealed_.size(); ++i) {
+      const Segment& s = sealed_[i];
+      bool too_big = opts_.retention_max_bytes != 0 && total > opts_.retention_max_bytes;
+      bool too_old = opts_.retention_max_age_ms != 0 && s.max_ts < now - opts_.retention_max_age_ms;
+      if (!too_big && !too_old) break;
+      victims.push_back(s);
+      total -= s.bytes;
+    }
+  }
+  if (victims.empty()) return Status::Ok();
+  // Say what is about to go first, so the chain records it even if we crash midway.
+  AuditEntry rec;
+  rec.kind = "retention";
+  rec.event = "AUDIT_RETENTION";
+  json::Array removed;
+  for (const auto& v : victims) removed.emplace_back(static_cast<int64_t>(v.id));
+  rec.detail.set("removed_segments", json::Value(std::move(removed)));
+  rec.detail.set("removed_through_seq", static_cast<int64_t>(victims.back().last_seq));
+  rec.detail.set("first_kept_seq", static_cast<int64_t>(victims.back().last_seq + 1));
+  if (opts_.retention_max_bytes) rec.detail.set("max_bytes", static_cast<int64_t>(opts_.retention_max_bytes));
+  if (opts_.retention_max_age_ms) rec.detail.set("max_age_ms", opts_.retention_max_age_ms);
+  Status s = write_records({rec});
+  if (!s.ok()) return s;
+  if (indexer_.joinable()) indexer_.join();
+  {
+    std::lock_guard<std::mutex> l(state_mu_);
+    sealed_.erase(sealed_.begin(), sealed_.begin() + static_cast<long>(victims.size()));
+  }
+  for (const auto& v : victims) {
+    s = env_->remove_file(seg_path(v.id));
+    if (!s.ok()) return s;
+    if (env_->exists(idx_path(v.id))) {
+      s = env_->remove_file(idx_path(v.id));
+      if (!s.ok()) return s;
+    }
+  }
+  return env_->sync_dir(dir_);
+}
+
+// ---------------------------------------------------------------- queries
+
+AuditLog::Impl::Snapshot AuditLog::Impl::snapshot() const {
+  Snapshot s;
+  std::lock_guard<std::mutex> l(state_mu_);
+  s.sealed = sealed_;
+  s.active_id = active_id_;
+  s.active_durable = durable_offset_;
+  s.active = active_index_;
+  return s;
+}
+
+Result<std::vector<IndexEntry>> AuditLog::Impl::entries_of(const Segment& s) const {
+  if (s.mem) return *s.mem;
+  if (s.header) return internal::read_index_entries(env_, idx_path(s.id), *s.header);
+  return unavailable("audit log: no index for segment " + std::to_string(s.id));
+}
+
+Result<std::string> AuditLog::Impl::read_line(uint64_t seg_id, const IndexEntry& e) const {
+  auto r = env_->read_range(seg_path(seg_id), e.offset, static_cast<size_t>(e.len));
+  if (!r.ok()) return r.error();
+  if (r->size() != e.len) return unavailable("audit log: short read in segment");
+  return std::move(*r);
+}
+
+namespace {
+struct ReaderGuard {
+  explicit ReaderGuard(std::atomic<int>& c) : c_(c) { ++c_; }
+  ~ReaderGuard() { --c_; }
+  std::atomic<int>& c_;
+};
+}  // namespace
+
+Status AuditLog::Impl::export_range(int64_t from, int64_t to, const LineSink& sink) const {
+  ReaderGuard guard(readers_);
+  Snapshot snap = snapshot();
+  bool stopped = false;
+  auto emit_segment = [&](uint64_t id, uint64_t limit, int64_t min_ts, int64_t max_ts,
+                          const std::vector<IndexEntry>* entries) -> Status {
+    if (max_ts < from || min_ts > to) return Status::Ok();
+    bool all = min_ts >= from && max_ts <= to;
+    size_t i = 0;
+    return internal::for_each_line(env_, seg_path(id), limit, [&](uint64_t, std::string_view line) {
+      bool keep = all;
+      if (!keep && entries && i < entries->size()) {
+        keep = (*entries)[i].ts >= from && (*entries)[i].ts <= to;
+      }
+      ++i;
+      if (keep && !sink(line)) {
+        stopped = true;
+        return false;
+      }
+      return true;
+    });
+  };
+  for (const auto& seg : snap.sealed) {
+    if (stopped) break;
+    if (seg.max_ts < from || seg.min_ts > to) continue;
+    std::vector<IndexEntry> entries;
+    if (!(seg.min_ts >= from && seg.max_ts <= to)) {
+      auto e = entries_of(seg);
+      if (!e.ok()) return e.error();
+      entries = std::move(*e);
+    }
+    Status s = emit_segment(seg.id, UINT64_MAX, seg.min_ts, seg.max_ts, &entries);
+    if (!s.ok()) return s;
+  }
+  if (!stopped && !snap.active.empty()) {
+    int64_t mn = snap.active.front().ts, mx = mn;
+    for (const auto& e : snap.active) {
+      mn = std::min(mn, e.ts);
+      mx = std::max(mx, e.ts);
+    }
+    Status s = emit_segment(snap.active_id, snap.active_durable, mn, mx, &snap.active);
+    if (!s.ok()) return s;
+  }
+  return Status::Ok();
+}
+
+Result<std::vector<std::string>> AuditLog::Impl::find(bool watermark, std::string_view key) const {
+  ReaderGuard guard(readers_);
+  Snapshot snap = snapshot();
+  uint64_t h = internal::fnv1a64(key);
+  std::vector<std::string> out;
+  auto consider = [&](uint64_t seg_id, const IndexEntry& e) -> Status {
+    auto line = read_line(seg_id, e);
+    if (!line.ok()) return line.error();
+    auto v = json::parse(*line, internal::record_parse_options());
+    if (!v.ok() || !v->is_object()) return Status::Ok();
+    const json::Value* f = v->get(watermark ? "watermark_token" : "message_id");
+    if (!f || !f->is_string() || f->as_string() != key) return Status::Ok();  // hash collision
+    if (!check_record(v->as_object(), opts_.secret).hmac_ok)
+      return unavailable("audit log: record at seq " + std::to_string(e.seq) + " fails its hmac");
+    out.push_back(std::move(*line));
+    return Status::Ok();
+  };
+  auto scan_mem = [&](uint64_t seg_id, const std::vector<IndexEntry>& entries) -> Status {
+    for (const auto& e : entries) {
+      if (watermark ? (e.has_wm && e.wm_hash == h) : e.mid_hash == h) {
+        Status s = consider(seg_id, e);
+        if (!s.ok()) return s;
+      }
+    }
+    return Status::Ok();
+  };
+  for (const auto& seg : snap.sealed) {
+    Status s;
+    if (seg.mem) {
+      s = scan_mem(seg.id, *seg.mem);
+    } else if (seg.header) {
+      auto seqs = internal::index_lookup(env_, idx_path(seg.id), *seg.header, watermark, h);
+      if (!seqs.ok()) return seqs.error();
+      for (uint64_t seq : *seqs) {
+        auto e = internal::read_index_entry(env_, idx_path(seg.id), *seg.header,
+                                            seq - seg.header->first_seq);
+        if (!e.ok()) return e.error();
+        s = consider(seg.id, *e);
+        if (!s.ok()) break;
+      }
+    }
+    if (!s.ok()) return s.error();
+  }
+  Status s = scan_mem(snap.active_id, snap.active);
+  if (!s.ok()) return s.error();
+  return out;
+}
+
+Result<std::string> AuditLog::Impl::get(uint64_t seq) const {
+  ReaderGuard guard(readers_);
+  Snapshot snap = snapshot();
+  for (const auto& seg : snap.sealed) {
+    if (seq < seg.first_seq || seq > seg.last_seq) continue;
+    if (seg.mem) return read_line(seg.id, (*seg.mem)[seq - seg.first_seq]);
+    if (seg.header) {
+      auto e = internal::read_index_entry(env_, idx_path(seg.id), *seg.header, seq - seg.first_seq);
+      if (!e.ok()) return e.error();
+      return read_line(seg.id, *e);
+    }
+  }
+  if (!snap.active.empty() && seq >= snap.active.front().seq && seq <= snap.active.back().seq)
+    return read_line(snap.active_id, snap.active[seq - snap.active.front().seq]);
+  return Error(ErrorCode::kNotFound, "no audit record with seq " + std::to_string(seq));
+}
+
+AuditStats AuditLog::Impl::stats() const {
+  AuditStats st;
+  {
+    std::lock_guard<std::mutex> l(state_mu_);
+    st.first_seq = !sealed_.empty()         ? sealed_.front().first_seq
+                   : !active_index_.empty() ? active_index_.front().seq
+                                            : 0;
+    st.last_seq = durable_seq_;
+    st.last_hash = durable_hash_;
+    st.segments = sealed_.size() + 1;
+    st.active_segment = active_id_;
+    st.total_bytes = durable_offset_;
+    for (const auto& s : sealed_) st.total_bytes += s.bytes;
+  }
+  std::lock_guard<std::mutex> l(mu_);
+  st.groups_committed = groups_.load();
+  st.syncs = syncs_.load();
+  st.failed = failed_.load();
+  return st;
+}
+
+// ---------------------------------------------------------------- public surface
+
+AuditLog::AuditLog(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+AuditLog::~AuditLog() = default;
+
+Result<std::unique_ptr<AuditLog>> AuditLog::open(const std::string& dir, AuditOptions options) {
+  auto impl = std::make_unique<Impl>(dir, std::move(options));
+  Status s = impl->open();
+  if (!s.ok()) return s.error();
+  return std::unique_ptr<AuditLog>(new AuditLog(std::move(impl)));
+}
+
+Result<Receipt> AuditLog::append(AuditEntry entry) {
+  // Shared: the writer may still be inside notify_one() when this thread wakes up.
+  struct Slot {
+    std::atomic<int> done{0};
+    std::optional<Result<Receipt>> result;
+  };
+  auto slot = std::make_shared<Slot>();
+  impl_->submit(std::move(entry), [slot](Result<Receipt> r) {
+    slot->result.emplace(std::move(r));
+    slot->done.store(1, std::memory_order_release);
+    slot->done.notify_one();
+  });
+  slot->done.wait(0, std::memory_order_acquire);
+  return std::move(*slot->result);
+}
+
+void AuditLog::append_async(AuditEntry entry, Callback done) {
+  impl_->submit(std::move(entry), std::move(done));
+}
+
+Status AuditLog::export_range(int64_t from_ms, int64_t to_ms, const LineSink& sink) const {
+  return impl_->export_range(from_ms, to_ms, sink);
+}
+
+Result<std::string> AuditLog::export_jsonl(int64_t from_ms, int64_t to_ms) const {
+  std::string out;
+  Status s = impl_->export_range(from_ms, to_ms, [&](std::string_view line) {
+    out.append(line);
+    out.push_back('\n');
+    return true;
+  });
+  if (!s.ok()) return s.error();
+  return out;
+}
+
+Result<std::vector<std::string>> AuditLog::find_by_message_id(std::string_view id) const {
+  return impl_->find(false, id);
+}
+Result<std::vector<std::string>> AuditLog::find_by_watermark(std::string_view token) const {
+  return impl_->find(true, token);
+}
+Result<std::string> AuditLog::get(uint64_t seq) const { return impl_->get(seq); }
+AuditStats AuditLog::stats() const { return impl_->stats(); }
+const std::string& AuditLog::dir() const { return impl_->dir(); }
+
+// ---------------------------------------------------------------- offline
+
+Result<std::vector<std::string>> list_segments(const std::string& dir, Env* env) {
+  if (!env) env = Env::posix();
+  auto ids = internal::segment_ids(env, dir);
+  if (!ids.ok()) return ids.error();
+  std::vector<std::string> out;
+  for (uint64_t id : *ids) out.push_back(dir + "/" + internal::segment_file_name(id));
+  return out;
+}
+
+Status export_dir(const std::string& dir, int64_t from_ms, int64_t to_ms,
+                  const AuditLog::LineSink& sink, Env* env) {
+  if (!env) env = Env::posix();
+  auto segs = list_segments(dir, env);
+  if (!segs.ok()) return segs.error();
+  if (segs->empty()) return Error(ErrorCode::kNotFound, "no audit segments in " + dir);
+  bool everything = from_ms == INT64_MIN && to_ms == INT64_MAX;
+  bool stopped = false;
+  for (const auto& p : *segs) {
+    if (stopped) break;
+    Status s = internal::for_each_line(env, p, UINT64_MAX, [&](uint64_t, std::string_view line) {
+      if (!everything) {
+        auto v = json::parse(line, internal::record_parse_options());
+        const json::Value* ts = v.ok() ? v->get("timestamp_ms") : nullptr;
+        if (!ts || !ts->is_int() || ts->as_int() < from_ms || ts->as_int() > to_ms) return true;
+      }
+      if (!sink(line)) {
+        stopped = true;
+        return false;
+      }
+      return true;
+    });
+    if (!s.ok()) return s;
+  }
+  return Status::Ok();
+}
+
+}  // namespace rcan::audit
