@@ -1,0 +1,201 @@
+// rcan token — issue and inspect JWTs (see include/rcan/crypto/jwt.h).
+#include <chrono>
+#include <cstdio>
+#include <iostream>
+
+#include "cli.h"
+#include "rcan/crypto/jwt.h"
+#include "rcan/errors.h"
+#include "rcan/hash.h"
+
+namespace rcan::cli {
+namespace {
+
+constexpr const char* kHelp =
+    "usage:\n"
+    "  rcan token issue --key FILE --sub S --role R --aud RURI [--scope a,b] [--ttl 1h]\n"
+    "                   [--iss I] [--alg EdDSA|ES256|RS256|HS256] [--kid K] [--fleet id1,id2]\n"
+    "                   [--sender-type T] [--cloud-provider P] [--function-name F]\n"
+    "      Prints a signed JWT. FILE is a PEM private key (Ed25519, P-256, RSA >= 2048) or a raw\n"
+    "      32-byte ed25519.seed; with --alg HS256 it is a shared-secret file (>= 32 bytes, one\n"
+    "      trailing newline ignored). The key file must not be group/world accessible. There is\n"
+    "      no default key. R is creator|owner|leasee|user|guest. --iss defaults to \"rcan-cli\".\n"
+    "  rcan token inspect [TOKEN] [--key PUBFILE | --secret FILE] [--iss I] [--aud RURI]\n"
+    "                     [--device ID] [--leeway S] [--now UNIX]\n"
+    "      Reads the token from the argument or stdin and prints {header, claims}. Given a key\n"
+    "      (PEM public key, JWK or JWKS; or an HS256 secret file) it verifies the token the way\n"
+    "      the robot does: issuer --iss (default: the token's own iss, trusted because you named\n"
+    "      the key), audience --aud (skipped when absent), fleet --device (skipped when absent).\n"
+    "  Exit: 0 issued / valid (or decoded, without a key), 1 invalid, 2 usage or malformed token.\n";
+
+std::vector<std::string> split_csv(const std::string& s) {
+  std::vector<std::string> out;
+  size_t start = 0;
+  while (start <= s.size()) {
+    size_t comma = s.find(',', start);
+    std::string part = s.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    if (!part.empty()) out.push_back(part);
+    if (comma == std::string::npos) break;
+    start = comma + 1;
+  }
+  return out;
+}
+
+int64_t unix_now() {
+  return std::chrono::duration_cast<std::chrono::seconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+int issue_main(const Args& args) {
+  Options o(args, {},
+            {"key", "sub", "role", "scope", "aud", "ttl", "iss", "alg", "kid", "fleet", "sender-type",
+             "cloud-provider", "function-name"});
+  if (!o.ok()) return usage_error("token issue", o.error());
+  if (!o.positional().empty()) return usage_error("token issue", "unexpected argument " + o.positional()[0]);
+  if (!o.has("key") || o.get("key").empty())
+    return usage_error("token issue", "--key FILE is required (there is no default signing key)");
+  if (o.get("sub").empty()) return usage_error("token issue", "--sub is required");
+  if (o.get("aud").empty()) return usage_error("token issue", "--aud is required");
+  if (o.get("aud").rfind("rcan://", 0) != 0) return usage_error("token issue", "--aud must be an rcan:// RURI");
+  std::string role = o.get("role");
+  if (jwt::role_level(role) == 0)
+    return usage_error("token issue", "--role must be one of creator, owner, leasee, user, guest");
+  auto ttl = jwt::parse_duration(o.get("ttl", "1h"));
+  if (!ttl) return usage_error("token issue", "--ttl must look like 90s, 15m, 1h or 7d");
+  std::optional<jwt::Alg> want;
+  if (o.has("alg")) {
+    want = jwt::alg_from_name(o.get("alg"));
+    if (!want) return usage_error("token issue", "--alg must be EdDSA, ES256, RS256 or HS256");
+  }
+  auto key = jwt::SigningKey::from_file(o.get("key"), want == jwt::Alg::kHS256);
+  if (!key.ok()) return usage_error("token issue", key.error().message);
+  if (want && *want != key->alg())
+    return usage_error("token issue", "--alg " + o.get("alg") + " does not match the key (a " +
+                                          std::string(jwt::alg_name(key->alg())) + " key)");
+  std::string sender_type = o.get("sender-type");
+  if (!sender_type.empty() && sender_type != "human" && sender_type != "robot" && sender_type != "cloud_function" &&
+      sender_type != "system")
+    return usage_error("token issue", "--sender-type must be human, robot, cloud_function or system");
+  if (sender_type == "cloud_function" && o.get("cloud-provider").empty())
+    return usage_error("token issue", "--sender-type cloud_function needs --cloud-provider (RCAN 8.5)");
+
+  int64_t now = unix_now();
+  uint8_t jti[16];
+  if (!random_bytes(jti, sizeof jti)) return usage_error("token issue", "random generator failed");
+  json::Object c;
+  c.set("iss", o.get("iss", "rcan-cli"));
+  c.set("sub", o.get("sub"));
+  c.set("aud", o.get("aud"));
+  c.set("role", role);
+  json::Array scopes;
+  for (auto& s : split_csv(o.get("scope"))) scopes.emplace_back(s);
+  c.set("scope", std::move(scopes));
+  if (o.has("fleet")) {
+    json::Array fleet;
+    for (auto& s : split_csv(o.get("fleet"))) fleet.emplace_back(s);
+    c.set("fleet", std::move(fleet));
+  }
+  if (!sender_type.empty()) c.set("sender_type", sender_type);
+  if (!o.get("cloud-provider").empty()) c.set("cloud_provider", o.get("cloud-provider"));
+  if (!o.get("function-name").empty()) c.set("function_name", o.get("function-name"));
+  c.set("iat", now);
+  c.set("exp", now + *ttl);
+  c.set("jti", to_hex(jti, sizeof jti));
+  auto tok = jwt::issue(c, *key, o.get("kid"));
+  if (!tok.ok()) {
+    std::fprintf(stderr, "rcan token issue: %s\n", tok.error().message.c_str());
+    return 1;
+  }
+  std::cout << *tok << "\n";
+  return 0;
+}
+
+std::string trim(std::string s) {
+  auto ws = [](char ch) { return ch == ' ' || ch == '\n' || ch == '\r' || ch == '\t'; };
+  while (!s.empty() && ws(s.back())) s.pop_back();
+  size_t i = 0;
+  while (i < s.size() && ws(s[i])) ++i;
+  return s.substr(i);
+}
+
+int inspect_main(const Args& args) {
+  Options o(args, {}, {"key", "secret", "iss", "aud", "device", "leeway", "now"});
+  if (!o.ok()) return usage_error("token inspect", o.error());
+  if (o.positional().size() > 1) return usage_error("token inspect", "give at most one token");
+  if (o.has("key") && o.has("secret")) return usage_error("token inspect", "give --key or --secret, not both");
+  std::string token = trim(o.positional().empty() ? read_stdin() : o.positional()[0]);
+  auto d = jwt::decode(token);
+  json::Object out;
+  if (!d.ok()) {
+    out.set("valid", false);
+    out.set("error", d.error().message);
+    std::cout << json::dump(out) << "\n";
+    return 2;
+  }
+  out.set("header", json::Value(d->header.raw));
+  out.set("claims", json::Value(d->claims));
+  if (!o.has("key") && !o.has("secret")) {
+    out.set("verified", false);
+    std::cout << json::dump(out) << "\n";
+    return 0;
+  }
+  bool secret = o.has("secret");
+  auto keys = jwt::load_verification_keys(secret ? o.get("secret") : o.get("key"), secret);
+  if (!keys.ok()) return usage_error("token inspect", keys.error().message);
+  std::string iss = o.get("iss");
+  if (iss.empty()) {
+    const json::Value* ti = d->claims.find("iss");
+    if (ti && ti->is_string()) iss = ti->as_string();
+  }
+  jwt::TrustStore ts;
+  for (auto& k : *keys) ts.add(iss, k);
+  jwt::VerifyOptions vo;
+  vo.audience = o.get("aud");
+  vo.skip_audience = vo.audience.empty();
+  if (o.has("device")) vo.fleet_ids = {o.get("device")};
+  vo.skip_fleet = !o.has("device");
+  vo.require_role = false;
+  int64_t now = unix_now();
+  try {
+    if (o.has("leeway")) vo.leeway_s = std::stoll(o.get("leeway"));
+    if (o.has("now")) now = std::stoll(o.get("now"));
+  } catch (...) {
+    return usage_error("token inspect", "--leeway and --now take integers");
+  }
+  jwt::JwtVerifier v(std::move(ts), vo);
+  auto r = v.verify(token, now);
+  out.set("verified", true);
+  if (!r.ok()) {
+    out.set("valid", false);
+    out.set("error_code", std::string(error_name(r.error().code)));
+    out.set("error", r.error().message);
+    out.set("reason", r.error().reason);
+    std::cout << json::dump(out) << "\n";
+    return 1;
+  }
+  out.set("valid", true);
+  out.set("role", r->role);
+  out.set("role_level", r->role_level);
+  json::Array scopes;
+  for (auto& s : r->scopes) scopes.emplace_back(s);
+  out.set("scopes", std::move(scopes));
+  if (vo.skip_audience) out.set("note", "audience not checked (no --aud)");
+  std::cout << json::dump(out) << "\n";
+  return 0;
+}
+
+int token_main(const Args& args) {
+  if (args.empty() || args[0] == "--help" || args[0] == "-h") {
+    std::fputs(kHelp, args.empty() ? stderr : stdout);
+    return args.empty() ? 2 : 0;
+  }
+  Args rest(args.begin() + 1, args.end());
+  if (args[0] == "issue") return issue_main(rest);
+  if (args[0] == "inspect") return inspect_main(rest);
+  return usage_error("token", "unknown subcommand " + args[0] + " (issue | inspect)");
+}
+
+const Registration kReg{"token", "issue and inspect JWTs", &token_main};
+
+}  // namespace
+}  // namespace rcan::cli
