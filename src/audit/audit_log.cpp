@@ -797,47 +797,96 @@ struct ReaderGuard {
 };
 }  // namespace
 
+// A ranged export is a contiguous slice of the chain: from the first record whose
+// timestamp is in [from, to] to the last such record, including whatever lies between
+// (e.g. checkpoints), so that it verifies with allow_partial_start.
+namespace {
+class SliceEmitter {
+ public:
+  SliceEmitter(int64_t from, int64_t to, const AuditLog::LineSink& sink)
+      : from_(from), to_(to), sink_(sink) {}
+  bool started() const { return started_; }
+  bool stopped() const { return stopped_; }
+  // Returns false to stop reading.
+  bool line(std::string_view l, int64_t ts) {
+    bool in = ts >= from_ && ts <= to_;
+    if (!started_) {
+      if (!in) return true;
+      started_ = true;
+    }
+    if (!in) {
+      held_.emplace_back(l);
+      return true;
+    }
+    for (const auto& h : held_) {
+      if (!sink_(h)) return stop();
+    }
+    held_.clear();
+    if (!sink_(l)) return stop();
+    return true;
+  }
+
+ private:
+  bool stop() {
+    stopped_ = true;
+    return false;
+  }
+  int64_t from_, to_;
+  const AuditLog::LineSink& sink_;
+  bool started_ = false;
+  bool stopped_ = false;
+  std::vector<std::string> held_;
+};
+}  // namespace
+
 Status AuditLog::Impl::export_range(int64_t from, int64_t to, const LineSink& sink) const {
   ReaderGuard guard(readers_);
   Snapshot snap = snapshot();
-  bool stopped = false;
-  auto emit_segment = [&](uint64_t id, uint64_t limit, int64_t min_ts, int64_t max_ts,
-                          const std::vector<IndexEntry>* entries) -> Status {
-    if (max_ts < from || min_ts > to) return Status::Ok();
-    bool all = min_ts >= from && max_ts <= to;
-    size_t i = 0;
-    return internal::for_each_line(env_, seg_path(id), limit, [&](uint64_t, std::string_view line) {
-      bool keep = all;
-      if (!keep && entries && i < entries->size()) {
-        keep = (*entries)[i].ts >= from && (*entries)[i].ts <= to;
-      }
-      ++i;
-      if (keep && !sink(line)) {
-        stopped = true;
-        return false;
-      }
-      return true;
-    });
+  struct Part {
+    uint64_t id;
+    uint64_t limit;
+    int64_t min_ts, max_ts;
+    const Segment* seg;  // null for the active segment
   };
-  for (const auto& seg : snap.sealed) {
-    if (stopped) break;
-    if (seg.max_ts < from || seg.min_ts > to) continue;
-    std::vector<IndexEntry> entries;
-    if (!(seg.min_ts >= from && seg.max_ts <= to)) {
-      auto e = entries_of(seg);
-      if (!e.ok()) return e.error();
-      entries = std::move(*e);
-    }
-    Status s = emit_segment(seg.id, UINT64_MAX, seg.min_ts, seg.max_ts, &entries);
-    if (!s.ok()) return s;
-  }
-  if (!stopped && !snap.active.empty()) {
+  std::vector<Part> parts;
+  for (const auto& seg : snap.sealed) parts.push_back({seg.id, UINT64_MAX, seg.min_ts, seg.max_ts, &seg});
+  if (!snap.active.empty()) {
     int64_t mn = snap.active.front().ts, mx = mn;
     for (const auto& e : snap.active) {
       mn = std::min(mn, e.ts);
       mx = std::max(mx, e.ts);
     }
-    Status s = emit_segment(snap.active_id, snap.active_durable, mn, mx, &snap.active);
+    parts.push_back({snap.active_id, snap.active_durable, mn, mx, nullptr});
+  }
+  // later_overlap[i]: some part at index >= i has a record in range.
+  std::vector<bool> later_overlap(parts.size() + 1, false);
+  for (size_t i = parts.size(); i-- > 0;)
+    later_overlap[i] = later_overlap[i + 1] || !(parts[i].max_ts < from || parts[i].min_ts > to);
+  SliceEmitter out(from, to, sink);
+  for (size_t i = 0; i < parts.size() && !out.stopped(); ++i) {
+    if (!later_overlap[i]) break;
+    const Part& p = parts[i];
+    bool overlap = !(p.max_ts < from || p.min_ts > to);
+    if (!out.started() && !overlap) continue;
+    bool all_in = p.min_ts >= from && p.max_ts <= to;
+    std::vector<IndexEntry> loaded;
+    const std::vector<IndexEntry>* entries = nullptr;
+    if (!all_in) {
+      if (p.seg) {
+        auto e = entries_of(*p.seg);
+        if (!e.ok()) return e.error();
+        loaded = std::move(*e);
+        entries = &loaded;
+      } else {
+        entries = &snap.active;
+      }
+    }
+    size_t k = 0;
+    Status s = internal::for_each_line(env_, seg_path(p.id), p.limit, [&](uint64_t, std::string_view line) {
+      int64_t ts = all_in ? from : (k < entries->size() ? (*entries)[k].ts : INT64_MIN);
+      ++k;
+      return out.line(line, ts);
+    });
     if (!s.ok()) return s;
   }
   return Status::Ok();
@@ -1004,20 +1053,17 @@ Status export_dir(const std::string& dir, int64_t from_ms, int64_t to_ms,
   if (!segs.ok()) return segs.error();
   if (segs->empty()) return Error(ErrorCode::kNotFound, "no audit segments in " + dir);
   bool everything = from_ms == INT64_MIN && to_ms == INT64_MAX;
-  bool stopped = false;
+  SliceEmitter out(from_ms, to_ms, sink);
   for (const auto& p : *segs) {
-    if (stopped) break;
+    if (out.stopped()) break;
     Status s = internal::for_each_line(env, p, UINT64_MAX, [&](uint64_t, std::string_view line) {
+      int64_t ts = from_ms;
       if (!everything) {
         auto v = json::parse(line, internal::record_parse_options());
-        const json::Value* ts = v.ok() ? v->get("timestamp_ms") : nullptr;
-        if (!ts || !ts->is_int() || ts->as_int() < from_ms || ts->as_int() > to_ms) return true;
+        const json::Value* t = v.ok() ? v->get("timestamp_ms") : nullptr;
+        ts = t && t->is_int() ? t->as_int() : INT64_MIN;
       }
-      if (!sink(line)) {
-        stopped = true;
-        return false;
-      }
-      return true;
+      return out.line(line, ts);
     });
     if (!s.ok()) return s;
   }

@@ -241,6 +241,6 @@ Status FaultInjectionEnv::write_file_synced(const std::string& path, std::string
 
 Result<int> FaultInjectionEnv::lock_file(const std::string& path) { return base_->lock_file(path); }
 void FaultInjectionEnv::unlock_file(int handle) { base_->unlock_file(handle); }
-int64_t FaultInjectionEnv::now_ms() { return base_->now_ms(); }
+int64_t FaultInjectionEnv::now_ms() { return base_->now_ms() + clock_offset_ms_.load(); }
 
 }  // namespace rcan::audit

@@ -13,6 +13,7 @@
 // `*base` must outlive this object.
 #pragma once
 
+#include <atomic>
 #include <map>
 #include <mutex>
 #include <set>
@@ -30,6 +31,8 @@ class FaultInjectionEnv : public Env {
   void fail_after(uint64_t n);
   void set_torn_appends(bool torn) { torn_appends_ = torn; }
   bool failed() const;
+  // Shifts now_ms() by `ms` (tests of age-based retention).
+  void advance_clock(int64_t ms) { clock_offset_ms_ += ms; }
   uint64_t mutations() const;  // mutating operations seen so far
   // Simulates the machine losing power; see above. Call with no writer running.
   Status drop_unsynced(double keep_fraction = 0.0);
@@ -69,6 +72,7 @@ class FaultInjectionEnv : public Env {
   bool failed_ = false;
   bool just_tripped_ = false;
   bool torn_appends_ = false;
+  std::atomic<int64_t> clock_offset_ms_{0};
   std::map<std::string, FileState> files_;
   std::set<std::string> new_files_;  // created, directory not yet synced
 };
