@@ -374,10 +374,15 @@ Result<Message> decode_rcanpy(const json::Object& o, const CodecLimits& lim) {
     if (!n.ok()) return n.error();
     m.target_ruri = *n;
   }
-  auto id = r.str("msg_id", 64);
+  auto id = r.str("msg_id", 128);
   if (!id.ok()) return id.error();
   if (!*id) return missing("msg_id", "msg_id is required");
-  if (!is_uuid(**id)) return schema("msg_id", "msg_id must be a UUID (8-4-4-4-12 hex)");
+  // rcan-py uses uuid4 ids but does not require them; any short printable id is accepted.
+  if ((*id)->empty() || (*id)->size() > 128) return schema("msg_id", "msg_id must be 1 to 128 characters");
+  for (char c : **id) {
+    if (static_cast<unsigned char>(c) <= 0x20 || static_cast<unsigned char>(c) >= 0x7f)
+      return schema("msg_id", "msg_id must be printable ASCII without spaces");
+  }
   m.message_id = **id;
   const json::Value* ts = o.find("timestamp");
   if (!ts) return missing("timestamp", "timestamp (Unix seconds) is required");
