@@ -24,11 +24,23 @@
 #include <openssl/evp.h>
 
 #include <array>
+#include <atomic>
 #include <cstring>
 #include <vector>
 
 #include "crypto/mldsa65_internal.h"
 #include "rcan/hash.h"
+
+#if (defined(__x86_64__) || defined(__i386__)) && (defined(__GNUC__) || defined(__clang__))
+#define RCAN_MLDSA_X86_DISPATCH 1
+#else
+#define RCAN_MLDSA_X86_DISPATCH 0
+#endif
+#if defined(__GNUC__) || defined(__clang__)
+#define RCAN_MLDSA_INLINE [[gnu::always_inline]] inline
+#else
+#define RCAN_MLDSA_INLINE inline
+#endif
 
 namespace rcan::mldsa65 {
 
@@ -111,26 +123,26 @@ constexpr std::array<int32_t, 256> kZetas = make_zetas();
 // Montgomery pointwise product. One Montgomery multiplication by 2^64/256 = 2^56 fixes both.
 constexpr int32_t kInvNttScale = centered(pow_mod(2, 56));
 
-inline int32_t mont_reduce(int64_t a) {
+RCAN_MLDSA_INLINE int32_t mont_reduce(int64_t a) {
   const int32_t t = static_cast<int32_t>(static_cast<uint32_t>(static_cast<uint64_t>(a)) * kQInv);
   return static_cast<int32_t>((a - static_cast<int64_t>(t) * kQ) >> 32);
 }
 // For |a| <= 2^31 - 2^22 - 1: r ≡ a (mod q) with |r| <= 6291456 < q.
-inline int32_t reduce32(int32_t a) {
+RCAN_MLDSA_INLINE int32_t reduce32(int32_t a) {
   const int32_t t = (a + (1 << 22)) >> 23;
   return a - t * kQ;
 }
 // Adds q when negative (sign mask, no branch).
-inline int32_t caddq(int32_t a) { return a + ((a >> 31) & kQ); }
-inline int32_t freeze_impl(int32_t a) { return caddq(reduce32(a)); }
+RCAN_MLDSA_INLINE int32_t caddq(int32_t a) { return a + ((a >> 31) & kQ); }
+RCAN_MLDSA_INLINE int32_t freeze_impl(int32_t a) { return caddq(reduce32(a)); }
 // [0, q) to the centered representative (-(q-1)/2, (q-1)/2].
-inline int32_t center(int32_t a) { return a - (((((kQ - 1) / 2) - a) >> 31) & kQ); }
-inline int32_t ct_abs(int32_t a) {
+RCAN_MLDSA_INLINE int32_t center(int32_t a) { return a - (((((kQ - 1) / 2) - a) >> 31) & kQ); }
+RCAN_MLDSA_INLINE int32_t ct_abs(int32_t a) {
   const int32_t m = a >> 31;
   return (a ^ m) - m;
 }
 // All-ones when a >= bound (both non-negative), else 0.
-inline uint32_t ct_ge_mask(int32_t a, int32_t bound) {
+RCAN_MLDSA_INLINE uint32_t ct_ge_mask(int32_t a, int32_t bound) {
   return static_cast<uint32_t>((bound - 1 - a) >> 31);
 }
 
@@ -138,48 +150,81 @@ struct Poly {
   alignas(32) int32_t c[kN];
 };
 
-void ntt_impl(int32_t a[kN]) {
-  size_t m = 0;
-  for (size_t len = 128; len >= 1; len >>= 1) {
-    for (size_t start = 0; start < kN; start += 2 * len) {
-      const int64_t z = kZetas[++m];
-      for (size_t j = start; j < start + len; ++j) {
-        const int32_t t = mont_reduce(z * a[j + len]);
-        a[j + len] = a[j] - t;
-        a[j] = a[j] + t;
-      }
+// FIPS 204 Alg. 41 with each layer instantiated for its compile-time half-length, so that
+// the compiler can vectorise every layer (the short layers as interleaved groups) instead of
+// only the ones with long inner loops. Layer `Len` uses zetas[128/Len + block].
+template <size_t Len>
+RCAN_MLDSA_INLINE void ntt_layer(int32_t* a) {
+  for (size_t block = 0; block < 128 / Len; ++block) {
+    const int64_t z = kZetas[128 / Len + block];
+    int32_t* x = a + 2 * Len * block;
+    for (size_t j = 0; j < Len; ++j) {
+      const int32_t t = mont_reduce(z * x[j + Len]);
+      x[j + Len] = x[j] - t;
+      x[j] = x[j] + t;
     }
   }
 }
+RCAN_MLDSA_INLINE void ntt_impl(int32_t a[kN]) {
+  ntt_layer<128>(a);
+  ntt_layer<64>(a);
+  ntt_layer<32>(a);
+  ntt_layer<16>(a);
+  ntt_layer<8>(a);
+  ntt_layer<4>(a);
+  ntt_layer<2>(a);
+  ntt_layer<1>(a);
+}
 
-// Bounds: with |in| < q the "sum" lanes at most double per layer, so after 8 layers they stay
-// below 256·q < 2^31; every "difference" lane is Montgomery-reduced back below q.
-void intt_impl(int32_t a[kN]) {
-  size_t m = 256;
-  for (size_t len = 1; len < kN; len <<= 1) {
-    for (size_t start = 0; start < kN; start += 2 * len) {
-      const int64_t z = -static_cast<int64_t>(kZetas[--m]);
-      for (size_t j = start; j < start + len; ++j) {
-        const int32_t t = a[j];
-        a[j] = t + a[j + len];
-        a[j + len] = mont_reduce(z * (t - a[j + len]));
-      }
+// FIPS 204 Alg. 42 walks the zetas backwards (m = 255 down to 1) with negated values; this
+// table stores them in the order the blocks of each layer visit them:
+// kInvZetas[128/Len + block] = -zetas[256/Len - 1 - block].
+constexpr std::array<int32_t, 256> make_inv_zetas() {
+  std::array<int32_t, 256> t{};
+  for (size_t len = 1; len < 256; len <<= 1)
+    for (size_t block = 0; block < 128 / len; ++block)
+      t[128 / len + block] = -kZetas[256 / len - 1 - block];
+  return t;
+}
+constexpr std::array<int32_t, 256> kInvZetas = make_inv_zetas();
+
+template <size_t Len>
+RCAN_MLDSA_INLINE void intt_layer(int32_t* a) {
+  for (size_t block = 0; block < 128 / Len; ++block) {
+    const int64_t z = kInvZetas[128 / Len + block];
+    int32_t* x = a + 2 * Len * block;
+    for (size_t j = 0; j < Len; ++j) {
+      const int32_t t = x[j];
+      x[j] = t + x[j + Len];
+      x[j + Len] = mont_reduce(z * (t - x[j + Len]));
     }
   }
+}
+// Bounds: with |in| < q the "sum" lanes at most double per layer, so after 8 layers they stay
+// below 256·q < 2^31; every "difference" lane is Montgomery-reduced back below q.
+RCAN_MLDSA_INLINE void intt_impl(int32_t a[kN]) {
+  intt_layer<1>(a);
+  intt_layer<2>(a);
+  intt_layer<4>(a);
+  intt_layer<8>(a);
+  intt_layer<16>(a);
+  intt_layer<32>(a);
+  intt_layer<64>(a);
+  intt_layer<128>(a);
   for (size_t j = 0; j < kN; ++j) a[j] = mont_reduce(static_cast<int64_t>(kInvNttScale) * a[j]);
 }
 
 // out = Σ_j a[j] ∘ b[j] (NTT domain), one Montgomery reduction per coefficient.
 // Caller guarantees Σ |a·b| < 2^31·q (e.g. a in [0,q), |b| < 9q, up to 5 terms: 45q^2).
 template <size_t Count>
-void dot_montgomery(Poly& out, const Poly* const (&a)[Count], const Poly* b) {
+RCAN_MLDSA_INLINE void dot_montgomery(Poly& out, const Poly* const (&a)[Count], const Poly* b) {
   for (size_t n = 0; n < kN; ++n) {
     int64_t acc = 0;
     for (size_t j = 0; j < Count; ++j) acc += static_cast<int64_t>(a[j]->c[n]) * b[j].c[n];
     out.c[n] = mont_reduce(acc);
   }
 }
-void mul_montgomery(Poly& out, const Poly& a, const Poly& b) {
+RCAN_MLDSA_INLINE void mul_montgomery(Poly& out, const Poly& a, const Poly& b) {
   for (size_t n = 0; n < kN; ++n) out.c[n] = mont_reduce(static_cast<int64_t>(a.c[n]) * b.c[n]);
 }
 
@@ -340,6 +385,18 @@ void unpack_bits(const uint8_t* in, Put put) {
   }
 }
 
+// BitUnpack(·, γ1-1, γ1): two 20-bit fields per 5 bytes, value γ1 - field.
+RCAN_MLDSA_INLINE void unpack_z20(Poly& z, const uint8_t* in) {
+  for (size_t i = 0; i < kN / 2; ++i) {
+    const uint8_t* b = in + 5 * i;
+    const uint32_t f0 = b[0] | static_cast<uint32_t>(b[1]) << 8 | static_cast<uint32_t>(b[2] & 0x0f) << 16;
+    const uint32_t f1 = static_cast<uint32_t>(b[2]) >> 4 | static_cast<uint32_t>(b[3]) << 4 |
+                        static_cast<uint32_t>(b[4]) << 12;
+    z.c[2 * i] = kGamma1 - static_cast<int32_t>(f0);
+    z.c[2 * i + 1] = kGamma1 - static_cast<int32_t>(f1);
+  }
+}
+
 // ExpandMask (Alg. 34), one polynomial: y = γ1 - BitUnpack20(H(ρ'' ‖ IntegerToBytes(κ, 2), 640)).
 void expand_mask_entry(Shake& x, Poly& out, const uint8_t rho_pp[64], uint16_t kappa) {
   uint8_t seed[66];
@@ -350,7 +407,7 @@ void expand_mask_entry(Shake& x, Poly& out, const uint8_t rho_pp[64], uint16_t k
   x.begin(shake256_md());
   x.absorb(seed, sizeof seed);
   x.squeeze(buf, sizeof buf);
-  unpack_bits<20>(buf, [&](size_t i, uint32_t v) { out.c[i] = kGamma1 - static_cast<int32_t>(v); });
+  unpack_z20(out, buf);
   secure_wipe(buf, sizeof buf);
   secure_wipe(seed, sizeof seed);
 }
@@ -358,7 +415,7 @@ void expand_mask_entry(Shake& x, Poly& out, const uint8_t rho_pp[64], uint16_t k
 // SampleInBall (Alg. 29). The byte-rejection loop (j > i) only discards candidates; the swap
 // c_i = c_j, c_j = ±1 touches every position 0..i with masks, so memory access does not depend
 // on j. The sign bits come from the first 8 bytes, bit (i + τ - 256) for position i.
-void sample_in_ball(Shake& x, Poly& c, const uint8_t* ctilde) {
+RCAN_MLDSA_INLINE void sample_in_ball(Shake& x, Poly& c, const uint8_t* ctilde) {
   constexpr size_t kFirst = kShake256Rate;
   uint8_t buf[kFirst];
   x.begin(shake256_md());
@@ -386,16 +443,16 @@ void sample_in_ball(Shake& x, Poly& c, const uint8_t* ctilde) {
     } while (j > i);
     const int32_t s = 1 - 2 * static_cast<int32_t>(signs & 1);
     signs >>= 1;
+    // One masked pass: read the old c_j and write ±1 at j. Position i is still 0 before this
+    // step, so afterwards c_i = (j == i) ? s : old c_j.
     int32_t cj = 0;
-    for (uint32_t k = 0; k <= i; ++k) {
+    for (uint32_t k = 0; k < i; ++k) {
       const int32_t eq = -static_cast<int32_t>(((k ^ j) - 1u) >> 31);
       cj |= c.c[k] & eq;
-    }
-    c.c[i] = cj;
-    for (uint32_t k = 0; k <= i; ++k) {
-      const int32_t eq = -static_cast<int32_t>(((k ^ j) - 1u) >> 31);
       c.c[k] = (c.c[k] & ~eq) | (s & eq);
     }
+    const int32_t j_is_i = -static_cast<int32_t>(((i ^ j) - 1u) >> 31);
+    c.c[i] = (cj & ~j_is_i) | (s & j_is_i);
   }
   secure_wipe(buf, sizeof buf);
 }
@@ -404,7 +461,7 @@ void sample_in_ball(Shake& x, Poly& c, const uint8_t* ctilde) {
 // 4. Rounding
 // ---------------------------------------------------------------------------------------
 // Power2Round (Alg. 35) for a in [0, q): a = r1·2^13 + r0, r0 in (-2^12, 2^12].
-inline void power2round(int32_t a, int32_t* r1, int32_t* r0) {
+RCAN_MLDSA_INLINE void power2round(int32_t a, int32_t* r1, int32_t* r0) {
   *r1 = (a + (1 << (kD - 1)) - 1) >> kD;
   *r0 = a - (*r1 << kD);
 }
@@ -414,7 +471,7 @@ inline void power2round(int32_t a, int32_t* r1, int32_t* r0) {
 // replaced by a multiply-shift (exact for the < 2^15 range involved; checked exhaustively in
 // the unit tests), so it is constant time on every compiler and optimisation level.
 // When r1 = 16 (a > q-1-γ2) the standard folds it to r1 = 0 and r0 - 1.
-inline void decompose_impl(int32_t a, int32_t* r1, int32_t* r0) {
+RCAN_MLDSA_INLINE void decompose_impl(int32_t a, int32_t* r1, int32_t* r0) {
   const uint32_t t = static_cast<uint32_t>(a + kGamma2 - 1) >> 9;
   int32_t h = static_cast<int32_t>((static_cast<uint64_t>(t) * 4198405u) >> 32);  // t / 1023
   int32_t l = a - h * 2 * kGamma2;
@@ -424,13 +481,13 @@ inline void decompose_impl(int32_t a, int32_t* r1, int32_t* r0) {
   *r1 = h;
   *r0 = l;
 }
-inline int32_t high_bits(int32_t a) {
+RCAN_MLDSA_INLINE int32_t high_bits(int32_t a) {
   int32_t r1, r0;
   decompose_impl(a, &r1, &r0);
   return r1;
 }
 
-inline int32_t use_hint_impl(int32_t a, uint32_t h) {
+RCAN_MLDSA_INLINE int32_t use_hint_impl(int32_t a, uint32_t h) {
   int32_t r1, r0;
   decompose_impl(a, &r1, &r0);
   // delta = +1 if r0 > 0, -1 otherwise; applied only when h = 1.
@@ -465,9 +522,7 @@ void unpack_t0(Poly& t0, const uint8_t* in) {
 void pack_z(uint8_t* out, const Poly& z) {
   pack_bits<20>(out, [&](size_t i) { return static_cast<uint32_t>(kGamma1 - z.c[i]); });
 }
-void unpack_z(Poly& z, const uint8_t* in) {
-  unpack_bits<20>(in, [&](size_t i, uint32_t v) { z.c[i] = kGamma1 - static_cast<int32_t>(v); });
-}
+void unpack_z(Poly& z, const uint8_t* in) { unpack_z20(z, in); }
 void pack_w1(uint8_t* out, const Poly& w1) {
   pack_bits<4>(out, [&](size_t i) { return static_cast<uint32_t>(w1.c[i]); });
 }
@@ -513,7 +568,7 @@ struct KeygenSecrets {
   Poly acc;
 };
 
-bool keygen_internal(const uint8_t xi[32], uint8_t pk[kPublicKeyBytes], uint8_t sk[kSecretKeyBytes]) {
+RCAN_MLDSA_INLINE bool keygen_body(const uint8_t xi[32], uint8_t pk[kPublicKeyBytes], uint8_t sk[kSecretKeyBytes]) {
   Shake x;
   KeygenSecrets sec;
   Poly a_entry, t1;
@@ -593,8 +648,8 @@ enum class SignStatus { kOk, kHashFailure, kIterationLimit };
 // so timing reveals the number of iterations (κ/ℓ) and nothing else — which is what FIPS 204
 // (and every implementation of it) leaks by design, since the rejected candidates are
 // independent of the accepted signature. Rejected z, h and c are never output.
-SignStatus sign_internal_impl(const uint8_t* sk, const MessageParts& m_prime, const uint8_t rnd[32],
-                              uint8_t sig[kSignatureBytes]) {
+RCAN_MLDSA_INLINE SignStatus sign_body(const uint8_t* sk, const MessageParts& m_prime, const uint8_t rnd[32],
+                                         uint8_t sig[kSignatureBytes]) {
   Shake x;
   SignSecrets sec;
   Poly a[kK][kL];
@@ -721,7 +776,7 @@ SignStatus sign_internal_impl(const uint8_t* sk, const MessageParts& m_prime, co
 }
 
 // Verify_internal (Alg. 8). All inputs are public; lengths are checked by the caller.
-bool verify_internal_impl(const uint8_t* pk, const MessageParts& m_prime, const uint8_t* sig) {
+RCAN_MLDSA_INLINE bool verify_body(const uint8_t* pk, const MessageParts& m_prime, const uint8_t* sig) {
   uint8_t hint[kK][kN];
   if (!unpack_hint(hint, sig + kSigHintOffset)) return false;
   Poly z_hat[kL];
@@ -772,6 +827,66 @@ bool verify_internal_impl(const uint8_t* pk, const MessageParts& m_prime, const 
   return x.ok() && CRYPTO_memcmp(c_tilde, sig, kCTildeBytes) == 0;
 }
 
+// ---------------------------------------------------------------------------------------
+// 7. Code generation variants
+// ---------------------------------------------------------------------------------------
+// The algorithm bodies and every arithmetic kernel are force-inlined into two entry points
+// each: one compiled for the baseline ISA and one compiled with AVX2 enabled, where the
+// compiler vectorises the NTT butterflies, the Montgomery products and the rounding loops
+// (all written as straight-line lane-wise code). The same C++ source, hence the same
+// constant-time properties, backs both; the choice is made once from CPUID.
+bool keygen_generic(const uint8_t* xi, uint8_t* pk, uint8_t* sk) { return keygen_body(xi, pk, sk); }
+SignStatus sign_generic(const uint8_t* sk, const MessageParts& m, const uint8_t* rnd, uint8_t* sig) {
+  return sign_body(sk, m, rnd, sig);
+}
+bool verify_generic(const uint8_t* pk, const MessageParts& m, const uint8_t* sig) {
+  return verify_body(pk, m, sig);
+}
+#if RCAN_MLDSA_X86_DISPATCH
+[[gnu::target("avx2")]] bool keygen_avx2(const uint8_t* xi, uint8_t* pk, uint8_t* sk) {
+  return keygen_body(xi, pk, sk);
+}
+[[gnu::target("avx2")]] SignStatus sign_avx2(const uint8_t* sk, const MessageParts& m,
+                                             const uint8_t* rnd, uint8_t* sig) {
+  return sign_body(sk, m, rnd, sig);
+}
+[[gnu::target("avx2")]] bool verify_avx2(const uint8_t* pk, const MessageParts& m,
+                                         const uint8_t* sig) {
+  return verify_body(pk, m, sig);
+}
+bool cpu_has_avx2() {
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx2") != 0;
+}
+std::atomic<bool>& avx2_enabled() {
+  static std::atomic<bool> enabled{cpu_has_avx2()};
+  return enabled;
+}
+bool use_avx2() { return avx2_enabled().load(std::memory_order_relaxed); }
+#else
+bool use_avx2() { return false; }
+#endif
+
+bool keygen_internal(const uint8_t* xi, uint8_t* pk, uint8_t* sk) {
+#if RCAN_MLDSA_X86_DISPATCH
+  if (use_avx2()) return keygen_avx2(xi, pk, sk);
+#endif
+  return keygen_generic(xi, pk, sk);
+}
+SignStatus sign_internal_impl(const uint8_t* sk, const MessageParts& m, const uint8_t* rnd,
+                              uint8_t* sig) {
+#if RCAN_MLDSA_X86_DISPATCH
+  if (use_avx2()) return sign_avx2(sk, m, rnd, sig);
+#endif
+  return sign_generic(sk, m, rnd, sig);
+}
+bool verify_internal_impl(const uint8_t* pk, const MessageParts& m, const uint8_t* sig) {
+#if RCAN_MLDSA_X86_DISPATCH
+  if (use_avx2()) return verify_avx2(pk, m, sig);
+#endif
+  return verify_generic(pk, m, sig);
+}
+
 }  // namespace
 
 int32_t montgomery_reduce(int64_t a) { return mont_reduce(a); }
@@ -783,6 +898,14 @@ int32_t pointwise_montgomery(int32_t a, int32_t b) {
 void decompose(int32_t a, int32_t* r1, int32_t* r0) { decompose_impl(a, r1, r0); }
 int32_t use_hint(int32_t a, uint32_t h) { return use_hint_impl(a, h); }
 int32_t freeze(int32_t a) { return freeze_impl(a); }
+bool select_simd(bool allow) {
+#if RCAN_MLDSA_X86_DISPATCH
+  avx2_enabled().store(allow && cpu_has_avx2(), std::memory_order_relaxed);
+#else
+  (void)allow;
+#endif
+  return use_avx2();
+}
 
 }  // namespace internal
 

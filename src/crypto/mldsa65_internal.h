@@ -26,6 +26,9 @@ int32_t pointwise_montgomery(int32_t a, int32_t b);
 void decompose(int32_t a, int32_t* r1, int32_t* r0);
 // FIPS 204 Alg. 40 UseHint for a in [0, q), h in {0, 1}.
 int32_t use_hint(int32_t a, uint32_t h);
+// Chooses the AVX2-compiled variant (when the CPU has AVX2 and `allow`) or the baseline one;
+// returns whether the AVX2 variant is now active. Both run the same source code.
+bool select_simd(bool allow);
 // Any int32 with |a| < 2^31 - 2^22 to its representative in [0, q), branch-free.
 int32_t freeze(int32_t a);
 
