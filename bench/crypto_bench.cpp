@@ -8,6 +8,7 @@
 #include <random>
 #include <vector>
 
+#include "crypto/mldsa65_internal.h"
 #include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/mldsa65.h"
 #include "rcan/hash.h"
@@ -83,6 +84,21 @@ void BM_MlDsa65_Verify(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_MlDsa65_Verify)->Unit(benchmark::kMicrosecond);
+
+// The same operations with the baseline-ISA (SSE2) build of the arithmetic, i.e. without the
+// AVX2-compiled variant that is chosen by default on CPUs that have it.
+template <void (*Fn)(benchmark::State&)>
+void Baseline(benchmark::State& state) {
+  rcan::mldsa65::internal::select_simd(false);
+  Fn(state);
+  rcan::mldsa65::internal::select_simd(true);
+}
+BENCHMARK(Baseline<BM_MlDsa65_KeyGen>)->Name("BM_MlDsa65_KeyGen_Baseline")->Unit(benchmark::kMicrosecond);
+BENCHMARK(Baseline<BM_MlDsa65_Sign>)
+    ->Name("BM_MlDsa65_Sign_Baseline")
+    ->Unit(benchmark::kMicrosecond)
+    ->MinTime(3.0);
+BENCHMARK(Baseline<BM_MlDsa65_Verify>)->Name("BM_MlDsa65_Verify_Baseline")->Unit(benchmark::kMicrosecond);
 
 void BM_Ed25519_Sign(benchmark::State& state) {
   const Bytes seed(32, 7);

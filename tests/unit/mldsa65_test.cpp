@@ -53,6 +53,19 @@ Bytes seed_of(uint8_t start) {
   return s;
 }
 
+// Runs `body` once with the baseline-ISA build of the algorithms and once with the AVX2 build
+// (when the CPU has it), restoring the default afterwards.
+template <typename Body>
+void for_each_code_path(Body body) {
+  for (bool simd : {false, true}) {
+    const bool active = internal::select_simd(simd);
+    if (simd && !active) continue;  // no AVX2 on this CPU: baseline only
+    SCOPED_TRACE(simd ? "AVX2 code path" : "baseline code path");
+    body();
+  }
+  internal::select_simd(true);
+}
+
 // ---- arithmetic ------------------------------------------------------------------------
 
 int64_t mod_q(int64_t a) { return ((a % kQ) + kQ) % kQ; }
@@ -147,96 +160,104 @@ TEST(MlDsa65Arithmetic, NttProductEqualsNegacyclicSchoolbook) {
 // ---- vectors -----------------------------------------------------------------------------
 
 TEST(MlDsa65Vectors, KeyGenAllCases) {
-  const auto v = rcan::test::load_vector("mldsa65-keygen.json");
-  const auto* cases = v.get("cases");
-  ASSERT_NE(cases, nullptr);
-  ASSERT_EQ(cases->as_array().size(), 25u);
-  size_t checked = 0;
-  for (const auto& c : cases->as_array()) {
-    const Bytes seed = hex(str(c, "seed_hex"));
-    auto kp = mldsa65::keygen_from_seed(seed);
-    ASSERT_TRUE(kp.ok()) << kp.error().message;
-    ASSERT_EQ(kp->public_key.size(), mldsa65::kPublicKeyBytes);
-    ASSERT_EQ(kp->secret_key.size(), mldsa65::kSecretKeyBytes);
-    EXPECT_EQ(rcan::to_hex(kp->public_key), str(c, "pk_hex")) << "case " << checked;
-    EXPECT_EQ(rcan::to_hex(kp->secret_key), str(c, "sk_hex")) << "case " << checked;
-    EXPECT_EQ(mldsa65::kid(kp->public_key), str(c, "kid"));
-    auto pk_digest = rcan::sha256(kp->public_key.data(), kp->public_key.size());
-    auto sk_digest = rcan::sha256(kp->secret_key.data(), kp->secret_key.size());
-    EXPECT_EQ(rcan::to_hex(pk_digest.data(), 32), str(c, "pk_sha256"));
-    EXPECT_EQ(rcan::to_hex(sk_digest.data(), 32), str(c, "sk_sha256"));
-    ++checked;
-  }
-  EXPECT_EQ(checked, 25u);
+  for_each_code_path([&] {
+    const auto v = rcan::test::load_vector("mldsa65-keygen.json");
+    const auto* cases = v.get("cases");
+    ASSERT_NE(cases, nullptr);
+    ASSERT_EQ(cases->as_array().size(), 25u);
+    size_t checked = 0;
+    for (const auto& c : cases->as_array()) {
+      const Bytes seed = hex(str(c, "seed_hex"));
+      auto kp = mldsa65::keygen_from_seed(seed);
+      ASSERT_TRUE(kp.ok()) << kp.error().message;
+      ASSERT_EQ(kp->public_key.size(), mldsa65::kPublicKeyBytes);
+      ASSERT_EQ(kp->secret_key.size(), mldsa65::kSecretKeyBytes);
+      EXPECT_EQ(rcan::to_hex(kp->public_key), str(c, "pk_hex")) << "case " << checked;
+      EXPECT_EQ(rcan::to_hex(kp->secret_key), str(c, "sk_hex")) << "case " << checked;
+      EXPECT_EQ(mldsa65::kid(kp->public_key), str(c, "kid"));
+      auto pk_digest = rcan::sha256(kp->public_key.data(), kp->public_key.size());
+      auto sk_digest = rcan::sha256(kp->secret_key.data(), kp->secret_key.size());
+      EXPECT_EQ(rcan::to_hex(pk_digest.data(), 32), str(c, "pk_sha256"));
+      EXPECT_EQ(rcan::to_hex(sk_digest.data(), 32), str(c, "sk_sha256"));
+      ++checked;
+    }
+    EXPECT_EQ(checked, 25u);
+  });
 }
 
 TEST(MlDsa65Vectors, DeterministicSignaturesAllCases) {
-  const auto v = rcan::test::load_vector("mldsa65-sign-deterministic.json");
-  const auto* cases = v.get("cases");
-  ASSERT_NE(cases, nullptr);
-  ASSERT_EQ(cases->as_array().size(), 25u);
-  size_t checked = 0, with_ctx = 0;
-  for (const auto& c : cases->as_array()) {
-    auto kp = mldsa65::keygen_from_seed(hex(str(c, "seed_hex")));
-    ASSERT_TRUE(kp.ok());
-    ASSERT_EQ(rcan::to_hex(kp->public_key), str(c, "pk_hex"));
-    const Bytes msg = hex(str(c, "msg_hex"));
-    const Bytes ctx = hex(str(c, "ctx_hex"));
-    if (!ctx.empty()) ++with_ctx;
-    mldsa65::SignOptions opts;
-    opts.deterministic = true;
-    opts.context = ctx;
-    auto sig = mldsa65::sign(kp->secret_key, msg, opts);
-    ASSERT_TRUE(sig.ok()) << sig.error().message;
-    ASSERT_EQ(sig->size(), mldsa65::kSignatureBytes);
-    EXPECT_EQ(rcan::to_hex(*sig), str(c, "sig_hex")) << "case " << checked;
-    auto d = rcan::sha256(sig->data(), sig->size());
-    EXPECT_EQ(rcan::to_hex(d.data(), 32), str(c, "sig_sha256"));
-    EXPECT_TRUE(mldsa65::verify(kp->public_key, msg, *sig, ctx));
-    // The deterministic variant is Sign_internal with rnd = 0^32 over M'.
-    auto internal_sig = mldsa65::sign_internal(kp->secret_key, m_prime(msg, ctx), Bytes(32, 0));
-    ASSERT_TRUE(internal_sig.ok());
-    EXPECT_EQ(*internal_sig, *sig);
-    ++checked;
-  }
-  EXPECT_EQ(checked, 25u);
-  EXPECT_EQ(with_ctx, 5u);
+  for_each_code_path([&] {
+    const auto v = rcan::test::load_vector("mldsa65-sign-deterministic.json");
+    const auto* cases = v.get("cases");
+    ASSERT_NE(cases, nullptr);
+    ASSERT_EQ(cases->as_array().size(), 25u);
+    size_t checked = 0, with_ctx = 0;
+    for (const auto& c : cases->as_array()) {
+      auto kp = mldsa65::keygen_from_seed(hex(str(c, "seed_hex")));
+      ASSERT_TRUE(kp.ok());
+      ASSERT_EQ(rcan::to_hex(kp->public_key), str(c, "pk_hex"));
+      const Bytes msg = hex(str(c, "msg_hex"));
+      const Bytes ctx = hex(str(c, "ctx_hex"));
+      if (!ctx.empty()) ++with_ctx;
+      mldsa65::SignOptions opts;
+      opts.deterministic = true;
+      opts.context = ctx;
+      auto sig = mldsa65::sign(kp->secret_key, msg, opts);
+      ASSERT_TRUE(sig.ok()) << sig.error().message;
+      ASSERT_EQ(sig->size(), mldsa65::kSignatureBytes);
+      EXPECT_EQ(rcan::to_hex(*sig), str(c, "sig_hex")) << "case " << checked;
+      auto d = rcan::sha256(sig->data(), sig->size());
+      EXPECT_EQ(rcan::to_hex(d.data(), 32), str(c, "sig_sha256"));
+      EXPECT_TRUE(mldsa65::verify(kp->public_key, msg, *sig, ctx));
+      // The deterministic variant is Sign_internal with rnd = 0^32 over M'.
+      auto internal_sig = mldsa65::sign_internal(kp->secret_key, m_prime(msg, ctx), Bytes(32, 0));
+      ASSERT_TRUE(internal_sig.ok());
+      EXPECT_EQ(*internal_sig, *sig);
+      ++checked;
+    }
+    EXPECT_EQ(checked, 25u);
+    EXPECT_EQ(with_ctx, 5u);
+  });
 }
 
 TEST(MlDsa65Vectors, FixedRndSignInternalAllCases) {
-  const auto v = rcan::test::load_vector("mldsa65-sign-deterministic.json");
-  const auto* cases = v.get("fixed_rnd_cases");
-  ASSERT_NE(cases, nullptr);
-  ASSERT_EQ(cases->as_array().size(), 3u);
-  for (const auto& c : cases->as_array()) {
-    auto kp = mldsa65::keygen_from_seed(hex(str(c, "seed_hex")));
-    ASSERT_TRUE(kp.ok());
-    const Bytes msg = hex(str(c, "msg_hex"));
-    const Bytes ctx = hex(str(c, "ctx_hex"));
-    auto sig = mldsa65::sign_internal(kp->secret_key, m_prime(msg, ctx), hex(str(c, "rnd_hex")));
-    ASSERT_TRUE(sig.ok()) << sig.error().message;
-    EXPECT_EQ(rcan::to_hex(*sig), str(c, "sig_hex"));
-    EXPECT_TRUE(mldsa65::verify(kp->public_key, msg, *sig, ctx));
-  }
+  for_each_code_path([&] {
+    const auto v = rcan::test::load_vector("mldsa65-sign-deterministic.json");
+    const auto* cases = v.get("fixed_rnd_cases");
+    ASSERT_NE(cases, nullptr);
+    ASSERT_EQ(cases->as_array().size(), 3u);
+    for (const auto& c : cases->as_array()) {
+      auto kp = mldsa65::keygen_from_seed(hex(str(c, "seed_hex")));
+      ASSERT_TRUE(kp.ok());
+      const Bytes msg = hex(str(c, "msg_hex"));
+      const Bytes ctx = hex(str(c, "ctx_hex"));
+      auto sig = mldsa65::sign_internal(kp->secret_key, m_prime(msg, ctx), hex(str(c, "rnd_hex")));
+      ASSERT_TRUE(sig.ok()) << sig.error().message;
+      EXPECT_EQ(rcan::to_hex(*sig), str(c, "sig_hex"));
+      EXPECT_TRUE(mldsa65::verify(kp->public_key, msg, *sig, ctx));
+    }
+  });
 }
 
 TEST(MlDsa65Vectors, VerifyAllCases) {
-  const auto v = rcan::test::load_vector("mldsa65-verify.json");
-  const auto* cases = v.get("cases");
-  ASSERT_NE(cases, nullptr);
-  ASSERT_EQ(cases->as_array().size(), 40u);
-  size_t n_valid = 0, n_invalid = 0, index = 0;
-  for (const auto& c : cases->as_array()) {
-    const auto* valid = c.get("valid");
-    ASSERT_TRUE(valid != nullptr && valid->is_bool());
-    const bool got = mldsa65::verify(hex(str(c, "pk_hex")), hex(str(c, "msg_hex")),
-                                     hex(str(c, "sig_hex")), hex(str(c, "ctx_hex")));
-    EXPECT_EQ(got, valid->as_bool()) << "case " << index << ": " << str(c, "why");
-    (valid->as_bool() ? n_valid : n_invalid)++;
-    ++index;
-  }
-  EXPECT_EQ(n_valid, 12u);
-  EXPECT_EQ(n_invalid, 28u);
+  for_each_code_path([&] {
+    const auto v = rcan::test::load_vector("mldsa65-verify.json");
+    const auto* cases = v.get("cases");
+    ASSERT_NE(cases, nullptr);
+    ASSERT_EQ(cases->as_array().size(), 40u);
+    size_t n_valid = 0, n_invalid = 0, index = 0;
+    for (const auto& c : cases->as_array()) {
+      const auto* valid = c.get("valid");
+      ASSERT_TRUE(valid != nullptr && valid->is_bool());
+      const bool got = mldsa65::verify(hex(str(c, "pk_hex")), hex(str(c, "msg_hex")),
+                                       hex(str(c, "sig_hex")), hex(str(c, "ctx_hex")));
+      EXPECT_EQ(got, valid->as_bool()) << "case " << index << ": " << str(c, "why");
+      (valid->as_bool() ? n_valid : n_invalid)++;
+      ++index;
+    }
+    EXPECT_EQ(n_valid, 12u);
+    EXPECT_EQ(n_invalid, 28u);
+  });
 }
 
 // ---- behaviour -----------------------------------------------------------------------------
@@ -467,6 +488,27 @@ TEST(MlDsa65, RandomKeysWorkAndDiffer) {
   EXPECT_TRUE(mldsa65::verify(a->public_key, rcan::to_bytes("hi"), *sig));
   EXPECT_FALSE(mldsa65::verify(b->public_key, rcan::to_bytes("hi"), *sig));
   EXPECT_EQ(mldsa65::kid(a->public_key).size(), 8u);
+}
+
+TEST(MlDsa65, CodePathsAgreeOnRandomInputs) {
+  if (!internal::select_simd(true)) GTEST_SKIP() << "CPU without AVX2: only one code path";
+  std::mt19937 rng(77);
+  for (int i = 0; i < 20; ++i) {
+    Bytes seed(32), msg(rng() % 100), rnd(32);
+    for (auto& b : seed) b = static_cast<uint8_t>(rng());
+    for (auto& b : msg) b = static_cast<uint8_t>(rng());
+    for (auto& b : rnd) b = static_cast<uint8_t>(rng());
+    internal::select_simd(false);
+    auto kp0 = mldsa65::keygen_from_seed(seed);
+    auto sig0 = mldsa65::sign_internal(kp0->secret_key, msg, rnd);
+    internal::select_simd(true);
+    auto kp1 = mldsa65::keygen_from_seed(seed);
+    auto sig1 = mldsa65::sign_internal(kp1->secret_key, msg, rnd);
+    ASSERT_TRUE(kp0.ok() && kp1.ok() && sig0.ok() && sig1.ok());
+    EXPECT_EQ(kp0->public_key, kp1->public_key);
+    EXPECT_EQ(kp0->secret_key, kp1->secret_key);
+    EXPECT_EQ(*sig0, *sig1);
+  }
 }
 
 TEST(MlDsa65, ManyRandomMessagesRoundTrip) {
