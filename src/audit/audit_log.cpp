@@ -647,7 +647,7 @@ void AuditLog::Impl::writer_loop() {
 void AuditLog::Impl::start_indexer(uint64_t id,
                                    std::shared_ptr<const std::vector<IndexEntry>> entries) {
   if (indexer_.joinable()) indexer_.join();
-  indexer_ = std::thread([this, id, entries] {
+  auto work = [this, id, entries] {
     std::string data = internal::build_index(*entries);
     Status s = env_->write_file_synced(idx_path(id) + ".tmp", data);
     if (s.ok()) s = env_->rename_file(idx_path(id) + ".tmp", idx_path(id));
@@ -662,7 +662,12 @@ void AuditLog::Impl::start_indexer(uint64_t id,
         seg.mem.reset();
       }
     }
-  });
+  };
+  if (opts_.background_index) {
+    indexer_ = std::thread(std::move(work));
+  } else {
+    work();
+  }
 }
 
 Status AuditLog::Impl::rotate() {

@@ -51,6 +51,9 @@ struct AuditOptions {
   uint64_t max_segment_bytes = 64ull << 20;  // rotate when the active segment reaches this
   size_t max_group_records = 4096;           // records per group commit at most
   size_t max_record_bytes = 1 << 20;         // larger entries are rejected
+  // Write a sealed segment's .idx on a background thread (false: inline in the writer,
+  // which makes the sequence of file operations deterministic for fault-injection tests).
+  bool background_index = true;
   // Retention (0 = unlimited). Applied after each rotation to sealed segments only.
   uint64_t retention_max_bytes = 0;
   int64_t retention_max_age_ms = 0;
