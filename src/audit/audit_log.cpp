@@ -687,6 +687,11 @@ Status AuditLog::Impl::rotate() {
     }
     entries = std::make_shared<const std::vector<IndexEntry>>(std::move(active_index_));
     done.mem = entries;
+    // Readers see the segment as sealed from now on (its bytes are all durable), and an
+    // empty active segment until the checkpoint of the next one is.
+    sealed_.push_back(done);
+    active_index_.clear();
+    durable_offset_ = 0;
   }
   Status s = file_->close();
   if (!s.ok()) return s;
@@ -700,10 +705,7 @@ Status AuditLog::Impl::rotate() {
   std::string prev_hash = last_hash_;
   {
     std::lock_guard<std::mutex> l(state_mu_);
-    sealed_.push_back(done);
     active_id_ = new_id;
-    active_index_.clear();
-    durable_offset_ = 0;
   }
   active_bytes_ = 0;
   start_indexer(done.id, entries);
