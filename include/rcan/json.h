@@ -28,37 +28,8 @@
 namespace rcan::json {
 
 class Value;
+class Object;
 using Array = std::vector<Value>;
-using Member = std::pair<std::string, Value>;
-
-// An object keeps members in insertion order. Keys are unique (set() replaces).
-class Object {
- public:
-  Object() = default;
-  Object(std::initializer_list<Member> init);
-
-  const Value* find(std::string_view key) const;
-  Value* find(std::string_view key);
-  bool contains(std::string_view key) const { return find(key) != nullptr; }
-  // Inserts or replaces.
-  Value& set(std::string key, Value v);
-  bool erase(std::string_view key);
-  // Appends without checking for an existing key (parser use; callers guarantee uniqueness).
-  void append_unchecked(std::string key, Value v);
-
-  size_t size() const { return members_.size(); }
-  bool empty() const { return members_.empty(); }
-  auto begin() const { return members_.begin(); }
-  auto end() const { return members_.end(); }
-  auto begin() { return members_.begin(); }
-  auto end() { return members_.end(); }
-  const std::vector<Member>& members() const { return members_; }
-
-  bool operator==(const Object& other) const;
-
- private:
-  std::vector<Member> members_;
-};
 
 class Value {
  public:
@@ -129,6 +100,38 @@ class Value {
   std::unique_ptr<Array> a_;
   std::unique_ptr<Object> o_;
 };
+
+using Member = std::pair<std::string, Value>;
+
+// An object keeps members in insertion order. Keys are unique (set() replaces).
+class Object {
+ public:
+  Object() = default;
+  Object(std::initializer_list<Member> init);
+
+  const Value* find(std::string_view key) const;
+  Value* find(std::string_view key);
+  bool contains(std::string_view key) const { return find(key) != nullptr; }
+  // Inserts or replaces.
+  Value& set(std::string key, Value v);
+  bool erase(std::string_view key);
+  // Appends without checking for an existing key (parser use; callers guarantee uniqueness).
+  void append_unchecked(std::string key, Value v);
+
+  size_t size() const { return members_.size(); }
+  bool empty() const { return members_.empty(); }
+  auto begin() const { return members_.begin(); }
+  auto end() const { return members_.end(); }
+  auto begin() { return members_.begin(); }
+  auto end() { return members_.end(); }
+  const std::vector<Member>& members() const { return members_; }
+
+  bool operator==(const Object& other) const;
+
+ private:
+  std::vector<Member> members_;
+};
+
 
 struct ParseOptions {
   size_t max_depth = 64;               // nesting of arrays/objects
