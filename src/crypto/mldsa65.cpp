@@ -329,15 +329,24 @@ void expand_a_entry(Shake& x, Poly& out, const uint8_t rho[32], uint8_t row, uin
 }
 
 // RejBoundedPoly (Alg. 31) for eta = 4: a nibble b < 9 becomes 4 - b, others are rejected.
-// The branch depends only on whether a candidate is rejected (see the file comment); the
-// accepted value is computed arithmetically.
+// Branch-free: every candidate is written at the current position and the position advances
+// by the acceptance bit, so neither timing nor branch prediction depends on the nibble values
+// beyond the rejection pattern itself (see the file comment). The scratch buffer has room for
+// the two candidates a byte can produce past the last needed slot.
 size_t parse_eta(int32_t* a, size_t ctr, const uint8_t* buf, size_t len) {
+  int32_t tmp[kN + 2];
+  std::memcpy(tmp, a, ctr * sizeof(int32_t));
   for (size_t pos = 0; ctr < kN && pos < len; ++pos) {
-    const int32_t lo = buf[pos] & 0x0f;
-    const int32_t hi = buf[pos] >> 4;
-    if (lo < 9) a[ctr++] = kEta - lo;
-    if (hi < 9 && ctr < kN) a[ctr++] = kEta - hi;
+    const uint32_t lo = buf[pos] & 0x0fu;
+    const uint32_t hi = static_cast<uint32_t>(buf[pos]) >> 4;
+    tmp[ctr] = kEta - static_cast<int32_t>(lo);
+    ctr += (lo - 9u) >> 31;  // 1 iff lo < 9
+    tmp[ctr] = kEta - static_cast<int32_t>(hi);
+    ctr += (hi - 9u) >> 31;
   }
+  if (ctr > kN) ctr = kN;  // the second nibble of the last byte may overshoot by one
+  std::memcpy(a, tmp, ctr * sizeof(int32_t));
+  secure_wipe(tmp, sizeof tmp);
   return ctr;
 }
 
