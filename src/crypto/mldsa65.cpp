@@ -532,8 +532,11 @@ void pack_z(uint8_t* out, const Poly& z) {
   pack_bits<20>(out, [&](size_t i) { return static_cast<uint32_t>(kGamma1 - z.c[i]); });
 }
 void unpack_z(Poly& z, const uint8_t* in) { unpack_z20(z, in); }
-void pack_w1(uint8_t* out, const Poly& w1) {
-  pack_bits<4>(out, [&](size_t i) { return static_cast<uint32_t>(w1.c[i]); });
+// w1Encode for one polynomial: two 4-bit values per byte, low nibble first.
+RCAN_MLDSA_INLINE void pack_w1(uint8_t* out, const Poly& w1) {
+  for (size_t i = 0; i < kN / 2; ++i) {
+    out[i] = static_cast<uint8_t>(w1.c[2 * i] | (w1.c[2 * i + 1] << 4));
+  }
 }
 
 // HintBitUnpack (Alg. 21) with every malformation rejected: a count that decreases or exceeds
