@@ -1,0 +1,58 @@
+// libFuzzer target: message `sig` blocks and hybrid signed bodies. The input is parsed as
+// JSON; objects go through parse_sig_block (on their "sig" and on themselves), the rcan-py /
+// canonical pre-image builders, msgsig::verify against fixed trusted keys, and
+// hybrid::verify_body in strict and SDK mode. Must never crash; nothing random may verify.
+#include <cstddef>
+#include <cstdint>
+#include <cstdlib>
+#include <string_view>
+
+#include "rcan/crypto/ed25519.h"
+#include "rcan/crypto/hybrid.h"
+#include "rcan/crypto/message_sig.h"
+#include "rcan/crypto/mldsa65.h"
+
+namespace {
+
+using namespace rcan;
+
+struct Trusted {
+  msgsig::TrustedKeys keys;
+  Bytes mldsa_pk;
+};
+
+const Trusted& trusted() {
+  static const Trusted t = [] {
+    Trusted out;
+    Bytes seed(32, 0);
+    for (int i = 0; i < 32; ++i) seed[static_cast<size_t>(i)] = static_cast<uint8_t>(i);
+    auto kp = mldsa65::keygen_from_seed(seed);
+    if (kp.ok()) out.mldsa_pk = kp->public_key;
+    out.keys.mldsa65.push_back(out.mldsa_pk);
+    auto ed = ed25519::public_key_from_seed(Bytes(32, 7));
+    if (ed.ok()) out.keys.ed25519.push_back(*ed);
+    return out;
+  }();
+  return t;
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  json::ParseOptions po;
+  po.max_bytes = 64 * 1024;
+  auto v = json::parse(std::string_view(reinterpret_cast<const char*>(data), size), po);
+  if (!v.ok()) return 0;
+  (void)msgsig::parse_sig_block(*v);
+  if (!v->is_object()) return 0;
+  const json::Object& obj = v->as_object();
+  if (const json::Value* sig = obj.find("sig")) (void)msgsig::parse_sig_block(*sig);
+  (void)msgsig::preimage(obj);
+  if (msgsig::verify(obj, trusted().keys).ok()) std::abort();
+  hybrid::VerifyOptions strict;
+  hybrid::VerifyOptions sdk;
+  sdk.strict = false;
+  if (hybrid::verify_body(obj, trusted().mldsa_pk, strict).ok()) std::abort();
+  if (hybrid::verify_body(obj, trusted().mldsa_pk, sdk).ok()) std::abort();
+  return 0;
+}
