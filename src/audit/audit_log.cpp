@@ -78,6 +78,7 @@ class AuditLog::Impl {
       writer_.join();
     }
     if (indexer_.joinable()) indexer_.join();
+    if (preallocer_.joinable()) preallocer_.join();
     if (file_) {
       (void)file_->close();
       if (!failed_.load() && opened_) {
@@ -123,6 +124,8 @@ class AuditLog::Impl {
   Result<std::string> read_line(uint64_t seg_id, const IndexEntry& e) const;
   Result<std::vector<IndexEntry>> entries_of(const Segment& s) const;
   void start_indexer(uint64_t id, std::shared_ptr<const std::vector<IndexEntry>> entries);
+  void prepare_spare();
+  std::string spare_path() const { return path("prealloc.tmp"); }
 
   std::string dir_;
   AuditOptions opts_;
@@ -148,6 +151,8 @@ class AuditLog::Impl {
   Error fail_error_;
   std::thread writer_;
   std::thread indexer_;
+  std::thread preallocer_;
+  std::atomic<bool> spare_ready_{false};
 
   // Published (durable) state, read by queries. Guarded by state_mu_.
   mutable std::mutex state_mu_;
@@ -180,11 +185,19 @@ Status AuditLog::Impl::open() {
     if (!s.ok()) return s;
   }
 
+  if (env_->exists(spare_path())) {  // a spare from an earlier run: rebuild it
+    s = env_->remove_file(spare_path());
+    if (!s.ok()) return s;
+  }
   auto ids = internal::segment_ids(env_, dir_);
   if (!ids.ok()) return ids.error();
   if (ids->empty()) {
     active_id_ = 1;
-    auto f = env_->open_appendable(seg_path(1));
+    if (opts_.preallocate) {
+      s = env_->write_zeros_synced(seg_path(1), opts_.max_segment_bytes);
+      if (!s.ok()) return s;
+    }
+    auto f = env_->open_writable_at(seg_path(1), 0);
     if (!f.ok()) return f.error();
     file_ = std::move(*f);
     s = env_->sync_dir(dir_);
@@ -211,6 +224,7 @@ Status AuditLog::Impl::open() {
     if (!s.ok()) return s;
   }
   opened_ = true;
+  prepare_spare();
   writer_ = std::thread([this] { writer_loop(); });
   return Status::Ok();
 }
@@ -289,6 +303,7 @@ Status AuditLog::Impl::recover_active(uint64_t id, bool clean) {
     auto tail = env_->read_range(seg_path(prev.id), from, static_cast<size_t>(size - from));
     if (!tail.ok()) return tail.error();
     std::string_view t(*tail);
+    while (!t.empty() && t.back() == '\0') t.remove_suffix(1);  // preallocated space
     if (t.empty() || t.back() != '\n')
       return unavailable("audit log: sealed segment " + internal::segment_file_name(prev.id) +
                          " does not end with a complete record");
@@ -377,9 +392,21 @@ Status AuditLog::Impl::recover_active(uint64_t id, bool clean) {
   if (!s.ok()) return s;
   if (is_corrupt) return corrupt;
 
+  // Whatever follows the last good record is either preallocated zeros (nothing to do)
+  // or a torn tail: keep its bytes in a quarantine file, then cut it.
   auto size = env_->file_size(p);
   if (!size.ok()) return size.error();
-  uint64_t cut = *size - good_end;
+  uint64_t data_end = good_end;  // one past the last non-zero byte
+  for (uint64_t pos = good_end; pos < *size;) {
+    size_t n = static_cast<size_t>(std::min<uint64_t>(4u << 20, *size - pos));
+    auto chunk = env_->read_range(p, pos, n);
+    if (!chunk.ok()) return chunk.error();
+    if (chunk->empty()) break;
+    size_t last = chunk->find_last_not_of('\0');
+    if (last != std::string::npos) data_end = pos + last + 1;
+    pos += chunk->size();
+  }
+  uint64_t cut = data_end - good_end;
   std::string quarantine;
   if (cut > 0) {
     auto tail = env_->read_range(p, good_end, static_cast<size_t>(cut));
@@ -390,6 +417,7 @@ Status AuditLog::Impl::recover_active(uint64_t id, bool clean) {
     if (s.ok()) s = env_->sync_dir(dir_);
     if (!s.ok()) return s;
   }
+  if (torn_reason.empty()) torn_reason = "garbage after the last record";
 
   next_seq_ = expected;
   last_hash_ = link;
@@ -401,7 +429,7 @@ Status AuditLog::Impl::recover_active(uint64_t id, bool clean) {
     durable_seq_ = expected - 1;
     durable_hash_ = link;
   }
-  auto f = env_->open_appendable(p);
+  auto f = env_->open_writable_at(p, good_end);
   if (!f.ok()) return f.error();
   file_ = std::move(*f);
 
@@ -696,7 +724,14 @@ Status AuditLog::Impl::rotate() {
   Status s = file_->close();
   if (!s.ok()) return s;
   uint64_t new_id = done.id + 1;
-  auto f = env_->open_appendable(seg_path(new_id));
+  if (preallocer_.joinable() && spare_ready_.load()) preallocer_.join();
+  if (spare_ready_.load()) {
+    // The spare is zero-filled and synced: renaming it makes a preallocated segment.
+    spare_ready_ = false;
+    s = env_->rename_file(spare_path(), seg_path(new_id));
+    if (!s.ok()) return s;
+  }
+  auto f = env_->open_writable_at(seg_path(new_id), 0);
   if (!f.ok()) return f.error();
   s = env_->sync_dir(dir_);
   if (!s.ok()) return s;
@@ -719,7 +754,31 @@ Status AuditLog::Impl::rotate() {
   cp.detail.set("prev_last_hash", prev_hash);
   s = write_records({cp});
   if (!s.ok()) return s;
-  return apply_retention();
+  s = apply_retention();
+  if (!s.ok()) return s;
+  prepare_spare();
+  return Status::Ok();
+}
+
+// Zero-fills the next segment ahead of time. If it is not ready at the next rotation,
+// that segment is simply not preallocated (slower syncs, same correctness).
+void AuditLog::Impl::prepare_spare() {
+  if (!opts_.preallocate || spare_ready_.load()) return;
+  if (preallocer_.joinable()) {
+    if (!opts_.background_index) {
+      preallocer_.join();
+    } else {
+      return;  // still working on it
+    }
+  }
+  auto work = [this] {
+    if (env_->write_zeros_synced(spare_path(), opts_.max_segment_bytes).ok()) spare_ready_ = true;
+  };
+  if (opts_.background_index) {
+    preallocer_ = std::thread(work);
+  } else {
+    work();
+  }
 }
 
 Status AuditLog::Impl::apply_retention() {

@@ -7,6 +7,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cstring>
@@ -57,8 +58,71 @@ class PosixWritableFile final : public WritableFile {
   std::string path_;
 };
 
+class PosixPositionalFile final : public WritableFile {
+ public:
+  PosixPositionalFile(int fd, std::string path, uint64_t offset)
+      : fd_(fd), path_(std::move(path)), offset_(offset) {}
+  ~PosixPositionalFile() override {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  Status append(std::string_view data) override {
+    const char* p = data.data();
+    size_t left = data.size();
+    while (left > 0) {
+      ssize_t n = ::pwrite(fd_, p, left, static_cast<off_t>(offset_));
+      if (n < 0) {
+        if (errno == EINTR) continue;
+        return io_error("pwrite", path_, errno);
+      }
+      p += n;
+      left -= static_cast<size_t>(n);
+      offset_ += static_cast<uint64_t>(n);
+    }
+    return Status::Ok();
+  }
+  Status sync() override {
+    if (::fdatasync(fd_) != 0) return io_error("fdatasync", path_, errno);
+    return Status::Ok();
+  }
+  Status close() override {
+    if (fd_ < 0) return Status::Ok();
+    int rc = ::close(fd_);
+    fd_ = -1;
+    if (rc != 0) return io_error("close", path_, errno);
+    return Status::Ok();
+  }
+
+ private:
+  int fd_;
+  std::string path_;
+  uint64_t offset_;
+};
+
 class PosixEnv final : public Env {
  public:
+  Result<std::unique_ptr<WritableFile>> open_writable_at(const std::string& path,
+                                                         uint64_t offset) override {
+    int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC, 0600);
+    if (fd < 0) return io_error("open", path, errno);
+    return std::unique_ptr<WritableFile>(new PosixPositionalFile(fd, path, offset));
+  }
+
+  Status write_zeros_synced(const std::string& path, uint64_t bytes) override {
+    int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+    if (fd < 0) return io_error("open", path, errno);
+    static const std::string kZeros(1 << 20, '\0');
+    Status s;
+    uint64_t left = bytes;
+    while (s.ok() && left > 0) {
+      size_t n = static_cast<size_t>(std::min<uint64_t>(left, kZeros.size()));
+      s = write_all(fd, std::string_view(kZeros.data(), n), path);
+      left -= n;
+    }
+    if (s.ok() && ::fsync(fd) != 0) s = io_error("fsync", path, errno);
+    ::close(fd);
+    return s;
+  }
+
   Result<std::unique_ptr<WritableFile>> open_appendable(const std::string& path) override {
     int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0600);
     if (fd < 0) return io_error("open", path, errno);

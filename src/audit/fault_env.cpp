@@ -154,6 +154,37 @@ Result<std::unique_ptr<WritableFile>> FaultInjectionEnv::open_appendable(const s
   return std::unique_ptr<WritableFile>(new FaultWritableFile(this, path, std::move(*base)));
 }
 
+Result<std::unique_ptr<WritableFile>> FaultInjectionEnv::open_writable_at(const std::string& path,
+                                                                        uint64_t offset) {
+  bool existed = base_->exists(path);
+  if (!existed) {
+    Status s = before_mutation("create " + path);
+    if (!s.ok()) return s.error();
+  }
+  auto base = base_->open_writable_at(path, offset);
+  if (!base.ok()) return base.error();
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    if (!existed) new_files_.insert(path);
+    // Data beyond `offset` (preallocated zeros) is not part of the log.
+    files_[path] = FileState{offset, offset};
+  }
+  return std::unique_ptr<WritableFile>(new FaultWritableFile(this, path, std::move(*base)));
+}
+
+Status FaultInjectionEnv::write_zeros_synced(const std::string& path, uint64_t bytes) {
+  bool existed = base_->exists(path);
+  Status s = before_mutation("preallocate " + path);
+  if (!s.ok()) return s;
+  s = base_->write_zeros_synced(path, bytes);
+  if (s.ok()) {
+    std::lock_guard<std::mutex> l(mu_);
+    files_[path] = FileState{bytes, bytes};
+    if (!existed) new_files_.insert(path);
+  }
+  return s;
+}
+
 Result<std::string> FaultInjectionEnv::read_file(const std::string& path) {
   return base_->read_file(path);
 }

@@ -235,11 +235,20 @@ Status for_each_line(Env* env, const std::string& path, uint64_t limit,
       }
       start = nl + 1;
     }
+    bool ended = false;
     if (start < c.size()) {
+      std::string_view rest = c.substr(start);
       if (carry.empty()) carry_offset = chunk_start + start;
-      carry.append(c.substr(start));
+      // A NUL in the unterminated remainder: preallocated (zero) space or a hole left by
+      // a crash. The data ends here.
+      size_t z = rest.find('\0');
+      if (z != std::string_view::npos) {
+        rest = rest.substr(0, z);
+        ended = true;
+      }
+      carry.append(rest);
     }
-    if (chunk->size() < want) break;
+    if (ended || chunk->size() < want) break;
   }
   if (!carry.empty() && partial) partial(carry_offset, carry);
   return Status::Ok();

@@ -65,6 +65,8 @@ Result<std::vector<uint64_t>> index_lookup(Env* env, const std::string& path, co
 // Calls fn(offset, line) for each newline-terminated line in [0, limit) of `path`
 // (limit = UINT64_MAX: whole file). A final line without newline is passed to
 // `partial` when given (offset, bytes), else ignored. fn returns false to stop.
+// Reading stops at a NUL byte in an unterminated line (preallocated zero space); the
+// bytes before it, if any, are the partial line.
 Status for_each_line(Env* env, const std::string& path, uint64_t limit,
                      const std::function<bool(uint64_t, std::string_view)>& fn,
                      const std::function<void(uint64_t, std::string_view)>& partial = {});

@@ -49,9 +49,14 @@ struct AuditOptions {
   SyncPolicy sync_policy = SyncPolicy::kPerGroup;
   int sync_interval_ms = 2;
   uint64_t max_segment_bytes = 64ull << 20;  // rotate when the active segment reaches this
+  // Zero-fill each segment file to max_segment_bytes before use (a spare is prepared in
+  // the background), so that fdatasync after an append flushes data only and needs no
+  // file-system journal commit for a size change. See docs/AUDIT.md §Durability.
+  bool preallocate = true;
   size_t max_group_records = 4096;           // records per group commit at most
   size_t max_record_bytes = 1 << 20;         // larger entries are rejected
-  // Write a sealed segment's .idx on a background thread (false: inline in the writer,
+  // Write a sealed segment's .idx and the spare preallocated segment on background
+  // threads (false: inline in the writer,
   // which makes the sequence of file operations deterministic for fault-injection tests).
   bool background_index = true;
   // Retention (0 = unlimited). Applied after each rotation to sealed segments only.

@@ -35,6 +35,13 @@ class Env {
 
   // Opens `path` for appending, creating it (mode 0600) when missing.
   virtual Result<std::unique_ptr<WritableFile>> open_appendable(const std::string& path) = 0;
+  // Opens `path` (creating it, mode 0600) for positional writes starting at `offset`;
+  // used on preallocated segments, whose file size is larger than their data.
+  virtual Result<std::unique_ptr<WritableFile>> open_writable_at(const std::string& path,
+                                                                 uint64_t offset) = 0;
+  // Creates/overwrites `path` with `bytes` zero bytes, written (not just allocated) and
+  // fsync'ed, so that later overwrites need no metadata journal commit on fdatasync.
+  virtual Status write_zeros_synced(const std::string& path, uint64_t bytes) = 0;
   virtual Result<std::string> read_file(const std::string& path) = 0;
   // Up to `n` bytes from `offset` (fewer at end of file).
   virtual Result<std::string> read_range(const std::string& path, uint64_t offset, size_t n) = 0;

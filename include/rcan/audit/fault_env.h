@@ -38,6 +38,9 @@ class FaultInjectionEnv : public Env {
   Status drop_unsynced(double keep_fraction = 0.0);
 
   Result<std::unique_ptr<WritableFile>> open_appendable(const std::string& path) override;
+  Result<std::unique_ptr<WritableFile>> open_writable_at(const std::string& path,
+                                                         uint64_t offset) override;
+  Status write_zeros_synced(const std::string& path, uint64_t bytes) override;
   Result<std::string> read_file(const std::string& path) override;
   Result<std::string> read_range(const std::string& path, uint64_t offset, size_t n) override;
   Result<uint64_t> file_size(const std::string& path) override;
