@@ -1,10 +1,11 @@
 // audit_bench — durable append throughput and latency of rcan::audit::AuditLog.
 //
-//   audit_bench [--dir D] [--seconds S] [--big N] [--probe M] [--policy group|interval]
+//   audit_bench [--dir D] [--seconds S] [--big N] [--probe M] [--window W] [--policy group|interval]
 //
 // 1. Durable appends/s with 1, 4 and 16 appending threads (each thread calls the blocking
 //    append(), which returns only after the fdatasync covering the record), with p50 /
-//    p99 / max append-to-acknowledge latency.
+//    p99 / max append-to-acknowledge latency; then the same with append_async() and W
+//    records in flight per thread (how the node's I/O threads use the log).
 // 2. Append cost when the log holds 1 thousand records vs N records (--big, default
 //    1,000,000; the README reports a 10,000,000 run): the log is filled with async
 //    appends, then M (--probe) blocking appends from 16 threads are timed.
@@ -100,6 +101,59 @@ RunResult run_appenders(AuditLog& log, int threads, double seconds, uint64_t tot
   return r;
 }
 
+// `threads` threads each keep up to `window` append_async() records in flight (what a
+// node's I/O threads do: they never block on the disk) for `seconds`.
+RunResult run_async_appenders(AuditLog& log, int threads, int window, double seconds,
+                              std::atomic<uint64_t>& counter) {
+  RunResult r;
+  std::mutex mu;
+  std::atomic<uint64_t> done{0};
+  auto deadline = Clock::now() + std::chrono::duration<double>(seconds);
+  uint64_t syncs0 = log.stats().syncs;
+  auto t0 = Clock::now();
+  std::vector<std::thread> ts;
+  for (int t = 0; t < threads; ++t) {
+    ts.emplace_back([&] {
+      std::vector<double> lat;
+      lat.reserve(1 << 18);
+      std::mutex lmu;
+      std::atomic<int> inflight{0};
+      while (Clock::now() < deadline) {
+        int v = inflight.load();
+        if (v >= window) {
+          inflight.wait(v);
+          continue;
+        }
+        inflight.fetch_add(1);
+        auto a = Clock::now();
+        log.append_async(make_entry(counter.fetch_add(1)), [&, a](rcan::Result<Receipt> res) {
+          auto b = Clock::now();
+          if (!res.ok()) {
+            std::fprintf(stderr, "append failed: %s\n", res.error().message.c_str());
+            std::exit(1);
+          }
+          {
+            std::lock_guard<std::mutex> l(lmu);
+            lat.push_back(std::chrono::duration<double, std::micro>(b - a).count());
+          }
+          done.fetch_add(1);
+          inflight.fetch_sub(1);
+          inflight.notify_all();
+        });
+      }
+      for (int v = inflight.load(); v != 0; v = inflight.load()) inflight.wait(v);
+      std::lock_guard<std::mutex> l(mu);
+      std::lock_guard<std::mutex> l2(lmu);
+      r.lat_us.insert(r.lat_us.end(), lat.begin(), lat.end());
+    });
+  }
+  for (auto& t : ts) t.join();
+  r.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  r.records = done.load();
+  r.syncs = log.stats().syncs - syncs0;
+  return r;
+}
+
 void print(const char* label, RunResult& r) {
   double rate = static_cast<double>(r.records) / r.seconds;
   double p50 = pct(r.lat_us, 0.50), p99 = pct(r.lat_us, 0.99);
@@ -147,6 +201,7 @@ int main(int argc, char** argv) {
   uint64_t big = 1000000;
   uint64_t probe = 50000;
   SyncPolicy policy = SyncPolicy::kPerGroup;
+  int window = 32;
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
     auto next = [&]() -> std::string {
@@ -160,9 +215,10 @@ int main(int argc, char** argv) {
     else if (a == "--seconds") seconds = std::stod(next());
     else if (a == "--big") big = std::stoull(next());
     else if (a == "--probe") probe = std::stoull(next());
+    else if (a == "--window") window = std::stoi(next());
     else if (a == "--policy") policy = next() == "interval" ? SyncPolicy::kInterval : SyncPolicy::kPerGroup;
     else {
-      std::fprintf(stderr, "usage: audit_bench [--dir D] [--seconds S] [--big N] [--probe M] [--policy group|interval]\n");
+      std::fprintf(stderr, "usage: audit_bench [--dir D] [--seconds S] [--big N] [--probe M] [--window W] [--policy group|interval]\n");
       return 2;
     }
   }
@@ -184,7 +240,20 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "open: %s\n", log.error().message.c_str());
       return 1;
     }
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));  // let the spare settle
     RunResult r = run_appenders(**log, threads, seconds, 0, counter);
+    std::string label = std::to_string(threads) + " appending thread" + (threads > 1 ? "s" : "");
+    print(label.c_str(), r);
+  }
+
+  std::printf("== durable appends (append_async(), %d in flight per thread, %.1f s each) ==\n", window,
+              seconds);
+  for (int threads : {1, 4, 16}) {
+    std::string dir = root + "/a" + std::to_string(threads);
+    auto log = AuditLog::open(dir, o);
+    if (!log.ok()) return 1;
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));  // let the spare settle
+    RunResult r = run_async_appenders(**log, threads, window, seconds, counter);
     std::string label = std::to_string(threads) + " appending thread" + (threads > 1 ? "s" : "");
     print(label.c_str(), r);
   }
@@ -195,6 +264,7 @@ int main(int argc, char** argv) {
     std::string dir = root + "/size";
     auto log = AuditLog::open(dir, o);
     if (!log.ok()) return 1;
+    uint64_t first_id = counter.load();
     fill(**log, 1000, counter);
     RunResult small = run_appenders(**log, 16, 0, probe, counter);
     std::string l1 = "at " + std::to_string((*log)->stats().last_seq - small.records) + " records";
@@ -215,7 +285,8 @@ int main(int argc, char** argv) {
                 c_large, static_cast<unsigned long long>(big), c_large / c_small);
     // Index lookups at size.
     auto q0 = Clock::now();
-    auto found = (*log)->find_by_message_id("7d3f2a10-5b7c-4c1e-9f2a-100000000500");
+    auto found = (*log)->find_by_message_id("7d3f2a10-5b7c-4c1e-9f2a-" +
+                                            std::to_string(100000000000 + first_id + 500));
     double q = std::chrono::duration<double, std::milli>(Clock::now() - q0).count();
     std::printf("find_by_message_id at %llu records: %zu hit(s) in %.2f ms\n",
                 static_cast<unsigned long long>(st.last_seq), found.ok() ? found->size() : 0, q);

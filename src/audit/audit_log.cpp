@@ -9,6 +9,7 @@
 #include <mutex>
 #include <thread>
 
+#include "audit/fast_seal.h"
 #include "audit/segment.h"
 #include "rcan/audit/secret.h"
 #include "rcan/hash.h"
@@ -36,7 +37,7 @@ struct Segment {
 };
 
 struct Pending {
-  json::Object obj;
+  internal::PreparedRecord prep;
   int64_t ts = 0;
   uint64_t mid_hash = 0;
   uint64_t wm_hash = 0;
@@ -134,6 +135,7 @@ class AuditLog::Impl {
   bool opened_ = false;
 
   // Writer state (writer thread only, or open() before the thread starts).
+  std::unique_ptr<internal::Hasher> hasher_;
   std::unique_ptr<WritableFile> file_;
   uint64_t next_seq_ = 1;
   std::string last_hash_;
@@ -170,6 +172,7 @@ class AuditLog::Impl {
 Status AuditLog::Impl::open() {
   if (opts_.secret.size() < kMinSecretBytes)
     return unavailable("audit chain secret missing or shorter than 16 bytes");
+  hasher_ = std::make_unique<internal::Hasher>(opts_.secret);
   Status s = env_->create_dir(dir_);
   if (!s.ok()) return s;
   auto lock = env_->lock_file(path("LOCK"));
@@ -495,7 +498,7 @@ Status AuditLog::Impl::write_records(std::vector<AuditEntry> entries) {
     json::Object obj = system_object(std::move(copy));
     int64_t ts = obj.find("timestamp_ms")->as_int();
     std::string mid = obj.find("message_id")->as_string();
-    SealedRecord r = seal(std::move(obj), next_seq_, last_hash_, opts_.secret);
+    SealedRecord r = internal::seal_prepared(internal::prepare(obj), next_seq_, last_hash_, *hasher_);
     idx.push_back(make_entry(r.seq, active_bytes_ + buf.size(), r.line.size(), ts, mid, {}));
     buf += r.line;
     buf += '\n';
@@ -534,7 +537,7 @@ void AuditLog::Impl::submit(AuditEntry entry, Callback done) {
     p.has_wm = true;
     p.wm_hash = internal::fnv1a64(*entry.watermark_token);
   }
-  p.obj = to_object(entry);
+  p.prep = internal::prepare(to_object(entry));  // serialised here, off the writer thread
   p.done = std::move(done);
   {
     std::unique_lock<std::mutex> l(mu_);
@@ -594,7 +597,7 @@ void AuditLog::Impl::writer_loop() {
     if (!batch.empty()) {
       buf.clear();
       for (auto& p : batch) {
-        SealedRecord r = seal(std::move(p.obj), next_seq_, last_hash_, opts_.secret);
+        SealedRecord r = internal::seal_prepared(p.prep, next_seq_, last_hash_, *hasher_);
         IndexEntry e;
         e.seq = r.seq;
         e.offset = active_bytes_ + buf.size();

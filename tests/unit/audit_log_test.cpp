@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <filesystem>
 
+#include "audit/fast_seal.h"
 #include "audit/test_util.h"
 #include "rcan/audit/audit_log.h"
 #include "rcan/audit/fault_env.h"
@@ -60,6 +61,28 @@ TEST(Audit, AppendAssignsSeqAndChainsRecords) {
   auto rep = verify_jsonl(join(lines), kSecret);
   EXPECT_TRUE(rep.ok) << rep.why;
   EXPECT_EQ(rep.count, 11u);
+}
+
+TEST(Audit, FastSealIsByteIdenticalToCanonicalSeal) {
+  internal::Hasher hasher(kSecret);
+  for (int i = 0; i < 40; ++i) {
+    AuditEntry e = entry(i);
+    e.principal = "op\xc3\xa9rateur \"quoted\"\n";
+    e.detail.set("zeta", json::Array{1, 2.5, "x"});
+    e.detail.set("alpha", json::Object{{"b", 1}, {"a", nullptr}});
+    std::string prev = i == 0 ? "" : std::string(64, 'a' + (i % 6));
+    SealedRecord slow = seal(to_object(e), static_cast<uint64_t>(i + 1), prev, kSecret);
+    SealedRecord fast = internal::seal_prepared(internal::prepare(to_object(e)),
+                                                static_cast<uint64_t>(i + 1), prev, hasher);
+    EXPECT_EQ(fast.preimage, slow.preimage);
+    EXPECT_EQ(fast.line, slow.line);
+    EXPECT_EQ(fast.hmac, slow.hmac);
+    EXPECT_EQ(fast.record_hash, slow.record_hash);
+  }
+  // Keys longer than a SHA-256 block are hashed first, as HMAC requires.
+  std::string long_key(100, 'k');
+  internal::Hasher lh(long_key);
+  EXPECT_EQ(lh.hmac_hex("data"), hmac_sha256_hex(long_key, "data"));
 }
 
 TEST(Audit, RecordCarriesProfileFieldsAndOmitsUnknownConfidence) {
