@@ -1,0 +1,74 @@
+// Authenticator — who sent this? Verifies the bearer token (JWT, docs/CRYPTO.md) and the
+// message signature when present, and applies the §8.5 sender-identity rules.
+//
+// There is no open mode: a message without a valid token is refused (DISCOVER and the
+// public read-only routes are the only exceptions, decided by the router, not here).
+#pragma once
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "rcan/crypto/jwt.h"
+#include "rcan/crypto/message_sig.h"
+#include "rcan/message.h"
+#include "rcan/result.h"
+#include "rcan/roles.h"
+#include "rcan/sender_identity.h"
+
+namespace rcan::node {
+
+struct Principal {
+  bool authenticated = false;
+  std::string issuer;
+  std::string sub;
+  Role role = Role::kGuest;
+  std::vector<std::string> scopes;
+  std::optional<int64_t> token_exp;  // unix seconds
+  TokenIdentity token_identity;
+
+  // Stable key for rate limits and session ownership.
+  std::string key() const { return issuer + "\x1f" + sub; }
+  // What audit records show as `principal`.
+  std::string display() const { return authenticated ? sub : "anonymous"; }
+  bool has_scope(std::string_view s) const;
+};
+
+struct SignatureCheck {
+  bool present = false;
+  bool verified = false;
+  bool robot_key = false;  // signed by a key configured as a peer robot's
+  std::string alg;
+  std::string kid;
+};
+
+struct AuthOptions {
+  jwt::TrustStore trust;
+  jwt::VerifyOptions verify;
+  // Keys whose signatures are accepted on messages; `robot` marks peer-robot keys.
+  msgsig::TrustedKeys signer_keys;
+  msgsig::TrustedKeys robot_keys;
+  bool require_signature = false;
+};
+
+class Authenticator {
+ public:
+  explicit Authenticator(AuthOptions opts);
+
+  // Verifies a bearer token at unix time `now_s`. Errors: AUTH_REQUIRED (empty), AUTH_INVALID.
+  Result<Principal> authenticate_token(std::string_view token, int64_t now_s) const;
+  // Verifies msg.sig (when present) over the received wire object. Errors:
+  // SIGNATURE_INVALID; AUTH_REQUIRED when signatures are required and absent.
+  Result<SignatureCheck> check_signature(const Message& msg) const;
+  // §8.5: the sender identity the audit record carries.
+  Result<SenderIdentity> sender(const Message& msg, const Principal& p, const SignatureCheck& sig) const;
+
+  const jwt::VerifyOptions& verify_options() const { return opts_.verify; }
+
+ private:
+  AuthOptions opts_;
+  std::unique_ptr<jwt::JwtVerifier> verifier_;
+};
+
+}  // namespace rcan::node

@@ -1,0 +1,698 @@
+// Node: HTTP routes and the WebSocket stream binding over the one pipeline.
+#include "node/node.h"
+
+#include <chrono>
+#include <cstdlib>
+
+#include "node/log.h"
+#include "rcan/errors.h"
+
+namespace rcan::node {
+
+// ---------------------------------------------------------------------------------------------
+// Streams (spec-digest Appendix B): CONNECT → CONNECT_ACK, PING/PONG, SUBSCRIBE, messages in,
+// ACK/ERROR/events/telemetry out, one JSON message per text frame.
+
+struct StreamState {
+  std::shared_ptr<StreamSink> sink;
+  std::mutex mu;
+  bool connected = false;
+  std::optional<Principal> principal;
+  std::string upgrade_token;   // from the upgrade request, if any
+  std::string stream_id;
+  bool telemetry = false;
+  int64_t telemetry_period_ms = 200;
+  int64_t next_telemetry_mono = 0;
+  int64_t opened_mono = 0;
+  bool closed = false;
+};
+
+struct StreamSessionImpl final : public StreamSession {
+  StreamSessionImpl(Node& n, std::shared_ptr<StreamState> s) : node(n), st(std::move(s)) {}
+  void on_text(std::string text) override;
+  void on_binary() override { st->sink->close(1003, "binary frames are not supported"); }
+  void on_closed() override {
+    {
+      std::lock_guard<std::mutex> lock(st->mu);
+      st->closed = true;
+    }
+    node.unregister_stream(st);
+  }
+  void refuse_connect(const std::string& why) {
+    json::Object err{{"type", "ERROR"}, {"code", 8001}, {"name", "ConnectionRefused"}, {"message", why}};
+    st->sink->send_text(json::dump(json::Value(err)));
+    st->sink->close(4001, "connection refused");
+  }
+  Node& node;
+  std::shared_ptr<StreamState> st;
+};
+
+void StreamSessionImpl::on_text(std::string text) {
+  NodeServices& svc = node.svc_;
+  json::ParseOptions po;
+  po.max_bytes = svc.settings.codec.max_body_bytes;
+  po.max_depth = 32;
+  auto v = json::parse(text, po);
+  bool connected;
+  {
+    std::lock_guard<std::mutex> lock(st->mu);
+    connected = st->connected;
+  }
+  if (!v.ok() || !v->is_object()) {
+    if (!connected) {
+      st->sink->close(1002, "the first frame must be a CONNECT message");
+      return;
+    }
+    Error e = v.ok() ? Error(ErrorCode::kSchemaValidationFailed, "a frame must hold one JSON object")
+                     : v.error();
+    st->sink->send_text(json::dump(svc.error(e)));
+    return;
+  }
+  const json::Value* type = v->get("type");
+  std::string t = type && type->is_string() ? type->as_string() : "";
+  if (!connected) {
+    if (t != "CONNECT") {
+      st->sink->close(1002, "the first frame must be a CONNECT message");
+      return;
+    }
+    std::string token = st->upgrade_token;
+    for (const char* k : {"token", "auth_token"}) {
+      const json::Value* tk = v->get(k);
+      if (tk && tk->is_string() && !tk->as_string().empty()) token = tk->as_string();
+    }
+    auto p = svc.auth.authenticate_token(token, svc.clock.wall_ms() / 1000);
+    if (!p.ok()) {
+      auto e = svc.entry("anonymous", "", "STREAM_REFUSED", "blocked");
+      e.reason = std::string(error_name(p.error().code));
+      e.detail.set("transport", "ws");
+      svc.write_audit(std::move(e));
+      refuse_connect(p.error().message);
+      return;
+    }
+    {
+      std::lock_guard<std::mutex> lock(st->mu);
+      st->connected = true;
+      st->principal = *p;
+    }
+    auto e = svc.entry(p->display(), st->stream_id, "STREAM_OPEN", "ok");
+    e.sub = p->sub;
+    e.detail.set("transport", "ws");
+    svc.write_audit(std::move(e));
+    json::Object ack{{"type", "CONNECT_ACK"},
+                     {"session_id", st->stream_id},
+                     {"server_version", svc.settings.rcan_version},
+                     {"ruri", svc.settings.ruri},
+                     {"role", std::string(role_name(p->role))}};
+    st->sink->send_text(json::dump(json::Value(ack)));
+    return;
+  }
+  if (t == "PING") {
+    json::Object pong{{"type", "PONG"}};
+    const json::Value* id = v->get("msg_id");
+    pong.set("reply_to", id ? *id : json::Value());
+    pong.set("timestamp_us", svc.clock.wall_ms() * 1000);
+    st->sink->send_text(json::dump(json::Value(pong)));
+    return;
+  }
+  if (t == "SUBSCRIBE" || t == "UNSUBSCRIBE") {
+    bool on = t == "SUBSCRIBE";
+    double hz = svc.settings.telemetry_hz;
+    if (const json::Value* h = v->get("hz"); h && h->is_number()) hz = h->to_double();
+    if (!(hz >= 0.2 && hz <= 50)) {
+      st->sink->send_text(json::dump(svc.error(Error(ErrorCode::kSchemaValidationFailed,
+                                                     "hz must be within 0.2..50", "hz"))));
+      return;
+    }
+    {
+      std::lock_guard<std::mutex> lock(st->mu);
+      st->telemetry = on;
+      st->telemetry_period_ms = static_cast<int64_t>(1000.0 / hz);
+      st->next_telemetry_mono = 0;
+    }
+    st->sink->send_text(json::dump(svc.envelope(
+        MessageType::kAck, json::Object{{"subscribed", on}, {"topic", "telemetry"}, {"hz", hz}})));
+    return;
+  }
+  // Everything else is an RCAN message through the pipeline, as this stream's principal.
+  Ingress in;
+  in.body = std::move(v).value();
+  in.transport = "ws";
+  in.route = "/rcan/v1/stream";
+  in.remote = st->sink->remote_addr();
+  {
+    std::lock_guard<std::mutex> lock(st->mu);
+    in.preauthenticated = st->principal;
+  }
+  auto state = st;
+  node.submit(std::move(in), [state](Outcome out) { state->sink->send_text(json::dump(out.body)); });
+}
+
+// ---------------------------------------------------------------------------------------------
+
+Node::Node(NodeServices& services)
+    : svc_(services), pipeline_(services, Pipeline::standard_stages(services)) {
+  event_sub_ = svc_.events.subscribe([this](const json::Value& ev) {
+    std::string text = json::dump(ev);
+    std::vector<std::shared_ptr<StreamState>> copy;
+    {
+      std::lock_guard<std::mutex> lock(streams_mu_);
+      copy = streams_;
+    }
+    for (auto& st : copy) {
+      bool ok;
+      {
+        std::lock_guard<std::mutex> lock(st->mu);
+        ok = st->connected && !st->closed;
+      }
+      if (ok) st->sink->send_text(text);
+    }
+  });
+  svc_.metrics.add_gauge("rcan_estop_active", "1 while ESTOP is latched.",
+                         [this] { return svc_.act.estop_active() ? 1.0 : 0.0; });
+  svc_.metrics.add_gauge("rcan_audit_queue_depth", "Audit records waiting to be durable.",
+                         [this] { return static_cast<double>(svc_.audit_inflight.load()); });
+  svc_.metrics.add_gauge("rcan_audit_available", "0 when the audit log cannot record.",
+                         [this] { return svc_.audit_unavailable.load() ? 0.0 : 1.0; });
+  svc_.metrics.add_counter_fn("rcan_audit_failures_total", "Audit appends that failed.",
+                              [this] { return static_cast<double>(svc_.audit_failures.load()); });
+  svc_.metrics.add_gauge("rcan_streams_open", "Connected WebSocket streams.",
+                         [this] { return static_cast<double>(stream_count()); });
+  svc_.metrics.add_gauge("rcan_control_sessions", "Live control sessions.", [this] {
+    return svc_.sessions.controller(svc_.clock.mono_ms()) ? 1.0 : 0.0;
+  });
+  svc_.metrics.add_gauge("rcan_audit_last_seq", "Last durable audit seq.",
+                         [this] { return static_cast<double>(svc_.audit.stats().last_seq); });
+}
+
+Node::~Node() {
+  shutdown();
+  svc_.events.unsubscribe(event_sub_);
+}
+
+void Node::start() {
+  if (running_.exchange(true)) return;
+  auto e = svc_.entry("system", "", "SYSTEM_START", "ok");
+  e.sender_type = "system";
+  e.detail.set("rcan_version", svc_.settings.rcan_version);
+  e.detail.set("estop_active", svc_.act.estop_active());
+  svc_.write_audit(std::move(e));
+  pump_ = std::thread([this] { pump(); });
+}
+
+void Node::shutdown() {
+  if (!running_.exchange(false)) return;
+  if (pump_.joinable()) pump_.join();
+  std::vector<std::shared_ptr<StreamState>> copy;
+  {
+    std::lock_guard<std::mutex> lock(streams_mu_);
+    copy = streams_;
+  }
+  for (auto& st : copy) st->sink->close(1001, "node shutting down");
+  worker_.shutdown();
+  auto e = svc_.entry("system", "", "SYSTEM_STOP", "ok");
+  e.sender_type = "system";
+  (void)svc_.audit.append(std::move(e));  // blocks until durable: the last word of the run
+}
+
+size_t Node::stream_count() const {
+  std::lock_guard<std::mutex> lock(streams_mu_);
+  return streams_.size();
+}
+
+void Node::register_stream(const std::shared_ptr<StreamState>& st) {
+  std::lock_guard<std::mutex> lock(streams_mu_);
+  streams_.push_back(st);
+}
+
+void Node::unregister_stream(const std::shared_ptr<StreamState>& st) {
+  std::lock_guard<std::mutex> lock(streams_mu_);
+  for (auto it = streams_.begin(); it != streams_.end(); ++it) {
+    if (*it == st) {
+      streams_.erase(it);
+      break;
+    }
+  }
+}
+
+void Node::pump() {
+  // Telemetry at each stream's rate; streams that never CONNECT are closed after 10 s.
+  while (running_.load()) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    int64_t now = svc_.clock.mono_ms();
+    std::vector<std::shared_ptr<StreamState>> copy;
+    {
+      std::lock_guard<std::mutex> lock(streams_mu_);
+      copy = streams_;
+    }
+    std::string telemetry;
+    for (auto& st : copy) {
+      bool send = false, handshake_timeout = false;
+      {
+        std::lock_guard<std::mutex> lock(st->mu);
+        if (!st->connected && now - st->opened_mono > 10'000) handshake_timeout = true;
+        if (st->connected && st->telemetry && now >= st->next_telemetry_mono) {
+          send = true;
+          st->next_telemetry_mono = now + st->telemetry_period_ms;
+        }
+      }
+      if (handshake_timeout) {
+        st->sink->close(1002, "no CONNECT within 10 s");
+        continue;
+      }
+      if (send) {
+        if (telemetry.empty()) {
+          json::Object t{{"type", "STREAM"},
+                         {"topic", "telemetry"},
+                         {"timestamp_ms", svc_.clock.wall_ms()},
+                         {"estop_active", svc_.act.estop_active()},
+                         {"payload", svc_.act.telemetry()}};
+          telemetry = json::dump(json::Value(t));
+        }
+        st->sink->send_text(telemetry);
+      }
+    }
+  }
+}
+
+void Node::on_safety_event(const std::string& type, const std::string& session_id, int64_t elapsed_ms,
+                           const std::string& detail) {
+  auto e = svc_.entry("system", "", type, "ok");
+  e.sender_type = "system";
+  e.reason = type;
+  if (!session_id.empty()) e.detail.set("session_id", session_id);
+  e.detail.set("elapsed_ms", elapsed_ms);
+  if (!detail.empty()) e.detail.set("detail", detail);
+  svc_.write_audit(std::move(e));
+  svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
+                                               {"event", type},
+                                               {"session_id", session_id},
+                                               {"elapsed_ms", elapsed_ms},
+                                               {"timestamp_ms", svc_.clock.wall_ms()}}));
+}
+
+std::unique_ptr<StreamSession> Node::open(const HttpRequest& upgrade, std::shared_ptr<StreamSink> sink,
+                                          HttpResponse& refusal) {
+  if (upgrade.path != "/rcan/v1/stream" && upgrade.path != "/ws/telemetry") {
+    refusal.status = 404;
+    refusal.body = json::dump(svc_.error(Error(ErrorCode::kNotFound, "no stream at " + upgrade.path)));
+    return nullptr;
+  }
+  auto st = std::make_shared<StreamState>();
+  st->sink = std::move(sink);
+  st->stream_id = new_uuid_v4();
+  st->opened_mono = svc_.clock.mono_ms();
+  std::string_view auth = upgrade.header("authorization");
+  if (auth.size() > 7 && (auth.substr(0, 7) == "Bearer " || auth.substr(0, 7) == "bearer "))
+    st->upgrade_token = std::string(auth.substr(7));
+  else if (upgrade.has_query("token"))
+    st->upgrade_token = std::string(upgrade.query_value("token"));
+  if (upgrade.path == "/ws/telemetry") {
+    // v1.1 telemetry socket: the token is in the query; telemetry starts at once.
+    auto p = svc_.auth.authenticate_token(st->upgrade_token, svc_.clock.wall_ms() / 1000);
+    if (!p.ok()) {
+      refusal.status = http_status(p.error().code);
+      refusal.body = json::dump(svc_.error(p.error()));
+      return nullptr;
+    }
+    st->connected = true;
+    st->principal = *p;
+    st->telemetry = true;
+    st->telemetry_period_ms = 1000 / std::max(1, svc_.settings.telemetry_hz);
+  }
+  register_stream(st);
+  return std::make_unique<StreamSessionImpl>(*this, st);
+}
+
+// ---------------------------------------------------------------------------------------------
+// HTTP
+
+void Node::answer_json(Respond& respond, const std::string& route, int status, json::Value body,
+                       std::vector<std::pair<std::string, std::string>> headers) {
+  svc_.metrics.count_request(route, status);
+  HttpResponse r;
+  r.status = status;
+  r.body = json::dump(body);
+  r.headers = std::move(headers);
+  respond(std::move(r));
+}
+
+void Node::answer_error(Respond& respond, const std::string& route, const Error& err) {
+  answer_json(respond, route, http_status(err.code, err.reason), svc_.error(err));
+}
+
+Result<Principal> Node::bearer_principal(const HttpRequest& req) const {
+  std::string_view auth = req.header("authorization");
+  std::string token;
+  if (auth.size() > 7 && (auth.substr(0, 7) == "Bearer " || auth.substr(0, 7) == "bearer "))
+    token = std::string(auth.substr(7));
+  else if (!auth.empty())
+    return Error(ErrorCode::kAuthInvalid, "the Authorization header must be 'Bearer <token>'", "authorization");
+  return svc_.auth.authenticate_token(token, svc_.clock.wall_ms() / 1000);
+}
+
+void Node::handle(HttpRequest req, Respond respond) {
+  route(req, respond);
+}
+
+namespace {
+
+std::string bearer_of(const HttpRequest& req) {
+  std::string_view auth = req.header("authorization");
+  if (auth.size() > 7 && (auth.substr(0, 7) == "Bearer " || auth.substr(0, 7) == "bearer "))
+    return std::string(auth.substr(7));
+  return {};
+}
+
+bool method_is(const HttpRequest& req, std::string_view m) { return req.method == m; }
+
+}  // namespace
+
+void Node::run_pipeline(HttpRequest& req, Respond& respond, const std::string& route, json::Value body) {
+  Ingress in;
+  // The reference client wraps the message: {"session_id": …, "message": {…}}.
+  if (body.is_object() && !body.get("type") && !body.get("cmd") && !body.get("message_type")) {
+    if (const json::Value* inner = body.get("message"); inner && inner->is_object()) {
+      json::Value m = *inner;
+      body = std::move(m);
+    }
+  }
+  in.body = std::move(body);
+  in.bearer = bearer_of(req);
+  in.transport = "http";
+  in.route = route;
+  in.remote = req.remote_addr;
+  std::string r = route;
+  pipeline_.submit(std::move(in), [this, respond, r](Outcome out) mutable {
+    svc_.metrics.count_request(r, out.status);
+    HttpResponse resp;
+    resp.status = out.status;
+    resp.body = json::dump(out.body);
+    resp.headers = std::move(out.headers);
+    respond(std::move(resp));
+  });
+}
+
+void Node::route(HttpRequest& req, Respond& respond) {
+  const std::string& p = req.path;
+  auto parse_body = [&](json::Value& out, bool allow_empty) -> bool {
+    if (req.body.empty() && allow_empty) {
+      out = json::Object{};
+      return true;
+    }
+    json::ParseOptions po;
+    po.max_bytes = svc_.settings.codec.max_body_bytes;
+    po.max_depth = 32;
+    auto v = json::parse(req.body, po);
+    if (!v.ok()) {
+      answer_error(respond, p, v.error());
+      return false;
+    }
+    out = std::move(v).value();
+    return true;
+  };
+  auto wrong_method = [&](const char* allowed) {
+    answer_json(respond, p, 405,
+                svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed on " + p)),
+                {{"Allow", allowed}});
+  };
+
+  if (p == "/healthz") {
+    if (!method_is(req, "GET") && !method_is(req, "HEAD")) return wrong_method("GET");
+    bool ok = !svc_.audit_unavailable.load();
+    return answer_json(respond, p, ok ? 200 : 503,
+                       json::Object{{"status", ok ? "ok" : "degraded"},
+                                    {"estop_active", svc_.act.estop_active()},
+                                    {"audit_available", ok}});
+  }
+  if (p == "/metrics") {
+    if (!method_is(req, "GET")) return wrong_method("GET");
+    svc_.metrics.count_request(p, 200);
+    HttpResponse r;
+    r.content_type = "text/plain; version=0.0.4";
+    r.body = svc_.metrics.render();
+    return respond(std::move(r));
+  }
+  if (p == "/rcan/v1/discover") {
+    if (!method_is(req, "POST")) return wrong_method("POST");
+    json::Value body;
+    if (!parse_body(body, true)) return;
+    std::string reply;
+    if (const json::Value* id = body.get("message_id"); id && id->is_string()) reply = id->as_string().substr(0, 64);
+    return answer_json(respond, p, 200,
+                       svc_.envelope(MessageType::kAnnounce, svc_.discovery_info().as_object(), reply));
+  }
+  if (p == "/api/discovery") {
+    if (!method_is(req, "GET")) return wrong_method("GET");
+    json::Value info = svc_.discovery_info();
+    std::string caps;
+    for (const auto& c : svc_.settings.capabilities) caps += (caps.empty() ? "" : ",") + c;
+    json::Object txt{{"ruri", svc_.settings.ruri},
+                     {"model", svc_.settings.model},
+                     {"caps", caps},
+                     {"roles", "creator,owner,leasee,user,guest"},
+                     {"role", "GUEST"},
+                     {"version", svc_.settings.rcan_version},
+                     {"name", svc_.settings.name},
+                     {"status", svc_.act.estop_active() ? "error" : "idle"}};
+    return answer_json(respond, p, 200, json::Object{{"service_type", "_rcan._tcp"}, {"txt_record", txt}});
+  }
+  if (p == "/rcan/v1/status" || p == "/api/status") {
+    if (!method_is(req, "GET")) return wrong_method("GET");
+    bool detailed = false;
+    if (!req.header("authorization").empty()) {
+      auto pr = bearer_principal(req);
+      if (!pr.ok()) return answer_error(respond, p, pr.error());
+      detailed = true;
+    }
+    return answer_json(respond, p, 200, svc_.status(detailed));
+  }
+  if (p == "/rcan/v1/command" || p == "/api/command") {
+    if (!method_is(req, "POST")) return wrong_method("POST");
+    json::Value body;
+    if (!parse_body(body, false)) return;
+    return run_pipeline(req, respond, p, std::move(body));
+  }
+  if (p == "/api/stop") {
+    if (!method_is(req, "POST")) return wrong_method("POST");
+    json::Value body;
+    if (!parse_body(body, true)) return;
+    // A bare stop request becomes a SAFETY ESTOP message from the caller.
+    if (!body.is_object() || !body.get("type")) {
+      json::Object payload{{"safety_event", "ESTOP"}};
+      if (body.is_object())
+        if (const json::Value* r = body.get("reason"); r && r->is_string()) payload.set("reason", r->as_string());
+      json::Object m{{"version", "1.0.0"},
+                     {"message_id", new_uuid_v4()},
+                     {"type", "SAFETY"},
+                     {"priority", "SAFETY"},
+                     {"timestamp_ms", svc_.clock.wall_ms()},
+                     {"payload", payload}};
+      body = std::move(m);
+    }
+    return run_pipeline(req, respond, p, std::move(body));
+  }
+  if (p == "/rcan/v1/auth/claim") {
+    if (!method_is(req, "POST")) return wrong_method("POST");
+    return claim(req, respond);
+  }
+  if (p == "/rcan/v1/auth/release") {
+    if (!method_is(req, "DELETE") && !method_is(req, "POST")) return wrong_method("DELETE");
+    return release(req, respond);
+  }
+  if (p == "/rcan/v1/handoff") {
+    if (!method_is(req, "POST")) return wrong_method("POST");
+    return handoff(req, respond);
+  }
+  if (p == "/api/audit") {
+    if (!method_is(req, "GET")) return wrong_method("GET");
+    return audit_listing(req, respond);
+  }
+  if (p == "/api/v1/audit") {
+    if (!method_is(req, "GET")) return wrong_method("GET");
+    return audit_export(req, respond);
+  }
+  answer_error(respond, "other", Error(ErrorCode::kNotFound, "no route for " + p.substr(0, 128)));
+}
+
+void Node::claim(HttpRequest& req, Respond& respond) {
+  const std::string route = "/rcan/v1/auth/claim";
+  json::Value body = json::Object{};
+  if (!req.body.empty()) {
+    auto v = json::parse(req.body, {.max_depth = 16, .max_bytes = svc_.settings.codec.max_body_bytes});
+    if (!v.ok()) return answer_error(respond, route, v.error());
+    if (!v->is_object()) return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "Invalid payload"));
+    body = std::move(v).value();
+  }
+  std::string token = bearer_of(req);
+  if (token.empty())
+    if (const json::Value* t = body.get("auth_token"); t && t->is_string()) token = t->as_string();
+  auto pr = svc_.auth.authenticate_token(token, svc_.clock.wall_ms() / 1000);
+  if (!pr.ok()) {
+    auto e = svc_.entry("anonymous", "", "CLAIM_DENIED", "blocked");
+    e.reason = std::string(error_name(pr.error().code));
+    svc_.write_audit(std::move(e));
+    return answer_error(respond, route, pr.error());
+  }
+  std::optional<Role> requested;
+  if (const json::Value* r = body.get("role"); r && r->is_string()) {
+    requested = role_from_name(r->as_string());
+    if (!requested)
+      return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "unknown role", "role"));
+  }
+  if (role_level(pr->role) < role_level(Role::kUser) || !pr->has_scope("control")) {
+    auto e = svc_.entry(pr->display(), "", "CLAIM_DENIED", "blocked");
+    e.sub = pr->sub;
+    e.reason = "INSUFFICIENT_PRIVILEGES";
+    svc_.write_audit(std::move(e));
+    return answer_error(respond, route,
+                        Error(ErrorCode::kInsufficientPrivileges,
+                              std::string(role_name(pr->role)) + " may not claim control (needs USER and scope control)",
+                              "role"));
+  }
+  auto c = svc_.sessions.claim(*pr, requested, svc_.clock.mono_ms(), svc_.clock.wall_ms());
+  if (!c.ok()) {
+    auto e = svc_.entry(pr->display(), "", "CLAIM_DENIED", "blocked");
+    e.sub = pr->sub;
+    e.reason = "CONTROL_CONFLICT";
+    svc_.write_audit(std::move(e));
+    return answer_error(respond, route, c.error());
+  }
+  if (c->preempted) {
+    svc_.act.session_ended(c->preempted->id);
+    svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
+                                                 {"event", "PREEMPTED"},
+                                                 {"session_id", c->preempted->id},
+                                                 {"by_role", std::string(role_name(c->session.role))},
+                                                 {"timestamp_ms", svc_.clock.wall_ms()}}));
+  }
+  svc_.act.session_started(c->session.id, svc_.settings.heartbeat_timeout_ms);
+  auto e = svc_.entry(pr->display(), c->session.id, c->renewed ? "CLAIM_RENEWED" : "CLAIM", "ok");
+  e.sub = pr->sub;
+  if (c->preempted) e.detail.set("preempted_session", c->preempted->id);
+  json::Array caps;
+  for (int i = 0; i < kCapabilityCount; ++i) {
+    auto cap = static_cast<Capability>(i);
+    if (role_allows(c->session.role, cap, svc_.settings.role_policy)) caps.emplace_back(std::string(capability_name(cap)));
+  }
+  json::Object payload{{"session_id", c->session.id},
+                       {"role", std::string(role_name(c->session.role))},
+                       {"capabilities", caps},
+                       {"heartbeat_timeout_ms", svc_.settings.heartbeat_timeout_ms}};
+  if (c->session.expires_mono_ms)
+    payload.set("expires_in", (c->session.expires_mono_ms - svc_.clock.mono_ms()) / 1000);
+  else
+    payload.set("expires_in", json::Value());
+  svc_.write_audit(std::move(e), [this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
+    answer_json(respond, route, 200, svc_.envelope(MessageType::kGranted, payload));
+  });
+}
+
+void Node::release(HttpRequest& req, Respond& respond) {
+  const std::string route = "/rcan/v1/auth/release";
+  auto pr = bearer_principal(req);
+  if (!pr.ok()) return answer_error(respond, route, pr.error());
+  auto v = json::parse(req.body.empty() ? "{}" : req.body, {.max_depth = 16, .max_bytes = 65536});
+  if (!v.ok()) return answer_error(respond, route, v.error());
+  const json::Value* sid = v->get("session_id");
+  std::string session_id;
+  if (sid && sid->is_string()) session_id = sid->as_string();
+  if (session_id.empty()) {
+    auto holder = svc_.sessions.controller(svc_.clock.mono_ms());
+    if (holder && holder->principal_key == pr->key()) session_id = holder->id;
+  }
+  if (session_id.empty())
+    return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "session_id is required", "session_id", "missing_field"));
+  auto r = svc_.sessions.release(session_id, *pr, svc_.clock.mono_ms());
+  if (!r.ok()) return answer_error(respond, route, r.error());
+  svc_.act.session_ended(session_id);
+  svc_.events.publish(json::Value(json::Object{{"type", "AVAILABLE"},
+                                               {"released_session", session_id},
+                                               {"window_ms", svc_.settings.handoff_window_ms},
+                                               {"timestamp_ms", svc_.clock.wall_ms()}}));
+  auto e = svc_.entry(pr->display(), session_id, "RELEASE", "ok");
+  e.sub = pr->sub;
+  svc_.write_audit(std::move(e), [this, respond, route, session_id](rcan::Result<audit::Receipt>) mutable {
+    answer_json(respond, route, 200,
+                svc_.envelope(MessageType::kReleased, json::Object{{"session_id", session_id}}));
+  });
+}
+
+void Node::handoff(HttpRequest& req, Respond& respond) {
+  const std::string route = "/rcan/v1/handoff";
+  auto pr = bearer_principal(req);
+  if (!pr.ok()) return answer_error(respond, route, pr.error());
+  // Named handoff with a reserved window is part of the sessions work; refuse honestly.
+  answer_error(respond, route,
+               Error(ErrorCode::kNotImplemented, "named handoff is not implemented yet; release and claim instead"));
+}
+
+void Node::audit_listing(HttpRequest& req, Respond& respond) {
+  const std::string route = "/api/audit";
+  auto pr = bearer_principal(req);
+  if (!pr.ok()) return answer_error(respond, route, pr.error());
+  size_t limit = svc_.settings.audit_listing;
+  if (req.has_query("limit")) {
+    char* end = nullptr;
+    std::string s(req.query_value("limit"));
+    long v = std::strtol(s.c_str(), &end, 10);
+    if (!end || *end || v < 1 || v > 1000)
+      return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "limit must be 1..1000", "limit"));
+    limit = static_cast<size_t>(v);
+  }
+  bool posted = worker_.post([this, respond, route, limit]() mutable {
+    audit::AuditStats st = svc_.audit.stats();
+    json::Array entries;
+    uint64_t first = st.last_seq >= limit ? st.last_seq - limit + 1 : 1;
+    if (first < st.first_seq) first = st.first_seq;
+    for (uint64_t seq = first; seq <= st.last_seq && seq != 0; ++seq) {
+      auto line = svc_.audit.get(seq);
+      if (!line.ok()) continue;
+      auto v = json::parse(*line, {.max_depth = 64, .max_bytes = 1u << 20});
+      if (v.ok()) entries.push_back(std::move(v).value());
+    }
+    answer_json(respond, route, 200,
+                json::Object{{"entries", entries}, {"count", static_cast<int64_t>(entries.size())},
+                             {"last_seq", static_cast<int64_t>(st.last_seq)}});
+  });
+  if (!posted) answer_error(respond, route, Error(ErrorCode::kSafeStop, "busy; try again"));
+}
+
+void Node::audit_export(HttpRequest& req, Respond& respond) {
+  const std::string route = "/api/v1/audit";
+  auto pr = bearer_principal(req);
+  if (!pr.ok()) return answer_error(respond, route, pr.error());
+  if (role_level(pr->role) < role_level(Role::kOwner) || !pr->has_scope("config"))
+    return answer_error(respond, route,
+                        Error(ErrorCode::kInsufficientPrivileges, "audit export needs OWNER and scope config", "scope"));
+  auto parse_time = [&](std::string_view name, int64_t def, int64_t& out) -> bool {
+    if (!req.has_query(name)) {
+      out = def;
+      return true;
+    }
+    std::string s(req.query_value(name));
+    char* end = nullptr;
+    long long v = std::strtoll(s.c_str(), &end, 10);
+    if (s.empty() || !end || *end || v < 0) return false;
+    out = v < 100'000'000'000LL ? v * 1000 : v;  // seconds or milliseconds
+    return true;
+  };
+  int64_t from = 0, to = 0;
+  if (!parse_time("from", 0, from) || !parse_time("to", INT64_MAX / 2, to))
+    return answer_error(respond, route,
+                        Error(ErrorCode::kSchemaValidationFailed, "from/to must be Unix seconds or milliseconds", "from"));
+  std::string format = req.has_query("format") ? std::string(req.query_value("format")) : "jsonl";
+  if (format != "jsonl")
+    return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "format must be jsonl", "format"));
+  bool posted = worker_.post([this, respond, route, from, to]() mutable {
+    auto text = svc_.audit.export_jsonl(from, to);
+    if (!text.ok()) return answer_error(respond, route, text.error());
+    svc_.metrics.count_request(route, 200);
+    HttpResponse r;
+    r.content_type = "application/x-ndjson";
+    r.body = std::move(text).value();
+    respond(std::move(r));
+  });
+  if (!posted) answer_error(respond, route, Error(ErrorCode::kSafeStop, "busy; try again"));
+}
+
+}  // namespace rcan::node

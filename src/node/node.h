@@ -1,0 +1,78 @@
+// Node — the robot node's front door: HTTP routes and the WebSocket stream binding, all
+// feeding the one Pipeline (docs/NODE.md). It implements the transport interface
+// (http_api.h) and owns the pipeline, the stream registry and the telemetry pump.
+#pragma once
+
+#include <atomic>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "node/http_api.h"
+#include "node/pipeline.h"
+#include "node/services.h"
+#include "node/worker.h"
+
+namespace rcan::node {
+
+struct StreamState;
+
+class Node final : public HttpHandler, public StreamHandler {
+ public:
+  // `services` must outlive the node.
+  explicit Node(NodeServices& services);
+  ~Node() override;
+  Node(const Node&) = delete;
+  Node& operator=(const Node&) = delete;
+
+  // Starts the telemetry pump and writes the SYSTEM_START audit record.
+  void start();
+  // Stops the pump, closes streams (1001) and writes SYSTEM_STOP (waits for it).
+  void shutdown();
+
+  void handle(HttpRequest req, Respond respond) override;
+  std::unique_ptr<StreamSession> open(const HttpRequest& upgrade, std::shared_ptr<StreamSink> sink,
+                                      HttpResponse& refusal) override;
+
+  // Runs a message through the pipeline as if it came from `transport` (used by streams and
+  // tests).
+  void submit(Ingress in, std::function<void(Outcome)> done) { pipeline_.submit(std::move(in), std::move(done)); }
+
+  NodeServices& services() { return svc_; }
+  size_t stream_count() const;
+
+  // Called by the safety core's event callback (deadman, watchdog): audit + notify streams.
+  void on_safety_event(const std::string& type, const std::string& session_id, int64_t elapsed_ms,
+                       const std::string& detail);
+
+ private:
+  friend struct StreamSessionImpl;
+  void route(HttpRequest& req, Respond& respond);
+  void answer_json(Respond& respond, const std::string& route, int status, json::Value body,
+                   std::vector<std::pair<std::string, std::string>> headers = {});
+  void answer_error(Respond& respond, const std::string& route, const Error& err);
+  void run_pipeline(HttpRequest& req, Respond& respond, const std::string& route, json::Value body);
+  void claim(HttpRequest& req, Respond& respond);
+  void release(HttpRequest& req, Respond& respond);
+  void handoff(HttpRequest& req, Respond& respond);
+  void audit_listing(HttpRequest& req, Respond& respond);
+  void audit_export(HttpRequest& req, Respond& respond);
+  Result<Principal> bearer_principal(const HttpRequest& req) const;
+  void pump();
+  void stream_text(const std::shared_ptr<StreamState>& st, std::string text);
+  void register_stream(const std::shared_ptr<StreamState>& st);
+  void unregister_stream(const std::shared_ptr<StreamState>& st);
+
+  NodeServices& svc_;
+  Pipeline pipeline_;
+  Worker worker_{1};
+  mutable std::mutex streams_mu_;
+  std::vector<std::shared_ptr<StreamState>> streams_;
+  std::atomic<bool> running_{false};
+  std::thread pump_;
+  uint64_t event_sub_ = 0;
+};
+
+}  // namespace rcan::node

@@ -1,0 +1,104 @@
+// The one dispatch pipeline. Every route and transport turns its input into an Ingress and
+// calls Pipeline::submit(); nothing else authorises, audits or dispatches.
+//
+// A pipeline is an ordered list of Stages (in the spirit of Envoy's filters). Each stage
+// receives the Context and returns:
+//   kContinue — pass it to the next stage;
+//   kAnswered — the stage refused (ctx.fail) or answered the message itself;
+//   kParked   — the stage took ownership and will finish the context later (audit
+//               durability, a HiTL decision); it must eventually call ctx.finish().
+// Whatever happens, the context is finished exactly once and writes exactly one audit record
+// (refusals: the record is written by Pipeline::refuse; acceptances: by the dispatch stage).
+//
+// Order (docs/NODE.md): shape → token → decode → version → replay → authentication →
+// role/scope → rate limit → safety state → injection screen → gates → audit → dispatch.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "node/auth.h"
+#include "rcan/json.h"
+#include "rcan/message.h"
+#include "rcan/roles.h"
+
+namespace rcan::node {
+
+class NodeServices;
+
+// What a transport hands to the pipeline.
+struct Ingress {
+  json::Value body;        // parsed JSON (the transport parsed it with its limits)
+  std::string bearer;      // token from the Authorization header or the stream's CONNECT
+  std::string transport;   // "http", "ws"
+  std::string route;       // e.g. "/rcan/v1/command"
+  std::string remote;      // peer address, for logs
+  std::optional<Principal> preauthenticated;  // a stream authenticated at CONNECT
+  std::string stream_session;                 // the control session a stream holds, if any
+};
+
+// What the pipeline answers.
+struct Outcome {
+  int status = 200;
+  json::Value body;
+  std::vector<std::pair<std::string, std::string>> headers;
+};
+
+enum class SafetyAction { kNone, kEstop, kStop, kResume };
+
+struct Context {
+  Ingress in;
+  std::optional<Message> msg;
+  Principal principal;
+  SignatureCheck sig;
+  SenderIdentity sender;
+  SafetyAction safety = SafetyAction::kNone;
+  std::optional<Capability> capability;
+  std::string event = "COMMAND";  // audit event for acceptance
+  json::Object audit_detail;
+  std::string session_id;           // control session the command runs under
+  int64_t started_mono_us = 0;
+  std::function<void(Outcome)> done;
+
+  // Finishes with `out` (once; later calls are ignored).
+  void finish(Outcome out);
+  bool finished() const { return finished_; }
+
+ private:
+  bool finished_ = false;
+};
+
+class Stage {
+ public:
+  enum class Result { kContinue, kAnswered, kParked };
+  virtual ~Stage() = default;
+  virtual const char* name() const = 0;
+  virtual Result run(const std::shared_ptr<Context>& ctx) = 0;
+};
+
+class Pipeline {
+ public:
+  Pipeline(NodeServices& services, std::vector<std::unique_ptr<Stage>> stages);
+  // Runs the stages; `done` is called exactly once, possibly on another thread.
+  void submit(Ingress in, std::function<void(Outcome)> done);
+
+  // The standard stage list.
+  static std::vector<std::unique_ptr<Stage>> standard_stages(NodeServices& services);
+
+ private:
+  NodeServices& svc_;
+  std::vector<std::unique_ptr<Stage>> stages_;
+};
+
+// Refuses a context: answers the error body with its HTTP status and writes the audit
+// record (event, outcome "blocked"/"error"). Used by every stage.
+void refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, const Error& err,
+            const std::string& audit_event = {});
+
+}  // namespace rcan::node

@@ -1,0 +1,39 @@
+// RateLimiter — per-principal command budgets (docs/PROTOCOL.md §Roles): a token bucket per
+// principal holding `per_minute` tokens, refilled continuously on the monotonic clock.
+// SAFETY messages never reach it. Idle buckets are dropped so memory stays bounded.
+#pragma once
+
+#include <cstdint>
+#include <mutex>
+#include <string>
+#include <unordered_map>
+
+namespace rcan::node {
+
+class RateLimiter {
+ public:
+  explicit RateLimiter(size_t max_principals = 100'000) : max_principals_(max_principals) {}
+
+  struct Decision {
+    bool allowed = true;
+    int64_t retry_after_ms = 0;  // when refused: until one token is back
+  };
+  // `per_minute` 0 = unlimited.
+  Decision take(const std::string& principal, uint32_t per_minute, int64_t now_mono_ms);
+  size_t tracked() const;
+
+ private:
+  struct Bucket {
+    double tokens;
+    int64_t last_ms;
+    uint32_t per_minute;
+  };
+  void sweep(int64_t now_mono_ms);
+
+  size_t max_principals_;
+  mutable std::mutex mu_;
+  std::unordered_map<std::string, Bucket> buckets_;
+  int64_t last_sweep_ms_ = 0;
+};
+
+}  // namespace rcan::node

@@ -1,0 +1,89 @@
+// NodeServices — everything the pipeline stages and routes share: settings, clock,
+// authenticator, replay guard, rate limiter, injection screen, the safety core (through
+// Actuation), the audit log, control sessions, the event bus and metrics.
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "node/actuation.h"
+#include "node/auth.h"
+#include "node/clock.h"
+#include "node/events.h"
+#include "node/injection.h"
+#include "node/metrics.h"
+#include "node/rate_limit.h"
+#include "node/replay.h"
+#include "node/sessions.h"
+#include "rcan/audit/audit_log.h"
+#include "rcan/message.h"
+#include "rcan/roles.h"
+
+namespace rcan::node {
+
+struct NodeSettings {
+  std::string ruri;  // canonical robot RURI (identity, no capability)
+  std::string rrn;
+  std::string name = "rcan-robot";
+  std::string manufacturer;
+  std::string model;
+  std::vector<std::string> capabilities{"status", "chat", "teleop", "nav", "arm"};
+  uint16_t port = 8080;
+  std::string rcan_version = "1.0.0";
+  std::vector<std::string> extensions{"8.5-sender-type", "16-ai-accountability", "16.6-watermark",
+                                      "replay-window"};
+  RolePolicy role_policy;
+  // Per-role rate limits per minute, indexed by role level (0 unused); 0 = unlimited.
+  std::array<uint32_t, 6> rate_per_minute{0, 10, 100, 500, 1000, 0};
+  ReplayOptions replay;
+  std::vector<std::string> injection_patterns = InjectionScreen::default_patterns();
+  int64_t heartbeat_timeout_ms = 2000;
+  int64_t default_ttl_ms = 0;  // applied to commands that carry none (0 = none)
+  CodecLimits codec;
+  int telemetry_hz = 5;
+  size_t audit_listing = 50;  // entries in GET /api/audit
+  int64_t handoff_window_ms = 30'000;
+};
+
+class NodeServices {
+ public:
+  NodeServices(NodeSettings settings, Clock& clock, AuthOptions auth, Actuation& actuation,
+               audit::AuditLog& audit);
+
+  NodeSettings settings;
+  Clock& clock;
+  Authenticator auth;
+  ReplayGuard replay;
+  RateLimiter rate;
+  InjectionScreen injection;
+  Actuation& act;
+  audit::AuditLog& audit;
+  SessionTable sessions;
+  EventBus events;
+  Metrics metrics;
+  std::atomic<uint64_t> audit_inflight{0};
+  std::atomic<uint64_t> audit_failures{0};
+  std::atomic<bool> audit_unavailable{false};
+
+  // An audit entry pre-filled with the robot, time, principal and sender identity.
+  audit::AuditEntry entry(const std::string& principal, const std::string& message_id,
+                          const std::string& event, const std::string& outcome) const;
+  // Appends asynchronously; `cb` (optional) runs once the record is durable or failed.
+  void write_audit(audit::AuditEntry e, std::function<void(Result<audit::Receipt>)> cb = {});
+
+  uint32_t rate_limit(Role r) const { return settings.rate_per_minute[static_cast<size_t>(role_level(r))]; }
+
+  json::Value discovery_info() const;
+  json::Value status(bool detailed);
+  // A fresh message envelope from the node (type, payload), seed shape.
+  json::Value envelope(MessageType type, json::Object payload, const std::string& reply_to = {}) const;
+  // The profile's error body with the node's clock.
+  json::Value error(const Error& err, const std::string& reply_to = {}) const;
+};
+
+}  // namespace rcan::node
