@@ -46,6 +46,15 @@ struct Pending {
   Receipt receipt;
 };
 
+// Records written by one group commit, waiting for the fdatasync that covers them.
+struct Ticket {
+  std::vector<Pending> items;
+  std::vector<IndexEntry> index;
+  uint64_t end_offset = 0;
+  uint64_t last_seq = 0;
+  std::string last_hash;
+};
+
 IndexEntry make_entry(uint64_t seq, uint64_t offset, uint64_t len, int64_t ts,
                       const std::string& mid, const std::optional<std::string>& wm) {
   IndexEntry e;
@@ -77,6 +86,14 @@ class AuditLog::Impl {
       }
       cv_.notify_all();
       writer_.join();
+    }
+    if (syncer_.joinable()) {
+      {
+        std::lock_guard<std::mutex> l(sync_mu_);
+        sync_stop_ = true;
+      }
+      sync_cv_.notify_all();
+      syncer_.join();
     }
     if (indexer_.joinable()) indexer_.join();
     if (preallocer_.joinable()) preallocer_.join();
@@ -120,6 +137,10 @@ class AuditLog::Impl {
   Status rotate();
   Status apply_retention();
   void writer_loop();
+  void syncer_loop();
+  void wait_synced();
+  void sync_and_ack(std::vector<Ticket>& tickets);
+  void set_failed(const std::string& why);
   void fail_all(std::vector<Pending>& items, const Error& err);
   Snapshot snapshot() const;
   Result<std::string> read_line(uint64_t seg_id, const IndexEntry& e) const;
@@ -140,7 +161,7 @@ class AuditLog::Impl {
   uint64_t next_seq_ = 1;
   std::string last_hash_;
   uint64_t active_bytes_ = 0;
-  int64_t last_sync_ms_ = 0;
+  std::atomic<int64_t> last_sync_ms_{0};
   std::atomic<uint64_t> groups_{0};
   std::atomic<uint64_t> syncs_{0};
 
@@ -152,6 +173,13 @@ class AuditLog::Impl {
   std::atomic<bool> failed_{false};
   Error fail_error_;
   std::thread writer_;
+  // Pipelined sync (background work on): tickets written by the writer, synced here.
+  std::mutex sync_mu_;
+  std::condition_variable sync_cv_;
+  std::vector<Ticket> tickets_;
+  bool sync_busy_ = false;
+  bool sync_stop_ = false;
+  std::thread syncer_;
   std::thread indexer_;
   std::thread preallocer_;
   std::atomic<bool> spare_ready_{false};
@@ -228,6 +256,7 @@ Status AuditLog::Impl::open() {
   }
   opened_ = true;
   prepare_spare();
+  if (opts_.background_index) syncer_ = std::thread([this] { syncer_loop(); });
   writer_ = std::thread([this] { writer_loop(); });
   return Status::Ok();
 }
@@ -557,119 +586,146 @@ void AuditLog::Impl::fail_all(std::vector<Pending>& items, const Error& err) {
   items.clear();
 }
 
+void AuditLog::Impl::set_failed(const std::string& why) {
+  std::lock_guard<std::mutex> l(mu_);
+  if (!failed_.load()) {
+    fail_error_ = unavailable("audit log failed: " + why);
+    failed_.store(true);
+  }
+}
+
+// Makes tickets durable with one fdatasync, publishes them to readers, acknowledges.
+void AuditLog::Impl::sync_and_ack(std::vector<Ticket>& tickets) {
+  if (tickets.empty()) return;
+  Status s;
+  if (!failed_.load()) {
+    s = file_->sync();
+    last_sync_ms_ = env_->now_ms();
+    ++syncs_;
+    if (!s.ok()) set_failed(s.error().message);
+  }
+  if (failed_.load()) {
+    for (auto& t : tickets) fail_all(t.items, fail_error_);
+    tickets.clear();
+    return;
+  }
+  {
+    std::lock_guard<std::mutex> l(state_mu_);
+    for (auto& t : tickets) active_index_.insert(active_index_.end(), t.index.begin(), t.index.end());
+    durable_offset_ = tickets.back().end_offset;
+    durable_seq_ = tickets.back().last_seq;
+    durable_hash_ = tickets.back().last_hash;
+  }
+  for (auto& t : tickets)
+    for (auto& p : t.items) p.done(std::move(p.receipt));
+  tickets.clear();
+}
+
+// The writer: seals records in arrival order and writes each group with one write().
+// With background work on, a separate syncer thread runs the fdatasync of group N while
+// the writer seals and writes group N+1 (both only ever append; acks follow the sync).
 void AuditLog::Impl::writer_loop() {
   std::vector<Pending> batch;
-  std::vector<Pending> awaiting;  // written, waiting for the covering sync
-  std::vector<IndexEntry> unsynced_idx;
   std::string buf;
+  const bool pipelined = opts_.background_index;
   for (;;) {
     bool stopping = false;
     {
       std::unique_lock<std::mutex> l(mu_);
-      for (;;) {
-        if (!queue_.empty() || stop_) break;
-        if (!awaiting.empty()) {
-          auto deadline = std::chrono::steady_clock::now() +
-                          std::chrono::milliseconds(std::max(0, opts_.sync_interval_ms));
-          if (cv_.wait_until(l, deadline) == std::cv_status::timeout) break;
-        } else {
-          cv_.wait(l);
-        }
-      }
+      cv_.wait(l, [&] { return !queue_.empty() || stop_; });
       stopping = stop_;
       size_t n = std::min(queue_.size(), opts_.max_group_records);
       for (size_t i = 0; i < n; ++i) {
         batch.push_back(std::move(queue_.front()));
         queue_.pop_front();
       }
-      if (stopping && queue_.empty() && batch.empty() && awaiting.empty()) return;
     }
+    if (batch.empty() && stopping) break;
     if (failed_.load()) {
       fail_all(batch, fail_error_);
-      fail_all(awaiting, fail_error_);
-      if (stopping) {
-        std::lock_guard<std::mutex> l(mu_);
-        if (queue_.empty()) return;
-      }
       continue;
     }
-    Status s;
-    if (!batch.empty()) {
-      buf.clear();
-      for (auto& p : batch) {
-        SealedRecord r = internal::seal_prepared(p.prep, next_seq_, last_hash_, *hasher_);
-        IndexEntry e;
-        e.seq = r.seq;
-        e.offset = active_bytes_ + buf.size();
-        e.len = r.line.size();
-        e.ts = p.ts;
-        e.mid_hash = p.mid_hash;
-        e.wm_hash = p.wm_hash;
-        e.has_wm = p.has_wm;
-        unsynced_idx.push_back(e);
-        p.receipt.seq = r.seq;
-        p.receipt.timestamp_ms = p.ts;
-        p.receipt.hmac = std::move(r.hmac);
-        p.receipt.record_hash = r.record_hash;
-        buf += r.line;
-        buf += '\n';
-        ++next_seq_;
-        last_hash_ = std::move(r.record_hash);
-      }
-      s = file_->append(buf);
-      if (s.ok()) active_bytes_ += buf.size();
-      for (auto& p : batch) awaiting.push_back(std::move(p));
-      batch.clear();
-      ++groups_;
+    Ticket t;
+    buf.clear();
+    for (auto& p : batch) {
+      SealedRecord r = internal::seal_prepared(p.prep, next_seq_, last_hash_, *hasher_);
+      IndexEntry e;
+      e.seq = r.seq;
+      e.offset = active_bytes_ + buf.size();
+      e.len = r.line.size();
+      e.ts = p.ts;
+      e.mid_hash = p.mid_hash;
+      e.wm_hash = p.wm_hash;
+      e.has_wm = p.has_wm;
+      t.index.push_back(e);
+      p.receipt.seq = r.seq;
+      p.receipt.timestamp_ms = p.ts;
+      p.receipt.hmac = std::move(r.hmac);
+      p.receipt.record_hash = r.record_hash;
+      buf += r.line;
+      buf += '\n';
+      ++next_seq_;
+      last_hash_ = std::move(r.record_hash);
     }
-    bool do_sync = false;
-    if (s.ok() && !awaiting.empty()) {
-      int64_t now = env_->now_ms();
-      do_sync = opts_.sync_policy == SyncPolicy::kPerGroup || stopping ||
-                now - last_sync_ms_ >= opts_.sync_interval_ms;
-      {
-        // Interval policy: keep collecting while more work is queued and time remains.
-        std::lock_guard<std::mutex> l(mu_);
-        if (opts_.sync_policy == SyncPolicy::kInterval && !queue_.empty() && !stopping &&
-            now - last_sync_ms_ < opts_.sync_interval_ms)
-          do_sync = false;
-      }
-      if (do_sync) {
-        s = file_->sync();
-        last_sync_ms_ = env_->now_ms();
-        ++syncs_;
-      }
-    }
+    Status s = file_->append(buf);
+    ++groups_;
     if (!s.ok()) {
-      {
-        std::lock_guard<std::mutex> l(mu_);
-        fail_error_ = unavailable("audit log failed: " + s.error().message);
-        failed_.store(true);
-      }
-      fail_all(awaiting, fail_error_);
-      unsynced_idx.clear();
+      set_failed(s.error().message);
+      fail_all(batch, fail_error_);
       continue;
     }
-    if (do_sync) {
+    active_bytes_ += buf.size();
+    t.items = std::move(batch);
+    batch.clear();
+    t.end_offset = active_bytes_;
+    t.last_seq = next_seq_ - 1;
+    t.last_hash = last_hash_;
+    if (pipelined) {
       {
-        std::lock_guard<std::mutex> l(state_mu_);
-        active_index_.insert(active_index_.end(), unsynced_idx.begin(), unsynced_idx.end());
-        durable_offset_ = active_bytes_;
-        durable_seq_ = next_seq_ - 1;
-        durable_hash_ = last_hash_;
+        std::lock_guard<std::mutex> l(sync_mu_);
+        tickets_.push_back(std::move(t));
       }
-      unsynced_idx.clear();
-      for (auto& p : awaiting) p.done(std::move(p.receipt));
-      awaiting.clear();
-      if (active_bytes_ >= opts_.max_segment_bytes) {
+      sync_cv_.notify_one();
+    } else {
+      std::vector<Ticket> one;
+      one.push_back(std::move(t));
+      sync_and_ack(one);
+    }
+    if (active_bytes_ >= opts_.max_segment_bytes) {
+      if (pipelined) wait_synced();
+      if (!failed_.load()) {
         Status r = rotate();
-        if (!r.ok()) {
-          std::lock_guard<std::mutex> l(mu_);
-          fail_error_ = unavailable("audit log failed during rotation: " + r.error().message);
-          failed_.store(true);
-        }
+        if (!r.ok()) set_failed("rotation: " + r.error().message);
       }
     }
+  }
+  if (pipelined) wait_synced();
+}
+
+void AuditLog::Impl::wait_synced() {
+  std::unique_lock<std::mutex> l(sync_mu_);
+  sync_cv_.wait(l, [&] { return tickets_.empty() && !sync_busy_; });
+}
+
+void AuditLog::Impl::syncer_loop() {
+  std::vector<Ticket> mine;
+  for (;;) {
+    {
+      std::unique_lock<std::mutex> l(sync_mu_);
+      sync_busy_ = false;
+      sync_cv_.notify_all();  // wakes wait_synced()
+      sync_cv_.wait(l, [&] { return !tickets_.empty() || sync_stop_; });
+      if (tickets_.empty() && sync_stop_) return;
+      if (opts_.sync_policy == SyncPolicy::kInterval && !sync_stop_) {
+        // Let more groups join until the interval since the last sync has passed.
+        auto wait_ms = opts_.sync_interval_ms - (env_->now_ms() - last_sync_ms_);
+        if (wait_ms > 0)
+          sync_cv_.wait_for(l, std::chrono::milliseconds(wait_ms), [&] { return sync_stop_; });
+      }
+      mine.swap(tickets_);
+      sync_busy_ = true;
+    }
+    sync_and_ack(mine);
   }
 }
 

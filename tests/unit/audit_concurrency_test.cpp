@@ -103,6 +103,24 @@ TEST(AuditConcurrency, AsyncAppendsAreAcknowledgedInSeqOrder) {
   for (size_t i = 1; i < order.size(); ++i) EXPECT_EQ(order[i], order[i - 1] + 1);
 }
 
+TEST(AuditConcurrency, IntervalSyncPolicyAcknowledgesAfterSync) {
+  TempDir tmp;
+  AuditOptions o = options(32 * 1024);
+  o.sync_policy = SyncPolicy::kInterval;
+  o.sync_interval_ms = 3;
+  auto opened = AuditLog::open(tmp.path() + "/log", o);
+  ASSERT_TRUE(opened.ok());
+  std::vector<std::thread> ts;
+  for (int t = 0; t < 4; ++t)
+    ts.emplace_back([&, t] {
+      for (int i = 0; i < 200; ++i) ASSERT_TRUE((*opened)->append(entry(t * 1000 + i)).ok());
+    });
+  for (auto& t : ts) t.join();
+  auto st = (*opened)->stats();
+  EXPECT_EQ(st.last_seq, 801u + (st.segments - 1));  // 800 + genesis + one checkpoint per rotation
+  EXPECT_TRUE(verify_jsonl(join(export_lines(**opened)), kSecret).ok);
+}
+
 // The child appends from 4 threads and reports each acknowledged seq on a pipe; the
 // parent SIGKILLs it at some instant, then reopens the log.
 void kill_child_and_check(int delay_ms) {
