@@ -579,16 +579,10 @@ Result<ActuatorCommand> SafetyCore::limit_command(const ActuatorCommand& cmd, Li
   return a;
 }
 
-Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd, const DispatchOptions& opts) {
+Result<DispatchOutcome> SafetyCore::precheck(const ActuatorCommand& cmd, const DispatchOptions& opts,
+                                             int64_t now) const {
   DispatchOutcome out;
   if (cmd.stop) {
-    // A stop is always allowed, latched or not, stale or not.
-    driver_->stop();
-    {
-      std::lock_guard<std::mutex> lock(apply_mu_);
-      driver_->stop();
-      drive_deadline_mono_ = 0;
-    }
     out.applied = ActuatorCommand::make_stop();
     return out;
   }
@@ -597,7 +591,6 @@ Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd, const D
   if (latched_.load(std::memory_order_acquire))
     return Error(ErrorCode::kCommandRejected, "ESTOP is latched; an explicit RESUME is required", "",
                  "estop_active");
-  const int64_t now = clock_.mono_ms();
   if (opts.deadline_mono_ms > 0 && now > opts.deadline_mono_ms)
     return Error(ErrorCode::kMessageStale,
                  "command expired " + std::to_string(now - opts.deadline_mono_ms) + " ms before dispatch", "",
@@ -611,7 +604,6 @@ Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd, const D
                    "heartbeat_lost");
     }
   }
-
   RobotState snapshot;
   {
     std::lock_guard<std::mutex> lock(apply_mu_);
@@ -620,6 +612,30 @@ Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd, const D
   auto limited = limit_command(cmd, opts.policy.value_or(cfg_.policy), snapshot, out);
   if (!limited.ok()) return std::move(limited).error();
   out.applied = std::move(limited).value();
+  return out;
+}
+
+Result<DispatchOutcome> SafetyCore::check(const ActuatorCommand& cmd, const DispatchOptions& opts) const {
+  return precheck(cmd, opts, clock_.mono_ms());
+}
+
+Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd, const DispatchOptions& opts) {
+  if (cmd.stop) {
+    // A stop is always allowed, latched or not, stale or not.
+    driver_->stop();
+    {
+      std::lock_guard<std::mutex> lock(apply_mu_);
+      driver_->stop();
+      drive_deadline_mono_ = 0;
+    }
+    DispatchOutcome out;
+    out.applied = ActuatorCommand::make_stop();
+    return out;
+  }
+  const int64_t now = clock_.mono_ms();
+  auto pre = precheck(cmd, opts, now);
+  if (!pre.ok()) return pre;
+  DispatchOutcome out = std::move(pre).value();
 
   {
     std::lock_guard<std::mutex> lock(apply_mu_);
@@ -752,7 +768,7 @@ void SafetyCore::tick() {
       const double py = st.y + dist * std::sin(st.theta);
       const double here = outside_distance(ws, st.x, st.y);
       const double ahead = outside_distance(ws, px, py);
-      if (ahead > 0.01 && ahead > here) {
+      if (ahead > 1e-3 && ahead > here) {
         driver_->stop();
         drive_deadline_mono_ = 0;
         events.push_back(make_event("WORKSPACE_SAFE_STOP", 0, 0, "the base was about to leave the workspace"));

@@ -198,6 +198,10 @@ class SafetyCore {
   uint64_t state_seq() const;
 
   Result<DispatchOutcome> dispatch(const ActuatorCommand& cmd, const DispatchOptions& opts = {});
+  // Dry run: every refusal dispatch() would give right now (latch, deadline, lost heartbeat,
+  // limits) and the command it would apply, without touching the driver. A later dispatch()
+  // re-checks everything (the state may have changed in between).
+  Result<DispatchOutcome> check(const ActuatorCommand& cmd, const DispatchOptions& opts = {}) const;
 
   // Deadman. timeout_ms <= 0 → SafetyConfig::default_heartbeat_ms. Registering an existing
   // session refreshes it.
@@ -234,6 +238,8 @@ class SafetyCore {
     int64_t since_wall_ms = 0;
   };
 
+  Result<DispatchOutcome> precheck(const ActuatorCommand& cmd, const DispatchOptions& opts,
+                                   int64_t now) const;
   Result<ActuatorCommand> limit_command(const ActuatorCommand& cmd, LimitPolicy policy,
                                         const RobotState& now, DispatchOutcome& out) const;
   void enter_safe_stop(std::string reason, std::string session);

@@ -11,7 +11,10 @@ namespace {
 
 constexpr int64_t kSubStepMs = 5;
 
+// Moves `current` toward `target` by at most `max_delta`; snaps onto the target when the
+// remaining gap is within rounding of max_delta (sums of sub-steps are not exact in binary).
 double approach(double current, double target, double max_delta) {
+  if (std::abs(target - current) <= max_delta * (1.0 + 1e-9) + 1e-12) return target;
   if (target > current) return std::min(target, current + max_delta);
   return std::max(target, current - max_delta);
 }
