@@ -1,0 +1,1019 @@
+// HttpServer: Boost.Beast HTTP/1.1 + WebSocket over one io_context.
+//
+// Shape (Beast's advanced server, with C++20 coroutines):
+//   Impl::accept_loop      accepts; over max_connections → reject() writes 503 and closes
+//   Conn<Stream>::serve    per connection, on its own strand:
+//                            [TLS handshake] → loop { idle wait → serve_one() } → close
+//   Conn<Stream>::serve_one  read one request under the read deadline → limits/errors →
+//                            handler → wait for respond() → write → keep-alive?
+//   Conn<Stream>::serve_websocket  node's open() → accept → read loop; pump() writes the
+//                            sink's queue, then the close frame
+// Stream is beast::tcp_stream or beast::ssl_stream<beast::tcp_stream> (TLS).
+#include "transport/http_server.h"
+
+// GCC 12 at -O3 reports -Wnull-dereference from inside Asio's scheduler and libstdc++'s
+// shared_ptr once they are inlined into this file; those are middle-end false positives that
+// `#pragma GCC system_header` (transport/beast.h) does not silence. Off for this file only.
+#pragma GCC diagnostic ignored "-Wnull-dereference"
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <ctime>
+#include <deque>
+#include <exception>
+#include <mutex>
+#include <optional>
+#include <thread>
+#include <type_traits>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include "node/log.h"
+#include "transport/beast.h"
+#include "transport/http_parse.h"
+
+namespace rcan::transport {
+namespace beast = boost::beast;
+namespace detail {
+
+namespace asio = boost::asio;
+namespace websocket = boost::beast::websocket;
+namespace ssl = boost::asio::ssl;
+using tcp = boost::asio::ip::tcp;
+using node::HttpRequest;
+using node::HttpResponse;
+using node::LogLevel;
+using SteadyClock = std::chrono::steady_clock;
+using Ms = std::chrono::milliseconds;
+
+constexpr auto kNoThrow = asio::as_tuple(asio::use_awaitable);
+constexpr std::string_view kServerName = "rcand";
+constexpr size_t kLingerBytes = 256 * 1024;  // discarded after an error answer, at most
+constexpr int kLingerMs = 1000;
+constexpr int kRejectTimeoutMs = 500;
+constexpr int kMaxConcurrentRejects = 64;
+constexpr std::string_view kQueueFullReason = "send queue limit exceeded";
+
+using PlainStream = beast::tcp_stream;
+using TlsStream = beast::ssl_stream<beast::tcp_stream>;
+
+inline std::string http_date() {
+  const std::time_t t = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[64];
+  const size_t n = std::strftime(buf, sizeof buf, "%a, %d %b %Y %H:%M:%S GMT", &tm);
+  return std::string(buf, n);
+}
+
+inline std::string endpoint_string(const tcp::endpoint& ep) {
+  auto addr = ep.address();
+  if (addr.is_v6() && addr.to_v6().is_v4_mapped())
+    addr = asio::ip::make_address_v4(asio::ip::v4_mapped, addr.to_v6());
+  if (addr.is_v6()) return "[" + addr.to_string() + "]:" + std::to_string(ep.port());
+  return addr.to_string() + ":" + std::to_string(ep.port());
+}
+
+inline bool is_token_char(char c) {
+  if ((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9')) return true;
+  return std::string_view("!#$%&'*+-.^_`|~").find(c) != std::string_view::npos;
+}
+
+inline bool valid_header(std::string_view name, std::string_view value) {
+  if (name.empty()) return false;
+  for (char c : name)
+    if (!is_token_char(c)) return false;
+  for (char c : value)
+    if (c == '\r' || c == '\n' || c == '\0') return false;
+  return true;
+}
+
+// Headers the transport owns; a handler's copies are dropped.
+inline bool reserved_header(std::string_view name) {
+  const std::string n = ascii_lower(name);
+  return n == "content-length" || n == "connection" || n == "transfer-encoding" ||
+         n == "content-type" || n == "date" || n == "upgrade" || n == "keep-alive";
+}
+
+// A WebSocket close reason fits in 123 bytes; cut at a UTF-8 boundary.
+inline std::string close_reason_text(std::string s) {
+  if (s.size() <= 123) return s;
+  size_t n = 123;
+  while (n > 0 && (static_cast<unsigned char>(s[n]) & 0xC0) == 0x80) --n;
+  s.resize(n);
+  return s;
+}
+
+// The response as written: the handler's answer plus the transport's headers.
+inline http::response<http::string_body> build_response(HttpResponse r, unsigned version,
+                                                        bool head, bool keep_alive) {
+  if (r.status < 200 || r.status > 599) {
+    node::log(LogLevel::kError, "http.bad_handler_status", {{"status", r.status}});
+    r.status = 500;
+    r.content_type = "application/json";
+    r.body = error_json({500, ErrorCode::kInternal, "bad_status", "internal error"});
+    r.headers.clear();
+  }
+  http::response<http::string_body> res;
+  res.version(version == 10 ? 10 : 11);
+  res.result(static_cast<unsigned>(r.status));
+  res.set(http::field::server, kServerName);
+  res.set(http::field::date, http_date());
+  for (auto& [name, value] : r.headers) {
+    if (!valid_header(name, value) || reserved_header(name)) {
+      node::log(LogLevel::kDebug, "http.header_dropped", {{"name", name}});
+      continue;
+    }
+    res.insert(name, value);
+  }
+  const bool no_body = r.status == 204 || r.status == 304;
+  if (!no_body) {
+    if (!r.content_type.empty() && valid_header("content-type", r.content_type))
+      res.set(http::field::content_type, r.content_type);
+    res.set(http::field::content_length, std::to_string(r.body.size()));
+  }
+  res.set("X-Content-Type-Options", "nosniff");
+  res.set(http::field::cache_control, "no-store");
+  res.set(http::field::connection, keep_alive ? "keep-alive" : "close");
+  if (!head && !no_body) res.body() = std::move(r.body);
+  return res;
+}
+
+inline HttpResponse error_response(const TransportError& err) {
+  HttpResponse r;
+  r.status = err.status;
+  r.body = error_json(err);
+  if (err.status == 426) r.headers.emplace_back("Sec-WebSocket-Version", "13");
+  if (err.status == 503) r.headers.emplace_back("Retry-After", "1");
+  return r;
+}
+
+// A connection, as the server sees it for shutdown. Both calls are thread-safe (they post).
+class ConnBase {
+ public:
+  virtual ~ConnBase() = default;
+  // Stop after the current request: close now if idle, 1001 for a WebSocket.
+  virtual void begin_shutdown() = 0;
+  // Close the socket now; pending waits end.
+  virtual void force_close() = 0;
+};
+
+// The one `respond` of one request. Fires at most once; when the handler drops it unanswered
+// the request is answered 500 so the connection never hangs.
+class ResponseSlot {
+ public:
+  ResponseSlot(std::weak_ptr<HttpServer::Impl> srv, asio::any_io_executor ex,
+               std::function<void(HttpResponse)> deliver)
+      : srv_(std::move(srv)), ex_(std::move(ex)), deliver_(std::move(deliver)) {}
+  ResponseSlot(const ResponseSlot&) = delete;
+  ResponseSlot& operator=(const ResponseSlot&) = delete;
+  ~ResponseSlot() {
+    bool answered;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      answered = done_;
+    }
+    if (!answered) {
+      node::log(LogLevel::kError, "http.handler_dropped_response");
+      fire(error_response({500, ErrorCode::kInternal, "no_response", "internal error"}));
+    }
+  }
+  void fire(HttpResponse r) {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (done_) return;
+      done_ = true;
+    }
+    // Holding the server keeps the io_context alive while posting to it.
+    auto srv = srv_.lock();
+    if (!srv) return;
+    asio::post(ex_, [d = deliver_, r = std::move(r)]() mutable { d(std::move(r)); });
+  }
+
+ private:
+  std::mutex mu_;
+  bool done_ = false;
+  std::weak_ptr<HttpServer::Impl> srv_;
+  asio::any_io_executor ex_;
+  std::function<void(HttpResponse)> deliver_;
+};
+
+// The transport's StreamSink: a bounded queue the connection's strand drains.
+class WsSink final : public node::StreamSink {
+ public:
+  using Kick = std::function<void()>;
+  using Closer = std::function<void(uint16_t, std::string, bool overflow)>;
+  WsSink(std::string remote, size_t limit, Kick kick, Closer closer)
+      : remote_(std::move(remote)), limit_(limit), kick_(std::move(kick)),
+        closer_(std::move(closer)) {}
+
+  bool send_text(std::string text) override {
+    bool post_kick = false;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (closed_) return false;
+      if (queue_.size() >= limit_) {
+        closed_ = true;
+        close_requested_ = true;
+        queue_.clear();
+      } else {
+        queue_.push_back(std::move(text));
+        post_kick = !kick_posted_;
+        kick_posted_ = true;
+      }
+    }
+    if (!post_kick) {
+      // Either the queue overflowed (closed_ is now set) or a kick is already on its way.
+      std::lock_guard<std::mutex> lock(mu_);
+      if (closed_ && queue_.empty() && !overflow_reported_) {
+        overflow_reported_ = true;
+      } else {
+        return true;
+      }
+    } else {
+      kick_();
+      return true;
+    }
+    closer_(1008, std::string(kQueueFullReason), true);
+    return false;
+  }
+
+  void close(uint16_t code, std::string reason) override {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (close_requested_) return;
+      close_requested_ = true;
+      closed_ = true;  // frames already queued still go out before the close frame
+    }
+    closer_(code, std::move(reason), false);
+  }
+
+  const std::string& remote_addr() const override { return remote_; }
+
+  // Connection side (strand).
+  bool pop(std::string& out) {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (queue_.empty()) {
+      kick_posted_ = false;
+      return false;
+    }
+    out = std::move(queue_.front());
+    queue_.pop_front();
+    return true;
+  }
+  void mark_closed(bool drop_queue) {
+    std::lock_guard<std::mutex> lock(mu_);
+    closed_ = true;
+    close_requested_ = true;
+    if (drop_queue) queue_.clear();
+  }
+
+ private:
+  const std::string remote_;
+  const size_t limit_;
+  Kick kick_;
+  Closer closer_;
+  std::mutex mu_;
+  std::deque<std::string> queue_;
+  bool closed_ = false;
+  bool close_requested_ = false;
+  bool kick_posted_ = false;
+  bool overflow_reported_ = false;
+};
+
+}  // namespace detail
+
+class HttpServer::Impl : public std::enable_shared_from_this<HttpServer::Impl> {
+ public:
+  Impl(ServerOptions o, node::HttpHandler& h, node::StreamHandler& s)
+      : opt(std::move(o)), http(h), streams(s) {}
+
+  Result<uint16_t> start();
+  void stop(int drain_ms);
+  ServerStats stats() const;
+
+  detail::asio::awaitable<void> accept_loop();
+  detail::asio::awaitable<void> reject(detail::tcp::socket sock);
+  template <class Stream>
+  void spawn_conn(detail::tcp::socket sock, std::string remote);
+  void conn_gone(uint64_t id) {
+    {
+      std::lock_guard<std::mutex> lock(mu);
+      conns.erase(id);
+      --connections_open;
+    }
+    cv.notify_all();
+  }
+  std::vector<std::shared_ptr<detail::ConnBase>> snapshot() {
+    std::vector<std::shared_ptr<detail::ConnBase>> out;
+    std::lock_guard<std::mutex> lock(mu);
+    for (auto& [id, weak] : conns)
+      if (auto c = weak.lock()) out.push_back(std::move(c));
+    return out;
+  }
+
+  const ServerOptions opt;
+  node::HttpHandler& http;
+  node::StreamHandler& streams;
+
+  std::atomic<bool> stopping{false};
+  std::atomic<uint64_t> connections_open{0};
+  std::atomic<uint64_t> connections_total{0};
+  std::atomic<uint64_t> ws_sessions_open{0};
+  std::atomic<uint64_t> ws_sessions_total{0};
+  std::atomic<uint64_t> requests_total{0};
+  std::atomic<uint64_t> rejected_connections{0};
+  std::atomic<uint64_t> rejected_limits{0};
+  std::atomic<uint64_t> bad_requests{0};
+  std::atomic<int> rejecting{0};
+
+  std::mutex mu;  // conns, next_id, running_threads (with cv)
+  std::condition_variable cv;
+  std::unordered_map<uint64_t, std::weak_ptr<detail::ConnBase>> conns;
+  uint64_t next_id = 0;
+  int running_threads = 0;
+
+  std::mutex lifecycle_mu;
+  bool started = false;
+  bool stopped = false;
+  std::vector<std::thread> threads;
+
+  // Declared after everything connections touch, so that it is destroyed first (frames still
+  // suspended in it are destroyed with it and may update the counters above).
+  std::unique_ptr<detail::ssl::context> ssl_ctx;
+  detail::asio::io_context ioc{1};
+  std::optional<detail::tcp::acceptor> acceptor;  // destroyed before ioc
+};
+
+namespace detail {
+
+template <class Stream>
+Stream make_stream(HttpServer::Impl& srv, tcp::socket&& sock);
+template <>
+inline PlainStream make_stream<PlainStream>(HttpServer::Impl&, tcp::socket&& sock) {
+  return PlainStream(std::move(sock));
+}
+template <>
+inline TlsStream make_stream<TlsStream>(HttpServer::Impl& srv, tcp::socket&& sock) {
+  return TlsStream(beast::tcp_stream(std::move(sock)), *srv.ssl_ctx);
+}
+
+template <class Stream>
+class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Stream>> {
+ public:
+  static constexpr bool kTls = std::is_same_v<Stream, TlsStream>;
+
+  Conn(HttpServer::Impl& srv, uint64_t id, tcp::socket sock, std::string remote)
+      : srv_(srv),
+        opt_(srv.opt),
+        id_(id),
+        ex_(sock.get_executor()),
+        stream_(make_stream<Stream>(srv, std::move(sock))),
+        remote_(std::move(remote)),
+        buf_(srv.opt.max_header_bytes + 64 * 1024),
+        deadline_(ex_),
+        response_timer_(ex_),
+        close_timer_(ex_),
+        started_(SteadyClock::now()) {}
+  ~Conn() override { srv_.conn_gone(id_); }
+  Conn(const Conn&) = delete;
+  Conn& operator=(const Conn&) = delete;
+
+  const asio::any_io_executor& executor() const { return ex_; }
+
+  static asio::awaitable<void> run(std::shared_ptr<Conn> self) { co_await self->serve(); }
+
+  void begin_shutdown() override {
+    asio::post(ex_, [self = this->shared_from_this()] {
+      self->shutdown_requested_ = true;
+      if (self->phase_ == Phase::kIdle) self->lowest().cancel();
+      if (self->phase_ == Phase::kWebSocket) self->request_ws_close(1001, "going away", false);
+    });
+  }
+
+  void force_close() override {
+    asio::post(ex_, [self = this->shared_from_this()] {
+      self->shutdown_requested_ = true;
+      self->deadline_.cancel();
+      self->response_timer_.cancel();
+      self->close_timer_.cancel();
+      self->lowest().close();
+    });
+  }
+
+ private:
+  enum class Phase { kIdle, kReading, kHandling, kWriting, kWebSocket, kClosing };
+
+  beast::tcp_stream& lowest() {
+    return ws_ ? beast::get_lowest_layer(*ws_) : beast::get_lowest_layer(stream_);
+  }
+
+  asio::awaitable<void> serve() {
+    if constexpr (kTls) {
+      lowest().expires_after(Ms(opt_.read_timeout_ms));
+      auto [ec] = co_await stream_.async_handshake(ssl::stream_base::server, kNoThrow);
+      if (ec) {
+        node::log(LogLevel::kDebug, "tls.handshake_failed",
+                  {{"remote", remote_}, {"error", ec.message()}});
+        co_return;
+      }
+    }
+    bool first = true;
+    for (;;) {
+      phase_ = Phase::kIdle;
+      if (srv_.stopping.load() || shutdown_requested_) break;
+      SteadyClock::time_point request_start = started_;
+      if (buf_.size() == 0) {
+        // The first request must arrive whole within read_timeout of the accept; later ones
+        // may take idle_timeout to start.
+        if (first) {
+          lowest().expires_at(started_ + Ms(opt_.read_timeout_ms));
+        } else {
+          lowest().expires_after(Ms(opt_.idle_timeout_ms));
+        }
+        auto [ec, n] = co_await stream_.async_read_some(buf_.prepare(4096), kNoThrow);
+        if (ec) break;  // idle timeout, peer closed, shutdown: close quietly
+        buf_.commit(n);
+        if (!first) request_start = SteadyClock::now();
+      } else if (!first) {
+        request_start = SteadyClock::now();  // pipelined: the next request is already here
+      }
+      lowest().expires_never();
+      phase_ = Phase::kReading;
+      const bool again = co_await serve_one(request_start);
+      first = false;
+      if (!again) break;
+    }
+    phase_ = Phase::kClosing;
+    co_await close_connection();
+  }
+
+  // Reads, handles and answers one request. Returns whether to keep the connection.
+  asio::awaitable<bool> serve_one(SteadyClock::time_point request_start) {
+    http::request_parser<http::string_body> parser;
+    apply_limits(parser, opt_.max_header_bytes, opt_.max_body_bytes);
+    arm_read_deadline(request_start + Ms(opt_.read_timeout_ms));
+    beast::error_code ec;
+    {
+      auto [hec, hn] = co_await http::async_read_header(stream_, buf_, parser, kNoThrow);
+      ec = hec;
+    }
+    if (!ec && !parser.is_done()) {
+      if (has_token(parser.get()[http::field::expect], "100-continue")) {
+        static constexpr std::string_view k100 = "HTTP/1.1 100 Continue\r\n\r\n";
+        auto [wec, wn] =
+            co_await asio::async_write(stream_, asio::buffer(k100.data(), k100.size()), kNoThrow);
+        ec = wec;
+      }
+      if (!ec) {
+        auto [rec, rn] = co_await http::async_read(stream_, buf_, parser, kNoThrow);
+        ec = rec;
+      }
+    }
+    const bool timed_out = disarm_read_deadline();
+    if (ec) {
+      std::optional<TransportError> err =
+          timed_out ? std::optional<TransportError>(read_timeout_error()) : classify_read_error(ec);
+      if (err) co_await answer_error(*err, parser.is_header_done() ? parser.get().version() : 11);
+      co_return false;
+    }
+
+    auto msg = parser.release();
+    const unsigned version = msg.version();
+    const bool head = msg.method() == http::verb::head;
+    bool keep_alive = msg.keep_alive();
+    HttpRequest req;
+    if (auto err = to_http_request(msg, remote_, kTls, req)) {
+      co_await answer_error(*err, version);
+      co_return false;
+    }
+    if (wants_websocket(req)) {
+      if (auto err = check_websocket_upgrade(req, version)) {
+        co_await answer_error(*err, version);
+        co_return false;
+      }
+      co_await serve_websocket(std::move(req), std::move(msg));
+      co_return false;
+    }
+
+    // Hand the request to the node and wait for its answer (posted from any thread).
+    ++srv_.requests_total;
+    const SteadyClock::time_point t0 = SteadyClock::now();
+    const std::string method = req.method;
+    const std::string path = req.path;
+    response_.reset();
+    const uint64_t seq = ++seq_;
+    phase_ = Phase::kHandling;
+    response_timer_.expires_at(SteadyClock::time_point::max());
+    auto slot = std::make_shared<ResponseSlot>(
+        srv_.weak_from_this(), ex_,
+        [weak = this->weak_from_this(), seq](HttpResponse r) {
+          if (auto self = weak.lock()) self->deliver(seq, std::move(r));
+        });
+    try {
+      srv_.http.handle(std::move(req), [slot](HttpResponse r) { slot->fire(std::move(r)); });
+    } catch (const std::exception& e) {
+      node::log(LogLevel::kError, "http.handler_exception", {{"error", e.what()}});
+      slot->fire(error_response({500, ErrorCode::kInternal, "handler_exception", "internal error"}));
+    } catch (...) {
+      node::log(LogLevel::kError, "http.handler_exception");
+      slot->fire(error_response({500, ErrorCode::kInternal, "handler_exception", "internal error"}));
+    }
+    slot.reset();  // the handler's copies keep it; a dropped respond answers 500
+    if (!response_) co_await response_timer_.async_wait(kNoThrow);
+    if (!response_) co_return false;  // force-closed while waiting
+
+    keep_alive = keep_alive && !srv_.stopping.load() && !shutdown_requested_;
+    phase_ = Phase::kWriting;
+    const int status = response_->status;
+    auto res = build_response(std::move(*response_), version, head, keep_alive);
+    response_.reset();
+    lowest().expires_after(Ms(opt_.read_timeout_ms));
+    auto [wec, wn] = co_await http::async_write(stream_, res, kNoThrow);
+    lowest().expires_never();
+    if (node::log_enabled(LogLevel::kDebug)) {
+      const auto ms = std::chrono::duration_cast<Ms>(SteadyClock::now() - t0).count();
+      node::log(LogLevel::kDebug, "http.request",
+                {{"remote", remote_},
+                 {"method", method},
+                 {"path", path},
+                 {"status", status},
+                 {"ms", static_cast<int64_t>(ms)}});
+    }
+    co_return !wec && keep_alive;
+  }
+
+  void deliver(uint64_t seq, HttpResponse r) {
+    if (seq != seq_ || phase_ != Phase::kHandling || response_) return;
+    response_ = std::move(r);
+    response_timer_.cancel();
+  }
+
+  // The read deadline cancels (rather than closes) the socket, so that 408 can still be sent.
+  void arm_read_deadline(SteadyClock::time_point at) {
+    read_timed_out_ = false;
+    const uint64_t gen = ++read_gen_;
+    deadline_.expires_at(at);
+    deadline_.async_wait([self = this->shared_from_this(), gen](beast::error_code ec) {
+      if (ec || gen != self->read_gen_) return;
+      self->read_timed_out_ = true;
+      self->lowest().cancel();
+    });
+  }
+  bool disarm_read_deadline() {
+    ++read_gen_;
+    deadline_.cancel();
+    return read_timed_out_;
+  }
+
+  // Answers a transport-level failure and lets serve() close the connection.
+  asio::awaitable<void> answer_error(const TransportError& err, unsigned version) {
+    if (err.status == 400 || err.status == 426) {
+      ++srv_.bad_requests;
+    } else {
+      ++srv_.rejected_limits;
+    }
+    node::log(LogLevel::kInfo, "http.rejected",
+              {{"remote", remote_}, {"status", err.status}, {"reason", std::string(err.reason)}});
+    auto res = build_response(error_response(err), version, false, false);
+    lowest().expires_after(Ms(opt_.read_timeout_ms));
+    co_await http::async_write(stream_, res, kNoThrow);
+    lowest().expires_never();
+  }
+
+  // Closes the connection. After answering, a plain connection half-closes and discards what
+  // the client still sends for a moment, so that the answer is not lost to a TCP reset.
+  asio::awaitable<void> close_connection() {
+    if (ws_) {
+      lowest().close();
+      co_return;
+    }
+    if (!lowest().socket().is_open()) co_return;
+    if constexpr (kTls) {
+      lowest().expires_after(Ms(kLingerMs));
+      co_await stream_.async_shutdown(kNoThrow);
+    } else {
+      beast::error_code ec;
+      lowest().socket().shutdown(tcp::socket::shutdown_send, ec);
+      if (!ec) {
+        lowest().expires_after(Ms(std::min(kLingerMs, opt_.read_timeout_ms)));
+        char scratch[4096];
+        size_t total = 0;
+        while (total < kLingerBytes) {
+          auto [rec, n] = co_await lowest().async_read_some(asio::buffer(scratch), kNoThrow);
+          if (rec) break;
+          total += n;
+        }
+      }
+    }
+    lowest().close();
+  }
+
+  // ---- WebSocket -------------------------------------------------------------------------
+
+  asio::awaitable<void> serve_websocket(HttpRequest req, http::request<http::string_body> msg) {
+    auto weak = this->weak_from_this();
+    auto srv_weak = srv_.weak_from_this();
+    auto ex = ex_;
+    sink_ = std::make_shared<WsSink>(
+        remote_, opt_.ws_send_queue_limit,
+        [weak, srv_weak, ex] {
+          auto srv = srv_weak.lock();
+          if (!srv) return;
+          asio::post(ex, [weak] {
+            if (auto self = weak.lock()) self->pump();
+          });
+        },
+        [weak, srv_weak, ex](uint16_t code, std::string reason, bool overflow) {
+          auto srv = srv_weak.lock();
+          if (!srv) return;
+          asio::post(ex, [weak, code, reason = std::move(reason), overflow]() mutable {
+            if (auto self = weak.lock()) self->request_ws_close(code, std::move(reason), overflow);
+          });
+        });
+
+    HttpResponse refusal = error_response(
+        {403, ErrorCode::kInsufficientPrivileges, "websocket_refused", "WebSocket refused"});
+    std::unique_ptr<node::StreamSession> session;
+    try {
+      session = srv_.streams.open(req, sink_, refusal);
+    } catch (const std::exception& e) {
+      node::log(LogLevel::kError, "ws.open_exception", {{"error", e.what()}});
+      refusal = error_response({500, ErrorCode::kInternal, "open_exception", "internal error"});
+      session.reset();
+    }
+    if (!session) {
+      sink_->mark_closed(true);
+      auto res = build_response(std::move(refusal), msg.version(), false, false);
+      lowest().expires_after(Ms(opt_.read_timeout_ms));
+      co_await http::async_write(stream_, res, kNoThrow);
+      lowest().expires_never();
+      co_return;
+    }
+    session_ = std::move(session);
+    phase_ = Phase::kWebSocket;
+    ++srv_.ws_sessions_open;
+    ++srv_.ws_sessions_total;
+
+    lowest().expires_never();  // the websocket stream runs its own timeouts
+    ws_.emplace(std::move(stream_));
+    websocket::stream_base::timeout timeouts{};
+    timeouts.handshake_timeout = Ms(opt_.ws_handshake_timeout_ms);
+    timeouts.idle_timeout = Ms(opt_.idle_timeout_ms);
+    timeouts.keep_alive_pings = true;  // a ping at half the idle timeout detects dead peers
+    ws_->set_option(timeouts);
+    ws_->set_option(websocket::stream_base::decorator(
+        [](websocket::response_type& res) { res.set(http::field::server, kServerName); }));
+    ws_->read_message_max(opt_.ws_max_message_bytes);
+    ws_->text(true);
+
+    auto [aec] = co_await ws_->async_accept(msg, kNoThrow);
+    if (!aec) {
+      ws_open_ = true;
+      node::log(LogLevel::kInfo, "ws.open", {{"remote", remote_}, {"path", req.path}});
+      pump();  // frames queued during open(), or a close requested meanwhile
+      beast::flat_buffer in;
+      for (;;) {
+        in.clear();
+        auto [rec, rn] = co_await ws_->async_read(in, kNoThrow);
+        if (rec) {
+          if (rec == websocket::error::message_too_big) ++srv_.rejected_limits;
+          break;
+        }
+        if (close_pending_) continue;  // closing: late frames are dropped
+        try {
+          if (ws_->got_text()) {
+            session_->on_text(beast::buffers_to_string(in.data()));
+          } else {
+            session_->on_binary();
+          }
+        } catch (const std::exception& e) {
+          node::log(LogLevel::kError, "ws.session_exception", {{"error", e.what()}});
+          request_ws_close(1011, "internal error", false);
+        }
+      }
+    }
+    ws_open_ = false;
+    sink_->mark_closed(true);
+    close_timer_.cancel();
+    const int code = aec ? 0 : static_cast<int>(ws_->reason().code);
+    try {
+      session_->on_closed();
+    } catch (const std::exception& e) {
+      node::log(LogLevel::kError, "ws.session_exception", {{"error", e.what()}});
+    }
+    session_.reset();
+    --srv_.ws_sessions_open;
+    node::log(LogLevel::kInfo, "ws.closed", {{"remote", remote_}, {"peer_close_code", code}});
+  }
+
+  // Writes queued frames one at a time, then the close frame once one is pending (strand).
+  void pump() {
+    if (!ws_open_ || ws_writing_ || ws_close_started_) return;
+    if (sink_->pop(ws_out_)) {
+      ws_writing_ = true;
+      ws_->async_write(asio::buffer(ws_out_),
+                       [self = this->shared_from_this()](beast::error_code ec, size_t) {
+                         self->ws_writing_ = false;
+                         if (ec) {
+                           self->sink_->mark_closed(true);
+                           self->lowest().close();
+                           return;
+                         }
+                         self->pump();
+                       });
+      return;
+    }
+    if (close_pending_) {
+      ws_close_started_ = true;
+      ws_->async_close(
+          websocket::close_reason(static_cast<websocket::close_code>(close_pending_->first),
+                                  close_pending_->second),
+          [self = this->shared_from_this()](beast::error_code) {});
+    }
+  }
+
+  // A close from the node, the send-queue limit or shutdown (strand). Queued frames go out
+  // first unless the queue overflowed; the close handshake is bounded by a watchdog.
+  void request_ws_close(uint16_t code, std::string reason, bool overflow) {
+    if (!sink_ || close_pending_) return;
+    sink_->mark_closed(overflow);
+    if (phase_ != Phase::kWebSocket || !ws_) return;
+    if (overflow) {
+      ++srv_.rejected_limits;
+      node::log(LogLevel::kWarn, "ws.send_queue_full", {{"remote", remote_}});
+    }
+    close_pending_.emplace(code, close_reason_text(std::move(reason)));
+    close_timer_.expires_after(Ms(opt_.ws_handshake_timeout_ms));
+    close_timer_.async_wait([self = this->shared_from_this()](beast::error_code ec) {
+      if (!ec && self->ws_) self->lowest().close();
+    });
+    pump();
+  }
+
+  HttpServer::Impl& srv_;
+  const ServerOptions& opt_;
+  const uint64_t id_;
+  asio::any_io_executor ex_;
+  Stream stream_;  // moved into ws_ on upgrade
+  std::optional<websocket::stream<Stream>> ws_;
+  const std::string remote_;
+  beast::flat_buffer buf_;
+  asio::steady_timer deadline_;
+  asio::steady_timer response_timer_;
+  asio::steady_timer close_timer_;
+  const SteadyClock::time_point started_;
+
+  Phase phase_ = Phase::kIdle;
+  bool shutdown_requested_ = false;
+  bool read_timed_out_ = false;
+  uint64_t read_gen_ = 0;
+  uint64_t seq_ = 0;
+  std::optional<HttpResponse> response_;
+
+  std::shared_ptr<WsSink> sink_;
+  std::unique_ptr<node::StreamSession> session_;
+  bool ws_open_ = false;
+  bool ws_writing_ = false;
+  bool ws_close_started_ = false;
+  std::optional<std::pair<uint16_t, std::string>> close_pending_;
+  std::string ws_out_;
+};
+
+inline void log_coroutine_exception(std::exception_ptr e) {
+  if (!e) return;
+  try {
+    std::rethrow_exception(e);
+  } catch (const std::exception& ex) {
+    node::log(LogLevel::kError, "http.connection_exception", {{"error", ex.what()}});
+  } catch (...) {
+    node::log(LogLevel::kError, "http.connection_exception");
+  }
+}
+
+}  // namespace detail
+
+// ---- HttpServer::Impl ------------------------------------------------------------------------
+
+template <class Stream>
+void HttpServer::Impl::spawn_conn(detail::tcp::socket sock, std::string remote) {
+  uint64_t id;
+  {
+    std::lock_guard<std::mutex> lock(mu);
+    id = ++next_id;
+    ++connections_open;
+  }
+  ++connections_total;
+  auto conn = std::make_shared<detail::Conn<Stream>>(*this, id, std::move(sock), std::move(remote));
+  {
+    std::lock_guard<std::mutex> lock(mu);
+    conns[id] = conn;
+  }
+  auto ex = conn->executor();
+  detail::asio::co_spawn(ex, detail::Conn<Stream>::run(std::move(conn)),
+                         detail::log_coroutine_exception);
+}
+
+detail::asio::awaitable<void> HttpServer::Impl::accept_loop() {
+  namespace asio = detail::asio;
+  for (;;) {
+    auto [ec, peer] = co_await acceptor->async_accept(asio::make_strand(ioc), detail::kNoThrow);
+    if (stopping.load()) co_return;
+    if (ec) {
+      if (ec == asio::error::operation_aborted) co_return;
+      node::log(node::LogLevel::kWarn, "http.accept_failed", {{"error", ec.message()}});
+      // Out of descriptors and the like: back off instead of spinning.
+      asio::steady_timer pause(co_await asio::this_coro::executor, detail::Ms(50));
+      co_await pause.async_wait(detail::kNoThrow);
+      continue;
+    }
+    detail::tcp::socket sock(std::move(peer));
+    beast::error_code rec;
+    const auto ep = sock.remote_endpoint(rec);
+    std::string remote = rec ? std::string("unknown") : detail::endpoint_string(ep);
+    sock.set_option(detail::tcp::no_delay(true), rec);
+    if (connections_open.load() >= opt.max_connections) {
+      ++rejected_connections;
+      node::log(node::LogLevel::kWarn, "http.connection_limit",
+                {{"remote", remote}, {"open", connections_open.load()}});
+      auto ex = sock.get_executor();
+      asio::co_spawn(ex, reject(std::move(sock)), detail::log_coroutine_exception);
+      continue;
+    }
+    if (opt.tls) {
+      spawn_conn<detail::TlsStream>(std::move(sock), std::move(remote));
+    } else {
+      spawn_conn<detail::PlainStream>(std::move(sock), std::move(remote));
+    }
+  }
+}
+
+// Over max_connections: answer 503 with the error body and close. TLS connections are closed
+// without an answer (a TLS handshake per refused connection would defeat the limit's purpose).
+detail::asio::awaitable<void> HttpServer::Impl::reject(detail::tcp::socket sock) {
+  namespace asio = detail::asio;
+  namespace http = detail::http;
+  if (opt.tls || rejecting.load() >= detail::kMaxConcurrentRejects) {
+    beast::error_code ec;
+    sock.close(ec);
+    co_return;
+  }
+  ++rejecting;
+  {
+    beast::tcp_stream s(std::move(sock));
+    s.expires_after(detail::Ms(detail::kRejectTimeoutMs));
+    auto res = detail::build_response(detail::error_response(detail::too_many_connections_error()),
+                                      11, false, false);
+    auto [wec, wn] = co_await http::async_write(s, res, detail::kNoThrow);
+    if (!wec) {
+      beast::error_code ec;
+      s.socket().shutdown(detail::tcp::socket::shutdown_send, ec);
+      char scratch[1024];
+      for (;;) {
+        auto [rec, n] = co_await s.async_read_some(asio::buffer(scratch), detail::kNoThrow);
+        if (rec) break;
+      }
+    }
+    s.close();
+  }
+  --rejecting;
+}
+
+Result<uint16_t> HttpServer::Impl::start() {
+  namespace asio = detail::asio;
+  std::lock_guard<std::mutex> life(lifecycle_mu);
+  if (started) return Error(ErrorCode::kInternal, "server already started");
+  if (opt.io_threads < 1 || opt.read_timeout_ms <= 0 || opt.idle_timeout_ms <= 0 ||
+      opt.ws_handshake_timeout_ms <= 0 || opt.max_connections == 0 || opt.max_header_bytes == 0 ||
+      opt.ws_max_message_bytes == 0 || opt.ws_send_queue_limit == 0)
+    return Error(ErrorCode::kSchemaValidationFailed, "invalid server options");
+  uint16_t port = 0;
+  try {
+    beast::error_code ec;
+    if (opt.tls) {
+      ssl_ctx = std::make_unique<detail::ssl::context>(detail::ssl::context::tls_server);
+      ssl_ctx->set_options(detail::ssl::context::default_workarounds |
+                           detail::ssl::context::no_sslv2 | detail::ssl::context::no_sslv3 |
+                           detail::ssl::context::no_tlsv1 | detail::ssl::context::no_tlsv1_1 |
+                           detail::ssl::context::single_dh_use);
+      ssl_ctx->use_certificate_chain_file(opt.cert_file, ec);
+      if (ec) return Error(ErrorCode::kSchemaValidationFailed, "cannot load TLS certificate: " + ec.message(), "cert_file");
+      ssl_ctx->use_private_key_file(opt.key_file, detail::ssl::context::pem, ec);
+      if (ec) return Error(ErrorCode::kSchemaValidationFailed, "cannot load TLS key: " + ec.message(), "key_file");
+    }
+    const auto addr = asio::ip::make_address(opt.bind_address, ec);
+    if (ec) return Error(ErrorCode::kSchemaValidationFailed, "invalid bind address", "bind_address");
+    const detail::tcp::endpoint ep(addr, opt.port);
+    acceptor.emplace(asio::make_strand(ioc));
+    acceptor->open(ep.protocol(), ec);
+    if (!ec) acceptor->set_option(asio::socket_base::reuse_address(true), ec);
+    if (!ec) acceptor->bind(ep, ec);
+    if (!ec) acceptor->listen(asio::socket_base::max_listen_connections, ec);
+    if (ec) {
+      acceptor.reset();
+      return Error(ErrorCode::kInternal,
+                   "cannot listen on " + opt.bind_address + ":" + std::to_string(opt.port) + ": " +
+                       ec.message());
+    }
+    port = acceptor->local_endpoint().port();
+  } catch (const std::exception& e) {
+    acceptor.reset();
+    return Error(ErrorCode::kInternal, std::string("cannot start server: ") + e.what());
+  }
+  asio::co_spawn(acceptor->get_executor(), accept_loop(), detail::log_coroutine_exception);
+  {
+    std::lock_guard<std::mutex> lock(mu);
+    running_threads = opt.io_threads;
+  }
+  for (int i = 0; i < opt.io_threads; ++i) {
+    threads.emplace_back([this] {
+      for (;;) {
+        try {
+          ioc.run();
+          break;
+        } catch (const std::exception& e) {
+          node::log(node::LogLevel::kError, "http.io_exception", {{"error", e.what()}});
+        } catch (...) {
+          node::log(node::LogLevel::kError, "http.io_exception");
+        }
+      }
+      {
+        std::lock_guard<std::mutex> lock(mu);
+        --running_threads;
+      }
+      cv.notify_all();
+    });
+  }
+  started = true;
+  node::log(node::LogLevel::kInfo, "http.listening",
+            {{"address", opt.bind_address},
+             {"port", static_cast<int>(port)},
+             {"tls", opt.tls},
+             {"io_threads", opt.io_threads}});
+  return port;
+}
+
+void HttpServer::Impl::stop(int drain_ms) {
+  {
+    std::lock_guard<std::mutex> life(lifecycle_mu);
+    if (!started || stopped) return;
+    stopped = true;
+  }
+  node::log(node::LogLevel::kInfo, "http.stopping",
+            {{"open_connections", connections_open.load()}, {"drain_ms", drain_ms}});
+  stopping = true;
+  detail::asio::post(acceptor->get_executor(), [this] {
+    beast::error_code ec;
+    acceptor->close(ec);
+  });
+  for (auto& c : snapshot()) c->begin_shutdown();
+  const auto deadline = detail::SteadyClock::now() + detail::Ms(drain_ms < 0 ? 0 : drain_ms);
+  {
+    std::unique_lock<std::mutex> lock(mu);
+    cv.wait_until(lock, deadline, [this] { return connections_open.load() == 0; });
+  }
+  const uint64_t left = connections_open.load();
+  for (auto& c : snapshot()) c->force_close();
+  {
+    std::unique_lock<std::mutex> lock(mu);
+    if (!cv.wait_for(lock, std::chrono::seconds(3), [this] { return running_threads == 0; })) {
+      lock.unlock();
+      node::log(node::LogLevel::kWarn, "http.stop_forced");
+      ioc.stop();
+    }
+  }
+  for (auto& t : threads)
+    if (t.joinable()) t.join();
+  threads.clear();
+  node::log(node::LogLevel::kInfo, "http.stopped", {{"closed_in_flight", left}});
+}
+
+ServerStats HttpServer::Impl::stats() const {
+  ServerStats s;
+  s.connections_open = connections_open.load();
+  s.connections_total = connections_total.load();
+  s.ws_sessions_open = ws_sessions_open.load();
+  s.ws_sessions_total = ws_sessions_total.load();
+  s.requests_total = requests_total.load();
+  s.rejected_connections = rejected_connections.load();
+  s.rejected_limits = rejected_limits.load();
+  s.bad_requests = bad_requests.load();
+  return s;
+}
+
+// ---- HttpServer ------------------------------------------------------------------------------
+
+HttpServer::HttpServer(ServerOptions options, node::HttpHandler& http, node::StreamHandler& stream)
+    : impl_(std::make_shared<Impl>(std::move(options), http, stream)) {}
+
+HttpServer::~HttpServer() {
+  if (impl_) impl_->stop(0);
+}
+
+Result<uint16_t> HttpServer::start() { return impl_->start(); }
+void HttpServer::stop(int drain_ms) { impl_->stop(drain_ms); }
+ServerStats HttpServer::stats() const { return impl_->stats(); }
+
+}  // namespace rcan::transport
