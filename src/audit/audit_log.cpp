@@ -842,10 +842,13 @@ void AuditLog::Impl::prepare_spare() {
 
 Status AuditLog::Impl::apply_retention() {
   if (opts_.retention_max_bytes == 0 && opts_.retention_max_age_ms == 0) return Status::Ok();
-  if (readers_.load() > 0) return Status::Ok();  // an export is reading; try next rotation
   std::vector<Segment> victims;
   {
+    // Readers count themselves before taking a snapshot under this lock, so checking the
+    // count and dropping the segments in one critical section never pulls a file from
+    // under an export.
     std::lock_guard<std::mutex> l(state_mu_);
+    if (readers_.load() > 0) return Status::Ok();  // an export is reading; next rotation
     uint64_t total = active_bytes_;
     for (const auto& s : sealed_) total += s.bytes;
     int64_t now = env_->now_ms();
@@ -858,9 +861,11 @@ Status AuditLog::Impl::apply_retention() {
       victims.push_back(s);
       total -= s.bytes;
     }
+    sealed_.erase(sealed_.begin(), sealed_.begin() + static_cast<long>(victims.size()));
   }
   if (victims.empty()) return Status::Ok();
-  // Say what is about to go first, so the chain records it even if we crash midway.
+  // The chain says what goes before the files go (a crash in between leaves the files,
+  // which the next open() and retention pass handle).
   AuditEntry rec;
   rec.kind = "retention";
   rec.event = "AUDIT_RETENTION";
@@ -874,10 +879,6 @@ Status AuditLog::Impl::apply_retention() {
   Status s = write_records({rec});
   if (!s.ok()) return s;
   if (indexer_.joinable()) indexer_.join();
-  {
-    std::lock_guard<std::mutex> l(state_mu_);
-    sealed_.erase(sealed_.begin(), sealed_.begin() + static_cast<long>(victims.size()));
-  }
   for (const auto& v : victims) {
     s = env_->remove_file(seg_path(v.id));
     if (!s.ok()) return s;
