@@ -566,7 +566,7 @@ void AuditLog::Impl::submit(AuditEntry entry, Callback done) {
     p.has_wm = true;
     p.wm_hash = internal::fnv1a64(*entry.watermark_token);
   }
-  p.prep = internal::prepare(to_object(entry));  // serialised here, off the writer thread
+  p.prep = internal::prepare(entry);  // serialised here, off the writer thread
   p.done = std::move(done);
   {
     std::unique_lock<std::mutex> l(mu_);

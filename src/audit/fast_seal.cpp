@@ -81,6 +81,61 @@ PreparedRecord prepare(const json::Object& obj) {
 
 namespace {
 
+std::string str_frag(std::string_view key, std::string_view value) {
+  std::string f;
+  f.reserve(key.size() + value.size() + 6);
+  f.push_back('"');
+  f.append(key);
+  f.append("\":");
+  f += json::canonical(json::Value(value));
+  return f;
+}
+
+std::string raw_frag(std::string_view key, std::string_view raw) {
+  std::string f;
+  f.reserve(key.size() + raw.size() + 3);
+  f.push_back('"');
+  f.append(key);
+  f.append("\":");
+  f.append(raw);
+  return f;
+}
+
+}  // namespace
+
+PreparedRecord prepare(const AuditEntry& e) {
+  PreparedRecord p;
+  auto& m = p.members;
+  m.reserve(20);
+  auto str = [&](const char* k, std::string_view v) { m.emplace_back(k, str_frag(k, v)); };
+  auto raw = [&](const char* k, std::string_view v) { m.emplace_back(k, raw_frag(k, v)); };
+  str("principal", e.principal);
+  str("ruri", e.ruri);
+  raw("timestamp_ms", std::to_string(e.timestamp_ms));
+  str("message_id", e.message_id);
+  str("event", e.event);
+  str("outcome", e.outcome);
+  str("sender_type", e.sender_type);
+  if (e.sub) str("sub", *e.sub);
+  if (e.cloud_provider) str("cloud_provider", *e.cloud_provider);
+  if (e.function_name) str("function_name", *e.function_name);
+  if (e.ai) {
+    raw("ai", json::canonical(json::Value(to_object(*e.ai))));
+  }
+  if (e.gate_bypassed) raw("gate_bypassed", "true");
+  if (e.hitl_timeout_bypass) raw("hitl_timeout_bypass", "true");
+  if (e.watermark_token) str("watermark_token", *e.watermark_token);
+  if (e.action) str("action", *e.action);
+  if (e.reason) str("reason", *e.reason);
+  if (!e.detail.empty()) raw("detail", json::canonical(json::Value(e.detail)));
+  if (!e.kind.empty()) str("kind", e.kind);
+  if (e.segment) raw("segment", std::to_string(*e.segment));
+  std::sort(m.begin(), m.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  return p;
+}
+
+namespace {
+
 // Appends the members with extra (key, fragment) pairs merged in sorted position.
 void assemble(std::string& out, const PreparedRecord& p,
               const std::pair<std::string_view, std::string_view>* extra, size_t n_extra) {

@@ -44,6 +44,8 @@ struct PreparedRecord {
 };
 
 PreparedRecord prepare(const json::Object& obj);
+// The same as prepare(to_object(e)) without building the object (the appender's hot path).
+PreparedRecord prepare(const AuditEntry& e);
 
 SealedRecord seal_prepared(const PreparedRecord& p, uint64_t seq, std::string_view prev_hash,
                            Hasher& hasher);

@@ -46,6 +46,19 @@ Status validate(const AuditEntry& e) {
   return Status::Ok();
 }
 
+json::Object to_object(const AiBlock& a) {
+  json::Object ai;
+  ai.set("provider", a.provider);
+  ai.set("model", a.model);
+  if (a.model_version) ai.set("model_version", *a.model_version);
+  if (a.layer) ai.set("layer", *a.layer);
+  if (a.confidence) ai.set("confidence", *a.confidence);
+  if (a.inference_latency_ms) ai.set("inference_latency_ms", *a.inference_latency_ms);
+  if (a.thought_id) ai.set("thought_id", *a.thought_id);
+  ai.set("escalated", a.escalated);
+  return ai;
+}
+
 json::Object to_object(const AuditEntry& e) {
   json::Object o;
   o.set("principal", e.principal);
@@ -58,19 +71,7 @@ json::Object to_object(const AuditEntry& e) {
   if (e.sub) o.set("sub", *e.sub);
   if (e.cloud_provider) o.set("cloud_provider", *e.cloud_provider);
   if (e.function_name) o.set("function_name", *e.function_name);
-  if (e.ai) {
-    const AiBlock& a = *e.ai;
-    json::Object ai;
-    ai.set("provider", a.provider);
-    ai.set("model", a.model);
-    if (a.model_version) ai.set("model_version", *a.model_version);
-    if (a.layer) ai.set("layer", *a.layer);
-    if (a.confidence) ai.set("confidence", *a.confidence);
-    if (a.inference_latency_ms) ai.set("inference_latency_ms", *a.inference_latency_ms);
-    if (a.thought_id) ai.set("thought_id", *a.thought_id);
-    ai.set("escalated", a.escalated);
-    o.set("ai", std::move(ai));
-  }
+  if (e.ai) o.set("ai", to_object(*e.ai));
   if (e.gate_bypassed) o.set("gate_bypassed", true);
   if (e.hitl_timeout_bypass) o.set("hitl_timeout_bypass", true);
   if (e.watermark_token) o.set("watermark_token", *e.watermark_token);

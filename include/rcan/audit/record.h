@@ -70,6 +70,8 @@ Status validate(const AuditEntry& e);
 
 // The unsealed JSON object of an entry (no seq / prev_hash / hmac).
 json::Object to_object(const AuditEntry& e);
+// The §16.2 ai block as written in a record.
+json::Object to_object(const AiBlock& a);
 
 // Result of sealing a record at a position in the chain.
 struct SealedRecord {
