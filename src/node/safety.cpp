@@ -170,6 +170,7 @@ json::Object SafetyStatus::to_json() const {
   o.set("robot", robot.to_json());
   o.set("driver", driver.to_json());
   o.set("estop_latency", estop_latency.to_json());
+  o.set("estop_fence_timeouts", static_cast<int64_t>(estop_fence_timeouts));
   o.set("persistence", json::Object{{"enabled", persistence_enabled},
                                     {"durable", persisted},
                                     {"error", persist_error.empty() ? json::Value() : json::Value(persist_error)}});
@@ -305,18 +306,30 @@ EstopResult SafetyCore::estop(std::string_view source, std::string_view reason) 
   driver_->stop();  // first, before any lock or I/O
   const int64_t ns = steady_ns() - t0;
 
-  // Fence: a dispatch() that read the latch before we set it may be inside Driver::apply().
-  // Waiting for apply_mu_ (held only around driver calls) and stopping again guarantees that
-  // nothing it applied survives, and that every later dispatch sees the latch under the lock.
-  {
-    std::lock_guard<std::mutex> lock(apply_mu_);
-    driver_->stop();
-    drive_deadline_mono_ = 0;
-  }
-  record_latency(ns);
-
+  // Fence without a lock: a dispatch() that read the latch as clear before we set it may be
+  // inside Driver::apply() right now (apply_seq_ odd). Wait for that one apply only (not for
+  // the threads queued behind it: they re-check the latch under the lock and must see it, by
+  // the seq_cst order of our latch store / seq load against their seq increment / latch
+  // load), then stop again, so nothing applied before this point survives. The wait is
+  // bounded; on timeout the straggler stops the driver itself right after its apply.
   EstopResult r;
   r.stop_latency_ns = ns;
+  const uint64_t seq = apply_seq_.load(std::memory_order_seq_cst);
+  if (seq & 1u) {
+    const int64_t limit = t0 + std::max<int64_t>(0, cfg_.estop_fence_timeout_ms) * 1'000'000;
+    int spins = 0;
+    while (apply_seq_.load(std::memory_order_acquire) == seq) {
+      if (steady_ns() > limit) {
+        r.fenced = false;
+        fence_timeouts_.fetch_add(1, std::memory_order_relaxed);
+        break;
+      }
+      if (++spins > 64) std::this_thread::yield();
+    }
+  }
+  driver_->stop();
+  record_latency(ns);
+
   {
     std::lock_guard<std::mutex> lock(meta_mu_);
     latched_.store(true, std::memory_order_release);  // a racing resume() must not win silently
@@ -328,6 +341,7 @@ EstopResult SafetyCore::estop(std::string_view source, std::string_view reason) 
     r.state_seq = latch_seq_;
   }
   if (r.newly_latched) persist_cv_.notify_all();
+  r.return_latency_ns = steady_ns() - t0;
   return r;
 }
 
@@ -639,12 +653,19 @@ Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd, const D
 
   {
     std::lock_guard<std::mutex> lock(apply_mu_);
-    // Re-check under the lock: estop() fences on this lock, so a latch set before we got here
-    // is seen; a latch set after is followed by estop()'s second Driver::stop().
-    if (latched_.load(std::memory_order_acquire))
+    // apply_seq_ is odd while this thread may call Driver::apply(); estop() waits for it to
+    // turn even (see estop()). The latch is re-checked after making it odd.
+    struct SeqGuard {
+      std::atomic<uint64_t>& seq;
+      explicit SeqGuard(std::atomic<uint64_t>& s) : seq(s) { seq.fetch_add(1, std::memory_order_seq_cst); }
+      ~SeqGuard() { seq.fetch_add(1, std::memory_order_seq_cst); }
+    } guard(apply_seq_);
+    if (latched_.load(std::memory_order_seq_cst))
       return Error(ErrorCode::kCommandRejected, "ESTOP is latched; an explicit RESUME is required", "",
                    "estop_active");
     Status st = driver_->apply(out.applied);
+    // An estop() whose bounded fence gave up on us: stop right behind our own apply.
+    if (latched_.load(std::memory_order_seq_cst)) driver_->stop();
     if (!st.ok()) return st.error();
     if (out.applied.drive) {
       drive_deadline_mono_ = out.applied.drive->duration_ms > 0 ? now + out.applied.drive->duration_ms : 0;
@@ -905,6 +926,7 @@ SafetyStatus SafetyCore::status() const {
       s.safe_stop_session = safe_stop_session_;
       s.safe_stop_since_wall_ms = safe_stop_since_wall_ms_;
     }
+    s.estop_fence_timeouts = fence_timeouts_.load(std::memory_order_relaxed);
     s.persistence_enabled = persist_enabled_;
     s.persisted = !persist_enabled_ || persisted_seq_ >= latch_seq_;
     s.persist_error = persist_error_;

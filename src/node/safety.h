@@ -4,9 +4,9 @@
 // What it guarantees:
 //   * ESTOP is a latch. estop() sets an atomic flag and calls Driver::stop() before anything
 //     else (no lock, no I/O on that path), then fences out any dispatch() that was already
-//     inside the driver (a short lock + a second stop()), then hands the new latch state to a
-//     persister thread that writes it durably (temp file + fsync + rename + fsync of the
-//     directory). A restarted core on the same state dir comes up latched.
+//     inside the driver (a lock-free wait for that one apply + a second stop()), then hands the
+//     new latch state to a persister thread that writes it durably (temp file + fsync +
+//     rename + fsync of the directory). A restarted core on the same state dir comes up latched.
 //     After estop() returns, no dispatch() reaches the driver until resume().
 //   * resume() clears the latch only for role level >= 3 (LEASEE); below that it returns
 //     INSUFFICIENT_PRIVILEGES. Clearing does not move anything: the robot stays stopped until
@@ -96,6 +96,9 @@ struct SafetyConfig {
   int64_t watchdog_timeout_ms = 0;       // brain watchdog; 0 = disabled
   // A drive still commanded this long after its deadline is stopped by tick() (safe-stop).
   int64_t drive_ttl_grace_ms = 100;
+  // estop() waits at most this long for a dispatch already inside Driver::apply() (see
+  // estop()). The stop itself never waits.
+  int64_t estop_fence_timeout_ms = 100;
 };
 
 struct DispatchOptions {
@@ -146,6 +149,7 @@ struct SafetyStatus {
   RobotState robot;               // with ts / loop_latency_ms / loop_count / paused filled
   DriverInfo driver;
   LatencyStats estop_latency;     // estop() call → Driver::stop() returned
+  uint64_t estop_fence_timeouts = 0;
   bool persistence_enabled = false;
   bool persisted = true;          // the latest latch state is durable
   std::string persist_error;      // last persistence error, empty when none
@@ -157,7 +161,11 @@ struct SafetyStatus {
 
 struct EstopResult {
   bool newly_latched = false;  // false when it was already latched (first source/reason kept)
-  int64_t stop_latency_ns = 0;
+  // True when no dispatch was left inside Driver::apply() at return (the normal case). False
+  // only if the fence timed out: that straggler stops the driver itself right after applying.
+  bool fenced = true;
+  int64_t stop_latency_ns = 0;    // call → Driver::stop() returned
+  int64_t return_latency_ns = 0;  // call → estop() returning (fence included, not persistence)
   uint64_t state_seq = 0;      // pass to wait_persisted()
 };
 
@@ -186,7 +194,11 @@ class SafetyCore {
   // then enforces drive TTLs, the workspace guard, heartbeats and the watchdog.
   void tick();
 
-  // SAFETY lane. O(1) before the driver stop: one atomic exchange, then Driver::stop().
+  // SAFETY lane. O(1) and lock-free up to the driver stop: one atomic store, then
+  // Driver::stop(). Then a lock-free fence (waits only for a dispatch already inside
+  // Driver::apply(), bounded by estop_fence_timeout_ms), a second stop(), and the latch
+  // metadata; persistence happens on the persister thread (wait_persisted() to wait for it).
+  // After it returns (fenced), no dispatch reaches the driver until resume().
   EstopResult estop(std::string_view source, std::string_view reason);
   Status resume(int principal_role_level, std::string_view source);
   bool estop_active() const { return latched_.load(std::memory_order_acquire); }
@@ -259,6 +271,9 @@ class SafetyCore {
   // The SAFETY lane flag: read by dispatch() (before and under apply_mu_) and tick().
   std::atomic<bool> latched_{false};
   std::atomic<bool> safe_stop_{false};
+  // Odd while a dispatch() may be inside Driver::apply() (bumped under apply_mu_).
+  std::atomic<uint64_t> apply_seq_{0};
+  std::atomic<uint64_t> fence_timeouts_{0};
 
   // Serialises Driver::apply/step/state. Held only around those calls.
   mutable std::mutex apply_mu_;

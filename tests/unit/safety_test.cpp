@@ -625,6 +625,7 @@ TEST(SafetyConcurrency, NoDispatchReachesDriverAfterEstopReturns) {
     RecordingDriver* rec = drv.get();
     SafetyConfig cfg;
     cfg.limits.workspace.enabled = false;
+    cfg.estop_fence_timeout_ms = 10'000;  // never give up here: the test checks the strict rule
     SafetyCore core(std::move(drv), cfg, Clock::system());
     std::atomic<bool> go{true};
     std::atomic<uint64_t> refused{0};
@@ -650,12 +651,54 @@ TEST(SafetyConcurrency, NoDispatchReachesDriverAfterEstopReturns) {
     go.store(false);
     for (auto& t : ts) t.join();
     EXPECT_TRUE(e.newly_latched);
+    EXPECT_TRUE(e.fenced);
+    EXPECT_GE(e.return_latency_ns, e.stop_latency_ns);
     EXPECT_EQ(rec->late_applies.load(), 0u) << "round " << round;
     EXPECT_FALSE(moving_after) << "round " << round;
     EXPECT_FALSE(rec->moving.load());
     EXPECT_GT(refused.load(), 0u);
     EXPECT_GE(rec->stops.load(), 2u);
   }
+}
+
+TEST(SafetyConcurrency, FenceTimeoutLeavesTheStragglerToStopItself) {
+  // A driver whose apply() blocks until released: estop() must not wait for it beyond the
+  // fence timeout, and the straggling dispatch stops the driver right after its apply.
+  class SlowDriver final : public Driver {
+   public:
+    DriverInfo describe() const override {
+      DriverInfo d;
+      d.has_base = true;
+      d.max_linear_mps = 10;
+      d.max_angular_radps = 10;
+      return d;
+    }
+    Status apply(const ActuatorCommand&) override {
+      entered.store(true);
+      while (!release.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      moving.store(true);
+      return Status::Ok();
+    }
+    void stop() noexcept override { moving.store(false); }
+    void step(int64_t) override {}
+    RobotState state() const override { return RobotState{}; }
+    std::atomic<bool> entered{false}, release{false}, moving{false};
+  };
+  auto drv = std::make_unique<SlowDriver>();
+  SlowDriver* slow = drv.get();
+  SafetyConfig cfg;
+  cfg.limits.workspace.enabled = false;
+  cfg.estop_fence_timeout_ms = 20;
+  SafetyCore core(std::move(drv), cfg, Clock::system());
+  std::thread t([&] { (void)core.dispatch(ActuatorCommand::make_drive(0.5, 0, 1000)); });
+  while (!slow->entered.load()) std::this_thread::yield();
+  auto e = core.estop("test", "slow driver");
+  EXPECT_FALSE(e.fenced);
+  EXPECT_LT(e.return_latency_ns, 2'000'000'000);
+  slow->release.store(true);
+  t.join();
+  EXPECT_EQ(core.status().estop_fence_timeouts, 1u);
+  EXPECT_FALSE(slow->moving.load());  // the straggler stopped behind itself
 }
 
 TEST(SafetyConcurrency, EstopLatencyIsRecorded) {
