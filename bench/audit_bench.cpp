@@ -201,7 +201,7 @@ int main(int argc, char** argv) {
   uint64_t big = 1000000;
   uint64_t probe = 50000;
   SyncPolicy policy = SyncPolicy::kPerGroup;
-  int window = 32;
+  int window = 8;
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
     auto next = [&]() -> std::string {
