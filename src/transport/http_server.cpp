@@ -679,6 +679,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
         in.clear();
         auto [rec, rn] = co_await ws_->async_read(in, kNoThrow);
         if (rec) {
+          node::log(LogLevel::kDebug, "ws.read_end", {{"remote", remote_}, {"error", rec.message()}});
           if (rec == websocket::error::message_too_big) ++srv_.rejected_limits;
           break;
         }
@@ -731,7 +732,10 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
       ws_->async_close(
           websocket::close_reason(static_cast<websocket::close_code>(close_pending_->first),
                                   close_pending_->second),
-          [self = this->shared_from_this()](beast::error_code) {});
+          [self = this->shared_from_this()](beast::error_code ec) {
+            node::log(LogLevel::kDebug, "ws.close_done",
+                      {{"remote", self->remote_}, {"error", ec.message()}});
+          });
     }
   }
 
