@@ -13,6 +13,7 @@
 #include <pwd.h>
 #include <unistd.h>
 #include <yaml-cpp/depthguard.h>
+#include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -29,6 +30,7 @@
 #include <memory>
 #include <regex>
 #include <set>
+#include <sstream>
 #include <unordered_map>
 #include <utility>
 
@@ -684,6 +686,36 @@ SP config_schema() {
     });
   }();
   return schema;
+}
+
+// ---------------------------------------------------------------------------------------
+// Document count. yaml-cpp 0.7's LoadAll() loops forever on a stray flow token at document
+// level (e.g. a file starting with ","): each HandleNextDocument() yields a null document
+// without consuming the token. So documents are counted with a bounded loop of our own.
+
+class DiscardEvents : public YAML::EventHandler {
+ public:
+  void OnDocumentStart(const YAML::Mark&) override {}
+  void OnDocumentEnd() override {}
+  void OnNull(const YAML::Mark&, YAML::anchor_t) override {}
+  void OnAlias(const YAML::Mark&, YAML::anchor_t) override {}
+  void OnScalar(const YAML::Mark&, const std::string&, YAML::anchor_t, const std::string&) override {}
+  void OnSequenceStart(const YAML::Mark&, const std::string&, YAML::anchor_t,
+                       YAML::EmitterStyle::value) override {}
+  void OnSequenceEnd() override {}
+  void OnMapStart(const YAML::Mark&, const std::string&, YAML::anchor_t,
+                  YAML::EmitterStyle::value) override {}
+  void OnMapEnd() override {}
+};
+
+// 0, 1 or 2 (= more than one). Throws YAML::Exception on syntax errors.
+int count_documents(const std::string& text) {
+  std::istringstream in(text);
+  YAML::Parser parser(in);
+  DiscardEvents discard;
+  int n = 0;
+  while (n < 2 && parser.HandleNextDocument(discard)) ++n;
+  return n;
 }
 
 // ---------------------------------------------------------------------------------------
@@ -1766,16 +1798,18 @@ Result<NodeConfig> parse_config_text(std::string_view yaml, const ConfigOptions&
     return make_error("", "config file contains a NUL byte", "malformed_yaml", "");
   Validator v;
   try {
-    std::vector<YAML::Node> docs = YAML::LoadAll(std::string(yaml));
-    if (docs.empty() || docs[0].IsNull() || !docs[0].IsDefined())
+    const std::string text(yaml);
+    int ndocs = count_documents(text);
+    if (ndocs > 1)
+      return make_error("", "unexpected content after the first YAML document (one document only)",
+                        "malformed_yaml", "");
+    YAML::Node doc = ndocs == 0 ? YAML::Node() : YAML::Load(text);
+    if (!doc.IsDefined() || doc.IsNull())
       return make_error("", "the config file is empty", "missing_key", "");
-    if (docs.size() > 1)
-      return make_error("", "the config file holds more than one YAML document", "malformed_yaml",
-                        "");
-    if (!docs[0].IsMap())
-      return make_error("", "the config file must be a YAML mapping, got " + describe(docs[0]),
-                        "wrong_type", location(docs[0].Mark()));
-    json::Value typed = v.run(docs[0]);
+    if (!doc.IsMap())
+      return make_error("", "the config file must be a YAML mapping, got " + describe(doc),
+                        "wrong_type", location(doc.Mark()));
+    json::Value typed = v.run(doc);
     NodeConfig cfg = build(typed, opts);
     cfg.source = opts.source_name;
     return cfg;

@@ -619,6 +619,13 @@ TEST(ConfigErrors, MalformedAndEmpty) {
   expect_error(parse_config_text(std::string(kHead) + "---\nrcan_version: \"1.2\"\n", o), "", "malformed_yaml");
   expect_error(parse_config_text(std::string("a: b\0c", 6), o), "", "malformed_yaml");
   expect_error(parse_config_text("just a string\n", o), "", "wrong_type");
+  // A stray flow token at document level: yaml-cpp 0.7's LoadAll() would loop forever here.
+  for (const char* t : {",\n", ", a\n", "# c\n, Bridge: x\n", "]\n", "}\n"}) {
+    auto start = std::chrono::steady_clock::now();
+    auto r = parse_config_text(t, o);
+    ASSERT_FALSE(r.ok()) << t;
+    EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(2));
+  }
   // Invalid UTF-8 in a value.
   expect_error(parse(std::string("robot:\n  name: \"\xff\xfe\"\n")), "robot.name", "invalid_value");
 }
