@@ -72,9 +72,9 @@ json::Value NodeServices::status(bool detailed) {
   o.set("estop_active", act.estop_active());
   o.set("mode", "NORMAL");  // OFFLINE_AUTONOMOUS / LOCKDOWN come with the sessions work
   o.set("audit_available", !audit_unavailable.load());
-  json::Value sessions = this->sessions.to_json(now, detailed);
-  o.set("active_sessions", static_cast<int64_t>(sessions.as_array().size()));
-  o.set("sessions", sessions);
+  json::Value session_list = sessions.to_json(now, detailed);
+  o.set("active_sessions", static_cast<int64_t>(session_list.as_array().size()));
+  o.set("sessions", session_list);
   json::Array caps;
   for (const auto& c : settings.capabilities) caps.emplace_back(c);
   o.set("capabilities", caps);
