@@ -210,7 +210,7 @@ class WsSink final : public node::StreamSink {
         closer_(std::move(closer)) {}
 
   bool send_text(std::string text) override {
-    bool post_kick = false;
+    enum class Outcome { kQueued, kQueuedKick, kOverflow } outcome;
     {
       std::lock_guard<std::mutex> lock(mu_);
       if (closed_) return false;
@@ -218,26 +218,19 @@ class WsSink final : public node::StreamSink {
         closed_ = true;
         close_requested_ = true;
         queue_.clear();
+        outcome = Outcome::kOverflow;
       } else {
         queue_.push_back(std::move(text));
-        post_kick = !kick_posted_;
+        outcome = kick_posted_ ? Outcome::kQueued : Outcome::kQueuedKick;
         kick_posted_ = true;
       }
     }
-    if (!post_kick) {
-      // Either the queue overflowed (closed_ is now set) or a kick is already on its way.
-      std::lock_guard<std::mutex> lock(mu_);
-      if (closed_ && queue_.empty() && !overflow_reported_) {
-        overflow_reported_ = true;
-      } else {
-        return true;
-      }
-    } else {
-      kick_();
-      return true;
+    if (outcome == Outcome::kOverflow) {
+      closer_(1008, std::string(kQueueFullReason), true);
+      return false;
     }
-    closer_(1008, std::string(kQueueFullReason), true);
-    return false;
+    if (outcome == Outcome::kQueuedKick) kick_();
+    return true;
   }
 
   void close(uint16_t code, std::string reason) override {
@@ -280,7 +273,6 @@ class WsSink final : public node::StreamSink {
   bool closed_ = false;
   bool close_requested_ = false;
   bool kick_posted_ = false;
-  bool overflow_reported_ = false;
 };
 
 }  // namespace detail
@@ -697,6 +689,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
       }
     }
     ws_open_ = false;
+    ws_done_ = true;
     sink_->mark_closed(true);
     close_timer_.cancel();
     const int code = aec ? 0 : static_cast<int>(ws_->reason().code);
@@ -744,7 +737,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
   void request_ws_close(uint16_t code, std::string reason, bool overflow) {
     if (!sink_ || close_pending_) return;
     sink_->mark_closed(overflow);
-    if (phase_ != Phase::kWebSocket || !ws_) return;
+    if (phase_ != Phase::kWebSocket || !ws_ || ws_done_) return;
     if (overflow) {
       ++srv_.rejected_limits;
       node::log(LogLevel::kWarn, "ws.send_queue_full", {{"remote", remote_}});
@@ -782,6 +775,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
   bool ws_open_ = false;
   bool ws_writing_ = false;
   bool ws_close_started_ = false;
+  bool ws_done_ = false;  // the read loop has ended
   std::optional<std::pair<uint16_t, std::string>> close_pending_;
   std::string ws_out_;
 };
