@@ -1297,6 +1297,14 @@ NodeConfig build(const json::Value& root_value, const ConfigOptions& opts) {
     fail(id_at.path, "the robot's RURI must not carry a port or capability", "invalid_value");
   c.ruri_parts = std::move(parsed).value();
   c.ruri = c.ruri_parts.str();
+  // The normalised form must itself be canonical (parse_ruri's shorthand reading is laxer
+  // than the canonical grammar, e.g. about the device id).
+  if (Result<Ruri> again = parse_ruri(c.ruri); !again.ok() || again->str() != c.ruri)
+    fail(id_at.path,
+         "invalid RURI \"" + printable(ruri_text, 128) + "\": its canonical form " + c.ruri +
+             (again.ok() ? std::string(" does not re-parse to itself")
+                         : " is invalid: " + again.error().message),
+         "invalid_value");
 
   At rrn_top = root["rrn"];
   At rrn_reg = root["registry"]["rrn"];
