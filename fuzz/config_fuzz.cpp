@@ -14,10 +14,10 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   std::string_view text(reinterpret_cast<const char*>(data), size);
-  rcan::node::ConfigOptions opts;
+  rcan::config::ConfigOptions opts;
   opts.default_data_dir = "/nonexistent/rcand-fuzz";
   opts.device_id = "0a1b2c3d";  // so that profile-shaped inputs with {device_id} get deep
-  auto r = rcan::node::parse_config_text(text, opts);
+  auto r = rcan::config::parse_config_text(text, opts);
   if (!r.ok()) {
     const rcan::Error& e = r.error();
     if (e.code != rcan::ErrorCode::kSchemaValidationFailed || e.message.empty() || e.reason.empty())
@@ -25,7 +25,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     if (e.message.size() > 4096) std::abort();  // messages quote input, but bounded
     return 0;
   }
-  const rcan::node::NodeConfig& c = *r;
+  const rcan::config::NodeConfig& c = *r;
   auto again = rcan::parse_ruri(c.ruri);
   if (!again.ok() || again->str() != c.ruri) std::abort();
   if (c.server.port == 0 || c.security.replay_window_s < 5 || c.security.replay_window_s > 300)

@@ -36,7 +36,7 @@
 
 #include "rcan/hash.h"
 
-namespace rcan::node {
+namespace rcan::config {
 namespace {
 
 // ---------------------------------------------------------------------------------------
@@ -2022,4 +2022,4 @@ Status apply_overrides(NodeConfig& cfg, std::optional<int> port,
   return Status::Ok();
 }
 
-}  // namespace rcan::node
+}  // namespace rcan::config

@@ -35,7 +35,7 @@
 #include "rcan/roles.h"
 #include "rcan/ruri.h"
 
-namespace rcan::node {
+namespace rcan::config {
 
 inline constexpr size_t kMaxConfigBytes = 1 << 20;  // 1 MiB of YAML text
 inline constexpr size_t kMaxConfigNodes = 100000;   // YAML nodes walked (aliases re-counted)
@@ -391,4 +391,4 @@ std::string_view hitl_on_timeout_name(HitlOnTimeout t);
 // The built-in prompt-injection substrings (lower case).
 const std::vector<std::string>& default_injection_patterns();
 
-}  // namespace rcan::node
+}  // namespace rcan::config

@@ -1,8 +1,12 @@
 // Shared helpers for the test programs: vector files, temp dirs, child processes.
 #pragma once
 
+#include <sys/types.h>
+
+#include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "rcan/encoding.h"
@@ -42,5 +46,97 @@ RunResult run(const std::vector<std::string>& argv, const std::string& stdin_dat
 // Runs the rcan CLI built alongside the tests.
 RunResult run_cli(const std::vector<std::string>& args, const std::string& stdin_data = {},
                   const std::vector<std::string>& extra_env = {});
+
+}  // namespace rcan::test
+
+namespace rcan::test {
+
+// A child process whose stderr is watched line by line (for daemons).
+class Process {
+ public:
+  Process() = default;
+  ~Process();
+  Process(const Process&) = delete;
+  Process& operator=(const Process&) = delete;
+
+  // Starts argv; stdout goes to /dev/null, stderr is captured.
+  bool start(const std::vector<std::string>& argv, const std::vector<std::string>& extra_env = {});
+  // Waits up to `timeout_ms` for a stderr line containing `needle`; returns the line.
+  std::optional<std::string> wait_for_line(const std::string& needle, int timeout_ms);
+  // Sends `sig` and waits up to `timeout_ms` for exit; returns the exit status (-1 if killed
+  // by a signal or still running).
+  int stop(int sig, int timeout_ms);
+  bool running();
+  pid_t pid() const { return pid_; }
+  // Everything read from stderr so far.
+  const std::string& err() const { return err_; }
+  void drain(int timeout_ms);
+
+ private:
+  pid_t pid_ = -1;
+  int err_fd_ = -1;
+  std::string err_;
+  size_t scanned_ = 0;
+  int exit_status_ = -2;
+};
+
+struct HttpReply {
+  int status = 0;  // 0 when the request failed at the socket level
+  std::vector<std::pair<std::string, std::string>> headers;  // names lower-cased
+  std::string body;
+  std::string header(const std::string& name) const {
+    for (const auto& h : headers)
+      if (h.first == name) return h.second;
+    return {};
+  }
+};
+
+// One HTTP/1.1 request on a fresh loopback connection (Connection: close).
+HttpReply http(uint16_t port, const std::string& method, const std::string& target,
+               const std::string& body = {},
+               const std::vector<std::pair<std::string, std::string>> headers = {},
+               int timeout_ms = 10000);
+
+// A keep-alive HTTP/1.1 client on one loopback connection.
+class HttpClient {
+ public:
+  explicit HttpClient(uint16_t port);
+  ~HttpClient();
+  HttpClient(const HttpClient&) = delete;
+  HttpClient& operator=(const HttpClient&) = delete;
+  bool connected() const { return fd_ >= 0; }
+  HttpReply request(const std::string& method, const std::string& target, const std::string& body = {},
+                    const std::vector<std::pair<std::string, std::string>>& headers = {},
+                    int timeout_ms = 10000);
+  // Raw bytes (for hostile input); returns what came back before close/timeout.
+  std::string raw(const std::string& bytes, int timeout_ms);
+
+ private:
+  int fd_ = -1;
+  std::string buf_;
+};
+
+// A minimal RFC 6455 client (text frames, masking) over loopback.
+class WsClient {
+ public:
+  WsClient() = default;
+  ~WsClient();
+  WsClient(const WsClient&) = delete;
+  WsClient& operator=(const WsClient&) = delete;
+  // Opens and upgrades; returns the HTTP status of the upgrade response (101 on success).
+  int connect(uint16_t port, const std::string& path,
+              const std::vector<std::pair<std::string, std::string>>& headers = {});
+  bool send_text(const std::string& text);
+  bool send_binary(const std::string& data);
+  // Next text frame within timeout; nullopt on timeout or close (close_code() tells).
+  std::optional<std::string> recv_text(int timeout_ms);
+  int close_code() const { return close_code_; }
+
+ private:
+  bool send_frame(uint8_t opcode, const std::string& payload);
+  int fd_ = -1;
+  std::string buf_;
+  int close_code_ = 0;
+};
 
 }  // namespace rcan::test

@@ -13,7 +13,7 @@
 
 #include "test_support.h"
 
-namespace rcan::node {
+namespace rcan::config {
 namespace {
 
 const std::string kData = RCAN_TESTDATA_DIR;
@@ -813,4 +813,4 @@ TEST(ConfigScalars, YamlForms) {
 }
 
 }  // namespace
-}  // namespace rcan::node
+}  // namespace rcan::config
