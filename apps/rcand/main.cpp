@@ -398,6 +398,7 @@ int main(int argc, char** argv) {
     core.stop();
     return fail("cannot listen on " + so.bind_address + ":" + std::to_string(so.port) + ": " + port.error().message);
   }
+  services.settings.port = *port;  // the bound port (differs from the configured one for --port 0)
   double startup_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - started).count();
   std::string scheme = so.tls ? "https" : "http";

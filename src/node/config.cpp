@@ -2004,9 +2004,10 @@ Result<std::string> default_data_dir() {
 Status apply_overrides(NodeConfig& cfg, std::optional<int> port,
                        std::optional<std::string> data_dir) {
   if (port) {
-    if (*port < 1 || *port > 65535)
+    // 0 asks the kernel for a free port (tests, several nodes on one host); the node logs it.
+    if (*port < 0 || *port > 65535)
       return Error(ErrorCode::kSchemaValidationFailed,
-                   "--port: out of range: " + std::to_string(*port) + " (must be between 1 and 65535)",
+                   "--port: out of range: " + std::to_string(*port) + " (must be between 0 and 65535)",
                    "server.port", "out_of_range");
   }
   if (data_dir && data_dir->empty())

@@ -378,7 +378,7 @@ std::string_view default_config_yaml();
 // else the passwd home directory. Error when no home directory can be found.
 Result<std::string> default_data_dir();
 
-// `--port N` and `--data-dir D`. Port must be 1..65535. A new data_dir (made absolute)
+// `--port N` and `--data-dir D`. Port must be 0..65535 (0: any free port, logged at start). A new data_dir (made absolute)
 // moves key_dir, audit.dir and audit.chain_secret_file with it unless the file set them.
 Status apply_overrides(NodeConfig& cfg, std::optional<int> port,
                        std::optional<std::string> data_dir);

@@ -722,6 +722,10 @@ TEST(ConfigOverrides, PortAndDataDir) {
   NodeConfig c = *r;
   ASSERT_TRUE(apply_overrides(c, 9090, std::string("/tmp/rcand-two")).ok());
   EXPECT_EQ(c.server.port, 9090);
+  // --port 0: any free port (tests run several nodes at once).
+  ASSERT_TRUE(apply_overrides(c, 0, std::nullopt).ok());
+  EXPECT_EQ(c.server.port, 0);
+  ASSERT_TRUE(apply_overrides(c, 9090, std::nullopt).ok());
   EXPECT_EQ(c.data_dir, "/tmp/rcand-two");
   EXPECT_EQ(c.security.key_dir, "/tmp/rcand-two/keys");
   EXPECT_EQ(c.security.audit.dir, "/tmp/rcand-two/audit");
@@ -729,10 +733,10 @@ TEST(ConfigOverrides, PortAndDataDir) {
   EXPECT_EQ(c.ruri, r->ruri);  // identity does not move with the data dir
 
   // Out of range or empty: refused, config unchanged.
-  Status s = apply_overrides(c, 0, std::nullopt);
+  Status s = apply_overrides(c, 70000, std::nullopt);
   ASSERT_FALSE(s.ok());
   EXPECT_EQ(s.error().field, "server.port");
-  EXPECT_FALSE(apply_overrides(c, 70000, std::nullopt).ok());
+  EXPECT_FALSE(apply_overrides(c, -1, std::nullopt).ok());
   EXPECT_FALSE(apply_overrides(c, std::nullopt, std::string()).ok());
   EXPECT_EQ(c.server.port, 9090);
   ASSERT_TRUE(apply_overrides(c, std::nullopt, std::nullopt).ok());

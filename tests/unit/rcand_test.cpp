@@ -197,7 +197,8 @@ TEST_F(RcandTest, OwnerCommandIsDispatchedAndAudited) {
   HttpReply audit = d().get("/api/audit?limit=200", d().owner_token());
   ASSERT_EQ(audit.status, 200);
   bool found = false;
-  for (const auto& e : parse(audit.body).get("entries")->as_array()) {
+  json::Value listing = parse(audit.body);
+  for (const auto& e : listing.get("entries")->as_array()) {
     if (e.get("message_id")->as_string() == id && e.get("event")->as_string() == "COMMAND") {
       found = true;
       EXPECT_EQ(e.get("outcome")->as_string(), "ok");
@@ -231,7 +232,9 @@ TEST_F(RcandTest, HostileInputGetsTheRightStatusAndErrorBody) {
     json::Value v = parse(r.body);
     EXPECT_EQ(v.get("type") ? v.get("type")->as_string() : "", "ERROR") << r.body;
     EXPECT_EQ(error_code(r), code);
-    EXPECT_FALSE(v.get("payload")->get("error")->as_string().empty());
+    const json::Value* p = v.get("payload");
+    ASSERT_TRUE(p && p->get("error") && p->get("error")->is_string()) << r.body;
+    EXPECT_FALSE(p->get("error")->as_string().empty());
   };
   check("malformed JSON", d().post("/rcan/v1/command", "{\"version\":", owner), 400, "MALFORMED_JSON");
   check("not an object", d().post("/rcan/v1/command", "[1,2]", owner), 400, "SCHEMA_VALIDATION_FAILED");
@@ -281,7 +284,6 @@ TEST_F(RcandTest, HostileInputGetsTheRightStatusAndErrorBody) {
         422, "COMMAND_REJECTED");
   check("unknown route", d().get("/nope"), 404, "NOT_FOUND");
   check("wrong method", d().get("/rcan/v1/command"), 405, "METHOD_NOT_ALLOWED");
-  check("bad auth header", d().get("/rcan/v1/status", ""), 200, "");  // sanity: public status
 }
 
 TEST_F(RcandTest, GuestRateLimitTripsWithRetryAfter) {
@@ -394,7 +396,8 @@ TEST_F(RcandTest, LiveCheckerL1Probes) {
   // L1-AUDIT-001: 200, non-empty, first entry has the six §6 fields.
   HttpReply audit = d().get("/api/audit", d().owner_token());
   ASSERT_EQ(audit.status, 200);
-  const auto& entries = parse(audit.body).get("entries")->as_array();
+  json::Value listing = parse(audit.body);
+  const auto& entries = listing.get("entries")->as_array();
   ASSERT_FALSE(entries.empty());
   for (const char* k : {"principal", "ruri", "timestamp_ms", "message_id", "event", "outcome"})
     EXPECT_NE(entries[0].get(k), nullptr) << k;
@@ -435,7 +438,8 @@ TEST_F(RcandTest, ConformanceL1CasesAgainstTheDaemon) {
       ASSERT_EQ(r.status, 200) << r.body;
       HttpReply audit = d().get("/api/audit?limit=500", d().owner_token());
       bool found = false;
-      for (const auto& e : parse(audit.body).get("entries")->as_array()) {
+      json::Value listing = parse(audit.body);
+  for (const auto& e : listing.get("entries")->as_array()) {
         if (e.get("message_id")->as_string() != mid) continue;
         found = true;
         for (const auto& k : expect.get("audit_entry_contains")->as_array()) EXPECT_NE(e.get(k.as_string()), nullptr);
