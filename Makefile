@@ -1,5 +1,5 @@
 # Two commands set everything up on a fresh Debian 12 machine:
-#   make run    install what is missing, build, start the node (for now: the CLI self-check)
+#   make run    install what is missing, build, start the node on its embedded simulated robot
 #   make test   install what is missing, build, run every test (CTest summary)
 # Other targets: build, debug, asan, bench, fuzz, format, clean.
 
@@ -26,6 +26,7 @@ build: deps $(BUILD_DIR)/build.ninja
 
 run: build
 	$(BUILD_DIR)/bin/rcan selfcheck
+	$(BUILD_DIR)/bin/rcand $(RCAND_ARGS)
 
 test: build
 	ctest --test-dir $(BUILD_DIR) --output-on-failure -j $(JOBS)

@@ -290,7 +290,12 @@ int main(int argc, char** argv) {
       return fail(s.error().message);
   }
   auto secret = audit::load_chain_secret(cfg.security.audit.chain_secret_file);
-  if (!secret.ok()) return fail(secret.error().message);
+  if (!secret.ok()) {
+    std::string msg = secret.error().message;
+    if (msg.find("new-secret") == std::string::npos)
+      msg += " (create one with: rcan audit new-secret --out " + cfg.security.audit.chain_secret_file + ")";
+    return fail(msg);
+  }
 
   // 3. Token issuers.
   auto trust = jwt::TrustStore::from_config(cfg.security.jwt.issuers);

@@ -153,6 +153,32 @@ std::optional<Ruri> parse_sdk5(const std::vector<std::string_view>& parts) {
   return r;
 }
 
+// The expanded form of the v1.1 dot shorthand: rcan://local.rcan/<mfr>/<model>/<id>[/cap],
+// whose id is 4..36 alphanumerics (not necessarily hex). Accepting it keeps the shorthand's
+// normalised output a fixed point of the parser.
+std::optional<Ruri> parse_local_expanded(const std::vector<std::string_view>& parts) {
+  if (parts.size() < 4 || parts[0] != "local.rcan") return std::nullopt;
+  auto label = [](std::string_view s) {
+    if (s.empty() || !is_lower_alnum(s[0])) return false;
+    for (char c : s)
+      if (!is_lower_alnum(c) && c != '-') return false;
+    return true;
+  };
+  if (!label(parts[1]) || !label(parts[2])) return std::nullopt;
+  std::string_view id = parts[3];
+  if (id.size() < 4 || id.size() > 36) return std::nullopt;
+  for (char c : id)
+    if (!is_lower_alnum(c)) return std::nullopt;
+  Ruri r;
+  if (parts.size() > 4 && check_capability(parts, 4, r.capability)) return std::nullopt;
+  r.form = Ruri::Form::kShorthand;
+  r.registry = "local.rcan";
+  r.manufacturer = std::string(parts[1]);
+  r.model = std::string(parts[2]);
+  r.device_id = std::string(id);
+  return r;
+}
+
 std::optional<Ruri> parse_shorthand(const std::vector<std::string_view>& parts) {
   std::string_view head = parts[0];
   size_t d1 = head.find('.');
@@ -255,6 +281,7 @@ Result<Ruri> parse_ruri(std::string_view text) {
     auto canon = parse_canonical(parts);
     if (canon.ok()) return canon;
     if (auto sdk = parse_sdk5(parts)) return *sdk;
+    if (auto ex = parse_local_expanded(parts)) return *ex;
     if (auto sh = parse_shorthand(parts)) return *sh;
     return canon;
   }

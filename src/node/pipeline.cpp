@@ -382,10 +382,18 @@ class DispatchStage final : public Stage {
       return Result::kAnswered;
     }
     if (m.type == MessageType::kHeartbeat) {
-      if (!ctx->in.stream_session.empty()) svc_.act.session_heartbeat(ctx->in.stream_session);
+      // Keeps the sender's control session alive (deadman). Only its holder can feed it.
+      auto holder = svc_.sessions.controller(svc_.clock.mono_ms());
+      bool fed = false;
+      if (holder && holder->principal_key == ctx->principal.key()) {
+        svc_.act.session_heartbeat(holder->id);
+        fed = true;
+      }
       auto e = accepted_entry(*ctx, "HEARTBEAT");
       svc_.write_audit(std::move(e));
-      ctx->finish(Outcome{200, svc_.envelope(MessageType::kAck, json::Object{{"ok", true}}, m.message_id), {}});
+      json::Object payload{{"ok", true}, {"session_alive", fed}};
+      if (fed) payload.set("session_id", holder->id);
+      ctx->finish(Outcome{200, svc_.envelope(MessageType::kAck, payload, m.message_id), {}});
       return Result::kAnswered;
     }
     return command(ctx);

@@ -40,7 +40,6 @@ struct Ingress {
   std::string route;       // e.g. "/rcan/v1/command"
   std::string remote;      // peer address, for logs
   std::optional<Principal> preauthenticated;  // a stream authenticated at CONNECT
-  std::string stream_session;                 // the control session a stream holds, if any
 };
 
 // What the pipeline answers.

@@ -7,8 +7,10 @@
 
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <thread>
 
+#include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/jwt.h"
 #include "rcan/errors.h"
 #include "rcan/json.h"
@@ -610,6 +612,150 @@ TEST(RcandLifecycle, KillDashNineUnderLoadLosesNoAcknowledgedRecord) {
   EXPECT_EQ(d2.terminate(), 0);
   auto r = test::run_cli({"audit", "verify", "--data-dir", data + "/audit", "--secret-file", data + "/audit.secret"});
   EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+}
+
+}  // namespace
+}  // namespace rcan
+
+namespace rcan {
+namespace {
+
+std::string heartbeat_msg() {
+  return "{\"version\":\"1.0.0\",\"type\":\"HEARTBEAT\",\"message_id\":\"" + new_uuid_v4() + "\",\"timestamp_ms\":" +
+         std::to_string(wall_ms()) + ",\"payload\":{}}";
+}
+
+TEST(RcandDeadman, HeartbeatLossSafeStopsAndIsAudited) {
+  test::TempDir dir;
+  Daemon d(dir.path() + "/node");
+  std::string user = d.token("user", {"control"}, 3600, "deadman-user");
+  HttpReply claim = d.post("/rcan/v1/auth/claim", "{}", user);
+  ASSERT_EQ(claim.status, 200) << claim.body;
+  std::string session = parse(claim.body).get("payload")->get("session_id")->as_string();
+  int64_t timeout = parse(claim.body).get("payload")->get("heartbeat_timeout_ms")->as_int();
+  EXPECT_EQ(timeout, 2000);
+  // Heartbeats keep the session alive while it drives.
+  ASSERT_EQ(d.post("/rcan/v1/command", command("move", {{"linear", 0.2}, {"duration_ms", 4000}}), user).status, 200);
+  for (int i = 0; i < 3; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(700));
+    HttpReply hb = d.post("/rcan/v1/command", heartbeat_msg(), user);
+    ASSERT_EQ(hb.status, 200) << hb.body;
+    EXPECT_TRUE(parse(hb.body).get("payload")->get("session_alive")->as_bool());
+  }
+  // Then silence: after the timeout the robot is safe-stopped and the record says why.
+  std::this_thread::sleep_for(std::chrono::milliseconds(2600));
+  HttpReply audit = d.get("/api/audit?limit=100", d.owner_token());
+  json::Value listing = parse(audit.body);
+  bool found = false;
+  for (const auto& e : listing.get("entries")->as_array()) {
+    if (e.get("event")->as_string() == "NETWORK_LOSS_SAFE_STOP") {
+      found = true;
+      EXPECT_EQ(e.get("detail")->get("session_id")->as_string(), session);
+      EXPECT_GE(e.get("detail")->get("elapsed_ms")->as_int(), 2000);
+    }
+  }
+  EXPECT_TRUE(found) << audit.body.substr(0, 2000);
+  json::Value st = parse(d.get("/rcan/v1/status", d.owner_token()).body);
+  ASSERT_NE(st.get("robot"), nullptr);
+  ASSERT_NE(st.get("robot")->get("safe_stop"), nullptr);
+  EXPECT_TRUE(st.get("robot")->get("safe_stop")->as_bool());
+  EXPECT_EQ(st.get("robot")->get("state")->as_string(), "safe_stop");
+  EXPECT_FALSE(st.get("estop_active")->as_bool());  // safe-stop is not the ESTOP latch
+}
+
+TEST(RcandConfig, UnknownKeyStopsStartUpNamingItsPath) {
+  test::TempDir dir;
+  std::string cfg = dir.file("robot.rcan.yaml");
+  {
+    std::ofstream out(cfg);
+    out << "rcan_version: \"1.2\"\nruri: rcan://local.rcan/acme/rover/0a1b2c3d\n"
+           "safety:\n  local_safety_wins: true\n  max_linear_speed_mps: fast\n";
+  }
+  test::Process p;
+  ASSERT_TRUE(p.start({RCAND_PATH, "--config", cfg, "--port", "0", "--data-dir", dir.file("data")}));
+  EXPECT_EQ(p.stop(0, 15000), 1);
+  EXPECT_NE(p.err().find("safety.max_linear_speed_mps"), std::string::npos) << p.err();
+}
+
+TEST(RcandConfig, ConfiguredRobotNeedsItsSecretAndIssuerThenServes) {
+  test::TempDir dir;
+  std::string data = dir.file("data");
+  std::string cfg = dir.file("robot.rcan.yaml");
+  auto write_cfg = [&](const std::string& issuer_block) {
+    std::ofstream out(cfg);
+    out << "rcan_version: \"1.2\"\nruri: rcan://local.rcan/acme/rover/0a1b2c3d\n"
+           "robot:\n  name: test-rover\n  manufacturer: acme\n  model: rover\n  type: mobile\n"
+           "safety:\n  local_safety_wins: true\n  max_linear_speed_mps: 0.4\n"
+        << issuer_block;
+  };
+  write_cfg("");
+  // No keys: start-up refuses, saying how to create them.
+  test::Process p1;
+  ASSERT_TRUE(p1.start({RCAND_PATH, "--config", cfg, "--port", "0", "--data-dir", data}));
+  EXPECT_EQ(p1.stop(0, 15000), 1);
+  EXPECT_NE(p1.err().find("rcan keys generate"), std::string::npos) << p1.err();
+  ASSERT_EQ(test::run_cli({"keys", "generate", "--dir", data + "/keys"}).exit_code, 0);
+  // No chain secret: refuses, saying how to create one.
+  test::Process p2;
+  ASSERT_TRUE(p2.start({RCAND_PATH, "--config", cfg, "--port", "0", "--data-dir", data}));
+  EXPECT_EQ(p2.stop(0, 15000), 1);
+  EXPECT_NE(p2.err().find("new-secret"), std::string::npos) << p2.err();
+  ASSERT_EQ(test::run_cli({"audit", "new-secret", "--out", data + "/audit.secret"}).exit_code, 0);
+  // No token issuer: refuses (there is no open mode).
+  test::Process p3;
+  ASSERT_TRUE(p3.start({RCAND_PATH, "--config", cfg, "--port", "0", "--data-dir", data}));
+  EXPECT_EQ(p3.stop(0, 15000), 1);
+  EXPECT_NE(p3.err().find("issuer"), std::string::npos) << p3.err();
+  // An issuer key: the node serves, and the configured speed limit clamps commands.
+  auto seed = test::hex("0707070707070707070707070707070707070707070707070707070707070707");
+  std::string seed_file = dir.file("issuer.seed");
+  {
+    std::ofstream out(seed_file, std::ios::binary);
+    out.write(reinterpret_cast<const char*>(seed.data()), static_cast<std::streamsize>(seed.size()));
+  }
+  std::filesystem::permissions(seed_file, std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
+  auto key = jwt::SigningKey::from_file(seed_file);
+  ASSERT_TRUE(key.ok());
+  auto vk = key->verification_key();
+  ASSERT_TRUE(vk.ok());
+  std::string pub_pem;
+  {
+    auto pk = ed25519::public_key_from_seed(seed);
+    ASSERT_TRUE(pk.ok());
+    auto pem = ed25519::public_key_to_pem(*pk);
+    ASSERT_TRUE(pem.ok());
+    pub_pem = *pem;
+  }
+  std::string pub_file = dir.file("issuer.pub.pem");
+  {
+    std::ofstream out(pub_file);
+    out << pub_pem;
+  }
+  write_cfg("security:\n  jwt:\n    issuers:\n      - issuer: ops.example\n        key_file: " + pub_file + "\n");
+  test::Process p4;
+  ASSERT_TRUE(p4.start({RCAND_PATH, "--config", cfg, "--port", "0", "--data-dir", data}));
+  auto line = p4.wait_for_line("\"event\":\"listening\"", 30000);
+  ASSERT_TRUE(line.has_value()) << p4.err();
+  json::Value lv = parse(*line);
+  std::string url = lv.get("url")->as_string();
+  uint16_t port = static_cast<uint16_t>(std::stoi(url.substr(url.rfind(':') + 1)));
+  int64_t now = wall_ms() / 1000;
+  auto tok = jwt::issue(json::Object{{"iss", "ops.example"},
+                                     {"sub", "operator-7"},
+                                     {"aud", "rcan://local.rcan/acme/rover/*"},
+                                     {"role", "owner"},
+                                     {"scope", json::Array{"control"}},
+                                     {"iat", now},
+                                     {"exp", now + 600}},
+                        *key);
+  ASSERT_TRUE(tok.ok());
+  HttpReply r = test::http(port, "POST", "/rcan/v1/command", command("move", {{"linear", 2.0}, {"duration_ms", 100}}),
+                           {{"Authorization", "Bearer " + *tok}});
+  ASSERT_EQ(r.status, 200) << r.body;
+  json::Value ack = parse(r.body);
+  EXPECT_TRUE(ack.get("payload")->get("result")->get("clamped")->as_bool());
+  EXPECT_DOUBLE_EQ(ack.get("payload")->get("result")->get("applied")->get("drive")->get("linear_mps")->as_double(), 0.4);
+  EXPECT_EQ(p4.stop(SIGTERM, 15000), 0);
 }
 
 }  // namespace

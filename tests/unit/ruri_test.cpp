@@ -33,7 +33,8 @@ const std::map<std::string, std::string>& profile_verdicts() {
       {"rcan://registry.rcan.dev/acme/arm/v1/x?sig=abc", "!ruri"},
       {"rcan://continuon.cloud/continuon/companion-v1/d3a4b5c6", "rcan://continuon.cloud/continuon/companion-v1/d3a4b5c6"},
       {"rcan://continuon.cloud/continuon/companion-v1/*", "!device-id"},
-      {"rcan://local.rcan/opencastor/rover/abc123", "!device-id"},
+      // The expanded v1.1 shorthand (device id of 4..36 alphanumerics under local.rcan).
+      {"rcan://local.rcan/opencastor/rover/abc123", "rcan://local.rcan/opencastor/rover/abc123"},
       {"rcan://rcan.dev/org/robot/v1/unit-001", "rcan://rcan.dev/org/robot/v1/unit-001"},
       {"rcan://local.rcan/opencastor/rover/abc12345", "rcan://local.rcan/opencastor/rover/abc12345"},
       {"rcan://local.rcan/opencastor/rover", "!device-id"},
@@ -45,7 +46,7 @@ const std::map<std::string, std::string>& profile_verdicts() {
       {"rcan://", "!registry"},
       {"https://example.com/robot", "!scheme"},
       {"rcan://UPPERCASE/mfr/mdl/12345678", "!registry"},
-      {"rcan://local.rcan/mfr/mdl/short", "!device-id"},
+      {"rcan://local.rcan/mfr/mdl/short", "rcan://local.rcan/mfr/mdl/short"},
       {"rcan://robots.acme-corp.com/acme/patrol-bot/a1b2c3d4e5f6", "!device-id"},
       {"rcan://local.rcan/generic/differential-drive/00000001", "rcan://local.rcan/generic/differential-drive/00000001"},
       {"rcan://registry.example.com:9000/universal-robots/ur10e/ur10e-0042-aabb", "!registry"},
@@ -126,13 +127,26 @@ TEST(Ruri, ErrorsNameSegmentAndRule) {
   r = parse_ruri("rcan://local.rcan/acme/arm/a1b2c3d4/Nav");
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.error().field, "capability");
-  r = parse_ruri("rcan://local.rcan/a/arm/a1b2c3d4");
+  r = parse_ruri("rcan://example.com/a/arm/a1b2c3d4");
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.error().field, "manufacturer");
   EXPECT_NE(r.error().message.find("shorter than 2"), std::string::npos);
   r = parse_ruri("rcan://local.rcan/discovered/999.1.1.1:80");
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.error().field, "device-id");
+}
+
+TEST(Ruri, ShorthandOutputIsAFixedPoint) {
+  // Found by fuzzing: a shorthand whose id is not hex must still re-parse after expansion.
+  for (const char* in : {"rcan://a.b.0a1bj2c3d", "rcan://opencastor.rover.abc123/nav", "rcan://x.y.zzzz"}) {
+    auto r = parse_ruri(in);
+    ASSERT_TRUE(r.ok()) << in << ": " << r.error().message;
+    auto again = parse_ruri(r->str());
+    ASSERT_TRUE(again.ok()) << r->str() << ": " << again.error().message;
+    EXPECT_EQ(again->str(), r->str());
+  }
+  EXPECT_FALSE(parse_ruri("rcan://local.rcan/acme/arm/abc").ok());  // 3 characters: too short
+  EXPECT_FALSE(parse_ruri("rcan://other.reg/acme/arm/abc123").ok());  // only under local.rcan
 }
 
 TEST(Ruri, HostileInputIsRejectedCleanly) {
