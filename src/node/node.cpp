@@ -621,9 +621,46 @@ void Node::handoff(HttpRequest& req, Respond& respond) {
   const std::string route = "/rcan/v1/handoff";
   auto pr = bearer_principal(req);
   if (!pr.ok()) return answer_error(respond, route, pr.error());
-  // Named handoff with a reserved window is part of the sessions work; refuse honestly.
-  answer_error(respond, route,
-               Error(ErrorCode::kNotImplemented, "named handoff is not implemented yet; release and claim instead"));
+  auto v = json::parse(req.body.empty() ? "{}" : req.body, {.max_depth = 16, .max_bytes = 65536});
+  if (!v.ok()) return answer_error(respond, route, v.error());
+  if (!v->is_object()) return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "Invalid payload"));
+  auto str = [&](const char* k) -> std::string {
+    const json::Value* f = v->get(k);
+    return f && f->is_string() ? f->as_string().substr(0, 256) : "";
+  };
+  std::string session_id = str("session_id");
+  std::string target = str("target_user_id");
+  if (session_id.empty() || target.empty())
+    return answer_error(respond, route,
+                        Error(ErrorCode::kSchemaValidationFailed, "session_id and target_user_id are required",
+                              session_id.empty() ? "session_id" : "target_user_id", "missing_field"));
+  std::optional<Role> target_role;
+  if (std::string r = str("target_role"); !r.empty()) {
+    target_role = role_from_name(r);
+    if (!target_role) {
+      json::Value body = svc_.error(Error(ErrorCode::kSchemaValidationFailed, "unknown target_role", "target_role"));
+      body.as_object().set("valid_roles", json::Array{"CREATOR", "OWNER", "LEASEE", "USER", "GUEST"});
+      return answer_json(respond, route, 400, std::move(body));
+    }
+  }
+  int64_t window = svc_.settings.handoff_window_ms;
+  auto r = svc_.sessions.handoff(session_id, *pr, target, target_role, window, svc_.clock.mono_ms());
+  if (!r.ok()) return answer_error(respond, route, r.error());
+  svc_.act.session_ended(session_id);
+  svc_.events.publish(json::Value(json::Object{{"type", "AVAILABLE"},
+                                               {"released_session", session_id},
+                                               {"reserved_for", target},
+                                               {"window_ms", window},
+                                               {"timestamp_ms", svc_.clock.wall_ms()}}));
+  auto e = svc_.entry(pr->display(), session_id, "HANDOFF", "ok");
+  e.sub = pr->sub;
+  e.detail.set("target_user_id", target);
+  if (target_role) e.detail.set("target_role", std::string(role_name(*target_role)));
+  if (std::string reason = str("reason"); !reason.empty()) e.reason = reason;
+  json::Object payload{{"session_id", session_id}, {"target_user_id", target}, {"window_ms", window}};
+  svc_.write_audit(std::move(e), [this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
+    answer_json(respond, route, 200, svc_.envelope(MessageType::kAvailable, payload));
+  });
 }
 
 void Node::audit_listing(HttpRequest& req, Respond& respond) {

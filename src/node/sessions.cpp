@@ -17,6 +17,17 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
   if (requested && role_level(*requested) < role_level(role)) role = *requested;  // only lower
   std::lock_guard<std::mutex> lock(mu_);
   expire_locked(now_mono_ms, nullptr);
+  if (reserved_ && now_mono_ms >= reserved_->until_mono_ms) reserved_.reset();
+  if (reserved_) {
+    if (p.sub != reserved_->target_sub) {
+      return Error(ErrorCode::kControlConflict,
+                   "control is reserved for a named handoff for " +
+                       std::to_string((reserved_->until_mono_ms - now_mono_ms + 999) / 1000) + " s",
+                   "session");
+    }
+    if (reserved_->max_role && role_level(*reserved_->max_role) < role_level(role)) role = *reserved_->max_role;
+    reserved_.reset();
+  }
   ClaimResult r;
   if (holder_) {
     if (holder_->principal_key == p.key()) {
@@ -55,6 +66,26 @@ Result<Session> SessionTable::release(const std::string& session_id, const Princ
   Session s = *holder_;
   holder_.reset();
   return s;
+}
+
+Result<Session> SessionTable::handoff(const std::string& session_id, const Principal& p, std::string target_sub,
+                                      std::optional<Role> target_role, int64_t window_ms, int64_t now_mono_ms) {
+  std::lock_guard<std::mutex> lock(mu_);
+  expire_locked(now_mono_ms, nullptr);
+  if (!holder_ || holder_->id != session_id)
+    return Error(ErrorCode::kNotFound, "no such control session", "session_id");
+  if (holder_->principal_key != p.key())
+    return Error(ErrorCode::kInsufficientPrivileges, "only the holder may hand control off", "session_id");
+  Session s = *holder_;
+  holder_.reset();
+  reserved_ = Reservation{std::move(target_sub), target_role, s.id, now_mono_ms + window_ms};
+  return s;
+}
+
+std::optional<Reservation> SessionTable::reservation(int64_t now_mono_ms) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (reserved_ && now_mono_ms >= reserved_->until_mono_ms) reserved_.reset();
+  return reserved_;
 }
 
 std::optional<Session> SessionTable::controller(int64_t now_mono_ms, std::vector<Session>* expired) {

@@ -378,6 +378,38 @@ TEST_F(RcandTest, ClaimConflictAndRelease) {
   EXPECT_EQ(test::http(d().port(), "DELETE", "/rcan/v1/auth/release", "{\"session_id\":\"" + s2 + "\"}", h2).status, 200);
 }
 
+TEST_F(RcandTest, NamedHandoffReservesTheWindowForItsTarget) {
+  std::string alice = d().token("user", {"control"}, 3600, "alice");
+  std::string bob = d().token("leasee", {"control"}, 3600, "bob");
+  std::string carol = d().token("owner", {"control"}, 3600, "carol");
+  HttpReply c = d().post("/rcan/v1/auth/claim", "{}", alice);
+  ASSERT_EQ(c.status, 200) << c.body;
+  std::string session = parse(c.body).get("payload")->get("session_id")->as_string();
+  // Missing fields and a bad role are 400; someone else cannot hand off alice's session.
+  EXPECT_EQ(d().post("/rcan/v1/handoff", "{\"session_id\":\"" + session + "\"}", alice).status, 400);
+  HttpReply bad_role = d().post("/rcan/v1/handoff",
+                                "{\"session_id\":\"" + session + "\",\"target_user_id\":\"bob\",\"target_role\":\"king\"}", alice);
+  EXPECT_EQ(bad_role.status, 400);
+  EXPECT_TRUE(parse(bad_role.body).get("valid_roles")->is_array());
+  EXPECT_EQ(d().post("/rcan/v1/handoff", "{\"session_id\":\"" + session + "\",\"target_user_id\":\"carol\"}", bob).status,
+            403);
+  HttpReply h = d().post("/rcan/v1/handoff",
+                         "{\"session_id\":\"" + session + "\",\"target_user_id\":\"bob\",\"target_role\":\"USER\",\"reason\":\"shift change\"}",
+                         alice);
+  ASSERT_EQ(h.status, 200) << h.body;
+  EXPECT_EQ(parse(h.body).get("type")->as_string(), "AVAILABLE");
+  // During the window: even a higher role is denied; the named target gets it, capped at USER.
+  HttpReply other = d().post("/rcan/v1/auth/claim", "{}", carol);
+  EXPECT_EQ(other.status, 409);
+  EXPECT_EQ(error_code(other), "CONTROL_CONFLICT");
+  HttpReply target = d().post("/rcan/v1/auth/claim", "{}", bob);
+  ASSERT_EQ(target.status, 200) << target.body;
+  EXPECT_EQ(parse(target.body).get("payload")->get("role")->as_string(), "USER");
+  std::string s2 = parse(target.body).get("payload")->get("session_id")->as_string();
+  std::vector<std::pair<std::string, std::string>> hb{{"Authorization", "Bearer " + bob}};
+  EXPECT_EQ(test::http(d().port(), "DELETE", "/rcan/v1/auth/release", "{\"session_id\":\"" + s2 + "\"}", hb).status, 200);
+}
+
 TEST_F(RcandTest, GuestCannotClaim) {
   HttpReply r = d().post("/rcan/v1/auth/claim", "{}", d().token("guest", {"status"}, 3600, "g-claim"));
   EXPECT_EQ(r.status, 403);
@@ -528,6 +560,22 @@ TEST_F(RcandTest, WebSocketRefusesBadTokensNonConnectFirstFramesAndBinary) {
     }
     EXPECT_EQ(ws.close_code(), 1003);
   }
+}
+
+TEST_F(RcandTest, CliEstopAndResumeAgainstTheDaemon) {
+  std::string url = "--url=http://127.0.0.1:" + std::to_string(d().port());
+  std::string tokfile = dir_->path() + "/node/owner.token";
+  auto st = test::run_cli({"status", url});
+  EXPECT_EQ(st.exit_code, 0) << st.err;
+  EXPECT_NE(st.out.find(d().ruri()), std::string::npos);
+  EXPECT_EQ(test::run_cli({"estop", url}).exit_code, 2);  // no token
+  auto e = test::run_cli({"estop", url, "--token-file", tokfile, "--reason", "cli test"});
+  EXPECT_EQ(e.exit_code, 0) << e.out << e.err;
+  EXPECT_TRUE(parse(d().get("/rcan/v1/status").body).get("estop_active")->as_bool());
+  auto r = test::run_cli({"resume"}, "", {"RCAN_URL=http://127.0.0.1:" + std::to_string(d().port()), "RCAN_TOKEN_FILE=" + tokfile});
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_FALSE(parse(d().get("/rcan/v1/status").body).get("estop_active")->as_bool());
+  EXPECT_EQ(test::run_cli({"status", "--url=http://127.0.0.1:1"}).exit_code, 2);
 }
 
 TEST_F(RcandTest, MetricsInPrometheusFormat) {
