@@ -156,6 +156,7 @@ RunResult run_cli(const std::vector<std::string>& args, const std::string& stdin
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <signal.h>
+#include <sys/prctl.h>
 #include <sys/socket.h>
 
 #include <chrono>
@@ -304,6 +305,7 @@ bool Process::start(const std::vector<std::string>& argv, const std::vector<std:
   for (const auto& e : extra_env) env_strings.push_back(e);
   pid_ = fork();
   if (pid_ == 0) {
+    prctl(PR_SET_PDEATHSIG, SIGKILL);  // never outlive a crashed test
     int devnull = open("/dev/null", O_RDWR);
     dup2(devnull, 0);
     dup2(devnull, 1);
