@@ -409,18 +409,7 @@ class DispatchStage final : public Stage {
     if (!ctx.sender.function_name.empty()) e.function_name = ctx.sender.function_name;
     std::string action = m.action();
     if (!action.empty()) e.action = action;
-    if (m.ai) {
-      audit::AiBlock ai;
-      ai.provider = m.ai->provider;
-      ai.model = m.ai->model;
-      ai.model_version = m.ai->model_version;
-      ai.layer = m.ai->layer;
-      ai.confidence = m.ai->confidence;
-      ai.inference_latency_ms = m.ai->inference_latency_ms;
-      ai.thought_id = m.ai->thought_id;
-      ai.escalated = m.ai->escalated;
-      e.ai = std::move(ai);
-    }
+    if (m.ai) e.ai = *m.ai;
     e.detail = ctx.audit_detail;
     e.detail.set("transport", ctx.in.transport);
     e.detail.set("route", ctx.in.route);

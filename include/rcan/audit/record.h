@@ -21,21 +21,14 @@
 #include <string_view>
 
 #include "rcan/json.h"
+#include "rcan/message.h"
 #include "rcan/result.h"
 
 namespace rcan::audit {
 
-// §16.2 ai block. `confidence` is absent when the model did not report one.
-struct AiBlock {
-  std::string provider;                      // MUST, non-empty
-  std::string model;                         // MUST, non-empty
-  std::optional<std::string> model_version;  // SHOULD
-  std::optional<std::string> layer;          // SHOULD: reactive | fast | planner | agent name
-  std::optional<double> confidence;          // SHOULD, 0..1; never defaulted
-  std::optional<double> inference_latency_ms;
-  std::optional<std::string> thought_id;
-  bool escalated = false;                    // always written when the block is present
-};
+// §16.2 ai block: the same model as on the message (rcan/message.h), so what a COMMAND
+// carries is what its record holds. `confidence` is absent when the model did not report one.
+using AiBlock = ::rcan::AiBlock;
 
 // What a caller asks to have recorded. The log adds seq, prev_hash and hmac.
 struct AuditEntry {
