@@ -1,5 +1,7 @@
-// libFuzzer: the message codec (both shapes). A decoded message must encode to the seed
-// shape and decode again to the same encoding.
+// libFuzzer: the message codec (both shapes). A decoded seed-shape message must encode and
+// decode again to the same encoding. An rcan-py message's seed-shape rendering is informational
+// (its msg_id need not be a UUID, and its signature covers rcan-py's own pre-image), so for that
+// shape only encoding is exercised.
 #include <cstdint>
 #include <cstdlib>
 #include <string_view>
@@ -17,6 +19,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   }
   (void)m->action();
   rcan::json::Value enc = rcan::encode_message(*m);
+  if (m->shape == rcan::WireShape::kRcanPy) return 0;
   auto again = rcan::decode_message(enc);
   if (!again.ok()) std::abort();
   if (rcan::json::dump(rcan::encode_message(*again)) != rcan::json::dump(enc)) std::abort();
