@@ -161,12 +161,13 @@ class ConnBase {
 };
 
 // The one `respond` of one request. Fires at most once; when the handler drops it unanswered
-// the request is answered 500 so the connection never hangs.
+// the request is answered 500 so the connection never hangs. It holds no executor: a handler
+// may keep it past the server's life, and an executor (a strand) must not be destroyed after
+// its io_context. `post` runs only while the server is alive and posts to the connection.
 class ResponseSlot {
  public:
-  ResponseSlot(std::weak_ptr<HttpServer::Impl> srv, asio::any_io_executor ex,
-               std::function<void(HttpResponse)> deliver)
-      : srv_(std::move(srv)), ex_(std::move(ex)), deliver_(std::move(deliver)) {}
+  ResponseSlot(std::weak_ptr<HttpServer::Impl> srv, std::function<void(HttpResponse)> post)
+      : srv_(std::move(srv)), post_(std::move(post)) {}
   ResponseSlot(const ResponseSlot&) = delete;
   ResponseSlot& operator=(const ResponseSlot&) = delete;
   ~ResponseSlot() {
@@ -189,15 +190,14 @@ class ResponseSlot {
     // Holding the server keeps the io_context alive while posting to it.
     auto srv = srv_.lock();
     if (!srv) return;
-    asio::post(ex_, [d = deliver_, r = std::move(r)]() mutable { d(std::move(r)); });
+    post_(std::move(r));
   }
 
  private:
   std::mutex mu_;
   bool done_ = false;
   std::weak_ptr<HttpServer::Impl> srv_;
-  asio::any_io_executor ex_;
-  std::function<void(HttpResponse)> deliver_;
+  std::function<void(HttpResponse)> post_;
 };
 
 // The transport's StreamSink: a bounded queue the connection's strand drains.
@@ -500,9 +500,10 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     phase_ = Phase::kHandling;
     response_timer_.expires_at(SteadyClock::time_point::max());
     auto slot = std::make_shared<ResponseSlot>(
-        srv_.weak_from_this(), ex_,
-        [weak = this->weak_from_this(), seq](HttpResponse r) {
-          if (auto self = weak.lock()) self->deliver(seq, std::move(r));
+        srv_.weak_from_this(), [weak = this->weak_from_this(), seq](HttpResponse r) {
+          auto self = weak.lock();
+          if (!self) return;
+          asio::post(self->ex_, [self, seq, r = std::move(r)]() mutable { self->deliver(seq, std::move(r)); });
         });
     try {
       srv_.http.handle(std::move(req), [slot](HttpResponse r) { slot->fire(std::move(r)); });
