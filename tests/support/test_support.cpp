@@ -19,6 +19,30 @@ extern char** environ;
 
 namespace rcan::test {
 
+namespace {
+
+// The parent's environment plus `extra` (prepared before fork: no allocation in the child).
+std::vector<std::string> child_env(const std::vector<std::string>& extra) {
+  std::vector<std::string> env;
+  for (char** e = environ; *e; ++e) env.emplace_back(*e);
+  for (const auto& e : extra) env.push_back(e);
+  return env;
+}
+
+// In the forked child: exec argv[0] with `env`; exits 127 when exec fails.
+[[noreturn]] void exec_child(const std::vector<std::string>& argv, std::vector<std::string>& env) {
+  std::vector<char*> args;
+  for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+  args.push_back(nullptr);
+  std::vector<char*> envp;
+  for (auto& e : env) envp.push_back(e.data());
+  envp.push_back(nullptr);
+  execve(args[0], args.data(), envp.data());
+  _exit(127);
+}
+
+}  // namespace
+
 std::string read_file(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) {
@@ -76,9 +100,7 @@ RunResult run(const std::vector<std::string>& argv, const std::string& stdin_dat
     ADD_FAILURE() << "pipe failed";
     return r;
   }
-  std::vector<std::string> env_strings;
-  for (char** e = environ; *e; ++e) env_strings.emplace_back(*e);
-  for (const auto& e : extra_env) env_strings.push_back(e);
+  std::vector<std::string> env_strings = child_env(extra_env);
   pid_t pid = fork();
   if (pid == 0) {
     dup2(in_pipe[0], 0);
@@ -86,14 +108,7 @@ RunResult run(const std::vector<std::string>& argv, const std::string& stdin_dat
     dup2(err_pipe[1], 2);
     for (int fd : {in_pipe[0], in_pipe[1], out_pipe[0], out_pipe[1], err_pipe[0], err_pipe[1]})
       close(fd);
-    std::vector<char*> args;
-    for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-    args.push_back(nullptr);
-    std::vector<char*> envp;
-    for (auto& e : env_strings) envp.push_back(e.data());
-    envp.push_back(nullptr);
-    execve(args[0], args.data(), envp.data());
-    _exit(127);
+    exec_child(argv, env_strings);
   }
   close(in_pipe[0]);
   close(out_pipe[1]);
@@ -300,9 +315,7 @@ Process::~Process() {
 bool Process::start(const std::vector<std::string>& argv, const std::vector<std::string>& extra_env) {
   int pipefd[2];
   if (pipe2(pipefd, O_CLOEXEC) != 0) return false;
-  std::vector<std::string> env_strings;
-  for (char** e = environ; *e; ++e) env_strings.emplace_back(*e);
-  for (const auto& e : extra_env) env_strings.push_back(e);
+  std::vector<std::string> env_strings = child_env(extra_env);
   pid_ = fork();
   if (pid_ == 0) {
     prctl(PR_SET_PDEATHSIG, SIGKILL);  // never outlive a crashed test
@@ -310,14 +323,7 @@ bool Process::start(const std::vector<std::string>& argv, const std::vector<std:
     dup2(devnull, 0);
     dup2(devnull, 1);
     dup2(pipefd[1], 2);
-    std::vector<char*> args;
-    for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-    args.push_back(nullptr);
-    std::vector<char*> envp;
-    for (auto& e : env_strings) envp.push_back(e.data());
-    envp.push_back(nullptr);
-    execve(args[0], args.data(), envp.data());
-    _exit(127);
+    exec_child(argv, env_strings);
   }
   close(pipefd[1]);
   err_fd_ = pipefd[0];

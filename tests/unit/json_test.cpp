@@ -83,11 +83,12 @@ TEST(PythonDumps, DefaultSeparatorsAndEnsureAscii) {
   EXPECT_EQ(python_dumps(*v, false, true), R"({"b":[1,2.0,"\u00e9\ud83d\ude00\u007f"],"a":{"z":true,"y":null}})");
 }
 
-TEST(PythonFloatRepr, MatchesPythonOnThreeThousandDoubles) {
-  std::ifstream in(std::string(RCAN_TESTDATA_DIR) + "/python_float_repr.txt");
-  ASSERT_TRUE(in.good());
+// Reads tests/data/<file>: lines "<hex bits of a double> <expected text>" ('#' comments).
+std::vector<std::pair<double, std::string>> double_table(const std::string& file) {
+  std::ifstream in(std::string(RCAN_TESTDATA_DIR) + "/" + file);
+  EXPECT_TRUE(in.good()) << file;
+  std::vector<std::pair<double, std::string>> rows;
   std::string line;
-  int n = 0;
   while (std::getline(in, line)) {
     if (line.empty() || line[0] == '#') continue;
     std::istringstream ss(line);
@@ -96,29 +97,21 @@ TEST(PythonFloatRepr, MatchesPythonOnThreeThousandDoubles) {
     uint64_t bits = std::stoull(bits_hex, nullptr, 16);
     double d;
     std::memcpy(&d, &bits, sizeof d);
-    ASSERT_EQ(python_float_repr(d), expected) << bits_hex;
-    ++n;
+    rows.emplace_back(d, expected);
   }
-  EXPECT_GT(n, 3000);
+  return rows;
+}
+
+TEST(PythonFloatRepr, MatchesPythonOnThreeThousandDoubles) {
+  auto rows = double_table("python_float_repr.txt");
+  EXPECT_GT(rows.size(), 3000u);
+  for (const auto& [d, expected] : rows) ASSERT_EQ(python_float_repr(d), expected);
 }
 
 TEST(IntegralDouble, ExactDecimalExpansionLikePythonInt) {
-  std::ifstream in(std::string(RCAN_TESTDATA_DIR) + "/integral_double.txt");
-  ASSERT_TRUE(in.good());
-  std::string line;
-  int n = 0;
-  while (std::getline(in, line)) {
-    if (line.empty() || line[0] == '#') continue;
-    std::istringstream ss(line);
-    std::string bits_hex, expected;
-    ss >> bits_hex >> expected;
-    uint64_t bits = std::stoull(bits_hex, nullptr, 16);
-    double d;
-    std::memcpy(&d, &bits, sizeof d);
-    ASSERT_EQ(integral_double_to_string(d), expected) << bits_hex;
-    ++n;
-  }
-  EXPECT_GT(n, 400);
+  auto rows = double_table("integral_double.txt");
+  EXPECT_GT(rows.size(), 400u);
+  for (const auto& [d, expected] : rows) ASSERT_EQ(integral_double_to_string(d), expected);
 }
 
 TEST(JsonParse, KeepsIntVersusFloatAndBigIntegersExactly) {
