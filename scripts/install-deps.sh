@@ -10,6 +10,7 @@ PKGS=(
   libssl-dev openssl
   libboost1.81-dev libboost-json1.81-dev libboost-url1.81-dev
   libyaml-cpp-dev libsqlite3-dev
+  mosquitto libmosquitto-dev
   libgtest-dev libgmock-dev googletest libbenchmark-dev
   clang-14 libclang-rt-14-dev
   python3

@@ -22,7 +22,9 @@
 #include "node/actuation_safety.h"
 #include "node/clock.h"
 #include "node/config.h"
+#include "node/fleet.h"
 #include "node/log.h"
+#include "node/mqtt_node.h"
 #include "node/node.h"
 #include "node/safety.h"
 #include "node/sim_robot.h"
@@ -360,6 +362,7 @@ int main(int argc, char** argv) {
   auth.trust = std::move(trust).value();
   auth.verify.audience = cfg.ruri;
   auth.verify.fleet_ids = {cfg.ruri_parts.device_id, cfg.ruri, ns.rrn};
+  if (!cfg.fleet.fleet_id.empty()) auth.verify.fleet_ids.push_back(cfg.fleet.member_id);
   auth.verify.leeway_s = cfg.security.jwt.leeway_s;
   for (const auto& rk : cfg.security.trusted_robot_keys) {
     if (!rk.mldsa65_pub_file.empty()) {
@@ -375,6 +378,7 @@ int main(int argc, char** argv) {
   }
 
   node::NodeServices services(ns, node::Clock::system(), std::move(auth), actuation, **audit_log);
+  if (!cfg.fleet.fleet_id.empty()) services.fleet = std::make_shared<node::FleetPolicy>(node::FleetPolicy{cfg.fleet, {}});
   node::Node rcan_node(services);
   core.set_event_callback([&rcan_node](const node::SafetyEvent& ev) {
     rcan_node.on_safety_event(ev.type, ev.session_id, ev.elapsed_ms, ev.detail);
@@ -404,6 +408,18 @@ int main(int argc, char** argv) {
     return fail("cannot listen on " + so.bind_address + ":" + std::to_string(so.port) + ": " + port.error().message);
   }
   services.settings.port = *port;  // the bound port (differs from the configured one for --port 0)
+  std::unique_ptr<node::MqttNode> mqtt;  // the MQTT transport (docs/FLEET.md)
+  if (cfg.mqtt.enabled) {
+    auto mo = node::mqtt_node_options(cfg);
+    if (mo.ok()) mqtt = std::make_unique<node::MqttNode>(rcan_node, services, std::move(mo).value());
+    Status s = mo.ok() ? mqtt->start() : Status(mo.error());
+    if (!s.ok()) {
+      server.stop(0);
+      rcan_node.shutdown();
+      core.stop();
+      return fail("mqtt: " + s.error().message);
+    }
+  }
   double startup_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - started).count();
   std::string scheme = so.tls ? "https" : "http";
@@ -432,6 +448,7 @@ int main(int argc, char** argv) {
   sigwait(&signals, &sig);
   log(LogLevel::kInfo, "shutting_down", json::Object{{"signal", sig == SIGTERM ? "SIGTERM" : "SIGINT"}});
   server.stop(2000);
+  if (mqtt) mqtt->stop();
   rcan_node.shutdown();
   core.stop();
   log(LogLevel::kInfo, "stopped", json::Object{{"audit_last_seq", static_cast<int64_t>((*audit_log)->stats().last_seq)}});

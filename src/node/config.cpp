@@ -34,7 +34,9 @@
 #include <unordered_map>
 #include <utility>
 
+#include "node/mqtt_topics.h"
 #include "rcan/hash.h"
+#include "transport/mqtt_client.h"
 
 namespace rcan::config {
 namespace {
@@ -602,7 +604,35 @@ SP config_schema() {
         {"swarm", Obj({{"enabled", Bool()},
                        {"sync_interval_s", Num(1.0)},
                        {"patch_sync", Bool()},
-                       {"shared_memory_path", Str(1024)}})},
+                       {"shared_memory_path", Str(1024)},
+                       // seed §5.2 (docs/FLEET.md)
+                       {"swarm_id", Str(128)},
+                       {"member_id", Str(128)},
+                       {"members", Arr(Str(128), 256)},
+                       {"leader", Str(128)},
+                       {"formation", Str(64)},
+                       {"join_policy", Enum({"open", "approval", "closed"})},
+                       {"heartbeat_ms", Int(50, 60'000)},
+                       {"leader_timeout_ms", Int(200, 600'000)}})},
+        {"mqtt", Obj({{"enabled", Bool()},
+                      {"broker", Str(512)},
+                      {"client_id", Str(128)},
+                      {"topic_prefix", Str(256)},
+                      {"keepalive_s", Int(5, 3600)},
+                      {"username", Str(256)},
+                      {"password_file", Str()},
+                      {"tls", Obj({{"ca_file", Str()}, {"cert_file", Str()}, {"key_file", Str()}})},
+                      {"reconnect", Obj({{"min_s", Int(1, 3600)}, {"max_s", Int(1, 3600)}})},
+                      {"telemetry_hz", Int(0, 50)},
+                      {"publish_audit", Bool()}})},
+        {"fleet", Obj({{"fleet_id", Str(128)},
+                       {"member_id", Str(128)},
+                       {"robots", Arr(Str(128), 10'000)},
+                       {"access_mode", Enum({"coordinated", "independent"})},
+                       {"commands", Obj({{"broadcast", Bool()},
+                                         {"individual", Bool()},
+                                         {"choreographed", Bool()}})}},
+                      {"fleet_id", "robots"})},
         {"connection", Free()},
         {"notes", Either({Str(65536), Free()})},
         {"ros2", Obj({{"enabled", Bool()}, {"namespace", Str(256)}, {"domain_id", Int(0, 232)}})},
@@ -1250,6 +1280,89 @@ void derive_paths(NodeConfig& c) {
     c.security.audit.chain_secret_file = (fs::path(c.data_dir) / "audit.secret").string();
 }
 
+// `mqtt`, `fleet` and the seed §5.2 keys of `swarm` (docs/FLEET.md).
+void parse_fleet_blocks(const At& root, const std::string& base, NodeConfig& c) {
+  At mq = root["mqtt"];
+  c.mqtt.enabled = mq["enabled"].flag(false);
+  c.mqtt.broker = mq["broker"].str(c.mqtt.broker);
+  if (auto u = transport::parse_broker_url(c.mqtt.broker); !u.ok())
+    fail(mq["broker"].path, u.error().message, "invalid_value");
+  else if (u->tls && mq["tls"]["ca_file"].str().empty())
+    fail(mq["tls"]["ca_file"].path, "required with an mqtts:// broker", "missing_key");
+  c.mqtt.client_id = mq["client_id"].str();
+  if (!c.mqtt.client_id.empty() && !node::valid_topic_segment(c.mqtt.client_id))
+    fail(mq["client_id"].path, "expected 1-128 characters of [A-Za-z0-9._-]", "invalid_value");
+  c.mqtt.topic_prefix = mq["topic_prefix"].str(c.mqtt.topic_prefix);
+  if (!node::valid_topic_prefix(c.mqtt.topic_prefix))
+    fail(mq["topic_prefix"].path, "expected '/'-separated segments of [A-Za-z0-9._-] (no wildcards)",
+         "invalid_value");
+  c.mqtt.keepalive_s = mq["keepalive_s"].u32(c.mqtt.keepalive_s);
+  c.mqtt.username = mq["username"].str();
+  c.mqtt.password_file = resolve_path(mq["password_file"].str(), base);
+  if (!c.mqtt.username.empty() && c.mqtt.password_file.empty())
+    fail(mq["password_file"].path, "required with mqtt.username", "missing_key");
+  c.mqtt.ca_file = resolve_path(mq["tls"]["ca_file"].str(), base);
+  c.mqtt.cert_file = resolve_path(mq["tls"]["cert_file"].str(), base);
+  c.mqtt.key_file = resolve_path(mq["tls"]["key_file"].str(), base);
+  if (c.mqtt.cert_file.empty() != c.mqtt.key_file.empty())
+    fail(mq["tls"].path, "cert_file and key_file go together", "missing_key");
+  c.mqtt.reconnect_min_s = mq["reconnect"]["min_s"].u32(c.mqtt.reconnect_min_s);
+  c.mqtt.reconnect_max_s = mq["reconnect"]["max_s"].u32(c.mqtt.reconnect_max_s);
+  if (c.mqtt.reconnect_max_s < c.mqtt.reconnect_min_s)
+    fail(mq["reconnect"]["max_s"].path, "must be at least reconnect.min_s", "out_of_range");
+  c.mqtt.telemetry_hz = mq["telemetry_hz"].u32(c.mqtt.telemetry_hz);
+  c.mqtt.publish_audit = mq["publish_audit"].flag(true);
+
+  auto segment = [](const At& at) {
+    if (at && !node::valid_topic_segment(at.str()))
+      fail(at.path, "expected 1-128 characters of [A-Za-z0-9._-], got \"" + printable(at.str()) + "\"",
+           "invalid_value");
+  };
+  auto segments = [&](const At& list) {
+    for (size_t i = 0; i < list.size(); ++i) segment(list[i]);
+  };
+  if (At fl = root["fleet"]) {
+    if (!c.mqtt.enabled) fail(fl.path, "a fleet needs the MQTT transport (mqtt.enabled: true)", "invalid_value");
+    segment(fl["fleet_id"]);
+    segments(fl["robots"]);
+    segment(fl["member_id"]);
+    c.fleet.fleet_id = fl["fleet_id"].str();
+    c.fleet.robots = fl["robots"].strs();
+    c.fleet.member_id = fl["member_id"].str(c.ruri_parts.device_id);
+    if (std::find(c.fleet.robots.begin(), c.fleet.robots.end(), c.fleet.member_id) == c.fleet.robots.end())
+      fail(fl["robots"].path, "must list this robot (\"" + printable(c.fleet.member_id) + "\", fleet.member_id or the RURI device id)",
+           "invalid_value");
+    c.fleet.access_mode = fl["access_mode"].str(c.fleet.access_mode);
+    c.fleet.broadcast = fl["commands"]["broadcast"].flag(true);
+    c.fleet.individual = fl["commands"]["individual"].flag(true);
+    c.fleet.choreographed = fl["commands"]["choreographed"].flag(true);
+  }
+  At sw = root["swarm"];
+  if (At id = sw["swarm_id"]) {
+    if (!c.mqtt.enabled) fail(id.path, "a swarm needs the MQTT transport (mqtt.enabled: true)", "invalid_value");
+    segment(id);
+    segments(sw["members"]);
+    segment(sw["member_id"]);
+    segment(sw["leader"]);
+    c.swarm.swarm_id = id.str();
+    c.swarm.members = sw["members"].strs();
+    c.swarm.member_id = sw["member_id"].str(c.fleet.member_id.empty() ? c.ruri_parts.device_id : c.fleet.member_id);
+    if (std::find(c.swarm.members.begin(), c.swarm.members.end(), c.swarm.member_id) == c.swarm.members.end())
+      c.swarm.members.push_back(c.swarm.member_id);
+    std::sort(c.swarm.members.begin(), c.swarm.members.end());
+    c.swarm.members.erase(std::unique(c.swarm.members.begin(), c.swarm.members.end()), c.swarm.members.end());
+    c.swarm.leader = sw["leader"].str(c.swarm.members.front());
+    if (std::find(c.swarm.members.begin(), c.swarm.members.end(), c.swarm.leader) == c.swarm.members.end())
+      fail(sw["leader"].path, "the leader must be one of swarm.members", "invalid_value");
+    c.swarm.formation = sw["formation"].str(c.swarm.formation);
+    c.swarm.join_policy = sw["join_policy"].str(c.swarm.join_policy);
+    c.swarm.heartbeat_ms = sw["heartbeat_ms"].u32(c.swarm.heartbeat_ms);
+    c.swarm.leader_timeout_ms = sw["leader_timeout_ms"].u32(c.swarm.leader_timeout_ms);
+    if (c.swarm.leader_timeout_ms < 2 * c.swarm.heartbeat_ms)
+      fail(sw["leader_timeout_ms"].path, "must be at least twice swarm.heartbeat_ms", "out_of_range");
+  }
+}
+
 NodeConfig build(const json::Value& root_value, const ConfigOptions& opts) {
   NodeConfig c;
   At root{&root_value, ""};
@@ -1705,6 +1818,8 @@ NodeConfig build(const json::Value& root_value, const ConfigOptions& opts) {
   c.qos.ack_timeout_ms = qos["ack_timeout_ms"].u32(c.qos.ack_timeout_ms);
   c.qos.max_retries = qos["max_retries"].u32(c.qos.max_retries);
   c.qos.backoff_base_ms = qos["backoff_base_ms"].u32(c.qos.backoff_base_ms);
+
+  parse_fleet_blocks(root, base, c);
 
   // --- kept blocks
   for (const char* k : {"bridge", "hardware_safety", "messaging", "metadata", "physics", "drivers",

@@ -28,6 +28,7 @@
 #include <string_view>
 #include <vector>
 
+#include "node/fleet_config.h"
 #include "rcan/audit/audit_log.h"
 #include "rcan/crypto/jwt.h"
 #include "rcan/json.h"
@@ -324,6 +325,9 @@ struct NodeConfig {
   DriverConfig driver;
   OfflineConfig offline;
   QosConfig qos;
+  MqttConfig mqtt;    // `mqtt` (node/fleet_config.h)
+  FleetConfig fleet;  // `fleet`
+  SwarmConfig swarm;  // `swarm` seed §5.2 keys
 
   // Validated blocks the node keeps but does not interpret, as JSON objects keyed by their
   // top-level name: bridge, hardware_safety, messaging, metadata, physics, drivers, network,

@@ -5,6 +5,7 @@
 #include <cctype>
 #include <chrono>
 
+#include "node/fleet.h"
 #include "node/services.h"
 #include "rcan/errors.h"
 
@@ -113,6 +114,10 @@ class DecodeStage final : public Stage {
     }
     ctx->msg = std::move(m).value();
     Message& msg = *ctx->msg;
+    if (msg.type == MessageType::kFleetCommand) {  // a fleet's command (fleet.cpp checks it)
+      msg.type = MessageType::kCommand;
+      ctx->fleet_command = true;
+    }
     ctx->safety = safety_action_of(msg);
     if (msg.priority == Priority::kSafety && ctx->safety == SafetyAction::kNone) {
       refuse(svc_, ctx,
@@ -150,7 +155,13 @@ class ReplayStage final : public Stage {
   Result run(const std::shared_ptr<Context>& ctx) override {
     const Message& m = *ctx->msg;
     bool safety = ctx->safety == SafetyAction::kEstop || ctx->safety == SafetyAction::kStop;
-    auto v = svc_.replay.check(m.message_id, m.timestamp_ms, safety, svc_.clock.wall_ms());
+    int64_t ts = m.timestamp_ms;
+    if (ctx->in.standing_estop && ctx->safety == SafetyAction::kEstop) {
+      // A retained fleet ESTOP stands until it is cleared: a robot joining later obeys it.
+      ctx->audit_detail.set("standing_fleet_estop_timestamp_ms", m.timestamp_ms);
+      ts = svc_.clock.wall_ms();
+    }
+    auto v = svc_.replay.check(m.message_id, ts, safety, svc_.clock.wall_ms());
     if (!v.ok()) {
       // Replay and staleness refusals are audited without the payload.
       refuse(svc_, ctx, v.error(), v.error().code == ErrorCode::kReplayDetected ? "REPLAY_DETECTED" : "MESSAGE_STALE");
@@ -592,6 +603,7 @@ std::vector<std::unique_ptr<Stage>> Pipeline::standard_stages(NodeServices& s) {
   v.push_back(std::make_unique<DecodeStage>(s));
   v.push_back(std::make_unique<ReplayStage>(s));
   v.push_back(std::make_unique<AuthStage>(s));
+  v.push_back(make_fleet_stage(s));  // fleet.cpp
   v.push_back(std::make_unique<AuthorizeStage>(s));
   v.push_back(std::make_unique<RateLimitStage>(s));
   v.push_back(std::make_unique<SafetyStateStage>(s));

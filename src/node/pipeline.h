@@ -40,6 +40,9 @@ struct Ingress {
   std::string route;       // e.g. "/rcan/v1/command"
   std::string remote;      // peer address, for logs
   std::optional<Principal> preauthenticated;  // a stream authenticated at CONNECT
+  std::string fleet_id;    // MQTT: the fleet topic it came in on (empty: not a fleet topic)
+  std::string fleet_mode;  // MQTT: "broadcast", "individual" or "estop" (docs/FLEET.md)
+  bool standing_estop = false;  // MQTT: the retained fleet ESTOP, obeyed whatever its age
 };
 
 // What the pipeline answers.
@@ -62,6 +65,7 @@ struct Context {
   std::string event = "COMMAND";  // audit event for acceptance
   json::Object audit_detail;
   std::string session_id;           // control session the command runs under
+  bool fleet_command = false;       // arrived as FLEET_COMMAND (decoded as a COMMAND)
   int64_t started_mono_us = 0;
   std::function<void(Outcome)> done;
 

@@ -26,6 +26,8 @@
 
 namespace rcan::node {
 
+struct FleetPolicy;
+
 struct NodeSettings {
   std::string ruri;  // canonical robot RURI (identity, no capability)
   std::string rrn;
@@ -66,6 +68,8 @@ class NodeServices {
   SessionTable sessions;
   EventBus events;
   Metrics metrics;
+  // The robot's fleet membership (fleet.h); null when it is in no fleet.
+  std::shared_ptr<const FleetPolicy> fleet;
   std::atomic<uint64_t> audit_inflight{0};
   std::atomic<uint64_t> audit_failures{0};
   std::atomic<bool> audit_unavailable{false};

@@ -1,0 +1,689 @@
+// rcan fleet — drive a fleet of robots over an MQTT broker (docs/FLEET.md).
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <cstdlib>
+#include <deque>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "cli.h"
+#include "node/mqtt_topics.h"
+#include "rcan/errors.h"
+#include "rcan/hash.h"
+#include "rcan/json.h"
+#include "transport/mqtt_client.h"
+
+namespace rcan::cli {
+namespace {
+
+constexpr const char* kHelp =
+    "usage:\n"
+    "  rcan fleet estop FLEET [--members a,b,…] [--reason TEXT]\n"
+    "      Publishes a retained ESTOP (QoS 2) on the fleet's estop topic: every member latches\n"
+    "      it, and so does a member that connects later. With --members, waits for each\n"
+    "      member's acknowledgement.\n"
+    "  rcan fleet resume FLEET [--members a,b,…]\n"
+    "      Replaces the retained ESTOP with a RESUME (LEASEE or above); live members resume.\n"
+    "  rcan fleet command FLEET ACTION [--params JSON] [--members a,b,…] [--wait-complete]\n"
+    "      Broadcasts a FLEET_COMMAND to every member; with --members, waits for each ACK\n"
+    "      (and, with --wait-complete, each completion).\n"
+    "  rcan fleet run CHOREOGRAPHY.json\n"
+    "      Runs a COORDINATED_MOVE: publishes each step to its robot, waits for its completion\n"
+    "      (sequential, or parallel with wait_for), and on a refusal, an abort or a timeout\n"
+    "      stops every robot it moved and reports the failed step.\n"
+    "  rcan fleet status FLEET\n"
+    "      Prints each member's retained status (online or offline).\n"
+    "  rcan fleet audit collect FLEET --out DIR [--duration-ms N]\n"
+    "      Subscribes to the members' audit topics and appends each robot's records to\n"
+    "      DIR/<member>.jsonl, checking seq continuity and prev_hash links on ingest (gaps and\n"
+    "      breaks are reported). Verify the files offline with rcan audit verify --partial.\n"
+    "  Common options: --broker URL (default $RCAN_MQTT_URL, else mqtt://127.0.0.1:1883),\n"
+    "    --token FILE (a fleet JWT; default $RCAN_TOKEN_FILE), --prefix P (default rcan),\n"
+    "    --ca-file F (mqtts), --username U --password-file F, --timeout-ms N (default 10000).\n"
+    "  Exit: 0 success, 1 a robot refused, failed or timed out, 2 usage or connection error.\n";
+
+int64_t wall_ms() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+int64_t mono_ms() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+std::string str_of(const json::Value& v, const char* key) {
+  const json::Value* f = v.is_object() ? v.get(key) : nullptr;
+  return f != nullptr && f->is_string() ? f->as_string() : std::string();
+}
+
+std::vector<std::string> split_list(const std::string& s) {
+  std::vector<std::string> out;
+  size_t start = 0;
+  while (start <= s.size() && !s.empty()) {
+    size_t comma = s.find(',', start);
+    std::string item = s.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    if (!item.empty()) out.push_back(item);
+    if (comma == std::string::npos) break;
+    start = comma + 1;
+  }
+  return out;
+}
+
+void print(const json::Value& v) { std::printf("%s\n", json::dump(v).c_str()); }
+
+// A connected client with an inbox.
+class Session {
+ public:
+  struct Inbound {
+    std::string topic;
+    json::Value body;
+    bool retained = false;
+  };
+
+  Status open(const Options& o, const std::vector<std::string>& subscriptions) {
+    transport::MqttOptions mo;
+    mo.url = o.get("broker", std::getenv("RCAN_MQTT_URL") ? std::getenv("RCAN_MQTT_URL") : "mqtt://127.0.0.1:1883");
+    mo.ca_file = o.get("ca-file");
+    mo.username = o.get("username");
+    if (o.has("password-file")) {
+      auto pw = read_file(o.get("password-file"));
+      if (!pw.ok()) return pw.error();
+      mo.password = *pw;
+      while (!mo.password.empty() && (mo.password.back() == '\n' || mo.password.back() == '\r')) mo.password.pop_back();
+    }
+    client_ = std::make_unique<transport::MqttClient>(mo);
+    for (const auto& s : subscriptions) client_->subscribe(s, 1);
+    client_->on_message([this](const transport::MqttMessage& m) {
+      auto body = node::parse_payload(m.payload);
+      if (!body.ok()) return;
+      std::lock_guard<std::mutex> lk(mu_);
+      inbox_.push_back(Inbound{m.topic, std::move(body).value(), m.retained});
+      cv_.notify_all();
+    });
+    client_->on_connection([this](bool up, int) {
+      std::lock_guard<std::mutex> lk(mu_);
+      if (up) ++connects_;
+      cv_.notify_all();
+    });
+    if (Status s = client_->start(); !s.ok()) return s;
+    std::unique_lock<std::mutex> lk(mu_);
+    if (!cv_.wait_for(lk, std::chrono::milliseconds(timeout_ms_), [this] { return connects_ > 0; }))
+      return Error(ErrorCode::kInternal, "cannot connect to the broker at " + mo.url);
+    lk.unlock();
+    // Subscriptions are sent on connect; a short settle lets the broker register them.
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    return Status::Ok();
+  }
+
+  Status publish(const std::string& topic, const json::Value& v, int qos, bool retain) {
+    return client_->publish(topic, json::dump(v), qos, retain);
+  }
+
+  // Next message, or nullopt at the deadline (monotonic ms).
+  std::optional<Inbound> next(int64_t deadline) {
+    std::unique_lock<std::mutex> lk(mu_);
+    while (inbox_.empty()) {
+      int64_t left = deadline - mono_ms();
+      if (left <= 0) return std::nullopt;
+      cv_.wait_for(lk, std::chrono::milliseconds(left));
+    }
+    Inbound m = std::move(inbox_.front());
+    inbox_.pop_front();
+    return m;
+  }
+
+  void close() {
+    if (client_) client_->stop();
+  }
+  void set_timeout(int64_t ms) { timeout_ms_ = ms; }
+
+ private:
+  std::unique_ptr<transport::MqttClient> client_;
+  std::mutex mu_;
+  std::condition_variable cv_;
+  std::deque<Inbound> inbox_;
+  int connects_ = 0;
+  int64_t timeout_ms_ = 10000;
+};
+
+struct Common {
+  std::string prefix = "rcan";
+  std::string token;
+  int64_t timeout_ms = 10000;
+};
+
+const std::vector<std::string> kValued{"broker", "token", "prefix", "ca-file", "username", "password-file",
+                                       "timeout-ms", "members", "reason", "params", "out", "duration-ms"};
+const std::vector<std::string> kFlags{"wait-complete"};
+
+Result<Common> common(const Options& o, bool need_token) {
+  Common c;
+  c.prefix = o.get("prefix", "rcan");
+  if (!node::valid_topic_prefix(c.prefix)) return Error(ErrorCode::kSchemaValidationFailed, "--prefix is not a valid topic prefix");
+  std::string tf = o.get("token", std::getenv("RCAN_TOKEN_FILE") ? std::getenv("RCAN_TOKEN_FILE") : "");
+  if (need_token) {
+    if (tf.empty()) return Error(ErrorCode::kSchemaValidationFailed, "--token FILE is required (a fleet JWT)");
+    auto t = read_file(tf);
+    if (!t.ok()) return t.error();
+    c.token = *t;
+    while (!c.token.empty() && (c.token.back() == '\n' || c.token.back() == '\r' || c.token.back() == ' ')) c.token.pop_back();
+  }
+  if (o.has("timeout-ms")) {
+    char* end = nullptr;
+    long long v = std::strtoll(o.get("timeout-ms").c_str(), &end, 10);
+    if (end == nullptr || *end != '\0' || v < 1 || v > 3'600'000)
+      return Error(ErrorCode::kSchemaValidationFailed, "--timeout-ms must be 1..3600000");
+    c.timeout_ms = v;
+  }
+  return c;
+}
+
+json::Value message(const std::string& type, json::Object payload, const std::string& token,
+                    const std::string& id = new_uuid_v4()) {
+  return json::Value(json::Object{{"version", "1.0.0"},
+                                  {"message_id", id},
+                                  {"type", type},
+                                  {"timestamp_ms", wall_ms()},
+                                  {"auth_token", token},
+                                  {"payload", std::move(payload)}});
+}
+
+bool valid_ids(const std::vector<std::string>& ids) {
+  for (const auto& m : ids)
+    if (!node::valid_topic_segment(m)) return false;
+  return true;
+}
+
+// Waits for the reply to `ids` (message_id → member) on the member reply topics: ACK/ERROR,
+// and with `complete`, the COMPLETED/ABORTED event. Returns {member: result}.
+json::Object await_replies(Session& s, const std::map<std::string, std::string>& ids, bool complete, int64_t timeout_ms,
+                           bool* all_ok) {
+  std::map<std::string, json::Object> results;
+  std::set<std::string> open;
+  for (const auto& [id, member] : ids) open.insert(id);
+  int64_t deadline = mono_ms() + timeout_ms;
+  while (!open.empty()) {
+    auto m = s.next(deadline);
+    if (!m) break;
+    std::string reply_to = str_of(m->body, "reply_to");
+    auto it = ids.find(reply_to);
+    if (it == ids.end() || open.count(reply_to) == 0) continue;
+    std::string type = str_of(m->body, "type");
+    json::Object& r = results[reply_to];
+    r.set("member", it->second);
+    if (type == "ERROR") {
+      const json::Value* p = m->body.get("payload");
+      r.set("result", "refused");
+      if (p != nullptr) r.set("error", *p);
+      open.erase(reply_to);
+    } else if (type == "ACK") {
+      r.set("result", "acknowledged");
+      if (!complete) open.erase(reply_to);
+    } else if (type == "EVENT") {
+      const json::Value* p = m->body.get("payload");
+      std::string ev = p != nullptr ? str_of(*p, "event") : "";
+      r.set("result", ev == "COMPLETED" ? "completed" : "aborted");
+      open.erase(reply_to);
+    }
+  }
+  json::Object out;
+  *all_ok = true;
+  for (const auto& [id, member] : ids) {
+    auto it = results.find(id);
+    json::Object r = it == results.end() ? json::Object{{"member", member}, {"result", "timeout"}} : it->second;
+    std::string res = str_of(json::Value(r), "result");
+    if (open.count(id) != 0 && res == "acknowledged") r.set("result", "timeout");
+    res = str_of(json::Value(r), "result");
+    if (res != (complete ? "completed" : "acknowledged") && !(complete && res == "completed")) *all_ok = false;
+    out.set(member, std::move(r));
+  }
+  return out;
+}
+
+int estop_or_resume(const Options& o, bool estop) {
+  const char* verb = estop ? "fleet estop" : "fleet resume";
+  if (o.positional().size() != 2) return usage_error(verb, "give the fleet id");
+  const std::string fleet = o.positional()[1];
+  auto c = common(o, true);
+  if (!c.ok()) return usage_error(verb, c.error().message);
+  auto members = split_list(o.get("members"));
+  if (!node::valid_topic_segment(fleet) || !valid_ids(members)) return usage_error(verb, "bad fleet or member id");
+  auto topics = node::fleet_topics(c->prefix, fleet);
+  Session s;
+  s.set_timeout(c->timeout_ms);
+  std::vector<std::string> subs;
+  for (const auto& m : members) subs.push_back(topics.member(m).reply());
+  if (Status st = s.open(o, subs); !st.ok()) return usage_error(verb, st.error().message);
+  json::Object payload{{"safety_event", estop ? "ESTOP" : "RESUME"}, {"fleet_id", fleet}};
+  payload.set("reason", o.get("reason", estop ? "fleet estop" : "fleet resume"));
+  std::string id = new_uuid_v4();
+  json::Value msg = message("SAFETY", std::move(payload), c->token, id);
+  // Retained: the fleet's standing state, for members that connect later.
+  if (Status st = s.publish(topics.estop(), msg, 2, true); !st.ok()) return usage_error(verb, st.error().message);
+  std::map<std::string, std::string> ids;
+  for (const auto& m : members) ids[id + "\x1f" + m] = m;
+  // Every member answers the same message id on its own reply topic.
+  json::Object results;
+  bool ok = true;
+  if (!members.empty()) {
+    std::set<std::string> open(members.begin(), members.end());
+    int64_t deadline = mono_ms() + c->timeout_ms;
+    while (!open.empty()) {
+      auto m = s.next(deadline);
+      if (!m) break;
+      if (str_of(m->body, "reply_to") != id) continue;
+      for (const auto& mem : members) {
+        if (m->topic != topics.member(mem).reply() || open.count(mem) == 0) continue;
+        std::string type = str_of(m->body, "type");
+        results.set(mem, json::Object{{"result", type == "ACK" ? "acknowledged" : "refused"}, {"reply", m->body}});
+        if (type != "ACK") ok = false;
+        open.erase(mem);
+      }
+    }
+    for (const auto& mem : open) {
+      results.set(mem, json::Object{{"result", "timeout"}});
+      ok = false;
+    }
+  }
+  s.close();
+  print(json::Value(json::Object{{"fleet_id", fleet},
+                                 {"event", estop ? "ESTOP" : "RESUME"},
+                                 {"message_id", id},
+                                 {"ok", ok},
+                                 {"members", std::move(results)}}));
+  return ok ? 0 : 1;
+}
+
+int command_main(const Options& o) {
+  if (o.positional().size() != 3) return usage_error("fleet command", "give the fleet id and the action");
+  const std::string fleet = o.positional()[1], action = o.positional()[2];
+  auto c = common(o, true);
+  if (!c.ok()) return usage_error("fleet command", c.error().message);
+  auto members = split_list(o.get("members"));
+  if (!node::valid_topic_segment(fleet) || !valid_ids(members)) return usage_error("fleet command", "bad fleet or member id");
+  json::Object payload{{"command", action}, {"fleet_id", fleet}};
+  if (o.has("params")) {
+    auto p = json::parse(o.get("params"));
+    if (!p.ok() || !p->is_object()) return usage_error("fleet command", "--params must be a JSON object");
+    payload.set("params", *p);
+  }
+  auto topics = node::fleet_topics(c->prefix, fleet);
+  Session s;
+  s.set_timeout(c->timeout_ms);
+  std::vector<std::string> subs;
+  for (const auto& m : members) subs.push_back(topics.member(m).reply());
+  if (Status st = s.open(o, subs); !st.ok()) return usage_error("fleet command", st.error().message);
+  std::string id = new_uuid_v4();
+  if (Status st = s.publish(topics.cmd(), message("FLEET_COMMAND", std::move(payload), c->token, id), 1, false); !st.ok())
+    return usage_error("fleet command", st.error().message);
+  bool complete = o.has("wait-complete");
+  json::Object results;
+  bool ok = true;
+  std::set<std::string> open(members.begin(), members.end());
+  std::map<std::string, std::string> acked;
+  int64_t deadline = mono_ms() + c->timeout_ms;
+  while (!open.empty()) {
+    auto m = s.next(deadline);
+    if (!m) break;
+    if (str_of(m->body, "reply_to") != id) continue;
+    for (const auto& mem : members) {
+      if (m->topic != topics.member(mem).reply() || open.count(mem) == 0) continue;
+      std::string type = str_of(m->body, "type");
+      if (type == "ACK" && complete) {
+        acked[mem] = "acknowledged";
+        continue;
+      }
+      std::string res = type == "ACK" ? "acknowledged" : type == "ERROR" ? "refused" : "";
+      if (type == "EVENT") {
+        const json::Value* p = m->body.get("payload");
+        res = p != nullptr && str_of(*p, "event") == "COMPLETED" ? "completed" : "aborted";
+      }
+      results.set(mem, json::Object{{"result", res}, {"reply", m->body}});
+      if (res != "acknowledged" && res != "completed") ok = false;
+      open.erase(mem);
+    }
+  }
+  for (const auto& mem : open) {
+    results.set(mem, json::Object{{"result", acked.count(mem) ? "incomplete" : "timeout"}});
+    ok = false;
+  }
+  s.close();
+  print(json::Value(json::Object{{"fleet_id", fleet}, {"message_id", id}, {"ok", ok}, {"members", std::move(results)}}));
+  return ok ? 0 : 1;
+}
+
+// ---- choreography
+
+struct Step {
+  size_t index = 0;
+  std::string robot;
+  std::string action;
+  json::Value params;
+  std::vector<std::string> wait_for;
+  int64_t timeout_ms = 0;
+  enum class State { kPending, kSent, kAcked, kDone, kFailed } state = State::kPending;
+  std::string message_id;
+  int64_t sent_mono = 0;
+  json::Value reply;
+};
+
+Result<std::vector<Step>> parse_choreography(const json::Value& doc, std::string* fleet, std::string* type,
+                                             int64_t default_timeout) {
+  auto bad = [](std::string m) { return Error(ErrorCode::kSchemaValidationFailed, std::move(m)); };
+  if (!doc.is_object()) return bad("the choreography must be a JSON object");
+  std::string cmd = str_of(doc, "command");
+  if (!cmd.empty() && cmd != "COORDINATED_MOVE") return bad("command must be COORDINATED_MOVE");
+  *fleet = str_of(doc, "fleet_id");
+  if (!node::valid_topic_segment(*fleet)) return bad("fleet_id is missing or not a valid id");
+  std::set<std::string> targets;
+  if (const json::Value* t = doc.get("targets"); t != nullptr) {
+    if (!t->is_array()) return bad("targets must be an array of robot ids");
+    for (const auto& r : t->as_array()) {
+      if (!r.is_string() || !node::valid_topic_segment(r.as_string())) return bad("targets must be robot ids");
+      targets.insert(r.as_string());
+    }
+  }
+  const json::Value* ch = doc.get("choreography");
+  if (ch == nullptr || !ch->is_object()) return bad("choreography is required");
+  *type = str_of(*ch, "type");
+  if (*type != "sequential" && *type != "parallel") return bad("choreography.type must be sequential or parallel");
+  const json::Value* steps = ch->get("steps");
+  if (steps == nullptr || !steps->is_array() || steps->as_array().empty() || steps->as_array().size() > 1000)
+    return bad("choreography.steps must be a non-empty array (at most 1000)");
+  std::vector<Step> out;
+  std::set<std::string> seen;
+  for (const auto& sv : steps->as_array()) {
+    Step s;
+    s.index = out.size();
+    std::string where = "step " + std::to_string(s.index);
+    if (!sv.is_object()) return bad(where + " must be an object");
+    s.robot = str_of(sv, "robot");
+    s.action = str_of(sv, "action");
+    if (!node::valid_topic_segment(s.robot)) return bad(where + ": robot is missing or not a valid id");
+    if (!targets.empty() && targets.count(s.robot) == 0) return bad(where + ": robot " + s.robot + " is not in targets");
+    if (s.action.empty() || s.action.size() > 128) return bad(where + ": action is required");
+    if (const json::Value* p = sv.get("params"); p != nullptr) {
+      if (!p->is_object()) return bad(where + ": params must be an object");
+      s.params = *p;
+    } else {
+      s.params = json::Object{};
+    }
+    if (const json::Value* w = sv.get("wait_for"); w != nullptr) {
+      std::vector<std::string> names;
+      if (w->is_string()) names.push_back(w->as_string());
+      else if (w->is_array())
+        for (const auto& n : w->as_array()) names.push_back(n.is_string() ? n.as_string() : std::string());
+      else return bad(where + ": wait_for must be a robot id or a list of them");
+      for (const auto& n : names)
+        if (seen.count(n) == 0) return bad(where + ": wait_for names " + n + ", which has no earlier step");
+      s.wait_for = std::move(names);
+    }
+    s.timeout_ms = default_timeout;
+    if (const json::Value* t = sv.get("timeout_ms"); t != nullptr) {
+      if (!t->is_int() || t->as_int() < 1 || t->as_int() > 3'600'000) return bad(where + ": timeout_ms must be 1..3600000");
+      s.timeout_ms = t->as_int();
+    }
+    seen.insert(s.robot);
+    out.push_back(std::move(s));
+  }
+  return out;
+}
+
+int run_main(const Options& o) {
+  if (o.positional().size() != 2) return usage_error("fleet run", "give the choreography file");
+  auto c = common(o, true);
+  if (!c.ok()) return usage_error("fleet run", c.error().message);
+  auto text = read_file(o.positional()[1]);
+  if (!text.ok()) return usage_error("fleet run", text.error().message);
+  auto doc = json::parse(*text);
+  if (!doc.ok()) return usage_error("fleet run", "the choreography is not JSON: " + doc.error().message);
+  std::string fleet, type;
+  auto steps = parse_choreography(*doc, &fleet, &type, c->timeout_ms);
+  if (!steps.ok()) return usage_error("fleet run", steps.error().message);
+  auto topics = node::fleet_topics(c->prefix, fleet);
+  std::set<std::string> robots;
+  for (const auto& s : *steps) robots.insert(s.robot);
+  Session sess;
+  sess.set_timeout(c->timeout_ms);
+  std::vector<std::string> subs;
+  for (const auto& r : robots) subs.push_back(topics.member(r).reply());
+  if (Status st = sess.open(o, subs); !st.ok()) return usage_error("fleet run", st.error().message);
+
+  std::string choreography_id = new_uuid_v4();
+  std::set<std::string> moved;
+  std::optional<size_t> failed;
+  std::string fail_reason;
+  auto& st = *steps;
+  auto robot_done = [&](const std::string& robot, size_t before) {
+    for (size_t i = 0; i < before; ++i)
+      if (st[i].robot == robot && st[i].state != Step::State::kDone) return false;
+    return true;
+  };
+  while (!failed) {
+    // Publish every step that may start now.
+    bool all_done = true;
+    for (auto& s : st) {
+      if (s.state != Step::State::kDone) all_done = false;
+      if (s.state != Step::State::kPending) continue;
+      bool ready = true;
+      if (type == "sequential")
+        for (size_t i = 0; i < s.index; ++i) ready = ready && st[i].state == Step::State::kDone;
+      for (const auto& w : s.wait_for) ready = ready && robot_done(w, s.index);
+      // A robot runs its own steps in order.
+      ready = ready && robot_done(s.robot, s.index);
+      if (!ready) continue;
+      json::Object payload{{"command", s.action},
+                           {"params", s.params},
+                           {"fleet_id", fleet},
+                           {"choreography_id", choreography_id},
+                           {"step", static_cast<int64_t>(s.index)}};
+      s.message_id = new_uuid_v4();
+      Status ps = sess.publish(topics.member(s.robot).cmd(), message("FLEET_COMMAND", std::move(payload), c->token, s.message_id), 1, false);
+      if (!ps.ok()) {
+        failed = s.index;
+        fail_reason = "publish failed: " + ps.error().message;
+        break;
+      }
+      s.state = Step::State::kSent;
+      s.sent_mono = mono_ms();
+      moved.insert(s.robot);
+    }
+    if (failed || all_done) break;
+    // The earliest step deadline.
+    int64_t deadline = mono_ms() + 1000;
+    for (const auto& s : st)
+      if (s.state == Step::State::kSent || s.state == Step::State::kAcked) deadline = std::min(deadline, s.sent_mono + s.timeout_ms);
+    auto m = sess.next(deadline);
+    if (m) {
+      std::string reply_to = str_of(m->body, "reply_to");
+      for (auto& s : st) {
+        if (s.message_id != reply_to || m->topic != topics.member(s.robot).reply()) continue;
+        std::string t = str_of(m->body, "type");
+        const json::Value* p = m->body.get("payload");
+        if (t == "ACK") {
+          if (s.state == Step::State::kSent) s.state = Step::State::kAcked;
+        } else if (t == "EVENT" && p != nullptr && str_of(*p, "event") == "COMPLETED") {
+          s.state = Step::State::kDone;
+        } else {
+          s.state = Step::State::kFailed;
+          s.reply = m->body;
+          failed = s.index;
+          fail_reason = t == "ERROR" && p != nullptr ? "refused: " + str_of(*p, "error_code") + " " + str_of(*p, "error")
+                                                     : "aborted: " + (p != nullptr ? str_of(*p, "reason") : std::string());
+        }
+      }
+    }
+    int64_t now = mono_ms();
+    for (auto& s : st) {
+      if (failed) break;
+      if ((s.state == Step::State::kSent || s.state == Step::State::kAcked) && now >= s.sent_mono + s.timeout_ms) {
+        s.state = Step::State::kFailed;
+        failed = s.index;
+        fail_reason = s.state == Step::State::kAcked ? "timeout waiting for completion" : "timeout";
+        fail_reason = "timeout after " + std::to_string(s.timeout_ms) + " ms";
+      }
+    }
+  }
+
+  json::Array report;
+  for (const auto& s : st) {
+    const char* names[] = {"pending", "sent", "acknowledged", "completed", "failed"};
+    json::Object r{{"step", static_cast<int64_t>(s.index)},
+                   {"robot", s.robot},
+                   {"action", s.action},
+                   {"state", names[static_cast<int>(s.state)]}};
+    if (!s.reply.is_null()) r.set("reply", s.reply);
+    report.emplace_back(std::move(r));
+  }
+  json::Object out{{"fleet_id", fleet}, {"choreography_id", choreography_id}, {"type", type}};
+  if (!failed) {
+    out.set("ok", true);
+    out.set("steps", std::move(report));
+    sess.close();
+    print(json::Value(std::move(out)));
+    return 0;
+  }
+  // Stop every robot this run moved, then report.
+  std::map<std::string, std::string> stop_ids;
+  for (const auto& r : moved) {
+    std::string id = new_uuid_v4();
+    stop_ids[id] = r;
+    (void)sess.publish(topics.member(r).cmd(),
+                       message("SAFETY", json::Object{{"safety_event", "STOP"}, {"fleet_id", fleet},
+                                                      {"reason", "choreography step " + std::to_string(*failed) + " failed"}},
+                               c->token, id),
+                       1, false);
+  }
+  bool stops_ok = true;
+  json::Object stopped = await_replies(sess, stop_ids, false, c->timeout_ms, &stops_ok);
+  sess.close();
+  out.set("ok", false);
+  out.set("failed_step", static_cast<int64_t>(*failed));
+  out.set("failed_robot", st[*failed].robot);
+  out.set("reason", fail_reason);
+  out.set("stopped", std::move(stopped));
+  out.set("all_stops_acknowledged", stops_ok);
+  out.set("steps", std::move(report));
+  print(json::Value(std::move(out)));
+  return 1;
+}
+
+int status_main(const Options& o) {
+  if (o.positional().size() != 2) return usage_error("fleet status", "give the fleet id");
+  auto c = common(o, false);
+  if (!c.ok()) return usage_error("fleet status", c.error().message);
+  const std::string fleet = o.positional()[1];
+  if (!node::valid_topic_segment(fleet)) return usage_error("fleet status", "bad fleet id");
+  auto topics = node::fleet_topics(c->prefix, fleet);
+  Session s;
+  s.set_timeout(c->timeout_ms);
+  if (Status st = s.open(o, {topics.base + "/robot/+/status"}); !st.ok()) return usage_error("fleet status", st.error().message);
+  json::Object members;
+  int64_t deadline = mono_ms() + std::min<int64_t>(c->timeout_ms, 500);  // retained statuses arrive at once
+  while (auto m = s.next(deadline)) {
+    node::InboundTopic t;
+    std::string member = m->topic.substr(topics.base.size() + 7);
+    member = member.substr(0, member.find('/'));
+    members.set(member, m->body);
+  }
+  s.close();
+  print(json::Value(json::Object{{"fleet_id", fleet}, {"members", std::move(members)}}));
+  return 0;
+}
+
+int audit_collect_main(const Options& o) {
+  if (o.positional().size() != 3) return usage_error("fleet audit collect", "give the fleet id");
+  auto c = common(o, false);
+  if (!c.ok()) return usage_error("fleet audit collect", c.error().message);
+  const std::string fleet = o.positional()[2];
+  if (!node::valid_topic_segment(fleet) || !o.has("out")) return usage_error("fleet audit collect", "give the fleet id and --out DIR");
+  int64_t duration = 5000;
+  if (o.has("duration-ms")) duration = std::strtoll(o.get("duration-ms").c_str(), nullptr, 10);
+  if (duration < 1 || duration > 86'400'000) return usage_error("fleet audit collect", "--duration-ms must be 1..86400000");
+  std::error_code ec;
+  std::filesystem::create_directories(o.get("out"), ec);
+  if (ec) return usage_error("fleet audit collect", "cannot create " + o.get("out"));
+  auto topics = node::fleet_topics(c->prefix, fleet);
+  Session s;
+  s.set_timeout(c->timeout_ms);
+  if (Status st = s.open(o, {topics.base + "/robot/+/audit"}); !st.ok()) return usage_error("fleet audit collect", st.error().message);
+  struct Chain {
+    uint64_t last_seq = 0;
+    std::string last_hash;
+    int64_t records = 0;
+    json::Array problems;
+  };
+  std::map<std::string, Chain> chains;
+  int64_t deadline = mono_ms() + duration;
+  while (auto m = s.next(deadline)) {
+    std::string member = m->topic.substr(topics.base.size() + 7);
+    member = member.substr(0, member.find('/'));
+    if (!node::valid_topic_segment(member)) continue;
+    Chain& ch = chains[member];
+    const json::Value* seq = m->body.get("seq");
+    std::string prev = str_of(m->body, "prev_hash");
+    // The chain links each record to the SHA-256 of its predecessor's canonical form without hmac.
+    std::string hash = m->body.is_object() ? sha256_hex(json::canonical_without(m->body.as_object(), "hmac")) : "";
+    if (seq == nullptr || !seq->is_int() || seq->as_int() < 1) {
+      ch.problems.emplace_back(json::Object{{"problem", "malformed"}});
+      continue;
+    }
+    uint64_t n = static_cast<uint64_t>(seq->as_int());
+    if (ch.records > 0) {
+      if (n <= ch.last_seq) {
+        ch.problems.emplace_back(json::Object{{"problem", "duplicate_or_reordered"}, {"seq", static_cast<int64_t>(n)}});
+        continue;
+      }
+      if (n != ch.last_seq + 1)
+        ch.problems.emplace_back(json::Object{{"problem", "gap"},
+                                              {"after_seq", static_cast<int64_t>(ch.last_seq)},
+                                              {"seq", static_cast<int64_t>(n)}});
+      else if (!ch.last_hash.empty() && prev != ch.last_hash)
+        ch.problems.emplace_back(json::Object{{"problem", "break"}, {"seq", static_cast<int64_t>(n)}});
+    }
+    ch.last_seq = n;
+    ch.last_hash = hash;
+    ++ch.records;
+    std::ofstream f(o.get("out") + "/" + member + ".jsonl", std::ios::app);
+    f << json::dump(m->body) << "\n";
+  }
+  s.close();
+  json::Object out;
+  bool ok = true;
+  for (auto& [member, ch] : chains) {
+    if (!ch.problems.empty()) ok = false;
+    out.set(member, json::Object{{"records", ch.records},
+                                 {"last_seq", static_cast<int64_t>(ch.last_seq)},
+                                 {"problems", std::move(ch.problems)}});
+  }
+  print(json::Value(json::Object{{"fleet_id", fleet}, {"ok", ok}, {"robots", std::move(out)}}));
+  return ok ? 0 : 1;
+}
+
+int fleet_main(const Args& args) {
+  if (args.empty() || args[0] == "--help" || args[0] == "-h") {
+    std::fputs(kHelp, stdout);
+    return args.empty() ? 2 : 0;
+  }
+  Options o(args, kFlags, kValued);
+  if (!o.ok()) return usage_error("fleet", o.error());
+  const std::string& sub = args[0];
+  if (sub == "estop") return estop_or_resume(o, true);
+  if (sub == "resume") return estop_or_resume(o, false);
+  if (sub == "command") return command_main(o);
+  if (sub == "run") return run_main(o);
+  if (sub == "status") return status_main(o);
+  if (sub == "audit" && o.positional().size() >= 2 && o.positional()[1] == "collect") return audit_collect_main(o);
+  return usage_error("fleet", "unknown subcommand " + sub + " (estop | resume | command | run | status | audit collect)");
+}
+
+const Registration kReg{"fleet", "drive a fleet over MQTT: estop, command, run a choreography, audit", &fleet_main};
+
+}  // namespace
+}  // namespace rcan::cli

@@ -1,0 +1,106 @@
+// MqttClient — a small MQTT 3.1.1 client over libmosquitto, used by rcand's MQTT transport
+// (src/node/mqtt_node.h) and by `rcan fleet` (docs/FLEET.md).
+//
+// libmosquitto runs its own network thread (mosquitto_loop_start): it keeps the connection,
+// answers keep-alives and reconnects with exponential backoff (reconnect_min_s doubling up to
+// reconnect_max_s) after a broker loss. Subscriptions are renewed on every (re)connect. The
+// callbacks run on that thread; publish() may be called from any thread.
+//
+// This header includes no libmosquitto: keep it that way.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "rcan/result.h"
+
+namespace rcan::transport {
+
+struct BrokerUrl {
+  std::string host;
+  uint16_t port = 1883;
+  bool tls = false;
+};
+// "mqtt://host[:port]" (default 1883) or "mqtts://host[:port]" (default 8883). IPv6 literals
+// in brackets. Errors: kSchemaValidationFailed.
+Result<BrokerUrl> parse_broker_url(std::string_view url);
+
+struct MqttWill {
+  std::string topic;  // empty: no will
+  std::string payload;
+  int qos = 1;
+  bool retain = true;
+};
+
+struct MqttOptions {
+  std::string url = "mqtt://127.0.0.1:1883";
+  std::string client_id;           // empty → random (a clean session is then forced)
+  bool clean_session = true;
+  int keepalive_s = 10;
+  std::string username;
+  std::string password;            // read from a 0600 file by the caller
+  std::string ca_file;             // TLS: CA bundle (required with mqtts)
+  std::string cert_file;           // TLS client certificate (optional, with key_file)
+  std::string key_file;
+  int reconnect_min_s = 1;
+  int reconnect_max_s = 30;
+  MqttWill will;
+};
+
+struct MqttMessage {
+  std::string topic;
+  std::string payload;
+  int qos = 0;
+  bool retained = false;
+};
+
+class MqttClient {
+ public:
+  using OnMessage = std::function<void(const MqttMessage&)>;
+  using OnConnection = std::function<void(bool connected, int code)>;
+
+  explicit MqttClient(MqttOptions opts);
+  ~MqttClient();  // stop()
+  MqttClient(const MqttClient&) = delete;
+  MqttClient& operator=(const MqttClient&) = delete;
+
+  // Set before start().
+  void on_message(OnMessage cb) { on_message_ = std::move(cb); }
+  void on_connection(OnConnection cb) { on_connection_ = std::move(cb); }
+  // Adds a subscription (renewed on every connect; subscribed now when connected).
+  void subscribe(const std::string& filter, int qos);
+
+  // Starts the network thread and connects asynchronously (a broker that is not up yet is
+  // retried with backoff). Errors: bad options, TLS files unreadable.
+  Status start();
+  // Publishes (queued by libmosquitto while disconnected for QoS > 0). Errors when the
+  // payload is too large or the client is stopped.
+  Status publish(const std::string& topic, const std::string& payload, int qos, bool retain);
+  // Disconnects cleanly (no will) and joins the network thread. Idempotent.
+  void stop();
+
+  bool connected() const { return connected_.load(); }
+  uint64_t connects() const { return connects_.load(); }
+
+  struct Impl;
+
+ private:
+  MqttOptions opts_;
+  OnMessage on_message_;
+  OnConnection on_connection_;
+  std::mutex mu_;
+  std::vector<std::pair<std::string, int>> subs_;
+  std::atomic<bool> connected_{false};
+  std::atomic<uint64_t> connects_{0};
+  std::atomic<bool> stopped_{false};
+  bool started_ = false;
+  std::unique_ptr<Impl> impl_;
+  friend struct MqttCallbacks;
+};
+
+}  // namespace rcan::transport
