@@ -13,6 +13,8 @@
 #include <vector>
 
 #include "cli.h"
+#include "fleet_audit_db.h"
+#include "rcan/audit/secret.h"
 #include "node/mqtt_topics.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
@@ -39,10 +41,14 @@ constexpr const char* kHelp =
     "      stops every robot it moved and reports the failed step.\n"
     "  rcan fleet status FLEET\n"
     "      Prints each member's retained status (online or offline).\n"
-    "  rcan fleet audit collect FLEET --out DIR [--duration-ms N]\n"
-    "      Subscribes to the members' audit topics and appends each robot's records to\n"
-    "      DIR/<member>.jsonl, checking seq continuity and prev_hash links on ingest (gaps and\n"
-    "      breaks are reported). Verify the files offline with rcan audit verify --partial.\n"
+    "  rcan fleet audit collect FLEET (--out DIR | --db CONNINFO) [--secrets-dir D] [--duration-ms N]\n"
+    "      Subscribes to the members' audit topics for N ms (default 5000) and checks each\n"
+    "      robot's chain on ingest: seq continuity (gap), prev_hash links (break), and with\n"
+    "      D/<member>.secret the HMAC (a tampered record is refused). --out appends the records\n"
+    "      to DIR/<member>.jsonl (verify offline with rcan audit verify --partial); --db stores\n"
+    "      them in PostgreSQL (libpq connection string; schema in docs/FLEET.md).\n"
+    "  rcan fleet audit verify --db CONNINFO [--fleet F] [--secrets-dir D]\n"
+    "      Re-verifies every stored chain from the database: record hashes, links, gaps, HMACs.\n"
     "  Common options: --broker URL (default $RCAN_MQTT_URL, else mqtt://127.0.0.1:1883),\n"
     "    --token FILE (a fleet JWT; default $RCAN_TOKEN_FILE), --prefix P (default rcan),\n"
     "    --ca-file F (mqtts), --username U --password-file F, --timeout-ms N (default 10000).\n"
@@ -159,7 +165,8 @@ struct Common {
 };
 
 const std::vector<std::string> kValued{"broker", "token", "prefix", "ca-file", "username", "password-file",
-                                       "timeout-ms", "members", "reason", "params", "out", "duration-ms"};
+                                       "timeout-ms", "members", "reason", "params", "out", "duration-ms",
+                                       "db", "secrets-dir", "fleet"};
 const std::vector<std::string> kFlags{"wait-complete"};
 
 Result<Common> common(const Options& o, bool need_token) {
@@ -597,17 +604,61 @@ int status_main(const Options& o) {
   return 0;
 }
 
+// D/<member>.secret → member → chain secret (each file must be private, as every secret).
+Result<std::map<std::string, std::string>> load_secrets(const Options& o) {
+  std::map<std::string, std::string> out;
+  if (!o.has("secrets-dir")) return out;
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator(o.get("secrets-dir"), ec)) {
+    std::string name = e.path().filename().string();
+    if (name.size() <= 7 || name.substr(name.size() - 7) != ".secret") continue;
+    auto s = audit::read_secret_file(e.path().string());
+    if (!s.ok()) return s.error();
+    out[name.substr(0, name.size() - 7)] = *s;
+  }
+  if (ec) return Error(ErrorCode::kNotFound, "cannot read --secrets-dir " + o.get("secrets-dir"));
+  return out;
+}
+
+int audit_verify_main(const Options& o) {
+  if (!o.has("db")) return usage_error("fleet audit verify", "--db CONNINFO is required");
+  auto secrets = load_secrets(o);
+  if (!secrets.ok()) return usage_error("fleet audit verify", secrets.error().message);
+  auto db = FleetAuditDb::open(o.get("db"));
+  if (!db.ok()) return usage_error("fleet audit verify", db.error().message);
+  int64_t n = 0;
+  auto problems = (*db)->verify(o.get("fleet"), *secrets, &n);
+  if (!problems.ok()) return usage_error("fleet audit verify", problems.error().message);
+  json::Array list;
+  for (const auto& p : *problems) list.push_back(p.to_json());
+  bool ok = problems->empty();
+  print(json::Value(json::Object{{"ok", ok},
+                                 {"records", n},
+                                 {"hmac_checked_members", static_cast<int64_t>(secrets->size())},
+                                 {"problems", std::move(list)}}));
+  return ok ? 0 : 1;
+}
+
 int audit_collect_main(const Options& o) {
   if (o.positional().size() != 3) return usage_error("fleet audit collect", "give the fleet id");
   auto c = common(o, false);
   if (!c.ok()) return usage_error("fleet audit collect", c.error().message);
   const std::string fleet = o.positional()[2];
-  if (!node::valid_topic_segment(fleet) || !o.has("out")) return usage_error("fleet audit collect", "give the fleet id and --out DIR");
+  if (!node::valid_topic_segment(fleet) || o.has("out") == o.has("db"))
+    return usage_error("fleet audit collect", "give the fleet id and one of --out DIR or --db CONNINFO");
+  auto secrets = load_secrets(o);
+  if (!secrets.ok()) return usage_error("fleet audit collect", secrets.error().message);
+  std::unique_ptr<FleetAuditDb> db;
+  if (o.has("db")) {
+    auto opened = FleetAuditDb::open(o.get("db"));
+    if (!opened.ok()) return usage_error("fleet audit collect", opened.error().message);
+    db = std::move(opened).value();
+  }
   int64_t duration = 5000;
   if (o.has("duration-ms")) duration = std::strtoll(o.get("duration-ms").c_str(), nullptr, 10);
   if (duration < 1 || duration > 86'400'000) return usage_error("fleet audit collect", "--duration-ms must be 1..86400000");
   std::error_code ec;
-  std::filesystem::create_directories(o.get("out"), ec);
+  if (o.has("out")) std::filesystem::create_directories(o.get("out"), ec);
   if (ec) return usage_error("fleet audit collect", "cannot create " + o.get("out"));
   auto topics = node::fleet_topics(c->prefix, fleet);
   Session s;
@@ -626,6 +677,28 @@ int audit_collect_main(const Options& o) {
     member = member.substr(0, member.find('/'));
     if (!node::valid_topic_segment(member)) continue;
     Chain& ch = chains[member];
+    auto sec = secrets->find(member);
+    if (db) {
+      auto found = db->ingest(fleet, member, m->body, sec == secrets->end() ? nullptr : &sec->second);
+      if (!found.ok()) {
+        s.close();
+        return usage_error("fleet audit collect", found.error().message);
+      }
+      for (const auto& p : *found) ch.problems.push_back(p.to_json());
+      if (found->empty() || found->front().problem == "gap" || found->front().problem == "break") ++ch.records;
+      const json::Value* sq = m->body.get("seq");
+      if (sq != nullptr && sq->is_int() && sq->as_int() > 0) ch.last_seq = std::max<uint64_t>(ch.last_seq, static_cast<uint64_t>(sq->as_int()));
+      continue;
+    }
+    if (sec != secrets->end() && m->body.is_object()) {
+      std::string pre = json::canonical_without(m->body.as_object(), "hmac");
+      if (hmac_sha256_hex(sec->second, pre) != str_of(m->body, "hmac")) {
+        const json::Value* sq = m->body.get("seq");
+        ch.problems.emplace_back(json::Object{{"problem", "hmac_mismatch"},
+                                              {"seq", sq != nullptr && sq->is_int() ? sq->as_int() : 0}});
+        continue;  // a tampered record is not kept
+      }
+    }
     const json::Value* seq = m->body.get("seq");
     std::string prev = str_of(m->body, "prev_hash");
     // The chain links each record to the SHA-256 of its predecessor's canonical form without hmac.
@@ -680,6 +753,7 @@ int fleet_main(const Args& args) {
   if (sub == "run") return run_main(o);
   if (sub == "status") return status_main(o);
   if (sub == "audit" && o.positional().size() >= 2 && o.positional()[1] == "collect") return audit_collect_main(o);
+  if (sub == "audit" && o.positional().size() == 2 && o.positional()[1] == "verify") return audit_verify_main(o);
   return usage_error("fleet", "unknown subcommand " + sub + " (estop | resume | command | run | status | audit collect)");
 }
 

@@ -260,8 +260,12 @@ void MqttNode::submit(const json::Value& body, const std::string& route, const s
       const json::Value* p = field(b, "payload");
       std::string cmd = p != nullptr ? str_field(*p, "command") : std::string();
       if (!cmd.empty()) {
-        std::lock_guard<std::mutex> lk(mu_);
-        pending_.push_back(Pending{reply_topic, str_field(b, "reply_to"), cmd, svc_.clock.mono_ms()});
+        {
+          std::lock_guard<std::mutex> lk(mu_);
+          pending_.push_back(Pending{reply_topic, str_field(b, "reply_to"), cmd, svc_.clock.mono_ms()});
+        }
+        { std::lock_guard<std::mutex> wake(loop_mu_); }  // the loop is waiting, or sees pending_ next
+        loop_cv_.notify_all();
       }
     }
     publish_json(reply_topic, b, 1, false);
@@ -274,7 +278,17 @@ void MqttNode::loop() {
   int64_t last_telemetry = 0;
   std::unique_lock<std::mutex> lk(loop_mu_);
   while (running_.load()) {
-    loop_cv_.wait_for(lk, std::chrono::milliseconds(20));
+    // Wake often only while there is something to watch: a motion to complete (20 ms), the
+    // swarm's heartbeat, telemetry, new audit records; otherwise once a second.
+    int64_t wait_ms = 1000;
+    {
+      std::lock_guard<std::mutex> plk(mu_);
+      if (!pending_.empty()) wait_ms = 20;
+    }
+    if (swarm_) wait_ms = std::min<int64_t>(wait_ms, std::max<int64_t>(10, opts_.swarm.heartbeat_ms / 4));
+    if (telemetry_period > 0) wait_ms = std::min<int64_t>(wait_ms, telemetry_period);
+    if (opts_.mqtt.publish_audit) wait_ms = std::min<int64_t>(wait_ms, 100);
+    loop_cv_.wait_for(lk, std::chrono::milliseconds(wait_ms));
     if (!running_.load()) break;
     int64_t now = svc_.clock.mono_ms();
     tick_completions();

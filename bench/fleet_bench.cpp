@@ -1,0 +1,381 @@
+// A fleet through one Mosquitto broker: N simulated robots (default 200), each a complete node
+// stack in this process — safety core and simulated robot, HMAC audit log on disk, the one
+// pipeline, and its own MQTT connection (MqttNode) — exactly what rcand wires up, minus the
+// HTTP port. The bench starts a broker on a free loopback port, then:
+//
+//   1. fleet ESTOP: publishes a retained QoS 2 SAFETY ESTOP on the fleet's estop topic and
+//      times, per robot, publish → the safety core latching (measured inside the robot's
+//      Actuation) and publish → the robot's ACK arriving back at the coordinator;
+//   2. RESUME, then a broadcast FLEET_COMMAND (`status`, then a short `move`): times publish →
+//      each robot's ACK at the coordinator.
+//
+// Repeats each round --rounds times and prints percentiles over all robot×round samples.
+//
+//   fleet_bench [--robots 200] [--rounds 5] [--mosquitto /usr/sbin/mosquitto]
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "node/actuation_safety.h"
+#include "node/clock.h"
+#include "node/fleet.h"
+#include "node/log.h"
+#include "node/mqtt_node.h"
+#include "node/node.h"
+#include "node/safety.h"
+#include "node/services.h"
+#include "node/sim_robot.h"
+#include "rcan/audit/audit_log.h"
+#include "rcan/crypto/jwt.h"
+#include "rcan/errors.h"
+#include "rcan/json.h"
+#include "transport/mqtt_client.h"
+
+using namespace rcan;
+namespace fs = std::filesystem;
+
+namespace {
+
+double mono_ms() {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+int64_t wall_ms() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+uint16_t free_port() {
+  int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
+  socklen_t len = sizeof a;
+  ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
+  ::close(fd);
+  return ntohs(a.sin_port);
+}
+
+// Records when the safety core was asked to latch.
+class TimedActuation final : public node::Actuation {
+ public:
+  explicit TimedActuation(node::SafetyActuation& inner) : inner_(inner) {}
+  bool estop_active() const override { return inner_.estop_active(); }
+  double estop(const std::string& source, const std::string& reason) override {
+    double r = inner_.estop(source, reason);
+    latched_at.store(mono_ms());
+    return r;
+  }
+  Status resume(Role role, const std::string& source) override { return inner_.resume(role, source); }
+  void stop(const std::string& source) override { inner_.stop(source); }
+  Result<node::PreparedCommand> prepare(const Message& msg, int64_t deadline, const std::string& sid) override {
+    return inner_.prepare(msg, deadline, sid);
+  }
+  Result<json::Value> apply(const node::PreparedCommand& cmd) override { return inner_.apply(cmd); }
+  void session_started(const std::string& s, int64_t t) override { inner_.session_started(s, t); }
+  void session_heartbeat(const std::string& s) override { inner_.session_heartbeat(s); }
+  void session_ended(const std::string& s) override { inner_.session_ended(s); }
+  json::Value status() const override { return inner_.status(); }
+  json::Value telemetry() const override { return inner_.telemetry(); }
+  std::atomic<double> latched_at{0};
+
+ private:
+  node::SafetyActuation& inner_;
+};
+
+struct Robot {
+  std::string member;
+  std::unique_ptr<node::SafetyCore> core;
+  std::unique_ptr<node::SafetyActuation> act;
+  std::unique_ptr<TimedActuation> timed;
+  std::unique_ptr<audit::AuditLog> audit;
+  std::unique_ptr<node::NodeServices> svc;
+  std::unique_ptr<node::Node> node;
+  std::unique_ptr<node::MqttNode> mqtt;
+};
+
+double pct(std::vector<double> v, double p) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  size_t i = static_cast<size_t>(p / 100.0 * static_cast<double>(v.size() - 1) + 0.5);
+  return v[std::min(i, v.size() - 1)];
+}
+
+void report(const char* what, const std::vector<double>& v, size_t expected) {
+  std::printf("%-34s n=%zu/%zu  p50 %.2f ms  p90 %.2f ms  p99 %.2f ms  max %.2f ms\n", what, v.size(), expected,
+              pct(v, 50), pct(v, 90), pct(v, 99), v.empty() ? 0.0 : *std::max_element(v.begin(), v.end()));
+}
+
+// The coordinator's side: one client subscribed to every member's reply topic.
+class Coordinator {
+ public:
+  explicit Coordinator(const std::string& url) {
+    transport::MqttOptions o;
+    o.url = url;
+    client_ = std::make_unique<transport::MqttClient>(o);
+    client_->subscribe("rcan/fleet/bench/robot/+/reply", 1);
+    client_->on_message([this](const transport::MqttMessage& m) {
+      double t = mono_ms();
+      auto v = json::parse(m.payload);
+      if (!v.ok()) return;
+      const json::Value* rt = v->get("reply_to");
+      const json::Value* ty = v->get("type");
+      if (rt == nullptr || !rt->is_string() || ty == nullptr || !ty->is_string()) return;
+      std::string member = m.topic.substr(std::string("rcan/fleet/bench/robot/").size());
+      member = member.substr(0, member.find('/'));
+      std::lock_guard<std::mutex> lk(mu_);
+      if (rt->as_string() != awaiting_ || (ty->as_string() != "ACK" && ty->as_string() != "ERROR")) return;
+      if (ty->as_string() == "ERROR") ++errors_;
+      if (acked_.emplace(member, t).second) cv_.notify_all();
+    });
+    (void)client_->start();
+    for (int i = 0; i < 1000 && !client_->connected(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
+  // Publishes and waits for `n` answers (up to `timeout_ms`); returns member → arrival time.
+  std::map<std::string, double> round(const std::string& topic, const json::Value& msg, const std::string& id, int qos,
+                                      bool retain, size_t n, double* t0, int timeout_ms, int* errors) {
+    {
+      std::lock_guard<std::mutex> lk(mu_);
+      awaiting_ = id;
+      acked_.clear();
+      errors_ = 0;
+    }
+    *t0 = mono_ms();
+    (void)client_->publish(topic, json::dump(msg), qos, retain);
+    std::unique_lock<std::mutex> lk(mu_);
+    cv_.wait_for(lk, std::chrono::milliseconds(timeout_ms), [&] { return acked_.size() >= n; });
+    *errors = errors_;
+    return acked_;
+  }
+  bool connected() const { return client_->connected(); }
+
+ private:
+  std::unique_ptr<transport::MqttClient> client_;
+  std::mutex mu_;
+  std::condition_variable cv_;
+  std::string awaiting_;
+  std::map<std::string, double> acked_;
+  int errors_ = 0;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int robots_n = 200, rounds = 5;
+  std::string mosquitto = "/usr/sbin/mosquitto";
+  for (int i = 1; i + 1 < argc; i += 2) {
+    std::string a = argv[i];
+    if (a == "--robots") robots_n = std::atoi(argv[i + 1]);
+    else if (a == "--rounds") rounds = std::atoi(argv[i + 1]);
+    else if (a == "--mosquitto") mosquitto = argv[i + 1];
+  }
+  if (robots_n < 1 || robots_n > 2000 || rounds < 1 || rounds > 1000) {
+    std::fprintf(stderr, "usage: fleet_bench [--robots 1..2000] [--rounds 1..1000] [--mosquitto PATH]\n");
+    return 2;
+  }
+  node::set_log_level(node::LogLevel::kError);
+  signal(SIGPIPE, SIG_IGN);
+  fs::path dir = fs::temp_directory_path() / ("fleet_bench_" + std::to_string(getpid()));
+  fs::create_directories(dir);
+
+  // The broker.
+  uint16_t port = free_port();
+  std::ofstream(dir / "mosquitto.conf") << "listener " << port
+                                        << " 127.0.0.1\nallow_anonymous true\npersistence false\nmax_queued_messages 10000\n";
+  pid_t broker = fork();
+  if (broker == 0) {
+    int devnull = ::open("/dev/null", O_WRONLY);
+    dup2(devnull, 2);
+    execl(mosquitto.c_str(), mosquitto.c_str(), "-c", (dir / "mosquitto.conf").c_str(), nullptr);
+    _exit(127);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  std::string url = "mqtt://127.0.0.1:" + std::to_string(port);
+
+  // One fleet token for all (HS256 issuer shared by the fleet).
+  std::string secret = "fleet-bench-secret-0123456789abcdef0123456789";
+  auto signing = jwt::SigningKey::hs256_secret({reinterpret_cast<const uint8_t*>(secret.data()), secret.size()});
+  auto verify = signing->verification_key();
+  std::vector<std::string> members;
+  json::Array fleet_claim;
+  for (int i = 0; i < robots_n; ++i) {
+    char b[32];
+    std::snprintf(b, sizeof b, "r%04d", i);
+    members.emplace_back(b);
+    fleet_claim.emplace_back(b);
+  }
+  int64_t now_s = wall_ms() / 1000;
+  std::string token = *jwt::issue(json::Object{{"iss", "fleet-issuer"},
+                                               {"sub", "bench"},
+                                               {"aud", "rcan://local.rcan/bench/sim/*"},
+                                               {"role", "owner"},
+                                               {"scope", json::Array{"status", "control"}},
+                                               {"fleet", fleet_claim},
+                                               {"iat", now_s - 5},
+                                               {"exp", now_s + 3600}},
+                                  *signing);
+
+  config::FleetConfig fc;
+  fc.fleet_id = "bench";
+  fc.robots = members;
+  std::vector<std::unique_ptr<Robot>> robots(static_cast<size_t>(robots_n));
+  double t_start = mono_ms();
+  std::atomic<int> next{0};
+  std::atomic<bool> failed{false};
+  auto build = [&] {
+    for (int i = next.fetch_add(1); i < robots_n && !failed.load(); i = next.fetch_add(1)) {
+    auto r = std::make_unique<Robot>();
+    r->member = members[static_cast<size_t>(i)];
+    char dev[16];
+    std::snprintf(dev, sizeof dev, "%08x", i + 1);
+    std::string ruri = std::string("rcan://local.rcan/bench/sim/") + dev;
+    fs::path rd = dir / r->member;
+    fs::create_directories(rd);
+    node::SimRobotConfig sim;
+    node::SafetyConfig sc;
+    r->core = std::make_unique<node::SafetyCore>(std::make_unique<node::SimRobot>(sim), sc);
+    r->act = std::make_unique<node::SafetyActuation>(*r->core, r->member);
+    r->timed = std::make_unique<TimedActuation>(*r->act);
+    audit::AuditOptions ao;
+    ao.secret = "bench-chain-secret-0123456789";
+    ao.robot_ruri = ruri;
+    auto log = audit::AuditLog::open((rd / "audit").string(), std::move(ao));
+    if (!log.ok()) {
+      std::fprintf(stderr, "audit log: %s\n", log.error().message.c_str());
+      failed.store(true);
+      return;
+    }
+    r->audit = std::move(log).value();
+    node::NodeSettings ns;
+    ns.ruri = ruri;
+    ns.name = r->member;
+    node::AuthOptions auth;
+    auth.trust.add("fleet-issuer", *verify);
+    auth.verify.audience = ruri;
+    auth.verify.fleet_ids = {dev, ruri, r->member};
+    r->svc = std::make_unique<node::NodeServices>(ns, node::Clock::system(), std::move(auth), *r->timed, *r->audit);
+    config::FleetConfig mine = fc;
+    mine.member_id = r->member;
+    r->svc->fleet = std::make_shared<node::FleetPolicy>(node::FleetPolicy{mine, {}});
+    r->node = std::make_unique<node::Node>(*r->svc);
+    r->core->start();
+    r->node->start();
+    node::MqttNodeOptions mo;
+    mo.mqtt.enabled = true;
+    mo.mqtt.broker = url;
+    mo.mqtt.telemetry_hz = 0;
+    mo.mqtt.publish_audit = false;
+    mo.fleet = mine;
+    mo.ruri = *parse_ruri(ruri);
+    r->mqtt = std::make_unique<node::MqttNode>(*r->node, *r->svc, mo);
+    if (Status s = r->mqtt->start(); !s.ok()) {
+      std::fprintf(stderr, "mqtt: %s\n", s.error().message.c_str());
+      failed.store(true);
+      return;
+    }
+    robots[static_cast<size_t>(i)] = std::move(r);
+    }
+  };
+  {
+    std::vector<std::thread> builders;
+    for (int t = 0; t < 8; ++t) builders.emplace_back(build);
+    for (auto& t : builders) t.join();
+  }
+  if (failed.load()) return 1;
+  for (int i = 0; i < 3000; ++i) {
+    bool all = std::all_of(robots.begin(), robots.end(), [](const auto& r) { return r->mqtt->connected(); });
+    if (all) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));  // subscriptions settle
+  std::printf("fleet_bench: %d robots (full node stacks, one MQTT connection each) on one Mosquitto, up in %.0f ms\n",
+              robots_n, mono_ms() - t_start);
+
+  Coordinator coord(url);
+  auto msg = [&](const std::string& type, json::Object payload, const std::string& id) {
+    return json::Value(json::Object{{"version", "1.0.0"},
+                                    {"message_id", id},
+                                    {"type", type},
+                                    {"timestamp_ms", wall_ms()},
+                                    {"auth_token", token},
+                                    {"payload", std::move(payload)}});
+  };
+  std::vector<double> latch, estop_ack, status_ack, move_ack;
+  size_t n = static_cast<size_t>(robots_n);
+  int failures = 0;
+  for (int round = 0; round < rounds; ++round) {
+    for (auto& r : robots) r->timed->latched_at.store(0);
+    double t0 = 0;
+    int errors = 0;
+    std::string id = new_uuid_v4();
+    auto acks = coord.round("rcan/fleet/bench/estop",
+                            msg("SAFETY", json::Object{{"safety_event", "ESTOP"}, {"fleet_id", "bench"}}, id), id, 2,
+                            true, n, &t0, 10000, &errors);
+    for (auto& [m, t] : acks) estop_ack.push_back(t - t0);
+    for (auto& r : robots) {
+      double t = r->timed->latched_at.load();
+      if (t > 0) latch.push_back(t - t0);
+    }
+    failures += errors + static_cast<int>(n - acks.size());
+    std::string rid = new_uuid_v4();
+    acks = coord.round("rcan/fleet/bench/estop",
+                       msg("SAFETY", json::Object{{"safety_event", "RESUME"}, {"fleet_id", "bench"}}, rid), rid, 2, true,
+                       n, &t0, 10000, &errors);
+    failures += errors + static_cast<int>(n - acks.size());
+    std::string sid = new_uuid_v4();
+    acks = coord.round("rcan/fleet/bench/cmd",
+                       msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "bench"}}, sid), sid, 1,
+                       false, n, &t0, 10000, &errors);
+    for (auto& [m, t] : acks) status_ack.push_back(t - t0);
+    failures += errors + static_cast<int>(n - acks.size());
+    std::string mid = new_uuid_v4();
+    acks = coord.round("rcan/fleet/bench/cmd",
+                       msg("FLEET_COMMAND",
+                           json::Object{{"command", "move"},
+                                        {"fleet_id", "bench"},
+                                        {"params", json::Object{{"linear", 0.1}, {"duration_ms", 50}}}},
+                           mid),
+                       mid, 1, false, n, &t0, 10000, &errors);
+    for (auto& [m, t] : acks) move_ack.push_back(t - t0);
+    failures += errors + static_cast<int>(n - acks.size());
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
+  size_t expected = n * static_cast<size_t>(rounds);
+  report("fleet ESTOP publish -> latched", latch, expected);
+  report("fleet ESTOP publish -> ACK back", estop_ack, expected);
+  report("broadcast status -> ACK back", status_ack, expected);
+  report("broadcast move -> ACK back", move_ack, expected);
+  std::printf("refused or missing answers: %d\n", failures);
+
+  for (auto& r : robots) r->mqtt->stop();
+  for (auto& r : robots) {
+    r->node->shutdown();
+    r->core->stop();
+  }
+  robots.clear();
+  kill(broker, SIGTERM);
+  waitpid(broker, nullptr, 0);
+  std::error_code ec;
+  fs::remove_all(dir, ec);
+  return failures == 0 ? 0 : 1;
+}
