@@ -32,6 +32,8 @@ class FleetStage final : public Stage {
     if (!ctx->in.fleet_mode.empty()) ctx->audit_detail.set("fleet_mode", ctx->in.fleet_mode);
     if (const json::Value* step = m.payload.find("step"); step != nullptr && step->is_int())
       ctx->audit_detail.set("fleet_step", step->as_int());
+    if (std::string cid = payload_string(m, "choreography_id"); !cid.empty() && cid.size() <= 64)
+      ctx->audit_detail.set("choreography_id", cid);
     if (stop) return Result::kContinue;  // an ESTOP/STOP is refused only for failed authentication
     if ((!ctx->in.fleet_id.empty() && ctx->in.fleet_id != cfg.fleet_id) ||
         (!claimed.empty() && claimed != cfg.fleet_id))
