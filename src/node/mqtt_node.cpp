@@ -156,7 +156,10 @@ void MqttNode::stop() {
   loop_cv_.notify_all();
   if (loop_.joinable()) loop_.join();
   svc_.events.unsubscribe(event_sub_);
-  if (client_->connected()) publish_status(false, "shutdown");
+  if (client_->connected()) {
+    publish_status(false, "shutdown");  // a clean disconnect sends no will: say it ourselves
+    client_->flush(1000);
+  }
   client_->stop();
 }
 

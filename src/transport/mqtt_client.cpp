@@ -3,6 +3,8 @@
 #include <mosquitto.h>
 
 #include <cctype>
+#include <chrono>
+#include <thread>
 #include <cstdlib>
 #include <string_view>
 
@@ -91,6 +93,10 @@ struct MqttCallbacks {
     self->connected_.store(false);
     if (self->on_connection_) self->on_connection_(false, rc);
   }
+  static void on_publish(mosquitto*, void* obj, int) {
+    auto* self = static_cast<MqttClient*>(obj);
+    self->inflight_.fetch_sub(1);
+  }
   static void on_message(mosquitto*, void* obj, const mosquitto_message* msg) {
     auto* self = static_cast<MqttClient*>(obj);
     if (!self->on_message_ || msg == nullptr || msg->topic == nullptr) return;
@@ -140,6 +146,7 @@ Status MqttClient::start() {
   mosquitto_connect_callback_set(m, &MqttCallbacks::on_connect);
   mosquitto_disconnect_callback_set(m, &MqttCallbacks::on_disconnect);
   mosquitto_message_callback_set(m, &MqttCallbacks::on_message);
+  mosquitto_publish_callback_set(m, &MqttCallbacks::on_publish);
   mosquitto_reconnect_delay_set(m, static_cast<unsigned>(opts_.reconnect_min_s),
                                 static_cast<unsigned>(opts_.reconnect_max_s), true);
   if (!opts_.username.empty()) {
@@ -179,13 +186,25 @@ Status MqttClient::start() {
 
 Status MqttClient::publish(const std::string& topic, const std::string& payload, int qos, bool retain) {
   if (impl_->m == nullptr || stopped_.load()) return Error(ErrorCode::kInternal, "the MQTT client is not running");
+  if (qos > 0) inflight_.fetch_add(1);
   int rc = mosquitto_publish(impl_->m, nullptr, topic.c_str(), static_cast<int>(payload.size()), payload.data(), qos,
                              retain);
-  if (rc != MOSQ_ERR_SUCCESS && rc != MOSQ_ERR_NO_CONN)
+  if (rc != MOSQ_ERR_SUCCESS && rc != MOSQ_ERR_NO_CONN) {
+    if (qos > 0) inflight_.fetch_sub(1);
     return Error(ErrorCode::kInternal, std::string("MQTT publish: ") + mosquitto_strerror(rc));
+  }
   if (rc == MOSQ_ERR_NO_CONN && qos == 0)
     return Error(ErrorCode::kInternal, "MQTT publish: not connected");
   return Status::Ok();
+}
+
+bool MqttClient::flush(int timeout_ms) {
+  auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  while (inflight_.load() > 0) {
+    if (std::chrono::steady_clock::now() >= deadline || !connected_.load()) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  return true;
 }
 
 void MqttClient::stop() {

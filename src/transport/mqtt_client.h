@@ -81,6 +81,9 @@ class MqttClient {
   // Publishes (queued by libmosquitto while disconnected for QoS > 0). Errors when the
   // payload is too large or the client is stopped.
   Status publish(const std::string& topic, const std::string& payload, int qos, bool retain);
+  // Waits up to `timeout_ms` until every QoS 1/2 message published so far is acknowledged by
+  // the broker. False on timeout.
+  bool flush(int timeout_ms);
   // Disconnects cleanly (no will) and joins the network thread. Idempotent.
   void stop();
 
@@ -98,6 +101,7 @@ class MqttClient {
   std::atomic<bool> connected_{false};
   std::atomic<uint64_t> connects_{0};
   std::atomic<bool> stopped_{false};
+  std::atomic<int64_t> inflight_{0};  // QoS > 0 publishes not yet acknowledged
   bool started_ = false;
   std::unique_ptr<Impl> impl_;
   friend struct MqttCallbacks;

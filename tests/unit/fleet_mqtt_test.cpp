@@ -449,11 +449,23 @@ TEST_F(FleetTest, RetainedFleetEstopIsObeyedByALateJoiner) {
 
 TEST_F(FleetTest, LastWillShowsTheRobotOffline) {
   add_robot("robot-a", "0000000a");
-  Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/robot-a/status"});
-  auto online = w.wait([](const Watcher::Msg& m) { return m.body.get("online") && m.body.get("online")->as_bool(); });
+  add_robot("robot-b", "0000000b");
+  Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/robot-a/status", "rcan/fleet/alpha/robot/robot-b/status"});
+  // A graceful stop says so itself (a clean disconnect sends no will).
+  EXPECT_EQ(robots_["robot-b"]->proc().stop(SIGTERM, 10000), 0);
+  auto gone = w.wait([](const Watcher::Msg& m) {
+    return m.topic == "rcan/fleet/alpha/robot/robot-b/status" && m.body.get("online") && !m.body.get("online")->as_bool();
+  });
+  ASSERT_TRUE(gone);
+  EXPECT_EQ(str_of(gone->body, "reason"), "shutdown");
+  auto online = w.wait([](const Watcher::Msg& m) {
+    return m.topic == "rcan/fleet/alpha/robot/robot-a/status" && m.body.get("online") && m.body.get("online")->as_bool();
+  });
   ASSERT_TRUE(online);
   robots_["robot-a"]->kill9();
-  auto offline = w.wait([](const Watcher::Msg& m) { return m.body.get("online") && !m.body.get("online")->as_bool(); });
+  auto offline = w.wait([](const Watcher::Msg& m) {
+    return m.topic == "rcan/fleet/alpha/robot/robot-a/status" && m.body.get("online") && !m.body.get("online")->as_bool();
+  });
   ASSERT_TRUE(offline);
   EXPECT_EQ(str_of(offline->body, "reason"), "connection_lost");
   // `rcan fleet status` sees the retained will.
