@@ -362,7 +362,10 @@ int main(int argc, char** argv) {
   auth.trust = std::move(trust).value();
   auth.verify.audience = cfg.ruri;
   auth.verify.fleet_ids = {cfg.ruri_parts.device_id, cfg.ruri, ns.rrn};
-  if (!cfg.fleet.fleet_id.empty()) auth.verify.fleet_ids.push_back(cfg.fleet.member_id);
+  if (!cfg.fleet.fleet_id.empty()) {
+    auth.verify.fleet_ids.push_back(cfg.fleet.member_id);
+    auth.verify.fleet_audiences.push_back("rcan://fleet/" + cfg.fleet.fleet_id);  // v1.5 fleet JWT
+  }
   auth.verify.leeway_s = cfg.security.jwt.leeway_s;
   for (const auto& rk : cfg.security.trusted_robot_keys) {
     if (!rk.mldsa65_pub_file.empty()) {

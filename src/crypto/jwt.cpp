@@ -681,8 +681,12 @@ Result<Claims> check_claims(const json::Object& c, const VerifyOptions& opts, in
   if (!opts.skip_audience) {
     if (out.aud.empty()) return auth_invalid("aud is missing", "aud", "missing_claim");
     if (opts.audience.empty()) return auth_invalid("this verifier has no audience (robot RURI) configured", "aud", "aud_mismatch");
-    bool match = std::any_of(out.aud.begin(), out.aud.end(),
-                             [&](const std::string& a) { return aud_matches(a, opts.audience); });
+    bool fleet_token = c.find("fleet") != nullptr;
+    bool match = std::any_of(out.aud.begin(), out.aud.end(), [&](const std::string& a) {
+      if (fleet_token && std::find(opts.fleet_audiences.begin(), opts.fleet_audiences.end(), a) != opts.fleet_audiences.end())
+        return true;
+      return aud_matches(a, opts.audience);
+    });
     if (!match) return auth_invalid("aud does not match this robot (" + opts.audience + ")", "aud", "aud_mismatch");
   }
 

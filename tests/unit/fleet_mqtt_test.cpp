@@ -267,13 +267,14 @@ class FleetTest : public ::testing::Test {
   }
   // An HS256 token from the fleet issuer, for every sim-rover of the registry; `fleet`
   // lists the members it may command (empty: no fleet claim).
-  std::string token(const std::string& role, std::vector<std::string> fleet, const std::string& sub = "coordinator") {
+  std::string token(const std::string& role, std::vector<std::string> fleet, const std::string& sub = "coordinator",
+                    const std::string& aud = "rcan://local.rcan/rcan/sim-rover/*") {
     auto key = jwt::SigningKey::from_file(secret_, true);
     EXPECT_TRUE(key.ok());
     int64_t now = wall_ms() / 1000;
     json::Object claims{{"iss", "fleet-issuer"},
                         {"sub", sub},
-                        {"aud", "rcan://local.rcan/rcan/sim-rover/*"},
+                        {"aud", aud},
                         {"role", role},
                         {"scope", json::Array{"status", "control"}},
                         {"iat", now - 5},
@@ -595,6 +596,24 @@ TEST_F(FleetTest, FleetJwtIsCheckedPerRobot) {
   auto r4 = reply_of("robot-a", id4);
   ASSERT_TRUE(r4);
   EXPECT_EQ(str_of(r4->body, "type"), "ACK");
+  // The v1.5 fleet audience "rcan://fleet/<group>": accepted from a fleet token of this fleet only.
+  struct AudCase {
+    std::string aud;
+    std::vector<std::string> fleet;
+    const char* expect;
+  } auds[] = {{"rcan://fleet/alpha", {"robot-a"}, "ACK"},
+              {"rcan://fleet/alpha", {}, "AUTH_INVALID"},
+              {"rcan://fleet/beta", {"robot-a"}, "AUTH_INVALID"}};
+  for (const auto& ac : auds) {
+    std::string aid = new_uuid_v4();
+    w.publish("rcan/fleet/alpha/robot/robot-a/cmd",
+              command_msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "alpha"}},
+                          token("owner", ac.fleet, "coordinator", ac.aud), aid));
+    auto ar = reply_of("robot-a", aid);
+    ASSERT_TRUE(ar) << ac.aud;
+    std::string got = str_of(ar->body, "type") == "ACK" ? "ACK" : payload_str(ar->body, "error_code");
+    EXPECT_EQ(got, ac.expect) << ac.aud << " fleet claim: " << ac.fleet.size();
+  }
   // A forged token (wrong secret) is refused everywhere.
   std::string id5 = new_uuid_v4();
   std::string forged = partial.substr(0, partial.rfind('.') + 1) + "AAAA";
@@ -735,6 +754,28 @@ TEST_F(FleetTest, FleetAuditIntoPostgresCatchesTamperingAndGaps) {
   EXPECT_EQ(v2.exit_code, 1);
   EXPECT_NE(v2.out.find("record_hash_mismatch"), std::string::npos) << v2.out;
   EXPECT_NE(v2.out.find("robot-a"), std::string::npos) << v2.out;
+}
+
+TEST(FleetJwt, FleetAudienceNeedsAFleetClaim) {
+  jwt::VerifyOptions o;
+  o.audience = "rcan://local.rcan/rcan/sim-rover/0000000a";
+  o.fleet_ids = {"robot-a"};
+  o.fleet_audiences = {"rcan://fleet/alpha"};
+  int64_t now = 1'800'000'000;
+  json::Object base{{"iss", "i"}, {"sub", "s"}, {"role", "owner"}, {"scope", json::Array{"control"}},
+                    {"iat", now}, {"exp", now + 60}};
+  auto with = [&](const char* aud, bool fleet_claim) {
+    json::Object c = base;
+    c.set("aud", aud);
+    if (fleet_claim) c.set("fleet", json::Array{"robot-a"});
+    return jwt::check_claims(c, o, now);
+  };
+  EXPECT_TRUE(with("rcan://fleet/alpha", true).ok());
+  EXPECT_FALSE(with("rcan://fleet/alpha", false).ok());  // not a fleet token
+  EXPECT_FALSE(with("rcan://fleet/beta", true).ok());    // another fleet
+  EXPECT_TRUE(with("rcan://local.rcan/rcan/sim-rover/*", false).ok());
+  o.fleet_ids = {"robot-b"};
+  EXPECT_FALSE(with("rcan://fleet/alpha", true).ok());  // this robot is not in the claim
 }
 
 TEST(FleetConfig, MqttFleetAndSwarmBlocksAreStrict) {

@@ -130,6 +130,9 @@ struct VerifyOptions {
   std::string audience;
   // Identifiers of this device accepted in a `fleet` claim (device-id, RURI, RRN).
   std::vector<std::string> fleet_ids;
+  // v1.5 fleet audiences ("rcan://fleet/<group>") of the fleets this device is in: such an
+  // `aud` is accepted (exact match) only from a token that carries a `fleet` claim.
+  std::vector<std::string> fleet_audiences;
   int64_t leeway_s = 60;
   size_t max_token_bytes = kDefaultMaxTokenBytes;
   bool require_iat = false;
