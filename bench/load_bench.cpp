@@ -18,7 +18,9 @@
 //
 //   load_bench [--rcand PATH] [--seconds 2] [--warmup 0.5] [--clients 1,16,64]
 //              [--phases startup,memory,http,ws,stages,estop,mldsa] [--io-threads 2]
-//              [--estops 40] [--smoke N]
+//              [--estops 100] [--mldsa-pool 12000] [--data-root /tmp] [--smoke N]
+// --io-threads N: the bare server's threads; keep it equal to the node's server.io_threads
+// (2 in the embedded configuration rcand runs here).
 // --data-root DIR: where the temporary data directory goes (default /tmp). The audit log
 // fdatasyncs every group commit, so the disk's sync latency bounds the throughput at a given
 // number of clients in flight; a tmpfs root (/dev/shm) shows the CPU-bound figure.
@@ -595,12 +597,12 @@ RunResult run_load(const RunOptions& o) {
   for (int i = 0; i < o.clients; ++i)
     asio::co_spawn(io, o.ws ? ws_client(sh) : http_client(sh), [](std::exception_ptr) {});
   int64_t t_measure = 0, t_end = 0;
+  if (o.max_requests) {  // a counted run: every request is measured
+    sh->phase = 1;
+    t_measure = mono_us();
+  }
   std::thread timer([&] {
-    if (o.max_requests) {
-      sh->phase = 1;
-      t_measure = mono_us();
-      return;
-    }
+    if (o.max_requests) return;
     std::this_thread::sleep_for(std::chrono::microseconds(static_cast<int64_t>(o.warmup_s * 1e6)));
     t_measure = mono_us();
     sh->phase = 1;
@@ -648,8 +650,7 @@ std::string token_for(const std::string& seed_file, const std::string& iss, cons
   return t.ok() ? *t : std::string();
 }
 
-bool start_node(Node& n, const std::string& rcand, const std::vector<std::string>& extra, int io_threads) {
-  (void)io_threads;
+bool start_node(Node& n, const std::string& rcand, const std::vector<std::string>& extra) {
   n.port = free_port();
   std::vector<std::string> argv{rcand, "--data-dir", n.dir, "--port", std::to_string(n.port), "--log-level",
                                 "info"};
@@ -811,7 +812,7 @@ int main(int argc, char** argv) {
 
   Node node;
   node.dir = root + "/node";
-  if (!start_node(node, rcand, {}, io_threads)) return 1;
+  if (!start_node(node, rcand, {})) return 1;
   const std::string seed = node.dir + "/issuer/ed25519.seed";
   const std::string token = token_for(seed, "rcand-local", node.ruri, "bench-client");
   if (token.empty()) {
@@ -861,7 +862,7 @@ int main(int argc, char** argv) {
     Node again;
     again.dir = node.dir;
     again.ruri = node.ruri;
-    if (!start_node(again, rcand, {}, io_threads)) return 1;
+    if (!start_node(again, rcand, {})) return 1;
     std::printf("\nstart-up (exec → first served GET /healthz)\n");
     std::printf("  first run (generates keys, secret, issuer, token)  %7.1f ms\n", first);
     std::printf("  restart (existing data dir)                        %7.1f ms\n", again.ready_ms);
@@ -890,7 +891,6 @@ int main(int argc, char** argv) {
       o.make = seed_move();
       ProcStat p0 = proc_stat(node.child->pid());
       ProcStat mid;
-      o.on_measuring = [&] {};
       std::thread sampler;
       std::atomic<bool> sampling{true};
       sampler = std::thread([&] {
@@ -1104,7 +1104,7 @@ int main(int argc, char** argv) {
     }
     Node m;
     m.dir = node.dir;
-    if (!start_node(m, rcand, {"--config", root + "/mldsa.rcan.yaml"}, io_threads)) return 1;
+    if (!start_node(m, rcand, {"--config", root + "/mldsa.rcan.yaml"})) return 1;
     settle(m.child->pid());
     auto key = jwt::SigningKey::ed25519_seed(peer->ed25519_seed.span());
     int64_t now = wall_ms() / 1000;
