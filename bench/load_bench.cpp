@@ -661,11 +661,17 @@ bool start_node(Node& n, const std::string& rcand, const std::vector<std::string
     std::fprintf(stderr, "rcand did not start:\n%s\n", n.child->head().c_str());
     return false;
   }
-  if (n.ruri.empty()) {
+  // The "listening" log line (which names the RURI) may come just after the first answer.
+  for (int i = 0; n.ruri.empty() && i < 5000; ++i) {
     std::string head = n.child->head();
     size_t p = head.find("\"ruri\":\"");
-    if (p != std::string::npos) n.ruri = head.substr(p + 8, head.find('"', p + 8) - p - 8);
+    if (p != std::string::npos) {
+      n.ruri = head.substr(p + 8, head.find('"', p + 8) - p - 8);
+    } else {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
   }
+  if (n.ruri.empty()) std::fprintf(stderr, "rcand did not log its RURI:\n%s\n", n.child->head().c_str());
   return !n.ruri.empty();
 }
 
