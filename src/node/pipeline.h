@@ -31,6 +31,7 @@
 namespace rcan::node {
 
 class NodeServices;
+class Histogram;
 
 // What a transport hands to the pipeline.
 struct Ingress {
@@ -43,6 +44,7 @@ struct Ingress {
   std::string fleet_id;    // MQTT: the fleet topic it came in on (empty: not a fleet topic)
   std::string fleet_mode;  // MQTT: "broadcast", "individual" or "estop" (docs/FLEET.md)
   bool standing_estop = false;  // MQTT: the retained fleet ESTOP, obeyed whatever its age
+  int64_t received_mono_us = 0;  // steady clock at arrival (transport read done); 0: at submit
 };
 
 // What the pipeline answers.
@@ -97,6 +99,9 @@ class Pipeline {
  private:
   NodeServices& svc_;
   std::vector<std::unique_ptr<Stage>> stages_;
+  std::vector<Histogram*> stage_timers_;  // one per stage (metrics lookups off the hot path)
+  Histogram* parse_timer_ = nullptr;
+  Histogram* total_timer_ = nullptr;
 };
 
 // Refuses a context: answers the error body with its HTTP status and writes the audit
