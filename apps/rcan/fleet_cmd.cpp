@@ -530,10 +530,11 @@ int run_main(const Options& o) {
     for (auto& s : st) {
       if (failed) break;
       if ((s.state == Step::State::kSent || s.state == Step::State::kAcked) && now >= s.sent_mono + s.timeout_ms) {
+        fail_reason = std::string(s.state == Step::State::kAcked ? "timeout waiting for completion"
+                                                                 : "timeout waiting for acknowledgement") +
+                      " after " + std::to_string(s.timeout_ms) + " ms";
         s.state = Step::State::kFailed;
         failed = s.index;
-        fail_reason = s.state == Step::State::kAcked ? "timeout waiting for completion" : "timeout";
-        fail_reason = "timeout after " + std::to_string(s.timeout_ms) + " ms";
       }
     }
   }
@@ -594,7 +595,6 @@ int status_main(const Options& o) {
   json::Object members;
   int64_t deadline = mono_ms() + std::min<int64_t>(c->timeout_ms, 500);  // retained statuses arrive at once
   while (auto m = s.next(deadline)) {
-    node::InboundTopic t;
     std::string member = m->topic.substr(topics.base.size() + 7);
     member = member.substr(0, member.find('/'));
     members.set(member, m->body);
