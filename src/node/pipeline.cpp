@@ -410,6 +410,9 @@ class DispatchStage final : public Stage {
     std::string action = m.action();
     if (!action.empty()) e.action = action;
     if (m.ai) e.ai = *m.ai;
+    e.gate_bypassed = ctx.gate_bypassed;
+    e.hitl_timeout_bypass = ctx.hitl_timeout_bypass;
+    if (!ctx.watermark_token.empty()) e.watermark_token = ctx.watermark_token;
     e.detail = ctx.audit_detail;
     e.detail.set("transport", ctx.in.transport);
     e.detail.set("route", ctx.in.route);
@@ -516,6 +519,7 @@ class DispatchStage final : public Stage {
       }
       json::Object payload{{"command", ctx->msg->action()}, {"result", *applied}};
       if (cmd->clamped) payload.set("clamped", cmd->clamp_note);
+      if (!ctx->watermark_token.empty()) payload.set("watermark_token", ctx->watermark_token);
       ctx->finish(Outcome{200, svc_.envelope(MessageType::kAck, payload, id), {}});
     });
     return Result::kParked;
@@ -574,7 +578,20 @@ void Pipeline::submit(Ingress in, std::function<void(Outcome)> done) {
   ctx->in = std::move(in);
   ctx->started_mono_us = mono_us();
   ctx->done = std::move(done);
-  for (const auto& stage : stages_) {
+  ctx->pipeline = this;
+  run(ctx, 0);
+}
+
+void Pipeline::run_from(const std::shared_ptr<Context>& ctx, std::string_view stage) {
+  ctx->pipeline = this;
+  for (size_t i = 0; i < stages_.size(); ++i)
+    if (stage == stages_[i]->name()) return run(ctx, i);
+  refuse(svc_, ctx, Error(ErrorCode::kInternal, "no pipeline stage named " + std::string(stage)), "INTERNAL_ERROR");
+}
+
+void Pipeline::run(const std::shared_ptr<Context>& ctx, size_t first) {
+  for (size_t i = first; i < stages_.size(); ++i) {
+    const auto& stage = stages_[i];
     int64_t t0 = mono_us();
     Stage::Result r = stage->run(ctx);
     svc_.metrics.stage(stage->name()).observe_us(static_cast<double>(mono_us() - t0));
@@ -596,7 +613,7 @@ std::vector<std::unique_ptr<Stage>> Pipeline::standard_stages(NodeServices& s) {
   v.push_back(std::make_unique<RateLimitStage>(s));
   v.push_back(std::make_unique<SafetyStateStage>(s));
   v.push_back(std::make_unique<InjectionStage>(s));
-  // Confidence and HiTL gate stages are inserted here by the AI-accountability work.
+  for (auto& g : ai_stages(s)) v.push_back(std::move(g));  // §16: confidence, HiTL, watermark
   v.push_back(std::make_unique<DispatchStage>(s));
   return v;
 }
