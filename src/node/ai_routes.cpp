@@ -95,7 +95,7 @@ void thought_route(NodeServices& svc, AiServices& ai, HttpRequest& req, const Ht
 void verify_route(NodeServices& svc, AiServices& ai, HttpRequest& req, const HttpHandler::Respond& respond) {
   const std::string route = "/api/v1/watermark/verify";
   if (wrong_method(svc, req, respond, route, "GET")) return;
-  auto seed_error = [&](int status, const char* msg) {
+  auto seed_error = [&svc, respond, route](int status, const char* msg) {
     answer(svc, respond, route, status,
            json::Object{{"error", msg}, {"code", "HTTP_" + std::to_string(status)}});
   };

@@ -3,6 +3,7 @@
 #include <chrono>
 #include <thread>
 
+#include "node/log.h"
 #include "rcan/errors.h"
 
 namespace rcan::node {
@@ -136,6 +137,7 @@ void SimLayer::handle(HttpRequest req, Respond respond) {
       }
     }
   }
+  log(LogLevel::kInfo, "layer_request", json::Object{{"layer", opts_.layer}, {"instruction", instruction}});
   std::string action = command.find("action")->is_string() ? command.find("action")->as_string() : "status";
   std::string thought_id = "th_" + new_uuid_v4();
   json::Object ai{{"provider", "sim"},

@@ -560,6 +560,7 @@ void refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, const Error&
   if (ctx->msg && !payload_free) {
     std::string action = ctx->msg->action();
     if (!action.empty()) e.action = action.substr(0, 128);
+    if (ctx->msg->ai) e.ai = *ctx->msg->ai;  // §16.2: refused AI commands name their model too
   }
   e.detail = ctx->audit_detail;
   e.detail.set("error_code", std::string(error_name(err.code)));
