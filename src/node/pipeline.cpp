@@ -560,8 +560,10 @@ void refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, const Error&
   if (ctx->msg && !payload_free) {
     std::string action = ctx->msg->action();
     if (!action.empty()) e.action = action.substr(0, 128);
-    if (ctx->msg->ai) e.ai = *ctx->msg->ai;  // §16.2: refused AI commands name their model too
   }
+  // §16.2: a refused AI command names its model too (not for replays: those record nothing sent).
+  if (ctx->msg && ctx->msg->ai && err.code != ErrorCode::kReplayDetected && err.code != ErrorCode::kMessageStale)
+    e.ai = *ctx->msg->ai;
   e.detail = ctx->audit_detail;
   e.detail.set("error_code", std::string(error_name(err.code)));
   if (!err.field.empty()) e.detail.set("field", err.field.substr(0, 128));

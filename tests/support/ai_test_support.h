@@ -188,7 +188,9 @@ class AiNode {
   static constexpr const char* kRuri = "rcan://local.rcan/acme/ai-rover/0a1b2c3d";
   static constexpr const char* kRrn = "RRN-000000000042";
 
-  AiNode(const std::string& dir, const std::string& agent_yaml, bool fresh = true) : dir_(dir) {
+  // `expect_start` false: the daemon is expected to refuse its configuration (exit 1).
+  AiNode(const std::string& dir, const std::string& agent_yaml, bool fresh = true, bool expect_start = true)
+      : dir_(dir) {
     std::string data = dir_ + "/data";
     if (fresh) {
       std::filesystem::create_directories(data);
@@ -220,6 +222,10 @@ class AiNode {
     write_token(owner_file(), owner_);
     write_token(leasee_file(), leasee_);
     proc_.start({RCAND_PATH, "--config", dir_ + "/robot.rcan.yaml", "--data-dir", data, "--port", "0"});
+    if (!expect_start) {
+      exit_code_ = proc_.stop(0, 15000);
+      return;
+    }
     auto line = proc_.wait_for_line("\"event\":\"listening\"", 30000);
     if (!line) {
       ADD_FAILURE() << "rcand did not start:\n" << proc_.err();
@@ -231,6 +237,8 @@ class AiNode {
     if (proc_.running()) proc_.stop(SIGTERM, 10000);
   }
   int terminate() { return proc_.stop(SIGTERM, 15000); }
+  int exit_code() const { return exit_code_; }
+  const std::string& log() const { return proc_.err(); }
   uint16_t port() const { return port_; }
   std::string url() const { return "http://127.0.0.1:" + std::to_string(port_); }
   std::string rrn() const { return kRrn; }
@@ -313,6 +321,7 @@ class AiNode {
   std::string dir_;
   test::Process proc_;
   uint16_t port_ = 0;
+  int exit_code_ = -1;
   std::string owner_, leasee_;
 };
 
