@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 
 #include "node/http_client.h"
 #include "node/layers.h"
@@ -44,7 +45,20 @@ Status AiServices::start(Pipeline& pipeline) {
   pipeline_ = &pipeline;
   size_t skipped = 0;
   auto items = load_pending(opts_.pending_file, &skipped);
-  if (!items.ok()) return items.error();
+  if (!items.ok()) {
+    // An unreadable file is kept aside for inspection; the node starts with nothing held.
+    std::string aside = opts_.pending_file + ".unreadable-" + std::to_string(svc_.clock.wall_ms());
+    if (std::rename(opts_.pending_file.c_str(), aside.c_str()) != 0)
+      return Error(ErrorCode::kInternal, items.error().message + " (and it cannot be moved aside)");
+    log(LogLevel::kError, "hitl_pending_unreadable",
+        json::Object{{"error", items.error().message}, {"moved_to", aside}});
+    auto e = svc_.entry("system", "", "HITL_PENDING_LOST", "error");
+    e.sender_type = "system";
+    e.reason = items.error().message.substr(0, 256);
+    e.detail.set("moved_to", aside);
+    svc_.write_audit(std::move(e));
+    items = std::vector<PendingItem>{};
+  }
   {
     std::lock_guard<std::mutex> lock(mu_);
     for (auto& i : *items) pending_[i.message_id] = std::move(i);

@@ -152,7 +152,7 @@ TEST_F(AiGates, EscalationClimbsLayersUntilTheGatePassesThenDispatchesWithAWater
   std::string wm = ack.get("payload")->get("watermark_token")->as_string();
   EXPECT_TRUE(wm.rfind("rcan-wm-v1:", 0) == 0) << wm;
   // reactive (0.3) → fast (0.5, still below 0.8) → planner (0.95): two escalation records.
-  auto escalations = n().records(id, "CONFIDENCE_GATE_ESCALATED");
+  auto escalations = n().records(id, "CONFIDENCE_GATE_ESCALATED", 2);
   ASSERT_EQ(escalations.size(), 2u);
   EXPECT_EQ(escalations[0].get("ai")->get("layer")->as_string(), "reactive");
   EXPECT_EQ(escalations[0].get("detail")->get("to_layer")->as_string(), "fast");
@@ -407,8 +407,10 @@ TEST(AiHitlRestart, HeldCommandsSurviveARestartAndTheCliDecides) {
   std::string agent =
       "agent:\n"
       "  hitl_gates:\n"
-      "    - {action_types: [arm_move], require_auth: true, auth_timeout_ms: 120000, on_timeout: block, notify: [ws]}\n";
+      "    - {action_types: [arm_move], require_auth: true, auth_timeout_ms: 120000, on_timeout: block, notify: [ws]}\n"
+      "    - {action_types: [arm_home], require_auth: true, auth_timeout_ms: 300, on_timeout: allow}\n";
   std::string held = new_uuid_v4();
+  std::string homing = new_uuid_v4();
   std::string second = new_uuid_v4();
   {
     AiNode node(dir.path(), agent);
@@ -417,6 +419,8 @@ TEST(AiHitlRestart, HeldCommandsSurviveARestartAndTheCliDecides) {
               202);
     namespace fs = std::filesystem;
     std::string file = dir.path() + "/data/hitl-pending.json";
+    // Held, then stop: it times out while the node is down or just after it is back.
+    ASSERT_EQ(node.command(node.leasee(), cmd(homing, "arm_home", {})).status, 202);
     ASSERT_TRUE(fs::exists(file));
     EXPECT_EQ(fs::status(file).permissions() & (fs::perms::group_all | fs::perms::others_all), fs::perms::none);
     EXPECT_NE(test::read_file(file).find(held), std::string::npos);
@@ -424,6 +428,10 @@ TEST(AiHitlRestart, HeldCommandsSurviveARestartAndTheCliDecides) {
     EXPECT_EQ(node.terminate(), 0);
   }
   AiNode node(dir.path(), agent, /*fresh=*/false);
+  // The arm_home hold is settled by its on_timeout (allow) after the restart.
+  json::Value homed = node.record(homing, "COMMAND");
+  ASSERT_TRUE(homed.get("hitl_timeout_bypass")) << json::dump(homed);
+  EXPECT_EQ(node.record(homing, "HITL_TIMEOUT").get("outcome")->as_string(), "ok");
   auto list = test::run_cli({"pending", "--url", node.url(), "--token-file", node.owner_file()});
   EXPECT_EQ(list.exit_code, 0) << list.err;
   EXPECT_NE(list.out.find(held), std::string::npos) << list.out;
@@ -435,7 +443,7 @@ TEST(AiHitlRestart, HeldCommandsSurviveARestartAndTheCliDecides) {
   auto no = test::run_cli({"authorize", second, "--deny", "--url", node.url(), "--token-file", node.owner_file()});
   EXPECT_EQ(no.exit_code, 0) << no.out << no.err;
   EXPECT_EQ(node.records(second, "COMMAND").size(), 0u);
-  EXPECT_EQ(node.records(second, "HITL_DENIED").size(), 1u);
+  EXPECT_EQ(node.records(second, "HITL_DENIED", 1).size(), 1u);
   // A LEASEE's CLI attempt is refused (exit 1) and audited.
   auto lower = test::run_cli({"authorize", second, "--approve", "--url", node.url(), "--token-file", node.leasee_file()});
   EXPECT_EQ(lower.exit_code, 1);
@@ -444,6 +452,25 @@ TEST(AiHitlRestart, HeldCommandsSurviveARestartAndTheCliDecides) {
   auto verify = test::run_cli({"audit", "verify", "--data-dir", dir.path() + "/data", "--secret-file",
                                dir.path() + "/data/audit.secret"});
   EXPECT_EQ(verify.exit_code, 0) << verify.out << verify.err;
+}
+
+TEST(AiHitlRestart, AnUnreadablePendingFileIsMovedAsideAndAudited) {
+  test::TempDir dir;
+  std::string agent = "agent:\n  hitl_gates:\n    - {action_types: [arm_move], require_auth: true}\n";
+  {
+    AiNode node(dir.path(), agent);
+    EXPECT_EQ(node.terminate(), 0);
+  }
+  std::ofstream(dir.path() + "/data/hitl-pending.json") << "{not json";
+  AiNode node(dir.path(), agent, /*fresh=*/false);
+  ASSERT_NE(node.port(), 0);
+  bool moved = false;
+  for (const auto& e : std::filesystem::directory_iterator(dir.path() + "/data"))
+    moved = moved || e.path().filename().string().rfind("hitl-pending.json.unreadable-", 0) == 0;
+  EXPECT_TRUE(moved);
+  EXPECT_EQ(parse(node.get("/rcan/v1/pending", node.owner()).body).get("pending")->as_array().size(), 0u);
+  HttpReply audit = node.get("/api/audit?limit=100", node.owner());
+  EXPECT_NE(audit.body.find("HITL_PENDING_LOST"), std::string::npos);
 }
 
 TEST(AiLayers, AFailingOrSlowLayerBlocksWithoutHoldingThePipeline) {
