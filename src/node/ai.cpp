@@ -78,7 +78,8 @@ void AiServices::shutdown() {
   }
   cv_.notify_all();
   if (timer_.joinable()) timer_.join();
-  worker_.shutdown();
+  net_.shutdown();
+  disk_.shutdown();
 }
 
 // ------------------------------------------------------------------------------------------
@@ -122,7 +123,7 @@ void AiServices::escalate(const std::shared_ptr<Context>& ctx, const config::Con
   e.detail.set("layer_url", layer.url);
   svc_.write_audit(std::move(e));
   config::ConfidenceGate g = gate;
-  bool posted = worker_.post([this, ctx, g, to, from, from_thought, layer] {
+  bool posted = net_.post([this, ctx, g, to, from, from_thought, layer] {
     const Message& orig = *ctx->msg;
     json::Value req = layer_request(orig, to, svc_.settings.ruri, g.scope, g.min_confidence);
     std::string problem;
@@ -244,7 +245,6 @@ void AiServices::hold(const std::shared_ptr<Context>& ctx, const config::HitlGat
   {
     std::lock_guard<std::mutex> lock(mu_);
     pending_[it.message_id] = it;
-    persist_locked();
   }
   cv_.notify_all();
   auto e = svc_.entry(ctx->principal.display(), m.message_id, "HITL_PENDING", "blocked");
@@ -263,11 +263,21 @@ void AiServices::hold(const std::shared_ptr<Context>& ctx, const config::HitlGat
   e.detail.set("notify", notify);
   e.detail.set("transport", ctx->in.transport);
   e.detail.set("route", ctx->in.route);
-  svc_.write_audit(std::move(e));
   json::Value event = svc_.envelope(MessageType::kPendingAuth, it.public_view(now), m.message_id);
-  notify_owners(event);
-  post_webhooks(it, event);
-  ctx->finish(Outcome{202, event, {}});
+  // The pending file is written off the transport thread; the sender hears 202 once it holds
+  // the command.
+  auto job = [this, ctx, it, event, e = std::move(e)]() mutable {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      persist_locked();
+    }
+    svc_.write_audit(std::move(e));
+    notify_owners(event);
+    post_webhooks(it, event);
+    ctx->finish(Outcome{202, event, {}});
+  };
+  auto shared = std::make_shared<decltype(job)>(std::move(job));
+  if (!disk_.post([shared] { (*shared)(); })) (*shared)();
 }
 
 void AiServices::post_webhooks(const PendingItem& item, const json::Value& event) {
@@ -282,7 +292,7 @@ void AiServices::post_webhooks(const PendingItem& item, const json::Value& event
     std::string url = n;
     std::string id = item.message_id;
     int timeout = opts_.webhook_timeout_ms;
-    worker_.post([url, body, id, timeout] {
+    net_.post([url, body, id, timeout] {
       auto u = parse_http_url(url);
       auto r = u.ok() ? http_post_json(*u, body, timeout) : Result<HttpAnswer>(u.error());
       if (!r.ok() || r->status / 100 != 2)
@@ -370,8 +380,18 @@ void AiServices::dispatch_held(const PendingItem& item, json::Object extra_detai
 
 void AiServices::authorize(const Principal& p, const json::Value& body, const std::string& transport,
                            const std::string& route, std::function<void(int, json::Value)> done) {
-  auto req = parse_authorize(body);
-  if (!req.ok()) return done(http_status(req.error().code), svc_.error(req.error()));
+  auto parsed = parse_authorize(body);
+  if (!parsed.ok()) return done(http_status(parsed.error().code), svc_.error(parsed.error()));
+  // The decision changes the pending file: it runs on the disk worker, in order.
+  bool posted = disk_.post([this, p, req = std::move(parsed).value(), transport, route, done] {
+    decide(p, req, transport, route, done);
+  });
+  if (!posted) done(503, svc_.error(Error(ErrorCode::kSafeStop, "the node is busy; try again")));
+}
+
+void AiServices::decide(const Principal& p, const AuthorizeRequest& request, const std::string& transport,
+                        const std::string& route, const std::function<void(int, json::Value)>& done) {
+  const AuthorizeRequest* req = &request;
   std::optional<PendingItem> item;
   {
     std::lock_guard<std::mutex> lock(mu_);

@@ -63,7 +63,8 @@ class AiServices {
 
   // --- HiTL gates (§16.4)
   const config::HitlGate* hitl_gate_for(const std::string& action_type) const;
-  // Holds the command: persists it, audits HITL_PENDING, notifies, answers 202.
+  // Holds the command: persists it, audits HITL_PENDING, notifies, answers 202 (from the disk
+  // worker, once the pending file holds it).
   void hold(const std::shared_ptr<Context>& ctx, const config::HitlGate& gate, const std::string& action_type);
   // An AUTHORIZE from `p` (authenticated). `done` gets the answer for the authorizer.
   void authorize(const Principal& p, const json::Value& body, const std::string& transport,
@@ -84,12 +85,15 @@ class AiServices {
   void notify_owners(json::Value event);
   void notify_principal(const std::string& principal_key, json::Value event);
 
-  Worker& worker() { return worker_; }
+  // Disk work (pending file, audit look-ups) off the transport threads.
+  Worker& worker() { return disk_; }
 
  private:
   struct Held {
     PendingItem item;
   };
+  void decide(const Principal& p, const AuthorizeRequest& req, const std::string& transport,
+              const std::string& route, const std::function<void(int, json::Value)>& done);
   void timer_loop();
   void settle_timeout(PendingItem item);
   void dispatch_held(const PendingItem& item, json::Object extra_detail, bool timeout_bypass,
@@ -107,7 +111,8 @@ class AiServices {
   std::map<std::string, PendingItem> pending_;
   bool quit_ = false;
   std::thread timer_;
-  Worker worker_{2};
+  Worker net_{2};   // layer calls and webhooks (may wait for their timeouts)
+  Worker disk_{1};  // the pending file and audit look-ups, in order
 };
 
 }  // namespace rcan::node

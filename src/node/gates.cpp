@@ -102,7 +102,7 @@ class HitlGateStage final : public Stage {
     const config::HitlGate* gate = svc_.ai->hitl_gate_for(action);
     if (!gate) return Result::kContinue;
     svc_.ai->hold(ctx, *gate, action);
-    return Result::kAnswered;
+    return Result::kParked;
   }
 
  private:
