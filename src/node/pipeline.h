@@ -33,6 +33,7 @@ namespace rcan::node {
 
 class NodeServices;
 class Pipeline;
+class Histogram;
 
 // What a transport hands to the pipeline.
 struct Ingress {
@@ -42,6 +43,7 @@ struct Ingress {
   std::string route;       // e.g. "/rcan/v1/command"
   std::string remote;      // peer address, for logs
   std::optional<Principal> preauthenticated;  // a stream authenticated at CONNECT
+  int64_t received_mono_us = 0;  // steady clock at arrival (transport read done); 0: at submit
 };
 
 // What the pipeline answers.
@@ -106,6 +108,9 @@ class Pipeline {
   NodeServices& svc_;
   void run(const std::shared_ptr<Context>& ctx, size_t first);
   std::vector<std::unique_ptr<Stage>> stages_;
+  std::vector<Histogram*> stage_timers_;  // one per stage (metrics lookups off the hot path)
+  Histogram* parse_timer_ = nullptr;
+  Histogram* total_timer_ = nullptr;
 };
 
 // The §16 stages (confidence gate, HiTL gate, watermark) for the gate slot (gates.cpp).
