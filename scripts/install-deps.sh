@@ -14,7 +14,7 @@ PKGS=(
   postgresql libpq-dev
   libgtest-dev libgmock-dev googletest libbenchmark-dev
   clang-14 libclang-rt-14-dev
-  python3
+  python3 curl
 )
 
 missing=()
