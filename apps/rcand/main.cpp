@@ -33,6 +33,7 @@
 #include "rcan/encoding.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
+#include "extra_transports.h"
 #include "transport/http_server.h"
 
 namespace fs = std::filesystem;
@@ -404,6 +405,13 @@ int main(int argc, char** argv) {
     return fail("cannot listen on " + so.bind_address + ":" + std::to_string(so.port) + ": " + port.error().message);
   }
   services.settings.port = *port;  // the bound port (differs from the configured one for --port 0)
+  auto extra = rcand::start_extra_transports(cfg, rcan_node);  // gRPC, UDP (docs/TRANSPORT.md)
+  if (!extra.ok()) {
+    server.stop(0);
+    rcan_node.shutdown();
+    core.stop();
+    return fail(extra.error().message);
+  }
   double startup_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - started).count();
   std::string scheme = so.tls ? "https" : "http";
@@ -431,6 +439,7 @@ int main(int argc, char** argv) {
   int sig = 0;
   sigwait(&signals, &sig);
   log(LogLevel::kInfo, "shutting_down", json::Object{{"signal", sig == SIGTERM ? "SIGTERM" : "SIGINT"}});
+  (*extra)->stop(2000);
   server.stop(2000);
   rcan_node.shutdown();
   core.stop();
