@@ -18,7 +18,7 @@
 #include "rcan/encoding.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
-#include "transport/udp_wire.h"
+#include "rcan/udp_wire.h"
 
 namespace rcan::transport {
 

@@ -16,7 +16,7 @@
 #include "configured_node.h"
 #include "node/config.h"
 #include "rcan/encoding.h"
-#include "transport/udp_wire.h"
+#include "rcan/udp_wire.h"
 
 namespace rcan {
 namespace {
@@ -24,7 +24,7 @@ namespace {
 using test::ConfiguredNode;
 using test::parse_json;
 using test::HttpReply;
-namespace udp = transport::udp;
+
 
 // ---------------------------------------------------------------------------------------------
 // Wire format
@@ -311,6 +311,37 @@ TEST(UdpDiscovery, DiscoverIsAnsweredWithAnnounceAndRateLimitedPerSource) {
   EXPECT_LE(answers, 5);
   EXPECT_GE(n.metric("rcan_udp_discover_limited_total"), 15);
   EXPECT_EQ(n.metric("rcan_udp_discover_answered_total"), 1 + answers);
+}
+
+TEST(UdpCli, UdpDiscoverAndUdpHeartbeatVerbsTalkToTheNode) {
+  ConfiguredNode n({}, /*heartbeat_timeout_ms=*/2000);
+  ASSERT_NE(n.udp_port(), 0) << n.proc().err();
+  auto r = test::run_cli({"udp-discover", "--host", "127.0.0.1", "--port", std::to_string(n.udp_port()),
+                          "--timeout-ms", "3000"});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  json::Value line = parse_json(r.out.substr(0, r.out.find('\n')));
+  EXPECT_EQ(line.get("announce")->get("payload")->get("ruri")->as_string(), ConfiguredNode::kRuri);
+  EXPECT_EQ(line.get("from")->as_string(), "127.0.0.1:" + std::to_string(n.udp_port()));
+  std::string owner = n.token("owner", {"control", "status", "config"});
+  HttpReply c = n.post("/rcan/v1/auth/claim", "{}", owner);
+  ASSERT_EQ(c.status, 200);
+  json::Value granted = parse_json(c.body);
+  const json::Value* u = granted.get("payload")->get("udp_heartbeat");
+  ASSERT_NE(u, nullptr);
+  auto hb = test::run_cli({"udp-heartbeat", "--port", std::to_string(u->get("port")->as_int()), "--key-id",
+                           u->get("key_id")->as_string(), "--key-b64", u->get("key_b64")->as_string(), "--count",
+                           "3", "--interval-ms", "20"});
+  ASSERT_EQ(hb.exit_code, 0) << hb.err;
+  double accepted = 0;
+  for (int i = 0; i < 40 && accepted < 3; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    accepted = n.metric("rcan_udp_heartbeats_accepted_total");
+  }
+  EXPECT_EQ(accepted, 3);
+  // Nothing answers on a port with no node: exit 1.
+  auto none = test::run_cli({"udp-discover", "--host", "127.0.0.1", "--port", "9", "--timeout-ms", "300"});
+  EXPECT_EQ(none.exit_code, 1);
+  EXPECT_EQ(test::run_cli({"udp-heartbeat", "--port", "1", "--key-id", "zz", "--key-b64", "AA=="}).exit_code, 2);
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -1,12 +1,12 @@
 // UDP datagram encoding and parsing (udp_wire.h).
-#include "transport/udp_wire.h"
+#include "rcan/udp_wire.h"
 
 #include <cstring>
 
 #include "rcan/hash.h"
 #include "rcan/json.h"
 
-namespace rcan::transport::udp {
+namespace rcan::udp {
 
 namespace {
 
@@ -125,4 +125,4 @@ std::string encode_announce(const Nonce& nonce, std::string_view json_body) {
   return out;
 }
 
-}  // namespace rcan::transport::udp
+}  // namespace rcan::udp

@@ -1,7 +1,7 @@
 // UDP datagrams of the node (docs/TRANSPORT.md §UDP): HEARTBEAT (a control session's deadman,
 // authenticated with the per-session key issued at claim), DISCOVER and ANNOUNCE. Pure
-// encoding and parsing: no sockets. Shared by the UDP service, the CLI, tests and
-// fuzz/udp_datagram_fuzz.cpp.
+// encoding and parsing: no sockets (librcan). Shared by the node's UDP service
+// (src/transport/udp.cpp), the CLI (rcan udp-discover), tests and fuzz/udp_datagram_fuzz.cpp.
 //
 // Every datagram starts with the same 8-byte header:
 //   0..3  magic "RCAN" (0x52 0x43 0x41 0x4E)
@@ -27,7 +27,7 @@
 #include <string>
 #include <string_view>
 
-namespace rcan::transport::udp {
+namespace rcan::udp {
 
 inline constexpr size_t kHeaderSize = 8;
 inline constexpr size_t kKeyIdSize = 16;
@@ -84,4 +84,4 @@ std::array<uint8_t, kHeartbeatSize> encode_heartbeat(const KeyId& key_id, uint64
 std::array<uint8_t, kDiscoverSize> encode_discover(const Nonce& nonce);
 std::string encode_announce(const Nonce& nonce, std::string_view json_body);
 
-}  // namespace rcan::transport::udp
+}  // namespace rcan::udp
