@@ -343,6 +343,111 @@ TEST_F(GrpcTest, StreamWithoutMetadataTakesTheTokenFromEachMessage) {
   EXPECT_TRUE(s.finish().ok());
 }
 
+TEST(GrpcConvert, EveryErrorCodeHasAStatusAndMessagesConvertBothWays) {
+  using transport::grpc_status_code;
+  struct Row {
+    ErrorCode code;
+    grpc::StatusCode want;
+  };
+  for (const Row& r : std::vector<Row>{{ErrorCode::kMalformedJson, grpc::INVALID_ARGUMENT},
+                                       {ErrorCode::kSchemaValidationFailed, grpc::INVALID_ARGUMENT},
+                                       {ErrorCode::kInvalidRuri, grpc::INVALID_ARGUMENT},
+                                       {ErrorCode::kVersionIncompatible, grpc::INVALID_ARGUMENT},
+                                       {ErrorCode::kMissingDelegationChain, grpc::INVALID_ARGUMENT},
+                                       {ErrorCode::kAuthRequired, grpc::UNAUTHENTICATED},
+                                       {ErrorCode::kAuthInvalid, grpc::UNAUTHENTICATED},
+                                       {ErrorCode::kSessionExpired, grpc::UNAUTHENTICATED},
+                                       {ErrorCode::kSignatureInvalid, grpc::UNAUTHENTICATED},
+                                       {ErrorCode::kInsufficientPrivileges, grpc::PERMISSION_DENIED},
+                                       {ErrorCode::kConfidenceGateFail, grpc::PERMISSION_DENIED},
+                                       {ErrorCode::kHitlDenied, grpc::PERMISSION_DENIED},
+                                       {ErrorCode::kNotFound, grpc::NOT_FOUND},
+                                       {ErrorCode::kMethodNotAllowed, grpc::UNIMPLEMENTED},
+                                       {ErrorCode::kNotImplemented, grpc::UNIMPLEMENTED},
+                                       {ErrorCode::kMessageStale, grpc::DEADLINE_EXCEEDED},
+                                       {ErrorCode::kHitlTimeout, grpc::DEADLINE_EXCEEDED},
+                                       {ErrorCode::kReplayDetected, grpc::ALREADY_EXISTS},
+                                       {ErrorCode::kControlConflict, grpc::ABORTED},
+                                       {ErrorCode::kBodyTooLarge, grpc::RESOURCE_EXHAUSTED},
+                                       {ErrorCode::kRateLimited, grpc::RESOURCE_EXHAUSTED},
+                                       {ErrorCode::kCommandRejected, grpc::FAILED_PRECONDITION},
+                                       {ErrorCode::kInternal, grpc::INTERNAL},
+                                       {ErrorCode::kSafeStop, grpc::UNAVAILABLE},
+                                       {ErrorCode::kLockdown, grpc::UNAVAILABLE},
+                                       {ErrorCode::kAuditUnavailable, grpc::UNAVAILABLE}}) {
+    EXPECT_EQ(grpc_status_code(error_name(r.code), http_status(r.code)), r.want) << error_name(r.code);
+    // The HTTP fallback agrees wherever the HTTP status alone is unambiguous.
+    int http = http_status(r.code);
+    if (http != 409 && http != 405 && http != 501 && http != 500) {
+      EXPECT_EQ(grpc_status_code("", http), r.want) << error_name(r.code);
+    }
+  }
+  RCANMessage m = command_msg("move", {{"linear", 0.5}});
+  m.set_ttl_ms(250);
+  m.add_scope("control");
+  m.set_sender_type("cloud_function");
+  m.set_cloud_provider("gcp");
+  m.set_function_name("dispatch");
+  m.set_ai(R"({"provider":"p","model":"m","confidence":0.75})");
+  auto j = transport::grpc_to_json(m);
+  ASSERT_TRUE(j.ok()) << j.error().message;
+  EXPECT_EQ(j->get("type")->as_string(), "COMMAND");
+  EXPECT_EQ(j->get("priority")->as_string(), "NORMAL");
+  EXPECT_EQ(j->get("ttl_ms")->as_int(), 250);
+  EXPECT_EQ(j->get("scope")->as_array().at(0).as_string(), "control");
+  EXPECT_EQ(j->get("payload")->get("linear")->as_double(), 0.5);
+  EXPECT_EQ(j->get("ai")->get("confidence")->as_double(), 0.75);
+  EXPECT_EQ(j->get("auth_token"), nullptr);  // empty → absent
+  RCANMessage safety = typed_msg(RCANMessage::SAFETY_MESSAGE, {{"safety_event", "ESTOP"}});
+  auto sj = transport::grpc_to_json(safety);
+  ASSERT_TRUE(sj.ok());
+  EXPECT_EQ(sj->get("type")->as_string(), "SAFETY");
+  EXPECT_EQ(sj->get("priority")->as_string(), "SAFETY");
+  RCANMessage back;
+  transport::json_to_grpc(json::Value(json::Object{{"type", "EVENT"}, {"event", "ESTOP"}, {"timestamp_ms", 5}}), back);
+  EXPECT_EQ(back.type(), RCANMessage::EVENT);
+  EXPECT_EQ(back.timestamp_ms(), 5);
+  EXPECT_EQ(payload_of(back).get("event")->as_string(), "ESTOP");
+  transport::json_to_grpc(json::Value(json::Object{{"type", "CONNECT_ACK"}, {"role", "OWNER"}}), back);
+  EXPECT_EQ(back.type(), RCANMessage::EVENT);
+  EXPECT_EQ(payload_of(back).get("type")->as_string(), "CONNECT_ACK");
+}
+
+TEST(GrpcTls, TlsFromConfigAndPlaintextClientsRefused) {
+  test::TempDir certs;
+  auto gen = test::run({"/usr/bin/openssl", "req", "-x509", "-newkey", "ec", "-pkeyopt",
+                        "ec_paramgen_curve:prime256v1", "-nodes", "-keyout", certs.file("key.pem"), "-out",
+                        certs.file("cert.pem"), "-days", "1", "-subj", "/CN=localhost", "-addext",
+                        "subjectAltName=DNS:localhost,IP:127.0.0.1"});
+  ASSERT_EQ(gen.exit_code, 0) << gen.err;
+  ConfiguredNode node("grpc:\n  enabled: true\n  port: 0\n  tls:\n    enabled: true\n    cert_file: " +
+                          certs.file("cert.pem") + "\n    key_file: " + certs.file("key.pem") + "\n",
+                      2000, /*transports=*/false);
+  ASSERT_NE(node.grpc_port(), 0) << node.proc().err();
+  EXPECT_NE(node.proc().err().find("\"tls\":true"), std::string::npos);
+  std::string owner = node.token("owner", {"status"});
+  grpc::SslCredentialsOptions so;
+  so.pem_root_certs = test::read_file(certs.file("cert.pem"));
+  auto ch = grpc::CreateChannel("127.0.0.1:" + std::to_string(node.grpc_port()), grpc::SslCredentials(so));
+  auto stub = v1::Rcan::NewStub(ch);
+  {
+    grpc::ClientContext ctx;
+    ctx.AddMetadata("authorization", "Bearer " + owner);
+    RCANMessage resp;
+    grpc::Status s = stub->Send(&ctx, typed_msg(RCANMessage::STATUS, {}), &resp);
+    ASSERT_TRUE(s.ok()) << s.error_message();
+    EXPECT_EQ(resp.type(), RCANMessage::STATUS);
+  }
+  {
+    auto plain = stub_for(node.grpc_port());
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
+    ctx.AddMetadata("authorization", "Bearer " + owner);
+    RCANMessage resp;
+    EXPECT_FALSE(plain->Send(&ctx, typed_msg(RCANMessage::STATUS, {}), &resp).ok());
+  }
+}
+
 // ---------------------------------------------------------------------------------------------
 // The same command sequence over gRPC and over WebSocket yields the same audit records, apart
 // from the transport fields (detail.transport, detail.route) and what differs by nature between
