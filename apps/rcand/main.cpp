@@ -397,21 +397,22 @@ int main(int argc, char** argv) {
   so.tls = cfg.server.tls.enabled;
   so.cert_file = cfg.server.tls.cert_file;
   so.key_file = cfg.server.tls.key_file;
+  // gRPC and UDP first: their claim hook is in place before HTTP serves (docs/TRANSPORT.md).
+  auto extra = rcand::start_extra_transports(cfg, rcan_node);
+  if (!extra.ok()) {
+    rcan_node.shutdown();
+    core.stop();
+    return fail(extra.error().message);
+  }
   transport::HttpServer server(so, rcan_node, rcan_node);
   auto port = server.start();
   if (!port.ok()) {
+    (*extra)->stop(0);
     rcan_node.shutdown();
     core.stop();
     return fail("cannot listen on " + so.bind_address + ":" + std::to_string(so.port) + ": " + port.error().message);
   }
   services.settings.port = *port;  // the bound port (differs from the configured one for --port 0)
-  auto extra = rcand::start_extra_transports(cfg, rcan_node);  // gRPC, UDP (docs/TRANSPORT.md)
-  if (!extra.ok()) {
-    server.stop(0);
-    rcan_node.shutdown();
-    core.stop();
-    return fail(extra.error().message);
-  }
   double startup_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - started).count();
   std::string scheme = so.tls ? "https" : "http";
