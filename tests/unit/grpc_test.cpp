@@ -448,6 +448,41 @@ TEST(GrpcTls, TlsFromConfigAndPlaintextClientsRefused) {
   }
 }
 
+TEST(GrpcLimits, StreamsBeyondMaxStreamsAreRefused) {
+  ConfiguredNode node("grpc:\n  enabled: true\n  port: 0\n  max_streams: 1\n", 2000, /*transports=*/false);
+  ASSERT_NE(node.grpc_port(), 0) << node.proc().err();
+  std::string owner = node.token("owner", {"status"});
+  auto stub = stub_for(node.grpc_port());
+  StreamClient first(*stub, owner);
+  RCANMessage ping = typed_msg(RCANMessage::STATUS, {});
+  ASSERT_TRUE(first.send(ping));
+  ASSERT_TRUE(first.reply_to(ping.message_id()).has_value());  // the first stream is open
+  grpc::ClientContext ctx;
+  ctx.AddMetadata("authorization", "Bearer " + owner);
+  auto second = stub->Stream(&ctx);
+  RCANMessage m;
+  EXPECT_FALSE(second->Read(&m));
+  EXPECT_EQ(second->Finish().error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_TRUE(first.finish().ok());
+  // Once the first has ended (the server counts it closed when its call is done, a moment after
+  // the client has the status), a new stream is accepted.
+  bool accepted = false;
+  for (int i = 0; i < 50 && !accepted; ++i) {
+    StreamClient third(*stub, owner);
+    RCANMessage again = typed_msg(RCANMessage::STATUS, {});
+    third.send(again);
+    accepted = third.reply_to(again.message_id(), 2000).has_value();
+    grpc::Status st = third.finish();
+    if (!accepted) {
+      EXPECT_EQ(st.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    } else {
+      EXPECT_TRUE(st.ok());
+    }
+  }
+  EXPECT_TRUE(accepted);
+}
+
 // ---------------------------------------------------------------------------------------------
 // The same command sequence over gRPC and over WebSocket yields the same audit records, apart
 // from the transport fields (detail.transport, detail.route) and what differs by nature between
