@@ -448,6 +448,46 @@ TEST(GrpcTls, TlsFromConfigAndPlaintextClientsRefused) {
   }
 }
 
+TEST(GrpcRobustness, ClientsVanishingMidStreamLeaveTheNodeServingAndItStopsCleanly) {
+  ConfiguredNode node;
+  ConfiguredNode& nd = node;
+  auto n = [&]() -> ConfiguredNode& { return nd; };
+  ASSERT_NE(n().grpc_port(), 0) << n().proc().err();
+  auto stub = stub_for(n().grpc_port());
+  std::string owner = n().token("owner", {"control", "status", "chat"}, "vanishing");
+  for (int round = 0; round < 8; ++round) {
+    grpc::ClientContext ctx;
+    ctx.AddMetadata("authorization", "Bearer " + owner);
+    auto rw = stub->Stream(&ctx);
+    for (int i = 0; i < 20; ++i) rw->Write(typed_msg(RCANMessage::STATUS, {}));
+    if (round % 2 == 0) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    ctx.TryCancel();  // answers still in the pipeline find the stream gone
+    EXPECT_EQ(rw->Finish().error_code(), grpc::StatusCode::CANCELLED);
+  }
+  // Unary callers that give up (deadline) before the answer.
+  for (int i = 0; i < 8; ++i) {
+    grpc::ClientContext ctx;
+    ctx.AddMetadata("authorization", "Bearer " + owner);
+    ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::microseconds(200));
+    RCANMessage resp;
+    (void)stub->Send(&ctx, command_msg("chat", {{"text", "hi"}}), &resp);
+  }
+  grpc::ClientContext ctx;
+  ctx.AddMetadata("authorization", "Bearer " + owner);
+  RCANMessage resp;
+  ASSERT_TRUE(stub->Send(&ctx, typed_msg(RCANMessage::STATUS, {}), &resp).ok());
+  EXPECT_EQ(n().get("/healthz").status, 200);
+  EXPECT_EQ(n().metric("rcan_audit_failures_total"), 0);
+  // A stream left open at shutdown is ended by the node; rcand exits 0.
+  StreamClient open(*stub, owner);
+  RCANMessage m = typed_msg(RCANMessage::STATUS, {});
+  ASSERT_TRUE(open.send(m));
+  ASSERT_TRUE(open.reply_to(m.message_id()).has_value());
+  EXPECT_EQ(node.terminate(), 0) << node.proc().err().substr(0, 2000);
+  grpc::Status st = open.finish();
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::UNAVAILABLE) << st.error_message();
+}
+
 TEST(GrpcLimits, StreamsBeyondMaxStreamsAreRefused) {
   ConfiguredNode node("grpc:\n  enabled: true\n  port: 0\n  max_streams: 1\n", 2000, /*transports=*/false);
   ASSERT_NE(node.grpc_port(), 0) << node.proc().err();
