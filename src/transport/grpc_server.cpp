@@ -1,6 +1,7 @@
 // gRPC transport on the callback API (grpc_server.h, docs/TRANSPORT.md §gRPC).
 #include "transport/grpc_server.h"
 
+#include <grpc/support/log.h>
 #include <grpcpp/grpcpp.h>
 
 #include <atomic>
@@ -69,6 +70,19 @@ void fill_reply_to(node::Outcome& out, const std::string& id) {
   if (id.empty() || !out.body.is_object()) return;
   json::Value* r = out.body.get("reply_to");
   if (!r || r->is_null()) out.body.as_object().set("reply_to", id);
+}
+
+// gRPC's own diagnostics (e.g. a TLS handshake refused to a plaintext client) go through the
+// node's JSON log like everything else, never as raw lines on stderr.
+void grpc_library_log(gpr_log_func_args* args) {
+  LogLevel lvl = args->severity == GPR_LOG_SEVERITY_ERROR ? LogLevel::kWarn
+                 : args->severity == GPR_LOG_SEVERITY_INFO ? LogLevel::kInfo
+                                                           : LogLevel::kDebug;
+  std::string file = args->file ? args->file : "";
+  if (auto slash = file.rfind('/'); slash != std::string::npos) file = file.substr(slash + 1);
+  log(lvl, "grpc.library",
+      json::Object{{"message", std::string(args->message ? args->message : "").substr(0, 512)},
+                   {"where", file + ":" + std::to_string(args->line)}});
 }
 
 Result<std::string> read_file(const std::string& path) {
@@ -404,6 +418,7 @@ GrpcServer::~GrpcServer() { stop(0); }
 
 Result<uint16_t> GrpcServer::start() {
   Impl& im = *impl_;
+  gpr_set_log_function(&grpc_library_log);
   std::shared_ptr<grpc::ServerCredentials> creds;
   if (im.opt.tls) {
     auto cert = read_file(im.opt.cert_file);

@@ -446,6 +446,19 @@ TEST(GrpcTls, TlsFromConfigAndPlaintextClientsRefused) {
     RCANMessage resp;
     EXPECT_FALSE(plain->Send(&ctx, typed_msg(RCANMessage::STATUS, {}), &resp).ok());
   }
+  // gRPC's own complaint about the plaintext client is a JSON log line like every other.
+  EXPECT_TRUE(node.proc().wait_for_line("grpc.library", 5000).has_value());
+  std::string err = node.proc().err();
+  size_t start = 0;
+  while (start < err.size()) {
+    size_t end = err.find('\n', start);
+    std::string line = err.substr(start, end == std::string::npos ? std::string::npos : end - start);
+    if (!line.empty()) {
+      EXPECT_EQ(line[0], '{') << line;
+    }
+    if (end == std::string::npos) break;
+    start = end + 1;
+  }
 }
 
 TEST(GrpcRobustness, ClientsVanishingMidStreamLeaveTheNodeServingAndItStopsCleanly) {
