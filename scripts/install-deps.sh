@@ -13,7 +13,7 @@ PKGS=(
   libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
   libgtest-dev libgmock-dev googletest libbenchmark-dev
   clang-14 libclang-rt-14-dev
-  python3 python3-grpcio python3-protobuf
+  python3 curl python3-grpcio python3-protobuf
 )
 
 missing=()

@@ -26,6 +26,8 @@
 
 namespace rcan::node {
 
+class AiServices;  // §16 gates, HiTL queue, thought log, watermark (ai.h)
+
 struct NodeSettings {
   std::string ruri;  // canonical robot RURI (identity, no capability)
   std::string rrn;
@@ -69,6 +71,7 @@ class NodeServices {
   std::atomic<uint64_t> audit_inflight{0};
   std::atomic<uint64_t> audit_failures{0};
   std::atomic<bool> audit_unavailable{false};
+  std::shared_ptr<AiServices> ai;  // set by the daemon before the node starts; may be null
   // Transports that add to a GRANTED claim answer (the UDP heartbeat key, src/transport/udp.h):
   // called with the new session's id and the answer's payload. Set once, before serving.
   std::function<void(const std::string& session_id, json::Object& payload)> on_grant;
