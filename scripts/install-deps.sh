@@ -12,9 +12,10 @@ PKGS=(
   libyaml-cpp-dev libsqlite3-dev
   mosquitto libmosquitto-dev
   postgresql libpq-dev
+  libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
   libgtest-dev libgmock-dev googletest libbenchmark-dev
   clang-14 libclang-rt-14-dev
-  python3 curl
+  python3 curl python3-grpcio python3-protobuf
 )
 
 missing=()

@@ -36,6 +36,7 @@
 #include "rcan/encoding.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
+#include "extra_transports.h"
 #include "transport/http_server.h"
 
 namespace fs = std::filesystem;
@@ -412,9 +413,18 @@ int main(int argc, char** argv) {
   so.tls = cfg.server.tls.enabled;
   so.cert_file = cfg.server.tls.cert_file;
   so.key_file = cfg.server.tls.key_file;
+  // gRPC and UDP first: their claim hook is in place before HTTP serves (docs/TRANSPORT.md).
+  auto extra = rcand::start_extra_transports(cfg, rcan_node);
+  if (!extra.ok()) {
+    services.ai->shutdown();
+    rcan_node.shutdown();
+    core.stop();
+    return fail(extra.error().message);
+  }
   transport::HttpServer server(so, rcan_node, rcan_node);
   auto port = server.start();
   if (!port.ok()) {
+    (*extra)->stop(0);
     services.ai->shutdown();
     rcan_node.shutdown();
     core.stop();
@@ -460,6 +470,7 @@ int main(int argc, char** argv) {
   int sig = 0;
   sigwait(&signals, &sig);
   log(LogLevel::kInfo, "shutting_down", json::Object{{"signal", sig == SIGTERM ? "SIGTERM" : "SIGINT"}});
+  (*extra)->stop(2000);
   server.stop(2000);
   if (mqtt) mqtt->stop();
   services.ai->shutdown();

@@ -658,6 +658,20 @@ SP config_schema() {
                                         {"read_timeout_ms", Int(100, 600'000)},
                                         {"idle_timeout_ms", Int(100, 86'400'000)},
                                         {"max_connections", Int(1, 1'000'000)}})}})},
+        {"grpc", Obj({{"enabled", Bool()},
+                      {"port", Int(0, 65535)},
+                      {"bind", Str(256)},
+                      {"max_streams", Int(1, 100'000)},
+                      {"tls", Obj({{"enabled", Bool()},
+                                   {"cert_file", Str()},
+                                   {"key_file", Str()},
+                                   {"client_ca_file", Str()}})}})},
+        {"udp", Obj({{"enabled", Bool()},
+                     {"port", Int(0, 65535)},
+                     {"bind", Str(256)},
+                     {"heartbeat", Bool()},
+                     {"discovery", Bool()},
+                     {"discovery_per_source_per_min", Int(1, 6000)}})},
         {"security",
          Obj({{"key_dir", Str()},
               {"replay_window_s", Int(5, 300)},
@@ -1363,6 +1377,42 @@ void parse_fleet_blocks(const At& root, const std::string& base, NodeConfig& c) 
   }
 }
 
+// `grpc` and `udp` (docs/CONFIG.md).
+void build_transports(const At& root, NodeConfig& c, const std::string& base) {
+  static const std::regex bind_re(R"(^[A-Za-z0-9.:_-]{1,255}$)");
+  At g = root["grpc"];
+  c.grpc.enabled = g["enabled"].flag(false);
+  c.grpc.port = static_cast<uint16_t>(g["port"].u32(8081));
+  c.grpc.bind_address = g["bind"].str("127.0.0.1");
+  if (!std::regex_match(c.grpc.bind_address, bind_re))
+    fail(g["bind"].path, "expected an IP address or host name", "invalid_value");
+  c.grpc.max_streams = g["max_streams"].u32(64);
+  At gt = g["tls"];
+  c.grpc.tls.enabled = gt["enabled"].flag(false);
+  c.grpc.tls.cert_file = resolve_path(gt["cert_file"].str(), base);
+  c.grpc.tls.key_file = resolve_path(gt["key_file"].str(), base);
+  c.grpc.client_ca_file = resolve_path(gt["client_ca_file"].str(), base);
+  if (c.grpc.tls.enabled && c.grpc.tls.cert_file.empty())
+    fail(gt["cert_file"].path, "required when tls.enabled is true", "missing_key");
+  if (c.grpc.tls.enabled && c.grpc.tls.key_file.empty())
+    fail(gt["key_file"].path, "required when tls.enabled is true", "missing_key");
+  if (!c.grpc.tls.enabled && !c.grpc.client_ca_file.empty())
+    fail(gt["client_ca_file"].path, "needs tls.enabled: true", "invalid_value");
+  At u = root["udp"];
+  c.udp.enabled = u["enabled"].flag(false);
+  c.udp.port = static_cast<uint16_t>(u["port"].u32(8082));
+  c.udp.bind_address = u["bind"].str("127.0.0.1");
+  if (!std::regex_match(c.udp.bind_address, bind_re))
+    fail(u["bind"].path, "expected an IP address", "invalid_value");
+  c.udp.heartbeat = u["heartbeat"].flag(true);
+  c.udp.discovery = u["discovery"].flag(true);
+  c.udp.discovery_per_source_per_min = u["discovery_per_source_per_min"].u32(30);
+  if (c.udp.enabled && !c.udp.heartbeat && !c.udp.discovery)
+    fail(u["enabled"].path, "udp is enabled but both heartbeat and discovery are off", "invalid_value");
+  if (c.grpc.enabled && c.grpc.port != 0 && c.grpc.port == c.server.port)
+    fail(g["port"].path, "must differ from server.port (" + std::to_string(c.server.port) + ")", "invalid_value");
+}
+
 NodeConfig build(const json::Value& root_value, const ConfigOptions& opts) {
   NodeConfig c;
   At root{&root_value, ""};
@@ -1538,6 +1588,7 @@ NodeConfig build(const json::Value& root_value, const ConfigOptions& opts) {
   c.server.limits.read_timeout_ms = lim["read_timeout_ms"].u32(c.server.limits.read_timeout_ms);
   c.server.limits.idle_timeout_ms = lim["idle_timeout_ms"].u32(c.server.limits.idle_timeout_ms);
   c.server.limits.max_connections = lim["max_connections"].u32(c.server.limits.max_connections);
+  build_transports(root, c, base);
   if (proto["enable_jwt"] && !proto["enable_jwt"].flag(true)) {
     c.enable_jwt_false_ignored = true;
     c.warnings.push_back(

@@ -68,6 +68,24 @@ struct ServerConfig {
   ServerLimits limits;
 };
 
+struct GrpcConfig {  // `grpc` (docs/CONFIG.md, docs/TRANSPORT.md §gRPC)
+  bool enabled = false;
+  uint16_t port = 8081;                    // 0 = any free port (logged)
+  std::string bind_address = "127.0.0.1";  // grpc.bind
+  TlsConfig tls;
+  std::string client_ca_file;              // grpc.tls.client_ca_file: require client certificates
+  uint32_t max_streams = 64;
+};
+
+struct UdpConfig {  // `udp` (docs/CONFIG.md, docs/TRANSPORT.md §UDP)
+  bool enabled = false;
+  uint16_t port = 8082;                    // 0 = any free port (logged)
+  std::string bind_address = "127.0.0.1";  // udp.bind; 0.0.0.0 to hear broadcast DISCOVER
+  bool heartbeat = true;                   // per-session keys in GRANTED, HEARTBEAT datagrams
+  bool discovery = true;                   // DISCOVER → ANNOUNCE
+  uint32_t discovery_per_source_per_min = 30;
+};
+
 struct AuditConfig {
   std::string dir;                // default <data_dir>/audit
   std::string chain_secret_file;  // default <data_dir>/audit.secret
@@ -317,6 +335,8 @@ struct NodeConfig {
   std::string data_dir;         // node.data_dir, default default_data_dir()
   std::string log_level = "info";  // trace|debug|info|warn|error
   ServerConfig server;
+  GrpcConfig grpc;
+  UdpConfig udp;
   SecurityConfig security;
   RbacConfig rbac;
   SafetyConfig safety;

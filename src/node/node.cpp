@@ -610,6 +610,7 @@ void Node::claim(HttpRequest& req, Respond& respond) {
     payload.set("expires_in", (c->session.expires_mono_ms - svc_.clock.mono_ms()) / 1000);
   else
     payload.set("expires_in", json::Value());
+  if (svc_.on_grant) svc_.on_grant(c->session.id, payload);  // e.g. udp_heartbeat (src/transport/udp.h)
   svc_.write_audit(std::move(e), [this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
     answer_json(respond, route, 200, svc_.envelope(MessageType::kGranted, payload));
   });

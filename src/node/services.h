@@ -75,6 +75,9 @@ class NodeServices {
   std::atomic<uint64_t> audit_failures{0};
   std::atomic<bool> audit_unavailable{false};
   std::shared_ptr<AiServices> ai;  // set by the daemon before the node starts; may be null
+  // Transports that add to a GRANTED claim answer (the UDP heartbeat key, src/transport/udp.h):
+  // called with the new session's id and the answer's payload. Set once, before serving.
+  std::function<void(const std::string& session_id, json::Object& payload)> on_grant;
 
   // An audit entry pre-filled with the robot, time, principal and sender identity.
   audit::AuditEntry entry(const std::string& principal, const std::string& message_id,
