@@ -10,6 +10,7 @@ import { existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { randomUUID } from 'node:crypto';
+import { createServer } from 'node:net';
 
 const SKIP = 77;
 const chromiumPath = process.env.CHROMIUM_PATH || '/usr/bin/chromium';
@@ -45,8 +46,16 @@ function check(cond, what) {
   else { console.log(`FAIL - ${what}`); failures.push(what); }
 }
 
-async function startRcand() {
-  rcand = spawn(rcandPath, ['--data-dir', dataDir, '--port', '0'], { stdio: ['ignore', 'ignore', 'pipe'] });
+async function freePort() {
+  const srv = createServer();
+  await new Promise((r) => srv.listen(0, '127.0.0.1', r));
+  const { port } = srv.address();
+  await new Promise((r) => srv.close(r));
+  return port;
+}
+
+async function startRcand(port) {
+  rcand = spawn(rcandPath, ['--data-dir', dataDir, '--port', String(port)], { stdio: ['ignore', 'ignore', 'pipe'] });
   let log = '';
   const url = await new Promise((resolve, reject) => {
     const timer = setTimeout(() => reject(new Error(`rcand did not start:\n${log}`)), 20000);
@@ -85,7 +94,8 @@ const HOSTILE = '<img src=x onerror="window.__pwned=1">';
 const HOSTILE_SUB = '<script>window.__pwned=2</script>';
 
 async function main() {
-  const base = await startRcand();
+  const port = await freePort();
+  const base = await startRcand(port);
   console.log(`rcand at ${base}`);
   const owner = readFileSync(join(dataDir, 'owner.token'), 'utf8').trim();
   const st = await http(base, 'GET', '/rcan/v1/status', owner);
@@ -257,7 +267,20 @@ async function main() {
   check(/Read-only|does not offer/.test(await page2.textContent('#approvals-note')), 'approvals are read-only for a USER');
   await page2.close();
 
-  // 9. Reconnect: the stream comes back after the node restarts.
+  // 9. Reconnect: the page shows the stream dropping when the node stops and comes back by
+  // itself (backoff) when it restarts on the same port.
+  await page.click('#tabs button[data-view=live]');
+  const stopped = new Promise((r) => rcand.once('exit', r));
+  rcand.kill('SIGTERM');
+  await stopped;
+  await page.waitForSelector('body[data-stream=waiting]', { timeout: 10000 });
+  const pill = await page.textContent('#conn-pill');
+  check(/reconnecting/.test(pill), `the lost stream is visible ("${pill}")`);
+  await shot('reconnecting');
+  await startRcand(port);
+  await page.waitForSelector('body[data-stream=open]', { timeout: 20000 });
+  const stats = await page.textContent('#stream-stats');
+  check(/[1-9]\d* reconnects/.test(stats), `the stream reconnects by itself after a restart (${stats.slice(0, 60)}…)`);
   check(consoleErrors.length === 0, `no console errors${consoleErrors.length ? ': ' + consoleErrors.slice(0, 3).join(' | ') : ''}`);
   check(pageErrors.length === 0, `no page errors${pageErrors.length ? ': ' + pageErrors.slice(0, 3).join(' | ') : ''}`);
   check(cspViolations.length === 0, `no CSP violations${cspViolations.length ? ': ' + cspViolations[0] : ''}`);

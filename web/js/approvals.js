@@ -31,7 +31,8 @@ function normalise(msg) {
     thought_id: p.thought_id,
     action: p.action_type || ocp.action || ocp.command || oc.cmd || '',
     description: p.description || '',
-    requester: p.requester || p.principal || p.requested_by || oc.principal || oc.source_ruri || '',
+    requester: [p.requester || p.principal || p.requested_by || oc.principal || oc.source_ruri || '', p.requested_role ? `(${p.requested_role})` : '']
+      .filter(Boolean).join(' '),
     sender_type: p.sender_type || oc.sender_type || '',
     model: p.model_id || ai.model || p.model || '',
     confidence: typeof p.confidence === 'number' ? p.confidence : (typeof ai.confidence === 'number' ? ai.confidence : null),

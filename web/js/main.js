@@ -68,7 +68,7 @@ async function signIn(token, remember) {
   await refreshStatus();
   refreshPending();
   clearInterval(pollTimer);
-  pollTimer = setInterval(() => { refreshStatus(); renderStreamStats(); }, 2000);
+  pollTimer = setInterval(() => { refreshStatus(); refreshPending(); renderStreamStats(); }, 2000);
 }
 
 function signOut(why) {
