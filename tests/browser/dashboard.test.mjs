@@ -6,7 +6,7 @@
 // /usr/bin/chromium), DASHBOARD_ARTIFACTS (screenshots and metrics.json; default a temp dir).
 
 import { spawn, execFileSync } from 'node:child_process';
-import { existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
+import { chmodSync, existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { randomUUID } from 'node:crypto';
@@ -40,6 +40,7 @@ const failures = [];
 const notes = [];
 let rcand = null;
 let browser = null;
+let gated = null;
 
 function check(cond, what) {
   if (cond) console.log(`ok - ${what}`);
@@ -88,6 +89,44 @@ function command(action, params = {}) {
 function issueToken(ruri, sub, role, scopes) {
   return execFileSync(cliPath, ['token', 'issue', '--key', join(dataDir, 'issuer', 'ed25519.seed'), '--iss', 'rcand-local',
     '--sub', sub, '--role', role, '--aud', ruri, '--scope', scopes, '--ttl', '1h'], { encoding: 'utf8' }).trim();
+}
+
+// A configured robot whose arm_move waits for a human (agent.hitl_gates), with its own issuer.
+async function startGatedRcand() {
+  const dir = join(work, 'gated');
+  const data = join(dir, 'data');
+  mkdirSync(data, { recursive: true, mode: 0o700 });
+  execFileSync(cliPath, ['keys', 'generate', '--dir', join(data, 'keys')]);
+  execFileSync(cliPath, ['audit', 'new-secret', '--out', join(data, 'audit.secret')]);
+  const key = join(dir, 'issuer.pem');
+  const pub = join(dir, 'issuer.pub.pem');
+  execFileSync('openssl', ['genpkey', '-algorithm', 'ed25519', '-out', key]);
+  chmodSync(key, 0o600);
+  execFileSync('openssl', ['pkey', '-in', key, '-pubout', '-out', pub]);
+  const ruri = 'rcan://local.rcan/acme/rover/0a1b2c3d';
+  const cfg = join(dir, 'robot.rcan.yaml');
+  writeFileSync(cfg, [
+    'rcan_version: "1.2"', `ruri: ${ruri}`,
+    'robot:', '  name: gated-rover', '  manufacturer: acme', '  model: rover', '  type: mobile',
+    'safety:', '  local_safety_wins: true',
+    'security:', '  jwt:', '    issuers:', '      - issuer: ops.example', `        key_file: ${pub}`,
+    'agent:', '  hitl_gates:', '    - action_types: [arm_move]', '      require_auth: true',
+    '      auth_timeout_ms: 60000', '      on_timeout: block', '      notify: [ws]', ''].join('\n'));
+  const proc = spawn(rcandPath, ['--config', cfg, '--data-dir', data, '--port', '0'], { stdio: ['ignore', 'ignore', 'pipe'] });
+  let log = '';
+  const url = await new Promise((resolve, reject) => {
+    const timer = setTimeout(() => reject(new Error(`configured rcand did not start:\n${log}`)), 20000);
+    proc.stderr.on('data', (d) => {
+      log += d.toString();
+      const m = log.match(/"event":"listening"[^\n]*"url":"(http:\/\/[^"]+)"/);
+      if (m) { clearTimeout(timer); resolve(m[1]); }
+    });
+    proc.on('exit', (code) => { clearTimeout(timer); reject(new Error(`configured rcand exited ${code}:\n${log}`)); });
+  });
+  proc.removeAllListeners('exit');
+  const tok = (sub, role, scopes) => execFileSync(cliPath, ['token', 'issue', '--key', key, '--iss', 'ops.example',
+    '--sub', sub, '--role', role, '--aud', ruri, '--scope', scopes, '--ttl', '1h'], { encoding: 'utf8' }).trim();
+  return { proc, url, owner: tok('owner-1', 'owner', 'status,control,config'), leasee: tok('leasee-1', 'leasee', 'status,control') };
 }
 
 const HOSTILE = '<img src=x onerror="window.__pwned=1">';
@@ -252,7 +291,7 @@ async function main() {
   } else {
     check(pend.status === 200, `GET /rcan/v1/pending answers (${pend.status})`);
   }
-  await shot('approvals');
+  if (pend.status === 404) await shot('approvals');
 
   // 8. A USER sees RESUME disabled and approvals read-only.
   const page2 = await context.newPage();
@@ -287,6 +326,45 @@ async function main() {
   const bad = responses.filter((r) => r.url.includes('/ui/') && r.status >= 400);
   check(bad.length === 0, `every dashboard file loads (${bad.map((r) => r.url).join(', ')})`);
   writeFileSync(join(artifacts, 'metrics.json'), JSON.stringify({ ...paint, transferred_with_api: transferred }, null, 2));
+  if (pend.status !== 404) await approvals(context, consoleErrors, pageErrors, isApiRefusal);
+}
+
+// An approval made in the page releases a parked command (PROFILE §8, seed §16.4).
+async function approvals(context, consoleErrors, pageErrors, isApiRefusal) {
+  const g = await startGatedRcand();
+  gated = g.proc;
+  const page = await context.newPage();
+  page.on('pageerror', (e) => pageErrors.push(String(e)));
+  page.on('console', (m) => { if (m.type() === 'error' && !isApiRefusal(m)) consoleErrors.push(m.text()); });
+  await page.goto(g.url + '/');
+  await page.fill('#token-input', g.owner);
+  await page.click('#signin-form button[type=submit]');
+  await page.waitForSelector('body[data-stream=open]', { timeout: 10000 });
+  await page.click('#tabs button[data-view=approvals]');
+  const target = [0.5, 0.25, 0, 0, 0, 0];
+  const held = await http(g.url, 'POST', '/rcan/v1/command', g.leasee, command('arm_move', { joints: target }));
+  check(held.status === 202, `a gated arm_move is parked with 202 PENDING_AUTH (${held.status})`);
+  const t0 = Date.now();
+  await page.waitForSelector('#approvals-list article.approval', { timeout: 5000 });
+  check(Date.now() - t0 < 1500, `the pending item appears in the page within a second or so (${Date.now() - t0} ms)`);
+  const card = await page.textContent('#approvals-list article.approval');
+  check(/arm_move/.test(card) && /leasee-1/.test(card), 'the item shows its action and requester');
+  await page.waitForFunction(() => /\d+ s left/.test(document.querySelector('#approvals-list .countdown').textContent));
+  check(true, 'the item counts down to its timeout');
+  const before = await http(g.url, 'GET', '/rcan/v1/status', g.owner);
+  const targets0 = before.json.robot.robot.arm.targets_rad;
+  check(targets0[0] === 0, 'the parked command has not moved the arm');
+  await page.screenshot({ path: join(artifacts, 'dashboard-approvals.png') });
+  await page.click('#approvals-list button.approve');
+  await page.waitForFunction(() => !document.querySelector('#approvals-list article.approval'), null, { timeout: 5000 });
+  let moved = false;
+  for (let i = 0; i < 40 && !moved; i++) {
+    const st = await http(g.url, 'GET', '/rcan/v1/status', g.owner);
+    moved = Math.abs(st.json.robot.robot.arm.targets_rad[0] - target[0]) < 1e-9;
+    if (!moved) await new Promise((r) => setTimeout(r, 100));
+  }
+  check(moved, 'approving in the page dispatches the parked command (the arm target is set)');
+  await page.close();
 }
 
 try {
@@ -297,6 +375,7 @@ try {
 } finally {
   if (browser) await browser.close().catch(() => {});
   if (rcand) rcand.kill('SIGTERM');
+  if (gated) gated.kill('SIGTERM');
   await new Promise((r) => setTimeout(r, 300));
   rmSync(work, { recursive: true, force: true });
 }

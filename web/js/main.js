@@ -23,9 +23,19 @@ function showSignedIn(yes) {
 
 function setSafety(estop) {
   app.estop = estop;
+  renderSafetyPill();
+}
+
+// The safety state as last reported; marked stale while the stream is down.
+function renderSafetyPill() {
+  const estop = app.estop;
+  const live = app.stream && app.stream.state === 'open';
   const pill = $('#safety-pill');
-  setText(pill, estop === null ? 'status unknown' : estop ? 'ESTOP LATCHED' : 'running');
-  pill.className = 'pill ' + (estop === null ? '' : estop ? 'bad' : 'good');
+  let text = estop === null ? 'status unknown' : estop ? 'ESTOP LATCHED' : 'running';
+  if (estop !== null && !live) text += ' (last known)';
+  setText(pill, text);
+  pill.className = 'pill ' + (estop === null ? '' : estop ? 'bad' : live ? 'good' : 'warn');
+  pill.title = live ? 'Safety state from the robot' : 'The stream is down: this is the last state the page saw';
   document.body.dataset.estop = estop ? 'latched' : 'clear';
 }
 
@@ -96,6 +106,8 @@ function setConn(state, detail) {
   pill.title = detail ? String(detail) : 'WebSocket stream';
   pill.className = 'pill ' + (state === 'open' ? 'good' : state === 'idle' ? '' : 'warn');
   document.body.dataset.stream = state;
+  renderSafetyPill();
+  renderStreamStats();
 }
 
 function wireStream(s) {
@@ -178,6 +190,8 @@ function init() {
   });
   setSafety(null);
   setConn('idle');
+  // Keep the "reconnecting in N s" countdown moving.
+  setInterval(() => { if (app.stream && app.stream.state === 'waiting') setConn('waiting', 'retrying'); }, 500);
   showView('overview');
   const saved = api.restoreToken();
   if (saved) signIn(saved, true);
