@@ -41,6 +41,7 @@ const notes = [];
 let rcand = null;
 let browser = null;
 let gated = null;
+let nodeDown = false;   // set while the test has stopped the node
 
 function check(cond, what) {
   if (cond) console.log(`ok - ${what}`);
@@ -158,7 +159,9 @@ async function main() {
   const cspViolations = [];
   // Chrome logs every 4xx/5xx answer as "Failed to load resource"; the API refusals this test
   // provokes on purpose (bad token, ESTOP, no pending endpoint) are expected, a page file is not.
-  const isApiRefusal = (m) => /Failed to load resource/.test(m.text()) && /\/(api|rcan)\//.test(m.location().url || '');
+  // While the test restarts the node on purpose, the page's reconnect attempts may be refused.
+  const isApiRefusal = (m) => (/Failed to load resource/.test(m.text()) && /\/(api|rcan)\//.test(m.location().url || '')) ||
+    (nodeDown && /WebSocket connection to .* failed/.test(m.text()));
   page.on('console', (m) => {
     if (m.type() === 'error' && !isApiRefusal(m)) consoleErrors.push(m.text());
     if (/Content.Security.Policy/i.test(m.text())) cspViolations.push(m.text());
@@ -309,6 +312,7 @@ async function main() {
   // 9. Reconnect: the page shows the stream dropping when the node stops and comes back by
   // itself (backoff) when it restarts on the same port.
   await page.click('#tabs button[data-view=live]');
+  nodeDown = true;
   const stopped = new Promise((r) => rcand.once('exit', r));
   rcand.kill('SIGTERM');
   await stopped;
@@ -318,6 +322,7 @@ async function main() {
   await shot('reconnecting');
   await startRcand(port);
   await page.waitForSelector('body[data-stream=open]', { timeout: 20000 });
+  nodeDown = false;
   const stats = await page.textContent('#stream-stats');
   check(/[1-9]\d* reconnects/.test(stats), `the stream reconnects by itself after a restart (${stats.slice(0, 60)}…)`);
   check(consoleErrors.length === 0, `no console errors${consoleErrors.length ? ': ' + consoleErrors.slice(0, 3).join(' | ') : ''}`);

@@ -40,8 +40,12 @@ function renderSafetyPill() {
 }
 
 async function refreshStatus() {
+  const asked = Date.now();
   try {
-    app.status = await api.status();
+    const st = await api.status();
+    if (asked < app.statusAskedAt) return;   // an older answer overtaken by a newer request
+    app.statusAskedAt = asked;
+    app.status = st;
     setSafety(!!app.status.estop_active);
     setText($('#robot-name'), app.status.name || 'RCAN robot');
     setText($('#robot-ruri'), app.status.ruri || '');

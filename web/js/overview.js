@@ -49,7 +49,11 @@ export function renderOverview() {
   const q = $('#control-queue');
   if (!queue) replace(q, el('li', { class: 'muted' }, 'This node does not report a queue.'));
   else if (!queue.length) replace(q, el('li', { class: 'muted' }, 'Empty.'));
-  else replace(q, queue.map((e) => el('li', {}, typeof e === 'object' ? `${e.role || ''} ${e.user_id || e.principal || ''}`.trim() : String(e))));
+  else {
+    replace(q, queue.map((e) => el('li', {}, e && typeof e === 'object'
+      ? [e.role, e.user_id || e.principal, typeof e.waiting_s === 'number' ? `(waiting ${e.waiting_s} s)` : ''].filter(Boolean).join(' ')
+      : String(e))));
+  }
   const c = app.claims || {};
   facts($('#me-facts'), [
     ['Role', app.role],

@@ -4,11 +4,12 @@ import { ROLE_LEVEL } from './api.js';
 export const app = {
   stream: null,
   status: null,        // last GET /rcan/v1/status
+  statusAskedAt: 0,    // when the request behind `status` was sent (Date.now())
   role: '',            // from the stream's CONNECT_ACK (the node's word), else the token's claim
   claims: null,        // the token's claims (display only)
   telemetry: null,     // last telemetry payload
   estop: null,         // last known ESTOP state
-  session: null,       // our control session {session_id, heartbeat_timeout_ms} while we hold it
+  session: null,       // our control session {session_id, heartbeat_timeout_ms, since} while we hold it
   bus: new EventTarget(),
 };
 

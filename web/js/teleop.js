@@ -16,7 +16,10 @@ function log(text, ok) {
   while (list.children.length > 30) list.removeChild(list.lastChild);
 }
 
+let lastSent = 0;
+
 async function act(label, fn) {
+  lastSent = Date.now();
   try {
     const res = await fn();
     const p = (res && res.payload) || {};
@@ -43,6 +46,10 @@ function startHeartbeat(timeoutMs) {
   stopHeartbeat();
   const every = Math.max(250, Math.floor((timeoutMs || 2000) / 3));
   heartbeatTimer = setInterval(() => {
+    // Commands from the holder feed the deadman too; a heartbeat is only needed when idle
+    // (this also keeps a USER within its rate limit while driving).
+    if (Date.now() - lastSent < every) return;
+    lastSent = Date.now();
     const msg = {
       version: '1.0.0', message_id: uuid(), type: 'HEARTBEAT', timestamp_ms: Math.round(serverNow()),
       payload: { session_id: app.session && app.session.session_id },
@@ -106,7 +113,7 @@ export function initTeleop() {
   $('#claim').addEventListener('click', async () => {
     const res = await act('claim', () => request('POST', '/rcan/v1/auth/claim', { source_ruri: 'rcan://local/dashboard' }));
     if (res && res.payload && res.payload.session_id) {
-      app.session = { session_id: res.payload.session_id, heartbeat_timeout_ms: res.payload.heartbeat_timeout_ms };
+      app.session = { session_id: res.payload.session_id, heartbeat_timeout_ms: res.payload.heartbeat_timeout_ms, since: Date.now() };
       startHeartbeat(res.payload.heartbeat_timeout_ms);
     }
     renderControl();
@@ -162,7 +169,8 @@ export function initTeleop() {
     // A session we held may have been pre-empted or expired.
     const s = app.status || {};
     const holder = Array.isArray(s.sessions) ? s.sessions[0] : null;
-    if (app.session && (!holder || !app.session.session_id.startsWith(holder.session_id))) {
+    if (app.session && app.statusAskedAt > app.session.since &&
+        (!holder || !app.session.session_id.startsWith(holder.session_id))) {
       app.session = null;
       stopHeartbeat();
       log('control session ended (released, pre-empted or expired)', false);
