@@ -347,13 +347,16 @@ async function approvals(context, consoleErrors, pageErrors, isApiRefusal) {
   await page.waitForSelector('body[data-stream=open]', { timeout: 10000 });
   await page.click('#tabs button[data-view=approvals]');
   const target = [0.5, 0.25, 0, 0, 0, 0];
-  const held = await http(g.url, 'POST', '/rcan/v1/command', g.leasee, command('arm_move', { joints: target }));
+  const heldCmd = command('arm_move', { joints: target });
+  heldCmd.ai = { provider: 'anthropic', model: 'arm-planner-2', confidence: 0.72, thought_id: `th_arm_${randomUUID().slice(0, 8)}` };
+  const held = await http(g.url, 'POST', '/rcan/v1/command', g.leasee, heldCmd);
   check(held.status === 202, `a gated arm_move is parked with 202 PENDING_AUTH (${held.status})`);
   const t0 = Date.now();
   await page.waitForSelector('#approvals-list article.approval', { timeout: 5000 });
   check(Date.now() - t0 < 1500, `the pending item appears in the page within a second or so (${Date.now() - t0} ms)`);
   const card = await page.textContent('#approvals-list article.approval');
-  check(/arm_move/.test(card) && /leasee-1/.test(card), 'the item shows its action and requester');
+  check(/arm_move/.test(card) && /leasee-1/.test(card) && /arm-planner-2/.test(card) && /0\.72/.test(card) && /0\.25/.test(card),
+    'the item shows action, parameters, requester, model and confidence');
   await page.waitForFunction(() => /\d+ s left/.test(document.querySelector('#approvals-list .countdown').textContent));
   check(true, 'the item counts down to its timeout');
   const before = await http(g.url, 'GET', '/rcan/v1/status', g.owner);
@@ -369,6 +372,42 @@ async function approvals(context, consoleErrors, pageErrors, isApiRefusal) {
     if (!moved) await new Promise((r) => setTimeout(r, 100));
   }
   check(moved, 'approving in the page dispatches the parked command (the arm target is set)');
+
+  // The thought behind an AI command, and its watermark, from the audit view.
+  const thoughtId = `th_dash_${randomUUID().slice(0, 8)}`;
+  const reasoning = 'The path ahead is clear <b>for 2 m</b>; drive slowly.';
+  const aiCmd = command('drive', { linear: 0.1, duration_ms: 200, thought: { reasoning, instruction: 'go forward a little' } });
+  aiCmd.ai = { provider: 'anthropic', model: 'planner-test-1', thought_id: thoughtId, confidence: 0.93, layer: 'planner' };
+  const ai = await http(g.url, 'POST', '/rcan/v1/command', g.owner, aiCmd);
+  check(ai.status === 200, `an AI command with a thought is dispatched (${ai.status})`);
+  await page.click('#tabs button[data-view=audit]');
+  await page.waitForFunction(() => document.querySelectorAll('#audit-table tbody tr').length > 3);
+  await page.evaluate(() => {
+    const tr = Array.from(document.querySelectorAll('#audit-table tbody tr')).find((r) => r.cells[6] && r.cells[6].textContent === 'drive');
+    if (tr) tr.click();
+  });
+  const thoughtBtn = await page.waitForSelector('#thought button', { timeout: 5000 }).catch(() => null);
+  check(thoughtBtn !== null, 'the AI command\'s audit record offers its thought');
+  if (thoughtBtn) {
+    await thoughtBtn.click();
+    await page.waitForFunction(() => /Reasoning/.test(document.querySelector('#thought').textContent));
+    const shown = await page.textContent('#thought');
+    check(shown.includes(reasoning) && shown.includes('planner-test-1'), 'the thought shows model and reasoning (OWNER with scope config), as text');
+    check(await page.$$eval('#thought b', (n) => n.length) === 0, 'markup in the reasoning stays text');
+  }
+  const wm = await page.inputValue('#wm-token');
+  if (/^rcan-wm-v1:/.test(wm)) {
+    await page.click('#wm-form button[type=submit]');
+    await page.waitForFunction(() => document.querySelector('#wm-result').textContent.length > 0);
+    check(/^Valid/.test(await page.textContent('#wm-result')), 'the watermark of the AI command verifies in the page');
+    await page.fill('#wm-token', 'rcan-wm-v1:' + '0'.repeat(32));
+    await page.click('#wm-form button[type=submit]');
+    await page.waitForFunction(() => /^Not verified/.test(document.querySelector('#wm-result').textContent));
+    check(true, 'an unknown watermark is reported as not verified');
+  } else {
+    check(false, 'the AI command\'s audit record carries a watermark token');
+  }
+  await page.screenshot({ path: join(artifacts, 'dashboard-audit-thought.png') });
   await page.close();
 }
 

@@ -38,13 +38,25 @@ function normalise(msg) {
     confidence: typeof p.confidence === 'number' ? p.confidence : (typeof ai.confidence === 'number' ? ai.confidence : null),
     expires,
     timeout: p.auth_timeout_ms,
+    params: paramsOf(ocp && Object.keys(ocp).length ? ocp : oc),
     raw: p,
   };
+}
+
+// What the command would do, without the fields already shown.
+function paramsOf(cmd) {
+  if (!cmd || typeof cmd !== 'object') return '';
+  const rest = {};
+  for (const [k, v] of Object.entries(cmd)) {
+    if (!['action', 'action_type', 'command', 'cmd', 'ai', 'thought', 'watermark_token'].includes(k)) rest[k] = v;
+  }
+  return Object.keys(rest).length ? JSON.stringify(rest) : '';
 }
 
 export function onPending(msg) {
   const it = normalise(msg);
   if (!it.key) return;
+  it.pushedAt = Date.now();
   items.set(it.key, it);
   render();
 }
@@ -61,6 +73,7 @@ export function onEvent(msg) {
 }
 
 export async function refresh() {
+  const asked = Date.now();
   try {
     const data = await request('GET', '/rcan/v1/pending');
     available = true;
@@ -72,7 +85,8 @@ export async function refresh() {
       seen.add(it.key);
       items.set(it.key, it);
     }
-    for (const k of Array.from(items.keys())) if (!seen.has(k)) items.delete(k);
+    // Drop what the node no longer lists, unless it was pushed after this list was asked for.
+    for (const [k, it] of Array.from(items.entries())) if (!seen.has(k) && !(it.pushedAt > asked)) items.delete(k);
   } catch (e) {
     if (e.status === 404 || e.status === 405) available = false;
   }
@@ -119,8 +133,9 @@ function render() {
       el('h3', {}, it.action || '(no action type)'),
       el('p', { class: 'desc' }, it.description),
       el('dl', { class: 'facts' },
+        el('dt', {}, 'Parameters'), el('dd', { class: 'mono' }, it.params || '–'),
         el('dt', {}, 'Requester'), el('dd', {}, it.requester || '–'),
-        el('dt', {}, 'Sender'), el('dd', {}, it.sender_type || '–'),
+        it.sender_type && [el('dt', {}, 'Sender'), el('dd', {}, it.sender_type)],
         el('dt', {}, 'Model'), el('dd', {}, it.model || '–'),
         el('dt', {}, 'Confidence'), el('dd', {}, it.confidence === null ? 'unknown' : it.confidence.toFixed(2)),
         el('dt', {}, 'Message'), el('dd', { class: 'mono' }, it.ref || '–'),
