@@ -400,14 +400,18 @@ async function approvals(context, consoleErrors, pageErrors, isApiRefusal) {
     await page.click('#wm-form button[type=submit]');
     await page.waitForFunction(() => document.querySelector('#wm-result').textContent.length > 0);
     check(/^Valid/.test(await page.textContent('#wm-result')), 'the watermark of the AI command verifies in the page');
+    await page.evaluate(() => document.querySelector('#thought').scrollIntoView({ block: 'end' }));
+    await page.screenshot({ path: join(artifacts, 'dashboard-audit-thought.png') });
     await page.fill('#wm-token', 'rcan-wm-v1:' + '0'.repeat(32));
     await page.click('#wm-form button[type=submit]');
     await page.waitForFunction(() => /^Not verified/.test(document.querySelector('#wm-result').textContent));
-    check(true, 'an unknown watermark is reported as not verified');
+    const nv = await page.textContent('#wm-result');
+    check(/not found in audit log/i.test(nv), `an unknown watermark is reported as not found (${nv})`);
+    const health = await http(g.url, 'GET', '/healthz', null).catch(() => ({ status: 0 }));
+    check(health.status === 200, 'the node still serves after the verifications');
   } else {
     check(false, 'the AI command\'s audit record carries a watermark token');
   }
-  await page.screenshot({ path: join(artifacts, 'dashboard-audit-thought.png') });
   await page.close();
 }
 
