@@ -49,6 +49,9 @@ struct StreamSessionImpl final : public StreamSession {
 };
 
 void StreamSessionImpl::on_text(std::string text) {
+  const int64_t received_us = std::chrono::duration_cast<std::chrono::microseconds>(
+                                  std::chrono::steady_clock::now().time_since_epoch())
+                                  .count();
   NodeServices& svc = node.svc_;
   json::ParseOptions po;
   po.max_bytes = svc.settings.codec.max_body_bytes;
@@ -140,6 +143,7 @@ void StreamSessionImpl::on_text(std::string text) {
   in.transport = "ws";
   in.route = "/rcan/v1/stream";
   in.remote = st->sink->remote_addr();
+  in.received_mono_us = received_us;
   {
     std::lock_guard<std::mutex> lock(st->mu);
     in.preauthenticated = st->principal;
@@ -382,6 +386,7 @@ void Node::run_pipeline(HttpRequest& req, Respond& respond, const std::string& r
   in.transport = "http";
   in.route = route;
   in.remote = req.remote_addr;
+  in.received_mono_us = req.received_mono_us;
   std::string r = route;
   pipeline_.submit(std::move(in), [this, respond, r](Outcome out) mutable {
     svc_.metrics.count_request(r, out.status);

@@ -5,6 +5,7 @@
 #include <cctype>
 #include <chrono>
 
+#include "node/log.h"
 #include "node/services.h"
 #include "rcan/errors.h"
 
@@ -423,12 +424,23 @@ class DispatchStage final : public Stage {
     std::string reason;
     if (const json::Value* r = ctx->msg->payload.find("reason"); r && r->is_string()) reason = r->as_string().substr(0, 512);
     double us = 0;
+    const int64_t t_call = mono_us();
     if (estop) {
       us = svc_.act.estop(source, reason);
     } else {
       svc_.act.stop(source);
+      us = static_cast<double>(mono_us() - t_call);
     }
+    // From the request's arrival (the transport's read) to Driver::stop() returning.
+    const double arrival_us = static_cast<double>(t_call - ctx->in.received_mono_us) + us;
     svc_.metrics.stage("estop_to_driver").observe_us(us);
+    svc_.metrics.stage(ctx->in.transport == "ws" ? "stop_arrival_to_driver_ws" : "stop_arrival_to_driver_http")
+        .observe_us(arrival_us);
+    log(LogLevel::kInfo, estop ? "estop.latency" : "stop.latency",
+        {{"transport", ctx->in.transport},
+         {"route", ctx->in.route},
+         {"arrival_to_driver_us", arrival_us},
+         {"call_to_driver_us", us}});
     json::Object ev{{"type", "EVENT"},
                     {"event", estop ? "ESTOP" : "STOP"},
                     {"source", ctx->principal.display()},
@@ -500,7 +512,7 @@ class DispatchStage final : public Stage {
       }
       int64_t t0 = mono_us();
       auto applied = svc_.act.apply(*cmd);
-      svc_.metrics.stage("dispatch").observe_us(static_cast<double>(mono_us() - t0));
+      svc_.metrics.stage("apply").observe_us(static_cast<double>(mono_us() - t0));
       if (!applied.ok()) {
         // An ESTOP overtook this command between its record and the driver: say so in a
         // record of its own and refuse.
@@ -567,17 +579,27 @@ void refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, const Error&
 }
 
 Pipeline::Pipeline(NodeServices& services, std::vector<std::unique_ptr<Stage>> stages)
-    : svc_(services), stages_(std::move(stages)) {}
+    : svc_(services), stages_(std::move(stages)) {
+  for (const auto& s : stages_) stage_timers_.push_back(&svc_.metrics.stage(s->name()));
+  parse_timer_ = &svc_.metrics.stage("parse");
+  total_timer_ = &svc_.metrics.stage("total");
+}
 
 void Pipeline::submit(Ingress in, std::function<void(Outcome)> done) {
   auto ctx = std::make_shared<Context>();
   ctx->in = std::move(in);
   ctx->started_mono_us = mono_us();
-  ctx->done = std::move(done);
-  for (const auto& stage : stages_) {
+  if (ctx->in.received_mono_us == 0) ctx->in.received_mono_us = ctx->started_mono_us;
+  // parse: arrival → here (routing and the JSON parse); total: arrival → answer handed over.
+  parse_timer_->observe_us(static_cast<double>(ctx->started_mono_us - ctx->in.received_mono_us));
+  ctx->done = [total = total_timer_, arrival = ctx->in.received_mono_us, done = std::move(done)](Outcome out) {
+    done(std::move(out));
+    total->observe_us(static_cast<double>(mono_us() - arrival));
+  };
+  for (size_t i = 0; i < stages_.size(); ++i) {
     int64_t t0 = mono_us();
-    Stage::Result r = stage->run(ctx);
-    svc_.metrics.stage(stage->name()).observe_us(static_cast<double>(mono_us() - t0));
+    Stage::Result r = stages_[i]->run(ctx);
+    stage_timers_[i]->observe_us(static_cast<double>(mono_us() - t0));
     if (r != Stage::Result::kContinue) return;
   }
   if (!ctx->finished()) {

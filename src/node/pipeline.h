@@ -31,6 +31,7 @@
 namespace rcan::node {
 
 class NodeServices;
+class Histogram;
 
 // What a transport hands to the pipeline.
 struct Ingress {
@@ -40,6 +41,7 @@ struct Ingress {
   std::string route;       // e.g. "/rcan/v1/command"
   std::string remote;      // peer address, for logs
   std::optional<Principal> preauthenticated;  // a stream authenticated at CONNECT
+  int64_t received_mono_us = 0;  // steady clock at arrival (transport read done); 0: at submit
 };
 
 // What the pipeline answers.
@@ -93,6 +95,9 @@ class Pipeline {
  private:
   NodeServices& svc_;
   std::vector<std::unique_ptr<Stage>> stages_;
+  std::vector<Histogram*> stage_timers_;  // one per stage (metrics lookups off the hot path)
+  Histogram* parse_timer_ = nullptr;
+  Histogram* total_timer_ = nullptr;
 };
 
 // Refuses a context: answers the error body with its HTTP status and writes the audit
