@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstdlib>
 
+#include "node/ai_routes.h"
 #include "node/log.h"
 #include "node/web_assets.h"
 #include "rcan/errors.h"
@@ -137,6 +138,16 @@ void StreamSessionImpl::on_text(std::string text) {
         MessageType::kAck, json::Object{{"subscribed", on}, {"topic", "telemetry"}, {"hz", hz}})));
     return;
   }
+  if (t == "AUTHORIZE") {  // §16.4, answered on this stream (ai_routes.cpp)
+    std::optional<Principal> who;
+    {
+      std::lock_guard<std::mutex> lock(st->mu);
+      who = st->principal;
+    }
+    auto state = st;
+    ai_stream_message(svc, t, *v, who, [state](std::string s) { state->sink->send_text(std::move(s)); });
+    return;
+  }
   // Everything else is an RCAN message through the pipeline, as this stream's principal.
   Ingress in;
   in.body = std::move(v).value();
@@ -157,7 +168,8 @@ void StreamSessionImpl::on_text(std::string text) {
 Node::Node(NodeServices& services)
     : svc_(services), pipeline_(services, Pipeline::standard_stages(services)) {
   event_sub_ = svc_.events.subscribe([this](const json::Value& ev) {
-    std::string text = json::dump(ev);
+    bool addressed = ev.is_object() && ev.get("_deliver");  // §16 events for some streams only
+    std::string text = addressed ? std::string() : json::dump(ev);
     std::vector<std::shared_ptr<StreamState>> copy;
     {
       std::lock_guard<std::mutex> lock(streams_mu_);
@@ -169,7 +181,17 @@ Node::Node(NodeServices& services)
         std::lock_guard<std::mutex> lock(st->mu);
         ok = st->connected && !st->closed;
       }
-      if (ok) st->sink->send_text(text);
+      if (ok && addressed) {
+        json::Value addressed_ev = ev;
+        std::optional<Principal> who;
+        {
+          std::lock_guard<std::mutex> lock(st->mu);
+          who = st->principal;
+        }
+        if (ai_event_for_stream(addressed_ev, who)) st->sink->send_text(json::dump(addressed_ev));
+      } else if (ok) {
+        st->sink->send_text(text);
+      }
     }
   });
   svc_.metrics.add_gauge("rcan_estop_active", "1 while ESTOP is latched.",
@@ -427,6 +449,7 @@ void Node::route(HttpRequest& req, Respond& respond) {
     svc_.metrics.count_request("/ui", r.status);
     return respond(std::move(r));
   }
+  if (ai_route(svc_, req, respond)) return;  // §16: authorize, pending, thoughts, watermark
   if (p == "/healthz") {
     if (!method_is(req, "GET") && !method_is(req, "HEAD")) return wrong_method("GET");
     bool ok = !svc_.audit_unavailable.load();

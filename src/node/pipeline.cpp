@@ -411,6 +411,9 @@ class DispatchStage final : public Stage {
     std::string action = m.action();
     if (!action.empty()) e.action = action;
     if (m.ai) e.ai = *m.ai;
+    e.gate_bypassed = ctx.gate_bypassed;
+    e.hitl_timeout_bypass = ctx.hitl_timeout_bypass;
+    if (!ctx.watermark_token.empty()) e.watermark_token = ctx.watermark_token;
     e.detail = ctx.audit_detail;
     e.detail.set("transport", ctx.in.transport);
     e.detail.set("route", ctx.in.route);
@@ -528,6 +531,7 @@ class DispatchStage final : public Stage {
       }
       json::Object payload{{"command", ctx->msg->action()}, {"result", *applied}};
       if (cmd->clamped) payload.set("clamped", cmd->clamp_note);
+      if (!ctx->watermark_token.empty()) payload.set("watermark_token", ctx->watermark_token);
       ctx->finish(Outcome{200, svc_.envelope(MessageType::kAck, payload, id), {}});
     });
     return Result::kParked;
@@ -569,6 +573,9 @@ void refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, const Error&
     std::string action = ctx->msg->action();
     if (!action.empty()) e.action = action.substr(0, 128);
   }
+  // §16.2: a refused AI command names its model too (not for replays: those record nothing sent).
+  if (ctx->msg && ctx->msg->ai && err.code != ErrorCode::kReplayDetected && err.code != ErrorCode::kMessageStale)
+    e.ai = *ctx->msg->ai;
   e.detail = ctx->audit_detail;
   e.detail.set("error_code", std::string(error_name(err.code)));
   if (!err.field.empty()) e.detail.set("field", err.field.substr(0, 128));
@@ -596,7 +603,19 @@ void Pipeline::submit(Ingress in, std::function<void(Outcome)> done) {
     done(std::move(out));
     total->observe_us(static_cast<double>(mono_us() - arrival));
   };
-  for (size_t i = 0; i < stages_.size(); ++i) {
+  ctx->pipeline = this;
+  run(ctx, 0);
+}
+
+void Pipeline::run_from(const std::shared_ptr<Context>& ctx, std::string_view stage) {
+  ctx->pipeline = this;
+  for (size_t i = 0; i < stages_.size(); ++i)
+    if (stage == stages_[i]->name()) return run(ctx, i);
+  refuse(svc_, ctx, Error(ErrorCode::kInternal, "no pipeline stage named " + std::string(stage)), "INTERNAL_ERROR");
+}
+
+void Pipeline::run(const std::shared_ptr<Context>& ctx, size_t first) {
+  for (size_t i = first; i < stages_.size(); ++i) {
     int64_t t0 = mono_us();
     Stage::Result r = stages_[i]->run(ctx);
     stage_timers_[i]->observe_us(static_cast<double>(mono_us() - t0));
@@ -618,7 +637,7 @@ std::vector<std::unique_ptr<Stage>> Pipeline::standard_stages(NodeServices& s) {
   v.push_back(std::make_unique<RateLimitStage>(s));
   v.push_back(std::make_unique<SafetyStateStage>(s));
   v.push_back(std::make_unique<InjectionStage>(s));
-  // Confidence and HiTL gate stages are inserted here by the AI-accountability work.
+  for (auto& g : ai_stages(s)) v.push_back(std::move(g));  // §16: confidence, HiTL, watermark
   v.push_back(std::make_unique<DispatchStage>(s));
   return v;
 }
