@@ -16,6 +16,7 @@ PKGS=(
   libgtest-dev libgmock-dev googletest libbenchmark-dev
   clang-14 libclang-rt-14-dev
   python3 curl python3-grpcio python3-protobuf
+  chromium fonts-dejavu-core nodejs
 )
 
 missing=()
@@ -24,14 +25,25 @@ for p in "${PKGS[@]}"; do
     missing+=("$p")
   fi
 done
-
-if [ ${#missing[@]} -eq 0 ]; then
-  exit 0
-fi
+# npm ships inside some Node.js builds; Debian packages it separately.
+if ! command -v npm >/dev/null 2>&1; then missing+=(npm); fi
 
 SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
-echo "install-deps: installing ${missing[*]}" >&2
-export DEBIAN_FRONTEND=noninteractive
-$SUDO apt-get update -qq
-$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "install-deps: installing ${missing[*]}" >&2
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+# The dashboard's browser test drives Debian's chromium with playwright-core, pinned in
+# tests/browser/package-lock.json (no browser download: it uses /usr/bin/chromium).
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+B="$ROOT/tests/browser"
+want="$(node -p "require('$B/package.json').dependencies['playwright-core']")"
+have="$(node -p "require('$B/node_modules/playwright-core/package.json').version" 2>/dev/null || true)"
+if [ "$want" != "$have" ]; then
+  echo "install-deps: npm ci in tests/browser (playwright-core $want)" >&2
+  (cd "$B" && PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 npm ci --no-audit --no-fund --loglevel=error >/dev/null)
+fi

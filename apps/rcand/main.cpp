@@ -461,9 +461,10 @@ int main(int argc, char** argv) {
                  "%s token: %s (mode 0600)\n"
                  "Use it from another terminal:\n"
                  "  export RCAN_URL=%s RCAN_TOKEN_FILE=%s\n"
-                 "  curl -s $RCAN_URL/rcan/v1/status -H \"Authorization: Bearer $(cat $RCAN_TOKEN_FILE)\"\n\n",
+                 "  curl -s $RCAN_URL/rcan/v1/status -H \"Authorization: Bearer $(cat $RCAN_TOKEN_FILE)\"\n"
+                 "Dashboard: %s/ (sign in with the token in that file; docs/DASHBOARD.md)\n\n",
                  cfg.ruri.c_str(), url.c_str(), token_created ? "New OWNER" : "OWNER",
-                 local->owner_token_file.c_str(), url.c_str(), local->owner_token_file.c_str());
+                 local->owner_token_file.c_str(), url.c_str(), local->owner_token_file.c_str(), url.c_str());
   }
 
   // 8. Run until SIGTERM / SIGINT.

@@ -6,6 +6,7 @@
 
 #include "node/ai_routes.h"
 #include "node/log.h"
+#include "node/web_assets.h"
 #include "rcan/errors.h"
 
 namespace rcan::node {
@@ -443,6 +444,11 @@ void Node::route(HttpRequest& req, Respond& respond) {
                 {{"Allow", allowed}});
   };
 
+  if (is_web_path(p)) {  // the operator dashboard (docs/DASHBOARD.md)
+    HttpResponse r = web_response(req, svc_.clock.wall_ms());
+    svc_.metrics.count_request("/ui", r.status);
+    return respond(std::move(r));
+  }
   if (ai_route(svc_, req, respond)) return;  // §16: authorize, pending, thoughts, watermark
   if (p == "/healthz") {
     if (!method_is(req, "GET") && !method_is(req, "HEAD")) return wrong_method("GET");

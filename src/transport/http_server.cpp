@@ -142,7 +142,7 @@ inline http::response<http::string_body> build_response(HttpResponse r, unsigned
     res.set(http::field::content_length, std::to_string(r.body.size()));
   }
   res.set("X-Content-Type-Options", "nosniff");
-  res.set(http::field::cache_control, "no-store");
+  if (res.find(http::field::cache_control) == res.end()) res.set(http::field::cache_control, "no-store");
   res.set(http::field::connection, keep_alive ? "keep-alive" : "close");
   if (!head && !no_body) res.body() = std::move(r.body);
   return res;

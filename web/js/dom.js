@@ -1,0 +1,72 @@
+// DOM helpers. Everything that comes from the robot is put into the page as text
+// (textContent / createTextNode); this module has no path that parses HTML.
+
+export function $(sel, root = document) {
+  return root.querySelector(sel);
+}
+
+export function $all(sel, root = document) {
+  return Array.from(root.querySelectorAll(sel));
+}
+
+// el('div', {class: 'x', dataset: {id: 1}, onclick: fn}, 'text', childNode, …)
+export function el(tag, attrs = {}, ...children) {
+  const node = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs || {})) {
+    if (v === undefined || v === null || v === false) continue;
+    if (k === 'class') node.className = v;
+    else if (k === 'dataset') Object.assign(node.dataset, v);
+    else if (k.startsWith('on') && typeof v === 'function') node.addEventListener(k.slice(2), v);
+    else if (k === 'text') node.textContent = String(v);
+    else if (v === true) node.setAttribute(k, '');
+    else node.setAttribute(k, String(v));
+  }
+  append(node, children);
+  return node;
+}
+
+function append(node, children) {
+  for (const c of children) {
+    if (c === undefined || c === null || c === false) continue;
+    if (Array.isArray(c)) append(node, c);
+    else if (c instanceof Node) node.appendChild(c);
+    else node.appendChild(document.createTextNode(String(c)));
+  }
+}
+
+export function setText(node, value) {
+  if (node) node.textContent = value === undefined || value === null ? '' : String(value);
+}
+
+export function clear(node) {
+  while (node && node.firstChild) node.removeChild(node.firstChild);
+}
+
+export function replace(node, ...children) {
+  clear(node);
+  append(node, children);
+}
+
+// A short-lived message at the bottom of the page.
+let toastTimer = 0;
+export function toast(text, kind = 'info') {
+  const t = $('#toast');
+  if (!t) return;
+  t.textContent = String(text);
+  t.className = 'toast ' + kind;
+  t.hidden = false;
+  clearTimeout(toastTimer);
+  toastTimer = setTimeout(() => { t.hidden = true; }, 5000);
+}
+
+export function fmtTime(ms) {
+  if (typeof ms !== 'number' || !isFinite(ms)) return '';
+  const d = new Date(ms);
+  const pad = (n, w = 2) => String(n).padStart(w, '0');
+  return `${d.getFullYear()}-${pad(d.getMonth() + 1)}-${pad(d.getDate())} ` +
+    `${pad(d.getHours())}:${pad(d.getMinutes())}:${pad(d.getSeconds())}.${pad(d.getMilliseconds(), 3)}`;
+}
+
+export function fmtNum(v, digits = 2) {
+  return typeof v === 'number' && isFinite(v) ? v.toFixed(digits) : '–';
+}

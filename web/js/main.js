@@ -1,0 +1,205 @@
+// The dashboard's entry point: sign-in, tabs, the always-visible ESTOP, status polling and the
+// stream that feeds the views.
+import { $, $all, setText, toast } from './dom.js';
+import * as api from './api.js';
+import { Stream } from './stream.js';
+import { app, emit, on } from './state.js';
+import { initOverview, renderOverview } from './overview.js';
+import { initLive, onTelemetry, setWorkspace, renderStreamStats } from './live.js';
+import { initTeleop, onTelemetryJoints, teleopSignedOut, renderControl } from './teleop.js';
+import { initApprovals, onPending, onEvent as approvalsEvent, refresh as refreshPending } from './approvals.js';
+import { initAudit, loadAudit, setDefaultRrn } from './audit.js';
+
+let pollTimer = 0;
+let auditLoaded = false;
+
+function showSignedIn(yes) {
+  $('#signin').hidden = yes;
+  $('#tabs').hidden = !yes;
+  $('#views').hidden = !yes;
+  $('#signout').hidden = !yes;
+  document.body.dataset.signedIn = yes ? 'yes' : 'no';
+}
+
+function setSafety(estop) {
+  app.estop = estop;
+  renderSafetyPill();
+}
+
+// The safety state as last reported; marked stale while the stream is down.
+function renderSafetyPill() {
+  const estop = app.estop;
+  const live = app.stream && app.stream.state === 'open';
+  const pill = $('#safety-pill');
+  let text = estop === null ? 'status unknown' : estop ? 'ESTOP LATCHED' : 'running';
+  if (estop !== null && !live) text += ' (last known)';
+  setText(pill, text);
+  pill.className = 'pill ' + (estop === null ? '' : estop ? 'bad' : live ? 'good' : 'warn');
+  pill.title = live ? 'Safety state from the robot' : 'The stream is down: this is the last state the page saw';
+  document.body.dataset.estop = estop ? 'latched' : 'clear';
+}
+
+async function refreshStatus() {
+  const asked = Date.now();
+  try {
+    const st = await api.status();
+    if (asked < app.statusAskedAt) return;   // an older answer overtaken by a newer request
+    app.statusAskedAt = asked;
+    app.status = st;
+    setSafety(!!app.status.estop_active);
+    setText($('#robot-name'), app.status.name || 'RCAN robot');
+    setText($('#robot-ruri'), app.status.ruri || '');
+    const lim = app.status.robot && app.status.robot.limits;
+    if (lim && lim.workspace) setWorkspace(lim.workspace);
+    setDefaultRrn(app.status.rrn);
+    emit('status');
+  } catch (e) {
+    if (e.status === 401) signOut(`The node refused the token: ${e.code} — ${e.message}`);
+  }
+}
+
+async function signIn(token, remember) {
+  const t = token.trim();
+  if (!t) return;
+  api.setToken(t, remember);
+  try {
+    app.status = await api.status();
+  } catch (e) {
+    api.setToken('', false);
+    showSignedIn(false);
+    setText($('#signin-error'), e.status === 401 ? `The node refused this token: ${e.code} — ${e.message}` : `Cannot reach the node: ${e.message}`);
+    return;
+  }
+  setText($('#signin-error'), '');
+  $('#token-input').value = '';
+  app.claims = api.tokenClaims(t) || {};
+  app.role = String(app.claims.role || '').toUpperCase();
+  setText($('#who'), `${app.claims.sub || 'signed in'} (${app.role || '?'})`);
+  showSignedIn(true);
+  app.stream = new Stream();
+  wireStream(app.stream);
+  app.stream.start();
+  await refreshStatus();
+  refreshPending();
+  clearInterval(pollTimer);
+  pollTimer = setInterval(() => { refreshStatus(); refreshPending(); renderStreamStats(); }, 2000);
+}
+
+function signOut(why) {
+  clearInterval(pollTimer);
+  if (app.stream) app.stream.stop();
+  app.stream = null;
+  teleopSignedOut();
+  api.setToken('', false);
+  app.role = '';
+  app.claims = null;
+  auditLoaded = false;
+  setText($('#who'), '');
+  setConn('idle');
+  showSignedIn(false);
+  setText($('#signin-error'), why || '');
+}
+
+function setConn(state, detail) {
+  const pill = $('#conn-pill');
+  const s = app.stream;
+  let text = `stream: ${state}`;
+  if (state === 'waiting' && s) text = `stream: reconnecting in ${Math.max(0, Math.round((s.retryAt - Date.now()) / 1000))} s`;
+  if (state === 'refused') text = 'stream: refused';
+  setText(pill, text);
+  pill.title = detail ? String(detail) : 'WebSocket stream';
+  pill.className = 'pill ' + (state === 'open' ? 'good' : state === 'idle' ? '' : 'warn');
+  document.body.dataset.stream = state;
+  renderSafetyPill();
+  renderStreamStats();
+}
+
+function wireStream(s) {
+  s.addEventListener('state', (e) => setConn(e.detail.state, e.detail.detail));
+  s.addEventListener('connected', (e) => {
+    if (e.detail.role) app.role = String(e.detail.role).toUpperCase();
+    setText($('#who'), `${(app.claims && app.claims.sub) || 'signed in'} (${app.role})`);
+    emit('status');
+  });
+  s.addEventListener('telemetry', (e) => {
+    const f = e.detail;
+    api.noteServerTime(f.timestamp_ms);
+    app.telemetry = f.payload || {};
+    if (typeof f.estop_active === 'boolean' && f.estop_active !== app.estop) {
+      setSafety(f.estop_active);
+      renderOverview();
+    }
+    onTelemetry(f);
+    onTelemetryJoints(app.telemetry);
+  });
+  s.addEventListener('pending', (e) => onPending(e.detail));
+  s.addEventListener('event', (e) => {
+    const m = e.detail;
+    const name = m.event || m.type;
+    if (m.type === 'ERROR') return;
+    if (['ESTOP', 'RESUME', 'STOP', 'PREEMPTED', 'AVAILABLE', 'NETWORK_LOSS_SAFE_STOP'].includes(name)) {
+      toast(`Event: ${name}`, name === 'ESTOP' || name === 'PREEMPTED' ? 'bad' : 'info');
+      refreshStatus();
+    }
+    approvalsEvent(m);
+  });
+  s.addEventListener('refused', (e) => signOut(`The stream refused the token: ${e.detail || ''}`));
+}
+
+function showView(name) {
+  for (const b of $all('#tabs button')) b.classList.toggle('active', b.dataset.view === name);
+  for (const v of $all('#views .view')) v.hidden = v.id !== `view-${name}`;
+  document.body.dataset.view = name;
+  if (name === 'audit' && !auditLoaded) { auditLoaded = true; loadAudit(); }
+  if (name === 'approvals') refreshPending();
+  if (name === 'teleop') renderControl();
+}
+
+async function onEstop() {
+  if (!api.getToken()) {
+    toast('Sign in first — or run `rcan estop` on the robot.', 'bad');
+    return;
+  }
+  try {
+    await api.estop();
+    setSafety(true);
+    toast('ESTOP latched. RESUME (LEASEE or above) clears it.', 'bad');
+  } catch (e) {
+    toast(`ESTOP failed: ${e.code} — ${e.message}`, 'bad');
+  }
+  refreshStatus();
+}
+
+function init() {
+  initOverview();
+  initLive();
+  initTeleop();
+  initApprovals();
+  initAudit();
+  on('refresh', refreshStatus);
+  $('#estop').addEventListener('click', onEstop);
+  $('#signout').addEventListener('click', () => signOut(''));
+  for (const b of $all('#tabs button')) b.addEventListener('click', () => showView(b.dataset.view));
+  $('#signin-form').addEventListener('submit', (e) => {
+    e.preventDefault();
+    signIn($('#token-input').value, $('#remember').checked);
+  });
+  $('#token-file').addEventListener('change', async (e) => {
+    const f = e.target.files && e.target.files[0];
+    if (!f) return;
+    if (f.size > 16384) { setText($('#signin-error'), 'That file is too large to be a token.'); return; }
+    const text = await f.text();
+    e.target.value = '';
+    signIn(text, $('#remember').checked);
+  });
+  setSafety(null);
+  setConn('idle');
+  // Keep the "reconnecting in N s" countdown moving.
+  setInterval(() => { if (app.stream && app.stream.state === 'waiting') setConn('waiting', 'retrying'); }, 500);
+  showView('overview');
+  const saved = api.restoreToken();
+  if (saved) signIn(saved, true);
+  else showSignedIn(false);
+}
+
+init();
