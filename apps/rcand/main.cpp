@@ -23,6 +23,7 @@
 #include "node/clock.h"
 #include "node/config.h"
 #include "node/log.h"
+#include "node/mdns.h"
 #include "node/node.h"
 #include "node/safety.h"
 #include "node/sim_robot.h"
@@ -404,6 +405,8 @@ int main(int argc, char** argv) {
     return fail("cannot listen on " + so.bind_address + ":" + std::to_string(so.port) + ": " + port.error().message);
   }
   services.settings.port = *port;  // the bound port (differs from the configured one for --port 0)
+  std::unique_ptr<node::MdnsAdvertiser> mdns;  // _rcan._tcp via Avahi (docs/NODE.md §Discovery)
+  if (cfg.server.enable_mdns) mdns = node::start_mdns(services, so.tls);
   double startup_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - started).count();
   std::string scheme = so.tls ? "https" : "http";
@@ -422,7 +425,7 @@ int main(int argc, char** argv) {
                  "%s token: %s (mode 0600)\n"
                  "Use it from another terminal:\n"
                  "  export RCAN_URL=%s RCAN_TOKEN_FILE=%s\n"
-                 "  curl -s $RCAN_URL/rcan/v1/status -H \"Authorization: Bearer $(cat $RCAN_TOKEN_FILE)\"\n\n",
+                 "  rcan status        # then: rcan claim, rcan command move --linear 0.3, rcan estop\n\n",
                  cfg.ruri.c_str(), url.c_str(), token_created ? "New OWNER" : "OWNER",
                  local->owner_token_file.c_str(), url.c_str(), local->owner_token_file.c_str());
   }
@@ -431,6 +434,7 @@ int main(int argc, char** argv) {
   int sig = 0;
   sigwait(&signals, &sig);
   log(LogLevel::kInfo, "shutting_down", json::Object{{"signal", sig == SIGTERM ? "SIGTERM" : "SIGINT"}});
+  mdns.reset();
   server.stop(2000);
   rcan_node.shutdown();
   core.stop();
