@@ -44,7 +44,7 @@ using rcan::node::LogLevel;
 namespace {
 
 constexpr const char* kUsage =
-    "usage: rcand [--config FILE] [--port N] [--data-dir DIR] [--log-level debug|info|warn|error]\n"
+    "usage: rcand [--config FILE] [--port N] [--bind ADDR] [--data-dir DIR] [--log-level debug|info|warn|error]\n"
     "\n"
     "Without --config, rcand runs the embedded simulated robot. On its first run it creates, in\n"
     "the data directory (default $RCAND_DATA_DIR, else ~/.local/share/rcand): robot keys, the\n"
@@ -56,6 +56,7 @@ struct Args {
   std::optional<int> port;
   std::optional<std::string> data_dir;
   std::optional<std::string> log_level;
+  std::optional<std::string> bind;  // overrides server.bind (e.g. 0.0.0.0 to serve the LAN)
 };
 
 int fail(const std::string& what) {
@@ -87,6 +88,8 @@ std::optional<Args> parse_args(int argc, char** argv, int& exit_code) {
       if (!(a.config = value("--config"))) return std::nullopt;
     } else if (s == "--data-dir") {
       if (!(a.data_dir = value("--data-dir"))) return std::nullopt;
+    } else if (s == "--bind") {
+      if (!(a.bind = value("--bind"))) return std::nullopt;
     } else if (s == "--log-level") {
       if (!(a.log_level = value("--log-level"))) return std::nullopt;
     } else if (s == "--port") {
@@ -270,6 +273,7 @@ int main(int argc, char** argv) {
   if (Status s = config::apply_overrides(cfg, args->port, args->data_dir ? std::optional<std::string>(data_dir) : std::nullopt);
       !s.ok())
     return fail(s.error().message);
+  if (args->bind) cfg.server.bind_address = *args->bind;
   if (!args->log_level) {
     if (auto lvl = node::parse_log_level(cfg.log_level)) node::set_log_level(*lvl);
   }
