@@ -148,6 +148,10 @@ ClientError Stream::run() {
                                                                     (reason.empty() ? "" : " " + reason));
           // 4001 ConnectionRefused / 4002 AuthExpired / 1008 policy: retrying cannot help.
           if (code == 4001 || code == 4002 || code == 1008) end.refused = !end.connected || code == 4002;
+          if (code == 4001 || code == 4002) {
+            end.error.code = code == 4001 ? "ConnectionRefused" : "AuthExpired";
+            end.error.http_status = 401;  // refused by the node (Appendix B 8001 / 8002)
+          }
           return end;
         }
         if (f.opcode == 0) {
@@ -186,7 +190,7 @@ ClientError Stream::run() {
             end.error = error_from_response(401, json::dump(*v));
             if (const json::Value* n = v->get("name"); n && n->is_string()) end.error.code = n->as_string();
             if (const json::Value* m = v->get("message"); m && m->is_string()) end.error.message = m->as_string();
-            end.error.http_status = 0;
+            end.error.http_status = 401;  // refused by the node (not a transport failure)
             end.refused = true;
             return end;
           }

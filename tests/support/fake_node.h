@@ -75,6 +75,25 @@ class FakeNode final : public node::HttpHandler, public node::StreamHandler {
       if (token.empty()) return err(401, ErrorCode::kAuthRequired, "a bearer token is required");
       if (token != kGoodToken && token != kConfigToken) return err(401, ErrorCode::kAuthInvalid, "token rejected");
     }
+    if (p == "/rcan/v1/command" && req.method == "POST") {
+      // Every command waits for a human (a HiTL gate on everything): 202 PENDING_AUTH.
+      auto v = json::parse(req.body);
+      const json::Value* id = v.ok() ? v->get("message_id") : nullptr;
+      std::string mid = id && id->is_string() ? id->as_string() : "";
+      {
+        std::lock_guard<std::mutex> lock(mu);
+        pending_ids.push_back(mid);
+      }
+      return ok(json::Object{{"type", "PENDING_AUTH"},
+                             {"message_id", "pa-1"},
+                             {"reply_to", mid},
+                             {"payload", json::Object{{"message_id", mid},
+                                                      {"action_type", "arm_move"},
+                                                      {"description", "gated"},
+                                                      {"auth_timeout_ms", 30000},
+                                                      {"expires_at_ms", int64_t{1795000000000}}}}},
+                202);
+    }
     if (p == "/rcan/v1/pending" && req.method == "GET") {
       json::Array list;
       std::lock_guard<std::mutex> lock(mu);
