@@ -43,7 +43,7 @@ const std::map<std::string, std::pair<std::string, std::string>>& table() {
                  "--function-name --secret --device --leeway --now --help"}},
       {"ruri", {"parse", "--help"}},
       {"json", {"canonical", "--help"}},
-      {"message", {"check", "--max-bytes --help"}},
+      {"message", {"check send", std::string("--max-bytes ") + kNet}},
       {"completion", {"bash", "--help"}},
   };
   return t;

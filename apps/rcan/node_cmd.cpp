@@ -97,8 +97,22 @@ int status_main(const Args& args) {
   std::printf("%-10s %lld\n", "sessions", static_cast<long long>(s->active_sessions));
   for (const auto& se : s->sessions)
     std::printf("  %s  %s  %s\n", se.session_id.c_str(), se.role.c_str(), se.principal.c_str());
-  if (s->robot.is_object()) {
-    for (const auto& [k, v] : s->robot.as_object()) std::printf("%-10s %s\n", k.c_str(), brief(v, 100).c_str());
+  if (s->robot.is_object()) {  // the safety core's state: scalars, and the base pose
+    std::printf("%s\n", bold("robot").c_str());
+    for (const auto& [k, v] : s->robot.as_object())
+      if (!v.is_object() && !v.is_array() && k != "estop_active") std::printf("  %-20s %s\n", k.c_str(), brief(v, 80).c_str());
+    const json::Value* inner = s->robot.get("robot");
+    const json::Value* base = inner ? inner->get("base") : nullptr;
+    if (base && base->is_object()) {
+      std::string pose;
+      for (const char* k : {"x", "y", "theta", "linear", "angular"})
+        if (const json::Value* f = base->get(k); f && f->is_number()) {
+          char b[48];
+          std::snprintf(b, sizeof b, "%s%s=%.3f", pose.empty() ? "" : " ", k, f->to_double());
+          pose += b;
+        }
+      if (!pose.empty()) std::printf("  %-20s %s\n", "base", pose.c_str());
+    }
   }
   return 0;
 }

@@ -4,9 +4,11 @@
 // every verb, exit codes, RCAN_URL / RCAN_TOKEN_FILE, --json, and the completion script.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <fstream>
 
 #include "fake_node.h"
+#include "rcan/errors.h"
 #include "rcan/json.h"
 #include "rcand_daemon.h"
 #include "test_support.h"
@@ -139,6 +141,24 @@ TEST_F(CliNodeTest, ClaimDriveStopResumeRelease) {
   EXPECT_NE(rel.out.find("RELEASED"), std::string::npos);
   EXPECT_EQ(cli({"release"}, "", alice).exit_code, 1);  // nothing held any more
   EXPECT_EQ(test::run_cli({"claim", "--url", daemon_->url()}).exit_code, 2);  // no token
+}
+
+TEST_F(CliNodeTest, MessageSendChecksLocallyThenSendsAsIs) {
+  int64_t now = std::chrono::duration_cast<std::chrono::milliseconds>(
+                    std::chrono::system_clock::now().time_since_epoch())
+                    .count();
+  std::string id = new_uuid_v4();
+  std::string msg = R"({"version":"1.0.0","type":"COMMAND","message_id":")" + id + R"(","timestamp_ms":)" +
+                    std::to_string(now) + R"(,"payload":{"action":"chat","text":"hello"}})";
+  auto r = cli({"message", "send"}, msg);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(parse(r.out).get("type")->as_string(), "ACK");
+  auto replay = cli({"message", "send"}, msg);  // same message_id again
+  EXPECT_EQ(replay.exit_code, 1);
+  EXPECT_NE(replay.err.find("REPLAY_DETECTED"), std::string::npos) << replay.err;
+  auto bad = cli({"message", "send"}, R"({"version":"2.0","type":"COMMAND","payload":{}})");
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_NE(bad.out.find("VERSION_INCOMPATIBLE"), std::string::npos) << bad.out;
 }
 
 TEST_F(CliNodeTest, HandoffToANamedUser) {
