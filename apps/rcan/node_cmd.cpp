@@ -457,7 +457,10 @@ int stream_main(const Args& args) {
   so.on_state = [&](const std::string& s) {
     std::fprintf(stderr, "rcan stream: %s\n", s.c_str());
   };
-  client::Stream stream(so);
+  // Heap-allocated: a --send-stdin reader blocked on stdin is detached at the end and may
+  // still touch the stream, which therefore lives until the process exits.
+  auto* stream_ptr = new client::Stream(so);
+  client::Stream& stream = *stream_ptr;
   sp = &stream;
   struct sigaction sa{};
   sa.sa_handler = on_sigint;
@@ -513,6 +516,7 @@ int stream_main(const Args& args) {
   done.store(true);
   watchdog.join();
   if (reader.joinable()) reader.detach();  // blocked on stdin; the process ends anyway
+  else delete stream_ptr;
   if (end.code == "STOPPED") return 0;
   return report_error("stream", end, false);
 }

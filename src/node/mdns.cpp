@@ -286,10 +286,24 @@ MdnsInfo mdns_info_for(NodeServices& services, bool tls) {
 
 std::unique_ptr<MdnsAdvertiser> start_mdns(NodeServices& services, bool tls) {
   auto adv = std::make_unique<MdnsAdvertiser>(mdns_info_for(services, tls));
-  MdnsAdvertiser* a = adv.get();
-  uint64_t sub = services.events.subscribe([a](const json::Value&) { a->poke(); });
+  // The EventBus may still call a copy of the subscriber while the advertiser stops: the
+  // subscriber reaches it only through this guarded pointer, cleared at stop().
+  struct Target {
+    std::mutex mu;
+    MdnsAdvertiser* adv = nullptr;
+  };
+  auto target = std::make_shared<Target>();
+  target->adv = adv.get();
+  uint64_t sub = services.events.subscribe([target](const json::Value&) {
+    std::lock_guard<std::mutex> lock(target->mu);
+    if (target->adv) target->adv->poke();
+  });
   NodeServices* svc = &services;
-  adv->set_on_stop([svc, sub] { svc->events.unsubscribe(sub); });
+  adv->set_on_stop([svc, sub, target] {
+    svc->events.unsubscribe(sub);
+    std::lock_guard<std::mutex> lock(target->mu);
+    target->adv = nullptr;
+  });
   adv->start();
   return adv;
 }

@@ -59,6 +59,7 @@ class NetnsDiscovery : public ::testing::Test {
     if (::geteuid() != 0) GTEST_SKIP() << "skipped: network namespaces need root (running as uid " << ::geteuid() << ")";
     for (const char* bin : {kIp, "/usr/sbin/avahi-daemon", "/usr/bin/dbus-daemon", "/bin/sh"})
       if (!exists(bin)) GTEST_SKIP() << "skipped: " << bin << " is not installed (scripts/install-deps.sh installs it)";
+    ::unsetenv("DBUS_SYSTEM_BUS_ADDRESS");  // children get each namespace's own bus only
     std::string tag = std::to_string(::getpid() % 100000);
     a_.name = "rcanA" + tag;
     b_.name = "rcanB" + tag;
