@@ -276,12 +276,14 @@ MdnsInfo mdns_info_for(NodeServices& services, bool tls) {
   if (!s.rrn.empty()) info.txt.push_back("rrn=" + s.rrn);
   if (tls) info.txt.push_back("tls=1");
   NodeServices* svc = &services;
-  info.status = [svc] {
-    if (svc->act.estop_active()) return std::string("estop");
-    if (svc->sessions.controller(svc->clock.mono_ms())) return std::string("claimed");
-    return std::string("available");
-  };
+  info.status = [svc] { return status_word(*svc); };
   return info;
+}
+
+std::string status_word(NodeServices& svc) {
+  if (svc.act.estop_active()) return "estop";
+  if (svc.sessions.controller(svc.clock.mono_ms())) return "claimed";
+  return "available";
 }
 
 std::unique_ptr<MdnsAdvertiser> start_mdns(NodeServices& services, bool tls) {

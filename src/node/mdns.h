@@ -28,6 +28,10 @@ struct MdnsInfo {
   std::function<std::string()> status;         // current status word
 };
 
+// The node's discovery status word: "estop", "claimed" or "available" (mDNS TXT `status` and
+// GET /api/discovery).
+std::string status_word(NodeServices& services);
+
 // The fixed TXT items and status function for a node.
 MdnsInfo mdns_info_for(NodeServices& services, bool tls);
 

@@ -5,6 +5,7 @@
 #include <cstdlib>
 
 #include "node/log.h"
+#include "node/mdns.h"
 #include "rcan/errors.h"
 
 namespace rcan::node {
@@ -453,7 +454,7 @@ void Node::route(HttpRequest& req, Respond& respond) {
                      {"role", "GUEST"},
                      {"version", svc_.settings.rcan_version},
                      {"name", svc_.settings.name},
-                     {"status", svc_.act.estop_active() ? "error" : "idle"}};
+                     {"status", status_word(svc_)}};  // as in the mDNS TXT record
     return answer_json(respond, p, 200, json::Object{{"service_type", "_rcan._tcp"}, {"txt_record", txt}});
   }
   if (p == "/rcan/v1/status" || p == "/api/status") {

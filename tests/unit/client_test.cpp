@@ -140,6 +140,9 @@ TEST_F(ClientNodeTest, EstopRefusesMotionUntilResume) {
   auto st = c.status();
   ASSERT_TRUE(st.ok());
   EXPECT_TRUE(st->estop_active);
+  auto disc = json::parse(test::http(daemon_->port(), "GET", "/api/discovery").body);
+  ASSERT_TRUE(disc.ok());
+  EXPECT_EQ(disc->get("txt_record")->get("status")->as_string(), "estop");  // as in the mDNS TXT
   client::Command move;
   move.action = "move";
   move.params.set("linear", 0.1);
@@ -155,6 +158,9 @@ TEST_F(ClientNodeTest, EstopRefusesMotionUntilResume) {
   auto ok = c.resume();
   ASSERT_TRUE(ok.ok()) << ok.error().message;
   EXPECT_FALSE(c.status()->estop_active);
+  disc = json::parse(test::http(daemon_->port(), "GET", "/api/discovery").body);
+  ASSERT_TRUE(disc.ok());
+  EXPECT_EQ(disc->get("txt_record")->get("status")->as_string(), "available");
 }
 
 TEST_F(ClientNodeTest, AuditRecentAndExportVerifyOffline) {
