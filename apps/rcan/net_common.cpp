@@ -55,7 +55,8 @@ client::ClientOptions client_options(const Options& o, bool need_token, std::str
   }
   if (o.has("timeout")) {
     char* end = nullptr;
-    long v = std::strtol(o.get("timeout").c_str(), &end, 10);
+    const std::string value_text = o.get("timeout");  // outlives `end`
+    long v = std::strtol(value_text.c_str(), &end, 10);
     if (!end || *end || v < 1 || v > 3600000) {
       err = "--timeout must be milliseconds (1..3600000)";
       return co;

@@ -336,7 +336,8 @@ int command_main(const Args& args) {
   json::Object& m = message.as_object();
   if (o.has("ttl-ms")) {
     char* end = nullptr;
-    long long v = std::strtoll(o.get("ttl-ms").c_str(), &end, 10);
+    const std::string value_text = o.get("ttl-ms");  // outlives `end`
+    long long v = std::strtoll(value_text.c_str(), &end, 10);
     if (!end || *end || v < 0) return usage_error("command", "--ttl-ms must be a non-negative integer");
     m.set("ttl_ms", static_cast<int64_t>(v));
   }
@@ -344,7 +345,8 @@ int command_main(const Args& args) {
   if (o.has("scope")) m.set("scope", o.get("scope"));
   if (o.has("confidence")) {
     char* end = nullptr;
-    double c = std::strtod(o.get("confidence").c_str(), &end);
+    const std::string value_text = o.get("confidence");  // outlives `end`
+    double c = std::strtod(value_text.c_str(), &end);
     if (!end || *end || !(c >= 0 && c <= 1)) return usage_error("command", "--confidence must be within 0..1");
     m.set("ai", json::Object{{"confidence", c}});
   }
@@ -431,7 +433,8 @@ int stream_main(const Args& args) {
   double hz = 2;
   if (o->has("hz")) {
     char* end = nullptr;
-    hz = std::strtod(o->get("hz").c_str(), &end);
+    const std::string value_text = o->get("hz");  // outlives `end`
+    hz = std::strtod(value_text.c_str(), &end);
     if (!end || *end || !(hz >= 0.2 && hz <= 50)) return usage_error("stream", "--hz must be within 0.2..50");
   }
   if (o->has("no-telemetry")) hz = 0;
@@ -439,7 +442,8 @@ int stream_main(const Args& args) {
   for (auto [name, dst] : {std::pair<const char*, long*>{"count", &count}, {"seconds", &seconds}, {"max-attempts", &attempts}}) {
     if (!o->has(name)) continue;
     char* end = nullptr;
-    *dst = std::strtol(o->get(name).c_str(), &end, 10);
+    const std::string value_text = o->get(name);  // outlives `end`
+    *dst = std::strtol(value_text.c_str(), &end, 10);
     if (!end || *end || *dst < 1) return usage_error("stream", std::string("--") + name + " must be a positive integer");
   }
   bool json_out = want_json(*o);
@@ -457,10 +461,7 @@ int stream_main(const Args& args) {
   so.on_state = [&](const std::string& s) {
     std::fprintf(stderr, "rcan stream: %s\n", s.c_str());
   };
-  // Heap-allocated: a --send-stdin reader blocked on stdin is detached at the end and may
-  // still touch the stream, which therefore lives until the process exits.
-  auto* stream_ptr = new client::Stream(so);
-  client::Stream& stream = *stream_ptr;
+  client::Stream stream(so);
   sp = &stream;
   struct sigaction sa{};
   sa.sa_handler = on_sigint;
@@ -515,10 +516,15 @@ int stream_main(const Args& args) {
   client::ClientError end = stream.run();
   done.store(true);
   watchdog.join();
-  if (reader.joinable()) reader.detach();  // blocked on stdin; the process ends anyway
-  else delete stream_ptr;
-  if (end.code == "STOPPED") return 0;
-  return report_error("stream", end, false);
+  int code = end.code == "STOPPED" ? kExitOk : report_error("stream", end, false);
+  if (reader.joinable()) {
+    // The stdin reader may be blocked in a read that cannot be interrupted: end the process
+    // here, before the stream it uses goes out of scope.
+    std::cout.flush();
+    std::fflush(nullptr);
+    std::_Exit(code);
+  }
+  return code;
 }
 
 // ------------------------------------------------------------------------------------------
@@ -542,7 +548,8 @@ int discover_main(const Args& args) {
   client::DiscoverOptions d;
   if (o.has("timeout")) {
     char* end = nullptr;
-    long v = std::strtol(o.get("timeout").c_str(), &end, 10);
+    const std::string value_text = o.get("timeout");  // outlives `end`
+    long v = std::strtol(value_text.c_str(), &end, 10);
     if (!end || *end || v < 100 || v > 600000) return usage_error("discover", "--timeout must be 100..600000 ms");
     d.timeout_ms = static_cast<int>(v);
   }
