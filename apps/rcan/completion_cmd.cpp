@@ -32,7 +32,7 @@ const std::map<std::string, std::pair<std::string, std::string>>& table() {
       {"discover", {"", "--hosts --timeout --no-mdns --json --ca-file --insecure --help"}},
       {"pending", {"", kNet}},
       {"authorize", {"", std::string("--approve --deny --reason ") + kNet}},
-      {"thoughts", {"", kNet}},
+      {"thoughts", {"get", kNet}},
       {"audit", {"export verify tail new-secret",
                  std::string("--data-dir --from --to --format --secret-file --secret --out --partial --expect-last-seq "
                              "-n --follow ") + kNet}},

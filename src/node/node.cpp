@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstdlib>
 
+#include "node/ai_routes.h"
 #include "node/log.h"
 #include "node/mdns.h"
 #include "rcan/errors.h"
@@ -49,6 +50,9 @@ struct StreamSessionImpl final : public StreamSession {
 };
 
 void StreamSessionImpl::on_text(std::string text) {
+  const int64_t received_us = std::chrono::duration_cast<std::chrono::microseconds>(
+                                  std::chrono::steady_clock::now().time_since_epoch())
+                                  .count();
   NodeServices& svc = node.svc_;
   json::ParseOptions po;
   po.max_bytes = svc.settings.codec.max_body_bytes;
@@ -134,12 +138,23 @@ void StreamSessionImpl::on_text(std::string text) {
         MessageType::kAck, json::Object{{"subscribed", on}, {"topic", "telemetry"}, {"hz", hz}})));
     return;
   }
+  if (t == "AUTHORIZE") {  // §16.4, answered on this stream (ai_routes.cpp)
+    std::optional<Principal> who;
+    {
+      std::lock_guard<std::mutex> lock(st->mu);
+      who = st->principal;
+    }
+    auto state = st;
+    ai_stream_message(svc, t, *v, who, [state](std::string s) { state->sink->send_text(std::move(s)); });
+    return;
+  }
   // Everything else is an RCAN message through the pipeline, as this stream's principal.
   Ingress in;
   in.body = std::move(v).value();
   in.transport = "ws";
   in.route = "/rcan/v1/stream";
   in.remote = st->sink->remote_addr();
+  in.received_mono_us = received_us;
   {
     std::lock_guard<std::mutex> lock(st->mu);
     in.preauthenticated = st->principal;
@@ -153,7 +168,8 @@ void StreamSessionImpl::on_text(std::string text) {
 Node::Node(NodeServices& services)
     : svc_(services), pipeline_(services, Pipeline::standard_stages(services)) {
   event_sub_ = svc_.events.subscribe([this](const json::Value& ev) {
-    std::string text = json::dump(ev);
+    bool addressed = ev.is_object() && ev.get("_deliver");  // §16 events for some streams only
+    std::string text = addressed ? std::string() : json::dump(ev);
     std::vector<std::shared_ptr<StreamState>> copy;
     {
       std::lock_guard<std::mutex> lock(streams_mu_);
@@ -165,7 +181,17 @@ Node::Node(NodeServices& services)
         std::lock_guard<std::mutex> lock(st->mu);
         ok = st->connected && !st->closed;
       }
-      if (ok) st->sink->send_text(text);
+      if (ok && addressed) {
+        json::Value addressed_ev = ev;
+        std::optional<Principal> who;
+        {
+          std::lock_guard<std::mutex> lock(st->mu);
+          who = st->principal;
+        }
+        if (ai_event_for_stream(addressed_ev, who)) st->sink->send_text(json::dump(addressed_ev));
+      } else if (ok) {
+        st->sink->send_text(text);
+      }
     }
   });
   svc_.metrics.add_gauge("rcan_estop_active", "1 while ESTOP is latched.",
@@ -382,6 +408,7 @@ void Node::run_pipeline(HttpRequest& req, Respond& respond, const std::string& r
   in.transport = "http";
   in.route = route;
   in.remote = req.remote_addr;
+  in.received_mono_us = req.received_mono_us;
   std::string r = route;
   pipeline_.submit(std::move(in), [this, respond, r](Outcome out) mutable {
     svc_.metrics.count_request(r, out.status);
@@ -417,6 +444,7 @@ void Node::route(HttpRequest& req, Respond& respond) {
                 {{"Allow", allowed}});
   };
 
+  if (ai_route(svc_, req, respond)) return;  // §16: authorize, pending, thoughts, watermark
   if (p == "/healthz") {
     if (!method_is(req, "GET") && !method_is(req, "HEAD")) return wrong_method("GET");
     bool ok = !svc_.audit_unavailable.load();
