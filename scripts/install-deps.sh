@@ -17,6 +17,7 @@ PKGS=(
   clang-14 libclang-rt-14-dev
   python3 curl python3-grpcio python3-protobuf
   chromium fonts-dejavu-core nodejs
+  avahi-daemon dbus libavahi-client-dev iproute2
 )
 
 missing=()
@@ -33,8 +34,8 @@ if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 if [ ${#missing[@]} -gt 0 ]; then
   echo "install-deps: installing ${missing[*]}" >&2
   export DEBIAN_FRONTEND=noninteractive
-  $SUDO apt-get update -qq
-  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+  $SUDO apt-get update -o DPkg::Lock::Timeout=600 -qq
+  $SUDO apt-get install -o DPkg::Lock::Timeout=600 -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 fi
 
 # The dashboard's browser test drives Debian's chromium with playwright-core, pinned in

@@ -1,10 +1,15 @@
 // rcan audit — export, verify and inspect audit logs offline (docs/AUDIT.md).
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <iostream>
 
+#include <chrono>
+#include <thread>
+
 #include "cli.h"
+#include "net_common.h"
 #include "rcan/audit/audit_log.h"
 #include "rcan/audit/secret.h"
 #include "rcan/audit/verify.h"
@@ -15,6 +20,12 @@ namespace {
 
 constexpr const char* kHelp =
     "usage:\n"
+    "  rcan audit export [--from MS] [--to MS] [--out FILE] [--url URL] [--token-file F]\n"
+    "      Without --data-dir: asks the running node (GET /api/v1/audit, OWNER + scope config)\n"
+    "      for its chain as JSONL, verifiable offline with `rcan audit verify`.\n"
+    "  rcan audit tail [-n N] [--follow] [--url URL] [--token-file F] [--json]\n"
+    "      The node's latest N records (GET /api/audit, default 20) as a table: seq, time,\n"
+    "      principal, event, outcome, reason. --follow keeps printing new records (1 s poll).\n"
     "  rcan audit export --data-dir D [--from MS] [--to MS] [--format jsonl|rcanpy]\n"
     "                    [--secret-file F | --secret S] [--out FILE]\n"
     "      Prints the log as JSONL, one canonical record per line, in seq order, reading the\n"
@@ -23,15 +34,17 @@ constexpr const char* kHelp =
     "      present) or the audit directory itself. --from/--to select timestamp_ms (inclusive);\n"
     "      a ranged export verifies with --partial. --format rcanpy re-states the chain as\n"
     "      rcan-py CommitmentRecord v0.3 lines signed with the chain secret (needs the secret).\n"
-    "  rcan audit verify (FILE | - | --data-dir D) (--secret-file F | --secret S)\n"
+    "  rcan audit verify [FILE | - | --data-dir D] (--secret-file F | --secret S)\n"
     "                    [--format native|rcanpy] [--partial] [--expect-last-seq N]\n"
     "      Verifies an exported chain offline. Exit 0 printing the number of records; exit 1\n"
     "      naming the first bad seq (rcanpy: 0-based index) and why: hmac mismatch, prev_hash\n"
     "      mismatch, seq gap, malformed line, wrong segment link, bad chain start, truncated.\n"
-    "      --data-dir verifies the segment files themselves, including segment links.\n"
+    "      --data-dir verifies the segment files themselves, including segment links. With\n"
+    "      neither FILE nor --data-dir it fetches the running node's chain (--url, --token-file).\n"
     "  rcan audit new-secret --out F\n"
     "      Writes a new chain secret (64 hex characters, mode 0600, no newline). Never overwrites.\n"
-    "  Exit: 0 ok, 1 verification failed, 2 usage or unreadable input.\n";
+    "  Exit: 0 ok, 1 verification failed (or refused by the node), 2 usage or unreadable input,\n"
+    "        3 node unreachable.\n";
 
 std::string resolve_dir(const std::string& d) {
   auto sub = audit::list_segments(d + "/audit");
@@ -61,11 +74,106 @@ bool parse_i64(const std::string& s, int64_t* out) {
   return true;
 }
 
+int remote_export(const Options& o) {
+  std::string err;
+  auto co = client_options(o, true, err);
+  if (!err.empty()) return usage_error("audit export", err);
+  std::optional<int64_t> from, to;
+  int64_t v = 0;
+  if (o.has("from")) {
+    if (!parse_i64(o.get("from"), &v)) return usage_error("audit export", "--from must be milliseconds since the epoch");
+    from = v;
+  }
+  if (o.has("to")) {
+    if (!parse_i64(o.get("to"), &v)) return usage_error("audit export", "--to must be milliseconds since the epoch");
+    to = v;
+  }
+  if (o.get("format", "jsonl") != "jsonl")
+    return usage_error("audit export", "the node exports jsonl (use --data-dir for rcanpy)");
+  client::Client c(co);
+  auto text = c.audit_export(from, to);
+  if (!text.ok()) return report_error("audit export", text.error(), false);
+  if (o.has("out")) {
+    std::ofstream f(o.get("out"), std::ios::binary | std::ios::trunc);
+    if (!f) return usage_error("audit export", "cannot write " + o.get("out"));
+    f << *text;
+  } else {
+    std::cout << *text;
+  }
+  size_t n = static_cast<size_t>(std::count(text->begin(), text->end(), '\n'));
+  std::fprintf(stderr, "rcan audit export: %zu records from %s\n", n, co.url.c_str());
+  return 0;
+}
+
+int tail_main(const Args& args) {
+  Args norm;
+  for (const auto& a : args) norm.push_back(a == "-n" ? "--lines" : a);
+  std::vector<std::string> flags{"follow"}, valued{"lines"};
+  flags.insert(flags.end(), net_flags().begin(), net_flags().end());
+  valued.insert(valued.end(), net_valued().begin(), net_valued().end());
+  Options o(norm, flags, valued);
+  if (!o.ok()) return usage_error("audit tail", o.error());
+  if (!o.positional().empty()) return usage_error("audit tail", "unexpected argument " + o.positional()[0]);
+  int64_t n = 20;
+  if (o.has("lines") && (!parse_i64(o.get("lines"), &n) || n < 1 || n > 1000))
+    return usage_error("audit tail", "-n must be 1..1000");
+  std::string err;
+  auto co = client_options(o, true, err);
+  if (!err.empty()) return usage_error("audit tail", err);
+  client::Client c(co);
+  bool json_out = want_json(o);
+  int64_t last_seen = 0;
+  bool header = false;
+  while (true) {
+    auto page = c.audit_recent(static_cast<int>(last_seen ? 1000 : n));
+    if (!page.ok()) return report_error("audit tail", page.error(), json_out);
+    std::vector<std::vector<std::string>> rows;
+    for (const auto& e : page->entries) {
+      const json::Value* seq = e.get("seq");
+      int64_t s = seq && seq->is_int() ? seq->as_int() : 0;
+      if (s <= last_seen) continue;
+      last_seen = s;
+      if (json_out) {
+        std::cout << json::dump(e) << "\n";
+        continue;
+      }
+      auto f = [&](const char* k) {
+        const json::Value* v = e.get(k);
+        return v ? brief(*v, 48) : std::string("-");
+      };
+      const json::Value* ts = e.get("timestamp_ms");
+      std::string outcome = f("outcome");
+      outcome = outcome == "ok" ? green(outcome) : outcome == "blocked" ? red(outcome) : yellow(outcome);
+      std::string reason = f("reason");
+      rows.push_back({std::to_string(s), when(ts && ts->is_int() ? ts->as_int() : 0), f("principal"), f("event"),
+                      outcome, reason == "null" ? "-" : reason});
+    }
+    if (!json_out && !rows.empty()) {
+      if (!header) {
+        print_table({"SEQ", "TIME", "PRINCIPAL", "EVENT", "OUTCOME", "REASON"}, rows);
+        header = true;
+      } else {
+        for (const auto& r : rows) {
+          std::string line;
+          for (const auto& cell : r) line += cell + "  ";
+          std::printf("%s\n", line.c_str());
+        }
+      }
+    }
+    std::fflush(stdout);
+    if (!o.has("follow")) return 0;
+    std::this_thread::sleep_for(std::chrono::seconds(1));
+  }
+}
+
 int export_main(const Args& args) {
-  Options o(args, {}, {"data-dir", "from", "to", "format", "secret-file", "secret", "out"});
+  std::vector<std::string> flags, valued{"data-dir", "from", "to", "format", "secret-file", "secret", "out"};
+  flags.insert(flags.end(), net_flags().begin(), net_flags().end());
+  valued.insert(valued.end(), net_valued().begin(), net_valued().end());
+  Options o(args, flags, valued);
   if (!o.ok()) return usage_error("audit export", o.error());
   if (!o.positional().empty()) return usage_error("audit export", "unexpected argument " + o.positional()[0]);
-  if (o.get("data-dir").empty()) return usage_error("audit export", "--data-dir D is required");
+  if (o.get("data-dir").empty()) return remote_export(o);
   int64_t from = INT64_MIN, to = INT64_MAX;
   if (o.has("from") && !parse_i64(o.get("from"), &from))
     return usage_error("audit export", "--from must be milliseconds since the epoch");
@@ -123,7 +231,10 @@ int export_main(const Args& args) {
 }
 
 int verify_main(const Args& args) {
-  Options o(args, {"partial"}, {"secret-file", "secret", "format", "data-dir", "expect-last-seq"});
+  std::vector<std::string> flags{"partial"}, valued{"secret-file", "secret", "format", "data-dir", "expect-last-seq"};
+  flags.insert(flags.end(), net_flags().begin(), net_flags().end());
+  valued.insert(valued.end(), net_valued().begin(), net_valued().end());
+  Options o(args, flags, valued);
   if (!o.ok()) return usage_error("audit verify", o.error());
   auto secret = secret_from(o);
   if (!secret.ok()) return usage_error("audit verify", secret.error().message);
@@ -137,9 +248,18 @@ int verify_main(const Args& args) {
     if (format != "native") return usage_error("audit verify", "--data-dir holds native segments");
     rep = audit::verify_dir(resolve_dir(o.get("data-dir")), *secret);
   } else {
-    if (o.positional().size() != 1) return usage_error("audit verify", "expected one FILE (or - for stdin)");
+    if (o.positional().size() > 1) return usage_error("audit verify", "expected one FILE (or - for stdin)");
     std::string text;
-    if (o.positional()[0] == "-") {
+    if (o.positional().empty()) {
+      // The running node's chain, fetched and verified here with the secret.
+      std::string err;
+      auto co = client_options(o, true, err);
+      if (!err.empty()) return usage_error("audit verify", err + " (or give FILE / --data-dir)");
+      client::Client c(co);
+      auto t = c.audit_export();
+      if (!t.ok()) return report_error("audit verify", t.error(), false);
+      text = std::move(t).value();
+    } else if (o.positional()[0] == "-") {
       text = read_stdin();
     } else {
       auto t = read_file(o.positional()[0]);
@@ -213,10 +333,11 @@ int audit_main(const Args& args) {
   if (args[0] == "export") return export_main(rest);
   if (args[0] == "verify") return verify_main(rest);
   if (args[0] == "new-secret") return new_secret_main(rest);
-  return usage_error("audit", "unknown subcommand " + args[0] + " (export, verify, new-secret)");
+  if (args[0] == "tail") return tail_main(rest);
+  return usage_error("audit", "unknown subcommand " + args[0] + " (export, verify, tail, new-secret)");
 }
 
-const Registration kReg{"audit", "export, verify and inspect audit logs", &audit_main};
+const Registration kReg{"audit", "export, verify and tail audit logs (node or files)", &audit_main};
 
 }  // namespace
 }  // namespace rcan::cli

@@ -25,8 +25,12 @@ void print_help() {
   auto list = verbs();
   std::sort(list.begin(), list.end(), [](const Verb& a, const Verb& b) { return a.name < b.name; });
   for (const auto& v : list) std::printf("  %-12s %s\n", v.name.c_str(), v.summary.c_str());
-  std::printf("\n'rcan <verb> --help' describes a verb.\n"
-              "Exit codes: 0 success, 1 negative answer, 2 usage or malformed input.\n");
+  std::printf("\n'rcan <verb> --help' describes a verb. Verbs that talk to a node take --url (default\n"
+              "$RCAN_URL), --token-file (default $RCAN_TOKEN_FILE) and --json; rcand prints both\n"
+              "variables on its first run. Bash completion: source <(rcan completion bash).\n"
+              "Exit codes: 0 success, 1 negative answer (refused by the node, invalid input, failed\n"
+              "verification), 2 usage or malformed input, 3 node unreachable, 4 waiting for a human\n"
+              "authorization.\n");
 }
 
 }  // namespace

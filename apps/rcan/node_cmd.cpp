@@ -1,73 +1,19 @@
-// rcan estop | resume | status — talk to a running node over HTTP.
-// The node's URL comes from --url or $RCAN_URL; the token from --token-file or
-// $RCAN_TOKEN_FILE (rcand's first-run message sets both).
-#include <arpa/inet.h>
-#include <netdb.h>
-#include <poll.h>
-#include <sys/socket.h>
-#include <unistd.h>
+// rcan status | claim | release | handoff | estop | resume | command | stream | discover —
+// operate a running node through rcan::client (include/rcan/client.h). Conventions and exit
+// codes: net_common.h.
+#include <signal.h>
 
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <iostream>
+#include <thread>
 
-#include "cli.h"
-#include "node_http.h"
+#include "net_common.h"
 #include "rcan/errors.h"
-#include "rcan/json.h"
 
 namespace rcan::cli {
-
-Result<Target> parse_url(const std::string& url) {
-  std::string rest;
-  if (url.rfind("http://", 0) == 0) rest = url.substr(7);
-  else return Error(ErrorCode::kSchemaValidationFailed, "the URL must start with http:// (for https use curl for now)");
-  if (auto slash = rest.find('/'); slash != std::string::npos) rest = rest.substr(0, slash);
-  Target t;
-  auto colon = rest.rfind(':');
-  t.host = colon == std::string::npos ? rest : rest.substr(0, colon);
-  t.port = colon == std::string::npos ? "80" : rest.substr(colon + 1);
-  if (t.host.empty()) return Error(ErrorCode::kSchemaValidationFailed, "the URL has no host");
-  return t;
-}
-
-// One HTTP/1.1 request; returns {status, body}.
-Result<std::pair<int, std::string>> request(const Target& t, const std::string& method, const std::string& path,
-                                            const std::string& body, const std::string& token) {
-  addrinfo hints{}, *res = nullptr;
-  hints.ai_socktype = SOCK_STREAM;
-  if (getaddrinfo(t.host.c_str(), t.port.c_str(), &hints, &res) != 0 || !res)
-    return Error(ErrorCode::kNotFound, "cannot resolve " + t.host);
-  int fd = socket(res->ai_family, res->ai_socktype | SOCK_CLOEXEC, res->ai_protocol);
-  int rc = fd >= 0 ? connect(fd, res->ai_addr, res->ai_addrlen) : -1;
-  freeaddrinfo(res);
-  if (rc != 0) {
-    if (fd >= 0) close(fd);
-    return Error(ErrorCode::kNotFound, "cannot connect to " + t.host + ":" + t.port + " (is rcand running?)");
-  }
-  std::string req = method + " " + path + " HTTP/1.1\r\nHost: " + t.host + "\r\nConnection: close\r\n";
-  if (!token.empty()) req += "Authorization: Bearer " + token + "\r\n";
-  req += "Content-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) + "\r\n\r\n" + body;
-  if (send(fd, req.data(), req.size(), MSG_NOSIGNAL) != static_cast<ssize_t>(req.size())) {
-    close(fd);
-    return Error(ErrorCode::kInternal, "send failed");
-  }
-  std::string resp;
-  char buf[65536];
-  while (true) {
-    pollfd p{fd, POLLIN, 0};
-    if (poll(&p, 1, 10000) <= 0) break;
-    ssize_t k = recv(fd, buf, sizeof buf, 0);
-    if (k <= 0) break;
-    resp.append(buf, static_cast<size_t>(k));
-  }
-  close(fd);
-  size_t end = resp.find("\r\n\r\n");
-  if (resp.size() < 12 || end == std::string::npos) return Error(ErrorCode::kInternal, "no HTTP answer");
-  return std::make_pair(std::atoi(resp.c_str() + 9), resp.substr(end + 4));
-}
-
 namespace {
 
 int64_t now_ms() {
@@ -75,97 +21,595 @@ int64_t now_ms() {
       .count();
 }
 
-}  // namespace
-
-std::string token_from(const Options& o, bool required, std::string& err) {
-  std::string file = o.get("token-file");
-  if (file.empty()) {
-    const char* env = std::getenv("RCAN_TOKEN_FILE");
-    if (env) file = env;
-  }
-  if (file.empty()) {
-    if (required) err = "a token is required: --token-file F or RCAN_TOKEN_FILE";
-    return {};
-  }
-  auto t = read_file(file);
-  if (!t.ok()) {
-    err = t.error().message;
-    return {};
-  }
-  std::string s = *t;
-  while (!s.empty() && (s.back() == '\n' || s.back() == '\r' || s.back() == ' ')) s.pop_back();
-  return s;
+std::vector<std::string> with_net(std::vector<std::string> v, bool flags) {
+  const auto& extra = flags ? net_flags() : net_valued();
+  v.insert(v.end(), extra.begin(), extra.end());
+  return v;
 }
 
-namespace {
+// Parses options common to simple verbs; returns false (with `rc` set) on usage errors.
+bool setup(const char* verb, const Args& args, const std::vector<std::string>& flags,
+           const std::vector<std::string>& valued, bool need_token, size_t max_positional, Options*& out,
+           client::ClientOptions& co, int& rc) {
+  static std::unique_ptr<Options> holder;
+  holder = std::make_unique<Options>(args, with_net(flags, true), with_net(valued, false));
+  out = holder.get();
+  if (!out->ok()) {
+    rc = usage_error(verb, out->error());
+    return false;
+  }
+  if (out->positional().size() > max_positional) {
+    rc = usage_error(verb, "unexpected argument " + out->positional()[max_positional]);
+    return false;
+  }
+  std::string err;
+  co = client_options(*out, need_token, err);
+  if (!err.empty()) {
+    rc = usage_error(verb, err);
+    return false;
+  }
+  return true;
+}
 
-int run(const char* verb, const Args& args) {
-  std::string v = verb;
-  if (!args.empty() && (args[0] == "--help" || args[0] == "-h")) {
-    std::printf("usage: rcan %s [--url URL] [--token-file F]%s [--json]\n"
-                "  URL defaults to $RCAN_URL, the token to $RCAN_TOKEN_FILE.\n"
-                "  Exit: 0 done, 1 refused by the node (its error is printed), 2 usage or unreachable.\n",
-                verb, v == "estop" ? " [--reason TEXT]" : "");
+void print_reply(const client::Reply& r, const char* what) {
+  std::string type = r.type.empty() ? "OK" : r.type;
+  std::printf("%s %s", green(type).c_str(), what);
+  if (r.payload.is_object()) {
+    for (const char* k : {"session_id", "action", "status", "result", "state", "target_user_id", "window_ms"})
+      if (const json::Value* f = r.payload.get(k)) std::printf("  %s=%s", k, brief(*f, 60).c_str());
+  }
+  std::printf("\n");
+}
+
+// ------------------------------------------------------------------------------------------
+// status
+
+constexpr const char* kStatusHelp =
+    "usage: rcan status [--url URL] [--token-file F] [--json]\n"
+    "  Shows the node's identity, ESTOP state, mode and control sessions (GET /rcan/v1/status).\n"
+    "  With a token the node adds the robot's live state (pose, speeds, arm).\n";
+
+int status_main(const Args& args) {
+  if (help_requested(args, (std::string(kStatusHelp) + kNetHelp).c_str())) return 0;
+  Options* o;
+  client::ClientOptions co;
+  int rc = 0;
+  if (!setup("status", args, {}, {}, false, 0, o, co, rc)) return rc;
+  client::Client c(co);
+  auto s = c.status();
+  if (!s.ok()) return report_error("status", s.error(), want_json(*o));
+  if (want_json(*o)) {
+    std::cout << json::dump(s->raw) << "\n";
     return 0;
   }
-  Options o(args, {"json"}, {"url", "token-file", "reason"});
-  if (!o.ok()) return usage_error(v, o.error());
-  if (!o.positional().empty()) return usage_error(v, "unexpected argument " + o.positional()[0]);
-  std::string url = o.get("url");
-  if (url.empty())
-    if (const char* env = std::getenv("RCAN_URL")) url = env;
-  if (url.empty()) url = "http://127.0.0.1:8080";
-  auto target = parse_url(url);
-  if (!target.ok()) return usage_error(v, target.error().message);
-  std::string err;
-  std::string token = token_from(o, v != "status", err);
-  if (!err.empty()) return usage_error(v, err);
-  Result<std::pair<int, std::string>> r = Error(ErrorCode::kInternal, "");
-  if (v == "estop") {
-    json::Object body;
-    if (o.has("reason")) body.set("reason", o.get("reason"));
-    r = request(*target, "POST", "/api/stop", json::dump(json::Value(body)), token);
-  } else if (v == "resume") {
-    json::Object m{{"version", "1.0.0"},
-                   {"message_id", new_uuid_v4()},
-                   {"type", "SAFETY"},
-                   {"timestamp_ms", now_ms()},
-                   {"payload", json::Object{{"safety_event", "RESUME"}}}};
-    r = request(*target, "POST", "/rcan/v1/command", json::dump(json::Value(m)), token);
-  } else {
-    r = request(*target, "GET", "/rcan/v1/status", "", token);
-  }
-  if (!r.ok()) {
-    std::fprintf(stderr, "rcan %s: %s\n", verb, r.error().message.c_str());
-    return 2;
-  }
-  auto [status, body] = *r;
-  if (o.has("json") || status != 200) {
-    std::cout << body << "\n";
-  } else if (v == "status") {
-    auto j = json::parse(body);
-    if (j.ok()) {
-      auto s = [&](const char* k) {
-        const json::Value* f = j->get(k);
-        return f ? (f->is_string() ? f->as_string() : json::dump(*f)) : std::string("-");
-      };
-      std::printf("ruri:    %s\nrrn:     %s\nversion: %s\nestop:   %s\nmode:    %s\nsessions:%s\n", s("ruri").c_str(),
-                  s("rrn").c_str(), s("rcan_version").c_str(), s("estop_active").c_str(), s("mode").c_str(),
-                  (" " + s("active_sessions")).c_str());
+  std::string extensions;
+  for (const auto& e : s->extensions) extensions += (extensions.empty() ? "" : ", ") + e;
+  std::string caps;
+  for (const auto& e : s->capabilities) caps += (caps.empty() ? "" : ", ") + e;
+  std::printf("%-10s %s\n", "ruri", bold(s->ruri).c_str());
+  std::printf("%-10s %s\n", "name", s->name.c_str());
+  std::printf("%-10s %s\n", "rrn", s->rrn.c_str());
+  std::printf("%-10s %s (%s)\n", "version", s->rcan_version.c_str(), extensions.c_str());
+  std::printf("%-10s %s\n", "estop", s->estop_active ? red("ACTIVE").c_str() : green("clear").c_str());
+  std::printf("%-10s %s\n", "mode", s->mode.c_str());
+  std::printf("%-10s %s\n", "audit", s->audit_available ? "available" : red("UNAVAILABLE").c_str());
+  std::printf("%-10s %s\n", "caps", caps.c_str());
+  std::printf("%-10s %lld\n", "sessions", static_cast<long long>(s->active_sessions));
+  for (const auto& se : s->sessions)
+    std::printf("  %s  %s  %s\n", se.session_id.c_str(), se.role.c_str(), se.principal.c_str());
+  if (s->robot.is_object()) {  // the safety core's state: scalars, and the base pose
+    std::printf("%s\n", bold("robot").c_str());
+    for (const auto& [k, v] : s->robot.as_object())
+      if (!v.is_object() && !v.is_array() && k != "estop_active") std::printf("  %-20s %s\n", k.c_str(), brief(v, 80).c_str());
+    const json::Value* inner = s->robot.get("robot");
+    const json::Value* base = inner ? inner->get("base") : nullptr;
+    if (base && base->is_object()) {
+      std::string pose;
+      for (const char* k : {"x", "y", "theta", "linear", "angular"})
+        if (const json::Value* f = base->get(k); f && f->is_number()) {
+          char b[48];
+          std::snprintf(b, sizeof b, "%s%s=%.3f", pose.empty() ? "" : " ", k, f->to_double());
+          pose += b;
+        }
+      if (!pose.empty()) std::printf("  %-20s %s\n", "base", pose.c_str());
     }
-  } else {
-    std::printf("%s: done (HTTP %d)\n", verb, status);
   }
-  return status == 200 ? 0 : 1;
+  return 0;
 }
 
-int estop_main(const Args& a) { return run("estop", a); }
-int resume_main(const Args& a) { return run("resume", a); }
-int status_main(const Args& a) { return run("status", a); }
+// ------------------------------------------------------------------------------------------
+// claim / release / handoff
 
-const Registration kEstop{"estop", "latch ESTOP on a running node (POST /api/stop)", &estop_main};
+constexpr const char* kClaimHelp =
+    "usage: rcan claim [--role ROLE] [--url URL] [--token-file F] [--json]\n"
+    "  Claims control (POST /rcan/v1/auth/claim): prints the session id, role and capabilities.\n"
+    "  Needs USER or above with scope control. --role asks for a lower role than the token's.\n"
+    "  A robot held by someone of the same or higher role answers CONTROL_CONFLICT (exit 1).\n"
+    "  While you hold control, send commands or `rcan command heartbeat` within the heartbeat\n"
+    "  timeout, or the robot safe-stops.\n";
+
+int claim_main(const Args& args) {
+  if (help_requested(args, (std::string(kClaimHelp) + kNetHelp).c_str())) return 0;
+  Options* o;
+  client::ClientOptions co;
+  int rc = 0;
+  if (!setup("claim", args, {}, {"role"}, true, 0, o, co, rc)) return rc;
+  client::Client c(co);
+  auto g = c.claim(o->get("role"));
+  if (!g.ok()) return report_error("claim", g.error(), want_json(*o));
+  if (want_json(*o)) {
+    std::cout << json::dump(g->raw) << "\n";
+    return 0;
+  }
+  std::string caps;
+  for (const auto& e : g->capabilities) caps += (caps.empty() ? "" : ",") + e;
+  std::printf("%s session %s as %s\n", green("GRANTED").c_str(), bold(g->session_id).c_str(), g->role.c_str());
+  std::printf("  capabilities: %s\n  heartbeat timeout: %lld ms\n  expires in: %s\n", caps.c_str(),
+              static_cast<long long>(g->heartbeat_timeout_ms),
+              g->expires_in_s < 0 ? "never" : (std::to_string(g->expires_in_s) + " s").c_str());
+  return 0;
+}
+
+constexpr const char* kReleaseHelp =
+    "usage: rcan release [SESSION_ID] [--url URL] [--token-file F] [--json]\n"
+    "  Releases control (DELETE /rcan/v1/auth/release). Without SESSION_ID, the session your\n"
+    "  token holds.\n";
+
+int release_main(const Args& args) {
+  if (help_requested(args, (std::string(kReleaseHelp) + kNetHelp).c_str())) return 0;
+  Options* o;
+  client::ClientOptions co;
+  int rc = 0;
+  if (!setup("release", args, {}, {}, true, 1, o, co, rc)) return rc;
+  client::Client c(co);
+  auto r = c.release(o->positional().empty() ? "" : o->positional()[0]);
+  if (!r.ok()) return report_error("release", r.error(), want_json(*o));
+  if (want_json(*o)) std::cout << json::dump(r->raw) << "\n";
+  else print_reply(*r, "control released");
+  return 0;
+}
+
+constexpr const char* kHandoffHelp =
+    "usage: rcan handoff SESSION_ID --to USER_ID [--role ROLE] [--reason TEXT] [--url URL]\n"
+    "                    [--token-file F] [--json]\n"
+    "  Hands control to USER_ID (POST /rcan/v1/handoff): your session ends and the robot is\n"
+    "  reserved for USER_ID for the handoff window (30 s); they claim it with their own token.\n"
+    "  --role lowers the role they will get.\n";
+
+int handoff_main(const Args& args) {
+  if (help_requested(args, (std::string(kHandoffHelp) + kNetHelp).c_str())) return 0;
+  Options* o;
+  client::ClientOptions co;
+  int rc = 0;
+  if (!setup("handoff", args, {}, {"to", "role", "reason"}, true, 1, o, co, rc)) return rc;
+  if (o->positional().size() != 1) return usage_error("handoff", "SESSION_ID is required");
+  if (o->get("to").empty()) return usage_error("handoff", "--to USER_ID is required");
+  client::Client c(co);
+  auto r = c.handoff(o->positional()[0], o->get("to"), o->get("role"), o->get("reason"));
+  if (!r.ok()) return report_error("handoff", r.error(), want_json(*o));
+  if (want_json(*o)) std::cout << json::dump(r->raw) << "\n";
+  else print_reply(*r, ("control handed to " + o->get("to")).c_str());
+  return 0;
+}
+
+// ------------------------------------------------------------------------------------------
+// estop / resume
+
+constexpr const char* kEstopHelp =
+    "usage: rcan estop [--reason TEXT] [--url URL] [--token-file F] [--json]\n"
+    "  Latches ESTOP (POST /api/stop): the robot stops at once and refuses motion until a\n"
+    "  RESUME. Any authenticated role may stop the robot.\n";
+constexpr const char* kResumeHelp =
+    "usage: rcan resume [--reason TEXT] [--url URL] [--token-file F] [--json]\n"
+    "  Clears a latched ESTOP (a SAFETY RESUME message). Needs LEASEE or above.\n";
+
+int safety_main(const char* verb, const char* help, const Args& args) {
+  if (help_requested(args, (std::string(help) + kNetHelp).c_str())) return 0;
+  Options* o;
+  client::ClientOptions co;
+  int rc = 0;
+  if (!setup(verb, args, {}, {"reason"}, true, 0, o, co, rc)) return rc;
+  client::Client c(co);
+  bool stop = std::string(verb) == "estop";
+  auto r = stop ? c.estop(o->get("reason")) : c.resume(o->get("reason"));
+  if (!r.ok()) return report_error(verb, r.error(), want_json(*o));
+  if (want_json(*o)) std::cout << json::dump(r->raw) << "\n";
+  else std::printf("%s\n", stop ? red("ESTOP latched").c_str() : green("resumed: ESTOP cleared").c_str());
+  return 0;
+}
+
+int estop_main(const Args& a) { return safety_main("estop", kEstopHelp, a); }
+int resume_main(const Args& a) { return safety_main("resume", kResumeHelp, a); }
+
+// ------------------------------------------------------------------------------------------
+// command
+
+constexpr const char* kCommandHelp =
+    "usage: rcan command ACTION [--PARAM VALUE …] [options]\n"
+    "       rcan command '{\"action\":\"move\",\"linear\":0.3}'    (a payload object)\n"
+    "       rcan command '{\"type\":\"COMMAND\",…}' | rcan command - < msg.json   (a whole message)\n"
+    "  Sends one COMMAND over HTTP (POST /rcan/v1/command) and prints the answer.\n"
+    "  Friendly form: every --name value becomes payload parameter name (dashes become\n"
+    "  underscores); values that parse as JSON (numbers, true/false, arrays) are sent as such.\n"
+    "    rcan command move --linear 0.3 --angular 0 --duration-ms 1000\n"
+    "    rcan command arm_move --joints '[0,0.5,0,0,0,0]'\n"
+    "    rcan command chat --text 'where are you?'\n"
+    "    rcan command heartbeat          (keeps a claimed session alive)\n"
+    "  A whole message gets message_id, timestamp_ms and version filled in when absent.\n"
+    "  Options: --ttl-ms N  --priority LOW|NORMAL|HIGH|SAFETY  --confidence X (§16 ai.confidence)\n"
+    "           --scope S\n";
+
+int command_main(const Args& args) {
+  if (args.empty()) {
+    std::fputs(kCommandHelp, stderr);
+    return kExitUsage;
+  }
+  if (help_requested(args, (std::string(kCommandHelp) + kNetHelp).c_str())) return 0;
+  // Split: our options vs payload parameters.
+  const std::vector<std::string> own_valued{"url", "token-file", "timeout", "ca-file", "ttl-ms", "priority", "confidence", "scope"};
+  const std::vector<std::string> own_flags{"json", "insecure"};
+  Args own;
+  std::vector<std::pair<std::string, std::string>> params;
+  std::vector<std::string> positional;
+  for (size_t i = 0; i < args.size(); ++i) {
+    const std::string& a = args[i];
+    if (a.size() > 2 && a.rfind("--", 0) == 0) {
+      std::string name = a.substr(2), value;
+      bool inline_value = false;
+      if (auto eq = name.find('='); eq != std::string::npos) {
+        value = name.substr(eq + 1);
+        name = name.substr(0, eq);
+        inline_value = true;
+      }
+      bool flag = std::find(own_flags.begin(), own_flags.end(), name) != own_flags.end();
+      bool valued = std::find(own_valued.begin(), own_valued.end(), name) != own_valued.end();
+      if (flag) {
+        own.push_back(a);
+        continue;
+      }
+      if (!inline_value) {
+        if (i + 1 >= args.size()) return usage_error("command", "--" + name + " needs a value");
+        value = args[++i];
+      }
+      if (valued) {
+        own.push_back("--" + name);
+        own.push_back(value);
+      } else {
+        for (auto& ch : name)
+          if (ch == '-') ch = '_';
+        params.emplace_back(name, value);
+      }
+    } else {
+      positional.push_back(a);
+    }
+  }
+  Options o(own, own_flags, own_valued);
+  if (!o.ok()) return usage_error("command", o.error());
+  if (positional.size() != 1) return usage_error("command", "give one ACTION, a JSON object, or - (see --help)");
+  std::string err;
+  client::ClientOptions co = client_options(o, true, err);
+  if (!err.empty()) return usage_error("command", err);
+
+  json::Value message;
+  std::string first = positional[0];
+  if (first == "-" || (!first.empty() && first[0] == '{')) {
+    if (!params.empty()) return usage_error("command", "parameters go inside the JSON when JSON is given");
+    std::string text = first == "-" ? read_stdin() : first;
+    auto v = json::parse(text, {.max_depth = 64, .max_bytes = 1u << 20});
+    if (!v.ok()) return usage_error("command", "not JSON: " + v.error().message);
+    if (!v->is_object()) return usage_error("command", "the JSON must be an object");
+    bool whole = v->get("type") || v->get("message_type") || v->get("cmd");
+    if (!whole) {
+      const json::Value* act = v->get("action");
+      if (!act || !act->is_string()) return usage_error("command", "a payload object needs an \"action\"");
+      client::Command c;
+      c.action = act->as_string();
+      for (const auto& [k, val] : v->as_object())
+        if (k != "action") c.params.set(k, val);
+      message = client::command_message(c, now_ms());
+    } else {
+      json::Object m = v->as_object();
+      bool rcanpy = v->get("cmd") != nullptr;
+      if (!rcanpy) {
+        if (!m.contains("message_id")) m.set("message_id", new_uuid_v4());
+        if (!m.contains("timestamp_ms")) m.set("timestamp_ms", now_ms());
+        if (!m.contains("version")) m.set("version", "1.0.0");
+      }
+      message = json::Value(std::move(m));
+    }
+  } else {
+    client::Command c;
+    c.action = first;
+    for (const auto& [k, val] : params) {
+      auto v = json::parse(val, {.max_depth = 16, .max_bytes = 65536});
+      if (v.ok()) c.params.set(k, *v);
+      else c.params.set(k, val);
+    }
+    if (first == "heartbeat") {
+      json::Object m{{"version", "1.0.0"}, {"message_id", new_uuid_v4()}, {"type", "HEARTBEAT"},
+                     {"timestamp_ms", now_ms()}, {"payload", json::Object{}}};
+      message = json::Value(std::move(m));
+    } else {
+      message = client::command_message(c, now_ms());
+    }
+  }
+  json::Object& m = message.as_object();
+  if (o.has("ttl-ms")) {
+    char* end = nullptr;
+    const std::string value_text = o.get("ttl-ms");  // outlives `end`
+    long long v = std::strtoll(value_text.c_str(), &end, 10);
+    if (!end || *end || v < 0) return usage_error("command", "--ttl-ms must be a non-negative integer");
+    m.set("ttl_ms", static_cast<int64_t>(v));
+  }
+  if (o.has("priority")) m.set("priority", o.get("priority"));
+  if (o.has("scope")) m.set("scope", o.get("scope"));
+  if (o.has("confidence")) {
+    char* end = nullptr;
+    const std::string value_text = o.get("confidence");  // outlives `end`
+    double c = std::strtod(value_text.c_str(), &end);
+    if (!end || *end || !(c >= 0 && c <= 1)) return usage_error("command", "--confidence must be within 0..1");
+    m.set("ai", json::Object{{"confidence", c}});
+  }
+  client::Client c(co);
+  auto r = c.send(message);
+  if (!r.ok()) return report_error("command", r.error(), want_json(o));
+  if (want_json(o)) {
+    std::cout << json::dump(r->raw) << "\n";
+  } else if (r->pending()) {
+    std::string id = r->payload.is_object() && r->payload.get("message_id") ? brief(*r->payload.get("message_id")) : r->reply_to;
+    std::printf("%s the command waits for a human authorization (message %s)\n"
+                "  approve: rcan authorize %s --approve   deny: rcan authorize %s --deny\n",
+                yellow("PENDING_AUTH").c_str(), id.c_str(), id.c_str(), id.c_str());
+  } else {
+    std::printf("%s", green(r->type.empty() ? "OK" : r->type).c_str());
+    if (const json::Value* mid = message.get("message_id"); mid && mid->is_string())
+      std::printf(" %s", dim(mid->as_string()).c_str());
+    std::printf("\n");
+    if (r->payload.is_object())
+      for (const auto& [k, v] : r->payload.as_object()) std::printf("  %-14s %s\n", k.c_str(), brief(v, 100).c_str());
+  }
+  return r->pending() ? kExitPending : kExitOk;
+}
+
+// ------------------------------------------------------------------------------------------
+// stream
+
+constexpr const char* kStreamHelp =
+    "usage: rcan stream [--hz N | --no-telemetry] [--count N] [--seconds S] [--send-stdin]\n"
+    "                   [--max-attempts N] [--url URL] [--token-file F] [--json]\n"
+    "  Opens the node's WebSocket stream (/rcan/v1/stream, CONNECT with your token) and prints\n"
+    "  live telemetry (default 2 Hz) and events (ESTOP, RESUME, AVAILABLE, PENDING_AUTH, …) until\n"
+    "  Ctrl-C. On a lost connection it reconnects with backoff 1, 2, 4, 8, 16, 30 s (±0.5 s).\n"
+    "  --send-stdin sends each stdin line (a JSON message or payload object with \"action\")\n"
+    "  over the stream; answers are printed like events. --count/--seconds stop after that many\n"
+    "  frames / seconds. --json prints every frame as one JSON line. Connection states go to stderr.\n";
+
+std::atomic<bool> g_interrupted{false};
+void on_sigint(int) { g_interrupted.store(true); }
+
+std::string render_frame(const json::Value& v) {
+  std::string type = v.get("type") && v.get("type")->is_string() ? v.get("type")->as_string() : "?";
+  std::string ts = when(v.get("timestamp_ms") && v.get("timestamp_ms")->is_int() ? v.get("timestamp_ms")->as_int() : now_ms());
+  ts = ts.size() > 11 ? ts.substr(11) : ts;
+  if (type == "STREAM") {
+    const json::Value* p = v.get("payload");
+    std::string line = dim(ts) + " telemetry";
+    if (v.get("estop_active") && v.get("estop_active")->is_bool() && v.get("estop_active")->as_bool())
+      line += " " + red("ESTOP");
+    if (p && p->is_object()) {
+      if (const json::Value* b = p->get("base"); b && b->is_object()) {
+        for (const char* k : {"x", "y", "theta", "linear", "angular"})
+          if (const json::Value* f = b->get(k); f && f->is_number()) {
+            char buf[48];
+            std::snprintf(buf, sizeof buf, " %s=%.3f", k, f->to_double());
+            line += buf;
+          }
+      }
+      for (const char* k : {"loop_count", "paused", "battery_v"})
+        if (const json::Value* f = p->get(k)) line += std::string(" ") + k + "=" + brief(*f, 20);
+    }
+    return line;
+  }
+  if (type == "ERROR") {
+    const json::Value* p = v.get("payload");
+    std::string code = p && p->get("error_code") ? brief(*p->get("error_code")) : brief(v.get("name") ? *v.get("name") : json::Value());
+    std::string msg = p && p->get("error") ? brief(*p->get("error"), 120) : "";
+    return dim(ts) + " " + red("ERROR " + code) + " " + msg;
+  }
+  std::string line = dim(ts) + " " + (type == "EVENT" || type == "AVAILABLE" || type == "PENDING_AUTH" ? yellow(type) : bold(type));
+  for (const char* k : {"event", "session_id", "reply_to", "reserved_for"})
+    if (const json::Value* f = v.get(k); f && f->is_string() && !f->as_string().empty()) line += std::string(" ") + k + "=" + f->as_string();
+  if (const json::Value* p = v.get("payload"); p && p->is_object() && !p->as_object().empty()) line += " " + brief(*p, 120);
+  return line;
+}
+
+int stream_main(const Args& args) {
+  if (help_requested(args, (std::string(kStreamHelp) + kNetHelp).c_str())) return 0;
+  Options* o;
+  client::ClientOptions co;
+  int rc = 0;
+  if (!setup("stream", args, {"no-telemetry", "send-stdin"}, {"hz", "count", "seconds", "max-attempts"}, true, 0, o, co, rc))
+    return rc;
+  double hz = 2;
+  if (o->has("hz")) {
+    char* end = nullptr;
+    const std::string value_text = o->get("hz");  // outlives `end`
+    hz = std::strtod(value_text.c_str(), &end);
+    if (!end || *end || !(hz >= 0.2 && hz <= 50)) return usage_error("stream", "--hz must be within 0.2..50");
+  }
+  if (o->has("no-telemetry")) hz = 0;
+  long count = -1, seconds = -1, attempts = -1;
+  for (auto [name, dst] : {std::pair<const char*, long*>{"count", &count}, {"seconds", &seconds}, {"max-attempts", &attempts}}) {
+    if (!o->has(name)) continue;
+    char* end = nullptr;
+    const std::string value_text = o->get(name);  // outlives `end`
+    *dst = std::strtol(value_text.c_str(), &end, 10);
+    if (!end || *end || *dst < 1) return usage_error("stream", std::string("--") + name + " must be a positive integer");
+  }
+  bool json_out = want_json(*o);
+  std::atomic<long> frames{0};
+  client::StreamOptions so;
+  so.client = co;
+  so.telemetry_hz = hz;
+  so.max_attempts = static_cast<int>(attempts);
+  client::Stream* sp = nullptr;
+  so.on_message = [&](const json::Value& v) {
+    if (json_out) std::cout << json::dump(v) << "\n" << std::flush;
+    else std::cout << render_frame(v) << "\n" << std::flush;
+    if (count > 0 && ++frames >= count && sp) sp->stop();
+  };
+  so.on_state = [&](const std::string& s) {
+    std::fprintf(stderr, "rcan stream: %s\n", s.c_str());
+  };
+  client::Stream stream(so);
+  sp = &stream;
+  struct sigaction sa{};
+  sa.sa_handler = on_sigint;
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+  auto started = std::chrono::steady_clock::now();
+  std::atomic<bool> done{false};
+  std::thread watchdog([&] {
+    while (!done.load()) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      if (g_interrupted.load() ||
+          (seconds > 0 && std::chrono::steady_clock::now() - started >= std::chrono::seconds(seconds))) {
+        stream.stop();
+        return;
+      }
+    }
+  });
+  std::thread reader;
+  if (o->has("send-stdin")) {
+    reader = std::thread([&] {
+      std::string line;
+      while (!done.load() && std::getline(std::cin, line)) {
+        if (line.empty()) continue;
+        auto v = json::parse(line, {.max_depth = 64, .max_bytes = 1u << 20});
+        if (!v.ok() || !v->is_object()) {
+          std::fprintf(stderr, "rcan stream: skipped a line that is not a JSON object\n");
+          continue;
+        }
+        if (!v->get("type") && !v->get("cmd")) {
+          const json::Value* act = v->get("action");
+          if (!act || !act->is_string()) {
+            std::fprintf(stderr, "rcan stream: skipped a payload without \"action\"\n");
+            continue;
+          }
+          client::Command c;
+          c.action = act->as_string();
+          for (const auto& [k, val] : v->as_object())
+            if (k != "action") c.params.set(k, val);
+          stream.send_command(c);
+        } else {
+          json::Object m = v->as_object();
+          if (!v->get("cmd")) {
+            if (!m.contains("message_id")) m.set("message_id", new_uuid_v4());
+            if (!m.contains("timestamp_ms")) m.set("timestamp_ms", now_ms());
+            if (!m.contains("version")) m.set("version", "1.0.0");
+          }
+          stream.send(json::Value(std::move(m)));
+        }
+      }
+    });
+  }
+  client::ClientError end = stream.run();
+  done.store(true);
+  watchdog.join();
+  int code = end.code == "STOPPED" ? kExitOk : report_error("stream", end, false);
+  if (reader.joinable()) {
+    // The stdin reader may be blocked in a read that cannot be interrupted: end the process
+    // here, before the stream it uses goes out of scope.
+    std::cout.flush();
+    std::fflush(nullptr);
+    std::_Exit(code);
+  }
+  return code;
+}
+
+// ------------------------------------------------------------------------------------------
+// discover
+
+constexpr const char* kDiscoverHelp =
+    "usage: rcan discover [--hosts a,b:8081,https://c] [--timeout MS] [--no-mdns] [--json]\n"
+    "                     [--ca-file F] [--insecure]\n"
+    "  Finds RCAN nodes: browses _rcan._tcp over mDNS (through the Avahi daemon) for --timeout\n"
+    "  (default 2000 ms) and probes each given host with GET /rcan/v1/status (default port\n"
+    "  8080). Each mDNS answer is confirmed the same way. Without --hosts, $RCAN_URL (else\n"
+    "  http://127.0.0.1:8080) is probed too, so the robot on this machine is found even\n"
+    "  without mDNS. Prints NAME, URL, RURI, STATUS (available, claimed, estop) and SOURCE.\n"
+    "  Exit: 0 at least one robot found, 1 none, 2 usage.\n";
+
+int discover_main(const Args& args) {
+  if (help_requested(args, kDiscoverHelp)) return 0;
+  Options o(args, {"json", "insecure", "no-mdns"}, {"hosts", "timeout", "ca-file", "url", "token-file"});
+  if (!o.ok()) return usage_error("discover", o.error());
+  if (!o.positional().empty()) return usage_error("discover", "unexpected argument " + o.positional()[0]);
+  client::DiscoverOptions d;
+  if (o.has("timeout")) {
+    char* end = nullptr;
+    const std::string value_text = o.get("timeout");  // outlives `end`
+    long v = std::strtol(value_text.c_str(), &end, 10);
+    if (!end || *end || v < 100 || v > 600000) return usage_error("discover", "--timeout must be 100..600000 ms");
+    d.timeout_ms = static_cast<int>(v);
+  }
+  d.mdns = !o.has("no-mdns");
+  d.ca_file = o.get("ca-file");
+  d.insecure = o.has("insecure");
+  std::string hosts = o.get("hosts");
+  size_t start = 0;
+  while (start < hosts.size()) {
+    size_t comma = hosts.find(',', start);
+    std::string h = hosts.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    if (!h.empty()) d.hosts.push_back(h);
+    if (comma == std::string::npos) break;
+    start = comma + 1;
+  }
+  if (!o.has("hosts")) {
+    std::string url = o.get("url");
+    if (url.empty())
+      if (const char* env = std::getenv("RCAN_URL"); env && *env) url = env;
+    d.hosts.push_back(url.empty() ? "http://127.0.0.1:8080" : url);
+  }
+  auto rep = client::discover(d);
+  if (!rep.mdns_error.empty() && d.mdns) std::fprintf(stderr, "rcan discover: mDNS: %s\n", rep.mdns_error.c_str());
+  if (want_json(o)) {
+    json::Array list;
+    for (const auto& r : rep.robots) {
+      json::Object txt;
+      for (const auto& [k, v] : r.txt) txt.set(k, v);
+      json::Object e{{"name", r.name},   {"url", r.url},         {"ruri", r.ruri},
+                     {"model", r.model}, {"version", r.version}, {"status", r.status_word},
+                     {"source", r.source}, {"reachable", r.reachable}, {"interface", r.interface},
+                     {"txt", txt}};
+      list.push_back(json::Value(std::move(e)));
+    }
+    json::Object out{{"robots", list}};
+    if (!rep.mdns_error.empty()) out.set("mdns_error", rep.mdns_error);
+    std::cout << json::dump(json::Value(std::move(out))) << "\n";
+  } else if (rep.robots.empty()) {
+    std::printf("no RCAN robot found\n");
+  } else {
+    std::vector<std::vector<std::string>> rows;
+    for (const auto& r : rep.robots) {
+      std::string st = r.status_word.empty() ? "-" : r.status_word;
+      st = st == "estop" ? red(st) : st == "available" ? green(st) : st == "claimed" ? yellow(st) : st;
+      rows.push_back({r.name, r.url + (r.reachable ? "" : " (unreachable)"), r.ruri, st, r.source});
+    }
+    print_table({"NAME", "URL", "RURI", "STATUS", "SOURCE"}, rows);
+  }
+  return rep.robots.empty() ? kExitRefused : kExitOk;
+}
+
+const Registration kStatus{"status", "show a node's status, ESTOP state and sessions", &status_main};
+const Registration kClaim{"claim", "claim control of a robot", &claim_main};
+const Registration kRelease{"release", "release control", &release_main};
+const Registration kHandoff{"handoff", "hand control to another user", &handoff_main};
+const Registration kEstop{"estop", "latch ESTOP (any authenticated role)", &estop_main};
 const Registration kResume{"resume", "clear a latched ESTOP (LEASEE or above)", &resume_main};
-const Registration kStatus{"status", "show a running node's status", &status_main};
+const Registration kCommand{"command", "send a command (friendly form or raw JSON)", &command_main};
+const Registration kStream{"stream", "live telemetry and events over the WebSocket stream", &stream_main};
+const Registration kDiscover{"discover", "find robots via mDNS and host probing", &discover_main};
 
 }  // namespace
 }  // namespace rcan::cli

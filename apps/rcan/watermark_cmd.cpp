@@ -1,8 +1,10 @@
 // rcan watermark — compute and check §16.6 watermark tokens.
+#include <algorithm>
 #include <cstdio>
 #include <iostream>
 
 #include "cli.h"
+#include "net_common.h"
 #include "rcan/crypto/watermark.h"
 #include "rcan/hash.h"
 #include "rcan/json.h"
@@ -21,6 +23,9 @@ constexpr const char* kHelp =
     "      on stderr and uses it).\n"
     "  rcan watermark check TOKEN\n"
     "      Whole-string format check ^rcan-wm-v1:[0-9a-f]{32}$ (no surrounding whitespace).\n"
+    "  rcan watermark verify TOKEN [--rrn R] [--url URL] [--json]\n"
+    "      Asks the node (public GET /api/v1/watermark/verify) whether TOKEN is in its audit\n"
+    "      log; prints the audit entry it belongs to. Exit 0 found, 1 not found / invalid.\n"
     "  rcan watermark verify --key-file SK --rrn R --thought-id T --timestamp ISO TOKEN\n"
     "      Recomputes and compares in constant time.\n"
     "  Exit: 0 ok / valid, 1 invalid, 2 usage or unreadable key.\n";
@@ -52,6 +57,31 @@ int compute_or_verify(const Args& args, bool verify) {
   return rc;
 }
 
+int node_verify(const Args& args) {
+  std::vector<std::string> flags = net_flags(), valued{"rrn"};
+  valued.insert(valued.end(), net_valued().begin(), net_valued().end());
+  Options o(args, flags, valued);
+  if (!o.ok()) return usage_error("watermark verify", o.error());
+  if (o.positional().size() != 1) return usage_error("watermark verify", "give exactly one TOKEN");
+  std::string err;
+  auto co = client_options(o, false, err);
+  if (!err.empty()) return usage_error("watermark verify", err);
+  client::Client c(co);
+  auto v = c.watermark_verify(o.positional()[0], o.get("rrn"));
+  if (!v.ok()) return report_error("watermark verify", v.error(), want_json(o));
+  if (want_json(o)) {
+    json::Object out{{"valid", v->valid}, {"rrn", v->rrn}, {"watermark_token", v->watermark_token},
+                     {"audit_entry", v->audit_entry}};
+    std::cout << json::dump(json::Value(std::move(out))) << "\n";
+  } else {
+    std::printf("%s %s (rrn %s)\n", v->valid ? green("valid").c_str() : red("invalid").c_str(),
+                v->watermark_token.c_str(), v->rrn.c_str());
+    if (v->audit_entry.is_object())
+      for (const auto& [k, val] : v->audit_entry.as_object()) std::printf("  %-16s %s\n", k.c_str(), brief(val, 100).c_str());
+  }
+  return v->valid ? 0 : 1;
+}
+
 int watermark_main(const Args& args) {
   if (args.empty() || args[0] == "--help" || args[0] == "-h") {
     std::fputs(kHelp, args.empty() ? stderr : stdout);
@@ -59,7 +89,11 @@ int watermark_main(const Args& args) {
   }
   Args rest(args.begin() + 1, args.end());
   if (args[0] == "compute") return compute_or_verify(rest, false);
-  if (args[0] == "verify") return compute_or_verify(rest, true);
+  if (args[0] == "verify") {
+    bool local = std::any_of(rest.begin(), rest.end(), [](const std::string& a) { return a.rfind("--key-file", 0) == 0; });
+    if (local) return compute_or_verify(rest, true);
+    return node_verify(rest);
+  }
   if (args[0] == "check") {
     if (rest.size() != 1) return usage_error("watermark check", "give exactly one TOKEN");
     Status s = watermark::check_format(rest[0]);

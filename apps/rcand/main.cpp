@@ -26,6 +26,7 @@
 #include "node/fleet.h"
 #include "node/log.h"
 #include "node/mqtt_node.h"
+#include "node/mdns.h"
 #include "node/node.h"
 #include "node/safety.h"
 #include "node/sim_robot.h"
@@ -49,7 +50,7 @@ int sim_layer_main(int argc, char** argv);  // sim_layer.cpp: `rcand --sim-layer
 namespace {
 
 constexpr const char* kUsage =
-    "usage: rcand [--config FILE] [--port N] [--data-dir DIR] [--log-level debug|info|warn|error]\n"
+    "usage: rcand [--config FILE] [--port N] [--bind ADDR] [--data-dir DIR] [--log-level debug|info|warn|error]\n"
     "       rcand --sim-layer [--port N] [--layer reactive|fast|planner] [--confidence C] [--delay-ms D]\n"
     "\n"
     "Without --config, rcand runs the embedded simulated robot. On its first run it creates, in\n"
@@ -62,6 +63,7 @@ struct Args {
   std::optional<int> port;
   std::optional<std::string> data_dir;
   std::optional<std::string> log_level;
+  std::optional<std::string> bind;  // overrides server.bind (e.g. 0.0.0.0 to serve the LAN)
 };
 
 int fail(const std::string& what) {
@@ -93,6 +95,8 @@ std::optional<Args> parse_args(int argc, char** argv, int& exit_code) {
       if (!(a.config = value("--config"))) return std::nullopt;
     } else if (s == "--data-dir") {
       if (!(a.data_dir = value("--data-dir"))) return std::nullopt;
+    } else if (s == "--bind") {
+      if (!(a.bind = value("--bind"))) return std::nullopt;
     } else if (s == "--log-level") {
       if (!(a.log_level = value("--log-level"))) return std::nullopt;
     } else if (s == "--port") {
@@ -277,6 +281,7 @@ int main(int argc, char** argv) {
   if (Status s = config::apply_overrides(cfg, args->port, args->data_dir ? std::optional<std::string>(data_dir) : std::nullopt);
       !s.ok())
     return fail(s.error().message);
+  if (args->bind) cfg.server.bind_address = *args->bind;
   if (!args->log_level) {
     if (auto lvl = node::parse_log_level(cfg.log_level)) node::set_log_level(*lvl);
   }
@@ -443,6 +448,8 @@ int main(int argc, char** argv) {
       return fail("mqtt: " + s.error().message);
     }
   }
+  std::unique_ptr<node::MdnsAdvertiser> mdns;  // _rcan._tcp via Avahi (docs/NODE.md §Discovery)
+  if (cfg.server.enable_mdns) mdns = node::start_mdns(services, so.tls);
   double startup_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - started).count();
   std::string scheme = so.tls ? "https" : "http";
@@ -461,7 +468,7 @@ int main(int argc, char** argv) {
                  "%s token: %s (mode 0600)\n"
                  "Use it from another terminal:\n"
                  "  export RCAN_URL=%s RCAN_TOKEN_FILE=%s\n"
-                 "  curl -s $RCAN_URL/rcan/v1/status -H \"Authorization: Bearer $(cat $RCAN_TOKEN_FILE)\"\n"
+                 "  rcan status        # then: rcan claim, rcan command move --linear 0.3, rcan estop\n"
                  "Dashboard: %s/ (sign in with the token in that file; docs/DASHBOARD.md)\n\n",
                  cfg.ruri.c_str(), url.c_str(), token_created ? "New OWNER" : "OWNER",
                  local->owner_token_file.c_str(), url.c_str(), local->owner_token_file.c_str(), url.c_str());
@@ -472,6 +479,7 @@ int main(int argc, char** argv) {
   sigwait(&signals, &sig);
   log(LogLevel::kInfo, "shutting_down", json::Object{{"signal", sig == SIGTERM ? "SIGTERM" : "SIGINT"}});
   (*extra)->stop(2000);
+  mdns.reset();
   server.stop(2000);
   if (mqtt) mqtt->stop();
   services.ai->shutdown();

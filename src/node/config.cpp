@@ -2064,7 +2064,7 @@ server:
   port: 8080
   bind: 127.0.0.1
   io_threads: 2
-  enable_mdns: false
+  enable_mdns: true
   limits:
     max_body_bytes: 65536
     max_header_bytes: 8192

@@ -7,6 +7,7 @@
 #include "node/ai_routes.h"
 #include "node/log.h"
 #include "node/web_assets.h"
+#include "node/mdns.h"
 #include "rcan/errors.h"
 
 namespace rcan::node {
@@ -487,7 +488,7 @@ void Node::route(HttpRequest& req, Respond& respond) {
                      {"role", "GUEST"},
                      {"version", svc_.settings.rcan_version},
                      {"name", svc_.settings.name},
-                     {"status", svc_.act.estop_active() ? "error" : "idle"}};
+                     {"status", status_word(svc_)}};  // as in the mDNS TXT record
     return answer_json(respond, p, 200, json::Object{{"service_type", "_rcan._tcp"}, {"txt_record", txt}});
   }
   if (p == "/rcan/v1/status" || p == "/api/status") {

@@ -575,7 +575,7 @@ TEST_F(RcandTest, CliEstopAndResumeAgainstTheDaemon) {
   auto r = test::run_cli({"resume"}, "", {"RCAN_URL=http://127.0.0.1:" + std::to_string(d().port()), "RCAN_TOKEN_FILE=" + tokfile});
   EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
   EXPECT_FALSE(parse(d().get("/rcan/v1/status").body).get("estop_active")->as_bool());
-  EXPECT_EQ(test::run_cli({"status", "--url=http://127.0.0.1:1"}).exit_code, 2);
+  EXPECT_EQ(test::run_cli({"status", "--url=http://127.0.0.1:1"}).exit_code, 3);  // unreachable
 }
 
 TEST_F(RcandTest, MetricsInPrometheusFormat) {

@@ -1,0 +1,50 @@
+// The small HTTP helpers of node_http.h, on the client library (include/rcan/client.h):
+// http and https URLs, one request per call.
+#include "node_http.h"
+
+#include <cstdlib>
+
+#include "rcan/client.h"
+#include "rcan/errors.h"
+
+namespace rcan::cli {
+
+Result<Target> parse_url(const std::string& url) {
+  auto ep = client::parse_endpoint(url);
+  if (!ep.ok()) return Error(ErrorCode::kSchemaValidationFailed, ep.error().message);
+  Target t;
+  t.host = ep->url();  // the whole base URL: request() hands it to the client library
+  t.port = std::to_string(ep->port);
+  return t;
+}
+
+Result<std::pair<int, std::string>> request(const Target& t, const std::string& method, const std::string& path,
+                                            const std::string& body, const std::string& token) {
+  client::ClientOptions co;
+  co.url = t.host;
+  co.token = token;
+  client::Client c(co);
+  auto r = c.request(method, path, body, !token.empty());
+  if (!r.ok()) return Error(ErrorCode::kNotFound, r.error().message);
+  return std::make_pair(r->status, r->body);
+}
+
+std::string token_from(const Options& o, bool required, std::string& err) {
+  std::string file = o.get("token-file");
+  if (file.empty())
+    if (const char* env = std::getenv("RCAN_TOKEN_FILE")) file = env;
+  if (file.empty()) {
+    if (required) err = "a token is required: --token-file F or RCAN_TOKEN_FILE";
+    return {};
+  }
+  auto t = read_file(file);
+  if (!t.ok()) {
+    err = t.error().message;
+    return {};
+  }
+  std::string s = *t;
+  while (!s.empty() && (s.back() == '\n' || s.back() == '\r' || s.back() == ' ')) s.pop_back();
+  return s;
+}
+
+}  // namespace rcan::cli

@@ -1,0 +1,319 @@
+#include "client/net.h"
+
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <netdb.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <openssl/err.h>
+#include <openssl/x509v3.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+
+#include "rcan/encoding.h"
+#include "rcan/hash.h"
+
+namespace rcan::client::net {
+namespace {
+
+int64_t mono_ms() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+std::string ssl_error_text() {
+  unsigned long e = ERR_get_error();
+  if (e == 0) return "TLS handshake failed";
+  char buf[256];
+  ERR_error_string_n(e, buf, sizeof buf);
+  ERR_clear_error();
+  return buf;
+}
+
+bool wait_fd(int fd, short events, int timeout_ms) {
+  pollfd p{fd, events, 0};
+  int r;
+  do {
+    r = ::poll(&p, 1, timeout_ms < 0 ? 0 : timeout_ms);
+  } while (r < 0 && errno == EINTR);
+  return r > 0;
+}
+
+}  // namespace
+
+ClientError transport_error(const std::string& code, const std::string& message) {
+  ClientError e;
+  e.code = code;
+  e.message = message;
+  return e;
+}
+
+Conn::~Conn() { close(); }
+
+void Conn::close() {
+  if (ssl_) {
+    SSL_free(ssl_);
+    ssl_ = nullptr;
+  }
+  if (ctx_) {
+    SSL_CTX_free(ctx_);
+    ctx_ = nullptr;
+  }
+  if (fd_ >= 0) {
+    ::close(fd_);
+    fd_ = -1;
+  }
+}
+
+bool Conn::pending() const { return ssl_ && SSL_pending(ssl_) > 0; }
+
+Result<bool> Conn::open(const Endpoint& ep, int timeout_ms, const std::string& ca_file, bool insecure) {
+  close();
+  int64_t deadline = mono_ms() + timeout_ms;
+  addrinfo hints{};
+  hints.ai_socktype = SOCK_STREAM;
+  hints.ai_family = AF_UNSPEC;
+  addrinfo* res = nullptr;
+  std::string port = std::to_string(ep.port);
+  int gai = ::getaddrinfo(ep.host.c_str(), port.c_str(), &hints, &res);
+  if (gai != 0 || !res)
+    return transport_error("CONNECTION_FAILED", "cannot resolve " + ep.host + ": " + gai_strerror(gai));
+  std::string last = "no address";
+  for (addrinfo* ai = res; ai; ai = ai->ai_next) {
+    int fd = ::socket(ai->ai_family, ai->ai_socktype | SOCK_CLOEXEC | SOCK_NONBLOCK, ai->ai_protocol);
+    if (fd < 0) continue;
+    int rc = ::connect(fd, ai->ai_addr, ai->ai_addrlen);
+    if (rc != 0 && errno == EINPROGRESS) {
+      if (wait_fd(fd, POLLOUT, static_cast<int>(deadline - mono_ms()))) {
+        int err = 0;
+        socklen_t len = sizeof err;
+        ::getsockopt(fd, SOL_SOCKET, SO_ERROR, &err, &len);
+        rc = err == 0 ? 0 : -1;
+        errno = err;
+      } else {
+        errno = ETIMEDOUT;
+        rc = -1;
+      }
+    }
+    if (rc == 0) {
+      fd_ = fd;
+      break;
+    }
+    last = std::strerror(errno);
+    ::close(fd);
+  }
+  ::freeaddrinfo(res);
+  if (fd_ < 0)
+    return transport_error("CONNECTION_FAILED",
+                           "cannot connect to " + ep.host + ":" + port + ": " + last + " (is rcand running?)");
+  int one = 1;
+  ::setsockopt(fd_, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+  if (!ep.tls) return true;
+
+  ctx_ = SSL_CTX_new(TLS_client_method());
+  if (!ctx_) return transport_error("TLS_FAILED", ssl_error_text());
+  SSL_CTX_set_min_proto_version(ctx_, TLS1_2_VERSION);
+  if (!insecure) {
+    SSL_CTX_set_verify(ctx_, SSL_VERIFY_PEER, nullptr);
+    int ok = ca_file.empty() ? SSL_CTX_set_default_verify_paths(ctx_)
+                             : SSL_CTX_load_verify_locations(ctx_, ca_file.c_str(), nullptr);
+    if (ok != 1) return transport_error("TLS_FAILED", "cannot load trust anchors " + ca_file + ": " + ssl_error_text());
+  }
+  ssl_ = SSL_new(ctx_);
+  if (!ssl_) return transport_error("TLS_FAILED", ssl_error_text());
+  SSL_set_fd(ssl_, fd_);
+  SSL_set_tlsext_host_name(ssl_, ep.host.c_str());
+  if (!insecure) {
+    X509_VERIFY_PARAM* param = SSL_get0_param(ssl_);
+    in6_addr a6;
+    in_addr a4;
+    bool is_ip = inet_pton(AF_INET, ep.host.c_str(), &a4) == 1 || inet_pton(AF_INET6, ep.host.c_str(), &a6) == 1;
+    if (is_ip) X509_VERIFY_PARAM_set1_ip_asc(param, ep.host.c_str());
+    else SSL_set1_host(ssl_, ep.host.c_str());
+  }
+  while (true) {
+    int r = SSL_connect(ssl_);
+    if (r == 1) break;
+    int e = SSL_get_error(ssl_, r);
+    int left = static_cast<int>(deadline - mono_ms());
+    if (e == SSL_ERROR_WANT_READ && left > 0 && wait_fd(fd_, POLLIN, left)) continue;
+    if (e == SSL_ERROR_WANT_WRITE && left > 0 && wait_fd(fd_, POLLOUT, left)) continue;
+    if (left <= 0) return transport_error("TIMEOUT", "TLS handshake with " + ep.host + " timed out");
+    long v = SSL_get_verify_result(ssl_);
+    std::string why = v != X509_V_OK ? std::string("certificate: ") + X509_verify_cert_error_string(v) : ssl_error_text();
+    return transport_error("TLS_FAILED", "TLS with " + ep.host + ":" + port + " failed: " + why);
+  }
+  return true;
+}
+
+Result<bool> Conn::write_all(std::string_view data, int timeout_ms) {
+  int64_t deadline = mono_ms() + timeout_ms;
+  size_t off = 0;
+  while (off < data.size()) {
+    int left = static_cast<int>(deadline - mono_ms());
+    if (left <= 0) return transport_error("TIMEOUT", "sending timed out");
+    if (ssl_) {
+      int r = SSL_write(ssl_, data.data() + off, static_cast<int>(std::min<size_t>(data.size() - off, 1 << 30)));
+      if (r > 0) {
+        off += static_cast<size_t>(r);
+        continue;
+      }
+      int e = SSL_get_error(ssl_, r);
+      if (e == SSL_ERROR_WANT_WRITE && wait_fd(fd_, POLLOUT, left)) continue;
+      if (e == SSL_ERROR_WANT_READ && wait_fd(fd_, POLLIN, left)) continue;
+      return transport_error("CONNECTION_FAILED", "TLS write failed: " + ssl_error_text());
+    }
+    ssize_t r = ::send(fd_, data.data() + off, data.size() - off, MSG_NOSIGNAL);
+    if (r > 0) {
+      off += static_cast<size_t>(r);
+      continue;
+    }
+    if (r < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR)) {
+      wait_fd(fd_, POLLOUT, left);
+      continue;
+    }
+    return transport_error("CONNECTION_FAILED", std::string("send failed: ") + std::strerror(errno));
+  }
+  return true;
+}
+
+Result<size_t> Conn::read_some(std::string& buf, int timeout_ms) {
+  char tmp[16384];
+  int64_t deadline = mono_ms() + timeout_ms;
+  while (true) {
+    if (ssl_) {
+      int r = SSL_read(ssl_, tmp, sizeof tmp);
+      if (r > 0) {
+        buf.append(tmp, static_cast<size_t>(r));
+        return static_cast<size_t>(r);
+      }
+      int e = SSL_get_error(ssl_, r);
+      if (e == SSL_ERROR_ZERO_RETURN) return size_t{0};
+      int left = static_cast<int>(deadline - mono_ms());
+      if ((e == SSL_ERROR_WANT_READ || e == SSL_ERROR_WANT_WRITE)) {
+        if (left <= 0) return transport_error("TIMEOUT", "no answer in time");
+        if (!wait_fd(fd_, e == SSL_ERROR_WANT_READ ? POLLIN : POLLOUT, left))
+          return transport_error("TIMEOUT", "no answer in time");
+        continue;
+      }
+      if (e == SSL_ERROR_SYSCALL && ERR_peek_error() == 0) return size_t{0};  // unclean close
+      return transport_error("CONNECTION_FAILED", "TLS read failed: " + ssl_error_text());
+    }
+    ssize_t r = ::recv(fd_, tmp, sizeof tmp, 0);
+    if (r > 0) {
+      buf.append(tmp, static_cast<size_t>(r));
+      return static_cast<size_t>(r);
+    }
+    if (r == 0) return size_t{0};
+    if (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR) {
+      int left = static_cast<int>(deadline - mono_ms());
+      if (left <= 0 || !wait_fd(fd_, POLLIN, left)) return transport_error("TIMEOUT", "no answer in time");
+      continue;
+    }
+    if (errno == ECONNRESET) return size_t{0};
+    return transport_error("CONNECTION_FAILED", std::string("receive failed: ") + std::strerror(errno));
+  }
+}
+
+Result<RawResponse> http_exchange(const Endpoint& ep, const std::string& method, const std::string& path,
+                                  const std::string& body, const std::vector<std::pair<std::string, std::string>>& headers,
+                                  int timeout_ms, const std::string& ca_file, bool insecure) {
+  int64_t deadline = mono_ms() + timeout_ms;
+  Conn c;
+  if (auto o = c.open(ep, timeout_ms, ca_file, insecure); !o.ok()) return o.error();
+  std::string host = ep.host.find(':') != std::string::npos ? "[" + ep.host + "]" : ep.host;
+  std::string req = method + " " + ep.base_path + path + " HTTP/1.1\r\nHost: " + host + ":" + std::to_string(ep.port) +
+                    "\r\nConnection: close\r\nUser-Agent: rcan-client/0.1\r\nAccept: application/json\r\n";
+  for (const auto& [k, v] : headers) req += k + ": " + v + "\r\n";
+  if (!body.empty() || method == "POST" || method == "PUT")
+    req += "Content-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) + "\r\n";
+  req += "\r\n";
+  req += body;
+  if (auto w = c.write_all(req, static_cast<int>(deadline - mono_ms())); !w.ok()) return w.error();
+  std::string buf;
+  bool eof = false;
+  while (true) {
+    wire::ParsedResponse pr;
+    size_t consumed = 0;
+    std::string err;
+    wire::Parse p = wire::parse_response(buf, eof, pr, consumed, err);
+    if (p == wire::Parse::kComplete) {
+      RawResponse r;
+      r.status = pr.status;
+      r.headers = std::move(pr.headers);
+      r.body = std::move(pr.body);
+      return r;
+    }
+    if (p == wire::Parse::kError) return transport_error("BAD_RESPONSE", "bad HTTP answer from " + ep.url() + ": " + err);
+    int left = static_cast<int>(deadline - mono_ms());
+    if (left <= 0) return transport_error("TIMEOUT", "no complete answer from " + ep.url() + " in time");
+    auto n = c.read_some(buf, left);
+    if (!n.ok()) return n.error();
+    if (*n == 0) eof = true;
+  }
+}
+
+Result<bool> ws_handshake(Conn& conn, const Endpoint& ep, const std::string& path, const std::string& token,
+                          int timeout_ms, std::string& leftover) {
+  uint8_t raw[16];
+  random_bytes(raw, sizeof raw);
+  std::string key = base64_encode(raw, sizeof raw);
+  std::string host = ep.host.find(':') != std::string::npos ? "[" + ep.host + "]" : ep.host;
+  std::string req = "GET " + ep.base_path + path + " HTTP/1.1\r\nHost: " + host + ":" + std::to_string(ep.port) +
+                    "\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Version: 13\r\n"
+                    "Sec-WebSocket-Key: " + key + "\r\nUser-Agent: rcan-client/0.1\r\n";
+  if (!token.empty()) req += "Authorization: Bearer " + token + "\r\n";
+  req += "\r\n";
+  if (auto w = conn.write_all(req, timeout_ms); !w.ok()) return w.error();
+  std::string buf;
+  int64_t deadline = mono_ms() + timeout_ms;
+  while (true) {
+    size_t head_end = buf.find("\r\n\r\n");
+    if (head_end != std::string::npos) {
+      wire::ParsedResponse pr;
+      size_t consumed = 0;
+      std::string err;
+      // Parse the head only (a refusal carries a body; a 101 has none).
+      wire::Parse p = wire::parse_response(std::string_view(buf).substr(0, head_end + 4), false, pr, consumed, err);
+      if (p == wire::Parse::kError) return transport_error("BAD_RESPONSE", "bad upgrade answer: " + err);
+      if (pr.status != 101) {
+        // Read the refusal body for its error code.
+        std::string all = buf;
+        bool eof = false;
+        while (true) {
+          wire::ParsedResponse full;
+          wire::Parse q = wire::parse_response(all, eof, full, consumed, err);
+          if (q == wire::Parse::kComplete) {
+            std::string ra;
+            for (auto& [k, v] : full.headers)
+              if (k == "retry-after") ra = v;
+            return error_from_response(full.status, full.body, ra);
+          }
+          if (q == wire::Parse::kError || mono_ms() >= deadline) return error_from_response(pr.status, "", "");
+          auto n = conn.read_some(all, static_cast<int>(deadline - mono_ms()));
+          if (!n.ok()) return error_from_response(pr.status, "", "");
+          if (*n == 0) eof = true;
+        }
+      }
+      std::string accept;
+      for (auto& [k, v] : pr.headers)
+        if (k == "sec-websocket-accept") accept = v;
+      if (accept != wire::ws_accept(key)) return transport_error("BAD_RESPONSE", "bad Sec-WebSocket-Accept");
+      leftover = buf.substr(head_end + 4);
+      return true;
+    }
+    if (buf.size() > wire::kMaxHeaderBytes) return transport_error("BAD_RESPONSE", "upgrade answer too large");
+    int left = static_cast<int>(deadline - mono_ms());
+    if (left <= 0) return transport_error("TIMEOUT", "WebSocket upgrade timed out");
+    auto n = conn.read_some(buf, left);
+    if (!n.ok()) return n.error();
+    if (*n == 0) return transport_error("CONNECTION_FAILED", "connection closed during the WebSocket upgrade");
+  }
+}
+
+}  // namespace rcan::client::net
