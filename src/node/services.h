@@ -14,9 +14,12 @@
 #include "node/actuation.h"
 #include "node/auth.h"
 #include "node/clock.h"
+#include "node/consent.h"
 #include "node/events.h"
 #include "node/injection.h"
 #include "node/metrics.h"
+#include "node/ownership.h"
+#include "node/partition.h"
 #include "node/rate_limit.h"
 #include "node/replay.h"
 #include "node/sessions.h"
@@ -48,6 +51,9 @@ struct NodeSettings {
   int telemetry_hz = 5;
   size_t audit_listing = 50;  // entries in GET /api/audit
   int64_t handoff_window_ms = 30'000;
+  GuestLimits guest_limits;     // seed §6.3 (guest_limits.h)
+  std::string state_dir;        // leases, ownership, consent, credential cache ("" = not kept)
+  std::string consent_webhook;  // http:// URL the owner notification is POSTed to ("" = none)
 };
 
 class NodeServices {
@@ -64,6 +70,9 @@ class NodeServices {
   Actuation& act;
   audit::AuditLog& audit;
   SessionTable sessions;
+  Ownership ownership;
+  ConsentBook consent;
+  PartitionMonitor partition;
   EventBus events;
   Metrics metrics;
   std::atomic<uint64_t> audit_inflight{0};
