@@ -386,6 +386,7 @@ int main(int argc, char** argv) {
     co.queue_wait_ms = int64_t{cfg.control.queue_wait_s} * 1000;
     co.fleet_policy = node::fleet_policy_from_name(cfg.control.fleet_policy).value_or(node::FleetPolicy::kRole);
     co.guest_session_s = ns.guest_limits.session_seconds;
+    co.max_session_ms = int64_t{cfg.control.max_session_s} * 1000;
     services.sessions.set_options(co);
     services.ownership.set_window_ms(int64_t{cfg.control.transfer_window_s} * 1000);
     services.consent.set_pending_ttl_ms(int64_t{cfg.control.consent_ttl_s} * 1000);

@@ -618,6 +618,7 @@ SP config_schema() {
                          {"handoff_window_s", Int(1, 3600)},
                          {"queue_max", Int(0, 1024)},
                          {"queue_wait_s", Int(1, 86400)},
+                         {"max_session_s", Int(0, 31'536'000)},
                          {"transfer_window_s", Int(1, 31'536'000)},
                          {"consent_ttl_s", Int(1, 31'536'000)},
                          {"consent_webhook", Str(2048)}})},
@@ -1722,6 +1723,7 @@ NodeConfig build(const json::Value& root_value, const ConfigOptions& opts) {
   c.control.handoff_window_s = ctl["handoff_window_s"].u32(c.control.handoff_window_s);
   c.control.queue_max = ctl["queue_max"].u32(c.control.queue_max);
   c.control.queue_wait_s = ctl["queue_wait_s"].u32(c.control.queue_wait_s);
+  c.control.max_session_s = ctl["max_session_s"].u32(c.control.max_session_s);
   c.control.transfer_window_s = ctl["transfer_window_s"].u32(c.control.transfer_window_s);
   c.control.consent_ttl_s = ctl["consent_ttl_s"].u32(c.control.consent_ttl_s);
   c.control.consent_webhook = ctl["consent_webhook"].str();

@@ -299,6 +299,7 @@ struct ControlConfig {  // this node's `control` block (docs/SESSIONS.md)
   uint32_t handoff_window_s = 30;
   uint32_t queue_max = 16;
   uint32_t queue_wait_s = 300;
+  uint32_t max_session_s = 0;  // caps every role's session TTL; 0 = the role TTLs
   uint32_t transfer_window_s = 86400;  // seed §6.2: 24 h
   uint32_t consent_ttl_s = 86400;
   std::string consent_webhook;  // http:// URL; empty: stream only

@@ -515,7 +515,12 @@ class DispatchStage final : public Stage {
         ctx->finish(Outcome{http_status(err.code), svc_.error(err, id), {}});
         return;
       }
-      if (!ctx->session_id.empty() && !svc_.sessions.live(ctx->session_id, svc_.clock.mono_ms())) {
+      int64_t t0 = mono_us();
+      std::optional<rcan::Result<json::Value>> result;
+      auto apply = [&] { result = svc_.act.apply(*cmd); };
+      if (ctx->session_id.empty()) {
+        apply();
+      } else if (!svc_.sessions.run_if_live(ctx->session_id, svc_.clock.mono_ms(), apply)) {
         // Its control session ended (pre-empted, expired, revoked) while it was in flight.
         auto drop = svc_.entry(ctx->principal.display(), id, "COMMAND_DROPPED", "blocked");
         drop.sender_type = std::string(sender_type_name(ctx->sender.sender_type));
@@ -528,8 +533,7 @@ class DispatchStage final : public Stage {
         ctx->finish(Outcome{http_status(err.code), svc_.error(err, id), {}});
         return;
       }
-      int64_t t0 = mono_us();
-      auto applied = svc_.act.apply(*cmd);
+      auto& applied = *result;
       svc_.metrics.stage("dispatch").observe_us(static_cast<double>(mono_us() - t0));
       if (!applied.ok()) {
         // An ESTOP overtook this command between its record and the driver: say so in a

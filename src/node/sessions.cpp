@@ -98,6 +98,8 @@ Session SessionTable::make_session_locked(const std::string& key, const std::str
   s.granted_wall_ms = now_wall_ms;
   uint32_t ttl = role == Role::kGuest ? opts_.guest_session_s : session_ttl_seconds(role);
   s.expires_mono_ms = ttl ? now_mono_ms + int64_t{ttl} * 1000 : 0;
+  if (opts_.max_session_ms > 0 && (s.expires_mono_ms == 0 || s.expires_mono_ms > now_mono_ms + opts_.max_session_ms))
+    s.expires_mono_ms = now_mono_ms + opts_.max_session_ms;
   Role r = role;
   int64_t end_wall = 0;
   if (lease_link_locked(sub, r, s.lease_id, end_wall, now_wall_ms)) s.role = r;
@@ -117,7 +119,7 @@ void SessionTable::drop_holder_locked(const std::string& event, const std::strin
   c.session = *holder_;
   c.lease_id = holder_->lease_id;
   c.reason = reason;
-  if (event == "EXPIRE") {
+  if (event == "EXPIRE" || event == "REVOKE") {
     expired_[holder_->principal_key] = holder_->id;
     if (expired_.size() > 4096) expired_.erase(expired_.begin());
   }
@@ -316,8 +318,8 @@ bool SessionTable::leave_queue(const Principal& p) {
 void SessionTable::tick(int64_t now_mono_ms, int64_t now_wall_ms) {
   std::lock_guard<std::mutex> lock(mu_);
   last_wall_ms_ = now_wall_ms;
-  expire_locked(now_mono_ms);
-  // Lease ends revoke everything derived from the lease.
+  // Lease ends revoke everything derived from the lease (before plain TTL expiry, so a
+  // session bounded by its lease is recorded as revoked by it).
   for (auto it = leases_.begin(); it != leases_.end();) {
     if (now_wall_ms >= it->end_wall_ms) {
       if (holder_ && holder_->lease_id == it->id)
@@ -340,6 +342,7 @@ void SessionTable::tick(int64_t now_mono_ms, int64_t now_wall_ms) {
       ++it;
     }
   }
+  expire_locked(now_mono_ms);
   promote_locked(now_mono_ms, now_wall_ms);
 }
 
@@ -398,6 +401,14 @@ std::optional<Session> SessionTable::find(const std::string& session_id, int64_t
 
 bool SessionTable::live(const std::string& session_id, int64_t now_mono_ms) {
   return find(session_id, now_mono_ms).has_value();
+}
+
+bool SessionTable::run_if_live(const std::string& session_id, int64_t now_mono_ms, const std::function<void()>& fn) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (!holder_ || holder_->id != session_id) return false;
+  if (holder_->expires_mono_ms != 0 && now_mono_ms >= holder_->expires_mono_ms) return false;
+  fn();
+  return true;
 }
 
 std::optional<std::string> SessionTable::expired_session_of(const std::string& principal_key) {

@@ -25,6 +25,7 @@
 
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -48,6 +49,7 @@ struct ControlOptions {
   int64_t queue_wait_ms = 300'000;  // a queued claim is dropped after this long
   FleetPolicy fleet_policy = FleetPolicy::kRole;
   uint32_t guest_session_s = 15 * 60;
+  int64_t max_session_ms = 0;  // caps every role's TTL (control.max_session_s); 0 = role TTLs
 };
 
 struct Session {
@@ -148,7 +150,10 @@ class SessionTable {
   std::optional<Session> controller(int64_t now_mono_ms, std::vector<Session>* expired = nullptr);
   std::optional<Session> find(const std::string& session_id, int64_t now_mono_ms);
   bool live(const std::string& session_id, int64_t now_mono_ms);
-  // The session this principal held and let expire (until it claims again).
+  // Runs `fn` only while the session is live, holding the table: a pre-emption, expiry or
+  // revocation happens entirely before or entirely after it. False when not live.
+  bool run_if_live(const std::string& session_id, int64_t now_mono_ms, const std::function<void()>& fn);
+  // The session this principal held that expired or was revoked (until it claims again).
   std::optional<std::string> expired_session_of(const std::string& principal_key);
   ControlState state(int64_t now_mono_ms);
   size_t queue_size();
