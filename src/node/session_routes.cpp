@@ -656,7 +656,7 @@ void Node::consent_route(HttpRequest& req, Respond& respond, const json::Value& 
   std::string rest = req.path.substr(route.size());
   if (rest.empty()) {
     if (req.method == "GET") {
-      auto pr = route_principal(req, body, route, "CONSENT_DENIED", Role::kOwner, "config");
+      auto pr = route_principal(req, body, route, "CONSENT_REFUSED", Role::kOwner, "config");
       if (!pr.ok()) return answer_error(respond, route, pr.error());
       svc_.consent.expire(now_wall);
       json::Array a;
@@ -666,7 +666,7 @@ void Node::consent_route(HttpRequest& req, Respond& respond, const json::Value& 
     if (req.method != "POST")
       return answer_json(respond, route, 405, svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed here")),
                          {{"Allow", "GET, POST"}});
-    auto pr = route_principal(req, body, route, "CONSENT_DENIED", Role::kGuest, "");
+    auto pr = route_principal(req, body, route, "CONSENT_REFUSED", Role::kGuest, "");
     if (!pr.ok()) return answer_error(respond, route, pr.error());
     json::Value msg_body = body;
     if (!msg_body.get("type")) msg_body.as_object().set("type", "CONSENT_REQUEST");
@@ -674,20 +674,22 @@ void Node::consent_route(HttpRequest& req, Respond& respond, const json::Value& 
     if (!msg_body.get("message_id")) msg_body.as_object().set("message_id", new_uuid_v4());
     if (!msg_body.get("timestamp_ms")) msg_body.as_object().set("timestamp_ms", now_wall);
     if (!msg_body.get("payload")) msg_body.as_object().set("payload", json::Object{});
-    auto msg = decode_message(msg_body, svc_.settings.codec);
-    if (!msg.ok()) return answer_error(respond, route, msg.error());
-    if (msg->type != MessageType::kConsentRequest)
-      return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "type must be CONSENT_REQUEST", "type"));
-    auto sig = svc_.auth.check_signature(*msg);
-    if (!sig.ok()) return answer_error(respond, route, sig.error());
-    auto sender = svc_.auth.sender(*msg, *pr, *sig);
-    if (!sender.ok()) {
-      auto e = svc_.entry(pr->display(), msg->message_id, "CONSENT_DENIED", "blocked");
+    auto refused = [&](const Error& err) {
+      auto e = svc_.entry(pr->display(), "", "CONSENT_REFUSED", "blocked");
       e.sub = pr->sub;
-      e.reason = std::string(error_name(sender.error().code));
+      e.reason = std::string(error_name(err.code));
+      if (!err.field.empty()) e.detail.set("field", err.field.substr(0, 128));
       svc_.write_audit(std::move(e));
-      return answer_error(respond, route, sender.error());
-    }
+      answer_error(respond, route, err);
+    };
+    auto msg = decode_message(msg_body, svc_.settings.codec);
+    if (!msg.ok()) return refused(msg.error());
+    if (msg->type != MessageType::kConsentRequest)
+      return refused(Error(ErrorCode::kSchemaValidationFailed, "type must be CONSENT_REQUEST", "type"));
+    auto sig = svc_.auth.check_signature(*msg);
+    if (!sig.ok()) return refused(sig.error());
+    auto sender = svc_.auth.sender(*msg, *pr, *sig);
+    if (!sender.ok()) return refused(sender.error());
     ConsentRequest c;
     c.requester_sub = pr->sub;
     c.sender_type = std::string(sender_type_name(sender->sender_type));
@@ -759,7 +761,7 @@ void Node::consent_route(HttpRequest& req, Respond& respond, const json::Value& 
   if (req.method != "POST")
     return answer_json(respond, route, 405, svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed here")),
                        {{"Allow", "POST"}});
-  auto pr = route_principal(req, body, route, "CONSENT_DENIED", Role::kOwner, "config");
+  auto pr = route_principal(req, body, route, "CONSENT_REFUSED", Role::kOwner, "config");
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   auto pending = svc_.consent.get(id);
   if (!pending.ok()) return answer_error(respond, route, pending.error());

@@ -197,3 +197,95 @@ class Stream {
 };
 
 }  // namespace rcan::test
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cstring>
+#include <mutex>
+
+namespace rcan::test {
+
+// A small real HTTP server on loopback: answers every request 200 "{}" and keeps the
+// request bodies. Stops (and closes its port) on stop() or destruction; start() again on the
+// same port.
+class TinyHttpServer {
+ public:
+  TinyHttpServer() = default;
+  ~TinyHttpServer() { stop(); }
+  bool start(uint16_t port = 0) {
+    fd_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    int one = 1;
+    ::setsockopt(fd_, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    a.sin_port = htons(port);
+    if (::bind(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 || ::listen(fd_, 16) != 0) return false;
+    socklen_t len = sizeof a;
+    ::getsockname(fd_, reinterpret_cast<sockaddr*>(&a), &len);
+    port_ = ntohs(a.sin_port);
+    running_ = true;
+    thread_ = std::thread([this] { loop(); });
+    return true;
+  }
+  void stop() {
+    running_ = false;
+    if (thread_.joinable()) thread_.join();
+    if (fd_ >= 0) ::close(fd_);
+    fd_ = -1;
+  }
+  uint16_t port() const { return port_; }
+  std::string url(const std::string& path) const { return "http://127.0.0.1:" + std::to_string(port_) + path; }
+  std::vector<std::string> bodies() {
+    std::lock_guard<std::mutex> lock(mu_);
+    return bodies_;
+  }
+  int hits() const { return hits_.load(); }
+
+ private:
+  void loop() {
+    while (running_) {
+      pollfd p{fd_, POLLIN, 0};
+      if (::poll(&p, 1, 20) <= 0) continue;
+      int c = ::accept4(fd_, nullptr, nullptr, SOCK_CLOEXEC);
+      if (c < 0) continue;
+      std::string in;
+      char buf[4096];
+      for (;;) {
+        pollfd q{c, POLLIN, 0};
+        if (::poll(&q, 1, 1000) <= 0) break;
+        ssize_t n = ::recv(c, buf, sizeof buf, 0);
+        if (n <= 0) break;
+        in.append(buf, static_cast<size_t>(n));
+        size_t h = in.find("\r\n\r\n");
+        if (h == std::string::npos) continue;
+        size_t cl = 0;
+        size_t k = in.find("Content-Length: ");
+        if (k != std::string::npos && k < h) cl = std::stoul(in.substr(k + 16));
+        if (in.size() >= h + 4 + cl) {
+          std::lock_guard<std::mutex> lock(mu_);
+          bodies_.push_back(in.substr(h + 4, cl));
+          break;
+        }
+      }
+      hits_.fetch_add(1);
+      const char* resp = "HTTP/1.1 200 OK\r\nContent-Type: application/json\r\nContent-Length: 2\r\nConnection: close\r\n\r\n{}";
+      (void)::send(c, resp, std::strlen(resp), MSG_NOSIGNAL);
+      ::close(c);
+    }
+  }
+  int fd_ = -1;
+  uint16_t port_ = 0;
+  std::atomic<bool> running_{false};
+  std::atomic<int> hits_{0};
+  std::thread thread_;
+  std::mutex mu_;
+  std::vector<std::string> bodies_;
+};
+
+}  // namespace rcan::test
