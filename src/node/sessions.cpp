@@ -176,7 +176,9 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
   promote_locked(now_mono_ms, now_wall_ms);
   ClaimResult r;
   if (holder_ && holder_->principal_key == p.key()) {
-    // Explicit renewal by re-claiming: a fresh TTL, same session id, role as now claimed.
+    // Explicit renewal by re-claiming: a fresh TTL, same session id; the role may be lowered,
+    // never raised above the session's (a handoff's cap stays).
+    if (role_level(holder_->role) < role_level(role)) role = holder_->role;
     Session s = make_session_locked(p.key(), p.sub, role, fleet,
                                     now_mono_ms, now_wall_ms, holder_->id);
     holder_ = s;

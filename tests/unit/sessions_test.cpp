@@ -9,6 +9,7 @@
 #include <sstream>
 #include <thread>
 
+#include "node/config.h"
 #include "node/consent.h"
 #include "node/control_machine.h"
 #include "node/http_fetch.h"
@@ -320,6 +321,31 @@ TEST(HttpFetch, UrlsAndStatusLines) {
   EXPECT_EQ(node::parse_status_line("HTTP/1.0 200"), 200);
   EXPECT_EQ(node::parse_status_line("HTTP/1.1 2x0 OK"), 0);
   EXPECT_EQ(node::parse_status_line("SSH-2.0-x"), 0);
+}
+
+TEST(ControlConfig, TheControlBlockAndTheIssuerProbeAreValidated) {
+  config::ConfigOptions o;
+  o.device_id = "0a1b2c3d";
+  std::string base(config::default_config_yaml());
+  auto ok = config::parse_config_text(base +
+                                          "control:\n  fleet_policy: fleet_wins\n  handoff_window_s: 5\n"
+                                          "  consent_webhook: http://127.0.0.1:9000/hook\n"
+                                          "offline:\n  issuer_url: http://issuer.local/jwks.json\n  issuer_poll_ms: 250\n",
+                                      o);
+  ASSERT_TRUE(ok.ok()) << ok.error().message;
+  EXPECT_EQ(ok->control.fleet_policy, "fleet_wins");
+  EXPECT_EQ(ok->control.handoff_window_s, 5u);
+  EXPECT_EQ(ok->control.transfer_window_s, 86400u);
+  EXPECT_EQ(ok->offline.issuer_poll_ms, 250u);
+  auto bad_policy = config::parse_config_text(base + "control:\n  fleet_policy: loudest\n", o);
+  ASSERT_FALSE(bad_policy.ok());
+  EXPECT_EQ(bad_policy.error().field, "control.fleet_policy");
+  auto bad_url = config::parse_config_text(base + "control:\n  consent_webhook: https://x/\n", o);
+  ASSERT_FALSE(bad_url.ok());
+  EXPECT_EQ(bad_url.error().field, "control.consent_webhook");
+  auto unknown = config::parse_config_text(base + "control:\n  queue_size: 3\n", o);
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_EQ(unknown.error().reason, "unknown_key");
 }
 
 // ------------------------------------------------------------------------------------------
