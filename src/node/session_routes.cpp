@@ -542,12 +542,12 @@ void Node::lease_route(HttpRequest& req, Respond& respond, const json::Value& bo
     e.detail.set("lease_id", l->id);
     e.detail.set("leasee", l->leasee_sub);
     e.detail.set("end_ms", l->end_wall_ms);
-    svc_.write_audit(std::move(e));
     svc_.events.publish(json::Value(json::Object{{"type", "EVENT"}, {"event", "LEASE_GRANTED"}, {"lease_id", l->id},
                                                  {"leasee", l->leasee_sub}, {"end_ms", l->end_wall_ms},
                                                  {"timestamp_ms", now_wall}}));
     announce_control_changes();
-    return answer_json(respond, route, 201, l->to_json(now_wall));
+    json::Value answer = l->to_json(now_wall);
+    return svc_.write_audit(std::move(e), [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable { answer_json(respond, route, 201, std::move(answer)); });
   }
   if (grants) {
     if (m != "POST") return method_error("POST");
@@ -566,9 +566,9 @@ void Node::lease_route(HttpRequest& req, Respond& respond, const json::Value& bo
     e.detail.set("lease_id", lease_id);
     e.detail.set("user_id", sub);
     e.detail.set("role", std::string(role_name(*role)));
-    svc_.write_audit(std::move(e));
     announce_control_changes();
-    return answer_json(respond, route, 200, l->to_json(now_wall));
+    json::Value answer = l->to_json(now_wall);
+    return svc_.write_audit(std::move(e), [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable { answer_json(respond, route, 200, std::move(answer)); });
   }
   if (m != "DELETE") return method_error("DELETE");
   auto pr = route_principal(req, body, route, "LEASE_DENIED", Role::kOwner, "config");
@@ -578,9 +578,9 @@ void Node::lease_route(HttpRequest& req, Respond& respond, const json::Value& bo
   auto e = svc_.entry(pr->display(), lease_id, "LEASE_REVOKED", "ok");
   e.sub = pr->sub;
   e.detail.set("lease_id", lease_id);
-  svc_.write_audit(std::move(e));
   announce_control_changes();
-  answer_json(respond, route, 200, json::Object{{"lease_id", lease_id}, {"revoked", true}});
+  json::Value answer = json::Object{{"lease_id", lease_id}, {"revoked", true}};
+  svc_.write_audit(std::move(e), [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable { answer_json(respond, route, 200, std::move(answer)); });
 }
 
 // GET /rcan/v1/transfer: the ownership state. POST {action: request|accept|cancel, …}.
@@ -641,11 +641,10 @@ void Node::transfer_route(HttpRequest& req, Respond& respond, const json::Value&
   answer.as_object().set("transfer_id", r->id);
   answer.as_object().set("step", event);
   std::string id = r->id;
-  svc_.write_audit(std::move(e));
   svc_.events.publish(json::Value(json::Object{{"type", "EVENT"}, {"event", event}, {"transfer_id", id},
                                                {"timestamp_ms", now_wall}}));
   announce_control_changes();
-  answer_json(respond, route, 200, std::move(answer));
+  svc_.write_audit(std::move(e), [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable { answer_json(respond, route, 200, std::move(answer)); });
 }
 
 // POST /rcan/v1/consent: a CONSENT_REQUEST message. GET: the list (OWNER).
@@ -727,7 +726,9 @@ void Node::consent_route(HttpRequest& req, Respond& respond, const json::Value& 
     e.detail.set("consent_id", added->id);
     e.detail.set("scopes", added->to_json().get("scopes") ? *added->to_json().get("scopes") : json::Value());
     e.detail.set("notification", note);
-    svc_.write_audit(std::move(e));
+    json::Value answer = added->to_json();
+    answer.as_object().set("notification", note);
+    svc_.write_audit(std::move(e), [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable { answer_json(respond, route, 202, std::move(answer)); });
     svc_.events.publish(json::Value(json::Object{{"type", "EVENT"}, {"event", "CONSENT_REQUEST"},
                                                  {"consent_id", added->id}, {"notification", note},
                                                  {"timestamp_ms", now_wall}}));
@@ -746,9 +747,7 @@ void Node::consent_route(HttpRequest& req, Respond& respond, const json::Value& 
       });
     }
     save_control_state();
-    json::Value answer = added->to_json();
-    answer.as_object().set("notification", note);
-    return answer_json(respond, route, 202, std::move(answer));
+    return;
   }
   // /<id>/grant or /<id>/deny
   size_t slash = rest.find('/', 1);
@@ -803,13 +802,13 @@ void Node::consent_route(HttpRequest& req, Respond& respond, const json::Value& 
   if (!d->function_name.empty()) e.detail.set("requester_function", d->function_name);
   if (!lease_id.empty()) e.detail.set("lease_id", lease_id);
   if (std::string reason = str_field(body, "reason", 512); !reason.empty()) e.reason = reason;
-  svc_.write_audit(std::move(e));
   svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
                                                {"event", verb == "grant" ? "CONSENT_GRANTED" : "CONSENT_DENIED"},
                                                {"consent_id", id},
                                                {"timestamp_ms", now_wall}}));
   announce_control_changes();
-  answer_json(respond, route, 200, d->to_json());
+  json::Value answer = d->to_json();
+  svc_.write_audit(std::move(e), [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable { answer_json(respond, route, 200, std::move(answer)); });
 }
 
 }  // namespace rcan::node

@@ -145,6 +145,15 @@ class ConfiguredNode {
     return out;
   }
 
+  // Audit records of `event` once at least `min` are durable (events on the streams run ahead
+  // of the records they announce); what is there after `timeout_ms` otherwise.
+  std::vector<json::Value> audit_eventually(const std::string& event, const std::string& token, size_t min = 1,
+                                            int timeout_ms = 5000) const {
+    std::vector<json::Value> out;
+    eventually([&] { return (out = audit(event, token)).size() >= min; }, timeout_ms);
+    return out;
+  }
+
   // Polls `pred` (every 20 ms) until it holds or `timeout_ms` passes.
   static bool eventually(const std::function<bool()>& pred, int timeout_ms = 5000) {
     auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);

@@ -407,8 +407,8 @@ TEST_F(SessionsE2E, TwoClaimsAtOnceGrantOneAndQueueTheOtherWhichIsPromotedOnRele
   json::Value st = parse_json(n().get("/rcan/v1/status", owner_).body);
   EXPECT_EQ(st.get("control")->as_string(), "HELD");
   EXPECT_EQ(st.get("sessions")->as_array()[0].get("session_id")->as_string(), sid);
-  EXPECT_FALSE(n().audit("CLAIM_QUEUED", owner_).empty());
-  EXPECT_FALSE(n().audit("CLAIM_PROMOTED", owner_).empty());
+  EXPECT_FALSE(n().audit_eventually("CLAIM_QUEUED", owner_).empty());
+  EXPECT_FALSE(n().audit_eventually("CLAIM_PROMOTED", owner_).empty());
 }
 
 TEST_F(SessionsE2E, ClaimDuringTheHandoffWindowIsDeniedUntilItCloses) {
@@ -430,7 +430,7 @@ TEST_F(SessionsE2E, ClaimDuringTheHandoffWindowIsDeniedUntilItCloses) {
   ASSERT_TRUE(ConfiguredNode::eventually(
       [&] { return parse_json(n().get("/rcan/v1/status").body).get("control")->as_string() == "AVAILABLE"; }, 4000));
   EXPECT_EQ(n().post("/rcan/v1/auth/claim", "{}", carol).status, 200);
-  EXPECT_FALSE(n().audit("HANDOFF_WINDOW_CLOSED", owner_).empty());
+  EXPECT_FALSE(n().audit_eventually("HANDOFF_WINDOW_CLOSED", owner_).empty());
   (void)bob;
 }
 
@@ -512,7 +512,7 @@ TEST_F(SessionsE2E, ExpiredSessionGetsSessionExpiredUntilItClaimsAgainAndRenewal
   EXPECT_EQ(r2.status, 200) << r2.body;
   EXPECT_EQ(n().post("/rcan/v1/command", test::command_msg("move", {{"linear", 0.1}, {"duration_ms", 100}}), user).status,
             200);
-  EXPECT_FALSE(n().audit("SESSION_EXPIRED", owner_).empty());
+  EXPECT_FALSE(n().audit_eventually("SESSION_EXPIRED", owner_).empty());
 }
 
 TEST_F(SessionsE2E, SafetyConflictStopsAndAlertsEverySession) {
@@ -524,7 +524,7 @@ TEST_F(SessionsE2E, SafetyConflictStopsAndAlertsEverySession) {
   ASSERT_EQ(stop.status, 200) << stop.body;
   EXPECT_TRUE(hs.wait_for("SAFETY_CONFLICT").has_value());
   EXPECT_TRUE(os.wait_for("SAFETY_CONFLICT").has_value());
-  auto es = n().audit("ESTOP", owner_);
+  auto es = n().audit_eventually("ESTOP", owner_);
   ASSERT_FALSE(es.empty());
   EXPECT_TRUE(es.back().get("detail")->get("safety_conflict")->as_bool());
 }
