@@ -281,6 +281,14 @@ class AuthorizeStage final : public Stage {
                      "the robot is controlled by another principal; claim it first", "session"),
                "COMMAND_REJECTED");
         return Result::kAnswered;
+      } else if (NetMode nm = svc_.partition.mode();
+                 nm == NetMode::kLockdown ||
+                 (nm == NetMode::kOfflineAutonomous && !svc_.partition.cached(p, svc_.clock.wall_ms()))) {
+        // Seed §6.1: partitioned, only sessions that already exist (or cached principals) act.
+        refuse(svc_, ctx,
+               Error(ErrorCode::kLockdown, std::string(net_mode_name(nm)) + ": no new control without a session"),
+               "COMMAND_REJECTED");
+        return Result::kAnswered;
       }
     }
     return Result::kContinue;

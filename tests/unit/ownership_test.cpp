@@ -260,6 +260,9 @@ TEST_F(OwnershipE2E, PartitionEnteringAndLeavingOfflineAutonomousAndLockdown) {
   HttpReply cb = n().post("/rcan/v1/auth/claim", "{}", b);
   EXPECT_EQ(cb.status, 503);
   EXPECT_EQ(test::error_code_of(cb), "LOCKDOWN");
+  HttpReply drive = n().post("/rcan/v1/command", test::command_msg("move", {{"linear", 0.1}}), b);
+  EXPECT_EQ(drive.status, 503);  // no session-less control for a principal the node cannot vouch for
+  EXPECT_EQ(test::error_code_of(drive), "LOCKDOWN");
   HttpReply ca2 = n().post("/rcan/v1/auth/claim", "{}", a);
   ASSERT_EQ(ca2.status, 200) << ca2.body;  // continues with cached credentials
   auto claims = n().audit("CLAIM", owner_);
