@@ -555,5 +555,48 @@ TEST_F(SessionsE2E, GuestLimitsFromConfig) {
   EXPECT_EQ(n().post("/api/stop", "{}", g3).status, 200);
 }
 
+TEST_F(SessionsE2E, HostileInputOnTheControlRoutesGetsTheErrorBody) {
+  start();
+  struct Case {
+    std::string method, path, body;
+    int status;
+    std::string code;
+  };
+  std::vector<Case> cases{
+      {"POST", "/rcan/v1/auth/claim", "[1,2]", 400, "SCHEMA_VALIDATION_FAILED"},
+      {"POST", "/rcan/v1/auth/claim", "{\"role\":\"king\"}", 400, "SCHEMA_VALIDATION_FAILED"},
+      {"POST", "/rcan/v1/auth/claim", "{not json", 400, "MALFORMED_JSON"},
+      {"GET", "/rcan/v1/auth/claim", "", 405, "METHOD_NOT_ALLOWED"},
+      {"POST", "/rcan/v1/auth/renew", "{}", 400, "SCHEMA_VALIDATION_FAILED"},
+      {"POST", "/rcan/v1/auth/renew", "{\"session_id\":\"nope\"}", 404, "NOT_FOUND"},
+      {"POST", "/rcan/v1/leases", "{\"leasee\":\"x\",\"duration_s\":-5}", 400, "SCHEMA_VALIDATION_FAILED"},
+      {"POST", "/rcan/v1/leases", "{\"leasee\":\"x\",\"duration_s\":99999999999}", 400, "SCHEMA_VALIDATION_FAILED"},
+      {"POST", "/rcan/v1/leases", "{\"duration_s\":60}", 400, "SCHEMA_VALIDATION_FAILED"},
+      {"DELETE", "/rcan/v1/leases/no-such-lease", "", 404, "NOT_FOUND"},
+      {"POST", "/rcan/v1/leases/x/other", "{}", 404, "NOT_FOUND"},
+      {"PUT", "/rcan/v1/leases", "{}", 405, "METHOD_NOT_ALLOWED"},
+      {"POST", "/rcan/v1/transfer", "{\"action\":\"steal\"}", 400, "SCHEMA_VALIDATION_FAILED"},
+      {"POST", "/rcan/v1/transfer", "{\"action\":\"request\"}", 400, "SCHEMA_VALIDATION_FAILED"},
+      {"POST", "/rcan/v1/transfer", "{\"action\":\"accept\",\"agreement\":\"x\"}", 404, "NOT_FOUND"},
+      {"POST", "/rcan/v1/consent", "{\"payload\":{\"scopes\":[\"root\"]}}", 400, "SCHEMA_VALIDATION_FAILED"},
+      {"POST", "/rcan/v1/consent", "{\"payload\":{}}", 400, "SCHEMA_VALIDATION_FAILED"},
+      {"POST", "/rcan/v1/consent", "{\"type\":\"COMMAND\",\"payload\":{\"scopes\":[\"control\"]}}", 400,
+       "SCHEMA_VALIDATION_FAILED"},
+      {"POST", "/rcan/v1/consent/unknown/grant", "{}", 404, "NOT_FOUND"},
+      {"POST", "/rcan/v1/consent/unknown/steal", "{}", 404, "NOT_FOUND"},
+  };
+  for (const auto& c : cases) {
+    HttpReply r = n().call(c.method, c.path, c.body, owner_);
+    EXPECT_EQ(r.status, c.status) << c.method << " " << c.path << " " << c.body << " -> " << r.body;
+    EXPECT_EQ(test::error_code_of(r), c.code) << c.method << " " << c.path << " " << c.body;
+  }
+  // No token, a bad token, a guest: refused and audited.
+  EXPECT_EQ(n().post("/rcan/v1/leases", "{\"leasee\":\"x\"}", "").status, 401);
+  EXPECT_EQ(n().post("/rcan/v1/leases", "{\"leasee\":\"x\"}", "garbage").status, 401);
+  EXPECT_EQ(n().post("/rcan/v1/leases", "{\"leasee\":\"x\"}", n().token("guest", "g", {"status"})).status, 403);
+  EXPECT_EQ(n().audit_eventually("LEASE_DENIED", owner_, 3).size(), 3u);
+  EXPECT_EQ(n().get("/healthz").status, 200);
+}
+
 }  // namespace
 }  // namespace rcan
