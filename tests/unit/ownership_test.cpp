@@ -67,6 +67,12 @@ TEST_F(OwnershipE2E, LeaseExpiryMidCommandRevokesEverythingDerivedFromIt) {
   json::Value leases = parse_json(list.out);
   ASSERT_EQ(leases.get("leases")->as_array().size(), 1u);
   EXPECT_EQ(leases.get("leases")->as_array()[0].get("grants")->as_array().size(), 1u);
+  // The leasee's grantee holds control under the lease, bounded by it.
+  HttpReply gi = n().post("/rcan/v1/auth/claim", "{}", guest_in);
+  ASSERT_EQ(gi.status, 200) << gi.body;
+  EXPECT_EQ(parse_json(gi.body).get("payload")->get("lease_id")->as_string(), lease_id);
+  EXPECT_LE(parse_json(gi.body).get("payload")->get("expires_in")->as_int(), 3);
+  ASSERT_EQ(n().call("DELETE", "/rcan/v1/auth/release", "{}", guest_in).status, 200);
   test::Stream ls(n().port(), leasee);
   HttpReply c = n().post("/rcan/v1/auth/claim", "{}", leasee);
   ASSERT_EQ(c.status, 200) << c.body;
@@ -97,7 +103,6 @@ TEST_F(OwnershipE2E, LeaseExpiryMidCommandRevokesEverythingDerivedFromIt) {
   EXPECT_EQ(cli({"lease", "revoke", id2}, lee_file).exit_code, 1);  // only an OWNER revokes
   EXPECT_EQ(cli({"lease", "revoke", id2}, owner_file_).exit_code, 0);
   EXPECT_EQ(parse_json(cli({"lease", "list"}, owner_file_).out).get("leases")->as_array().size(), 0u);
-  (void)guest_in;
 }
 
 TEST_F(OwnershipE2E, TransferAcceptedClearsPersonalDataKeepsTheChainAndCapsTheFormerOwner) {
