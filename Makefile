@@ -1,7 +1,7 @@
 # Two commands set everything up on a fresh Debian 12 machine:
 #   make run    install what is missing, build, start the node on its embedded simulated robot
 #   make test   install what is missing, build, run every test (CTest summary)
-# Other targets: build, debug, asan, bench, fuzz, format, clean.
+# Other targets: build, debug, asan, bench, load-bench, fuzz, format, clean.
 
 BUILD_DIR   ?= build/release
 DEBUG_DIR   ?= build/debug
@@ -11,7 +11,7 @@ JOBS        ?= $(shell nproc)
 GENERATOR   := -G Ninja
 CMAKE_FLAGS ?=
 
-.PHONY: all deps build run test debug asan test-asan bench fuzz format clean
+.PHONY: all deps build run test debug asan test-asan bench load-bench fuzz format clean
 
 all: build
 
@@ -44,6 +44,11 @@ test-asan: asan
 
 bench: build
 	@for b in $(BUILD_DIR)/bench/*_bench; do echo "== $$b"; $$b; done
+
+# End-to-end figures of rcand against a bare Beast server (README "Performance").
+# LOAD_BENCH_ARGS, e.g. "--seconds 10 --data-root /dev/shm".
+load-bench: build
+	$(BUILD_DIR)/bench/load_bench $(LOAD_BENCH_ARGS)
 
 fuzz: deps
 	CXX=clang++-14 cmake -S . -B $(FUZZ_DIR) $(GENERATOR) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DRCAN_FUZZ=ON -DRCAN_WERROR=OFF -DRCAN_BUILD_TESTS=OFF -DRCAN_BUILD_BENCH=OFF

@@ -12,7 +12,7 @@ PKGS=(
   libyaml-cpp-dev libsqlite3-dev
   libgtest-dev libgmock-dev googletest libbenchmark-dev
   clang-14 libclang-rt-14-dev
-  python3
+  python3 curl
 )
 
 missing=()

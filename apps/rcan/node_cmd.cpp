@@ -18,12 +18,6 @@
 #include "rcan/json.h"
 
 namespace rcan::cli {
-namespace {
-
-struct Target {
-  std::string host;
-  std::string port;
-};
 
 Result<Target> parse_url(const std::string& url) {
   std::string rest;
@@ -74,10 +68,14 @@ Result<std::pair<int, std::string>> request(const Target& t, const std::string& 
   return std::make_pair(std::atoi(resp.c_str() + 9), resp.substr(end + 4));
 }
 
+namespace {
+
 int64_t now_ms() {
   return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
       .count();
 }
+
+}  // namespace
 
 std::string token_from(const Options& o, bool required, std::string& err) {
   std::string file = o.get("token-file");
@@ -98,6 +96,8 @@ std::string token_from(const Options& o, bool required, std::string& err) {
   while (!s.empty() && (s.back() == '\n' || s.back() == '\r' || s.back() == ' ')) s.pop_back();
   return s;
 }
+
+namespace {
 
 int run(const char* verb, const Args& args) {
   std::string v = verb;

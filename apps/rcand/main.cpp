@@ -20,6 +20,7 @@
 #include <string>
 
 #include "node/actuation_safety.h"
+#include "node/ai.h"
 #include "node/clock.h"
 #include "node/config.h"
 #include "node/log.h"
@@ -40,10 +41,13 @@ using namespace rcan;
 using rcan::node::log;
 using rcan::node::LogLevel;
 
+int sim_layer_main(int argc, char** argv);  // sim_layer.cpp: `rcand --sim-layer …`
+
 namespace {
 
 constexpr const char* kUsage =
     "usage: rcand [--config FILE] [--port N] [--data-dir DIR] [--log-level debug|info|warn|error]\n"
+    "       rcand --sim-layer [--port N] [--layer reactive|fast|planner] [--confidence C] [--delay-ms D]\n"
     "\n"
     "Without --config, rcand runs the embedded simulated robot. On its first run it creates, in\n"
     "the data directory (default $RCAND_DATA_DIR, else ~/.local/share/rcand): robot keys, the\n"
@@ -230,6 +234,7 @@ node::SafetyConfig safety_config(const config::NodeConfig& cfg, const node::SimR
 }  // namespace
 
 int main(int argc, char** argv) {
+  if (argc > 1 && std::strcmp(argv[1], "--sim-layer") == 0) return sim_layer_main(argc, argv);
   int exit_code = 2;
   auto args = parse_args(argc, argv, exit_code);
   if (!args) return exit_code;
@@ -397,7 +402,13 @@ int main(int argc, char** argv) {
     po.key_ttl_ms = int64_t{cfg.offline.max_key_ttl_s} * 1000;
     services.partition.configure(po);
   }
+  node::AiOptions ai_opts = node::ai_options(cfg);  // §16 gates, layers, HiTL, watermark
+  ai_opts.watermark_key = robot_keys->mldsa65_sk.clone();
+  services.ai = std::make_shared<node::AiServices>(services, std::move(ai_opts));
+  // An ownership transfer clears personal data, the thought log included (docs/SESSIONS.md).
+  services.ownership.on_clear([ai = services.ai] { ai->clear_thoughts(); });
   node::Node rcan_node(services);
+  if (Status s = services.ai->start(rcan_node.pipeline()); !s.ok()) return fail("HiTL pending file: " + s.error().message);
   core.set_event_callback([&rcan_node](const node::SafetyEvent& ev) {
     rcan_node.on_safety_event(ev.type, ev.session_id, ev.elapsed_ms, ev.detail);
   });
@@ -421,6 +432,7 @@ int main(int argc, char** argv) {
   transport::HttpServer server(so, rcan_node, rcan_node);
   auto port = server.start();
   if (!port.ok()) {
+    services.ai->shutdown();
     rcan_node.shutdown();
     core.stop();
     return fail("cannot listen on " + so.bind_address + ":" + std::to_string(so.port) + ": " + port.error().message);
@@ -454,6 +466,7 @@ int main(int argc, char** argv) {
   sigwait(&signals, &sig);
   log(LogLevel::kInfo, "shutting_down", json::Object{{"signal", sig == SIGTERM ? "SIGTERM" : "SIGINT"}});
   server.stop(2000);
+  services.ai->shutdown();
   rcan_node.shutdown();
   core.stop();
   log(LogLevel::kInfo, "stopped", json::Object{{"audit_last_seq", static_cast<int64_t>((*audit_log)->stats().last_seq)}});

@@ -23,9 +23,12 @@
 #include <openssl/crypto.h>
 #include <openssl/evp.h>
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <cstring>
+#include <memory>
+#include <mutex>
 #include <vector>
 
 #include "crypto/mldsa65_internal.h"
@@ -788,7 +791,35 @@ RCAN_MLDSA_INLINE SignStatus sign_body(const uint8_t* sk, const MessageParts& m_
 }
 
 // Verify_internal (Alg. 8). All inputs are public; lengths are checked by the caller.
-RCAN_MLDSA_INLINE bool verify_body(const uint8_t* pk, const MessageParts& m_prime, const uint8_t* sig) {
+// The public-key half of Verify_internal, which depends on pk alone: tr = H(pk), Â =
+// ExpandA(ρ) and NTT(t1 · 2^d). It is computed once per key and cached (see
+// prepared_key()), so a robot verifying a stream of messages from the same signer does not
+// re-sample the 30 polynomials of Â for every message. Everything here is public data.
+struct PreparedKey {
+  std::array<uint8_t, kPublicKeyBytes> pk;
+  uint8_t tr[kTrBytes];
+  Poly a_hat[kK][kL];
+  Poly t1_hat[kK];
+  bool ok = false;
+};
+
+RCAN_MLDSA_INLINE void prepare_body(const uint8_t* pk, PreparedKey& k) {
+  std::memcpy(k.pk.data(), pk, kPublicKeyBytes);
+  Shake x;
+  x.begin(shake256_md());
+  x.absorb(pk, kPublicKeyBytes);
+  x.squeeze(k.tr, sizeof k.tr);
+  for (int i = 0; i < kK; ++i) {
+    for (int j = 0; j < kL; ++j)
+      expand_a_entry(x, k.a_hat[i][j], pk, static_cast<uint8_t>(i), static_cast<uint8_t>(j));
+    unpack_t1(k.t1_hat[i], pk + 32 + i * kPolyT1Bytes);
+    for (size_t n = 0; n < kN; ++n) k.t1_hat[i].c[n] <<= kD;
+    ntt_impl(k.t1_hat[i].c);
+  }
+  k.ok = x.ok();
+}
+
+RCAN_MLDSA_INLINE bool verify_body(const PreparedKey& k, const MessageParts& m_prime, const uint8_t* sig) {
   uint8_t hint[kK][kN];
   if (!unpack_hint(hint, sig + kSigHintOffset)) return false;
   Poly z_hat[kL];
@@ -801,31 +832,22 @@ RCAN_MLDSA_INLINE bool verify_body(const uint8_t* pk, const MessageParts& m_prim
   for (int r = 0; r < kL; ++r) ntt_impl(z_hat[r].c);
 
   Shake x;
-  uint8_t tr[kTrBytes];
-  x.begin(shake256_md());
-  x.absorb(pk, kPublicKeyBytes);
-  x.squeeze(tr, sizeof tr);
   uint8_t mu[kMuBytes];
-  hash_mu(x, mu, tr, m_prime);
+  hash_mu(x, mu, k.tr, m_prime);
 
   Poly c_hat;
   sample_in_ball(x, c_hat, sig);
   ntt_impl(c_hat.c);
 
-  Poly a_entry, t1, w;
+  Poly w;
   uint8_t w1_packed[kK * kPolyW1Bytes];
   for (int i = 0; i < kK; ++i) {
     // w'_i = NTT^-1(Σ_j A[i][j] ∘ ẑ_j - ĉ ∘ NTT(t1_i · 2^d)); the single Montgomery reduction
     // is safe: 5 terms below 9q^2 plus one below 81q^2 stay under 2^31·q.
-    unpack_t1(t1, pk + 32 + i * kPolyT1Bytes);
-    for (size_t n = 0; n < kN; ++n) t1.c[n] <<= kD;
-    ntt_impl(t1.c);
     int64_t acc[kN];
-    for (size_t n = 0; n < kN; ++n) acc[n] = -static_cast<int64_t>(c_hat.c[n]) * t1.c[n];
-    for (int j = 0; j < kL; ++j) {
-      expand_a_entry(x, a_entry, pk, static_cast<uint8_t>(i), static_cast<uint8_t>(j));
-      for (size_t n = 0; n < kN; ++n) acc[n] += static_cast<int64_t>(a_entry.c[n]) * z_hat[j].c[n];
-    }
+    for (size_t n = 0; n < kN; ++n) acc[n] = -static_cast<int64_t>(c_hat.c[n]) * k.t1_hat[i].c[n];
+    for (int j = 0; j < kL; ++j)
+      for (size_t n = 0; n < kN; ++n) acc[n] += static_cast<int64_t>(k.a_hat[i][j].c[n]) * z_hat[j].c[n];
     for (size_t n = 0; n < kN; ++n) w.c[n] = mont_reduce(acc[n]);
     intt_impl(w.c);
     for (size_t n = 0; n < kN; ++n) w.c[n] = use_hint_impl(caddq(w.c[n]), hint[i][n]);
@@ -851,9 +873,10 @@ bool keygen_generic(const uint8_t* xi, uint8_t* pk, uint8_t* sk) { return keygen
 SignStatus sign_generic(const uint8_t* sk, const MessageParts& m, const uint8_t* rnd, uint8_t* sig) {
   return sign_body(sk, m, rnd, sig);
 }
-bool verify_generic(const uint8_t* pk, const MessageParts& m, const uint8_t* sig) {
-  return verify_body(pk, m, sig);
+bool verify_generic(const PreparedKey& k, const MessageParts& m, const uint8_t* sig) {
+  return verify_body(k, m, sig);
 }
+void prepare_generic(const uint8_t* pk, PreparedKey& k) { prepare_body(pk, k); }
 #if RCAN_MLDSA_X86_DISPATCH
 [[gnu::target("avx2")]] bool keygen_avx2(const uint8_t* xi, uint8_t* pk, uint8_t* sk) {
   return keygen_body(xi, pk, sk);
@@ -862,10 +885,11 @@ bool verify_generic(const uint8_t* pk, const MessageParts& m, const uint8_t* sig
                                              const uint8_t* rnd, uint8_t* sig) {
   return sign_body(sk, m, rnd, sig);
 }
-[[gnu::target("avx2")]] bool verify_avx2(const uint8_t* pk, const MessageParts& m,
+[[gnu::target("avx2")]] bool verify_avx2(const PreparedKey& k, const MessageParts& m,
                                          const uint8_t* sig) {
-  return verify_body(pk, m, sig);
+  return verify_body(k, m, sig);
 }
+[[gnu::target("avx2")]] void prepare_avx2(const uint8_t* pk, PreparedKey& k) { prepare_body(pk, k); }
 bool cpu_has_avx2() {
   __builtin_cpu_init();
   return __builtin_cpu_supports("avx2") != 0;
@@ -892,11 +916,51 @@ SignStatus sign_internal_impl(const uint8_t* sk, const MessageParts& m, const ui
 #endif
   return sign_generic(sk, m, rnd, sig);
 }
-bool verify_internal_impl(const uint8_t* pk, const MessageParts& m, const uint8_t* sig) {
+std::shared_ptr<const PreparedKey> prepare(const uint8_t* pk) {
+  auto k = std::make_shared<PreparedKey>();
 #if RCAN_MLDSA_X86_DISPATCH
-  if (use_avx2()) return verify_avx2(pk, m, sig);
+  if (use_avx2()) {
+    prepare_avx2(pk, *k);
+    return k;
+  }
 #endif
-  return verify_generic(pk, m, sig);
+  prepare_generic(pk, *k);
+  return k;
+}
+
+// A small most-recently-used cache of prepared public keys (about 37 KiB each). A node
+// verifies messages from a handful of signers; an unknown key costs one preparation, as
+// verification without the cache would.
+constexpr size_t kPreparedCacheSize = 8;
+std::shared_ptr<const PreparedKey> prepared_key(const uint8_t* pk) {
+  static std::mutex mu;
+  static std::vector<std::shared_ptr<const PreparedKey>> cache;  // most recent first
+  {
+    std::lock_guard<std::mutex> lock(mu);
+    for (size_t i = 0; i < cache.size(); ++i) {
+      if (std::memcmp(cache[i]->pk.data(), pk, kPublicKeyBytes) == 0) {
+        const auto at = cache.begin() + static_cast<std::ptrdiff_t>(i);
+        std::rotate(cache.begin(), at, at + 1);
+        return cache.front();
+      }
+    }
+  }
+  auto k = prepare(pk);
+  if (!k->ok) return k;  // never cache a failed preparation
+  std::lock_guard<std::mutex> lock(mu);
+  if (cache.size() < kPreparedCacheSize) cache.push_back(k);
+  else cache.back() = k;
+  std::rotate(cache.begin(), cache.end() - 1, cache.end());
+  return k;
+}
+
+bool verify_internal_impl(const uint8_t* pk, const MessageParts& m, const uint8_t* sig) {
+  auto k = prepared_key(pk);
+  if (!k->ok) return false;
+#if RCAN_MLDSA_X86_DISPATCH
+  if (use_avx2()) return verify_avx2(*k, m, sig);
+#endif
+  return verify_generic(*k, m, sig);
 }
 
 }  // namespace

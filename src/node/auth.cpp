@@ -1,6 +1,9 @@
 #include "node/auth.h"
 
 #include <algorithm>
+#include <limits>
+
+#include "node/token_cache.h"
 
 namespace rcan::node {
 
@@ -10,10 +13,14 @@ bool Principal::has_scope(std::string_view s) const {
 
 Authenticator::Authenticator(AuthOptions opts) : opts_(std::move(opts)) {
   verifier_ = std::make_unique<jwt::JwtVerifier>(opts_.trust, opts_.verify);
+  cache_ = std::make_unique<TokenCache>(opts_.token_cache_entries);
 }
+
+Authenticator::~Authenticator() = default;
 
 Result<Principal> Authenticator::authenticate_token(std::string_view token, int64_t now_s) const {
   if (token.empty()) return Error(ErrorCode::kAuthRequired, "a bearer token is required", "auth_token");
+  if (auto hit = cache_->find(token, now_s)) return std::move(*hit);
   auto claims = verifier_->verify(token, now_s);
   if (!claims.ok()) {
     Error e = claims.error();
@@ -34,6 +41,12 @@ Result<Principal> Authenticator::authenticate_token(std::string_view token, int6
   if (!claims->cloud_provider.empty()) p.token_identity.cloud_provider = claims->cloud_provider;
   if (!claims->function_name.empty()) p.token_identity.function_name = claims->function_name;
   if (Status s = check_token_sender_claims(p.token_identity); !s.ok()) return s.error();
+  // The window in which jwt::check_claims' time checks pass (exp required; nbf, iat optional).
+  const int64_t leeway = std::max<int64_t>(0, opts_.verify.leeway_s);
+  int64_t from = std::numeric_limits<int64_t>::min();
+  if (claims->nbf) from = std::max(from, *claims->nbf - leeway);
+  if (claims->iat) from = std::max(from, *claims->iat - leeway);
+  if (claims->exp) cache_->insert(token, p, from, *claims->exp + leeway);
   return p;
 }
 

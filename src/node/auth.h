@@ -50,11 +50,16 @@ struct AuthOptions {
   msgsig::TrustedKeys signer_keys;
   msgsig::TrustedKeys robot_keys;
   bool require_signature = false;
+  // Verified tokens remembered (node/token_cache.h); 0 verifies every token every time.
+  size_t token_cache_entries = 4096;
 };
+
+class TokenCache;
 
 class Authenticator {
  public:
   explicit Authenticator(AuthOptions opts);
+  ~Authenticator();
 
   // Verifies a bearer token at unix time `now_s`. Errors: AUTH_REQUIRED (empty), AUTH_INVALID.
   Result<Principal> authenticate_token(std::string_view token, int64_t now_s) const;
@@ -69,6 +74,7 @@ class Authenticator {
  private:
   AuthOptions opts_;
   std::unique_ptr<jwt::JwtVerifier> verifier_;
+  std::unique_ptr<TokenCache> cache_;
 };
 
 }  // namespace rcan::node

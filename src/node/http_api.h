@@ -25,6 +25,7 @@ struct HttpRequest {
   std::string body;
   std::string remote_addr;  // "ip:port"
   bool tls = false;
+  int64_t received_mono_us = 0;  // steady clock when the transport had read the request (0: unknown)
 
   // First header / query value with that (lower-case) name; empty when absent.
   std::string_view header(std::string_view name) const {

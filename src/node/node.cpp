@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstdlib>
 
+#include "node/ai_routes.h"
 #include "node/log.h"
 #include "rcan/errors.h"
 
@@ -48,6 +49,9 @@ struct StreamSessionImpl final : public StreamSession {
 };
 
 void StreamSessionImpl::on_text(std::string text) {
+  const int64_t received_us = std::chrono::duration_cast<std::chrono::microseconds>(
+                                  std::chrono::steady_clock::now().time_since_epoch())
+                                  .count();
   NodeServices& svc = node.svc_;
   json::ParseOptions po;
   po.max_bytes = svc.settings.codec.max_body_bytes;
@@ -133,12 +137,23 @@ void StreamSessionImpl::on_text(std::string text) {
         MessageType::kAck, json::Object{{"subscribed", on}, {"topic", "telemetry"}, {"hz", hz}})));
     return;
   }
+  if (t == "AUTHORIZE") {  // §16.4, answered on this stream (ai_routes.cpp)
+    std::optional<Principal> who;
+    {
+      std::lock_guard<std::mutex> lock(st->mu);
+      who = st->principal;
+    }
+    auto state = st;
+    ai_stream_message(svc, t, *v, who, [state](std::string s) { state->sink->send_text(std::move(s)); });
+    return;
+  }
   // Everything else is an RCAN message through the pipeline, as this stream's principal.
   Ingress in;
   in.body = std::move(v).value();
   in.transport = "ws";
   in.route = "/rcan/v1/stream";
   in.remote = st->sink->remote_addr();
+  in.received_mono_us = received_us;
   {
     std::lock_guard<std::mutex> lock(st->mu);
     in.preauthenticated = st->principal;
@@ -155,14 +170,15 @@ Node::Node(NodeServices& services)
     // An event with "_to" is for the streams of that principal only (PREEMPTED, PROMOTED, …).
     std::string to;
     json::Value out = ev;
-    if (const json::Value* t = ev.get("_to"); t && t->is_string()) {
+    if (const json::Value* t = ev.is_object() ? ev.get("_to") : nullptr; t && t->is_string()) {
       to = t->as_string();
       json::Object copy;
       for (const auto& m : ev.as_object())
         if (m.first != "_to") copy.set(m.first, m.second);
       out = json::Value(std::move(copy));
     }
-    std::string text = json::dump(out);
+    bool addressed = ev.is_object() && ev.get("_deliver");  // §16 events for some streams only
+    std::string text = addressed ? std::string() : json::dump(out);
     std::vector<std::shared_ptr<StreamState>> copy;
     {
       std::lock_guard<std::mutex> lock(streams_mu_);
@@ -174,7 +190,17 @@ Node::Node(NodeServices& services)
         std::lock_guard<std::mutex> lock(st->mu);
         ok = st->connected && !st->closed && (to.empty() || (st->principal && st->principal->key() == to));
       }
-      if (ok) st->sink->send_text(text);
+      if (ok && addressed) {
+        json::Value addressed_ev = ev;
+        std::optional<Principal> who;
+        {
+          std::lock_guard<std::mutex> lock(st->mu);
+          who = st->principal;
+        }
+        if (ai_event_for_stream(addressed_ev, who)) st->sink->send_text(json::dump(addressed_ev));
+      } else if (ok) {
+        st->sink->send_text(text);
+      }
     }
   });
   svc_.metrics.add_gauge("rcan_estop_active", "1 while ESTOP is latched.",
@@ -399,6 +425,7 @@ void Node::run_pipeline(HttpRequest& req, Respond& respond, const std::string& r
   in.transport = "http";
   in.route = route;
   in.remote = req.remote_addr;
+  in.received_mono_us = req.received_mono_us;
   std::string r = route;
   pipeline_.submit(std::move(in), [this, respond, r](Outcome out) mutable {
     svc_.metrics.count_request(r, out.status);
@@ -434,6 +461,7 @@ void Node::route(HttpRequest& req, Respond& respond) {
                 {{"Allow", allowed}});
   };
 
+  if (ai_route(svc_, req, respond)) return;  // §16: authorize, pending, thoughts, watermark
   if (p == "/healthz") {
     if (!method_is(req, "GET") && !method_is(req, "HEAD")) return wrong_method("GET");
     bool ok = !svc_.audit_unavailable.load();

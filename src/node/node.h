@@ -41,6 +41,7 @@ class Node final : public HttpHandler, public StreamHandler {
   void submit(Ingress in, std::function<void(Outcome)> done) { pipeline_.submit(std::move(in), std::move(done)); }
 
   NodeServices& services() { return svc_; }
+  Pipeline& pipeline() { return pipeline_; }
   size_t stream_count() const;
 
   // Called by the safety core's event callback (deadman, watchdog): audit + notify streams.

@@ -6,6 +6,7 @@
 #include <chrono>
 
 #include "node/guest_limits.h"
+#include "node/log.h"
 #include "node/services.h"
 #include "rcan/errors.h"
 
@@ -423,6 +424,9 @@ class DispatchStage final : public Stage {
     std::string action = m.action();
     if (!action.empty()) e.action = action;
     if (m.ai) e.ai = *m.ai;
+    e.gate_bypassed = ctx.gate_bypassed;
+    e.hitl_timeout_bypass = ctx.hitl_timeout_bypass;
+    if (!ctx.watermark_token.empty()) e.watermark_token = ctx.watermark_token;
     e.detail = ctx.audit_detail;
     e.detail.set("transport", ctx.in.transport);
     e.detail.set("route", ctx.in.route);
@@ -436,12 +440,23 @@ class DispatchStage final : public Stage {
     std::string reason;
     if (const json::Value* r = ctx->msg->payload.find("reason"); r && r->is_string()) reason = r->as_string().substr(0, 512);
     double us = 0;
+    const int64_t t_call = mono_us();
     if (estop) {
       us = svc_.act.estop(source, reason);
     } else {
       svc_.act.stop(source);
+      us = static_cast<double>(mono_us() - t_call);
     }
+    // From the request's arrival (the transport's read) to Driver::stop() returning.
+    const double arrival_us = static_cast<double>(t_call - ctx->in.received_mono_us) + us;
     svc_.metrics.stage("estop_to_driver").observe_us(us);
+    svc_.metrics.stage(ctx->in.transport == "ws" ? "stop_arrival_to_driver_ws" : "stop_arrival_to_driver_http")
+        .observe_us(arrival_us);
+    log(LogLevel::kInfo, estop ? "estop.latency" : "stop.latency",
+        {{"transport", ctx->in.transport},
+         {"route", ctx->in.route},
+         {"arrival_to_driver_us", arrival_us},
+         {"call_to_driver_us", us}});
     json::Object ev{{"type", "EVENT"},
                     {"event", estop ? "ESTOP" : "STOP"},
                     {"source", ctx->principal.display()},
@@ -542,7 +557,7 @@ class DispatchStage final : public Stage {
         return;
       }
       auto& applied = *result;
-      svc_.metrics.stage("dispatch").observe_us(static_cast<double>(mono_us() - t0));
+      svc_.metrics.stage("apply").observe_us(static_cast<double>(mono_us() - t0));
       if (!applied.ok()) {
         // An ESTOP overtook this command between its record and the driver: say so in a
         // record of its own and refuse.
@@ -558,6 +573,7 @@ class DispatchStage final : public Stage {
       }
       json::Object payload{{"command", ctx->msg->action()}, {"result", *applied}};
       if (cmd->clamped) payload.set("clamped", cmd->clamp_note);
+      if (!ctx->watermark_token.empty()) payload.set("watermark_token", ctx->watermark_token);
       ctx->finish(Outcome{200, svc_.envelope(MessageType::kAck, payload, id), {}});
     });
     return Result::kParked;
@@ -599,6 +615,9 @@ void refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, const Error&
     std::string action = ctx->msg->action();
     if (!action.empty()) e.action = action.substr(0, 128);
   }
+  // §16.2: a refused AI command names its model too (not for replays: those record nothing sent).
+  if (ctx->msg && ctx->msg->ai && err.code != ErrorCode::kReplayDetected && err.code != ErrorCode::kMessageStale)
+    e.ai = *ctx->msg->ai;
   e.detail = ctx->audit_detail;
   e.detail.set("error_code", std::string(error_name(err.code)));
   if (!err.field.empty()) e.detail.set("field", err.field.substr(0, 128));
@@ -609,17 +628,39 @@ void refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, const Error&
 }
 
 Pipeline::Pipeline(NodeServices& services, std::vector<std::unique_ptr<Stage>> stages)
-    : svc_(services), stages_(std::move(stages)) {}
+    : svc_(services), stages_(std::move(stages)) {
+  for (const auto& s : stages_) stage_timers_.push_back(&svc_.metrics.stage(s->name()));
+  parse_timer_ = &svc_.metrics.stage("parse");
+  total_timer_ = &svc_.metrics.stage("total");
+}
 
 void Pipeline::submit(Ingress in, std::function<void(Outcome)> done) {
   auto ctx = std::make_shared<Context>();
   ctx->in = std::move(in);
   ctx->started_mono_us = mono_us();
-  ctx->done = std::move(done);
-  for (const auto& stage : stages_) {
+  if (ctx->in.received_mono_us == 0) ctx->in.received_mono_us = ctx->started_mono_us;
+  // parse: arrival → here (routing and the JSON parse); total: arrival → answer handed over.
+  parse_timer_->observe_us(static_cast<double>(ctx->started_mono_us - ctx->in.received_mono_us));
+  ctx->done = [total = total_timer_, arrival = ctx->in.received_mono_us, done = std::move(done)](Outcome out) {
+    done(std::move(out));
+    total->observe_us(static_cast<double>(mono_us() - arrival));
+  };
+  ctx->pipeline = this;
+  run(ctx, 0);
+}
+
+void Pipeline::run_from(const std::shared_ptr<Context>& ctx, std::string_view stage) {
+  ctx->pipeline = this;
+  for (size_t i = 0; i < stages_.size(); ++i)
+    if (stage == stages_[i]->name()) return run(ctx, i);
+  refuse(svc_, ctx, Error(ErrorCode::kInternal, "no pipeline stage named " + std::string(stage)), "INTERNAL_ERROR");
+}
+
+void Pipeline::run(const std::shared_ptr<Context>& ctx, size_t first) {
+  for (size_t i = first; i < stages_.size(); ++i) {
     int64_t t0 = mono_us();
-    Stage::Result r = stage->run(ctx);
-    svc_.metrics.stage(stage->name()).observe_us(static_cast<double>(mono_us() - t0));
+    Stage::Result r = stages_[i]->run(ctx);
+    stage_timers_[i]->observe_us(static_cast<double>(mono_us() - t0));
     if (r != Stage::Result::kContinue) return;
   }
   if (!ctx->finished()) {
@@ -639,7 +680,7 @@ std::vector<std::unique_ptr<Stage>> Pipeline::standard_stages(NodeServices& s) {
   v.push_back(std::make_unique<RateLimitStage>(s));
   v.push_back(std::make_unique<SafetyStateStage>(s));
   v.push_back(std::make_unique<InjectionStage>(s));
-  // Confidence and HiTL gate stages are inserted here by the AI-accountability work.
+  for (auto& g : ai_stages(s)) v.push_back(std::move(g));  // §16: confidence, HiTL, watermark
   v.push_back(std::make_unique<DispatchStage>(s));
   return v;
 }

@@ -20,6 +20,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -31,6 +32,8 @@
 namespace rcan::node {
 
 class NodeServices;
+class Pipeline;
+class Histogram;
 
 // What a transport hands to the pipeline.
 struct Ingress {
@@ -40,6 +43,7 @@ struct Ingress {
   std::string route;       // e.g. "/rcan/v1/command"
   std::string remote;      // peer address, for logs
   std::optional<Principal> preauthenticated;  // a stream authenticated at CONNECT
+  int64_t received_mono_us = 0;  // steady clock at arrival (transport read done); 0: at submit
 };
 
 // What the pipeline answers.
@@ -62,6 +66,11 @@ struct Context {
   std::string event = "COMMAND";  // audit event for acceptance
   json::Object audit_detail;
   std::string session_id;           // control session the command runs under
+  // §16 (src/node/gates.cpp): written into the acceptance record by the dispatch stage.
+  bool gate_bypassed = false;        // a confidence gate missed with on_fail allow
+  bool hitl_timeout_bypass = false;  // a HiTL gate timed out with on_timeout allow
+  std::string watermark_token;       // §16.6 token of an AI-produced command
+  Pipeline* pipeline = nullptr;      // set by submit(), for stages that park and resume
   int64_t started_mono_us = 0;
   std::function<void(Outcome)> done;
 
@@ -87,13 +96,25 @@ class Pipeline {
   // Runs the stages; `done` is called exactly once, possibly on another thread.
   void submit(Ingress in, std::function<void(Outcome)> done);
 
+  // Runs the stages from the one named `stage` (inclusive) on a context that a stage parked
+  // (a §16 gate resuming after escalation or a HiTL decision). An unknown name finishes the
+  // context with an internal error.
+  void run_from(const std::shared_ptr<Context>& ctx, std::string_view stage);
+
   // The standard stage list.
   static std::vector<std::unique_ptr<Stage>> standard_stages(NodeServices& services);
 
  private:
   NodeServices& svc_;
+  void run(const std::shared_ptr<Context>& ctx, size_t first);
   std::vector<std::unique_ptr<Stage>> stages_;
+  std::vector<Histogram*> stage_timers_;  // one per stage (metrics lookups off the hot path)
+  Histogram* parse_timer_ = nullptr;
+  Histogram* total_timer_ = nullptr;
 };
+
+// The §16 stages (confidence gate, HiTL gate, watermark) for the gate slot (gates.cpp).
+std::vector<std::unique_ptr<Stage>> ai_stages(NodeServices& services);
 
 // Refuses a context: answers the error body with its HTTP status and writes the audit
 // record (event, outcome "blocked"/"error"). Used by every stage.

@@ -29,6 +29,8 @@
 
 namespace rcan::node {
 
+class AiServices;  // §16 gates, HiTL queue, thought log, watermark (ai.h)
+
 struct NodeSettings {
   std::string ruri;  // canonical robot RURI (identity, no capability)
   std::string rrn;
@@ -78,6 +80,7 @@ class NodeServices {
   std::atomic<uint64_t> audit_inflight{0};
   std::atomic<uint64_t> audit_failures{0};
   std::atomic<bool> audit_unavailable{false};
+  std::shared_ptr<AiServices> ai;  // set by the daemon before the node starts; may be null
 
   // An audit entry pre-filled with the robot, time, principal and sender identity.
   audit::AuditEntry entry(const std::string& principal, const std::string& message_id,

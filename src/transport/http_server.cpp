@@ -59,13 +59,20 @@ constexpr std::string_view kQueueFullReason = "send queue limit exceeded";
 using PlainStream = beast::tcp_stream;
 using TlsStream = beast::ssl_stream<beast::tcp_stream>;
 
+// The Date header changes once a second: formatted once per second per thread.
 inline std::string http_date() {
+  thread_local std::time_t cached_t = -1;
+  thread_local std::string cached;
   const std::time_t t = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[64];
-  const size_t n = std::strftime(buf, sizeof buf, "%a, %d %b %Y %H:%M:%S GMT", &tm);
-  return std::string(buf, n);
+  if (t != cached_t) {
+    std::tm tm{};
+    gmtime_r(&t, &tm);
+    char buf[64];
+    const size_t n = std::strftime(buf, sizeof buf, "%a, %d %b %Y %H:%M:%S GMT", &tm);
+    cached.assign(buf, n);
+    cached_t = t;
+  }
+  return cached;
 }
 
 inline std::string endpoint_string(const tcp::endpoint& ep) {
@@ -465,6 +472,9 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
       }
     }
     const bool timed_out = disarm_read_deadline();
+    const int64_t received_us = std::chrono::duration_cast<std::chrono::microseconds>(
+                                    SteadyClock::now().time_since_epoch())
+                                    .count();
     if (ec) {
       std::optional<TransportError> err =
           timed_out ? std::optional<TransportError>(read_timeout_error()) : classify_read_error(ec);
@@ -481,6 +491,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
       co_await answer_error(*err, version);
       co_return false;
     }
+    req.received_mono_us = received_us;
     if (wants_websocket(req)) {
       if (auto err = check_websocket_upgrade(req, version)) {
         co_await answer_error(*err, version);
