@@ -276,7 +276,7 @@ int main(int argc, char** argv) {
     r->svc = std::make_unique<node::NodeServices>(ns, node::Clock::system(), std::move(auth), *r->timed, *r->audit);
     config::FleetConfig mine = fc;
     mine.member_id = r->member;
-    r->svc->fleet = std::make_shared<node::FleetPolicy>(node::FleetPolicy{mine, {}});
+    r->svc->fleet = std::make_shared<node::FleetMembership>(node::FleetMembership{mine, {}});
     r->node = std::make_unique<node::Node>(*r->svc);
     r->core->start();
     r->node->start();

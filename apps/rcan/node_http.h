@@ -22,4 +22,13 @@ Result<std::pair<int, std::string>> request(const Target& t, const std::string& 
 // The bearer token from --token-file or $RCAN_TOKEN_FILE; `err` set when required and absent.
 std::string token_from(const Options& o, bool required, std::string& err);
 
+// --url, else $RCAN_URL, else http://127.0.0.1:8080.
+std::string node_url(const Options& o);
+// token_from() under the name the lease/transfer/consent verbs use.
+std::string node_token(const Options& o, bool required, std::string& err);
+// parse_url() + request().
+Result<std::pair<int, std::string>> node_request(const std::string& url, const std::string& method,
+                                                 const std::string& path, const std::string& body,
+                                                 const std::string& token);
+
 }  // namespace rcan::cli

@@ -368,6 +368,10 @@ int main(int argc, char** argv) {
   ns.default_ttl_ms = cfg.safety.command_ttl_default_ms;
   ns.codec.max_body_bytes = cfg.server.limits.max_body_bytes;
   ns.telemetry_hz = static_cast<int>(cfg.driver.sim.telemetry_hz);
+  ns.guest_limits = cfg.rbac.guest_limits.to_guest_limits();
+  ns.handoff_window_ms = int64_t{cfg.control.handoff_window_s} * 1000;
+  ns.state_dir = cfg.data_dir;
+  ns.consent_webhook = cfg.control.consent_webhook;
 
   node::AuthOptions auth;
   auth.trust = std::move(trust).value();
@@ -392,10 +396,30 @@ int main(int argc, char** argv) {
   }
 
   node::NodeServices services(ns, node::Clock::system(), std::move(auth), actuation, **audit_log);
-  if (!cfg.fleet.fleet_id.empty()) services.fleet = std::make_shared<node::FleetPolicy>(node::FleetPolicy{cfg.fleet, {}});
+  if (!cfg.fleet.fleet_id.empty()) services.fleet = std::make_shared<node::FleetMembership>(node::FleetMembership{cfg.fleet, {}});
+  {
+    node::ControlOptions co;  // docs/SESSIONS.md
+    co.handoff_window_ms = ns.handoff_window_ms;
+    co.queue_max = cfg.control.queue_max;
+    co.queue_wait_ms = int64_t{cfg.control.queue_wait_s} * 1000;
+    co.fleet_policy = node::fleet_policy_from_name(cfg.control.fleet_policy).value_or(node::FleetPolicy::kRole);
+    co.guest_session_s = ns.guest_limits.session_seconds;
+    co.max_session_ms = int64_t{cfg.control.max_session_s} * 1000;
+    services.sessions.set_options(co);
+    services.ownership.set_window_ms(int64_t{cfg.control.transfer_window_s} * 1000);
+    services.consent.set_pending_ttl_ms(int64_t{cfg.control.consent_ttl_s} * 1000);
+    node::PartitionOptions po;
+    po.issuer_url = cfg.offline.issuer_url;
+    po.poll_interval_ms = cfg.offline.issuer_poll_ms;
+    po.timeout_ms = static_cast<int>(cfg.offline.issuer_timeout_ms);
+    po.key_ttl_ms = int64_t{cfg.offline.max_key_ttl_s} * 1000;
+    services.partition.configure(po);
+  }
   node::AiOptions ai_opts = node::ai_options(cfg);  // §16 gates, layers, HiTL, watermark
   ai_opts.watermark_key = robot_keys->mldsa65_sk.clone();
   services.ai = std::make_shared<node::AiServices>(services, std::move(ai_opts));
+  // An ownership transfer clears personal data, the thought log included (docs/SESSIONS.md).
+  services.ownership.on_clear([ai = services.ai] { ai->clear_thoughts(); });
   node::Node rcan_node(services);
   if (Status s = services.ai->start(rcan_node.pipeline()); !s.ok()) return fail("HiTL pending file: " + s.error().message);
   core.set_event_callback([&rcan_node](const node::SafetyEvent& ev) {

@@ -9,6 +9,7 @@
 //      styles, cross-field checks (min < max, RURI, RRN), defaults and path resolution.
 // yaml-cpp exceptions and this file's own ConfigError never leave the module.
 #include "node/config.h"
+#include "node/http_fetch.h"
 
 #include <pwd.h>
 #include <unistd.h>
@@ -639,7 +640,18 @@ SP config_schema() {
         // v1.5 blocks
         {"offline", Obj({{"grace_period_s", Int(0, 31'536'000)},
                          {"cross_owner_grace_s", Int(0, 31'536'000)},
-                         {"max_key_ttl_s", Int(0, 31'536'000)}})},
+                         {"max_key_ttl_s", Int(0, 31'536'000)},
+                         {"issuer_url", Str(2048)},
+                         {"issuer_poll_ms", Int(50, 3'600'000)},
+                         {"issuer_timeout_ms", Int(50, 60'000)}})},
+        {"control", Obj({{"fleet_policy", Enum({"role", "fleet_wins", "individual_wins"})},
+                         {"handoff_window_s", Int(1, 3600)},
+                         {"queue_max", Int(0, 1024)},
+                         {"queue_wait_s", Int(1, 86400)},
+                         {"max_session_s", Int(0, 31'536'000)},
+                         {"transfer_window_s", Int(1, 31'536'000)},
+                         {"consent_ttl_s", Int(1, 31'536'000)},
+                         {"consent_webhook", Str(2048)}})},
         {"qos", Obj({{"ack_timeout_ms", Int(1, 600'000)},
                      {"max_retries", Int(0, 100)},
                      {"backoff_base_ms", Int(1, 600'000)}})},
@@ -1865,6 +1877,22 @@ NodeConfig build(const json::Value& root_value, const ConfigOptions& opts) {
   c.offline.grace_period_s = off["grace_period_s"].u32(c.offline.grace_period_s);
   c.offline.cross_owner_grace_s = off["cross_owner_grace_s"].u32(c.offline.cross_owner_grace_s);
   c.offline.max_key_ttl_s = off["max_key_ttl_s"].u32(c.offline.max_key_ttl_s);
+  c.offline.issuer_url = off["issuer_url"].str();
+  c.offline.issuer_poll_ms = off["issuer_poll_ms"].u32(c.offline.issuer_poll_ms);
+  c.offline.issuer_timeout_ms = off["issuer_timeout_ms"].u32(c.offline.issuer_timeout_ms);
+  if (!c.offline.issuer_url.empty() && !node::parse_http_url(c.offline.issuer_url).ok())
+    fail(off["issuer_url"].path, "must be an http:// URL", "invalid_value");
+  At ctl = root["control"];
+  c.control.fleet_policy = ctl["fleet_policy"].str(c.control.fleet_policy);
+  c.control.handoff_window_s = ctl["handoff_window_s"].u32(c.control.handoff_window_s);
+  c.control.queue_max = ctl["queue_max"].u32(c.control.queue_max);
+  c.control.queue_wait_s = ctl["queue_wait_s"].u32(c.control.queue_wait_s);
+  c.control.max_session_s = ctl["max_session_s"].u32(c.control.max_session_s);
+  c.control.transfer_window_s = ctl["transfer_window_s"].u32(c.control.transfer_window_s);
+  c.control.consent_ttl_s = ctl["consent_ttl_s"].u32(c.control.consent_ttl_s);
+  c.control.consent_webhook = ctl["consent_webhook"].str();
+  if (!c.control.consent_webhook.empty() && !node::parse_http_url(c.control.consent_webhook).ok())
+    fail(ctl["consent_webhook"].path, "must be an http:// URL", "invalid_value");
   At qos = root["qos"];
   c.qos.ack_timeout_ms = qos["ack_timeout_ms"].u32(c.qos.ack_timeout_ms);
   c.qos.max_retries = qos["max_retries"].u32(c.qos.max_retries);

@@ -308,6 +308,20 @@ struct OfflineConfig {  // v1.5 `offline`
   uint32_t grace_period_s = 86400;
   uint32_t cross_owner_grace_s = 3600;
   uint32_t max_key_ttl_s = 86400;
+  std::string issuer_url;            // probed for reachability (seed §6.1); empty: off
+  uint32_t issuer_poll_ms = 5000;
+  uint32_t issuer_timeout_ms = 1000;
+};
+
+struct ControlConfig {  // this node's `control` block (docs/SESSIONS.md)
+  std::string fleet_policy = "role";  // role | fleet_wins | individual_wins
+  uint32_t handoff_window_s = 30;
+  uint32_t queue_max = 16;
+  uint32_t queue_wait_s = 300;
+  uint32_t max_session_s = 0;  // caps every role's session TTL; 0 = the role TTLs
+  uint32_t transfer_window_s = 86400;  // seed §6.2: 24 h
+  uint32_t consent_ttl_s = 86400;
+  std::string consent_webhook;  // http:// URL; empty: stream only
 };
 
 struct QosConfig {  // v1.5 `qos`
@@ -348,6 +362,7 @@ struct NodeConfig {
   MqttConfig mqtt;    // `mqtt` (node/fleet_config.h)
   FleetConfig fleet;  // `fleet`
   SwarmConfig swarm;  // `swarm` seed §5.2 keys
+  ControlConfig control;
 
   // Validated blocks the node keeps but does not interpret, as JSON objects keyed by their
   // top-level name: bridge, hardware_safety, messaging, metadata, physics, drivers, network,

@@ -21,7 +21,7 @@ class FleetStage final : public Stage {
     if (!fleet_origin(*ctx)) return Result::kContinue;
     const Message& m = *ctx->msg;
     bool stop = ctx->safety == SafetyAction::kEstop || ctx->safety == SafetyAction::kStop;
-    const FleetPolicy* fleet = svc_.fleet.get();
+    const FleetMembership* fleet = svc_.fleet.get();
     std::string claimed = payload_string(m, "fleet_id");
     if (fleet == nullptr) {
       if (stop) return Result::kContinue;

@@ -10,7 +10,7 @@
 // principal may stop a robot, through any topic.
 //
 // Fleet command vs individual command (seed §5.3 "fleet owner decides the policy"): the
-// policy itself belongs to the control-session rules; FleetPolicy::conflict is the hook they
+// policy itself belongs to the control-session rules; FleetMembership::conflict is the hook they
 // install. It sees every fleet message after the checks above and may refuse it.
 #pragma once
 
@@ -28,7 +28,7 @@ namespace rcan::node {
 
 class NodeServices;
 
-struct FleetPolicy {
+struct FleetMembership {
   config::FleetConfig config;
   // Optional: the fleet-vs-individual conflict policy. Returns an error to refuse.
   std::function<std::optional<Error>(const Context& ctx, NodeServices& svc)> conflict;

@@ -169,8 +169,18 @@ void StreamSessionImpl::on_text(std::string text) {
 Node::Node(NodeServices& services)
     : svc_(services), pipeline_(services, Pipeline::standard_stages(services)) {
   event_sub_ = svc_.events.subscribe([this](const json::Value& ev) {
+    // An event with "_to" is for the streams of that principal only (PREEMPTED, PROMOTED, …).
+    std::string to;
+    json::Value out = ev;
+    if (const json::Value* t = ev.is_object() ? ev.get("_to") : nullptr; t && t->is_string()) {
+      to = t->as_string();
+      json::Object copy;
+      for (const auto& m : ev.as_object())
+        if (m.first != "_to") copy.set(m.first, m.second);
+      out = json::Value(std::move(copy));
+    }
     bool addressed = ev.is_object() && ev.get("_deliver");  // §16 events for some streams only
-    std::string text = addressed ? std::string() : json::dump(ev);
+    std::string text = addressed ? std::string() : json::dump(out);
     std::vector<std::shared_ptr<StreamState>> copy;
     {
       std::lock_guard<std::mutex> lock(streams_mu_);
@@ -180,7 +190,7 @@ Node::Node(NodeServices& services)
       bool ok;
       {
         std::lock_guard<std::mutex> lock(st->mu);
-        ok = st->connected && !st->closed;
+        ok = st->connected && !st->closed && (to.empty() || (st->principal && st->principal->key() == to));
       }
       if (ok && addressed) {
         json::Value addressed_ev = ev;
@@ -224,12 +234,15 @@ void Node::start() {
   e.detail.set("rcan_version", svc_.settings.rcan_version);
   e.detail.set("estop_active", svc_.act.estop_active());
   svc_.write_audit(std::move(e));
+  control_start();
   pump_ = std::thread([this] { pump(); });
 }
 
 void Node::shutdown() {
   if (!running_.exchange(false)) return;
   if (pump_.joinable()) pump_.join();
+  svc_.partition.stop();
+  save_control_state();
   std::vector<std::shared_ptr<StreamState>> copy;
   {
     std::lock_guard<std::mutex> lock(streams_mu_);
@@ -264,9 +277,14 @@ void Node::unregister_stream(const std::shared_ptr<StreamState>& st) {
 
 void Node::pump() {
   // Telemetry at each stream's rate; streams that never CONNECT are closed after 10 s.
+  int64_t next_control_tick = 0;
   while (running_.load()) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
     int64_t now = svc_.clock.mono_ms();
+    if (now >= next_control_tick) {  // expiries, promotions, lease ends (session_routes.cpp)
+      next_control_tick = now + 100;
+      control_tick();
+    }
     std::vector<std::shared_ptr<StreamState>> copy;
     {
       std::lock_guard<std::mutex> lock(streams_mu_);
@@ -526,18 +544,7 @@ void Node::route(HttpRequest& req, Respond& respond) {
     }
     return run_pipeline(req, respond, p, std::move(body));
   }
-  if (p == "/rcan/v1/auth/claim") {
-    if (!method_is(req, "POST")) return wrong_method("POST");
-    return claim(req, respond);
-  }
-  if (p == "/rcan/v1/auth/release") {
-    if (!method_is(req, "DELETE") && !method_is(req, "POST")) return wrong_method("DELETE");
-    return release(req, respond);
-  }
-  if (p == "/rcan/v1/handoff") {
-    if (!method_is(req, "POST")) return wrong_method("POST");
-    return handoff(req, respond);
-  }
+  if (control_route(req, respond)) return;
   if (p == "/api/audit") {
     if (!method_is(req, "GET")) return wrong_method("GET");
     return audit_listing(req, respond);
@@ -547,156 +554,6 @@ void Node::route(HttpRequest& req, Respond& respond) {
     return audit_export(req, respond);
   }
   answer_error(respond, "other", Error(ErrorCode::kNotFound, "no route for " + p.substr(0, 128)));
-}
-
-void Node::claim(HttpRequest& req, Respond& respond) {
-  const std::string route = "/rcan/v1/auth/claim";
-  json::Value body = json::Object{};
-  if (!req.body.empty()) {
-    auto v = json::parse(req.body, {.max_depth = 16, .max_bytes = svc_.settings.codec.max_body_bytes});
-    if (!v.ok()) return answer_error(respond, route, v.error());
-    if (!v->is_object()) return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "Invalid payload"));
-    body = std::move(v).value();
-  }
-  std::string token = bearer_of(req);
-  if (token.empty())
-    if (const json::Value* t = body.get("auth_token"); t && t->is_string()) token = t->as_string();
-  auto pr = svc_.auth.authenticate_token(token, svc_.clock.wall_ms() / 1000);
-  if (!pr.ok()) {
-    auto e = svc_.entry("anonymous", "", "CLAIM_DENIED", "blocked");
-    e.reason = std::string(error_name(pr.error().code));
-    svc_.write_audit(std::move(e));
-    return answer_error(respond, route, pr.error());
-  }
-  std::optional<Role> requested;
-  if (const json::Value* r = body.get("role"); r && r->is_string()) {
-    requested = role_from_name(r->as_string());
-    if (!requested)
-      return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "unknown role", "role"));
-  }
-  if (role_level(pr->role) < role_level(Role::kUser) || !pr->has_scope("control")) {
-    auto e = svc_.entry(pr->display(), "", "CLAIM_DENIED", "blocked");
-    e.sub = pr->sub;
-    e.reason = "INSUFFICIENT_PRIVILEGES";
-    svc_.write_audit(std::move(e));
-    return answer_error(respond, route,
-                        Error(ErrorCode::kInsufficientPrivileges,
-                              std::string(role_name(pr->role)) + " may not claim control (needs USER and scope control)",
-                              "role"));
-  }
-  auto c = svc_.sessions.claim(*pr, requested, svc_.clock.mono_ms(), svc_.clock.wall_ms());
-  if (!c.ok()) {
-    auto e = svc_.entry(pr->display(), "", "CLAIM_DENIED", "blocked");
-    e.sub = pr->sub;
-    e.reason = "CONTROL_CONFLICT";
-    svc_.write_audit(std::move(e));
-    return answer_error(respond, route, c.error());
-  }
-  if (c->preempted) {
-    svc_.act.session_ended(c->preempted->id);
-    svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
-                                                 {"event", "PREEMPTED"},
-                                                 {"session_id", c->preempted->id},
-                                                 {"by_role", std::string(role_name(c->session.role))},
-                                                 {"timestamp_ms", svc_.clock.wall_ms()}}));
-  }
-  svc_.act.session_started(c->session.id, svc_.settings.heartbeat_timeout_ms);
-  auto e = svc_.entry(pr->display(), c->session.id, c->renewed ? "CLAIM_RENEWED" : "CLAIM", "ok");
-  e.sub = pr->sub;
-  if (c->preempted) e.detail.set("preempted_session", c->preempted->id);
-  json::Array caps;
-  for (int i = 0; i < kCapabilityCount; ++i) {
-    auto cap = static_cast<Capability>(i);
-    if (role_allows(c->session.role, cap, svc_.settings.role_policy)) caps.emplace_back(std::string(capability_name(cap)));
-  }
-  json::Object payload{{"session_id", c->session.id},
-                       {"role", std::string(role_name(c->session.role))},
-                       {"capabilities", caps},
-                       {"heartbeat_timeout_ms", svc_.settings.heartbeat_timeout_ms}};
-  if (c->session.expires_mono_ms)
-    payload.set("expires_in", (c->session.expires_mono_ms - svc_.clock.mono_ms()) / 1000);
-  else
-    payload.set("expires_in", json::Value());
-  if (svc_.on_grant) svc_.on_grant(c->session.id, payload);  // e.g. udp_heartbeat (src/transport/udp.h)
-  svc_.write_audit(std::move(e), [this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
-    answer_json(respond, route, 200, svc_.envelope(MessageType::kGranted, payload));
-  });
-}
-
-void Node::release(HttpRequest& req, Respond& respond) {
-  const std::string route = "/rcan/v1/auth/release";
-  auto pr = bearer_principal(req);
-  if (!pr.ok()) return answer_error(respond, route, pr.error());
-  auto v = json::parse(req.body.empty() ? "{}" : req.body, {.max_depth = 16, .max_bytes = 65536});
-  if (!v.ok()) return answer_error(respond, route, v.error());
-  const json::Value* sid = v->get("session_id");
-  std::string session_id;
-  if (sid && sid->is_string()) session_id = sid->as_string();
-  if (session_id.empty()) {
-    auto holder = svc_.sessions.controller(svc_.clock.mono_ms());
-    if (holder && holder->principal_key == pr->key()) session_id = holder->id;
-  }
-  if (session_id.empty())
-    return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "session_id is required", "session_id", "missing_field"));
-  auto r = svc_.sessions.release(session_id, *pr, svc_.clock.mono_ms());
-  if (!r.ok()) return answer_error(respond, route, r.error());
-  svc_.act.session_ended(session_id);
-  svc_.events.publish(json::Value(json::Object{{"type", "AVAILABLE"},
-                                               {"released_session", session_id},
-                                               {"window_ms", svc_.settings.handoff_window_ms},
-                                               {"timestamp_ms", svc_.clock.wall_ms()}}));
-  auto e = svc_.entry(pr->display(), session_id, "RELEASE", "ok");
-  e.sub = pr->sub;
-  svc_.write_audit(std::move(e), [this, respond, route, session_id](rcan::Result<audit::Receipt>) mutable {
-    answer_json(respond, route, 200,
-                svc_.envelope(MessageType::kReleased, json::Object{{"session_id", session_id}}));
-  });
-}
-
-void Node::handoff(HttpRequest& req, Respond& respond) {
-  const std::string route = "/rcan/v1/handoff";
-  auto pr = bearer_principal(req);
-  if (!pr.ok()) return answer_error(respond, route, pr.error());
-  auto v = json::parse(req.body.empty() ? "{}" : req.body, {.max_depth = 16, .max_bytes = 65536});
-  if (!v.ok()) return answer_error(respond, route, v.error());
-  if (!v->is_object()) return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "Invalid payload"));
-  auto str = [&](const char* k) -> std::string {
-    const json::Value* f = v->get(k);
-    return f && f->is_string() ? f->as_string().substr(0, 256) : "";
-  };
-  std::string session_id = str("session_id");
-  std::string target = str("target_user_id");
-  if (session_id.empty() || target.empty())
-    return answer_error(respond, route,
-                        Error(ErrorCode::kSchemaValidationFailed, "session_id and target_user_id are required",
-                              session_id.empty() ? "session_id" : "target_user_id", "missing_field"));
-  std::optional<Role> target_role;
-  if (std::string r = str("target_role"); !r.empty()) {
-    target_role = role_from_name(r);
-    if (!target_role) {
-      json::Value body = svc_.error(Error(ErrorCode::kSchemaValidationFailed, "unknown target_role", "target_role"));
-      body.as_object().set("valid_roles", json::Array{"CREATOR", "OWNER", "LEASEE", "USER", "GUEST"});
-      return answer_json(respond, route, 400, std::move(body));
-    }
-  }
-  int64_t window = svc_.settings.handoff_window_ms;
-  auto r = svc_.sessions.handoff(session_id, *pr, target, target_role, window, svc_.clock.mono_ms());
-  if (!r.ok()) return answer_error(respond, route, r.error());
-  svc_.act.session_ended(session_id);
-  svc_.events.publish(json::Value(json::Object{{"type", "AVAILABLE"},
-                                               {"released_session", session_id},
-                                               {"reserved_for", target},
-                                               {"window_ms", window},
-                                               {"timestamp_ms", svc_.clock.wall_ms()}}));
-  auto e = svc_.entry(pr->display(), session_id, "HANDOFF", "ok");
-  e.sub = pr->sub;
-  e.detail.set("target_user_id", target);
-  if (target_role) e.detail.set("target_role", std::string(role_name(*target_role)));
-  if (std::string reason = str("reason"); !reason.empty()) e.reason = reason;
-  json::Object payload{{"session_id", session_id}, {"target_user_id", target}, {"window_ms", window}};
-  svc_.write_audit(std::move(e), [this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
-    answer_json(respond, route, 200, svc_.envelope(MessageType::kAvailable, payload));
-  });
 }
 
 void Node::audit_listing(HttpRequest& req, Respond& respond) {

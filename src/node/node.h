@@ -55,9 +55,22 @@ class Node final : public HttpHandler, public StreamHandler {
                    std::vector<std::pair<std::string, std::string>> headers = {});
   void answer_error(Respond& respond, const std::string& route, const Error& err);
   void run_pipeline(HttpRequest& req, Respond& respond, const std::string& route, json::Value body);
-  void claim(HttpRequest& req, Respond& respond);
-  void release(HttpRequest& req, Respond& respond);
-  void handoff(HttpRequest& req, Respond& respond);
+  // Control sessions, leases, ownership transfer, consent (session_routes.cpp).
+  bool control_route(HttpRequest& req, Respond& respond);
+  void claim_route(HttpRequest& req, Respond& respond, const json::Value& body);
+  void renew_route(HttpRequest& req, Respond& respond, const json::Value& body);
+  void release_route(HttpRequest& req, Respond& respond, const json::Value& body);
+  void handoff_route(HttpRequest& req, Respond& respond, const json::Value& body);
+  void lease_route(HttpRequest& req, Respond& respond, const json::Value& body);
+  void transfer_route(HttpRequest& req, Respond& respond, const json::Value& body);
+  void consent_route(HttpRequest& req, Respond& respond, const json::Value& body);
+  Result<Principal> route_principal(const HttpRequest& req, const json::Value& body, const std::string& route,
+                                    const std::string& denied_event, Role min_role, std::string_view scope);
+  void control_start();
+  void control_tick();
+  void announce_control_changes();
+  void save_control_state();
+  void publish_to(const std::string& principal_key, json::Object ev);
   void audit_listing(HttpRequest& req, Respond& respond);
   void audit_export(HttpRequest& req, Respond& respond);
   Result<Principal> bearer_principal(const HttpRequest& req) const;
@@ -74,6 +87,10 @@ class Node final : public HttpHandler, public StreamHandler {
   std::atomic<bool> running_{false};
   std::thread pump_;
   uint64_t event_sub_ = 0;
+  std::mutex control_mu_;
+  std::string last_control_state_;
+  std::mutex save_mu_;
+  uint64_t saved_versions_[4] = {0, 0, 0, 0};
 };
 
 }  // namespace rcan::node

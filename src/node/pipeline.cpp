@@ -6,6 +6,7 @@
 #include <chrono>
 
 #include "node/fleet.h"
+#include "node/guest_limits.h"
 #include "node/log.h"
 #include "node/services.h"
 #include "rcan/errors.h"
@@ -203,6 +204,7 @@ class AuthStage final : public Stage {
       }
       ctx->principal = std::move(p).value();
     }
+    svc_.ownership.cap(ctx->principal);  // a former owner's token no longer carries ownership
     auto sig = svc_.auth.check_signature(*ctx->msg);
     if (!sig.ok()) {
       refuse(svc_, ctx, sig.error(), "AUTH_FAILED");
@@ -273,21 +275,32 @@ class AuthorizeStage final : public Stage {
       refuse(svc_, ctx, st.error(), "COMMAND_REJECTED");
       return Result::kAnswered;
     }
-    // A held control session reserves motion for its holder.
+    // A held control session reserves motion for its holder; a session that expired needs an
+    // explicit renewal (a new claim) before its principal drives again.
     if (capability_scope(cap) == "control") {
-      std::vector<Session> expired;
-      auto holder = svc_.sessions.controller(svc_.clock.mono_ms(), &expired);
-      for (const auto& s : expired) svc_.act.session_ended(s.id);
-      if (holder) {
-        if (holder->principal_key != p.key()) {
-          refuse(svc_, ctx,
-                 Error(ErrorCode::kControlConflict,
-                       "the robot is controlled by another principal; claim it first", "session"),
-                 "COMMAND_REJECTED");
-          return Result::kAnswered;
-        }
+      auto holder = svc_.sessions.controller(svc_.clock.mono_ms());
+      if (holder && holder->principal_key == p.key()) {
         ctx->session_id = holder->id;
         svc_.act.session_heartbeat(holder->id);
+      } else if (auto gone = svc_.sessions.expired_session_of(p.key())) {
+        ctx->audit_detail.set("session_id", *gone);
+        refuse(svc_, ctx, Error(ErrorCode::kSessionExpired, "the control session expired; claim control again", "session"),
+               "COMMAND_REJECTED");
+        return Result::kAnswered;
+      } else if (holder) {
+        refuse(svc_, ctx,
+               Error(ErrorCode::kControlConflict,
+                     "the robot is controlled by another principal; claim it first", "session"),
+               "COMMAND_REJECTED");
+        return Result::kAnswered;
+      } else if (NetMode nm = svc_.partition.mode();
+                 nm == NetMode::kLockdown ||
+                 (nm == NetMode::kOfflineAutonomous && !svc_.partition.cached(p, svc_.clock.wall_ms()))) {
+        // Seed §6.1: partitioned, only sessions that already exist (or cached principals) act.
+        refuse(svc_, ctx,
+               Error(ErrorCode::kLockdown, std::string(net_mode_name(nm)) + ": no new control without a session"),
+               "COMMAND_REJECTED");
+        return Result::kAnswered;
       }
     }
     return Result::kContinue;
@@ -460,6 +473,18 @@ class DispatchStage final : public Stage {
                     {"source", ctx->principal.display()},
                     {"timestamp_ms", svc_.clock.wall_ms()}};
     svc_.events.publish(json::Value(ev));
+    // Seed §5.3 safety conflict: a stop from someone other than the holder. The stop always
+    // wins (it already happened); every session is alerted.
+    auto holder = svc_.sessions.controller(svc_.clock.mono_ms());
+    if (holder && holder->principal_key != ctx->principal.key()) {
+      svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
+                                                   {"event", "SAFETY_CONFLICT"},
+                                                   {"stopped_by", ctx->principal.display()},
+                                                   {"holder_session", holder->id},
+                                                   {"timestamp_ms", svc_.clock.wall_ms()}}));
+      ctx->audit_detail.set("safety_conflict", true);
+      ctx->audit_detail.set("holder_session", holder->id);
+    }
     auto e = accepted_entry(*ctx, estop ? "ESTOP" : "STOP");
     if (!reason.empty()) e.reason = reason;
     std::string id = ctx->msg->message_id;
@@ -525,7 +550,24 @@ class DispatchStage final : public Stage {
         return;
       }
       int64_t t0 = mono_us();
-      auto applied = svc_.act.apply(*cmd);
+      std::optional<rcan::Result<json::Value>> result;
+      auto apply = [&] { result = svc_.act.apply(*cmd); };
+      if (ctx->session_id.empty()) {
+        apply();
+      } else if (!svc_.sessions.run_if_live(ctx->session_id, svc_.clock.mono_ms(), apply)) {
+        // Its control session ended (pre-empted, expired, revoked) while it was in flight.
+        auto drop = svc_.entry(ctx->principal.display(), id, "COMMAND_DROPPED", "blocked");
+        drop.sender_type = std::string(sender_type_name(ctx->sender.sender_type));
+        drop.sub = ctx->principal.sub;
+        drop.reason = "session_ended";
+        drop.detail.set("session_id", ctx->session_id);
+        svc_.write_audit(std::move(drop));
+        Error err(ErrorCode::kControlConflict, "the control session ended before the command reached the robot",
+                  "session", "session_ended");
+        ctx->finish(Outcome{http_status(err.code), svc_.error(err, id), {}});
+        return;
+      }
+      auto& applied = *result;
       svc_.metrics.stage("apply").observe_us(static_cast<double>(mono_us() - t0));
       if (!applied.ok()) {
         // An ESTOP overtook this command between its record and the driver: say so in a
@@ -646,6 +688,7 @@ std::vector<std::unique_ptr<Stage>> Pipeline::standard_stages(NodeServices& s) {
   v.push_back(std::make_unique<AuthStage>(s));
   v.push_back(make_fleet_stage(s));  // fleet.cpp
   v.push_back(std::make_unique<AuthorizeStage>(s));
+  v.push_back(make_guest_limit_stage(s));
   v.push_back(std::make_unique<RateLimitStage>(s));
   v.push_back(std::make_unique<SafetyStateStage>(s));
   v.push_back(std::make_unique<InjectionStage>(s));

@@ -27,6 +27,10 @@ audit::AuditEntry NodeServices::entry(const std::string& principal, const std::s
 }
 
 void NodeServices::write_audit(audit::AuditEntry e, std::function<void(Result<audit::Receipt>)> cb) {
+  if (NetMode m = partition.mode(); m != NetMode::kNormal) {  // seed §6.1 log_for_sync()
+    e.detail.set("partition_mode", std::string(net_mode_name(m)));
+    e.detail.set("sync_pending", true);
+  }
   metrics.count_audit(e.event);
   audit_inflight.fetch_add(1, std::memory_order_relaxed);
   audit.append_async(std::move(e), [this, cb = std::move(cb)](Result<audit::Receipt> r) {
@@ -70,7 +74,13 @@ json::Value NodeServices::status(bool detailed) {
   for (const auto& e : settings.extensions) ext.emplace_back(e);
   o.set("extensions", ext);
   o.set("estop_active", act.estop_active());
-  o.set("mode", "NORMAL");  // OFFLINE_AUTONOMOUS / LOCKDOWN come with the sessions work
+  o.set("mode", std::string(net_mode_name(partition.mode())));
+  o.set("control", std::string(control_state_name(sessions.state(now))));
+  if (detailed) {
+    o.set("partition", partition.status_json(clock.wall_ms()));
+    o.set("ownership", ownership.to_json(clock.wall_ms(), false));
+    o.set("control_queue", sessions.queue_json(now));
+  }
   o.set("audit_available", !audit_unavailable.load());
   json::Value session_list = sessions.to_json(now, detailed);
   o.set("active_sessions", static_cast<int64_t>(session_list.as_array().size()));

@@ -14,9 +14,12 @@
 #include "node/actuation.h"
 #include "node/auth.h"
 #include "node/clock.h"
+#include "node/consent.h"
 #include "node/events.h"
 #include "node/injection.h"
 #include "node/metrics.h"
+#include "node/ownership.h"
+#include "node/partition.h"
 #include "node/rate_limit.h"
 #include "node/replay.h"
 #include "node/sessions.h"
@@ -26,7 +29,7 @@
 
 namespace rcan::node {
 
-struct FleetPolicy;
+struct FleetMembership;
 class AiServices;  // §16 gates, HiTL queue, thought log, watermark (ai.h)
 
 struct NodeSettings {
@@ -51,6 +54,9 @@ struct NodeSettings {
   int telemetry_hz = 5;
   size_t audit_listing = 50;  // entries in GET /api/audit
   int64_t handoff_window_ms = 30'000;
+  GuestLimits guest_limits;     // seed §6.3 (guest_limits.h)
+  std::string state_dir;        // leases, ownership, consent, credential cache ("" = not kept)
+  std::string consent_webhook;  // http:// URL the owner notification is POSTed to ("" = none)
 };
 
 class NodeServices {
@@ -67,10 +73,13 @@ class NodeServices {
   Actuation& act;
   audit::AuditLog& audit;
   SessionTable sessions;
+  Ownership ownership;
+  ConsentBook consent;
+  PartitionMonitor partition;
   EventBus events;
   Metrics metrics;
   // The robot's fleet membership (fleet.h); null when it is in no fleet.
-  std::shared_ptr<const FleetPolicy> fleet;
+  std::shared_ptr<const FleetMembership> fleet;
   std::atomic<uint64_t> audit_inflight{0};
   std::atomic<uint64_t> audit_failures{0};
   std::atomic<bool> audit_unavailable{false};

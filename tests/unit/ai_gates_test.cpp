@@ -469,7 +469,13 @@ TEST(AiHitlRestart, AnUnreadablePendingFileIsMovedAsideAndAudited) {
     moved = moved || e.path().filename().string().rfind("hitl-pending.json.unreadable-", 0) == 0;
   EXPECT_TRUE(moved);
   EXPECT_EQ(parse(node.get("/rcan/v1/pending", node.owner()).body).get("pending")->as_array().size(), 0u);
-  HttpReply audit = node.get("/api/audit?limit=100", node.owner());
+  // The record is written asynchronously at start-up: wait for it to be durable.
+  HttpReply audit;
+  for (int i = 0; i < 250; ++i) {
+    audit = node.get("/api/audit?limit=100", node.owner());
+    if (audit.body.find("HITL_PENDING_LOST") != std::string::npos) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
   EXPECT_NE(audit.body.find("HITL_PENDING_LOST"), std::string::npos);
 }
 

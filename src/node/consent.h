@@ -1,0 +1,64 @@
+// Consent requests (§8.5 "Consent Requests from Cloud Functions"; docs/SESSIONS.md): a party
+// (human, robot or cloud function) asks the owner for access with scopes; the owner is told
+// (stream + webhook) with the seed's notification payload and grants (a scoped, time-bound
+// lease or grant) or denies. Pending requests expire.
+#pragma once
+
+#include <cstdint>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "rcan/json.h"
+#include "rcan/result.h"
+
+namespace rcan::node {
+
+struct ConsentRequest {
+  std::string id;
+  std::string requester_sub;
+  std::string sender_type = "human";
+  std::string cloud_provider;
+  std::string function_name;
+  std::string on_behalf_of;
+  std::string reason;
+  std::vector<std::string> scopes;
+  int64_t duration_s = 3600;
+  int64_t created_ms = 0;
+  int64_t expires_ms = 0;
+  std::string status = "PENDING";  // PENDING, GRANTED, DENIED, EXPIRED
+  std::string decided_by;
+  int64_t decided_ms = 0;
+  std::string grant_kind;  // "lease" | "grant"
+  std::string lease_id;
+  json::Value to_json() const;
+};
+
+// The owner notification of §8.5: for a cloud function its identity is in title, body and
+// highlight; a human request says who asks.
+json::Value consent_notification(const ConsentRequest& r, const std::string& robot_name);
+
+class ConsentBook {
+ public:
+  void set_pending_ttl_ms(int64_t ms) { ttl_ms_ = ms; }
+  // Errors: CONTROL_CONFLICT when too many are pending.
+  Result<ConsentRequest> add(ConsentRequest r, int64_t now_ms);
+  Result<ConsentRequest> get(const std::string& id);
+  // Errors: NOT_FOUND, CONTROL_CONFLICT (already decided), SESSION_EXPIRED.
+  Result<ConsentRequest> decide(const std::string& id, bool grant, const std::string& by, const std::string& kind,
+                                const std::string& lease_id, int64_t now_ms);
+  std::vector<ConsentRequest> expire(int64_t now_ms);
+  std::vector<ConsentRequest> list();
+  void clear();
+  json::Value persist_json();
+  void load_json(const json::Value& v);
+  uint64_t version();
+
+ private:
+  std::mutex mu_;
+  std::vector<ConsentRequest> items_;
+  int64_t ttl_ms_ = 24 * 3600 * 1000LL;
+  uint64_t version_ = 0;
+};
+
+}  // namespace rcan::node
