@@ -47,4 +47,22 @@ std::string token_from(const Options& o, bool required, std::string& err) {
   return s;
 }
 
+std::string node_url(const Options& o) {
+  std::string url = o.get("url");
+  if (url.empty())
+    if (const char* env = std::getenv("RCAN_URL")) url = env;
+  return url.empty() ? "http://127.0.0.1:8080" : url;
+}
+
+std::string node_token(const Options& o, bool required, std::string& err) { return token_from(o, required, err); }
+
+Result<std::pair<int, std::string>> node_request(const std::string& url, const std::string& method,
+                                                 const std::string& path, const std::string& body,
+                                                 const std::string& token) {
+  auto t = parse_url(url);
+  if (!t.ok()) return t.error();
+  return request(*t, method, path, body, token);
+}
+
+
 }  // namespace rcan::cli
