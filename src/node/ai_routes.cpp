@@ -25,13 +25,7 @@ void answer_error(NodeServices& svc, const HttpHandler::Respond& respond, const 
 }
 
 Result<Principal> bearer(NodeServices& svc, const HttpRequest& req) {
-  std::string_view auth = req.header("authorization");
-  std::string token;
-  if (auth.size() > 7 && (auth.substr(0, 7) == "Bearer " || auth.substr(0, 7) == "bearer "))
-    token = std::string(auth.substr(7));
-  else if (!auth.empty())
-    return Error(ErrorCode::kAuthInvalid, "the Authorization header must be 'Bearer <token>'", "authorization");
-  return svc.auth.authenticate_token(token, svc.clock.wall_ms() / 1000);
+  return svc.authenticate_header(req.header("authorization"));
 }
 
 bool wrong_method(NodeServices& svc, const HttpRequest& req, const HttpHandler::Respond& respond,

@@ -86,7 +86,7 @@ void StreamSessionImpl::on_text(std::string text) {
       const json::Value* tk = v->get(k);
       if (tk && tk->is_string() && !tk->as_string().empty()) token = tk->as_string();
     }
-    auto p = svc.auth.authenticate_token(token, svc.clock.wall_ms() / 1000);
+    auto p = svc.authenticate(token);
     if (!p.ok()) {
       auto e = svc.entry("anonymous", "", "STREAM_REFUSED", "blocked");
       e.reason = std::string(error_name(p.error().code));
@@ -354,7 +354,7 @@ std::unique_ptr<StreamSession> Node::open(const HttpRequest& upgrade, std::share
     st->upgrade_token = std::string(upgrade.query_value("token"));
   if (upgrade.path == "/ws/telemetry") {
     // v1.1 telemetry socket: the token is in the query; telemetry starts at once.
-    auto p = svc_.auth.authenticate_token(st->upgrade_token, svc_.clock.wall_ms() / 1000);
+    auto p = svc_.authenticate(st->upgrade_token);
     if (!p.ok()) {
       refusal.status = http_status(p.error().code);
       refusal.body = json::dump(svc_.error(p.error()));
@@ -387,13 +387,7 @@ void Node::answer_error(Respond& respond, const std::string& route, const Error&
 }
 
 Result<Principal> Node::bearer_principal(const HttpRequest& req) const {
-  std::string_view auth = req.header("authorization");
-  std::string token;
-  if (auth.size() > 7 && (auth.substr(0, 7) == "Bearer " || auth.substr(0, 7) == "bearer "))
-    token = std::string(auth.substr(7));
-  else if (!auth.empty())
-    return Error(ErrorCode::kAuthInvalid, "the Authorization header must be 'Bearer <token>'", "authorization");
-  return svc_.auth.authenticate_token(token, svc_.clock.wall_ms() / 1000);
+  return svc_.authenticate_header(req.header("authorization"));
 }
 
 void Node::handle(HttpRequest req, Respond respond) {

@@ -197,7 +197,7 @@ class AuthStage final : public Stage {
         return Result::kAnswered;
       }
     } else {
-      auto p = svc_.auth.authenticate_token(token_of(*ctx), svc_.clock.wall_ms() / 1000);
+      auto p = svc_.authenticate(token_of(*ctx));
       if (!p.ok()) {
         refuse(svc_, ctx, p.error(), "AUTH_FAILED");
         return Result::kAnswered;

@@ -43,6 +43,22 @@ void NodeServices::write_audit(audit::AuditEntry e, std::function<void(Result<au
   });
 }
 
+Result<Principal> NodeServices::authenticate(std::string_view token) const {
+  auto p = auth.authenticate_token(token, clock.wall_ms() / 1000);
+  if (p.ok()) ownership.cap(*p);
+  return p;
+}
+
+Result<Principal> NodeServices::authenticate_header(std::string_view authorization) const {
+  std::string_view token;
+  if (authorization.size() > 7 &&
+      (authorization.substr(0, 7) == "Bearer " || authorization.substr(0, 7) == "bearer "))
+    token = authorization.substr(7);
+  else if (!authorization.empty())
+    return Error(ErrorCode::kAuthInvalid, "the Authorization header must be 'Bearer <token>'", "authorization");
+  return authenticate(token);
+}
+
 json::Value NodeServices::discovery_info() const {
   json::Object o;
   o.set("ruri", settings.ruri);

@@ -96,6 +96,13 @@ class NodeServices {
 
   uint32_t rate_limit(Role r) const { return settings.rate_per_minute[static_cast<size_t>(role_level(r))]; }
 
+  // The one way a token becomes a principal outside the pipeline's own stage: verified (JWT,
+  // audience, expiry) and then limited by the node's state (a former owner's token no longer
+  // carries ownership). Errors: AUTH_REQUIRED (empty), AUTH_INVALID.
+  Result<Principal> authenticate(std::string_view token) const;
+  // The same from an Authorization header value ("Bearer <token>"; empty → AUTH_REQUIRED).
+  Result<Principal> authenticate_header(std::string_view authorization) const;
+
   json::Value discovery_info() const;
   json::Value status(bool detailed);
   // A fresh message envelope from the node (type, payload), seed shape.

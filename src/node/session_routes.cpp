@@ -54,7 +54,7 @@ Result<Principal> Node::route_principal(const HttpRequest& req, const json::Valu
     pr = Error(ErrorCode::kAuthInvalid, "the Authorization header must be 'Bearer <token>'", "authorization");
   } else {
     if (token.empty()) token = str_field(body, "auth_token", 16384);
-    if (!token.empty()) pr = svc_.auth.authenticate_token(token, svc_.clock.wall_ms() / 1000);
+    if (!token.empty()) pr = svc_.authenticate(token);
   }
   auto refuse_audit = [&](const Error& err, const Principal* p) {
     auto e = svc_.entry(p ? p->display() : "anonymous", "", denied_event, "blocked");
@@ -68,7 +68,6 @@ Result<Principal> Node::route_principal(const HttpRequest& req, const json::Valu
     return pr.error();
   }
   Principal p = std::move(pr).value();
-  svc_.ownership.cap(p);
   if (role_level(p.role) < role_level(min_role) || (!scope.empty() && !p.has_scope(scope))) {
     Error err(ErrorCode::kInsufficientPrivileges,
               std::string(role_name(p.role)) + " may not use " + route + " (needs " + std::string(role_name(min_role)) +

@@ -195,7 +195,7 @@ void SwarmAgent::handle_join(const json::Value& body) {
     svc_.write_audit(std::move(e));
   };
   // The same checks as every other inbound message: a verified token and a fresh, unseen id.
-  auto principal = svc_.auth.authenticate_token(str_of(body, "auth_token"), svc_.clock.wall_ms() / 1000);
+  auto principal = svc_.authenticate(str_of(body, "auth_token"));
   if (!principal.ok()) {
     record(type, "blocked", "anonymous", std::string(error_name(principal.error().code)));
     answer(member, "DENIED", id, std::string(error_name(principal.error().code)));

@@ -128,7 +128,7 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
     bearer_ = bearer_of(ctx);
     node::NodeServices& svc = impl_.svc;
     if (!bearer_.empty()) {
-      auto p = svc.auth.authenticate_token(bearer_, svc.clock.wall_ms() / 1000);
+      auto p = svc.authenticate(bearer_);
       if (!p.ok()) {
         auto e = svc.entry("anonymous", "", "STREAM_REFUSED", "blocked");
         e.reason = std::string(error_name(p.error().code));

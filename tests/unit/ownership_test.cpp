@@ -135,6 +135,10 @@ TEST_F(OwnershipE2E, TransferAcceptedClearsPersonalDataKeepsTheChainAndCapsTheFo
   // The former owner's token is a GUEST now; the new owner has the owner's powers.
   HttpReply old_claim = n().post("/rcan/v1/auth/claim", "{}", owner_);
   EXPECT_EQ(old_claim.status, 403);
+  // …on every route that reads a bearer token, not only the control routes: the owner-only
+  // chain export refuses it too.
+  EXPECT_EQ(n().get("/api/v1/audit?format=jsonl", owner_).status, 403);
+  EXPECT_EQ(n().get("/api/v1/audit?format=jsonl", bob).status, 200);
   EXPECT_EQ(cli({"lease", "grant", "--leasee", "x"}, owner_file_).exit_code, 1);
   EXPECT_EQ(cli({"transfer", "request", "--to", "alice"}, owner_file_).exit_code, 1);
   EXPECT_EQ(cli({"lease", "grant", "--leasee", "x", "--duration", "10m"}, bob_file).exit_code, 0);
