@@ -11,11 +11,12 @@
 //
 // Repeats each round --rounds times and prints percentiles over all robot×round samples.
 //
-//   fleet_bench [--robots 200] [--rounds 5] [--mosquitto /usr/sbin/mosquitto]
+//   fleet_bench [--robots 200] [--rounds 5] [--segment-kib 1024] [--mosquitto /usr/sbin/mosquitto]
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <netinet/in.h>
 #include <signal.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -54,6 +55,14 @@ using namespace rcan;
 namespace fs = std::filesystem;
 
 namespace {
+
+// CPU seconds used by this process so far (every robot's threads).
+double cpu_now() {
+  rusage ru{};
+  getrusage(RUSAGE_SELF, &ru);
+  return static_cast<double>(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) +
+         static_cast<double>(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec) / 1e6;
+}
 
 double mono_ms() {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
@@ -182,15 +191,21 @@ class Coordinator {
 
 int main(int argc, char** argv) {
   int robots_n = 200, rounds = 5;
+  // Each robot's audit log preallocates its active segment and a spare (zero-filled, see
+  // docs/AUDIT.md §Durability). A real robot does that once on its own storage; 200 robots
+  // in one process would write 2 × 200 × 64 MiB to one disk while being measured, so the
+  // bench gives each log 1 MiB segments (--segment-kib) — the records and fsyncs are the same.
+  uint64_t segment_bytes = 1024ull << 10;
   std::string mosquitto = "/usr/sbin/mosquitto";
   for (int i = 1; i + 1 < argc; i += 2) {
     std::string a = argv[i];
     if (a == "--robots") robots_n = std::atoi(argv[i + 1]);
     else if (a == "--rounds") rounds = std::atoi(argv[i + 1]);
     else if (a == "--mosquitto") mosquitto = argv[i + 1];
+    else if (a == "--segment-kib") segment_bytes = std::strtoull(argv[i + 1], nullptr, 10) << 10;
   }
-  if (robots_n < 1 || robots_n > 2000 || rounds < 1 || rounds > 1000) {
-    std::fprintf(stderr, "usage: fleet_bench [--robots 1..2000] [--rounds 1..1000] [--mosquitto PATH]\n");
+  if (robots_n < 1 || robots_n > 2000 || rounds < 1 || rounds > 1000 || segment_bytes < (64u << 10)) {
+    std::fprintf(stderr, "usage: fleet_bench [--robots 1..2000] [--rounds 1..1000] [--segment-kib N] [--mosquitto PATH]\n");
     return 2;
   }
   node::set_log_level(node::LogLevel::kError);
@@ -201,7 +216,7 @@ int main(int argc, char** argv) {
   // The broker.
   uint16_t port = free_port();
   std::ofstream(dir / "mosquitto.conf") << "listener " << port
-                                        << " 127.0.0.1\nallow_anonymous true\npersistence false\nmax_queued_messages 10000\n";
+                                        << " 127.0.0.1\nset_tcp_nodelay true\nallow_anonymous true\npersistence false\nmax_queued_messages 10000\n";
   pid_t broker = fork();
   if (broker == 0) {
     int devnull = ::open("/dev/null", O_WRONLY);
@@ -259,6 +274,7 @@ int main(int argc, char** argv) {
     audit::AuditOptions ao;
     ao.secret = "bench-chain-secret-0123456789";
     ao.robot_ruri = ruri;
+    ao.max_segment_bytes = segment_bytes;
     auto log = audit::AuditLog::open((rd / "audit").string(), std::move(ao));
     if (!log.ok()) {
       std::fprintf(stderr, "audit log: %s\n", log.error().message.c_str());
@@ -310,6 +326,13 @@ int main(int argc, char** argv) {
   std::this_thread::sleep_for(std::chrono::milliseconds(500));  // subscriptions settle
   std::printf("fleet_bench: %d robots (full node stacks, one MQTT connection each) on one Mosquitto, up in %.0f ms\n",
               robots_n, mono_ms() - t_start);
+  {  // What the idle fleet costs: CPU of this process (all robots) over 2 s with no traffic.
+    double c0 = cpu_now(), w0 = mono_ms();
+    std::this_thread::sleep_for(std::chrono::seconds(2));
+    double share = (cpu_now() - c0) / ((mono_ms() - w0) / 1000.0);
+    std::printf("idle: %.1f%% of one core for %d robots (%.0f us of CPU per robot per second)\n", share * 100, robots_n,
+                share * 1e6 / robots_n);
+  }
 
   Coordinator coord(url);
   auto msg = [&](const std::string& type, json::Object payload, const std::string& id) {
@@ -321,6 +344,7 @@ int main(int argc, char** argv) {
                                     {"payload", std::move(payload)}});
   };
   std::vector<double> latch, estop_ack, status_ack, move_ack;
+  double estop_cpu_ms = 0;
   size_t n = static_cast<size_t>(robots_n);
   int failures = 0;
   for (int round = 0; round < rounds; ++round) {
@@ -328,10 +352,12 @@ int main(int argc, char** argv) {
     double t0 = 0;
     int errors = 0;
     std::string id = new_uuid_v4();
+    double cpu0 = cpu_now();
     auto acks = coord.round("rcan/fleet/bench/estop",
                             msg("SAFETY", json::Object{{"safety_event", "ESTOP"}, {"fleet_id", "bench"}}, id), id, 2,
                             true, n, &t0, 10000, &errors);
     for (auto& [m, t] : acks) estop_ack.push_back(t - t0);
+    estop_cpu_ms += (cpu_now() - cpu0) * 1000;
     for (auto& r : robots) {
       double t = r->timed->latched_at.load();
       if (t > 0) latch.push_back(t - t0);
@@ -363,6 +389,8 @@ int main(int argc, char** argv) {
   size_t expected = n * static_cast<size_t>(rounds);
   report("fleet ESTOP publish -> latched", latch, expected);
   report("fleet ESTOP publish -> ACK back", estop_ack, expected);
+  std::printf("fleet ESTOP CPU (all robots, publish to last ACK): %.1f ms per round, %.0f us per robot\n",
+              estop_cpu_ms / rounds, estop_cpu_ms * 1000 / rounds / robots_n);
   report("broadcast status -> ACK back", status_ack, expected);
   report("broadcast move -> ACK back", move_ack, expected);
   std::printf("refused or missing answers: %d\n", failures);

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <atomic>
+#include <condition_variable>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -86,6 +87,8 @@ class Node final : public HttpHandler, public StreamHandler {
   std::vector<std::shared_ptr<StreamState>> streams_;
   std::atomic<bool> running_{false};
   std::thread pump_;
+  std::mutex pump_mu_;
+  std::condition_variable pump_cv_;  // wakes the pump on a new stream and on shutdown
   uint64_t event_sub_ = 0;
   std::mutex control_mu_;
   std::string last_control_state_;

@@ -143,6 +143,9 @@ Status MqttClient::start() {
   if (impl_->m == nullptr) return Error(ErrorCode::kInternal, "mosquitto_new failed");
   mosquitto* m = impl_->m;
   mosquitto_int_option(m, MOSQ_OPT_PROTOCOL_VERSION, MQTT_PROTOCOL_V311);
+  // Small packets (a QoS 2 ESTOP is PUBLISH/PUBREC/PUBREL/PUBCOMP) must not wait for
+  // Nagle's algorithm behind the peer's delayed ACK (~40 ms per exchange on Linux).
+  mosquitto_int_option(m, MOSQ_OPT_TCP_NODELAY, 1);
   mosquitto_connect_callback_set(m, &MqttCallbacks::on_connect);
   mosquitto_disconnect_callback_set(m, &MqttCallbacks::on_disconnect);
   mosquitto_message_callback_set(m, &MqttCallbacks::on_message);
