@@ -349,7 +349,7 @@ class SafetyStateStage final : public Stage {
              "COMMAND_REJECTED");
       return Result::kAnswered;
     }
-    if (svc_.audit_unavailable.load()) {
+    if (!svc_.audit.available()) {
       refuse(svc_, ctx,
              Error(ErrorCode::kAuditUnavailable,
                    "the audit log cannot record; commands are refused until it can (ESTOP still works)"),

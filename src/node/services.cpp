@@ -38,6 +38,8 @@ void NodeServices::write_audit(audit::AuditEntry e, std::function<void(Result<au
     if (!r.ok()) {
       audit_failures.fetch_add(1, std::memory_order_relaxed);
       if (r.error().code == ErrorCode::kAuditUnavailable) audit_unavailable.store(true);
+    } else {
+      audit_unavailable.store(false);  // the log recovered (AuditLog::available() is the live state)
     }
     if (cb) cb(std::move(r));
   });
@@ -97,7 +99,7 @@ json::Value NodeServices::status(bool detailed) {
     o.set("ownership", ownership.to_json(clock.wall_ms(), false));
     o.set("control_queue", sessions.queue_json(now));
   }
-  o.set("audit_available", !audit_unavailable.load());
+  o.set("audit_available", audit.available());
   json::Value session_list = sessions.to_json(now, detailed);
   o.set("active_sessions", static_cast<int64_t>(session_list.as_array().size()));
   o.set("sessions", session_list);
