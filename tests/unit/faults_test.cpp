@@ -1,0 +1,402 @@
+// Fail closed under real faults (docs/AUDIT.md §Faults, docs/NODE.md §Faults): a real rcand whose
+// audit store is a small tmpfs that the test fills up and empties again, a real rcand whose wall
+// clock libfaketime steps forwards and back while it runs (the monotonic clock untouched), and a
+// real Mosquitto broker stopped under a robot. After each, the audit chain is verified with
+// `rcan audit verify`.
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <sys/mount.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <memory>
+#include <set>
+#include <thread>
+
+#include "rcan/crypto/ed25519.h"
+#include "rcan/crypto/jwt.h"
+#include "rcan/encoding.h"
+#include "rcan/errors.h"
+#include "rcan/hash.h"
+#include "rcan/json.h"
+#include "test_support.h"
+
+namespace rcan {
+namespace {
+
+namespace fs = std::filesystem;
+using test::HttpReply;
+
+int64_t real_wall_ms() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+json::Value parse(const std::string& s) {
+  auto v = json::parse(s, {.max_depth = 128, .max_bytes = 64u << 20});
+  EXPECT_TRUE(v.ok()) << s.substr(0, 300);
+  return v.ok() ? *v : json::Value();
+}
+
+std::string error_code(const HttpReply& r) {
+  json::Value v = parse(r.body);
+  const json::Value* p = v.get("payload");
+  const json::Value* c = p ? p->get("error_code") : nullptr;
+  return c && c->is_string() ? c->as_string() : "";
+}
+
+// Polls `pred` every 20 ms until it holds or `timeout_ms` passes (a bound, never a measurement).
+bool eventually(const std::function<bool()>& pred, int timeout_ms = 10000) {
+  auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  while (std::chrono::steady_clock::now() < end) {
+    if (pred()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return pred();
+}
+
+void write_text(const std::string& path, const std::string& text) {
+  std::ofstream out(path, std::ios::trunc);
+  out << text;
+}
+
+// A configured rcand: robot keys and chain secret made with the CLI, an Ed25519 test issuer,
+// `security_yaml` added inside the security block, `extra_yaml` at the top level, and extra
+// environment variables for the process (libfaketime).
+class Node {
+ public:
+  static constexpr const char* kRuri = "rcan://local.rcan/acme/rover/0a1b2c3d";
+
+  Node(const std::string& root, std::string security_yaml, std::string extra_yaml, std::vector<std::string> env = {})
+      : root_(root), env_(std::move(env)) {
+    data_ = root_ + "/data";
+    fs::create_directories(data_);
+    fs::permissions(data_, fs::perms::owner_all);
+    EXPECT_EQ(test::run_cli({"keys", "generate", "--dir", data_ + "/keys"}).exit_code, 0);
+    EXPECT_EQ(test::run_cli({"audit", "new-secret", "--out", data_ + "/audit.secret"}).exit_code, 0);
+    seed_file_ = root_ + "/issuer.seed";
+    uint8_t seed[32];
+    EXPECT_TRUE(random_bytes(seed, sizeof seed));
+    {
+      std::ofstream out(seed_file_, std::ios::binary);
+      out.write(reinterpret_cast<const char*>(seed), sizeof seed);
+    }
+    fs::permissions(seed_file_, fs::perms::owner_read | fs::perms::owner_write);
+    auto pk = ed25519::public_key_from_seed(std::span<const uint8_t>(seed, sizeof seed));
+    EXPECT_TRUE(pk.ok());
+    auto pem = ed25519::public_key_to_pem(*pk);
+    EXPECT_TRUE(pem.ok());
+    write_text(root_ + "/issuer.pub.pem", *pem);
+    write_text(root_ + "/robot.rcan.yaml",
+               std::string("rcan_version: \"1.2\"\nruri: ") + kRuri +
+                   "\nrobot:\n  name: fault-rover\n  manufacturer: acme\n  model: rover\n  type: mobile\n"
+                   "safety:\n  local_safety_wins: true\n"
+                   "driver:\n  type: sim\n  sim:\n    tick_hz: 200\n"
+                   "security:\n  jwt:\n    issuers:\n      - issuer: test.local\n        key_file: " +
+                   root_ + "/issuer.pub.pem\n" + security_yaml + extra_yaml);
+  }
+  ~Node() { stop(); }
+
+  bool start() {
+    proc_ = std::make_unique<test::Process>();
+    if (!proc_->start({RCAND_PATH, "--config", root_ + "/robot.rcan.yaml", "--port", "0", "--data-dir", data_},
+                      env_)) {
+      ADD_FAILURE() << "cannot start rcand";
+      return false;
+    }
+    auto line = proc_->wait_for_line("\"event\":\"listening\"", 60000);
+    if (!line) {
+      ADD_FAILURE() << "rcand did not start:\n" << proc_->err();
+      return false;
+    }
+    std::string url = parse(*line).get("url")->as_string();
+    port_ = static_cast<uint16_t>(std::stoi(url.substr(url.rfind(':') + 1)));
+    return true;
+  }
+  int stop() {
+    if (!proc_ || !proc_->running()) return 0;
+    return proc_->stop(SIGTERM, 15000);
+  }
+  test::Process& proc() { return *proc_; }
+  uint16_t port() const { return port_; }
+  const std::string& data_dir() const { return data_; }
+  std::string secret_file() const { return data_ + "/audit.secret"; }
+
+  // A token from the test issuer; iat/exp are relative to `now_s` (the node's clock by default
+  // the real one), valid from `before_s` before it to `after_s` after it.
+  std::string token(const std::string& role, std::vector<std::string> scopes, const std::string& sub,
+                    int64_t before_s = 5, int64_t after_s = 3600) const {
+    auto key = jwt::SigningKey::from_file(seed_file_);
+    EXPECT_TRUE(key.ok());
+    int64_t now = real_wall_ms() / 1000;
+    json::Array sc;
+    for (auto& s : scopes) sc.emplace_back(s);
+    json::Object claims{{"iss", "test.local"}, {"sub", sub},          {"aud", kRuri},
+                        {"role", role},         {"scope", sc},         {"iat", now - before_s},
+                        {"exp", now + after_s}};
+    auto t = jwt::issue(claims, *key);
+    EXPECT_TRUE(t.ok());
+    return t.ok() ? *t : "";
+  }
+
+  HttpReply call(const std::string& method, const std::string& path, const std::string& body,
+                 const std::string& tok) const {
+    std::vector<std::pair<std::string, std::string>> h;
+    if (!tok.empty()) h.emplace_back("Authorization", "Bearer " + tok);
+    return test::http(port_, method, path, body, h);
+  }
+  HttpReply get(const std::string& path, const std::string& tok = "") const { return call("GET", path, "", tok); }
+  HttpReply post(const std::string& path, const std::string& body, const std::string& tok) const {
+    return call("POST", path, body, tok);
+  }
+  json::Value status(const std::string& tok) const { return parse(get("/rcan/v1/status", tok).body); }
+
+  // One metric line `name value` on /metrics (-1 when absent).
+  double metric(const std::string& name) const {
+    HttpReply r = get("/metrics");
+    size_t at = 0;
+    while ((at = r.body.find(name, at)) != std::string::npos) {
+      bool line_start = at == 0 || r.body[at - 1] == '\n';
+      size_t sp = at + name.size();
+      if (line_start && sp < r.body.size() && r.body[sp] == ' ') return std::stod(r.body.substr(sp + 1));
+      at = sp;
+    }
+    return -1;
+  }
+
+ private:
+  std::string root_, data_, seed_file_;
+  std::vector<std::string> env_;
+  std::unique_ptr<test::Process> proc_;
+  uint16_t port_ = 0;
+};
+
+std::string command(const std::string& action, json::Object params = {}, std::string id = "", int64_t ts = 0) {
+  json::Object payload{{"action", action}};
+  for (auto& m : params) payload.set(m.first, m.second);
+  json::Object m{{"version", "1.0.0"},
+                 {"message_id", id.empty() ? new_uuid_v4() : id},
+                 {"type", "COMMAND"},
+                 {"timestamp_ms", ts ? ts : real_wall_ms()},
+                 {"payload", payload}};
+  return json::dump(json::Value(m));
+}
+
+// `rcan audit verify --data-dir` on a stopped node's audit directory, and its records.
+void expect_chain_verifies(const std::string& audit_dir, const std::string& secret_file) {
+  auto v = test::run_cli({"audit", "verify", "--data-dir", audit_dir, "--secret-file", secret_file});
+  EXPECT_EQ(v.exit_code, 0) << v.out << v.err;
+  EXPECT_NE(v.out.find("ok:"), std::string::npos) << v.out;
+}
+
+std::vector<json::Value> exported(const std::string& audit_dir) {
+  auto e = test::run_cli({"audit", "export", "--data-dir", audit_dir});
+  EXPECT_EQ(e.exit_code, 0) << e.err;
+  std::vector<json::Value> out;
+  size_t pos = 0;
+  while (pos < e.out.size()) {
+    size_t nl = e.out.find('\n', pos);
+    if (nl == std::string::npos) nl = e.out.size();
+    if (nl > pos) out.push_back(parse(e.out.substr(pos, nl - pos)));
+    pos = nl + 1;
+  }
+  return out;
+}
+
+// The simulated robot's base (odometry, target speed) from a detailed status.
+double base_number(const json::Value& status, const char* key) {
+  const json::Value* r = status.get("robot");
+  const json::Value* rr = r ? r->get("robot") : nullptr;
+  const json::Value* b = rr ? rr->get("base") : nullptr;
+  const json::Value* f = b ? b->get(key) : nullptr;
+  EXPECT_TRUE(f && f->is_number()) << json::dump(status).substr(0, 400);
+  return f && f->is_number() ? f->to_double() : -1;
+}
+
+std::string str(const json::Value& v, const char* key) {
+  const json::Value* f = v.is_object() ? v.get(key) : nullptr;
+  return f && f->is_string() ? f->as_string() : "";
+}
+
+// ------------------------------------------------------------------------------------------
+// Disk full: the audit directory on a small tmpfs.
+
+class Tmpfs {
+ public:
+  // Mounts a tmpfs of `bytes` at `dir`; ok() false (with why()) when this machine cannot.
+  Tmpfs(const std::string& dir, uint64_t bytes) : dir_(dir) {
+    fs::create_directories(dir_);
+    std::string opts = "size=" + std::to_string(bytes) + ",mode=0700";
+    if (::mount("tmpfs", dir_.c_str(), "tmpfs", MS_NOSUID | MS_NODEV, opts.c_str()) != 0) {
+      why_ = std::string("mount -t tmpfs: ") + std::strerror(errno);
+      return;
+    }
+    mounted_ = true;
+  }
+  ~Tmpfs() {
+    if (mounted_) ::umount2(dir_.c_str(), MNT_DETACH);
+  }
+  bool ok() const { return mounted_; }
+  const std::string& why() const { return why_; }
+
+  // Writes a file until the file system says ENOSPC; returns the bytes written.
+  uint64_t fill(const std::string& name) {
+    filler_ = dir_ + "/" + name;
+    int fd = ::open(filler_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+    EXPECT_GE(fd, 0) << std::strerror(errno);
+    if (fd < 0) return 0;
+    std::string chunk(64 * 1024, 'x');
+    uint64_t total = 0;
+    size_t n = chunk.size();
+    for (;;) {
+      ssize_t w = ::write(fd, chunk.data(), n);
+      if (w > 0) {
+        total += static_cast<uint64_t>(w);
+        continue;
+      }
+      if (w < 0 && errno == EINTR) continue;
+      if (w < 0 && errno == ENOSPC && n > 1) {  // top up the last pages
+        n /= 2;
+        continue;
+      }
+      EXPECT_EQ(errno, ENOSPC) << std::strerror(errno);
+      break;
+    }
+    ::close(fd);
+    return total;
+  }
+  void unfill() { fs::remove(filler_); }
+
+ private:
+  std::string dir_, filler_, why_;
+  bool mounted_ = false;
+};
+
+TEST(DiskFull, CommandsAreRefusedEstopWorksAndTheNodeRecoversWhenSpaceReturns) {
+  test::TempDir tmp;
+  const std::string mnt = tmp.file("auditfs");
+  Tmpfs disk(mnt, 1u << 20);
+  if (!disk.ok()) GTEST_SKIP() << "cannot mount a tmpfs for the audit store (" << disk.why() << ")";
+  const std::string audit_dir = mnt + "/audit";
+  // 64 KiB segments: a preallocated segment and its spare take 128 KiB of the 1 MiB.
+  Node node(tmp.file("node"), "  audit:\n    dir: " + audit_dir + "\n    max_segment_bytes: 65536\n", "");
+  ASSERT_TRUE(node.start());
+  const std::string owner = node.token("owner", {"status", "control", "config"}, "owner-1");
+
+  // Healthy: a drive is accepted and recorded.
+  HttpReply first = node.post("/rcan/v1/command", command("move", {{"linear", 0.1}, {"duration_ms", 100}}), owner);
+  ASSERT_EQ(first.status, 200) << first.body;
+  EXPECT_TRUE(node.status(owner).get("audit_available")->as_bool());
+
+  // The disk fills up. The log keeps recording into the space it preallocated; once that is
+  // used up, the next record cannot be written and the command that needed it is refused.
+  ASSERT_GT(disk.fill("filler"), 0u);
+  std::vector<std::string> acked;
+  std::string refused_id;
+  for (int i = 0; i < 3000 && refused_id.empty(); ++i) {
+    std::string id = new_uuid_v4();
+    HttpReply r = node.post("/rcan/v1/command", command("status", {}, id), owner);
+    if (r.status == 200) {
+      acked.push_back(id);
+      continue;
+    }
+    ASSERT_EQ(r.status, 503) << r.body;
+    ASSERT_EQ(error_code(r), "AUDIT_UNAVAILABLE") << r.body;
+    json::Value body = parse(r.body);
+    EXPECT_EQ(str(body, "type"), "ERROR");  // the profile's error body
+    EXPECT_EQ(str(body, "reply_to"), id);
+    refused_id = id;
+  }
+  ASSERT_FALSE(refused_id.empty()) << "the full disk never stopped the audit log";
+  EXPECT_GT(acked.size(), 10u);  // it really recorded into its preallocated space first
+
+  // The condition shows: status, /healthz, metrics. (The first drive has come to rest.)
+  auto at_rest = [&] {
+    json::Value s = node.status(owner);
+    const json::Value* r = s.get("robot");
+    return r && str(*r, "state") == "idle";
+  };
+  ASSERT_TRUE(eventually(at_rest));
+  json::Value st = node.status(owner);
+  EXPECT_FALSE(st.get("audit_available")->as_bool());
+  EXPECT_FALSE(node.status("").get("audit_available")->as_bool());  // in the public summary too
+  EXPECT_EQ(node.get("/healthz").status, 503);
+  EXPECT_EQ(node.metric("rcan_audit_available"), 0.0);
+  EXPECT_GE(node.metric("rcan_audit_failures_total"), 1.0);
+  const double odometry = base_number(st, "odometry_m");
+
+  // Nothing is dispatched without its record: a drive is refused and the robot does not move.
+  std::string drive_id = new_uuid_v4();
+  HttpReply drive =
+      node.post("/rcan/v1/command", command("move", {{"linear", 0.2}, {"duration_ms", 300}}, drive_id), owner);
+  EXPECT_EQ(drive.status, 503) << drive.body;
+  EXPECT_EQ(error_code(drive), "AUDIT_UNAVAILABLE");
+  std::this_thread::sleep_for(std::chrono::milliseconds(400));  // longer than the drive would have run
+  json::Value still = node.status(owner);
+  EXPECT_EQ(base_number(still, "odometry_m"), odometry);
+  EXPECT_EQ(base_number(still, "target_linear_mps"), 0.0);
+
+  // ESTOP still works: latched and answered (the answer says the record could not be written).
+  HttpReply estop = node.post("/api/stop", "", owner);
+  ASSERT_EQ(estop.status, 200) << estop.body;
+  json::Value ev = parse(estop.body);
+  EXPECT_TRUE(ev.get("payload")->get("estop_active")->as_bool());
+  EXPECT_EQ(str(*ev.get("payload"), "audit"), "unavailable");
+  EXPECT_TRUE(node.status(owner).get("estop_active")->as_bool());
+
+  // Space returns: the node recovers by itself, without a restart.
+  disk.unfill();
+  ASSERT_TRUE(eventually([&] { return node.status(owner).get("audit_available")->as_bool(); }, 15000))
+      << "the audit log did not recover";
+  EXPECT_EQ(node.get("/healthz").status, 200);
+  EXPECT_EQ(node.metric("rcan_audit_available"), 1.0);
+  EXPECT_GE(node.metric("rcan_audit_recoveries_total"), 1.0);
+  HttpReply resume = node.post(
+      "/rcan/v1/command",
+      json::dump(json::Value(json::Object{{"version", "1.0.0"},
+                                          {"message_id", new_uuid_v4()},
+                                          {"type", "SAFETY"},
+                                          {"timestamp_ms", real_wall_ms()},
+                                          {"payload", json::Object{{"safety_event", "RESUME"}}}})),
+      owner);
+  ASSERT_EQ(resume.status, 200) << resume.body;
+  std::string after_id = new_uuid_v4();
+  HttpReply after =
+      node.post("/rcan/v1/command", command("move", {{"linear", 0.2}, {"duration_ms", 200}}, after_id), owner);
+  ASSERT_EQ(after.status, 200) << after.body;
+  EXPECT_TRUE(eventually([&] {
+    return base_number(node.status(owner), "odometry_m") > odometry;
+  }));
+
+  // The chain: every acknowledged record is there, the refused ones are not, the recovery is
+  // recorded, and `rcan audit verify` passes on the directory.
+  ASSERT_EQ(node.stop(), 0);
+  std::set<std::string> ids;
+  int recoveries = 0, late_estops = 0;
+  for (const auto& r : exported(audit_dir)) {
+    ids.insert(str(r, "message_id"));
+    if (str(r, "event") == "AUDIT_RECOVERY" && str(r, "outcome") == "repaired") ++recoveries;
+    const json::Value* d = r.get("detail");
+    const json::Value* late = d ? d->get("recorded_after_audit_outage") : nullptr;
+    if (str(r, "event") == "ESTOP" && late && late->is_bool() && late->as_bool()) ++late_estops;
+  }
+  for (const auto& id : acked) EXPECT_TRUE(ids.count(id)) << "acknowledged " << id << " is missing";
+  EXPECT_FALSE(ids.count(refused_id));
+  EXPECT_FALSE(ids.count(drive_id));
+  EXPECT_TRUE(ids.count(after_id));
+  EXPECT_EQ(recoveries, 1);
+  EXPECT_EQ(late_estops, 1);  // the ESTOP acted at once; its record followed the recovery
+  expect_chain_verifies(audit_dir, node.secret_file());
+}
+
+}  // namespace
+}  // namespace rcan
