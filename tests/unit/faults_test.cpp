@@ -22,6 +22,7 @@
 #include <set>
 #include <thread>
 
+#include "node/replay.h"
 #include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/jwt.h"
 #include "rcan/encoding.h"
@@ -396,6 +397,185 @@ TEST(DiskFull, CommandsAreRefusedEstopWorksAndTheNodeRecoversWhenSpaceReturns) {
   EXPECT_EQ(recoveries, 1);
   EXPECT_EQ(late_estops, 1);  // the ESTOP acted at once; its record followed the recovery
   expect_chain_verifies(audit_dir, node.secret_file());
+}
+
+// ------------------------------------------------------------------------------------------
+// Clock steps. First the replay guard alone (its clock is a parameter), then a real rcand under
+// libfaketime: its wall clock is stepped back an hour and forward two while it runs; its
+// monotonic clock is not faked.
+
+TEST(ClockSteps, ReplayMemoryEvictedBeforeAStepBackDoesNotRefuseTheNewTime) {
+  node::ReplayOptions o;
+  o.capacity = 3;
+  node::ReplayGuard g(o);
+  const int64_t t = 1'750'000'000'000;
+  for (int i = 0; i < 4; ++i) ASSERT_TRUE(g.check("m" + std::to_string(i), t + i, false, t + 10).ok());
+  EXPECT_EQ(g.evictions(), 1u);
+  // The evicted id cannot come back while it could be fresh.
+  auto again = g.check("m0", t, false, t + 20);
+  ASSERT_FALSE(again.ok());
+  EXPECT_EQ(again.error().code, ErrorCode::kMessageStale);
+  // The clock steps back an hour: messages stamped with the new time are fresh…
+  const int64_t back = t - 3'600'000;
+  for (int i = 0; i < 6; ++i)
+    EXPECT_TRUE(g.check("b" + std::to_string(i), back + 100 + i, false, back + 200).ok()) << i;
+  // …ids from before the step are still remembered (they could become fresh once the clock
+  // has caught up), and a replay of a new one is refused.
+  auto replay = g.check("b5", back + 105, false, back + 300);
+  ASSERT_FALSE(replay.ok());
+  EXPECT_EQ(replay.error().code, ErrorCode::kReplayDetected);
+  // Evictions after the step took the oldest timestamps (the new ones): the pre-step ids that
+  // remain still refuse their replays once the clock is back where it was.
+  auto late = g.check("m3", t + 3, false, t + 1000);
+  ASSERT_FALSE(late.ok());
+  EXPECT_EQ(late.error().code, ErrorCode::kReplayDetected);
+  // Forward step: everything remembered is out of the window; the new time is fresh.
+  const int64_t fwd = t + 7'200'000;
+  EXPECT_TRUE(g.check("f0", fwd, false, fwd + 5).ok());
+  auto old = g.check("m9", t + 5000, false, fwd + 10);
+  ASSERT_FALSE(old.ok());
+  EXPECT_EQ(old.error().code, ErrorCode::kMessageStale);
+}
+
+// libfaketime, if installed (scripts/install-deps.sh installs the `faketime` package).
+std::string faketime_library() {
+  for (const char* p : {"/usr/lib/x86_64-linux-gnu/faketime/libfaketimeMT.so.1",
+                        "/usr/lib/aarch64-linux-gnu/faketime/libfaketimeMT.so.1",
+                        "/usr/lib/faketime/libfaketimeMT.so.1"})
+    if (::access(p, R_OK) == 0) return p;
+  return "";
+}
+
+class SteppedClock {
+ public:
+  explicit SteppedClock(const std::string& file) : file_(file) { set(0); }
+  // The node's wall clock is `offset_s` from the real one (libfaketime re-reads the file).
+  void set(int64_t offset_s) {
+    offset_ms_ = offset_s * 1000;
+    write_text(file_ + ".tmp", (offset_s < 0 ? "" : "+") + std::to_string(offset_s) + "\n");
+    fs::rename(file_ + ".tmp", file_);
+  }
+  int64_t node_now_ms() const { return real_wall_ms() + offset_ms_; }
+  std::vector<std::string> env(const std::string& lib) const {
+    return {"LD_PRELOAD=" + lib, "FAKETIME_TIMESTAMP_FILE=" + file_, "FAKETIME_DONT_FAKE_MONOTONIC=1",
+            "FAKETIME_CACHE_DURATION=1"};
+  }
+
+ private:
+  std::string file_;
+  int64_t offset_ms_ = 0;
+};
+
+// The node's wall clock as it answers (an ANNOUNCE envelope's timestamp).
+int64_t node_clock_ms(const Node& n) {
+  json::Value v = parse(n.post("/rcan/v1/discover", "{}", "").body);
+  const json::Value* t = v.get("timestamp_ms");
+  return t && t->is_int() ? t->as_int() : 0;
+}
+
+TEST(ClockSteps, RealNodeUnderFaketimeKeepsReplayTtlAndAuditOrdering) {
+  const std::string lib = faketime_library();
+  if (lib.empty()) GTEST_SKIP() << "libfaketime is not installed (scripts/install-deps.sh installs faketime)";
+  test::TempDir tmp;
+  SteppedClock clock(tmp.file("faketime.rc"));
+  Node node(tmp.file("node"), "  msg_id_cache_size: 100\n", "", clock.env(lib));
+  ASSERT_TRUE(node.start());
+  ASSERT_LT(std::llabs(node_clock_ms(node) - real_wall_ms()), 5000) << "libfaketime moved the clock at +0";
+  // Tokens valid across the whole test whatever the node's clock says (iat 2 h back, exp 3 h on).
+  const std::string owner = node.token("owner", {"status", "control", "config"}, "owner-1", 7200, 10800);
+  const std::string user = node.token("user", {"status", "control"}, "user-1", 7200, 10800);
+  auto send = [&](const std::string& id, int64_t ts, const std::string& tok) {
+    return node.post("/rcan/v1/command", command("status", {}, id, ts), tok);
+  };
+
+  // Fill the replay memory (100 ids) past its capacity, so that evictions happen before the step.
+  std::vector<std::pair<std::string, int64_t>> before;
+  for (int i = 0; i < 110; ++i) {
+    std::string id = new_uuid_v4();
+    int64_t ts = clock.node_now_ms();
+    HttpReply r = send(id, ts, owner);
+    ASSERT_EQ(r.status, 200) << r.body;
+    before.emplace_back(id, ts);
+  }
+  // A control session (USER: 1 h TTL, counted on the monotonic clock).
+  HttpReply claim = node.post("/rcan/v1/auth/claim", "{}", user);
+  ASSERT_EQ(claim.status, 200) << claim.body;
+  auto session_expires_in = [&]() -> int64_t {
+    json::Value st = node.status(owner);
+    const json::Value* ss = st.get("sessions");
+    if (!ss || !ss->is_array() || ss->as_array().empty()) return -1;
+    const json::Value* e = ss->as_array()[0].get("expires_in");
+    return e && e->is_int() ? e->as_int() : -1;
+  };
+  const int64_t ttl0 = session_expires_in();
+  ASSERT_GT(ttl0, 3000);
+
+  // ---- The wall clock steps back one hour.
+  clock.set(-3600);
+  ASSERT_TRUE(eventually([&] { return std::llabs(node_clock_ms(node) - clock.node_now_ms()) < 5000; }))
+      << "the node's clock did not step back";
+  // A message stamped with the node's (new) time is fresh, although the replay memory evicted
+  // ids from before the step.
+  std::string fresh = new_uuid_v4();
+  int64_t fresh_ts = clock.node_now_ms();
+  HttpReply r1 = send(fresh, fresh_ts, user);
+  EXPECT_EQ(r1.status, 200) << r1.body;
+  // Replays are still refused: an id from before the step with its own timestamp (now an hour in
+  // the node's future: stale), the same id restamped with the new time (remembered: replay), and
+  // the new message sent again.
+  HttpReply r2 = send(before.back().first, before.back().second, user);
+  EXPECT_EQ(r2.status, 408) << r2.body;
+  EXPECT_EQ(error_code(r2), "MESSAGE_STALE");
+  HttpReply r3 = send(before.back().first, clock.node_now_ms(), user);
+  EXPECT_EQ(r3.status, 409) << r3.body;
+  EXPECT_EQ(error_code(r3), "REPLAY_DETECTED");
+  HttpReply r4 = send(fresh, fresh_ts, user);
+  EXPECT_EQ(r4.status, 409) << r4.body;
+  EXPECT_EQ(error_code(r4), "REPLAY_DETECTED");
+  // The session's TTL did not grow with the step, and it is still held.
+  int64_t ttl1 = session_expires_in();
+  EXPECT_GT(ttl1, 0);
+  EXPECT_LE(ttl1, ttl0);
+
+  // ---- The wall clock steps forward two hours (one hour ahead of the real time).
+  clock.set(3600);
+  ASSERT_TRUE(eventually([&] { return std::llabs(node_clock_ms(node) - clock.node_now_ms()) < 5000; }))
+      << "the node's clock did not step forward";
+  std::string ahead = new_uuid_v4();
+  int64_t ahead_ts = clock.node_now_ms();
+  HttpReply r5 = send(ahead, ahead_ts, user);
+  EXPECT_EQ(r5.status, 200) << r5.body;  // fresh by the node's clock (PROFILE.md §3)
+  HttpReply r6 = send(ahead, ahead_ts, user);
+  EXPECT_EQ(r6.status, 409) << r6.body;
+  HttpReply r7 = send(fresh, fresh_ts, user);  // two hours old now
+  EXPECT_EQ(r7.status, 408) << r7.body;
+  // Two hours of wall clock did not end the one-hour session: it runs on the monotonic clock.
+  int64_t ttl2 = session_expires_in();
+  EXPECT_GT(ttl2, 0) << "the control session expired with the wall-clock step";
+  EXPECT_LE(ttl2, ttl1);
+  HttpReply drive = node.post("/rcan/v1/command", command("move", {{"linear", 0.1}, {"duration_ms", 100}}, "",
+                                                          clock.node_now_ms()),
+                              user);
+  EXPECT_EQ(drive.status, 200) << drive.body;
+
+  // ---- The audit chain: seq strictly increasing, timestamps follow the node's clock (back
+  // and forth), and it verifies.
+  ASSERT_EQ(node.stop(), 0);
+  std::vector<json::Value> records = exported(node.data_dir() + "/audit");
+  ASSERT_GT(records.size(), 110u);
+  int64_t last_seq = 0;
+  bool went_back = false;
+  int64_t prev_ts = 0;
+  for (const auto& r : records) {
+    int64_t seq = r.get("seq")->as_int();
+    EXPECT_EQ(seq, last_seq + 1);
+    last_seq = seq;
+    int64_t ts = r.get("timestamp_ms")->as_int();
+    if (prev_ts && ts < prev_ts - 1'000'000) went_back = true;
+    prev_ts = ts;
+  }
+  EXPECT_TRUE(went_back) << "the audit timestamps never showed the step back";
+  expect_chain_verifies(node.data_dir() + "/audit", node.secret_file());
 }
 
 }  // namespace
