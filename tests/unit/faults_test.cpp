@@ -19,10 +19,13 @@
 #include <fstream>
 #include <functional>
 #include <memory>
+#include <mutex>
+#include <optional>
 #include <set>
 #include <thread>
 
 #include "node/replay.h"
+#include "transport/mqtt_client.h"
 #include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/jwt.h"
 #include "rcan/encoding.h"
@@ -575,6 +578,219 @@ TEST(ClockSteps, RealNodeUnderFaketimeKeepsReplayTtlAndAuditOrdering) {
     prev_ts = ts;
   }
   EXPECT_TRUE(went_back) << "the audit timestamps never showed the step back";
+  expect_chain_verifies(node.data_dir() + "/audit", node.secret_file());
+}
+
+// ------------------------------------------------------------------------------------------
+// Broker and issuer outages (seed §6.1; docs/FLEET.md, docs/SESSIONS.md §Network partition).
+
+uint16_t free_port() {
+  int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
+  socklen_t len = sizeof a;
+  ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
+  ::close(fd);
+  return ntohs(a.sin_port);
+}
+
+// A Mosquitto broker on a free loopback port that the test stops and starts again.
+class Broker {
+ public:
+  explicit Broker(const std::string& dir) : dir_(dir), port_(free_port()) {
+    write_text(dir_ + "/mosquitto.conf",
+               "listener " + std::to_string(port_) + " 127.0.0.1\nallow_anonymous true\npersistence false\n");
+  }
+  ~Broker() { stop(); }
+  bool start() {
+    proc_ = std::make_unique<test::Process>();
+    if (!proc_->start({"/usr/sbin/mosquitto", "-c", dir_ + "/mosquitto.conf"})) return false;
+    return proc_->wait_for_line("running", 10000).has_value();
+  }
+  void stop() {
+    if (proc_ && proc_->running()) proc_->stop(SIGTERM, 5000);
+  }
+  std::string url() const { return "mqtt://127.0.0.1:" + std::to_string(port_); }
+
+ private:
+  std::string dir_;
+  uint16_t port_;
+  std::unique_ptr<test::Process> proc_;
+};
+
+// The test's MQTT client: publishes commands and keeps the replies.
+class MqttPeer {
+ public:
+  MqttPeer(const std::string& url, const std::string& reply_topic) {
+    transport::MqttOptions o;
+    o.url = url;
+    client_ = std::make_unique<transport::MqttClient>(o);
+    client_->subscribe(reply_topic, 1);
+    client_->on_message([this](const transport::MqttMessage& m) {
+      auto v = json::parse(m.payload);
+      std::lock_guard<std::mutex> lk(mu_);
+      if (v.ok()) replies_.push_back(*v);
+    });
+    EXPECT_TRUE(client_->start().ok());
+    EXPECT_TRUE(eventually([&] { return client_->connected(); }));
+    std::this_thread::sleep_for(std::chrono::milliseconds(150));  // the subscription is registered
+  }
+  void publish(const std::string& topic, const json::Value& v) {
+    EXPECT_TRUE(client_->publish(topic, json::dump(v), 1, false).ok());
+  }
+  // The reply to `id` (type ACK or ERROR), waiting up to 10 s.
+  std::optional<json::Value> reply_to(const std::string& id) {
+    std::optional<json::Value> out;
+    eventually([&] {
+      std::lock_guard<std::mutex> lk(mu_);
+      for (const auto& r : replies_)
+        if (str(r, "reply_to") == id) out = r;
+      return out.has_value();
+    });
+    return out;
+  }
+
+ private:
+  std::unique_ptr<transport::MqttClient> client_;
+  std::mutex mu_;
+  std::vector<json::Value> replies_;
+};
+
+TEST(BrokerOutage, RobotKeepsServingHttpAndMqttCommandsResumeWithoutRunningTwice) {
+  test::TempDir tmp;
+  Broker broker(tmp.path());
+  ASSERT_TRUE(broker.start());
+  Node node(tmp.file("node"), "",
+            "mqtt: {enabled: true, broker: \"" + broker.url() +
+                "\", telemetry_hz: 0, keepalive_s: 5, reconnect: {min_s: 1, max_s: 2}}\n");
+  ASSERT_TRUE(node.start());
+  ASSERT_TRUE(node.proc().wait_for_line("mqtt_connected", 10000)) << node.proc().err();
+  const std::string owner = node.token("owner", {"status", "control", "config"}, "owner-1");
+  const std::string topic = "rcan/robot/local.rcan/acme/rover/0a1b2c3d/cmd";
+  const std::string reply = "rcan/robot/local.rcan/acme/rover/0a1b2c3d/reply";
+  auto mqtt_cmd = [&](const std::string& id) {
+    return json::Value(json::Object{{"version", "1.0.0"},
+                                    {"message_id", id},
+                                    {"type", "COMMAND"},
+                                    {"timestamp_ms", real_wall_ms()},
+                                    {"auth_token", owner},
+                                    {"payload", json::Object{{"action", "move"}, {"linear", 0.1}, {"duration_ms", 100}}}});
+  };
+  const std::string a = new_uuid_v4();
+  json::Value msg_a = mqtt_cmd(a);
+  {
+    MqttPeer peer(broker.url(), reply);
+    peer.publish(topic, msg_a);
+    auto ack = peer.reply_to(a);
+    ASSERT_TRUE(ack);
+    EXPECT_EQ(str(*ack, "type"), "ACK");
+  }
+
+  // The broker goes away. The robot keeps serving HTTP: status, commands, ESTOP and RESUME.
+  broker.stop();
+  ASSERT_TRUE(node.proc().wait_for_line("mqtt_disconnected", 10000)) << node.proc().err();
+  HttpReply st = node.get("/rcan/v1/status", owner);
+  ASSERT_EQ(st.status, 200);
+  EXPECT_EQ(str(parse(st.body), "mode"), "NORMAL");  // a broker is not the issuer: no partition mode
+  EXPECT_EQ(node.post("/rcan/v1/command", command("move", {{"linear", 0.1}, {"duration_ms", 100}}), owner).status, 200);
+  EXPECT_EQ(node.post("/api/stop", "", owner).status, 200);
+  EXPECT_TRUE(node.status(owner).get("estop_active")->as_bool());
+  HttpReply resume = node.post(
+      "/rcan/v1/command",
+      json::dump(json::Value(json::Object{{"version", "1.0.0"},
+                                          {"message_id", new_uuid_v4()},
+                                          {"type", "SAFETY"},
+                                          {"timestamp_ms", real_wall_ms()},
+                                          {"payload", json::Object{{"safety_event", "RESUME"}}}})),
+      owner);
+  EXPECT_EQ(resume.status, 200) << resume.body;
+
+  // The broker comes back: the robot reconnects by itself, new commands over MQTT run, and a
+  // command it already ran (what a redelivery after the reconnect looks like) is not run again.
+  ASSERT_TRUE(broker.start());
+  ASSERT_TRUE(node.proc().wait_for_line("\"connects\":2", 15000)) << node.proc().err();
+  MqttPeer peer(broker.url(), reply);
+  const std::string b = new_uuid_v4();
+  peer.publish(topic, mqtt_cmd(b));
+  auto ack_b = peer.reply_to(b);
+  ASSERT_TRUE(ack_b);
+  EXPECT_EQ(str(*ack_b, "type"), "ACK");
+  peer.publish(topic, msg_a);
+  auto again = peer.reply_to(a);
+  ASSERT_TRUE(again);
+  EXPECT_EQ(str(*again, "type"), "ERROR");
+  EXPECT_EQ(str(*again->get("payload"), "error_code"), "REPLAY_DETECTED");
+
+  ASSERT_EQ(node.stop(), 0);
+  int commands_a = 0, commands_b = 0;
+  for (const auto& r : exported(node.data_dir() + "/audit")) {
+    if (str(r, "event") != "COMMAND") continue;
+    if (str(r, "message_id") == a) ++commands_a;
+    if (str(r, "message_id") == b) ++commands_b;
+  }
+  EXPECT_EQ(commands_a, 1);
+  EXPECT_EQ(commands_b, 1);
+  expect_chain_verifies(node.data_dir() + "/audit", node.secret_file());
+}
+
+// An issuer endpoint that accepts connections and never answers (a hung cloud, not a refused
+// port): the probe times out, the node goes OFFLINE_AUTONOMOUS then LOCKDOWN as §6.1 says —
+// and an ESTOP from a principal it cannot vouch for still stops the robot.
+class SilentServer {
+ public:
+  SilentServer() {
+    fd_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    ::bind(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a);
+    ::listen(fd_, 64);  // the kernel completes handshakes; nobody ever reads or answers
+    socklen_t len = sizeof a;
+    ::getsockname(fd_, reinterpret_cast<sockaddr*>(&a), &len);
+    port_ = ntohs(a.sin_port);
+  }
+  ~SilentServer() { ::close(fd_); }
+  uint16_t port() const { return port_; }
+
+ private:
+  int fd_ = -1;
+  uint16_t port_ = 0;
+};
+
+TEST(IssuerOutage, HungIssuerDegradesToLockdownAndEstopStillWorks) {
+  test::TempDir tmp;
+  SilentServer issuer;
+  Node node(tmp.file("node"), "",
+            "offline:\n  issuer_url: http://127.0.0.1:" + std::to_string(issuer.port()) +
+                "/jwks.json\n  issuer_poll_ms: 50\n  issuer_timeout_ms: 200\n  max_key_ttl_s: 2\n");
+  ASSERT_TRUE(node.start());
+  const std::string owner = node.token("owner", {"status", "control", "config"}, "owner-1");
+  const std::string stranger = node.token("user", {"status", "control"}, "stranger");
+  auto mode = [&] { return str(parse(node.get("/rcan/v1/status").body), "mode"); };
+  // No good probe ever: the key cache is empty, so the node is in LOCKDOWN (§6.1: deny new
+  // sessions, maintain existing).
+  ASSERT_TRUE(eventually([&] { return mode() == "LOCKDOWN"; })) << mode();
+  HttpReply claim = node.post("/rcan/v1/auth/claim", "{}", stranger);
+  EXPECT_EQ(claim.status, 503);
+  EXPECT_EQ(error_code(claim), "LOCKDOWN");
+  HttpReply drive =
+      node.post("/rcan/v1/command", command("move", {{"linear", 0.1}, {"duration_ms", 100}}), stranger);
+  EXPECT_EQ(drive.status, 503);
+  EXPECT_EQ(error_code(drive), "LOCKDOWN");
+  // The robot still serves, and a stop is never refused for anything but authentication.
+  EXPECT_EQ(node.get("/healthz").status, 200);
+  HttpReply stop = node.post("/api/stop", "", stranger);
+  EXPECT_EQ(stop.status, 200) << stop.body;
+  EXPECT_TRUE(node.status(owner).get("estop_active")->as_bool());
+  ASSERT_EQ(node.stop(), 0);
+  bool estop_tagged = false;
+  for (const auto& r : exported(node.data_dir() + "/audit")) {
+    const json::Value* d = r.get("detail");
+    if (str(r, "event") == "ESTOP" && d && str(*d, "partition_mode") == "LOCKDOWN") estop_tagged = true;
+  }
+  EXPECT_TRUE(estop_tagged) << "the ESTOP record is not tagged for sync (log_for_sync)";
   expect_chain_verifies(node.data_dir() + "/audit", node.secret_file());
 }
 
