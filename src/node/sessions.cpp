@@ -171,6 +171,7 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
   Role role = p.role;
   if (requested && role_level(*requested) < role_level(role)) role = *requested;  // only lower
   std::lock_guard<std::mutex> lock(mu_);
+  absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   last_wall_ms_ = now_wall_ms;
   expire_locked(now_mono_ms);
   promote_locked(now_mono_ms, now_wall_ms);
@@ -253,6 +254,7 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
 Result<Session> SessionTable::renew(const std::string& session_id, const Principal& p, int64_t now_mono_ms,
                                     int64_t now_wall_ms) {
   std::lock_guard<std::mutex> lock(mu_);
+  absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   last_wall_ms_ = now_wall_ms;
   if (holder_ && holder_->id == session_id && holder_->expires_mono_ms != 0 &&
       now_mono_ms >= holder_->expires_mono_ms) {
@@ -317,8 +319,26 @@ bool SessionTable::leave_queue(const Principal& p) {
   return false;
 }
 
+void SessionTable::absorb_wall_step_locked(int64_t now_mono_ms, int64_t now_wall_ms) {
+  if (now_wall_ms == 0) return;
+  if (anchor_mono_ms_ >= 0) {
+    int64_t step = (now_wall_ms - anchor_wall_ms_) - (now_mono_ms - anchor_mono_ms_);
+    if (step > 2000 || step < -2000) {  // a step, not drift or slewing
+      for (auto& l : leases_) {
+        l.start_wall_ms += step;
+        l.end_wall_ms += step;
+        for (auto& g : l.grants) g.end_wall_ms += step;
+      }
+      if (!leases_.empty()) ++version_;  // persisted with the shifted times
+    }
+  }
+  anchor_mono_ms_ = now_mono_ms;
+  anchor_wall_ms_ = now_wall_ms;
+}
+
 void SessionTable::tick(int64_t now_mono_ms, int64_t now_wall_ms) {
   std::lock_guard<std::mutex> lock(mu_);
+  absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   last_wall_ms_ = now_wall_ms;
   // Lease ends revoke everything derived from the lease (before plain TTL expiry, so a
   // session bounded by its lease is recorded as revoked by it).

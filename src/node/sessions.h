@@ -200,6 +200,12 @@ class SessionTable {
   std::vector<ControlChange> changes_;
   ControlState state_ = ControlState::kAvailable;
   int64_t last_wall_ms_ = 0;
+  // Lease times are wall-clock (they are shown and persisted as such) but run on the
+  // monotonic clock: a wall-clock step seen between two calls that carry both clocks shifts
+  // every lease and grant by the step (docs/NODE.md §Faults). -1 = no reading yet.
+  void absorb_wall_step_locked(int64_t now_mono_ms, int64_t now_wall_ms);
+  int64_t anchor_mono_ms_ = -1;
+  int64_t anchor_wall_ms_ = 0;
   uint64_t violations_ = 0;
   uint64_t version_ = 0;
 };

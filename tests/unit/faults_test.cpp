@@ -512,6 +512,18 @@ TEST(ClockSteps, RealNodeUnderFaketimeKeepsReplayTtlAndAuditOrdering) {
   };
   const int64_t ttl0 = session_expires_in();
   ASSERT_GT(ttl0, 3000);
+  // A one-hour lease (its end is a wall-clock time, shown and persisted as such).
+  HttpReply lease = node.post("/rcan/v1/leases", R"({"leasee":"lee","duration_s":3600})", owner);
+  ASSERT_EQ(lease.status, 201) << lease.body;
+  auto lease_remaining_s = [&]() -> int64_t {
+    json::Value v = parse(node.get("/rcan/v1/leases", owner).body);
+    const json::Value* ls = v.get("leases");
+    if (!ls || !ls->is_array() || ls->as_array().empty()) return -1;
+    const json::Value* r = ls->as_array()[0].get("remaining_s");
+    return r && r->is_int() ? r->as_int() : -1;
+  };
+  const int64_t lease0 = lease_remaining_s();
+  ASSERT_GT(lease0, 3500);
 
   // ---- The wall clock steps back one hour.
   clock.set(-3600);
@@ -539,6 +551,9 @@ TEST(ClockSteps, RealNodeUnderFaketimeKeepsReplayTtlAndAuditOrdering) {
   int64_t ttl1 = session_expires_in();
   EXPECT_GT(ttl1, 0);
   EXPECT_LE(ttl1, ttl0);
+  // Nor did the lease's: its end moved with the step (after the next control tick).
+  EXPECT_TRUE(eventually([&] { int64_t r = lease_remaining_s(); return r > 3000 && r <= lease0; }))
+      << "lease remaining " << lease_remaining_s() << " s after the step back";
 
   // ---- The wall clock steps forward two hours (one hour ahead of the real time).
   clock.set(3600);
@@ -556,6 +571,8 @@ TEST(ClockSteps, RealNodeUnderFaketimeKeepsReplayTtlAndAuditOrdering) {
   int64_t ttl2 = session_expires_in();
   EXPECT_GT(ttl2, 0) << "the control session expired with the wall-clock step";
   EXPECT_LE(ttl2, ttl1);
+  EXPECT_TRUE(eventually([&] { int64_t r = lease_remaining_s(); return r > 3000 && r <= lease0; }))
+      << "lease remaining " << lease_remaining_s() << " s after the step forward";
   HttpReply drive = node.post("/rcan/v1/command", command("move", {{"linear", 0.1}, {"duration_ms", 100}}, "",
                                                           clock.node_now_ms()),
                               user);
