@@ -483,7 +483,7 @@ json::Value SessionTable::queue_json(int64_t now_mono_ms) {
 }
 
 Result<Lease> SessionTable::grant_lease(const Principal& owner, const std::string& leasee_sub, int64_t duration_ms,
-                                        int64_t now_wall_ms) {
+                                        int64_t now_wall_ms, int64_t now_mono_ms) {
   if (role_level(owner.role) < role_level(Role::kOwner))
     return Error(ErrorCode::kInsufficientPrivileges, "only an OWNER may grant a lease", "role");
   if (leasee_sub.empty() || leasee_sub.size() > 256)
@@ -491,6 +491,7 @@ Result<Lease> SessionTable::grant_lease(const Principal& owner, const std::strin
   if (duration_ms <= 0 || duration_ms > int64_t{366} * 86'400'000)
     return Error(ErrorCode::kSchemaValidationFailed, "duration_s must be 1 s .. 366 days", "duration_s");
   std::lock_guard<std::mutex> lock(mu_);
+  if (now_mono_ms >= 0) absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   if (const Lease* l = active_lease_locked(now_wall_ms))
     return Error(ErrorCode::kControlConflict, "lease " + l->id + " is running; revoke it first", "lease");
   Lease l;
@@ -506,13 +507,14 @@ Result<Lease> SessionTable::grant_lease(const Principal& owner, const std::strin
 
 Result<Lease> SessionTable::grant_within_lease(const Principal& leasee, const std::string& lease_id,
                                                const std::string& sub, Role role, int64_t duration_ms,
-                                               int64_t now_wall_ms) {
+                                               int64_t now_wall_ms, int64_t now_mono_ms) {
   if (role != Role::kUser && role != Role::kGuest)
     return Error(ErrorCode::kSchemaValidationFailed, "a lease grants USER or GUEST access only", "role");
   if (sub.empty() || sub.size() > 256)
     return Error(ErrorCode::kSchemaValidationFailed, "user_id is required", "user_id", "missing_field");
   if (duration_ms <= 0) return Error(ErrorCode::kSchemaValidationFailed, "duration_s must be positive", "duration_s");
   std::lock_guard<std::mutex> lock(mu_);
+  if (now_mono_ms >= 0) absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   for (auto& l : leases_) {
     if (l.id != lease_id || now_wall_ms >= l.end_wall_ms) continue;
     bool may = (leasee.sub == l.leasee_sub && role_level(leasee.role) >= role_level(Role::kLeasee)) ||

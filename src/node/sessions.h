@@ -162,10 +162,12 @@ class SessionTable {
 
   // Leases. Errors: INSUFFICIENT_PRIVILEGES, CONTROL_CONFLICT (one already runs),
   // SCHEMA_VALIDATION_FAILED, NOT_FOUND.
+  // `now_mono_ms` (optional, -1 = not given) lets a wall-clock step since the last reading be
+  // absorbed first, so that a lease granted just after a step is not shifted by it later.
   Result<Lease> grant_lease(const Principal& owner, const std::string& leasee_sub, int64_t duration_ms,
-                            int64_t now_wall_ms);
+                            int64_t now_wall_ms, int64_t now_mono_ms = -1);
   Result<Lease> grant_within_lease(const Principal& leasee, const std::string& lease_id, const std::string& sub,
-                                   Role role, int64_t duration_ms, int64_t now_wall_ms);
+                                   Role role, int64_t duration_ms, int64_t now_wall_ms, int64_t now_mono_ms = -1);
   Result<Lease> revoke_lease(const Principal& p, const std::string& lease_id, int64_t now_mono_ms,
                              int64_t now_wall_ms);
   std::vector<Lease> leases(int64_t now_wall_ms);

@@ -598,6 +598,42 @@ TEST(ClockSteps, RealNodeUnderFaketimeKeepsReplayTtlAndAuditOrdering) {
   expect_chain_verifies(node.data_dir() + "/audit", node.secret_file());
 }
 
+TEST(ClockSteps, AStepForwardDoesNotTimeOutOrAutoAllowAHeldCommand) {
+  const std::string lib = faketime_library();
+  if (lib.empty()) GTEST_SKIP() << "libfaketime is not installed (scripts/install-deps.sh installs faketime)";
+  test::TempDir tmp;
+  SteppedClock clock(tmp.file("faketime.rc"));
+  // Drives wait for an OWNER's approval for a minute; on timeout they would be let through.
+  Node node(tmp.file("node"), "",
+            "agent:\n  hitl_gates:\n    - action_types: [move]\n      require_auth: true\n"
+            "      auth_timeout_ms: 60000\n      on_timeout: allow\n",
+            clock.env(lib));
+  ASSERT_TRUE(node.start());
+  const std::string owner = node.token("owner", {"status", "control", "config"}, "owner-1", 7200, 10800);
+  const std::string user = node.token("user", {"status", "control"}, "user-1", 7200, 10800);
+  std::string id = new_uuid_v4();
+  HttpReply held = node.post("/rcan/v1/command", command("move", {{"linear", 0.2}, {"duration_ms", 200}}, id), user);
+  ASSERT_EQ(held.status, 202) << held.body;
+  auto pending = [&] {
+    json::Value v = parse(node.get("/rcan/v1/pending", owner).body);
+    const json::Value* p = v.get("pending");
+    return p && p->is_array() ? p->as_array().size() : size_t{999};
+  };
+  ASSERT_EQ(pending(), 1u);
+  const double odometry = base_number(node.status(owner), "odometry_m");
+  // Two hours of wall clock in one step: the approval window has not run out.
+  clock.set(7200);
+  ASSERT_TRUE(eventually([&] { return std::llabs(node_clock_ms(node) - clock.node_now_ms()) < 5000; }))
+      << "the node's clock did not step";
+  std::this_thread::sleep_for(std::chrono::milliseconds(1000));  // several passes of the hold timer
+  EXPECT_EQ(pending(), 1u) << "the held command timed out with the wall-clock step";
+  EXPECT_EQ(base_number(node.status(owner), "odometry_m"), odometry) << "the held drive ran unapproved";
+  ASSERT_EQ(node.stop(), 0);
+  for (const auto& r : exported(node.data_dir() + "/audit"))
+    EXPECT_NE(str(r, "event"), "HITL_TIMEOUT") << json::dump(r);
+  expect_chain_verifies(node.data_dir() + "/audit", node.secret_file());
+}
+
 // ------------------------------------------------------------------------------------------
 // Broker and issuer outages (seed §6.1; docs/FLEET.md, docs/SESSIONS.md §Network partition).
 
