@@ -285,14 +285,13 @@ class Tmpfs {
   bool mounted_ = false;
 };
 
-TEST(DiskFull, CommandsAreRefusedEstopWorksAndTheNodeRecoversWhenSpaceReturns) {
-  test::TempDir tmp;
-  const std::string mnt = tmp.file("auditfs");
-  Tmpfs disk(mnt, 1u << 20);
-  if (!disk.ok()) GTEST_SKIP() << "cannot mount a tmpfs for the audit store (" << disk.why() << ")";
-  const std::string audit_dir = mnt + "/audit";
-  // 64 KiB segments: a preallocated segment and its spare take 128 KiB of the 1 MiB.
-  Node node(tmp.file("node"), "  audit:\n    dir: " + audit_dir + "\n    max_segment_bytes: 65536\n", "");
+// The whole story against one real node whose audit directory is `audit_dir`: `fill` makes its
+// store refuse writes, `unfill` gives the space back.
+// `failing_op` is what the recovery record must name as the operation that failed.
+void audit_store_outage(const std::string& root, const std::string& audit_dir, const std::function<void()>& fill,
+                        const std::function<void()>& unfill, const std::string& failing_op) {
+  // 64 KiB segments: a preallocated segment and its spare take 128 KiB.
+  Node node(root + "/node", "  audit:\n    dir: " + audit_dir + "\n    max_segment_bytes: 65536\n", "");
   ASSERT_TRUE(node.start());
   const std::string owner = node.token("owner", {"status", "control", "config"}, "owner-1");
 
@@ -303,7 +302,7 @@ TEST(DiskFull, CommandsAreRefusedEstopWorksAndTheNodeRecoversWhenSpaceReturns) {
 
   // The disk fills up. The log keeps recording into the space it preallocated; once that is
   // used up, the next record cannot be written and the command that needed it is refused.
-  ASSERT_GT(disk.fill("filler"), 0u);
+  fill();
   std::vector<std::string> acked;
   std::string refused_id;
   for (int i = 0; i < 3000 && refused_id.empty(); ++i) {
@@ -358,7 +357,7 @@ TEST(DiskFull, CommandsAreRefusedEstopWorksAndTheNodeRecoversWhenSpaceReturns) {
   EXPECT_TRUE(node.status(owner).get("estop_active")->as_bool());
 
   // Space returns: the node recovers by itself, without a restart.
-  disk.unfill();
+  unfill();
   ASSERT_TRUE(eventually([&] { return node.status(owner).get("audit_available")->as_bool(); }, 15000))
       << "the audit log did not recover";
   EXPECT_EQ(node.get("/healthz").status, 200);
@@ -388,8 +387,11 @@ TEST(DiskFull, CommandsAreRefusedEstopWorksAndTheNodeRecoversWhenSpaceReturns) {
   int recoveries = 0, late_estops = 0;
   for (const auto& r : exported(audit_dir)) {
     ids.insert(str(r, "message_id"));
-    if (str(r, "event") == "AUDIT_RECOVERY" && str(r, "outcome") == "repaired") ++recoveries;
     const json::Value* d = r.get("detail");
+    if (str(r, "event") == "AUDIT_RECOVERY" && str(r, "outcome") == "repaired") {
+      ++recoveries;
+      EXPECT_NE(str(*d, "failure").find(failing_op), std::string::npos) << str(*d, "failure");
+    }
     const json::Value* late = d ? d->get("recorded_after_audit_outage") : nullptr;
     if (str(r, "event") == "ESTOP" && late && late->is_bool() && late->as_bool()) ++late_estops;
   }
@@ -400,6 +402,70 @@ TEST(DiskFull, CommandsAreRefusedEstopWorksAndTheNodeRecoversWhenSpaceReturns) {
   EXPECT_EQ(recoveries, 1);
   EXPECT_EQ(late_estops, 1);  // the ESTOP acted at once; its record followed the recovery
   expect_chain_verifies(audit_dir, node.secret_file());
+}
+
+TEST(DiskFull, CommandsAreRefusedEstopWorksAndTheNodeRecoversWhenSpaceReturns) {
+  test::TempDir tmp;
+  const std::string mnt = tmp.file("auditfs");
+  Tmpfs disk(mnt, 1u << 20);
+  if (!disk.ok()) GTEST_SKIP() << "cannot mount a tmpfs for the audit store (" << disk.why() << ")";
+  // A full file system: the audit log's write() itself fails with ENOSPC.
+  audit_store_outage(tmp.path(), mnt + "/audit", [&] { ASSERT_GT(disk.fill("filler"), 0u); }, [&] { disk.unfill(); },
+                     "pwrite");
+}
+
+// An ext2 file system on a loop device whose backing file is sparse and lives on a small tmpfs.
+// Filling that tmpfs makes the loop device fail writes at writeback: write() into the page
+// cache succeeds, the fdatasync that should make it durable fails (the "fsyncgate" case).
+class LoopFs {
+ public:
+  LoopFs(const std::string& outer, const std::string& mnt) : outer_(outer, 8u << 20), mnt_(mnt) {
+    if (!outer_.ok()) {
+      why_ = outer_.why();
+      return;
+    }
+    const std::string img = outer + "/disk.img";
+    { std::ofstream(img).close(); }
+    fs::resize_file(img, 64u << 20);  // sparse: backed by tmpfs pages only where written
+    auto mk = test::run({"/usr/sbin/mkfs.ext2", "-q", "-F", img});
+    if (mk.exit_code != 0) {
+      why_ = "mkfs.ext2: " + mk.err;
+      return;
+    }
+    auto lo = test::run({"/usr/sbin/losetup", "-f", "--show", img});
+    if (lo.exit_code != 0) {
+      why_ = "losetup: " + lo.err;
+      return;
+    }
+    dev_ = lo.out.substr(0, lo.out.find('\n'));
+    fs::create_directories(mnt_);
+    if (::mount(dev_.c_str(), mnt_.c_str(), "ext2", MS_NOSUID | MS_NODEV, "errors=continue") != 0) {
+      why_ = std::string("mount ext2 on ") + dev_ + ": " + std::strerror(errno);
+      return;
+    }
+    mounted_ = true;
+  }
+  ~LoopFs() {
+    if (mounted_) ::umount2(mnt_.c_str(), MNT_DETACH);
+    if (!dev_.empty()) test::run({"/usr/sbin/losetup", "-d", dev_});
+  }
+  bool ok() const { return mounted_; }
+  const std::string& why() const { return why_; }
+  Tmpfs& backing() { return outer_; }
+
+ private:
+  Tmpfs outer_;
+  std::string mnt_, dev_, why_;
+  bool mounted_ = false;
+};
+
+TEST(DiskFull, WritebackErrorsUnderTheFileSystemFailClosedAndRecoverToo) {
+  test::TempDir tmp;
+  LoopFs disk(tmp.file("backing"), tmp.file("auditfs"));
+  if (!disk.ok()) GTEST_SKIP() << "cannot set up an ext2 loop device over a tmpfs (" << disk.why() << ")";
+  audit_store_outage(tmp.path(), tmp.file("auditfs") + "/audit",
+                     [&] { ASSERT_GT(disk.backing().fill("filler"), 0u); }, [&] { disk.backing().unfill(); },
+                     "fdatasync");
 }
 
 // ------------------------------------------------------------------------------------------
