@@ -196,6 +196,10 @@ void Node::announce_control_changes() {
       ev.set("capabilities", capabilities_of(s.role, svc_.settings.role_policy));
       ev.set("expires_in", s.expires_mono_ms ? json::Value((s.expires_mono_ms - svc_.clock.mono_ms()) / 1000)
                                              : json::Value());
+      ev.set("heartbeat_timeout_ms", svc_.settings.heartbeat_timeout_ms);
+      // What a direct grant carries (e.g. the UDP heartbeat key) reaches a promoted holder on
+      // its own streams only.
+      if (svc_.on_grant) svc_.on_grant(s.id, ev);
       publish_to(s.principal_key, std::move(ev));
     } else if (c.event == "QUEUE_DROP") {
       e.event = "CLAIM_DROPPED";
