@@ -9,7 +9,7 @@
 //      styles, cross-field checks (min < max, RURI, RRN), defaults and path resolution.
 // yaml-cpp exceptions and this file's own ConfigError never leave the module.
 #include "node/config.h"
-#include "node/http_fetch.h"
+#include "node/http_client.h"
 
 #include <pwd.h>
 #include <unistd.h>

@@ -4,7 +4,7 @@
 // verified token (lowered for former owners), and every refusal and every step is audited.
 #include <algorithm>
 
-#include "node/http_fetch.h"
+#include "node/http_client.h"
 #include "node/log.h"
 #include "node/node.h"
 #include "node/state_store.h"
@@ -741,7 +741,7 @@ void Node::consent_route(HttpRequest& req, Respond& respond, const json::Value& 
       std::string text = json::dump(note);
       std::string cid = added->id;
       worker_.post([this, url, text, cid] {
-        auto r = http_fetch("POST", url, text, 2000);
+        auto r = http_request("POST", url, text, 2000);
         auto we = svc_.entry("system", cid, "CONSENT_NOTIFIED", r.ok() && r->status < 300 ? "ok" : "error");
         we.sender_type = "system";
         we.detail.set("consent_id", cid);
