@@ -355,6 +355,18 @@ void audit_store_outage(const std::string& root, const std::string& audit_dir, c
   EXPECT_TRUE(ev.get("payload")->get("estop_active")->as_bool());
   EXPECT_EQ(str(*ev.get("payload"), "audit"), "unavailable");
   EXPECT_TRUE(node.status(owner).get("estop_active")->as_bool());
+  // RESUME re-enables motion: not without its record. The latch holds.
+  auto resume_msg = [] {
+    return json::dump(json::Value(json::Object{{"version", "1.0.0"},
+                                               {"message_id", new_uuid_v4()},
+                                               {"type", "SAFETY"},
+                                               {"timestamp_ms", real_wall_ms()},
+                                               {"payload", json::Object{{"safety_event", "RESUME"}}}}));
+  };
+  HttpReply early = node.post("/rcan/v1/command", resume_msg(), owner);
+  EXPECT_EQ(early.status, 503) << early.body;
+  EXPECT_EQ(error_code(early), "AUDIT_UNAVAILABLE");
+  EXPECT_TRUE(node.status(owner).get("estop_active")->as_bool());
 
   // Space returns: the node recovers by itself, without a restart.
   unfill();
@@ -363,14 +375,7 @@ void audit_store_outage(const std::string& root, const std::string& audit_dir, c
   EXPECT_EQ(node.get("/healthz").status, 200);
   EXPECT_EQ(node.metric("rcan_audit_available"), 1.0);
   EXPECT_GE(node.metric("rcan_audit_recoveries_total"), 1.0);
-  HttpReply resume = node.post(
-      "/rcan/v1/command",
-      json::dump(json::Value(json::Object{{"version", "1.0.0"},
-                                          {"message_id", new_uuid_v4()},
-                                          {"type", "SAFETY"},
-                                          {"timestamp_ms", real_wall_ms()},
-                                          {"payload", json::Object{{"safety_event", "RESUME"}}}})),
-      owner);
+  HttpReply resume = node.post("/rcan/v1/command", resume_msg(), owner);
   ASSERT_EQ(resume.status, 200) << resume.body;
   std::string after_id = new_uuid_v4();
   HttpReply after =
