@@ -27,18 +27,19 @@ namespace {
   std::abort();
 }
 
+// Created on first use, removed at exit (the string outlives the exit handler: never freed).
 const std::string& base_dir() {
-  static const std::string dir = [] {
+  static const std::string* dir = [] {
     std::string base = ::access("/dev/shm", W_OK) == 0 ? "/dev/shm" : std::filesystem::temp_directory_path().string();
-    std::string tmpl = base + "/rcan-fuzz-audit-XXXXXX";
-    if (!::mkdtemp(tmpl.data())) fail("mkdtemp failed");
+    auto* d = new std::string(base + "/rcan-fuzz-audit-XXXXXX");
+    if (!::mkdtemp(d->data())) fail("mkdtemp failed");
     std::atexit([] {
       std::error_code ec;
       std::filesystem::remove_all(base_dir(), ec);
     });
-    return tmpl;
+    return d;
   }();
-  return dir;
+  return *dir;
 }
 
 void write_file(const std::string& path, std::string_view bytes) {

@@ -53,11 +53,13 @@ fi
 for t in "${targets[@]}"; do
   [ -x "$bin/${t}_fuzz" ] || { echo "fuzz.sh: no target $bin/${t}_fuzz" >&2; exit 2; }
 done
-mkdir -p "$out/logs" "$out/corpus" "$out/artifacts" "$out/runs"
+mkdir -p "$out/logs" "$out/corpus" "$out/artifacts"
+runs=$(mktemp -d "$out/runs.XXXXXX")  # this invocation's per-target lines
+trap 'rm -rf "$runs"' EXIT
 
 count_files() { find "$1" -maxdepth 1 -type f 2>/dev/null | wc -l; }
 
-# One target: run, then write build/fuzz/runs/<name>.tsv (one summary line).
+# One target: run, then write its summary line to $runs/<name>.tsv.
 run_one() {
   local name=$1 exe="$bin/${1}_fuzz" work="$out/corpus/$1" art="$out/artifacts/$1/" log="$out/logs/$1.log"
   mkdir -p "$work" "$art"
@@ -83,7 +85,7 @@ run_one() {
   ft=$(grep -oE 'ft: [0-9]+' "$log" | tail -1 | cut -d' ' -f2)
   after=$(( $(count_files "$work") + $( [ ${#seeds[@]} -gt 0 ] && count_files "${seeds[0]}" || echo 0) ))
   local found
-  found=$(find "$art" -maxdepth 1 -type f -newer "$marker" ! -name 'minimized-*' | head -1)
+  found=$(find "${art%/}" -maxdepth 1 -type f -newer "$marker" ! -name 'minimized-*' | head -1)
   rm -f "$marker"
   if [ -n "$found" ] || [ $rc -ne 0 ]; then
     case "$(basename "${found:-crash}")" in
@@ -105,13 +107,12 @@ run_one() {
   local eps=0
   [ -n "$execs" ] && [ "$elapsed" -gt 0 ] && eps=$(( execs / elapsed ))
   printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n' "$name" "$elapsed" "${execs:-0}" "$eps" "$before" "$after" \
-    "${cov:-0}" "${ft:-0}" "${rss:-0}" "$result" "$artifact" >"$out/runs/$name.tsv"
+    "${cov:-0}" "${ft:-0}" "${rss:-0}" "$result" "$artifact" >"$runs/$name.tsv"
   printf '%-18s %5ss %10s execs %7s/s corpus %5s -> %-5s cov %-6s %s %s\n' "$name" "$elapsed" "${execs:-0}" "$eps" \
     "$before" "$after" "${cov:-0}" "$result" "$( [ "$artifact" = - ] && echo "" || echo "$artifact")"
 }
 
 echo "fuzzing ${#targets[@]} target(s) for ${secs}s each, $jobs at a time"
-rm -f "$out"/runs/*.tsv
 running=0
 for t in "${targets[@]}"; do
   if [ "$running" -ge "$jobs" ]; then
@@ -129,7 +130,7 @@ status=0
 when=$(date -u +%Y-%m-%dT%H:%M:%SZ)
 [ -f "$out/history.tsv" ] || printf 'date\ttarget\tseconds\texecutions\texec_per_s\tcorpus_before\tcorpus_after\tcoverage\tfeatures\tpeak_rss_mb\tresult\tartifact\n' >"$out/history.tsv"
 for t in "${targets[@]}"; do
-  line=$(cat "$out/runs/$t.tsv" 2>/dev/null || printf '%s\t0\t0\t0\t0\t0\t0\t0\t0\tnot-run\t-' "$t")
+  line=$(cat "$runs/$t.tsv" 2>/dev/null || printf '%s\t0\t0\t0\t0\t0\t0\t0\t0\tnot-run\t-' "$t")
   printf '%s\n' "$line" >>"$summary"
   printf '%s\t%s\n' "$when" "$line" >>"$out/history.tsv"
   [ "$(cut -f10 <<<"$line")" = ok ] || status=1
