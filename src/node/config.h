@@ -75,6 +75,7 @@ struct GrpcConfig {  // `grpc` (docs/CONFIG.md, docs/TRANSPORT.md §gRPC)
   TlsConfig tls;
   std::string client_ca_file;              // grpc.tls.client_ca_file: require client certificates
   uint32_t max_streams = 64;
+  std::string module;                      // grpc.module: path of librcand_grpc.so (default: beside rcand)
 };
 
 struct UdpConfig {  // `udp` (docs/CONFIG.md, docs/TRANSPORT.md §UDP)
@@ -138,6 +139,9 @@ struct SecurityConfig {
   uint32_t replay_window_s = 30;  // 5..300
   uint32_t msg_id_cache_size = 10000;
   std::vector<TrustedRobotKey> trusted_robot_keys;
+  // Operators' and integrators' message-signing keys (rcan-py clients sign with their own
+  // key): a verified signature from one of these is a human/software signer, not a robot.
+  std::vector<TrustedRobotKey> trusted_signer_keys;
   std::vector<InjectionPattern> injection_patterns;  // defaults (unless disabled) + configured
   CommitmentConfig commitment;
   KeyRotationConfig key_rotation;
