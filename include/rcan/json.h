@@ -157,9 +157,6 @@ std::string canonical_without(const Object& obj, std::string_view excluded_key);
 std::string python_dumps(const Value& v, bool sort_keys = true, bool compact = true);
 
 // Compact, members in stored order, raw UTF-8; floats in Python repr form.
-// The writers always produce valid JSON: a string that is not valid UTF-8 (never a parsed one;
-// it can hold a request path or header) has each invalid byte written as the code point of its
-// value (0xF2 → U+00F2), in all three writers alike.
 std::string dump(const Value& v);
 
 // Python repr() of a float: shortest round-trip digits, "1.0", "1e-05", "1e+16", "inf", "nan".
