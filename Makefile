@@ -52,7 +52,7 @@ load-bench: build
 
 fuzz: deps
 	CXX=clang++-14 cmake -S . -B $(FUZZ_DIR) $(GENERATOR) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DRCAN_FUZZ=ON -DRCAN_WERROR=OFF -DRCAN_BUILD_TESTS=OFF -DRCAN_BUILD_BENCH=OFF
-	cmake --build $(FUZZ_DIR) -j $(JOBS)
+	cmake --build $(FUZZ_DIR) -j $(JOBS) --target fuzzers
 
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.h')

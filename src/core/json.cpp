@@ -673,10 +673,25 @@ namespace {
 
 enum class Style { kCanonical, kPython, kDump };
 
+// Raw UTF-8. A string that is not valid UTF-8 (never one that was parsed; it can come from a
+// request path or header) has each invalid byte written as the code point of its value, as
+// write_string_ascii() does, so that the output is always valid JSON.
 void write_string_raw(std::string& out, const std::string& s) {
   static const char* hex = "0123456789abcdef";
   out.push_back('"');
-  for (unsigned char c : s) {
+  for (size_t i = 0; i < s.size(); ++i) {
+    const unsigned char c = static_cast<unsigned char>(s[i]);
+    if (c >= 0x80) {
+      uint32_t cp;
+      const size_t len = decode_utf8(s, i, cp);
+      if (len == 0) {
+        append_utf8(out, c);
+      } else {
+        out.append(s, i, len);
+        i += len - 1;
+      }
+      continue;
+    }
     switch (c) {
       case '"': out += "\\\""; break;
       case '\\': out += "\\\\"; break;

@@ -236,7 +236,9 @@ std::string Ruri::str() const {
   return s;
 }
 
-Result<Ruri> parse_ruri(std::string_view text) {
+namespace {
+
+Result<Ruri> parse_ruri_text(std::string_view text) {
   if (text.size() > 512) return invalid("ruri", "the RURI is longer than 512 characters");
   for (char c : text) {
     if (static_cast<unsigned char>(c) <= 0x20 || static_cast<unsigned char>(c) >= 0x7f)
@@ -297,6 +299,17 @@ Result<Ruri> parse_ruri(std::string_view text) {
   std::string msg = "missing " + missing + " segment";
   if (parts.size() < 3) msg = "missing " + missing + " and later segments";
   return invalid(missing, msg);
+}
+
+}  // namespace
+
+Result<Ruri> parse_ruri(std::string_view text) {
+  auto r = parse_ruri_text(text);
+  // The normalised form (a shorthand gains "local.rcan/…") must itself be a RURI, so the limit
+  // applies to it too (found by ruri_fuzz).
+  if (r.ok() && r->str().size() > 512)
+    return invalid("ruri", "the RURI is longer than 512 characters once normalised");
+  return r;
 }
 
 bool aud_matches(std::string_view pattern, const Ruri& robot) {

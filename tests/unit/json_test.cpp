@@ -75,6 +75,22 @@ TEST(PythonDumps, MatchesRcanPyPreimagesOfTheSignedFields) {
   EXPECT_EQ(checked, 8);
 }
 
+// A string built from raw bytes (a request path, found by http_handler_fuzz) that is not valid
+// UTF-8 still gives valid JSON from every writer, each invalid byte as the code point of its value.
+TEST(Writers, InvalidUtf8InAStringStillGivesValidJson) {
+  const std::string raw = "no route for /\xf2/\xe2\x82/ok-\xc3\xa9-\xf0\x9f\x98\x80";
+  Value v(Object{{"error", raw}, {std::string("k\xff"), int64_t{1}}});
+  for (const std::string& text : {dump(v), canonical(v), python_dumps(v)}) {
+    auto back = parse(text);
+    ASSERT_TRUE(back.ok()) << text;
+    const std::string& s = back->get("error")->as_string();
+    EXPECT_EQ(s, "no route for /\u00f2/\u00e2\u0082/ok-\u00e9-\U0001F600") << text;
+    EXPECT_NE(back->get("k\u00ff"), nullptr) << text;
+  }
+  // Valid UTF-8 is written unchanged.
+  EXPECT_EQ(dump(Value(std::string("ok-\xc3\xa9-\xf0\x9f\x98\x80"))), "\"ok-\xc3\xa9-\xf0\x9f\x98\x80\"");
+}
+
 TEST(PythonDumps, DefaultSeparatorsAndEnsureAscii) {
   auto v = parse(R"({"b":[1,2.0,"é😀\u007f"],"a":{"z":true,"y":null}})");
   ASSERT_TRUE(v.ok());
