@@ -32,7 +32,7 @@
 //      holds at least as many records as commands were answered.
 //
 //   soak [--minutes 60] [--clients 64] [--interval-ms 250] [--rss-slack-mb 8] [--window-s 60]
-//        [--rcand PATH] [--rcan PATH] [--data-root /tmp] [--tsv FILE] [--keep]
+//        [--segment-mib 8] [--rcand PATH] [--rcan PATH] [--data-root /tmp] [--tsv FILE] [--keep]
 // --window-s: the length of a sampling "minute" (shorter only to try the program out).
 // Exit status 0 when every judgement holds.
 // GCC 12 at -O3 reports -Wnull-dereference from inside Asio and libstdc++ once inlined here
@@ -523,6 +523,7 @@ int main(int argc, char** argv) {
   std::string rcan_cli = (self_dir / ".." / "bin" / "rcan").string();
   double minutes = 60, rss_slack_mb = 8, window_s = 60;
   int clients = 64, interval_ms = 250;
+  long segment_mib = 8;
   std::string data_root = "/tmp", tsv_path;
   bool keep = false;
   for (int i = 1; i < argc; ++i) {
@@ -533,6 +534,7 @@ int main(int argc, char** argv) {
     else if (a == "--interval-ms") interval_ms = std::atoi(next().c_str());
     else if (a == "--rss-slack-mb") rss_slack_mb = std::atof(next().c_str());
     else if (a == "--window-s") window_s = std::atof(next().c_str());
+    else if (a == "--segment-mib") segment_mib = std::atol(next().c_str());
     else if (a == "--rcand") rcand = next();
     else if (a == "--rcan") rcan_cli = next();
     else if (a == "--data-root") data_root = next();
@@ -541,13 +543,13 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr,
                    "usage: soak [--minutes 60] [--clients 64] [--interval-ms 250] [--rss-slack-mb 8]\n"
-                   "            [--window-s 60] [--rcand PATH] [--rcan PATH] [--data-root DIR] [--tsv FILE] [--keep]\n");
+                   "            [--window-s 60] [--segment-mib 8] [--rcand PATH] [--rcan PATH] [--data-root DIR] [--tsv FILE] [--keep]\n");
       return 2;
     }
   }
   const int n_minutes = std::max(2, static_cast<int>(minutes + 0.5));
-  if (clients < 8 || interval_ms < 1 || window_s < 1) {
-    std::fprintf(stderr, "soak: --clients ≥ 8, --interval-ms ≥ 1, --window-s ≥ 1\n");
+  if (clients < 8 || interval_ms < 1 || window_s < 1 || segment_mib < 1 || segment_mib > 4096) {
+    std::fprintf(stderr, "soak: --clients ≥ 8, --interval-ms ≥ 1, --window-s ≥ 1, --segment-mib 1–4096\n");
     return 2;
   }
   signal(SIGPIPE, SIG_IGN);
@@ -620,6 +622,19 @@ int main(int argc, char** argv) {
     yaml.replace(jp, jwt_default.size(),
                  jwt_default + "    issuers:\n      - {issuer: rcand-local, key_file: " + root + "/issuer.pub.pem}\n");
   }
+  // Audit segments of --segment-mib: the active segment's index lives in memory until the
+  // segment is sealed (docs/AUDIT.md §6), so memory legitimately grows with the segment; small
+  // segments make several rotations happen within the run and that bound visible.
+  {
+    const std::string audit_default = "  audit:\n    sync: per_group\n";
+    size_t sp = yaml.find(audit_default);
+    if (sp == std::string::npos) {
+      std::fprintf(stderr, "soak: the embedded configuration has no audit block to extend\n");
+      return 1;
+    }
+    yaml.replace(sp, audit_default.size(),
+                 audit_default + "    max_segment_bytes: " + std::to_string(segment_mib * 1024 * 1024) + "\n");
+  }
   // No mDNS: the soak measures the node, not the machine's Avahi daemon.
   if (size_t mp = yaml.find("enable_mdns: true"); mp != std::string::npos) yaml.replace(mp, 17, "enable_mdns: false");
   {
@@ -650,9 +665,9 @@ int main(int argc, char** argv) {
   const int n_cmd = clients / 4, n_status = clients / 8, n_ws = clients * 3 / 8;
   const int n_gate = clients - n_cmd - n_status - n_ws;
   std::printf("soak: rcand %s (pid %d), %d minutes of %.0f s, %d clients (http_cmd %d, status %d, ws %d, gate %d), "
-              "one request per %d ms each\n",
+              "one request per %d ms each, audit segments of %ld MiB\n",
               node.ruri.c_str(), static_cast<int>(pid), n_minutes, window_s, clients, n_cmd, n_status, n_ws, n_gate,
-              interval_ms);
+              interval_ms, segment_mib);
   std::printf("  idle before load: VmRSS %.1f MB, fds %d, threads %ld; data dir %s\n",
               static_cast<double>(idle0.rss_kb) / 1024.0, idle_fds0, idle0.threads, node.dir.c_str());
   std::fflush(stdout);
