@@ -471,6 +471,60 @@ TEST(Security, SignaturesAreVerifiedNeverTakenOnTrust) {
   EXPECT_EQ(plain.status, 200) << plain.body;
 }
 
+// The role and scopes come from the verified token: whatever the message or the headers claim.
+TEST(Security, TheRoleComesFromTheVerifiedTokenNeverFromTheMessageOrHeaders) {
+  test::TempDir dir;
+  test::RcandDaemon d(dir.path() + "/node");
+  ASSERT_NE(d.port(), 0);
+  const std::string guest = d.token("guest", {"status"}, "guest-1");
+  const std::string user = d.token("user", {"status", "control"}, "user-1");
+  Headers claims{{"X-RCAN-Role", "owner"}, {"X-Forwarded-User", "owner-1"}, {"X-Real-IP", "127.0.0.1"}};
+  const std::string self_promotion = R"(,"role":"creator","rcan_role":5,"principal":"owner-1","scope":["control"])";
+  // A GUEST may not drive, whatever it says about itself.
+  Headers g = claims;
+  g.emplace_back("Authorization", "Bearer " + guest);
+  HttpReply drive = test::http(d.port(), "POST", "/rcan/v1/command",
+                               cmd_json(new_uuid_v4(), "move", R"(,"linear":0.2,"duration_ms":100)", self_promotion), g);
+  EXPECT_EQ(drive.status, 403) << drive.body;
+  // A USER may not clear an ESTOP (LEASEE or above), whatever it says about itself.
+  ASSERT_EQ(test::http(d.port(), "POST", "/api/stop", "{}", bearer(user)).status, 200);
+  Headers u = claims;
+  u.emplace_back("Authorization", "Bearer " + user);
+  std::string resume = R"({"version":"1.0.0","message_id":")" + new_uuid_v4() + R"(","type":"SAFETY","timestamp_ms":)" +
+                       std::to_string(now_ms()) + R"(,"payload":{"safety_event":"RESUME","role":"owner"})" +
+                       self_promotion + "}";
+  HttpReply r = test::http(d.port(), "POST", "/rcan/v1/command", resume, u);
+  EXPECT_EQ(r.status, 403) << r.body;
+  EXPECT_EQ(code_of(r), "INSUFFICIENT_PRIVILEGES") << r.body;
+  // Nor read the audit export (OWNER with `config`).
+  EXPECT_EQ(test::http(d.port(), "GET", "/api/v1/audit?format=jsonl", "", u).status, 403);
+  // The robot is still latched: the refused RESUME changed nothing.
+  HttpReply st = test::http(d.port(), "GET", "/rcan/v1/status", "", bearer(user));
+  EXPECT_NE(st.body.find("\"estop_active\":true"), std::string::npos) << st.body;
+}
+
+// Authentication comes before the replay memory: a stranger cannot burn a message_id (or fill
+// the bounded memory) with a bad token; a real replay is still refused.
+TEST(Security, AMessageWhoseTokenFailsUsesUpNoIdAndReplaysAreStillRefused) {
+  test::TempDir dir;
+  test::RcandDaemon d(dir.path() + "/node");
+  ASSERT_NE(d.port(), 0);
+  const std::string tok = d.token("owner", {"status", "control"}, "owner-1");
+  const std::string body = cmd_json(new_uuid_v4(), "status");
+  for (const std::string& bad : {std::string("garbage"), forged_token(d.ruri())}) {
+    HttpReply r = test::http(d.port(), "POST", "/rcan/v1/command", body, bearer(bad));
+    EXPECT_EQ(r.status, 401) << r.body;
+  }
+  HttpReply ok = test::http(d.port(), "POST", "/rcan/v1/command", body, bearer(tok));
+  EXPECT_EQ(ok.status, 200) << "the bad tokens used up the message's id: " << ok.body;
+  HttpReply again = test::http(d.port(), "POST", "/rcan/v1/command", body, bearer(tok));
+  EXPECT_EQ(again.status, 409) << again.body;
+  EXPECT_EQ(code_of(again), "REPLAY_DETECTED");
+  // A replay under a bad token is refused for its token (it learns nothing about the id).
+  HttpReply bad_replay = test::http(d.port(), "POST", "/rcan/v1/command", body, bearer("garbage"));
+  EXPECT_EQ(bad_replay.status, 401) << bad_replay.body;
+}
+
 // ---------------------------------------------------------------------------------------------
 // 6. Nothing the node sends to others carries the caller's credentials: brain-layer calls,
 //    HiTL webhooks, PENDING_AUTH on other principals' streams, the pending file, thoughts.
