@@ -64,6 +64,7 @@
 #include "rcan/json.h"
 #include "node/config.h"
 #include "transport/beast.h"
+#include "bench_support.h"
 
 namespace fs = std::filesystem;
 namespace asio = boost::asio;
@@ -72,192 +73,12 @@ namespace http = boost::beast::http;
 namespace websocket = boost::beast::websocket;
 using tcp = asio::ip::tcp;
 using namespace rcan;
+using namespace rcan::bench;
 
 namespace {
 
 constexpr auto kNoThrow = asio::as_tuple(asio::use_awaitable);
 std::atomic<bool> g_abort_load{false};  // ends a time-bound run early
-
-int64_t mono_us() {
-  return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
-int64_t wall_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
-
-// A UUIDv4-shaped id from a fast generator (the node requires unique ids, not secret ones).
-std::string fast_uuid() {
-  thread_local std::mt19937_64 rng{std::random_device{}()};
-  uint64_t a = rng(), b = rng();
-  a = (a & 0xffffffffffff0fffULL) | 0x0000000000004000ULL;
-  b = (b & 0x3fffffffffffffffULL) | 0x8000000000000000ULL;
-  char s[40];
-  std::snprintf(s, sizeof s, "%08x-%04x-%04x-%04x-%012llx", static_cast<unsigned>(a >> 32),
-                static_cast<unsigned>((a >> 16) & 0xffff), static_cast<unsigned>(a & 0xffff),
-                static_cast<unsigned>(b >> 48), static_cast<unsigned long long>(b & 0xffffffffffffULL));
-  return s;
-}
-
-uint16_t free_port() {
-  asio::io_context io;
-  tcp::acceptor a(io, tcp::endpoint(asio::ip::make_address("127.0.0.1"), 0));
-  return a.local_endpoint().port();
-}
-
-double pct(std::vector<double>& v, double q) {
-  if (v.empty()) return 0;
-  size_t i = static_cast<size_t>(std::ceil(q * static_cast<double>(v.size()))) ;
-  if (i > 0) --i;
-  return v[std::min(i, v.size() - 1)];
-}
-
-// ---- processes -------------------------------------------------------------------------------
-
-struct ProcStat {
-  long rss_kb = 0, hwm_kb = 0;
-  double cpu_s = 0;  // utime + stime
-};
-
-ProcStat proc_stat(pid_t pid) {
-  ProcStat s;
-  std::ifstream st("/proc/" + std::to_string(pid) + "/status");
-  std::string line;
-  while (std::getline(st, line)) {
-    if (line.rfind("VmRSS:", 0) == 0) s.rss_kb = std::atol(line.c_str() + 6);
-    if (line.rfind("VmHWM:", 0) == 0) s.hwm_kb = std::atol(line.c_str() + 6);
-  }
-  std::ifstream sf("/proc/" + std::to_string(pid) + "/stat");
-  std::string all((std::istreambuf_iterator<char>(sf)), std::istreambuf_iterator<char>());
-  size_t p = all.rfind(')');
-  if (p != std::string::npos) {
-    std::istringstream is(all.substr(p + 2));
-    std::string f;
-    unsigned long ut = 0, stt = 0;
-    for (int i = 3; i <= 15 && is >> f; ++i) {
-      if (i == 14) ut = std::stoul(f);
-      if (i == 15) stt = std::stoul(f);
-    }
-    s.cpu_s = static_cast<double>(ut + stt) / static_cast<double>(sysconf(_SC_CLK_TCK));
-  }
-  return s;
-}
-
-// A child process whose stderr is drained by a thread; lines naming `keep` are kept.
-class Child {
- public:
-  Child(std::vector<std::string> argv, std::string keep) : keep_(std::move(keep)) {
-    int p[2];
-    if (pipe2(p, O_CLOEXEC) != 0) return;
-    t_spawn_ = mono_us();
-    pid_ = fork();
-    if (pid_ == 0) {
-      dup2(p[1], 2);
-      int devnull = open("/dev/null", O_WRONLY);
-      if (devnull >= 0) dup2(devnull, 1);
-      std::vector<char*> args;
-      for (auto& a : argv) args.push_back(a.data());
-      args.push_back(nullptr);
-      execv(args[0], args.data());
-      _exit(127);
-    }
-    close(p[1]);
-    fd_ = p[0];
-    drain_ = std::thread([this] {
-      std::string pending;
-      char b[8192];
-      for (;;) {
-        ssize_t k = read(fd_, b, sizeof b);
-        if (k <= 0) break;
-        pending.append(b, static_cast<size_t>(k));
-        size_t nl;
-        while ((nl = pending.find('\n')) != std::string::npos) {
-          std::string line = pending.substr(0, nl);
-          pending.erase(0, nl + 1);
-          std::lock_guard<std::mutex> l(mu_);
-          if (head_.size() < 65536) head_ += line + "\n";
-          if (!keep_.empty() && line.find(keep_) != std::string::npos) kept_.push_back(line);
-        }
-      }
-    });
-  }
-  ~Child() { stop(); }
-  Child(const Child&) = delete;
-  Child& operator=(const Child&) = delete;
-
-  pid_t pid() const { return pid_; }
-  int64_t spawned_us() const { return t_spawn_; }
-  bool alive() const { return pid_ > 0 && waitpid(pid_, nullptr, WNOHANG) == 0; }
-  std::string head() {
-    std::lock_guard<std::mutex> l(mu_);
-    return head_;
-  }
-  std::vector<std::string> take_kept() {
-    std::lock_guard<std::mutex> l(mu_);
-    return std::exchange(kept_, {});
-  }
-  void stop() {
-    if (pid_ > 0) {
-      kill(pid_, SIGTERM);
-      int st = 0;
-      waitpid(pid_, &st, 0);
-      pid_ = -1;
-    }
-    if (drain_.joinable()) drain_.join();
-    if (fd_ >= 0) close(fd_);
-    fd_ = -1;
-  }
-
- private:
-  std::string keep_;
-  pid_t pid_ = -1;
-  int fd_ = -1;
-  int64_t t_spawn_ = 0;
-  std::thread drain_;
-  std::mutex mu_;
-  std::string head_;
-  std::vector<std::string> kept_;
-};
-
-// One blocking HTTP exchange (setup, /healthz, /metrics). Returns the status, 0 on failure.
-int sync_http(uint16_t port, http::verb verb, const std::string& target, const std::string& body,
-              const std::string& token, std::string* out = nullptr) {
-  try {
-    asio::io_context io;
-    beast::tcp_stream s(io);
-    s.expires_after(std::chrono::seconds(10));
-    s.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
-    http::request<http::string_body> req{verb, target, 11};
-    req.set(http::field::host, "127.0.0.1");
-    if (!token.empty()) req.set(http::field::authorization, "Bearer " + token);
-    if (verb == http::verb::post) {
-      req.set(http::field::content_type, "application/json");
-      req.body() = body;
-      req.prepare_payload();
-    }
-    http::write(s, req);
-    beast::flat_buffer buf;
-    http::response<http::string_body> res;
-    http::read(s, buf, res);
-    if (out) *out = res.body();
-    beast::error_code ec;
-    s.socket().shutdown(tcp::socket::shutdown_both, ec);
-    return static_cast<int>(res.result_int());
-  } catch (const std::exception&) {
-    return 0;
-  }
-}
-
-// Polls GET /healthz until it answers 200; returns ms since the child was spawned, or -1.
-double wait_ready(Child& c, uint16_t port, double timeout_ms = 30000) {
-  for (;;) {
-    if (sync_http(port, http::verb::get, "/healthz", "", "") == 200)
-      return static_cast<double>(mono_us() - c.spawned_us()) / 1000.0;
-    if (!c.alive() || static_cast<double>(mono_us() - c.spawned_us()) / 1000.0 > timeout_ms) return -1;
-    std::this_thread::sleep_for(std::chrono::microseconds(500));
-  }
-}
 
 // ---- the baseline server --------------------------------------------------------------------
 
@@ -374,38 +195,21 @@ enum class Expect { kNodeAck, kBaseline };
 bool check_answer(Expect e, int status, const std::string& body, const std::string& id, bool allow_estop,
                   bool& refused, std::string& why) {
   refused = false;
-  json::ParseOptions po;
-  auto v = json::parse(body, po);
-  if (!v.ok() || !v->is_object()) {
-    why = "status " + std::to_string(status) + ", body not a JSON object: " + body.substr(0, 200);
-    return false;
-  }
   if (e == Expect::kBaseline) {
-    const json::Value* t = v->get("type");
+    auto v = json::parse(body, json::ParseOptions{});
+    const json::Value* t = v.ok() && v->is_object() ? v->get("type") : nullptr;
     if (status != 200 || !t || !t->is_string() || t->as_string() != "ACK") {
       why = "baseline answered " + std::to_string(status) + " " + body.substr(0, 200);
       return false;
     }
     return true;
   }
-  const json::Value* t = v->get("type");
-  const json::Value* rt = v->get("reply_to");
-  const json::Value* pl = v->get("payload");
-  bool reply_ok = rt && rt->is_string() && rt->as_string() == id;
-  if (status == 200 && t && t->is_string() && t->as_string() == "ACK" && reply_ok && pl && pl->is_object()) {
-    const json::Value* cmd = pl->get("command");
-    const json::Value* res = pl->get("result");
-    if (cmd && cmd->is_string() && res && !res->is_null()) return true;
+  if (check_node_ack(status, body, id, why)) return true;
+  std::string not_estop;
+  if (allow_estop && check_node_error(status, body, id, 423, "", "estop_active", not_estop)) {
+    refused = true;
+    return true;
   }
-  if (allow_estop && status == 423 && t && t->is_string() && t->as_string() == "ERROR" && reply_ok && pl &&
-      pl->is_object()) {
-    const json::Value* reason = pl->get("reason");
-    if (reason && reason->is_string() && reason->as_string() == "estop_active") {
-      refused = true;
-      return true;
-    }
-  }
-  why = "status " + std::to_string(status) + ": " + body.substr(0, 300);
   return false;
 }
 
@@ -625,66 +429,6 @@ RunResult run_load(const RunOptions& o) {
 }
 
 // ---- the node under test --------------------------------------------------------------------
-
-struct Node {
-  std::string dir;
-  std::string ruri;
-  uint16_t port = 0;
-  std::unique_ptr<Child> child;
-  double ready_ms = -1;
-};
-
-std::string token_for(const std::string& seed_file, const std::string& iss, const std::string& ruri,
-                      const std::string& sub) {
-  auto key = jwt::SigningKey::from_file(seed_file);
-  if (!key.ok()) return {};
-  int64_t now = wall_ms() / 1000;
-  auto t = jwt::issue(json::Object{{"iss", iss},
-                                   {"sub", sub},
-                                   {"aud", ruri},
-                                   {"role", "creator"},
-                                   {"scope", json::Array{"status", "control", "config"}},
-                                   {"iat", now},
-                                   {"exp", now + 3600}},
-                      *key);
-  return t.ok() ? *t : std::string();
-}
-
-bool start_node(Node& n, const std::string& rcand, const std::vector<std::string>& extra) {
-  n.port = free_port();
-  std::vector<std::string> argv{rcand, "--data-dir", n.dir, "--port", std::to_string(n.port), "--log-level",
-                                "info"};
-  argv.insert(argv.end(), extra.begin(), extra.end());
-  n.child = std::make_unique<Child>(argv, "estop.latency");
-  n.ready_ms = wait_ready(*n.child, n.port);
-  if (n.ready_ms < 0) {
-    std::fprintf(stderr, "rcand did not start:\n%s\n", n.child->head().c_str());
-    return false;
-  }
-  // The "listening" log line (which names the RURI) may come just after the first answer.
-  for (int i = 0; n.ruri.empty() && i < 5000; ++i) {
-    std::string head = n.child->head();
-    size_t p = head.find("\"ruri\":\"");
-    if (p != std::string::npos) {
-      n.ruri = head.substr(p + 8, head.find('"', p + 8) - p - 8);
-    } else {
-      std::this_thread::sleep_for(std::chrono::milliseconds(1));
-    }
-  }
-  if (n.ruri.empty()) std::fprintf(stderr, "rcand did not log its RURI:\n%s\n", n.child->head().c_str());
-  return !n.ruri.empty();
-}
-
-// Waits until the process is quiet (start-up work such as the audit log's preallocated spare
-// segment is done): CPU use below 5% over 200 ms, for at most `max_ms`.
-void settle(pid_t pid, int max_ms = 5000) {
-  int64_t until = mono_us() + int64_t{max_ms} * 1000;
-  while (mono_us() < until) {
-    double c0 = proc_stat(pid).cpu_s;
-    std::this_thread::sleep_for(std::chrono::milliseconds(200));
-    if (proc_stat(pid).cpu_s - c0 < 0.010) return;
-  }
-}
 
 // ---- /metrics -------------------------------------------------------------------------------
 
@@ -1089,17 +833,11 @@ int main(int argc, char** argv) {
       jwk << json::dump(json::Value(json::Object{
           {"kty", "OKP"}, {"crv", "Ed25519"}, {"x", base64url_encode(peer->pub.ed25519_pk, false)}}));
     }
-    std::string device;
-    {
-      std::ifstream d(node.dir + "/device_id");
-      std::getline(d, device);
-    }
-    std::string yaml(config::default_config_yaml());
+    std::string yaml = default_yaml_for(node.dir);
     auto replace = [&](const std::string& from, const std::string& to) {
       size_t p = yaml.find(from);
       if (p != std::string::npos) yaml.replace(p, from.size(), to);
     };
-    replace("{device_id}", device);
     replace("security:\n", "security:\n  trusted_robot_keys:\n    - {name: bench-peer, mldsa65_pub_file: " + root +
                                "/peer/mldsa65.pub}\n");
     replace("  jwt:\n    leeway_s: 60\n",

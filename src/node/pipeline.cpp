@@ -691,8 +691,10 @@ std::vector<std::unique_ptr<Stage>> Pipeline::standard_stages(NodeServices& s) {
   v.push_back(std::make_unique<ShapeStage>(s));
   v.push_back(std::make_unique<TokenPresenceStage>(s));
   v.push_back(std::make_unique<DecodeStage>(s));
-  v.push_back(std::make_unique<ReplayStage>(s));
+  // Authentication before the replay memory: a message whose token does not verify must not
+  // use up its message_id or a place in the bounded memory (docs/SECURITY.md).
   v.push_back(std::make_unique<AuthStage>(s));
+  v.push_back(std::make_unique<ReplayStage>(s));
   v.push_back(make_fleet_stage(s));  // fleet.cpp
   v.push_back(std::make_unique<AuthorizeStage>(s));
   v.push_back(make_guest_limit_stage(s));

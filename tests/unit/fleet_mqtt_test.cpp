@@ -635,6 +635,48 @@ TEST_F(FleetTest, FleetJwtIsCheckedPerRobot) {
   EXPECT_TRUE(robots_["robot-b"]->proc().running());
 }
 
+// docs/SECURITY.md: a commander's token reaches the robots in the command envelope, and no
+// robot passes it on — nothing a robot publishes (replies, status, telemetry, events, audit
+// records) carries it, for accepted and for refused commands alike.
+TEST_F(FleetTest, RobotsNeverPublishTheCommandersToken) {
+  three_robots();
+  Watcher w(broker_->url(), {"rcan/#"});
+  // Accepted: a fleet command to every member. Refused: a token without a fleet claim, and a
+  // forged one.
+  std::string plain = token("owner", {}, "plain-commander");
+  std::string forged = fleet_token_.substr(0, fleet_token_.rfind('.') + 1) + "AAAA";
+  std::string fleet_id = new_uuid_v4();
+  w.publish("rcan/fleet/alpha/cmd",
+            command_msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "alpha"}}, fleet_token_, fleet_id));
+  std::vector<std::pair<std::string, std::string>> waits;  // (robot, message id)
+  for (const char* robot : {"robot-a", "robot-b", "robot-c"}) waits.emplace_back(robot, fleet_id);
+  for (const std::string& tok : {plain, forged}) {
+    std::string id = new_uuid_v4();
+    w.publish("rcan/fleet/alpha/robot/robot-a/cmd", command_msg("COMMAND", json::Object{{"action", "status"}}, tok, id));
+    waits.emplace_back("robot-a", id);
+  }
+  for (const auto& [robot, id] : waits)
+    ASSERT_TRUE(w.wait([&](const Watcher::Msg& m) {
+      return m.topic == "rcan/fleet/alpha/robot/" + robot + "/reply" && str_of(m.body, "reply_to") == id;
+    })) << robot << " " << id;
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the audit mirror publishes after the record
+  size_t outbound = 0;
+  for (const auto& m : w.all()) {
+    bool inbound = m.topic.ends_with("/cmd") || m.topic.ends_with("/estop");
+    if (inbound) continue;
+    ++outbound;
+    std::string text = json::dump(m.body);
+    for (const std::string& tok : {fleet_token_, plain, forged}) {
+      EXPECT_EQ(text.find(tok), std::string::npos) << m.topic;
+      size_t dot = tok.rfind('.');
+      if (dot != std::string::npos && tok.size() - dot > 20) {
+        EXPECT_EQ(text.find(tok.substr(dot + 1)), std::string::npos) << m.topic << ": " << text.substr(0, 300);
+      }
+    }
+  }
+  EXPECT_GT(outbound, 6u) << "the robots published nothing to check";
+}
+
 TEST_F(FleetTest, SwarmLeaderFailoverAndJoinPolicy) {
   const std::string swarm =
       "swarm: {swarm_id: s42, members: [robot-a, robot-b, robot-c], leader: robot-a, formation: follow-leader,"
