@@ -7,7 +7,7 @@
 #include <string_view>
 
 #include "node/consent.h"
-#include "node/http_fetch.h"
+#include "node/http_client.h"
 #include "node/ownership.h"
 #include "node/partition.h"
 #include "node/sessions.h"

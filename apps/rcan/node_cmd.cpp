@@ -100,7 +100,9 @@ int status_main(const Args& args) {
   if (s->robot.is_object()) {  // the safety core's state: scalars, and the base pose
     std::printf("%s\n", bold("robot").c_str());
     for (const auto& [k, v] : s->robot.as_object())
-      if (!v.is_object() && !v.is_array() && k != "estop_active") std::printf("  %-20s %s\n", k.c_str(), brief(v, 80).c_str());
+      // estop and the session count are already shown above
+      if (!v.is_object() && !v.is_array() && k != "estop_active" && k != "sessions")
+        std::printf("  %-20s %s\n", k.c_str(), brief(v, 80).c_str());
     const json::Value* inner = s->robot.get("robot");
     const json::Value* base = inner ? inner->get("base") : nullptr;
     if (base && base->is_object()) {

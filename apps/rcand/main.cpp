@@ -382,18 +382,26 @@ int main(int argc, char** argv) {
     auth.verify.fleet_audiences.push_back("rcan://fleet/" + cfg.fleet.fleet_id);  // v1.5 fleet JWT
   }
   auth.verify.leeway_s = cfg.security.jwt.leeway_s;
-  for (const auto& rk : cfg.security.trusted_robot_keys) {
-    if (!rk.mldsa65_pub_file.empty()) {
-      auto b = keys::read_public_file(rk.mldsa65_pub_file);
-      if (!b.ok()) return fail("security.trusted_robot_keys " + rk.name + ": " + b.error().message);
-      auth.robot_keys.mldsa65.push_back(*b);
+  // Public keys named in the config: peer robots' (a robot signature changes the §8.5
+  // verdict) and operators'/integrators' (human or software signers).
+  auto load_keys = [&](const std::vector<config::TrustedRobotKey>& list, const char* what,
+                       msgsig::TrustedKeys& into) -> std::optional<std::string> {
+    for (const auto& rk : list) {
+      if (!rk.mldsa65_pub_file.empty()) {
+        auto b = keys::read_public_file(rk.mldsa65_pub_file);
+        if (!b.ok()) return std::string("security.") + what + " " + rk.name + ": " + b.error().message;
+        into.mldsa65.push_back(*b);
+      }
+      if (!rk.ed25519_pub_file.empty()) {
+        auto b = keys::read_public_file(rk.ed25519_pub_file);
+        if (!b.ok()) return std::string("security.") + what + " " + rk.name + ": " + b.error().message;
+        into.ed25519.push_back(*b);
+      }
     }
-    if (!rk.ed25519_pub_file.empty()) {
-      auto b = keys::read_public_file(rk.ed25519_pub_file);
-      if (!b.ok()) return fail("security.trusted_robot_keys " + rk.name + ": " + b.error().message);
-      auth.robot_keys.ed25519.push_back(*b);
-    }
-  }
+    return std::nullopt;
+  };
+  if (auto e = load_keys(cfg.security.trusted_robot_keys, "trusted_robot_keys", auth.robot_keys)) return fail(*e);
+  if (auto e = load_keys(cfg.security.trusted_signer_keys, "trusted_signer_keys", auth.signer_keys)) return fail(*e);
 
   node::NodeServices services(ns, node::Clock::system(), std::move(auth), actuation, **audit_log);
   if (!cfg.fleet.fleet_id.empty()) services.fleet = std::make_shared<node::FleetMembership>(node::FleetMembership{cfg.fleet, {}});

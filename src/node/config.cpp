@@ -9,7 +9,7 @@
 //      styles, cross-field checks (min < max, RURI, RRN), defaults and path resolution.
 // yaml-cpp exceptions and this file's own ConfigError never leave the module.
 #include "node/config.h"
-#include "node/http_fetch.h"
+#include "node/http_client.h"
 
 #include <pwd.h>
 #include <unistd.h>
@@ -707,6 +707,11 @@ SP config_schema() {
                                               {"ed25519_pub_file", Str()}},
                                              {"name"}),
                                          256)},
+              {"trusted_signer_keys", Arr(Obj({{"name", Str(128)},
+                                               {"mldsa65_pub_file", Str()},
+                                               {"ed25519_pub_file", Str()}},
+                                              {"name"}),
+                                          256)},
               {"injection", Obj({{"use_defaults", Bool()},
                                  {"patterns", Arr(Either({Str(256), Obj({{"regex", Str(256)}},
                                                                         {"regex"})}),
@@ -1650,21 +1655,26 @@ NodeConfig build(const json::Value& root_value, const ConfigOptions& opts) {
   c.security.jwt.leeway_s = static_cast<int64_t>(jwt_at["leeway_s"].u32(60));
   c.security.replay_window_s = sec["replay_window_s"].u32(30);
   c.security.msg_id_cache_size = sec["msg_id_cache_size"].u32(10000);
+  // trusted_robot_keys and trusted_signer_keys: the same shape; names unique across both.
   std::set<std::string> key_names;
-  for (size_t i = 0; i < sec["trusted_robot_keys"].size(); ++i) {
-    At k = sec["trusted_robot_keys"][i];
-    TrustedRobotKey t;
-    t.name = k["name"].str();
-    if (t.name.empty()) fail(k["name"].path, "must not be empty", "invalid_value");
-    if (!key_names.insert(t.name).second)
-      fail(k["name"].path, "duplicate trusted key name \"" + printable(t.name) + "\"",
-           "invalid_value");
-    t.mldsa65_pub_file = resolve_path(k["mldsa65_pub_file"].str(), base);
-    t.ed25519_pub_file = resolve_path(k["ed25519_pub_file"].str(), base);
-    if (t.mldsa65_pub_file.empty() && t.ed25519_pub_file.empty())
-      fail(k.path, "needs mldsa65_pub_file and/or ed25519_pub_file", "missing_key");
-    c.security.trusted_robot_keys.push_back(std::move(t));
-  }
+  auto trusted_keys = [&](const char* member, std::vector<TrustedRobotKey>& into) {
+    for (size_t i = 0; i < sec[member].size(); ++i) {
+      At k = sec[member][i];
+      TrustedRobotKey t;
+      t.name = k["name"].str();
+      if (t.name.empty()) fail(k["name"].path, "must not be empty", "invalid_value");
+      if (!key_names.insert(t.name).second)
+        fail(k["name"].path, "duplicate trusted key name \"" + printable(t.name) + "\"",
+             "invalid_value");
+      t.mldsa65_pub_file = resolve_path(k["mldsa65_pub_file"].str(), base);
+      t.ed25519_pub_file = resolve_path(k["ed25519_pub_file"].str(), base);
+      if (t.mldsa65_pub_file.empty() && t.ed25519_pub_file.empty())
+        fail(k.path, "needs mldsa65_pub_file and/or ed25519_pub_file", "missing_key");
+      into.push_back(std::move(t));
+    }
+  };
+  trusted_keys("trusted_robot_keys", c.security.trusted_robot_keys);
+  trusted_keys("trusted_signer_keys", c.security.trusted_signer_keys);
   At inj = sec["injection"];
   if (inj["use_defaults"].flag(true))
     for (const auto& p : default_injection_patterns())

@@ -138,6 +138,9 @@ struct SecurityConfig {
   uint32_t replay_window_s = 30;  // 5..300
   uint32_t msg_id_cache_size = 10000;
   std::vector<TrustedRobotKey> trusted_robot_keys;
+  // Operators' and integrators' message-signing keys (rcan-py clients sign with their own
+  // key): a verified signature from one of these is a human/software signer, not a robot.
+  std::vector<TrustedRobotKey> trusted_signer_keys;
   std::vector<InjectionPattern> injection_patterns;  // defaults (unless disabled) + configured
   CommitmentConfig commitment;
   KeyRotationConfig key_rotation;

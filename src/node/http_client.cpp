@@ -38,31 +38,59 @@ bool wait_fd(int fd, short events, int64_t deadline) {
 
 }  // namespace
 
-Result<HttpUrl> parse_http_url(const std::string& url) {
-  const std::string scheme = "http://";
-  if (url.rfind(scheme, 0) != 0) return fail("only http:// URLs are supported: " + url.substr(0, 128));
-  std::string rest = url.substr(scheme.size());
-  HttpUrl u;
+Result<HttpUrl> parse_http_url(std::string_view url) {
+  constexpr std::string_view kScheme = "http://";
+  auto bad = [](const char* why) { return Error(ErrorCode::kSchemaValidationFailed, why, "url"); };
+  if (url.substr(0, kScheme.size()) != kScheme || url.size() > 2048)
+    return bad("only http:// URLs are supported");
+  std::string_view rest = url.substr(kScheme.size());
   size_t slash = rest.find('/');
-  std::string hostport = rest.substr(0, slash);
-  if (slash != std::string::npos) u.path = rest.substr(slash);
-  size_t colon = hostport.rfind(':');
-  u.host = hostport.substr(0, colon);
-  if (colon != std::string::npos) {
-    std::string ps = hostport.substr(colon + 1);
-    char* end = nullptr;
-    long p = std::strtol(ps.c_str(), &end, 10);
-    if (ps.empty() || !end || *end || p < 1 || p > 65535) return fail("bad port in " + url.substr(0, 128));
+  std::string_view authority = rest.substr(0, slash);
+  HttpUrl u;
+  if (slash != std::string_view::npos) u.path = std::string(rest.substr(slash));
+  size_t colon = authority.rfind(':');
+  if (colon != std::string_view::npos) {
+    std::string_view ps = authority.substr(colon + 1);
+    if (ps.empty() || ps.size() > 5) return bad("bad port");
+    uint32_t p = 0;
+    for (char c : ps) {
+      if (c < '0' || c > '9') return bad("bad port");
+      p = p * 10 + static_cast<uint32_t>(c - '0');
+    }
+    if (p < 1 || p > 65535) return bad("bad port");
     u.port = static_cast<uint16_t>(p);
+    u.host = std::string(authority.substr(0, colon));
+  } else {
+    u.host = std::string(authority);
   }
-  if (u.host.empty()) return fail("no host in " + url.substr(0, 128));
-  for (char c : u.host + u.path)
-    if (static_cast<unsigned char>(c) <= 0x20 || c == 0x7f) return fail("bad character in URL");
+  if (u.host.empty()) return bad("no host");
+  for (char c : u.host)
+    if (static_cast<unsigned char>(c) <= ' ' || c == '@' || c == '/' || c == 0x7f) return bad("bad host");
+  for (char c : u.path)
+    if (static_cast<unsigned char>(c) <= ' ' || c == 0x7f) return bad("bad path");
   return u;
 }
 
-Result<HttpAnswer> http_post_json(const HttpUrl& url, const std::string& json_body, int timeout_ms,
-                                  size_t max_body) {
+int parse_status_line(std::string_view line) {
+  if (line.size() < 12 || line.substr(0, 7) != "HTTP/1." || line[8] != ' ') return 0;
+  int code = 0;
+  for (size_t i = 9; i < 12; ++i) {
+    if (line[i] < '0' || line[i] > '9') return 0;
+    code = code * 10 + (line[i] - '0');
+  }
+  if (line.size() > 12 && line[12] != ' ' && line[12] != '\r') return 0;
+  return code >= 100 && code <= 599 ? code : 0;
+}
+
+Result<HttpAnswer> http_request(std::string_view method, std::string_view url, std::string_view body,
+                                int timeout_ms, size_t max_body) {
+  auto u = parse_http_url(url);
+  if (!u.ok()) return u.error();
+  return http_request(method, *u, body, timeout_ms, max_body);
+}
+
+Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std::string_view body, int timeout_ms,
+                                size_t max_body) {
   int64_t deadline = now_ms() + timeout_ms;
   addrinfo hints{};
   hints.ai_family = AF_UNSPEC;
@@ -90,9 +118,12 @@ Result<HttpAnswer> http_post_json(const HttpUrl& url, const std::string& json_bo
     ::getsockopt(fd, SOL_SOCKET, SO_ERROR, &err, &len);
     if (err != 0) return close_fail("connect to " + url.host + ":" + port + " failed: " + std::strerror(err));
   }
-  std::string req = "POST " + url.path + " HTTP/1.1\r\nHost: " + url.host + ":" + port +
-                    "\r\nContent-Type: application/json\r\nAccept: application/json\r\nConnection: close\r\n"
-                    "Content-Length: " + std::to_string(json_body.size()) + "\r\n\r\n" + json_body;
+  std::string req = std::string(method) + " " + url.path + " HTTP/1.1\r\nHost: " + url.host + ":" + port +
+                    "\r\nAccept: application/json\r\nConnection: close\r\nUser-Agent: rcand\r\n";
+  if (!body.empty() || method == "POST")
+    req += "Content-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) + "\r\n";
+  req += "\r\n";
+  req.append(body);
   size_t sent = 0;
   while (sent < req.size()) {
     if (!wait_fd(fd, POLLOUT, deadline)) return close_fail("send timed out");
@@ -133,10 +164,11 @@ Result<HttpAnswer> http_post_json(const HttpUrl& url, const std::string& json_bo
     }
   }
   ::close(fd);
-  if (header_end == std::string::npos || resp.size() < 12 || resp.compare(0, 5, "HTTP/") != 0)
-    return fail("malformed HTTP answer");
+  if (resp.empty()) return fail("no answer");
+  size_t eol = resp.find("\r\n");
   HttpAnswer a;
-  a.status = std::atoi(resp.c_str() + 9);
+  a.status = parse_status_line(std::string_view(resp).substr(0, eol == std::string::npos ? resp.size() : eol));
+  if (header_end == std::string::npos || a.status == 0) return fail("malformed HTTP answer");
   a.body = resp.substr(header_end + 4);
   if (content_length != std::string::npos && a.body.size() > content_length) a.body.resize(content_length);
   if (a.body.size() > max_body) return fail("answer too large");

@@ -2,7 +2,7 @@
 
 #include <algorithm>
 
-#include "node/http_fetch.h"
+#include "node/http_client.h"
 
 namespace rcan::node {
 
@@ -44,7 +44,7 @@ std::pair<NetMode, NetMode> PartitionMonitor::record(bool reachable, int64_t now
 
 NetMode PartitionMonitor::probe_once() {
   if (!enabled()) return NetMode::kNormal;
-  auto r = http_fetch("GET", opts_.issuer_url, "", opts_.timeout_ms);
+  auto r = http_request("GET", opts_.issuer_url, "", opts_.timeout_ms);
   bool ok = r.ok() && r->status >= 200 && r->status < 300;
   int64_t now = wall_ ? wall_() : 0;
   auto [old, cur] = record(ok, now);

@@ -4,7 +4,7 @@
 // verified token (lowered for former owners), and every refusal and every step is audited.
 #include <algorithm>
 
-#include "node/http_fetch.h"
+#include "node/http_client.h"
 #include "node/log.h"
 #include "node/node.h"
 #include "node/state_store.h"
@@ -196,6 +196,10 @@ void Node::announce_control_changes() {
       ev.set("capabilities", capabilities_of(s.role, svc_.settings.role_policy));
       ev.set("expires_in", s.expires_mono_ms ? json::Value((s.expires_mono_ms - svc_.clock.mono_ms()) / 1000)
                                              : json::Value());
+      ev.set("heartbeat_timeout_ms", svc_.settings.heartbeat_timeout_ms);
+      // What a direct grant carries (e.g. the UDP heartbeat key) reaches a promoted holder on
+      // its own streams only.
+      if (svc_.on_grant) svc_.on_grant(s.id, ev);
       publish_to(s.principal_key, std::move(ev));
     } else if (c.event == "QUEUE_DROP") {
       e.event = "CLAIM_DROPPED";
@@ -737,7 +741,7 @@ void Node::consent_route(HttpRequest& req, Respond& respond, const json::Value& 
       std::string text = json::dump(note);
       std::string cid = added->id;
       worker_.post([this, url, text, cid] {
-        auto r = http_fetch("POST", url, text, 2000);
+        auto r = http_request("POST", url, text, 2000);
         auto we = svc_.entry("system", cid, "CONSENT_NOTIFIED", r.ok() && r->status < 300 ? "ok" : "error");
         we.sender_type = "system";
         we.detail.set("consent_id", cid);

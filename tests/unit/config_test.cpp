@@ -575,6 +575,11 @@ TEST(ConfigErrors, Semantics) {
                "security.injection.patterns[0].regex", "invalid_value");
   expect_error(parse("security:\n  trusted_robot_keys: [{name: a}]\n"), "security.trusted_robot_keys[0]",
                "missing_key");
+  expect_error(parse("security:\n  trusted_signer_keys: [{name: a}]\n"), "security.trusted_signer_keys[0]",
+               "missing_key");
+  expect_error(parse("security:\n  trusted_robot_keys: [{name: a, ed25519_pub_file: a.pub}]\n"
+                     "  trusted_signer_keys: [{name: a, ed25519_pub_file: b.pub}]\n"),
+               "security.trusted_signer_keys[0].name", "invalid_value");
   expect_error(parse("agent:\n  layers:\n    fast: {url: ftp://x}\n"), "agent.layers.fast.url", "invalid_value");
   expect_error(parse("rrn: RRN-12\n"), "rrn", "invalid_value");
   expect_error(parse("metadata: {robot_uuid: not-a-uuid}\n"), "metadata.robot_uuid", "invalid_value");

@@ -12,7 +12,7 @@
 #include "node/config.h"
 #include "node/consent.h"
 #include "node/control_machine.h"
-#include "node/http_fetch.h"
+#include "node/http_client.h"
 #include "node/ownership.h"
 #include "node/partition.h"
 #include "node/sessions.h"
@@ -311,7 +311,7 @@ TEST(HttpFetch, UrlsAndStatusLines) {
   auto u = node::parse_http_url("http://127.0.0.1:8080/jwks.json");
   ASSERT_TRUE(u.ok());
   EXPECT_EQ(u->host, "127.0.0.1");
-  EXPECT_EQ(u->port, "8080");
+  EXPECT_EQ(u->port, 8080);
   EXPECT_EQ(u->path, "/jwks.json");
   EXPECT_FALSE(node::parse_http_url("https://x/").ok());
   EXPECT_FALSE(node::parse_http_url("http://:80/").ok());

@@ -227,6 +227,61 @@ TEST(UdpHeartbeat, HeartbeatsKeepTheSessionAliveAndTheirLossSafeStopsTheRobot) {
   EXPECT_EQ(n.metric("rcan_audit_failures_total"), 0);
 }
 
+TEST(UdpHeartbeat, ASessionPromotedFromTheQueueGetsItsKeyOnItsStream) {
+  ConfiguredNode n({}, /*heartbeat_timeout_ms=*/2000);
+  ASSERT_NE(n.udp_port(), 0) << n.proc().err();
+  std::string a = n.token("user", {"control", "status"}, "udp-user-a");
+  std::string b = n.token("user", {"control", "status"}, "udp-user-b");
+  Grant ga = claim(n, a);
+  ASSERT_FALSE(ga.session_id.empty());
+  // B listens on its stream, then queues behind A.
+  test::WsClient ws;
+  ASSERT_EQ(ws.connect(n.http_port(), "/rcan/v1/stream"), 101);
+  ASSERT_TRUE(ws.send_text(json::dump(json::Value(json::Object{{"type", "CONNECT"}, {"token", b}}))));
+  auto ack = ws.recv_text(5000);
+  ASSERT_TRUE(ack && ack->find("CONNECT_ACK") != std::string::npos) << (ack ? *ack : "no answer");
+  HttpReply q = n.post("/rcan/v1/auth/claim", "{}", b);
+  ASSERT_EQ(q.status, 409) << q.body;
+  ASSERT_NE(q.body.find("\"queued\":true"), std::string::npos) << q.body;
+  // A releases: B is promoted and its GRANTED event carries B's own heartbeat key.
+  HttpReply rel = n.post("/rcan/v1/auth/release", "{}", a);
+  ASSERT_EQ(rel.status, 200) << rel.body;
+  std::optional<json::Value> promoted;
+  for (int i = 0; i < 50 && !promoted; ++i) {
+    auto f = ws.recv_text(200);
+    if (!f) continue;
+    json::Value v = parse_json(*f);
+    if (v.get("event") && v.get("event")->as_string() == "PROMOTED") promoted = v;
+  }
+  ASSERT_TRUE(promoted) << "no PROMOTED event on B's stream";
+  const json::Value* u = promoted->get("udp_heartbeat");
+  ASSERT_NE(u, nullptr) << json::dump(*promoted);
+  std::string b_session = promoted->get("session_id")->as_string();
+  EXPECT_NE(b_session, ga.session_id);
+  EXPECT_EQ(u->get("session_id")->as_string(), b_session);
+  auto id = from_hex(u->get("key_id")->as_string());
+  auto key = base64_decode(u->get("key_b64")->as_string());
+  ASSERT_TRUE(id && id->size() == 16);
+  ASSERT_TRUE(key && key->size() == 32);
+  udp::KeyId kid{};
+  udp::Key k{};
+  std::memcpy(kid.data(), id->data(), 16);
+  std::memcpy(k.data(), key->data(), 32);
+  // The key works: B's heartbeats are accepted; A's old key no longer is (A released).
+  double before = n.metric("rcan_udp_heartbeats_accepted_total");
+  UdpSocket s;
+  for (uint64_t seq = 1; seq <= 3; ++seq) {
+    ASSERT_TRUE(s.send(n.udp_port(), udp::encode_heartbeat(kid, seq, k)));
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  double after = before;
+  for (int i = 0; i < 40 && after < before + 3; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(25));
+    after = n.metric("rcan_udp_heartbeats_accepted_total");
+  }
+  EXPECT_EQ(after, before + 3);
+}
+
 TEST(UdpHeartbeat, ForgedReplayedAndMalformedDatagramsAreIgnoredAndCounted) {
   ConfiguredNode n({}, /*heartbeat_timeout_ms=*/600);
   ASSERT_NE(n.udp_port(), 0) << n.proc().err();
