@@ -19,11 +19,27 @@ add_custom_command(
   COMMENT "protoc: proto/rcan.proto"
   VERBATIM)
 
-# Generated code: compiled once, without the project's warning flags.
+# Generated code: compiled once, without the project's warning flags; position-independent,
+# since it also goes into the loadable module below.
 add_library(rcan_proto STATIC ${RCAN_PROTO_GEN}/rcan.pb.cc ${RCAN_PROTO_GEN}/rcan.grpc.pb.cc)
+set_target_properties(rcan_proto PROPERTIES POSITION_INDEPENDENT_CODE ON)
 target_include_directories(rcan_proto SYSTEM PUBLIC ${RCAN_PROTO_GEN})
 target_link_libraries(rcan_proto PUBLIC PkgConfig::GRPCPP)
 
+# src/transport/grpc_*.cpp, compiled once (PIC) for two consumers.
 file(GLOB RCAN_GRPC_SOURCES CONFIGURE_DEPENDS ${PROJECT_SOURCE_DIR}/src/transport/grpc_*.cpp)
-add_library(rcan_grpc STATIC ${RCAN_GRPC_SOURCES})
-target_link_libraries(rcan_grpc PUBLIC rcan_node rcan_proto PRIVATE rcan_warnings)
+add_library(rcan_grpc_objects OBJECT ${RCAN_GRPC_SOURCES})
+set_target_properties(rcan_grpc_objects PROPERTIES POSITION_INDEPENDENT_CODE ON)
+target_link_libraries(rcan_grpc_objects PUBLIC rcan_proto PRIVATE rcan_node rcan_warnings)
+
+# rcan_grpc: the gRPC transport linked statically with the node (the gRPC tests and fuzz target).
+add_library(rcan_grpc STATIC $<TARGET_OBJECTS:rcan_grpc_objects>)
+target_link_libraries(rcan_grpc PUBLIC rcan_node rcan_proto)
+
+# librcand_grpc.so: the gRPC transport as the module rcand dlopen()s when grpc.enabled is true
+# (src/transport/grpc_module.h, apps/rcand/grpc_loader.cpp). It links gRPC and protobuf but not
+# the node: Node, json, logs… resolve against the rcand executable (ENABLE_EXPORTS). Placed
+# beside rcand; installed into lib/rcan/ (found relative to rcand, docs/TRANSPORT.md).
+add_library(rcand_grpc MODULE $<TARGET_OBJECTS:rcan_grpc_objects>)
+target_link_libraries(rcand_grpc PRIVATE rcan_proto)
+set_target_properties(rcand_grpc PROPERTIES LIBRARY_OUTPUT_DIRECTORY ${PROJECT_BINARY_DIR}/bin)

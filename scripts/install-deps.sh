@@ -18,6 +18,7 @@ PKGS=(
   python3 curl python3-grpcio python3-protobuf
   chromium fonts-dejavu-core nodejs
   avahi-daemon dbus libavahi-client-dev iproute2
+  faketime e2fsprogs
 )
 
 missing=()

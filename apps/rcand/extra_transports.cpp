@@ -1,5 +1,7 @@
 #include "extra_transports.h"
 
+#include "grpc_loader.h"
+
 namespace rcan::rcand {
 
 void ExtraTransports::stop(int drain_ms) {
@@ -29,7 +31,12 @@ Result<std::unique_ptr<ExtraTransports>> start_extra_transports(const config::No
     go.client_ca_file = cfg.grpc.client_ca_file;
     go.max_message_bytes = cfg.server.limits.max_body_bytes;
     go.max_streams = static_cast<int>(cfg.grpc.max_streams);
-    t->grpc = std::make_unique<transport::GrpcServer>(go, node);
+    auto loaded = load_grpc_transport(cfg.grpc.module, go, node);
+    if (!loaded.ok()) {
+      t->stop(0);
+      return Error(ErrorCode::kInternal, "grpc: " + loaded.error().message);
+    }
+    t->grpc = std::move(loaded).value();
     if (auto p = t->grpc->start(); !p.ok()) {
       t->stop(0);
       return Error(ErrorCode::kInternal, "grpc: " + p.error().message);

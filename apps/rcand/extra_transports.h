@@ -6,13 +6,13 @@
 
 #include "node/config.h"
 #include "node/node.h"
-#include "transport/grpc_server.h"
+#include "transport/grpc_module.h"
 #include "transport/udp.h"
 
 namespace rcan::rcand {
 
 struct ExtraTransports {
-  std::unique_ptr<transport::GrpcServer> grpc;
+  std::unique_ptr<transport::GrpcTransport> grpc;  // librcand_grpc.so (grpc_loader.h)
   std::unique_ptr<transport::UdpService> udp;
   // gRPC first (drains its calls through the pipeline), then UDP.
   void stop(int drain_ms);

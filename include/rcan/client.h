@@ -31,6 +31,7 @@
 
 #include "rcan/error_code.h"
 #include "rcan/json.h"
+#include "rcan/result.h"
 
 namespace rcan::client {
 
@@ -47,24 +48,7 @@ struct ClientError {
 };
 
 template <typename T>
-class [[nodiscard]] Result {
- public:
-  Result(T value) : v_(std::in_place_index<0>, std::move(value)) {}             // NOLINT
-  Result(ClientError err) : v_(std::in_place_index<1>, std::move(err)) {}       // NOLINT
-  bool ok() const { return v_.index() == 0; }
-  explicit operator bool() const { return ok(); }
-  T& value() & { return std::get<0>(v_); }
-  const T& value() const& { return std::get<0>(v_); }
-  T&& value() && { return std::get<0>(std::move(v_)); }
-  T* operator->() { return &std::get<0>(v_); }
-  const T* operator->() const { return &std::get<0>(v_); }
-  T& operator*() & { return std::get<0>(v_); }
-  const T& operator*() const& { return std::get<0>(v_); }
-  const ClientError& error() const& { return std::get<1>(v_); }
-
- private:
-  std::variant<T, ClientError> v_;
-};
+using Result = rcan::Result<T, ClientError>;
 
 // ---------------------------------------------------------------------------------------
 // Addresses

@@ -4,6 +4,7 @@
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
+#include <cstring>
 #include <deque>
 #include <memory>
 #include <mutex>
@@ -22,6 +23,24 @@ using internal::IndexHeader;
 namespace {
 
 Error unavailable(std::string msg) { return Error(ErrorCode::kAuditUnavailable, std::move(msg)); }
+
+// One past the last non-zero byte of `s` (0 when it is all zeros), eight bytes at a time: the
+// preallocated tail of the active segment is zeros, scanned on every start.
+size_t end_of_data(std::string_view s) {
+  size_t n = s.size();
+  while (n % 8 != 0) {
+    if (s[n - 1] != '\0') return n;
+    --n;
+  }
+  while (n >= 8) {
+    uint64_t w;
+    std::memcpy(&w, s.data() + n - 8, 8);
+    if (w != 0) break;
+    n -= 8;
+  }
+  while (n > 0 && s[n - 1] == '\0') --n;
+  return n;
+}
 
 // A segment the log knows about. Sealed segments have either `mem` (index not yet on
 // disk) or `header` (index file loaded).
@@ -120,6 +139,7 @@ class AuditLog::Impl {
   Result<std::string> get(uint64_t seq) const;
   AuditStats stats() const;
   const std::string& dir() const { return dir_; }
+  bool available() const { return !failed_.load(); }
 
  private:
   struct Snapshot {
@@ -141,6 +161,7 @@ class AuditLog::Impl {
   void wait_synced();
   void sync_and_ack(std::vector<Ticket>& tickets);
   void set_failed(const std::string& why);
+  bool try_recover();
   void fail_all(std::vector<Pending>& items, const Error& err);
   Snapshot snapshot() const;
   Result<std::string> read_line(uint64_t seg_id, const IndexEntry& e) const;
@@ -183,6 +204,9 @@ class AuditLog::Impl {
   std::thread indexer_;
   std::thread preallocer_;
   std::atomic<bool> spare_ready_{false};
+  std::atomic<bool> prealloc_busy_{false};
+  std::atomic<uint64_t> recoveries_{0};
+  uint64_t failed_next_seq_ = 0;  // writer: next_seq_ when the failure was first seen
 
   // Published (durable) state, read by queries. Guarded by state_mu_.
   mutable std::mutex state_mu_;
@@ -191,6 +215,10 @@ class AuditLog::Impl {
   uint64_t durable_offset_ = 0;
   uint64_t durable_seq_ = 0;
   std::string durable_hash_;
+  // Where the chain head (durable_seq_) lives: its segment and the end of its line there.
+  // Unlike durable_offset_ these do not move at a rotation until the next record is durable.
+  uint64_t head_seg_ = 0;
+  uint64_t head_end_ = 0;
   std::vector<IndexEntry> active_index_;
   mutable std::atomic<int> readers_{0};
 };
@@ -430,12 +458,13 @@ Status AuditLog::Impl::recover_active(uint64_t id, bool clean) {
   if (!size.ok()) return size.error();
   uint64_t data_end = good_end;  // one past the last non-zero byte
   for (uint64_t pos = good_end; pos < *size;) {
-    size_t n = static_cast<size_t>(std::min<uint64_t>(4u << 20, *size - pos));
+    // Small chunks: a 64 MiB preallocated segment is scanned on every start, and 4 MiB
+    // buffers stayed in the heap (glibc's raised mmap/trim thresholds) for the node's life.
+    size_t n = static_cast<size_t>(std::min<uint64_t>(256u << 10, *size - pos));
     auto chunk = env_->read_range(p, pos, n);
     if (!chunk.ok()) return chunk.error();
     if (chunk->empty()) break;
-    size_t last = chunk->find_last_not_of('\0');
-    if (last != std::string::npos) data_end = pos + last + 1;
+    if (size_t e = end_of_data(*chunk); e > 0) data_end = pos + e;
     pos += chunk->size();
   }
   uint64_t cut = data_end - good_end;
@@ -459,6 +488,8 @@ Status AuditLog::Impl::recover_active(uint64_t id, bool clean) {
     active_index_ = std::move(entries);
     durable_offset_ = good_end;
     durable_seq_ = expected - 1;
+    head_seg_ = id;
+    head_end_ = good_end;
     durable_hash_ = link;
   }
   auto f = env_->open_writable_at(p, good_end);
@@ -543,6 +574,8 @@ Status AuditLog::Impl::write_records(std::vector<AuditEntry> entries) {
   active_index_.insert(active_index_.end(), idx.begin(), idx.end());
   durable_offset_ = active_bytes_;
   durable_seq_ = next_seq_ - 1;
+  head_seg_ = active_id_;
+  head_end_ = active_bytes_;
   durable_hash_ = last_hash_;
   return Status::Ok();
 }
@@ -594,6 +627,132 @@ void AuditLog::Impl::set_failed(const std::string& why) {
   }
 }
 
+// After a failed write or sync (disk full, I/O error, read-only file system): once the disk
+// takes writes again, continue the chain from the last ACKNOWLEDGED record in a fresh
+// segment. Nothing written after that record is trusted (after a failed fsync the page
+// cache may hold bytes that never reached the disk, "fsyncgate"): the failed segment is cut
+// back to the end of that record and synced, segments a failed rotation began are removed,
+// and the new segment opens with a checkpoint followed by a `recovery` record saying what
+// happened. Every step is retried from scratch at the next probe if any fails.
+// Writer thread only. Returns whether the log is writable again.
+bool AuditLog::Impl::try_recover() {
+  if (opts_.background_index) wait_synced();  // no sync in flight on file_
+  uint64_t head_seg = 0, head_end = 0, head_seq = 0;
+  std::string head_hash;
+  {
+    std::lock_guard<std::mutex> l(state_mu_);
+    head_seg = head_seg_;
+    head_end = head_end_;
+    head_seq = durable_seq_;
+    head_hash = durable_hash_;
+  }
+  if (head_seg == 0) return false;
+  if (failed_next_seq_ == 0) failed_next_seq_ = next_seq_;
+  if (file_) {
+    (void)file_->close();
+    file_.reset();
+  }
+  // 1. Cut the head segment back to the last acknowledged record (this also frees its
+  //    preallocated tail, which a sealed segment does not need).
+  Status s = env_->truncate_file(seg_path(head_seg), head_end);
+  if (!s.ok()) return false;
+  // 2. Segments after it hold no acknowledged record: a rotation that failed half-way.
+  auto ids = internal::segment_ids(env_, dir_);
+  if (!ids.ok()) return false;
+  for (uint64_t id : *ids) {
+    if (id <= head_seg) continue;
+    if (env_->exists(idx_path(id)) && !env_->remove_file(idx_path(id)).ok()) return false;
+    if (!env_->remove_file(seg_path(id)).ok()) return false;
+  }
+  // 3. The head segment is sealed as it now is.
+  std::shared_ptr<const std::vector<IndexEntry>> to_index;
+  {
+    std::lock_guard<std::mutex> l(state_mu_);
+    if (sealed_.empty() || sealed_.back().id != head_seg) {
+      if (active_index_.empty()) return false;  // cannot happen: the head lives here
+      Segment done;
+      done.id = head_seg;
+      done.bytes = head_end;
+      done.first_seq = active_index_.front().seq;
+      done.last_seq = active_index_.back().seq;
+      done.min_ts = done.max_ts = active_index_.front().ts;
+      for (const auto& e : active_index_) {
+        done.min_ts = std::min(done.min_ts, e.ts);
+        done.max_ts = std::max(done.max_ts, e.ts);
+      }
+      done.mem = std::make_shared<const std::vector<IndexEntry>>(std::move(active_index_));
+      sealed_.push_back(done);
+      active_index_.clear();
+      durable_offset_ = 0;
+      to_index = done.mem;
+    } else {
+      sealed_.back().bytes = head_end;
+    }
+  }
+  if (to_index) start_indexer(head_seg, to_index);
+  // 4. A fresh segment, preallocated when there is room for it (otherwise it grows).
+  const uint64_t new_id = head_seg + 1;
+  bool have_file = false;
+  if (opts_.preallocate) {
+    if (preallocer_.joinable() && !prealloc_busy_.load()) preallocer_.join();
+    if (spare_ready_.load() && !preallocer_.joinable()) {
+      spare_ready_ = false;
+      have_file = env_->rename_file(spare_path(), seg_path(new_id)).ok();
+    }
+    if (!have_file) {
+      have_file = env_->write_zeros_synced(seg_path(new_id), opts_.max_segment_bytes).ok();
+      if (!have_file) (void)env_->remove_file(seg_path(new_id));
+    }
+  }
+  auto f = env_->open_writable_at(seg_path(new_id), 0);
+  if (!f.ok()) return false;
+  if (!env_->sync_dir(dir_).ok()) return false;
+  file_ = std::move(*f);
+  {
+    std::lock_guard<std::mutex> l(state_mu_);
+    active_id_ = new_id;
+    active_index_.clear();
+    durable_offset_ = 0;
+  }
+  active_bytes_ = 0;
+  next_seq_ = head_seq + 1;
+  last_hash_ = head_hash;
+  std::string why;
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    why = fail_error_.message;
+  }
+  AuditEntry cp;
+  cp.kind = "checkpoint";
+  cp.event = "AUDIT_CHECKPOINT";
+  cp.segment = new_id;
+  cp.detail.set("prev_segment", static_cast<int64_t>(head_seg));
+  cp.detail.set("prev_last_seq", static_cast<int64_t>(head_seq));
+  cp.detail.set("prev_last_hash", head_hash);
+  AuditEntry rec;
+  rec.kind = "recovery";
+  rec.event = "AUDIT_RECOVERY";
+  rec.outcome = "repaired";
+  rec.reason = "the audit store takes writes again after a failure";
+  rec.detail.set("failure", why);
+  rec.detail.set("last_good_seq", static_cast<int64_t>(head_seq));
+  // Sealed but never acknowledged (their appenders were told the log failed): not in the chain.
+  rec.detail.set("unacknowledged_discarded",
+                 static_cast<int64_t>(failed_next_seq_ > head_seq + 1 ? failed_next_seq_ - head_seq - 1 : 0));
+  rec.detail.set("cut_segment", static_cast<int64_t>(head_seg));
+  rec.detail.set("cut_at_offset", static_cast<int64_t>(head_end));
+  if (!write_records({cp, rec}).ok()) return false;
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    failed_.store(false);
+    fail_error_ = Error();
+  }
+  failed_next_seq_ = 0;
+  ++recoveries_;
+  prepare_spare();
+  return true;
+}
+
 // Makes tickets durable with one fdatasync, publishes them to readers, acknowledges.
 void AuditLog::Impl::sync_and_ack(std::vector<Ticket>& tickets) {
   if (tickets.empty()) return;
@@ -614,6 +773,8 @@ void AuditLog::Impl::sync_and_ack(std::vector<Ticket>& tickets) {
     for (auto& t : tickets) active_index_.insert(active_index_.end(), t.index.begin(), t.index.end());
     durable_offset_ = tickets.back().end_offset;
     durable_seq_ = tickets.back().last_seq;
+    head_seg_ = active_id_;
+    head_end_ = durable_offset_;
     durable_hash_ = tickets.back().last_hash;
   }
   for (auto& t : tickets)
@@ -632,7 +793,18 @@ void AuditLog::Impl::writer_loop() {
     bool stopping = false;
     {
       std::unique_lock<std::mutex> l(mu_);
-      cv_.wait(l, [&] { return !queue_.empty() || stop_; });
+      if (failed_.load() && opts_.recovery_interval_ms > 0) {
+        // Failed: nothing is queued (submit() refuses); probe the disk once per interval.
+        bool woken = cv_.wait_for(l, std::chrono::milliseconds(opts_.recovery_interval_ms),
+                                  [&] { return !queue_.empty() || stop_; });
+        if (!woken) {
+          l.unlock();
+          try_recover();
+          continue;
+        }
+      } else {
+        cv_.wait(l, [&] { return !queue_.empty() || stop_; });
+      }
       stopping = stop_;
       size_t n = std::min(queue_.size(), opts_.max_group_records);
       for (size_t i = 0; i < n; ++i) {
@@ -824,14 +996,17 @@ Status AuditLog::Impl::rotate() {
 void AuditLog::Impl::prepare_spare() {
   if (!opts_.preallocate || spare_ready_.load()) return;
   if (preallocer_.joinable()) {
-    if (!opts_.background_index) {
-      preallocer_.join();
-    } else {
-      return;  // still working on it
-    }
+    if (opts_.background_index && prealloc_busy_.load()) return;  // still working on it
+    preallocer_.join();  // done (and failed, or the spare would be ready): try again
   }
+  prealloc_busy_ = true;
   auto work = [this] {
-    if (env_->write_zeros_synced(spare_path(), opts_.max_segment_bytes).ok()) spare_ready_ = true;
+    if (env_->write_zeros_synced(spare_path(), opts_.max_segment_bytes).ok()) {
+      spare_ready_ = true;
+    } else {
+      (void)env_->remove_file(spare_path());  // a full disk: give the space back
+    }
+    prealloc_busy_ = false;
   };
   if (opts_.background_index) {
     preallocer_ = std::thread(work);
@@ -1101,6 +1276,7 @@ AuditStats AuditLog::Impl::stats() const {
   st.groups_committed = groups_.load();
   st.syncs = syncs_.load();
   st.failed = failed_.load();
+  st.recoveries = recoveries_.load();
   return st;
 }
 
@@ -1159,6 +1335,7 @@ Result<std::vector<std::string>> AuditLog::find_by_watermark(std::string_view to
 }
 Result<std::string> AuditLog::get(uint64_t seq) const { return impl_->get(seq); }
 AuditStats AuditLog::stats() const { return impl_->stats(); }
+bool AuditLog::available() const { return impl_->available(); }
 const std::string& AuditLog::dir() const { return impl_->dir(); }
 
 // ---------------------------------------------------------------- offline

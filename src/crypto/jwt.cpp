@@ -872,6 +872,17 @@ Result<SigningKey> SigningKey::from_file(const std::string& path, bool hs256) {
 
 Result<VerificationKey> SigningKey::verification_key() const {
   if (alg_ == Alg::kHS256) return VerificationKey::hs256_secret(impl_->secret.span());
+  if (alg_ == Alg::kEdDSA) {
+    // The raw key: PEM export goes through OpenSSL's encoder machinery, which walks every
+    // provider's encoders (slow, and megabytes touched at start-up for one key).
+    uint8_t raw[32];
+    size_t n = sizeof raw;
+    if (EVP_PKEY_get_raw_public_key(impl_->pkey.get(), raw, &n) != 1 || n != sizeof raw) {
+      ERR_clear_error();
+      return Error(ErrorCode::kInternal, "cannot export public key");
+    }
+    return VerificationKey::ed25519_raw(raw);
+  }
   BioPtr bio(BIO_new(BIO_s_mem()));
   if (!bio || PEM_write_bio_PUBKEY(bio.get(), impl_->pkey.get()) != 1) {
     ERR_clear_error();

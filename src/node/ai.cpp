@@ -244,6 +244,7 @@ void AiServices::hold(const std::shared_ptr<Context>& ctx, const config::HitlGat
   }
   {
     std::lock_guard<std::mutex> lock(mu_);
+    if (absorb_wall_step_locked(svc_.clock.mono_ms(), now)) persist_locked();
     pending_[it.message_id] = it;
   }
   cv_.notify_all();
@@ -464,10 +465,28 @@ void AiServices::decide(const Principal& p, const AuthorizeRequest& request, con
                           req->authorize_id));
 }
 
+bool AiServices::absorb_wall_step_locked(int64_t now_mono_ms, int64_t now_wall_ms) {
+  bool moved = false;
+  if (anchor_mono_ms_ >= 0) {
+    int64_t step = (now_wall_ms - anchor_wall_ms_) - (now_mono_ms - anchor_mono_ms_);
+    if (step > 2000 || step < -2000) {
+      for (auto& [id, i] : pending_) {
+        i.created_ms += step;
+        i.expires_at_ms += step;
+        moved = true;
+      }
+    }
+  }
+  anchor_mono_ms_ = now_mono_ms;
+  anchor_wall_ms_ = now_wall_ms;
+  return moved;
+}
+
 void AiServices::timer_loop() {
   std::unique_lock<std::mutex> lock(mu_);
   while (!quit_) {
     int64_t now = svc_.clock.wall_ms();
+    if (absorb_wall_step_locked(svc_.clock.mono_ms(), now)) persist_locked();
     std::vector<PendingItem> expired;
     int64_t next = now + 200;
     for (auto it = pending_.begin(); it != pending_.end();) {

@@ -99,6 +99,12 @@ class AiServices {
   void dispatch_held(const PendingItem& item, json::Object extra_detail, bool timeout_bypass,
                      std::function<void(Outcome)> done);
   void persist_locked();
+  // Held commands time out on the monotonic clock: a wall-clock step since the last reading
+  // shifts every deadline by the step (a step forward must not time out, or auto-allow, what
+  // is waiting for its approver). Returns whether anything moved.
+  bool absorb_wall_step_locked(int64_t now_mono_ms, int64_t now_wall_ms);
+  int64_t anchor_mono_ms_ = -1;
+  int64_t anchor_wall_ms_ = 0;
   void post_webhooks(const PendingItem& item, const json::Value& event);
   std::shared_ptr<Context> rebuild(const PendingItem& item, Error& err);
 

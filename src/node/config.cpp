@@ -674,6 +674,7 @@ SP config_schema() {
                       {"port", Int(0, 65535)},
                       {"bind", Str(256)},
                       {"max_streams", Int(1, 100'000)},
+                      {"module", Str()},
                       {"tls", Obj({{"enabled", Bool()},
                                    {"cert_file", Str()},
                                    {"key_file", Str()},
@@ -1404,6 +1405,7 @@ void build_transports(const At& root, NodeConfig& c, const std::string& base) {
   if (!std::regex_match(c.grpc.bind_address, bind_re))
     fail(g["bind"].path, "expected an IP address or host name", "invalid_value");
   c.grpc.max_streams = g["max_streams"].u32(64);
+  c.grpc.module = resolve_path(g["module"].str(), base);
   At gt = g["tls"];
   c.grpc.tls.enabled = gt["enabled"].flag(false);
   c.grpc.tls.cert_file = resolve_path(gt["cert_file"].str(), base);

@@ -75,6 +75,7 @@ struct GrpcConfig {  // `grpc` (docs/CONFIG.md, docs/TRANSPORT.md §gRPC)
   TlsConfig tls;
   std::string client_ca_file;              // grpc.tls.client_ca_file: require client certificates
   uint32_t max_streams = 64;
+  std::string module;                      // grpc.module: path of librcand_grpc.so (default: beside rcand)
 };
 
 struct UdpConfig {  // `udp` (docs/CONFIG.md, docs/TRANSPORT.md §UDP)

@@ -1,19 +1,39 @@
 // MdnsAdvertiser on libavahi-client's threaded poll (src/node/mdns.h).
 #include "node/mdns.h"
 
-#include <avahi-client/client.h>
-#include <avahi-client/publish.h>
-#include <avahi-common/alternative.h>
-#include <avahi-common/error.h>
-#include <avahi-common/malloc.h>
-#include <avahi-common/thread-watch.h>
+#include <sys/stat.h>
 
 #include <chrono>
+#include <cstdlib>
 
+#include "node/avahi_dl.h"
 #include "node/log.h"
 #include "node/services.h"
 
 namespace rcan::node {
+
+namespace {
+// Avahi, loaded by start() (avahi_dl.h); nothing below runs before it has loaded.
+const AvahiApi& av() { return *avahi_api(); }
+
+// Whether the D-Bus system bus socket Avahi's client would use exists: DBUS_SYSTEM_BUS_ADDRESS
+// when it names a unix:path=, else the standard socket. Other address forms are tried as given.
+bool system_bus_present(std::string& why) {
+  std::string path = "/run/dbus/system_bus_socket";
+  if (const char* a = std::getenv("DBUS_SYSTEM_BUS_ADDRESS"); a && *a) {
+    std::string addr = a;
+    if (addr.rfind("unix:", 0) != 0) return true;
+    size_t p = addr.find("path=");
+    if (p == std::string::npos) return true;  // unix:abstract=…, unix:runtime=yes…
+    size_t end = addr.find_first_of(",;", p);
+    path = addr.substr(p + 5, end == std::string::npos ? std::string::npos : end - p - 5);
+  }
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0) return true;
+  why = "no D-Bus system bus at " + path;
+  return false;
+}
+}  // namespace
 
 struct MdnsAdvertiser::Impl {
   MdnsInfo info;
@@ -37,8 +57,8 @@ struct MdnsAdvertiser::Impl {
 
   AvahiStringList* txt_list() const {
     AvahiStringList* l = nullptr;
-    for (auto it = info.txt.rbegin(); it != info.txt.rend(); ++it) l = avahi_string_list_add(l, it->c_str());
-    l = avahi_string_list_add(l, ("status=" + status).c_str());
+    for (auto it = info.txt.rbegin(); it != info.txt.rend(); ++it) l = av().string_list_add(l, it->c_str());
+    l = av().string_list_add(l, ("status=" + status).c_str());
     return l;
   }
 
@@ -58,52 +78,52 @@ struct MdnsAdvertiser::Impl {
   // Poll thread (or under the poll lock).
   void create_services(AvahiClient* c) {
     if (!group) {
-      group = avahi_entry_group_new(c, &Impl::group_cb, this);
+      group = av().entry_group_new(c, &Impl::group_cb, this);
       if (!group) {
-        unavailable(std::string("cannot create an entry group: ") + avahi_strerror(avahi_client_errno(c)));
+        unavailable(std::string("cannot create an entry group: ") + av().strerror(av().client_errno(c)));
         return;
       }
     }
-    if (!avahi_entry_group_is_empty(group)) return;
+    if (!av().entry_group_is_empty(group)) return;
     while (true) {
       AvahiStringList* txt = txt_list();
-      int r = avahi_entry_group_add_service_strlst(group, AVAHI_IF_UNSPEC, AVAHI_PROTO_UNSPEC,
+      int r = av().entry_group_add_service_strlst(group, AVAHI_IF_UNSPEC, AVAHI_PROTO_UNSPEC,
                                                    static_cast<AvahiPublishFlags>(0), name.c_str(), "_rcan._tcp",
                                                    nullptr, nullptr, info.port, txt);
-      avahi_string_list_free(txt);
+      av().string_list_free(txt);
       if (r == AVAHI_ERR_COLLISION) {
         rename();
-        avahi_entry_group_reset(group);
+        av().entry_group_reset(group);
         continue;
       }
       if (r < 0) {
-        log(LogLevel::kWarn, "mdns_publish_failed", json::Object{{"error", avahi_strerror(r)}});
+        log(LogLevel::kWarn, "mdns_publish_failed", json::Object{{"error", av().strerror(r)}});
         return;
       }
       break;
     }
-    if (int r = avahi_entry_group_commit(group); r < 0)
-      log(LogLevel::kWarn, "mdns_publish_failed", json::Object{{"error", avahi_strerror(r)}});
+    if (int r = av().entry_group_commit(group); r < 0)
+      log(LogLevel::kWarn, "mdns_publish_failed", json::Object{{"error", av().strerror(r)}});
   }
 
   void rename() {
-    char* n = avahi_alternative_service_name(name.c_str());
+    char* n = av().alternative_service_name(name.c_str());
     log(LogLevel::kInfo, "mdns_name_collision", json::Object{{"name", name}, {"renamed_to", n ? n : ""}});
     if (n) {
       name = n;
-      avahi_free(n);
+      av().free(n);
     }
   }
 
   void update_txt() {
     if (!group || !established) return;
     AvahiStringList* txt = txt_list();
-    int r = avahi_entry_group_update_service_txt_strlst(group, AVAHI_IF_UNSPEC, AVAHI_PROTO_UNSPEC,
+    int r = av().entry_group_update_service_txt_strlst(group, AVAHI_IF_UNSPEC, AVAHI_PROTO_UNSPEC,
                                                         static_cast<AvahiPublishFlags>(0), name.c_str(), "_rcan._tcp",
                                                         nullptr, txt);
-    avahi_string_list_free(txt);
+    av().string_list_free(txt);
     if (r < 0) {
-      log(LogLevel::kWarn, "mdns_update_failed", json::Object{{"error", avahi_strerror(r)}});
+      log(LogLevel::kWarn, "mdns_update_failed", json::Object{{"error", av().strerror(r)}});
       return;
     }
     set_published(status);
@@ -124,13 +144,13 @@ struct MdnsAdvertiser::Impl {
       case AVAHI_ENTRY_GROUP_COLLISION:
         self->established = false;
         self->rename();
-        avahi_entry_group_reset(g);
-        self->create_services(avahi_entry_group_get_client(g));
+        av().entry_group_reset(g);
+        self->create_services(av().entry_group_get_client(g));
         break;
       case AVAHI_ENTRY_GROUP_FAILURE:
         self->established = false;
         log(LogLevel::kWarn, "mdns_publish_failed",
-            json::Object{{"error", avahi_strerror(avahi_client_errno(avahi_entry_group_get_client(g)))}});
+            json::Object{{"error", av().strerror(av().client_errno(av().entry_group_get_client(g)))}});
         break;
       default:
         break;
@@ -148,20 +168,20 @@ struct MdnsAdvertiser::Impl {
       case AVAHI_CLIENT_S_COLLISION:
       case AVAHI_CLIENT_S_REGISTERING:
         self->established = false;
-        if (self->group) avahi_entry_group_reset(self->group);
+        if (self->group) av().entry_group_reset(self->group);
         break;
       case AVAHI_CLIENT_CONNECTING:
         self->unavailable("no Avahi daemon is running (waiting for one)");
         break;
       case AVAHI_CLIENT_FAILURE:
         self->established = false;
-        self->unavailable(avahi_client_errno(c) == AVAHI_ERR_DISCONNECTED
+        self->unavailable(av().client_errno(c) == AVAHI_ERR_DISCONNECTED
                               ? "the Avahi daemon went away (waiting for it)"
-                              : avahi_strerror(avahi_client_errno(c)));
+                              : av().strerror(av().client_errno(c)));
         // Drop the client (only once avahi_client_new has returned it); the watcher thread
         // creates a new one within 5 s, which waits for the daemon to come back.
         if (c == self->client) {
-          avahi_client_free(c);
+          av().client_free(c);
           self->client = nullptr;
           self->group = nullptr;
         }
@@ -180,22 +200,38 @@ MdnsAdvertiser::~MdnsAdvertiser() { stop(); }
 
 void MdnsAdvertiser::start() {
   Impl* im = impl_.get();
-  if (im->poll) return;
-  im->poll = avahi_threaded_poll_new();
-  if (!im->poll) {
-    im->unavailable("cannot create the Avahi poll thread");
-    return;
-  }
-  avahi_threaded_poll_start(im->poll);
+  if (im->watcher.joinable()) return;
+  // Avahi is loaded (and its poll thread started) once a D-Bus system bus exists: without one
+  // it cannot be reached, and a node that never finds one never maps Avahi and D-Bus.
+  auto ready = [im]() -> bool {
+    if (im->poll) return true;
+    std::string why;
+    if (!system_bus_present(why)) {
+      im->unavailable("cannot reach D-Bus/Avahi: " + why);
+      return false;
+    }
+    if (!avahi_api(&why)) {
+      im->unavailable(why);
+      return false;
+    }
+    im->poll = av().threaded_poll_new();
+    if (!im->poll) {
+      im->unavailable("cannot create the Avahi poll thread");
+      return false;
+    }
+    av().threaded_poll_start(im->poll);
+    return true;
+  };
   // Connects (or retries every 5 s while D-Bus/Avahi are absent), under the poll lock.
-  auto connect = [im](bool first) {
-    avahi_threaded_poll_lock(im->poll);
+  auto connect = [im, ready](bool first) {
+    if (!ready()) return;
+    av().threaded_poll_lock(im->poll);
     if (!im->client) {
       int err = 0;
-      im->client = avahi_client_new(avahi_threaded_poll_get(im->poll), AVAHI_CLIENT_NO_FAIL, &Impl::client_cb, im, &err);
-      if (!im->client && first) im->unavailable(std::string("cannot reach D-Bus/Avahi: ") + avahi_strerror(err));
+      im->client = av().client_new(av().threaded_poll_get(im->poll), AVAHI_CLIENT_NO_FAIL, &Impl::client_cb, im, &err);
+      if (!im->client && first) im->unavailable(std::string("cannot reach D-Bus/Avahi: ") + av().strerror(err));
     }
-    avahi_threaded_poll_unlock(im->poll);
+    av().threaded_poll_unlock(im->poll);
   };
   connect(true);
   im->watcher = std::thread([im, connect] {
@@ -210,13 +246,17 @@ void MdnsAdvertiser::start() {
         connect(false);
         next_try = std::chrono::steady_clock::now() + std::chrono::seconds(5);
       }
+      if (!im->poll) {
+        lock.lock();
+        continue;
+      }
       std::string s = im->info.status ? im->info.status() : "available";
-      avahi_threaded_poll_lock(im->poll);
+      av().threaded_poll_lock(im->poll);
       if (s != im->status) {
         im->status = s;
         im->update_txt();
       }
-      avahi_threaded_poll_unlock(im->poll);
+      av().threaded_poll_unlock(im->poll);
       lock.lock();
     }
   });
@@ -243,11 +283,11 @@ void MdnsAdvertiser::stop() {
   im->cv.notify_one();
   if (im->watcher.joinable()) im->watcher.join();
   if (im->poll) {
-    avahi_threaded_poll_stop(im->poll);
-    if (im->client) avahi_client_free(im->client);  // frees the entry group: goodbye packets
+    av().threaded_poll_stop(im->poll);
+    if (im->client) av().client_free(im->client);  // frees the entry group: goodbye packets
     im->client = nullptr;
     im->group = nullptr;
-    avahi_threaded_poll_free(im->poll);
+    av().threaded_poll_free(im->poll);
     im->poll = nullptr;
   }
 }

@@ -210,7 +210,9 @@ Node::Node(NodeServices& services)
   svc_.metrics.add_gauge("rcan_audit_queue_depth", "Audit records waiting to be durable.",
                          [this] { return static_cast<double>(svc_.audit_inflight.load()); });
   svc_.metrics.add_gauge("rcan_audit_available", "0 when the audit log cannot record.",
-                         [this] { return svc_.audit_unavailable.load() ? 0.0 : 1.0; });
+                         [this] { return svc_.audit.available() ? 1.0 : 0.0; });
+  svc_.metrics.add_counter_fn("rcan_audit_recoveries_total", "Times the audit log came back after a failure.",
+                              [this] { return static_cast<double>(svc_.audit.stats().recoveries); });
   svc_.metrics.add_counter_fn("rcan_audit_failures_total", "Audit appends that failed.",
                               [this] { return static_cast<double>(svc_.audit_failures.load()); });
   svc_.metrics.add_gauge("rcan_streams_open", "Connected WebSocket streams.",
@@ -482,7 +484,7 @@ void Node::route(HttpRequest& req, Respond& respond) {
   if (ai_route(svc_, req, respond)) return;  // §16: authorize, pending, thoughts, watermark
   if (p == "/healthz") {
     if (!method_is(req, "GET") && !method_is(req, "HEAD")) return wrong_method("GET");
-    bool ok = !svc_.audit_unavailable.load();
+    bool ok = svc_.audit.available();
     return answer_json(respond, p, ok ? 200 : 503,
                        json::Object{{"status", ok ? "ok" : "degraded"},
                                     {"estop_active", svc_.act.estop_active()},

@@ -349,7 +349,7 @@ class SafetyStateStage final : public Stage {
              "COMMAND_REJECTED");
       return Result::kAnswered;
     }
-    if (svc_.audit_unavailable.load()) {
+    if (!svc_.audit.available()) {
       refuse(svc_, ctx,
              Error(ErrorCode::kAuditUnavailable,
                    "the audit log cannot record; commands are refused until it can (ESTOP still works)"),
@@ -500,6 +500,13 @@ class DispatchStage final : public Stage {
   }
 
   Result resume(const std::shared_ptr<Context>& ctx) {
+    if (!svc_.audit.available()) {  // RESUME re-enables motion: not without its record
+      refuse(svc_, ctx,
+             Error(ErrorCode::kAuditUnavailable,
+                   "the audit log cannot record; RESUME is refused until it can (ESTOP still works)"),
+             "COMMAND_REJECTED");
+      return Result::kAnswered;
+    }
     Status st = svc_.act.resume(ctx->principal.role, ctx->principal.display());
     if (!st.ok()) {
       refuse(svc_, ctx, st.error(), "COMMAND_REJECTED");

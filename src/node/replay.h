@@ -3,17 +3,26 @@
 // A message is fresh when its timestamp is within `window_ms` of the node's wall clock
 // (10 s at most for SAFETY messages) and its id has not been seen inside the window.
 // Ids are remembered until their timestamp leaves the window. The memory is bounded: when
-// it is full of live ids the oldest is evicted and the window's floor rises to its
-// timestamp, so an evicted id can never be replayed (anything at or below the floor is
-// stale). Fresh duplicate SAFETY stops are let through (an ESTOP is never refused for
-// anything but authentication) and reported as duplicates.
+// it is full of live ids the one with the oldest timestamp is evicted and its timestamp joins
+// a refused range, so an evicted id can never be replayed (a non-safety message whose
+// timestamp lies in a refused range is stale). Fresh duplicate SAFETY stops are let through
+// (an ESTOP is never refused for anything but authentication) and reported as duplicates.
+//
+// Wall-clock steps (docs/NODE.md §Faults): ids are kept and expired by their own timestamps
+// in timestamp order, never by arrival order, and the refused ranges cover only the
+// timestamps that were evicted. After the node's clock steps back, ids from before the step
+// stay remembered until the clock has caught up with them (they could become fresh again),
+// and messages stamped with the new time are not refused because of evictions that happened
+// before the step; after a step forward, everything older than the window is stale anyway.
 #pragma once
 
 #include <cstdint>
-#include <deque>
 #include <mutex>
+#include <set>
 #include <string>
 #include <unordered_set>
+#include <utility>
+#include <vector>
 
 #include "rcan/result.h"
 
@@ -42,17 +51,15 @@ class ReplayGuard {
   uint64_t evictions() const;
 
  private:
-  struct Entry {
-    int64_t ts;
-    std::string id;
-  };
   void expire(int64_t now_wall_ms);
+  void note_evicted(int64_t ts);
+  bool refused(int64_t ts) const;
 
   ReplayOptions opts_;
   mutable std::mutex mu_;
-  std::deque<Entry> order_;  // by insertion (timestamps roughly increasing)
+  std::set<std::pair<int64_t, std::string>> by_ts_;  // (timestamp, id), oldest first
   std::unordered_set<std::string> ids_;
-  int64_t floor_ms_ = INT64_MIN;
+  std::vector<std::pair<int64_t, int64_t>> refused_;  // [lo, hi] timestamp ranges of evicted ids
   uint64_t evictions_ = 0;
 };
 

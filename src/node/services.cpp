@@ -1,5 +1,7 @@
 #include "node/services.h"
 
+#include <optional>
+
 #include "rcan/errors.h"
 
 namespace rcan::node {
@@ -32,12 +34,32 @@ void NodeServices::write_audit(audit::AuditEntry e, std::function<void(Result<au
     e.detail.set("sync_pending", true);
   }
   metrics.count_audit(e.event);
+  std::vector<audit::AuditEntry> late;
+  if (audit.available()) {
+    std::lock_guard<std::mutex> l(deferred_mu);
+    late.swap(deferred_stops);
+  }
+  for (auto& d : late) {  // stops the log could not record while it was failed: recorded now
+    d.detail.set("recorded_after_audit_outage", true);
+    write_audit(std::move(d));
+  }
+  std::optional<audit::AuditEntry> stop_copy;
+  if (e.event == "ESTOP" || e.event == "STOP") stop_copy = e;
   audit_inflight.fetch_add(1, std::memory_order_relaxed);
-  audit.append_async(std::move(e), [this, cb = std::move(cb)](Result<audit::Receipt> r) {
+  audit.append_async(std::move(e), [this, cb = std::move(cb), stop_copy = std::move(stop_copy)](
+                                       Result<audit::Receipt> r) mutable {
     audit_inflight.fetch_sub(1, std::memory_order_relaxed);
     if (!r.ok()) {
       audit_failures.fetch_add(1, std::memory_order_relaxed);
-      if (r.error().code == ErrorCode::kAuditUnavailable) audit_unavailable.store(true);
+      if (r.error().code == ErrorCode::kAuditUnavailable) {
+        audit_unavailable.store(true);
+        if (stop_copy) {
+          std::lock_guard<std::mutex> l(deferred_mu);
+          if (deferred_stops.size() < 1000) deferred_stops.push_back(std::move(*stop_copy));
+        }
+      }
+    } else {
+      audit_unavailable.store(false);  // the log recovered (AuditLog::available() is the live state)
     }
     if (cb) cb(std::move(r));
   });
@@ -97,7 +119,7 @@ json::Value NodeServices::status(bool detailed) {
     o.set("ownership", ownership.to_json(clock.wall_ms(), false));
     o.set("control_queue", sessions.queue_json(now));
   }
-  o.set("audit_available", !audit_unavailable.load());
+  o.set("audit_available", audit.available());
   json::Value session_list = sessions.to_json(now, detailed);
   o.set("active_sessions", static_cast<int64_t>(session_list.as_array().size()));
   o.set("sessions", session_list);

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -111,6 +112,12 @@ class NodeServices {
                           const std::string& event, const std::string& outcome) const;
   // Appends asynchronously; `cb` (optional) runs once the record is durable or failed.
   void write_audit(audit::AuditEntry e, std::function<void(Result<audit::Receipt>)> cb = {});
+
+  // ESTOP/STOP records that could not be written while the audit log was failed (the stop
+  // itself happened): written, marked `recorded_after_audit_outage`, by the first write_audit
+  // once the log is back. Bounded.
+  std::mutex deferred_mu;
+  std::vector<audit::AuditEntry> deferred_stops;
 
   uint32_t rate_limit(Role r) const { return settings.rate_per_minute[static_cast<size_t>(role_level(r))]; }
 

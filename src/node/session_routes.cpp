@@ -539,7 +539,8 @@ void Node::lease_route(HttpRequest& req, Respond& respond, const json::Value& bo
     int64_t dur = seconds_field(body, "duration_s", 3600);
     if (dur < 0)
       return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "duration_s must be 1 s .. 366 days", "duration_s"));
-    auto l = svc_.sessions.grant_lease(*pr, str_field(body, "leasee"), dur * 1000, now_wall);
+    auto l = svc_.sessions.grant_lease(*pr, str_field(body, "leasee"), dur * 1000, now_wall,
+                                                svc_.clock.mono_ms());
     if (!l.ok()) return answer_error(respond, route, l.error());
     auto e = svc_.entry(pr->display(), l->id, "LEASE_GRANTED", "ok");
     e.sub = pr->sub;
@@ -563,7 +564,8 @@ void Node::lease_route(HttpRequest& req, Respond& respond, const json::Value& bo
     if (dur < 0)
       return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "duration_s must be positive", "duration_s"));
     std::string sub = str_field(body, "user_id");
-    auto l = svc_.sessions.grant_within_lease(*pr, lease_id, sub, *role, dur * 1000, now_wall);
+    auto l = svc_.sessions.grant_within_lease(*pr, lease_id, sub, *role, dur * 1000, now_wall,
+                                                svc_.clock.mono_ms());
     if (!l.ok()) return answer_error(respond, route, l.error());
     auto e = svc_.entry(pr->display(), lease_id, "LEASE_ACCESS_GRANTED", "ok");
     e.sub = pr->sub;
@@ -780,7 +782,8 @@ void Node::consent_route(HttpRequest& req, Respond& respond, const json::Value& 
       return answer_error(respond, route, d.ok() ? Error(ErrorCode::kInternal, "unexpected") : d.error());
     }
     if (kind == "lease") {
-      auto l = svc_.sessions.grant_lease(*pr, pending->requester_sub, dur * 1000, now_wall);
+      auto l = svc_.sessions.grant_lease(*pr, pending->requester_sub, dur * 1000, now_wall,
+                                                svc_.clock.mono_ms());
       if (!l.ok()) return answer_error(respond, route, l.error());
       lease_id = l->id;
     } else {
@@ -790,7 +793,8 @@ void Node::consent_route(HttpRequest& req, Respond& respond, const json::Value& 
         return answer_error(respond, route,
                             Error(ErrorCode::kControlConflict, "kind grant needs a running lease; use kind lease", "kind"));
       auto l = svc_.sessions.grant_within_lease(*pr, running.front().id, pending->requester_sub,
-                                                control ? Role::kUser : Role::kGuest, dur * 1000, now_wall);
+                                                control ? Role::kUser : Role::kGuest, dur * 1000, now_wall,
+                                                svc_.clock.mono_ms());
       if (!l.ok()) return answer_error(respond, route, l.error());
       lease_id = l->id;
     }

@@ -171,6 +171,7 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
   Role role = p.role;
   if (requested && role_level(*requested) < role_level(role)) role = *requested;  // only lower
   std::lock_guard<std::mutex> lock(mu_);
+  absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   last_wall_ms_ = now_wall_ms;
   expire_locked(now_mono_ms);
   promote_locked(now_mono_ms, now_wall_ms);
@@ -253,6 +254,7 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
 Result<Session> SessionTable::renew(const std::string& session_id, const Principal& p, int64_t now_mono_ms,
                                     int64_t now_wall_ms) {
   std::lock_guard<std::mutex> lock(mu_);
+  absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   last_wall_ms_ = now_wall_ms;
   if (holder_ && holder_->id == session_id && holder_->expires_mono_ms != 0 &&
       now_mono_ms >= holder_->expires_mono_ms) {
@@ -317,8 +319,26 @@ bool SessionTable::leave_queue(const Principal& p) {
   return false;
 }
 
+void SessionTable::absorb_wall_step_locked(int64_t now_mono_ms, int64_t now_wall_ms) {
+  if (now_wall_ms == 0) return;
+  if (anchor_mono_ms_ >= 0) {
+    int64_t step = (now_wall_ms - anchor_wall_ms_) - (now_mono_ms - anchor_mono_ms_);
+    if (step > 2000 || step < -2000) {  // a step, not drift or slewing
+      for (auto& l : leases_) {
+        l.start_wall_ms += step;
+        l.end_wall_ms += step;
+        for (auto& g : l.grants) g.end_wall_ms += step;
+      }
+      if (!leases_.empty()) ++version_;  // persisted with the shifted times
+    }
+  }
+  anchor_mono_ms_ = now_mono_ms;
+  anchor_wall_ms_ = now_wall_ms;
+}
+
 void SessionTable::tick(int64_t now_mono_ms, int64_t now_wall_ms) {
   std::lock_guard<std::mutex> lock(mu_);
+  absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   last_wall_ms_ = now_wall_ms;
   // Lease ends revoke everything derived from the lease (before plain TTL expiry, so a
   // session bounded by its lease is recorded as revoked by it).
@@ -463,7 +483,7 @@ json::Value SessionTable::queue_json(int64_t now_mono_ms) {
 }
 
 Result<Lease> SessionTable::grant_lease(const Principal& owner, const std::string& leasee_sub, int64_t duration_ms,
-                                        int64_t now_wall_ms) {
+                                        int64_t now_wall_ms, int64_t now_mono_ms) {
   if (role_level(owner.role) < role_level(Role::kOwner))
     return Error(ErrorCode::kInsufficientPrivileges, "only an OWNER may grant a lease", "role");
   if (leasee_sub.empty() || leasee_sub.size() > 256)
@@ -471,6 +491,7 @@ Result<Lease> SessionTable::grant_lease(const Principal& owner, const std::strin
   if (duration_ms <= 0 || duration_ms > int64_t{366} * 86'400'000)
     return Error(ErrorCode::kSchemaValidationFailed, "duration_s must be 1 s .. 366 days", "duration_s");
   std::lock_guard<std::mutex> lock(mu_);
+  if (now_mono_ms >= 0) absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   if (const Lease* l = active_lease_locked(now_wall_ms))
     return Error(ErrorCode::kControlConflict, "lease " + l->id + " is running; revoke it first", "lease");
   Lease l;
@@ -486,13 +507,14 @@ Result<Lease> SessionTable::grant_lease(const Principal& owner, const std::strin
 
 Result<Lease> SessionTable::grant_within_lease(const Principal& leasee, const std::string& lease_id,
                                                const std::string& sub, Role role, int64_t duration_ms,
-                                               int64_t now_wall_ms) {
+                                               int64_t now_wall_ms, int64_t now_mono_ms) {
   if (role != Role::kUser && role != Role::kGuest)
     return Error(ErrorCode::kSchemaValidationFailed, "a lease grants USER or GUEST access only", "role");
   if (sub.empty() || sub.size() > 256)
     return Error(ErrorCode::kSchemaValidationFailed, "user_id is required", "user_id", "missing_field");
   if (duration_ms <= 0) return Error(ErrorCode::kSchemaValidationFailed, "duration_s must be positive", "duration_s");
   std::lock_guard<std::mutex> lock(mu_);
+  if (now_mono_ms >= 0) absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   for (auto& l : leases_) {
     if (l.id != lease_id || now_wall_ms >= l.end_wall_ms) continue;
     bool may = (leasee.sub == l.leasee_sub && role_level(leasee.role) >= role_level(Role::kLeasee)) ||

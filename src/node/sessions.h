@@ -162,10 +162,12 @@ class SessionTable {
 
   // Leases. Errors: INSUFFICIENT_PRIVILEGES, CONTROL_CONFLICT (one already runs),
   // SCHEMA_VALIDATION_FAILED, NOT_FOUND.
+  // `now_mono_ms` (optional, -1 = not given) lets a wall-clock step since the last reading be
+  // absorbed first, so that a lease granted just after a step is not shifted by it later.
   Result<Lease> grant_lease(const Principal& owner, const std::string& leasee_sub, int64_t duration_ms,
-                            int64_t now_wall_ms);
+                            int64_t now_wall_ms, int64_t now_mono_ms = -1);
   Result<Lease> grant_within_lease(const Principal& leasee, const std::string& lease_id, const std::string& sub,
-                                   Role role, int64_t duration_ms, int64_t now_wall_ms);
+                                   Role role, int64_t duration_ms, int64_t now_wall_ms, int64_t now_mono_ms = -1);
   Result<Lease> revoke_lease(const Principal& p, const std::string& lease_id, int64_t now_mono_ms,
                              int64_t now_wall_ms);
   std::vector<Lease> leases(int64_t now_wall_ms);
@@ -200,6 +202,12 @@ class SessionTable {
   std::vector<ControlChange> changes_;
   ControlState state_ = ControlState::kAvailable;
   int64_t last_wall_ms_ = 0;
+  // Lease times are wall-clock (they are shown and persisted as such) but run on the
+  // monotonic clock: a wall-clock step seen between two calls that carry both clocks shifts
+  // every lease and grant by the step (docs/NODE.md §Faults). -1 = no reading yet.
+  void absorb_wall_step_locked(int64_t now_mono_ms, int64_t now_wall_ms);
+  int64_t anchor_mono_ms_ = -1;
+  int64_t anchor_wall_ms_ = 0;
   uint64_t violations_ = 0;
   uint64_t version_ = 0;
 };

@@ -10,6 +10,8 @@
 #include <atomic>
 #include <condition_variable>
 #include <mutex>
+#include <set>
+#include <thread>
 
 #include "audit/test_util.h"
 #include "rcan/audit/audit_log.h"
@@ -192,19 +194,111 @@ TEST(AuditFault, CrashInsideRecovery) {
 TEST(AuditFault, DiskFailureFailsClosed) {
   TempDir tmp;
   FaultInjectionEnv env(Env::posix());
-  auto log = AuditLog::open(tmp.path() + "/log", fault_options(&env, false));
+  AuditOptions o = fault_options(&env, false);
+  o.recovery_interval_ms = 0;  // no probe: failed until reopened
+  auto log = AuditLog::open(tmp.path() + "/log", o);
   ASSERT_TRUE(log.ok());
   ASSERT_TRUE((*log)->append(entry(1)).ok());
   env.fail_after(1);
   auto r = (*log)->append(entry(2));
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.error().code, ErrorCode::kAuditUnavailable);
-  // Sticky: the log does not come back by itself even if the disk does.
+  // Sticky without a probe: the log does not come back by itself even if the disk does.
   env.fail_after(0);
   auto again = (*log)->append(entry(3));
   ASSERT_FALSE(again.ok());
   EXPECT_EQ(again.error().code, ErrorCode::kAuditUnavailable);
   EXPECT_TRUE((*log)->stats().failed);
+}
+
+// With the probe on, the log comes back once the disk does: the chain continues from the
+// last acknowledged record in a new segment (checkpoint + recovery record), nothing that was
+// refused is in it, and the directory verifies. Run for a failure at each of the first
+// operations of a group commit (the write, the sync), with and without torn appends, and in
+// the middle of a rotation.
+void fail_then_recover(uint64_t fail_at, bool torn, bool pipelined) {
+  SCOPED_TRACE("fail_at " + std::to_string(fail_at) + (torn ? " torn" : "") + (pipelined ? " pipelined" : ""));
+  TempDir tmp;
+  const std::string dir = tmp.path() + "/log";
+  FaultInjectionEnv env(Env::posix());
+  env.set_torn_appends(torn);
+  AuditOptions o = fault_options(&env, false);
+  o.background_index = pipelined;
+  o.recovery_interval_ms = 20;
+  auto log = AuditLog::open(dir, o);
+  ASSERT_TRUE(log.ok());
+  std::vector<Acked> acked;
+  int i = 0;
+  for (; i < 5; ++i) {
+    auto r = (*log)->append(entry(i));
+    ASSERT_TRUE(r.ok());
+    acked.push_back({r->seq, "msg-" + std::to_string(i)});
+  }
+  env.fail_after(fail_at);
+  std::set<std::string> refused;
+  for (; i < 40; ++i) {
+    auto r = (*log)->append(entry(i));
+    if (!r.ok()) {
+      EXPECT_EQ(r.error().code, ErrorCode::kAuditUnavailable);
+      refused.insert("msg-" + std::to_string(i));
+      ++i;
+      break;
+    }
+    acked.push_back({r->seq, "msg-" + std::to_string(i)});
+  }
+  ASSERT_FALSE(refused.empty()) << "the fault never tripped";
+  EXPECT_FALSE((*log)->available());
+  // Still failing: the probe keeps failing, appends are refused at once.
+  std::this_thread::sleep_for(std::chrono::milliseconds(60));
+  EXPECT_FALSE((*log)->available());
+  env.fail_after(0);  // the disk is back
+  bool back = false;
+  for (int k = 0; k < 500 && !back; ++k) {
+    back = (*log)->available();
+    if (!back) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_TRUE(back) << "the log did not recover";
+  for (int k = 0; k < 10; ++k, ++i) {
+    auto r = (*log)->append(entry(i));
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    acked.push_back({r->seq, "msg-" + std::to_string(i)});
+  }
+  EXPECT_GE((*log)->stats().recoveries, 1u);
+  auto lines = export_lines(**log);
+  log->reset();
+  // Every acknowledged record is there, nothing refused is, and the chain says it recovered.
+  std::set<std::string> ids;
+  int recoveries = 0;
+  for (const auto& l : lines) {
+    json::Value v = parse(l);
+    ids.insert(v.get("message_id")->as_string());
+    if (v.get("event")->as_string() == "AUDIT_RECOVERY" && v.get("outcome")->as_string() == "repaired") ++recoveries;
+  }
+  for (const auto& a : acked) EXPECT_TRUE(ids.count(a.message_id)) << a.message_id;
+  for (const auto& r : refused) EXPECT_FALSE(ids.count(r)) << r << " was refused but is in the chain";
+  EXPECT_GE(recoveries, 1);
+  VerifyReport rep = verify_jsonl(join(lines), kSecret);
+  EXPECT_TRUE(rep.ok) << rep.why << " at seq " << rep.first_bad_seq;
+  VerifyReport drep = verify_dir(dir, kSecret);
+  EXPECT_TRUE(drep.ok) << drep.why << " at seq " << drep.first_bad_seq;
+  // And it reopens cleanly.
+  auto again = AuditLog::open(dir, fault_options(&env, false));
+  ASSERT_TRUE(again.ok()) << again.error().message;
+}
+
+TEST(AuditFault, DiskFailureRecoversWhenTheDiskDoes) {
+  for (uint64_t k = 1; k <= 12; ++k) {
+    fail_then_recover(k, false, false);
+    if (::testing::Test::HasFailure()) return;
+  }
+  for (uint64_t k = 1; k <= 12; ++k) {
+    fail_then_recover(k, true, false);
+    if (::testing::Test::HasFailure()) return;
+  }
+  for (uint64_t k = 1; k <= 6; ++k) {
+    fail_then_recover(k, true, true);
+    if (::testing::Test::HasFailure()) return;
+  }
 }
 
 }  // namespace

@@ -17,8 +17,11 @@
 //     cuts a torn tail (keeping the cut bytes in `<segment>.torn-<offset>`), and appends
 //     a `recovery` record saying what it found. Every acknowledged record survives.
 //   * A failed write or sync makes the log fail closed: that append and every later one
-//     returns ErrorCode::kAuditUnavailable (the node then refuses commands). The log is
-//     not retried in-process: after a failed fsync the page cache cannot be trusted.
+//     returns ErrorCode::kAuditUnavailable (the node then refuses commands) until the
+//     writer's probe (every recovery_interval_ms) finds the disk writable again. Recovery
+//     never trusts what was written after the last acknowledged record (after a failed
+//     fsync the page cache cannot be trusted): it cuts the segment back to that record and
+//     continues the chain in a new segment, opened by a checkpoint and a `recovery` record.
 //   * A well-formed record that fails its HMAC or chain link is never auto-repaired:
 //     open() refuses with kAuditUnavailable naming the seq (wrong secret or tampering).
 #pragma once
@@ -62,6 +65,9 @@ struct AuditOptions {
   // Retention (0 = unlimited). Applied after each rotation to sealed segments only.
   uint64_t retention_max_bytes = 0;
   int64_t retention_max_age_ms = 0;
+  // After a failed write or sync, how often the writer probes whether the disk takes
+  // writes again (and, if so, recovers: docs/AUDIT.md §3). 0 = stay failed until reopened.
+  int recovery_interval_ms = 1000;
   // Identity written into the log's own (system) records.
   std::string robot_ruri = "rcan://local.rcan/unknown/unknown/unknown";
   std::string system_principal = "system:audit";
@@ -85,6 +91,7 @@ struct AuditStats {
   uint64_t groups_committed = 0;
   uint64_t syncs = 0;
   bool failed = false;
+  uint64_t recoveries = 0;  // times the log came back after a failure (this process)
 };
 
 class AuditLog {
@@ -122,6 +129,8 @@ class AuditLog {
   Result<std::string> get(uint64_t seq) const;
 
   AuditStats stats() const;
+  // False while the log is failed (appends return kAuditUnavailable). Cheap (one atomic).
+  bool available() const;
   const std::string& dir() const;
 
   class Impl;

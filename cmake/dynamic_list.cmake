@@ -1,0 +1,27 @@
+# Writes the dynamic list rcand is linked with (ld --dynamic-list): every dynamic symbol of the
+# gRPC module librcand_grpc.so, so that rcand exports exactly what the module takes from it
+# (Node, json, logs, and the shared inline/template entities) instead of all of its symbols.
+# Run as a script: cmake -DMODULE=… -DNM=… -DOUT=… -P dynamic_list.cmake
+if(NOT MODULE OR NOT NM OR NOT OUT)
+  message(FATAL_ERROR "dynamic_list.cmake needs MODULE, NM and OUT")
+endif()
+execute_process(COMMAND ${NM} -D --format=posix ${MODULE} OUTPUT_VARIABLE syms RESULT_VARIABLE rc)
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "nm failed on ${MODULE}")
+endif()
+string(REPLACE "\n" ";" lines "${syms}")
+set(body "{\n")
+foreach(line ${lines})
+  string(REGEX MATCH "^[^ @]+" name "${line}")
+  if(name)
+    string(APPEND body "  ${name};\n")
+  endif()
+endforeach()
+string(APPEND body "};\n")
+set(old "")
+if(EXISTS "${OUT}")
+  file(READ "${OUT}" old)
+endif()
+if(NOT old STREQUAL body)
+  file(WRITE "${OUT}" "${body}")
+endif()
