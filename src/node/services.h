@@ -33,6 +33,24 @@ namespace rcan::node {
 struct FleetMembership;
 class AiServices;  // §16 gates, HiTL queue, thought log, watermark (ai.h)
 
+// The port the node serves on: rcand stores the bound port (for `--port 0`) after the listener
+// is up, while I/O threads may already read it for /rcan/v1/status — an atomic, still copyable.
+class BoundPort {
+ public:
+  BoundPort(uint16_t p = 0) : v_(p) {}  // NOLINT: converts like the uint16_t it replaces
+  BoundPort(const BoundPort& o) : v_(o.load()) {}
+  BoundPort& operator=(const BoundPort& o) { return *this = o.load(); }
+  BoundPort& operator=(uint16_t p) {
+    v_.store(p, std::memory_order_relaxed);
+    return *this;
+  }
+  operator uint16_t() const { return load(); }
+  uint16_t load() const { return v_.load(std::memory_order_relaxed); }
+
+ private:
+  std::atomic<uint16_t> v_;
+};
+
 struct NodeSettings {
   std::string ruri;  // canonical robot RURI (identity, no capability)
   std::string rrn;
@@ -40,7 +58,7 @@ struct NodeSettings {
   std::string manufacturer;
   std::string model;
   std::vector<std::string> capabilities{"status", "chat", "teleop", "nav", "arm"};
-  uint16_t port = 8080;
+  BoundPort port = 8080;
   std::string rcan_version = "1.0.0";
   std::vector<std::string> extensions{"8.5-sender-type", "16-ai-accountability", "16.6-watermark",
                                       "replay-window"};

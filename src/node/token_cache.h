@@ -33,7 +33,10 @@ class TokenCache {
   void insert(std::string_view token, const Principal& p, int64_t valid_from_s, int64_t valid_until_s);
 
   size_t size() const;
-  uint64_t hits() const { return hits_; }
+  uint64_t hits() const {
+    std::lock_guard<std::mutex> lock(mu_);
+    return hits_;
+  }
 
  private:
   struct Entry {

@@ -1,5 +1,6 @@
 // Many appenders + a concurrent exporter end in one valid chain; a real SIGKILL of a
 // process that is appending loses no acknowledged record.
+#include <algorithm>
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -150,14 +151,18 @@ void kill_child_and_check(int delay_ms) {
     ::_exit(0);
   }
   ::close(fds[1]);
+  // The kill lands `delay_ms` after the child's first acknowledgements, not after the fork: a
+  // slow start (a loaded machine, a sanitizer build) must not leave nothing to check.
+  std::string data;
+  char buf[65536];
+  ssize_t n;
+  while (std::count(data.begin(), data.end(), '\n') <= 10 && (n = ::read(fds[0], buf, sizeof buf)) > 0)
+    data.append(buf, static_cast<size_t>(n));
   std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms));
   ASSERT_EQ(::kill(pid, SIGKILL), 0);
   int status = 0;
   ::waitpid(pid, &status, 0);
   ASSERT_TRUE(WIFSIGNALED(status)) << "child exited with " << WEXITSTATUS(status);
-  std::string data;
-  char buf[65536];
-  ssize_t n;
   while ((n = ::read(fds[0], buf, sizeof buf)) > 0) data.append(buf, static_cast<size_t>(n));
   ::close(fds[0]);
   std::map<uint64_t, std::string> acked;

@@ -120,6 +120,8 @@ class Watcher {
     EXPECT_TRUE(client_->connected());
     std::this_thread::sleep_for(std::chrono::milliseconds(150));  // subscriptions registered
   }
+  // The client's network thread calls on_message: stop it before msgs_ and mu_ go away.
+  ~Watcher() { client_.reset(); }
   void publish(const std::string& topic, const json::Value& v, bool retain = false) {
     ASSERT_TRUE(client_->publish(topic, json::dump(v), 1, retain).ok());
   }

@@ -40,7 +40,12 @@ class OwnershipE2E : public ::testing::Test {
     args.insert(args.end(), {"--url", url(), "--token-file", token_file});
     return test::run_cli(args);
   }
-  std::string mode() { return parse_json(n().get("/rcan/v1/status").body).get("mode")->as_string(); }
+  std::string mode() {
+    auto r = n().get("/rcan/v1/status");
+    json::Value v = parse_json(r.body);
+    const json::Value* m = v.get("mode");
+    return m != nullptr && m->is_string() ? m->as_string() : "(no mode: " + std::to_string(r.status) + " " + r.body + ")";
+  }
   test::TempDir dir_;
   std::unique_ptr<ConfiguredNode> node_;
   std::string owner_, owner_file_;
