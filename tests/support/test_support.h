@@ -22,6 +22,18 @@ json::Value load_vector(const std::string& name);
 Bytes hex(std::string_view h);
 
 // A fresh directory under $TMPDIR, removed with its contents on destruction.
+// The value of the metric line `name value` in a Prometheus text body (-1 when absent).
+inline double metric_value(const std::string& body, const std::string& name) {
+  size_t at = 0;
+  while ((at = body.find(name, at)) != std::string::npos) {
+    bool line_start = at == 0 || body[at - 1] == '\n';
+    size_t sp = at + name.size();
+    if (line_start && sp < body.size() && body[sp] == ' ') return std::stod(body.substr(sp + 1));
+    at = sp;
+  }
+  return -1;
+}
+
 class TempDir {
  public:
   TempDir();

@@ -166,15 +166,7 @@ class Node {
 
   // One metric line `name value` on /metrics (-1 when absent).
   double metric(const std::string& name) const {
-    HttpReply r = get("/metrics");
-    size_t at = 0;
-    while ((at = r.body.find(name, at)) != std::string::npos) {
-      bool line_start = at == 0 || r.body[at - 1] == '\n';
-      size_t sp = at + name.size();
-      if (line_start && sp < r.body.size() && r.body[sp] == ' ') return std::stod(r.body.substr(sp + 1));
-      at = sp;
-    }
-    return -1;
+    return test::metric_value(get("/metrics").body, name);
   }
 
  private:
