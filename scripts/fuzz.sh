@@ -2,12 +2,14 @@
 # Runs the libFuzzer targets (clang-14, `make fuzz`) for a given time each and records what
 # each run did (docs/FUZZING.md).
 #
-#   scripts/fuzz.sh [-t SECONDS] [-j N] [--no-build] [TARGET…]
+#   scripts/fuzz.sh [-t SECONDS] [-j N] [--no-build] [--record] [TARGET…]
 #   scripts/fuzz.sh SECONDS [TARGET…]          (the older form)
 #
 #   -t SECONDS   time per target (default 60)
 #   -j N         run N targets at once (default 1; each target is one process)
 #   --no-build   use the binaries already in build/fuzz/fuzz/
+#   --record     also append each target's line, with the commit it fuzzed, to the committed
+#                fuzz/campaigns.tsv (the project's record of fuzzing time per target)
 #   TARGET       json, http_handler, … or json_fuzz (default: every target)
 #
 # Each target starts from its committed seeds (fuzz/corpus/<name>/) plus what earlier runs found
@@ -25,13 +27,15 @@ cd "$(dirname "$0")/.."
 secs=60
 jobs=1
 build=1
+record=0
 targets=()
 while [ $# -gt 0 ]; do
   case "$1" in
     -t) secs=$2; shift 2 ;;
     -j) jobs=$2; shift 2 ;;
     --no-build) build=0; shift ;;
-    -h|--help) sed -n '2,26p' "$0"; exit 0 ;;
+    --record) record=1; shift ;;
+    -h|--help) sed -n '2,28p' "$0"; exit 0 ;;
     -*) echo "fuzz.sh: unknown option $1" >&2; exit 2 ;;
     *)
       if [ ${#targets[@]} -eq 0 ] && [[ "$1" =~ ^[0-9]+$ ]]; then secs=$1; else targets+=("${1%_fuzz}"); fi
@@ -129,10 +133,19 @@ printf 'target\tseconds\texecutions\texec_per_s\tcorpus_before\tcorpus_after\tco
 status=0
 when=$(date -u +%Y-%m-%dT%H:%M:%SZ)
 [ -f "$out/history.tsv" ] || printf 'date\ttarget\tseconds\texecutions\texec_per_s\tcorpus_before\tcorpus_after\tcoverage\tfeatures\tpeak_rss_mb\tresult\tartifact\n' >"$out/history.tsv"
+commit=$(git rev-parse --short=12 HEAD 2>/dev/null || echo unknown)
+git diff --quiet HEAD -- src include fuzz apps 2>/dev/null || commit="$commit+changes"
+campaigns=fuzz/campaigns.tsv
+if [ "$record" -eq 1 ] && [ ! -f "$campaigns" ]; then
+  printf 'date\tcommit\ttarget\tseconds\texecutions\tcoverage\tresult\n' >"$campaigns"
+fi
 for t in "${targets[@]}"; do
   line=$(cat "$runs/$t.tsv" 2>/dev/null || printf '%s\t0\t0\t0\t0\t0\t0\t0\t0\tnot-run\t-' "$t")
   printf '%s\n' "$line" >>"$summary"
   printf '%s\t%s\n' "$when" "$line" >>"$out/history.tsv"
+  if [ "$record" -eq 1 ]; then
+    awk -F'\t' -v OFS='\t' -v w="$when" -v c="$commit" '{ print w, c, $1, $2, $3, $7, $10 }' <<<"$line" >>"$campaigns"
+  fi
   [ "$(cut -f10 <<<"$line")" = ok ] || status=1
 done
 echo "summary: $summary (all runs: $out/history.tsv)"

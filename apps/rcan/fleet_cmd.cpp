@@ -182,8 +182,9 @@ Result<Common> common(const Options& o, bool need_token) {
     while (!c.token.empty() && (c.token.back() == '\n' || c.token.back() == '\r' || c.token.back() == ' ')) c.token.pop_back();
   }
   if (o.has("timeout-ms")) {
+    const std::string text = o.get("timeout-ms");  // `end` points into it
     char* end = nullptr;
-    long long v = std::strtoll(o.get("timeout-ms").c_str(), &end, 10);
+    long long v = std::strtoll(text.c_str(), &end, 10);
     if (end == nullptr || *end != '\0' || v < 1 || v > 3'600'000)
       return Error(ErrorCode::kSchemaValidationFailed, "--timeout-ms must be 1..3600000");
     c.timeout_ms = v;

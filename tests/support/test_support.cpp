@@ -21,10 +21,17 @@ namespace rcan::test {
 
 namespace {
 
-// The parent's environment plus `extra` (prepared before fork: no allocation in the child).
+// The parent's environment with `extra` ("NAME=value", replacing a variable of the same name)
+// (prepared before fork: no allocation in the child).
 std::vector<std::string> child_env(const std::vector<std::string>& extra) {
+  auto name_of = [](const std::string& e) { return e.substr(0, e.find('=')); };
   std::vector<std::string> env;
-  for (char** e = environ; *e; ++e) env.emplace_back(*e);
+  for (char** e = environ; *e; ++e) {
+    std::string v(*e);
+    bool replaced = false;
+    for (const auto& x : extra) replaced = replaced || name_of(x) == name_of(v);
+    if (!replaced) env.push_back(std::move(v));
+  }
   for (const auto& e : extra) env.push_back(e);
   return env;
 }

@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdlib>
 #include <chrono>
 #include <cstring>
 #include <filesystem>
@@ -523,8 +524,15 @@ class SteppedClock {
   }
   int64_t node_now_ms() const { return real_wall_ms() + offset_ms_; }
   std::vector<std::string> env(const std::string& lib) const {
-    return {"LD_PRELOAD=" + lib, "FAKETIME_TIMESTAMP_FILE=" + file_, "FAKETIME_DONT_FAKE_MONOTONIC=1",
-            "FAKETIME_CACHE_DURATION=1"};
+    std::vector<std::string> e{"LD_PRELOAD=" + lib, "FAKETIME_TIMESTAMP_FILE=" + file_,
+                               "FAKETIME_DONT_FAKE_MONOTONIC=1", "FAKETIME_CACHE_DURATION=1"};
+    // In the ASan tree the preloaded library comes before the ASan runtime, which ASan refuses
+    // by default; libfaketime only wraps clock calls, so the check is turned off (and the
+    // sanitizer options the test runner set are kept).
+    const char* asan = std::getenv("ASAN_OPTIONS");
+    e.push_back(std::string("ASAN_OPTIONS=") + (asan != nullptr && *asan != '\0' ? std::string(asan) + ":" : "") +
+                "verify_asan_link_order=0");
+    return e;
   }
 
  private:
