@@ -152,6 +152,16 @@ class PosixEnv final : public Env {
   Result<std::string> read_range(const std::string& path, uint64_t offset, size_t n) override {
     int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd < 0) return io_error("open", path, errno);
+    // A length from a corrupt index must not become a huge allocation: never more than the
+    // file holds past `offset` (a short result, which the callers report).
+    struct stat st{};
+    if (::fstat(fd, &st) != 0) {
+      int e = errno;
+      ::close(fd);
+      return io_error("fstat", path, e);
+    }
+    const uint64_t size = st.st_size > 0 ? static_cast<uint64_t>(st.st_size) : 0;
+    n = offset >= size ? 0 : static_cast<size_t>(std::min<uint64_t>(n, size - offset));
     std::string out(n, '\0');
     size_t got = 0;
     while (got < n) {

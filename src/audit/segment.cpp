@@ -130,6 +130,7 @@ std::optional<IndexHeader> read_index_header(Env* env, const std::string& path) 
   h.max_ts = static_cast<int64_t>(get64(p + 40));
   h.wm_count = get64(p + 48);
   if (h.count == 0 || h.last_seq - h.first_seq + 1 != h.count || h.wm_count > h.count) return {};
+  if (h.count > (uint64_t{1} << 40)) return {};  // expected_size() must not wrap around
   auto size = env->file_size(path);
   if (!size.ok() || *size != expected_size(h)) return {};
   return h;

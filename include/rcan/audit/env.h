@@ -43,7 +43,8 @@ class Env {
   // fsync'ed, so that later overwrites need no metadata journal commit on fdatasync.
   virtual Status write_zeros_synced(const std::string& path, uint64_t bytes) = 0;
   virtual Result<std::string> read_file(const std::string& path) = 0;
-  // Up to `n` bytes from `offset` (fewer at end of file).
+  // Up to `n` bytes from `offset` (fewer at end of file). `n` comes from indexes on disk, which
+  // may be corrupt: an implementation never allocates more than the file holds.
   virtual Result<std::string> read_range(const std::string& path, uint64_t offset, size_t n) = 0;
   virtual Result<uint64_t> file_size(const std::string& path) = 0;
   virtual bool exists(const std::string& path) = 0;
