@@ -58,6 +58,9 @@ for t in "${targets[@]}"; do
   [ -x "$bin/${t}_fuzz" ] || { echo "fuzz.sh: no target $bin/${t}_fuzz" >&2; exit 2; }
 done
 mkdir -p "$out/logs" "$out/corpus" "$out/artifacts"
+# The code being fuzzed: the commit at the start (+changes when the code differs from it).
+commit=$(git rev-parse --short=12 HEAD 2>/dev/null || echo unknown)
+git diff --quiet HEAD -- src include apps fuzz ':!fuzz/campaigns.tsv' 2>/dev/null || commit="$commit+changes"
 runs=$(mktemp -d "$out/runs.XXXXXX")  # this invocation's per-target lines
 trap 'rm -rf "$runs"' EXIT
 
@@ -133,8 +136,6 @@ printf 'target\tseconds\texecutions\texec_per_s\tcorpus_before\tcorpus_after\tco
 status=0
 when=$(date -u +%Y-%m-%dT%H:%M:%SZ)
 [ -f "$out/history.tsv" ] || printf 'date\ttarget\tseconds\texecutions\texec_per_s\tcorpus_before\tcorpus_after\tcoverage\tfeatures\tpeak_rss_mb\tresult\tartifact\n' >"$out/history.tsv"
-commit=$(git rev-parse --short=12 HEAD 2>/dev/null || echo unknown)
-git diff --quiet HEAD -- src include fuzz apps 2>/dev/null || commit="$commit+changes"
 campaigns=fuzz/campaigns.tsv
 if [ "$record" -eq 1 ] && [ ! -f "$campaigns" ]; then
   printf 'date\tcommit\ttarget\tseconds\texecutions\tcoverage\tresult\n' >"$campaigns"
