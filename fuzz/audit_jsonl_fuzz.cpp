@@ -19,6 +19,20 @@ void check(bool cond) {
   if (!cond) std::abort();
 }
 
+// The rcan-py line form (to_dict) leaves out an optional field that is null or "", and
+// from_dict restores a missing one as its default (null; "" for safety_reason). A record
+// whose optional field holds the other empty value (e.g. "confidence": "") therefore reads
+// back different — in rcan-py exactly as here — and only other records must round-trip.
+bool line_form_is_lossless(const rcan::json::Object& fields) {
+  for (const char* k : {"confidence", "model_identity", "operator", "safety_reason", "previous_hash"}) {
+    const rcan::json::Value* v = fields.find(k);
+    if (v == nullptr) continue;
+    const bool is_reason = std::string_view(k) == "safety_reason";
+    if (is_reason ? v->is_null() : (v->is_string() && v->as_string().empty())) return false;
+  }
+  return true;
+}
+
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
@@ -55,7 +69,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       std::string again = rcanpy_line(rec->fields, rec->hmac);
       auto reparsed = rcanpy_parse_line(again);
       check(reparsed.ok());
-      check(rcanpy_preimage(reparsed->fields) == rcanpy_preimage(rec->fields));
+      if (line_form_is_lossless(rec->fields))
+        check(rcanpy_preimage(reparsed->fields) == rcanpy_preimage(rec->fields));
     }
     auto v = rcan::json::parse(line);
     if (v.ok() && v->is_object()) {
