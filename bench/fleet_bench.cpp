@@ -3,7 +3,8 @@
 // pipeline, and its own MQTT connection (MqttNode) — exactly what rcand wires up, minus the
 // HTTP port. The bench starts a broker on a free loopback port, then:
 //
-//   1. fleet ESTOP: publishes a retained QoS 2 SAFETY ESTOP on the fleet's estop topic and
+//   1. fleet ESTOP: publishes a retained QoS 2 SAFETY ESTOP on the fleet's estop topic (the
+//      robots subscribe at mqtt.estop_qos, 1 unless --estop-qos 2) and
 //      times, per robot, publish → the safety core latching (measured inside the robot's
 //      Actuation) and publish → the robot's ACK arriving back at the coordinator;
 //   2. RESUME, then a broadcast FLEET_COMMAND (`status`, then a short `move`): times publish →
@@ -11,7 +12,8 @@
 //
 // Repeats each round --rounds times and prints percentiles over all robot×round samples.
 //
-//   fleet_bench [--robots 200] [--rounds 5] [--segment-kib 1024] [--mosquitto /usr/sbin/mosquitto]
+//   fleet_bench [--robots 200] [--rounds 5] [--estop-qos 1|2] [--segment-kib 1024]
+//               [--mosquitto /usr/sbin/mosquitto]
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <netinet/in.h>
@@ -62,6 +64,23 @@ double cpu_now() {
   getrusage(RUSAGE_SELF, &ru);
   return static_cast<double>(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) +
          static_cast<double>(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec) / 1e6;
+}
+
+// Voluntary context switches (the thread slept: a wake-up) of this process's threads, summed
+// by thread name (the node names its threads: mqtt-io, audit-writer, safety-tick, …).
+std::map<std::string, long> wakeups_by_thread() {
+  std::map<std::string, long> out;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator("/proc/self/task", ec)) {
+    std::ifstream comm(e.path() / "comm");
+    std::string name;
+    std::getline(comm, name);
+    std::ifstream st(e.path() / "status");
+    std::string line;
+    while (std::getline(st, line))
+      if (line.rfind("voluntary_ctxt_switches:", 0) == 0) out[name] += std::atol(line.c_str() + 24);
+  }
+  return out;
 }
 
 double mono_ms() {
@@ -190,7 +209,7 @@ class Coordinator {
 }  // namespace
 
 int main(int argc, char** argv) {
-  int robots_n = 200, rounds = 5;
+  int robots_n = 200, rounds = 5, estop_qos = 1;
   // Each robot's audit log preallocates its active segment and a spare (zero-filled, see
   // docs/AUDIT.md §Durability). A real robot does that once on its own storage; 200 robots
   // in one process would write 2 × 200 × 64 MiB to one disk while being measured, so the
@@ -201,11 +220,15 @@ int main(int argc, char** argv) {
     std::string a = argv[i];
     if (a == "--robots") robots_n = std::atoi(argv[i + 1]);
     else if (a == "--rounds") rounds = std::atoi(argv[i + 1]);
+    else if (a == "--estop-qos") estop_qos = std::atoi(argv[i + 1]);
     else if (a == "--mosquitto") mosquitto = argv[i + 1];
     else if (a == "--segment-kib") segment_bytes = std::strtoull(argv[i + 1], nullptr, 10) << 10;
   }
-  if (robots_n < 1 || robots_n > 2000 || rounds < 1 || rounds > 1000 || segment_bytes < (64u << 10)) {
-    std::fprintf(stderr, "usage: fleet_bench [--robots 1..2000] [--rounds 1..1000] [--segment-kib N] [--mosquitto PATH]\n");
+  if (robots_n < 1 || robots_n > 2000 || rounds < 1 || rounds > 1000 || segment_bytes < (64u << 10) ||
+      (estop_qos != 1 && estop_qos != 2)) {
+    std::fprintf(stderr,
+                 "usage: fleet_bench [--robots 1..2000] [--rounds 1..1000] [--estop-qos 1|2] [--segment-kib N] "
+                 "[--mosquitto PATH]\n");
     return 2;
   }
   node::set_log_level(node::LogLevel::kError);
@@ -301,6 +324,7 @@ int main(int argc, char** argv) {
     mo.mqtt.broker = url;
     mo.mqtt.telemetry_hz = 0;
     mo.mqtt.publish_audit = false;
+    mo.mqtt.estop_qos = estop_qos;
     mo.fleet = mine;
     mo.ruri = *parse_ruri(ruri);
     r->mqtt = std::make_unique<node::MqttNode>(*r->node, *r->svc, mo);
@@ -324,8 +348,10 @@ int main(int argc, char** argv) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   std::this_thread::sleep_for(std::chrono::milliseconds(500));  // subscriptions settle
-  std::printf("fleet_bench: %d robots (full node stacks, one MQTT connection each) on one Mosquitto, up in %.0f ms\n",
-              robots_n, mono_ms() - t_start);
+  std::printf(
+      "fleet_bench: %d robots (full node stacks, one MQTT connection each, estop subscription QoS %d) on one "
+      "Mosquitto, up in %.0f ms\n",
+      robots_n, estop_qos, mono_ms() - t_start);
   {  // What the idle fleet costs: CPU of this process (all robots) over 2 s with no traffic.
     double c0 = cpu_now(), w0 = mono_ms();
     std::this_thread::sleep_for(std::chrono::seconds(2));
@@ -345,6 +371,7 @@ int main(int argc, char** argv) {
   };
   std::vector<double> latch, estop_ack, status_ack, move_ack;
   double estop_cpu_ms = 0;
+  std::map<std::string, long> estop_wakeups;  // summed over the ESTOP rounds
   size_t n = static_cast<size_t>(robots_n);
   int failures = 0;
   for (int round = 0; round < rounds; ++round) {
@@ -353,22 +380,25 @@ int main(int argc, char** argv) {
     int errors = 0;
     std::string id = new_uuid_v4();
     double cpu0 = cpu_now();
+    auto wake0 = wakeups_by_thread();
     auto acks = coord.round("rcan/fleet/bench/estop",
                             msg("SAFETY", json::Object{{"safety_event", "ESTOP"}, {"fleet_id", "bench"}}, id), id, 2,
                             true, n, &t0, 10000, &errors);
     for (auto& [m, t] : acks) estop_ack.push_back(t - t0);
-    estop_cpu_ms += (cpu_now() - cpu0) * 1000;
+    const double round_cpu_ms = (cpu_now() - cpu0) * 1000;
+    estop_cpu_ms += round_cpu_ms;
+    for (auto& [name, n_wakes] : wakeups_by_thread()) estop_wakeups[name] += n_wakes - wake0[name];
     std::vector<double> round_latch;
     for (auto& r : robots) {
       double t = r->timed->latched_at.load();
       if (t > 0) round_latch.push_back(t - t0);
     }
-    // Round 1 verifies the fleet JWT on every robot (Ed25519); later rounds find it in each
-    // robot's verified-token cache.
-    std::printf("  round %d: ESTOP latched on %zu/%zu  p50 %.2f ms  p99 %.2f ms  max %.2f ms%s\n", round + 1,
-                round_latch.size(), n, pct(round_latch, 50), pct(round_latch, 99),
+    // Round 1 is each robot's first message: the fleet JWT is verified (later rounds find it
+    // in the robot's verified-token cache) and every path runs for the first time.
+    std::printf("  round %d: ESTOP latched on %zu/%zu  p50 %.2f ms  p99 %.2f ms  max %.2f ms  CPU %.0f us/robot%s\n",
+                round + 1, round_latch.size(), n, pct(round_latch, 50), pct(round_latch, 99),
                 round_latch.empty() ? 0.0 : *std::max_element(round_latch.begin(), round_latch.end()),
-                round == 0 ? "  (token verified cold)" : "");
+                round_cpu_ms * 1000 / robots_n, round == 0 ? "  (first message)" : "");
     latch.insert(latch.end(), round_latch.begin(), round_latch.end());
     failures += errors + static_cast<int>(n - acks.size());
     std::string rid = new_uuid_v4();
@@ -399,6 +429,10 @@ int main(int argc, char** argv) {
   report("fleet ESTOP publish -> ACK back", estop_ack, expected);
   std::printf("fleet ESTOP CPU (all robots, publish to last ACK): %.1f ms per round, %.0f us per robot\n",
               estop_cpu_ms / rounds, estop_cpu_ms * 1000 / rounds / robots_n);
+  std::printf("fleet ESTOP thread wake-ups per robot:");
+  for (auto& [name, n_wakes] : estop_wakeups)
+    if (n_wakes > 0) std::printf(" %s %.2f", name.c_str(), static_cast<double>(n_wakes) / rounds / robots_n);
+  std::printf("\n");
   report("broadcast status -> ACK back", status_ack, expected);
   report("broadcast move -> ACK back", move_ack, expected);
   std::printf("refused or missing answers: %d\n", failures);

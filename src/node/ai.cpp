@@ -1,6 +1,8 @@
 // AiServices: confidence-gate escalation, the HiTL queue, notifications, the watermark.
 #include "node/ai.h"
 
+#include <pthread.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -66,7 +68,10 @@ Status AiServices::start(Pipeline& pipeline) {
   if (!items->empty() || skipped)
     log(LogLevel::kInfo, "hitl_pending_restored",
         json::Object{{"pending", static_cast<int64_t>(items->size())}, {"skipped", static_cast<int64_t>(skipped)}});
-  timer_ = std::thread([this] { timer_loop(); });
+  timer_ = std::thread([this] {
+    pthread_setname_np(pthread_self(), "hitl-timer");
+    timer_loop();
+  });
   return Status::Ok();
 }
 

@@ -625,7 +625,8 @@ SP config_schema() {
                       {"tls", Obj({{"ca_file", Str()}, {"cert_file", Str()}, {"key_file", Str()}})},
                       {"reconnect", Obj({{"min_s", Int(1, 3600)}, {"max_s", Int(1, 3600)}})},
                       {"telemetry_hz", Int(0, 50)},
-                      {"publish_audit", Bool()}})},
+                      {"publish_audit", Bool()},
+                      {"estop_qos", Int(1, 2)}})},
         {"fleet", Obj({{"fleet_id", Str(128)},
                        {"member_id", Str(128)},
                        {"robots", Arr(Str(128), 10'000)},
@@ -1344,6 +1345,7 @@ void parse_fleet_blocks(const At& root, const std::string& base, NodeConfig& c) 
     fail(mq["reconnect"]["max_s"].path, "must be at least reconnect.min_s", "out_of_range");
   c.mqtt.telemetry_hz = mq["telemetry_hz"].u32(c.mqtt.telemetry_hz);
   c.mqtt.publish_audit = mq["publish_audit"].flag(true);
+  c.mqtt.estop_qos = static_cast<int>(mq["estop_qos"].u32(static_cast<uint32_t>(c.mqtt.estop_qos)));
 
   auto segment = [](const At& at) {
     if (at && !node::valid_topic_segment(at.str()))

@@ -156,6 +156,11 @@ class Driver {
   // Integrates / services the hardware for `dt_ms` milliseconds (the core's loop period).
   virtual void step(int64_t dt_ms) = 0;
   virtual RobotState state() const = 0;
+  // True while step() has nothing to integrate or service until the next apply(): the robot
+  // is stopped and holds no target. The core's loop then slows to SafetyConfig::idle_tick_ms
+  // (and wakes for the next command). The default keeps a driver that services hardware on
+  // the full-rate loop.
+  virtual bool at_rest() const { return false; }
 };
 
 // ---- JSON (inline so that the header stands alone) ----

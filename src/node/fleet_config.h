@@ -23,6 +23,9 @@ struct MqttConfig {
   uint32_t reconnect_max_s = 30;
   uint32_t telemetry_hz = 1;                     // 0 = no telemetry over MQTT
   bool publish_audit = true;                     // audit records on the audit topic
+  // QoS of the robot's subscription to its fleet's estop topic (docs/FLEET.md): 1 acts on the
+  // first PUBLISH that arrives; 2 only after the PUBREL round trip through the broker.
+  int estop_qos = 1;
 };
 
 struct FleetConfig {

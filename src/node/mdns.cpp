@@ -1,6 +1,7 @@
 // MdnsAdvertiser on libavahi-client's threaded poll (src/node/mdns.h).
 #include "node/mdns.h"
 
+#include <pthread.h>
 #include <sys/stat.h>
 
 #include <chrono>
@@ -235,6 +236,7 @@ void MdnsAdvertiser::start() {
   };
   connect(true);
   im->watcher = std::thread([im, connect] {
+    pthread_setname_np(pthread_self(), "mdns-watch");
     std::unique_lock<std::mutex> lock(im->mu);
     auto next_try = std::chrono::steady_clock::now() + std::chrono::seconds(5);
     while (!im->stopping) {

@@ -1,5 +1,6 @@
 #include "node/mqtt_node.h"
 
+#include <pthread.h>
 #include <sys/stat.h>
 
 #include <algorithm>
@@ -118,7 +119,7 @@ Status MqttNode::start() {
   client_->subscribe(robot_.cmd(), 1);
   if (in_fleet) {
     client_->subscribe(fleet_.cmd(), 1);
-    client_->subscribe(fleet_.estop(), 2);  // ESTOP: QoS 2
+    client_->subscribe(fleet_.estop(), mq.estop_qos);  // 1 by default: act on the first copy
     client_->subscribe(out_.cmd(), 1);
   }
   if (!opts_.swarm.swarm_id.empty()) {
@@ -143,7 +144,10 @@ Status MqttNode::start() {
     svc_.events.unsubscribe(event_sub_);
     return s;
   }
-  loop_ = std::thread([this] { loop(); });
+  loop_ = std::thread([this] {
+    pthread_setname_np(pthread_self(), "mqtt-node");
+    loop();
+  });
   log(LogLevel::kInfo, "mqtt_started",
       json::Object{{"broker", mq.broker}, {"cmd_topic", robot_.cmd()}, {"status_topic", out_.status()}});
   return Status::Ok();

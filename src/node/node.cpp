@@ -1,6 +1,8 @@
 // Node: HTTP routes and the WebSocket stream binding over the one pipeline.
 #include "node/node.h"
 
+#include <pthread.h>
+
 #include <chrono>
 #include <cstdlib>
 
@@ -237,7 +239,10 @@ void Node::start() {
   e.detail.set("estop_active", svc_.act.estop_active());
   svc_.write_audit(std::move(e));
   control_start();
-  pump_ = std::thread([this] { pump(); });
+  pump_ = std::thread([this] {
+    pthread_setname_np(pthread_self(), "node-pump");
+    pump();
+  });
 }
 
 void Node::shutdown() {

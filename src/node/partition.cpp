@@ -1,5 +1,7 @@
 #include "node/partition.h"
 
+#include <pthread.h>
+
 #include <algorithm>
 
 #include "node/http_client.h"
@@ -62,6 +64,7 @@ void PartitionMonitor::start(std::function<int64_t()> wall_now, std::function<vo
     running_ = true;
   }
   thread_ = std::thread([this] {
+    pthread_setname_np(pthread_self(), "partition");
     for (;;) {
       probe_once();
       std::unique_lock<std::mutex> lock(run_mu_);

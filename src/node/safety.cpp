@@ -1,5 +1,6 @@
 #include "node/safety.h"
 
+#include <pthread.h>
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -280,7 +281,10 @@ Status SafetyCore::open(const std::string& state_dir) {
     if (need_write) ++latch_seq_;
   }
   if (latched_.load()) driver_->stop();
-  persister_ = std::thread([this] { persist_loop(); });
+  persister_ = std::thread([this] {
+    pthread_setname_np(pthread_self(), "safety-persist");
+    persist_loop();
+  });
   return Status::Ok();
 }
 
@@ -663,6 +667,13 @@ Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd, const D
     if (latched_.load(std::memory_order_seq_cst))
       return Error(ErrorCode::kCommandRejected, "ESTOP is latched; an explicit RESUME is required", "",
                    "estop_active");
+    if (resting_.load(std::memory_order_seq_cst)) {
+      // The loop may have slept up to idle_tick_ms: bring the driver to now first, so the
+      // new motion is integrated from this moment and not from the last tick.
+      const int64_t t = clock_.mono_ms();
+      if (t > last_tick_mono_) driver_->step(std::min(t - last_tick_mono_, kMaxStepMs));
+      last_tick_mono_ = std::max(last_tick_mono_, t);
+    }
     Status st = driver_->apply(out.applied);
     // An estop() whose bounded fence gave up on us: stop right behind our own apply.
     if (latched_.load(std::memory_order_seq_cst)) driver_->stop();
@@ -672,6 +683,7 @@ Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd, const D
     }
     motion_owner_ = opts.session_id;
   }
+  wake_ticker();
   if (safe_stop_.load(std::memory_order_acquire)) {
     std::lock_guard<std::mutex> lock(meta_mu_);
     safe_stop_.store(false, std::memory_order_release);
@@ -684,20 +696,28 @@ Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd, const D
 // ---- sessions / watchdog --------------------------------------------------------------------
 
 void SafetyCore::register_session(const std::string& session_id, int64_t timeout_ms) {
-  std::lock_guard<std::mutex> lock(sessions_mu_);
-  Session& s = sessions_[session_id];
-  s.timeout_ms = timeout_ms > 0 ? timeout_ms : cfg_.default_heartbeat_ms;
-  s.last_heartbeat_mono = clock_.mono_ms();
-  s.lost = false;
+  {
+    std::lock_guard<std::mutex> lock(sessions_mu_);
+    Session& s = sessions_[session_id];
+    s.timeout_ms = timeout_ms > 0 ? timeout_ms : cfg_.default_heartbeat_ms;
+    s.last_heartbeat_mono = clock_.mono_ms();
+    s.lost = false;
+  }
+  wake_ticker();  // a new deadline, possibly sooner than the loop's idle sleep
 }
 
 Status SafetyCore::heartbeat(const std::string& session_id) {
-  std::lock_guard<std::mutex> lock(sessions_mu_);
-  auto it = sessions_.find(session_id);
-  if (it == sessions_.end())
-    return Error(ErrorCode::kNotFound, "unknown session", "session_id", "unknown_session");
-  it->second.last_heartbeat_mono = clock_.mono_ms();
-  it->second.lost = false;
+  bool revived = false;
+  {
+    std::lock_guard<std::mutex> lock(sessions_mu_);
+    auto it = sessions_.find(session_id);
+    if (it == sessions_.end())
+      return Error(ErrorCode::kNotFound, "unknown session", "session_id", "unknown_session");
+    it->second.last_heartbeat_mono = clock_.mono_ms();
+    revived = it->second.lost;
+    it->second.lost = false;
+  }
+  if (revived) wake_ticker();  // a heartbeat only moves a live deadline later
   return Status::Ok();
 }
 
@@ -727,9 +747,14 @@ void SafetyCore::set_session_control(const std::string& session_id, bool holds_c
 }
 
 void SafetyCore::feed_watchdog() {
-  std::lock_guard<std::mutex> lock(sessions_mu_);
-  watchdog_last_feed_mono_ = clock_.mono_ms();
-  if (watchdog_last_feed_mono_ == 0) watchdog_last_feed_mono_ = 1;
+  bool armed = false;
+  {
+    std::lock_guard<std::mutex> lock(sessions_mu_);
+    armed = watchdog_last_feed_mono_ == 0;
+    watchdog_last_feed_mono_ = clock_.mono_ms();
+    if (watchdog_last_feed_mono_ == 0) watchdog_last_feed_mono_ = 1;
+  }
+  if (armed) wake_ticker();  // a feed only moves an armed deadline later
 }
 
 void SafetyCore::enter_safe_stop(std::string reason, std::string session) {
@@ -847,6 +872,35 @@ void SafetyCore::tick() {
   for (const auto& ev : events) emit(ev);
 }
 
+int64_t SafetyCore::rest_for_ms() const {
+  if (cfg_.idle_tick_ms <= cfg_.tick_period_ms) return 0;
+  const int64_t now = clock_.mono_ms();
+  int64_t until = now + cfg_.idle_tick_ms;
+  {
+    std::lock_guard<std::mutex> lock(apply_mu_);
+    if (drive_deadline_mono_ != 0 || !driver_->at_rest()) return 0;
+  }
+  {
+    std::lock_guard<std::mutex> lock(sessions_mu_);
+    // tick() acts once a deadline has passed (elapsed > timeout): wake 1 ms after it.
+    for (const auto& [id, s] : sessions_)
+      if (!s.lost) until = std::min(until, s.last_heartbeat_mono + s.timeout_ms + 1);
+    if (cfg_.watchdog_timeout_ms > 0 && watchdog_last_feed_mono_ != 0)
+      until = std::min(until, watchdog_last_feed_mono_ + cfg_.watchdog_timeout_ms + 1);
+  }
+  const int64_t rest = until - now;
+  return rest > cfg_.tick_period_ms ? rest : 0;
+}
+
+void SafetyCore::wake_ticker() {
+  if (!resting_.load(std::memory_order_seq_cst)) return;
+  {
+    std::lock_guard<std::mutex> wl(tick_wait_mu_);
+    wake_requested_ = true;
+  }
+  tick_wait_cv_.notify_all();
+}
+
 void SafetyCore::start() {
   std::lock_guard<std::mutex> lock(thread_mu_);
   if (running_.load()) return;
@@ -856,11 +910,29 @@ void SafetyCore::start() {
     last_tick_mono_ = clock_.mono_ms();
   }
   ticker_ = std::thread([this] {
+    pthread_setname_np(pthread_self(), "safety-tick");
     const auto period = std::chrono::milliseconds(std::max<int64_t>(1, cfg_.tick_period_ms));
     auto next = std::chrono::steady_clock::now() + period;
     while (running_.load(std::memory_order_acquire)) {
       tick();
+      {
+        std::lock_guard<std::mutex> wl(tick_wait_mu_);
+        wake_requested_ = false;
+      }
+      // Announce the rest before checking whether we may: a dispatch() or session change that
+      // the check does not see then sees resting_ and wakes us (see wake_ticker()).
+      resting_.store(true, std::memory_order_seq_cst);
+      const int64_t rest_ms = rest_for_ms();
       std::unique_lock<std::mutex> wl(tick_wait_mu_);
+      if (rest_ms > 0) {
+        tick_wait_cv_.wait_for(wl, std::chrono::milliseconds(rest_ms), [this] {
+          return wake_requested_ || !running_.load(std::memory_order_acquire);
+        });
+        resting_.store(false, std::memory_order_seq_cst);
+        next = std::chrono::steady_clock::now() + period;
+        continue;
+      }
+      resting_.store(false, std::memory_order_seq_cst);
       tick_wait_cv_.wait_until(wl, next, [this] { return !running_.load(std::memory_order_acquire); });
       next += period;
       const auto now = std::chrono::steady_clock::now();

@@ -92,6 +92,11 @@ struct SafetyConfig {
   LimitPolicy policy = LimitPolicy::kClamp;
   bool estop_on_startup = false;         // safety.estop_on_startup: always come up latched
   int64_t tick_period_ms = 20;           // 50 Hz control loop
+  // While the driver is at rest (Driver::at_rest()) and no drive TTL is running, the loop
+  // sleeps up to this long instead — woken early by a command, a session or watchdog feed,
+  // and always on time for the next heartbeat or watchdog deadline. An idle robot then costs
+  // one wake-up a second instead of fifty. 0 or ≤ tick_period_ms: always the full rate.
+  int64_t idle_tick_ms = 1000;
   int64_t default_heartbeat_ms = 2000;   // register_session(id, 0) → this (latency_budget × 2)
   int64_t watchdog_timeout_ms = 0;       // brain watchdog; 0 = disabled
   // A drive still commanded this long after its deadline is stopped by tick() (safe-stop).
@@ -193,6 +198,10 @@ class SafetyCore {
   // One control-loop iteration: steps the driver by the monotonic time since the last tick,
   // then enforces drive TTLs, the workspace guard, heartbeats and the watchdog.
   void tick();
+  // How long the loop thread may sleep after a tick (ms; 0 = keep the full rate): the driver
+  // at rest, no drive TTL running, and up to idle_tick_ms or the next heartbeat / watchdog
+  // deadline, whichever comes first.
+  int64_t rest_for_ms() const;
 
   // SAFETY lane. O(1) and lock-free up to the driver stop: one atomic store, then
   // Driver::stop(). Then a lock-free fence (waits only for a dispatch already inside
@@ -256,6 +265,8 @@ class SafetyCore {
                                         const RobotState& now, DispatchOutcome& out) const;
   void enter_safe_stop(std::string reason, std::string session);
   void record_latency(int64_t ns);
+  // Wakes a resting loop (new motion, session or watchdog deadline). Cheap when not resting.
+  void wake_ticker();
   void persist_loop();
   Status write_state_file(const LatchState& st);
   void request_persist(uint64_t seq);
@@ -320,6 +331,10 @@ class SafetyCore {
   std::atomic<bool> running_{false};
   std::mutex tick_wait_mu_;
   std::condition_variable tick_wait_cv_;
+  bool wake_requested_ = false;        // guarded by tick_wait_mu_
+  // True while the loop thread may be sleeping at its idle rate: dispatch() then brings the
+  // driver up to date before applying, and anything that adds work wakes the loop.
+  std::atomic<bool> resting_{false};
 };
 
 }  // namespace rcan::node

@@ -188,6 +188,12 @@ void SimRobot::step(int64_t dt_ms) {
   st_.stopped = stopped_locked();
 }
 
+bool SimRobot::at_rest() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  absorb_stop_locked();
+  return stopped_locked();
+}
+
 RobotState SimRobot::state() const {
   std::lock_guard<std::mutex> lock(mu_);
   absorb_stop_locked();

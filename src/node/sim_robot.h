@@ -54,6 +54,7 @@ class SimRobot final : public Driver {
   void stop() noexcept override;
   void step(int64_t dt_ms) override;
   RobotState state() const override;
+  bool at_rest() const override;
 
   // How many times stop() has been called (for tests and benchmarks).
   uint64_t stop_count() const { return stop_gen_.load(std::memory_order_acquire); }

@@ -2,6 +2,8 @@
 // transport's I/O threads never wait on a disk.
 #pragma once
 
+#include <pthread.h>
+
 #include <condition_variable>
 #include <deque>
 #include <functional>
@@ -14,7 +16,10 @@ namespace rcan::node {
 class Worker {
  public:
   explicit Worker(int threads = 1) {
-    for (int i = 0; i < threads; ++i) threads_.emplace_back([this] { loop(); });
+    for (int i = 0; i < threads; ++i) threads_.emplace_back([this] {
+      pthread_setname_np(pthread_self(), "node-worker");
+      loop();
+    });
   }
   ~Worker() { shutdown(); }
   Worker(const Worker&) = delete;

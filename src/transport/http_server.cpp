@@ -16,6 +16,8 @@
 // `#pragma GCC system_header` (transport/beast.h) does not silence. Off for this file only.
 #pragma GCC diagnostic ignored "-Wnull-dereference"
 
+#include <pthread.h>
+
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -939,6 +941,7 @@ Result<uint16_t> HttpServer::Impl::start() {
   }
   for (int i = 0; i < opt.io_threads; ++i) {
     threads.emplace_back([this] {
+      pthread_setname_np(pthread_self(), "http-io");
       for (;;) {
         try {
           ioc.run();

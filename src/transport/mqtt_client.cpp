@@ -1,5 +1,6 @@
 #include "transport/mqtt_client.h"
 
+#include <pthread.h>
 #include <mosquitto.h>
 
 #include <cctype>
@@ -76,6 +77,7 @@ struct MqttClient::Impl {
 struct MqttCallbacks {
   static void on_connect(mosquitto* m, void* obj, int rc) {
     auto* self = static_cast<MqttClient*>(obj);
+    pthread_setname_np(pthread_self(), "mqtt-io");  // libmosquitto's network thread
     if (rc == 0) {
       self->connected_.store(true);
       self->connects_.fetch_add(1);

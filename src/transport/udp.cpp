@@ -1,6 +1,7 @@
 // UDP service: heartbeats and discovery (udp.h, docs/TRANSPORT.md §UDP).
 #include "transport/udp.h"
 
+#include <pthread.h>
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <poll.h>
@@ -305,7 +306,10 @@ Result<uint16_t> UdpService::start() {
     };
   }
   im.running.store(true);
-  im.thread = std::thread([&im] { im.loop(); });
+  im.thread = std::thread([&im] {
+    pthread_setname_np(pthread_self(), "udp");
+    im.loop();
+  });
   log(LogLevel::kInfo, "udp.listening",
       json::Object{{"address", im.opt.bind_address},
                    {"port", static_cast<int64_t>(im.port)},

@@ -538,6 +538,17 @@ TEST(ConfigErrors, Ranges) {
   expect_error(parse("driver:\n  sim: {tick_hz: 10, telemetry_hz: 20}\n"), "driver.sim.telemetry_hz",
                "out_of_range");
   expect_error(parse("bridge:\n  ros_domain_id: 233\n"), "bridge.ros_domain_id", "out_of_range");
+  expect_error(parse("mqtt:\n  estop_qos: 0\n"), "mqtt.estop_qos", "out_of_range");
+  expect_error(parse("mqtt:\n  estop_qos: 3\n"), "mqtt.estop_qos", "out_of_range");
+}
+
+TEST(ConfigMqtt, EstopSubscriptionQos) {
+  auto dflt = parse("mqtt:\n  enabled: true\n");
+  ASSERT_TRUE(dflt.ok()) << dflt.error().message;
+  EXPECT_EQ(dflt->mqtt.estop_qos, 1);
+  auto two = parse("mqtt:\n  enabled: true\n  estop_qos: 2\n");
+  ASSERT_TRUE(two.ok()) << two.error().message;
+  EXPECT_EQ(two->mqtt.estop_qos, 2);
 }
 
 TEST(ConfigErrors, Semantics) {

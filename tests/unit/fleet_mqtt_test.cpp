@@ -9,6 +9,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <deque>
@@ -202,7 +203,7 @@ class Postgres {
 class Robot {
  public:
   Robot(const std::string& root, const std::string& name, const std::string& device, const std::string& broker,
-        const std::string& secret_file, const std::string& extra_yaml = "")
+        const std::string& secret_file, const std::string& extra_yaml = "", const std::string& mqtt_extra = "")
       : dir_(root + "/" + name), name_(name) {
     fs::create_directories(dir_);
     fs::permissions(dir_, fs::perms::owner_all);
@@ -212,8 +213,8 @@ class Robot {
     std::string yaml = "rcan_version: \"1.2\"\nruri: " + ruri_ + "\nnode: {data_dir: " + dir_ +
                        "}\nsecurity:\n  jwt:\n    issuers: [{issuer: fleet-issuer, key_file: " + secret_file +
                        ", kind: hs256_secret}]\nmqtt: {enabled: true, broker: \"" + broker +
-                       "\", telemetry_hz: 0, keepalive_s: 5, reconnect: {min_s: 1, max_s: 2}}\n"
-                       "fleet: {fleet_id: alpha, member_id: " + name +
+                       "\", telemetry_hz: 0, keepalive_s: 5, reconnect: {min_s: 1, max_s: 2}" + mqtt_extra +
+                       "}\nfleet: {fleet_id: alpha, member_id: " + name +
                        ", robots: [robot-a, robot-b, robot-c]}\n" + extra_yaml;
     write_file(dir_ + "/robot.yaml", yaml);
     start();
@@ -290,8 +291,10 @@ class FleetTest : public ::testing::Test {
     EXPECT_TRUE(t.ok());
     return t.ok() ? *t : "";
   }
-  Robot& add_robot(const std::string& name, const std::string& device, const std::string& extra_yaml = "") {
-    robots_[name] = std::make_unique<Robot>(tmp_.path(), name, device, broker_->url(), secret_, extra_yaml);
+  Robot& add_robot(const std::string& name, const std::string& device, const std::string& extra_yaml = "",
+                   const std::string& mqtt_extra = "") {
+    robots_[name] =
+        std::make_unique<Robot>(tmp_.path(), name, device, broker_->url(), secret_, extra_yaml, mqtt_extra);
     return *robots_[name];
   }
   void three_robots(const std::string& extra_yaml = "") {
@@ -448,6 +451,45 @@ TEST_F(FleetTest, RetainedFleetEstopIsObeyedByALateJoiner) {
   robots_["robot-c"]->restart();
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   EXPECT_NE(json::dump(robots_["robot-c"]->status(fleet_token_)).find("\"estop_active\":false"), std::string::npos);
+}
+
+// A fleet ESTOP subscription at QoS 1 (the default: act on the first copy) may see the same
+// ESTOP twice — a redelivery after a reconnect, a publisher's retry. A stop is idempotent and
+// a fresh SAFETY stop is never refused as a replay (src/node/replay.h): the second copy stops
+// the (already stopped) robot again, is answered, and its record says it was a duplicate
+// (`duplicate_safety_message`). The same at QoS 2 (mqtt.estop_qos: 2).
+TEST_F(FleetTest, FleetEstopDeliveredTwiceIsHarmlessAtEitherQos) {
+  add_robot("robot-a", "0000000a");
+  add_robot("robot-b", "0000000b", "", ", estop_qos: 2");
+  std::string id = new_uuid_v4();
+  json::Value msg = command_msg("SAFETY", json::Object{{"safety_event", "ESTOP"}}, fleet_token_, id);
+  Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/+/reply"});
+  w.publish("rcan/fleet/alpha/estop", msg);
+  w.publish("rcan/fleet/alpha/estop", msg);  // exactly what an at-least-once redelivery looks like
+  for (const char* m : {"robot-a", "robot-b"}) {
+    const std::string reply = std::string("rcan/fleet/alpha/robot/") + m + "/reply";
+    int acks = 0;
+    for (int attempt = 0; attempt < 100 && acks < 2; ++attempt) {
+      if (attempt > 0) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      auto seen = w.all();
+      acks = static_cast<int>(std::count_if(seen.begin(), seen.end(), [&](const Watcher::Msg& x) {
+        return x.topic == reply && str_of(x.body, "reply_to") == id && str_of(x.body, "type") == "ACK";
+      }));
+    }
+    EXPECT_EQ(acks, 2) << m;
+    EXPECT_NE(json::dump(robots_[m]->status(fleet_token_)).find("\"estop_active\":true"), std::string::npos) << m;
+    int first = 0, duplicates = 0;
+    json::Value entries = parse(robots_[m]->audit(fleet_token_));
+    for (const auto& e : entries.get("entries")->as_array()) {
+      if (str_of(e, "message_id") != id || str_of(e, "event") != "ESTOP") continue;
+      const json::Value* detail = e.get("detail");
+      const json::Value* dup = detail != nullptr ? detail->get("duplicate_safety_message") : nullptr;
+      if (dup != nullptr && dup->is_bool() && dup->as_bool()) ++duplicates;
+      else ++first;
+    }
+    EXPECT_EQ(first, 1) << m;
+    EXPECT_EQ(duplicates, 1) << m;
+  }
 }
 
 TEST_F(FleetTest, LastWillShowsTheRobotOffline) {

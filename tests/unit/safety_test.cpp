@@ -617,6 +617,70 @@ TEST(SafetyThread, RealClockLoopIntegratesAndStops) {
   EXPECT_FALSE(core.status().running);
 }
 
+TEST(SafetyThread, RestsWhileIdleOnlyUntilTheNextDeadline) {
+  SafetyConfig cfg;
+  cfg.watchdog_timeout_ms = 700;
+  Rig r(cfg);
+  EXPECT_EQ(r.core->rest_for_ms(), 1000);  // at rest, nothing pending: the idle rate
+  r.core->register_session("s", 300);
+  EXPECT_EQ(r.core->rest_for_ms(), 301);  // wakes just after the heartbeat deadline
+  r.run(100);
+  EXPECT_EQ(r.core->rest_for_ms(), 201);
+  ASSERT_TRUE(r.core->heartbeat("s").ok());
+  EXPECT_EQ(r.core->rest_for_ms(), 301);
+  r.core->end_session("s");
+  EXPECT_EQ(r.core->rest_for_ms(), 1000);
+  ASSERT_TRUE(r.core->dispatch(ActuatorCommand::make_drive(0.3, 0, 200)).ok());
+  EXPECT_EQ(r.core->rest_for_ms(), 0);  // moving: the full rate
+  r.run(3000);
+  EXPECT_TRUE(r.core->robot_state().stopped);
+  EXPECT_EQ(r.core->rest_for_ms(), 1000);  // at rest again once stopped and the TTL is over
+  r.core->feed_watchdog();
+  EXPECT_EQ(r.core->rest_for_ms(), 701);  // the armed watchdog
+  r.run(690);
+  EXPECT_EQ(r.core->rest_for_ms(), 0);  // 11 ms to the watchdog: not worth a rest
+  r.run(20);
+  EXPECT_TRUE(r.core->estop_active());
+
+  SafetyConfig always;
+  always.idle_tick_ms = 0;
+  Rig full(always);
+  EXPECT_EQ(full.core->rest_for_ms(), 0);
+}
+
+TEST(SafetyThread, RestingLoopWakesForCommandsAndDeadlines) {
+  SafetyConfig cfg;
+  cfg.idle_tick_ms = 5000;  // long, so that anything on time below was woken for
+  auto d = std::make_unique<SimRobot>(quiet_sim());
+  SafetyCore core(std::move(d), cfg, Clock::system());
+  std::atomic<int> lost{0};
+  core.set_event_callback([&](const SafetyEvent& e) {
+    if (e.type == "NETWORK_LOSS_SAFE_STOP") lost.fetch_add(1);
+  });
+  core.start();
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_LE(core.robot_state().loop_count, 3u);  // resting, not ticking at 50 Hz
+
+  // A command wakes it, and the motion is integrated from the command, not from the last
+  // tick 300 ms earlier (at 1 m/s² that would put the base 0.045 m ahead at once; 20 ms of
+  // motion is 0.2 mm, and 0.02 m would take 200 ms).
+  ASSERT_TRUE(core.dispatch(ActuatorCommand::make_drive(1.0, 0, 600)).ok());
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  EXPECT_LT(core.robot_state().x, 0.02);
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  auto s = core.robot_state();
+  EXPECT_TRUE(s.stopped);
+  EXPECT_GT(s.x, 0.2);  // 0.36 m nominal; loop jitter only shortens the drive
+
+  // A session registered while resting: its deadman fires on time, not after the 5 s rest.
+  core.register_session("s", 200);
+  core.set_session_control("s", true);
+  for (int i = 0; i < 150 && lost.load() == 0; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  EXPECT_EQ(lost.load(), 1);
+  EXPECT_TRUE(core.safe_stop_active());
+  core.stop();
+}
+
 // ---- ESTOP vs concurrent dispatch (real threads) ---------------------------------------
 
 TEST(SafetyConcurrency, NoDispatchReachesDriverAfterEstopReturns) {
