@@ -787,8 +787,11 @@ void SafetyCore::tick() {
   {
     std::lock_guard<std::mutex> lock(apply_mu_);
     const int64_t dt = now - last_tick_mono_;
-    last_tick_mono_ = now;
+    last_tick_mono_ = std::max(last_tick_mono_, now);
     if (dt > 0) driver_->step(std::min(dt, kMaxStepMs));
+    // Only now, with the driver stepped to `now` under apply_mu_, is a rest over: until here a
+    // dispatch() still catches the driver up itself (see start()).
+    resting_.store(false, std::memory_order_seq_cst);
     if (latched_.load(std::memory_order_acquire)) driver_->stop();  // belt and braces
     RobotState st = driver_->state();
 
@@ -928,7 +931,9 @@ void SafetyCore::start() {
         tick_wait_cv_.wait_for(wl, std::chrono::milliseconds(rest_ms), [this] {
           return wake_requested_ || !running_.load(std::memory_order_acquire);
         });
-        resting_.store(false, std::memory_order_seq_cst);
+        // resting_ stays set until the next tick() has stepped the driver (it clears it under
+        // apply_mu_): a command arriving between this wake-up and that step still brings the
+        // driver up to its own moment, instead of being integrated over the whole rest.
         next = std::chrono::steady_clock::now() + period;
         continue;
       }

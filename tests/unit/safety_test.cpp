@@ -4,12 +4,14 @@
 #include "node/safety.h"
 
 #include <gtest/gtest.h>
+#include <pthread.h>
 
 #include <cmath>
 #include <limits>
 #include <atomic>
 #include <chrono>
 #include <fstream>
+#include <string_view>
 #include <thread>
 #include <vector>
 
@@ -678,6 +680,38 @@ TEST(SafetyThread, RestingLoopWakesForCommandsAndDeadlines) {
   for (int i = 0; i < 150 && lost.load() == 0; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
   EXPECT_EQ(lost.load(), 1);
   EXPECT_TRUE(core.safe_stop_active());
+  core.stop();
+}
+
+// The window between the loop waking from a rest and its tick() stepping the driver: a
+// command that lands there must still be integrated from its own moment. The clock stalls
+// the loop thread's first reading after the wake (tick() reads the time before it takes the
+// lock) so that the command reliably lands in the window.
+TEST(SafetyThread, CommandBetweenWakeAndTickIsNotIntegratedOverTheRest) {
+  struct StallingClock final : Clock {
+    mutable std::atomic<bool> armed{false};
+    int64_t wall_ms() const override { return Clock::system().wall_ms(); }
+    int64_t mono_ms() const override {
+      char name[16] = {};
+      pthread_getname_np(pthread_self(), name, sizeof name);
+      if (std::string_view(name) == "safety-tick" && armed.exchange(false))
+        std::this_thread::sleep_for(std::chrono::milliseconds(60));
+      return Clock::system().mono_ms();
+    }
+  };
+  StallingClock clock;
+  SafetyConfig cfg;
+  cfg.idle_tick_ms = 5000;
+  SafetyCore core(std::make_unique<SimRobot>(quiet_sim()), cfg, clock);
+  core.start();
+  std::this_thread::sleep_for(std::chrono::milliseconds(600));  // resting since the start
+  clock.armed.store(true);
+  core.register_session("s", 60000);  // wakes the loop, whose tick() then stalls 60 ms
+  std::this_thread::sleep_for(std::chrono::milliseconds(15));
+  ASSERT_TRUE(core.dispatch(ActuatorCommand::make_drive(1.0, 0, 600)).ok());
+  std::this_thread::sleep_for(std::chrono::milliseconds(70));
+  // ~85 ms of motion at 1 m/s² is 4 mm; integrated over the 600 ms rest it would be ~0.2 m.
+  EXPECT_LT(core.robot_state().x, 0.05);
   core.stop();
 }
 
