@@ -670,9 +670,7 @@ Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd, const D
     if (resting_.load(std::memory_order_seq_cst)) {
       // The loop may have slept up to idle_tick_ms: bring the driver to now first, so the
       // new motion is integrated from this moment and not from the last tick.
-      const int64_t t = clock_.mono_ms();
-      if (t > last_tick_mono_) driver_->step(std::min(t - last_tick_mono_, kMaxStepMs));
-      last_tick_mono_ = std::max(last_tick_mono_, t);
+      step_driver_to_locked(clock_.mono_ms());
     }
     Status st = driver_->apply(out.applied);
     // An estop() whose bounded fence gave up on us: stop right behind our own apply.
@@ -786,9 +784,7 @@ void SafetyCore::tick() {
   bool moving = false;
   {
     std::lock_guard<std::mutex> lock(apply_mu_);
-    const int64_t dt = now - last_tick_mono_;
-    last_tick_mono_ = std::max(last_tick_mono_, now);
-    if (dt > 0) driver_->step(std::min(dt, kMaxStepMs));
+    step_driver_to_locked(now);
     // Only now, with the driver stepped to `now` under apply_mu_, is a rest over: until here a
     // dispatch() still catches the driver up itself (see start()).
     resting_.store(false, std::memory_order_seq_cst);
@@ -873,6 +869,12 @@ void SafetyCore::tick() {
   loop_count_.fetch_add(1, std::memory_order_relaxed);
   loop_latency_us_.store((steady_ns() - t0) / 1000, std::memory_order_relaxed);
   for (const auto& ev : events) emit(ev);
+}
+
+// Steps the driver from the last tick (or catch-up) to `now`; never backwards. Holds apply_mu_.
+void SafetyCore::step_driver_to_locked(int64_t now) {
+  if (now > last_tick_mono_) driver_->step(std::min(now - last_tick_mono_, kMaxStepMs));
+  last_tick_mono_ = std::max(last_tick_mono_, now);
 }
 
 int64_t SafetyCore::rest_for_ms() const {

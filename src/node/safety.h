@@ -265,6 +265,7 @@ class SafetyCore {
                                         const RobotState& now, DispatchOutcome& out) const;
   void enter_safe_stop(std::string reason, std::string session);
   void record_latency(int64_t ns);
+  void step_driver_to_locked(int64_t now);  // caller holds apply_mu_
   // Wakes a resting loop (new motion, session or watchdog deadline). Cheap when not resting.
   void wake_ticker();
   void persist_loop();
