@@ -66,6 +66,13 @@ double cpu_now() {
          static_cast<double>(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec) / 1e6;
 }
 
+// Minor page faults of this process so far.
+long faults_now() {
+  rusage ru{};
+  getrusage(RUSAGE_SELF, &ru);
+  return ru.ru_minflt + ru.ru_majflt;
+}
+
 // Voluntary context switches (the thread slept: a wake-up) of this process's threads, summed
 // by thread name (the node names its threads: mqtt-io, audit-writer, safety-tick, …).
 std::map<std::string, long> wakeups_by_thread() {
@@ -380,12 +387,14 @@ int main(int argc, char** argv) {
     int errors = 0;
     std::string id = new_uuid_v4();
     double cpu0 = cpu_now();
+    long faults0 = faults_now();
     auto wake0 = wakeups_by_thread();
     auto acks = coord.round("rcan/fleet/bench/estop",
                             msg("SAFETY", json::Object{{"safety_event", "ESTOP"}, {"fleet_id", "bench"}}, id), id, 2,
                             true, n, &t0, 10000, &errors);
     for (auto& [m, t] : acks) estop_ack.push_back(t - t0);
     const double round_cpu_ms = (cpu_now() - cpu0) * 1000;
+    const double round_faults = static_cast<double>(faults_now() - faults0) / robots_n;
     estop_cpu_ms += round_cpu_ms;
     for (auto& [name, n_wakes] : wakeups_by_thread()) estop_wakeups[name] += n_wakes - wake0[name];
     std::vector<double> round_latch;
@@ -395,10 +404,10 @@ int main(int argc, char** argv) {
     }
     // Round 1 is each robot's first message: the fleet JWT is verified (later rounds find it
     // in the robot's verified-token cache) and every path runs for the first time.
-    std::printf("  round %d: ESTOP latched on %zu/%zu  p50 %.2f ms  p99 %.2f ms  max %.2f ms  CPU %.0f us/robot%s\n",
+    std::printf("  round %d: ESTOP latched on %zu/%zu  p50 %.2f ms  p99 %.2f ms  max %.2f ms  CPU %.0f us/robot  %.1f page faults/robot%s\n",
                 round + 1, round_latch.size(), n, pct(round_latch, 50), pct(round_latch, 99),
                 round_latch.empty() ? 0.0 : *std::max_element(round_latch.begin(), round_latch.end()),
-                round_cpu_ms * 1000 / robots_n, round == 0 ? "  (first message)" : "");
+                round_cpu_ms * 1000 / robots_n, round_faults, round == 0 ? "  (first message)" : "");
     latch.insert(latch.end(), round_latch.begin(), round_latch.end());
     failures += errors + static_cast<int>(n - acks.size());
     std::string rid = new_uuid_v4();

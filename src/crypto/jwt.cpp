@@ -633,9 +633,8 @@ bool Claims::has_scope(std::string_view s) const {
   return std::find(scopes.begin(), scopes.end(), s) != scopes.end();
 }
 
-Result<Claims> check_claims(const json::Object& c, const VerifyOptions& opts, int64_t now) {
+Result<Claims> check_claims(json::Object c, const VerifyOptions& opts, int64_t now) {
   Claims out;
-  out.raw = c;
   // Identity strings.
   auto iss = optional_string(c, "iss");
   if (!iss.ok()) return iss.error();
@@ -756,6 +755,7 @@ Result<Claims> check_claims(const json::Object& c, const VerifyOptions& opts, in
     if (!member && !opts.skip_fleet) return auth_invalid("this device is not in the token's fleet", "fleet", "fleet_mismatch");
     out.fleet = std::move(fleet);
   }
+  out.raw = std::move(c);
   return out;
 }
 
@@ -792,7 +792,7 @@ Result<Claims> JwtVerifier::verify(std::string_view token, int64_t now) const {
     return auth_invalid("alg " + alg_s + " does not match the issuer's key type (algorithm confusion refused)",
                         "alg", "alg_mismatch");
   if (!verified) return auth_invalid("signature does not verify", "signature", "bad_signature");
-  return check_claims(d->claims, opts_, now);
+  return check_claims(std::move(d->claims), opts_, now);
 }
 
 Result<Claims> JwtVerifier::verify(std::string_view token) const {

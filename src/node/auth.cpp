@@ -36,7 +36,7 @@ Result<Principal> Authenticator::authenticate_token(std::string_view token, int6
   p.role = *role;
   p.scopes = claims->scopes;
   p.token_exp = claims->exp;
-  p.fleet = claims->fleet;
+  if (claims->fleet) p.fleet = std::make_shared<const std::vector<std::string>>(std::move(*claims->fleet));
   p.token_identity.sub = claims->sub;
   if (!claims->sender_type.empty()) p.token_identity.sender_type = claims->sender_type;
   if (!claims->cloud_provider.empty()) p.token_identity.cloud_provider = claims->cloud_provider;

@@ -27,8 +27,9 @@ struct Principal {
   std::vector<std::string> scopes;
   std::optional<int64_t> token_exp;  // unix seconds
   TokenIdentity token_identity;
-  // The token's `fleet` claim (a fleet JWT; already checked to list this robot).
-  std::optional<std::vector<std::string>> fleet;
+  // The token's `fleet` claim (a fleet JWT; already checked to list this robot). Shared: a
+  // fleet token lists every member, and a Principal is copied once per message.
+  std::shared_ptr<const std::vector<std::string>> fleet;
 
   // Stable key for rate limits and session ownership.
   std::string key() const { return issuer + "\x1f" + sub; }

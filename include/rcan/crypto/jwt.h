@@ -183,8 +183,9 @@ struct Decoded {
 // as step 1 of verification). Errors: kAuthInvalid (kAuthRequired when empty).
 Result<Decoded> decode(std::string_view token, size_t max_token_bytes = kDefaultMaxTokenBytes);
 
-// Interprets claims (steps 4–9 of the verification order) with `now` in unix seconds.
-Result<Claims> check_claims(const json::Object& claims, const VerifyOptions& opts, int64_t now);
+// Interprets claims (steps 4–9 of the verification order) with `now` in unix seconds. The
+// object ends up in Claims::raw (pass an rvalue to spare the copy).
+Result<Claims> check_claims(json::Object claims, const VerifyOptions& opts, int64_t now);
 
 // Seed role name ↔ level (rcan/roles.h). Level 0 / empty for unknown names/levels.
 int role_level(std::string_view role_name);
