@@ -13,7 +13,11 @@
 // Repeats each round --rounds times and prints percentiles over all robot×round samples.
 //
 //   fleet_bench [--robots 200] [--rounds 5] [--estop-qos 1|2] [--segment-kib 1024]
-//               [--mosquitto /usr/sbin/mosquitto]
+//               [--mosquitto /usr/sbin/mosquitto] [--perf-ctl FIFO --profile-round N]
+//
+// --perf-ctl FIFO --profile-round N: writes "enable" / "disable" to a `perf record --control
+// fifo:FIFO --delay=-1` control fifo around round N's ESTOP, so that a profile holds that round
+// alone (e.g. round 1, each robot's first message, against round 2).
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <netinet/in.h>
@@ -148,6 +152,22 @@ struct Robot {
   std::unique_ptr<node::MqttNode> mqtt;
 };
 
+// The pipeline's stage timers (wall time per stage, node/metrics.h), summed over all robots:
+// stage → {sum_us, count}. A round's deltas show where its time went.
+constexpr const char* kStages[] = {"parse", "shape", "token", "decode", "auth", "replay", "fleet", "authorize",
+                                   "safety_state", "dispatch", "audit", "total"};
+std::map<std::string, std::pair<double, uint64_t>> stage_totals(const std::vector<std::unique_ptr<Robot>>& robots) {
+  std::map<std::string, std::pair<double, uint64_t>> out;
+  for (const auto& r : robots)
+    for (const char* name : kStages) {
+      const node::Histogram& h = r->svc->metrics.stage(name);
+      auto& [sum, n] = out[name];
+      sum += h.sum_us();
+      n += h.count();
+    }
+  return out;
+}
+
 double pct(std::vector<double> v, double p) {
   if (v.empty()) return 0;
   std::sort(v.begin(), v.end());
@@ -223,19 +243,23 @@ int main(int argc, char** argv) {
   // bench gives each log 1 MiB segments (--segment-kib) — the records and fsyncs are the same.
   uint64_t segment_bytes = 1024ull << 10;
   std::string mosquitto = "/usr/sbin/mosquitto";
+  std::string perf_ctl;
+  int profile_round = 0;
   for (int i = 1; i + 1 < argc; i += 2) {
     std::string a = argv[i];
     if (a == "--robots") robots_n = std::atoi(argv[i + 1]);
     else if (a == "--rounds") rounds = std::atoi(argv[i + 1]);
     else if (a == "--estop-qos") estop_qos = std::atoi(argv[i + 1]);
     else if (a == "--mosquitto") mosquitto = argv[i + 1];
+    else if (a == "--perf-ctl") perf_ctl = argv[i + 1];
+    else if (a == "--profile-round") profile_round = std::atoi(argv[i + 1]);
     else if (a == "--segment-kib") segment_bytes = std::strtoull(argv[i + 1], nullptr, 10) << 10;
   }
   if (robots_n < 1 || robots_n > 2000 || rounds < 1 || rounds > 1000 || segment_bytes < (64u << 10) ||
       (estop_qos != 1 && estop_qos != 2)) {
     std::fprintf(stderr,
                  "usage: fleet_bench [--robots 1..2000] [--rounds 1..1000] [--estop-qos 1|2] [--segment-kib N] "
-                 "[--mosquitto PATH]\n");
+                 "[--mosquitto PATH] [--perf-ctl FIFO --profile-round N]\n");
     return 2;
   }
   node::set_log_level(node::LogLevel::kError);
@@ -388,13 +412,21 @@ int main(int argc, char** argv) {
     std::string id = new_uuid_v4();
     double cpu0 = cpu_now();
     long faults0 = faults_now();
+    auto stages0 = stage_totals(robots);
+    auto perf = [&](const char* cmd) {
+      if (perf_ctl.empty() || round + 1 != profile_round) return;
+      std::ofstream(perf_ctl) << cmd << "\n";
+    };
     auto wake0 = wakeups_by_thread();
+    perf("enable");
     auto acks = coord.round("rcan/fleet/bench/estop",
                             msg("SAFETY", json::Object{{"safety_event", "ESTOP"}, {"fleet_id", "bench"}}, id), id, 2,
                             true, n, &t0, 10000, &errors);
     for (auto& [m, t] : acks) estop_ack.push_back(t - t0);
+    perf("disable");
     const double round_cpu_ms = (cpu_now() - cpu0) * 1000;
     const double round_faults = static_cast<double>(faults_now() - faults0) / robots_n;
+    auto stages1 = stage_totals(robots);
     estop_cpu_ms += round_cpu_ms;
     for (auto& [name, n_wakes] : wakeups_by_thread()) estop_wakeups[name] += n_wakes - wake0[name];
     std::vector<double> round_latch;
@@ -408,6 +440,13 @@ int main(int argc, char** argv) {
                 round + 1, round_latch.size(), n, pct(round_latch, 50), pct(round_latch, 99),
                 round_latch.empty() ? 0.0 : *std::max_element(round_latch.begin(), round_latch.end()),
                 round_cpu_ms * 1000 / robots_n, round_faults, round == 0 ? "  (first message)" : "");
+    std::printf("           stage means (wall, us):");
+    for (const char* name : kStages) {
+      const double dsum = stages1[name].first - stages0[name].first;
+      const uint64_t dn = stages1[name].second - stages0[name].second;
+      if (dn > 0) std::printf(" %s %.0f", name, dsum / static_cast<double>(dn));
+    }
+    std::printf("\n");
     latch.insert(latch.end(), round_latch.begin(), round_latch.end());
     failures += errors + static_cast<int>(n - acks.size());
     std::string rid = new_uuid_v4();

@@ -13,7 +13,6 @@
 #include "node/node.h"
 #include "node/services.h"
 #include "node/swarm.h"
-#include "node/thread_prep.h"
 #include "rcan/errors.h"
 
 namespace rcan::node {
@@ -171,9 +170,6 @@ void MqttNode::stop() {
 
 void MqttNode::on_connection(bool up) {
   if (up) {
-    // Runs on the network thread, which is also the thread every inbound command's pipeline
-    // runs on: ready it now rather than inside the first ESTOP.
-    prepare_command_thread();
     publish_status(true, "connected");
     if (swarm_) swarm_->on_connected(svc_.clock.mono_ms());
     log(LogLevel::kInfo, "mqtt_connected", json::Object{{"connects", static_cast<int64_t>(client_->connects())}});
