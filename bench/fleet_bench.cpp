@@ -13,7 +13,11 @@
 // Repeats each round --rounds times and prints percentiles over all robot×round samples.
 //
 //   fleet_bench [--robots 200] [--rounds 5] [--estop-qos 1|2] [--segment-kib 1024]
-//               [--mosquitto /usr/sbin/mosquitto] [--perf-ctl FIFO --profile-round N]
+//               [--mosquitto /usr/sbin/mosquitto] [--perf-ctl FIFO --profile-round N] [--warm-up 0|1]
+//
+// --warm-up 1: one broadcast `status` before round 1, so that the first ESTOP is no longer each
+// robot's first message (the fleet token is verified then); separates first-message costs from
+// the ESTOP's own.
 //
 // --perf-ctl FIFO --profile-round N: writes "enable" / "disable" to a `perf record --control
 // fifo:FIFO --delay=-1` control fifo around round N's ESTOP, so that a profile holds that round
@@ -245,6 +249,7 @@ int main(int argc, char** argv) {
   std::string mosquitto = "/usr/sbin/mosquitto";
   std::string perf_ctl;
   int profile_round = 0;
+  int warm_up = 0;
   for (int i = 1; i + 1 < argc; i += 2) {
     std::string a = argv[i];
     if (a == "--robots") robots_n = std::atoi(argv[i + 1]);
@@ -253,13 +258,14 @@ int main(int argc, char** argv) {
     else if (a == "--mosquitto") mosquitto = argv[i + 1];
     else if (a == "--perf-ctl") perf_ctl = argv[i + 1];
     else if (a == "--profile-round") profile_round = std::atoi(argv[i + 1]);
+    else if (a == "--warm-up") warm_up = std::atoi(argv[i + 1]);
     else if (a == "--segment-kib") segment_bytes = std::strtoull(argv[i + 1], nullptr, 10) << 10;
   }
   if (robots_n < 1 || robots_n > 2000 || rounds < 1 || rounds > 1000 || segment_bytes < (64u << 10) ||
       (estop_qos != 1 && estop_qos != 2)) {
     std::fprintf(stderr,
                  "usage: fleet_bench [--robots 1..2000] [--rounds 1..1000] [--estop-qos 1|2] [--segment-kib N] "
-                 "[--mosquitto PATH] [--perf-ctl FIFO --profile-round N]\n");
+                 "[--mosquitto PATH] [--perf-ctl FIFO --profile-round N] [--warm-up 0|1]\n");
     return 2;
   }
   node::set_log_level(node::LogLevel::kError);
@@ -401,6 +407,16 @@ int main(int argc, char** argv) {
                                     {"payload", std::move(payload)}});
   };
   std::vector<double> latch, estop_ack, status_ack, move_ack;
+  if (warm_up != 0) {
+    std::string wid = new_uuid_v4();
+    double tw = 0;
+    int werr = 0;
+    auto wacks = coord.round("rcan/fleet/bench/cmd",
+                             msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "bench"}}, wid), wid,
+                             1, false, static_cast<size_t>(robots_n), &tw, 10000, &werr);
+    std::printf("warm-up: broadcast status answered by %zu/%d robots\n", wacks.size(), robots_n);
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  }
   double estop_cpu_ms = 0;
   std::map<std::string, long> estop_wakeups;  // summed over the ESTOP rounds
   size_t n = static_cast<size_t>(robots_n);

@@ -215,6 +215,9 @@ Node::Node(NodeServices& services)
                          [this] { return svc_.audit.available() ? 1.0 : 0.0; });
   svc_.metrics.add_counter_fn("rcan_audit_recoveries_total", "Times the audit log came back after a failure.",
                               [this] { return static_cast<double>(svc_.audit.stats().recoveries); });
+  svc_.metrics.add_counter_fn("rcan_audit_index_fallbacks_total",
+                              "Audit reads by seq answered from the segment because its index entry was damaged.",
+                              [this] { return static_cast<double>(svc_.audit.stats().index_fallbacks); });
   svc_.metrics.add_counter_fn("rcan_audit_failures_total", "Audit appends that failed.",
                               [this] { return static_cast<double>(svc_.audit_failures.load()); });
   svc_.metrics.add_gauge("rcan_streams_open", "Connected WebSocket streams.",

@@ -3,6 +3,7 @@
 #include <sys/stat.h>
 
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 
 #include "audit/fast_seal.h"
@@ -553,6 +554,72 @@ TEST(AuditStorage, MissingIndexIsRebuiltOnOpen) {
   ASSERT_TRUE(f.ok());
   EXPECT_EQ(f->size(), 1u);
   EXPECT_TRUE(std::filesystem::exists(dir + "/seg-00000001.idx"));
+}
+
+// An index file is outside the chain: a damaged entry must make get() slower, never wrong.
+TEST(AuditStorage, DamagedIndexEntryNeverAnswersWithAnotherRecord) {
+  TempDir tmp;
+  std::string dir = tmp.path() + "/log";
+  {
+    auto log = open_log(dir, options(4096));
+    for (int i = 1; i <= 60; ++i) ASSERT_TRUE(log->append(entry(i)).ok());
+  }
+  const std::string idx = dir + "/seg-00000001.idx";
+  ASSERT_TRUE(std::filesystem::exists(idx));
+  std::string data = rcan::test::read_file(idx);
+  constexpr size_t kHeader = 64, kEntry = 32;  // docs/AUDIT.md §6: header, then (seq, offset, length, ts)
+  auto get64 = [&](size_t at) {
+    uint64_t v = 0;
+    std::memcpy(&v, data.data() + at, 8);
+    return v;
+  };
+  auto put64 = [&](size_t at, uint64_t v) { std::memcpy(data.data() + at, &v, 8); };
+  const uint64_t count = get64(8), first = get64(16);
+  ASSERT_GE(count, 6u);
+  ASSERT_EQ(get64(kHeader), first);  // the layout this test edits
+  // Entry 1 points at entry 3's record (a well-formed, verifying line: the wrong answer).
+  put64(kHeader + 1 * kEntry + 8, get64(kHeader + 3 * kEntry + 8));
+  put64(kHeader + 1 * kEntry + 16, get64(kHeader + 3 * kEntry + 16));
+  // Entry 2: a length running past the end of the segment.
+  put64(kHeader + 2 * kEntry + 16, uint64_t{1} << 20);
+  // Entry 4: the wrong seq.
+  put64(kHeader + 4 * kEntry, first + 5);
+  write_file(idx, data);
+
+  auto log = open_log(dir, options(4096));
+  for (uint64_t seq = first; seq < first + count; ++seq) {
+    auto line = log->get(seq);
+    ASSERT_TRUE(line.ok()) << seq << ": " << line.error().message;
+    auto v = json::parse(*line);
+    ASSERT_TRUE(v.ok());
+    EXPECT_EQ(v->get("seq")->as_int(), static_cast<int64_t>(seq)) << *line;
+  }
+  EXPECT_EQ(log->stats().index_fallbacks, 3u);
+
+  // A record whose bytes were changed in the segment is refused, through the index or not.
+  const std::string seg = dir + "/seg-00000001.log";
+  std::string segment = rcan::test::read_file(seg);
+  const uint64_t tampered_seq = first + 1;
+  size_t at = std::string::npos;
+  for (size_t begin = 0; begin < segment.size();) {
+    size_t end = segment.find('\n', begin);
+    if (end == std::string::npos) break;
+    auto v = json::parse(std::string_view(segment).substr(begin, end - begin));
+    if (v.ok() && v->get("seq") && v->get("seq")->as_int() == static_cast<int64_t>(tampered_seq)) {
+      at = segment.find("move_forward", begin);
+      break;
+    }
+    begin = end + 1;
+  }
+  ASSERT_NE(at, std::string::npos);
+  segment[at] = 'M';  // same length: offsets stay valid
+  write_file(seg, segment);
+  auto refused = log->get(tampered_seq);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().code, ErrorCode::kAuditUnavailable);
+  EXPECT_NE(refused.error().message.find("hmac"), std::string::npos) << refused.error().message;
+  auto neighbour = log->get(first + 3);  // its entry was not damaged; its record was not changed
+  ASSERT_TRUE(neighbour.ok());
 }
 
 // ---- CLI ----
