@@ -1235,18 +1235,18 @@ Result<std::vector<std::string>> AuditLog::Impl::find(bool watermark, std::strin
   Snapshot snap = snapshot();
   uint64_t h = internal::fnv1a64(key);
   std::vector<std::string> out;
-  auto consider = [&](uint64_t seg_id, const IndexEntry& e) -> Status {
-    auto line = read_line(seg_id, e);
+  auto consider_line = [&](uint64_t seq, Result<std::string> line) -> Status {
     if (!line.ok()) return line.error();
     auto v = json::parse(*line, internal::record_parse_options());
     if (!v.ok() || !v->is_object()) return Status::Ok();
     const json::Value* f = v->get(watermark ? "watermark_token" : "message_id");
     if (!f || !f->is_string() || f->as_string() != key) return Status::Ok();  // hash collision
     if (!check_record(v->as_object(), opts_.secret).hmac_ok)
-      return unavailable("audit log: record at seq " + std::to_string(e.seq) + " fails its hmac");
+      return unavailable("audit log: record at seq " + std::to_string(seq) + " fails its hmac");
     out.push_back(std::move(*line));
     return Status::Ok();
   };
+  auto consider = [&](uint64_t seg_id, const IndexEntry& e) { return consider_line(e.seq, read_line(seg_id, e)); };
   auto scan_mem = [&](uint64_t seg_id, const std::vector<IndexEntry>& entries) -> Status {
     for (const auto& e : entries) {
       if (watermark ? (e.has_wm && e.wm_hash == h) : e.mid_hash == h) {
@@ -1264,10 +1264,12 @@ Result<std::vector<std::string>> AuditLog::Impl::find(bool watermark, std::strin
       auto seqs = internal::index_lookup(env_, idx_path(seg.id), *seg.header, watermark, h);
       if (!seqs.ok()) return seqs.error();
       for (uint64_t seq : *seqs) {
-        auto e = internal::read_index_entry(env_, idx_path(seg.id), *seg.header,
-                                            seq - seg.header->first_seq);
-        if (!e.ok()) return e.error();
-        s = consider(seg.id, *e);
+        if (seq < seg.header->first_seq || seq > seg.header->last_seq) continue;  // a damaged hash table
+        // Checked like get(): a damaged entry is looked up in the segment, not trusted.
+        s = consider_line(seq, sealed_line(seg.id,
+                                           internal::read_index_entry(env_, idx_path(seg.id), *seg.header,
+                                                                      seq - seg.header->first_seq),
+                                           seq));
         if (!s.ok()) break;
       }
     }

@@ -595,6 +595,14 @@ TEST(AuditStorage, DamagedIndexEntryNeverAnswersWithAnotherRecord) {
     EXPECT_EQ(v->get("seq")->as_int(), static_cast<int64_t>(seq)) << *line;
   }
   EXPECT_EQ(log->stats().index_fallbacks, 3u);
+  // find_by_message_id reads through the same check (entry 2's length ran past the segment).
+  auto second = log->get(first + 2);
+  ASSERT_TRUE(second.ok());
+  const std::string mid = json::parse(*second)->get("message_id")->as_string();
+  auto found = log->find_by_message_id(mid);
+  ASSERT_TRUE(found.ok()) << found.error().message;
+  ASSERT_EQ(found->size(), 1u);
+  EXPECT_EQ(json::parse((*found)[0])->get("seq")->as_int(), static_cast<int64_t>(first + 2));
 
   // A record whose bytes were changed in the segment is refused, through the index or not.
   const std::string seg = dir + "/seg-00000001.log";
