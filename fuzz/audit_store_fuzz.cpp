@@ -5,8 +5,8 @@
 //   part are absent)
 // and the directory is opened twice: offline (export_dir, as `rcan audit export` does) and by
 // AuditLog::open (recovery, as rcand does). Invariants: nothing crashes or hangs; when open
-// succeeds, every seq it reports can be read or is cleanly absent, the export and the lookups
-// return, and a new record appends right after the last seq it reported. RCAN_FUZZ_VERBOSE=1
+// succeeds, every seq it reports can be read or is cleanly absent (and a record read by seq is
+// that record), the export and the lookups return, and a new record appends right after the last seq it reported. RCAN_FUZZ_VERBOSE=1
 // prints what each step gave.
 #include <unistd.h>
 
@@ -19,6 +19,7 @@
 #include <string_view>
 
 #include "rcan/audit/audit_log.h"
+#include "rcan/json.h"
 
 namespace {
 
@@ -89,7 +90,15 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   audit::AuditStats st = (*log)->stats();
   if (st.last_seq != 0 && st.first_seq > st.last_seq) fail("first_seq > last_seq");
   uint64_t from = st.first_seq ? st.first_seq : 1;
-  for (uint64_t seq = from; seq <= st.last_seq && seq < from + 64; ++seq) (void)(*log)->get(seq);
+  for (uint64_t seq = from; seq <= st.last_seq && seq < from + 64; ++seq) {
+    // Whatever the .idx holds, a record read by seq is the record with that seq.
+    auto line = (*log)->get(seq);
+    if (!line.ok()) continue;
+    auto v = json::parse(*line);
+    const json::Value* got = v.ok() ? v->get("seq") : nullptr;
+    if (got == nullptr || !got->is_int() || got->as_int() != static_cast<int64_t>(seq))
+      fail("get(" + std::to_string(seq) + ") answered with another line");
+  }
   (void)(*log)->get(st.last_seq + 1);
   (void)(*log)->export_jsonl(0, INT64_MAX / 2);
   (void)(*log)->find_by_message_id("6f1c3b5e-2a4d-4f7e-9b1a-0c2d3e4f5a60");
