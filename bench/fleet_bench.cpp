@@ -455,7 +455,7 @@ int main(int argc, char** argv) {
     std::printf("  round %d: ESTOP latched on %zu/%zu  p50 %.2f ms  p99 %.2f ms  max %.2f ms  CPU %.0f us/robot  %.1f page faults/robot%s\n",
                 round + 1, round_latch.size(), n, pct(round_latch, 50), pct(round_latch, 99),
                 round_latch.empty() ? 0.0 : *std::max_element(round_latch.begin(), round_latch.end()),
-                round_cpu_ms * 1000 / robots_n, round_faults, round == 0 ? "  (first message)" : "");
+                round_cpu_ms * 1000 / robots_n, round_faults, round == 0 && warm_up == 0 ? "  (first message)" : "");
     std::printf("           stage means (wall, us):");
     for (const char* name : kStages) {
       const double dsum = stages1[name].first - stages0[name].first;
