@@ -520,7 +520,7 @@ Result<Decoded> decode(std::string_view token, size_t max_token_bytes) {
   if (!claims->is_object()) return auth_invalid("claims are not a JSON object", "payload", "malformed");
 
   Decoded d;
-  d.header.raw = header->as_object();
+  d.header.raw = std::move(header->as_object());
   const json::Value* alg = d.header.raw.find("alg");
   if (!alg || !alg->is_string()) return auth_invalid("header has no alg", "alg", "malformed");
   d.header.alg = alg->as_string();
@@ -532,7 +532,7 @@ Result<Decoded> decode(std::string_view token, size_t max_token_bytes) {
     if (!typ->is_string()) return auth_invalid("header typ is not a string", "typ", "malformed");
     d.header.typ = typ->as_string();
   }
-  d.claims = claims->as_object();
+  d.claims = std::move(claims->as_object());
   d.signing_input = std::string(token.substr(0, d2));
   d.signature = std::move(*sb);
   return d;
