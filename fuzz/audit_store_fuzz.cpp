@@ -6,8 +6,8 @@
 // and the directory is opened twice: offline (export_dir, as `rcan audit export` does) and by
 // AuditLog::open (recovery, as rcand does). Invariants: nothing crashes or hangs; when open
 // succeeds, every seq it reports can be read or is cleanly absent (and a record read by seq is
-// that record), the export and the lookups return, and a new record appends right after the last seq it reported. RCAN_FUZZ_VERBOSE=1
-// prints what each step gave.
+// that record), the export and the lookups return, and a new record appends right after the
+// last seq it reported. RCAN_FUZZ_VERBOSE=1 prints what each step gave.
 #include <unistd.h>
 
 #include <cstdint>

@@ -167,7 +167,11 @@ class AuditLog::Impl {
   void fail_all(std::vector<Pending>& items, const Error& err);
   Snapshot snapshot() const;
   Result<std::string> read_line(uint64_t seg_id, const IndexEntry& e) const;
-  Result<std::string> sealed_line(uint64_t seg_id, Result<IndexEntry> e, uint64_t seq) const;
+  enum class LineCheck { kOk, kOtherLine, kBadHmac };
+  LineCheck check_line(std::string_view line, uint64_t seq, bool verify_hmac) const;
+  Result<std::string> exact_line(Result<std::string> line, uint64_t seq) const;
+  static Error hmac_refusal(uint64_t seq);
+  Result<std::string> sealed_line(uint64_t seg_id, Result<IndexEntry> e, uint64_t seq, bool verify_hmac) const;
   Result<std::vector<IndexEntry>> entries_of(const Segment& s) const;
   void start_indexer(uint64_t id, std::shared_ptr<const std::vector<IndexEntry>> entries);
   void prepare_spare();
@@ -1265,11 +1269,12 @@ Result<std::vector<std::string>> AuditLog::Impl::find(bool watermark, std::strin
       if (!seqs.ok()) return seqs.error();
       for (uint64_t seq : *seqs) {
         if (seq < seg.header->first_seq || seq > seg.header->last_seq) continue;  // a damaged hash table
-        // Checked like get(): a damaged entry is looked up in the segment, not trusted.
+        // A damaged entry is looked up in the segment, not trusted (the HMAC is checked below,
+        // after the key: a hash collision is a miss, not an error).
         s = consider_line(seq, sealed_line(seg.id,
                                            internal::read_index_entry(env_, idx_path(seg.id), *seg.header,
                                                                       seq - seg.header->first_seq),
-                                           seq));
+                                           seq, false));
         if (!s.ok()) break;
       }
     }
@@ -1285,31 +1290,59 @@ Result<std::string> AuditLog::Impl::get(uint64_t seq) const {
   Snapshot snap = snapshot();
   for (const auto& seg : snap.sealed) {
     if (seq < seg.first_seq || seq > seg.last_seq) continue;
-    if (seg.mem) return read_line(seg.id, (*seg.mem)[seq - seg.first_seq]);
+    if (seg.mem) return exact_line(read_line(seg.id, (*seg.mem)[seq - seg.first_seq]), seq);
     if (seg.header)
       return sealed_line(seg.id, internal::read_index_entry(env_, idx_path(seg.id), *seg.header, seq - seg.first_seq),
-                         seq);
+                         seq, true);
   }
   if (!snap.active.empty() && seq >= snap.active.front().seq && seq <= snap.active.back().seq)
-    return read_line(snap.active_id, snap.active[seq - snap.active.front().seq]);
+    return exact_line(read_line(snap.active_id, snap.active[seq - snap.active.front().seq]), seq);
   return Error(ErrorCode::kNotFound, "no audit record with seq " + std::to_string(seq));
 }
 
-// Record `seq` of a sealed segment through its index entry, checked: the line must be the
-// record with that seq and verify with the secret. An index file is not covered by the chain, so
-// a damaged entry (wrong offset, length or seq) must make the answer slower, never wrong: the
-// record is then looked for in the segment itself. A segment line that fails its HMAC is never
-// returned.
-Result<std::string> AuditLog::Impl::sealed_line(uint64_t seg_id, Result<IndexEntry> e, uint64_t seq) const {
-  auto is_record = [&](std::string_view line) {
-    auto v = json::parse(line, internal::record_parse_options());
-    if (!v.ok() || !v->is_object()) return false;
-    auto k = internal::record_keys(*v);
-    return k && k->seq == seq && check_record(v->as_object(), opts_.secret).hmac_ok;
-  };
-  if (e.ok() && e->seq == seq) {
+// Whether `line` is the record with this seq (and, with verify_hmac, verifies with the secret).
+AuditLog::Impl::LineCheck AuditLog::Impl::check_line(std::string_view line, uint64_t seq, bool verify_hmac) const {
+  auto v = json::parse(line, internal::record_parse_options());
+  if (!v.ok() || !v->is_object()) return LineCheck::kOtherLine;
+  auto k = internal::record_keys(*v);
+  if (!k || k->seq != seq) return LineCheck::kOtherLine;
+  if (verify_hmac && !check_record(v->as_object(), opts_.secret).hmac_ok) return LineCheck::kBadHmac;
+  return LineCheck::kOk;
+}
+
+Error AuditLog::Impl::hmac_refusal(uint64_t seq) {
+  return unavailable("audit log: record at seq " + std::to_string(seq) + " fails its hmac");
+}
+
+// A line read through an in-memory entry (the active segment, or a sealed one whose .idx is
+// not written yet): the entry is exact, so a line that is not the verifying record means the
+// file changed under the log. Refused, never returned.
+Result<std::string> AuditLog::Impl::exact_line(Result<std::string> line, uint64_t seq) const {
+  if (!line.ok()) return line;
+  switch (check_line(*line, seq, true)) {
+    case LineCheck::kOk: return line;
+    case LineCheck::kBadHmac: return hmac_refusal(seq);
+    case LineCheck::kOtherLine: break;
+  }
+  return unavailable("audit log: the stored line for seq " + std::to_string(seq) + " is not that record");
+}
+
+// Record `seq` of a sealed segment through its .idx entry. The index file is not covered by the
+// chain, so a damaged entry (wrong offset, length or seq) must make the answer slower, never
+// wrong: when the entry does not lead to the record with that seq, the record is looked for in
+// the segment itself (counted in index_fallbacks). With verify_hmac, a record that fails its HMAC
+// is refused, never returned (find() checks the HMAC itself, after comparing its key).
+Result<std::string> AuditLog::Impl::sealed_line(uint64_t seg_id, Result<IndexEntry> e, uint64_t seq,
+                                                bool verify_hmac) const {
+  if (e.ok()) {
     auto line = read_line(seg_id, *e);
-    if (line.ok() && is_record(*line)) return line;
+    if (line.ok()) {
+      switch (check_line(*line, seq, verify_hmac)) {
+        case LineCheck::kOk: return line;
+        case LineCheck::kBadHmac: return hmac_refusal(seq);
+        case LineCheck::kOtherLine: break;
+      }
+    }
   }
   index_fallbacks_.fetch_add(1, std::memory_order_relaxed);
   std::optional<std::string> found;
@@ -1325,8 +1358,7 @@ Result<std::string> AuditLog::Impl::sealed_line(uint64_t seg_id, Result<IndexEnt
   if (!found)
     return unavailable("audit log: seq " + std::to_string(seq) + " is missing from sealed segment " +
                        internal::segment_file_name(seg_id));
-  if (!is_record(*found))
-    return unavailable("audit log: record at seq " + std::to_string(seq) + " fails its hmac");
+  if (check_line(*found, seq, verify_hmac) != LineCheck::kOk) return hmac_refusal(seq);
   return std::move(*found);
 }
 

@@ -216,7 +216,7 @@ Node::Node(NodeServices& services)
   svc_.metrics.add_counter_fn("rcan_audit_recoveries_total", "Times the audit log came back after a failure.",
                               [this] { return static_cast<double>(svc_.audit.stats().recoveries); });
   svc_.metrics.add_counter_fn("rcan_audit_index_fallbacks_total",
-                              "Audit reads by seq answered from the segment because its index entry was damaged.",
+                              "Audit reads whose index entry did not lead to the record, answered from the segment itself.",
                               [this] { return static_cast<double>(svc_.audit.stats().index_fallbacks); });
   svc_.metrics.add_counter_fn("rcan_audit_failures_total", "Audit appends that failed.",
                               [this] { return static_cast<double>(svc_.audit_failures.load()); });

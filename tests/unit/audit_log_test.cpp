@@ -594,7 +594,8 @@ TEST(AuditStorage, DamagedIndexEntryNeverAnswersWithAnotherRecord) {
     ASSERT_TRUE(v.ok());
     EXPECT_EQ(v->get("seq")->as_int(), static_cast<int64_t>(seq)) << *line;
   }
-  EXPECT_EQ(log->stats().index_fallbacks, 3u);
+  // Entries 1 and 2 sent the read to the segment; entry 4's offset still led to the record.
+  EXPECT_EQ(log->stats().index_fallbacks, 2u);
   // find_by_message_id reads through the same check (entry 2's length ran past the segment).
   auto second = log->get(first + 2);
   ASSERT_TRUE(second.ok());
@@ -604,28 +605,41 @@ TEST(AuditStorage, DamagedIndexEntryNeverAnswersWithAnotherRecord) {
   ASSERT_EQ(found->size(), 1u);
   EXPECT_EQ(json::parse((*found)[0])->get("seq")->as_int(), static_cast<int64_t>(first + 2));
 
-  // A record whose bytes were changed in the segment is refused, through the index or not.
-  const std::string seg = dir + "/seg-00000001.log";
-  std::string segment = rcan::test::read_file(seg);
-  const uint64_t tampered_seq = first + 1;
-  size_t at = std::string::npos;
-  for (size_t begin = 0; begin < segment.size();) {
-    size_t end = segment.find('\n', begin);
-    if (end == std::string::npos) break;
-    auto v = json::parse(std::string_view(segment).substr(begin, end - begin));
-    if (v.ok() && v->get("seq") && v->get("seq")->as_int() == static_cast<int64_t>(tampered_seq)) {
-      at = segment.find("move_forward", begin);
-      break;
+  // A record whose bytes were changed on disk is refused: through a damaged entry (first + 1),
+  // through an intact one (first + 5), and in the active segment (served from memory).
+  auto tamper = [](const std::string& path, uint64_t seq) {
+    std::string text = rcan::test::read_file(path);
+    for (size_t begin = 0; begin < text.size();) {
+      size_t end = text.find('\n', begin);
+      if (end == std::string::npos) break;
+      auto v = json::parse(std::string_view(text).substr(begin, end - begin));
+      if (v.ok() && v->get("seq") && v->get("seq")->as_int() == static_cast<int64_t>(seq)) {
+        size_t at = text.find("move_forward", begin);
+        if (at == std::string::npos || at > end) return false;
+        text[at] = 'M';  // same length: offsets stay valid
+        write_file(path, text);
+        return true;
+      }
+      begin = end + 1;
     }
-    begin = end + 1;
+    return false;
+  };
+  const std::string seg = dir + "/seg-00000001.log";
+  ASSERT_TRUE(tamper(seg, first + 1));
+  ASSERT_TRUE(tamper(seg, first + 5));
+  const uint64_t last = log->stats().last_seq;
+  const std::string active = dir + "/" + [&] {
+    char name[32];
+    std::snprintf(name, sizeof name, "seg-%08llu.log", static_cast<unsigned long long>(log->stats().active_segment));
+    return std::string(name);
+  }();
+  ASSERT_TRUE(tamper(active, last));
+  for (uint64_t seq : {first + 1, first + 5, last}) {
+    auto refused = log->get(seq);
+    ASSERT_FALSE(refused.ok()) << seq;
+    EXPECT_EQ(refused.error().code, ErrorCode::kAuditUnavailable);
+    EXPECT_NE(refused.error().message.find("hmac"), std::string::npos) << refused.error().message;
   }
-  ASSERT_NE(at, std::string::npos);
-  segment[at] = 'M';  // same length: offsets stay valid
-  write_file(seg, segment);
-  auto refused = log->get(tampered_seq);
-  ASSERT_FALSE(refused.ok());
-  EXPECT_EQ(refused.error().code, ErrorCode::kAuditUnavailable);
-  EXPECT_NE(refused.error().message.find("hmac"), std::string::npos) << refused.error().message;
   auto neighbour = log->get(first + 3);  // its entry was not damaged; its record was not changed
   ASSERT_TRUE(neighbour.ok());
 }

@@ -92,8 +92,8 @@ struct AuditStats {
   uint64_t syncs = 0;
   bool failed = false;
   uint64_t recoveries = 0;  // times the log came back after a failure (this process)
-  // Reads whose sealed-segment index entry did not lead to the record (a damaged .idx),
-  // answered by reading the segment instead (docs/AUDIT.md §6).
+  // Reads whose sealed-segment .idx entry did not lead to the record (a damaged index), sent to
+  // the segment itself instead (docs/AUDIT.md §6).
   uint64_t index_fallbacks = 0;
 };
 
