@@ -52,22 +52,32 @@ std::array<int8_t, 256> make_table(const char* alphabet) {
 
 // Decodes unpadded symbols (length mod 4 != 1), checking that unused trailing bits are zero.
 std::optional<Bytes> b64_decode_core(std::string_view s, const std::array<int8_t, 256>& table) {
-  if (s.size() % 4 == 1) return std::nullopt;
-  Bytes out;
-  out.reserve(s.size() * 3 / 4);
-  uint32_t acc = 0;
-  int bits = 0;
-  for (char c : s) {
-    int v = table[static_cast<uint8_t>(c)];
-    if (v < 0) return std::nullopt;
-    acc = (acc << 6) | static_cast<uint32_t>(v);
-    bits += 6;
-    if (bits >= 8) {
-      bits -= 8;
-      out.push_back(static_cast<uint8_t>((acc >> bits) & 0xff));
-    }
+  const size_t rest = s.size() % 4;
+  if (rest == 1) return std::nullopt;
+  const size_t groups = s.size() / 4;
+  Bytes out(groups * 3 + (rest == 0 ? 0 : rest - 1));
+  const auto* in = reinterpret_cast<const uint8_t*>(s.data());
+  uint8_t* o = out.data();
+  // Four symbols → three bytes; a symbol outside the alphabet is -1 in the table, so one test
+  // of the OR of the four catches it.
+  for (size_t g = 0; g < groups; ++g, in += 4, o += 3) {
+    const int a = table[in[0]], b = table[in[1]], c = table[in[2]], d = table[in[3]];
+    if ((a | b | c | d) < 0) return std::nullopt;
+    const uint32_t v = (static_cast<uint32_t>(a) << 18) | (static_cast<uint32_t>(b) << 12) |
+                       (static_cast<uint32_t>(c) << 6) | static_cast<uint32_t>(d);
+    o[0] = static_cast<uint8_t>(v >> 16);
+    o[1] = static_cast<uint8_t>(v >> 8);
+    o[2] = static_cast<uint8_t>(v);
   }
-  if (bits > 0 && (acc & ((1u << bits) - 1)) != 0) return std::nullopt;  // non-canonical
+  if (rest != 0) {  // 2 symbols → 1 byte (4 bits left over), 3 → 2 bytes (2 bits left over)
+    const int a = table[in[0]], b = table[in[1]], c = rest == 3 ? table[in[2]] : 0;
+    if ((a | b | c) < 0) return std::nullopt;
+    const uint32_t v =
+        (static_cast<uint32_t>(a) << 18) | (static_cast<uint32_t>(b) << 12) | (static_cast<uint32_t>(c) << 6);
+    if ((rest == 2 ? (v & 0xFFFF) : (v & 0xFF)) != 0) return std::nullopt;  // non-canonical: unused bits set
+    o[0] = static_cast<uint8_t>(v >> 16);
+    if (rest == 3) o[1] = static_cast<uint8_t>(v >> 8);
+  }
   return out;
 }
 

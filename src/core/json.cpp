@@ -410,9 +410,7 @@ class Parser {
     }
     while (true) {
       skip_ws();
-      Value v;
-      if (!parse_value(v, depth)) return false;
-      arr.push_back(std::move(v));
+      if (!parse_value(arr.emplace_back(), depth)) return false;
       skip_ws();
       if (pos_ >= s_.size()) return set_error("unexpected end of input in array");
       if (s_[pos_] == ',') {
@@ -490,8 +488,19 @@ class Parser {
         continue;
       }
       if (c < 0x80) {
-        out.push_back(static_cast<char>(c));
-        ++pos_;
+        // A run of plain characters goes in at once. It stops one character past the size
+        // limit at the latest, so the check at the loop's top refuses exactly where it would
+        // one character at a time.
+        const size_t room = opts_.max_string_bytes - out.size();  // out.size() <= the limit here
+        const size_t stop = room >= s_.size() - pos_ ? s_.size() : pos_ + room + 1;
+        size_t end = pos_ + 1;
+        while (end < stop) {
+          const auto d = static_cast<unsigned char>(s_[end]);
+          if (d == '"' || d == '\\' || d < 0x20 || d >= 0x80) break;
+          ++end;
+        }
+        out.append(s_.data() + pos_, end - pos_);
+        pos_ = end;
         continue;
       }
       uint32_t cp;
