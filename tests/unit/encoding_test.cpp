@@ -43,6 +43,28 @@ TEST(Encoding, Base64UrlWithAndWithoutPadding) {
   EXPECT_FALSE(base64url_decode("a").has_value());
 }
 
+// Every length and every byte value round-trips; every symbol position refuses a foreign
+// symbol, and a tail with unused bits set is refused (the decoder works four symbols at a time).
+TEST(Encoding, Base64EveryLengthRoundTripsAndEveryPositionRefuses) {
+  Bytes data;
+  for (int i = 0; i < 70; ++i) {
+    std::string std_enc = base64_encode(data), url_enc = base64url_encode(data);
+    ASSERT_EQ(base64_decode(std_enc), data) << std_enc;
+    ASSERT_EQ(base64url_decode(url_enc), data) << url_enc;
+    for (size_t at = 0; at < url_enc.size(); ++at) {
+      std::string bad = url_enc;
+      bad[at] = '*';
+      EXPECT_FALSE(base64url_decode(bad).has_value()) << bad;
+    }
+    data.push_back(static_cast<uint8_t>(i * 37 + 11));
+  }
+  EXPECT_TRUE(base64url_decode("Zm9vYg").has_value());            // canonical 2-symbol tail
+  EXPECT_FALSE(base64url_decode("Zm9vYh").has_value());           // 4 unused bits not zero
+  EXPECT_TRUE(base64url_decode("Zm9vYmE").has_value());           // canonical 3-symbol tail
+  EXPECT_FALSE(base64url_decode("Zm9vYmF").has_value());          // 2 unused bits not zero
+  EXPECT_FALSE(base64url_decode("Zm9vY").has_value());            // length 1 mod 4
+}
+
 TEST(Hash, KnownAnswers) {
   EXPECT_EQ(sha256_hex(""), "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855");
   EXPECT_EQ(hmac_sha256_hex("key", "The quick brown fox jumps over the lazy dog"),
