@@ -19,6 +19,7 @@ PKGS=(
   chromium fonts-dejavu-core nodejs
   avahi-daemon dbus libavahi-client-dev iproute2
   faketime e2fsprogs
+  libjemalloc-dev
 )
 
 missing=()

@@ -97,6 +97,8 @@ class AuditLog::Impl {
  public:
   Impl(std::string dir, AuditOptions opts) : dir_(std::move(dir)), opts_(std::move(opts)) {
     env_ = opts_.env ? opts_.env : Env::posix();
+    pipelined_ = opts_.background_index &&
+                 (opts_.pipelined_sync || opts_.sync_policy == SyncPolicy::kInterval);
   }
 
   ~Impl() {
@@ -179,6 +181,7 @@ class AuditLog::Impl {
 
   std::string dir_;
   AuditOptions opts_;
+  bool pipelined_ = false;  // a syncer thread runs the fdatasyncs (AuditOptions::pipelined_sync)
   Env* env_ = nullptr;
   int lock_ = -1;
   bool opened_ = false;
@@ -292,7 +295,7 @@ Status AuditLog::Impl::open() {
   }
   opened_ = true;
   prepare_spare();
-  if (opts_.background_index) syncer_ = std::thread([this] {
+  if (pipelined_) syncer_ = std::thread([this] {
     pthread_setname_np(pthread_self(), "audit-sync");
     syncer_loop();
   });
@@ -580,6 +583,7 @@ Status AuditLog::Impl::write_records(std::vector<AuditEntry> entries) {
     last_hash_ = r.record_hash;
   }
   Status s = file_->append(buf);
+  ++groups_;
   if (s.ok()) s = file_->sync();
   if (!s.ok()) return s;
   active_bytes_ += buf.size();
@@ -650,7 +654,7 @@ void AuditLog::Impl::set_failed(const std::string& why) {
 // happened. Every step is retried from scratch at the next probe if any fails.
 // Writer thread only. Returns whether the log is writable again.
 bool AuditLog::Impl::try_recover() {
-  if (opts_.background_index) wait_synced();  // no sync in flight on file_
+  if (pipelined_) wait_synced();  // no sync in flight on file_
   uint64_t head_seg = 0, head_end = 0, head_seq = 0;
   std::string head_hash;
   {
@@ -797,12 +801,12 @@ void AuditLog::Impl::sync_and_ack(std::vector<Ticket>& tickets) {
 }
 
 // The writer: seals records in arrival order and writes each group with one write().
-// With background work on, a separate syncer thread runs the fdatasync of group N while
+// With pipelined_sync (or the interval policy), a syncer thread runs the fdatasync of group N while
 // the writer seals and writes group N+1 (both only ever append; acks follow the sync).
 void AuditLog::Impl::writer_loop() {
   std::vector<Pending> batch;
   std::string buf;
-  const bool pipelined = opts_.background_index;
+  const bool pipelined = pipelined_;
   for (;;) {
     bool stopping = false;
     {

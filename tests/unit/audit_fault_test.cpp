@@ -224,6 +224,7 @@ void fail_then_recover(uint64_t fail_at, bool torn, bool pipelined) {
   env.set_torn_appends(torn);
   AuditOptions o = fault_options(&env, false);
   o.background_index = pipelined;
+  o.pipelined_sync = pipelined;
   o.recovery_interval_ms = 20;
   auto log = AuditLog::open(dir, o);
   ASSERT_TRUE(log.ok());

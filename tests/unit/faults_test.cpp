@@ -83,6 +83,10 @@ class Node {
 
   Node(const std::string& root, std::string security_yaml, std::string extra_yaml, std::vector<std::string> env = {})
       : root_(root), env_(std::move(env)) {
+    // rcand links jemalloc, which cannot start under libfaketime (CMakeLists.txt): a node
+    // with a preloaded library runs the same daemon built on the C library's malloc.
+    for (const auto& e : env_)
+      if (e.rfind("LD_PRELOAD=", 0) == 0) binary_ = RCAND_SYSMALLOC_PATH;
     data_ = root_ + "/data";
     fs::create_directories(data_);
     fs::permissions(data_, fs::perms::owner_all);
@@ -113,7 +117,7 @@ class Node {
 
   bool start() {
     proc_ = std::make_unique<test::Process>();
-    if (!proc_->start({RCAND_PATH, "--config", root_ + "/robot.rcan.yaml", "--port", "0", "--data-dir", data_},
+    if (!proc_->start({binary_, "--config", root_ + "/robot.rcan.yaml", "--port", "0", "--data-dir", data_},
                       env_)) {
       ADD_FAILURE() << "cannot start rcand";
       return false;
@@ -173,6 +177,7 @@ class Node {
  private:
   std::string root_, data_, seed_file_;
   std::vector<std::string> env_;
+  std::string binary_ = RCAND_PATH;
   std::unique_ptr<test::Process> proc_;
   uint16_t port_ = 0;
 };
