@@ -116,8 +116,10 @@ inline std::string close_reason_text(std::string s) {
 }
 
 // The response as written: the handler's answer plus the transport's headers.
-inline http::response<http::string_body> build_response(HttpResponse r, unsigned version,
-                                                        bool head, bool keep_alive) {
+// The response as written, status line to body: the handler's answer plus the transport's
+// headers, serialised here in one buffer (cheaper than Beast's fields and serializer, and
+// written with a single write).
+inline std::string response_bytes(HttpResponse r, unsigned version, bool head, bool keep_alive) {
   if (r.status < 200 || r.status > 599) {
     node::log(LogLevel::kError, "http.bad_handler_status", {{"status", r.status}});
     r.status = 500;
@@ -125,29 +127,47 @@ inline http::response<http::string_body> build_response(HttpResponse r, unsigned
     r.body = error_json({500, ErrorCode::kInternal, "bad_status", "internal error"});
     r.headers.clear();
   }
-  http::response<http::string_body> res;
-  res.version(version == 10 ? 10 : 11);
-  res.result(static_cast<unsigned>(r.status));
-  res.set(http::field::server, kServerName);
-  res.set(http::field::date, http_date());
-  for (auto& [name, value] : r.headers) {
+  const bool no_body = r.status == 204 || r.status == 304;
+  const std::string date = http_date();
+  const std::string_view reason = http::obsolete_reason(http::int_to_status(static_cast<unsigned>(r.status)));
+  std::string out;
+  out.reserve(192 + r.body.size() + r.content_type.size());
+  out += version == 10 ? "HTTP/1.0 " : "HTTP/1.1 ";
+  out += std::to_string(r.status);
+  out += ' ';
+  out += reason;
+  out += "\r\nServer: ";
+  out += kServerName;
+  out += "\r\nDate: ";
+  out += date;
+  out += "\r\n";
+  bool cache_control = false;
+  for (const auto& [name, value] : r.headers) {
     if (!valid_header(name, value) || reserved_header(name)) {
       node::log(LogLevel::kDebug, "http.header_dropped", {{"name", name}});
       continue;
     }
-    res.insert(name, value);
+    if (beast::iequals(name, "cache-control")) cache_control = true;
+    out += name;
+    out += ": ";
+    out += value;
+    out += "\r\n";
   }
-  const bool no_body = r.status == 204 || r.status == 304;
   if (!no_body) {
-    if (!r.content_type.empty() && valid_header("content-type", r.content_type))
-      res.set(http::field::content_type, r.content_type);
-    res.set(http::field::content_length, std::to_string(r.body.size()));
+    if (!r.content_type.empty() && valid_header("content-type", r.content_type)) {
+      out += "Content-Type: ";
+      out += r.content_type;
+      out += "\r\n";
+    }
+    out += "Content-Length: ";
+    out += std::to_string(r.body.size());
+    out += "\r\n";
   }
-  res.set("X-Content-Type-Options", "nosniff");
-  if (res.find(http::field::cache_control) == res.end()) res.set(http::field::cache_control, "no-store");
-  res.set(http::field::connection, keep_alive ? "keep-alive" : "close");
-  if (!head && !no_body) res.body() = std::move(r.body);
-  return res;
+  out += "X-Content-Type-Options: nosniff\r\n";
+  if (!cache_control) out += "Cache-Control: no-store\r\n";
+  out += keep_alive ? "Connection: keep-alive\r\n\r\n" : "Connection: close\r\n\r\n";
+  if (!head && !no_body) out += r.body;
+  return out;
 }
 
 inline HttpResponse error_response(const TransportError& err) {
@@ -534,10 +554,10 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     keep_alive = keep_alive && !srv_.stopping.load() && !shutdown_requested_;
     phase_ = Phase::kWriting;
     const int status = response_->status;
-    auto res = build_response(std::move(*response_), version, head, keep_alive);
+    const std::string wire = response_bytes(std::move(*response_), version, head, keep_alive);
     response_.reset();
     lowest().expires_after(Ms(opt_.read_timeout_ms));
-    auto [wec, wn] = co_await http::async_write(stream_, res, kNoThrow);
+    auto [wec, wn] = co_await asio::async_write(stream_, asio::buffer(wire), kNoThrow);
     lowest().expires_never();
     if (node::log_enabled(LogLevel::kDebug)) {
       const auto ms = std::chrono::duration_cast<Ms>(SteadyClock::now() - t0).count();
@@ -583,9 +603,9 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     }
     node::log(LogLevel::kInfo, "http.rejected",
               {{"remote", remote_}, {"status", err.status}, {"reason", std::string(err.reason)}});
-    auto res = build_response(error_response(err), version, false, false);
+    const std::string wire = response_bytes(error_response(err), version, false, false);
     lowest().expires_after(Ms(opt_.read_timeout_ms));
-    co_await http::async_write(stream_, res, kNoThrow);
+    co_await asio::async_write(stream_, asio::buffer(wire), kNoThrow);
     lowest().expires_never();
   }
 
@@ -652,9 +672,9 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     }
     if (!session) {
       sink_->mark_closed(true);
-      auto res = build_response(std::move(refusal), msg.version(), false, false);
+      const std::string wire = response_bytes(std::move(refusal), msg.version(), false, false);
       lowest().expires_after(Ms(opt_.read_timeout_ms));
-      co_await http::async_write(stream_, res, kNoThrow);
+      co_await asio::async_write(stream_, asio::buffer(wire), kNoThrow);
       lowest().expires_never();
       co_return;
     }
@@ -876,9 +896,9 @@ detail::asio::awaitable<void> HttpServer::Impl::reject(detail::tcp::socket sock)
   {
     beast::tcp_stream s(std::move(sock));
     s.expires_after(detail::Ms(detail::kRejectTimeoutMs));
-    auto res = detail::build_response(detail::error_response(detail::too_many_connections_error()),
-                                      11, false, false);
-    auto [wec, wn] = co_await http::async_write(s, res, detail::kNoThrow);
+    const std::string wire = detail::response_bytes(
+        detail::error_response(detail::too_many_connections_error()), 11, false, false);
+    auto [wec, wn] = co_await asio::async_write(s, asio::buffer(wire), detail::kNoThrow);
     if (!wec) {
       beast::error_code ec;
       s.socket().shutdown(detail::tcp::socket::shutdown_send, ec);
