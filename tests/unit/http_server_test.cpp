@@ -300,7 +300,8 @@ class FakeHttp : public node::HttpHandler {
                    {"X-Bad", "a\r\nInjected: 1"},
                    {"Content-Length", "999"},
                    {"Bad Name", "x"},
-                   {"Connection", "upgrade"}};
+                   {"Connection", "upgrade"},
+                   {"Cache-Control", "max-age=5"}};
       respond(r);
       return;
     }
@@ -828,6 +829,43 @@ TEST_F(HttpServerTest, HandlerHeadersAreSanitised) {
   auto r3 = c.read_response();
   ASSERT_TRUE(r3);
   EXPECT_EQ(r3->status, 200);
+}
+
+// The transport writes its own bytes (one buffer): status line, then Server and Date, the
+// handler's headers, the transport's; a handler's Cache-Control replaces the default.
+TEST_F(HttpServerTest, ResponseBytesAreExactlyTheAnswer) {
+  start();
+  Client c(port_);
+  ASSERT_TRUE(c.send(get("/headers")));
+  while (c.buffer().find("\r\n\r\nhi") == std::string::npos) ASSERT_TRUE(c.fill(5000));
+  const std::string raw = c.buffer();
+  c.buffer().clear();
+  EXPECT_EQ(raw.rfind("HTTP/1.1 200 OK\r\nServer: rcand\r\nDate: ", 0), 0u) << raw;
+  auto count = [&](std::string_view needle) {
+    size_t n = 0;
+    for (size_t at = raw.find(needle); at != std::string::npos; at = raw.find(needle, at + 1)) ++n;
+    return n;
+  };
+  EXPECT_EQ(count("\r\nCache-Control: "), 1u) << raw;
+  EXPECT_EQ(count("\r\nCache-Control: max-age=5\r\n"), 1u) << raw;
+  EXPECT_EQ(count("\r\nContent-Length: "), 1u) << raw;
+  EXPECT_EQ(count("\r\nContent-Length: 2\r\n"), 1u) << raw;
+  EXPECT_EQ(count("\r\nX-Content-Type-Options: nosniff\r\n"), 1u) << raw;
+  EXPECT_EQ(count("\r\nConnection: "), 1u) << raw;
+  EXPECT_EQ(raw.size() - raw.find("\r\nConnection: keep-alive\r\n\r\nhi"),
+            std::string_view("\r\nConnection: keep-alive\r\n\r\nhi").size())
+      << raw;
+  // HEAD: the GET's headers (its Content-Length included), no body bytes after them.
+  ASSERT_TRUE(c.send("HEAD /echo HTTP/1.1\r\nHost: x\r\n\r\n"));
+  auto h = c.read_response(5000, true);
+  ASSERT_TRUE(h);
+  EXPECT_EQ(h->status, 200);
+  EXPECT_GT(std::atoi(h->header("content-length").c_str()), 0);
+  ASSERT_TRUE(c.send(get("/status?s=404")));
+  auto r = c.read_response();
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 404);
+  EXPECT_EQ(r->body, "{}");
 }
 
 TEST_F(HttpServerTest, GarbageFloodLeavesTheServerServing) {
