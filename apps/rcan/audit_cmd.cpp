@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <filesystem>
 #include <iostream>
 
 #include <chrono>
@@ -34,13 +35,14 @@ constexpr const char* kHelp =
     "      present) or the audit directory itself. --from/--to select timestamp_ms (inclusive);\n"
     "      a ranged export verifies with --partial. --format rcanpy re-states the chain as\n"
     "      rcan-py CommitmentRecord v0.3 lines signed with the chain secret (needs the secret).\n"
-    "  rcan audit verify [FILE | - | --data-dir D] (--secret-file F | --secret S)\n"
+    "  rcan audit verify [FILE | - | --data-dir D | D] (--secret-file F | --secret S)\n"
     "                    [--format native|rcanpy] [--partial] [--expect-last-seq N]\n"
     "      Verifies an exported chain offline. Exit 0 printing the number of records; exit 1\n"
     "      naming the first bad seq (rcanpy: 0-based index) and why: hmac mismatch, prev_hash\n"
     "      mismatch, seq gap, malformed line, wrong segment link, bad chain start, truncated.\n"
-    "      --data-dir verifies the segment files themselves, including segment links. With\n"
-    "      neither FILE nor --data-dir it fetches the running node's chain (--url, --token-file).\n"
+    "      --data-dir D (or the directory D alone) verifies the segment files themselves,\n"
+    "      including segment links. With neither FILE nor a directory it fetches the running\n"
+    "      node's chain (--url, --token-file).\n"
     "  rcan audit new-secret --out F\n"
     "      Writes a new chain secret (64 hex characters, mode 0600, no newline). Never overwrites.\n"
     "  Exit: 0 ok, 1 verification failed (or refused by the node), 2 usage or unreadable input,\n"
@@ -243,10 +245,16 @@ int verify_main(const Args& args) {
   if (format != "native" && format != "rcanpy") return usage_error("audit verify", "--format is native or rcanpy");
 
   audit::VerifyReport rep;
-  if (o.has("data-dir")) {
-    if (!o.positional().empty()) return usage_error("audit verify", "give FILE or --data-dir, not both");
-    if (format != "native") return usage_error("audit verify", "--data-dir holds native segments");
-    rep = audit::verify_dir(resolve_dir(o.get("data-dir")), *secret);
+  // A directory given as FILE is a data directory (or its audit/ subdirectory), as with
+  // --data-dir: reading it as a file would only say "no records".
+  std::error_code dir_ec;
+  const bool positional_dir = o.positional().size() == 1 && o.positional()[0] != "-" &&
+                              std::filesystem::is_directory(o.positional()[0], dir_ec);
+  if (o.has("data-dir") || positional_dir) {
+    if (o.has("data-dir") && !o.positional().empty())
+      return usage_error("audit verify", "give FILE or --data-dir, not both");
+    if (format != "native") return usage_error("audit verify", "a data directory holds native segments");
+    rep = audit::verify_dir(resolve_dir(positional_dir ? o.positional()[0] : o.get("data-dir")), *secret);
   } else {
     if (o.positional().size() > 1) return usage_error("audit verify", "expected one FILE (or - for stdin)");
     std::string text;

@@ -665,6 +665,10 @@ TEST(AuditCli, ExportAndVerify) {
   EXPECT_NE(ok.out.find("records"), std::string::npos);
   auto dirv = rcan::test::run_cli({"audit", "verify", "--data-dir", dir, "--secret-file", secret_file});
   EXPECT_EQ(dirv.exit_code, 0) << dirv.out << dirv.err;
+  // A directory given in FILE's place is verified as a data directory, not read as a file.
+  auto dirp = rcan::test::run_cli({"audit", "verify", dir, "--secret-file", secret_file});
+  EXPECT_EQ(dirp.exit_code, 0) << dirp.out << dirp.err;
+  EXPECT_EQ(dirp.out, dirv.out);
 
   // Tamper with seq 20.
   auto lines = export_dir_lines(dir + "/audit");
