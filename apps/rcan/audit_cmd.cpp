@@ -129,6 +129,13 @@ int tail_main(const Args& args) {
   while (true) {
     auto page = c.audit_recent(static_cast<int>(last_seen ? 1000 : n));
     if (!page.ok()) return report_error("audit tail", page.error(), json_out);
+    if (!page->unreadable.empty() && page->unreadable.back() > last_seen) {
+      std::string seqs;
+      for (int64_t s : page->unreadable)
+        if (s > last_seen) seqs += (seqs.empty() ? "" : ", ") + std::to_string(s);
+      std::cerr << "warning: audit records that failed their check on the node are not shown: seq " << seqs
+                << " (rcan audit verify --data-dir on the robot names the fault)\n";
+    }
     std::vector<std::vector<std::string>> rows;
     for (const auto& e : page->entries) {
       const json::Value* seq = e.get("seq");

@@ -123,6 +123,8 @@ struct PendingAuth {
 struct AuditPage {
   std::vector<json::Value> entries;
   int64_t last_seq = 0;
+  // Records in the range the node could not show (they failed their check): their seqs.
+  std::vector<int64_t> unreadable;
 };
 
 struct Thought {

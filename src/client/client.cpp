@@ -402,6 +402,9 @@ Result<AuditPage> Client::audit_recent(int limit) {
   AuditPage page;
   page.entries = list->as_array();
   page.last_seq = v->is_object() ? int_of(*v, "last_seq", 0) : 0;
+  if (const json::Value* bad = v->is_object() ? v->get("unreadable") : nullptr; bad && bad->is_array())
+    for (const auto& s : bad->as_array())
+      if (s.is_int()) page.unreadable.push_back(s.as_int());
   return page;
 }
 

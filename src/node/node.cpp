@@ -593,17 +593,32 @@ void Node::audit_listing(HttpRequest& req, Respond& respond) {
   bool posted = worker_.post([this, respond, route, limit]() mutable {
     audit::AuditStats st = svc_.audit.stats();
     json::Array entries;
+    // Records in the range that cannot be shown (changed on disk, unreadable): named, never
+    // left out silently.
+    json::Array unreadable;
+    std::string first_error;
     uint64_t first = st.last_seq >= limit ? st.last_seq - limit + 1 : 1;
     if (first < st.first_seq) first = st.first_seq;
     for (uint64_t seq = first; seq <= st.last_seq && seq != 0; ++seq) {
       auto line = svc_.audit.get(seq);
-      if (!line.ok()) continue;
-      auto v = json::parse(*line, {.max_depth = 64, .max_bytes = 1u << 20});
-      if (v.ok()) entries.push_back(std::move(v).value());
+      auto v = line.ok() ? json::parse(*line, {.max_depth = 64, .max_bytes = 1u << 20})
+                         : rcan::Result<json::Value>(line.error());
+      if (v.ok()) {
+        entries.push_back(std::move(v).value());
+        continue;
+      }
+      if (first_error.empty()) first_error = v.error().message;
+      unreadable.emplace_back(static_cast<int64_t>(seq));
     }
+    if (!unreadable.empty())
+      log(LogLevel::kWarn, "audit.listing_unreadable",
+          {{"count", static_cast<int64_t>(unreadable.size())},
+           {"first_seq", unreadable.front()},
+           {"error", first_error}});
     answer_json(respond, route, 200,
                 json::Object{{"entries", entries}, {"count", static_cast<int64_t>(entries.size())},
-                             {"last_seq", static_cast<int64_t>(st.last_seq)}});
+                             {"last_seq", static_cast<int64_t>(st.last_seq)},
+                             {"unreadable", unreadable}});
   });
   if (!posted) answer_error(respond, route, Error(ErrorCode::kSafeStop, "busy; try again"));
 }

@@ -606,6 +606,43 @@ TEST(RcandLifecycle, EstopStaysLatchedAcrossARestart) {
   EXPECT_EQ(d2.post("/rcan/v1/command", command("move", {{"linear", 0.1}}), d2.owner_token()).status, 423);
 }
 
+// A record changed on disk is not shown by GET /api/audit, and the answer names it: the
+// listing never drops a record silently. `rcan audit tail` warns about it.
+TEST(RcandLifecycle, AuditListingNamesARecordThatFailsItsCheck) {
+  test::TempDir dir;
+  std::string data = dir.path() + "/node";
+  Daemon d(data);
+  for (int i = 0; i < 3; ++i)
+    ASSERT_EQ(d.post("/rcan/v1/command", command("move", {{"linear", 0.1}, {"duration_ms", 50}}), d.owner_token()).status,
+              200);
+  json::Value before = parse(d.get("/api/audit?limit=100", d.owner_token()).body);
+  ASSERT_TRUE(before.get("unreadable") && before.get("unreadable")->is_array());
+  EXPECT_TRUE(before.get("unreadable")->as_array().empty());
+  const int64_t shown = before.get("count")->as_int();
+  ASSERT_GE(shown, 4);
+  // Change one character inside the second record's line (the file stays valid JSON lines).
+  const std::string seg = data + "/audit/seg-00000001.log";
+  std::string bytes = test::read_file(seg);
+  const size_t line2 = bytes.find('\n') + 1;
+  const size_t at = bytes.find("\"principal\":\"", line2) + 13;
+  ASSERT_LT(at, bytes.find('\n', line2));
+  {
+    std::fstream f(seg, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(static_cast<std::streamoff>(at));
+    f.put(bytes[at] == 'x' ? 'y' : 'x');
+  }
+  json::Value after = parse(d.get("/api/audit?limit=100", d.owner_token()).body);
+  ASSERT_TRUE(after.get("unreadable") && after.get("unreadable")->is_array());
+  ASSERT_EQ(after.get("unreadable")->as_array().size(), 1u) << json::dump(after);
+  EXPECT_EQ(after.get("unreadable")->as_array()[0].as_int(), 2);
+  EXPECT_EQ(after.get("count")->as_int(), shown - 1);
+  for (const auto& e : after.get("entries")->as_array()) EXPECT_NE(e.get("seq")->as_int(), 2);
+  auto tail = test::run_cli({"audit", "tail", "-n", "100", "--url", "http://127.0.0.1:" + std::to_string(d.port()),
+                             "--token-file", data + "/owner.token"});
+  EXPECT_EQ(tail.exit_code, 0) << tail.err;
+  EXPECT_NE(tail.err.find("seq 2 "), std::string::npos) << tail.err;
+}
+
 TEST(RcandLifecycle, GracefulShutdownEndsTheChainWithSystemStop) {
   test::TempDir dir;
   std::string data = dir.path() + "/node";

@@ -46,7 +46,9 @@ export async function loadAudit() {
       const data = await request('GET', '/api/audit?limit=1000');
       all = (data && data.entries) || [];
       rawJsonl = '';
-      setText($('#audit-source'), `The latest ${all.length} records (GET /api/audit). The full export and the chain check need OWNER with scope config.`);
+      const bad = (data && Array.isArray(data.unreadable)) ? data.unreadable : [];
+      const warn = bad.length ? ` ${bad.length} record(s) failed their check on the node and are not shown (seq ${bad.slice(0, 10).join(', ')}${bad.length > 10 ? ', …' : ''}).` : '';
+      setText($('#audit-source'), `The latest ${all.length} records (GET /api/audit). The full export and the chain check need OWNER with scope config.${warn}`);
     }
   } catch (e) {
     all = [];
