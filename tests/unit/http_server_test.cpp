@@ -831,8 +831,9 @@ TEST_F(HttpServerTest, HandlerHeadersAreSanitised) {
   EXPECT_EQ(r3->status, 200);
 }
 
-// The transport writes its own bytes (one buffer): status line, then Server and Date, the
-// handler's headers, the transport's; a handler's Cache-Control replaces the default.
+// The transport writes its own bytes (one buffer): status line with its reason phrase, then
+// Server and Date, the handler's headers, the transport's; a handler's Cache-Control replaces
+// the default.
 TEST_F(HttpServerTest, ResponseBytesAreExactlyTheAnswer) {
   start();
   Client c(port_);
@@ -855,17 +856,10 @@ TEST_F(HttpServerTest, ResponseBytesAreExactlyTheAnswer) {
   EXPECT_EQ(raw.size() - raw.find("\r\nConnection: keep-alive\r\n\r\nhi"),
             std::string_view("\r\nConnection: keep-alive\r\n\r\nhi").size())
       << raw;
-  // HEAD: the GET's headers (its Content-Length included), no body bytes after them.
-  ASSERT_TRUE(c.send("HEAD /echo HTTP/1.1\r\nHost: x\r\n\r\n"));
-  auto h = c.read_response(5000, true);
-  ASSERT_TRUE(h);
-  EXPECT_EQ(h->status, 200);
-  EXPECT_GT(std::atoi(h->header("content-length").c_str()), 0);
+  // The reason phrase follows the status (HEAD is covered by its own test above).
   ASSERT_TRUE(c.send(get("/status?s=404")));
-  auto r = c.read_response();
-  ASSERT_TRUE(r);
-  EXPECT_EQ(r->status, 404);
-  EXPECT_EQ(r->body, "{}");
+  while (c.buffer().find("\r\n\r\n{}") == std::string::npos) ASSERT_TRUE(c.fill(5000));
+  EXPECT_EQ(c.buffer().rfind("HTTP/1.1 404 Not Found\r\n", 0), 0u) << c.buffer();
 }
 
 TEST_F(HttpServerTest, GarbageFloodLeavesTheServerServing) {
