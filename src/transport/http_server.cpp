@@ -18,6 +18,7 @@
 
 #include <pthread.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -309,7 +310,7 @@ class WsSink final : public node::StreamSink {
 class HttpServer::Impl : public std::enable_shared_from_this<HttpServer::Impl> {
  public:
   Impl(ServerOptions o, node::HttpHandler& h, node::StreamHandler& s)
-      : opt(std::move(o)), http(h), streams(s) {}
+      : opt(std::move(o)), http(h), streams(s), ioc(std::max(opt.io_threads, 1)) {}
 
   Result<uint16_t> start();
   void stop(int drain_ms);
@@ -364,7 +365,9 @@ class HttpServer::Impl : public std::enable_shared_from_this<HttpServer::Impl> {
   // Declared after everything connections touch, so that it is destroyed first (frames still
   // suspended in it are destroyed with it and may update the counters above).
   std::unique_ptr<detail::ssl::context> ssl_ctx;
-  detail::asio::io_context ioc{1};
+  // Concurrency hint = io_threads. (A hint of 1 tells asio that one thread runs it: it then
+  // keeps work posted from an I/O thread on that thread and never wakes the other for it.)
+  detail::asio::io_context ioc;
   std::optional<detail::tcp::acceptor> acceptor;  // destroyed before ioc
 };
 
