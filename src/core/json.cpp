@@ -715,7 +715,15 @@ void write_string_raw(std::string& out, const std::string& s) {
           out.push_back(hex[c >> 4]);
           out.push_back(hex[c & 15]);
         } else {
-          out.push_back(static_cast<char>(c));
+          // A run of characters that need no escape goes in at once.
+          size_t end = i + 1;
+          while (end < s.size()) {
+            const auto d = static_cast<unsigned char>(s[end]);
+            if (d == '"' || d == '\\' || d < 0x20 || d >= 0x80) break;
+            ++end;
+          }
+          out.append(s, i, end - i);
+          i = end - 1;
         }
     }
   }

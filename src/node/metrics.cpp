@@ -27,7 +27,12 @@ double Histogram::quantile_us(double q) const {
 
 void Metrics::count_request(const std::string& route, int status) {
   std::lock_guard<std::mutex> lock(mu_);
-  ++requests_[{route, status}];
+  auto it = requests_.find(std::pair<std::string_view, int>(route, status));
+  if (it != requests_.end()) {
+    ++it->second;
+  } else {
+    requests_.emplace(std::pair<std::string, int>(route, status), 1);
+  }
 }
 
 Histogram& Metrics::stage(const std::string& name) {
@@ -39,7 +44,12 @@ Histogram& Metrics::stage(const std::string& name) {
 
 void Metrics::count_audit(const std::string& event) {
   std::lock_guard<std::mutex> lock(mu_);
-  ++audit_events_[event];
+  auto it = audit_events_.find(event);
+  if (it != audit_events_.end()) {
+    ++it->second;
+  } else {
+    audit_events_.emplace(event, 1);
+  }
 }
 
 void Metrics::add_gauge(std::string name, std::string help, std::function<double()> fn) {

@@ -11,6 +11,7 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace rcan::node {
@@ -49,9 +50,18 @@ class Metrics {
 
  private:
   mutable std::mutex mu_;
-  std::map<std::pair<std::string, int>, uint64_t> requests_;
-  std::map<std::string, uint64_t> audit_events_;
-  std::map<std::string, std::unique_ptr<Histogram>> stages_;
+  // Looked up without building a key (every answer counts itself).
+  struct RouteStatusLess {
+    using is_transparent = void;
+    template <class A, class B>
+    bool operator()(const A& a, const B& b) const {
+      const int c = std::string_view(a.first).compare(std::string_view(b.first));
+      return c < 0 || (c == 0 && a.second < b.second);
+    }
+  };
+  std::map<std::pair<std::string, int>, uint64_t, RouteStatusLess> requests_;
+  std::map<std::string, uint64_t, std::less<>> audit_events_;
+  std::map<std::string, std::unique_ptr<Histogram>, std::less<>> stages_;
   struct Fn {
     std::string name, help, type;
     std::function<double()> fn;
