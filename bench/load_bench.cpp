@@ -18,12 +18,16 @@
 //
 //   load_bench [--rcand PATH] [--seconds 2] [--warmup 0.5] [--clients 1,16,64]
 //              [--phases startup,memory,http,ws,stages,estop,mldsa] [--io-threads 2]
-//              [--estops 100] [--mldsa-pool 12000] [--data-root /tmp] [--smoke N]
+//              [--estops 100] [--mldsa-pool 12000] [--data-root /tmp] [--pairs 1] [--smoke N]
 // --io-threads N: the bare server's threads; keep it equal to the node's server.io_threads
 // (2 in the embedded configuration rcand runs here).
 // --data-root DIR: where the temporary data directory goes (default /tmp). The audit log
 // fdatasyncs every group commit, so the disk's sync latency bounds the throughput at a given
 // number of clients in flight; a tmpfs root (/dev/shm) shows the CPU-bound figure.
+// --pairs N: for each HTTP/WebSocket client count, N rcand runs and N bare-server runs,
+// alternating (rcand, bare, rcand, bare, …); each rcand run is compared with the bare run right
+// after it, and the medians and ranges of those N ratios are printed. On a shared or virtual
+// machine a single pair swings by several points either way; N pairs show where the ratio sits.
 // --smoke N: one client sends N commands over HTTP and N over a WebSocket to rcand, every
 // answer checked; exit status 0 only when all were accepted. Used by CTest.
 // GCC 12 at -O3 reports -Wnull-dereference from inside Asio and libstdc++ once inlined here
@@ -518,6 +522,7 @@ int main(int argc, char** argv) {
   long mldsa_pool = 12000;
   std::string data_root = "/tmp";  // where the node's data directory (and its audit log) lives
   long smoke = 0;
+  int pairs = 1;
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
     auto next = [&]() -> std::string { return i + 1 < argc ? argv[++i] : ""; };
@@ -536,11 +541,12 @@ int main(int argc, char** argv) {
     else if (a == "--smoke") smoke = std::atol(next().c_str());
     else if (a == "--mldsa-pool") mldsa_pool = std::atol(next().c_str());
     else if (a == "--data-root") data_root = next();
+    else if (a == "--pairs") pairs = std::max(1, std::atoi(next().c_str()));
     else {
       std::fprintf(stderr,
                    "usage: load_bench [--rcand PATH] [--seconds S] [--warmup S] [--clients 1,16,64]\n"
                    "                  [--phases startup,memory,http,ws,stages,estop,mldsa] [--io-threads N]\n"
-                   "                  [--estops N] [--mldsa-pool N] [--data-root DIR] [--smoke N]\n");
+                   "                  [--estops N] [--mldsa-pool N] [--data-root DIR] [--pairs N] [--smoke N]\n");
       return 2;
     }
   }
@@ -631,44 +637,61 @@ int main(int argc, char** argv) {
     std::printf("\n%s COMMAND (EdDSA JWT, move), %s\n", ws ? "WebSocket" : "HTTP keep-alive",
                 ws ? "one stream per client, one frame in flight each" : "one request in flight per client");
     for (int c : parse_list(clients_list)) {
-      RunOptions o;
-      o.port = node.port;
-      o.ws = ws;
-      o.clients = c;
-      o.seconds = seconds;
-      o.warmup_s = warmup;
-      o.token = token;
-      o.make = seed_move();
-      ProcStat p0 = proc_stat(node.child->pid());
-      ProcStat mid;
-      std::thread sampler;
-      std::atomic<bool> sampling{true};
-      sampler = std::thread([&] {
-        std::this_thread::sleep_for(std::chrono::microseconds(static_cast<int64_t>((warmup + seconds / 2) * 1e6)));
-        if (sampling) mid = proc_stat(node.child->pid());
-      });
-      if (c == 16 && !ws) before16 = scrape(node.port);
-      RunResult rn = run_load(o);
-      if (c == 16 && !ws) after16 = scrape(node.port);
-      sampling = false;
-      sampler.join();
-      ProcStat p1 = proc_stat(node.child->pid());
-      RunOptions b = o;
-      b.port = bport;
-      b.expect = Expect::kBaseline;
-      ProcStat q0 = proc_stat(baseline.pid());
-      RunResult rb = run_load(b);
-      ProcStat q1 = proc_stat(baseline.pid());
-      print_row("rcand", c, rn);
-      print_row("bare Beast server", c, rb);
-      double ncpu = (p1.cpu_s - p0.cpu_s) / static_cast<double>(std::max<uint64_t>(1, rn.ok + rn.refused + rn.failed));
-      double bcpu = (q1.cpu_s - q0.cpu_s) / static_cast<double>(std::max<uint64_t>(1, rb.ok));
-      std::printf("  %-22s %3d  throughput %.0f%%  p99 %.2fx  (server CPU per request: rcand %.0f us, bare %.0f us; "
-                  "rcand RSS under load %.1f MB)\n",
-                  "rcand / bare", c, 100.0 * rn.throughput() / std::max(1.0, rb.throughput()),
-                  pct(rn.lat_us, 0.99) / std::max(1.0, pct(rb.lat_us, 0.99)), ncpu * 1e6, bcpu * 1e6,
-                  static_cast<double>(mid.rss_kb) / 1024.0);
-      if (rn.failed || rn.connect_failures || rb.failed || rb.connect_failures) all_ok = false;
+      std::vector<double> tput_ratio, p99_ratio;
+      for (int pair = 0; pair < pairs; ++pair) {
+        RunOptions o;
+        o.port = node.port;
+        o.ws = ws;
+        o.clients = c;
+        o.seconds = seconds;
+        o.warmup_s = warmup;
+        o.token = token;
+        o.make = seed_move();
+        ProcStat p0 = proc_stat(node.child->pid());
+        ProcStat mid;
+        std::thread sampler;
+        std::atomic<bool> sampling{true};
+        sampler = std::thread([&] {
+          std::this_thread::sleep_for(std::chrono::microseconds(static_cast<int64_t>((warmup + seconds / 2) * 1e6)));
+          if (sampling) mid = proc_stat(node.child->pid());
+        });
+        const bool stage_run = c == 16 && !ws && pair == 0;
+        if (stage_run) before16 = scrape(node.port);
+        RunResult rn = run_load(o);
+        if (stage_run) after16 = scrape(node.port);
+        sampling = false;
+        sampler.join();
+        ProcStat p1 = proc_stat(node.child->pid());
+        RunOptions b = o;
+        b.port = bport;
+        b.expect = Expect::kBaseline;
+        ProcStat q0 = proc_stat(baseline.pid());
+        RunResult rb = run_load(b);
+        ProcStat q1 = proc_stat(baseline.pid());
+        print_row("rcand", c, rn);
+        print_row("bare Beast server", c, rb);
+        double ncpu = (p1.cpu_s - p0.cpu_s) / static_cast<double>(std::max<uint64_t>(1, rn.ok + rn.refused + rn.failed));
+        double bcpu = (q1.cpu_s - q0.cpu_s) / static_cast<double>(std::max<uint64_t>(1, rb.ok));
+        tput_ratio.push_back(rn.throughput() / std::max(1.0, rb.throughput()));
+        p99_ratio.push_back(pct(rn.lat_us, 0.99) / std::max(1.0, pct(rb.lat_us, 0.99)));
+        std::printf("  %-22s %3d  throughput %.0f%%  p99 %.2fx  (server CPU per request: rcand %.0f us, bare %.0f us; "
+                    "rcand RSS under load %.1f MB)\n",
+                    "rcand / bare", c, 100.0 * tput_ratio.back(), p99_ratio.back(), ncpu * 1e6, bcpu * 1e6,
+                    static_cast<double>(mid.rss_kb) / 1024.0);
+        if (rn.failed || rn.connect_failures || rb.failed || rb.connect_failures) all_ok = false;
+      }
+      if (pairs > 1) {
+        auto median = [](std::vector<double> v) {
+          std::sort(v.begin(), v.end());
+          return v.size() % 2 ? v[v.size() / 2] : (v[v.size() / 2 - 1] + v[v.size() / 2]) / 2;
+        };
+        auto [tlo, thi] = std::minmax_element(tput_ratio.begin(), tput_ratio.end());
+        auto [plo, phi] = std::minmax_element(p99_ratio.begin(), p99_ratio.end());
+        std::printf("  %-22s %3d  over %d pairs: throughput median %.0f%% (%.0f–%.0f%%), p99 median %.2fx "
+                    "(%.2f–%.2fx)\n",
+                    "rcand / bare", c, pairs, 100.0 * median(tput_ratio), 100.0 * *tlo, 100.0 * *thi,
+                    median(p99_ratio), *plo, *phi);
+      }
     }
   };
   if (has(phases, "http")) compare(false);
