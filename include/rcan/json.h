@@ -149,6 +149,7 @@ Result<Value> parse(std::string_view text, const ParseOptions& opts = {});
 // raw UTF-8, controls escaped, whole floats written as integers (-0.0 → 0),
 // other floats in Python repr form.
 std::string canonical(const Value& v);
+std::string canonical(const Object& obj);  // the same as canonical(Value(obj)), without the copy
 // Canonical JSON of `obj` without one top-level key (e.g. "sig" or "hmac").
 std::string canonical_without(const Object& obj, std::string_view excluded_key);
 
@@ -158,6 +159,8 @@ std::string python_dumps(const Value& v, bool sort_keys = true, bool compact = t
 
 // Compact, members in stored order, raw UTF-8; floats in Python repr form.
 std::string dump(const Value& v);
+// Appends `s` as a JSON string literal, as dump() and canonical() write a string.
+void append_string(std::string& out, std::string_view s);
 
 // Python repr() of a float: shortest round-trip digits, "1.0", "1e-05", "1e+16", "inf", "nan".
 std::string python_float_repr(double d);

@@ -87,7 +87,7 @@ std::string str_frag(std::string_view key, std::string_view value) {
   f.push_back('"');
   f.append(key);
   f.append("\":");
-  f += json::canonical(json::Value(value));
+  json::append_string(f, value);
   return f;
 }
 
@@ -127,7 +127,7 @@ PreparedRecord prepare(const AuditEntry& e) {
   if (e.watermark_token) str("watermark_token", *e.watermark_token);
   if (e.action) str("action", *e.action);
   if (e.reason) str("reason", *e.reason);
-  if (!e.detail.empty()) raw("detail", json::canonical(json::Value(e.detail)));
+  if (!e.detail.empty()) raw("detail", json::canonical(e.detail));
   if (!e.kind.empty()) str("kind", e.kind);
   if (e.segment) raw("segment", std::to_string(*e.segment));
   std::sort(m.begin(), m.end(), [](const auto& a, const auto& b) { return a.first < b.first; });

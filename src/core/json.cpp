@@ -685,7 +685,7 @@ enum class Style { kCanonical, kPython, kDump };
 // Raw UTF-8. A string that is not valid UTF-8 (never one that was parsed; it can come from a
 // request path or header) has each invalid byte written as the code point of its value, as
 // write_string_ascii() does, so that the output is always valid JSON.
-void write_string_raw(std::string& out, const std::string& s) {
+void write_string_raw(std::string& out, std::string_view s) {
   static const char* hex = "0123456789abcdef";
   out.push_back('"');
   for (size_t i = 0; i < s.size(); ++i) {
@@ -696,7 +696,7 @@ void write_string_raw(std::string& out, const std::string& s) {
       if (len == 0) {
         append_utf8(out, c);
       } else {
-        out.append(s, i, len);
+        out.append(s.substr(i, len));
         i += len - 1;
       }
       continue;
@@ -722,7 +722,7 @@ void write_string_raw(std::string& out, const std::string& s) {
             if (d == '"' || d == '\\' || d < 0x20 || d >= 0x80) break;
             ++end;
           }
-          out.append(s, i, end - i);
+          out.append(s.substr(i, end - i));
           i = end - 1;
         }
     }
@@ -802,9 +802,10 @@ void write_number(std::string& out, const Value& v, Style style) {
   }
 }
 
+void write_object(std::string& out, const Object& obj, Style style, bool sort_keys, bool compact);
+
 void write_value(std::string& out, const Value& v, Style style, bool sort_keys, bool compact) {
   const char* item_sep = compact ? "," : ", ";
-  const char* key_sep = compact ? ":" : ": ";
   switch (v.kind()) {
     case Value::Kind::kNull: out += "null"; break;
     case Value::Kind::kBool: out += v.as_bool() ? "true" : "false"; break;
@@ -826,30 +827,32 @@ void write_value(std::string& out, const Value& v, Style style, bool sort_keys, 
       out.push_back(']');
       break;
     }
-    case Value::Kind::kObject: {
-      const auto& members = v.as_object().members();
-      std::vector<const Member*> order;
-      order.reserve(members.size());
-      for (const auto& m : members) order.push_back(&m);
-      if (sort_keys) {
-        // UTF-8 byte order equals code point order (char_traits<char> compares unsigned).
-        std::sort(order.begin(), order.end(),
-                  [](const Member* a, const Member* b) { return a->first < b->first; });
-      }
-      out.push_back('{');
-      bool first = true;
-      for (const Member* m : order) {
-        if (!first) out += item_sep;
-        first = false;
-        if (style == Style::kPython) write_string_ascii(out, m->first);
-        else write_string_raw(out, m->first);
-        out += key_sep;
-        write_value(out, m->second, style, sort_keys, compact);
-      }
-      out.push_back('}');
-      break;
-    }
+    case Value::Kind::kObject: write_object(out, v.as_object(), style, sort_keys, compact); break;
   }
+}
+
+void write_object(std::string& out, const Object& obj, Style style, bool sort_keys, bool compact) {
+  const char* item_sep = compact ? "," : ", ";
+  const char* key_sep = compact ? ":" : ": ";
+  const auto& members = obj.members();
+  std::vector<const Member*> order;
+  order.reserve(members.size());
+  for (const auto& m : members) order.push_back(&m);
+  if (sort_keys) {
+    // UTF-8 byte order equals code point order (char_traits<char> compares unsigned).
+    std::sort(order.begin(), order.end(), [](const Member* a, const Member* b) { return a->first < b->first; });
+  }
+  out.push_back('{');
+  bool first = true;
+  for (const Member* m : order) {
+    if (!first) out += item_sep;
+    first = false;
+    if (style == Style::kPython) write_string_ascii(out, m->first);
+    else write_string_raw(out, m->first);
+    out += key_sep;
+    write_value(out, m->second, style, sort_keys, compact);
+  }
+  out.push_back('}');
 }
 
 }  // namespace
@@ -857,6 +860,12 @@ void write_value(std::string& out, const Value& v, Style style, bool sort_keys, 
 std::string canonical(const Value& v) {
   std::string out;
   write_value(out, v, Style::kCanonical, true, true);
+  return out;
+}
+
+std::string canonical(const Object& obj) {
+  std::string out;
+  write_object(out, obj, Style::kCanonical, true, true);
   return out;
 }
 
@@ -885,6 +894,8 @@ std::string python_dumps(const Value& v, bool sort_keys, bool compact) {
   write_value(out, v, Style::kPython, sort_keys, compact);
   return out;
 }
+
+void append_string(std::string& out, std::string_view s) { write_string_raw(out, s); }
 
 std::string dump(const Value& v) {
   std::string out;

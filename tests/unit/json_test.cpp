@@ -91,6 +91,21 @@ TEST(Writers, InvalidUtf8InAStringStillGivesValidJson) {
   EXPECT_EQ(dump(Value(std::string("ok-\xc3\xa9-\xf0\x9f\x98\x80"))), "\"ok-\xc3\xa9-\xf0\x9f\x98\x80\"");
 }
 
+// The writer copies runs of characters that need no escape at once: escapes at a run's start,
+// middle and end, control characters, DEL and UTF-8 between them come out as one at a time would.
+TEST(Writers, EscapesBetweenRunsOfPlainCharacters) {
+  const std::string s = std::string("\"lead plain \"quoted\" back\\slash\ttab\x01") + "ctl\x7f" +
+                        "del caf\xc3\xa9 end\n";
+  const std::string want = std::string(R"("\"lead plain \"quoted\" back\\slash\ttab\u0001ctl)") + "\x7f" +
+                           "del caf\xc3\xa9 end\\n\"";
+  EXPECT_EQ(dump(Value(s)), want);
+  auto back = parse(dump(Value(s)));
+  ASSERT_TRUE(back.ok());
+  EXPECT_EQ(back->as_string(), s);
+  EXPECT_EQ(dump(Value(std::string("\\"))), R"("\\")");
+  EXPECT_EQ(dump(Value(std::string("x"))), R"("x")");
+}
+
 TEST(PythonDumps, DefaultSeparatorsAndEnsureAscii) {
   auto v = parse(R"({"b":[1,2.0,"é😀\u007f"],"a":{"z":true,"y":null}})");
   ASSERT_TRUE(v.ok());
