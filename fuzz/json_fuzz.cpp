@@ -2,6 +2,7 @@
 // and whatever parses must re-parse from each writer's output to an equal document.
 #include <cstdint>
 #include <cstdlib>
+#include <string>
 #include <string_view>
 
 #include "rcan/json.h"
@@ -19,5 +20,12 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (!p.ok()) std::abort();
   auto c = rcan::json::parse(canon, {.max_depth = 1000, .max_bytes = 1u << 30});
   if (!c.ok() || rcan::json::canonical(*c) != canon) std::abort();  // canonical is a fixed point
+  // The Object overload and the string-literal writer agree with the Value writers.
+  if (v->is_object() && rcan::json::canonical(v->as_object()) != canon) std::abort();
+  if (v->is_string()) {
+    std::string lit;
+    rcan::json::append_string(lit, v->as_string());
+    if (lit != dumped || lit != canon) std::abort();
+  }
   return 0;
 }
