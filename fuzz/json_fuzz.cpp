@@ -7,8 +7,33 @@
 
 #include "rcan/json.h"
 
+namespace {
+
+// The string-literal writer fed one character at a time (a run can then be one character
+// long): what it writes for ASCII text must not depend on how it groups plain characters into
+// runs. Bytes >= 0x80 are not split (a lone byte of a sequence is written differently).
+std::string one_at_a_time(std::string_view s) {
+  std::string out = "\"";
+  for (char c : s) {
+    std::string one;
+    rcan::json::append_string(one, std::string_view(&c, 1));
+    out.append(one, 1, one.size() - 2);  // without its quotes
+  }
+  out.push_back('"');
+  return out;
+}
+
+}  // namespace
+
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   std::string_view text(reinterpret_cast<const char*>(data), size);
+  bool ascii = true;
+  for (unsigned char c : text) ascii = ascii && c < 0x80;
+  if (ascii) {  // any bytes, not only parsed strings: the raw input as a string value
+    std::string lit;
+    rcan::json::append_string(lit, text);
+    if (lit != one_at_a_time(text)) std::abort();
+  }
   auto v = rcan::json::parse(text);
   if (!v.ok()) return 0;
   std::string canon = rcan::json::canonical(*v);

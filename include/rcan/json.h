@@ -159,7 +159,8 @@ std::string python_dumps(const Value& v, bool sort_keys = true, bool compact = t
 
 // Compact, members in stored order, raw UTF-8; floats in Python repr form.
 std::string dump(const Value& v);
-// Appends `s` as a JSON string literal, as dump() and canonical() write a string.
+// Appends `s` as a JSON string literal, as dump() and canonical() write a string. `s` must not
+// point into `out` (appending may move `out`'s bytes).
 void append_string(std::string& out, std::string_view s);
 
 // Python repr() of a float: shortest round-trip digits, "1.0", "1e-05", "1e+16", "inf", "nan".
