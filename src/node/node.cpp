@@ -218,6 +218,11 @@ Node::Node(NodeServices& services)
   svc_.metrics.add_counter_fn("rcan_audit_index_fallbacks_total",
                               "Audit reads whose index entry did not lead to the record, answered from the segment itself.",
                               [this] { return static_cast<double>(svc_.audit.stats().index_fallbacks); });
+  // Records per group commit = records / groups; syncs per second = the disk's flush rate.
+  svc_.metrics.add_counter_fn("rcan_audit_group_commits_total", "Audit group commits (one write each).",
+                              [this] { return static_cast<double>(svc_.audit.stats().groups_committed); });
+  svc_.metrics.add_counter_fn("rcan_audit_syncs_total", "fdatasync calls of the audit log.",
+                              [this] { return static_cast<double>(svc_.audit.stats().syncs); });
   svc_.metrics.add_counter_fn("rcan_audit_failures_total", "Audit appends that failed.",
                               [this] { return static_cast<double>(svc_.audit_failures.load()); });
   svc_.metrics.add_gauge("rcan_streams_open", "Connected WebSocket streams.",

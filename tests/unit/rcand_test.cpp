@@ -587,6 +587,14 @@ TEST_F(RcandTest, MetricsInPrometheusFormat) {
   for (const char* m : {"rcan_requests_total{", "rcan_estop_active", "rcan_audit_queue_depth",
                         "rcan_pipeline_stage_seconds_bucket{stage=\"auth\"", "rcan_streams_open"})
     EXPECT_NE(r.body.find(m), std::string::npos) << m;
+  // The group commit's own counters: every durable record came in some group, and each group was
+  // synced (the per-group policy), so 1 ≤ syncs ≤ groups ≤ last seq.
+  const double groups = test::metric_value(r.body, "rcan_audit_group_commits_total");
+  const double syncs = test::metric_value(r.body, "rcan_audit_syncs_total");
+  const double last_seq = test::metric_value(r.body, "rcan_audit_last_seq");
+  EXPECT_GE(syncs, 1.0) << r.body;
+  EXPECT_LE(syncs, groups) << r.body;
+  EXPECT_LE(groups, last_seq) << r.body;
 }
 
 // ---------------------------------------------------------------------------------------------
