@@ -456,6 +456,9 @@ MetricsSnap scrape(uint16_t port) {
       return line.substr(p + 7, line.find('"', p + 7) - p - 7);
     };
     double v = std::atof(line.c_str() + line.rfind(' ') + 1);
+    // The audit log's group-commit counters, kept as `count` under their own names.
+    for (const char* c : {"rcan_audit_group_commits_total", "rcan_audit_syncs_total"})
+      if (line.rfind(std::string(c) + " ", 0) == 0) m[c].count = v;
     if (auto s = stage_of("rcan_pipeline_stage_seconds_sum"); !s.empty()) m[s].sum_s = v;
     if (auto s = stage_of("rcan_pipeline_stage_seconds_count"); !s.empty()) m[s].count = v;
     if (auto s = stage_of("rcan_pipeline_stage_seconds_bucket"); !s.empty()) {
@@ -718,6 +721,13 @@ int main(int argc, char** argv) {
       }
       std::printf("  %-13s mean %8.1f us   p99 ≤ %7.0f us   (n=%.0f)\n", s, mean, p99, n);
     }
+    auto delta = [&](const char* name) { return after16[name].count - before16[name].count; };
+    const double groups = delta("rcan_audit_group_commits_total");
+    const double syncs = delta("rcan_audit_syncs_total");
+    const double records = delta("audit");
+    if (groups > 0)
+      std::printf("  audit group commits %.0f: %.2f command records per group, %.0f fdatasyncs/s\n", groups,
+                  records / groups, syncs / (warmup + seconds));
   }
 
   if (has(phases, "memory")) {
