@@ -7,6 +7,9 @@
 //      * call → estop() returned         (includes the fence that waits out an in-flight apply)
 //    and reports p50 / p99 / max over the trials.
 // 2. dispatch() throughput with N threads (unlatched, all accepted).
+// 3. One COMMAND through SafetyActuation, single-threaded: prepare() (translate, check; on the
+//    I/O thread before the audit record) and apply() (dispatch; on the audit writer once the
+//    record is durable), for load_bench's move with its parameters under "params".
 //
 // Usage: safety_bench [trials=300] [throughput_ms=1000]
 #include <algorithm>
@@ -18,6 +21,7 @@
 #include <thread>
 #include <vector>
 
+#include "node/actuation_safety.h"
 #include "node/clock.h"
 #include "node/safety.h"
 #include "node/sim_robot.h"
@@ -151,11 +155,48 @@ void run_throughput(int threads, int ms) {
 
 }  // namespace
 
+void run_actuation(int ms) {
+  auto drv = std::make_unique<TimedSim>();
+  SafetyCore core(std::move(drv), SafetyConfig{}, Clock::system());
+  SafetyActuation act(core, "bench");
+  rcan::Message m;
+  m.type = rcan::MessageType::kCommand;
+  m.payload = rcan::json::Object{
+      {"action", "move"},
+      {"params", rcan::json::Object{{"linear", 0.2}, {"angular", 0.1}, {"duration_ms", 200}}}};
+  int64_t prep_ns = 0, apply_ns = 0, n = 0;
+  const int64_t end = now_ns() + int64_t{ms} * 1'000'000;
+  while (now_ns() < end) {
+    for (int i = 0; i < 256; ++i) {
+      const int64_t t0 = now_ns();
+      auto pc = act.prepare(m, 0, "");
+      const int64_t t1 = now_ns();
+      if (!pc.ok()) {
+        std::fprintf(stderr, "prepare failed: %s\n", pc.error().message.c_str());
+        std::exit(1);
+      }
+      auto r = act.apply(*pc);
+      const int64_t t2 = now_ns();
+      if (!r.ok()) {
+        std::fprintf(stderr, "apply failed: %s\n", r.error().message.c_str());
+        std::exit(1);
+      }
+      prep_ns += t1 - t0;
+      apply_ns += t2 - t1;
+      ++n;
+    }
+  }
+  std::printf("SafetyActuation move: prepare %.2f us, apply %.2f us (mean of %lld)\n",
+              static_cast<double>(prep_ns) / 1e3 / static_cast<double>(n),
+              static_cast<double>(apply_ns) / 1e3 / static_cast<double>(n), static_cast<long long>(n));
+}
+
 int main(int argc, char** argv) {
   const int trials = argc > 1 ? std::atoi(argv[1]) : 300;
   const int ms = argc > 2 ? std::atoi(argv[2]) : 1000;
   std::printf("hardware threads: %u\n", std::thread::hardware_concurrency());
   for (int n : {0, 4, 16, 64}) run_latency(n, trials);
   for (int n : {1, 4, 16, 64}) run_throughput(n, ms);
+  run_actuation(ms);
   return 0;
 }

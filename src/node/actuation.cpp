@@ -22,8 +22,31 @@ Error bad_param(std::string field, std::string msg) {
   return Error(ErrorCode::kSchemaValidationFailed, std::move(msg), "payload." + field);
 }
 
+// A COMMAND's parameters: flat in the payload or under "params"/"parameters", in that order of
+// precedence (looked up in place, not merged into a copy).
+class Params {
+ public:
+  explicit Params(const json::Object& payload) : flat_(payload) {
+    int i = 0;
+    for (const char* k : {"params", "parameters"})
+      if (const json::Value* inner = payload.find(k); inner && inner->is_object()) nested_[i++] = &inner->as_object();
+  }
+  // The first of the three that has `name` (even as null) decides.
+  const json::Value* find(std::string_view name) const {
+    if (const json::Value* v = flat_.find(name)) return v;
+    for (const json::Object* o : nested_)
+      if (o)
+        if (const json::Value* v = o->find(name)) return v;
+    return nullptr;
+  }
+
+ private:
+  const json::Object& flat_;
+  const json::Object* nested_[2] = {nullptr, nullptr};
+};
+
 // First present numeric parameter among `names`; error when present but not a finite number.
-Result<std::optional<double>> number(const json::Object& p, std::initializer_list<const char*> names) {
+Result<std::optional<double>> number(const Params& p, std::initializer_list<const char*> names) {
   for (const char* n : names) {
     const json::Value* v = p.find(n);
     if (!v || v->is_null()) continue;
@@ -41,14 +64,7 @@ bool starts(const std::string& s, std::string_view p) { return s.rfind(p, 0) == 
 
 Result<ActuatorCommand> translate_command(const Message& msg, const SafetyLimits& limits) {
   std::string action = lower(msg.action());
-  const json::Object& p = msg.payload;
-  // Parameters may be flat in the payload or under "params"/"parameters".
-  json::Object merged = p;
-  for (const char* k : {"params", "parameters"}) {
-    if (const json::Value* inner = p.find(k); inner && inner->is_object())
-      for (const auto& m : inner->as_object())
-        if (!merged.contains(m.first)) merged.set(m.first, m.second);
-  }
+  const Params merged(msg.payload);
   if (action == "move" || action == "move_forward" || action == "move_backward" || action == "drive" ||
       action == "teleop" || starts(action, "nav") || action == "turn" || action == "turn_left" ||
       action == "turn_right" || action == "rotate" || action == "goto") {
@@ -132,11 +148,20 @@ bool SafetyActuation::informational(const std::string& action) const {
 Result<PreparedCommand> SafetyActuation::prepare(const Message& msg, int64_t deadline_mono_ms,
                                                  const std::string& session_id) {
   PreparedCommand pc;
-  pc.msg = msg;
   pc.deadline_mono_ms = deadline_mono_ms;
   pc.session_id = session_id;
-  std::string action = lower(msg.action());
+  pc.action_name = lower(msg.action());
+  const std::string& action = pc.action_name;
   if (informational(action)) {
+    if (action == "chat" || action == "ask") {
+      for (const char* k : {"text", "message", "question", "instruction", "prompt"}) {
+        const json::Value* v = msg.payload.find(k);
+        if (v && v->is_string()) {
+          pc.question = v->as_string();
+          break;
+        }
+      }
+    }
     pc.action = json::Object{{"informational", action}};
     return pc;
   }
@@ -150,22 +175,15 @@ Result<PreparedCommand> SafetyActuation::prepare(const Message& msg, int64_t dea
   pc.clamped = checked->clamped;
   for (const auto& c : checked->clamps) pc.clamp_note += (pc.clamp_note.empty() ? "" : "; ") + c;
   pc.action = checked->applied.to_json();
+  pc.command = std::move(*cmd);  // apply() hands this to the core, which checks it again
   return pc;
 }
 
 Result<json::Value> SafetyActuation::apply(const PreparedCommand& pc) {
-  std::string action = lower(pc.msg.action());
-  if (informational(action)) {
+  const std::string& action = pc.action_name;
+  if (!pc.command) {
     RobotState st = core_.robot_state();
     if (action == "chat" || action == "ask") {
-      std::string q;
-      for (const char* k : {"text", "message", "question", "instruction", "prompt"}) {
-        const json::Value* v = pc.msg.payload.find(k);
-        if (v && v->is_string()) {
-          q = v->as_string();
-          break;
-        }
-      }
       SafetyStatus s = core_.status();
       ChatContext ctx;
       ctx.estop_active = s.estop_active;
@@ -173,16 +191,14 @@ Result<json::Value> SafetyActuation::apply(const PreparedCommand& pc) {
       ctx.safe_stop_active = s.safe_stop_active;
       ctx.safe_stop_reason = s.safe_stop_reason;
       ctx.robot_name = robot_name_;
-      return json::Value(json::Object{{"reply", chat(q, st, ctx)}});
+      return json::Value(json::Object{{"reply", chat(pc.question, st, ctx)}});
     }
     return json::Value(st.to_json());
   }
-  auto cmd = translate_command(pc.msg, core_.limits());
-  if (!cmd.ok()) return cmd.error();
   DispatchOptions opts;
   opts.deadline_mono_ms = pc.deadline_mono_ms;
   opts.session_id = pc.session_id;
-  auto out = core_.dispatch(*cmd, opts);
+  auto out = core_.dispatch(*pc.command, opts);
   if (!out.ok()) return out.error();
   return json::Value(out->to_json());
 }

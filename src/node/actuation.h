@@ -5,8 +5,10 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 
+#include "node/driver.h"
 #include "rcan/json.h"
 #include "rcan/message.h"
 #include "rcan/result.h"
@@ -15,7 +17,9 @@
 namespace rcan::node {
 
 struct PreparedCommand {
-  Message msg;
+  std::string action_name;                 // the COMMAND's action, lower-cased
+  std::optional<ActuatorCommand> command;  // as checked by prepare(); none for an informational action
+  std::string question;                    // chat/ask: the text asked
   json::Value action;      // what will be applied (after clamping), for the audit record
   bool clamped = false;
   std::string clamp_note;  // which limit clamped it

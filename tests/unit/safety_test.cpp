@@ -15,6 +15,7 @@
 #include <thread>
 #include <vector>
 
+#include "node/actuation_safety.h"
 #include "node/clock.h"
 #include "node/sim_robot.h"
 #include "test_support.h"
@@ -797,6 +798,81 @@ TEST(SafetyConcurrency, FenceTimeoutLeavesTheStragglerToStopItself) {
   t.join();
   EXPECT_EQ(core.status().estop_fence_timeouts, 1u);
   EXPECT_FALSE(slow->moving.load());  // the straggler stopped behind itself
+}
+
+// ---- SafetyActuation: COMMAND → ActuatorCommand, prepare → apply ------------------------------
+
+Message command_msg(json::Object payload) {
+  Message m;
+  m.type = MessageType::kCommand;
+  m.payload = std::move(payload);
+  return m;
+}
+
+TEST(TranslateCommand, FlatParametersWinOverParamsOverParameters) {
+  SafetyLimits limits;
+  auto c = translate_command(command_msg(json::Object{{"action", "move"},
+                                                      {"linear", 0.1},
+                                                      {"params", json::Object{{"linear", 0.5}, {"angular", 0.2}}},
+                                                      {"parameters", json::Object{{"angular", 0.9}, {"duration_ms", 300}}}}),
+                             limits);
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  ASSERT_TRUE(c->drive.has_value());
+  EXPECT_DOUBLE_EQ(c->drive->linear_mps, 0.1);
+  EXPECT_DOUBLE_EQ(c->drive->angular_radps, 0.2);
+  EXPECT_EQ(c->drive->duration_ms, 300);
+  // Joints may come from "parameters" alone.
+  auto arm = translate_command(
+      command_msg(json::Object{{"action", "set_joints"},
+                               {"parameters", json::Object{{"joints", json::Array{0.1, 0.2, 0.3, 0.4, 0.5, 0.6}}}}}),
+      limits);
+  ASSERT_TRUE(arm.ok()) << arm.error().message;
+  ASSERT_TRUE(arm->arm.has_value());
+  EXPECT_DOUBLE_EQ(arm->arm->targets_rad[5], 0.6);
+}
+
+TEST(TranslateCommand, AFlatNullHidesTheNestedValue) {
+  // The flat key is present (as null): it decides, and null means "not given".
+  auto c = translate_command(
+      command_msg(json::Object{{"action", "move"}, {"linear", nullptr}, {"params", json::Object{{"linear", 0.4}}}}),
+      SafetyLimits{});
+  ASSERT_FALSE(c.ok());
+  EXPECT_EQ(c.error().code, ErrorCode::kSchemaValidationFailed);
+  auto bad = translate_command(
+      command_msg(json::Object{{"action", "move"}, {"params", json::Object{{"linear", "fast"}}}}), SafetyLimits{});
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.error().field, "payload.linear");
+}
+
+TEST(SafetyActuationApply, AppliesWhatPrepareCheckedAndAnswersChat) {
+  Rig r;
+  SafetyActuation act(*r.core, "test-bot");
+  auto pc = act.prepare(command_msg(json::Object{{"action", "MOVE"}, {"linear", 0.2}, {"duration_ms", 500}}), 0, "");
+  ASSERT_TRUE(pc.ok()) << pc.error().message;
+  EXPECT_EQ(pc->action_name, "move");
+  ASSERT_TRUE(pc->command.has_value());
+  ASSERT_TRUE(pc->action.is_object());
+  auto applied = act.apply(*pc);
+  ASSERT_TRUE(applied.ok()) << applied.error().message;
+  r.run(200);
+  EXPECT_FALSE(r.core->robot_state().stopped);
+  // An ESTOP between prepare() and apply() refuses the prepared command.
+  auto again = act.prepare(command_msg(json::Object{{"action", "move"}, {"linear", 0.1}}), 0, "");
+  ASSERT_TRUE(again.ok());
+  (void)act.estop("test", "between");
+  auto refused = act.apply(*again);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().reason, "estop_active");
+
+  // Informational actions carry no actuator command; chat answers the text that was asked.
+  auto chat = act.prepare(command_msg(json::Object{{"action", "chat"}, {"text", "Who are you?"}}), 0, "");
+  ASSERT_TRUE(chat.ok());
+  EXPECT_FALSE(chat->command.has_value());
+  auto reply = act.apply(*chat);
+  ASSERT_TRUE(reply.ok());
+  const json::Value* text = reply->get("reply");
+  ASSERT_TRUE(text && text->is_string());
+  EXPECT_NE(text->as_string().find("test-bot"), std::string::npos) << text->as_string();
 }
 
 TEST(SafetyConcurrency, EstopLatencyIsRecorded) {
