@@ -64,19 +64,19 @@ bool starts(const std::string& s, std::string_view p) { return s.rfind(p, 0) == 
 
 Result<ActuatorCommand> translate_command(const Message& msg, const SafetyLimits& limits) {
   std::string action = lower(msg.action());
-  const Params merged(msg.payload);
+  const Params params(msg.payload);
   if (action == "move" || action == "move_forward" || action == "move_backward" || action == "drive" ||
       action == "teleop" || starts(action, "nav") || action == "turn" || action == "turn_left" ||
       action == "turn_right" || action == "rotate" || action == "goto") {
-    auto lin = number(merged, {"linear", "linear_x", "linear_mps", "speed", "speed_mps", "velocity"});
+    auto lin = number(params, {"linear", "linear_x", "linear_mps", "speed", "speed_mps", "velocity"});
     if (!lin.ok()) return lin.error();
-    auto ang = number(merged, {"angular", "angular_z", "angular_radps", "yaw_rate"});
+    auto ang = number(params, {"angular", "angular_z", "angular_radps", "yaw_rate"});
     if (!ang.ok()) return ang.error();
-    auto dur_ms = number(merged, {"duration_ms"});
+    auto dur_ms = number(params, {"duration_ms"});
     if (!dur_ms.ok()) return dur_ms.error();
-    auto dur_s = number(merged, {"duration_s", "duration"});
+    auto dur_s = number(params, {"duration_s", "duration"});
     if (!dur_s.ok()) return dur_s.error();
-    auto dist = number(merged, {"distance_m", "distance"});
+    auto dist = number(params, {"distance_m", "distance"});
     if (!dist.ok()) return dist.error();
     double linear = lin->value_or(0.0);
     double angular = ang->value_or(0.0);
@@ -99,7 +99,7 @@ Result<ActuatorCommand> translate_command(const Message& msg, const SafetyLimits
     if (action == "arm_home") return ActuatorCommand::make_arm(targets);
     const json::Value* j = nullptr;
     for (const char* k : {"joints", "joints_rad", "targets", "positions"}) {
-      if ((j = merged.find(k))) break;
+      if ((j = params.find(k))) break;
     }
     if (!j) return bad_param("joints", "an arm command needs joints: 6 target angles in radians");
     if (!j->is_array() || j->as_array().size() != static_cast<size_t>(kArmJoints))
@@ -109,7 +109,7 @@ Result<ActuatorCommand> translate_command(const Message& msg, const SafetyLimits
       if (!e.is_number() || !std::isfinite(e.to_double())) return bad_param("joints", "joints must be finite numbers");
       targets[static_cast<size_t>(i)] = e.to_double();
     }
-    auto speed = number(merged, {"max_joint_speed_radps", "joint_speed", "speed"});
+    auto speed = number(params, {"max_joint_speed_radps", "joint_speed", "speed"});
     if (!speed.ok()) return speed.error();
     return ActuatorCommand::make_arm(targets, speed->value_or(0.0));
   }
