@@ -702,7 +702,7 @@ int main(int argc, char** argv) {
 
   if (has(phases, "stages") && !before16.empty()) {
     std::printf("\ncommand path, node's own stage timers over the 16-client HTTP run (mean / ~p99 by bucket)\n");
-    const char* order[] = {"http_parse", "shape", "token", "decode", "replay", "auth", "authorize", "rate_limit",
+    const char* order[] = {"parse", "shape", "token", "decode", "replay", "auth", "authorize", "rate_limit",
                            "safety_state", "injection", "dispatch", "audit", "apply", "respond", "total"};
     for (const char* s : order) {
       auto a = after16.find(s);

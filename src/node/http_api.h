@@ -50,6 +50,9 @@ struct HttpResponse {
   std::string content_type = "application/json";
   std::string body;
   std::vector<std::pair<std::string, std::string>> headers;  // extra headers
+  // When the node handed the answer over (steady clock, µs; 0 = not timed). The transport then
+  // reports how long the answer waited before its write began (HttpHandler::answer_waited).
+  int64_t answered_mono_us = 0;
 };
 
 // Called on a transport thread. `respond` must be called exactly once, from any thread,
@@ -60,6 +63,9 @@ class HttpHandler {
   using Respond = std::function<void(HttpResponse)>;
   virtual ~HttpHandler() = default;
   virtual void handle(HttpRequest req, Respond respond) = 0;
+  // A timed answer (answered_mono_us set) waited `us` between respond() and the start of its
+  // write. Called on a transport thread; must be cheap.
+  virtual void answer_waited(int64_t us) { (void)us; }
 };
 
 // The transport's side of one WebSocket. Thread-safe; calls after close are ignored.

@@ -1,5 +1,6 @@
 #include "node/metrics.h"
 
+#include <charconv>
 #include <cstdio>
 #include <memory>
 
@@ -68,6 +69,12 @@ std::string num(double v) {
   std::snprintf(b, sizeof b, "%.17g", v);
   return b;
 }
+// A bucket bound as its shortest exact decimal ("0.00015", not "0.00014999999999999999").
+std::string le_label(double v) {
+  char b[64];
+  auto r = std::to_chars(b, b + sizeof b, v);
+  return std::string(b, r.ptr);
+}
 std::string escape_label(const std::string& s) {
   std::string out;
   for (char c : s) {
@@ -102,7 +109,7 @@ std::string Metrics::render() const {
     for (size_t i = 0; i < Histogram::kBucketsUs.size(); ++i) {
       acc += h->bucket(i);
       out += "rcan_pipeline_stage_seconds_bucket{stage=\"" + name + "\",le=\"" +
-             num(Histogram::kBucketsUs[i] / 1e6) + "\"} " + std::to_string(acc) + "\n";
+             le_label(Histogram::kBucketsUs[i] / 1e6) + "\"} " + std::to_string(acc) + "\n";
     }
     out += "rcan_pipeline_stage_seconds_bucket{stage=\"" + name + "\",le=\"+Inf\"} " +
            std::to_string(h->count()) + "\n";

@@ -19,8 +19,10 @@ namespace rcan::node {
 // Latency histogram in microseconds with fixed buckets; lock-free observe().
 class Histogram {
  public:
-  static constexpr std::array<double, 14> kBucketsUs{10,    25,    50,     100,    250,    500,    1000,
-                                                     2500,  5000,  10000,  25000,  50000,  100000, 1000000};
+  // Finer between 100 µs and 2.5 ms, where a durable command's stages fall.
+  static constexpr std::array<double, 20> kBucketsUs{10,   25,   50,   100,   150,   200,   250,
+                                                     300,  400,  500,  750,   1000,  1500,  2500,
+                                                     5000, 10000, 25000, 50000, 100000, 1000000};
   void observe_us(double us);
   // Approximate quantile (0..1) from the buckets, in microseconds.
   double quantile_us(double q) const;

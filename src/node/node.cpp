@@ -169,7 +169,9 @@ void StreamSessionImpl::on_text(std::string text) {
 // ---------------------------------------------------------------------------------------------
 
 Node::Node(NodeServices& services)
-    : svc_(services), pipeline_(services, Pipeline::standard_stages(services)) {
+    : svc_(services),
+      pipeline_(services, Pipeline::standard_stages(services)),
+      respond_timer_(&services.metrics.stage("respond")) {
   event_sub_ = svc_.events.subscribe([this](const json::Value& ev) {
     // An event with "_to" is for the streams of that principal only (PREEMPTED, PROMOTED, …).
     std::string to;
@@ -461,9 +463,14 @@ void Node::run_pipeline(HttpRequest& req, Respond& respond, const std::string& r
     resp.status = out.status;
     resp.body = json::dump(out.body);
     resp.headers = std::move(out.headers);
+    resp.answered_mono_us = std::chrono::duration_cast<std::chrono::microseconds>(
+                                std::chrono::steady_clock::now().time_since_epoch())
+                                .count();
     respond(std::move(resp));
   });
 }
+
+void Node::answer_waited(int64_t us) { respond_timer_->observe_us(static_cast<double>(us)); }
 
 void Node::route(HttpRequest& req, Respond& respond) {
   const std::string& p = req.path;

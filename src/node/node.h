@@ -34,6 +34,7 @@ class Node final : public HttpHandler, public StreamHandler {
   void shutdown();
 
   void handle(HttpRequest req, Respond respond) override;
+  void answer_waited(int64_t us) override;
   std::unique_ptr<StreamSession> open(const HttpRequest& upgrade, std::shared_ptr<StreamSink> sink,
                                       HttpResponse& refusal) override;
 
@@ -82,6 +83,7 @@ class Node final : public HttpHandler, public StreamHandler {
 
   NodeServices& svc_;
   Pipeline pipeline_;
+  Histogram* respond_timer_;  // stage "respond": answer handed over → its write begins
   Worker worker_{1};
   mutable std::mutex streams_mu_;
   std::vector<std::shared_ptr<StreamState>> streams_;

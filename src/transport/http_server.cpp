@@ -557,6 +557,12 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     keep_alive = keep_alive && !srv_.stopping.load() && !shutdown_requested_;
     phase_ = Phase::kWriting;
     const int status = response_->status;
+    if (response_->answered_mono_us > 0) {
+      const int64_t now_us = std::chrono::duration_cast<std::chrono::microseconds>(
+                                 SteadyClock::now().time_since_epoch())
+                                 .count();
+      srv_.http.answer_waited(std::max<int64_t>(0, now_us - response_->answered_mono_us));
+    }
     const std::string wire = response_bytes(std::move(*response_), version, head, keep_alive);
     response_.reset();
     lowest().expires_after(Ms(opt_.read_timeout_ms));
