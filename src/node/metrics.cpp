@@ -69,10 +69,11 @@ std::string num(double v) {
   std::snprintf(b, sizeof b, "%.17g", v);
   return b;
 }
-// A bucket bound as its shortest exact decimal ("0.00015", not "0.00014999999999999999").
+// A bucket bound in the shortest form that reads back exactly, %g style as Prometheus' own
+// clients write it ("0.00015", "0.0001", "1e-05"; not "0.00014999999999999999").
 std::string le_label(double v) {
   char b[64];
-  auto r = std::to_chars(b, b + sizeof b, v);
+  auto r = std::to_chars(b, b + sizeof b, v, std::chars_format::general);
   return std::string(b, r.ptr);
 }
 std::string escape_label(const std::string& s) {
