@@ -1,7 +1,6 @@
 #include "node/metrics.h"
 
 #include <charconv>
-#include <cstdio>
 #include <memory>
 
 namespace rcan::node {
@@ -64,14 +63,9 @@ void Metrics::add_counter_fn(std::string name, std::string help, std::function<d
 }
 
 namespace {
+// The shortest form that reads back exactly, %g style as Prometheus' own clients write values
+// and bucket bounds ("0.00015", "0.0001", "1e-05"; not "0.00014999999999999999").
 std::string num(double v) {
-  char b[64];
-  std::snprintf(b, sizeof b, "%.17g", v);
-  return b;
-}
-// A bucket bound in the shortest form that reads back exactly, %g style as Prometheus' own
-// clients write it ("0.00015", "0.0001", "1e-05"; not "0.00014999999999999999").
-std::string le_label(double v) {
   char b[64];
   auto r = std::to_chars(b, b + sizeof b, v, std::chars_format::general);
   return std::string(b, r.ptr);
@@ -110,7 +104,7 @@ std::string Metrics::render() const {
     for (size_t i = 0; i < Histogram::kBucketsUs.size(); ++i) {
       acc += h->bucket(i);
       out += "rcan_pipeline_stage_seconds_bucket{stage=\"" + name + "\",le=\"" +
-             le_label(Histogram::kBucketsUs[i] / 1e6) + "\"} " + std::to_string(acc) + "\n";
+             num(Histogram::kBucketsUs[i] / 1e6) + "\"} " + std::to_string(acc) + "\n";
     }
     out += "rcan_pipeline_stage_seconds_bucket{stage=\"" + name + "\",le=\"+Inf\"} " +
            std::to_string(h->count()) + "\n";
