@@ -7,6 +7,8 @@
 // same requests and checks every response (status and body), not just counts.
 //
 // Phases:
+//   disk       the disk under the data root alone: append + fdatasync of a group commit's size,
+//              rate, latency and the CPU one sync costs (the syncing thread's, the machine's)
 //   start-up   time from exec to the first served GET /healthz (fresh data dir, then a restart)
 //   memory     VmRSS idle, under 64 HTTP and 64 WebSocket clients, VmHWM
 //   http / ws  authenticated COMMANDs (EdDSA JWT) over HTTP keep-alive and over one WebSocket
@@ -17,7 +19,7 @@
 //   ml-dsa     rcan-py-shaped commands signed with ML-DSA-65 by a trusted peer-robot key
 //
 //   load_bench [--rcand PATH] [--seconds 2] [--warmup 0.5] [--clients 1,16,64]
-//              [--phases startup,memory,http,ws,stages,estop,mldsa] [--io-threads 2]
+//              [--phases disk,startup,memory,http,ws,stages,estop,mldsa] [--io-threads 2]
 //              [--estops 100] [--mldsa-pool 12000] [--data-root /tmp] [--pairs 1] [--smoke N]
 // --io-threads N: the bare server's threads; keep it equal to the node's server.io_threads
 // (2 in the embedded configuration rcand runs here).
@@ -43,6 +45,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -500,6 +503,94 @@ bool has(const std::string& list, const std::string& item) {
   return false;
 }
 
+// ---- the disk under the data root -----------------------------------------------------------
+
+// CPU time of the whole machine so far (all CPUs, /proc/stat): everything but idle and iowait,
+// in seconds. Interrupts, softirqs and kernel threads on any CPU count too.
+double machine_busy_s() {
+  std::ifstream st("/proc/stat");
+  std::string cpu;
+  uint64_t v[8] = {};
+  st >> cpu;
+  for (uint64_t& x : v) st >> x;
+  if (cpu != "cpu") return 0;
+  const uint64_t busy = v[0] + v[1] + v[2] + v[5] + v[6] + v[7];  // user nice system irq softirq steal
+  return static_cast<double>(busy) / static_cast<double>(sysconf(_SC_CLK_TCK));
+}
+
+struct DiskProbe {
+  bool ok = false;
+  std::string error;  // what failed, when !ok
+  uint64_t syncs = 0;
+  double per_s = 0, p50_us = 0, p99_us = 0;
+  double thread_cpu_us = 0;   // the syncing thread's own CPU per append + fdatasync
+  double machine_cpu_us = 0;  // all CPUs' busy time per append + fdatasync
+};
+
+// What the audit writer asks of the disk, alone on the machine: appends of `bytes` (about one
+// group commit of command records) into a zero-filled file, as the log's preallocated segment
+// is, each followed by fdatasync. On a virtual disk the CPU a sync costs (the device
+// notifications, the interrupts, the sleeps and wake-ups) is a large part of a command's.
+DiskProbe probe_disk(const std::string& dir, size_t bytes, double seconds) {
+  DiskProbe d;
+  auto failed = [&d](const char* what) {
+    d.error = std::string(what) + ": " + std::strerror(errno);
+    return d;
+  };
+  const std::string path = dir + "/disk-probe";
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+  if (fd < 0) return failed("open");
+  struct Closer {
+    int fd;
+    std::string path;
+    ~Closer() {
+      ::close(fd);
+      ::unlink(path.c_str());
+    }
+  } closer{fd, path};
+  constexpr size_t kFileBytes = size_t{32} << 20;
+  const std::vector<char> zeros(size_t{1} << 20, 0);
+  for (size_t off = 0; off < kFileBytes; off += zeros.size())
+    if (::pwrite(fd, zeros.data(), zeros.size(), static_cast<off_t>(off)) != static_cast<ssize_t>(zeros.size()))
+      return failed("zero-fill");
+  if (::fsync(fd) != 0) return failed("fsync");
+  std::string rec(bytes, 'x');
+  rec.back() = '\n';
+  std::vector<double> lat;
+  timespec c0{}, c1{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &c0);
+  const double busy0 = machine_busy_s();
+  const int64_t start = mono_us();
+  size_t off = 0;
+  while (mono_us() - start < static_cast<int64_t>(seconds * 1e6) && off + bytes <= kFileBytes) {
+    const int64_t t0 = mono_us();
+    if (::pwrite(fd, rec.data(), bytes, static_cast<off_t>(off)) != static_cast<ssize_t>(bytes))
+      return failed("append");
+    if (::fdatasync(fd) != 0) return failed("fdatasync");
+    lat.push_back(static_cast<double>(mono_us() - t0));
+    off += bytes;
+  }
+  const double elapsed_s = static_cast<double>(mono_us() - start) / 1e6;
+  const double busy = machine_busy_s() - busy0;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &c1);
+  if (lat.empty() || elapsed_s <= 0) {
+    d.error = "no sync completed";
+    return d;
+  }
+  std::sort(lat.begin(), lat.end());
+  const double n = static_cast<double>(lat.size());
+  d.ok = true;
+  d.syncs = lat.size();
+  d.per_s = n / elapsed_s;
+  d.p50_us = pct(lat, 0.50);
+  d.p99_us = pct(lat, 0.99);
+  const double thread_cpu_us =
+      static_cast<double>(c1.tv_sec - c0.tv_sec) * 1e6 + static_cast<double>(c1.tv_nsec - c0.tv_nsec) / 1e3;
+  d.thread_cpu_us = thread_cpu_us / n;
+  d.machine_cpu_us = busy * 1e6 / n;
+  return d;
+}
+
 // The node's estop.latency log lines: arrival → Driver::stop() in microseconds, by transport.
 std::map<std::string, std::vector<double>> estop_lines(Child& c) {
   std::map<std::string, std::vector<double>> out;
@@ -520,7 +611,7 @@ int main(int argc, char** argv) {
   std::string rcand = (fs::path(argv[0]).parent_path() / ".." / "bin" / "rcand").string();
   double seconds = 2, warmup = 0.5;
   std::string clients_list = "1,16,64";
-  std::string phases = "startup,memory,http,ws,stages,estop,mldsa";
+  std::string phases = "disk,startup,memory,http,ws,stages,estop,mldsa";
   int io_threads = 2, estops = 100;
   long mldsa_pool = 12000;
   std::string data_root = "/tmp";  // where the node's data directory (and its audit log) lives
@@ -548,7 +639,7 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr,
                    "usage: load_bench [--rcand PATH] [--seconds S] [--warmup S] [--clients 1,16,64]\n"
-                   "                  [--phases startup,memory,http,ws,stages,estop,mldsa] [--io-threads N]\n"
+                   "                  [--phases disk,startup,memory,http,ws,stages,estop,mldsa] [--io-threads N]\n"
                    "                  [--estops N] [--mldsa-pool N] [--data-root DIR] [--pairs N] [--smoke N]\n");
       return 2;
     }
@@ -558,7 +649,11 @@ int main(int argc, char** argv) {
   std::vector<char> tmpl(tmpl_s.begin(), tmpl_s.end());
   tmpl.push_back('\0');
   const char* made = mkdtemp(tmpl.data());
-  if (!made) return 1;
+  if (!made) {
+    std::fprintf(stderr, "load_bench: cannot create a directory under %s: %s\n", data_root.c_str(),
+                 std::strerror(errno));
+    return 1;
+  }
   const std::string root = made;
   struct Cleanup {
     std::string dir;
@@ -605,6 +700,19 @@ int main(int argc, char** argv) {
   std::printf("load_bench: rcand %s, %d io threads, generator on 1 thread, %u CPUs, %.1f s per run\n",
               node.ruri.c_str(), io_threads, std::thread::hardware_concurrency(), seconds);
   std::printf("  data dir (audit log, fdatasync per group commit) under %s\n", data_root.c_str());
+  DiskProbe disk;
+  if (has(phases, "disk")) {
+    constexpr size_t kGroupBytes = 3000;  // about five command records: a group commit at 16 clients
+    disk = probe_disk(root, kGroupBytes, 1.0);
+    std::printf("\ndisk under the data dir, alone (append %zu bytes + fdatasync, as a group commit)\n", kGroupBytes);
+    if (disk.ok)
+      std::printf("  %.0f syncs/s  p50 %.0f us  p99 %.0f us;  CPU per sync: syncing thread %.1f us, "
+                  "whole machine %.1f us  (n=%llu)\n",
+                  disk.per_s, disk.p50_us, disk.p99_us, disk.thread_cpu_us, disk.machine_cpu_us,
+                  static_cast<unsigned long long>(disk.syncs));
+    else
+      std::printf("  probe failed (%s)\n", disk.error.c_str());
+  }
   // The embedded node starts with io_threads 2 (docs/CONFIG.md); the baseline uses the same.
   uint16_t bport = free_port();
   Child baseline({fs::canonical("/proc/self/exe").string(), "--serve-baseline", std::to_string(bport),
@@ -728,6 +836,13 @@ int main(int argc, char** argv) {
     if (groups > 0)
       std::printf("  audit group commits %.0f: %.2f command records per group, %.0f fdatasyncs/s\n", groups,
                   records / groups, syncs / (warmup + seconds));
+    if (groups > 0 && disk.ok) {
+      // An estimate from two measurements: the run's sync rate times what one sync cost alone.
+      const double share = syncs / (warmup + seconds) * disk.machine_cpu_us / 1e6;
+      std::printf("  those syncs at the disk probe's CPU per sync: ~%.2f CPUs of %u (%.0f%% of the machine)\n", share,
+                  std::thread::hardware_concurrency(),
+                  100.0 * share / std::max(1u, std::thread::hardware_concurrency()));
+    }
   }
 
   if (has(phases, "memory")) {
