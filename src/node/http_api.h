@@ -6,6 +6,7 @@
 // (src/node/) implements both handlers: routing, the pipeline, audit and safety live there.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -15,6 +16,13 @@
 #include <vector>
 
 namespace rcan::node {
+
+// The steady clock in microseconds: the clock of received_mono_us and answered_mono_us and of
+// the node's stage timers, which subtract them from one another across transport and node.
+inline int64_t steady_us() {
+  return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
 
 struct HttpRequest {
   std::string method;  // "GET", "POST", "DELETE", …

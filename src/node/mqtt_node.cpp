@@ -259,9 +259,7 @@ void MqttNode::submit(const json::Value& body, const std::string& route, const s
   in.fleet_id = fleet_id;
   in.fleet_mode = fleet_mode;
   in.standing_estop = standing_estop;
-  in.received_mono_us = std::chrono::duration_cast<std::chrono::microseconds>(
-                            std::chrono::steady_clock::now().time_since_epoch())
-                            .count();
+  in.received_mono_us = steady_us();
   bool is_command = upper(str_field(body, "type")) == "COMMAND" || upper(str_field(body, "type")) == "FLEET_COMMAND" ||
                     field(body, "cmd") != nullptr;
   node_.submit(std::move(in), [this, reply_topic, is_command](Outcome out) {

@@ -53,9 +53,7 @@ struct StreamSessionImpl final : public StreamSession {
 };
 
 void StreamSessionImpl::on_text(std::string text) {
-  const int64_t received_us = std::chrono::duration_cast<std::chrono::microseconds>(
-                                  std::chrono::steady_clock::now().time_since_epoch())
-                                  .count();
+  const int64_t received_us = steady_us();
   NodeServices& svc = node.svc_;
   json::ParseOptions po;
   po.max_bytes = svc.settings.codec.max_body_bytes;
@@ -463,9 +461,7 @@ void Node::run_pipeline(HttpRequest& req, Respond& respond, const std::string& r
     resp.status = out.status;
     resp.body = json::dump(out.body);
     resp.headers = std::move(out.headers);
-    resp.answered_mono_us = std::chrono::duration_cast<std::chrono::microseconds>(
-                                std::chrono::steady_clock::now().time_since_epoch())
-                                .count();
+    resp.answered_mono_us = steady_us();
     respond(std::move(resp));
   });
 }

@@ -7,18 +7,13 @@
 
 #include "node/fleet.h"
 #include "node/guest_limits.h"
+#include "node/http_api.h"
 #include "node/log.h"
 #include "node/services.h"
 #include "rcan/errors.h"
 
 namespace rcan::node {
 namespace {
-
-int64_t mono_us() {
-  return std::chrono::duration_cast<std::chrono::microseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
 
 std::string upper(std::string s) {
   for (auto& c : s) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
@@ -452,12 +447,12 @@ class DispatchStage final : public Stage {
     std::string reason;
     if (const json::Value* r = ctx->msg->payload.find("reason"); r && r->is_string()) reason = r->as_string().substr(0, 512);
     double us = 0;
-    const int64_t t_call = mono_us();
+    const int64_t t_call = steady_us();
     if (estop) {
       us = svc_.act.estop(source, reason);
     } else {
       svc_.act.stop(source);
-      us = static_cast<double>(mono_us() - t_call);
+      us = static_cast<double>(steady_us() - t_call);
     }
     // From the request's arrival (the transport's read) to Driver::stop() returning.
     const double arrival_us = static_cast<double>(t_call - ctx->in.received_mono_us) + us;
@@ -547,9 +542,9 @@ class DispatchStage final : public Stage {
     }
     e.detail.set("applied", prepared->action);
     auto cmd = std::make_shared<PreparedCommand>(std::move(prepared).value());
-    int64_t audit_start = mono_us();
+    int64_t audit_start = steady_us();
     svc_.write_audit(std::move(e), [this, ctx, cmd, audit_start](rcan::Result<audit::Receipt> r) {
-      audit_timer_.observe_us(static_cast<double>(mono_us() - audit_start));
+      audit_timer_.observe_us(static_cast<double>(steady_us() - audit_start));
       const std::string& id = ctx->msg->message_id;
       if (!r.ok()) {
         // Nothing is dispatched without its record.
@@ -557,7 +552,7 @@ class DispatchStage final : public Stage {
         ctx->finish(Outcome{http_status(err.code), svc_.error(err, id), {}});
         return;
       }
-      int64_t t0 = mono_us();
+      int64_t t0 = steady_us();
       std::optional<rcan::Result<json::Value>> result;
       auto apply = [&] { result = svc_.act.apply(*cmd); };
       if (ctx->session_id.empty()) {
@@ -576,7 +571,7 @@ class DispatchStage final : public Stage {
         return;
       }
       auto& applied = *result;
-      apply_timer_.observe_us(static_cast<double>(mono_us() - t0));
+      apply_timer_.observe_us(static_cast<double>(steady_us() - t0));
       if (!applied.ok()) {
         // An ESTOP overtook this command between its record and the driver: say so in a
         // record of its own and refuse.
@@ -658,13 +653,13 @@ Pipeline::Pipeline(NodeServices& services, std::vector<std::unique_ptr<Stage>> s
 void Pipeline::submit(Ingress in, std::function<void(Outcome)> done) {
   auto ctx = std::make_shared<Context>();
   ctx->in = std::move(in);
-  ctx->started_mono_us = mono_us();
+  ctx->started_mono_us = steady_us();
   if (ctx->in.received_mono_us == 0) ctx->in.received_mono_us = ctx->started_mono_us;
   // parse: arrival → here (routing and the JSON parse); total: arrival → answer handed over.
   parse_timer_->observe_us(static_cast<double>(ctx->started_mono_us - ctx->in.received_mono_us));
   ctx->done = [total = total_timer_, arrival = ctx->in.received_mono_us, done = std::move(done)](Outcome out) {
     done(std::move(out));
-    total->observe_us(static_cast<double>(mono_us() - arrival));
+    total->observe_us(static_cast<double>(steady_us() - arrival));
   };
   ctx->pipeline = this;
   run(ctx, 0);
@@ -679,9 +674,9 @@ void Pipeline::run_from(const std::shared_ptr<Context>& ctx, std::string_view st
 
 void Pipeline::run(const std::shared_ptr<Context>& ctx, size_t first) {
   for (size_t i = first; i < stages_.size(); ++i) {
-    int64_t t0 = mono_us();
+    int64_t t0 = steady_us();
     Stage::Result r = stages_[i]->run(ctx);
-    stage_timers_[i]->observe_us(static_cast<double>(mono_us() - t0));
+    stage_timers_[i]->observe_us(static_cast<double>(steady_us() - t0));
     if (r != Stage::Result::kContinue) return;
   }
   if (!ctx->finished()) {

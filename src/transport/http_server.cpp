@@ -497,9 +497,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
       }
     }
     const bool timed_out = disarm_read_deadline();
-    const int64_t received_us = std::chrono::duration_cast<std::chrono::microseconds>(
-                                    SteadyClock::now().time_since_epoch())
-                                    .count();
+    const int64_t received_us = node::steady_us();
     if (ec) {
       std::optional<TransportError> err =
           timed_out ? std::optional<TransportError>(read_timeout_error()) : classify_read_error(ec);
@@ -557,12 +555,8 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     keep_alive = keep_alive && !srv_.stopping.load() && !shutdown_requested_;
     phase_ = Phase::kWriting;
     const int status = response_->status;
-    if (response_->answered_mono_us > 0) {
-      const int64_t now_us = std::chrono::duration_cast<std::chrono::microseconds>(
-                                 SteadyClock::now().time_since_epoch())
-                                 .count();
-      srv_.http.answer_waited(std::max<int64_t>(0, now_us - response_->answered_mono_us));
-    }
+    if (response_->answered_mono_us > 0)
+      srv_.http.answer_waited(std::max<int64_t>(0, node::steady_us() - response_->answered_mono_us));
     const std::string wire = response_bytes(std::move(*response_), version, head, keep_alive);
     response_.reset();
     lowest().expires_after(Ms(opt_.read_timeout_ms));
