@@ -24,7 +24,7 @@
 
 #include "rcan/crypto/jwt.h"
 #include "rcan/json.h"
-#include "node/config.h"
+#include "config/config.h"
 
 namespace rcan::bench {
 

@@ -42,19 +42,20 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
 
-#include "node/actuation_safety.h"
-#include "node/clock.h"
-#include "node/fleet.h"
-#include "node/log.h"
-#include "node/mqtt_node.h"
-#include "node/node.h"
-#include "node/safety.h"
-#include "node/services.h"
-#include "node/sim_robot.h"
+#include "node/safety/actuation_safety.h"
+#include "base/clock.h"
+#include "node/fleet/fleet.h"
+#include "base/log.h"
+#include "node/bindings/mqtt_node.h"
+#include "node/api/node.h"
+#include "node/safety/safety.h"
+#include "node/services/node_services.h"
+#include "node/safety/sim_robot.h"
 #include "rcan/audit/audit_log.h"
 #include "rcan/crypto/jwt.h"
 #include "rcan/errors.h"
@@ -164,7 +165,7 @@ std::map<std::string, std::pair<double, uint64_t>> stage_totals(const std::vecto
   std::map<std::string, std::pair<double, uint64_t>> out;
   for (const auto& r : robots)
     for (const char* name : kStages) {
-      const node::Histogram& h = r->svc->metrics.stage(name);
+      const rcan::Histogram& h = r->svc->metrics.stage(name);
       auto& [sum, n] = out[name];
       sum += h.sum_us();
       n += h.count();
@@ -237,9 +238,8 @@ class Coordinator {
   int errors_ = 0;
 };
 
-}  // namespace
-
-int main(int argc, char** argv) {
+// The command line.
+struct Options {
   int robots_n = 200, rounds = 5, estop_qos = 1;
   // Each robot's audit log preallocates its active segment and a spare (zero-filled, see
   // docs/AUDIT.md §Durability). A real robot does that once on its own storage; 200 robots
@@ -250,127 +250,167 @@ int main(int argc, char** argv) {
   std::string perf_ctl;
   int profile_round = 0;
   int warm_up = 0;
+};
+
+// False (after printing the usage) when an option is out of range.
+bool parse_options(int argc, char** argv, Options& o) {
   for (int i = 1; i + 1 < argc; i += 2) {
     std::string a = argv[i];
-    if (a == "--robots") robots_n = std::atoi(argv[i + 1]);
-    else if (a == "--rounds") rounds = std::atoi(argv[i + 1]);
-    else if (a == "--estop-qos") estop_qos = std::atoi(argv[i + 1]);
-    else if (a == "--mosquitto") mosquitto = argv[i + 1];
-    else if (a == "--perf-ctl") perf_ctl = argv[i + 1];
-    else if (a == "--profile-round") profile_round = std::atoi(argv[i + 1]);
-    else if (a == "--warm-up") warm_up = std::atoi(argv[i + 1]);
-    else if (a == "--segment-kib") segment_bytes = std::strtoull(argv[i + 1], nullptr, 10) << 10;
+    if (a == "--robots") o.robots_n = std::atoi(argv[i + 1]);
+    else if (a == "--rounds") o.rounds = std::atoi(argv[i + 1]);
+    else if (a == "--estop-qos") o.estop_qos = std::atoi(argv[i + 1]);
+    else if (a == "--mosquitto") o.mosquitto = argv[i + 1];
+    else if (a == "--perf-ctl") o.perf_ctl = argv[i + 1];
+    else if (a == "--profile-round") o.profile_round = std::atoi(argv[i + 1]);
+    else if (a == "--warm-up") o.warm_up = std::atoi(argv[i + 1]);
+    else if (a == "--segment-kib") o.segment_bytes = std::strtoull(argv[i + 1], nullptr, 10) << 10;
   }
-  if (robots_n < 1 || robots_n > 2000 || rounds < 1 || rounds > 1000 || segment_bytes < (64u << 10) ||
-      (estop_qos != 1 && estop_qos != 2)) {
+  if (o.robots_n < 1 || o.robots_n > 2000 || o.rounds < 1 || o.rounds > 1000 || o.segment_bytes < (64u << 10) ||
+      (o.estop_qos != 1 && o.estop_qos != 2)) {
     std::fprintf(stderr,
                  "usage: fleet_bench [--robots 1..2000] [--rounds 1..1000] [--estop-qos 1|2] [--segment-kib N] "
                  "[--mosquitto PATH] [--perf-ctl FIFO --profile-round N] [--warm-up 0|1]\n");
-    return 2;
+    return false;
   }
-  node::set_log_level(node::LogLevel::kError);
-  signal(SIGPIPE, SIG_IGN);
-  fs::path dir = fs::temp_directory_path() / ("fleet_bench_" + std::to_string(getpid()));
-  fs::create_directories(dir);
+  return true;
+}
 
-  // The broker.
+// The run's shared state: the broker, the fleet's token and members, the robots.
+struct Fleet {
+  Options opt;
+  fs::path dir;
+  pid_t broker = -1;
+  std::string url;
+  std::vector<std::string> members;
+  std::string token;
+  std::optional<jwt::VerificationKey> verify;
+  std::vector<std::unique_ptr<Robot>> robots;
+
+  size_t size() const { return static_cast<size_t>(opt.robots_n); }
+  // A message of `type` from the coordinator, carrying the fleet token.
+  json::Value message(const std::string& type, json::Object payload, const std::string& id) const {
+    return json::Value(json::Object{{"version", "1.0.0"},
+                                    {"message_id", id},
+                                    {"type", type},
+                                    {"timestamp_ms", wall_ms()},
+                                    {"auth_token", token},
+                                    {"payload", std::move(payload)}});
+  }
+};
+
+// The broker, on a free loopback port.
+void start_broker(Fleet& f) {
   uint16_t port = free_port();
-  std::ofstream(dir / "mosquitto.conf") << "listener " << port
-                                        << " 127.0.0.1\nset_tcp_nodelay true\nallow_anonymous true\npersistence false\nmax_queued_messages 10000\n";
-  pid_t broker = fork();
-  if (broker == 0) {
+  std::ofstream(f.dir / "mosquitto.conf") << "listener " << port
+                                          << " 127.0.0.1\nset_tcp_nodelay true\nallow_anonymous true\npersistence false\nmax_queued_messages 10000\n";
+  f.broker = fork();
+  if (f.broker == 0) {
     int devnull = ::open("/dev/null", O_WRONLY);
     dup2(devnull, 2);
-    execl(mosquitto.c_str(), mosquitto.c_str(), "-c", (dir / "mosquitto.conf").c_str(), nullptr);
+    execl(f.opt.mosquitto.c_str(), f.opt.mosquitto.c_str(), "-c", (f.dir / "mosquitto.conf").c_str(), nullptr);
     _exit(127);
   }
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
-  std::string url = "mqtt://127.0.0.1:" + std::to_string(port);
+  f.url = "mqtt://127.0.0.1:" + std::to_string(port);
+}
 
-  // One fleet token for all (HS256 issuer shared by the fleet).
+// One fleet token for all (HS256 issuer shared by the fleet).
+void issue_fleet_token(Fleet& f) {
   std::string secret = "fleet-bench-secret-0123456789abcdef0123456789";
   auto signing = jwt::SigningKey::hs256_secret({reinterpret_cast<const uint8_t*>(secret.data()), secret.size()});
-  auto verify = signing->verification_key();
-  std::vector<std::string> members;
+  f.verify = *signing->verification_key();
   json::Array fleet_claim;
-  for (int i = 0; i < robots_n; ++i) {
+  for (int i = 0; i < f.opt.robots_n; ++i) {
     char b[32];
     std::snprintf(b, sizeof b, "r%04d", i);
-    members.emplace_back(b);
+    f.members.emplace_back(b);
     fleet_claim.emplace_back(b);
   }
   int64_t now_s = wall_ms() / 1000;
-  std::string token = *jwt::issue(json::Object{{"iss", "fleet-issuer"},
-                                               {"sub", "bench"},
-                                               {"aud", "rcan://local.rcan/bench/sim/*"},
-                                               {"role", "owner"},
-                                               {"scope", json::Array{"status", "control"}},
-                                               {"fleet", fleet_claim},
-                                               {"iat", now_s - 5},
-                                               {"exp", now_s + 3600}},
-                                  *signing);
+  f.token = *jwt::issue(json::Object{{"iss", "fleet-issuer"},
+                                     {"sub", "bench"},
+                                     {"aud", "rcan://local.rcan/bench/sim/*"},
+                                     {"role", "owner"},
+                                     {"scope", json::Array{"status", "control"}},
+                                     {"fleet", fleet_claim},
+                                     {"iat", now_s - 5},
+                                     {"exp", now_s + 3600}},
+                        *signing);
+}
 
+// Robot `i`'s node stack, started, with its MQTT connection; null (after saying why) when a
+// part did not start.
+std::unique_ptr<Robot> start_robot(const Fleet& f, const config::FleetConfig& fc, int i) {
+  auto r = std::make_unique<Robot>();
+  r->member = f.members[static_cast<size_t>(i)];
+  char dev[16];
+  std::snprintf(dev, sizeof dev, "%08x", i + 1);
+  std::string ruri = std::string("rcan://local.rcan/bench/sim/") + dev;
+  fs::path rd = f.dir / r->member;
+  fs::create_directories(rd);
+  node::SimRobotConfig sim;
+  node::SafetyConfig sc;
+  r->core = std::make_unique<node::SafetyCore>(std::make_unique<node::SimRobot>(sim), sc);
+  r->act = std::make_unique<node::SafetyActuation>(*r->core, r->member);
+  r->timed = std::make_unique<TimedActuation>(*r->act);
+  audit::AuditOptions ao;
+  ao.secret = "bench-chain-secret-0123456789";
+  ao.robot_ruri = ruri;
+  ao.max_segment_bytes = f.opt.segment_bytes;
+  auto log = audit::AuditLog::open((rd / "audit").string(), std::move(ao));
+  if (!log.ok()) {
+    std::fprintf(stderr, "audit log: %s\n", log.error().message.c_str());
+    return nullptr;
+  }
+  r->audit = std::move(log).value();
+  node::NodeSettings ns;
+  ns.ruri = ruri;
+  ns.name = r->member;
+  node::AuthOptions auth;
+  auth.trust.add("fleet-issuer", *f.verify);
+  auth.verify.audience = ruri;
+  auth.verify.fleet_ids = {dev, ruri, r->member};
+  r->svc = std::make_unique<node::NodeServices>(ns, rcan::Clock::system(), std::move(auth), *r->timed, *r->audit);
+  config::FleetConfig mine = fc;
+  mine.member_id = r->member;
+  r->svc->fleet = std::make_shared<node::FleetMembership>(node::FleetMembership{mine, {}});
+  r->node = std::make_unique<node::Node>(*r->svc);
+  r->core->start();
+  r->node->start();
+  node::MqttNodeOptions mo;
+  mo.mqtt.enabled = true;
+  mo.mqtt.broker = f.url;
+  mo.mqtt.telemetry_hz = 0;
+  mo.mqtt.publish_audit = false;
+  mo.mqtt.estop_qos = f.opt.estop_qos;
+  mo.fleet = mine;
+  mo.ruri = *parse_ruri(ruri);
+  r->mqtt = std::make_unique<node::MqttNode>(*r->node, *r->svc, mo);
+  if (Status s = r->mqtt->start(); !s.ok()) {
+    std::fprintf(stderr, "mqtt: %s\n", s.error().message.c_str());
+    return nullptr;
+  }
+  return r;
+}
+
+// Starts every robot (8 builder threads) and waits until all are connected to the broker;
+// false when one did not start.
+bool start_robots(Fleet& f) {
   config::FleetConfig fc;
   fc.fleet_id = "bench";
-  fc.robots = members;
-  std::vector<std::unique_ptr<Robot>> robots(static_cast<size_t>(robots_n));
+  fc.robots = f.members;
+  f.robots.resize(f.size());
   double t_start = mono_ms();
   std::atomic<int> next{0};
   std::atomic<bool> failed{false};
   auto build = [&] {
-    for (int i = next.fetch_add(1); i < robots_n && !failed.load(); i = next.fetch_add(1)) {
-    auto r = std::make_unique<Robot>();
-    r->member = members[static_cast<size_t>(i)];
-    char dev[16];
-    std::snprintf(dev, sizeof dev, "%08x", i + 1);
-    std::string ruri = std::string("rcan://local.rcan/bench/sim/") + dev;
-    fs::path rd = dir / r->member;
-    fs::create_directories(rd);
-    node::SimRobotConfig sim;
-    node::SafetyConfig sc;
-    r->core = std::make_unique<node::SafetyCore>(std::make_unique<node::SimRobot>(sim), sc);
-    r->act = std::make_unique<node::SafetyActuation>(*r->core, r->member);
-    r->timed = std::make_unique<TimedActuation>(*r->act);
-    audit::AuditOptions ao;
-    ao.secret = "bench-chain-secret-0123456789";
-    ao.robot_ruri = ruri;
-    ao.max_segment_bytes = segment_bytes;
-    auto log = audit::AuditLog::open((rd / "audit").string(), std::move(ao));
-    if (!log.ok()) {
-      std::fprintf(stderr, "audit log: %s\n", log.error().message.c_str());
-      failed.store(true);
-      return;
-    }
-    r->audit = std::move(log).value();
-    node::NodeSettings ns;
-    ns.ruri = ruri;
-    ns.name = r->member;
-    node::AuthOptions auth;
-    auth.trust.add("fleet-issuer", *verify);
-    auth.verify.audience = ruri;
-    auth.verify.fleet_ids = {dev, ruri, r->member};
-    r->svc = std::make_unique<node::NodeServices>(ns, node::Clock::system(), std::move(auth), *r->timed, *r->audit);
-    config::FleetConfig mine = fc;
-    mine.member_id = r->member;
-    r->svc->fleet = std::make_shared<node::FleetMembership>(node::FleetMembership{mine, {}});
-    r->node = std::make_unique<node::Node>(*r->svc);
-    r->core->start();
-    r->node->start();
-    node::MqttNodeOptions mo;
-    mo.mqtt.enabled = true;
-    mo.mqtt.broker = url;
-    mo.mqtt.telemetry_hz = 0;
-    mo.mqtt.publish_audit = false;
-    mo.mqtt.estop_qos = estop_qos;
-    mo.fleet = mine;
-    mo.ruri = *parse_ruri(ruri);
-    r->mqtt = std::make_unique<node::MqttNode>(*r->node, *r->svc, mo);
-    if (Status s = r->mqtt->start(); !s.ok()) {
-      std::fprintf(stderr, "mqtt: %s\n", s.error().message.c_str());
-      failed.store(true);
-      return;
-    }
-    robots[static_cast<size_t>(i)] = std::move(r);
+    for (int i = next.fetch_add(1); i < f.opt.robots_n && !failed.load(); i = next.fetch_add(1)) {
+      auto r = start_robot(f, fc, i);
+      if (!r) {
+        failed.store(true);
+        return;
+      }
+      f.robots[static_cast<size_t>(i)] = std::move(r);
     }
   };
   {
@@ -378,9 +418,9 @@ int main(int argc, char** argv) {
     for (int t = 0; t < 8; ++t) builders.emplace_back(build);
     for (auto& t : builders) t.join();
   }
-  if (failed.load()) return 1;
+  if (failed.load()) return false;
   for (int i = 0; i < 3000; ++i) {
-    bool all = std::all_of(robots.begin(), robots.end(), [](const auto& r) { return r->mqtt->connected(); });
+    bool all = std::all_of(f.robots.begin(), f.robots.end(), [](const auto& r) { return r->mqtt->connected(); });
     if (all) break;
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
@@ -388,128 +428,170 @@ int main(int argc, char** argv) {
   std::printf(
       "fleet_bench: %d robots (full node stacks, one MQTT connection each, estop subscription QoS %d) on one "
       "Mosquitto, up in %.0f ms\n",
-      robots_n, estop_qos, mono_ms() - t_start);
-  {  // What the idle fleet costs: CPU of this process (all robots) over 2 s with no traffic.
-    double c0 = cpu_now(), w0 = mono_ms();
-    std::this_thread::sleep_for(std::chrono::seconds(2));
-    double share = (cpu_now() - c0) / ((mono_ms() - w0) / 1000.0);
-    std::printf("idle: %.1f%% of one core for %d robots (%.0f us of CPU per robot per second)\n", share * 100, robots_n,
-                share * 1e6 / robots_n);
-  }
+      f.opt.robots_n, f.opt.estop_qos, mono_ms() - t_start);
+  return true;
+}
 
-  Coordinator coord(url);
-  auto msg = [&](const std::string& type, json::Object payload, const std::string& id) {
-    return json::Value(json::Object{{"version", "1.0.0"},
-                                    {"message_id", id},
-                                    {"type", type},
-                                    {"timestamp_ms", wall_ms()},
-                                    {"auth_token", token},
-                                    {"payload", std::move(payload)}});
-  };
+// What the idle fleet costs: CPU of this process (all robots) over 2 s with no traffic.
+void report_idle_cost(int robots_n) {
+  double c0 = cpu_now(), w0 = mono_ms();
+  std::this_thread::sleep_for(std::chrono::seconds(2));
+  double share = (cpu_now() - c0) / ((mono_ms() - w0) / 1000.0);
+  std::printf("idle: %.1f%% of one core for %d robots (%.0f us of CPU per robot per second)\n", share * 100, robots_n,
+              share * 1e6 / robots_n);
+}
+
+// What the rounds measured, over all robot×round samples.
+struct Results {
   std::vector<double> latch, estop_ack, status_ack, move_ack;
-  if (warm_up != 0) {
-    std::string wid = new_uuid_v4();
-    double tw = 0;
-    int werr = 0;
-    auto wacks = coord.round("rcan/fleet/bench/cmd",
-                             msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "bench"}}, wid), wid,
-                             1, false, static_cast<size_t>(robots_n), &tw, 10000, &werr);
-    std::printf("warm-up: broadcast status answered by %zu/%d robots\n", wacks.size(), robots_n);
-    std::this_thread::sleep_for(std::chrono::milliseconds(500));
-  }
   double estop_cpu_ms = 0;
   std::map<std::string, long> estop_wakeups;  // summed over the ESTOP rounds
-  size_t n = static_cast<size_t>(robots_n);
   int failures = 0;
-  for (int round = 0; round < rounds; ++round) {
-    for (auto& r : robots) r->timed->latched_at.store(0);
-    double t0 = 0;
-    int errors = 0;
-    std::string id = new_uuid_v4();
-    double cpu0 = cpu_now();
-    long faults0 = faults_now();
-    auto stages0 = stage_totals(robots);
-    auto perf = [&](const char* cmd) {
-      if (perf_ctl.empty() || round + 1 != profile_round) return;
-      std::ofstream(perf_ctl) << cmd << "\n";
-    };
-    auto wake0 = wakeups_by_thread();
-    perf("enable");
-    auto acks = coord.round("rcan/fleet/bench/estop",
-                            msg("SAFETY", json::Object{{"safety_event", "ESTOP"}, {"fleet_id", "bench"}}, id), id, 2,
-                            true, n, &t0, 10000, &errors);
-    for (auto& [m, t] : acks) estop_ack.push_back(t - t0);
-    perf("disable");
-    const double round_cpu_ms = (cpu_now() - cpu0) * 1000;
-    const double round_faults = static_cast<double>(faults_now() - faults0) / robots_n;
-    auto stages1 = stage_totals(robots);
-    estop_cpu_ms += round_cpu_ms;
-    for (auto& [name, n_wakes] : wakeups_by_thread()) estop_wakeups[name] += n_wakes - wake0[name];
-    std::vector<double> round_latch;
-    for (auto& r : robots) {
-      double t = r->timed->latched_at.load();
-      if (t > 0) round_latch.push_back(t - t0);
-    }
-    // Round 1 is each robot's first message: the fleet JWT is verified (later rounds find it
-    // in the robot's verified-token cache) and every path runs for the first time.
-    std::printf("  round %d: ESTOP latched on %zu/%zu  p50 %.2f ms  p99 %.2f ms  max %.2f ms  CPU %.0f us/robot  %.1f page faults/robot%s\n",
-                round + 1, round_latch.size(), n, pct(round_latch, 50), pct(round_latch, 99),
-                round_latch.empty() ? 0.0 : *std::max_element(round_latch.begin(), round_latch.end()),
-                round_cpu_ms * 1000 / robots_n, round_faults, round == 0 && warm_up == 0 ? "  (first message)" : "");
-    std::printf("           stage means (wall, us):");
-    for (const char* name : kStages) {
-      const double dsum = stages1[name].first - stages0[name].first;
-      const uint64_t dn = stages1[name].second - stages0[name].second;
-      if (dn > 0) std::printf(" %s %.0f", name, dsum / static_cast<double>(dn));
-    }
-    std::printf("\n");
-    latch.insert(latch.end(), round_latch.begin(), round_latch.end());
-    failures += errors + static_cast<int>(n - acks.size());
-    std::string rid = new_uuid_v4();
-    acks = coord.round("rcan/fleet/bench/estop",
-                       msg("SAFETY", json::Object{{"safety_event", "RESUME"}, {"fleet_id", "bench"}}, rid), rid, 2, true,
-                       n, &t0, 10000, &errors);
-    failures += errors + static_cast<int>(n - acks.size());
-    std::string sid = new_uuid_v4();
-    acks = coord.round("rcan/fleet/bench/cmd",
-                       msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "bench"}}, sid), sid, 1,
-                       false, n, &t0, 10000, &errors);
-    for (auto& [m, t] : acks) status_ack.push_back(t - t0);
-    failures += errors + static_cast<int>(n - acks.size());
-    std::string mid = new_uuid_v4();
-    acks = coord.round("rcan/fleet/bench/cmd",
-                       msg("FLEET_COMMAND",
-                           json::Object{{"command", "move"},
-                                        {"fleet_id", "bench"},
-                                        {"params", json::Object{{"linear", 0.1}, {"duration_ms", 50}}}},
-                           mid),
-                       mid, 1, false, n, &t0, 10000, &errors);
-    for (auto& [m, t] : acks) move_ack.push_back(t - t0);
-    failures += errors + static_cast<int>(n - acks.size());
-    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+};
+
+// --warm-up 1: one broadcast `status` before round 1.
+void warm_up(const Fleet& f, Coordinator& coord) {
+  std::string wid = new_uuid_v4();
+  double tw = 0;
+  int werr = 0;
+  auto wacks = coord.round("rcan/fleet/bench/cmd",
+                           f.message("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "bench"}}, wid),
+                           wid, 1, false, f.size(), &tw, 10000, &werr);
+  std::printf("warm-up: broadcast status answered by %zu/%d robots\n", wacks.size(), f.opt.robots_n);
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+}
+
+// One round's fleet ESTOP: latency to latched and to the ACK, CPU, page faults, wake-ups and
+// the pipeline's stage means, printed as the round's lines.
+void estop_round(const Fleet& f, Coordinator& coord, int round, Results& res) {
+  const Options& o = f.opt;
+  const size_t n = f.size();
+  for (auto& r : f.robots) r->timed->latched_at.store(0);
+  double t0 = 0;
+  int errors = 0;
+  std::string id = new_uuid_v4();
+  double cpu0 = cpu_now();
+  long faults0 = faults_now();
+  auto stages0 = stage_totals(f.robots);
+  auto perf = [&](const char* cmd) {
+    if (o.perf_ctl.empty() || round + 1 != o.profile_round) return;
+    std::ofstream(o.perf_ctl) << cmd << "\n";
+  };
+  auto wake0 = wakeups_by_thread();
+  perf("enable");
+  auto acks = coord.round("rcan/fleet/bench/estop",
+                          f.message("SAFETY", json::Object{{"safety_event", "ESTOP"}, {"fleet_id", "bench"}}, id), id,
+                          2, true, n, &t0, 10000, &errors);
+  for (auto& [m, t] : acks) res.estop_ack.push_back(t - t0);
+  perf("disable");
+  const double round_cpu_ms = (cpu_now() - cpu0) * 1000;
+  const double round_faults = static_cast<double>(faults_now() - faults0) / o.robots_n;
+  auto stages1 = stage_totals(f.robots);
+  res.estop_cpu_ms += round_cpu_ms;
+  for (auto& [name, n_wakes] : wakeups_by_thread()) res.estop_wakeups[name] += n_wakes - wake0[name];
+  std::vector<double> round_latch;
+  for (auto& r : f.robots) {
+    double t = r->timed->latched_at.load();
+    if (t > 0) round_latch.push_back(t - t0);
   }
-  size_t expected = n * static_cast<size_t>(rounds);
-  report("fleet ESTOP publish -> latched", latch, expected);
-  report("fleet ESTOP publish -> ACK back", estop_ack, expected);
+  // Round 1 is each robot's first message: the fleet JWT is verified (later rounds find it
+  // in the robot's verified-token cache) and every path runs for the first time.
+  std::printf("  round %d: ESTOP latched on %zu/%zu  p50 %.2f ms  p99 %.2f ms  max %.2f ms  CPU %.0f us/robot  %.1f page faults/robot%s\n",
+              round + 1, round_latch.size(), n, pct(round_latch, 50), pct(round_latch, 99),
+              round_latch.empty() ? 0.0 : *std::max_element(round_latch.begin(), round_latch.end()),
+              round_cpu_ms * 1000 / o.robots_n, round_faults, round == 0 && o.warm_up == 0 ? "  (first message)" : "");
+  std::printf("           stage means (wall, us):");
+  for (const char* name : kStages) {
+    const double dsum = stages1[name].first - stages0[name].first;
+    const uint64_t dn = stages1[name].second - stages0[name].second;
+    if (dn > 0) std::printf(" %s %.0f", name, dsum / static_cast<double>(dn));
+  }
+  std::printf("\n");
+  res.latch.insert(res.latch.end(), round_latch.begin(), round_latch.end());
+  res.failures += errors + static_cast<int>(n - acks.size());
+}
+
+// After a round's ESTOP: RESUME, then a broadcast `status` and a short `move`.
+void resume_and_command(const Fleet& f, Coordinator& coord, Results& res) {
+  const size_t n = f.size();
+  double t0 = 0;
+  int errors = 0;
+  std::string rid = new_uuid_v4();
+  auto acks = coord.round("rcan/fleet/bench/estop",
+                          f.message("SAFETY", json::Object{{"safety_event", "RESUME"}, {"fleet_id", "bench"}}, rid),
+                          rid, 2, true, n, &t0, 10000, &errors);
+  res.failures += errors + static_cast<int>(n - acks.size());
+  std::string sid = new_uuid_v4();
+  acks = coord.round("rcan/fleet/bench/cmd",
+                     f.message("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "bench"}}, sid), sid,
+                     1, false, n, &t0, 10000, &errors);
+  for (auto& [m, t] : acks) res.status_ack.push_back(t - t0);
+  res.failures += errors + static_cast<int>(n - acks.size());
+  std::string mid = new_uuid_v4();
+  acks = coord.round("rcan/fleet/bench/cmd",
+                     f.message("FLEET_COMMAND",
+                               json::Object{{"command", "move"},
+                                            {"fleet_id", "bench"},
+                                            {"params", json::Object{{"linear", 0.1}, {"duration_ms", 50}}}},
+                               mid),
+                     mid, 1, false, n, &t0, 10000, &errors);
+  for (auto& [m, t] : acks) res.move_ack.push_back(t - t0);
+  res.failures += errors + static_cast<int>(n - acks.size());
+}
+
+void print_report(const Fleet& f, const Results& res) {
+  const int rounds = f.opt.rounds, robots_n = f.opt.robots_n;
+  size_t expected = f.size() * static_cast<size_t>(rounds);
+  report("fleet ESTOP publish -> latched", res.latch, expected);
+  report("fleet ESTOP publish -> ACK back", res.estop_ack, expected);
   std::printf("fleet ESTOP CPU (all robots, publish to last ACK): %.1f ms per round, %.0f us per robot\n",
-              estop_cpu_ms / rounds, estop_cpu_ms * 1000 / rounds / robots_n);
+              res.estop_cpu_ms / rounds, res.estop_cpu_ms * 1000 / rounds / robots_n);
   std::printf("fleet ESTOP thread wake-ups per robot:");
-  for (auto& [name, n_wakes] : estop_wakeups)
+  for (auto& [name, n_wakes] : res.estop_wakeups)
     if (n_wakes > 0) std::printf(" %s %.2f", name.c_str(), static_cast<double>(n_wakes) / rounds / robots_n);
   std::printf("\n");
-  report("broadcast status -> ACK back", status_ack, expected);
-  report("broadcast move -> ACK back", move_ack, expected);
-  std::printf("refused or missing answers: %d\n", failures);
+  report("broadcast status -> ACK back", res.status_ack, expected);
+  report("broadcast move -> ACK back", res.move_ack, expected);
+  std::printf("refused or missing answers: %d\n", res.failures);
+}
 
-  for (auto& r : robots) r->mqtt->stop();
-  for (auto& r : robots) {
+// Stops the robots and the broker and removes the temporary directory.
+void stop_fleet(Fleet& f) {
+  for (auto& r : f.robots) r->mqtt->stop();
+  for (auto& r : f.robots) {
     r->node->shutdown();
     r->core->stop();
   }
-  robots.clear();
-  kill(broker, SIGTERM);
-  waitpid(broker, nullptr, 0);
+  f.robots.clear();
+  kill(f.broker, SIGTERM);
+  waitpid(f.broker, nullptr, 0);
   std::error_code ec;
-  fs::remove_all(dir, ec);
-  return failures == 0 ? 0 : 1;
+  fs::remove_all(f.dir, ec);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Fleet f;
+  if (!parse_options(argc, argv, f.opt)) return 2;
+  rcan::set_log_level(rcan::LogLevel::kError);
+  signal(SIGPIPE, SIG_IGN);
+  f.dir = fs::temp_directory_path() / ("fleet_bench_" + std::to_string(getpid()));
+  fs::create_directories(f.dir);
+  start_broker(f);
+  issue_fleet_token(f);
+  if (!start_robots(f)) return 1;
+  report_idle_cost(f.opt.robots_n);
+
+  Coordinator coord(f.url);
+  Results res;
+  if (f.opt.warm_up != 0) warm_up(f, coord);
+  for (int round = 0; round < f.opt.rounds; ++round) {
+    estop_round(f, coord, round, res);
+    resume_and_command(f, coord, res);
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
+  print_report(f, res);
+  stop_fleet(f);
+  return res.failures == 0 ? 0 : 1;
 }

@@ -69,7 +69,7 @@
 #include "rcan/crypto/message_sig.h"
 #include "rcan/encoding.h"
 #include "rcan/json.h"
-#include "node/config.h"
+#include "config/config.h"
 #include "transport/beast.h"
 #include "bench_support.h"
 
@@ -605,10 +605,11 @@ std::map<std::string, std::vector<double>> estop_lines(Child& c) {
   return out;
 }
 
-}  // namespace
+// ---- the run ------------------------------------------------------------------------------
 
-int main(int argc, char** argv) {
-  std::string rcand = (fs::path(argv[0]).parent_path() / ".." / "bin" / "rcand").string();
+// The command line.
+struct Options {
+  std::string rcand;
   double seconds = 2, warmup = 0.5;
   std::string clients_list = "1,16,64";
   std::string phases = "disk,startup,memory,http,ws,stages,estop,mldsa";
@@ -617,34 +618,48 @@ int main(int argc, char** argv) {
   std::string data_root = "/tmp";  // where the node's data directory (and its audit log) lives
   long smoke = 0;
   int pairs = 1;
+  // --serve-baseline PORT THREADS: this process is the bare server (ends the parsing).
+  bool serve_baseline = false;
+  uint16_t baseline_port = 0;
+  int baseline_threads = 0;
+};
+
+// False (after printing the usage) on an unknown argument.
+bool parse_options(int argc, char** argv, Options& o) {
+  o.rcand = (fs::path(argv[0]).parent_path() / ".." / "bin" / "rcand").string();
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
     auto next = [&]() -> std::string { return i + 1 < argc ? argv[++i] : ""; };
     if (a == "--serve-baseline") {
-      uint16_t port = static_cast<uint16_t>(std::atoi(next().c_str()));
-      int threads = std::atoi(next().c_str());
-      return serve_baseline(port, threads);
+      o.serve_baseline = true;
+      o.baseline_port = static_cast<uint16_t>(std::atoi(next().c_str()));
+      o.baseline_threads = std::atoi(next().c_str());
+      return true;
     }
-    if (a == "--rcand") rcand = next();
-    else if (a == "--seconds") seconds = std::atof(next().c_str());
-    else if (a == "--warmup") warmup = std::atof(next().c_str());
-    else if (a == "--clients") clients_list = next();
-    else if (a == "--phases") phases = next();
-    else if (a == "--io-threads") io_threads = std::atoi(next().c_str());
-    else if (a == "--estops") estops = std::atoi(next().c_str());
-    else if (a == "--smoke") smoke = std::atol(next().c_str());
-    else if (a == "--mldsa-pool") mldsa_pool = std::atol(next().c_str());
-    else if (a == "--data-root") data_root = next();
-    else if (a == "--pairs") pairs = std::max(1, std::atoi(next().c_str()));
+    if (a == "--rcand") o.rcand = next();
+    else if (a == "--seconds") o.seconds = std::atof(next().c_str());
+    else if (a == "--warmup") o.warmup = std::atof(next().c_str());
+    else if (a == "--clients") o.clients_list = next();
+    else if (a == "--phases") o.phases = next();
+    else if (a == "--io-threads") o.io_threads = std::atoi(next().c_str());
+    else if (a == "--estops") o.estops = std::atoi(next().c_str());
+    else if (a == "--smoke") o.smoke = std::atol(next().c_str());
+    else if (a == "--mldsa-pool") o.mldsa_pool = std::atol(next().c_str());
+    else if (a == "--data-root") o.data_root = next();
+    else if (a == "--pairs") o.pairs = std::max(1, std::atoi(next().c_str()));
     else {
       std::fprintf(stderr,
                    "usage: load_bench [--rcand PATH] [--seconds S] [--warmup S] [--clients 1,16,64]\n"
                    "                  [--phases disk,startup,memory,http,ws,stages,estop,mldsa] [--io-threads N]\n"
                    "                  [--estops N] [--mldsa-pool N] [--data-root DIR] [--pairs N] [--smoke N]\n");
-      return 2;
+      return false;
     }
   }
-  signal(SIGPIPE, SIG_IGN);
+  return true;
+}
+
+// A new temporary directory under `data_root`; empty (after saying why) when it cannot be made.
+std::string make_root(const std::string& data_root) {
   std::string tmpl_s = data_root + "/rcan-load-bench-XXXXXX";
   std::vector<char> tmpl(tmpl_s.begin(), tmpl_s.end());
   tmpl.push_back('\0');
@@ -652,426 +667,526 @@ int main(int argc, char** argv) {
   if (!made) {
     std::fprintf(stderr, "load_bench: cannot create a directory under %s: %s\n", data_root.c_str(),
                  std::strerror(errno));
-    return 1;
+    return "";
   }
-  const std::string root = made;
-  struct Cleanup {
-    std::string dir;
-    ~Cleanup() {
-      std::error_code ec;
-      fs::remove_all(dir, ec);
-    }
-  } cleanup{root};
+  return made;
+}
+
+// The run's shared state: the node under test and its token, the bare server, what the phases
+// hand on to later ones, and whether every answer so far was right.
+struct Bench {
+  Options opt;
+  std::string root;
+  Node node;
+  std::string token;
+  DiskProbe disk;
+  uint16_t bport = 0;
+  std::unique_ptr<Child> baseline;
+  ProcStat idle;
+  MetricsSnap before16, after16;
   bool all_ok = true;
 
-  Node node;
-  node.dir = root + "/node";
-  if (!start_node(node, rcand, {})) return 1;
-  const std::string seed = node.dir + "/issuer/ed25519.seed";
-  const std::string token = token_for(seed, "rcand-local", node.ruri, "bench-client");
-  if (token.empty()) {
-    std::fprintf(stderr, "cannot issue a token\n");
-    return 1;
-  }
-
-  if (smoke > 0) {
-    int failed = 0;
-    for (bool ws : {false, true}) {
-      RunOptions o;
-      o.port = node.port;
-      o.ws = ws;
-      o.clients = 1;
-      o.max_requests = static_cast<uint64_t>(smoke);
-      o.token = token;
-      o.make = seed_move();
-      RunResult r = run_load(o);
-      print_row(ws ? "smoke ws" : "smoke http", 1, r);
-      if (r.ok != static_cast<uint64_t>(smoke) || r.failed || r.connect_failures) ++failed;
-    }
-    std::string metrics;
-    sync_http(node.port, http::verb::get, "/metrics", "", "", &metrics);
-    if (metrics.find("rcan_pipeline_stage_seconds_count{stage=\"total\"}") == std::string::npos) {
-      std::printf("  /metrics has no total stage timer\n");
-      ++failed;
-    }
-    return failed ? 1 : 0;
-  }
-
-  std::printf("load_bench: rcand %s, %d io threads, generator on 1 thread, %u CPUs, %.1f s per run\n",
-              node.ruri.c_str(), io_threads, std::thread::hardware_concurrency(), seconds);
-  std::printf("  data dir (audit log, fdatasync per group commit) under %s\n", data_root.c_str());
-  DiskProbe disk;
-  if (has(phases, "disk")) {
-    constexpr size_t kGroupBytes = 3000;  // about five command records: a group commit at 16 clients
-    disk = probe_disk(root, kGroupBytes, 1.0);
-    std::printf("\ndisk under the data dir, alone (append %zu bytes + fdatasync, as a group commit)\n", kGroupBytes);
-    if (disk.ok)
-      std::printf("  %.0f syncs/s  p50 %.0f us  p99 %.0f us;  CPU per sync: syncing thread %.1f us, "
-                  "whole machine %.1f us  (n=%llu)\n",
-                  disk.per_s, disk.p50_us, disk.p99_us, disk.thread_cpu_us, disk.machine_cpu_us,
-                  static_cast<unsigned long long>(disk.syncs));
-    else
-      std::printf("  probe failed (%s)\n", disk.error.c_str());
-  }
-  // The embedded node starts with io_threads 2 (docs/CONFIG.md); the baseline uses the same.
-  uint16_t bport = free_port();
-  Child baseline({fs::canonical("/proc/self/exe").string(), "--serve-baseline", std::to_string(bport),
-                  std::to_string(io_threads)},
-                 "");
-  if (wait_ready(baseline, bport) < 0) {
-    std::fprintf(stderr, "the baseline server did not start\n");
-    return 1;
-  }
-
-  if (has(phases, "startup")) {
-    double first = node.ready_ms;
-    node.child->stop();
-    Node again;
-    again.dir = node.dir;
-    again.ruri = node.ruri;
-    if (!start_node(again, rcand, {})) return 1;
-    std::printf("\nstart-up (exec → first served GET /healthz)\n");
-    std::printf("  first run (generates keys, secret, issuer, token)  %7.1f ms\n", first);
-    std::printf("  restart (existing data dir)                        %7.1f ms\n", again.ready_ms);
-    node = std::move(again);
-  }
-
-  settle(node.child->pid());
-  ProcStat idle = proc_stat(node.child->pid());
-  if (has(phases, "memory")) {
-    std::printf("\nmemory (VmRSS)\n  idle after start-up: %.1f MB\n", static_cast<double>(idle.rss_kb) / 1024.0);
-  }
-
-  std::map<std::string, double> node_tput16;
-  MetricsSnap before16, after16;
-  auto compare = [&](bool ws) {
-    std::printf("\n%s COMMAND (EdDSA JWT, move), %s\n", ws ? "WebSocket" : "HTTP keep-alive",
-                ws ? "one stream per client, one frame in flight each" : "one request in flight per client");
-    for (int c : parse_list(clients_list)) {
-      std::vector<double> tput_ratio, p99_ratio;
-      for (int pair = 0; pair < pairs; ++pair) {
-        RunOptions o;
-        o.port = node.port;
-        o.ws = ws;
-        o.clients = c;
-        o.seconds = seconds;
-        o.warmup_s = warmup;
-        o.token = token;
-        o.make = seed_move();
-        ProcStat p0 = proc_stat(node.child->pid());
-        ProcStat mid;
-        std::thread sampler;
-        std::atomic<bool> sampling{true};
-        sampler = std::thread([&] {
-          std::this_thread::sleep_for(std::chrono::microseconds(static_cast<int64_t>((warmup + seconds / 2) * 1e6)));
-          if (sampling) mid = proc_stat(node.child->pid());
-        });
-        const bool stage_run = c == 16 && !ws && pair == 0;
-        if (stage_run) before16 = scrape(node.port);
-        RunResult rn = run_load(o);
-        if (stage_run) after16 = scrape(node.port);
-        sampling = false;
-        sampler.join();
-        ProcStat p1 = proc_stat(node.child->pid());
-        RunOptions b = o;
-        b.port = bport;
-        b.expect = Expect::kBaseline;
-        ProcStat q0 = proc_stat(baseline.pid());
-        RunResult rb = run_load(b);
-        ProcStat q1 = proc_stat(baseline.pid());
-        print_row("rcand", c, rn);
-        print_row("bare Beast server", c, rb);
-        double ncpu = (p1.cpu_s - p0.cpu_s) / static_cast<double>(std::max<uint64_t>(1, rn.ok + rn.refused + rn.failed));
-        double bcpu = (q1.cpu_s - q0.cpu_s) / static_cast<double>(std::max<uint64_t>(1, rb.ok));
-        tput_ratio.push_back(rn.throughput() / std::max(1.0, rb.throughput()));
-        p99_ratio.push_back(pct(rn.lat_us, 0.99) / std::max(1.0, pct(rb.lat_us, 0.99)));
-        std::printf("  %-22s %3d  throughput %.0f%%  p99 %.2fx  (server CPU per request: rcand %.0f us, bare %.0f us; "
-                    "rcand RSS under load %.1f MB)\n",
-                    "rcand / bare", c, 100.0 * tput_ratio.back(), p99_ratio.back(), ncpu * 1e6, bcpu * 1e6,
-                    static_cast<double>(mid.rss_kb) / 1024.0);
-        if (rn.failed || rn.connect_failures || rb.failed || rb.connect_failures) all_ok = false;
-      }
-      if (pairs > 1) {
-        auto median = [](std::vector<double> v) {
-          std::sort(v.begin(), v.end());
-          return v.size() % 2 ? v[v.size() / 2] : (v[v.size() / 2 - 1] + v[v.size() / 2]) / 2;
-        };
-        auto [tlo, thi] = std::minmax_element(tput_ratio.begin(), tput_ratio.end());
-        auto [plo, phi] = std::minmax_element(p99_ratio.begin(), p99_ratio.end());
-        std::printf("  %-22s %3d  over %d pairs: throughput median %.0f%% (%.0f–%.0f%%), p99 median %.2fx "
-                    "(%.2f–%.2fx)\n",
-                    "rcand / bare", c, pairs, 100.0 * median(tput_ratio), 100.0 * *tlo, 100.0 * *thi,
-                    median(p99_ratio), *plo, *phi);
-      }
-    }
-  };
-  if (has(phases, "http")) compare(false);
-  if (has(phases, "ws")) compare(true);
-
-  if (has(phases, "stages") && !before16.empty()) {
-    std::printf("\ncommand path, node's own stage timers over the 16-client HTTP run (mean / ~p99 by bucket)\n");
-    const char* order[] = {"parse", "shape", "token", "decode", "replay", "auth", "authorize", "rate_limit",
-                           "safety_state", "injection", "dispatch", "audit", "apply", "respond", "total"};
-    for (const char* s : order) {
-      auto a = after16.find(s);
-      if (a == after16.end()) continue;
-      StageSnap b = before16.count(s) ? before16[s] : StageSnap{};
-      double n = a->second.count - b.count;
-      if (n <= 0) continue;
-      double mean = (a->second.sum_s - b.sum_s) / n * 1e6;
-      double p99 = 0;
-      for (size_t i = 0; i < a->second.buckets.size(); ++i) {
-        double prev = i < b.buckets.size() ? b.buckets[i].second : 0;
-        if (a->second.buckets[i].second - prev >= 0.99 * n) {
-          p99 = a->second.buckets[i].first * 1e6;
-          break;
-        }
-      }
-      std::printf("  %-13s mean %8.1f us   p99 ≤ %7.0f us   (n=%.0f)\n", s, mean, p99, n);
-    }
-    auto delta = [&](const char* name) { return after16[name].count - before16[name].count; };
-    const double groups = delta("rcan_audit_group_commits_total");
-    const double syncs = delta("rcan_audit_syncs_total");
-    const double records = delta("audit");
-    if (groups > 0)
-      std::printf("  audit group commits %.0f: %.2f command records per group, %.0f fdatasyncs/s\n", groups,
-                  records / groups, syncs / (warmup + seconds));
-    if (groups > 0 && disk.ok) {
-      // An estimate from two measurements: the run's sync rate times what one sync cost alone.
-      const double share = syncs / (warmup + seconds) * disk.machine_cpu_us / 1e6;
-      std::printf("  those syncs at the disk probe's CPU per sync: ~%.2f CPUs of %u (%.0f%% of the machine)\n", share,
-                  std::thread::hardware_concurrency(),
-                  100.0 * share / std::max(1u, std::thread::hardware_concurrency()));
-    }
-  }
-
-  if (has(phases, "memory")) {
-    // 64 clients of each transport at once, then the high-water mark.
-    RunOptions h;
-    h.port = node.port;
-    h.clients = 64;
-    h.seconds = std::max(1.0, seconds / 2);
-    h.warmup_s = 0.3;
-    h.token = token;
-    h.make = seed_move();
-    RunOptions w = h;
-    w.ws = true;
-    ProcStat mid;
-    std::thread t1([&] { run_load(h); });
-    std::thread t2([&] { run_load(w); });
-    std::this_thread::sleep_for(std::chrono::milliseconds(static_cast<int64_t>((0.3 + h.seconds / 2) * 1000)));
-    mid = proc_stat(node.child->pid());
-    t1.join();
-    t2.join();
-    ProcStat after = proc_stat(node.child->pid());
-    std::printf("\nmemory (VmRSS)\n  idle %.1f MB; under 64 HTTP + 64 WebSocket clients %.1f MB; after %.1f MB; "
-                "high-water (VmHWM) %.1f MB\n",
-                static_cast<double>(idle.rss_kb) / 1024.0, static_cast<double>(mid.rss_kb) / 1024.0,
-                static_cast<double>(after.rss_kb) / 1024.0, static_cast<double>(after.hwm_kb) / 1024.0);
-  }
-
-  if (has(phases, "estop")) {
-    // 64 HTTP clients saturate the node; meanwhile ESTOPs arrive over HTTP and over a stream.
-    node.child->take_kept();
+  bool phase(const char* name) const { return has(opt.phases, name); }
+  // The options of a run against the node: seed_move COMMANDs with the node's token.
+  RunOptions node_run(int clients) const {
     RunOptions o;
     o.port = node.port;
-    o.clients = 64;
-    o.warmup_s = 0.3;
-    o.seconds = 3600;  // ended by the ESTOP driver below
+    o.clients = clients;
     o.token = token;
     o.make = seed_move();
-    o.allow_estop = true;
-    RunResult load;
-    std::thread gen([&] { load = run_load(o); });
-    std::this_thread::sleep_for(std::chrono::milliseconds(500));
-    std::vector<double> http_rtt, ws_rtt;
-    int answered = 0;
-    auto resume = [&] {
-      std::string body = R"({"version":"1.0.0","type":"SAFETY","message_id":")" + fast_uuid() +
-                         R"(","timestamp_ms":)" + std::to_string(wall_ms()) + R"(,"payload":{"safety_event":"RESUME"}})";
-      return sync_http(node.port, http::verb::post, "/rcan/v1/command", body, token) == 200;
-    };
-    // HTTP: a fresh keep-alive connection, like an operator's stop button.
-    for (int i = 0; i < estops; ++i) {
-      asio::io_context io;
-      beast::tcp_stream s(io);
-      s.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), node.port));
-      s.socket().set_option(tcp::no_delay(true));
-      http::request<http::string_body> req{http::verb::post, "/api/stop", 11};
-      req.set(http::field::host, "127.0.0.1");
-      req.set(http::field::authorization, "Bearer " + token);
-      req.set(http::field::content_type, "application/json");
-      req.body() = R"({"reason":"load_bench"})";
-      req.prepare_payload();
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-      int64_t t0 = mono_us();
-      http::write(s, req);
-      beast::flat_buffer buf;
-      http::response<http::string_body> res;
-      http::read(s, buf, res);
-      http_rtt.push_back(static_cast<double>(mono_us() - t0));
-      if (res.result_int() == 200 && res.body().find("estop_latched") != std::string::npos) ++answered;
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-      if (!resume()) all_ok = false;
+    return o;
+  }
+};
+
+// Starts rcand on a fresh data directory and issues the clients' token.
+bool start_first_node(Bench& b) {
+  b.node.dir = b.root + "/node";
+  if (!start_node(b.node, b.opt.rcand, {})) return false;
+  const std::string seed = b.node.dir + "/issuer/ed25519.seed";
+  b.token = token_for(seed, "rcand-local", b.node.ruri, "bench-client");
+  if (b.token.empty()) {
+    std::fprintf(stderr, "cannot issue a token\n");
+    return false;
+  }
+  return true;
+}
+
+// --smoke N: N commands over HTTP and N over a WebSocket, and a total stage timer in /metrics.
+int run_smoke(const Bench& b) {
+  int failed = 0;
+  for (bool ws : {false, true}) {
+    RunOptions o = b.node_run(1);
+    o.ws = ws;
+    o.max_requests = static_cast<uint64_t>(b.opt.smoke);
+    RunResult r = run_load(o);
+    print_row(ws ? "smoke ws" : "smoke http", 1, r);
+    if (r.ok != static_cast<uint64_t>(b.opt.smoke) || r.failed || r.connect_failures) ++failed;
+  }
+  std::string metrics;
+  sync_http(b.node.port, http::verb::get, "/metrics", "", "", &metrics);
+  if (metrics.find("rcan_pipeline_stage_seconds_count{stage=\"total\"}") == std::string::npos) {
+    std::printf("  /metrics has no total stage timer\n");
+    ++failed;
+  }
+  return failed ? 1 : 0;
+}
+
+void run_disk_phase(Bench& b) {
+  constexpr size_t kGroupBytes = 3000;  // about five command records: a group commit at 16 clients
+  b.disk = probe_disk(b.root, kGroupBytes, 1.0);
+  const DiskProbe& disk = b.disk;
+  std::printf("\ndisk under the data dir, alone (append %zu bytes + fdatasync, as a group commit)\n", kGroupBytes);
+  if (disk.ok)
+    std::printf("  %.0f syncs/s  p50 %.0f us  p99 %.0f us;  CPU per sync: syncing thread %.1f us, "
+                "whole machine %.1f us  (n=%llu)\n",
+                disk.per_s, disk.p50_us, disk.p99_us, disk.thread_cpu_us, disk.machine_cpu_us,
+                static_cast<unsigned long long>(disk.syncs));
+  else
+    std::printf("  probe failed (%s)\n", disk.error.c_str());
+}
+
+// The bare server: this program again, with --serve-baseline.
+bool start_baseline(Bench& b) {
+  // The embedded node starts with io_threads 2 (docs/CONFIG.md); the baseline uses the same.
+  b.bport = free_port();
+  b.baseline = std::make_unique<Child>(std::vector<std::string>{fs::canonical("/proc/self/exe").string(),
+                                                                "--serve-baseline", std::to_string(b.bport),
+                                                                std::to_string(b.opt.io_threads)},
+                                       "");
+  if (wait_ready(*b.baseline, b.bport) < 0) {
+    std::fprintf(stderr, "the baseline server did not start\n");
+    return false;
+  }
+  return true;
+}
+
+bool run_startup_phase(Bench& b) {
+  double first = b.node.ready_ms;
+  b.node.child->stop();
+  Node again;
+  again.dir = b.node.dir;
+  again.ruri = b.node.ruri;
+  if (!start_node(again, b.opt.rcand, {})) return false;
+  std::printf("\nstart-up (exec → first served GET /healthz)\n");
+  std::printf("  first run (generates keys, secret, issuer, token)  %7.1f ms\n", first);
+  std::printf("  restart (existing data dir)                        %7.1f ms\n", again.ready_ms);
+  b.node = std::move(again);
+  return true;
+}
+
+// One rcand run and the bare-server run right after it, at `c` clients; appends their ratios.
+void run_pair(Bench& b, bool ws, int c, bool stage_run, std::vector<double>& tput_ratio,
+              std::vector<double>& p99_ratio) {
+  const double warmup = b.opt.warmup, seconds = b.opt.seconds;
+  RunOptions o = b.node_run(c);
+  o.ws = ws;
+  o.seconds = seconds;
+  o.warmup_s = warmup;
+  ProcStat p0 = proc_stat(b.node.child->pid());
+  ProcStat mid;
+  std::thread sampler;
+  std::atomic<bool> sampling{true};
+  sampler = std::thread([&] {
+    std::this_thread::sleep_for(std::chrono::microseconds(static_cast<int64_t>((warmup + seconds / 2) * 1e6)));
+    if (sampling) mid = proc_stat(b.node.child->pid());
+  });
+  if (stage_run) b.before16 = scrape(b.node.port);
+  RunResult rn = run_load(o);
+  if (stage_run) b.after16 = scrape(b.node.port);
+  sampling = false;
+  sampler.join();
+  ProcStat p1 = proc_stat(b.node.child->pid());
+  RunOptions bo = o;
+  bo.port = b.bport;
+  bo.expect = Expect::kBaseline;
+  ProcStat q0 = proc_stat(b.baseline->pid());
+  RunResult rb = run_load(bo);
+  ProcStat q1 = proc_stat(b.baseline->pid());
+  print_row("rcand", c, rn);
+  print_row("bare Beast server", c, rb);
+  double ncpu = (p1.cpu_s - p0.cpu_s) / static_cast<double>(std::max<uint64_t>(1, rn.ok + rn.refused + rn.failed));
+  double bcpu = (q1.cpu_s - q0.cpu_s) / static_cast<double>(std::max<uint64_t>(1, rb.ok));
+  tput_ratio.push_back(rn.throughput() / std::max(1.0, rb.throughput()));
+  p99_ratio.push_back(pct(rn.lat_us, 0.99) / std::max(1.0, pct(rb.lat_us, 0.99)));
+  std::printf("  %-22s %3d  throughput %.0f%%  p99 %.2fx  (server CPU per request: rcand %.0f us, bare %.0f us; "
+              "rcand RSS under load %.1f MB)\n",
+              "rcand / bare", c, 100.0 * tput_ratio.back(), p99_ratio.back(), ncpu * 1e6, bcpu * 1e6,
+              static_cast<double>(mid.rss_kb) / 1024.0);
+  if (rn.failed || rn.connect_failures || rb.failed || rb.connect_failures) b.all_ok = false;
+}
+
+// --pairs N > 1: the medians and ranges of the N ratios at `c` clients.
+void print_pair_spread(int c, int pairs, const std::vector<double>& tput_ratio, const std::vector<double>& p99_ratio) {
+  auto median = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v.size() % 2 ? v[v.size() / 2] : (v[v.size() / 2 - 1] + v[v.size() / 2]) / 2;
+  };
+  auto [tlo, thi] = std::minmax_element(tput_ratio.begin(), tput_ratio.end());
+  auto [plo, phi] = std::minmax_element(p99_ratio.begin(), p99_ratio.end());
+  std::printf("  %-22s %3d  over %d pairs: throughput median %.0f%% (%.0f–%.0f%%), p99 median %.2fx "
+              "(%.2f–%.2fx)\n",
+              "rcand / bare", c, pairs, 100.0 * median(tput_ratio), 100.0 * *tlo, 100.0 * *thi,
+              median(p99_ratio), *plo, *phi);
+}
+
+// The http / ws phases: rcand against the bare server at each client count.
+void compare(Bench& b, bool ws) {
+  std::printf("\n%s COMMAND (EdDSA JWT, move), %s\n", ws ? "WebSocket" : "HTTP keep-alive",
+              ws ? "one stream per client, one frame in flight each" : "one request in flight per client");
+  for (int c : parse_list(b.opt.clients_list)) {
+    std::vector<double> tput_ratio, p99_ratio;
+    for (int pair = 0; pair < b.opt.pairs; ++pair) {
+      const bool stage_run = c == 16 && !ws && pair == 0;
+      run_pair(b, ws, c, stage_run, tput_ratio, p99_ratio);
     }
-    // WebSocket: one CONNECTed stream sends SAFETY ESTOP frames.
-    int ws_answered = 0;
-    {
-      asio::io_context io;
-      websocket::stream<beast::tcp_stream> ws(io);
-      beast::get_lowest_layer(ws).connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), node.port));
-      beast::get_lowest_layer(ws).socket().set_option(tcp::no_delay(true));
-      ws.handshake("127.0.0.1", "/rcan/v1/stream");
-      ws.text(true);
-      ws.write(asio::buffer(R"({"type":"CONNECT","token":")" + token + "\"}"));
-      beast::flat_buffer in;
+    if (b.opt.pairs > 1) print_pair_spread(c, b.opt.pairs, tput_ratio, p99_ratio);
+  }
+}
+
+void print_stages(Bench& bench) {
+  MetricsSnap &before16 = bench.before16, &after16 = bench.after16;
+  const double warmup = bench.opt.warmup, seconds = bench.opt.seconds;
+  std::printf("\ncommand path, node's own stage timers over the 16-client HTTP run (mean / ~p99 by bucket)\n");
+  const char* order[] = {"parse", "shape", "token", "decode", "replay", "auth", "authorize", "rate_limit",
+                         "safety_state", "injection", "dispatch", "audit", "apply", "respond", "total"};
+  for (const char* s : order) {
+    auto a = after16.find(s);
+    if (a == after16.end()) continue;
+    StageSnap b = before16.count(s) ? before16[s] : StageSnap{};
+    double n = a->second.count - b.count;
+    if (n <= 0) continue;
+    double mean = (a->second.sum_s - b.sum_s) / n * 1e6;
+    double p99 = 0;
+    for (size_t i = 0; i < a->second.buckets.size(); ++i) {
+      double prev = i < b.buckets.size() ? b.buckets[i].second : 0;
+      if (a->second.buckets[i].second - prev >= 0.99 * n) {
+        p99 = a->second.buckets[i].first * 1e6;
+        break;
+      }
+    }
+    std::printf("  %-13s mean %8.1f us   p99 ≤ %7.0f us   (n=%.0f)\n", s, mean, p99, n);
+  }
+  auto delta = [&](const char* name) { return after16[name].count - before16[name].count; };
+  const double groups = delta("rcan_audit_group_commits_total");
+  const double syncs = delta("rcan_audit_syncs_total");
+  const double records = delta("audit");
+  if (groups > 0)
+    std::printf("  audit group commits %.0f: %.2f command records per group, %.0f fdatasyncs/s\n", groups,
+                records / groups, syncs / (warmup + seconds));
+  if (groups > 0 && bench.disk.ok) {
+    // An estimate from two measurements: the run's sync rate times what one sync cost alone.
+    const double share = syncs / (warmup + seconds) * bench.disk.machine_cpu_us / 1e6;
+    std::printf("  those syncs at the disk probe's CPU per sync: ~%.2f CPUs of %u (%.0f%% of the machine)\n", share,
+                std::thread::hardware_concurrency(),
+                100.0 * share / std::max(1u, std::thread::hardware_concurrency()));
+  }
+}
+
+// The node's idle memory after start-up (and the quiet it needs before measuring).
+void measure_idle(Bench& b) {
+  settle(b.node.child->pid());
+  b.idle = proc_stat(b.node.child->pid());
+  if (b.phase("memory")) {
+    std::printf("\nmemory (VmRSS)\n  idle after start-up: %.1f MB\n", static_cast<double>(b.idle.rss_kb) / 1024.0);
+  }
+}
+
+void run_memory_phase(Bench& b) {
+  // 64 clients of each transport at once, then the high-water mark.
+  RunOptions h = b.node_run(64);
+  h.seconds = std::max(1.0, b.opt.seconds / 2);
+  h.warmup_s = 0.3;
+  RunOptions w = h;
+  w.ws = true;
+  ProcStat mid;
+  std::thread t1([&] { run_load(h); });
+  std::thread t2([&] { run_load(w); });
+  std::this_thread::sleep_for(std::chrono::milliseconds(static_cast<int64_t>((0.3 + h.seconds / 2) * 1000)));
+  mid = proc_stat(b.node.child->pid());
+  t1.join();
+  t2.join();
+  ProcStat after = proc_stat(b.node.child->pid());
+  std::printf("\nmemory (VmRSS)\n  idle %.1f MB; under 64 HTTP + 64 WebSocket clients %.1f MB; after %.1f MB; "
+              "high-water (VmHWM) %.1f MB\n",
+              static_cast<double>(b.idle.rss_kb) / 1024.0, static_cast<double>(mid.rss_kb) / 1024.0,
+              static_cast<double>(after.rss_kb) / 1024.0, static_cast<double>(after.hwm_kb) / 1024.0);
+}
+
+// A SAFETY RESUME after each ESTOP; true when the node accepted it.
+bool send_resume(const Bench& b) {
+  std::string body = R"({"version":"1.0.0","type":"SAFETY","message_id":")" + fast_uuid() +
+                     R"(","timestamp_ms":)" + std::to_string(wall_ms()) + R"(,"payload":{"safety_event":"RESUME"}})";
+  return sync_http(b.node.port, http::verb::post, "/rcan/v1/command", body, b.token) == 200;
+}
+
+// HTTP: a fresh keep-alive connection, like an operator's stop button. Returns how many were
+// answered estop_latched.
+int http_estops(Bench& b, std::vector<double>& http_rtt) {
+  int answered = 0;
+  for (int i = 0; i < b.opt.estops; ++i) {
+    asio::io_context io;
+    beast::tcp_stream s(io);
+    s.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), b.node.port));
+    s.socket().set_option(tcp::no_delay(true));
+    http::request<http::string_body> req{http::verb::post, "/api/stop", 11};
+    req.set(http::field::host, "127.0.0.1");
+    req.set(http::field::authorization, "Bearer " + b.token);
+    req.set(http::field::content_type, "application/json");
+    req.body() = R"({"reason":"load_bench"})";
+    req.prepare_payload();
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    int64_t t0 = mono_us();
+    http::write(s, req);
+    beast::flat_buffer buf;
+    http::response<http::string_body> res;
+    http::read(s, buf, res);
+    http_rtt.push_back(static_cast<double>(mono_us() - t0));
+    if (res.result_int() == 200 && res.body().find("estop_latched") != std::string::npos) ++answered;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    if (!send_resume(b)) b.all_ok = false;
+  }
+  return answered;
+}
+
+// WebSocket: one CONNECTed stream sends SAFETY ESTOP frames. Returns how many were answered
+// estop_latched.
+int ws_estops(Bench& b, std::vector<double>& ws_rtt) {
+  int ws_answered = 0;
+  asio::io_context io;
+  websocket::stream<beast::tcp_stream> ws(io);
+  beast::get_lowest_layer(ws).connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), b.node.port));
+  beast::get_lowest_layer(ws).socket().set_option(tcp::no_delay(true));
+  ws.handshake("127.0.0.1", "/rcan/v1/stream");
+  ws.text(true);
+  ws.write(asio::buffer(R"({"type":"CONNECT","token":")" + b.token + "\"}"));
+  beast::flat_buffer in;
+  ws.read(in);
+  for (int i = 0; i < b.opt.estops; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    std::string id = fast_uuid();
+    std::string frame = R"({"version":"1.0.0","type":"SAFETY","message_id":")" + id + R"(","timestamp_ms":)" +
+                        std::to_string(wall_ms()) + R"(,"payload":{"safety_event":"ESTOP","reason":"load_bench"}})";
+    int64_t t0 = mono_us();
+    ws.write(asio::buffer(frame));
+    for (;;) {
+      in.clear();
       ws.read(in);
-      for (int i = 0; i < estops; ++i) {
-        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+      std::string text = beast::buffers_to_string(in.data());
+      if (text.find(id) == std::string::npos) continue;
+      ws_rtt.push_back(static_cast<double>(mono_us() - t0));
+      if (text.find("estop_latched") != std::string::npos) ++ws_answered;
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    if (!send_resume(b)) b.all_ok = false;
+  }
+  beast::error_code ec;
+  ws.close(websocket::close_code::normal, ec);
+  return ws_answered;
+}
+
+void run_estop_phase(Bench& b) {
+  // 64 HTTP clients saturate the node; meanwhile ESTOPs arrive over HTTP and over a stream.
+  const int estops = b.opt.estops;
+  b.node.child->take_kept();
+  RunOptions o = b.node_run(64);
+  o.warmup_s = 0.3;
+  o.seconds = 3600;  // ended by the ESTOP driver below
+  o.allow_estop = true;
+  RunResult load;
+  std::thread gen([&] { load = run_load(o); });
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  std::vector<double> http_rtt, ws_rtt;
+  int answered = http_estops(b, http_rtt);
+  int ws_answered = ws_estops(b, ws_rtt);
+  std::sort(http_rtt.begin(), http_rtt.end());
+  std::sort(ws_rtt.begin(), ws_rtt.end());
+  auto node_lat = estop_lines(*b.node.child);
+  std::printf("\nESTOP while 64 HTTP clients saturate the node with COMMANDs\n");
+  for (const char* tr : {"http", "ws"}) {
+    auto& v = node_lat[tr];
+    auto& rtt = std::string(tr) == "http" ? http_rtt : ws_rtt;
+    std::printf("  %-4s node arrival→Driver::stop  p50 %6.0f  p99 %6.0f  max %6.0f us (n=%zu);  "
+                "client round trip p50 %6.0f  p99 %6.0f us\n",
+                tr, pct(v, 0.5), pct(v, 0.99), v.empty() ? 0.0 : v.back(), v.size(), pct(rtt, 0.5),
+                pct(rtt, 0.99));
+  }
+  std::printf("  answered estop_latched: http %d/%d, ws %d/%d\n", answered, estops, ws_answered, estops);
+  if (answered != estops || ws_answered != estops) b.all_ok = false;
+  g_abort_load = true;
+  gen.join();
+  g_abort_load = false;
+  print_row("load during ESTOPs", 64, load);
+  if (load.failed || load.connect_failures) b.all_ok = false;
+}
+
+// The configuration of the ML-DSA phase: the embedded one plus the peer robot's key under
+// security.trusted_robot_keys and a configured issuer (the peer's Ed25519 key as a JWK).
+void write_mldsa_config(const Bench& b, const keys::RobotKeys& peer) {
+  const std::string& root = b.root;
+  {
+    std::ofstream jwk(root + "/issuer.jwk");
+    jwk << json::dump(json::Value(json::Object{
+        {"kty", "OKP"}, {"crv", "Ed25519"}, {"x", base64url_encode(peer.pub.ed25519_pk, false)}}));
+  }
+  std::string yaml = default_yaml_for(b.node.dir);
+  auto replace = [&](const std::string& from, const std::string& to) {
+    size_t p = yaml.find(from);
+    if (p != std::string::npos) yaml.replace(p, from.size(), to);
+  };
+  replace("security:\n", "security:\n  trusted_robot_keys:\n    - {name: bench-peer, mldsa65_pub_file: " + root +
+                             "/peer/mldsa65.pub}\n");
+  replace("  jwt:\n    leeway_s: 60\n",
+          "  jwt:\n    leeway_s: 60\n    issuers:\n      - {issuer: bench-issuer, key_file: " + root + "/issuer.jwk}\n");
+  {
+    std::ofstream cf(root + "/mldsa.rcan.yaml");
+    cf << yaml;
+  }
+}
+
+// The peer robot that signs the ML-DSA phase's commands, and what its messages name.
+struct PeerSigner {
+  const keys::RobotKeys& keys;
+  std::string ruri;    // the node's
+  std::string target;  // the node's RURI in the SDK form
+  std::string token;   // from the configured issuer, for the node
+};
+
+// `pool_size` signed move commands, made on every CPU.
+std::vector<Outgoing> sign_pool(const PeerSigner& peer, size_t pool_size) {
+  std::vector<Outgoing> pool(pool_size);
+  std::vector<std::thread> signers;
+  unsigned nt = std::max(1u, std::thread::hardware_concurrency());
+  for (unsigned t = 0; t < nt; ++t) {
+    signers.emplace_back([&, t] {
+      for (size_t i = t; i < pool_size; i += nt) {
         std::string id = fast_uuid();
-        std::string frame = R"({"version":"1.0.0","type":"SAFETY","message_id":")" + id + R"(","timestamp_ms":)" +
-                            std::to_string(wall_ms()) + R"(,"payload":{"safety_event":"ESTOP","reason":"load_bench"}})";
-        int64_t t0 = mono_us();
-        ws.write(asio::buffer(frame));
-        for (;;) {
-          in.clear();
-          ws.read(in);
-          std::string text = beast::buffers_to_string(in.data());
-          if (text.find(id) == std::string::npos) continue;
-          ws_rtt.push_back(static_cast<double>(mono_us() - t0));
-          if (text.find("estop_latched") != std::string::npos) ++ws_answered;
-          break;
-        }
-        std::this_thread::sleep_for(std::chrono::milliseconds(10));
-        if (!resume()) all_ok = false;
+        json::Object msg{{"rcan", "3.2"},
+                         {"msg_id", id},
+                         {"timestamp", static_cast<double>(wall_ms()) / 1000.0},
+                         {"cmd", "move"},
+                         {"target", peer.target},
+                         {"params", json::Object{{"linear", 0.2}, {"duration_ms", 100}}},
+                         {"sender_type", "robot"},
+                         {"delegation_chain", json::Array{json::Object{{"issuer_ruri", peer.ruri},
+                                                                       {"human_subject", "operator"},
+                                                                       {"timestamp", wall_ms() / 1000},
+                                                                       {"scope", "control"}}}}};
+        if (!msgsig::sign_mldsa65(msg, peer.keys.mldsa65_sk.span(), peer.keys.pub.mldsa65_pk).ok()) continue;
+        pool[i] = Outgoing{json::dump(json::Value(std::move(msg))), id};
       }
-      beast::error_code ec;
-      ws.close(websocket::close_code::normal, ec);
-    }
-    std::sort(http_rtt.begin(), http_rtt.end());
-    std::sort(ws_rtt.begin(), ws_rtt.end());
-    auto node_lat = estop_lines(*node.child);
-    std::printf("\nESTOP while 64 HTTP clients saturate the node with COMMANDs\n");
-    for (const char* tr : {"http", "ws"}) {
-      auto& v = node_lat[tr];
-      auto& rtt = std::string(tr) == "http" ? http_rtt : ws_rtt;
-      std::printf("  %-4s node arrival→Driver::stop  p50 %6.0f  p99 %6.0f  max %6.0f us (n=%zu);  "
-                  "client round trip p50 %6.0f  p99 %6.0f us\n",
-                  tr, pct(v, 0.5), pct(v, 0.99), v.empty() ? 0.0 : v.back(), v.size(), pct(rtt, 0.5),
-                  pct(rtt, 0.99));
-    }
-    std::printf("  answered estop_latched: http %d/%d, ws %d/%d\n", answered, estops, ws_answered, estops);
-    if (answered != estops || ws_answered != estops) all_ok = false;
-    g_abort_load = true;
-    gen.join();
-    g_abort_load = false;
-    print_row("load during ESTOPs", 64, load);
-    if (load.failed || load.connect_failures) all_ok = false;
+    });
   }
+  for (auto& t : signers) t.join();
+  return pool;
+}
 
-  if (has(phases, "mldsa")) {
-    // rcan-py-shaped commands signed with ML-DSA-65 by a peer robot's key that the node trusts
-    // (security.trusted_robot_keys), with a token from a configured issuer. The signatures are
-    // made before the run (the generator would otherwise spend the shared cores signing).
-    node.child->stop();
-    auto peer = keys::generate();
-    if (!peer.ok() || !keys::write_dir(root + "/peer", *peer).ok()) return 1;
-    {
-      std::ofstream jwk(root + "/issuer.jwk");
-      jwk << json::dump(json::Value(json::Object{
-          {"kty", "OKP"}, {"crv", "Ed25519"}, {"x", base64url_encode(peer->pub.ed25519_pk, false)}}));
-    }
-    std::string yaml = default_yaml_for(node.dir);
-    auto replace = [&](const std::string& from, const std::string& to) {
-      size_t p = yaml.find(from);
-      if (p != std::string::npos) yaml.replace(p, from.size(), to);
-    };
-    replace("security:\n", "security:\n  trusted_robot_keys:\n    - {name: bench-peer, mldsa65_pub_file: " + root +
-                               "/peer/mldsa65.pub}\n");
-    replace("  jwt:\n    leeway_s: 60\n",
-            "  jwt:\n    leeway_s: 60\n    issuers:\n      - {issuer: bench-issuer, key_file: " + root + "/issuer.jwk}\n");
-    {
-      std::ofstream cf(root + "/mldsa.rcan.yaml");
-      cf << yaml;
-    }
-    Node m;
-    m.dir = node.dir;
-    if (!start_node(m, rcand, {"--config", root + "/mldsa.rcan.yaml"})) return 1;
-    settle(m.child->pid());
-    auto key = jwt::SigningKey::ed25519_seed(peer->ed25519_seed.span());
-    int64_t now = wall_ms() / 1000;
-    std::string robot_token = *jwt::issue(json::Object{{"iss", "bench-issuer"},
-                                                       {"sub", "peer-robot"},
-                                                       {"aud", m.ruri},
-                                                       {"role", "creator"},
-                                                       {"scope", json::Array{"status", "control"}},
-                                                       {"iat", now},
-                                                       {"exp", now + 3600}},
-                                          *key);
-    // The SDK form of the node's RURI (rcan-py's RobotURI has a version segment).
-    std::string target = m.ruri;
-    {
-      size_t last = target.rfind('/');
-      target = target.substr(0, last) + "/v1" + target.substr(last);
-    }
-    const size_t pool_size = static_cast<size_t>(mldsa_pool);
-    std::printf("\nML-DSA-65-signed COMMANDs (rcan-py shape, peer-robot key, delegation chain), HTTP keep-alive\n");
-    for (int c : {16, 64}) {
-      // A fresh supply per run: the messages must be used within the 30 s replay window.
-      std::vector<Outgoing> pool(pool_size);
-      int64_t s0 = mono_us();
-      {
-        std::vector<std::thread> signers;
-        unsigned nt = std::max(1u, std::thread::hardware_concurrency());
-        for (unsigned t = 0; t < nt; ++t) {
-          signers.emplace_back([&, t] {
-            for (size_t i = t; i < pool_size; i += nt) {
-              std::string id = fast_uuid();
-              json::Object msg{{"rcan", "3.2"},
-                               {"msg_id", id},
-                               {"timestamp", static_cast<double>(wall_ms()) / 1000.0},
-                               {"cmd", "move"},
-                               {"target", target},
-                               {"params", json::Object{{"linear", 0.2}, {"duration_ms", 100}}},
-                               {"sender_type", "robot"},
-                               {"delegation_chain", json::Array{json::Object{{"issuer_ruri", m.ruri},
-                                                                             {"human_subject", "operator"},
-                                                                             {"timestamp", wall_ms() / 1000},
-                                                                             {"scope", "control"}}}}};
-              if (!msgsig::sign_mldsa65(msg, peer->mldsa65_sk.span(), peer->pub.mldsa65_pk).ok()) continue;
-              pool[i] = Outgoing{json::dump(json::Value(std::move(msg))), id};
-            }
-          });
-        }
-        for (auto& t : signers) t.join();
-      }
-      double sign_s = static_cast<double>(mono_us() - s0) / 1e6;
-      auto next = std::make_shared<std::atomic<size_t>>(0);
-      MakeCommand from_pool = [&pool, next]() -> Outgoing {
-        size_t i = next->fetch_add(1);
-        return i < pool.size() ? pool[i] : Outgoing{};
-      };
-      settle(m.child->pid(), 2000);
-      RunOptions o;
-      o.port = m.port;
-      o.clients = c;
-      o.seconds = seconds;
-      o.warmup_s = 0.2;
-      o.token = robot_token;
-      o.make = from_pool;
-      ProcStat p0 = proc_stat(m.child->pid());
-      RunResult r = run_load(o);
-      ProcStat p1 = proc_stat(m.child->pid());
-      print_row("rcand ML-DSA-65", c, r);
-      std::printf("  server CPU per signed command: %.0f us  (%zu messages signed beforehand in %.1f s%s)\n",
-                  (p1.cpu_s - p0.cpu_s) * 1e6 / static_cast<double>(std::max<uint64_t>(1, r.ok + r.failed)),
-                  pool_size, sign_s,
-                  next->load() >= pool.size() ? "; the supply ran out: raise --mldsa-pool" : "");
-      if (r.failed || r.connect_failures || r.ok == 0) all_ok = false;
-    }
-    m.child->stop();
+// One run of `c` clients sending signed commands to `m`.
+void run_mldsa_clients(Bench& b, const Node& m, const PeerSigner& peer, int c) {
+  const size_t pool_size = static_cast<size_t>(b.opt.mldsa_pool);
+  // A fresh supply per run: the messages must be used within the 30 s replay window.
+  int64_t s0 = mono_us();
+  std::vector<Outgoing> pool = sign_pool(peer, pool_size);
+  double sign_s = static_cast<double>(mono_us() - s0) / 1e6;
+  auto next = std::make_shared<std::atomic<size_t>>(0);
+  MakeCommand from_pool = [&pool, next]() -> Outgoing {
+    size_t i = next->fetch_add(1);
+    return i < pool.size() ? pool[i] : Outgoing{};
+  };
+  settle(m.child->pid(), 2000);
+  RunOptions o;
+  o.port = m.port;
+  o.clients = c;
+  o.seconds = b.opt.seconds;
+  o.warmup_s = 0.2;
+  o.token = peer.token;
+  o.make = from_pool;
+  ProcStat p0 = proc_stat(m.child->pid());
+  RunResult r = run_load(o);
+  ProcStat p1 = proc_stat(m.child->pid());
+  print_row("rcand ML-DSA-65", c, r);
+  std::printf("  server CPU per signed command: %.0f us  (%zu messages signed beforehand in %.1f s%s)\n",
+              (p1.cpu_s - p0.cpu_s) * 1e6 / static_cast<double>(std::max<uint64_t>(1, r.ok + r.failed)),
+              pool_size, sign_s,
+              next->load() >= pool.size() ? "; the supply ran out: raise --mldsa-pool" : "");
+  if (r.failed || r.connect_failures || r.ok == 0) b.all_ok = false;
+}
+
+bool run_mldsa_phase(Bench& b) {
+  // rcan-py-shaped commands signed with ML-DSA-65 by a peer robot's key that the node trusts
+  // (security.trusted_robot_keys), with a token from a configured issuer. The signatures are
+  // made before the run (the generator would otherwise spend the shared cores signing).
+  b.node.child->stop();
+  auto peer = keys::generate();
+  if (!peer.ok() || !keys::write_dir(b.root + "/peer", *peer).ok()) return false;
+  write_mldsa_config(b, *peer);
+  Node m;
+  m.dir = b.node.dir;
+  if (!start_node(m, b.opt.rcand, {"--config", b.root + "/mldsa.rcan.yaml"})) return false;
+  settle(m.child->pid());
+  auto key = jwt::SigningKey::ed25519_seed(peer->ed25519_seed.span());
+  int64_t now = wall_ms() / 1000;
+  std::string robot_token = *jwt::issue(json::Object{{"iss", "bench-issuer"},
+                                                     {"sub", "peer-robot"},
+                                                     {"aud", m.ruri},
+                                                     {"role", "creator"},
+                                                     {"scope", json::Array{"status", "control"}},
+                                                     {"iat", now},
+                                                     {"exp", now + 3600}},
+                                        *key);
+  // The SDK form of the node's RURI (rcan-py's RobotURI has a version segment).
+  std::string target = m.ruri;
+  {
+    size_t last = target.rfind('/');
+    target = target.substr(0, last) + "/v1" + target.substr(last);
   }
+  const PeerSigner signer{*peer, m.ruri, target, robot_token};
+  std::printf("\nML-DSA-65-signed COMMANDs (rcan-py shape, peer-robot key, delegation chain), HTTP keep-alive\n");
+  for (int c : {16, 64}) run_mldsa_clients(b, m, signer, c);
+  m.child->stop();
+  return true;
+}
 
-  std::printf("\n%s\n", all_ok ? "all responses checked: OK" : "SOME RESPONSES WERE WRONG (see failures above)");
-  return all_ok ? 0 : 1;
+// Removes the temporary directory when the run ends, however it ends.
+struct Cleanup {
+  std::string dir;
+  ~Cleanup() {
+    std::error_code ec;
+    fs::remove_all(dir, ec);
+  }
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options opt;
+  if (!parse_options(argc, argv, opt)) return 2;
+  if (opt.serve_baseline) return serve_baseline(opt.baseline_port, opt.baseline_threads);
+  signal(SIGPIPE, SIG_IGN);
+  const std::string root = make_root(opt.data_root);
+  if (root.empty()) return 1;
+  Cleanup cleanup{root};
+  Bench b;
+  b.opt = opt;
+  b.root = root;
+
+  if (!start_first_node(b)) return 1;
+  if (opt.smoke > 0) return run_smoke(b);
+
+  std::printf("load_bench: rcand %s, %d io threads, generator on 1 thread, %u CPUs, %.1f s per run\n",
+              b.node.ruri.c_str(), opt.io_threads, std::thread::hardware_concurrency(), opt.seconds);
+  std::printf("  data dir (audit log, fdatasync per group commit) under %s\n", opt.data_root.c_str());
+  if (b.phase("disk")) run_disk_phase(b);
+  if (!start_baseline(b)) return 1;
+  if (b.phase("startup") && !run_startup_phase(b)) return 1;
+  measure_idle(b);
+  if (b.phase("http")) compare(b, false);
+  if (b.phase("ws")) compare(b, true);
+  if (b.phase("stages") && !b.before16.empty()) print_stages(b);
+  if (b.phase("memory")) run_memory_phase(b);
+  if (b.phase("estop")) run_estop_phase(b);
+  if (b.phase("mldsa") && !run_mldsa_phase(b)) return 1;
+
+  std::printf("\n%s\n", b.all_ok ? "all responses checked: OK" : "SOME RESPONSES WERE WRONG (see failures above)");
+  return b.all_ok ? 0 : 1;
 }

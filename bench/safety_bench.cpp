@@ -21,12 +21,13 @@
 #include <thread>
 #include <vector>
 
-#include "node/actuation_safety.h"
-#include "node/clock.h"
-#include "node/safety.h"
-#include "node/sim_robot.h"
+#include "node/safety/actuation_safety.h"
+#include "base/clock.h"
+#include "node/safety/safety.h"
+#include "node/safety/sim_robot.h"
 
 using namespace rcan::node;
+using rcan::Clock;
 
 namespace {
 

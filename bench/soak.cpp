@@ -517,76 +517,99 @@ std::string shell_quote(const std::string& s) {
   return q + "'";
 }
 
-}  // namespace
+// ---- the run -------------------------------------------------------------------------------
 
-int main(int argc, char** argv) {
-  fs::path self_dir = fs::path(argv[0]).parent_path();
-  std::string rcand = (self_dir / ".." / "bin" / "rcand").string();
-  std::string rcan_cli = (self_dir / ".." / "bin" / "rcan").string();
+// The command line.
+struct Options {
+  std::string rcand, rcan_cli;
   double minutes = 60, rss_slack_mb = 8, window_s = 60;
   int clients = 64, interval_ms = 250;
   long segment_mib = 8;
   std::string only;
   std::string data_root = "/tmp", tsv_path;
   bool keep = false;
+  int n_minutes = 0;  // --minutes, rounded, at least 2
+};
+
+// False (after printing the usage or what is out of range) when the options do not fit.
+bool parse_options(int argc, char** argv, Options& o) {
+  fs::path self_dir = fs::path(argv[0]).parent_path();
+  o.rcand = (self_dir / ".." / "bin" / "rcand").string();
+  o.rcan_cli = (self_dir / ".." / "bin" / "rcan").string();
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
     auto next = [&]() -> std::string { return i + 1 < argc ? argv[++i] : ""; };
-    if (a == "--minutes") minutes = std::atof(next().c_str());
-    else if (a == "--clients") clients = std::atoi(next().c_str());
-    else if (a == "--interval-ms") interval_ms = std::atoi(next().c_str());
-    else if (a == "--rss-slack-mb") rss_slack_mb = std::atof(next().c_str());
-    else if (a == "--window-s") window_s = std::atof(next().c_str());
-    else if (a == "--segment-mib") segment_mib = std::atol(next().c_str());
-    else if (a == "--only") only = next();
-    else if (a == "--rcand") rcand = next();
-    else if (a == "--rcan") rcan_cli = next();
-    else if (a == "--data-root") data_root = next();
-    else if (a == "--tsv") tsv_path = next();
-    else if (a == "--keep") keep = true;
+    if (a == "--minutes") o.minutes = std::atof(next().c_str());
+    else if (a == "--clients") o.clients = std::atoi(next().c_str());
+    else if (a == "--interval-ms") o.interval_ms = std::atoi(next().c_str());
+    else if (a == "--rss-slack-mb") o.rss_slack_mb = std::atof(next().c_str());
+    else if (a == "--window-s") o.window_s = std::atof(next().c_str());
+    else if (a == "--segment-mib") o.segment_mib = std::atol(next().c_str());
+    else if (a == "--only") o.only = next();
+    else if (a == "--rcand") o.rcand = next();
+    else if (a == "--rcan") o.rcan_cli = next();
+    else if (a == "--data-root") o.data_root = next();
+    else if (a == "--tsv") o.tsv_path = next();
+    else if (a == "--keep") o.keep = true;
     else {
       std::fprintf(stderr,
                    "usage: soak [--minutes 60] [--clients 64] [--interval-ms 250] [--rss-slack-mb 8]\n"
                    "            [--window-s 60] [--segment-mib 8] [--only KIND] [--rcand PATH] [--rcan PATH] [--data-root DIR] [--tsv FILE] [--keep]\n");
-      return 2;
+      return false;
     }
   }
-  const int n_minutes = std::max(2, static_cast<int>(minutes + 0.5));
+  o.n_minutes = std::max(2, static_cast<int>(o.minutes + 0.5));
+  const std::string& only = o.only;
   if (!only.empty() && only != "http_cmd" && only != "status" && only != "ws" && only != "gate") {
     std::fprintf(stderr, "soak: --only http_cmd|status|ws|gate\n");
-    return 2;
+    return false;
   }
-  if (clients < 8 || interval_ms < 1 || window_s < 1 || segment_mib < 1 || segment_mib > 4096) {
+  if (o.clients < 8 || o.interval_ms < 1 || o.window_s < 1 || o.segment_mib < 1 || o.segment_mib > 4096) {
     std::fprintf(stderr, "soak: --clients ≥ 8, --interval-ms ≥ 1, --window-s ≥ 1, --segment-mib 1–4096\n");
-    return 2;
+    return false;
   }
-  signal(SIGPIPE, SIG_IGN);
-  std::string tmpl_s = data_root + "/rcan-soak-XXXXXX";
-  std::vector<char> tmpl(tmpl_s.begin(), tmpl_s.end());
-  tmpl.push_back('\0');
-  const char* made = mkdtemp(tmpl.data());
-  if (!made) {
-    std::perror("soak: mkdtemp");
-    return 1;
-  }
-  const std::string root = made;
-  struct Cleanup {
-    std::string dir;
-    bool keep;
-    ~Cleanup() {
-      std::error_code ec;
-      if (!keep) fs::remove_all(dir, ec);
-    }
-  } cleanup{root, keep};
+  return true;
+}
 
-  // 1. A first start creates the data directory (keys, audit secret, local issuer, device id).
+// Removes the temporary directory when the run ends (unless --keep), however it ends.
+struct Cleanup {
+  std::string dir;
+  bool keep;
+  ~Cleanup() {
+    std::error_code ec;
+    if (!keep) fs::remove_all(dir, ec);
+  }
+};
+
+// The run's shared state: the daemon and its planner layer, the clients' context, the figures
+// measured before the load.
+struct Soak {
+  Options opt;
+  std::string root;
   Node node;
-  node.dir = root + "/node";
-  if (!start_node(node, rcand, {}, "")) return 1;
-  node.child->stop();
+  std::unique_ptr<Child> layer;
+  pid_t pid = -1;  // rcand's, once configured
+  Ctx ctx;
+  ProcStat idle0;
+  int idle_fds0 = 0;
+  uint64_t audit0 = 0;
+};
 
-  // 2. The planner layer and the configuration with the gates.
-  Child layer({rcand, "--sim-layer", "--port", "0", "--layer", "planner", "--confidence", "0.95"}, "");
+// 1. A first start creates the data directory (keys, audit secret, local issuer, device id).
+bool first_start(Soak& s) {
+  s.node.dir = s.root + "/node";
+  if (!start_node(s.node, s.opt.rcand, {}, "")) return false;
+  s.node.child->stop();
+  return true;
+}
+
+// 2. The planner layer (a `rcand --sim-layer` process); returns its URL, empty when it did not
+// start.
+std::string start_layer(Soak& s) {
+  s.layer = std::make_unique<Child>(
+      std::vector<std::string>{s.opt.rcand, "--sim-layer", "--port", "0", "--layer", "planner", "--confidence", "0.95"},
+      "");
+  Child& layer = *s.layer;
   std::string layer_url;
   for (int i = 0; i < 3000 && layer_url.empty() && layer.alive(); ++i) {
     std::string head = layer.head();
@@ -596,80 +619,111 @@ int main(int argc, char** argv) {
     else
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
-  if (layer_url.empty()) {
-    std::fprintf(stderr, "the sim layer did not start:\n%s\n", layer.head().c_str());
-    return 1;
+  if (layer_url.empty()) std::fprintf(stderr, "the sim layer did not start:\n%s\n", layer.head().c_str());
+  return layer_url;
+}
+
+// Replaces `block` of the embedded configuration with `with`; false (after naming what is
+// missing) when the configuration has no such block.
+bool replace_block(std::string& yaml, const std::string& block, const std::string& with, const char* missing) {
+  size_t p = yaml.find(block);
+  if (p == std::string::npos) {
+    std::fprintf(stderr, "soak: the embedded configuration has no %s\n", missing);
+    return false;
   }
-  std::string yaml = default_yaml_for(node.dir);
+  yaml.replace(p, block.size(), with);
+  return true;
+}
+
+// The §16 confidence gates and the planner layer, in place of the embedded agent block.
+bool configure_gates(std::string& yaml, const std::string& layer_url) {
   const std::string agent_default = "agent:\n  provider: none\n  confidence_gates: []\n  hitl_gates: []\n";
-  size_t ap = yaml.find(agent_default);
-  if (ap == std::string::npos) {
-    std::fprintf(stderr, "soak: the embedded configuration has no agent block to replace\n");
-    return 1;
+  return replace_block(yaml, agent_default,
+                       "agent:\n  provider: none\n  confidence_gates:\n"
+                       "    - {scope: nav, min_confidence: 0.8, on_fail: escalate}\n"
+                       "    - {scope: chat, min_confidence: 0.5, on_fail: block}\n"
+                       "    - {scope: teleop, min_confidence: 0.6, on_fail: allow}\n"
+                       "  hitl_gates: []\n  layers:\n    planner: {url: \"" + layer_url + "\", timeout_ms: 5000}\n",
+                       "agent block to replace");
+}
+
+// The local issuer the first start created, now as a configured issuer (a configured robot
+// generates nothing and trusts only what its configuration names).
+bool configure_issuer(std::string& yaml, const Soak& s) {
+  std::ifstream sf(s.node.dir + "/issuer/ed25519.seed", std::ios::binary);
+  std::string seed((std::istreambuf_iterator<char>(sf)), std::istreambuf_iterator<char>());
+  auto pk = ed25519::public_key_from_seed(Bytes(seed.begin(), seed.end()));
+  auto pem = pk.ok() ? ed25519::public_key_to_pem(*pk) : Result<std::string>(pk.error());
+  const std::string jwt_default = "  jwt:\n    leeway_s: 60\n";
+  size_t jp = yaml.find(jwt_default);
+  if (!pem.ok() || jp == std::string::npos) {
+    std::fprintf(stderr, "soak: cannot configure the local issuer\n");
+    return false;
   }
-  yaml.replace(ap, agent_default.size(),
-               "agent:\n  provider: none\n  confidence_gates:\n"
-               "    - {scope: nav, min_confidence: 0.8, on_fail: escalate}\n"
-               "    - {scope: chat, min_confidence: 0.5, on_fail: block}\n"
-               "    - {scope: teleop, min_confidence: 0.6, on_fail: allow}\n"
-               "  hitl_gates: []\n  layers:\n    planner: {url: \"" + layer_url + "\", timeout_ms: 5000}\n");
-  // The local issuer the first start created, now as a configured issuer (a configured robot
-  // generates nothing and trusts only what its configuration names).
-  {
-    std::ifstream sf(node.dir + "/issuer/ed25519.seed", std::ios::binary);
-    std::string seed((std::istreambuf_iterator<char>(sf)), std::istreambuf_iterator<char>());
-    auto pk = ed25519::public_key_from_seed(Bytes(seed.begin(), seed.end()));
-    auto pem = pk.ok() ? ed25519::public_key_to_pem(*pk) : Result<std::string>(pk.error());
-    const std::string jwt_default = "  jwt:\n    leeway_s: 60\n";
-    size_t jp = yaml.find(jwt_default);
-    if (!pem.ok() || jp == std::string::npos) {
-      std::fprintf(stderr, "soak: cannot configure the local issuer\n");
-      return 1;
-    }
-    std::ofstream(root + "/issuer.pub.pem") << *pem;
-    yaml.replace(jp, jwt_default.size(),
-                 jwt_default + "    issuers:\n      - {issuer: rcand-local, key_file: " + root + "/issuer.pub.pem}\n");
-  }
-  // Audit segments of --segment-mib: the active segment's index lives in memory until the
-  // segment is sealed (docs/AUDIT.md §6), so memory legitimately grows with the segment; small
-  // segments make several rotations happen within the run and that bound visible.
-  {
-    const std::string audit_default = "  audit:\n    sync: per_group\n";
-    size_t sp = yaml.find(audit_default);
-    if (sp == std::string::npos) {
-      std::fprintf(stderr, "soak: the embedded configuration has no audit block to extend\n");
-      return 1;
-    }
-    yaml.replace(sp, audit_default.size(),
-                 audit_default + "    max_segment_bytes: " + std::to_string(segment_mib * 1024 * 1024) + "\n");
-  }
+  std::ofstream(s.root + "/issuer.pub.pem") << *pem;
+  yaml.replace(jp, jwt_default.size(),
+               jwt_default + "    issuers:\n      - {issuer: rcand-local, key_file: " + s.root + "/issuer.pub.pem}\n");
+  return true;
+}
+
+// Audit segments of --segment-mib: the active segment's index lives in memory until the
+// segment is sealed (docs/AUDIT.md §6), so memory legitimately grows with the segment; small
+// segments make several rotations happen within the run and that bound visible.
+bool configure_audit(std::string& yaml, long segment_mib) {
+  const std::string audit_default = "  audit:\n    sync: per_group\n";
+  return replace_block(yaml, audit_default,
+                       audit_default + "    max_segment_bytes: " + std::to_string(segment_mib * 1024 * 1024) + "\n",
+                       "audit block to extend");
+}
+
+// The configuration with the gates: <root>/soak.rcan.yaml.
+bool write_config(const Soak& s, const std::string& layer_url) {
+  std::string yaml = default_yaml_for(s.node.dir);
+  if (!configure_gates(yaml, layer_url) || !configure_issuer(yaml, s) || !configure_audit(yaml, s.opt.segment_mib))
+    return false;
   // No mDNS: the soak measures the node, not the machine's Avahi daemon.
   if (size_t mp = yaml.find("enable_mdns: true"); mp != std::string::npos) yaml.replace(mp, 17, "enable_mdns: false");
   {
-    std::ofstream cf(root + "/soak.rcan.yaml");
+    std::ofstream cf(s.root + "/soak.rcan.yaml");
     cf << yaml;
   }
+  return true;
+}
+
+// Restarts rcand with the configuration, issues the clients' token and measures the idle node.
+bool restart_configured(Soak& s) {
+  Node& node = s.node;
   std::string ruri = node.ruri;
   node.ruri.clear();
-  if (!start_node(node, rcand, {"--config", root + "/soak.rcan.yaml"}, "")) return 1;
+  if (!start_node(node, s.opt.rcand, {"--config", s.root + "/soak.rcan.yaml"}, "")) return false;
   if (node.ruri != ruri) std::fprintf(stderr, "soak: note: RURI %s after restart (was %s)\n", node.ruri.c_str(), ruri.c_str());
-  const pid_t pid = node.child->pid();
-  const int64_t lifetime_s = static_cast<int64_t>(n_minutes * window_s) + 3600;
-  Ctx ctx;
+  s.pid = node.child->pid();
+  const int64_t lifetime_s = static_cast<int64_t>(s.opt.n_minutes * s.opt.window_s) + 3600;
+  Ctx& ctx = s.ctx;
   ctx.port = node.port;
   ctx.ruri = node.ruri;
   ctx.token = token_for(node.dir + "/issuer/ed25519.seed", "rcand-local", node.ruri, "soak", lifetime_s);
-  ctx.interval = std::chrono::milliseconds(interval_ms);
-  ctx.stream_life = std::chrono::seconds(std::max<int64_t>(5, static_cast<int64_t>(window_s)));
+  ctx.interval = std::chrono::milliseconds(s.opt.interval_ms);
+  ctx.stream_life = std::chrono::seconds(std::max<int64_t>(5, static_cast<int64_t>(s.opt.window_s)));
   if (ctx.token.empty()) {
     std::fprintf(stderr, "soak: cannot issue a token\n");
-    return 1;
+    return false;
   }
-  settle(pid);
-  const ProcStat idle0 = proc_stat(pid);
-  const int idle_fds0 = count_fds(pid);
-  const uint64_t audit0 = dir_data_bytes(node.dir + "/audit");
+  settle(s.pid);
+  s.idle0 = proc_stat(s.pid);
+  s.idle_fds0 = count_fds(s.pid);
+  s.audit0 = dir_data_bytes(node.dir + "/audit");
+  return true;
+}
 
+// How many clients of each kind.
+struct ClientMix {
+  int n_cmd = 0, n_status = 0, n_ws = 0, n_gate = 0;
+};
+
+ClientMix client_mix(const Options& o) {
+  const int clients = o.clients;
+  const std::string& only = o.only;
   int n_cmd = clients / 4, n_status = clients / 8, n_ws = clients * 3 / 8;
   int n_gate = clients - n_cmd - n_status - n_ws;
   if (!only.empty()) {  // one kind only (to tell which traffic a growth comes from)
@@ -678,15 +732,22 @@ int main(int argc, char** argv) {
     n_ws = only == "ws" ? clients : 0;
     n_gate = only == "gate" ? clients : 0;
   }
+  return ClientMix{n_cmd, n_status, n_ws, n_gate};
+}
+
+void print_intro(const Soak& s, const ClientMix& mix) {
+  const Options& o = s.opt;
   std::printf("soak: rcand %s (pid %d), %d minutes of %.0f s, %d clients (http_cmd %d, status %d, ws %d, gate %d), "
               "one request per %d ms each, audit segments of %ld MiB\n",
-              node.ruri.c_str(), static_cast<int>(pid), n_minutes, window_s, clients, n_cmd, n_status, n_ws, n_gate,
-              interval_ms, segment_mib);
+              s.node.ruri.c_str(), static_cast<int>(s.pid), o.n_minutes, o.window_s, o.clients, mix.n_cmd,
+              mix.n_status, mix.n_ws, mix.n_gate, o.interval_ms, o.segment_mib);
   std::printf("  idle before load: VmRSS %.1f MB, fds %d, threads %ld; data dir %s\n",
-              static_cast<double>(idle0.rss_kb) / 1024.0, idle_fds0, idle0.threads, node.dir.c_str());
+              static_cast<double>(s.idle0.rss_kb) / 1024.0, s.idle_fds0, s.idle0.threads, s.node.dir.c_str());
   std::fflush(stdout);
+}
 
-  asio::io_context io{1};
+// Spawns every client on `io` (run by the generator thread).
+void spawn_clients(asio::io_context& io, Ctx& ctx, const ClientMix& mix) {
   auto done = [&ctx](std::exception_ptr e) {
     if (!e) return;
     try {
@@ -695,58 +756,67 @@ int main(int argc, char** argv) {
       ctx.stats.fail(kHttpCmd, std::string("a client ended on an exception: ") + ex.what());
     }
   };
-  for (int i = 0; i < n_cmd; ++i) asio::co_spawn(io, http_client(ctx, kHttpCmd, static_cast<uint64_t>(i)), done);
-  for (int i = 0; i < n_gate; ++i) asio::co_spawn(io, http_client(ctx, kGate, static_cast<uint64_t>(i)), done);
-  for (int i = 0; i < n_status; ++i) asio::co_spawn(io, status_client(ctx), done);
-  for (int i = 0; i < n_ws; ++i) asio::co_spawn(io, ws_client(ctx, static_cast<uint64_t>(i)), done);
-  std::thread gen([&] { io.run(); });
+  for (int i = 0; i < mix.n_cmd; ++i) asio::co_spawn(io, http_client(ctx, kHttpCmd, static_cast<uint64_t>(i)), done);
+  for (int i = 0; i < mix.n_gate; ++i) asio::co_spawn(io, http_client(ctx, kGate, static_cast<uint64_t>(i)), done);
+  for (int i = 0; i < mix.n_status; ++i) asio::co_spawn(io, status_client(ctx), done);
+  for (int i = 0; i < mix.n_ws; ++i) asio::co_spawn(io, ws_client(ctx, static_cast<uint64_t>(i)), done);
+}
 
-  std::vector<Row> rows;
+// Minute `m`'s row: rcand sampled every second until the minute ends (`died` when it is gone),
+// then what the clients collected.
+Row sample_minute(Soak& s, int m, std::chrono::steady_clock::time_point t_start, bool& died) {
+  const pid_t pid = s.pid;
+  Row r;
+  r.minute = m;
+  const auto end = t_start + std::chrono::milliseconds(static_cast<int64_t>(m * s.opt.window_s * 1000));
+  std::vector<long> fd_samples, thread_samples;
+  while (std::chrono::steady_clock::now() < end) {
+    std::this_thread::sleep_until(std::min(end, std::chrono::steady_clock::now() + std::chrono::seconds(1)));
+    if (!s.node.child->alive()) {
+      died = true;
+      break;
+    }
+    ProcStat ps = proc_stat(pid);
+    r.rss_max_mb = std::max(r.rss_max_mb, static_cast<double>(ps.rss_kb) / 1024.0);
+    fd_samples.push_back(count_fds(pid));
+    thread_samples.push_back(ps.threads);
+  }
+  r.w = s.ctx.stats.take();
+  ProcStat ps = proc_stat(pid);
+  r.rss_mb = static_cast<double>(ps.rss_kb) / 1024.0;
+  r.anon_mb = static_cast<double>(ps.rss_anon_kb) / 1024.0;
+  r.rss_max_mb = std::max(r.rss_max_mb, r.rss_mb);
+  fd_samples.push_back(count_fds(pid));
+  thread_samples.push_back(ps.threads);
+  // The median of the per-second samples (what stays open) and their maximum (transients:
+  // a status client's connection in flight, a stream reconnecting, a segment being sealed).
+  auto median_max = [](std::vector<long>& v, long& median, long& mx) {
+    std::sort(v.begin(), v.end());
+    median = v[v.size() / 2];
+    mx = v.back();
+  };
+  long fmed = 0, fmax = 0;
+  median_max(fd_samples, fmed, fmax);
+  r.fds = static_cast<int>(fmed);
+  r.fds_max = static_cast<int>(fmax);
+  median_max(thread_samples, r.threads, r.threads_max);
+  r.audit_mb = static_cast<double>(dir_data_bytes(s.node.dir + "/audit")) / (1024.0 * 1024.0);
+  r.audit_records = audit_records(s.node.port);
+  return r;
+}
+
+// The minutes, each printed (and written to --tsv) as it ends; true when rcand died.
+bool sample_minutes(Soak& s, std::vector<Row>& rows) {
   std::ofstream tsv;
-  if (!tsv_path.empty()) {
-    tsv.open(tsv_path);
+  if (!s.opt.tsv_path.empty()) {
+    tsv.open(s.opt.tsv_path);
     tsv << join(header(), "\t") << "\n" << std::flush;
   }
   std::printf("%s\n", join(header(), "\t").c_str());
   bool died = false;
   const auto t_start = std::chrono::steady_clock::now();
-  for (int m = 1; m <= n_minutes && !died; ++m) {
-    Row r;
-    r.minute = m;
-    const auto end = t_start + std::chrono::milliseconds(static_cast<int64_t>(m * window_s * 1000));
-    std::vector<long> fd_samples, thread_samples;
-    while (std::chrono::steady_clock::now() < end) {
-      std::this_thread::sleep_until(std::min(end, std::chrono::steady_clock::now() + std::chrono::seconds(1)));
-      if (!node.child->alive()) {
-        died = true;
-        break;
-      }
-      ProcStat ps = proc_stat(pid);
-      r.rss_max_mb = std::max(r.rss_max_mb, static_cast<double>(ps.rss_kb) / 1024.0);
-      fd_samples.push_back(count_fds(pid));
-      thread_samples.push_back(ps.threads);
-    }
-    r.w = ctx.stats.take();
-    ProcStat ps = proc_stat(pid);
-    r.rss_mb = static_cast<double>(ps.rss_kb) / 1024.0;
-    r.anon_mb = static_cast<double>(ps.rss_anon_kb) / 1024.0;
-    r.rss_max_mb = std::max(r.rss_max_mb, r.rss_mb);
-    fd_samples.push_back(count_fds(pid));
-    thread_samples.push_back(ps.threads);
-    // The median of the per-second samples (what stays open) and their maximum (transients:
-    // a status client's connection in flight, a stream reconnecting, a segment being sealed).
-    auto median_max = [](std::vector<long>& v, long& median, long& mx) {
-      std::sort(v.begin(), v.end());
-      median = v[v.size() / 2];
-      mx = v.back();
-    };
-    long fmed = 0, fmax = 0;
-    median_max(fd_samples, fmed, fmax);
-    r.fds = static_cast<int>(fmed);
-    r.fds_max = static_cast<int>(fmax);
-    median_max(thread_samples, r.threads, r.threads_max);
-    r.audit_mb = static_cast<double>(dir_data_bytes(node.dir + "/audit")) / (1024.0 * 1024.0);
-    r.audit_records = audit_records(node.port);
+  for (int m = 1; m <= s.opt.n_minutes && !died; ++m) {
+    Row r = sample_minute(s, m, t_start, died);
     auto c = cells(r);
     std::printf("%s\n", join(c, "\t").c_str());
     for (auto& f : r.w.failures) std::printf("  failure: %s\n", f.c_str());
@@ -754,22 +824,29 @@ int main(int argc, char** argv) {
     if (tsv.is_open()) tsv << join(c, "\t") << "\n" << std::flush;
     rows.push_back(std::move(r));
   }
-  ctx.stop = true;
-  gen.join();
-  Window tail = ctx.stats.take();  // answers that came in after the last sample
+  return died;
+}
+
+// ---- the judgement ----------------------------------------------------------------------
+
+// Each judgement: whether it holds, and what it says.
+struct Verdicts {
+  std::vector<std::pair<bool, std::string>> list;
+  void judge(bool ok, std::string what) { list.emplace_back(ok, std::move(what)); }
+};
+
+// 1. No error, and every minute saw every traffic kind; returns the commands answered.
+uint64_t judge_errors(Soak& s, const std::vector<Row>& rows, bool died, Verdicts& v) {
+  Window tail = s.ctx.stats.take();  // answers that came in after the last sample
   uint64_t tail_errors = 0;
   for (auto e : tail.err) tail_errors += e;
-
-  // ---- the judgement ----------------------------------------------------------------------
-  std::vector<std::pair<bool, std::string>> verdicts;
-  auto judge = [&](bool ok, std::string what) { verdicts.emplace_back(ok, std::move(what)); };
   char line[512];
 
   uint64_t errors = tail_errors, answered = 0, commands = 0;
   for (auto& r : rows)
     for (int k = 0; k < kKinds; ++k) errors += r.w.err[static_cast<size_t>(k)];
   for (int k = 0; k < kKinds; ++k) {
-    uint64_t t = ctx.stats.total_ok(static_cast<Kind>(k));
+    uint64_t t = s.ctx.stats.total_ok(static_cast<Kind>(k));
     answered += t;
     if (k != kStatus) commands += t;
   }
@@ -777,17 +854,23 @@ int main(int argc, char** argv) {
   std::snprintf(line, sizeof line, "no error: %llu answers checked, %llu errors%s",
                 static_cast<unsigned long long>(answered), static_cast<unsigned long long>(errors),
                 died ? "; rcand DIED during the run" : "");
-  judge(errors == 0 && !died && answered > 0, line);
+  v.judge(errors == 0 && !died && answered > 0, line);
   bool every_kind = true;
   for (auto& r : rows)
     for (int k = 0; k < kKinds; ++k) every_kind = every_kind && r.w.ok[static_cast<size_t>(k)] > 0;
   for (auto& r : rows)
     for (int g = 0; g < kGateCases; ++g) every_kind = every_kind && r.w.gate[static_cast<size_t>(g)] > 0;
   for (auto& r : rows) every_kind = every_kind && r.w.telemetry > 0;
-  if (only.empty())
-    judge(every_kind && !rows.empty(),
-          "every minute answered every traffic kind and every gate case, and the streams received telemetry");
+  if (s.opt.only.empty())
+    v.judge(every_kind && !rows.empty(),
+            "every minute answered every traffic kind and every gate case, and the streams received telemetry");
+  return commands;
+}
 
+// 2.–3. Memory, fds and threads under load: the last window against the early one.
+void judge_growth(const Soak& s, const std::vector<Row>& rows, bool died, Verdicts& v) {
+  const int n_minutes = s.opt.n_minutes;
+  char line[512];
   const int W = std::max(1, n_minutes / 6);
   auto window_max = [&](int from, int to, auto get) {  // minutes [from, to], 1-based
     double mx = 0;
@@ -801,25 +884,33 @@ int main(int argc, char** argv) {
     double rss_l = window_max(last_from, last_to, [](const Row& r) { return r.rss_max_mb; });
     std::snprintf(line, sizeof line,
                   "memory: max VmRSS minutes %d-%d = %.1f MB ≤ max VmRSS minutes %d-%d (%.1f MB) + %.0f MB",
-                  last_from, last_to, rss_l, early_from, early_to, rss_e, rss_slack_mb);
-    judge(rss_l <= rss_e + rss_slack_mb, line);
+                  last_from, last_to, rss_l, early_from, early_to, rss_e, s.opt.rss_slack_mb);
+    v.judge(rss_l <= rss_e + s.opt.rss_slack_mb, line);
     double fd_e = window_max(early_from, early_to, [](const Row& r) { return r.fds; });
     double fd_l = window_max(last_from, last_to, [](const Row& r) { return r.fds; });
     std::snprintf(line, sizeof line, "fds under load: median minutes %d-%d = %.0f ≤ median minutes %d-%d = %.0f",
                   last_from, last_to, fd_l, early_from, early_to, fd_e);
-    judge(fd_l <= fd_e, line);
+    v.judge(fd_l <= fd_e, line);
     double th_e = window_max(early_from, early_to, [](const Row& r) { return r.threads; });
     double th_l = window_max(last_from, last_to, [](const Row& r) { return r.threads; });
     std::snprintf(line, sizeof line, "threads under load: median minutes %d-%d = %.0f ≤ median minutes %d-%d = %.0f",
                   last_from, last_to, th_l, early_from, early_to, th_e);
-    judge(th_l <= th_e, line);
+    v.judge(th_l <= th_e, line);
   } else {
-    judge(false, "memory, fds, threads: the run did not complete");
+    v.judge(false, "memory, fds, threads: the run did not complete");
   }
+}
+
+// 3.–4. Idle again with the counts from before the load; the audit directory grew.
+void judge_idle_and_audit(const Soak& s, Verdicts& v) {
+  const pid_t pid = s.pid;
+  const int idle_fds0 = s.idle_fds0;
+  const ProcStat& idle0 = s.idle0;
+  char line[512];
   // Idle again: the clients have closed their connections.
   int idle_fds1 = -1;
   ProcStat idle1;
-  for (int i = 0; i < 50 && node.child->alive(); ++i) {  // closes finish within a moment
+  for (int i = 0; i < 50 && s.node.child->alive(); ++i) {  // closes finish within a moment
     std::this_thread::sleep_for(std::chrono::milliseconds(200));
     idle_fds1 = count_fds(pid);
     idle1 = proc_stat(pid);
@@ -828,38 +919,85 @@ int main(int argc, char** argv) {
   std::snprintf(line, sizeof line, "idle after the load: fds %d (before: %d), threads %ld (before: %ld), VmRSS %.1f MB (before: %.1f MB)",
                 idle_fds1, idle_fds0, idle1.threads, idle0.threads, static_cast<double>(idle1.rss_kb) / 1024.0,
                 static_cast<double>(idle0.rss_kb) / 1024.0);
-  judge(idle_fds1 == idle_fds0 && idle1.threads == idle0.threads, line);
-  const uint64_t audit1 = dir_data_bytes(node.dir + "/audit");
-  std::snprintf(line, sizeof line, "audit grows: %.1f MB → %.1f MB", static_cast<double>(audit0) / 1048576.0,
+  v.judge(idle_fds1 == idle_fds0 && idle1.threads == idle0.threads, line);
+  const uint64_t audit1 = dir_data_bytes(s.node.dir + "/audit");
+  std::snprintf(line, sizeof line, "audit grows: %.1f MB → %.1f MB", static_cast<double>(s.audit0) / 1048576.0,
                 static_cast<double>(audit1) / 1048576.0);
-  judge(audit1 > audit0, line);
+  v.judge(audit1 > s.audit0, line);
+}
 
-  int st = node.child->stop();
-  judge(WIFEXITED(st) && WEXITSTATUS(st) == 0, "rcand stopped cleanly on SIGTERM (exit 0)");
-  layer.stop();
+// 5. rcand stops cleanly and `rcan audit verify` verifies at least `commands` records.
+void judge_shutdown(Soak& s, uint64_t commands, Verdicts& v) {
+  char line[512];
+  int st = s.node.child->stop();
+  v.judge(WIFEXITED(st) && WEXITSTATUS(st) == 0, "rcand stopped cleanly on SIGTERM (exit 0)");
+  s.layer->stop();
   std::string vout;
-  int vrc = run_capture(shell_quote(rcan_cli) + " audit verify --data-dir " + shell_quote(node.dir) +
-                            " --secret-file " + shell_quote(node.dir + "/audit.secret"),
+  int vrc = run_capture(shell_quote(s.opt.rcan_cli) + " audit verify --data-dir " + shell_quote(s.node.dir) +
+                            " --secret-file " + shell_quote(s.node.dir + "/audit.secret"),
                         vout);
   while (!vout.empty() && vout.back() == '\n') vout.pop_back();
   unsigned long long records = 0;
   if (size_t p = vout.find("ok: "); p != std::string::npos) records = std::strtoull(vout.c_str() + p + 4, nullptr, 10);
   std::snprintf(line, sizeof line, "audit chain: `rcan audit verify` exit %d (%s); %llu records ≥ %llu commands answered",
                 vrc, vout.substr(0, 200).c_str(), records, static_cast<unsigned long long>(commands));
-  judge(vrc == 0 && records >= commands, line);
+  v.judge(vrc == 0 && records >= commands, line);
+}
 
-  // ---- the quotable table -----------------------------------------------------------------
+// The quotable table and the verdicts; true when every judgement holds.
+bool print_results(const Soak& s, std::vector<Row>& rows, const Verdicts& v) {
   std::printf("\n%s\n", join(header(), " | ", "| ", " |").c_str());
   std::vector<std::string> sep(header().size(), "---:");
   std::printf("%s\n", join(sep, "|", "|", "|").c_str());
   for (auto& r : rows) std::printf("%s\n", join(cells(r), " | ", "| ", " |").c_str());
   std::printf("\nlatency in ms (client round trip, per request kind, within the minute); sizes in MiB\n\n");
   bool all = true;
-  for (auto& [ok, what] : verdicts) {
+  for (auto& [ok, what] : v.list) {
     std::printf("%s  %s\n", ok ? "PASS" : "FAIL", what.c_str());
     all = all && ok;
   }
   std::printf("\nsoak: %s\n", all ? "PASS" : "FAIL");
-  if (keep) std::printf("data kept in %s\n", root.c_str());
-  return all ? 0 : 1;
+  if (s.opt.keep) std::printf("data kept in %s\n", s.root.c_str());
+  return all;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options opt;
+  if (!parse_options(argc, argv, opt)) return 2;
+  signal(SIGPIPE, SIG_IGN);
+  std::string tmpl_s = opt.data_root + "/rcan-soak-XXXXXX";
+  std::vector<char> tmpl(tmpl_s.begin(), tmpl_s.end());
+  tmpl.push_back('\0');
+  const char* made = mkdtemp(tmpl.data());
+  if (!made) {
+    std::perror("soak: mkdtemp");
+    return 1;
+  }
+  Cleanup cleanup{made, opt.keep};
+  Soak s;
+  s.opt = opt;
+  s.root = made;
+
+  if (!first_start(s)) return 1;
+  const std::string layer_url = start_layer(s);
+  if (layer_url.empty() || !write_config(s, layer_url) || !restart_configured(s)) return 1;
+  const ClientMix mix = client_mix(opt);
+  print_intro(s, mix);
+
+  asio::io_context io{1};
+  spawn_clients(io, s.ctx, mix);
+  std::thread gen([&] { io.run(); });
+  std::vector<Row> rows;
+  const bool died = sample_minutes(s, rows);
+  s.ctx.stop = true;
+  gen.join();
+
+  Verdicts verdicts;
+  const uint64_t commands = judge_errors(s, rows, died, verdicts);
+  judge_growth(s, rows, died, verdicts);
+  judge_idle_and_audit(s, verdicts);
+  judge_shutdown(s, commands, verdicts);
+  return print_results(s, rows, verdicts) ? 0 : 1;
 }

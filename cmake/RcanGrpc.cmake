@@ -26,8 +26,10 @@ set_target_properties(rcan_proto PROPERTIES POSITION_INDEPENDENT_CODE ON)
 target_include_directories(rcan_proto SYSTEM PUBLIC ${RCAN_PROTO_GEN})
 target_link_libraries(rcan_proto PUBLIC PkgConfig::GRPCPP)
 
-# src/transport/grpc_*.cpp, compiled once (PIC) for two consumers.
-file(GLOB RCAN_GRPC_SOURCES CONFIGURE_DEPENDS ${PROJECT_SOURCE_DIR}/src/transport/grpc_*.cpp)
+# The message conversion (src/transport/grpc_convert.cpp) and the node's gRPC binding
+# (src/node/bindings/grpc_*.cpp), compiled once (PIC) for two consumers.
+file(GLOB RCAN_GRPC_SOURCES CONFIGURE_DEPENDS ${PROJECT_SOURCE_DIR}/src/transport/grpc_*.cpp
+     ${PROJECT_SOURCE_DIR}/src/node/bindings/grpc_*.cpp)
 add_library(rcan_grpc_objects OBJECT ${RCAN_GRPC_SOURCES})
 set_target_properties(rcan_grpc_objects PROPERTIES POSITION_INDEPENDENT_CODE ON)
 target_link_libraries(rcan_grpc_objects PUBLIC rcan_proto PRIVATE rcan_node rcan_warnings)
@@ -37,7 +39,7 @@ add_library(rcan_grpc STATIC $<TARGET_OBJECTS:rcan_grpc_objects>)
 target_link_libraries(rcan_grpc PUBLIC rcan_node rcan_proto)
 
 # librcand_grpc.so: the gRPC transport as the module rcand dlopen()s when grpc.enabled is true
-# (src/transport/grpc_module.h, apps/rcand/grpc_loader.cpp). It links gRPC and protobuf but not
+# (src/node/bindings/grpc_module.h, apps/rcand/grpc_loader.cpp). It links gRPC and protobuf but not
 # the node: Node, json, logs… resolve against the rcand executable (ENABLE_EXPORTS). Placed
 # beside rcand; installed into lib/rcan/ (found relative to rcand, docs/TRANSPORT.md).
 add_library(rcand_grpc MODULE $<TARGET_OBJECTS:rcan_grpc_objects>)

@@ -6,7 +6,7 @@
 #include <cstdlib>
 #include <string_view>
 
-#include "node/hitl.h"
+#include "node/ai/hitl.h"
 #include "rcan/json.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -1,4 +1,4 @@
-// libFuzzer: `.rcan.yaml` parsing (src/node/config.cpp) on arbitrary text. Must never crash,
+// libFuzzer: `.rcan.yaml` parsing (src/config/config.cpp) on arbitrary text. Must never crash,
 // hang or blow up memory: alias bombs, recursive aliases, deep nesting and oversized input
 // must end in an Error. Accepted configs must satisfy the loader's own invariants.
 //
@@ -10,7 +10,7 @@
 #include <cstdlib>
 #include <string_view>
 
-#include "node/config.h"
+#include "config/config.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   std::string_view text(reinterpret_cast<const char*>(data), size);

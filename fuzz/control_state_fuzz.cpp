@@ -6,17 +6,17 @@
 #include <cstdlib>
 #include <string_view>
 
-#include "node/consent.h"
-#include "node/http_client.h"
-#include "node/ownership.h"
-#include "node/partition.h"
-#include "node/sessions.h"
+#include "node/control/consent.h"
+#include "base/http_client.h"
+#include "node/control/ownership.h"
+#include "node/control/partition.h"
+#include "node/control/sessions.h"
 #include "rcan/json.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   std::string_view text(reinterpret_cast<const char*>(data), size);
-  (void)rcan::node::parse_http_url(text);
-  int code = rcan::node::parse_status_line(text);
+  (void)rcan::parse_http_url(text);
+  int code = rcan::parse_status_line(text);
   if (code != 0 && (code < 100 || code > 599)) std::abort();
   auto v = rcan::json::parse(text, {.max_depth = 32, .max_bytes = 1u << 20});
   if (!v.ok() || !v->is_object()) return 0;

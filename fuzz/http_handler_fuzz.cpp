@@ -24,7 +24,7 @@
 
 namespace {
 
-[[noreturn]] void fail(const std::string& what, const rcan::node::HttpResponse* r = nullptr) {
+[[noreturn]] void fail(const std::string& what, const rcan::transport::HttpResponse* r = nullptr) {
   std::fprintf(stderr, "http_handler_fuzz: %s\n", what.c_str());
   if (r) std::fprintf(stderr, "  status %d, content-type %s, body: %.2000s\n", r->status, r->content_type.c_str(), r->body.c_str());
   std::abort();
@@ -39,10 +39,10 @@ struct Answer {
   std::mutex mu;
   std::condition_variable cv;
   int calls = 0;
-  rcan::node::HttpResponse response;
+  rcan::transport::HttpResponse response;
 };
 
-void check_response(const rcan::node::HttpResponse& r) {
+void check_response(const rcan::transport::HttpResponse& r) {
   if (r.status < 100 || r.status > 599) fail("status out of range", &r);
   if (r.status == 500) fail("500 on input", &r);
   if (r.content_type.rfind("application/json", 0) != 0) return;
@@ -62,17 +62,17 @@ void check_response(const rcan::node::HttpResponse& r) {
 
 // A sink for an upgrade the node accepts: the fuzz input carries no frames (ws_stream_fuzz
 // does), so the stream is closed at once.
-struct NullSink final : rcan::node::StreamSink {
+struct NullSink final : rcan::transport::StreamSink {
   bool send_text(std::string) override { return true; }
   void close(uint16_t, std::string) override {}
   const std::string& remote_addr() const override { return addr; }
   std::string addr = "127.0.0.1:40001";
 };
 
-void handle_one(rcan::node::HttpRequest req, bool websocket) {
+void handle_one(rcan::transport::HttpRequest req, bool websocket) {
   auto& h = rcan::fuzz::NodeHarness::get();
   if (websocket) {
-    rcan::node::HttpResponse refusal;
+    rcan::transport::HttpResponse refusal;
     auto session = h.node().open(req, std::make_shared<NullSink>(), refusal);
     if (session) {
       session->on_closed();
@@ -84,7 +84,7 @@ void handle_one(rcan::node::HttpRequest req, bool websocket) {
   }
   const std::string method = req.method, target = req.target;
   auto answer = std::make_shared<Answer>();
-  h.node().handle(std::move(req), [answer](rcan::node::HttpResponse r) {
+  h.node().handle(std::move(req), [answer](rcan::transport::HttpResponse r) {
     std::lock_guard<std::mutex> lock(answer->mu);
     if (++answer->calls > 1) fail("respond called twice", &r);
     answer->response = std::move(r);

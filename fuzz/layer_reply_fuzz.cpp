@@ -6,7 +6,7 @@
 #include <cstdlib>
 #include <string_view>
 
-#include "node/layers.h"
+#include "node/ai/brain_layers.h"
 #include "rcan/errors.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -6,7 +6,7 @@
 #include <string>
 #include <string_view>
 
-#include "node/mqtt_topics.h"
+#include "rcan/mqtt_topics.h"
 #include "transport/mqtt_client.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
@@ -14,31 +14,31 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   size_t nl = text.find('\n');
   std::string_view topic = text.substr(0, nl);
   std::string_view payload = nl == std::string_view::npos ? std::string_view() : text.substr(nl + 1);
-  using rcan::node::TopicKind;
-  auto t = rcan::node::parse_topic("rcan", topic);
+  using rcan::mqtt::TopicKind;
+  auto t = rcan::mqtt::parse_topic("rcan", topic);
   switch (t.kind) {
-    case TopicKind::kFleetCmd:
-      if (rcan::node::fleet_topics("rcan", t.fleet_id).cmd() != topic) std::abort();
+    case rcan::mqtt::TopicKind::kFleetCmd:
+      if (rcan::mqtt::fleet_topics("rcan", t.fleet_id).cmd() != topic) std::abort();
       break;
-    case TopicKind::kFleetEstop:
-      if (rcan::node::fleet_topics("rcan", t.fleet_id).estop() != topic) std::abort();
+    case rcan::mqtt::TopicKind::kFleetEstop:
+      if (rcan::mqtt::fleet_topics("rcan", t.fleet_id).estop() != topic) std::abort();
       break;
-    case TopicKind::kMemberCmd:
-      if (rcan::node::fleet_topics("rcan", t.fleet_id).member(t.member).cmd() != topic) std::abort();
+    case rcan::mqtt::TopicKind::kMemberCmd:
+      if (rcan::mqtt::fleet_topics("rcan", t.fleet_id).member(t.member).cmd() != topic) std::abort();
       break;
-    case TopicKind::kSwarmAnnounce:
-      if (rcan::node::swarm_topics("rcan", t.swarm_id).announce() != topic) std::abort();
+    case rcan::mqtt::TopicKind::kSwarmAnnounce:
+      if (rcan::mqtt::swarm_topics("rcan", t.swarm_id).announce() != topic) std::abort();
       break;
-    case TopicKind::kSwarmHeartbeat:
-      if (rcan::node::swarm_topics("rcan", t.swarm_id).heartbeat(t.member) != topic) std::abort();
+    case rcan::mqtt::TopicKind::kSwarmHeartbeat:
+      if (rcan::mqtt::swarm_topics("rcan", t.swarm_id).heartbeat(t.member) != topic) std::abort();
       break;
-    case TopicKind::kSwarmJoin:
-      if (rcan::node::swarm_topics("rcan", t.swarm_id).join() != topic) std::abort();
+    case rcan::mqtt::TopicKind::kSwarmJoin:
+      if (rcan::mqtt::swarm_topics("rcan", t.swarm_id).join() != topic) std::abort();
       break;
-    case TopicKind::kRobotCmd:
-    case TopicKind::kOther: break;
+    case rcan::mqtt::TopicKind::kRobotCmd:
+    case rcan::mqtt::TopicKind::kOther: break;
   }
-  auto p = rcan::node::parse_payload(payload);
+  auto p = rcan::mqtt::parse_payload(payload);
   if (p.ok() && !p->is_object()) std::abort();
   auto u = rcan::transport::parse_broker_url(topic);
   if (u.ok() && (u->host.empty() || u->port == 0)) std::abort();

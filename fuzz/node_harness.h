@@ -25,13 +25,13 @@
 #include <string>
 #include <string_view>
 
-#include "node/actuation_safety.h"
-#include "node/ai.h"
-#include "node/clock.h"
-#include "node/config.h"
-#include "node/node.h"
-#include "node/safety.h"
-#include "node/sim_robot.h"
+#include "node/safety/actuation_safety.h"
+#include "node/ai/ai_services.h"
+#include "base/clock.h"
+#include "config/config.h"
+#include "node/api/node.h"
+#include "node/safety/safety.h"
+#include "node/safety/sim_robot.h"
 #include "rcan/crypto/jwt.h"
 #include "rcan/crypto/keys.h"
 #include "rcan/errors.h"
@@ -177,7 +177,7 @@ class NodeHarness {
     auth.trust.add(std::string(kIssuer), *verify);
     auth.verify.audience = ruri_;
     auth.verify.fleet_ids = {device, ruri_};
-    const int64_t now_s = node::Clock::system().wall_ms() / 1000;
+    const int64_t now_s = rcan::Clock::system().wall_ms() / 1000;
     static constexpr std::array<const char*, 5> kClaims{"guest", "user", "leasee", "owner", "creator"};
     for (size_t i = 0; i < kClaims.size(); ++i) {
       json::Object claims{{"iss", std::string(kIssuer)},
@@ -198,7 +198,7 @@ class NodeHarness {
     ns.name = "fuzz-robot";
     ns.rate_per_minute = {0, 0, 0, 0, 0, 0};  // no rate limit: the fuzzer sends thousands per second
     ns.state_dir = dir_;
-    services_ = std::make_unique<node::NodeServices>(ns, node::Clock::system(), std::move(auth), *act_, *audit_);
+    services_ = std::make_unique<node::NodeServices>(ns, rcan::Clock::system(), std::move(auth), *act_, *audit_);
 
     auto robot_keys = keys::generate();
     if (!robot_keys.ok()) die("robot keys: " + robot_keys.error().message);

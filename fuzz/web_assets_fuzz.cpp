@@ -1,4 +1,4 @@
-// libFuzzer: the dashboard's file server (src/node/web_assets.cpp) on arbitrary request
+// libFuzzer: the dashboard's file server (src/node/api/web_assets.cpp) on arbitrary request
 // lines. Input: "METHOD\nPATH\nIF-NONE-MATCH" (missing parts empty). Must never crash; every
 // answer is 200/304/404/405 with the CSP header, a 200 carries exactly the embedded bytes and
 // a 304 carries none.
@@ -7,7 +7,7 @@
 #include <string>
 #include <string_view>
 
-#include "node/web_assets.h"
+#include "node/api/web_assets.h"
 
 namespace {
 
@@ -26,11 +26,11 @@ std::string_view next_line(std::string_view& s) {
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   std::string_view in(reinterpret_cast<const char*>(data), size);
-  rcan::node::HttpRequest req;
+  rcan::transport::HttpRequest req;
   req.method = std::string(next_line(in));
   req.path = std::string(next_line(in));
   req.headers.emplace_back("if-none-match", std::string(next_line(in)));
-  rcan::node::HttpResponse r = rcan::node::web_response(req, 0);
+  rcan::transport::HttpResponse r = rcan::node::web_response(req, 0);
   bool csp = false;
   for (const auto& h : r.headers)
     if (h.first == "Content-Security-Policy") csp = h.second == rcan::node::web_csp();

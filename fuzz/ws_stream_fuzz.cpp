@@ -32,7 +32,7 @@ namespace {
   std::abort();
 }
 
-class Sink final : public rcan::node::StreamSink {
+class Sink final : public rcan::transport::StreamSink {
  public:
   bool send_text(std::string text) override {
     if (std::getenv("RCAN_FUZZ_VERBOSE")) std::fprintf(stderr, "  <- %.300s\n", text.c_str());
@@ -100,7 +100,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     authorization = first.substr(tab + 1);
     first = first.substr(0, tab);
   }
-  rcan::node::HttpRequest up;
+  rcan::transport::HttpRequest up;
   up.method = "GET";
   up.target = std::string(first.empty() ? "/rcan/v1/stream" : first);
   if (rcan::transport::detail::split_target(up.target, up.path, up.query)) return 0;  // the transport answers 400
@@ -108,7 +108,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (!authorization.empty()) up.headers.emplace_back("authorization", std::string(authorization));
   up.remote_addr = "127.0.0.1:40002";
   auto sink = std::make_shared<Sink>();
-  rcan::node::HttpResponse refusal;
+  rcan::transport::HttpResponse refusal;
   auto session = h.node().open(up, sink, refusal);
   if (!session) {
     if (refusal.status < 400 || refusal.status > 499) fail("refusal status " + std::to_string(refusal.status), refusal.body);

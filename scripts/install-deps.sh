@@ -14,7 +14,7 @@ PKGS=(
   postgresql libpq-dev
   libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
   libgtest-dev libgmock-dev googletest libbenchmark-dev
-  clang-14 libclang-rt-14-dev
+  clang-14 libclang-rt-14-dev clang-format
   python3 curl python3-grpcio python3-protobuf
   chromium fonts-dejavu-core nodejs
   avahi-daemon dbus libavahi-client-dev iproute2

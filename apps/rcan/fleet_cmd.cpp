@@ -15,7 +15,7 @@
 #include "cli.h"
 #include "fleet_audit_db.h"
 #include "rcan/audit/secret.h"
-#include "node/mqtt_topics.h"
+#include "rcan/mqtt_topics.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
 #include "rcan/json.h"
@@ -106,7 +106,7 @@ class Session {
     client_ = std::make_unique<transport::MqttClient>(mo);
     for (const auto& s : subscriptions) client_->subscribe(s, 1);
     client_->on_message([this](const transport::MqttMessage& m) {
-      auto body = node::parse_payload(m.payload);
+      auto body = mqtt::parse_payload(m.payload);
       if (!body.ok()) return;
       std::lock_guard<std::mutex> lk(mu_);
       inbox_.push_back(Inbound{m.topic, std::move(body).value(), m.retained});
@@ -172,7 +172,7 @@ const std::vector<std::string> kFlags{"wait-complete"};
 Result<Common> common(const Options& o, bool need_token) {
   Common c;
   c.prefix = o.get("prefix", "rcan");
-  if (!node::valid_topic_prefix(c.prefix)) return Error(ErrorCode::kSchemaValidationFailed, "--prefix is not a valid topic prefix");
+  if (!mqtt::valid_topic_prefix(c.prefix)) return Error(ErrorCode::kSchemaValidationFailed, "--prefix is not a valid topic prefix");
   std::string tf = o.get("token", std::getenv("RCAN_TOKEN_FILE") ? std::getenv("RCAN_TOKEN_FILE") : "");
   if (need_token) {
     if (tf.empty()) return Error(ErrorCode::kSchemaValidationFailed, "--token FILE is required (a fleet JWT)");
@@ -204,7 +204,7 @@ json::Value message(const std::string& type, json::Object payload, const std::st
 
 bool valid_ids(const std::vector<std::string>& ids) {
   for (const auto& m : ids)
-    if (!node::valid_topic_segment(m)) return false;
+    if (!mqtt::valid_topic_segment(m)) return false;
   return true;
 }
 
@@ -261,8 +261,8 @@ int estop_or_resume(const Options& o, bool estop) {
   auto c = common(o, true);
   if (!c.ok()) return usage_error(verb, c.error().message);
   auto members = split_list(o.get("members"));
-  if (!node::valid_topic_segment(fleet) || !valid_ids(members)) return usage_error(verb, "bad fleet or member id");
-  auto topics = node::fleet_topics(c->prefix, fleet);
+  if (!mqtt::valid_topic_segment(fleet) || !valid_ids(members)) return usage_error(verb, "bad fleet or member id");
+  auto topics = mqtt::fleet_topics(c->prefix, fleet);
   Session s;
   s.set_timeout(c->timeout_ms);
   std::vector<std::string> subs;
@@ -314,14 +314,14 @@ int command_main(const Options& o) {
   auto c = common(o, true);
   if (!c.ok()) return usage_error("fleet command", c.error().message);
   auto members = split_list(o.get("members"));
-  if (!node::valid_topic_segment(fleet) || !valid_ids(members)) return usage_error("fleet command", "bad fleet or member id");
+  if (!mqtt::valid_topic_segment(fleet) || !valid_ids(members)) return usage_error("fleet command", "bad fleet or member id");
   json::Object payload{{"command", action}, {"fleet_id", fleet}};
   if (o.has("params")) {
     auto p = json::parse(o.get("params"));
     if (!p.ok() || !p->is_object()) return usage_error("fleet command", "--params must be a JSON object");
     payload.set("params", *p);
   }
-  auto topics = node::fleet_topics(c->prefix, fleet);
+  auto topics = mqtt::fleet_topics(c->prefix, fleet);
   Session s;
   s.set_timeout(c->timeout_ms);
   std::vector<std::string> subs;
@@ -388,12 +388,12 @@ Result<std::vector<Step>> parse_choreography(const json::Value& doc, std::string
   std::string cmd = str_of(doc, "command");
   if (!cmd.empty() && cmd != "COORDINATED_MOVE") return bad("command must be COORDINATED_MOVE");
   *fleet = str_of(doc, "fleet_id");
-  if (!node::valid_topic_segment(*fleet)) return bad("fleet_id is missing or not a valid id");
+  if (!mqtt::valid_topic_segment(*fleet)) return bad("fleet_id is missing or not a valid id");
   std::set<std::string> targets;
   if (const json::Value* t = doc.get("targets"); t != nullptr) {
     if (!t->is_array()) return bad("targets must be an array of robot ids");
     for (const auto& r : t->as_array()) {
-      if (!r.is_string() || !node::valid_topic_segment(r.as_string())) return bad("targets must be robot ids");
+      if (!r.is_string() || !mqtt::valid_topic_segment(r.as_string())) return bad("targets must be robot ids");
       targets.insert(r.as_string());
     }
   }
@@ -413,7 +413,7 @@ Result<std::vector<Step>> parse_choreography(const json::Value& doc, std::string
     if (!sv.is_object()) return bad(where + " must be an object");
     s.robot = str_of(sv, "robot");
     s.action = str_of(sv, "action");
-    if (!node::valid_topic_segment(s.robot)) return bad(where + ": robot is missing or not a valid id");
+    if (!mqtt::valid_topic_segment(s.robot)) return bad(where + ": robot is missing or not a valid id");
     if (!targets.empty() && targets.count(s.robot) == 0) return bad(where + ": robot " + s.robot + " is not in targets");
     if (s.action.empty() || s.action.size() > 128) return bad(where + ": action is required");
     if (const json::Value* p = sv.get("params"); p != nullptr) {
@@ -454,7 +454,7 @@ int run_main(const Options& o) {
   std::string fleet, type;
   auto steps = parse_choreography(*doc, &fleet, &type, c->timeout_ms);
   if (!steps.ok()) return usage_error("fleet run", steps.error().message);
-  auto topics = node::fleet_topics(c->prefix, fleet);
+  auto topics = mqtt::fleet_topics(c->prefix, fleet);
   std::set<std::string> robots;
   for (const auto& s : *steps) robots.insert(s.robot);
   Session sess;
@@ -588,8 +588,8 @@ int status_main(const Options& o) {
   auto c = common(o, false);
   if (!c.ok()) return usage_error("fleet status", c.error().message);
   const std::string fleet = o.positional()[1];
-  if (!node::valid_topic_segment(fleet)) return usage_error("fleet status", "bad fleet id");
-  auto topics = node::fleet_topics(c->prefix, fleet);
+  if (!mqtt::valid_topic_segment(fleet)) return usage_error("fleet status", "bad fleet id");
+  auto topics = mqtt::fleet_topics(c->prefix, fleet);
   Session s;
   s.set_timeout(c->timeout_ms);
   if (Status st = s.open(o, {topics.base + "/robot/+/status"}); !st.ok()) return usage_error("fleet status", st.error().message);
@@ -645,7 +645,7 @@ int audit_collect_main(const Options& o) {
   auto c = common(o, false);
   if (!c.ok()) return usage_error("fleet audit collect", c.error().message);
   const std::string fleet = o.positional()[2];
-  if (!node::valid_topic_segment(fleet) || o.has("out") == o.has("db"))
+  if (!mqtt::valid_topic_segment(fleet) || o.has("out") == o.has("db"))
     return usage_error("fleet audit collect", "give the fleet id and one of --out DIR or --db CONNINFO");
   auto secrets = load_secrets(o);
   if (!secrets.ok()) return usage_error("fleet audit collect", secrets.error().message);
@@ -661,7 +661,7 @@ int audit_collect_main(const Options& o) {
   std::error_code ec;
   if (o.has("out")) std::filesystem::create_directories(o.get("out"), ec);
   if (ec) return usage_error("fleet audit collect", "cannot create " + o.get("out"));
-  auto topics = node::fleet_topics(c->prefix, fleet);
+  auto topics = mqtt::fleet_topics(c->prefix, fleet);
   Session s;
   s.set_timeout(c->timeout_ms);
   if (Status st = s.open(o, {topics.base + "/robot/+/audit"}); !st.ok()) return usage_error("fleet audit collect", st.error().message);
@@ -676,7 +676,7 @@ int audit_collect_main(const Options& o) {
   while (auto m = s.next(deadline)) {
     std::string member = m->topic.substr(topics.base.size() + 7);
     member = member.substr(0, member.find('/'));
-    if (!node::valid_topic_segment(member)) continue;
+    if (!mqtt::valid_topic_segment(member)) continue;
     Chain& ch = chains[member];
     auto sec = secrets->find(member);
     if (db) {

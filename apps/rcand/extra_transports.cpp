@@ -12,17 +12,17 @@ void ExtraTransports::stop(int drain_ms) {
 Result<std::unique_ptr<ExtraTransports>> start_extra_transports(const config::NodeConfig& cfg, node::Node& node) {
   auto t = std::make_unique<ExtraTransports>();
   if (cfg.udp.enabled) {
-    transport::UdpOptions uo;
+    node::UdpOptions uo;
     uo.bind_address = cfg.udp.bind_address;
     uo.port = cfg.udp.port;
     uo.heartbeat = cfg.udp.heartbeat;
     uo.discovery = cfg.udp.discovery;
     uo.discovery_per_source_per_min = cfg.udp.discovery_per_source_per_min;
-    t->udp = std::make_unique<transport::UdpService>(uo, node.services());
+    t->udp = std::make_unique<node::UdpService>(uo, node.services());
     if (auto p = t->udp->start(); !p.ok()) return Error(ErrorCode::kInternal, "udp: " + p.error().message);
   }
   if (cfg.grpc.enabled) {
-    transport::GrpcOptions go;
+    node::GrpcOptions go;
     go.bind_address = cfg.grpc.bind_address;
     go.port = cfg.grpc.port;
     go.tls = cfg.grpc.tls.enabled;

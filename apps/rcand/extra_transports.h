@@ -4,16 +4,16 @@
 
 #include <memory>
 
-#include "node/config.h"
-#include "node/node.h"
-#include "transport/grpc_module.h"
-#include "transport/udp.h"
+#include "config/config.h"
+#include "node/api/node.h"
+#include "node/bindings/grpc_module.h"
+#include "node/bindings/udp_service.h"
 
 namespace rcan::rcand {
 
 struct ExtraTransports {
-  std::unique_ptr<transport::GrpcTransport> grpc;  // librcand_grpc.so (grpc_loader.h)
-  std::unique_ptr<transport::UdpService> udp;
+  std::unique_ptr<node::GrpcTransport> grpc;  // librcand_grpc.so (grpc_loader.h)
+  std::unique_ptr<node::UdpService> udp;
   // gRPC first (drains its calls through the pipeline), then UDP.
   void stop(int drain_ms);
 };

@@ -5,7 +5,7 @@
 
 #include <filesystem>
 
-#include "node/log.h"
+#include "base/log.h"
 #include "rcan/errors.h"
 
 namespace rcan::rcand {
@@ -25,8 +25,8 @@ std::vector<std::string> grpc_module_candidates(const std::string& configured) {
   return out;
 }
 
-Result<std::unique_ptr<transport::GrpcTransport>> load_grpc_transport(const std::string& configured,
-                                                                      const transport::GrpcOptions& opt,
+Result<std::unique_ptr<node::GrpcTransport>> load_grpc_transport(const std::string& configured,
+                                                                      const node::GrpcOptions& opt,
                                                                       node::Node& node) {
   std::vector<std::string> candidates = grpc_module_candidates(configured);
   std::string tried;
@@ -45,12 +45,12 @@ Result<std::unique_ptr<transport::GrpcTransport>> load_grpc_transport(const std:
     auto create = reinterpret_cast<RcanGrpcModuleCreate>(::dlsym(handle, RCAN_GRPC_MODULE_ENTRY));
     if (!create)
       return Error(ErrorCode::kInternal, path + " is not an rcand gRPC module (no " RCAN_GRPC_MODULE_ENTRY ")");
-    transport::GrpcTransport* t = create(transport::kGrpcModuleAbi, &opt, &node);
+    node::GrpcTransport* t = create(node::kGrpcModuleAbi, &opt, &node);
     if (!t)
       return Error(ErrorCode::kInternal, "the gRPC module " + path + " was built for another rcand (ABI " +
-                                             std::to_string(transport::kGrpcModuleAbi) + " expected)");
-    node::log(node::LogLevel::kDebug, "grpc.module", json::Object{{"path", path}});
-    return std::unique_ptr<transport::GrpcTransport>(t);
+                                             std::to_string(node::kGrpcModuleAbi) + " expected)");
+    rcan::log(rcan::LogLevel::kDebug, "grpc.module", json::Object{{"path", path}});
+    return std::unique_ptr<node::GrpcTransport>(t);
   }
   return Error(ErrorCode::kInternal, "grpc.enabled is true but the gRPC module " + std::string(kGrpcModuleFile) +
                                          " was not found (looked in: " + (tried.empty() ? "nowhere" : tried) +

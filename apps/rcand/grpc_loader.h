@@ -1,4 +1,4 @@
-// Loading the gRPC transport module (librcand_grpc.so, src/transport/grpc_module.h) on demand:
+// Loading the gRPC transport module (librcand_grpc.so, src/node/bindings/grpc_module.h) on demand:
 // rcand maps gRPC, protobuf and absl only when the config enables gRPC. docs/TRANSPORT.md.
 #pragma once
 
@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "rcan/result.h"
-#include "transport/grpc_module.h"
+#include "node/bindings/grpc_module.h"
 
 namespace rcan::rcand {
 
@@ -19,8 +19,8 @@ std::vector<std::string> grpc_module_candidates(const std::string& configured);
 
 // dlopen()s the first candidate that exists and creates a transport. Errors (INTERNAL) name
 // the paths tried, or the loader's message (missing library, wrong ABI version).
-Result<std::unique_ptr<transport::GrpcTransport>> load_grpc_transport(const std::string& configured,
-                                                                      const transport::GrpcOptions& opt,
+Result<std::unique_ptr<node::GrpcTransport>> load_grpc_transport(const std::string& configured,
+                                                                      const node::GrpcOptions& opt,
                                                                       node::Node& node);
 
 }  // namespace rcan::rcand

@@ -9,18 +9,18 @@
 #include <cstring>
 #include <string>
 
-#include "node/layers.h"
-#include "node/log.h"
+#include "node/ai/brain_layers.h"
+#include "base/log.h"
 #include "transport/http_server.h"
 
 using namespace rcan;
 
 namespace {
 
-class NoStreams final : public node::StreamHandler {
+class NoStreams final : public transport::StreamHandler {
  public:
-  std::unique_ptr<node::StreamSession> open(const node::HttpRequest&, std::shared_ptr<node::StreamSink>,
-                                            node::HttpResponse& refusal) override {
+  std::unique_ptr<transport::StreamSession> open(const transport::HttpRequest&, std::shared_ptr<transport::StreamSink>,
+                                            transport::HttpResponse& refusal) override {
     refusal.status = 404;
     refusal.body = R"({"error":"a brain layer has no streams"})";
     return nullptr;
@@ -81,7 +81,7 @@ int sim_layer_main(int argc, char** argv) {
     std::fprintf(stderr, "rcand --sim-layer: cannot listen: %s\n", bound.error().message.c_str());
     return 1;
   }
-  node::log(node::LogLevel::kInfo, "listening",
+  rcan::log(rcan::LogLevel::kInfo, "listening",
             json::Object{{"url", "http://" + bind + ":" + std::to_string(*bound)},
                          {"sim_layer", o.layer},
                          {"confidence", o.confidence}});

@@ -251,9 +251,9 @@ class Stream {
   bool connected() const { return connected_.load(); }
   std::string session_id() const;
 
-  class Conn;
-
  private:
+  class Connection;  // one connection's life (stream.cpp)
+
   StreamOptions opts_;
   std::atomic<bool> stop_{false};
   std::atomic<bool> connected_{false};

@@ -159,6 +159,12 @@ std::string python_dumps(const Value& v, bool sort_keys = true, bool compact = t
 
 // Compact, members in stored order, raw UTF-8; floats in Python repr form.
 std::string dump(const Value& v);
+
+// Lenient readers of one member, for stored state and request bodies: the member `key` of `v`
+// when `v` is an object holding it with that kind, otherwise `def`.
+//   int64_t end = json::int_field(lease, "end_ms");   // 0 when absent or not an integer
+std::string string_field(const Value& v, std::string_view key, std::string_view def = {});
+int64_t int_field(const Value& v, std::string_view key, int64_t def = 0);
 // Appends `s` as a JSON string literal, as dump() and canonical() write a string. `s` must not
 // point into `out` (appending may move `out`'s bytes).
 void append_string(std::string& out, std::string_view s);

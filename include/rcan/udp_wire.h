@@ -1,7 +1,7 @@
 // UDP datagrams of the node (docs/TRANSPORT.md §UDP): HEARTBEAT (a control session's deadman,
 // authenticated with the per-session key issued at claim), DISCOVER and ANNOUNCE. Pure
 // encoding and parsing: no sockets (librcan). Shared by the node's UDP service
-// (src/transport/udp.cpp), the CLI (rcan udp-discover), tests and fuzz/udp_datagram_fuzz.cpp.
+// (src/node/bindings/udp_service.cpp), the CLI (rcan udp-discover), tests and fuzz/udp_datagram_fuzz.cpp.
 //
 // Every datagram starts with the same 8-byte header:
 //   0..3  magic "RCAN" (0x52 0x43 0x41 0x4E)

@@ -152,6 +152,16 @@ const Value* Value::get(std::string_view key) const {
 }
 Value* Value::get(std::string_view key) { return kind_ == Kind::kObject ? o_->find(key) : nullptr; }
 
+std::string string_field(const Value& v, std::string_view key, std::string_view def) {
+  const Value* f = v.get(key);
+  return f != nullptr && f->is_string() ? f->as_string() : std::string(def);
+}
+
+int64_t int_field(const Value& v, std::string_view key, int64_t def) {
+  const Value* f = v.get(key);
+  return f != nullptr && f->is_int() ? f->as_int() : def;
+}
+
 bool Value::operator==(const Value& other) const {
   if (kind_ != other.kind_) return false;
   switch (kind_) {

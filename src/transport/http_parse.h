@@ -28,7 +28,7 @@
 #include <utility>
 #include <vector>
 
-#include "node/http_api.h"
+#include "transport/http_api.h"
 #include "rcan/errors.h"
 #include "rcan/json.h"
 #include "transport/beast.h"
@@ -218,7 +218,7 @@ inline bool has_token(std::string_view value, std::string_view token) {
 template <class Fields>
 std::optional<TransportError> to_http_request(http::request<http::string_body, Fields>& msg,
                                               std::string remote_addr, bool tls,
-                                              node::HttpRequest& out) {
+                                              HttpRequest& out) {
   out.method = std::string(msg.method_string());
   out.target = std::string(msg.target());
   if (auto err = split_target(out.target, out.path, out.query)) return err;
@@ -231,12 +231,12 @@ std::optional<TransportError> to_http_request(http::request<http::string_body, F
 }
 
 // True when the request asks for a WebSocket (an Upgrade header naming "websocket").
-inline bool wants_websocket(const node::HttpRequest& req) {
+inline bool wants_websocket(const HttpRequest& req) {
   return has_token(req.header("upgrade"), "websocket");
 }
 
 // Checks an upgrade request the way RFC 6455 §4.2.1 asks, before the node sees it.
-inline std::optional<TransportError> check_websocket_upgrade(const node::HttpRequest& req,
+inline std::optional<TransportError> check_websocket_upgrade(const HttpRequest& req,
                                                              unsigned http_version) {
   if (req.method != "GET" || http_version < 11)
     return bad_request("bad_upgrade", "WebSocket upgrade must be an HTTP/1.1 GET");
@@ -269,7 +269,7 @@ void apply_limits(Parser& parser, size_t max_header_bytes, size_t max_body_bytes
 // runs the same parser, limits, classification and conversion over a socket).
 struct ParseOutcome {
   enum class Kind { kRequest, kNeedMore, kError, kSilent } kind = Kind::kNeedMore;
-  node::HttpRequest request;     // kRequest
+  HttpRequest request;     // kRequest
   TransportError error;          // kError
   std::string error_body;        // kError
   bool websocket = false;        // kRequest wanting an upgrade (check already applied)

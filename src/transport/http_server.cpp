@@ -33,9 +33,10 @@
 #include <utility>
 #include <vector>
 
-#include "node/log.h"
+#include "base/log.h"
 #include "transport/beast.h"
 #include "transport/http_parse.h"
+#include "base/clock.h"
 
 namespace rcan::transport {
 namespace beast = boost::beast;
@@ -45,9 +46,6 @@ namespace asio = boost::asio;
 namespace websocket = boost::beast::websocket;
 namespace ssl = boost::asio::ssl;
 using tcp = boost::asio::ip::tcp;
-using node::HttpRequest;
-using node::HttpResponse;
-using node::LogLevel;
 using SteadyClock = std::chrono::steady_clock;
 using Ms = std::chrono::milliseconds;
 
@@ -122,7 +120,7 @@ inline std::string close_reason_text(std::string s) {
 // written with a single write).
 inline std::string response_bytes(HttpResponse r, unsigned version, bool head, bool keep_alive) {
   if (r.status < 200 || r.status > 599) {
-    node::log(LogLevel::kError, "http.bad_handler_status", {{"status", r.status}});
+    rcan::log(LogLevel::kError, "http.bad_handler_status", {{"status", r.status}});
     r.status = 500;
     r.content_type = "application/json";
     r.body = error_json({500, ErrorCode::kInternal, "bad_status", "internal error"});
@@ -145,7 +143,7 @@ inline std::string response_bytes(HttpResponse r, unsigned version, bool head, b
   bool cache_control = false;
   for (const auto& [name, value] : r.headers) {
     if (!valid_header(name, value) || reserved_header(name)) {
-      node::log(LogLevel::kDebug, "http.header_dropped", {{"name", name}});
+      rcan::log(LogLevel::kDebug, "http.header_dropped", {{"name", name}});
       continue;
     }
     if (beast::iequals(name, "cache-control")) cache_control = true;
@@ -207,7 +205,7 @@ class ResponseSlot {
       answered = done_;
     }
     if (!answered) {
-      node::log(LogLevel::kError, "http.handler_dropped_response");
+      rcan::log(LogLevel::kError, "http.handler_dropped_response");
       fire(error_response({500, ErrorCode::kInternal, "no_response", "internal error"}));
     }
   }
@@ -231,7 +229,7 @@ class ResponseSlot {
 };
 
 // The transport's StreamSink: a bounded queue the connection's strand drains.
-class WsSink final : public node::StreamSink {
+class WsSink final : public StreamSink {
  public:
   using Kick = std::function<void()>;
   using Closer = std::function<void(uint16_t, std::string, bool overflow)>;
@@ -309,7 +307,7 @@ class WsSink final : public node::StreamSink {
 
 class HttpServer::Impl : public std::enable_shared_from_this<HttpServer::Impl> {
  public:
-  Impl(ServerOptions o, node::HttpHandler& h, node::StreamHandler& s)
+  Impl(ServerOptions o, HttpHandler& h, StreamHandler& s)
       : opt(std::move(o)), http(h), streams(s), ioc(std::max(opt.io_threads, 1)) {}
 
   Result<uint16_t> start();
@@ -337,8 +335,8 @@ class HttpServer::Impl : public std::enable_shared_from_this<HttpServer::Impl> {
   }
 
   const ServerOptions opt;
-  node::HttpHandler& http;
-  node::StreamHandler& streams;
+  HttpHandler& http;
+  StreamHandler& streams;
 
   std::atomic<bool> stopping{false};
   std::atomic<uint64_t> connections_open{0};
@@ -439,7 +437,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
       lowest().expires_after(Ms(opt_.read_timeout_ms));
       auto [ec] = co_await stream_.async_handshake(ssl::stream_base::server, kNoThrow);
       if (ec) {
-        node::log(LogLevel::kDebug, "tls.handshake_failed",
+        rcan::log(LogLevel::kDebug, "tls.handshake_failed",
                   {{"remote", remote_}, {"error", ec.message()}});
         co_return;
       }
@@ -497,7 +495,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
       }
     }
     const bool timed_out = disarm_read_deadline();
-    const int64_t received_us = node::steady_us();
+    const int64_t received_us = rcan::steady_us();
     if (ec) {
       std::optional<TransportError> err =
           timed_out ? std::optional<TransportError>(read_timeout_error()) : classify_read_error(ec);
@@ -542,10 +540,10 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     try {
       srv_.http.handle(std::move(req), [slot](HttpResponse r) { slot->fire(std::move(r)); });
     } catch (const std::exception& e) {
-      node::log(LogLevel::kError, "http.handler_exception", {{"error", e.what()}});
+      rcan::log(LogLevel::kError, "http.handler_exception", {{"error", e.what()}});
       slot->fire(error_response({500, ErrorCode::kInternal, "handler_exception", "internal error"}));
     } catch (...) {
-      node::log(LogLevel::kError, "http.handler_exception");
+      rcan::log(LogLevel::kError, "http.handler_exception");
       slot->fire(error_response({500, ErrorCode::kInternal, "handler_exception", "internal error"}));
     }
     slot.reset();  // the handler's copies keep it; a dropped respond answers 500
@@ -556,15 +554,15 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     phase_ = Phase::kWriting;
     const int status = response_->status;
     if (response_->answered_mono_us > 0)
-      srv_.http.answer_waited(std::max<int64_t>(0, node::steady_us() - response_->answered_mono_us));
+      srv_.http.answer_waited(std::max<int64_t>(0, rcan::steady_us() - response_->answered_mono_us));
     const std::string wire = response_bytes(std::move(*response_), version, head, keep_alive);
     response_.reset();
     lowest().expires_after(Ms(opt_.read_timeout_ms));
     auto [wec, wn] = co_await asio::async_write(stream_, asio::buffer(wire), kNoThrow);
     lowest().expires_never();
-    if (node::log_enabled(LogLevel::kDebug)) {
+    if (rcan::log_enabled(LogLevel::kDebug)) {
       const auto ms = std::chrono::duration_cast<Ms>(SteadyClock::now() - t0).count();
-      node::log(LogLevel::kDebug, "http.request",
+      rcan::log(LogLevel::kDebug, "http.request",
                 {{"remote", remote_},
                  {"method", method},
                  {"path", path},
@@ -604,7 +602,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     } else {
       ++srv_.rejected_limits;
     }
-    node::log(LogLevel::kInfo, "http.rejected",
+    rcan::log(LogLevel::kInfo, "http.rejected",
               {{"remote", remote_}, {"status", err.status}, {"reason", std::string(err.reason)}});
     const std::string wire = response_bytes(error_response(err), version, false, false);
     lowest().expires_after(Ms(opt_.read_timeout_ms));
@@ -665,11 +663,11 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
 
     HttpResponse refusal = error_response(
         {403, ErrorCode::kInsufficientPrivileges, "websocket_refused", "WebSocket refused"});
-    std::unique_ptr<node::StreamSession> session;
+    std::unique_ptr<StreamSession> session;
     try {
       session = srv_.streams.open(req, sink_, refusal);
     } catch (const std::exception& e) {
-      node::log(LogLevel::kError, "ws.open_exception", {{"error", e.what()}});
+      rcan::log(LogLevel::kError, "ws.open_exception", {{"error", e.what()}});
       refusal = error_response({500, ErrorCode::kInternal, "open_exception", "internal error"});
       session.reset();
     }
@@ -701,14 +699,14 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     auto [aec] = co_await ws_->async_accept(msg, kNoThrow);
     if (!aec) {
       ws_open_ = true;
-      node::log(LogLevel::kInfo, "ws.open", {{"remote", remote_}, {"path", req.path}});
+      rcan::log(LogLevel::kInfo, "ws.open", {{"remote", remote_}, {"path", req.path}});
       pump();  // frames queued during open(), or a close requested meanwhile
       beast::flat_buffer in;
       for (;;) {
         in.clear();
         auto [rec, rn] = co_await ws_->async_read(in, kNoThrow);
         if (rec) {
-          node::log(LogLevel::kDebug, "ws.read_end", {{"remote", remote_}, {"error", rec.message()}});
+          rcan::log(LogLevel::kDebug, "ws.read_end", {{"remote", remote_}, {"error", rec.message()}});
           if (rec == websocket::error::message_too_big) ++srv_.rejected_limits;
           break;
         }
@@ -720,7 +718,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
             session_->on_binary();
           }
         } catch (const std::exception& e) {
-          node::log(LogLevel::kError, "ws.session_exception", {{"error", e.what()}});
+          rcan::log(LogLevel::kError, "ws.session_exception", {{"error", e.what()}});
           request_ws_close(1011, "internal error", false);
         }
       }
@@ -733,11 +731,11 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     try {
       session_->on_closed();
     } catch (const std::exception& e) {
-      node::log(LogLevel::kError, "ws.session_exception", {{"error", e.what()}});
+      rcan::log(LogLevel::kError, "ws.session_exception", {{"error", e.what()}});
     }
     session_.reset();
     --srv_.ws_sessions_open;
-    node::log(LogLevel::kInfo, "ws.closed", {{"remote", remote_}, {"peer_close_code", code}});
+    rcan::log(LogLevel::kInfo, "ws.closed", {{"remote", remote_}, {"peer_close_code", code}});
   }
 
   // Writes queued frames one at a time, then the close frame once one is pending (strand).
@@ -763,7 +761,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
           websocket::close_reason(static_cast<websocket::close_code>(close_pending_->first),
                                   close_pending_->second),
           [self = this->shared_from_this()](beast::error_code ec) {
-            node::log(LogLevel::kDebug, "ws.close_done",
+            rcan::log(LogLevel::kDebug, "ws.close_done",
                       {{"remote", self->remote_}, {"error", ec.message()}});
           });
     }
@@ -777,7 +775,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     if (phase_ != Phase::kWebSocket || !ws_ || ws_done_) return;
     if (overflow) {
       ++srv_.rejected_limits;
-      node::log(LogLevel::kWarn, "ws.send_queue_full", {{"remote", remote_}});
+      rcan::log(LogLevel::kWarn, "ws.send_queue_full", {{"remote", remote_}});
     }
     close_pending_.emplace(code, close_reason_text(std::move(reason)));
     close_timer_.expires_after(Ms(opt_.ws_handshake_timeout_ms));
@@ -808,7 +806,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
   std::optional<HttpResponse> response_;
 
   std::shared_ptr<WsSink> sink_;
-  std::unique_ptr<node::StreamSession> session_;
+  std::unique_ptr<StreamSession> session_;
   bool ws_open_ = false;
   bool ws_writing_ = false;
   bool ws_close_started_ = false;
@@ -822,9 +820,9 @@ inline void log_coroutine_exception(std::exception_ptr e) {
   try {
     std::rethrow_exception(e);
   } catch (const std::exception& ex) {
-    node::log(LogLevel::kError, "http.connection_exception", {{"error", ex.what()}});
+    rcan::log(LogLevel::kError, "http.connection_exception", {{"error", ex.what()}});
   } catch (...) {
-    node::log(LogLevel::kError, "http.connection_exception");
+    rcan::log(LogLevel::kError, "http.connection_exception");
   }
 }
 
@@ -858,7 +856,7 @@ detail::asio::awaitable<void> HttpServer::Impl::accept_loop() {
     if (stopping.load()) co_return;
     if (ec) {
       if (ec == asio::error::operation_aborted) co_return;
-      node::log(node::LogLevel::kWarn, "http.accept_failed", {{"error", ec.message()}});
+      rcan::log(rcan::LogLevel::kWarn, "http.accept_failed", {{"error", ec.message()}});
       // Out of descriptors and the like: back off instead of spinning.
       asio::steady_timer pause(co_await asio::this_coro::executor, detail::Ms(50));
       co_await pause.async_wait(detail::kNoThrow);
@@ -871,7 +869,7 @@ detail::asio::awaitable<void> HttpServer::Impl::accept_loop() {
     sock.set_option(detail::tcp::no_delay(true), rec);
     if (connections_open.load() >= opt.max_connections) {
       ++rejected_connections;
-      node::log(node::LogLevel::kWarn, "http.connection_limit",
+      rcan::log(rcan::LogLevel::kWarn, "http.connection_limit",
                 {{"remote", remote}, {"open", connections_open.load()}});
       auto ex = sock.get_executor();
       asio::co_spawn(ex, reject(std::move(sock)), detail::log_coroutine_exception);
@@ -970,9 +968,9 @@ Result<uint16_t> HttpServer::Impl::start() {
           ioc.run();
           break;
         } catch (const std::exception& e) {
-          node::log(node::LogLevel::kError, "http.io_exception", {{"error", e.what()}});
+          rcan::log(rcan::LogLevel::kError, "http.io_exception", {{"error", e.what()}});
         } catch (...) {
-          node::log(node::LogLevel::kError, "http.io_exception");
+          rcan::log(rcan::LogLevel::kError, "http.io_exception");
         }
       }
       {
@@ -983,7 +981,7 @@ Result<uint16_t> HttpServer::Impl::start() {
     });
   }
   started = true;
-  node::log(node::LogLevel::kInfo, "http.listening",
+  rcan::log(rcan::LogLevel::kInfo, "http.listening",
             {{"address", opt.bind_address},
              {"port", static_cast<int>(port)},
              {"tls", opt.tls},
@@ -997,7 +995,7 @@ void HttpServer::Impl::stop(int drain_ms) {
     if (!started || stopped) return;
     stopped = true;
   }
-  node::log(node::LogLevel::kInfo, "http.stopping",
+  rcan::log(rcan::LogLevel::kInfo, "http.stopping",
             {{"open_connections", connections_open.load()}, {"drain_ms", drain_ms}});
   stopping = true;
   detail::asio::post(acceptor->get_executor(), [this] {
@@ -1016,14 +1014,14 @@ void HttpServer::Impl::stop(int drain_ms) {
     std::unique_lock<std::mutex> lock(mu);
     if (!cv.wait_for(lock, std::chrono::seconds(3), [this] { return running_threads == 0; })) {
       lock.unlock();
-      node::log(node::LogLevel::kWarn, "http.stop_forced");
+      rcan::log(rcan::LogLevel::kWarn, "http.stop_forced");
       ioc.stop();
     }
   }
   for (auto& t : threads)
     if (t.joinable()) t.join();
   threads.clear();
-  node::log(node::LogLevel::kInfo, "http.stopped", {{"closed_in_flight", left}});
+  rcan::log(rcan::LogLevel::kInfo, "http.stopped", {{"closed_in_flight", left}});
 }
 
 ServerStats HttpServer::Impl::stats() const {
@@ -1041,7 +1039,7 @@ ServerStats HttpServer::Impl::stats() const {
 
 // ---- HttpServer ------------------------------------------------------------------------------
 
-HttpServer::HttpServer(ServerOptions options, node::HttpHandler& http, node::StreamHandler& stream)
+HttpServer::HttpServer(ServerOptions options, HttpHandler& http, StreamHandler& stream)
     : impl_(std::make_shared<Impl>(std::move(options), http, stream)) {}
 
 HttpServer::~HttpServer() {

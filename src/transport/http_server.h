@@ -1,9 +1,9 @@
 // HttpServer — the HTTP/1.1 + WebSocket transport of rcand (Boost.Beast behind a pimpl).
 //
 // One port serves HTTP/1.1 with keep-alive and WebSocket upgrades (plain, or TLS only when
-// `tls` is set). Each request becomes an rcan::node::HttpRequest handed to the HttpHandler;
+// `tls` is set). Each request becomes an HttpRequest handed to the HttpHandler;
 // each accepted upgrade becomes a StreamSession obtained from the StreamHandler
-// (src/node/http_api.h). The transport answers only transport-level failures itself —
+// (src/transport/http_api.h). The transport answers only transport-level failures itself —
 // oversize bodies/headers, unparsable HTTP, slow clients, too many connections — always with
 // the project's JSON error body (docs/TRANSPORT.md has the status mapping).
 //
@@ -19,7 +19,7 @@
 #include <memory>
 #include <string>
 
-#include "node/http_api.h"
+#include "transport/http_api.h"
 #include "rcan/result.h"
 
 namespace rcan::transport {
@@ -57,7 +57,7 @@ class HttpServer {
  public:
   // `http` and `stream` must outlive the server (until stop() has returned or the
   // destructor has run).
-  HttpServer(ServerOptions options, node::HttpHandler& http, node::StreamHandler& stream);
+  HttpServer(ServerOptions options, HttpHandler& http, StreamHandler& stream);
   // Calls stop(0) when still running.
   ~HttpServer();
   HttpServer(const HttpServer&) = delete;

@@ -1,5 +1,5 @@
 // MqttClient — a small MQTT 3.1.1 client over libmosquitto, used by rcand's MQTT transport
-// (src/node/mqtt_node.h) and by `rcan fleet` (docs/FLEET.md).
+// (src/node/bindings/mqtt_node.h) and by `rcan fleet` (docs/FLEET.md).
 //
 // libmosquitto runs its own network thread (mosquitto_loop_start): it keeps the connection,
 // answers keep-alives and reconnects with exponential backoff (reconnect_min_s doubling up to

@@ -10,14 +10,14 @@
 #include <string>
 #include <vector>
 
-#include "node/http_api.h"
+#include "transport/http_api.h"
 #include "rcan/errors.h"
 #include "rcan/json.h"
 #include "transport/http_server.h"
 
 namespace rcan::test {
 
-class FakeNode final : public node::HttpHandler, public node::StreamHandler {
+class FakeNode final : public transport::HttpHandler, public transport::StreamHandler {
  public:
   static constexpr const char* kGoodToken = "good-token";
   static constexpr const char* kConfigToken = "config-token";
@@ -46,16 +46,16 @@ class FakeNode final : public node::HttpHandler, public node::StreamHandler {
   std::atomic<int> drop_streams_after_ack{0};  // > 0: close that many streams right after CONNECT_ACK
   std::vector<std::string> stream_frames;      // every text frame received after CONNECT
 
-  void handle(node::HttpRequest req, Respond respond) override {
+  void handle(transport::HttpRequest req, Respond respond) override {
     auto token = bearer(req);
     auto err = [&](int status, ErrorCode code, const std::string& msg) {
-      node::HttpResponse r;
+      transport::HttpResponse r;
       r.status = status;
       r.body = json::dump(error_body(Error(code, msg), "", 1));
       respond(std::move(r));
     };
     auto ok = [&](json::Value body, int status = 200) {
-      node::HttpResponse r;
+      transport::HttpResponse r;
       r.status = status;
       r.body = json::dump(body);
       respond(std::move(r));
@@ -149,7 +149,7 @@ class FakeNode final : public node::HttpHandler, public node::StreamHandler {
       std::string tok(req.query_value("token"));
       bool well_formed = tok.size() == 43 && tok.rfind("rcan-wm-v1:", 0) == 0 &&
                          tok.find_first_not_of("0123456789abcdef", 11) == std::string::npos;
-      node::HttpResponse r;
+      transport::HttpResponse r;
       if (!well_formed) {
         r.status = 400;
         r.body = R"({"error":"Invalid watermark token format","code":"HTTP_400"})";
@@ -168,8 +168,8 @@ class FakeNode final : public node::HttpHandler, public node::StreamHandler {
     err(404, ErrorCode::kNotFound, "no route for " + p);
   }
 
-  struct Session final : public node::StreamSession {
-    Session(FakeNode& n, std::shared_ptr<node::StreamSink> s) : node(n), sink(std::move(s)) {}
+  struct Session final : public transport::StreamSession {
+    Session(FakeNode& n, std::shared_ptr<transport::StreamSink> s) : node(n), sink(std::move(s)) {}
     void on_text(std::string text) override {
       auto v = json::parse(text);
       if (!connected) {
@@ -205,12 +205,12 @@ class FakeNode final : public node::HttpHandler, public node::StreamHandler {
     void on_binary() override { sink->close(1003, "binary"); }
     void on_closed() override {}
     FakeNode& node;
-    std::shared_ptr<node::StreamSink> sink;
+    std::shared_ptr<transport::StreamSink> sink;
     bool connected = false;
   };
 
-  std::unique_ptr<node::StreamSession> open(const node::HttpRequest& upgrade, std::shared_ptr<node::StreamSink> sink,
-                                            node::HttpResponse& refusal) override {
+  std::unique_ptr<transport::StreamSession> open(const transport::HttpRequest& upgrade, std::shared_ptr<transport::StreamSink> sink,
+                                            transport::HttpResponse& refusal) override {
     if (upgrade.path != "/rcan/v1/stream") {
       refusal.status = 404;
       refusal.body = json::dump(error_body(Error(ErrorCode::kNotFound, "no stream here"), "", 1));
@@ -222,7 +222,7 @@ class FakeNode final : public node::HttpHandler, public node::StreamHandler {
   void set_tls(bool t) { tls_ = t; }
 
  private:
-  static std::string bearer(const node::HttpRequest& req) {
+  static std::string bearer(const transport::HttpRequest& req) {
     std::string_view a = req.header("authorization");
     return a.size() > 7 && a.substr(0, 7) == "Bearer " ? std::string(a.substr(7)) : std::string();
   }

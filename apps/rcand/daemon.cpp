@@ -1,0 +1,220 @@
+// rcand's start and stop paths (daemon.h).
+#include "daemon.h"
+
+#include <chrono>
+#include <filesystem>
+
+#include "base/clock.h"
+#include "base/log.h"
+#include "extra_transports.h"
+#include "node/ai/ai_services.h"
+#include "node/api/node.h"
+#include "node/bindings/mqtt_node.h"
+#include "node/discovery/mdns.h"
+#include "node/fleet/fleet.h"
+#include "node/safety/actuation_safety.h"
+#include "node/safety/safety.h"
+#include "node/safety/sim_robot.h"
+#include "node/services/node_services.h"
+#include "rcan/errors.h"
+#include "rcan/hash.h"
+#include "settings.h"
+#include "transport/http_server.h"
+
+namespace fs = std::filesystem;
+
+namespace rcan::rcand {
+namespace {
+
+// An error whose message is `context` followed by the cause's message.
+Error failed(const std::string& context, const Error& cause) {
+  return Error(ErrorCode::kInternal, context + cause.message);
+}
+
+}  // namespace
+
+Daemon::Daemon() = default;
+
+Daemon::~Daemon() { stop(0); }
+
+void Daemon::stop(int drain_ms) {
+  while (!stops_.empty()) {
+    auto fn = std::move(stops_.back());
+    stops_.pop_back();
+    fn(drain_ms);
+  }
+}
+
+uint64_t Daemon::audit_last_seq() const { return audit_ ? audit_->stats().last_seq : 0; }
+
+Status Daemon::start(const DaemonOptions& options) {
+  const auto started = std::chrono::steady_clock::now();
+  Status s = load_configuration(options);
+  for (auto step : {&Daemon::open_identity, &Daemon::open_audit_log, &Daemon::start_safety_core,
+                    &Daemon::start_node, &Daemon::start_transports}) {
+    if (!s.ok()) break;
+    s = (this->*step)();
+  }
+  if (!s.ok()) {
+    stop(0);
+    return s;
+  }
+  const double startup_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - started).count();
+  log(LogLevel::kInfo, "listening",
+      json::Object{{"url", info_.url},
+                   {"ruri", cfg_.ruri},
+                   {"rrn", services_->settings.rrn},
+                   {"data_dir", cfg_.data_dir},
+                   {"estop_active", core_->estop_active()},
+                   {"startup_ms", startup_ms}});
+  return Status::Ok();
+}
+
+// 1. The configuration: the embedded default (with its local identity) or the --config file,
+// then the command line's overrides.
+Status Daemon::load_configuration(const DaemonOptions& options) {
+  embedded_ = !options.config;
+  std::string data_dir;
+  if (options.data_dir) {
+    data_dir = fs::absolute(*options.data_dir).string();
+  } else {
+    auto d = config::default_data_dir();
+    if (!d.ok()) return d.error();
+    data_dir = *d;
+  }
+  Result<config::NodeConfig> loaded = Error(ErrorCode::kInternal, "no configuration");
+  if (embedded_) {
+    auto id = ensure_local_identity(data_dir);
+    if (!id.ok()) return id.error();
+    local_ = *id;
+    loaded = config::default_config(data_dir, local_->device_id);
+  } else {
+    loaded = config::load_config(*options.config);
+  }
+  if (!loaded.ok()) {
+    const Error& e = loaded.error();
+    return Error(ErrorCode::kInternal,
+                 "configuration: " + (e.field.empty() ? "" : e.field + ": ") + e.message);
+  }
+  cfg_ = std::move(loaded).value();
+  std::optional<std::string> dir_override;
+  if (options.data_dir) dir_override = data_dir;
+  if (Status s = config::apply_overrides(cfg_, options.port, dir_override); !s.ok()) return s;
+  if (options.bind) cfg_.server.bind_address = *options.bind;
+  if (!options.log_level_given) {
+    if (auto lvl = parse_log_level(cfg_.log_level)) set_log_level(*lvl);
+  }
+  for (const auto& w : cfg_.warnings) log(LogLevel::kWarn, "config_warning", json::Object{{"warning", w}});
+  return make_private_dir(cfg_.data_dir);
+}
+
+// 2. Identity: robot keys, the audit chain secret (kept until the log has it) and the token
+// issuers (the embedded default's own issuer and OWNER token included).
+Status Daemon::open_identity() {
+  auto k = robot_keys(cfg_, embedded_);
+  if (!k.ok()) return k.error();
+  robot_keys_ = std::move(k).value();
+  auto secret = chain_secret(cfg_, embedded_);
+  if (!secret.ok()) return secret.error();
+  chain_secret_ = std::move(secret).value();
+  auto trust = jwt::TrustStore::from_config(cfg_.security.jwt.issuers);
+  if (!trust.ok()) return failed("security.jwt.issuers: ", trust.error());
+  if (local_) {
+    if (Status s = ensure_issuer_and_token(*local_, cfg_.data_dir, cfg_.ruri, *trust, info_.token_created);
+        !s.ok())
+      return s;
+  }
+  if (trust->empty())
+    return Error(ErrorCode::kInternal,
+                 "no token issuer is configured (security.jwt.issuers); every request would be refused");
+  trust_ = std::move(trust).value();
+  return Status::Ok();
+}
+
+// 3. The audit log (its secret is wiped from memory once the log holds it).
+Status Daemon::open_audit_log() {
+  auto opened = audit::AuditLog::open(cfg_.security.audit.dir, audit_options(cfg_, chain_secret_));
+  secure_wipe(chain_secret_.data(), chain_secret_.size());
+  chain_secret_.clear();
+  if (!opened.ok()) return failed("audit log in " + cfg_.security.audit.dir + ": ", opened.error());
+  audit_ = std::move(opened).value();
+  return Status::Ok();
+}
+
+// 4. The safety core over the simulated robot, with its persisted ESTOP latch.
+Status Daemon::start_safety_core() {
+  node::SimRobotConfig sim;
+  core_ = std::make_unique<node::SafetyCore>(std::make_unique<node::SimRobot>(sim), safety_config(cfg_, sim));
+  if (Status s = core_->open(cfg_.data_dir + "/safety"); !s.ok()) return failed("safety state: ", s.error());
+  actuation_ = std::make_unique<node::SafetyActuation>(*core_, cfg_.robot.name.empty() ? "rcan robot" : cfg_.robot.name);
+  return Status::Ok();
+}
+
+// 5. The node: its services, the §16 services, the Node itself; then the safety core's ticker,
+// the node (SYSTEM_START) and the §16 services (held HiTL commands come back) start, in that
+// order, and stop in the reverse one (§16 first, SYSTEM_STOP, the ticker last).
+Status Daemon::start_node() {
+  node::NodeSettings ns = node_settings(cfg_, *robot_keys_);
+  auto auth = auth_options(cfg_, std::move(*trust_), ns.rrn);
+  trust_.reset();
+  if (!auth.ok()) return auth.error();
+  services_ = std::make_unique<node::NodeServices>(ns, Clock::system(), std::move(auth).value(), *actuation_, *audit_);
+  if (!cfg_.fleet.fleet_id.empty())
+    services_->fleet = std::make_shared<node::FleetMembership>(node::FleetMembership{cfg_.fleet, {}});
+  configure_control(*services_, cfg_);
+  node::AiOptions ai_opts = node::ai_options(cfg_);  // §16 gates, layers, HiTL, watermark
+  ai_opts.watermark_key = robot_keys_->mldsa65_sk.clone();
+  services_->ai = std::make_shared<node::AiServices>(*services_, std::move(ai_opts));
+  // An ownership transfer clears personal data, the thought log included (docs/SESSIONS.md).
+  services_->ownership.on_clear([ai = services_->ai] { ai->clear_thoughts(); });
+  node_ = std::make_unique<node::Node>(*services_);
+  core_->set_event_callback([node = node_.get()](const node::SafetyEvent& ev) {
+    node->on_safety_event(ev.type, ev.session_id, ev.elapsed_ms, ev.detail);
+  });
+  core_->start();
+  on_stop([this](int) { core_->stop(); });
+  node_->start();
+  on_stop([this](int) { node_->shutdown(); });
+  on_stop([this](int) { services_->ai->shutdown(); });
+  if (Status s = services_->ai->start(node_->pipeline()); !s.ok()) return failed("HiTL pending file: ", s.error());
+  return Status::Ok();
+}
+
+// 6. The transports: gRPC and UDP first (their claim hook is in place before HTTP serves,
+// docs/TRANSPORT.md), HTTP/WebSocket, MQTT (docs/FLEET.md), then the mDNS advertisement.
+Status Daemon::start_transports() {
+  auto extra = start_extra_transports(cfg_, *node_);
+  if (!extra.ok()) return extra.error();
+  extra_ = std::move(extra).value();
+  on_stop([this](int drain_ms) { extra_->stop(drain_ms); });
+
+  transport::ServerOptions so = server_options(cfg_);
+  http_ = std::make_unique<transport::HttpServer>(so, *node_, *node_);
+  auto port = http_->start();
+  if (!port.ok())
+    return failed("cannot listen on " + so.bind_address + ":" + std::to_string(so.port) + ": ", port.error());
+  on_stop([this](int drain_ms) { http_->stop(drain_ms); });
+  services_->settings.port = *port;  // the bound port (differs from the configured one for --port 0)
+
+  if (cfg_.mqtt.enabled) {
+    auto mo = node::mqtt_node_options(cfg_);
+    if (!mo.ok()) return failed("mqtt: ", mo.error());
+    mqtt_ = std::make_unique<node::MqttNode>(*node_, *services_, std::move(mo).value());
+    on_stop([this](int) { mqtt_->stop(); });
+    if (Status s = mqtt_->start(); !s.ok()) return failed("mqtt: ", s.error());
+  }
+  if (cfg_.server.enable_mdns) {  // _rcan._tcp via Avahi (docs/NODE.md §Discovery)
+    mdns_ = node::start_mdns(*services_, so.tls);
+    on_stop([this](int) { mdns_.reset(); });
+  }
+
+  const std::string host = so.bind_address == "0.0.0.0" ? std::string("127.0.0.1") : so.bind_address;
+  info_.url = std::string(so.tls ? "https" : "http") + "://" + host + ":" + std::to_string(*port);
+  info_.ruri = cfg_.ruri;
+  info_.local = local_.has_value();
+  if (local_) info_.identity = *local_;
+  return Status::Ok();
+}
+
+}  // namespace rcan::rcand

@@ -1,0 +1,437 @@
+// Node configuration: `.rcan.yaml` loaded and strictly validated into a typed NodeConfig.
+//
+// The file format is the union of the two published RCAN config styles (the profile style of
+// schemas/rcan-config.json used by spec/profiles/*.rcan.yaml, and the OpenCastor style of
+// schemas/rcan-config.schema.json) where they overlap, plus this node's own blocks (`node`,
+// `server`, `security`, `rbac`, `driver`). docs/CONFIG.md lists every key, its type, default
+// and source.
+//
+// Validation is strict: an unknown key, a duplicate key, a wrong type, a value out of range
+// or an inconsistent pair of aliases stops loading. Errors are values (never exceptions):
+// ErrorCode::kSchemaValidationFailed (kMalformedJson for YAML syntax errors is NOT used — the
+// code is always kSchemaValidationFailed), with
+//   field   = the key path, e.g. "agent.confidence_gates[1].on_fial"
+//   message = "<path>: <what is wrong> (line L, column C)"
+//   reason  = unknown_key | duplicate_key | wrong_type | out_of_range | invalid_value |
+//             missing_key | malformed_yaml | too_large | io_error
+// The first error stops loading.
+//
+// Hostile input: the text is capped at kMaxConfigBytes, the walk visits at most
+// kMaxConfigNodes nodes (alias expansion counts every time an alias is walked, so a
+// "billion laughs" document fails fast) and free-form blocks nest at most kMaxFreeDepth.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "config/fleet_config.h"
+#include "rcan/audit/audit_log.h"
+#include "rcan/crypto/jwt.h"
+#include "rcan/json.h"
+#include "rcan/result.h"
+#include "rcan/roles.h"
+#include "rcan/ruri.h"
+
+namespace rcan::config {
+
+inline constexpr size_t kMaxConfigBytes = 1 << 20;  // 1 MiB of YAML text
+inline constexpr size_t kMaxConfigNodes = 100000;   // YAML nodes walked (aliases re-counted)
+inline constexpr size_t kMaxFreeDepth = 16;         // nesting inside free-form blocks
+
+// ---------------------------------------------------------------------------------------
+// Blocks
+
+struct TlsConfig {
+  bool enabled = false;
+  std::string cert_file;  // PEM chain; required when enabled
+  std::string key_file;   // PEM private key; required when enabled
+};
+
+struct ServerLimits {
+  uint64_t max_body_bytes = 64 * 1024;
+  uint64_t max_header_bytes = 8 * 1024;
+  uint32_t read_timeout_ms = 10000;
+  uint32_t idle_timeout_ms = 60000;
+  uint32_t max_connections = 1024;
+};
+
+struct ServerConfig {
+  uint16_t port = 8080;                     // server.port | rcan_protocol.port
+  std::string bind_address = "127.0.0.1";   // server.bind; "0.0.0.0" to expose on a robot
+  uint32_t io_threads = 2;
+  bool enable_mdns = false;                 // server.enable_mdns | rcan_protocol.enable_mdns
+  TlsConfig tls;
+  ServerLimits limits;
+};
+
+struct GrpcConfig {  // `grpc` (docs/CONFIG.md, docs/TRANSPORT.md §gRPC)
+  bool enabled = false;
+  uint16_t port = 8081;                    // 0 = any free port (logged)
+  std::string bind_address = "127.0.0.1";  // grpc.bind
+  TlsConfig tls;
+  std::string client_ca_file;              // grpc.tls.client_ca_file: require client certificates
+  uint32_t max_streams = 64;
+  std::string module;                      // grpc.module: path of librcand_grpc.so (default: beside rcand)
+};
+
+struct UdpConfig {  // `udp` (docs/CONFIG.md, docs/TRANSPORT.md §UDP)
+  bool enabled = false;
+  uint16_t port = 8082;                    // 0 = any free port (logged)
+  std::string bind_address = "127.0.0.1";  // udp.bind; 0.0.0.0 to hear broadcast DISCOVER
+  bool heartbeat = true;                   // per-session keys in GRANTED, HEARTBEAT datagrams
+  bool discovery = true;                   // DISCOVER → ANNOUNCE
+  uint32_t discovery_per_source_per_min = 30;
+};
+
+struct AuditConfig {
+  std::string dir;                // default <data_dir>/audit
+  std::string chain_secret_file;  // default <data_dir>/audit.secret
+  audit::SyncPolicy sync_policy = audit::SyncPolicy::kPerGroup;
+  uint32_t sync_interval_ms = 2;
+  uint64_t max_segment_bytes = 64ull << 20;
+  uint64_t retention_max_bytes = 0;     // 0 = unlimited
+  uint32_t retention_max_age_days = 0;  // 0 = unlimited
+};
+
+struct JwtConfig {
+  std::vector<jwt::TrustStore::IssuerConfig> issuers;  // {issuer, key_file, kind, kid}
+  int64_t leeway_s = 60;
+};
+
+struct TrustedRobotKey {
+  std::string name;
+  std::string mldsa65_pub_file;  // at least one of the two files is set
+  std::string ed25519_pub_file;
+};
+
+struct InjectionPattern {
+  std::string text;    // case-insensitive substring, or an ECMAScript regex when `regex`
+  bool regex = false;
+};
+
+struct CommitmentConfig {  // security.commitment (profile schema; kept, unused)
+  bool enabled = false;
+  std::string key_mode = "classical";  // classical | quantum | hybrid
+  std::optional<double> qber_threshold;
+};
+
+struct KeyRotationConfig {  // security.key_rotation (v1.5)
+  uint32_t overlap_s = 3600;
+  uint32_t max_validity_days = 365;
+  bool auto_rotate = false;
+};
+
+struct RevocationConfig {  // security.revocation (v1.5)
+  bool check_on_startup = false;
+  uint32_t cache_ttl_s = 3600;
+  uint32_t max_staleness_s = 3600;
+  bool quarantine_on_staleness = false;
+};
+
+struct SecurityConfig {
+  std::string key_dir;  // default <data_dir>/keys
+  AuditConfig audit;
+  JwtConfig jwt;
+  uint32_t replay_window_s = 30;  // 5..300
+  uint32_t msg_id_cache_size = 10000;
+  std::vector<TrustedRobotKey> trusted_robot_keys;
+  // Operators' and integrators' message-signing keys (rcan-py clients sign with their own
+  // key): a verified signature from one of these is a human/software signer, not a robot.
+  std::vector<TrustedRobotKey> trusted_signer_keys;
+  std::vector<InjectionPattern> injection_patterns;  // defaults (unless disabled) + configured
+  CommitmentConfig commitment;
+  KeyRotationConfig key_rotation;
+  RevocationConfig revocation;
+};
+
+// "10/minute" → {10, 60}.
+struct RateSpec {
+  uint32_t count = 0;
+  uint32_t window_s = 60;
+  double per_minute() const { return window_s == 0 ? 0.0 : count * 60.0 / window_s; }
+};
+
+struct GuestLimitsConfig {  // seed §6.3
+  RateSpec chat_rate{10, 60};
+  RateSpec query_rate{30, 60};
+  uint32_t session_duration_s = 15 * 60;
+  uint32_t concurrent_sessions = 3;
+  std::vector<std::string> capabilities{"status_read", "chat_text", "basic_info"};
+  std::vector<std::string> blocked{"control", "camera_access", "location_history"};
+  // The roles.h shape. Rates are converted to whole events per minute, rounded down, at
+  // least 1 when the configured count is non-zero.
+  GuestLimits to_guest_limits() const;
+};
+
+struct RateLimits {  // per principal per minute, 0 = unlimited (PROFILE §5)
+  uint32_t guest = 10;
+  uint32_t user = 100;
+  uint32_t leasee = 500;
+  uint32_t owner = 1000;
+  uint32_t creator = 0;
+  uint32_t for_role(Role r) const;
+};
+
+struct RbacConfig {
+  RolePolicy policy;  // rbac.grants.{user_arm,user_record,leasee_training,leasee_diagnostics,owner_safety_config}
+  RateLimits rate_limits;
+  GuestLimitsConfig guest_limits;  // rbac.guest_limits | top-level guest_limits (seed shape)
+};
+
+enum class LimitPolicy { kClamp, kReject };
+
+struct JointLimit {
+  std::string name;  // may be empty
+  double min_rad = 0;
+  double max_rad = 0;
+};
+
+struct Workspace {
+  double x_min = -5, x_max = 5, y_min = -5, y_max = 5;  // metres
+  std::optional<double> z_min, z_max;
+};
+
+struct WatchdogConfig {  // top-level `watchdog` (profile schema)
+  bool enabled = true;
+  uint32_t timeout_s = 10;  // 1..300
+};
+
+struct SafetyConfig {
+  bool local_safety_wins = true;  // must be true when present
+  double max_linear_speed_mps = 0.5;     // max_linear_speed_mps | max_linear_x
+  double max_angular_speed_radps = 1.0;  // max_angular_speed_radps | max_angular_z
+  std::optional<double> max_speed_override;  // 0..1, fraction applied on top of the caps
+  std::optional<double> estop_distance_m;    // emergency_stop_distance (m) | estop_distance_mm
+  std::optional<double> collision_monitor_stop_m;
+  std::optional<double> collision_monitor_slowdown_m;
+  std::optional<double> obstacle_stop_cm;  // OpenCastor
+  std::vector<JointLimit> joint_limits;    // sim arm default: 6 × ±3.14
+  Workspace workspace;
+  LimitPolicy speed_policy = LimitPolicy::kClamp;
+  LimitPolicy joint_policy = LimitPolicy::kReject;
+  LimitPolicy workspace_policy = LimitPolicy::kReject;
+  bool estop_on_startup = false;
+  bool estop_clear_requires_presence = false;
+  uint32_t heartbeat_timeout_ms = 2000;  // default: agent.latency_budget_ms × 2 when set
+  uint32_t command_ttl_default_ms = 0;   // 0: only the message's own ttl_ms applies
+  WatchdogConfig watchdog;
+  // Vendor keys from the profiles (kept; the simulated robot does not use them).
+  std::optional<double> max_walk_speed_mps;
+  std::optional<double> max_tcp_speed_mm_s;
+  std::optional<double> max_tcp_force_n;
+  std::optional<double> collision_threshold_scale;  // 0..1
+  std::optional<double> protective_stop_distance_mm;
+  std::optional<uint32_t> estop_heartbeat_interval_ms;
+  std::optional<uint32_t> estop_timeout_ms;
+  std::optional<uint32_t> fri_heartbeat_timeout_ms;
+  std::vector<double> max_joint_torques_nm;
+};
+
+enum class GateOnFail { kBlock, kEscalate, kAllow };  // "log" is read as kAllow
+enum class HitlOnTimeout { kBlock, kAllow };         // "escalate" is read as kBlock
+
+struct ConfidenceGate {
+  std::string scope;  // control, nav, admin, observe, configure, safety, … (unique)
+  double min_confidence = 0;
+  GateOnFail on_fail = GateOnFail::kBlock;
+};
+
+struct HitlGate {
+  std::vector<std::string> action_types;  // action_types | action_type
+  bool require_auth = true;
+  uint32_t auth_timeout_ms = 30000;
+  HitlOnTimeout on_timeout = HitlOnTimeout::kBlock;
+  std::vector<std::string> notify;
+  std::vector<Role> authorized_roles{Role::kOwner, Role::kCreator};  // only OWNER/CREATOR
+};
+
+struct AgentLayer {
+  std::string url;
+  uint32_t timeout_ms = 1000;
+};
+
+struct AgentConfig {
+  std::string provider;  // empty when not configured
+  std::string model;
+  std::optional<uint32_t> latency_budget_ms;
+  bool safety_stop = true;
+  std::optional<double> min_obstacle_m;  // agent.min_obstacle_m | reactive.min_obstacle_m
+  std::vector<ConfidenceGate> confidence_gates;  // agent.* | brain.* (alias)
+  std::vector<HitlGate> hitl_gates;              // agent.* | brain.* (alias)
+  std::optional<AgentLayer> reactive_layer;      // agent.layers.reactive
+  std::optional<AgentLayer> fast_layer;          // agent.layers.fast
+  std::optional<AgentLayer> planner_layer;       // agent.layers.planner
+};
+
+struct BrainConfig {  // profile-style `brain`
+  std::string provider;
+  std::string model;
+  std::string fast_brain;
+  std::string api_key_env;
+  std::optional<uint32_t> max_tokens;
+  std::optional<double> temperature;
+};
+
+struct SimDriverConfig {
+  double wheel_base_m = 0.3;
+  double max_accel_mps2 = 1.0;
+  double max_angular_accel_radps2 = 2.0;
+  uint32_t tick_hz = 50;
+  uint32_t telemetry_hz = 5;
+  uint32_t arm_joints = 6;
+};
+
+struct DriverConfig {
+  std::string type = "sim";  // only "sim" today
+  SimDriverConfig sim;
+};
+
+struct RobotInfo {
+  std::string name;          // robot.name | metadata.robot_name
+  std::string manufacturer;  // robot.manufacturer | metadata.manufacturer (display text)
+  std::string model;         // robot.model | metadata.model
+  std::string type;          // robot.type | physics.type
+  std::optional<uint32_t> dof;
+  std::optional<double> payload_kg;
+  std::optional<double> reach_mm;
+  std::string serial_pattern;
+  std::string description;
+  std::vector<std::string> tags;
+  std::string robot_uuid;  // metadata.robot_uuid
+};
+
+struct HardwareCapabilities {  // profile-style `capabilities: {motion, sensing, io, safety}`
+  std::vector<std::string> motion, sensing, io, safety;
+};
+
+struct OfflineConfig {  // v1.5 `offline`
+  uint32_t grace_period_s = 86400;
+  uint32_t cross_owner_grace_s = 3600;
+  uint32_t max_key_ttl_s = 86400;
+  std::string issuer_url;            // probed for reachability (seed §6.1); empty: off
+  uint32_t issuer_poll_ms = 5000;
+  uint32_t issuer_timeout_ms = 1000;
+};
+
+struct ControlConfig {  // this node's `control` block (docs/SESSIONS.md)
+  std::string fleet_policy = "role";  // role | fleet_wins | individual_wins
+  uint32_t handoff_window_s = 30;
+  uint32_t queue_max = 16;
+  uint32_t queue_wait_s = 300;
+  uint32_t max_session_s = 0;  // caps every role's session TTL; 0 = the role TTLs
+  uint32_t transfer_window_s = 86400;  // seed §6.2: 24 h
+  uint32_t consent_ttl_s = 86400;
+  std::string consent_webhook;  // http:// URL; empty: stream only
+};
+
+struct QosConfig {  // v1.5 `qos`
+  uint32_t ack_timeout_ms = 500;
+  uint32_t max_retries = 3;
+  uint32_t backoff_base_ms = 100;
+};
+
+// ---------------------------------------------------------------------------------------
+
+struct NodeConfig {
+  std::string rcan_version = "1.2";  // "1.2" and "1.3.0" styles
+  std::string ruri;                  // canonical (ruri | metadata.ruri, normalised)
+  Ruri ruri_parts;                   // parse_ruri(ruri)
+  std::string rrn;                   // canonical RRN, empty unless configured (rrn | registry.rrn)
+  std::string registry_url;          // registry.registry_url | rcan_protocol.registry
+  RobotInfo robot;
+  // Protocol capabilities the node offers (status, chat, teleop, nav, arm, vision, …):
+  // top-level `capabilities` as a list | rcan_protocol.capabilities; when neither is given,
+  // derived from robot.type (docs/CONFIG.md).
+  std::vector<std::string> capabilities;
+  HardwareCapabilities hardware_capabilities;
+  std::string channel_admin_scope;  // rcan_protocol.channel_admin_scope
+
+  std::string data_dir;         // node.data_dir, default default_data_dir()
+  std::string log_level = "info";  // trace|debug|info|warn|error
+  ServerConfig server;
+  GrpcConfig grpc;
+  UdpConfig udp;
+  SecurityConfig security;
+  RbacConfig rbac;
+  SafetyConfig safety;
+  AgentConfig agent;
+  BrainConfig brain;
+  DriverConfig driver;
+  OfflineConfig offline;
+  QosConfig qos;
+  MqttConfig mqtt;    // `mqtt` (node/fleet_config.h)
+  FleetConfig fleet;  // `fleet`
+  SwarmConfig swarm;  // `swarm` seed §5.2 keys
+  ControlConfig control;
+
+  // Validated blocks the node keeps but does not interpret, as JSON objects keyed by their
+  // top-level name: bridge, hardware_safety, messaging, metadata, physics, drivers, network,
+  // tiered_brain, reactive, learner, camera, audio, channels, agent_roster, swarm,
+  // connection, notes, ros2 (only those present).
+  json::Object kept;
+
+  // rcan_protocol.enable_jwt: false was given. It is ignored: JWT is always required.
+  bool enable_jwt_false_ignored = false;
+  // Non-fatal notes for the log (e.g. the enable_jwt note above).
+  std::vector<std::string> warnings;
+
+  std::string source;  // the file path, or "<embedded default>" / "<text>"
+
+  // Which data_dir-derived paths the file set explicitly (apply_overrides keeps these).
+  struct ExplicitPaths {
+    bool key_dir = false;
+    bool audit_dir = false;
+    bool chain_secret_file = false;
+  } explicit_paths;
+};
+
+struct ConfigOptions {
+  // Relative paths in the file resolve against this directory (load_config: the file's
+  // directory). Empty: relative paths are kept relative (resolved against the CWD later).
+  std::string base_dir;
+  // When non-empty, replaces a `{device_id}` placeholder in ruri / metadata.ruri (8 hex
+  // digits or a UUID, lower case), as in spec/profiles/*.rcan.yaml.
+  std::string device_id;
+  // Name used in NodeConfig::source.
+  std::string source_name = "<text>";
+  // data_dir when the file has no node.data_dir; empty → default_data_dir().
+  std::string default_data_dir;
+};
+
+// Parses and validates YAML text. Never throws. The fuzz entry point.
+Result<NodeConfig> parse_config_text(std::string_view yaml, const ConfigOptions& opts = {});
+
+// Reads `path` (at most kMaxConfigBytes) and parses it with base_dir = its directory.
+Result<NodeConfig> load_config(const std::string& path, ConfigOptions opts = {});
+
+// The embedded simulated robot (`rcand` with no arguments): name "sim-rover",
+// ruri rcan://local.rcan/rcan/sim-rover/<device_id>, capabilities status, chat, teleop, nav,
+// arm; port 8080 on 127.0.0.1; no gates. `device_id` (8 hex or UUID): empty → the first 8
+// hex digits of SHA-256(data_dir), stable per data directory.
+Result<NodeConfig> default_config(const std::string& data_dir, std::string_view device_id = {});
+// The YAML text default_config() parses (same as examples/sim-robot.rcan.yaml, minus
+// comments and node.data_dir), with a `{device_id}` placeholder.
+std::string_view default_config_yaml();
+
+// $RCAND_DATA_DIR, else $XDG_DATA_HOME/rcand (when absolute), else $HOME/.local/share/rcand,
+// else the passwd home directory. Error when no home directory can be found.
+Result<std::string> default_data_dir();
+
+// `--port N` and `--data-dir D`. Port must be 0..65535 (0: any free port, logged at start). A new data_dir (made absolute)
+// moves key_dir, audit.dir and audit.chain_secret_file with it unless the file set them.
+Status apply_overrides(NodeConfig& cfg, std::optional<int> port,
+                       std::optional<std::string> data_dir);
+
+// Names used in docs and logs.
+std::string_view limit_policy_name(LimitPolicy p);
+std::string_view gate_on_fail_name(GateOnFail f);
+std::string_view hitl_on_timeout_name(HitlOnTimeout t);
+
+// The built-in prompt-injection substrings (lower case).
+const std::vector<std::string>& default_injection_patterns();
+
+}  // namespace rcan::config

@@ -1,0 +1,93 @@
+#include "node/admission/authenticator.h"
+
+#include <algorithm>
+#include <limits>
+
+#include "node/admission/token_cache.h"
+
+namespace rcan::node {
+
+bool Principal::has_scope(std::string_view s) const {
+  return std::find(scopes.begin(), scopes.end(), s) != scopes.end();
+}
+
+Authenticator::Authenticator(AuthOptions opts) : opts_(std::move(opts)) {
+  verifier_ = std::make_unique<jwt::JwtVerifier>(opts_.trust, opts_.verify);
+  cache_ = std::make_unique<TokenCache>(opts_.token_cache_entries);
+}
+
+Authenticator::~Authenticator() = default;
+
+Result<Principal> Authenticator::authenticate_token(std::string_view token, int64_t now_s) const {
+  if (token.empty()) return Error(ErrorCode::kAuthRequired, "a bearer token is required", "auth_token");
+  if (auto hit = cache_->find(token, now_s)) return std::move(*hit);
+  auto claims = verifier_->verify(token, now_s);
+  if (!claims.ok()) {
+    Error e = claims.error();
+    if (e.code != ErrorCode::kAuthRequired) e.code = ErrorCode::kAuthInvalid;
+    return e;
+  }
+  Principal p;
+  p.authenticated = true;
+  p.issuer = claims->iss;
+  p.sub = claims->sub;
+  auto role = role_from_name(claims->role);
+  if (!role) return Error(ErrorCode::kAuthInvalid, "token role is not an RCAN role", "role");
+  p.role = *role;
+  p.scopes = claims->scopes;
+  p.token_exp = claims->exp;
+  if (claims->fleet) p.fleet = std::make_shared<const std::vector<std::string>>(std::move(*claims->fleet));
+  p.token_identity.sub = claims->sub;
+  if (!claims->sender_type.empty()) p.token_identity.sender_type = claims->sender_type;
+  if (!claims->cloud_provider.empty()) p.token_identity.cloud_provider = claims->cloud_provider;
+  if (!claims->function_name.empty()) p.token_identity.function_name = claims->function_name;
+  if (Status s = check_token_sender_claims(p.token_identity); !s.ok()) return s.error();
+  // The window in which jwt::check_claims' time checks pass (exp required; nbf, iat optional).
+  const int64_t leeway = std::max<int64_t>(0, opts_.verify.leeway_s);
+  int64_t from = std::numeric_limits<int64_t>::min();
+  if (claims->nbf) from = std::max(from, *claims->nbf - leeway);
+  if (claims->iat) from = std::max(from, *claims->iat - leeway);
+  if (claims->exp) cache_->insert(token, p, from, *claims->exp + leeway);
+  return p;
+}
+
+Result<SignatureCheck> Authenticator::check_signature(const Message& msg) const {
+  SignatureCheck c;
+  const json::Value* sig = msg.wire.find("sig");
+  if (!sig || sig->is_null()) {
+    if (opts_.require_signature)
+      return Error(ErrorCode::kAuthRequired, "this node requires signed messages", "sig");
+    return c;
+  }
+  c.present = true;
+  // Peer-robot keys first: a robot signature changes the §8.5 verdict.
+  if (!opts_.robot_keys.mldsa65.empty() || !opts_.robot_keys.ed25519.empty()) {
+    auto r = msgsig::verify(msg.wire, opts_.robot_keys);
+    if (r.ok()) {
+      c.verified = true;
+      c.robot_key = true;
+      c.alg = r->alg == msgsig::Alg::kMlDsa65 ? "ml-dsa-65" : "ed25519";
+      c.kid = r->kid;
+      return c;
+    }
+  }
+  auto r = msgsig::verify(msg.wire, opts_.signer_keys);
+  if (!r.ok()) {
+    Error e = r.error();
+    if (e.code == ErrorCode::kAuthRequired) e.code = ErrorCode::kSignatureInvalid;
+    if (e.code != ErrorCode::kSchemaValidationFailed && e.code != ErrorCode::kInvalidRuri)
+      e.code = ErrorCode::kSignatureInvalid;
+    return e;
+  }
+  c.verified = true;
+  c.alg = r->alg == msgsig::Alg::kMlDsa65 ? "ml-dsa-65" : "ed25519";
+  c.kid = r->kid;
+  return c;
+}
+
+Result<SenderIdentity> Authenticator::sender(const Message& msg, const Principal& p,
+                                             const SignatureCheck& sig) const {
+  return resolve_sender(msg, p.token_identity, sig.robot_key, true);
+}
+
+}  // namespace rcan::node

@@ -1,0 +1,170 @@
+// The §16 HTTP routes (docs/AI.md): AUTHORIZE, the pending list, the thought log and the
+// public watermark verification endpoint. Node::route hands them over through ai_route().
+#include "node/api/ai_routes.h"
+
+#include "node/ai/ai_services.h"
+#include "node/services/node_services.h"
+#include "rcan/crypto/watermark.h"
+#include "rcan/errors.h"
+
+namespace rcan::node {
+namespace {
+
+void answer(NodeServices& svc, const transport::HttpHandler::Respond& respond, const std::string& route, int status,
+            const json::Value& body, std::vector<std::pair<std::string, std::string>> headers = {}) {
+  svc.metrics.count_request(route, status);
+  transport::HttpResponse r;
+  r.status = status;
+  r.body = json::dump(body);
+  r.headers = std::move(headers);
+  respond(std::move(r));
+}
+
+void answer_error(NodeServices& svc, const transport::HttpHandler::Respond& respond, const std::string& route, const Error& e) {
+  answer(svc, respond, route, http_status(e.code, e.reason), svc.error(e));
+}
+
+Result<Principal> bearer(NodeServices& svc, const transport::HttpRequest& req) {
+  return svc.authenticate_header(req.header("authorization"));
+}
+
+bool wrong_method(NodeServices& svc, const transport::HttpRequest& req, const transport::HttpHandler::Respond& respond,
+                  const std::string& route, const char* allowed) {
+  if (req.method == allowed) return false;
+  answer(svc, respond, route, 405,
+         svc.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed on " + route)),
+         {{"Allow", allowed}});
+  return true;
+}
+
+void authorize_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req, const transport::HttpHandler::Respond& respond) {
+  const std::string route = "/rcan/v1/authorize";
+  if (wrong_method(svc, req, respond, route, "POST")) return;
+  auto p = bearer(svc, req);
+  if (!p.ok()) {
+    auto e = svc.entry("anonymous", "", "HITL_AUTHORIZE_REFUSED", "blocked");
+    e.reason = std::string(error_name(p.error().code));
+    e.detail.set("route", route);
+    svc.write_audit(std::move(e));
+    return answer_error(svc, respond, route, p.error());
+  }
+  auto body = json::parse(req.body, {.max_depth = 16, .max_bytes = 64 * 1024});
+  if (!body.ok()) return answer_error(svc, respond, route, body.error());
+  ai.authorize(*p, *body, "http", route,
+               [&svc, respond, route](int status, json::Value out) { answer(svc, respond, route, status, out); });
+}
+
+void pending_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req, const transport::HttpHandler::Respond& respond) {
+  const std::string route = "/rcan/v1/pending";
+  if (wrong_method(svc, req, respond, route, "GET")) return;
+  auto p = bearer(svc, req);
+  if (!p.ok()) return answer_error(svc, respond, route, p.error());
+  json::Value list = ai.pending_list();
+  if (role_level(p->role) < role_level(Role::kOwner)) {
+    // Below OWNER: only one's own held commands.
+    json::Array mine;
+    for (const auto& i : list.get("pending")->as_array())
+      if (const json::Value* by = i.get("requested_by"); by && by->is_string() && by->as_string() == p->sub)
+        mine.push_back(i);
+    list = json::Object{{"pending", mine}, {"count", static_cast<int64_t>(mine.size())}};
+  }
+  answer(svc, respond, route, 200, list);
+}
+
+void thought_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req, const transport::HttpHandler::Respond& respond) {
+  const std::string route = "/api/thoughts";
+  if (wrong_method(svc, req, respond, route, "GET")) return;
+  auto p = bearer(svc, req);
+  if (!p.ok()) return answer_error(svc, respond, route, p.error());
+  // `status` is the lowest scope (GUEST): every verified token holds it (docs/AI.md).
+  std::string id = req.path.substr(std::string("/api/thoughts/").size());
+  auto t = id.empty() || id.size() > 128 ? std::nullopt : ai.thoughts().get(id);
+  if (!t)
+    return answer_error(svc, respond, route,
+                        Error(ErrorCode::kNotFound, "no thought with id " + id.substr(0, 128), "thought_id"));
+  bool reasoning = p->has_scope("config") && role_level(p->role) >= role_level(Role::kOwner);
+  answer(svc, respond, route, 200, t->to_json(reasoning));
+}
+
+void verify_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req, const transport::HttpHandler::Respond& respond) {
+  const std::string route = "/api/v1/watermark/verify";
+  if (wrong_method(svc, req, respond, route, "GET")) return;
+  auto seed_error = [&svc, respond, route](int status, const char* msg) {
+    answer(svc, respond, route, status,
+           json::Object{{"error", msg}, {"code", "HTTP_" + std::to_string(status)}});
+  };
+  std::string token(req.query_value("token"));
+  if (!req.has_query("token") || !watermark::valid_format(token))
+    return seed_error(400, "Invalid watermark token format");
+  std::string rrn(req.query_value("rrn"));
+  if (req.has_query("rrn") && rrn != svc.settings.rrn)
+    return seed_error(404, "Watermark token not found in audit log");
+  bool posted = ai.worker().post([&svc, respond, route, token, seed_error]() mutable {
+    auto lines = svc.audit.find_by_watermark(token);
+    std::optional<json::Value> entry;
+    if (lines.ok()) {
+      for (const auto& l : *lines) {
+        auto v = json::parse(l, {.max_depth = 64, .max_bytes = 1u << 20});
+        if (!v.ok()) continue;
+        const json::Value* ev = v->get("event");
+        bool command = ev && ev->is_string() && ev->as_string() == "COMMAND";
+        if (!entry || command) entry = std::move(v).value();
+        if (command) break;
+      }
+    }
+    if (!entry) return seed_error(404, "Watermark token not found in audit log");
+    answer(svc, respond, route, 200,
+           json::Object{{"valid", true},
+                        {"rrn", svc.settings.rrn},
+                        {"watermark_token", token},
+                        {"audit_entry", *entry}});
+  });
+  if (!posted) answer_error(svc, respond, route, Error(ErrorCode::kSafeStop, "busy; try again"));
+}
+
+}  // namespace
+
+bool ai_route(NodeServices& svc, transport::HttpRequest& req, transport::HttpHandler::Respond& respond) {
+  const std::string& p = req.path;
+  bool ours = p == "/rcan/v1/authorize" || p == "/rcan/v1/pending" || p == "/api/v1/watermark/verify" ||
+              p.rfind("/api/thoughts/", 0) == 0;
+  if (!ours) return false;
+  if (!svc.ai) {
+    answer_error(svc, respond, p, Error(ErrorCode::kNotFound, "AI accountability is not enabled on this node"));
+    return true;
+  }
+  AiServices& ai = *svc.ai;
+  if (p == "/rcan/v1/authorize") authorize_route(svc, ai, req, respond);
+  else if (p == "/rcan/v1/pending") pending_route(svc, ai, req, respond);
+  else if (p == "/api/v1/watermark/verify") verify_route(svc, ai, req, respond);
+  else thought_route(svc, ai, req, respond);
+  return true;
+}
+
+bool ai_stream_message(NodeServices& svc, const std::string& type, const json::Value& body,
+                       const std::optional<Principal>& principal, const std::function<void(std::string)>& send) {
+  if (type != "AUTHORIZE") return false;
+  if (!svc.ai || !principal) {
+    send(json::dump(svc.error(Error(ErrorCode::kNotFound, "AI accountability is not enabled on this node"))));
+    return true;
+  }
+  svc.ai->authorize(*principal, body, "ws", "/rcan/v1/stream",
+                    [send](int, json::Value out) { send(json::dump(out)); });
+  return true;
+}
+
+bool ai_event_for_stream(json::Value& event, const std::optional<Principal>& principal) {
+  if (!event.is_object()) return true;
+  const json::Value* d = event.get("_deliver");
+  if (!d) return true;
+  json::Value deliver = *d;
+  event.as_object().erase("_deliver");
+  if (!principal) return false;
+  if (const json::Value* r = deliver.get("min_role"); r && r->is_int())
+    return role_level(principal->role) >= r->as_int();
+  if (const json::Value* k = deliver.get("principal"); k && k->is_string())
+    return principal->key() == k->as_string();
+  return false;
+}
+
+}  // namespace rcan::node

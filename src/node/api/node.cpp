@@ -1,0 +1,668 @@
+// Node: HTTP routes and the WebSocket stream binding over the one pipeline.
+#include "node/api/node.h"
+
+#include <pthread.h>
+
+#include <chrono>
+#include <cstdlib>
+
+#include "node/api/ai_routes.h"
+#include "node/api/stage_order.h"
+#include "base/log.h"
+#include "node/api/web_assets.h"
+#include "node/discovery/mdns.h"
+#include "rcan/errors.h"
+#include "base/clock.h"
+
+namespace rcan::node {
+
+// ---------------------------------------------------------------------------------------------
+// Streams (spec-digest Appendix B): CONNECT → CONNECT_ACK, PING/PONG, SUBSCRIBE, messages in,
+// ACK/ERROR/events/telemetry out, one JSON message per text frame.
+
+struct StreamState {
+  std::shared_ptr<transport::StreamSink> sink;
+  std::mutex mu;
+  bool connected = false;
+  std::optional<Principal> principal;
+  std::string upgrade_token;   // from the upgrade request, if any
+  std::string stream_id;
+  bool telemetry = false;
+  int64_t telemetry_period_ms = 200;
+  int64_t next_telemetry_mono = 0;
+  int64_t opened_mono = 0;
+  bool closed = false;
+};
+
+struct StreamSessionImpl final : public transport::StreamSession {
+  StreamSessionImpl(Node& n, std::shared_ptr<StreamState> s) : node(n), st(std::move(s)) {}
+  void on_text(std::string text) override;
+  void on_binary() override { st->sink->close(1003, "binary frames are not supported"); }
+  void on_closed() override {
+    {
+      std::lock_guard<std::mutex> lock(st->mu);
+      st->closed = true;
+    }
+    node.unregister_stream(st);
+  }
+  void refuse_connect(const std::string& why) {
+    json::Object err{{"type", "ERROR"}, {"code", 8001}, {"name", "ConnectionRefused"}, {"message", why}};
+    st->sink->send_text(json::dump(json::Value(err)));
+    st->sink->close(4001, "connection refused");
+  }
+  Node& node;
+  std::shared_ptr<StreamState> st;
+};
+
+void StreamSessionImpl::on_text(std::string text) {
+  const int64_t received_us = steady_us();
+  NodeServices& svc = node.svc_;
+  json::ParseOptions po;
+  po.max_bytes = svc.settings.codec.max_body_bytes;
+  po.max_depth = 32;
+  auto v = json::parse(text, po);
+  bool connected;
+  {
+    std::lock_guard<std::mutex> lock(st->mu);
+    connected = st->connected;
+  }
+  if (!v.ok() || !v->is_object()) {
+    if (!connected) {
+      st->sink->close(1002, "the first frame must be a CONNECT message");
+      return;
+    }
+    Error e = v.ok() ? Error(ErrorCode::kSchemaValidationFailed, "a frame must hold one JSON object")
+                     : v.error();
+    st->sink->send_text(json::dump(svc.error(e)));
+    return;
+  }
+  const json::Value* type = v->get("type");
+  std::string t = type && type->is_string() ? type->as_string() : "";
+  if (!connected) {
+    if (t != "CONNECT") {
+      st->sink->close(1002, "the first frame must be a CONNECT message");
+      return;
+    }
+    std::string token = st->upgrade_token;
+    for (const char* k : {"token", "auth_token"}) {
+      const json::Value* tk = v->get(k);
+      if (tk && tk->is_string() && !tk->as_string().empty()) token = tk->as_string();
+    }
+    auto p = svc.authenticate(token);
+    if (!p.ok()) {
+      auto e = svc.entry("anonymous", "", "STREAM_REFUSED", "blocked");
+      e.reason = std::string(error_name(p.error().code));
+      e.detail.set("transport", "ws");
+      svc.write_audit(std::move(e));
+      refuse_connect(p.error().message);
+      return;
+    }
+    {
+      std::lock_guard<std::mutex> lock(st->mu);
+      st->connected = true;
+      st->principal = *p;
+    }
+    auto e = svc.entry(p->display(), st->stream_id, "STREAM_OPEN", "ok");
+    e.sub = p->sub;
+    e.detail.set("transport", "ws");
+    svc.write_audit(std::move(e));
+    json::Object ack{{"type", "CONNECT_ACK"},
+                     {"session_id", st->stream_id},
+                     {"server_version", svc.settings.rcan_version},
+                     {"ruri", svc.settings.ruri},
+                     {"role", std::string(role_name(p->role))}};
+    st->sink->send_text(json::dump(json::Value(ack)));
+    return;
+  }
+  if (t == "PING") {
+    json::Object pong{{"type", "PONG"}};
+    const json::Value* id = v->get("msg_id");
+    pong.set("reply_to", id ? *id : json::Value());
+    pong.set("timestamp_us", svc.clock.wall_ms() * 1000);
+    st->sink->send_text(json::dump(json::Value(pong)));
+    return;
+  }
+  if (t == "SUBSCRIBE" || t == "UNSUBSCRIBE") {
+    bool on = t == "SUBSCRIBE";
+    double hz = svc.settings.telemetry_hz;
+    if (const json::Value* h = v->get("hz"); h && h->is_number()) hz = h->to_double();
+    if (!(hz >= 0.2 && hz <= 50)) {
+      st->sink->send_text(json::dump(svc.error(Error(ErrorCode::kSchemaValidationFailed,
+                                                     "hz must be within 0.2..50", "hz"))));
+      return;
+    }
+    {
+      std::lock_guard<std::mutex> lock(st->mu);
+      st->telemetry = on;
+      st->telemetry_period_ms = static_cast<int64_t>(1000.0 / hz);
+      st->next_telemetry_mono = 0;
+    }
+    st->sink->send_text(json::dump(svc.envelope(
+        MessageType::kAck, json::Object{{"subscribed", on}, {"topic", "telemetry"}, {"hz", hz}})));
+    return;
+  }
+  if (t == "AUTHORIZE") {  // §16.4, answered on this stream (ai_routes.cpp)
+    std::optional<Principal> who;
+    {
+      std::lock_guard<std::mutex> lock(st->mu);
+      who = st->principal;
+    }
+    auto state = st;
+    ai_stream_message(svc, t, *v, who, [state](std::string s) { state->sink->send_text(std::move(s)); });
+    return;
+  }
+  // Everything else is an RCAN message through the pipeline, as this stream's principal.
+  Ingress in;
+  in.body = std::move(v).value();
+  in.transport = "ws";
+  in.route = "/rcan/v1/stream";
+  in.remote = st->sink->remote_addr();
+  in.received_mono_us = received_us;
+  {
+    std::lock_guard<std::mutex> lock(st->mu);
+    in.preauthenticated = st->principal;
+  }
+  auto state = st;
+  node.submit(std::move(in), [state](Outcome out) { state->sink->send_text(json::dump(out.body)); });
+}
+
+// ---------------------------------------------------------------------------------------------
+
+Node::Node(NodeServices& services)
+    : svc_(services),
+      pipeline_(services, standard_stages(services)),
+      respond_timer_(&services.metrics.stage("respond")) {
+  event_sub_ = svc_.events.subscribe([this](const json::Value& ev) {
+    // An event with "_to" is for the streams of that principal only (PREEMPTED, PROMOTED, …).
+    std::string to;
+    json::Value out = ev;
+    if (const json::Value* t = ev.is_object() ? ev.get("_to") : nullptr; t && t->is_string()) {
+      to = t->as_string();
+      json::Object copy;
+      for (const auto& m : ev.as_object())
+        if (m.first != "_to") copy.set(m.first, m.second);
+      out = json::Value(std::move(copy));
+    }
+    bool addressed = ev.is_object() && ev.get("_deliver");  // §16 events for some streams only
+    std::string text = addressed ? std::string() : json::dump(out);
+    std::vector<std::shared_ptr<StreamState>> copy;
+    {
+      std::lock_guard<std::mutex> lock(streams_mu_);
+      copy = streams_;
+    }
+    for (auto& st : copy) {
+      bool ok;
+      {
+        std::lock_guard<std::mutex> lock(st->mu);
+        ok = st->connected && !st->closed && (to.empty() || (st->principal && st->principal->key() == to));
+      }
+      if (ok && addressed) {
+        json::Value addressed_ev = ev;
+        std::optional<Principal> who;
+        {
+          std::lock_guard<std::mutex> lock(st->mu);
+          who = st->principal;
+        }
+        if (ai_event_for_stream(addressed_ev, who)) st->sink->send_text(json::dump(addressed_ev));
+      } else if (ok) {
+        st->sink->send_text(text);
+      }
+    }
+  });
+  svc_.metrics.add_gauge("rcan_estop_active", "1 while ESTOP is latched.",
+                         [this] { return svc_.act.estop_active() ? 1.0 : 0.0; });
+  svc_.metrics.add_gauge("rcan_audit_queue_depth", "Audit records waiting to be durable.",
+                         [this] { return static_cast<double>(svc_.audit_inflight.load()); });
+  svc_.metrics.add_gauge("rcan_audit_available", "0 when the audit log cannot record.",
+                         [this] { return svc_.audit.available() ? 1.0 : 0.0; });
+  svc_.metrics.add_counter_fn("rcan_audit_recoveries_total", "Times the audit log came back after a failure.",
+                              [this] { return static_cast<double>(svc_.audit.stats().recoveries); });
+  svc_.metrics.add_counter_fn("rcan_audit_index_fallbacks_total",
+                              "Audit reads whose index entry did not lead to the record, answered from the segment itself.",
+                              [this] { return static_cast<double>(svc_.audit.stats().index_fallbacks); });
+  // Records per group commit = records / groups; syncs per second = the disk's flush rate.
+  svc_.metrics.add_counter_fn("rcan_audit_group_commits_total", "Audit group commits (one write each).",
+                              [this] { return static_cast<double>(svc_.audit.stats().groups_committed); });
+  svc_.metrics.add_counter_fn("rcan_audit_syncs_total", "fdatasync calls of the audit log.",
+                              [this] { return static_cast<double>(svc_.audit.stats().syncs); });
+  svc_.metrics.add_counter_fn("rcan_audit_failures_total", "Audit appends that failed.",
+                              [this] { return static_cast<double>(svc_.audit_failures.load()); });
+  svc_.metrics.add_gauge("rcan_streams_open", "Connected WebSocket streams.",
+                         [this] { return static_cast<double>(stream_count()); });
+  svc_.metrics.add_gauge("rcan_control_sessions", "Live control sessions.", [this] {
+    return svc_.sessions.controller(svc_.clock.mono_ms()) ? 1.0 : 0.0;
+  });
+  svc_.metrics.add_gauge("rcan_audit_last_seq", "Last durable audit seq.",
+                         [this] { return static_cast<double>(svc_.audit.stats().last_seq); });
+}
+
+Node::~Node() {
+  shutdown();
+  svc_.events.unsubscribe(event_sub_);
+}
+
+void Node::start() {
+  if (running_.exchange(true)) return;
+  auto e = svc_.entry("system", "", "SYSTEM_START", "ok");
+  e.sender_type = "system";
+  e.detail.set("rcan_version", svc_.settings.rcan_version);
+  e.detail.set("estop_active", svc_.act.estop_active());
+  svc_.write_audit(std::move(e));
+  control_start();
+  pump_ = std::thread([this] {
+    pthread_setname_np(pthread_self(), "node-pump");
+    pump();
+  });
+}
+
+void Node::shutdown() {
+  if (!running_.exchange(false)) return;
+  { std::lock_guard<std::mutex> wake(pump_mu_); }
+  pump_cv_.notify_all();
+  if (pump_.joinable()) pump_.join();
+  svc_.partition.stop();
+  save_control_state();
+  std::vector<std::shared_ptr<StreamState>> copy;
+  {
+    std::lock_guard<std::mutex> lock(streams_mu_);
+    copy = streams_;
+  }
+  for (auto& st : copy) st->sink->close(1001, "node shutting down");
+  worker_.shutdown();
+  auto e = svc_.entry("system", "", "SYSTEM_STOP", "ok");
+  e.sender_type = "system";
+  (void)svc_.audit.append(std::move(e));  // blocks until durable: the last word of the run
+}
+
+size_t Node::stream_count() const {
+  std::lock_guard<std::mutex> lock(streams_mu_);
+  return streams_.size();
+}
+
+void Node::register_stream(const std::shared_ptr<StreamState>& st) {
+  {
+    std::lock_guard<std::mutex> lock(streams_mu_);
+    streams_.push_back(st);
+  }
+  { std::lock_guard<std::mutex> wake(pump_mu_); }
+  pump_cv_.notify_all();  // telemetry and the CONNECT deadline start now, not at the next idle tick
+}
+
+void Node::unregister_stream(const std::shared_ptr<StreamState>& st) {
+  std::lock_guard<std::mutex> lock(streams_mu_);
+  for (auto it = streams_.begin(); it != streams_.end(); ++it) {
+    if (*it == st) {
+      streams_.erase(it);
+      break;
+    }
+  }
+}
+
+void Node::pump() {
+  // Telemetry at each stream's rate; streams that never CONNECT are closed after 10 s.
+  // With streams open it wakes every 10 ms (telemetry rates up to 100 Hz); without, only for
+  // the control tick — an idle node costs next to nothing (bench/fleet_bench prints the figure).
+  int64_t next_control_tick = 0;
+  while (running_.load()) {
+    {
+      bool idle;
+      {
+        std::lock_guard<std::mutex> lock(streams_mu_);
+        idle = streams_.empty();
+      }
+      std::unique_lock<std::mutex> lk(pump_mu_);
+      pump_cv_.wait_for(lk, std::chrono::milliseconds(idle ? 100 : 10));
+    }
+    if (!running_.load()) break;
+    int64_t now = svc_.clock.mono_ms();
+    if (now >= next_control_tick) {  // expiries, promotions, lease ends (control_routes.cpp)
+      next_control_tick = now + 100;
+      control_tick();
+    }
+    std::vector<std::shared_ptr<StreamState>> copy;
+    {
+      std::lock_guard<std::mutex> lock(streams_mu_);
+      copy = streams_;
+    }
+    std::string telemetry;
+    for (auto& st : copy) {
+      bool send = false, handshake_timeout = false;
+      {
+        std::lock_guard<std::mutex> lock(st->mu);
+        if (!st->connected && now - st->opened_mono > 10'000) handshake_timeout = true;
+        if (st->connected && st->telemetry && now >= st->next_telemetry_mono) {
+          send = true;
+          st->next_telemetry_mono = now + st->telemetry_period_ms;
+        }
+      }
+      if (handshake_timeout) {
+        st->sink->close(1002, "no CONNECT within 10 s");
+        continue;
+      }
+      if (send) {
+        if (telemetry.empty()) {
+          json::Object t{{"type", "STREAM"},
+                         {"topic", "telemetry"},
+                         {"timestamp_ms", svc_.clock.wall_ms()},
+                         {"estop_active", svc_.act.estop_active()},
+                         {"payload", svc_.act.telemetry()}};
+          telemetry = json::dump(json::Value(t));
+        }
+        st->sink->send_text(telemetry);
+      }
+    }
+  }
+}
+
+void Node::on_safety_event(const std::string& type, const std::string& session_id, int64_t elapsed_ms,
+                           const std::string& detail) {
+  auto e = svc_.entry("system", "", type, "ok");
+  e.sender_type = "system";
+  e.reason = type;
+  if (!session_id.empty()) e.detail.set("session_id", session_id);
+  e.detail.set("elapsed_ms", elapsed_ms);
+  if (!detail.empty()) e.detail.set("detail", detail);
+  svc_.write_audit(std::move(e));
+  svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
+                                               {"event", type},
+                                               {"session_id", session_id},
+                                               {"elapsed_ms", elapsed_ms},
+                                               {"timestamp_ms", svc_.clock.wall_ms()}}));
+}
+
+std::unique_ptr<transport::StreamSession> Node::open(const transport::HttpRequest& upgrade, std::shared_ptr<transport::StreamSink> sink,
+                                          transport::HttpResponse& refusal) {
+  if (upgrade.path != "/rcan/v1/stream" && upgrade.path != "/ws/telemetry") {
+    refusal.status = 404;
+    refusal.body = json::dump(svc_.error(Error(ErrorCode::kNotFound, "no stream at " + upgrade.path)));
+    return nullptr;
+  }
+  auto st = std::make_shared<StreamState>();
+  st->sink = std::move(sink);
+  st->stream_id = new_uuid_v4();
+  st->opened_mono = svc_.clock.mono_ms();
+  if (!upgrade.bearer().empty())
+    st->upgrade_token = std::string(upgrade.bearer());
+  else if (upgrade.has_query("token"))
+    st->upgrade_token = std::string(upgrade.query_value("token"));
+  if (upgrade.path == "/ws/telemetry") {
+    // v1.1 telemetry socket: the token is in the query; telemetry starts at once.
+    auto p = svc_.authenticate(st->upgrade_token);
+    if (!p.ok()) {
+      refusal.status = http_status(p.error().code);
+      refusal.body = json::dump(svc_.error(p.error()));
+      return nullptr;
+    }
+    st->connected = true;
+    st->principal = *p;
+    st->telemetry = true;
+    st->telemetry_period_ms = 1000 / std::max(1, svc_.settings.telemetry_hz);
+  }
+  register_stream(st);
+  return std::make_unique<StreamSessionImpl>(*this, st);
+}
+
+// ---------------------------------------------------------------------------------------------
+// HTTP
+
+void Node::answer_json(Respond& respond, const std::string& route, int status, json::Value body,
+                       std::vector<std::pair<std::string, std::string>> headers) {
+  svc_.metrics.count_request(route, status);
+  transport::HttpResponse r;
+  r.status = status;
+  r.body = json::dump(body);
+  r.headers = std::move(headers);
+  respond(std::move(r));
+}
+
+void Node::answer_error(Respond& respond, const std::string& route, const Error& err) {
+  answer_json(respond, route, http_status(err.code, err.reason), svc_.error(err));
+}
+
+Result<Principal> Node::bearer_principal(const transport::HttpRequest& req) const {
+  return svc_.authenticate_header(req.header("authorization"));
+}
+
+void Node::handle(transport::HttpRequest req, Respond respond) {
+  route(req, respond);
+}
+
+namespace {
+
+bool method_is(const transport::HttpRequest& req, std::string_view m) { return req.method == m; }
+
+}  // namespace
+
+void Node::run_pipeline(transport::HttpRequest& req, Respond& respond, const std::string& route, json::Value body) {
+  Ingress in;
+  // The reference client wraps the message: {"session_id": …, "message": {…}}.
+  if (body.is_object() && !body.get("type") && !body.get("cmd") && !body.get("message_type")) {
+    if (const json::Value* inner = body.get("message"); inner && inner->is_object()) {
+      json::Value m = *inner;
+      body = std::move(m);
+    }
+  }
+  in.body = std::move(body);
+  in.bearer = std::string(req.bearer());
+  in.transport = "http";
+  in.route = route;
+  in.remote = req.remote_addr;
+  in.received_mono_us = req.received_mono_us;
+  std::string r = route;
+  pipeline_.submit(std::move(in), [this, respond, r](Outcome out) mutable {
+    svc_.metrics.count_request(r, out.status);
+    transport::HttpResponse resp;
+    resp.status = out.status;
+    resp.body = json::dump(out.body);
+    resp.headers = std::move(out.headers);
+    resp.answered_mono_us = steady_us();
+    respond(std::move(resp));
+  });
+}
+
+void Node::answer_waited(int64_t us) { respond_timer_->observe_us(static_cast<double>(us)); }
+
+void Node::route(transport::HttpRequest& req, Respond& respond) {
+  const std::string& p = req.path;
+  auto parse_body = [&](json::Value& out, bool allow_empty) -> bool {
+    if (req.body.empty() && allow_empty) {
+      out = json::Object{};
+      return true;
+    }
+    json::ParseOptions po;
+    po.max_bytes = svc_.settings.codec.max_body_bytes;
+    po.max_depth = 32;
+    auto v = json::parse(req.body, po);
+    if (!v.ok()) {
+      answer_error(respond, p, v.error());
+      return false;
+    }
+    out = std::move(v).value();
+    return true;
+  };
+  auto wrong_method = [&](const char* allowed) {
+    answer_json(respond, p, 405,
+                svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed on " + p)),
+                {{"Allow", allowed}});
+  };
+
+  if (is_web_path(p)) {  // the operator dashboard (docs/DASHBOARD.md)
+    transport::HttpResponse r = web_response(req, svc_.clock.wall_ms());
+    svc_.metrics.count_request("/ui", r.status);
+    return respond(std::move(r));
+  }
+  if (ai_route(svc_, req, respond)) return;  // §16: authorize, pending, thoughts, watermark
+  if (p == "/healthz") {
+    if (!method_is(req, "GET") && !method_is(req, "HEAD")) return wrong_method("GET");
+    bool ok = svc_.audit.available();
+    return answer_json(respond, p, ok ? 200 : 503,
+                       json::Object{{"status", ok ? "ok" : "degraded"},
+                                    {"estop_active", svc_.act.estop_active()},
+                                    {"audit_available", ok}});
+  }
+  if (p == "/metrics") {
+    if (!method_is(req, "GET")) return wrong_method("GET");
+    svc_.metrics.count_request(p, 200);
+    transport::HttpResponse r;
+    r.content_type = "text/plain; version=0.0.4";
+    r.body = svc_.metrics.render();
+    return respond(std::move(r));
+  }
+  if (p == "/rcan/v1/discover") {
+    if (!method_is(req, "POST")) return wrong_method("POST");
+    json::Value body;
+    if (!parse_body(body, true)) return;
+    std::string reply;
+    if (const json::Value* id = body.get("message_id"); id && id->is_string()) reply = id->as_string().substr(0, 64);
+    return answer_json(respond, p, 200,
+                       svc_.envelope(MessageType::kAnnounce, svc_.discovery_info().as_object(), reply));
+  }
+  if (p == "/api/discovery") {
+    if (!method_is(req, "GET")) return wrong_method("GET");
+    json::Value info = svc_.discovery_info();
+    std::string caps;
+    for (const auto& c : svc_.settings.capabilities) caps += (caps.empty() ? "" : ",") + c;
+    json::Object txt{{"ruri", svc_.settings.ruri},
+                     {"model", svc_.settings.model},
+                     {"caps", caps},
+                     {"roles", "creator,owner,leasee,user,guest"},
+                     {"role", "GUEST"},
+                     {"version", svc_.settings.rcan_version},
+                     {"name", svc_.settings.name},
+                     {"status", status_word(svc_)}};  // as in the mDNS TXT record
+    return answer_json(respond, p, 200, json::Object{{"service_type", "_rcan._tcp"}, {"txt_record", txt}});
+  }
+  if (p == "/rcan/v1/status" || p == "/api/status") {
+    if (!method_is(req, "GET")) return wrong_method("GET");
+    bool detailed = false;
+    if (!req.header("authorization").empty()) {
+      auto pr = bearer_principal(req);
+      if (!pr.ok()) return answer_error(respond, p, pr.error());
+      detailed = true;
+    }
+    return answer_json(respond, p, 200, svc_.status(detailed));
+  }
+  if (p == "/rcan/v1/command" || p == "/api/command") {
+    if (!method_is(req, "POST")) return wrong_method("POST");
+    json::Value body;
+    if (!parse_body(body, false)) return;
+    return run_pipeline(req, respond, p, std::move(body));
+  }
+  if (p == "/api/stop") {
+    if (!method_is(req, "POST")) return wrong_method("POST");
+    json::Value body;
+    if (!parse_body(body, true)) return;
+    // A bare stop request becomes a SAFETY ESTOP message from the caller.
+    if (!body.is_object() || !body.get("type")) {
+      json::Object payload{{"safety_event", "ESTOP"}};
+      if (body.is_object())
+        if (const json::Value* r = body.get("reason"); r && r->is_string()) payload.set("reason", r->as_string());
+      json::Object m{{"version", "1.0.0"},
+                     {"message_id", new_uuid_v4()},
+                     {"type", "SAFETY"},
+                     {"priority", "SAFETY"},
+                     {"timestamp_ms", svc_.clock.wall_ms()},
+                     {"payload", payload}};
+      body = std::move(m);
+    }
+    return run_pipeline(req, respond, p, std::move(body));
+  }
+  if (control_route(req, respond)) return;
+  if (p == "/api/audit") {
+    if (!method_is(req, "GET")) return wrong_method("GET");
+    return audit_listing(req, respond);
+  }
+  if (p == "/api/v1/audit") {
+    if (!method_is(req, "GET")) return wrong_method("GET");
+    return audit_export(req, respond);
+  }
+  answer_error(respond, "other", Error(ErrorCode::kNotFound, "no route for " + p.substr(0, 128)));
+}
+
+void Node::audit_listing(transport::HttpRequest& req, Respond& respond) {
+  const std::string route = "/api/audit";
+  auto pr = bearer_principal(req);
+  if (!pr.ok()) return answer_error(respond, route, pr.error());
+  size_t limit = svc_.settings.audit_listing;
+  if (req.has_query("limit")) {
+    char* end = nullptr;
+    std::string s(req.query_value("limit"));
+    long v = std::strtol(s.c_str(), &end, 10);
+    if (!end || *end || v < 1 || v > 1000)
+      return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "limit must be 1..1000", "limit"));
+    limit = static_cast<size_t>(v);
+  }
+  bool posted = worker_.post([this, respond, route, limit]() mutable {
+    audit::AuditStats st = svc_.audit.stats();
+    json::Array entries;
+    // Records in the range that cannot be shown (changed on disk, unreadable): named, never
+    // left out silently.
+    json::Array unreadable;
+    std::string first_error;
+    uint64_t first = st.last_seq >= limit ? st.last_seq - limit + 1 : 1;
+    if (first < st.first_seq) first = st.first_seq;
+    for (uint64_t seq = first; seq <= st.last_seq && seq != 0; ++seq) {
+      auto line = svc_.audit.get(seq);
+      // Removed by retention since stats() was read: gone by design, not a failed check.
+      if (!line.ok() && line.error().code == ErrorCode::kNotFound) continue;
+      auto v = line.ok() ? json::parse(*line, {.max_depth = 64, .max_bytes = 1u << 20})
+                         : rcan::Result<json::Value>(line.error());
+      if (v.ok()) {
+        entries.push_back(std::move(v).value());
+        continue;
+      }
+      if (first_error.empty()) first_error = v.error().message;
+      unreadable.emplace_back(static_cast<int64_t>(seq));
+    }
+    if (!unreadable.empty())
+      log(LogLevel::kWarn, "audit.listing_unreadable",
+          {{"count", static_cast<int64_t>(unreadable.size())},
+           {"first_seq", unreadable.front()},
+           {"error", first_error}});
+    answer_json(respond, route, 200,
+                json::Object{{"entries", entries}, {"count", static_cast<int64_t>(entries.size())},
+                             {"last_seq", static_cast<int64_t>(st.last_seq)},
+                             {"unreadable", unreadable}});
+  });
+  if (!posted) answer_error(respond, route, Error(ErrorCode::kSafeStop, "busy; try again"));
+}
+
+void Node::audit_export(transport::HttpRequest& req, Respond& respond) {
+  const std::string route = "/api/v1/audit";
+  auto pr = bearer_principal(req);
+  if (!pr.ok()) return answer_error(respond, route, pr.error());
+  if (role_level(pr->role) < role_level(Role::kOwner) || !pr->has_scope("config"))
+    return answer_error(respond, route,
+                        Error(ErrorCode::kInsufficientPrivileges, "audit export needs OWNER and scope config", "scope"));
+  auto parse_time = [&](std::string_view name, int64_t def, int64_t& out) -> bool {
+    if (!req.has_query(name)) {
+      out = def;
+      return true;
+    }
+    std::string s(req.query_value(name));
+    char* end = nullptr;
+    long long v = std::strtoll(s.c_str(), &end, 10);
+    if (s.empty() || !end || *end || v < 0) return false;
+    out = v < 100'000'000'000LL ? v * 1000 : v;  // seconds or milliseconds
+    return true;
+  };
+  int64_t from = 0, to = 0;
+  if (!parse_time("from", 0, from) || !parse_time("to", INT64_MAX / 2, to))
+    return answer_error(respond, route,
+                        Error(ErrorCode::kSchemaValidationFailed, "from/to must be Unix seconds or milliseconds", "from"));
+  std::string format = req.has_query("format") ? std::string(req.query_value("format")) : "jsonl";
+  if (format != "jsonl")
+    return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "format must be jsonl", "format"));
+  bool posted = worker_.post([this, respond, route, from, to]() mutable {
+    auto text = svc_.audit.export_jsonl(from, to);
+    if (!text.ok()) return answer_error(respond, route, text.error());
+    svc_.metrics.count_request(route, 200);
+    transport::HttpResponse r;
+    r.content_type = "application/x-ndjson";
+    r.body = std::move(text).value();
+    respond(std::move(r));
+  });
+  if (!posted) answer_error(respond, route, Error(ErrorCode::kSafeStop, "busy; try again"));
+}
+
+}  // namespace rcan::node

@@ -1,0 +1,104 @@
+// Node — the robot node's front door: HTTP routes and the WebSocket stream binding, all
+// feeding the one Pipeline (docs/NODE.md). It implements the transport interface
+// (http_api.h) and owns the pipeline, the stream registry and the telemetry pump.
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "transport/http_api.h"
+#include "node/pipeline/pipeline.h"
+#include "node/services/node_services.h"
+#include "base/worker.h"
+
+namespace rcan::node {
+
+struct StreamState;
+
+class Node final : public transport::HttpHandler, public transport::StreamHandler {
+ public:
+  // `services` must outlive the node.
+  explicit Node(NodeServices& services);
+  ~Node() override;
+  Node(const Node&) = delete;
+  Node& operator=(const Node&) = delete;
+
+  // Starts the telemetry pump and writes the SYSTEM_START audit record.
+  void start();
+  // Stops the pump, closes streams (1001) and writes SYSTEM_STOP (waits for it).
+  void shutdown();
+
+  void handle(transport::HttpRequest req, Respond respond) override;
+  void answer_waited(int64_t us) override;
+  std::unique_ptr<transport::StreamSession> open(const transport::HttpRequest& upgrade, std::shared_ptr<transport::StreamSink> sink,
+                                      transport::HttpResponse& refusal) override;
+
+  // Runs a message through the pipeline as if it came from `transport` (used by streams and
+  // tests).
+  void submit(Ingress in, std::function<void(Outcome)> done) { pipeline_.submit(std::move(in), std::move(done)); }
+
+  NodeServices& services() { return svc_; }
+  Pipeline& pipeline() { return pipeline_; }
+  size_t stream_count() const;
+
+  // Called by the safety core's event callback (deadman, watchdog): audit + notify streams.
+  void on_safety_event(const std::string& type, const std::string& session_id, int64_t elapsed_ms,
+                       const std::string& detail);
+
+ private:
+  friend struct StreamSessionImpl;
+  void route(transport::HttpRequest& req, Respond& respond);
+  void answer_json(Respond& respond, const std::string& route, int status, json::Value body,
+                   std::vector<std::pair<std::string, std::string>> headers = {});
+  void answer_error(Respond& respond, const std::string& route, const Error& err);
+  void run_pipeline(transport::HttpRequest& req, Respond& respond, const std::string& route, json::Value body);
+  // Control sessions, leases, ownership transfer, consent (control_routes.cpp).
+  bool control_route(transport::HttpRequest& req, Respond& respond);
+  void claim_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
+  void renew_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
+  void release_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
+  void handoff_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
+  void lease_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
+  void transfer_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
+  void consent_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
+  void consent_request_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
+  void consent_decision_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                              const std::string& rest);
+  Result<Principal> route_principal(const transport::HttpRequest& req, const json::Value& body, const std::string& route,
+                                    const std::string& denied_event, Role min_role, std::string_view scope);
+  void control_start();
+  void control_tick();
+  void announce_control_changes();
+  void save_control_state();
+  void publish_to(const std::string& principal_key, json::Object ev);
+  void audit_listing(transport::HttpRequest& req, Respond& respond);
+  void audit_export(transport::HttpRequest& req, Respond& respond);
+  Result<Principal> bearer_principal(const transport::HttpRequest& req) const;
+  void pump();
+  void stream_text(const std::shared_ptr<StreamState>& st, std::string text);
+  void register_stream(const std::shared_ptr<StreamState>& st);
+  void unregister_stream(const std::shared_ptr<StreamState>& st);
+
+  NodeServices& svc_;
+  Pipeline pipeline_;
+  Histogram* respond_timer_;  // stage "respond": answer handed over → its write begins
+  Worker worker_{1};
+  mutable std::mutex streams_mu_;
+  std::vector<std::shared_ptr<StreamState>> streams_;
+  std::atomic<bool> running_{false};
+  std::thread pump_;
+  std::mutex pump_mu_;
+  std::condition_variable pump_cv_;  // wakes the pump on a new stream and on shutdown
+  uint64_t event_sub_ = 0;
+  std::mutex control_mu_;
+  std::string last_control_state_;
+  std::mutex save_mu_;
+  uint64_t saved_versions_[4] = {0, 0, 0, 0};
+};
+
+}  // namespace rcan::node

@@ -1,0 +1,349 @@
+#include "node/bindings/mqtt_node.h"
+
+#include <pthread.h>
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <cctype>
+#include <chrono>
+#include <cstdio>
+
+#include "config/config.h"
+#include "base/log.h"
+#include "node/api/node.h"
+#include "node/services/node_services.h"
+#include "node/fleet/swarm.h"
+#include "rcan/errors.h"
+#include "base/clock.h"
+
+namespace rcan::node {
+
+namespace {
+
+std::string upper(std::string s) {
+  for (auto& c : s) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+  return s;
+}
+
+const json::Value* field(const json::Value& v, const char* key) {
+  return v.is_object() ? v.get(key) : nullptr;
+}
+
+std::string str_field(const json::Value& v, const char* key) {
+  const json::Value* f = field(v, key);
+  return f != nullptr && f->is_string() ? f->as_string() : std::string();
+}
+
+// Only a retained ESTOP stands on the fleet's estop topic; a retained RESUME or anything else
+// is history and never acts on a robot that subscribes later.
+bool is_estop_message(const json::Value& body) {
+  std::string type = upper(str_field(body, "type"));
+  if (type.empty()) type = upper(str_field(body, "message_type"));
+  if (type != "SAFETY") return false;
+  const json::Value* p = field(body, "payload");
+  if (p == nullptr || !p->is_object()) return true;
+  for (const char* k : {"safety_event", "action", "cmd", "command"}) {
+    std::string w = upper(str_field(*p, k));
+    if (!w.empty()) return w == "ESTOP" || w == "E_STOP" || w == "EMERGENCY_STOP";
+  }
+  return true;
+}
+
+}  // namespace
+
+Result<MqttNodeOptions> mqtt_node_options(const config::NodeConfig& cfg) {
+  MqttNodeOptions o;
+  o.mqtt = cfg.mqtt;
+  o.fleet = cfg.fleet;
+  o.swarm = cfg.swarm;
+  o.ruri = cfg.ruri_parts;
+  if (!cfg.mqtt.password_file.empty()) {
+    struct stat st {};
+    if (::stat(cfg.mqtt.password_file.c_str(), &st) != 0)
+      return Error(ErrorCode::kNotFound, "cannot read mqtt.password_file " + cfg.mqtt.password_file);
+    if ((st.st_mode & 077) != 0)
+      return Error(ErrorCode::kInsufficientPrivileges,
+                   "mqtt.password_file " + cfg.mqtt.password_file + " must not be group/world accessible (chmod 600)");
+    std::string pw;
+    if (FILE* f = std::fopen(cfg.mqtt.password_file.c_str(), "rb")) {
+      char buf[1100];
+      size_t n = std::fread(buf, 1, sizeof buf, f);
+      std::fclose(f);
+      pw.assign(buf, n);
+    }
+    while (!pw.empty() && (pw.back() == '\n' || pw.back() == '\r')) pw.pop_back();
+    if (pw.empty() || pw.size() > 1024) return Error(ErrorCode::kSchemaValidationFailed, "mqtt.password_file is empty or too long");
+    o.password = std::move(pw);
+  }
+  return o;
+}
+
+MqttNode::MqttNode(Node& node, NodeServices& services, MqttNodeOptions opts)
+    : node_(node), svc_(services), opts_(std::move(opts)) {}
+
+MqttNode::~MqttNode() { stop(); }
+
+bool MqttNode::connected() const { return client_ && client_->connected(); }
+
+Status MqttNode::start() {
+  const auto& mq = opts_.mqtt;
+  auto rt = mqtt::robot_topics(mq.topic_prefix, opts_.ruri);
+  if (!rt.ok()) return rt.error();
+  robot_ = *rt;
+  out_ = robot_;
+  const bool in_fleet = !opts_.fleet.fleet_id.empty();
+  if (in_fleet) {
+    fleet_ = mqtt::fleet_topics(mq.topic_prefix, opts_.fleet.fleet_id);
+    out_ = fleet_.member(opts_.fleet.member_id);
+  }
+
+  transport::MqttOptions co;
+  co.url = mq.broker;
+  co.client_id = mq.client_id.empty() ? "rcand-" + opts_.ruri.device_id : mq.client_id;
+  co.clean_session = false;  // QoS 1 commands sent during a short absence still arrive
+  co.keepalive_s = static_cast<int>(mq.keepalive_s);
+  co.username = mq.username;
+  co.password = opts_.password;
+  co.ca_file = mq.ca_file;
+  co.cert_file = mq.cert_file;
+  co.key_file = mq.key_file;
+  co.reconnect_min_s = static_cast<int>(mq.reconnect_min_s);
+  co.reconnect_max_s = static_cast<int>(mq.reconnect_max_s);
+  co.will.topic = out_.status();
+  co.will.payload = json::dump(json::Value(json::Object{{"online", false},
+                                             {"ruri", svc_.settings.ruri},
+                                             {"member", opts_.fleet.member_id},
+                                             {"reason", "connection_lost"}}));
+  co.will.qos = 1;
+  co.will.retain = true;
+  client_ = std::make_unique<transport::MqttClient>(co);
+  client_->subscribe(robot_.cmd(), 1);
+  if (in_fleet) {
+    client_->subscribe(fleet_.cmd(), 1);
+    client_->subscribe(fleet_.estop(), mq.estop_qos);  // 1 by default: act on the first copy
+    client_->subscribe(out_.cmd(), 1);
+  }
+  if (!opts_.swarm.swarm_id.empty()) {
+    swarm_ = std::make_unique<SwarmAgent>(
+        svc_, opts_.swarm, mq.topic_prefix,
+        [this](const std::string& topic, const json::Value& body, int qos, bool retain) {
+          publish_json(topic, body, qos, retain);
+        });
+    for (const auto& f : swarm_->subscriptions()) client_->subscribe(f, 1);
+  }
+  client_->on_message([this](const transport::MqttMessage& m) { on_message(m); });
+  client_->on_connection([this](bool up, int) { on_connection(up); });
+
+  if (mq.publish_audit) {
+    auto st = svc_.audit.stats();
+    next_audit_seq_ = st.last_seq == 0 ? 1 : st.last_seq;  // from the latest record on
+  }
+  event_sub_ = svc_.events.subscribe([this](const json::Value& ev) { publish_json(out_.events(), ev, 1, false); });
+  running_.store(true);
+  if (Status s = client_->start(); !s.ok()) {
+    running_.store(false);
+    svc_.events.unsubscribe(event_sub_);
+    return s;
+  }
+  loop_ = std::thread([this] {
+    pthread_setname_np(pthread_self(), "mqtt-node");
+    loop();
+  });
+  log(LogLevel::kInfo, "mqtt_started",
+      json::Object{{"broker", mq.broker}, {"cmd_topic", robot_.cmd()}, {"status_topic", out_.status()}});
+  return Status::Ok();
+}
+
+void MqttNode::stop() {
+  if (!running_.exchange(false)) return;
+  {
+    std::lock_guard<std::mutex> lk(loop_mu_);
+  }
+  loop_cv_.notify_all();
+  if (loop_.joinable()) loop_.join();
+  svc_.events.unsubscribe(event_sub_);
+  if (client_->connected()) {
+    publish_status(false, "shutdown");  // a clean disconnect sends no will: say it ourselves
+    client_->flush(1000);
+  }
+  client_->stop();
+}
+
+void MqttNode::on_connection(bool up) {
+  if (up) {
+    publish_status(true, "connected");
+    if (swarm_) swarm_->on_connected(svc_.clock.mono_ms());
+    log(LogLevel::kInfo, "mqtt_connected", json::Object{{"connects", static_cast<int64_t>(client_->connects())}});
+  } else if (running_.load()) {
+    log(LogLevel::kWarn, "mqtt_disconnected", json::Object{{"note", "reconnecting with backoff"}});
+  }
+}
+
+void MqttNode::publish_json(const std::string& topic, const json::Value& v, int qos, bool retain) {
+  if (!client_) return;
+  if (Status s = client_->publish(topic, json::dump(v), qos, retain); !s.ok())
+    log(LogLevel::kDebug, "mqtt_publish_failed", json::Object{{"topic", topic}, {"error", s.error().message}});
+}
+
+void MqttNode::publish_status(bool online, const std::string& reason) {
+  json::Object o{{"online", online},
+                 {"ruri", svc_.settings.ruri},
+                 {"member", opts_.fleet.member_id},
+                 {"fleet_id", opts_.fleet.fleet_id},
+                 {"estop_active", svc_.act.estop_active()},
+                 {"reason", reason},
+                 {"timestamp_ms", svc_.clock.wall_ms()}};
+  publish_json(out_.status(), json::Value(std::move(o)), 1, true);
+}
+
+void MqttNode::on_message(const transport::MqttMessage& msg) {
+  mqtt::InboundTopic t = mqtt::parse_topic(opts_.mqtt.topic_prefix, msg.topic);
+  if (t.kind == mqtt::TopicKind::kOther && msg.topic != robot_.cmd()) return;
+  if (msg.payload.empty()) return;  // a cleared retained message
+  const bool own_fleet = !opts_.fleet.fleet_id.empty() && t.fleet_id == opts_.fleet.fleet_id;
+  std::string reply_topic;
+  std::string fleet_id, fleet_mode;
+  switch (t.kind) {
+    case mqtt::TopicKind::kRobotCmd:
+      if (msg.topic != robot_.cmd()) return;
+      reply_topic = robot_.reply();
+      break;
+    case mqtt::TopicKind::kFleetCmd:
+      if (!own_fleet) return;
+      reply_topic = out_.reply();
+      fleet_id = t.fleet_id;
+      fleet_mode = "broadcast";
+      break;
+    case mqtt::TopicKind::kFleetEstop:
+      if (!own_fleet) return;
+      reply_topic = out_.reply();
+      fleet_id = t.fleet_id;
+      fleet_mode = "estop";
+      break;
+    case mqtt::TopicKind::kMemberCmd:
+      if (!own_fleet || t.member != opts_.fleet.member_id) return;
+      reply_topic = out_.reply();
+      fleet_id = t.fleet_id;
+      fleet_mode = "individual";
+      break;
+    case mqtt::TopicKind::kSwarmAnnounce:
+    case mqtt::TopicKind::kSwarmHeartbeat:
+    case mqtt::TopicKind::kSwarmJoin: {
+      if (!swarm_ || t.swarm_id != opts_.swarm.swarm_id) return;
+      auto body = mqtt::parse_payload(msg.payload);
+      if (body.ok()) swarm_->on_message(t, *body, svc_.clock.mono_ms());
+      return;
+    }
+    case mqtt::TopicKind::kOther: return;
+  }
+  auto body = mqtt::parse_payload(msg.payload);
+  if (!body.ok()) {
+    publish_json(reply_topic, svc_.error(body.error()), 1, false);
+    return;
+  }
+  // Commands are never retained: a retained message on a command topic is stale history.
+  bool standing = false;
+  if (msg.retained) {
+    if (t.kind != mqtt::TopicKind::kFleetEstop || !is_estop_message(*body)) return;
+    standing = true;
+  }
+  submit(*body, msg.topic, reply_topic, fleet_id, fleet_mode, standing);
+}
+
+void MqttNode::submit(const json::Value& body, const std::string& route, const std::string& reply_topic,
+                      const std::string& fleet_id, const std::string& fleet_mode, bool standing_estop) {
+  Ingress in;
+  in.body = body;
+  in.transport = "mqtt";
+  in.route = route;
+  in.remote = "mqtt";
+  in.fleet_id = fleet_id;
+  in.fleet_mode = fleet_mode;
+  in.standing_estop = standing_estop;
+  in.received_mono_us = steady_us();
+  bool is_command = upper(str_field(body, "type")) == "COMMAND" || upper(str_field(body, "type")) == "FLEET_COMMAND" ||
+                    field(body, "cmd") != nullptr;
+  node_.submit(std::move(in), [this, reply_topic, is_command](Outcome out) {
+    if (!running_.load()) return;
+    const json::Value& b = out.body;
+    if (is_command && out.status == 200 && str_field(b, "type") == "ACK") {
+      const json::Value* p = field(b, "payload");
+      std::string cmd = p != nullptr ? str_field(*p, "command") : std::string();
+      if (!cmd.empty()) {
+        {
+          std::lock_guard<std::mutex> lk(mu_);
+          pending_.push_back(Pending{reply_topic, str_field(b, "reply_to"), cmd, svc_.clock.mono_ms()});
+        }
+        { std::lock_guard<std::mutex> wake(loop_mu_); }  // the loop is waiting, or sees pending_ next
+        loop_cv_.notify_all();
+      }
+    }
+    publish_json(reply_topic, b, 1, false);
+  });
+}
+
+void MqttNode::loop() {
+  const int64_t telemetry_period =
+      opts_.mqtt.telemetry_hz > 0 ? static_cast<int64_t>(1000 / opts_.mqtt.telemetry_hz) : 0;
+  int64_t last_telemetry = 0;
+  std::unique_lock<std::mutex> lk(loop_mu_);
+  while (running_.load()) {
+    // Wake often only while there is something to watch: a motion to complete (20 ms), the
+    // swarm's heartbeat, telemetry, new audit records; otherwise once a second.
+    int64_t wait_ms = 1000;
+    {
+      std::lock_guard<std::mutex> plk(mu_);
+      if (!pending_.empty()) wait_ms = 20;
+    }
+    if (swarm_) wait_ms = std::min<int64_t>(wait_ms, std::max<int64_t>(10, opts_.swarm.heartbeat_ms / 4));
+    if (telemetry_period > 0) wait_ms = std::min<int64_t>(wait_ms, telemetry_period);
+    if (opts_.mqtt.publish_audit) wait_ms = std::min<int64_t>(wait_ms, 100);
+    loop_cv_.wait_for(lk, std::chrono::milliseconds(wait_ms));
+    if (!running_.load()) break;
+    int64_t now = svc_.clock.mono_ms();
+    tick_completions();
+    if (opts_.mqtt.publish_audit) tick_audit();
+    if (swarm_ && client_->connected()) swarm_->tick(now);
+    if (telemetry_period > 0 && now - last_telemetry >= telemetry_period && client_->connected()) {
+      last_telemetry = now;
+      publish_json(out_.telemetry(), svc_.act.telemetry(), 0, false);
+    }
+  }
+}
+
+// A motion is complete when the robot has stopped; it is aborted when an ESTOP latched first.
+void MqttNode::tick_completions() {
+  std::vector<Pending> done;
+  {
+    std::lock_guard<std::mutex> lk(mu_);
+    if (pending_.empty()) return;
+    json::Value tel = svc_.act.telemetry();
+    const json::Value* stopped = field(tel, "stopped");
+    bool is_stopped = stopped != nullptr && stopped->is_bool() && stopped->as_bool();
+    if (!is_stopped && !svc_.act.estop_active()) return;
+    done.swap(pending_);
+  }
+  bool estop = svc_.act.estop_active();
+  for (const auto& p : done) {
+    json::Object payload{{"event", estop ? "ABORTED" : "COMPLETED"},
+                         {"command", p.command},
+                         {"member", opts_.fleet.member_id},
+                         {"ruri", svc_.settings.ruri}};
+    if (estop) payload.set("reason", "estop_active");
+    publish_json(p.reply_topic, svc_.envelope(MessageType::kEvent, std::move(payload), p.message_id), 1, false);
+  }
+}
+
+void MqttNode::tick_audit() {
+  if (!client_->connected()) return;
+  uint64_t last = svc_.audit.stats().last_seq;
+  for (int n = 0; next_audit_seq_ <= last && n < 256; ++n, ++next_audit_seq_) {
+    auto line = svc_.audit.get(next_audit_seq_);
+    if (!line.ok()) continue;  // removed by retention
+    std::string text = *line;
+    while (!text.empty() && (text.back() == '\n' || text.back() == '\r')) text.pop_back();
+    if (Status s = client_->publish(out_.audit(), text, 1, false); !s.ok()) return;
+  }
+}
+
+}  // namespace rcan::node

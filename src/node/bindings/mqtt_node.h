@@ -1,0 +1,107 @@
+// MqttNode — rcand's MQTT transport (docs/FLEET.md): connects to a broker, subscribes to the
+// robot's command topics (its RURI topics, and its fleet's), hands every inbound message to
+// the one pipeline (Node::submit; the JWT travels in the envelope's auth_token) and publishes
+// the answer on the matching reply topic. It also publishes the robot's retained status (the
+// will says "offline"), telemetry, events, motion completions and the audit records, and runs
+// the swarm agent (swarm.h) when a swarm is configured.
+//
+// Delivery: commands and replies use QoS 1 on a persistent session (clean_session false), so a
+// command published while the robot is briefly away still arrives; a redelivered or
+// re-published command is refused by the replay window (REPLAY_DETECTED), never run twice.
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "config/fleet_config.h"
+#include "rcan/mqtt_topics.h"
+#include "rcan/result.h"
+#include "rcan/ruri.h"
+#include "transport/mqtt_client.h"
+
+namespace rcan::config {
+struct NodeConfig;
+}
+
+namespace rcan::node {
+
+class Node;
+class NodeServices;
+class SwarmAgent;
+
+struct MqttNodeOptions {
+  config::MqttConfig mqtt;
+  config::FleetConfig fleet;
+  config::SwarmConfig swarm;
+  Ruri ruri;
+  std::string password;  // read from mqtt.password_file
+};
+
+// The options from a validated configuration; reads mqtt.password_file (which must not be
+// group/world accessible).
+Result<MqttNodeOptions> mqtt_node_options(const config::NodeConfig& cfg);
+
+class MqttNode {
+ public:
+  MqttNode(Node& node, NodeServices& services, MqttNodeOptions opts);
+  ~MqttNode();  // stop()
+  MqttNode(const MqttNode&) = delete;
+  MqttNode& operator=(const MqttNode&) = delete;
+
+  // Connects (asynchronously: a broker that is down is retried with backoff) and starts the
+  // publishing thread. Errors: bad topics, TLS setup.
+  Status start();
+  // Publishes "offline" (retained), disconnects, joins the threads. Idempotent.
+  void stop();
+
+  bool connected() const;
+  const mqtt::RobotTopics& robot() const { return robot_; }
+  // The topics the robot publishes its status, telemetry, events and audit on: its fleet
+  // member topics when it is in a fleet, else its RURI topics.
+  const mqtt::RobotTopics& out() const { return out_; }
+
+ private:
+  void on_message(const transport::MqttMessage& msg);
+  void on_connection(bool up);
+  void submit(const json::Value& body, const std::string& route, const std::string& reply_topic,
+              const std::string& fleet_id, const std::string& fleet_mode, bool standing_estop);
+  void publish_json(const std::string& topic, const json::Value& v, int qos, bool retain);
+  void publish_status(bool online, const std::string& reason);
+  void loop();
+  void tick_completions();
+  void tick_audit();
+
+  Node& node_;
+  NodeServices& svc_;
+  MqttNodeOptions opts_;
+  mqtt::RobotTopics robot_;
+  mqtt::RobotTopics out_;
+  mqtt::FleetTopics fleet_;
+  std::unique_ptr<transport::MqttClient> client_;
+  std::unique_ptr<SwarmAgent> swarm_;
+
+  struct Pending {
+    std::string reply_topic;
+    std::string message_id;
+    std::string command;
+    int64_t since_mono_ms = 0;
+  };
+  std::mutex mu_;
+  std::vector<Pending> pending_;  // motions acknowledged, completion not yet published
+  uint64_t next_audit_seq_ = 0;
+  uint64_t event_sub_ = 0;
+
+  std::atomic<bool> running_{false};
+  std::mutex loop_mu_;
+  std::condition_variable loop_cv_;
+  std::thread loop_;
+};
+
+}  // namespace rcan::node

@@ -1,0 +1,186 @@
+#include "node/control/ownership.h"
+
+#include "rcan/errors.h"
+
+namespace rcan::node {
+
+void Ownership::transit(std::string_view event, OwnershipState to) {
+  if (!ownership_transition_allowed(state_, event, to)) ++violations_;
+  state_ = to;
+  ++version_;
+}
+
+bool Ownership::is_owner_locked(const Principal& p) const {
+  if (role_level(p.role) >= role_level(Role::kCreator)) return true;
+  if (role_level(p.role) < role_level(Role::kOwner)) return false;
+  return owner_sub_.empty() || p.sub == owner_sub_;
+}
+
+Result<PendingTransfer> Ownership::request(const Principal& p, const std::string& to_sub, const std::string& note,
+                                           int64_t now_wall_ms) {
+  if (to_sub.empty() || to_sub.size() > 256)
+    return Error(ErrorCode::kSchemaValidationFailed, "new_owner (a user id) is required", "new_owner", "missing_field");
+  std::lock_guard<std::mutex> lock(mu_);
+  if (!is_owner_locked(p))
+    return Error(ErrorCode::kInsufficientPrivileges, "only the robot's owner may transfer it", "role");
+  if (pending_ && now_wall_ms < pending_->expires_ms)
+    return Error(ErrorCode::kControlConflict, "transfer " + pending_->id + " is already pending", "transfer_id");
+  if (to_sub == p.sub) return Error(ErrorCode::kSchemaValidationFailed, "the new owner is the owner", "new_owner");
+  PendingTransfer t{new_uuid_v4(), p.sub, to_sub, now_wall_ms, now_wall_ms + window_ms_, note.substr(0, 512)};
+  pending_ = t;
+  transit("TRANSFER_REQUEST", OwnershipState::kTransferPending);
+  return t;
+}
+
+Result<PendingTransfer> Ownership::accept(const Principal& p, const std::string& transfer_id,
+                                          const std::string& agreement, int64_t now_wall_ms) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (!pending_ || (!transfer_id.empty() && transfer_id != pending_->id))
+    return Error(ErrorCode::kNotFound, "no such pending transfer", "transfer_id");
+  if (now_wall_ms >= pending_->expires_ms)
+    return Error(ErrorCode::kSessionExpired, "the transfer window has passed", "transfer_id");
+  if (p.sub != pending_->to_sub)
+    return Error(ErrorCode::kInsufficientPrivileges, "only the named new owner may accept", "sub");
+  if (agreement.empty())
+    return Error(ErrorCode::kSchemaValidationFailed, "agreement (payment or agreement reference) is required",
+                 "agreement", "missing_field");
+  PendingTransfer t = *pending_;
+  pending_.reset();
+  if (!owner_sub_.empty()) former_owners_.insert(owner_sub_);
+  former_owners_.insert(t.from_sub);
+  former_owners_.erase(t.to_sub);
+  owner_sub_ = t.to_sub;
+  users_.clear();
+  transit("TRANSFER_ACCEPT", OwnershipState::kOwned);
+  return t;
+}
+
+Result<PendingTransfer> Ownership::cancel(const Principal& p, int64_t now_wall_ms) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (!pending_ || now_wall_ms >= pending_->expires_ms)
+    return Error(ErrorCode::kNotFound, "no pending transfer", "transfer_id");
+  if (!is_owner_locked(p) && p.sub != pending_->to_sub)
+    return Error(ErrorCode::kInsufficientPrivileges, "only the owner or the named new owner may cancel", "role");
+  PendingTransfer t = *pending_;
+  pending_.reset();
+  transit("TRANSFER_CANCEL", OwnershipState::kOwned);
+  return t;
+}
+
+std::optional<PendingTransfer> Ownership::expire(int64_t now_wall_ms) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (!pending_ || now_wall_ms < pending_->expires_ms) return std::nullopt;
+  PendingTransfer t = *pending_;
+  pending_.reset();
+  transit("TRANSFER_EXPIRE", OwnershipState::kOwned);
+  return t;
+}
+
+void Ownership::cap(Principal& p) const {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (former_owners_.count(p.sub) && role_level(p.role) < role_level(Role::kCreator)) p.role = Role::kGuest;
+}
+
+void Ownership::note_user(const std::string& sub) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (users_.size() < 10000 && users_.insert(sub).second) ++version_;
+}
+
+void Ownership::on_clear(std::function<void()> fn) {
+  std::lock_guard<std::mutex> lock(mu_);
+  clear_hooks_.push_back(std::move(fn));
+}
+
+void Ownership::run_clear_hooks() {
+  std::vector<std::function<void()>> hooks;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    hooks = clear_hooks_;
+  }
+  for (auto& h : hooks) h();
+}
+
+OwnershipState Ownership::state(int64_t now_wall_ms) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (pending_ && now_wall_ms >= pending_->expires_ms) return OwnershipState::kOwned;  // tick() records it
+  return state_;
+}
+
+std::string Ownership::owner() {
+  std::lock_guard<std::mutex> lock(mu_);
+  return owner_sub_;
+}
+
+std::optional<PendingTransfer> Ownership::pending() {
+  std::lock_guard<std::mutex> lock(mu_);
+  return pending_;
+}
+
+json::Value Ownership::to_json(int64_t now_wall_ms, bool detailed) {
+  OwnershipState st = state(now_wall_ms);
+  std::lock_guard<std::mutex> lock(mu_);
+  json::Object o{{"state", std::string(ownership_state_name(st))},
+                 {"owner", owner_sub_.empty() ? json::Value() : json::Value(owner_sub_)},
+                 {"users", static_cast<int64_t>(users_.size())}};
+  if (pending_ && now_wall_ms < pending_->expires_ms) {
+    json::Object t{{"transfer_id", pending_->id},
+                   {"from", pending_->from_sub},
+                   {"to", pending_->to_sub},
+                   {"requested_ms", pending_->requested_ms},
+                   {"expires_ms", pending_->expires_ms},
+                   {"remaining_s", (pending_->expires_ms - now_wall_ms) / 1000}};
+    if (detailed && !pending_->note.empty()) t.set("note", pending_->note);
+    o.set("pending", t);
+  } else {
+    o.set("pending", json::Value());
+  }
+  return o;
+}
+
+json::Value Ownership::persist_json() {
+  std::lock_guard<std::mutex> lock(mu_);
+  json::Array formers, users;
+  for (const auto& f : former_owners_) formers.emplace_back(f);
+  for (const auto& u : users_) users.emplace_back(u);
+  json::Object o{{"owner", owner_sub_}, {"former_owners", formers}, {"users", users}};
+  if (pending_)
+    o.set("pending", json::Object{{"transfer_id", pending_->id},
+                                  {"from", pending_->from_sub},
+                                  {"to", pending_->to_sub},
+                                  {"requested_ms", pending_->requested_ms},
+                                  {"expires_ms", pending_->expires_ms},
+                                  {"note", pending_->note}});
+  return o;
+}
+
+void Ownership::load_json(const json::Value& v) {
+  std::lock_guard<std::mutex> lock(mu_);
+  owner_sub_ = json::string_field(v, "owner");
+  former_owners_.clear();
+  users_.clear();
+  if (const json::Value* a = v.get("former_owners"); a && a->is_array())
+    for (const auto& e : a->as_array())
+      if (e.is_string()) former_owners_.insert(e.as_string());
+  if (const json::Value* a = v.get("users"); a && a->is_array())
+    for (const auto& e : a->as_array())
+      if (e.is_string()) users_.insert(e.as_string());
+  pending_.reset();
+  state_ = OwnershipState::kOwned;
+  if (const json::Value* p = v.get("pending"); p && p->is_object()) {
+    PendingTransfer t{json::string_field(*p, "transfer_id"), json::string_field(*p, "from"),
+                      json::string_field(*p, "to"),          json::int_field(*p, "requested_ms"),
+                      json::int_field(*p, "expires_ms"),     json::string_field(*p, "note")};
+    if (!t.id.empty() && !t.to_sub.empty()) {
+      pending_ = t;
+      state_ = OwnershipState::kTransferPending;  // an expired one is recorded by the next tick
+    }
+  }
+  ++version_;
+}
+
+uint64_t Ownership::version() {
+  std::lock_guard<std::mutex> lock(mu_);
+  return version_;
+}
+
+}  // namespace rcan::node

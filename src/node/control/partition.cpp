@@ -1,0 +1,150 @@
+#include "node/control/partition.h"
+
+#include <pthread.h>
+
+#include <algorithm>
+
+#include "base/http_client.h"
+
+namespace rcan::node {
+
+std::string_view net_mode_name(NetMode m) {
+  switch (m) {
+    case NetMode::kNormal: return "NORMAL";
+    case NetMode::kOfflineAutonomous: return "OFFLINE_AUTONOMOUS";
+    case NetMode::kLockdown: return "LOCKDOWN";
+  }
+  return "NORMAL";
+}
+
+PartitionMonitor::~PartitionMonitor() { stop(); }
+
+void PartitionMonitor::configure(PartitionOptions o) { opts_ = std::move(o); }
+
+NetMode PartitionMonitor::compute_locked(int64_t now_wall_ms) const {
+  if (!enabled() || reachable_) return NetMode::kNormal;
+  if (last_ok_ms_ != 0 && now_wall_ms < last_ok_ms_ + opts_.key_ttl_ms) return NetMode::kOfflineAutonomous;
+  return NetMode::kLockdown;
+}
+
+std::pair<NetMode, NetMode> PartitionMonitor::record(bool reachable, int64_t now_wall_ms) {
+  std::lock_guard<std::mutex> lock(mu_);
+  NetMode old = mode();
+  if (reachable) {
+    reachable_ = true;
+    last_ok_ms_ = now_wall_ms;
+    offline_since_ms_ = 0;
+  } else {
+    if (reachable_) offline_since_ms_ = now_wall_ms;
+    reachable_ = false;
+  }
+  NetMode now = compute_locked(now_wall_ms);
+  mode_.store(static_cast<int>(now));
+  ++version_;
+  return {old, now};
+}
+
+NetMode PartitionMonitor::probe_once() {
+  if (!enabled()) return NetMode::kNormal;
+  auto r = http_request("GET", opts_.issuer_url, "", opts_.timeout_ms);
+  bool ok = r.ok() && r->status >= 200 && r->status < 300;
+  int64_t now = wall_ ? wall_() : 0;
+  auto [old, cur] = record(ok, now);
+  if (old != cur && on_change_) on_change_(old, cur);
+  return cur;
+}
+
+void PartitionMonitor::start(std::function<int64_t()> wall_now, std::function<void(NetMode, NetMode)> on_change) {
+  wall_ = std::move(wall_now);
+  on_change_ = std::move(on_change);
+  if (!enabled()) return;
+  {
+    std::lock_guard<std::mutex> lock(run_mu_);
+    if (running_) return;
+    running_ = true;
+  }
+  thread_ = std::thread([this] {
+    pthread_setname_np(pthread_self(), "partition");
+    for (;;) {
+      probe_once();
+      std::unique_lock<std::mutex> lock(run_mu_);
+      run_cv_.wait_for(lock, std::chrono::milliseconds(opts_.poll_interval_ms), [this] { return !running_; });
+      if (!running_) return;
+    }
+  });
+}
+
+void PartitionMonitor::stop() {
+  {
+    std::lock_guard<std::mutex> lock(run_mu_);
+    running_ = false;
+  }
+  run_cv_.notify_all();
+  if (thread_.joinable()) thread_.join();
+}
+
+void PartitionMonitor::note_validated(const Principal& p, int64_t now_wall_ms) {
+  if (!enabled()) return;
+  std::lock_guard<std::mutex> lock(mu_);
+  if (!reachable_) return;  // only what was validated while the issuer answered
+  int64_t until = now_wall_ms + opts_.key_ttl_ms;
+  if (p.token_exp) until = std::min(until, *p.token_exp * 1000);
+  auto& slot = cache_[p.key()];
+  if (slot != until) {
+    slot = until;
+    ++version_;
+  }
+  if (cache_.size() > 10000) cache_.erase(cache_.begin());
+}
+
+bool PartitionMonitor::cached(const Principal& p, int64_t now_wall_ms) {
+  std::lock_guard<std::mutex> lock(mu_);
+  auto it = cache_.find(p.key());
+  return it != cache_.end() && now_wall_ms < it->second && last_ok_ms_ != 0 &&
+         now_wall_ms < last_ok_ms_ + opts_.key_ttl_ms;
+}
+
+json::Value PartitionMonitor::status_json(int64_t now_wall_ms) {
+  std::lock_guard<std::mutex> lock(mu_);
+  json::Object o{{"mode", std::string(net_mode_name(mode()))},
+                 {"issuer_probe", enabled()},
+                 {"issuer_reachable", reachable_}};
+  if (enabled()) {
+    o.set("last_reachable_ms", last_ok_ms_ ? json::Value(last_ok_ms_) : json::Value());
+    o.set("keys_fresh_until_ms", last_ok_ms_ ? json::Value(last_ok_ms_ + opts_.key_ttl_ms) : json::Value());
+    o.set("offline_since_s", offline_since_ms_ ? json::Value((now_wall_ms - offline_since_ms_) / 1000) : json::Value());
+    int64_t live = 0;
+    for (const auto& [k, until] : cache_)
+      if (until > now_wall_ms) ++live;
+    o.set("cached_principals", live);
+  }
+  return o;
+}
+
+json::Value PartitionMonitor::persist_json() {
+  std::lock_guard<std::mutex> lock(mu_);
+  json::Array entries;
+  for (const auto& [k, until] : cache_) entries.push_back(json::Object{{"principal", k}, {"until_ms", until}});
+  return json::Object{{"last_reachable_ms", last_ok_ms_}, {"principals", entries}};
+}
+
+void PartitionMonitor::load_json(const json::Value& v, int64_t now_wall_ms) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (const json::Value* l = v.get("last_reachable_ms"); l && l->is_int()) last_ok_ms_ = l->as_int();
+  cache_.clear();
+  if (const json::Value* a = v.get("principals"); a && a->is_array())
+    for (const auto& e : a->as_array()) {
+      const json::Value* k = e.get("principal");
+      const json::Value* u = e.get("until_ms");
+      if (k && k->is_string() && u && u->is_int() && u->as_int() > now_wall_ms) cache_[k->as_string()] = u->as_int();
+    }
+  // Until the first probe answers, the node is as reachable as its cache says.
+  ++version_;
+}
+
+uint64_t PartitionMonitor::version() {
+  std::lock_guard<std::mutex> lock(mu_);
+  return version_;
+}
+
+}  // namespace rcan::node

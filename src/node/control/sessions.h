@@ -1,0 +1,215 @@
+// SessionTable — who controls the robot (seed §2.3, §4.3.5, §5.3; docs/SESSIONS.md).
+//
+//   * claim: a verified principal asks for control. AVAILABLE → GRANTED. A holder of a lower
+//     role is pre-empted (higher role wins). The same role → the claimant joins a FIFO queue
+//     and is told its position (first claim wins); when the holder releases or expires, the
+//     head of the queue is promoted. A lower role → DENIED. Fleet vs individual claims of the
+//     same role follow the configured fleet policy. The same principal re-claiming renews
+//     explicitly (never implicitly).
+//   * a session lasts its role's TTL (roles.h; GUEST: the guest session length), bounded by
+//     the lease it was granted under; renew() is the other explicit renewal;
+//   * release ends it; only its holder (or a higher role) may release it;
+//   * handoff: the holder names a successor; the session ends and the robot is AVAILABLE for
+//     a window reserved for that successor (other claims are DENIED until it closes). The
+//     successor's role comes from its own token, lowered to the role the handoff names;
+//   * leases: an OWNER grants a LEASEE a time-bound lease (one at a time); the LEASEE grants
+//     USER/GUEST access inside it; while a lease runs, principals below OWNER that are neither
+//     the leasee nor granted by it cannot claim; the lease's end revokes everything derived.
+// The role always comes from the verified token: a body can only ask for a lower role.
+//
+// Every mutation that others must hear about (expiry, promotion, revocation, window close,
+// lease end) is queued as a Change; the node drains them (take_changes) to announce them on
+// the streams and write their audit records. Every state move is checked against
+// control_transitions() (control_machine.h).
+#pragma once
+
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <map>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "node/admission/authenticator.h"
+#include "node/control/control_machine.h"
+#include "rcan/json.h"
+#include "rcan/result.h"
+
+namespace rcan::node {
+
+enum class FleetPolicy { kRole, kFleetWins, kIndividualWins };
+std::string_view fleet_policy_name(FleetPolicy p);
+std::optional<FleetPolicy> fleet_policy_from_name(std::string_view s);
+
+struct ControlOptions {
+  int64_t handoff_window_ms = 30'000;
+  size_t queue_max = 16;
+  int64_t queue_wait_ms = 300'000;  // a queued claim is dropped after this long
+  FleetPolicy fleet_policy = FleetPolicy::kRole;
+  uint32_t guest_session_s = 15 * 60;
+  int64_t max_session_ms = 0;  // caps every role's TTL (control.max_session_s); 0 = role TTLs
+};
+
+struct Session {
+  std::string id;
+  std::string principal_key;
+  std::string sub;
+  Role role = Role::kGuest;
+  int64_t granted_mono_ms = 0;
+  int64_t expires_mono_ms = 0;  // 0 = never (CREATOR)
+  int64_t granted_wall_ms = 0;
+  std::string lease_id;  // granted under this lease (as its leasee or a grantee)
+  bool fleet = false;
+};
+
+struct Reservation {
+  std::string target_sub;
+  std::optional<Role> max_role;  // the handoff's target_role (can only lower)
+  std::string from_session;
+  int64_t until_mono_ms = 0;
+};
+
+struct QueuedClaim {
+  std::string principal_key;
+  std::string sub;
+  Role role = Role::kGuest;
+  bool fleet = false;
+  int64_t enqueued_mono_ms = 0;
+};
+
+struct LeaseGrant {
+  std::string sub;
+  Role role = Role::kUser;  // USER or GUEST
+  int64_t end_wall_ms = 0;
+};
+
+struct Lease {
+  std::string id;
+  std::string leasee_sub;
+  std::string granted_by;
+  int64_t start_wall_ms = 0;
+  int64_t end_wall_ms = 0;
+  std::vector<LeaseGrant> grants;
+  json::Value to_json(int64_t now_wall_ms) const;
+};
+
+enum class ClaimOutcome { kGranted, kRenewed, kQueued };
+
+struct ClaimResult {
+  ClaimOutcome outcome = ClaimOutcome::kGranted;
+  Session session;                   // kGranted / kRenewed
+  std::optional<Session> preempted;  // the holder this claim displaced
+  size_t queue_position = 0;         // kQueued: 1-based
+};
+
+// Something the node must announce and audit.
+struct ControlChange {
+  std::string event;  // EXPIRE, PROMOTE, REVOKE, WINDOW_CLOSE, QUEUE_DROP, LEASE_END
+  Session session;    // the session concerned (EXPIRE, PROMOTE, REVOKE)
+  QueuedClaim queued;  // QUEUE_DROP
+  std::string lease_id;
+  std::string reason;
+};
+
+class SessionTable {
+ public:
+  SessionTable() = default;
+  void set_options(ControlOptions o);
+  const ControlOptions& options() const { return opts_; }
+
+  // Errors: CONTROL_CONFLICT (higher role holds, reserved window, leased, queue full).
+  Result<ClaimResult> claim(const Principal& p, std::optional<Role> requested, bool fleet, int64_t now_mono_ms,
+                            int64_t now_wall_ms);
+  // Compatibility overload (an individual claim).
+  Result<ClaimResult> claim(const Principal& p, std::optional<Role> requested, int64_t now_mono_ms,
+                            int64_t now_wall_ms) {
+    return claim(p, requested, false, now_mono_ms, now_wall_ms);
+  }
+  // Explicit renewal by the holder. Errors: NOT_FOUND, INSUFFICIENT_PRIVILEGES, SESSION_EXPIRED.
+  Result<Session> renew(const std::string& session_id, const Principal& p, int64_t now_mono_ms, int64_t now_wall_ms);
+  // Errors: NOT_FOUND (no such session), INSUFFICIENT_PRIVILEGES (not the holder).
+  Result<Session> release(const std::string& session_id, const Principal& p, int64_t now_mono_ms,
+                          int64_t now_wall_ms = 0);
+  // Ends the holder's session and reserves control for `target_sub` for the window.
+  Result<Session> handoff(const std::string& session_id, const Principal& p, std::string target_sub,
+                          std::optional<Role> target_role, int64_t window_ms, int64_t now_mono_ms);
+  // Leaves the queue (the claimant gave up). True when it was queued.
+  bool leave_queue(const Principal& p);
+
+  // Expiries, window closes, lease ends. Call often (the node does every 100 ms).
+  void tick(int64_t now_mono_ms, int64_t now_wall_ms);
+  std::vector<ControlChange> take_changes();
+
+  // Ends every session, the queue, the reservation and every lease (ownership transfer).
+  void revoke_all(const std::string& reason, int64_t now_mono_ms);
+
+  std::optional<Reservation> reservation(int64_t now_mono_ms);
+  // The live controller, if any (an expired holder counts as absent; tick() ends it).
+  std::optional<Session> controller(int64_t now_mono_ms, std::vector<Session>* expired = nullptr);
+  std::optional<Session> find(const std::string& session_id, int64_t now_mono_ms);
+  bool live(const std::string& session_id, int64_t now_mono_ms);
+  // Runs `fn` only while the session is live, holding the table: a pre-emption, expiry or
+  // revocation happens entirely before or entirely after it. False when not live.
+  bool run_if_live(const std::string& session_id, int64_t now_mono_ms, const std::function<void()>& fn);
+  // The session this principal held that expired or was revoked (until it claims again).
+  std::optional<std::string> expired_session_of(const std::string& principal_key);
+  ControlState state(int64_t now_mono_ms);
+  size_t queue_size();
+  json::Value to_json(int64_t now_mono_ms, bool detailed);
+  json::Value queue_json(int64_t now_mono_ms);
+
+  // Leases. Errors: INSUFFICIENT_PRIVILEGES, CONTROL_CONFLICT (one already runs),
+  // SCHEMA_VALIDATION_FAILED, NOT_FOUND.
+  // `now_mono_ms` (optional, -1 = not given) lets a wall-clock step since the last reading be
+  // absorbed first, so that a lease granted just after a step is not shifted by it later.
+  Result<Lease> grant_lease(const Principal& owner, const std::string& leasee_sub, int64_t duration_ms,
+                            int64_t now_wall_ms, int64_t now_mono_ms = -1);
+  Result<Lease> grant_within_lease(const Principal& leasee, const std::string& lease_id, const std::string& sub,
+                                   Role role, int64_t duration_ms, int64_t now_wall_ms, int64_t now_mono_ms = -1);
+  Result<Lease> revoke_lease(const Principal& p, const std::string& lease_id, int64_t now_mono_ms,
+                             int64_t now_wall_ms);
+  std::vector<Lease> leases(int64_t now_wall_ms);
+  json::Value leases_json(int64_t now_wall_ms);
+  // Persistence of the leases (sessions are not persisted: they die with the process).
+  json::Value persist_json();
+  void load_json(const json::Value& v, int64_t now_wall_ms);
+
+  uint64_t transition_violations() const { return violations_; }
+  uint64_t version();  // bumps on every change (persistence, mDNS status)
+
+ private:
+  void transit(std::string_view event, ControlState to);
+  ControlState state_locked() const;
+  void expire_locked(int64_t now_mono_ms);
+  void drop_holder_locked(const std::string& event, const std::string& reason, int64_t now_mono_ms);
+  void promote_locked(int64_t now_mono_ms, int64_t now_wall_ms);
+  Session make_session_locked(const std::string& key, const std::string& sub, Role role, bool fleet,
+                              int64_t now_mono_ms, int64_t now_wall_ms, const std::string& id = {});
+  const Lease* active_lease_locked(int64_t now_wall_ms) const;
+  // The lease link and role cap of a claimant; false when a lease runs and excludes it.
+  bool lease_link_locked(const std::string& sub, Role& role, std::string& lease_id, int64_t& end_wall,
+                         int64_t now_wall_ms) const;
+
+  std::mutex mu_;
+  ControlOptions opts_;
+  std::optional<Session> holder_;
+  std::optional<Reservation> reserved_;
+  std::deque<QueuedClaim> queue_;
+  std::map<std::string, std::string> expired_;  // principal key → session id
+  std::vector<Lease> leases_;
+  std::vector<ControlChange> changes_;
+  ControlState state_ = ControlState::kAvailable;
+  int64_t last_wall_ms_ = 0;
+  // Lease times are wall-clock (they are shown and persisted as such) but run on the
+  // monotonic clock: a wall-clock step seen between two calls that carry both clocks shifts
+  // every lease and grant by the step (docs/NODE.md §Faults). -1 = no reading yet.
+  void absorb_wall_step_locked(int64_t now_mono_ms, int64_t now_wall_ms);
+  int64_t anchor_mono_ms_ = -1;
+  int64_t anchor_wall_ms_ = 0;
+  uint64_t violations_ = 0;
+  uint64_t version_ = 0;
+};
+
+}  // namespace rcan::node

@@ -1,0 +1,257 @@
+#include "node/fleet/swarm.h"
+
+#include <algorithm>
+
+#include "base/log.h"
+#include "node/services/node_services.h"
+#include "rcan/errors.h"
+
+namespace rcan::node {
+
+namespace {
+
+std::string str_of(const json::Value& v, const char* key) {
+  const json::Value* f = v.is_object() ? v.get(key) : nullptr;
+  return f != nullptr && f->is_string() ? f->as_string() : std::string();
+}
+
+json::Array to_array(const std::set<std::string>& s) {
+  json::Array a;
+  for (const auto& m : s) a.emplace_back(m);
+  return a;
+}
+
+}  // namespace
+
+SwarmAgent::SwarmAgent(NodeServices& svc, config::SwarmConfig cfg, std::string prefix, Publish publish)
+    : svc_(svc), cfg_(std::move(cfg)), topics_(mqtt::swarm_topics(prefix, cfg_.swarm_id)), publish_(std::move(publish)) {
+  members_.insert(cfg_.members.begin(), cfg_.members.end());
+  leader_ = cfg_.leader;
+}
+
+std::vector<std::string> SwarmAgent::subscriptions() const {
+  return {topics_.announce(), topics_.heartbeats(), topics_.join()};
+}
+
+std::string SwarmAgent::leader() const {
+  std::lock_guard<std::mutex> lk(mu_);
+  return leader_;
+}
+
+json::Value SwarmAgent::state() const {
+  std::lock_guard<std::mutex> lk(mu_);
+  return announce_body("state", "");
+}
+
+json::Value SwarmAgent::announce_body(const std::string& reason, const std::string& previous) const {
+  json::Object p{{"swarm_id", cfg_.swarm_id},
+                 {"members", to_array(members_)},
+                 {"leader", leader_},
+                 {"formation", cfg_.formation},
+                 {"join_policy", cfg_.join_policy},
+                 {"epoch", static_cast<int64_t>(epoch_)},
+                 {"pending", to_array(pending_)},
+                 {"announced_by", cfg_.member_id},
+                 {"reason", reason}};
+  if (!previous.empty()) p.set("previous_leader", previous);
+  return json::Value(json::Object{{"type", "SWARM_ANNOUNCE"},
+                                  {"message_id", new_uuid_v4()},
+                                  {"source_ruri", svc_.settings.ruri},
+                                  {"timestamp_ms", svc_.clock.wall_ms()},
+                                  {"payload", std::move(p)}});
+}
+
+void SwarmAgent::announce_locked(const std::string& reason, const std::string& previous) {
+  publish_(topics_.announce(), announce_body(reason, previous), 1, true);
+}
+
+void SwarmAgent::on_connected(int64_t now) {
+  std::lock_guard<std::mutex> lk(mu_);
+  connected_since_ = now;
+  for (const auto& m : members_) last_seen_[m] = now;  // everyone gets a full timeout of grace
+  if (leader_ == cfg_.member_id) announce_locked("connected", "");
+}
+
+void SwarmAgent::on_message(const mqtt::InboundTopic& t, const json::Value& body, int64_t now) {
+  if (t.kind == mqtt::TopicKind::kSwarmHeartbeat) {
+    std::lock_guard<std::mutex> lk(mu_);
+    if (members_.count(t.member) == 0) return;
+    last_seen_[t.member] = now;
+    return;
+  }
+  if (t.kind == mqtt::TopicKind::kSwarmJoin) {
+    handle_join(body);
+    return;
+  }
+  if (t.kind != mqtt::TopicKind::kSwarmAnnounce) return;
+  const json::Value* p = body.get("payload");
+  if (p == nullptr || !p->is_object()) return;
+  const json::Value* ep = p->get("epoch");
+  const json::Value* mem = p->get("members");
+  std::string leader = str_of(*p, "leader");
+  if (ep == nullptr || !ep->is_int() || ep->as_int() < 0 || mem == nullptr || !mem->is_array() || leader.empty()) return;
+  uint64_t epoch = static_cast<uint64_t>(ep->as_int());
+  std::set<std::string> members;
+  for (const auto& m : mem->as_array())
+    if (m.is_string() && mqtt::valid_topic_segment(m.as_string())) members.insert(m.as_string());
+  if (members.count(leader) == 0 || members.size() > 1024) return;
+  std::lock_guard<std::mutex> lk(mu_);
+  bool newer = epoch > epoch_ || (epoch == epoch_ && leader < leader_) || (epoch == epoch_ && leader == leader_);
+  if (!newer) {
+    // A stale announce (e.g. the retained one of a leader we replaced): correct it.
+    if (leader_ == cfg_.member_id) announce_locked("superseded", "");
+    return;
+  }
+  if (leader != leader_)
+    log(LogLevel::kInfo, "swarm_leader", json::Object{{"swarm_id", cfg_.swarm_id}, {"leader", leader},
+                                                      {"epoch", static_cast<int64_t>(epoch)}});
+  epoch_ = epoch;
+  leader_ = leader;
+  for (const auto& m : members)
+    if (last_seen_.count(m) == 0) last_seen_[m] = now;
+  members_ = std::move(members);
+  pending_.clear();
+  if (const json::Value* pend = p->get("pending"); pend != nullptr && pend->is_array())
+    for (const auto& m : pend->as_array())
+      if (m.is_string() && mqtt::valid_topic_segment(m.as_string())) pending_.insert(m.as_string());
+}
+
+void SwarmAgent::tick(int64_t now) {
+  std::lock_guard<std::mutex> lk(mu_);
+  if (now - last_beat_ >= cfg_.heartbeat_ms) {
+    last_beat_ = now;
+    last_seen_[cfg_.member_id] = now;
+    publish_(topics_.heartbeat(cfg_.member_id),
+             json::Value(json::Object{{"type", "HEARTBEAT"},
+                                      {"member", cfg_.member_id},
+                                      {"leader", leader_},
+                                      {"epoch", static_cast<int64_t>(epoch_)},
+                                      {"timestamp_ms", svc_.clock.wall_ms()}}),
+             0, false);
+  }
+  if (leader_ == cfg_.member_id) return;
+  auto it = last_seen_.find(leader_);
+  int64_t seen = it == last_seen_.end() ? connected_since_ : it->second;
+  if (now - seen <= static_cast<int64_t>(cfg_.leader_timeout_ms)) return;
+  // The deterministic rule: the first live member in byte order, other than the silent leader.
+  std::string next;
+  for (const auto& m : members_) {
+    if (m == leader_) continue;
+    auto s = last_seen_.find(m);
+    bool live = m == cfg_.member_id ||
+                (s != last_seen_.end() && now - s->second <= static_cast<int64_t>(cfg_.leader_timeout_ms));
+    if (live) {
+      next = m;
+      break;
+    }
+  }
+  if (next.empty()) return;
+  std::string previous = leader_;
+  leader_ = next;
+  last_seen_[next] = now;
+  log(LogLevel::kWarn, "swarm_leader_silent",
+      json::Object{{"swarm_id", cfg_.swarm_id}, {"previous_leader", previous}, {"leader", next}});
+  if (next == cfg_.member_id) {
+    ++epoch_;
+    announce_locked("leader_silent", previous);
+    auto e = svc_.entry("system", new_uuid_v4(), "SWARM_LEADER_CHANGE", "ok");
+    e.sender_type = "system";
+    e.detail.set("swarm_id", cfg_.swarm_id);
+    e.detail.set("previous_leader", previous);
+    e.detail.set("leader", next);
+    e.detail.set("epoch", static_cast<int64_t>(epoch_));
+    svc_.write_audit(std::move(e));
+  }
+}
+
+void SwarmAgent::answer(const std::string& member, const std::string& type, const std::string& reply_to,
+                        const std::string& reason) {
+  json::Object o{{"type", type},
+                 {"message_id", new_uuid_v4()},
+                 {"reply_to", reply_to},
+                 {"source_ruri", svc_.settings.ruri},
+                 {"timestamp_ms", svc_.clock.wall_ms()},
+                 {"payload", json::Object{{"swarm_id", cfg_.swarm_id}, {"member", member}, {"reason", reason}}}};
+  publish_(topics_.join_answer(member), json::Value(std::move(o)), 1, false);
+}
+
+void SwarmAgent::handle_join(const json::Value& body) {
+  std::string type = str_of(body, "type");
+  const json::Value* p = body.get("payload");
+  std::string member = p != nullptr ? str_of(*p, "member") : std::string();
+  std::string id = str_of(body, "message_id");
+  {
+    std::lock_guard<std::mutex> lk(mu_);
+    if (leader_ != cfg_.member_id) return;  // only the leader answers
+  }
+  if ((type != "SWARM_JOIN" && type != "SWARM_APPROVE") || !mqtt::valid_topic_segment(member)) return;
+  auto record = [&](const std::string& event, const std::string& outcome, const std::string& principal,
+                    const std::string& reason) {
+    auto e = svc_.entry(principal, id.empty() ? new_uuid_v4() : id, event, outcome);
+    e.reason = reason;
+    e.detail.set("swarm_id", cfg_.swarm_id);
+    e.detail.set("member", member);
+    e.detail.set("join_policy", cfg_.join_policy);
+    svc_.write_audit(std::move(e));
+  };
+  // The same checks as every other inbound message: a verified token and a fresh, unseen id.
+  auto principal = svc_.authenticate(str_of(body, "auth_token"));
+  if (!principal.ok()) {
+    record(type, "blocked", "anonymous", std::string(error_name(principal.error().code)));
+    answer(member, "DENIED", id, std::string(error_name(principal.error().code)));
+    return;
+  }
+  const json::Value* ts = body.get("timestamp_ms");
+  auto fresh = svc_.replay.check(id, ts != nullptr && ts->is_int() ? ts->as_int() : 0, false, svc_.clock.wall_ms());
+  if (id.empty() || !fresh.ok()) {
+    std::string why = id.empty() ? "missing message_id" : std::string(error_name(fresh.error().code));
+    record(type, "blocked", principal->display(), why);
+    answer(member, "DENIED", id, why);
+    return;
+  }
+  std::unique_lock<std::mutex> lk(mu_);
+  if (type == "SWARM_APPROVE") {
+    if (role_level(principal->role) < role_level(Role::kOwner) || cfg_.join_policy != "approval" ||
+        pending_.count(member) == 0) {
+      lk.unlock();
+      record(type, "blocked", principal->display(), "not_allowed");
+      answer(member, "DENIED", id, "approval needs OWNER and a pending request");
+      return;
+    }
+    pending_.erase(member);
+    members_.insert(member);
+    last_seen_[member] = svc_.clock.mono_ms();
+    ++epoch_;
+    announce_locked("joined", "");
+    lk.unlock();
+    record(type, "ok", principal->display(), "approved");
+    answer(member, "GRANTED", id, "approved");
+    return;
+  }
+  if (members_.count(member) != 0) {
+    lk.unlock();
+    answer(member, "GRANTED", id, "already_member");
+    return;
+  }
+  if (cfg_.join_policy == "open") {
+    members_.insert(member);
+    last_seen_[member] = svc_.clock.mono_ms();
+    ++epoch_;
+    announce_locked("joined", "");
+    lk.unlock();
+    record(type, "ok", principal->display(), "open");
+    answer(member, "GRANTED", id, "open");
+  } else if (cfg_.join_policy == "approval") {
+    pending_.insert(member);
+    announce_locked("join_pending", "");
+    lk.unlock();
+    record(type, "ok", principal->display(), "pending_approval");
+    answer(member, "PENDING_AUTH", id, "approval");
+  } else {
+    lk.unlock();
+    record(type, "blocked", principal->display(), "closed");
+    answer(member, "DENIED", id, "closed");
+  }
+}
+
+}  // namespace rcan::node

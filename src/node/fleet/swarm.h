@@ -1,0 +1,77 @@
+// SwarmAgent — swarm discovery and leadership (seed §5.2; docs/FLEET.md §Swarms).
+//
+// Every member beats on <prefix>/swarm/<id>/heartbeat/<member> every heartbeat_ms. The leader
+// publishes SWARM_ANNOUNCE {swarm_id, members, leader, formation, join_policy, epoch} retained
+// on <prefix>/swarm/<id>/announce, so a member starting later learns the swarm at once.
+//
+// Leader loss: when the leader has not been heard for leader_timeout_ms, every member applies
+// the same rule — the new leader is the first member, in byte order, among those heard within
+// the timeout (a member always counts itself) other than the silent leader. The member the
+// rule names takes over: it raises the epoch and announces (reason "leader_silent",
+// previous_leader). An announce with a higher epoch (or an equal epoch and a smaller leader)
+// wins, so members converge after a partition.
+//
+// Joins: SWARM_JOIN {member, auth_token, message_id, timestamp_ms} on <prefix>/swarm/<id>/join.
+// The leader alone answers, on <prefix>/swarm/<id>/join/<member>: the token must verify (as
+// on every other route); then `open` grants (the member is added and announced), `closed`
+// denies, `approval` answers PENDING_AUTH until a SWARM_APPROVE {member} under an OWNER token
+// (or above) arrives on the same topic. Each decision is audited (SWARM_JOIN / SWARM_APPROVE).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <mutex>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "config/fleet_config.h"
+#include "rcan/mqtt_topics.h"
+#include "rcan/json.h"
+
+namespace rcan::node {
+
+class NodeServices;
+
+class SwarmAgent {
+ public:
+  using Publish = std::function<void(const std::string& topic, const json::Value& body, int qos, bool retain)>;
+
+  SwarmAgent(NodeServices& svc, config::SwarmConfig cfg, std::string prefix, Publish publish);
+
+  // Topic filters to subscribe to.
+  std::vector<std::string> subscriptions() const;
+  // Called on every (re)connect: starts the silence clocks and announces when leader.
+  void on_connected(int64_t now_mono_ms);
+  void on_message(const mqtt::InboundTopic& topic, const json::Value& body, int64_t now_mono_ms);
+  // Heartbeat and leader check; call every few tens of milliseconds.
+  void tick(int64_t now_mono_ms);
+
+  // {swarm_id, member, members, leader, epoch, formation, join_policy, pending}
+  json::Value state() const;
+  std::string leader() const;
+
+ private:
+  json::Value announce_body(const std::string& reason, const std::string& previous) const;
+  void announce_locked(const std::string& reason, const std::string& previous);
+  void handle_join(const json::Value& body);
+  void answer(const std::string& member, const std::string& type, const std::string& reply_to,
+              const std::string& reason);
+
+  NodeServices& svc_;
+  config::SwarmConfig cfg_;
+  mqtt::SwarmTopics topics_;
+  Publish publish_;
+
+  mutable std::mutex mu_;
+  std::set<std::string> members_;
+  std::set<std::string> pending_;
+  std::string leader_;
+  uint64_t epoch_ = 0;
+  std::map<std::string, int64_t> last_seen_;
+  int64_t last_beat_ = 0;
+  int64_t connected_since_ = 0;
+};
+
+}  // namespace rcan::node

@@ -1,0 +1,101 @@
+// Authorisation: scopes, role, capability, the control session (pipeline.h).
+#include "node/pipeline/stages.h"
+
+#include <algorithm>
+#include <cctype>
+
+#include "base/clock.h"
+#include "base/log.h"
+#include "node/services/node_services.h"
+#include "rcan/errors.h"
+
+namespace rcan::node {
+namespace {
+
+class AuthorizeStage final : public Stage {
+ public:
+  explicit AuthorizeStage(NodeServices& s) : svc_(s) {}
+  const char* name() const override { return "authorize"; }
+  Result run(const std::shared_ptr<Context>& ctx) override {
+    const Message& m = *ctx->msg;
+    const Principal& p = ctx->principal;
+    auto deny = [&](std::string msg, std::string field) {
+      refuse(svc_, ctx, Error(ErrorCode::kInsufficientPrivileges, std::move(msg), std::move(field)),
+             "COMMAND_REJECTED");
+      return Result::kAnswered;
+    };
+    switch (ctx->safety) {
+      case SafetyAction::kEstop:
+      case SafetyAction::kStop:
+        return Result::kContinue;  // any authenticated principal may stop the robot
+      case SafetyAction::kResume:
+        if (role_level(p.role) < role_level(Role::kLeasee))
+          return deny(std::string(role_name(p.role)) + " may not clear an ESTOP (LEASEE or above)", "role");
+        return Result::kContinue;
+      case SafetyAction::kNone: break;
+    }
+    // Every scope the message asks for must be held and within the role.
+    for (const auto& s : m.scope) {
+      auto min = scope_min_role(s);
+      if (!min) return deny("unknown scope " + s, "scope");
+      if (!p.has_scope(s) && s != "status")
+        return deny(std::string(role_name(p.role)) + " token lacks scope " + s, "scope");
+      if (role_level(p.role) < role_level(*min))
+        return deny(std::string(role_name(p.role)) + " may not use scope " + s, "scope");
+    }
+    if (m.type == MessageType::kStatus || m.type == MessageType::kHeartbeat) return Result::kContinue;
+    std::string action = m.action();
+    if (action.empty()) {
+      refuse(svc_, ctx,
+             Error(ErrorCode::kSchemaValidationFailed, "a COMMAND needs payload.action (or command)",
+                   "payload.action", "missing_field"),
+             "MESSAGE_REJECTED");
+      return Result::kAnswered;
+    }
+    Capability cap = capability_for_action(action);
+    ctx->capability = cap;
+    Status st = authorize(p.role, p.scopes, cap, svc_.settings.role_policy);
+    if (!st.ok()) {
+      refuse(svc_, ctx, st.error(), "COMMAND_REJECTED");
+      return Result::kAnswered;
+    }
+    // A held control session reserves motion for its holder; a session that expired needs an
+    // explicit renewal (a new claim) before its principal drives again.
+    if (capability_scope(cap) == "control") {
+      auto holder = svc_.sessions.controller(svc_.clock.mono_ms());
+      if (holder && holder->principal_key == p.key()) {
+        ctx->session_id = holder->id;
+        svc_.act.session_heartbeat(holder->id);
+      } else if (auto gone = svc_.sessions.expired_session_of(p.key())) {
+        ctx->audit_detail.set("session_id", *gone);
+        refuse(svc_, ctx, Error(ErrorCode::kSessionExpired, "the control session expired; claim control again", "session"),
+               "COMMAND_REJECTED");
+        return Result::kAnswered;
+      } else if (holder) {
+        refuse(svc_, ctx,
+               Error(ErrorCode::kControlConflict,
+                     "the robot is controlled by another principal; claim it first", "session"),
+               "COMMAND_REJECTED");
+        return Result::kAnswered;
+      } else if (NetMode nm = svc_.partition.mode();
+                 nm == NetMode::kLockdown ||
+                 (nm == NetMode::kOfflineAutonomous && !svc_.partition.cached(p, svc_.clock.wall_ms()))) {
+        // Seed §6.1: partitioned, only sessions that already exist (or cached principals) act.
+        refuse(svc_, ctx,
+               Error(ErrorCode::kLockdown, std::string(net_mode_name(nm)) + ": no new control without a session"),
+               "COMMAND_REJECTED");
+        return Result::kAnswered;
+      }
+    }
+    return Result::kContinue;
+  }
+
+ private:
+  NodeServices& svc_;
+};
+
+}  // namespace
+
+std::unique_ptr<Stage> make_authorize_stage(NodeServices& services) { return std::make_unique<AuthorizeStage>(services); }
+
+}  // namespace rcan::node

@@ -1,0 +1,103 @@
+// The first stages: the message's shape, the presence of a token, decoding (pipeline.h).
+#include "node/pipeline/stages.h"
+
+#include <algorithm>
+#include <cctype>
+
+#include "base/clock.h"
+#include "base/log.h"
+#include "node/services/node_services.h"
+#include "rcan/errors.h"
+
+namespace rcan::node {
+namespace {
+
+class ShapeStage final : public Stage {
+ public:
+  explicit ShapeStage(NodeServices& s) : svc_(s) {}
+  const char* name() const override { return "shape"; }
+  Result run(const std::shared_ptr<Context>& ctx) override {
+    Status s = check_shape(ctx->in.body);
+    if (!s.ok()) {
+      refuse(svc_, ctx, s.error(), "MESSAGE_REJECTED");
+      return Result::kAnswered;
+    }
+    return Result::kContinue;
+  }
+
+ private:
+  NodeServices& svc_;
+};
+
+// A missing token is answered before anything else is validated (the live checker's order).
+class TokenPresenceStage final : public Stage {
+ public:
+  explicit TokenPresenceStage(NodeServices& s) : svc_(s) {}
+  const char* name() const override { return "token"; }
+  Result run(const std::shared_ptr<Context>& ctx) override {
+    if (ctx->in.preauthenticated) return Result::kContinue;
+    if (token_of(*ctx).empty()) {
+      refuse(svc_, ctx, Error(ErrorCode::kAuthRequired, "a bearer token is required", "auth_token"),
+             "AUTH_FAILED");
+      return Result::kAnswered;
+    }
+    return Result::kContinue;
+  }
+
+ private:
+  NodeServices& svc_;
+};
+
+class DecodeStage final : public Stage {
+ public:
+  explicit DecodeStage(NodeServices& s) : svc_(s) {}
+  const char* name() const override { return "decode"; }
+  Result run(const std::shared_ptr<Context>& ctx) override {
+    auto m = decode_message(ctx->in.body, svc_.settings.codec);
+    if (!m.ok()) {
+      refuse(svc_, ctx, m.error(), "MESSAGE_REJECTED");
+      return Result::kAnswered;
+    }
+    ctx->msg = std::move(m).value();
+    Message& msg = *ctx->msg;
+    if (msg.type == MessageType::kFleetCommand) {  // a fleet's command (fleet.cpp checks it)
+      msg.type = MessageType::kCommand;
+      ctx->fleet_command = true;
+    }
+    ctx->safety = safety_action_of(msg);
+    if (msg.priority == Priority::kSafety && ctx->safety == SafetyAction::kNone) {
+      refuse(svc_, ctx,
+             Error(ErrorCode::kSchemaValidationFailed,
+                   "priority SAFETY is reserved for SAFETY messages (ESTOP, STOP, RESUME)", "priority"),
+             "MESSAGE_REJECTED");
+      return Result::kAnswered;
+    }
+    if (ctx->safety != SafetyAction::kNone) msg.priority = Priority::kSafety;
+    switch (msg.type) {
+      case MessageType::kCommand:
+      case MessageType::kSafety:
+      case MessageType::kStatus:
+      case MessageType::kHeartbeat: break;
+      default:
+        refuse(svc_, ctx,
+               Error(ErrorCode::kSchemaValidationFailed,
+                     "message type " + std::string(message_type_name(msg.type)) + " is not accepted on " +
+                         ctx->in.route,
+                     "type"),
+               "MESSAGE_REJECTED");
+        return Result::kAnswered;
+    }
+    return Result::kContinue;
+  }
+
+ private:
+  NodeServices& svc_;
+};
+
+}  // namespace
+
+std::unique_ptr<Stage> make_shape_stage(NodeServices& services) { return std::make_unique<ShapeStage>(services); }
+std::unique_ptr<Stage> make_token_stage(NodeServices& services) { return std::make_unique<TokenPresenceStage>(services); }
+std::unique_ptr<Stage> make_decode_stage(NodeServices& services) { return std::make_unique<DecodeStage>(services); }
+
+}  // namespace rcan::node

@@ -1,0 +1,147 @@
+// The pipeline engine: contexts, refusals, running the stages. See pipeline.h for the contract.
+#include "node/pipeline/pipeline.h"
+
+#include <algorithm>
+#include <cctype>
+
+#include "base/clock.h"
+#include "node/pipeline/stages.h"
+#include "node/services/node_services.h"
+#include "rcan/errors.h"
+
+namespace rcan::node {
+namespace {
+
+std::string upper(std::string s) {
+  for (auto& c : s) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+  return s;
+}
+
+}  // namespace
+
+// The SAFETY event a message asks for, if any: a SAFETY message's safety_event / action /
+// cmd, or a COMMAND whose action is a stop word. An ESTOP request is honoured in any form.
+SafetyAction safety_action_of(const Message& m) {
+  std::string word;
+  if (m.type == MessageType::kSafety) {
+    for (const char* k : {"safety_event", "action", "cmd", "command"}) {
+      const json::Value* v = m.payload.find(k);
+      if (v && v->is_string()) {
+        word = upper(v->as_string());
+        break;
+      }
+    }
+    if (word.empty()) word = "ESTOP";  // a SAFETY message that says nothing more stops the robot
+  } else if (m.type == MessageType::kCommand) {
+    word = upper(m.action());
+  } else {
+    return SafetyAction::kNone;
+  }
+  if (word == "ESTOP" || word == "E_STOP" || word == "EMERGENCY_STOP") return SafetyAction::kEstop;
+  if (word == "STOP" || word == "SAFE_STOP") return SafetyAction::kStop;
+  if (word == "RESUME" || word == "ESTOP_CLEAR") return SafetyAction::kResume;
+  if (m.type == MessageType::kSafety) return SafetyAction::kEstop;  // unknown safety word: stop
+  return SafetyAction::kNone;
+}
+
+const char* safety_action_name(SafetyAction e) {
+  switch (e) {
+    case SafetyAction::kEstop: return "ESTOP";
+    case SafetyAction::kStop: return "STOP";
+    case SafetyAction::kResume: return "RESUME";
+    case SafetyAction::kNone: return "NONE";
+  }
+  return "NONE";
+}
+
+std::string token_of(const Context& ctx) {
+  if (!ctx.in.bearer.empty()) return ctx.in.bearer;
+  if (const json::Value* t = ctx.in.body.get("auth_token"); t && t->is_string()) return t->as_string();
+  return {};
+}
+
+void Context::finish(Outcome out) {
+  if (finished_) return;
+  finished_ = true;
+  if (done) done(std::move(out));
+}
+
+void refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, const Error& err,
+            const std::string& audit_event) {
+  std::string reply_to;
+  if (ctx->msg) reply_to = ctx->msg->message_id;
+  Outcome out;
+  out.status = http_status(err.code, err.reason);
+  out.body = svc.error(err, reply_to);
+  if (err.code == ErrorCode::kRateLimited) {
+    const json::Value* ra = ctx->audit_detail.find("retry_after_ms");
+    int64_t secs = ra && ra->is_int() ? (ra->as_int() + 999) / 1000 : 1;
+    out.headers.emplace_back("Retry-After", std::to_string(std::max<int64_t>(secs, 1)));
+  }
+  auto e = svc.entry(ctx->principal.display(), reply_to, audit_event.empty() ? "COMMAND_REJECTED" : audit_event,
+                     err.code == ErrorCode::kAuditUnavailable || err.code == ErrorCode::kInternal ? "error" : "blocked");
+  e.sender_type = std::string(sender_type_name(ctx->sender.sender_type));
+  if (ctx->principal.authenticated) e.sub = ctx->principal.sub;
+  if (!ctx->sender.cloud_provider.empty()) e.cloud_provider = ctx->sender.cloud_provider;
+  if (!ctx->sender.function_name.empty()) e.function_name = ctx->sender.function_name;
+  e.reason = err.reason.empty() ? std::string(error_name(err.code)) : err.reason;
+  bool payload_free = err.code == ErrorCode::kReplayDetected || err.code == ErrorCode::kMessageStale ||
+                      err.code == ErrorCode::kMalformedJson || err.code == ErrorCode::kSchemaValidationFailed;
+  if (ctx->msg && !payload_free) {
+    std::string action = ctx->msg->action();
+    if (!action.empty()) e.action = action.substr(0, 128);
+  }
+  // §16.2: a refused AI command names its model too (not for replays: those record nothing sent).
+  if (ctx->msg && ctx->msg->ai && err.code != ErrorCode::kReplayDetected && err.code != ErrorCode::kMessageStale)
+    e.ai = *ctx->msg->ai;
+  e.detail = ctx->audit_detail;
+  e.detail.set("error_code", std::string(error_name(err.code)));
+  if (!err.field.empty()) e.detail.set("field", err.field.substr(0, 128));
+  e.detail.set("transport", ctx->in.transport);
+  e.detail.set("route", ctx->in.route);
+  svc.write_audit(std::move(e));
+  ctx->finish(std::move(out));
+}
+
+Pipeline::Pipeline(NodeServices& services, std::vector<std::unique_ptr<Stage>> stages)
+    : svc_(services), stages_(std::move(stages)) {
+  for (const auto& s : stages_) stage_timers_.push_back(&svc_.metrics.stage(s->name()));
+  parse_timer_ = &svc_.metrics.stage("parse");
+  total_timer_ = &svc_.metrics.stage("total");
+}
+
+void Pipeline::submit(Ingress in, std::function<void(Outcome)> done) {
+  auto ctx = std::make_shared<Context>();
+  ctx->in = std::move(in);
+  ctx->started_mono_us = steady_us();
+  if (ctx->in.received_mono_us == 0) ctx->in.received_mono_us = ctx->started_mono_us;
+  // parse: arrival → here (routing and the JSON parse); total: arrival → answer handed over.
+  parse_timer_->observe_us(static_cast<double>(ctx->started_mono_us - ctx->in.received_mono_us));
+  ctx->done = [total = total_timer_, arrival = ctx->in.received_mono_us, done = std::move(done)](Outcome out) {
+    done(std::move(out));
+    total->observe_us(static_cast<double>(steady_us() - arrival));
+  };
+  ctx->pipeline = this;
+  run(ctx, 0);
+}
+
+void Pipeline::run_from(const std::shared_ptr<Context>& ctx, std::string_view stage) {
+  ctx->pipeline = this;
+  for (size_t i = 0; i < stages_.size(); ++i)
+    if (stage == stages_[i]->name()) return run(ctx, i);
+  refuse(svc_, ctx, Error(ErrorCode::kInternal, "no pipeline stage named " + std::string(stage)), "INTERNAL_ERROR");
+}
+
+void Pipeline::run(const std::shared_ptr<Context>& ctx, size_t first) {
+  for (size_t i = first; i < stages_.size(); ++i) {
+    int64_t t0 = steady_us();
+    Stage::Result r = stages_[i]->run(ctx);
+    stage_timers_[i]->observe_us(static_cast<double>(steady_us() - t0));
+    if (r != Stage::Result::kContinue) return;
+  }
+  if (!ctx->finished()) {
+    refuse(svc_, ctx, Error(ErrorCode::kInternal, "the pipeline ended without an answer"), "INTERNAL_ERROR");
+  }
+}
+
+}  // namespace rcan::node

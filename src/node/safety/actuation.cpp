@@ -1,0 +1,222 @@
+// SafetyActuation: the pipeline's Actuation over the SafetyCore. It turns a COMMAND's action
+// and parameters into an ActuatorCommand (docs/NODE.md §Commands), asks the core to check it
+// (limits, ESTOP, deadline) without applying, and applies it once the audit record is durable.
+#include "node/safety/actuation_safety.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+
+#include "node/safety/sim_robot.h"
+#include "rcan/errors.h"
+
+namespace rcan::node {
+namespace {
+
+std::string lower(std::string s) {
+  for (auto& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+Error bad_param(std::string field, std::string msg) {
+  return Error(ErrorCode::kSchemaValidationFailed, std::move(msg), "payload." + field);
+}
+
+// A COMMAND's parameters: flat in the payload or under "params"/"parameters", in that order of
+// precedence (looked up in place, not merged into a copy).
+class Params {
+ public:
+  explicit Params(const json::Object& payload) : flat_(payload) {
+    int i = 0;
+    for (const char* k : {"params", "parameters"})
+      if (const json::Value* inner = payload.find(k); inner && inner->is_object()) nested_[i++] = &inner->as_object();
+  }
+  // The first of the three that has `name` (even as null) decides.
+  const json::Value* find(std::string_view name) const {
+    if (const json::Value* v = flat_.find(name)) return v;
+    for (const json::Object* o : nested_)
+      if (o)
+        if (const json::Value* v = o->find(name)) return v;
+    return nullptr;
+  }
+
+ private:
+  const json::Object& flat_;
+  const json::Object* nested_[2] = {nullptr, nullptr};
+};
+
+// First present numeric parameter among `names`; error when present but not a finite number.
+Result<std::optional<double>> number(const Params& p, std::initializer_list<const char*> names) {
+  for (const char* n : names) {
+    const json::Value* v = p.find(n);
+    if (!v || v->is_null()) continue;
+    if (!v->is_number()) return bad_param(n, std::string(n) + " must be a number");
+    double d = v->to_double();
+    if (!std::isfinite(d)) return bad_param(n, std::string(n) + " must be finite");
+    return std::optional<double>(d);
+  }
+  return std::optional<double>();
+}
+
+bool starts(const std::string& s, std::string_view p) { return s.rfind(p, 0) == 0; }
+
+}  // namespace
+
+Result<ActuatorCommand> translate_command(const Message& msg, const SafetyLimits& limits) {
+  std::string action = lower(msg.action());
+  const Params params(msg.payload);
+  if (action == "move" || action == "move_forward" || action == "move_backward" || action == "drive" ||
+      action == "teleop" || starts(action, "nav") || action == "turn" || action == "turn_left" ||
+      action == "turn_right" || action == "rotate" || action == "goto") {
+    auto lin = number(params, {"linear", "linear_x", "linear_mps", "speed", "speed_mps", "velocity"});
+    if (!lin.ok()) return lin.error();
+    auto ang = number(params, {"angular", "angular_z", "angular_radps", "yaw_rate"});
+    if (!ang.ok()) return ang.error();
+    auto dur_ms = number(params, {"duration_ms"});
+    if (!dur_ms.ok()) return dur_ms.error();
+    auto dur_s = number(params, {"duration_s", "duration"});
+    if (!dur_s.ok()) return dur_s.error();
+    auto dist = number(params, {"distance_m", "distance"});
+    if (!dist.ok()) return dist.error();
+    double linear = lin->value_or(0.0);
+    double angular = ang->value_or(0.0);
+    if (action == "move_forward" && !*lin) linear = std::min(0.3, limits.max_linear_mps);
+    if (action == "move_backward") linear = -std::fabs(*lin ? linear : std::min(0.3, limits.max_linear_mps));
+    if ((action == "turn_left" || action == "turn_right") && !*ang) angular = std::min(0.5, limits.max_angular_radps);
+    if (action == "turn_right") angular = -std::fabs(angular);
+    int64_t duration = 0;
+    if (*dur_ms) duration = static_cast<int64_t>(**dur_ms);
+    else if (*dur_s) duration = static_cast<int64_t>(**dur_s * 1000.0);
+    else if (*dist && std::fabs(linear) > 1e-6) duration = static_cast<int64_t>(std::fabs(**dist / linear) * 1000.0);
+    if (duration < 0) return bad_param("duration_ms", "duration must not be negative");
+    if (!*lin && !*ang && action != "move_forward" && action != "move_backward" && action != "turn_left" &&
+        action != "turn_right")
+      return bad_param("linear", "a drive command needs linear and/or angular");
+    return ActuatorCommand::make_drive(linear, angular, duration);
+  }
+  if (starts(action, "arm") || starts(action, "joint") || action == "set_joints") {
+    JointArray targets{};
+    if (action == "arm_home") return ActuatorCommand::make_arm(targets);
+    const json::Value* j = nullptr;
+    for (const char* k : {"joints", "joints_rad", "targets", "positions"}) {
+      if ((j = params.find(k))) break;
+    }
+    if (!j) return bad_param("joints", "an arm command needs joints: 6 target angles in radians");
+    if (!j->is_array() || j->as_array().size() != static_cast<size_t>(kArmJoints))
+      return bad_param("joints", "joints must be an array of 6 numbers (radians)");
+    for (int i = 0; i < kArmJoints; ++i) {
+      const json::Value& e = j->as_array()[static_cast<size_t>(i)];
+      if (!e.is_number() || !std::isfinite(e.to_double())) return bad_param("joints", "joints must be finite numbers");
+      targets[static_cast<size_t>(i)] = e.to_double();
+    }
+    auto speed = number(params, {"max_joint_speed_radps", "joint_speed", "speed"});
+    if (!speed.ok()) return speed.error();
+    return ActuatorCommand::make_arm(targets, speed->value_or(0.0));
+  }
+  if (action == "gripper_open" || action == "gripper_close" || action == "grip" || action == "release_grip") {
+    ActuatorCommand c;
+    c.gripper = (action == "gripper_open" || action == "release_grip") ? GripperAction::kOpen : GripperAction::kClose;
+    return c;
+  }
+  return Error(ErrorCode::kCommandRejected, "unknown action '" + msg.action().substr(0, 64) + "'", "payload.action",
+               "unknown_action");
+}
+
+SafetyActuation::SafetyActuation(SafetyCore& core, std::string robot_name)
+    : core_(core), robot_name_(std::move(robot_name)) {}
+
+bool SafetyActuation::estop_active() const { return core_.estop_active(); }
+
+double SafetyActuation::estop(const std::string& source, const std::string& reason) {
+  EstopResult r = core_.estop(source, reason);
+  return static_cast<double>(r.stop_latency_ns) / 1000.0;
+}
+
+Status SafetyActuation::resume(Role role, const std::string& source) {
+  return core_.resume(role_level(role), source);
+}
+
+void SafetyActuation::stop(const std::string& source) {
+  (void)source;
+  (void)core_.dispatch(ActuatorCommand::make_stop());
+}
+
+bool SafetyActuation::informational(const std::string& action) const {
+  return action == "chat" || action == "ask" || action == "status" || action == "get_status" || action == "query";
+}
+
+Result<PreparedCommand> SafetyActuation::prepare(const Message& msg, int64_t deadline_mono_ms,
+                                                 const std::string& session_id) {
+  PreparedCommand pc;
+  pc.deadline_mono_ms = deadline_mono_ms;
+  pc.session_id = session_id;
+  pc.action_name = lower(msg.action());
+  const std::string& action = pc.action_name;
+  if (informational(action)) {
+    if (action == "chat" || action == "ask") {
+      for (const char* k : {"text", "message", "question", "instruction", "prompt"}) {
+        const json::Value* v = msg.payload.find(k);
+        if (v && v->is_string()) {
+          pc.question = v->as_string();
+          break;
+        }
+      }
+    }
+    pc.action = json::Object{{"informational", action}};
+    return pc;
+  }
+  auto cmd = translate_command(msg, core_.limits());
+  if (!cmd.ok()) return cmd.error();
+  DispatchOptions opts;
+  opts.deadline_mono_ms = deadline_mono_ms;
+  opts.session_id = session_id;
+  auto checked = core_.check(*cmd, opts);
+  if (!checked.ok()) return checked.error();
+  pc.clamped = checked->clamped;
+  for (const auto& c : checked->clamps) pc.clamp_note += (pc.clamp_note.empty() ? "" : "; ") + c;
+  pc.action = checked->applied.to_json();
+  pc.command = std::move(*cmd);  // apply() hands this to the core, which checks it again
+  return pc;
+}
+
+Result<json::Value> SafetyActuation::apply(const PreparedCommand& pc) {
+  const std::string& action = pc.action_name;
+  if (!pc.command) {
+    RobotState st = core_.robot_state();
+    if (action == "chat" || action == "ask") {
+      SafetyStatus s = core_.status();
+      ChatContext ctx;
+      ctx.estop_active = s.estop_active;
+      ctx.estop_reason = s.estop_reason;
+      ctx.safe_stop_active = s.safe_stop_active;
+      ctx.safe_stop_reason = s.safe_stop_reason;
+      ctx.robot_name = robot_name_;
+      return json::Value(json::Object{{"reply", chat(pc.question, st, ctx)}});
+    }
+    return json::Value(st.to_json());
+  }
+  DispatchOptions opts;
+  opts.deadline_mono_ms = pc.deadline_mono_ms;
+  opts.session_id = pc.session_id;
+  auto out = core_.dispatch(*pc.command, opts);
+  if (!out.ok()) return out.error();
+  return json::Value(out->to_json());
+}
+
+void SafetyActuation::session_started(const std::string& session_id, int64_t timeout_ms) {
+  core_.register_session(session_id, timeout_ms);
+  core_.set_session_control(session_id, true);
+}
+
+void SafetyActuation::session_heartbeat(const std::string& session_id) { (void)core_.heartbeat(session_id); }
+
+void SafetyActuation::session_ended(const std::string& session_id) {
+  core_.set_session_control(session_id, false);
+  core_.end_session(session_id);
+}
+
+json::Value SafetyActuation::status() const { return json::Value(core_.status().to_json()); }
+
+json::Value SafetyActuation::telemetry() const { return json::Value(core_.robot_state().to_json()); }
+
+}  // namespace rcan::node

@@ -1,0 +1,57 @@
+// Actuation — what the pipeline needs from the safety core, as a narrow interface so the
+// pipeline can be tested against a fake and the safety core can change underneath.
+// The real implementation (actuation.cpp) translates a COMMAND's action into an actuator
+// command and hands it to the SafetyCore, which alone talks to the driver.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+
+#include "node/safety/driver.h"
+#include "rcan/json.h"
+#include "rcan/message.h"
+#include "rcan/result.h"
+#include "rcan/roles.h"
+
+namespace rcan::node {
+
+struct PreparedCommand {
+  std::string action_name;                 // the COMMAND's action, lower-cased
+  std::optional<ActuatorCommand> command;  // as checked by prepare(); none for an informational action
+  std::string question;                    // chat/ask: the text asked
+  json::Value action;      // what will be applied (after clamping), for the audit record
+  bool clamped = false;
+  std::string clamp_note;  // which limit clamped it
+  int64_t deadline_mono_ms = 0;  // 0 = none
+  std::string session_id;
+};
+
+class Actuation {
+ public:
+  virtual ~Actuation() = default;
+  virtual bool estop_active() const = 0;
+  // Latches ESTOP and stops the actuators now. Returns the microseconds from the call to
+  // the driver's stop.
+  virtual double estop(const std::string& source, const std::string& reason) = 0;
+  // Clears a latched ESTOP. Errors: INSUFFICIENT_PRIVILEGES below LEASEE.
+  virtual Status resume(Role role, const std::string& source) = 0;
+  // Stops motion without latching (STOP safety event).
+  virtual void stop(const std::string& source) = 0;
+  // Validates a COMMAND against the state and the local limits, clamping where the
+  // policy says so. Errors: COMMAND_REJECTED (estop_active, limit_exceeded, unknown action).
+  virtual Result<PreparedCommand> prepare(const Message& msg, int64_t deadline_mono_ms,
+                                          const std::string& session_id) = 0;
+  // Applies a prepared command. Errors: COMMAND_REJECTED estop_active when an ESTOP came in
+  // between prepare() and apply(); MESSAGE_STALE past its deadline.
+  virtual Result<json::Value> apply(const PreparedCommand& cmd) = 0;
+  // Deadman bookkeeping for control sessions.
+  virtual void session_started(const std::string& session_id, int64_t timeout_ms) = 0;
+  virtual void session_heartbeat(const std::string& session_id) = 0;
+  virtual void session_ended(const std::string& session_id) = 0;
+  // Snapshots for status and telemetry.
+  virtual json::Value status() const = 0;
+  virtual json::Value telemetry() const = 0;
+};
+
+}  // namespace rcan::node

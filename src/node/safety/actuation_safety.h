@@ -1,0 +1,39 @@
+// SafetyActuation — the Actuation the node runs on: COMMAND → ActuatorCommand → SafetyCore.
+#pragma once
+
+#include <string>
+
+#include "node/safety/actuation.h"
+#include "node/safety/safety.h"
+
+namespace rcan::node {
+
+// The actuator command a COMMAND asks for (docs/NODE.md §Commands). Errors:
+// SCHEMA_VALIDATION_FAILED for bad parameters, COMMAND_REJECTED/unknown_action.
+Result<ActuatorCommand> translate_command(const Message& msg, const SafetyLimits& limits);
+
+class SafetyActuation final : public Actuation {
+ public:
+  // `core` must outlive this object.
+  SafetyActuation(SafetyCore& core, std::string robot_name);
+
+  bool estop_active() const override;
+  double estop(const std::string& source, const std::string& reason) override;
+  Status resume(Role role, const std::string& source) override;
+  void stop(const std::string& source) override;
+  Result<PreparedCommand> prepare(const Message& msg, int64_t deadline_mono_ms,
+                                  const std::string& session_id) override;
+  Result<json::Value> apply(const PreparedCommand& cmd) override;
+  void session_started(const std::string& session_id, int64_t timeout_ms) override;
+  void session_heartbeat(const std::string& session_id) override;
+  void session_ended(const std::string& session_id) override;
+  json::Value status() const override;
+  json::Value telemetry() const override;
+
+ private:
+  bool informational(const std::string& action) const;
+  SafetyCore& core_;
+  std::string robot_name_;
+};
+
+}  // namespace rcan::node

@@ -1,0 +1,766 @@
+#include "node/safety/safety.h"
+
+#include <pthread.h>
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "base/clock.h"
+
+namespace rcan::node {
+namespace {
+
+constexpr const char* kStateFile = "safety_state.json";
+constexpr const char* kStateFormat = "rcan-safety-state-v1";
+constexpr size_t kLatencyRing = 4096;
+constexpr int64_t kMaxStepMs = 60'000;
+constexpr int kLevelLeasee = 3;
+
+json::Value joints_json(const JointArray& a) {
+  json::Array out;
+  for (double d : a) out.emplace_back(d);
+  return json::Value(std::move(out));
+}
+
+SafetyLimits effective_limits(const SafetyLimits& cfg, const DriverInfo& hw) {
+  SafetyLimits l = cfg;
+  auto cap = [](double c, double h) { return h > 0 ? std::min(c, h) : c; };
+  l.max_linear_mps = cap(std::max(0.0, cfg.max_linear_mps), hw.max_linear_mps);
+  l.max_angular_radps = cap(std::max(0.0, cfg.max_angular_radps), hw.max_angular_radps);
+  l.max_joint_speed_radps = cap(std::max(0.0, cfg.max_joint_speed_radps), hw.max_joint_speed_radps);
+  if (hw.has_arm) {
+    for (int i = 0; i < kArmJoints; ++i) {
+      l.joint_min_rad[i] = std::max(cfg.joint_min_rad[i], hw.joint_min_rad[i]);
+      l.joint_max_rad[i] = std::min(cfg.joint_max_rad[i], hw.joint_max_rad[i]);
+      if (l.joint_min_rad[i] > l.joint_max_rad[i]) l.joint_max_rad[i] = l.joint_min_rad[i];
+    }
+  }
+  if (l.max_drive_duration_ms <= 0) l.max_drive_duration_ms = 1000;
+  return l;
+}
+
+}  // namespace
+
+double Workspace::distance_outside(double x, double y) const {
+  if (!enabled) return 0.0;
+  const double dx = std::max({min_x - x, 0.0, x - max_x});
+  const double dy = std::max({min_y - y, 0.0, y - max_y});
+  return std::hypot(dx, dy);
+}
+
+std::string_view limit_policy_name(LimitPolicy p) {
+  return p == LimitPolicy::kClamp ? "clamp" : "reject";
+}
+
+json::Object SafetyLimits::to_json() const {
+  return json::Object{{"max_linear_mps", max_linear_mps},
+                      {"max_angular_radps", max_angular_radps},
+                      {"max_joint_speed_radps", max_joint_speed_radps},
+                      {"joint_min_rad", joints_json(joint_min_rad)},
+                      {"joint_max_rad", joints_json(joint_max_rad)},
+                      {"max_drive_duration_ms", max_drive_duration_ms},
+                      {"workspace", json::Object{{"enabled", workspace.enabled},
+                                                 {"min_x", workspace.min_x},
+                                                 {"max_x", workspace.max_x},
+                                                 {"min_y", workspace.min_y},
+                                                 {"max_y", workspace.max_y}}}};
+}
+
+json::Object DispatchOutcome::to_json() const {
+  json::Array c;
+  for (const auto& s : clamps) c.emplace_back(s);
+  return json::Object{{"clamped", clamped}, {"clamps", json::Value(std::move(c))},
+                      {"applied", applied.to_json()}};
+}
+
+json::Object SafetyEvent::to_json() const {
+  json::Object o{{"type", type}};
+  if (!session_id.empty()) o.set("session_id", session_id);
+  o.set("elapsed_ms", elapsed_ms);
+  if (timeout_ms > 0) o.set("timeout_ms", timeout_ms);
+  if (!detail.empty()) o.set("detail", detail);
+  o.set("timestamp_ms", wall_ms);
+  return o;
+}
+
+json::Object LatencyStats::to_json() const {
+  return json::Object{{"count", static_cast<int64_t>(count)},
+                      {"last_ns", last_ns},
+                      {"p50_ns", p50_ns},
+                      {"p99_ns", p99_ns},
+                      {"max_ns", max_ns}};
+}
+
+json::Object SafetyStatus::to_json() const {
+  json::Object o;
+  o.set("estop_active", estop_active);
+  if (estop_active) {
+    o.set("estop", json::Object{{"source", estop_source},
+                                {"reason", estop_reason},
+                                {"since_ms", estop_since_wall_ms}});
+  }
+  o.set("safe_stop", safe_stop_active);
+  if (safe_stop_active) {
+    json::Object s{{"reason", safe_stop_reason}, {"since_ms", safe_stop_since_wall_ms}};
+    if (!safe_stop_session.empty()) s.set("session_id", safe_stop_session);
+    o.set("safe_stop_detail", std::move(s));
+  }
+  o.set("state", estop_active ? "estop" : safe_stop_active ? "safe_stop" : robot.stopped ? "idle" : "moving");
+  o.set("limit_policy", limit_policy_name(policy));
+  o.set("limits", limits.to_json());
+  o.set("robot", robot.to_json());
+  o.set("driver", driver.to_json());
+  o.set("estop_latency", estop_latency.to_json());
+  o.set("estop_fence_timeouts", static_cast<int64_t>(estop_fence_timeouts));
+  o.set("persistence", json::Object{{"enabled", persistence_enabled},
+                                    {"durable", persisted},
+                                    {"error", persist_error.empty() ? json::Value() : json::Value(persist_error)}});
+  if (!startup_note.empty()) o.set("startup_note", startup_note);
+  o.set("sessions", static_cast<int64_t>(sessions));
+  o.set("running", running);
+  return o;
+}
+
+// ---------------------------------------------------------------------------------------------
+
+SafetyCore::SafetyCore(std::unique_ptr<Driver> driver, SafetyConfig cfg, Clock& clock)
+    : driver_(std::move(driver)),
+      cfg_(std::move(cfg)),
+      clock_(clock),
+      driver_info_(driver_->describe()),
+      limits_(effective_limits(cfg_.limits, driver_info_)) {
+  latency_ring_.reserve(kLatencyRing);
+  last_tick_mono_ = clock_.mono_ms();
+  if (cfg_.estop_on_startup) {
+    latched_.store(true);
+    latch_ = LatchState{true, "startup", "estop_on_startup", clock_.wall_ms()};
+    driver_->stop();
+  }
+}
+
+SafetyCore::~SafetyCore() {
+  stop();
+  {
+    std::lock_guard<std::mutex> lock(meta_mu_);
+    persist_quit_ = true;
+  }
+  persist_cv_.notify_all();
+  if (persister_.joinable()) persister_.join();
+}
+
+Status SafetyCore::open(const std::string& state_dir) {
+  namespace fs = std::filesystem;
+  {
+    std::lock_guard<std::mutex> lock(meta_mu_);
+    if (persist_enabled_) return Error(ErrorCode::kInternal, "SafetyCore::open called twice");
+  }
+  std::error_code ec;
+  fs::create_directories(state_dir, ec);
+  if (ec) return Error(ErrorCode::kInternal, "cannot create safety state dir " + state_dir + ": " + ec.message());
+  ::chmod(state_dir.c_str(), 0700);
+  const std::string path = state_dir + "/" + kStateFile;
+
+  LatchState loaded;
+  bool corrupt = false;
+  bool missing = false;
+  std::string why;
+  {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) {
+      if (!fs::exists(path, ec)) {
+        missing = true;
+      } else {
+        corrupt = true;
+        why = "state file unreadable";
+      }
+    } else {
+      std::stringstream ss;
+      ss << in.rdbuf();
+      auto parsed = json::parse(ss.str());
+      if (!parsed.ok() || !parsed->is_object()) {
+        corrupt = true;
+        why = parsed.ok() ? "state file is not an object" : "state file corrupt: " + parsed.error().message;
+      } else {
+        const auto* fmt = parsed->get("format");
+        const auto* active = parsed->get("estop_active");
+        if (!fmt || !fmt->is_string() || fmt->as_string() != kStateFormat || !active || !active->is_bool()) {
+          corrupt = true;
+          why = "state file has an unknown format";
+        } else {
+          loaded.active = active->as_bool();
+          if (const auto* s = parsed->get("source"); s && s->is_string()) loaded.source = s->as_string();
+          if (const auto* r = parsed->get("reason"); r && r->is_string()) loaded.reason = r->as_string();
+          if (const auto* t = parsed->get("since_ms"); t && t->is_int()) loaded.since_wall_ms = t->as_int();
+        }
+      }
+    }
+  }
+  if (corrupt) {
+    fs::rename(path, path + ".corrupt", ec);  // keep it for forensics; best effort
+  }
+
+  bool need_write = false;
+  {
+    std::lock_guard<std::mutex> lock(meta_mu_);
+    state_dir_ = state_dir;
+    persist_enabled_ = true;
+    if (corrupt) {
+      latch_ = LatchState{true, "startup", why + "; came up latched (fail safe)", clock_.wall_ms()};
+      startup_note_ = latch_.reason;
+      need_write = true;
+    } else if (missing) {
+      if (!latch_.active) startup_note_ = "no safety state file (first start)";
+      need_write = latch_.active;  // estop_on_startup
+    } else if (loaded.active) {
+      latch_ = loaded;
+      startup_note_ = "ESTOP was latched before restart; still latched";
+    } else if (latch_.active) {
+      need_write = true;  // estop_on_startup over a cleared file
+    }
+    if (latch_.active) latched_.store(true, std::memory_order_release);
+    if (need_write) ++latch_seq_;
+  }
+  if (latched_.load()) driver_->stop();
+  persister_ = std::thread([this] {
+    pthread_setname_np(pthread_self(), "safety-persist");
+    persist_loop();
+  });
+  return Status::Ok();
+}
+
+void SafetyCore::set_event_callback(EventFn fn) {
+  std::lock_guard<std::mutex> lock(event_mu_);
+  on_event_ = std::move(fn);
+}
+
+void SafetyCore::emit(const SafetyEvent& ev) {
+  EventFn fn;
+  {
+    std::lock_guard<std::mutex> lock(event_mu_);
+    fn = on_event_;
+  }
+  if (fn) fn(ev);
+}
+
+// ---- ESTOP / RESUME -------------------------------------------------------------------------
+
+EstopResult SafetyCore::estop(std::string_view source, std::string_view reason) {
+  const int64_t t0 = steady_ns();
+  latched_.store(true, std::memory_order_seq_cst);
+  driver_->stop();  // first, before any lock or I/O
+  const int64_t ns = steady_ns() - t0;
+
+  // Fence without a lock: a dispatch() that read the latch as clear before we set it may be
+  // inside Driver::apply() right now (apply_seq_ odd). Wait for that one apply only (not for
+  // the threads queued behind it: they re-check the latch under the lock and must see it, by
+  // the seq_cst order of our latch store / seq load against their seq increment / latch
+  // load), then stop again, so nothing applied before this point survives. The wait is
+  // bounded; on timeout the straggler stops the driver itself right after its apply.
+  EstopResult r;
+  r.stop_latency_ns = ns;
+  const uint64_t seq = apply_seq_.load(std::memory_order_seq_cst);
+  if (seq & 1u) {
+    const int64_t limit = t0 + std::max<int64_t>(0, cfg_.estop_fence_timeout_ms) * 1'000'000;
+    int spins = 0;
+    while (apply_seq_.load(std::memory_order_acquire) == seq) {
+      if (steady_ns() > limit) {
+        r.fenced = false;
+        fence_timeouts_.fetch_add(1, std::memory_order_relaxed);
+        break;
+      }
+      if (++spins > 64) std::this_thread::yield();
+    }
+  }
+  driver_->stop();
+  record_latency(ns);
+
+  {
+    std::lock_guard<std::mutex> lock(meta_mu_);
+    latched_.store(true, std::memory_order_release);  // a racing resume() must not win silently
+    if (!latch_.active) {
+      latch_ = LatchState{true, std::string(source), std::string(reason), clock_.wall_ms()};
+      ++latch_seq_;
+      r.newly_latched = true;
+    }
+    r.state_seq = latch_seq_;
+  }
+  if (r.newly_latched) persist_cv_.notify_all();
+  r.return_latency_ns = steady_ns() - t0;
+  return r;
+}
+
+Status SafetyCore::resume(int principal_role_level, std::string_view source) {
+  if (principal_role_level < kLevelLeasee) {
+    return Error(ErrorCode::kInsufficientPrivileges,
+                 "clearing ESTOP requires LEASEE (level 3) or above", "", "estop_clear_forbidden");
+  }
+  {
+    std::lock_guard<std::mutex> lock(meta_mu_);
+    if (!latch_.active && !latched_.load()) return Status::Ok();  // nothing latched
+    latch_ = LatchState{false, std::string(source), "resume", clock_.wall_ms()};
+    ++latch_seq_;
+    latched_.store(false, std::memory_order_release);
+  }
+  {
+    std::lock_guard<std::mutex> lock(sessions_mu_);
+    watchdog_last_feed_mono_ = 0;  // re-armed by the next feed
+  }
+  persist_cv_.notify_all();
+  return Status::Ok();
+}
+
+bool SafetyCore::wait_persisted(uint64_t seq, int64_t timeout_ms) {
+  std::unique_lock<std::mutex> lock(meta_mu_);
+  if (!persist_enabled_) return false;
+  return durable_cv_.wait_for(lock, std::chrono::milliseconds(timeout_ms),
+                              [&] { return persisted_seq_ >= seq; });
+}
+
+uint64_t SafetyCore::state_seq() const {
+  std::lock_guard<std::mutex> lock(meta_mu_);
+  return latch_seq_;
+}
+
+void SafetyCore::record_latency(int64_t ns) {
+  std::lock_guard<std::mutex> lock(stats_mu_);
+  if (latency_ring_.size() < kLatencyRing) {
+    latency_ring_.push_back(ns);
+  } else {
+    latency_ring_[latency_next_] = ns;
+  }
+  latency_next_ = (latency_next_ + 1) % kLatencyRing;
+  ++latency_count_;
+  latency_last_ns_ = ns;
+  latency_max_ns_ = std::max(latency_max_ns_, ns);
+}
+
+LatencyStats SafetyCore::estop_latency() const {
+  std::vector<int64_t> v;
+  LatencyStats s;
+  {
+    std::lock_guard<std::mutex> lock(stats_mu_);
+    v = latency_ring_;
+    s.count = latency_count_;
+    s.last_ns = latency_last_ns_;
+    s.max_ns = latency_max_ns_;
+  }
+  if (!v.empty()) {
+    std::sort(v.begin(), v.end());
+    s.p50_ns = v[(v.size() - 1) / 2];
+    s.p99_ns = v[std::min(v.size() - 1, (v.size() * 99) / 100)];
+  }
+  return s;
+}
+
+// ---- persistence ----------------------------------------------------------------------------
+
+Status SafetyCore::write_state_file(const LatchState& st) {
+  const std::string dir = state_dir_;
+  const std::string path = dir + "/" + kStateFile;
+  const std::string tmp = path + ".tmp";
+  json::Object o{{"format", kStateFormat},
+                 {"estop_active", st.active},
+                 {"source", st.source},
+                 {"reason", st.reason},
+                 {"since_ms", st.since_wall_ms},
+                 {"written_ms", clock_.wall_ms()}};
+  const std::string body = json::dump(json::Value(std::move(o))) + "\n";
+
+  auto fail = [](const std::string& what) {
+    return Error(ErrorCode::kInternal, what + ": " + std::strerror(errno));
+  };
+  int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+  if (fd < 0) return fail("open " + tmp);
+  size_t off = 0;
+  while (off < body.size()) {
+    ssize_t n = ::write(fd, body.data() + off, body.size() - off);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      Error e = fail("write " + tmp);
+      ::close(fd);
+      return e;
+    }
+    off += static_cast<size_t>(n);
+  }
+  if (::fsync(fd) != 0) {
+    Error e = fail("fsync " + tmp);
+    ::close(fd);
+    return e;
+  }
+  if (::close(fd) != 0) return fail("close " + tmp);
+  if (::rename(tmp.c_str(), path.c_str()) != 0) return fail("rename " + tmp);
+  int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dfd < 0) return fail("open dir " + dir);
+  if (::fsync(dfd) != 0) {
+    Error e = fail("fsync dir " + dir);
+    ::close(dfd);
+    return e;
+  }
+  ::close(dfd);
+  return Status::Ok();
+}
+
+void SafetyCore::persist_loop() {
+  std::unique_lock<std::mutex> lock(meta_mu_);
+  for (;;) {
+    persist_cv_.wait(lock, [&] { return persist_quit_ || persisted_seq_ < latch_seq_; });
+    if (persisted_seq_ >= latch_seq_) return;  // shutting down, nothing pending
+    const uint64_t seq = latch_seq_;
+    const LatchState snapshot = latch_;
+    lock.unlock();
+    Status st = write_state_file(snapshot);
+    lock.lock();
+    if (st.ok()) {
+      persisted_seq_ = std::max(persisted_seq_, seq);
+      persist_error_.clear();
+      durable_cv_.notify_all();
+      continue;
+    }
+    persist_error_ = st.error().message;
+    durable_cv_.notify_all();
+    if (persist_quit_) return;
+    // Retry every 200 ms, sooner on a new change or shutdown (which makes one last attempt).
+    persist_cv_.wait_for(lock, std::chrono::milliseconds(200),
+                         [&] { return persist_quit_ || latch_seq_ != seq; });
+  }
+}
+
+// ---- sessions / watchdog --------------------------------------------------------------------
+
+void SafetyCore::register_session(const std::string& session_id, int64_t timeout_ms) {
+  {
+    std::lock_guard<std::mutex> lock(sessions_mu_);
+    Session& s = sessions_[session_id];
+    s.timeout_ms = timeout_ms > 0 ? timeout_ms : cfg_.default_heartbeat_ms;
+    s.last_heartbeat_mono = clock_.mono_ms();
+    s.lost = false;
+  }
+  wake_ticker();  // a new deadline, possibly sooner than the loop's idle sleep
+}
+
+Status SafetyCore::heartbeat(const std::string& session_id) {
+  bool revived = false;
+  {
+    std::lock_guard<std::mutex> lock(sessions_mu_);
+    auto it = sessions_.find(session_id);
+    if (it == sessions_.end())
+      return Error(ErrorCode::kNotFound, "unknown session", "session_id", "unknown_session");
+    it->second.last_heartbeat_mono = clock_.mono_ms();
+    revived = it->second.lost;
+    it->second.lost = false;
+  }
+  if (revived) wake_ticker();  // a heartbeat only moves a live deadline later
+  return Status::Ok();
+}
+
+void SafetyCore::end_session(const std::string& session_id) {
+  bool held = false;
+  {
+    std::lock_guard<std::mutex> lock(sessions_mu_);
+    auto it = sessions_.find(session_id);
+    if (it == sessions_.end()) return;
+    held = it->second.holds_control;
+    sessions_.erase(it);
+  }
+  std::lock_guard<std::mutex> lock(apply_mu_);
+  if (held || (!session_id.empty() && motion_owner_ == session_id)) {
+    if (!driver_->state().stopped || held) {
+      driver_->stop();
+      drive_deadline_mono_ = 0;
+    }
+    if (motion_owner_ == session_id) motion_owner_.clear();
+  }
+}
+
+void SafetyCore::set_session_control(const std::string& session_id, bool holds_control) {
+  std::lock_guard<std::mutex> lock(sessions_mu_);
+  auto it = sessions_.find(session_id);
+  if (it != sessions_.end()) it->second.holds_control = holds_control;
+}
+
+void SafetyCore::feed_watchdog() {
+  bool armed = false;
+  {
+    std::lock_guard<std::mutex> lock(sessions_mu_);
+    armed = watchdog_last_feed_mono_ == 0;
+    watchdog_last_feed_mono_ = clock_.mono_ms();
+    if (watchdog_last_feed_mono_ == 0) watchdog_last_feed_mono_ = 1;
+  }
+  if (armed) wake_ticker();  // a feed only moves an armed deadline later
+}
+
+void SafetyCore::enter_safe_stop(std::string reason, std::string session) {
+  std::lock_guard<std::mutex> lock(meta_mu_);
+  safe_stop_reason_ = std::move(reason);
+  safe_stop_session_ = std::move(session);
+  safe_stop_since_wall_ms_ = clock_.wall_ms();
+  safe_stop_.store(true, std::memory_order_release);
+}
+
+// ---- control loop ---------------------------------------------------------------------------
+
+void SafetyCore::tick() {
+  const int64_t t0 = steady_ns();
+  const int64_t now = clock_.mono_ms();
+  std::vector<SafetyEvent> events;
+  auto make_event = [&](std::string type, int64_t elapsed, int64_t timeout, std::string detail) {
+    SafetyEvent ev;
+    ev.type = std::move(type);
+    ev.elapsed_ms = elapsed;
+    ev.timeout_ms = timeout;
+    ev.detail = std::move(detail);
+    ev.wall_ms = clock_.wall_ms();
+    ev.mono_ms = now;
+    return ev;
+  };
+
+  std::string owner;
+  bool moving = false;
+  {
+    std::lock_guard<std::mutex> lock(apply_mu_);
+    step_driver_to_locked(now);
+    // Only now, with the driver stepped to `now` under apply_mu_, is a rest over: until here a
+    // dispatch() still catches the driver up itself (see start()).
+    resting_.store(false, std::memory_order_seq_cst);
+    if (latched_.load(std::memory_order_acquire)) driver_->stop();  // belt and braces
+    RobotState st = driver_->state();
+
+    // Drive TTL on the monotonic clock.
+    if (drive_deadline_mono_ > 0 && now >= drive_deadline_mono_) {
+      const bool still_driving = st.target_linear_mps != 0.0 || st.target_angular_radps != 0.0;
+      if (!still_driving) {
+        drive_deadline_mono_ = 0;
+      } else if (now > drive_deadline_mono_ + cfg_.drive_ttl_grace_ms) {
+        driver_->stop();
+        events.push_back(make_event("DRIVE_TTL_SAFE_STOP", now - drive_deadline_mono_, 0,
+                                    "the driver kept driving past the command's duration"));
+        drive_deadline_mono_ = 0;
+      }
+    }
+
+    // Workspace guard: braking distance ahead must not take the base further out.
+    const Workspace& ws = limits_.workspace;
+    if (ws.enabled && st.linear_mps != 0.0) {
+      const double brake = driver_info_.brake_decel_mps2;
+      const double dist = brake > 0 ? st.linear_mps * std::abs(st.linear_mps) / (2.0 * brake) : 0.0;
+      const double px = st.x + dist * std::cos(st.theta);
+      const double py = st.y + dist * std::sin(st.theta);
+      const double here = ws.distance_outside(st.x, st.y);
+      const double ahead = ws.distance_outside(px, py);
+      if (ahead > 1e-3 && ahead > here) {
+        driver_->stop();
+        drive_deadline_mono_ = 0;
+        events.push_back(make_event("WORKSPACE_SAFE_STOP", 0, 0, "the base was about to leave the workspace"));
+      }
+    }
+    owner = motion_owner_;
+    moving = !st.stopped;
+  }
+
+  // Deadman.
+  bool watchdog_fired = false;
+  int64_t watchdog_elapsed = 0;
+  {
+    std::lock_guard<std::mutex> lock(sessions_mu_);
+    for (auto& [id, s] : sessions_) {
+      const int64_t elapsed = now - s.last_heartbeat_mono;
+      if (s.lost || elapsed <= s.timeout_ms) continue;
+      s.lost = true;
+      if (s.holds_control || (moving && id == owner)) {
+        SafetyEvent ev = make_event("NETWORK_LOSS_SAFE_STOP", elapsed, s.timeout_ms, "heartbeat timeout");
+        ev.session_id = id;
+        events.push_back(std::move(ev));
+      }
+    }
+    if (cfg_.watchdog_timeout_ms > 0 && watchdog_last_feed_mono_ != 0 &&
+        now - watchdog_last_feed_mono_ > cfg_.watchdog_timeout_ms) {
+      watchdog_fired = true;
+      watchdog_elapsed = now - watchdog_last_feed_mono_;
+      watchdog_last_feed_mono_ = 0;
+    }
+  }
+
+  for (const auto& ev : events) {
+    driver_->stop();
+    if (ev.type == "NETWORK_LOSS_SAFE_STOP") {
+      enter_safe_stop("NETWORK_LOSS_SAFE_STOP", ev.session_id);
+    } else if (ev.type == "WORKSPACE_SAFE_STOP") {
+      enter_safe_stop("workspace", "");
+    } else {
+      enter_safe_stop("drive_ttl", "");
+    }
+  }
+  if (!events.empty()) {
+    std::lock_guard<std::mutex> lock(apply_mu_);
+    drive_deadline_mono_ = 0;
+  }
+  if (watchdog_fired) {
+    (void)estop("watchdog", "brain watchdog timeout");
+    events.push_back(make_event("WATCHDOG_TIMEOUT", watchdog_elapsed, cfg_.watchdog_timeout_ms,
+                                "no watchdog feed; ESTOP latched"));
+  }
+
+  loop_count_.fetch_add(1, std::memory_order_relaxed);
+  loop_latency_us_.store((steady_ns() - t0) / 1000, std::memory_order_relaxed);
+  for (const auto& ev : events) emit(ev);
+}
+
+// Steps the driver from the last tick (or catch-up) to `now`; never backwards. Holds apply_mu_.
+void SafetyCore::step_driver_to_locked(int64_t now) {
+  if (now > last_tick_mono_) driver_->step(std::min(now - last_tick_mono_, kMaxStepMs));
+  last_tick_mono_ = std::max(last_tick_mono_, now);
+}
+
+int64_t SafetyCore::rest_for_ms() const {
+  if (cfg_.idle_tick_ms <= cfg_.tick_period_ms) return 0;
+  const int64_t now = clock_.mono_ms();
+  int64_t until = now + cfg_.idle_tick_ms;
+  {
+    std::lock_guard<std::mutex> lock(apply_mu_);
+    if (drive_deadline_mono_ != 0 || !driver_->at_rest()) return 0;
+  }
+  {
+    std::lock_guard<std::mutex> lock(sessions_mu_);
+    // tick() acts once a deadline has passed (elapsed > timeout): wake 1 ms after it.
+    for (const auto& [id, s] : sessions_)
+      if (!s.lost) until = std::min(until, s.last_heartbeat_mono + s.timeout_ms + 1);
+    if (cfg_.watchdog_timeout_ms > 0 && watchdog_last_feed_mono_ != 0)
+      until = std::min(until, watchdog_last_feed_mono_ + cfg_.watchdog_timeout_ms + 1);
+  }
+  const int64_t rest = until - now;
+  return rest > cfg_.tick_period_ms ? rest : 0;
+}
+
+void SafetyCore::wake_ticker() {
+  if (!resting_.load(std::memory_order_seq_cst)) return;
+  {
+    std::lock_guard<std::mutex> wl(tick_wait_mu_);
+    wake_requested_ = true;
+  }
+  tick_wait_cv_.notify_all();
+}
+
+void SafetyCore::start() {
+  std::lock_guard<std::mutex> lock(thread_mu_);
+  if (running_.load()) return;
+  running_.store(true);
+  {
+    std::lock_guard<std::mutex> l2(apply_mu_);
+    last_tick_mono_ = clock_.mono_ms();
+  }
+  ticker_ = std::thread([this] {
+    pthread_setname_np(pthread_self(), "safety-tick");
+    const auto period = std::chrono::milliseconds(std::max<int64_t>(1, cfg_.tick_period_ms));
+    auto next = std::chrono::steady_clock::now() + period;
+    while (running_.load(std::memory_order_acquire)) {
+      tick();
+      {
+        std::lock_guard<std::mutex> wl(tick_wait_mu_);
+        wake_requested_ = false;
+      }
+      // Announce the rest before checking whether we may: a dispatch() or session change that
+      // the check does not see then sees resting_ and wakes us (see wake_ticker()).
+      resting_.store(true, std::memory_order_seq_cst);
+      const int64_t rest_ms = rest_for_ms();
+      std::unique_lock<std::mutex> wl(tick_wait_mu_);
+      if (rest_ms > 0) {
+        tick_wait_cv_.wait_for(wl, std::chrono::milliseconds(rest_ms), [this] {
+          return wake_requested_ || !running_.load(std::memory_order_acquire);
+        });
+        // resting_ stays set until the next tick() has stepped the driver (it clears it under
+        // apply_mu_): a command arriving between this wake-up and that step still brings the
+        // driver up to its own moment, instead of being integrated over the whole rest.
+        next = std::chrono::steady_clock::now() + period;
+        continue;
+      }
+      resting_.store(false, std::memory_order_seq_cst);
+      tick_wait_cv_.wait_until(wl, next, [this] { return !running_.load(std::memory_order_acquire); });
+      next += period;
+      const auto now = std::chrono::steady_clock::now();
+      if (next < now) next = now + period;  // overran: do not try to catch up
+    }
+  });
+}
+
+void SafetyCore::stop() {
+  std::lock_guard<std::mutex> lock(thread_mu_);
+  if (ticker_.joinable()) {
+    {
+      std::lock_guard<std::mutex> wl(tick_wait_mu_);
+      running_.store(false, std::memory_order_release);
+    }
+    tick_wait_cv_.notify_all();
+    ticker_.join();
+  }
+  running_.store(false);
+  driver_->stop();
+  std::lock_guard<std::mutex> al(apply_mu_);
+  driver_->stop();
+  drive_deadline_mono_ = 0;
+}
+
+// ---- status ---------------------------------------------------------------------------------
+
+RobotState SafetyCore::decorate(RobotState st) const {
+  st.ts = clock_.wall_ms();
+  st.loop_latency_ms = static_cast<double>(loop_latency_us_.load(std::memory_order_relaxed)) / 1000.0;
+  st.loop_count = loop_count_.load(std::memory_order_relaxed);
+  st.paused = latched_.load(std::memory_order_acquire) || safe_stop_.load(std::memory_order_acquire);
+  return st;
+}
+
+RobotState SafetyCore::robot_state() const {
+  RobotState st;
+  {
+    std::lock_guard<std::mutex> lock(apply_mu_);
+    st = driver_->state();
+  }
+  return decorate(st);
+}
+
+SafetyStatus SafetyCore::status() const {
+  SafetyStatus s;
+  s.robot = robot_state();
+  s.driver = driver_info_;
+  s.limits = limits_;
+  s.policy = cfg_.policy;
+  s.estop_latency = estop_latency();
+  {
+    std::lock_guard<std::mutex> lock(meta_mu_);
+    s.estop_active = latched_.load(std::memory_order_acquire);
+    if (s.estop_active) {
+      s.estop_source = latch_.source;
+      s.estop_reason = latch_.reason;
+      s.estop_since_wall_ms = latch_.since_wall_ms;
+    }
+    s.safe_stop_active = safe_stop_.load(std::memory_order_acquire);
+    if (s.safe_stop_active) {
+      s.safe_stop_reason = safe_stop_reason_;
+      s.safe_stop_session = safe_stop_session_;
+      s.safe_stop_since_wall_ms = safe_stop_since_wall_ms_;
+    }
+    s.estop_fence_timeouts = fence_timeouts_.load(std::memory_order_relaxed);
+    s.persistence_enabled = persist_enabled_;
+    s.persisted = !persist_enabled_ || persisted_seq_ >= latch_seq_;
+    s.persist_error = persist_error_;
+    s.startup_note = startup_note_;
+  }
+  {
+    std::lock_guard<std::mutex> lock(sessions_mu_);
+    s.sessions = sessions_.size();
+  }
+  s.running = running_.load();
+  return s;
+}
+
+}  // namespace rcan::node

@@ -1,0 +1,343 @@
+// SafetyCore — below the pipeline, owning the actuators (docs/ARCHITECTURE.md, seed §4.3,
+// spec-digest §5.6). Nothing reaches a Driver except through this class.
+//
+// What it guarantees:
+//   * ESTOP is a latch. estop() sets an atomic flag and calls Driver::stop() before anything
+//     else (no lock, no I/O on that path), then fences out any dispatch() that was already
+//     inside the driver (a lock-free wait for that one apply + a second stop()), then hands the
+//     new latch state to a persister thread that writes it durably (temp file + fsync +
+//     rename + fsync of the directory). A restarted core on the same state dir comes up latched.
+//     After estop() returns, no dispatch() reaches the driver until resume().
+//   * resume() clears the latch only for role level >= 3 (LEASEE); below that it returns
+//     INSUFFICIENT_PRIVILEGES. Clearing does not move anything: the robot stays stopped until
+//     the next command. The cleared state is persisted the same way.
+//   * dispatch() refuses while latched (COMMAND_REJECTED / estop_active → HTTP 423), refuses a
+//     command past its deadline (MESSAGE_STALE), and enforces the configured limits (speeds,
+//     joint ranges, joint speed, drive duration, workspace rectangle) by clamping or rejecting
+//     (COMMAND_REJECTED / limit_exceeded, message naming the limit). Limits are fixed at
+//     construction: min(config, the driver's hardware envelope). No method raises them.
+//   * Every drive has a duration (0 → max_drive_duration_ms); the base stops when it elapses
+//     (the driver does it, and tick() enforces it again on the monotonic clock).
+//   * Deadman: sessions registered with a heartbeat timeout. tick() detects a session whose
+//     last heartbeat is older than its timeout; if that session holds control (set by the
+//     node on claim) or owns the motion in progress, the core safe-stops (Driver::stop(), no
+//     latch) and emits {type:"NETWORK_LOSS_SAFE_STOP", session_id, elapsed_ms}.
+//
+// Safe-stop rule (exact): safe-stop is entered by a deadman expiry, a workspace guard trip or
+// a drive-TTL overrun detected by tick(). It is NOT a latch. It clears when dispatch() accepts
+// a motion command whose session_id is empty (a session-less request, bounded by its own
+// duration) or names a registered session whose heartbeat is live. A command naming a session
+// whose heartbeat was lost is refused with SAFE_STOP / reason "heartbeat_lost" until that
+// session sends a heartbeat again (heartbeat() revives it; reviving alone does not clear the
+// safe-stop, only the next accepted command does). A command naming an unregistered session
+// is treated as session-less.
+//
+// Time: every deadline, TTL and heartbeat uses Clock::mono_ms(); ts/since fields use wall_ms.
+// The ESTOP latency statistics use std::chrono::steady_clock (real elapsed time).
+//
+// Threads: all public methods are thread-safe. start() runs tick() on the core's own thread
+// every tick_period_ms; stop() ends that thread and stops the driver. Tests may instead call
+// tick() by hand with a ManualClock. The event callback runs on the thread that calls tick()
+// and must not block (hand the event to an executor).
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <thread>
+#include <unordered_map>
+#include <vector>
+
+#include "base/clock.h"
+#include "node/safety/driver.h"
+#include "rcan/json.h"
+#include "rcan/result.h"
+
+namespace rcan::node {
+
+enum class LimitPolicy : uint8_t { kClamp, kReject };
+std::string_view limit_policy_name(LimitPolicy p);  // "clamp" / "reject"
+
+struct Workspace {
+  bool enabled = true;
+  double min_x = -5.0;
+  double max_x = 5.0;
+  double min_y = -5.0;
+  double max_y = 5.0;
+  bool contains(double x, double y) const {
+    return !enabled || (x >= min_x && x <= max_x && y >= min_y && y <= max_y);
+  }
+  // Distance from (x, y) to the rectangle (0 inside, and when the workspace is disabled).
+  double distance_outside(double x, double y) const;
+};
+
+struct SafetyLimits {
+  double max_linear_mps = 1.0;
+  double max_angular_radps = 2.0;
+  double max_joint_speed_radps = 1.0;
+  JointArray joint_min_rad{-3.0, -1.8, -2.4, -3.0, -1.8, -3.0};
+  JointArray joint_max_rad{3.0, 1.8, 2.4, 3.0, 1.8, 3.0};
+  int64_t max_drive_duration_ms = 5000;
+  Workspace workspace;
+  json::Object to_json() const;
+};
+
+struct SafetyConfig {
+  SafetyLimits limits;
+  LimitPolicy policy = LimitPolicy::kClamp;
+  bool estop_on_startup = false;         // safety.estop_on_startup: always come up latched
+  int64_t tick_period_ms = 20;           // 50 Hz control loop
+  // While the driver is at rest (Driver::at_rest()) and no drive TTL is running, the loop
+  // sleeps up to this long instead — woken early by a command, a session or watchdog feed,
+  // and always on time for the next heartbeat or watchdog deadline. An idle robot then costs
+  // one wake-up a second instead of fifty. 0 or ≤ tick_period_ms: always the full rate.
+  int64_t idle_tick_ms = 1000;
+  int64_t default_heartbeat_ms = 2000;   // register_session(id, 0) → this (latency_budget × 2)
+  int64_t watchdog_timeout_ms = 0;       // brain watchdog; 0 = disabled
+  // A drive still commanded this long after its deadline is stopped by tick() (safe-stop).
+  int64_t drive_ttl_grace_ms = 100;
+  // estop() waits at most this long for a dispatch already inside Driver::apply() (see
+  // estop()). The stop itself never waits.
+  int64_t estop_fence_timeout_ms = 100;
+};
+
+struct DispatchOptions {
+  int64_t deadline_mono_ms = 0;           // 0 = no deadline; else refused when now > deadline
+  std::string session_id;                 // empty = session-less
+  std::optional<LimitPolicy> policy;      // default: SafetyConfig::policy
+};
+
+struct DispatchOutcome {
+  bool clamped = false;
+  std::vector<std::string> clamps;  // one line per clamp, e.g. "linear_mps 2 -> 1 (max_linear_mps)"
+  ActuatorCommand applied;          // what reached the driver
+  json::Object to_json() const;
+};
+
+struct SafetyEvent {
+  std::string type;        // "NETWORK_LOSS_SAFE_STOP", "WATCHDOG_TIMEOUT", "WORKSPACE_SAFE_STOP",
+                           // "DRIVE_TTL_SAFE_STOP"
+  std::string session_id;  // NETWORK_LOSS_SAFE_STOP
+  int64_t elapsed_ms = 0;  // since the last heartbeat / watchdog feed
+  int64_t timeout_ms = 0;
+  std::string detail;
+  int64_t wall_ms = 0;
+  int64_t mono_ms = 0;
+  json::Object to_json() const;
+};
+
+struct LatencyStats {
+  uint64_t count = 0;
+  int64_t last_ns = 0;
+  int64_t p50_ns = 0;  // over the last (up to) 4096 samples
+  int64_t p99_ns = 0;
+  int64_t max_ns = 0;  // since start
+  json::Object to_json() const;
+};
+
+struct SafetyStatus {
+  bool estop_active = false;
+  std::string estop_source;
+  std::string estop_reason;
+  int64_t estop_since_wall_ms = 0;
+  bool safe_stop_active = false;
+  std::string safe_stop_reason;   // "NETWORK_LOSS_SAFE_STOP", "workspace", "drive_ttl"
+  std::string safe_stop_session;
+  int64_t safe_stop_since_wall_ms = 0;
+  SafetyLimits limits;
+  LimitPolicy policy = LimitPolicy::kClamp;
+  RobotState robot;               // with ts / loop_latency_ms / loop_count / paused filled
+  DriverInfo driver;
+  LatencyStats estop_latency;     // estop() call → Driver::stop() returned
+  uint64_t estop_fence_timeouts = 0;
+  bool persistence_enabled = false;
+  bool persisted = true;          // the latest latch state is durable
+  std::string persist_error;      // last persistence error, empty when none
+  std::string startup_note;       // e.g. "state file corrupt: …; came up latched (fail safe)"
+  size_t sessions = 0;
+  bool running = false;           // tick thread running
+  json::Object to_json() const;
+};
+
+struct EstopResult {
+  bool newly_latched = false;  // false when it was already latched (first source/reason kept)
+  // True when no dispatch was left inside Driver::apply() at return (the normal case). False
+  // only if the fence timed out: that straggler stops the driver itself right after applying.
+  bool fenced = true;
+  int64_t stop_latency_ns = 0;    // call → Driver::stop() returned
+  int64_t return_latency_ns = 0;  // call → estop() returning (fence included, not persistence)
+  uint64_t state_seq = 0;      // pass to wait_persisted()
+};
+
+class SafetyCore {
+ public:
+  using EventFn = std::function<void(const SafetyEvent&)>;
+
+  // `driver` must not be null. `clock` must outlive the core.
+  SafetyCore(std::unique_ptr<Driver> driver, SafetyConfig cfg, Clock& clock = Clock::system());
+  ~SafetyCore();  // stop(), then flush pending persistence
+  SafetyCore(const SafetyCore&) = delete;
+  SafetyCore& operator=(const SafetyCore&) = delete;
+
+  // Loads the persisted latch from `state_dir` (created 0700 if missing) and starts the
+  // persister. Missing file → not latched (unless estop_on_startup); corrupt/unreadable file →
+  // latched, source "startup", startup_note says why (the bad file is kept as *.corrupt).
+  // Call once, before start(). Without open() the latch lives in memory only.
+  Status open(const std::string& state_dir);
+
+  void set_event_callback(EventFn fn);
+
+  // The control loop thread (tick every tick_period_ms). stop() also stops the driver.
+  void start();
+  void stop();
+  // One control-loop iteration: steps the driver by the monotonic time since the last tick,
+  // then enforces drive TTLs, the workspace guard, heartbeats and the watchdog.
+  void tick();
+  // How long the loop thread may sleep after a tick (ms; 0 = keep the full rate): the driver
+  // at rest, no drive TTL running, and up to idle_tick_ms or the next heartbeat / watchdog
+  // deadline, whichever comes first.
+  int64_t rest_for_ms() const;
+
+  // SAFETY lane. O(1) and lock-free up to the driver stop: one atomic store, then
+  // Driver::stop(). Then a lock-free fence (waits only for a dispatch already inside
+  // Driver::apply(), bounded by estop_fence_timeout_ms), a second stop(), and the latch
+  // metadata; persistence happens on the persister thread (wait_persisted() to wait for it).
+  // After it returns (fenced), no dispatch reaches the driver until resume().
+  EstopResult estop(std::string_view source, std::string_view reason);
+  Status resume(int principal_role_level, std::string_view source);
+  bool estop_active() const { return latched_.load(std::memory_order_acquire); }
+  bool safe_stop_active() const { return safe_stop_.load(std::memory_order_acquire); }
+  // Waits until the latch state `seq` (or later) is durable; false on timeout (a failing
+  // write is retried every 200 ms; status().persist_error says why) or without open().
+  bool wait_persisted(uint64_t seq, int64_t timeout_ms);
+  // The sequence number of the current latch state (bumps on every latch/clear).
+  uint64_t state_seq() const;
+
+  Result<DispatchOutcome> dispatch(const ActuatorCommand& cmd, const DispatchOptions& opts = {});
+  // Dry run: every refusal dispatch() would give right now (latch, deadline, lost heartbeat,
+  // limits) and the command it would apply, without touching the driver. A later dispatch()
+  // re-checks everything (the state may have changed in between).
+  Result<DispatchOutcome> check(const ActuatorCommand& cmd, const DispatchOptions& opts = {}) const;
+
+  // Deadman. timeout_ms <= 0 → SafetyConfig::default_heartbeat_ms. Registering an existing
+  // session refreshes it.
+  void register_session(const std::string& session_id, int64_t timeout_ms = 0);
+  // Unknown session → NOT_FOUND. Revives a session whose heartbeat was lost.
+  Status heartbeat(const std::string& session_id);
+  // Removes the session; if it owned motion in progress or held control, the driver is
+  // stopped (an orderly end, no event).
+  void end_session(const std::string& session_id);
+  // The node marks the session that holds control (claim/release).
+  void set_session_control(const std::string& session_id, bool holds_control);
+
+  // Brain watchdog (optional; SafetyConfig::watchdog_timeout_ms > 0). Armed by the first feed;
+  // expiry latches ESTOP (source "watchdog") and emits WATCHDOG_TIMEOUT.
+  void feed_watchdog();
+
+  SafetyStatus status() const;
+  RobotState robot_state() const;  // telemetry snapshot (ts/loop fields filled)
+  const SafetyLimits& limits() const { return limits_; }
+  DriverInfo driver_info() const { return driver_info_; }
+  LatencyStats estop_latency() const;
+
+ private:
+  struct Session {
+    int64_t timeout_ms = 0;
+    int64_t last_heartbeat_mono = 0;
+    bool holds_control = false;
+    bool lost = false;
+  };
+  struct LatchState {
+    bool active = false;
+    std::string source;
+    std::string reason;
+    int64_t since_wall_ms = 0;
+  };
+
+  Result<DispatchOutcome> precheck(const ActuatorCommand& cmd, const DispatchOptions& opts,
+                                   int64_t now) const;
+  Result<ActuatorCommand> limit_command(const ActuatorCommand& cmd, LimitPolicy policy,
+                                        const RobotState& now, DispatchOutcome& out) const;
+  void enter_safe_stop(std::string reason, std::string session);
+  void record_latency(int64_t ns);
+  void step_driver_to_locked(int64_t now);  // caller holds apply_mu_
+  // Wakes a resting loop (new motion, session or watchdog deadline). Cheap when not resting.
+  void wake_ticker();
+  void persist_loop();
+  Status write_state_file(const LatchState& st);
+  void request_persist(uint64_t seq);
+  void emit(const SafetyEvent& ev);
+  RobotState decorate(RobotState st) const;
+
+  const std::unique_ptr<Driver> driver_;
+  const SafetyConfig cfg_;
+  Clock& clock_;
+  const DriverInfo driver_info_;
+  const SafetyLimits limits_;  // effective: min(config, hardware)
+
+  // The SAFETY lane flag: read by dispatch() (before and under apply_mu_) and tick().
+  std::atomic<bool> latched_{false};
+  std::atomic<bool> safe_stop_{false};
+  // Odd while a dispatch() may be inside Driver::apply() (bumped under apply_mu_).
+  std::atomic<uint64_t> apply_seq_{0};
+  std::atomic<uint64_t> fence_timeouts_{0};
+
+  // Serialises Driver::apply/step/state. Held only around those calls.
+  mutable std::mutex apply_mu_;
+  std::string motion_owner_;          // guarded by apply_mu_: session of the last motion command
+  int64_t drive_deadline_mono_ = 0;   // guarded by apply_mu_: 0 = no active drive
+  int64_t last_tick_mono_ = 0;        // guarded by apply_mu_
+
+  // Latch metadata, safe-stop metadata, persistence bookkeeping.
+  mutable std::mutex meta_mu_;
+  LatchState latch_;                  // guarded by meta_mu_
+  uint64_t latch_seq_ = 0;            // guarded by meta_mu_: bumps on every latch change
+  uint64_t persisted_seq_ = 0;        // guarded by meta_mu_
+  std::string persist_error_;         // guarded by meta_mu_
+  std::string startup_note_;          // guarded by meta_mu_
+  std::string safe_stop_reason_;      // guarded by meta_mu_
+  std::string safe_stop_session_;     // guarded by meta_mu_
+  int64_t safe_stop_since_wall_ms_ = 0;
+  std::string state_dir_;             // set once by open()
+  bool persist_enabled_ = false;      // set once by open()
+  bool persist_quit_ = false;         // guarded by meta_mu_
+  std::condition_variable persist_cv_;  // persister wakes (meta_mu_)
+  std::condition_variable durable_cv_;  // waiters in wait_persisted (meta_mu_)
+  std::thread persister_;
+
+  mutable std::mutex sessions_mu_;
+  std::unordered_map<std::string, Session> sessions_;
+  int64_t watchdog_last_feed_mono_ = 0;  // guarded by sessions_mu_; 0 = not armed
+
+  mutable std::mutex event_mu_;
+  EventFn on_event_;
+
+  mutable std::mutex stats_mu_;
+  std::vector<int64_t> latency_ring_;  // guarded by stats_mu_
+  size_t latency_next_ = 0;
+  uint64_t latency_count_ = 0;
+  int64_t latency_last_ns_ = 0;
+  int64_t latency_max_ns_ = 0;
+
+  std::atomic<uint64_t> loop_count_{0};
+  std::atomic<int64_t> loop_latency_us_{0};
+
+  std::mutex thread_mu_;               // start()/stop()
+  std::thread ticker_;
+  std::atomic<bool> running_{false};
+  std::mutex tick_wait_mu_;
+  std::condition_variable tick_wait_cv_;
+  bool wake_requested_ = false;        // guarded by tick_wait_mu_
+  // True while the loop thread may be sleeping at its idle rate: dispatch() then brings the
+  // driver up to date before applying, and anything that adds work wakes the loop.
+  std::atomic<bool> resting_{false};
+};
+
+}  // namespace rcan::node

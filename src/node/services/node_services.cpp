@@ -1,0 +1,149 @@
+#include "node/services/node_services.h"
+
+#include <optional>
+
+#include "rcan/errors.h"
+#include "transport/http_api.h"
+
+namespace rcan::node {
+
+NodeServices::NodeServices(NodeSettings s, Clock& c, AuthOptions a, Actuation& actuation,
+                           audit::AuditLog& log)
+    : settings(std::move(s)),
+      clock(c),
+      auth(std::move(a)),
+      replay(settings.replay),
+      injection(settings.injection_patterns),
+      act(actuation),
+      audit(log) {}
+
+audit::AuditEntry NodeServices::entry(const std::string& principal, const std::string& message_id,
+                                      const std::string& event, const std::string& outcome) const {
+  audit::AuditEntry e;
+  e.principal = principal.empty() ? "anonymous" : principal;
+  e.ruri = settings.ruri;
+  e.timestamp_ms = clock.wall_ms();
+  e.message_id = message_id.empty() ? new_uuid_v4() : message_id;
+  e.event = event;
+  e.outcome = outcome;
+  return e;
+}
+
+void NodeServices::write_audit(audit::AuditEntry e, std::function<void(Result<audit::Receipt>)> cb) {
+  if (NetMode m = partition.mode(); m != NetMode::kNormal) {  // seed §6.1 log_for_sync()
+    e.detail.set("partition_mode", std::string(net_mode_name(m)));
+    e.detail.set("sync_pending", true);
+  }
+  metrics.count_audit(e.event);
+  std::vector<audit::AuditEntry> late;
+  if (audit.available()) {
+    std::lock_guard<std::mutex> l(deferred_mu);
+    late.swap(deferred_stops);
+  }
+  for (auto& d : late) {  // stops the log could not record while it was failed: recorded now
+    d.detail.set("recorded_after_audit_outage", true);
+    write_audit(std::move(d));
+  }
+  std::optional<audit::AuditEntry> stop_copy;
+  if (e.event == "ESTOP" || e.event == "STOP") stop_copy = e;
+  audit_inflight.fetch_add(1, std::memory_order_relaxed);
+  audit.append_async(std::move(e), [this, cb = std::move(cb), stop_copy = std::move(stop_copy)](
+                                       Result<audit::Receipt> r) mutable {
+    audit_inflight.fetch_sub(1, std::memory_order_relaxed);
+    if (!r.ok()) {
+      audit_failures.fetch_add(1, std::memory_order_relaxed);
+      if (r.error().code == ErrorCode::kAuditUnavailable) {
+        audit_unavailable.store(true);
+        if (stop_copy) {
+          std::lock_guard<std::mutex> l(deferred_mu);
+          if (deferred_stops.size() < 1000) deferred_stops.push_back(std::move(*stop_copy));
+        }
+      }
+    } else {
+      audit_unavailable.store(false);  // the log recovered (AuditLog::available() is the live state)
+    }
+    if (cb) cb(std::move(r));
+  });
+}
+
+Result<Principal> NodeServices::authenticate(std::string_view token) const {
+  auto p = auth.authenticate_token(token, clock.wall_ms() / 1000);
+  if (p.ok()) ownership.cap(*p);
+  return p;
+}
+
+Result<Principal> NodeServices::authenticate_header(std::string_view authorization) const {
+  std::string_view token = transport::bearer_token(authorization);
+  if (token.empty() && !authorization.empty())
+    return Error(ErrorCode::kAuthInvalid, "the Authorization header must be 'Bearer <token>'", "authorization");
+  return authenticate(token);
+}
+
+json::Value NodeServices::discovery_info() const {
+  json::Object o;
+  o.set("ruri", settings.ruri);
+  if (!settings.rrn.empty()) o.set("rrn", settings.rrn);
+  o.set("name", settings.name);
+  o.set("model", settings.model);
+  o.set("manufacturer", settings.manufacturer);
+  json::Array caps;
+  for (const auto& c : settings.capabilities) caps.emplace_back(c);
+  o.set("caps", caps);
+  o.set("roles", json::Array{"creator", "owner", "leasee", "user", "guest"});
+  o.set("version", settings.rcan_version);
+  o.set("rcan_version", settings.rcan_version);
+  json::Array ext;
+  for (const auto& e : settings.extensions) ext.emplace_back(e);
+  o.set("extensions", ext);
+  o.set("port", static_cast<int64_t>(settings.port));
+  return o;
+}
+
+json::Value NodeServices::status(bool detailed) {
+  int64_t now = clock.mono_ms();
+  json::Object o;
+  o.set("ruri", settings.ruri);
+  o.set("rrn", settings.rrn);
+  o.set("name", settings.name);
+  o.set("rcan_version", settings.rcan_version);
+  json::Array ext;
+  for (const auto& e : settings.extensions) ext.emplace_back(e);
+  o.set("extensions", ext);
+  o.set("estop_active", act.estop_active());
+  o.set("mode", std::string(net_mode_name(partition.mode())));
+  o.set("control", std::string(control_state_name(sessions.state(now))));
+  if (detailed) {
+    o.set("partition", partition.status_json(clock.wall_ms()));
+    o.set("ownership", ownership.to_json(clock.wall_ms(), false));
+    o.set("control_queue", sessions.queue_json(now));
+  }
+  o.set("audit_available", audit.available());
+  json::Value session_list = sessions.to_json(now, detailed);
+  o.set("active_sessions", static_cast<int64_t>(session_list.as_array().size()));
+  o.set("sessions", session_list);
+  json::Array caps;
+  for (const auto& c : settings.capabilities) caps.emplace_back(c);
+  o.set("capabilities", caps);
+  o.set("discovery", discovery_info());
+  if (detailed) o.set("robot", act.status());
+  return o;
+}
+
+json::Value NodeServices::envelope(MessageType type, json::Object payload, const std::string& reply_to) const {
+  json::Object o;
+  o.set("version", settings.rcan_version);
+  o.set("message_id", new_uuid_v4());
+  o.set("source_ruri", settings.ruri);
+  o.set("type", std::string(message_type_name(type)));
+  o.set("message_type", std::string(message_type_name(type)));
+  o.set("reply_to", reply_to.empty() ? json::Value() : json::Value(reply_to));
+  o.set("timestamp_ms", clock.wall_ms());
+  o.set("payload", std::move(payload));
+  return o;
+}
+
+json::Value NodeServices::error(const Error& err, const std::string& reply_to) const {
+  return error_body(err, reply_to, clock.wall_ms());
+}
+
+}  // namespace rcan::node

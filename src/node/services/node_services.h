@@ -1,0 +1,139 @@
+// NodeServices — everything the pipeline stages and routes share: settings, clock,
+// authenticator, replay guard, rate limiter, injection screen, the safety core (through
+// Actuation), the audit log, control sessions, the event bus and metrics.
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "node/safety/actuation.h"
+#include "node/admission/authenticator.h"
+#include "base/clock.h"
+#include "node/control/consent.h"
+#include "node/services/event_bus.h"
+#include "node/admission/injection.h"
+#include "base/metrics.h"
+#include "node/control/ownership.h"
+#include "node/control/partition.h"
+#include "node/admission/rate_limit.h"
+#include "node/admission/replay.h"
+#include "node/control/sessions.h"
+#include "rcan/audit/audit_log.h"
+#include "rcan/message.h"
+#include "rcan/roles.h"
+
+namespace rcan::node {
+
+struct FleetMembership;
+class AiServices;  // §16 gates, HiTL queue, thought log, watermark (ai_services.h)
+
+// The port the node serves on: rcand stores the bound port (for `--port 0`) after the listener
+// is up, while I/O threads may already read it for /rcan/v1/status — an atomic, still copyable.
+class BoundPort {
+ public:
+  BoundPort(uint16_t p = 0) : v_(p) {}  // NOLINT: converts like the uint16_t it replaces
+  BoundPort(const BoundPort& o) : v_(o.load()) {}
+  BoundPort& operator=(const BoundPort& o) { return *this = o.load(); }
+  BoundPort& operator=(uint16_t p) {
+    v_.store(p, std::memory_order_relaxed);
+    return *this;
+  }
+  operator uint16_t() const { return load(); }
+  uint16_t load() const { return v_.load(std::memory_order_relaxed); }
+
+ private:
+  std::atomic<uint16_t> v_;
+};
+
+struct NodeSettings {
+  std::string ruri;  // canonical robot RURI (identity, no capability)
+  std::string rrn;
+  std::string name = "rcan-robot";
+  std::string manufacturer;
+  std::string model;
+  std::vector<std::string> capabilities{"status", "chat", "teleop", "nav", "arm"};
+  BoundPort port = 8080;
+  std::string rcan_version = "1.0.0";
+  std::vector<std::string> extensions{"8.5-sender-type", "16-ai-accountability", "16.6-watermark",
+                                      "replay-window"};
+  RolePolicy role_policy;
+  // Per-role rate limits per minute, indexed by role level (0 unused); 0 = unlimited.
+  std::array<uint32_t, 6> rate_per_minute{0, 10, 100, 500, 1000, 0};
+  ReplayOptions replay;
+  std::vector<std::string> injection_patterns = InjectionScreen::default_patterns();
+  int64_t heartbeat_timeout_ms = 2000;
+  int64_t default_ttl_ms = 0;  // applied to commands that carry none (0 = none)
+  CodecLimits codec;
+  int telemetry_hz = 5;
+  size_t audit_listing = 50;  // entries in GET /api/audit
+  int64_t handoff_window_ms = 30'000;
+  GuestLimits guest_limits;     // seed §6.3 (guest_limits.h)
+  std::string state_dir;        // leases, ownership, consent, credential cache ("" = not kept)
+  std::string consent_webhook;  // http:// URL the owner notification is POSTed to ("" = none)
+};
+
+class NodeServices {
+ public:
+  NodeServices(NodeSettings settings, Clock& clock, AuthOptions auth, Actuation& actuation,
+               audit::AuditLog& audit);
+
+  NodeSettings settings;
+  Clock& clock;
+  Authenticator auth;
+  ReplayGuard replay;
+  RateLimiter rate;
+  InjectionScreen injection;
+  Actuation& act;
+  audit::AuditLog& audit;
+  SessionTable sessions;
+  Ownership ownership;
+  ConsentBook consent;
+  PartitionMonitor partition;
+  EventBus events;
+  Metrics metrics;
+  // The robot's fleet membership (fleet.h); null when it is in no fleet.
+  std::shared_ptr<const FleetMembership> fleet;
+  std::atomic<uint64_t> audit_inflight{0};
+  std::atomic<uint64_t> audit_failures{0};
+  std::atomic<bool> audit_unavailable{false};
+  std::shared_ptr<AiServices> ai;  // set by the daemon before the node starts; may be null
+  // Transports that add to a GRANTED claim answer (the UDP heartbeat key, src/node/bindings/udp_service.h):
+  // called with the new session's id and the answer's payload. Set once, before serving.
+  std::function<void(const std::string& session_id, json::Object& payload)> on_grant;
+
+  // An audit entry pre-filled with the robot, time, principal and sender identity.
+  audit::AuditEntry entry(const std::string& principal, const std::string& message_id,
+                          const std::string& event, const std::string& outcome) const;
+  // Appends asynchronously; `cb` (optional) runs once the record is durable or failed.
+  void write_audit(audit::AuditEntry e, std::function<void(Result<audit::Receipt>)> cb = {});
+
+  // ESTOP/STOP records that could not be written while the audit log was failed (the stop
+  // itself happened): written, marked `recorded_after_audit_outage`, by the first write_audit
+  // once the log is back. Bounded.
+  std::mutex deferred_mu;
+  std::vector<audit::AuditEntry> deferred_stops;
+
+  uint32_t rate_limit(Role r) const { return settings.rate_per_minute[static_cast<size_t>(role_level(r))]; }
+
+  // The one way a token becomes a principal outside the pipeline's own stage: verified (JWT,
+  // audience, expiry) and then limited by the node's state (a former owner's token no longer
+  // carries ownership). Errors: AUTH_REQUIRED (empty), AUTH_INVALID.
+  Result<Principal> authenticate(std::string_view token) const;
+  // The same from an Authorization header value ("Bearer <token>"; empty → AUTH_REQUIRED).
+  Result<Principal> authenticate_header(std::string_view authorization) const;
+
+  json::Value discovery_info() const;
+  json::Value status(bool detailed);
+  // A fresh message envelope from the node (type, payload), seed shape.
+  json::Value envelope(MessageType type, json::Object payload, const std::string& reply_to = {}) const;
+  // The profile's error body with the node's clock.
+  json::Value error(const Error& err, const std::string& reply_to = {}) const;
+};
+
+}  // namespace rcan::node

@@ -1,0 +1,938 @@
+// Fleets and swarms over MQTT, end to end: a real Mosquitto broker on a free loopback port,
+// real rcand processes as fleet members, the real `rcan fleet` CLI, and an MQTT client in the
+// test that watches the topics (docs/FLEET.md).
+#include <arpa/inet.h>
+#include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <pwd.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <condition_variable>
+#include <deque>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <thread>
+
+#include "config/config.h"
+#include "rcan/mqtt_topics.h"
+#include "rcan/crypto/jwt.h"
+#include "rcan/errors.h"
+#include "rcan/hash.h"
+#include "rcan/json.h"
+#include "test_support.h"
+#include "transport/mqtt_client.h"
+
+namespace rcan {
+namespace {
+
+namespace fs = std::filesystem;
+
+int64_t wall_ms() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+json::Value parse(const std::string& s) {
+  auto v = json::parse(s);
+  EXPECT_TRUE(v.ok()) << s.substr(0, 400);
+  return v.ok() ? *v : json::Value();
+}
+
+std::string str_of(const json::Value& v, const char* key) {
+  const json::Value* f = v.is_object() ? v.get(key) : nullptr;
+  return f != nullptr && f->is_string() ? f->as_string() : std::string();
+}
+std::string payload_str(const json::Value& v, const char* key) {
+  const json::Value* p = v.is_object() ? v.get("payload") : nullptr;
+  return p != nullptr ? str_of(*p, key) : std::string();
+}
+
+uint16_t free_port() {
+  int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  a.sin_port = 0;
+  ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
+  socklen_t len = sizeof a;
+  ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
+  ::close(fd);
+  return ntohs(a.sin_port);
+}
+
+void write_file(const std::string& path, const std::string& text, fs::perms perms = fs::perms::owner_read | fs::perms::owner_write) {
+  std::ofstream(path) << text;
+  fs::permissions(path, perms);
+}
+
+// A Mosquitto broker on a free loopback port.
+class Broker {
+ public:
+  explicit Broker(const std::string& dir) : dir_(dir), port_(free_port()) {
+    write_file(dir_ + "/mosquitto.conf", "listener " + std::to_string(port_) +
+                                             " 127.0.0.1\nallow_anonymous true\npersistence false\n");
+    start();
+  }
+  ~Broker() { stop(); }
+  void start() {
+    proc_ = std::make_unique<test::Process>();
+    ASSERT_TRUE(proc_->start({"/usr/sbin/mosquitto", "-c", dir_ + "/mosquitto.conf"}));
+    ASSERT_TRUE(proc_->wait_for_line("running", 10000)) << proc_->err();
+  }
+  void stop() {
+    if (proc_ && proc_->running()) proc_->stop(SIGTERM, 5000);
+  }
+  std::string url() const { return "mqtt://127.0.0.1:" + std::to_string(port_); }
+
+ private:
+  std::string dir_;
+  uint16_t port_;
+  std::unique_ptr<test::Process> proc_;
+};
+
+// The test's own MQTT client: records every message it receives.
+class Watcher {
+ public:
+  struct Msg {
+    std::string topic;
+    json::Value body;
+    bool retained = false;
+  };
+  Watcher(const std::string& url, const std::vector<std::string>& filters) {
+    transport::MqttOptions o;
+    o.url = url;
+    client_ = std::make_unique<transport::MqttClient>(o);
+    for (const auto& f : filters) client_->subscribe(f, 1);
+    client_->on_message([this](const transport::MqttMessage& m) {
+      auto v = json::parse(m.payload);
+      std::lock_guard<std::mutex> lk(mu_);
+      msgs_.push_back(Msg{m.topic, v.ok() ? *v : json::Value(), m.retained});
+      cv_.notify_all();
+    });
+    EXPECT_TRUE(client_->start().ok());
+    for (int i = 0; i < 500 && !client_->connected(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    EXPECT_TRUE(client_->connected());
+    std::this_thread::sleep_for(std::chrono::milliseconds(150));  // subscriptions registered
+  }
+  // The client's network thread calls on_message: stop it before msgs_ and mu_ go away.
+  ~Watcher() { client_.reset(); }
+  void publish(const std::string& topic, const json::Value& v, bool retain = false) {
+    ASSERT_TRUE(client_->publish(topic, json::dump(v), 1, retain).ok());
+  }
+  // The first message (from the start of the log) satisfying `pred`, waiting up to `ms`.
+  std::optional<Msg> wait(const std::function<bool(const Msg&)>& pred, int ms = 10000) {
+    std::unique_lock<std::mutex> lk(mu_);
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(ms);
+    size_t i = 0;
+    while (true) {
+      for (; i < msgs_.size(); ++i)
+        if (pred(msgs_[i])) return msgs_[i];
+      if (cv_.wait_until(lk, deadline) == std::cv_status::timeout) {
+        for (; i < msgs_.size(); ++i)
+          if (pred(msgs_[i])) return msgs_[i];
+        return std::nullopt;
+      }
+    }
+  }
+  std::vector<Msg> all() {
+    std::lock_guard<std::mutex> lk(mu_);
+    return {msgs_.begin(), msgs_.end()};
+  }
+
+ private:
+  std::unique_ptr<transport::MqttClient> client_;
+  std::mutex mu_;
+  std::condition_variable cv_;
+  std::deque<Msg> msgs_;
+};
+
+// A PostgreSQL server on a free loopback port, in a fresh cluster (initdb). PostgreSQL refuses
+// to run as root: under root the server runs as the `postgres` system user.
+class Postgres {
+ public:
+  Postgres() : port_(free_port()) {
+    std::vector<char> tmpl{'/', 't', 'm', 'p', '/', 'r', 'c', 'a', 'n', '-', 'p', 'g', '-', 'X', 'X', 'X', 'X', 'X', 'X', '\0'};
+    dir_ = ::mkdtemp(tmpl.data());
+    for (const auto& e : fs::directory_iterator("/usr/lib/postgresql"))
+      if (fs::exists(e.path() / "bin/postgres")) bin_ = (e.path() / "bin").string();
+    EXPECT_FALSE(bin_.empty()) << "PostgreSQL is not installed (scripts/install-deps.sh)";
+    if (::getuid() == 0) {
+      struct passwd* pw = ::getpwnam("postgres");
+      EXPECT_NE(pw, nullptr);
+      if (pw != nullptr) {
+        EXPECT_EQ(::chown(dir_.c_str(), pw->pw_uid, pw->pw_gid), 0);
+        as_ = {"/usr/bin/setpriv", "--reuid=postgres", "--regid=postgres", "--init-groups"};
+      }
+    }
+    auto init = test::run(with_user({bin_ + "/initdb", "-D", dir_ + "/data", "-A", "trust", "-U", "rcan", "--no-sync",
+                                     "-E", "UTF8"}));
+    EXPECT_EQ(init.exit_code, 0) << init.out << init.err;
+    EXPECT_TRUE(proc_.start(with_user({bin_ + "/postgres", "-D", dir_ + "/data", "-p", std::to_string(port_), "-k", dir_,
+                                       "-c", "listen_addresses=127.0.0.1", "-c", "fsync=off"})));
+    EXPECT_TRUE(proc_.wait_for_line("ready to accept connections", 30000)) << proc_.err();
+  }
+  ~Postgres() {
+    if (proc_.running()) proc_.stop(SIGTERM, 15000);
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
+  }
+  std::string conninfo() const { return "host=127.0.0.1 port=" + std::to_string(port_) + " user=rcan dbname=postgres"; }
+  test::RunResult sql(const std::string& statement) const {
+    return test::run({bin_ + "/psql", conninfo(), "-v", "ON_ERROR_STOP=1", "-At", "-c", statement});
+  }
+
+ private:
+  std::vector<std::string> with_user(std::vector<std::string> argv) const {
+    argv.insert(argv.begin(), as_.begin(), as_.end());
+    return argv;
+  }
+  uint16_t port_;
+  std::string dir_, bin_;
+  std::vector<std::string> as_;
+  test::Process proc_;
+};
+
+// One fleet member: its own data directory, keys, chain secret and config.
+class Robot {
+ public:
+  Robot(const std::string& root, const std::string& name, const std::string& device, const std::string& broker,
+        const std::string& secret_file, const std::string& extra_yaml = "", const std::string& mqtt_extra = "")
+      : dir_(root + "/" + name), name_(name) {
+    fs::create_directories(dir_);
+    fs::permissions(dir_, fs::perms::owner_all);
+    EXPECT_EQ(test::run_cli({"keys", "generate", "--dir", dir_ + "/keys"}).exit_code, 0);
+    EXPECT_EQ(test::run_cli({"audit", "new-secret", "--out", dir_ + "/audit.secret"}).exit_code, 0);
+    ruri_ = "rcan://local.rcan/rcan/sim-rover/" + device;
+    std::string yaml = "rcan_version: \"1.2\"\nruri: " + ruri_ + "\nnode: {data_dir: " + dir_ +
+                       "}\nsecurity:\n  jwt:\n    issuers: [{issuer: fleet-issuer, key_file: " + secret_file +
+                       ", kind: hs256_secret}]\nmqtt: {enabled: true, broker: \"" + broker +
+                       "\", telemetry_hz: 0, keepalive_s: 5, reconnect: {min_s: 1, max_s: 2}" + mqtt_extra +
+                       "}\nfleet: {fleet_id: alpha, member_id: " + name +
+                       ", robots: [robot-a, robot-b, robot-c]}\n" + extra_yaml;
+    write_file(dir_ + "/robot.yaml", yaml);
+    start();
+  }
+  ~Robot() {
+    if (proc_ && proc_->running()) proc_->stop(SIGTERM, 10000);
+  }
+  void start() {
+    proc_ = std::make_unique<test::Process>();
+    ASSERT_TRUE(proc_->start({RCAND_PATH, "--config", dir_ + "/robot.yaml", "--port", "0"}));
+    auto line = proc_->wait_for_line("\"event\":\"listening\"", 30000);
+    ASSERT_TRUE(line) << proc_->err();
+    std::string url = str_of(parse(*line), "url");
+    port_ = static_cast<uint16_t>(std::stoi(url.substr(url.rfind(':') + 1)));
+    ASSERT_TRUE(proc_->wait_for_line("mqtt_connected", 10000)) << proc_->err();
+  }
+  void kill9() { proc_->stop(SIGKILL, 5000); }
+  void restart() {
+    proc_->stop(SIGTERM, 10000);
+    start();
+  }
+  test::Process& proc() { return *proc_; }
+  uint16_t port() const { return port_; }
+  const std::string& ruri() const { return ruri_; }
+  const std::string& dir() const { return dir_; }
+  // The safety core's view over HTTP (with a token valid for this robot).
+  json::Value status(const std::string& token) const {
+    auto r = test::http(port_, "GET", "/api/status", "", {{"Authorization", "Bearer " + token}});
+    return parse(r.body);
+  }
+  std::string audit(const std::string& token) const {
+    return test::http(port_, "GET", "/api/audit?limit=1000", "", {{"Authorization", "Bearer " + token}}).body;
+  }
+
+ private:
+  std::string dir_, name_, ruri_;
+  uint16_t port_ = 0;
+  std::unique_ptr<test::Process> proc_;
+};
+
+class FleetTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    broker_ = std::make_unique<Broker>(tmp_.path());
+    secret_ = tmp_.file("fleet.secret");
+    write_file(secret_, "0123456789abcdef0123456789abcdef-fleet-test-secret");
+    fleet_token_ = token("owner", {"robot-a", "robot-b", "robot-c"});
+    write_file(tmp_.file("fleet.token"), fleet_token_);
+  }
+  void TearDown() override {
+    robots_.clear();
+    broker_.reset();
+  }
+  // An HS256 token from the fleet issuer, for every sim-rover of the registry; `fleet`
+  // lists the members it may command (empty: no fleet claim).
+  std::string token(const std::string& role, std::vector<std::string> fleet, const std::string& sub = "coordinator",
+                    const std::string& aud = "rcan://local.rcan/rcan/sim-rover/*") {
+    auto key = jwt::SigningKey::from_file(secret_, true);
+    EXPECT_TRUE(key.ok());
+    int64_t now = wall_ms() / 1000;
+    json::Object claims{{"iss", "fleet-issuer"},
+                        {"sub", sub},
+                        {"aud", aud},
+                        {"role", role},
+                        {"scope", json::Array{"status", "control"}},
+                        {"iat", now - 5},
+                        {"exp", now + 3600}};
+    if (!fleet.empty()) {
+      json::Array f;
+      for (auto& m : fleet) f.emplace_back(m);
+      claims.set("fleet", f);
+    }
+    auto t = jwt::issue(claims, *key);
+    EXPECT_TRUE(t.ok());
+    return t.ok() ? *t : "";
+  }
+  Robot& add_robot(const std::string& name, const std::string& device, const std::string& extra_yaml = "",
+                   const std::string& mqtt_extra = "") {
+    robots_[name] =
+        std::make_unique<Robot>(tmp_.path(), name, device, broker_->url(), secret_, extra_yaml, mqtt_extra);
+    return *robots_[name];
+  }
+  void three_robots(const std::string& extra_yaml = "") {
+    add_robot("robot-a", "0000000a", extra_yaml);
+    add_robot("robot-b", "0000000b", extra_yaml);
+    add_robot("robot-c", "0000000c", extra_yaml);
+  }
+  test::RunResult fleet(std::vector<std::string> args) {
+    args.insert(args.begin(), "fleet");
+    args.insert(args.end(), {"--broker", broker_->url(), "--token", tmp_.file("fleet.token")});
+    return test::run_cli(args);
+  }
+  json::Value command_msg(const std::string& type, json::Object payload, const std::string& tok,
+                          const std::string& id = new_uuid_v4()) {
+    return json::Value(json::Object{{"version", "1.0.0"},
+                                    {"message_id", id},
+                                    {"type", type},
+                                    {"timestamp_ms", wall_ms()},
+                                    {"auth_token", tok},
+                                    {"payload", std::move(payload)}});
+  }
+  static bool moving(const json::Value& status) {
+    // /api/status with a token: the safety core's state under "safety".
+    std::string s = json::dump(status);
+    return s.find("\"state\":\"moving\"") != std::string::npos;
+  }
+  // The robot comes to rest (it decelerates over a few control ticks after a STOP); a 30 s
+  // drive that was not stopped would still be running when this gives up.
+  bool comes_to_rest(const Robot& r) {
+    for (int i = 0; i < 100; ++i) {
+      if (!moving(r.status(fleet_token_))) return true;
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    return false;
+  }
+
+  test::TempDir tmp_;
+  std::unique_ptr<Broker> broker_;
+  std::string secret_;
+  std::string fleet_token_;
+  std::map<std::string, std::unique_ptr<Robot>> robots_;
+};
+
+TEST_F(FleetTest, FleetCommandReachesEveryMemberAndCompletes) {
+  three_robots();
+  auto r = fleet({"command", "alpha", "move", "--params", R"({"linear":0.2,"duration_ms":200})", "--members",
+                  "robot-a,robot-b,robot-c", "--wait-complete"});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  json::Value out = parse(r.out);
+  for (const char* m : {"robot-a", "robot-b", "robot-c"}) {
+    const json::Value* res = out.get("members")->get(m);
+    ASSERT_NE(res, nullptr) << m;
+    EXPECT_EQ(str_of(*res, "result"), "completed") << m;
+  }
+  // Every robot audited the fleet command with its fleet context.
+  std::string id = str_of(out, "message_id");
+  for (auto& [name, robot] : robots_) {
+    std::string audit = robot->audit(fleet_token_);
+    EXPECT_NE(audit.find(id), std::string::npos) << name;
+    EXPECT_NE(audit.find("\"fleet_mode\":\"broadcast\""), std::string::npos) << name;
+  }
+}
+
+TEST_F(FleetTest, SequentialChoreographyHonoursWaitFor) {
+  three_robots();
+  Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/+/reply"});
+  write_file(tmp_.file("seq.json"), R"({"command":"COORDINATED_MOVE","fleet_id":"alpha","targets":["robot-a","robot-b","robot-c"],
+    "choreography":{"type":"sequential","steps":[
+      {"robot":"robot-a","action":"move","params":{"linear":0.2,"duration_ms":300}},
+      {"robot":"robot-b","action":"move","params":{"x":0,"linear":0.1,"duration_ms":200},"wait_for":"robot-a"},
+      {"robot":"robot-c","action":"turn_left","params":{"angular":0.3,"duration_ms":100},"wait_for":["robot-a","robot-b"]}]}})");
+  auto r = fleet({"run", tmp_.file("seq.json")});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  json::Value out = parse(r.out);
+  EXPECT_TRUE(out.get("ok")->as_bool());
+  // Causality on the wire: each robot's ACK comes after the previous robot's COMPLETED.
+  auto msgs = w.all();
+  auto index_of = [&](const std::string& robot, const std::string& what) {
+    for (size_t i = 0; i < msgs.size(); ++i) {
+      if (msgs[i].topic != "rcan/fleet/alpha/robot/" + robot + "/reply") continue;
+      std::string t = str_of(msgs[i].body, "type");
+      if ((what == "ACK" && t == "ACK") || (what == "COMPLETED" && payload_str(msgs[i].body, "event") == "COMPLETED"))
+        return static_cast<long>(i);
+    }
+    return -1L;
+  };
+  long a_done = index_of("robot-a", "COMPLETED"), b_ack = index_of("robot-b", "ACK");
+  long b_done = index_of("robot-b", "COMPLETED"), c_ack = index_of("robot-c", "ACK");
+  ASSERT_GE(a_done, 0);
+  ASSERT_GE(b_done, 0);
+  EXPECT_LT(a_done, b_ack);
+  EXPECT_LT(b_done, c_ack);
+}
+
+TEST_F(FleetTest, FailingStepStopsEveryRobotTheRunMoved) {
+  three_robots();
+  write_file(tmp_.file("par.json"), R"({"command":"COORDINATED_MOVE","fleet_id":"alpha",
+    "choreography":{"type":"parallel","steps":[
+      {"robot":"robot-a","action":"move","params":{"linear":0.2,"duration_ms":30000}},
+      {"robot":"robot-b","action":"move","params":{"linear":0.2,"duration_ms":30000}},
+      {"robot":"robot-c","action":"move","params":{"linear":0.1,"duration_ms":100}},
+      {"robot":"robot-c","action":"fly_to_the_moon","wait_for":"robot-c"}]}})");
+  auto r = fleet({"run", tmp_.file("par.json")});
+  ASSERT_EQ(r.exit_code, 1) << r.out << r.err;
+  json::Value out = parse(r.out);
+  EXPECT_FALSE(out.get("ok")->as_bool());
+  EXPECT_EQ(out.get("failed_step")->as_int(), 3);
+  EXPECT_EQ(str_of(out, "failed_robot"), "robot-c");
+  EXPECT_NE(str_of(out, "reason").find("COMMAND_REJECTED"), std::string::npos);
+  for (const char* m : {"robot-a", "robot-b", "robot-c"})
+    EXPECT_EQ(str_of(*out.get("stopped")->get(m), "result"), "acknowledged") << m;
+  // The 30 s drives were stopped, not left running.
+  for (const char* m : {"robot-a", "robot-b"}) EXPECT_TRUE(comes_to_rest(*robots_[m])) << m;
+}
+
+TEST_F(FleetTest, StepTimeoutIsAFailure) {
+  add_robot("robot-a", "0000000a");
+  // robot-b is in the fleet but not running: its step never acknowledges.
+  write_file(tmp_.file("to.json"), R"({"command":"COORDINATED_MOVE","fleet_id":"alpha",
+    "choreography":{"type":"parallel","steps":[
+      {"robot":"robot-a","action":"move","params":{"linear":0.2,"duration_ms":30000}},
+      {"robot":"robot-b","action":"move","params":{"linear":0.2,"duration_ms":100},"timeout_ms":500}]}})");
+  auto r = fleet({"run", tmp_.file("to.json"), "--timeout-ms", "2000"});
+  ASSERT_EQ(r.exit_code, 1) << r.out << r.err;
+  json::Value out = parse(r.out);
+  EXPECT_EQ(out.get("failed_step")->as_int(), 1);
+  EXPECT_NE(str_of(out, "reason").find("timeout"), std::string::npos);
+  EXPECT_EQ(str_of(*out.get("stopped")->get("robot-a"), "result"), "acknowledged");
+  EXPECT_EQ(str_of(*out.get("stopped")->get("robot-b"), "result"), "timeout");  // it never answered
+  EXPECT_FALSE(out.get("all_stops_acknowledged")->as_bool());
+  EXPECT_TRUE(comes_to_rest(*robots_["robot-a"]));
+}
+
+TEST_F(FleetTest, RetainedFleetEstopIsObeyedByALateJoiner) {
+  add_robot("robot-a", "0000000a");
+  add_robot("robot-b", "0000000b");
+  auto r = fleet({"estop", "alpha", "--members", "robot-a,robot-b", "--reason", "test"});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  for (const char* m : {"robot-a", "robot-b"})
+    EXPECT_NE(json::dump(robots_[m]->status(fleet_token_)).find("\"estop_active\":true"), std::string::npos) << m;
+  // robot-c starts after the ESTOP was published: the retained message latches it too.
+  Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/robot-c/reply"});
+  add_robot("robot-c", "0000000c");
+  auto ack = w.wait([](const Watcher::Msg& m) { return str_of(m.body, "type") == "ACK"; });
+  ASSERT_TRUE(ack);
+  EXPECT_NE(json::dump(robots_["robot-c"]->status(fleet_token_)).find("\"estop_active\":true"), std::string::npos);
+  // A command is refused while latched.
+  auto c = fleet({"command", "alpha", "move", "--params", R"({"linear":0.1,"duration_ms":100})", "--members", "robot-c"});
+  EXPECT_EQ(c.exit_code, 1);
+  EXPECT_NE(c.out.find("estop_active"), std::string::npos) << c.out;
+  // RESUME replaces the retained ESTOP; a robot joining after that is not stopped.
+  auto res = fleet({"resume", "alpha", "--members", "robot-a,robot-b,robot-c"});
+  ASSERT_EQ(res.exit_code, 0) << res.out << res.err;
+  robots_["robot-c"]->restart();
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_NE(json::dump(robots_["robot-c"]->status(fleet_token_)).find("\"estop_active\":false"), std::string::npos);
+}
+
+// A fleet ESTOP subscription at QoS 1 (the default: act on the first copy) may see the same
+// ESTOP twice — a redelivery after a reconnect, a publisher's retry. A stop is idempotent and
+// a fresh SAFETY stop is never refused as a replay (src/node/admission/replay.h): the second copy stops
+// the (already stopped) robot again, is answered, and its record says it was a duplicate
+// (`duplicate_safety_message`). The same at QoS 2 (mqtt.estop_qos: 2).
+TEST_F(FleetTest, FleetEstopDeliveredTwiceIsHarmlessAtEitherQos) {
+  add_robot("robot-a", "0000000a");
+  add_robot("robot-b", "0000000b", "", ", estop_qos: 2");
+  std::string id = new_uuid_v4();
+  json::Value msg = command_msg("SAFETY", json::Object{{"safety_event", "ESTOP"}}, fleet_token_, id);
+  Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/+/reply"});
+  w.publish("rcan/fleet/alpha/estop", msg);
+  w.publish("rcan/fleet/alpha/estop", msg);  // exactly what an at-least-once redelivery looks like
+  for (const char* m : {"robot-a", "robot-b"}) {
+    const std::string reply = std::string("rcan/fleet/alpha/robot/") + m + "/reply";
+    int acks = 0;
+    for (int attempt = 0; attempt < 100 && acks < 2; ++attempt) {
+      if (attempt > 0) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      auto seen = w.all();
+      acks = static_cast<int>(std::count_if(seen.begin(), seen.end(), [&](const Watcher::Msg& x) {
+        return x.topic == reply && str_of(x.body, "reply_to") == id && str_of(x.body, "type") == "ACK";
+      }));
+    }
+    EXPECT_EQ(acks, 2) << m;
+    EXPECT_NE(json::dump(robots_[m]->status(fleet_token_)).find("\"estop_active\":true"), std::string::npos) << m;
+    int first = 0, duplicates = 0;
+    json::Value entries = parse(robots_[m]->audit(fleet_token_));
+    for (const auto& e : entries.get("entries")->as_array()) {
+      if (str_of(e, "message_id") != id || str_of(e, "event") != "ESTOP") continue;
+      const json::Value* detail = e.get("detail");
+      const json::Value* dup = detail != nullptr ? detail->get("duplicate_safety_message") : nullptr;
+      if (dup != nullptr && dup->is_bool() && dup->as_bool()) ++duplicates;
+      else ++first;
+    }
+    EXPECT_EQ(first, 1) << m;
+    EXPECT_EQ(duplicates, 1) << m;
+  }
+}
+
+TEST_F(FleetTest, LastWillShowsTheRobotOffline) {
+  add_robot("robot-a", "0000000a");
+  add_robot("robot-b", "0000000b");
+  Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/robot-a/status", "rcan/fleet/alpha/robot/robot-b/status"});
+  // A graceful stop says so itself (a clean disconnect sends no will).
+  EXPECT_EQ(robots_["robot-b"]->proc().stop(SIGTERM, 10000), 0);
+  auto gone = w.wait([](const Watcher::Msg& m) {
+    return m.topic == "rcan/fleet/alpha/robot/robot-b/status" && m.body.get("online") && !m.body.get("online")->as_bool();
+  });
+  ASSERT_TRUE(gone);
+  EXPECT_EQ(str_of(gone->body, "reason"), "shutdown");
+  auto online = w.wait([](const Watcher::Msg& m) {
+    return m.topic == "rcan/fleet/alpha/robot/robot-a/status" && m.body.get("online") && m.body.get("online")->as_bool();
+  });
+  ASSERT_TRUE(online);
+  robots_["robot-a"]->kill9();
+  auto offline = w.wait([](const Watcher::Msg& m) {
+    return m.topic == "rcan/fleet/alpha/robot/robot-a/status" && m.body.get("online") && !m.body.get("online")->as_bool();
+  });
+  ASSERT_TRUE(offline);
+  EXPECT_EQ(str_of(offline->body, "reason"), "connection_lost");
+  // `rcan fleet status` sees the retained will.
+  auto s = fleet({"status", "alpha"});
+  EXPECT_EQ(s.exit_code, 0);
+  EXPECT_NE(s.out.find("connection_lost"), std::string::npos) << s.out;
+}
+
+TEST_F(FleetTest, ReconnectAfterBrokerRestartNeverRunsACommandTwice) {
+  Robot& a = add_robot("robot-a", "0000000a");
+  std::string cmd_topic = "rcan/robot/local.rcan/rcan/sim-rover/0000000a/cmd";
+  std::string reply_topic = "rcan/robot/local.rcan/rcan/sim-rover/0000000a/reply";
+  std::string id = new_uuid_v4();
+  json::Value msg = command_msg("COMMAND", json::Object{{"action", "move"}, {"linear", 0.1}, {"duration_ms", 100}},
+                                token("owner", {}), id);
+  {
+    Watcher w(broker_->url(), {reply_topic});
+    w.publish(cmd_topic, msg);
+    auto ack = w.wait([&](const Watcher::Msg& m) { return str_of(m.body, "reply_to") == id; });
+    ASSERT_TRUE(ack);
+    EXPECT_EQ(str_of(ack->body, "type"), "ACK");
+  }
+  // The broker goes away and comes back; the robot reconnects by itself (backoff).
+  broker_->stop();
+  ASSERT_TRUE(a.proc().wait_for_line("mqtt_disconnected", 10000));
+  broker_->start();
+  ASSERT_TRUE(a.proc().wait_for_line("\"connects\":2", 15000)) << a.proc().err();
+  // The same message again (a redelivery after reconnect looks exactly like this): refused.
+  Watcher w(broker_->url(), {reply_topic});
+  w.publish(cmd_topic, msg);
+  auto again = w.wait([&](const Watcher::Msg& m) { return str_of(m.body, "reply_to") == id; });
+  ASSERT_TRUE(again);
+  EXPECT_EQ(str_of(again->body, "type"), "ERROR");
+  EXPECT_EQ(payload_str(again->body, "error_code"), "REPLAY_DETECTED");
+  // Exactly one COMMAND record for that id: it ran once. (A refusal is answered without waiting
+  // for its record to be durable, so the REPLAY_DETECTED record may trail the ERROR briefly.)
+  int commands = 0, replays = 0;
+  for (int attempt = 0; attempt < 100 && replays == 0; ++attempt) {
+    if (attempt > 0) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    commands = replays = 0;
+    json::Value entries = parse(a.audit(fleet_token_));
+    for (const auto& e : entries.get("entries")->as_array()) {
+      if (str_of(e, "message_id") != id) continue;
+      if (str_of(e, "event") == "COMMAND") ++commands;
+      if (str_of(e, "event") == "REPLAY_DETECTED") ++replays;
+    }
+  }
+  EXPECT_EQ(commands, 1);
+  EXPECT_EQ(replays, 1);
+}
+
+TEST_F(FleetTest, BrokerRestartInTheMiddleOfARunExecutesNoStepTwice) {
+  three_robots();
+  write_file(tmp_.file("long.json"), R"({"command":"COORDINATED_MOVE","fleet_id":"alpha",
+    "choreography":{"type":"sequential","steps":[
+      {"robot":"robot-a","action":"move","params":{"linear":0.1,"duration_ms":1500},"timeout_ms":8000},
+      {"robot":"robot-b","action":"move","params":{"linear":0.1,"duration_ms":300},"timeout_ms":8000},
+      {"robot":"robot-c","action":"move","params":{"linear":0.1,"duration_ms":300},"timeout_ms":8000}]}})");
+  test::RunResult run;
+  std::thread coordinator([&] { run = fleet({"run", tmp_.file("long.json"), "--timeout-ms", "3000"}); });
+  // Step 0 (1.5 s of motion) is under way: take the broker away and bring it back.
+  std::this_thread::sleep_for(std::chrono::milliseconds(700));
+  broker_->stop();
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  broker_->start();
+  coordinator.join();
+  // The run either finished or failed safely (every moved robot stopped) — never a usage error.
+  ASSERT_TRUE(run.exit_code == 0 || run.exit_code == 1) << run.out << run.err;
+  json::Value out = parse(run.out);
+  std::string cid = str_of(out, "choreography_id");
+  ASSERT_FALSE(cid.empty());
+  // No step ran twice on any robot: at most one accepted COMMAND per (robot, step).
+  for (auto& [name, robot] : robots_) {
+    json::Value entries = parse(robot->audit(fleet_token_));
+    std::map<int64_t, int> per_step;
+    for (const auto& e : entries.get("entries")->as_array()) {
+      const json::Value* d = e.get("detail");
+      if (str_of(e, "event") != "COMMAND" || d == nullptr || str_of(*d, "choreography_id") != cid) continue;
+      ++per_step[d->get("fleet_step")->as_int()];
+    }
+    for (auto& [step, n] : per_step) EXPECT_EQ(n, 1) << name << " step " << step;
+    if (name == "robot-a") {
+      EXPECT_EQ(per_step[0], 1);  // sent before the restart: ran exactly once
+    }
+  }
+  if (run.exit_code == 1) {
+    for (auto& [name, robot] : robots_) EXPECT_TRUE(comes_to_rest(*robot)) << name;
+  }
+}
+
+TEST_F(FleetTest, FleetJwtIsCheckedPerRobot) {
+  three_robots();
+  Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/+/reply"});
+  // A fleet token listing robot-a and robot-b only.
+  std::string partial = token("owner", {"robot-a", "robot-b"});
+  std::string id = new_uuid_v4();
+  w.publish("rcan/fleet/alpha/cmd",
+            command_msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "alpha"}}, partial, id));
+  auto reply_of = [&](const std::string& robot, const std::string& mid) {
+    return w.wait([&](const Watcher::Msg& m) {
+      return m.topic == "rcan/fleet/alpha/robot/" + robot + "/reply" && str_of(m.body, "reply_to") == mid &&
+             str_of(m.body, "type") != "EVENT";
+    });
+  };
+  for (const char* m : {"robot-a", "robot-b"}) {
+    auto r = reply_of(m, id);
+    ASSERT_TRUE(r) << m;
+    EXPECT_EQ(str_of(r->body, "type"), "ACK") << m;
+  }
+  auto c = reply_of("robot-c", id);
+  ASSERT_TRUE(c);
+  EXPECT_EQ(payload_str(c->body, "error_code"), "AUTH_INVALID");
+  // A valid token without a `fleet` claim may not command through the fleet…
+  std::string plain = token("owner", {});
+  std::string id2 = new_uuid_v4();
+  w.publish("rcan/fleet/alpha/robot/robot-a/cmd",
+            command_msg("COMMAND", json::Object{{"action", "status"}}, plain, id2));
+  auto r2 = reply_of("robot-a", id2);
+  ASSERT_TRUE(r2);
+  EXPECT_EQ(payload_str(r2->body, "error_code"), "INSUFFICIENT_PRIVILEGES");
+  // …nor name another fleet…
+  std::string id3 = new_uuid_v4();
+  w.publish("rcan/fleet/alpha/robot/robot-a/cmd",
+            command_msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "beta"}}, fleet_token_, id3));
+  auto r3 = reply_of("robot-a", id3);
+  ASSERT_TRUE(r3);
+  EXPECT_EQ(payload_str(r3->body, "error_code"), "INSUFFICIENT_PRIVILEGES");
+  // …but it may always stop a robot (ESTOP/STOP need authentication only).
+  std::string id4 = new_uuid_v4();
+  w.publish("rcan/fleet/alpha/robot/robot-a/cmd",
+            command_msg("SAFETY", json::Object{{"safety_event", "STOP"}}, plain, id4));
+  auto r4 = reply_of("robot-a", id4);
+  ASSERT_TRUE(r4);
+  EXPECT_EQ(str_of(r4->body, "type"), "ACK");
+  // The v1.5 fleet audience "rcan://fleet/<group>": accepted from a fleet token of this fleet only.
+  struct AudCase {
+    std::string aud;
+    std::vector<std::string> fleet;
+    const char* expect;
+  } auds[] = {{"rcan://fleet/alpha", {"robot-a"}, "ACK"},
+              {"rcan://fleet/alpha", {}, "AUTH_INVALID"},
+              {"rcan://fleet/beta", {"robot-a"}, "AUTH_INVALID"}};
+  for (const auto& ac : auds) {
+    std::string aid = new_uuid_v4();
+    w.publish("rcan/fleet/alpha/robot/robot-a/cmd",
+              command_msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "alpha"}},
+                          token("owner", ac.fleet, "coordinator", ac.aud), aid));
+    auto ar = reply_of("robot-a", aid);
+    ASSERT_TRUE(ar) << ac.aud;
+    std::string got = str_of(ar->body, "type") == "ACK" ? "ACK" : payload_str(ar->body, "error_code");
+    EXPECT_EQ(got, ac.expect) << ac.aud << " fleet claim: " << ac.fleet.size();
+  }
+  // A forged token (wrong secret) is refused everywhere.
+  std::string id5 = new_uuid_v4();
+  std::string forged = partial.substr(0, partial.rfind('.') + 1) + "AAAA";
+  w.publish("rcan/fleet/alpha/estop", command_msg("SAFETY", json::Object{{"safety_event", "ESTOP"}}, forged, id5));
+  auto r5 = reply_of("robot-a", id5);
+  ASSERT_TRUE(r5);
+  EXPECT_EQ(payload_str(r5->body, "error_code"), "AUTH_INVALID");
+  // Malformed payloads get the error body, never a crash.
+  w.publish("rcan/fleet/alpha/robot/robot-b/cmd", json::Value("not an object"));
+  auto bad = w.wait([&](const Watcher::Msg& m) {
+    return m.topic == "rcan/fleet/alpha/robot/robot-b/reply" && payload_str(m.body, "error_code") == "SCHEMA_VALIDATION_FAILED";
+  });
+  EXPECT_TRUE(bad);
+  EXPECT_TRUE(robots_["robot-b"]->proc().running());
+}
+
+// docs/SECURITY.md: a commander's token reaches the robots in the command envelope, and no
+// robot passes it on — nothing a robot publishes (replies, status, telemetry, events, audit
+// records) carries it, for accepted and for refused commands alike.
+TEST_F(FleetTest, RobotsNeverPublishTheCommandersToken) {
+  three_robots();
+  Watcher w(broker_->url(), {"rcan/#"});
+  // Accepted: a fleet command to every member. Refused: a token without a fleet claim, and a
+  // forged one.
+  std::string plain = token("owner", {}, "plain-commander");
+  std::string forged = fleet_token_.substr(0, fleet_token_.rfind('.') + 1) + "AAAA";
+  std::string fleet_id = new_uuid_v4();
+  w.publish("rcan/fleet/alpha/cmd",
+            command_msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "alpha"}}, fleet_token_, fleet_id));
+  std::vector<std::pair<std::string, std::string>> waits;  // (robot, message id)
+  for (const char* robot : {"robot-a", "robot-b", "robot-c"}) waits.emplace_back(robot, fleet_id);
+  for (const std::string& tok : {plain, forged}) {
+    std::string id = new_uuid_v4();
+    w.publish("rcan/fleet/alpha/robot/robot-a/cmd", command_msg("COMMAND", json::Object{{"action", "status"}}, tok, id));
+    waits.emplace_back("robot-a", id);
+  }
+  for (const auto& [robot, id] : waits)
+    ASSERT_TRUE(w.wait([&](const Watcher::Msg& m) {
+      return m.topic == "rcan/fleet/alpha/robot/" + robot + "/reply" && str_of(m.body, "reply_to") == id;
+    })) << robot << " " << id;
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the audit mirror publishes after the record
+  size_t outbound = 0;
+  for (const auto& m : w.all()) {
+    bool inbound = m.topic.ends_with("/cmd") || m.topic.ends_with("/estop");
+    if (inbound) continue;
+    ++outbound;
+    std::string text = json::dump(m.body);
+    for (const std::string& tok : {fleet_token_, plain, forged}) {
+      EXPECT_EQ(text.find(tok), std::string::npos) << m.topic;
+      size_t dot = tok.rfind('.');
+      if (dot != std::string::npos && tok.size() - dot > 20) {
+        EXPECT_EQ(text.find(tok.substr(dot + 1)), std::string::npos) << m.topic << ": " << text.substr(0, 300);
+      }
+    }
+  }
+  EXPECT_GT(outbound, 6u) << "the robots published nothing to check";
+}
+
+TEST_F(FleetTest, SwarmLeaderFailoverAndJoinPolicy) {
+  const std::string swarm =
+      "swarm: {swarm_id: s42, members: [robot-a, robot-b, robot-c], leader: robot-a, formation: follow-leader,"
+      " join_policy: approval, heartbeat_ms: 100, leader_timeout_ms: 600}\n";
+  three_robots(swarm);
+  Watcher w(broker_->url(), {"rcan/swarm/s42/announce", "rcan/swarm/s42/join/+"});
+  auto first = w.wait([](const Watcher::Msg& m) { return payload_str(m.body, "leader") == "robot-a"; });
+  ASSERT_TRUE(first);
+  EXPECT_EQ(str_of(first->body, "type"), "SWARM_ANNOUNCE");
+  EXPECT_EQ(payload_str(first->body, "formation"), "follow-leader");
+  EXPECT_EQ(payload_str(first->body, "join_policy"), "approval");
+  // Join under the approval policy: pending, then granted by an OWNER's approval.
+  std::string jid = new_uuid_v4();
+  w.publish("rcan/swarm/s42/join", json::Value(json::Object{{"type", "SWARM_JOIN"},
+                                                            {"message_id", jid},
+                                                            {"timestamp_ms", wall_ms()},
+                                                            {"auth_token", token("user", {}, "robot-d")},
+                                                            {"payload", json::Object{{"member", "robot-d"}}}}));
+  auto pending = w.wait([&](const Watcher::Msg& m) { return str_of(m.body, "reply_to") == jid; });
+  ASSERT_TRUE(pending);
+  EXPECT_EQ(str_of(pending->body, "type"), "PENDING_AUTH");
+  std::string aid = new_uuid_v4();
+  w.publish("rcan/swarm/s42/join", json::Value(json::Object{{"type", "SWARM_APPROVE"},
+                                                            {"message_id", aid},
+                                                            {"timestamp_ms", wall_ms()},
+                                                            {"auth_token", token("owner", {})},
+                                                            {"payload", json::Object{{"member", "robot-d"}}}}));
+  auto granted = w.wait([&](const Watcher::Msg& m) { return str_of(m.body, "reply_to") == aid; });
+  ASSERT_TRUE(granted);
+  EXPECT_EQ(str_of(granted->body, "type"), "GRANTED");
+  // A join with a bad token is denied.
+  std::string bid = new_uuid_v4();
+  w.publish("rcan/swarm/s42/join", json::Value(json::Object{{"type", "SWARM_JOIN"},
+                                                            {"message_id", bid},
+                                                            {"timestamp_ms", wall_ms()},
+                                                            {"auth_token", "not-a-token"},
+                                                            {"payload", json::Object{{"member", "robot-e"}}}}));
+  auto denied = w.wait([&](const Watcher::Msg& m) { return str_of(m.body, "reply_to") == bid; });
+  ASSERT_TRUE(denied);
+  EXPECT_EQ(str_of(denied->body, "type"), "DENIED");
+  // The leader goes silent: robot-b (first live member in order) takes over and announces.
+  robots_["robot-a"]->kill9();
+  auto next = w.wait(
+      [](const Watcher::Msg& m) { return payload_str(m.body, "reason") == "leader_silent"; }, 15000);
+  ASSERT_TRUE(next);
+  EXPECT_EQ(payload_str(next->body, "leader"), "robot-b");
+  EXPECT_EQ(payload_str(next->body, "previous_leader"), "robot-a");
+  EXPECT_EQ(payload_str(next->body, "announced_by"), "robot-b");
+  std::string members = json::dump(*next->body.get("payload")->get("members"));
+  EXPECT_NE(members.find("robot-d"), std::string::npos) << members;  // the approved member stays
+  // The change is audited on the new leader (the record is written just after the announce).
+  bool audited = false;
+  for (int i = 0; i < 100 && !audited; ++i) {
+    audited = robots_["robot-b"]->audit(fleet_token_).find("SWARM_LEADER_CHANGE") != std::string::npos;
+    if (!audited) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  EXPECT_TRUE(audited);
+}
+
+TEST_F(FleetTest, FleetAuditIntoPostgresCatchesTamperingAndGaps) {
+  Postgres pg;
+  three_robots();
+  // The collector holds each robot's chain secret (to verify HMACs on ingest).
+  fs::create_directories(tmp_.file("secrets"));
+  fs::permissions(tmp_.file("secrets"), fs::perms::owner_all);
+  for (auto& [name, robot] : robots_) {
+    fs::copy_file(robot->dir() + "/audit.secret", tmp_.file("secrets/" + name + ".secret"));
+    fs::permissions(tmp_.file("secrets/" + name + ".secret"), fs::perms::owner_read | fs::perms::owner_write);
+  }
+  Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/+/audit"});
+  test::RunResult collected;
+  std::thread collector([&] {
+    collected = fleet({"audit", "collect", "alpha", "--db", pg.conninfo(), "--secrets-dir", tmp_.file("secrets"),
+                       "--duration-ms", "6000"});
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // the collector is subscribed
+  auto r = fleet({"command", "alpha", "status", "--members", "robot-a,robot-b,robot-c"});
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  auto rec = w.wait([](const Watcher::Msg& m) {
+    return m.topic == "rcan/fleet/alpha/robot/robot-a/audit" && str_of(m.body, "event") == "COMMAND";
+  });
+  ASSERT_TRUE(rec);
+  int64_t seq = rec->body.get("seq")->as_int();
+  // 1. A tampered copy (the outcome rewritten, the hmac kept) under the next seq: refused.
+  json::Object tampered = rec->body.as_object();
+  tampered.set("outcome", "blocked");
+  tampered.set("seq", seq + 100);
+  w.publish("rcan/fleet/alpha/robot/robot-a/audit", json::Value(tampered));
+  // 2. A correctly sealed record (with robot-b's own secret) far ahead of its chain: a gap.
+  std::string secret = test::read_file(tmp_.file("secrets/robot-b.secret"));
+  auto b_rec = w.wait([](const Watcher::Msg& m) { return m.topic == "rcan/fleet/alpha/robot/robot-b/audit"; });
+  ASSERT_TRUE(b_rec);
+  json::Object gap = b_rec->body.as_object();
+  int64_t gap_seq = gap.find("seq")->as_int() + 50;
+  gap.set("seq", gap_seq);
+  gap.erase("hmac");
+  gap.set("hmac", hmac_sha256_hex(secret, json::canonical_without(gap, "hmac")));
+  w.publish("rcan/fleet/alpha/robot/robot-b/audit", json::Value(gap));
+  collector.join();
+  ASSERT_EQ(collected.exit_code, 1) << collected.out << collected.err;
+  json::Value out = parse(collected.out);
+  std::string a_problems = json::dump(*out.get("robots")->get("robot-a")->get("problems"));
+  EXPECT_NE(a_problems.find("hmac_mismatch"), std::string::npos) << a_problems;
+  std::string b_problems = json::dump(*out.get("robots")->get("robot-b")->get("problems"));
+  EXPECT_NE(b_problems.find("\"gap\""), std::string::npos) << b_problems;
+  EXPECT_EQ(json::dump(*out.get("robots")->get("robot-c")->get("problems")), "[]");
+  // The database holds the genuine chains (the tampered record is not stored, only flagged).
+  auto stored = pg.sql("SELECT count(*) FROM rcan_fleet_audit WHERE member='robot-a' AND seq=" + std::to_string(seq + 100));
+  EXPECT_EQ(stored.out, "0\n") << stored.err;
+  auto flagged = pg.sql("SELECT problem FROM rcan_fleet_audit_problems WHERE member='robot-a'");
+  EXPECT_NE(flagged.out.find("hmac_mismatch"), std::string::npos) << flagged.out << flagged.err;
+  // Re-verification from the database: robot-b's gap is still there…
+  auto v = fleet({"audit", "verify", "--db", pg.conninfo(), "--fleet", "alpha", "--secrets-dir", tmp_.file("secrets")});
+  EXPECT_EQ(v.exit_code, 1) << v.out << v.err;
+  EXPECT_NE(v.out.find("\"gap\""), std::string::npos) << v.out;
+  EXPECT_EQ(v.out.find("robot-a"), std::string::npos) << v.out;
+  // …and a row altered inside the database after ingest is caught.
+  auto upd = pg.sql("UPDATE rcan_fleet_audit SET line = replace(line, '\"outcome\":\"ok\"', '\"outcome\":\"blocked\"') "
+                    "WHERE member='robot-a' AND seq=" + std::to_string(seq));
+  EXPECT_EQ(upd.exit_code, 0) << upd.err;
+  auto v2 = fleet({"audit", "verify", "--db", pg.conninfo(), "--fleet", "alpha"});
+  EXPECT_EQ(v2.exit_code, 1);
+  EXPECT_NE(v2.out.find("record_hash_mismatch"), std::string::npos) << v2.out;
+  EXPECT_NE(v2.out.find("robot-a"), std::string::npos) << v2.out;
+}
+
+TEST(FleetJwt, FleetAudienceNeedsAFleetClaim) {
+  jwt::VerifyOptions o;
+  o.audience = "rcan://local.rcan/rcan/sim-rover/0000000a";
+  o.fleet_ids = {"robot-a"};
+  o.fleet_audiences = {"rcan://fleet/alpha"};
+  int64_t now = 1'800'000'000;
+  json::Object base{{"iss", "i"}, {"sub", "s"}, {"role", "owner"}, {"scope", json::Array{"control"}},
+                    {"iat", now}, {"exp", now + 60}};
+  auto with = [&](const char* aud, bool fleet_claim) {
+    json::Object c = base;
+    c.set("aud", aud);
+    if (fleet_claim) c.set("fleet", json::Array{"robot-a"});
+    return jwt::check_claims(c, o, now);
+  };
+  EXPECT_TRUE(with("rcan://fleet/alpha", true).ok());
+  EXPECT_FALSE(with("rcan://fleet/alpha", false).ok());  // not a fleet token
+  EXPECT_FALSE(with("rcan://fleet/beta", true).ok());    // another fleet
+  EXPECT_TRUE(with("rcan://local.rcan/rcan/sim-rover/*", false).ok());
+  o.fleet_ids = {"robot-b"};
+  EXPECT_FALSE(with("rcan://fleet/alpha", true).ok());  // this robot is not in the claim
+}
+
+TEST(FleetConfig, MqttFleetAndSwarmBlocksAreStrict) {
+  const std::string base = "rcan_version: \"1.2\"\nruri: rcan://local.rcan/rcan/sim-rover/0000000a\nnode: {data_dir: /tmp/x}\n";
+  auto ok = config::parse_config_text(base +
+                                      "mqtt: {enabled: true, broker: \"mqtt://broker.local:1884\"}\n"
+                                      "fleet: {fleet_id: alpha, member_id: robot-a, robots: [robot-a, robot-b],"
+                                      " commands: {broadcast: false}}\n"
+                                      "swarm: {swarm_id: s1, member_id: robot-a, members: [robot-b, robot-a]}\n");
+  ASSERT_TRUE(ok.ok()) << ok.error().message;
+  EXPECT_TRUE(ok->mqtt.enabled);
+  EXPECT_EQ(ok->fleet.fleet_id, "alpha");
+  EXPECT_FALSE(ok->fleet.broadcast);
+  EXPECT_EQ(ok->swarm.leader, "robot-a");  // first in order by default
+  EXPECT_EQ(ok->swarm.join_policy, "closed");
+  struct Bad {
+    std::string yaml, field;
+  } bad[] = {
+      {"mqtt: {enabled: true, broker: \"http://x\"}\n", "mqtt.broker"},
+      {"mqtt: {enabled: true, broker: \"mqtts://x\"}\n", "mqtt.tls.ca_file"},
+      {"mqtt: {enabled: true, topic_prefix: \"rcan/#\"}\n", "mqtt.topic_prefix"},
+      {"mqtt: {enabled: true, username: u}\n", "mqtt.password_file"},
+      {"mqtt: {enabled: true, brokr: x}\n", "mqtt.brokr"},
+      {"fleet: {fleet_id: alpha, robots: [a]}\n", "fleet"},
+      {"mqtt: {enabled: true}\nfleet: {fleet_id: alpha, robots: [robot-b]}\n", "fleet.robots"},
+      {"mqtt: {enabled: true}\nfleet: {fleet_id: \"al/pha\", robots: [0000000a]}\n", "fleet.fleet_id"},
+      {"mqtt: {enabled: true}\nswarm: {swarm_id: s, members: [a], leader: z}\n", "swarm.leader"},
+      {"mqtt: {enabled: true}\nswarm: {swarm_id: s, join_policy: maybe}\n", "swarm.join_policy"},
+  };
+  for (const auto& b : bad) {
+    auto r = config::parse_config_text(base + b.yaml);
+    ASSERT_FALSE(r.ok()) << b.yaml;
+    EXPECT_EQ(r.error().field, b.field) << b.yaml << " → " << r.error().message;
+  }
+}
+
+TEST(MqttTopics, LayoutAndParser) {
+  auto ruri = parse_ruri("rcan://local.rcan/acme/rover/0000000a");
+  ASSERT_TRUE(ruri.ok());
+  auto t = mqtt::robot_topics("rcan", *ruri);
+  ASSERT_TRUE(t.ok());
+  EXPECT_EQ(t->cmd(), "rcan/robot/local.rcan/acme/rover/0000000a/cmd");
+  EXPECT_EQ(mqtt::parse_topic("rcan", t->cmd()).kind, mqtt::TopicKind::kRobotCmd);
+  auto f = mqtt::parse_topic("rcan", "rcan/fleet/alpha/robot/robot-a/cmd");
+  EXPECT_EQ(f.kind, mqtt::TopicKind::kMemberCmd);
+  EXPECT_EQ(f.fleet_id, "alpha");
+  EXPECT_EQ(f.member, "robot-a");
+  EXPECT_EQ(mqtt::parse_topic("rcan", "rcan/fleet/alpha/estop").kind, mqtt::TopicKind::kFleetEstop);
+  EXPECT_EQ(mqtt::parse_topic("rcan", "rcan/fleet/+/cmd").kind, mqtt::TopicKind::kOther);
+  EXPECT_EQ(mqtt::parse_topic("rcan", "rcan/fleet//cmd").kind, mqtt::TopicKind::kOther);
+  EXPECT_EQ(mqtt::parse_topic("rcan", "other/fleet/alpha/cmd").kind, mqtt::TopicKind::kOther);
+  EXPECT_EQ(mqtt::parse_topic("rcan", "rcanx/fleet/alpha/cmd").kind, mqtt::TopicKind::kOther);
+  EXPECT_EQ(mqtt::parse_payload("[1]").error().code, ErrorCode::kSchemaValidationFailed);
+  EXPECT_EQ(mqtt::parse_payload("{").error().code, ErrorCode::kMalformedJson);
+  EXPECT_EQ(mqtt::parse_payload(std::string(70000, ' ')).error().code, ErrorCode::kBodyTooLarge);
+  EXPECT_TRUE(mqtt::parse_payload("{\"a\":1}").ok());
+  auto u = transport::parse_broker_url("mqtts://[::1]:8884");
+  ASSERT_TRUE(u.ok());
+  EXPECT_EQ(u->host, "::1");
+  EXPECT_EQ(u->port, 8884);
+  EXPECT_TRUE(u->tls);
+  EXPECT_EQ(transport::parse_broker_url("mqtt://h").value().port, 1883);
+  EXPECT_FALSE(transport::parse_broker_url("mqtt://h:0").ok());
+  EXPECT_FALSE(transport::parse_broker_url("mqtt://h:99999").ok());
+  EXPECT_FALSE(transport::parse_broker_url("mqtt://").ok());
+}
+
+}  // namespace
+}  // namespace rcan
