@@ -1,6 +1,7 @@
 // audit_bench — durable append throughput and latency of rcan::audit::AuditLog.
 //
-//   audit_bench [--dir D] [--seconds S] [--big N] [--probe M] [--window W] [--policy group|interval]
+//   audit_bench [--dir D] [--seconds S] [--big N] [--probe M] [--window W] [--policy
+//   group|interval]
 //
 // 1. Durable appends/s with 1, 4 and 16 appending threads (each thread calls the blocking
 //    append(), which returns only after the fdatasync covering the record), with p50 /
@@ -158,9 +159,10 @@ void print(const char* label, RunResult& r) {
   double rate = static_cast<double>(r.records) / r.seconds;
   double p50 = pct(r.lat_us, 0.50), p99 = pct(r.lat_us, 0.99);
   double mx = r.lat_us.empty() ? 0 : *std::max_element(r.lat_us.begin(), r.lat_us.end());
-  std::printf("%-34s %10.0f rec/s  p50 %7.0f us  p99 %7.0f us  max %8.0f us  (%llu rec, %.2f rec/fsync)\n",
-              label, rate, p50, p99, mx, static_cast<unsigned long long>(r.records),
-              r.syncs ? static_cast<double>(r.records) / static_cast<double>(r.syncs) : 0.0);
+  std::printf(
+      "%-34s %10.0f rec/s  p50 %7.0f us  p99 %7.0f us  max %8.0f us  (%llu rec, %.2f rec/fsync)\n",
+      label, rate, p50, p99, mx, static_cast<unsigned long long>(r.records),
+      r.syncs ? static_cast<double>(r.records) / static_cast<double>(r.syncs) : 0.0);
   std::fflush(stdout);
 }
 
@@ -211,14 +213,22 @@ int main(int argc, char** argv) {
       }
       return argv[++i];
     };
-    if (a == "--dir") base = next();
-    else if (a == "--seconds") seconds = std::stod(next());
-    else if (a == "--big") big = std::stoull(next());
-    else if (a == "--probe") probe = std::stoull(next());
-    else if (a == "--window") window = std::stoi(next());
-    else if (a == "--policy") policy = next() == "interval" ? SyncPolicy::kInterval : SyncPolicy::kPerGroup;
+    if (a == "--dir")
+      base = next();
+    else if (a == "--seconds")
+      seconds = std::stod(next());
+    else if (a == "--big")
+      big = std::stoull(next());
+    else if (a == "--probe")
+      probe = std::stoull(next());
+    else if (a == "--window")
+      window = std::stoi(next());
+    else if (a == "--policy")
+      policy = next() == "interval" ? SyncPolicy::kInterval : SyncPolicy::kPerGroup;
     else {
-      std::fprintf(stderr, "usage: audit_bench [--dir D] [--seconds S] [--big N] [--probe M] [--window W] [--policy group|interval]\n");
+      std::fprintf(stderr,
+                   "usage: audit_bench [--dir D] [--seconds S] [--big N] [--probe M] [--window W] "
+                   "[--policy group|interval]\n");
       return 2;
     }
   }
@@ -246,8 +256,8 @@ int main(int argc, char** argv) {
     print(label.c_str(), r);
   }
 
-  std::printf("== durable appends (append_async(), %d in flight per thread, %.1f s each) ==\n", window,
-              seconds);
+  std::printf("== durable appends (append_async(), %d in flight per thread, %.1f s each) ==\n",
+              window, seconds);
   for (int threads : {1, 4, 16}) {
     std::string dir = root + "/a" + std::to_string(threads);
     auto log = AuditLog::open(dir, o);
@@ -275,7 +285,8 @@ int main(int argc, char** argv) {
     double fs = std::chrono::duration<double>(Clock::now() - t0).count();
     auto st = (*log)->stats();
     std::printf("  filled in %.1f s; %llu segments, %.2f GB\n", fs,
-                static_cast<unsigned long long>(st.segments), static_cast<double>(st.total_bytes) / 1e9);
+                static_cast<unsigned long long>(st.segments),
+                static_cast<double>(st.total_bytes) / 1e9);
     RunResult large = run_appenders(**log, 16, 0, probe, counter);
     std::string l2 = "at " + std::to_string((*log)->stats().last_seq - large.records) + " records";
     print(l2.c_str(), large);

@@ -22,9 +22,9 @@
 #include <random>
 #include <sstream>
 
+#include "config/config.h"
 #include "rcan/crypto/jwt.h"
 #include "rcan/json.h"
-#include "config/config.h"
 
 namespace rcan::bench {
 
@@ -35,11 +35,13 @@ namespace http = boost::beast::http;
 using tcp = asio::ip::tcp;
 
 int64_t mono_us() {
-  return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::microseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
       .count();
 }
 int64_t wall_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
       .count();
 }
 
@@ -51,7 +53,8 @@ std::string fast_uuid() {
   char s[40];
   std::snprintf(s, sizeof s, "%08x-%04x-%04x-%04x-%012llx", static_cast<unsigned>(a >> 32),
                 static_cast<unsigned>((a >> 16) & 0xffff), static_cast<unsigned>(a & 0xffff),
-                static_cast<unsigned>(b >> 48), static_cast<unsigned long long>(b & 0xffffffffffffULL));
+                static_cast<unsigned>(b >> 48),
+                static_cast<unsigned long long>(b & 0xffffffffffffULL));
   return s;
 }
 
@@ -140,8 +143,10 @@ uint64_t data_length(const std::string& path) {
     uint64_t lo = 0, hi = static_cast<uint64_t>(st.st_size);  // the first zero is in [lo, hi]
     while (lo < hi) {
       uint64_t mid = lo + (hi - lo) / 2;
-      if (zero_at(mid)) hi = mid;
-      else lo = mid + 1;
+      if (zero_at(mid))
+        hi = mid;
+      else
+        lo = mid + 1;
     }
     len = lo;
   }
@@ -255,7 +260,8 @@ double wait_ready(Child& c, uint16_t port, double timeout_ms) {
   for (;;) {
     if (sync_http(port, http::verb::get, "/healthz", "", "") == 200)
       return static_cast<double>(mono_us() - c.spawned_us()) / 1000.0;
-    if (!c.alive() || static_cast<double>(mono_us() - c.spawned_us()) / 1000.0 > timeout_ms) return -1;
+    if (!c.alive() || static_cast<double>(mono_us() - c.spawned_us()) / 1000.0 > timeout_ms)
+      return -1;
     std::this_thread::sleep_for(std::chrono::microseconds(500));
   }
 }
@@ -278,10 +284,11 @@ std::string token_for(const std::string& seed_file, const std::string& iss, cons
   return t.ok() ? *t : std::string();
 }
 
-bool start_node(Node& n, const std::string& rcand, const std::vector<std::string>& extra, const std::string& keep) {
+bool start_node(Node& n, const std::string& rcand, const std::vector<std::string>& extra,
+                const std::string& keep) {
   n.port = free_port();
-  std::vector<std::string> argv{rcand, "--data-dir", n.dir, "--port", std::to_string(n.port), "--log-level",
-                                "info"};
+  std::vector<std::string> argv{
+      rcand, "--data-dir", n.dir, "--port", std::to_string(n.port), "--log-level", "info"};
   argv.insert(argv.end(), extra.begin(), extra.end());
   n.child = std::make_unique<Child>(argv, keep);
   n.ready_ms = wait_ready(*n.child, n.port);
@@ -299,7 +306,8 @@ bool start_node(Node& n, const std::string& rcand, const std::vector<std::string
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
   }
-  if (n.ruri.empty()) std::fprintf(stderr, "rcand did not log its RURI:\n%s\n", n.child->head().c_str());
+  if (n.ruri.empty())
+    std::fprintf(stderr, "rcand did not log its RURI:\n%s\n", n.child->head().c_str());
   return !n.ruri.empty();
 }
 
@@ -344,7 +352,8 @@ bool check_node_ack(int status, const std::string& body, const std::string& id, 
   const json::Value* t = str_member(&*v, "type");
   const json::Value* rt = str_member(&*v, "reply_to");
   const json::Value* pl = v->get("payload");
-  if (status == 200 && t && t->as_string() == "ACK" && rt && rt->as_string() == id && pl && pl->is_object()) {
+  if (status == 200 && t && t->as_string() == "ACK" && rt && rt->as_string() == id && pl &&
+      pl->is_object()) {
     const json::Value* res = pl->get("result");
     if (str_member(pl, "command") && res && !res->is_null()) return true;
   }
@@ -367,8 +376,8 @@ bool check_node_error(int status, const std::string& body, const std::string& id
            (reason.empty() || (rs && rs->as_string() == reason));
   }
   if (!good)
-    why = "expected " + std::to_string(want_status) + " " + error_code + "/" + reason + ", got status " +
-          std::to_string(status) + ": " + body.substr(0, 300);
+    why = "expected " + std::to_string(want_status) + " " + error_code + "/" + reason +
+          ", got status " + std::to_string(status) + ": " + body.substr(0, 300);
   return good;
 }
 

@@ -78,8 +78,8 @@ class Child {
 };
 
 // One blocking HTTP exchange (setup, /healthz, /metrics). Returns the status, 0 on failure.
-int sync_http(uint16_t port, boost::beast::http::verb verb, const std::string& target, const std::string& body,
-              const std::string& token, std::string* out = nullptr);
+int sync_http(uint16_t port, boost::beast::http::verb verb, const std::string& target,
+              const std::string& body, const std::string& token, std::string* out = nullptr);
 
 // Polls GET /healthz until it answers 200; returns ms since the child was spawned, or -1.
 double wait_ready(Child& c, uint16_t port, double timeout_ms = 30000);

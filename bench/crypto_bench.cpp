@@ -93,12 +93,16 @@ void Baseline(benchmark::State& state) {
   Fn(state);
   rcan::mldsa65::internal::select_simd(true);
 }
-BENCHMARK(Baseline<BM_MlDsa65_KeyGen>)->Name("BM_MlDsa65_KeyGen_Baseline")->Unit(benchmark::kMicrosecond);
+BENCHMARK(Baseline<BM_MlDsa65_KeyGen>)
+    ->Name("BM_MlDsa65_KeyGen_Baseline")
+    ->Unit(benchmark::kMicrosecond);
 BENCHMARK(Baseline<BM_MlDsa65_Sign>)
     ->Name("BM_MlDsa65_Sign_Baseline")
     ->Unit(benchmark::kMicrosecond)
     ->MinTime(3.0);
-BENCHMARK(Baseline<BM_MlDsa65_Verify>)->Name("BM_MlDsa65_Verify_Baseline")->Unit(benchmark::kMicrosecond);
+BENCHMARK(Baseline<BM_MlDsa65_Verify>)
+    ->Name("BM_MlDsa65_Verify_Baseline")
+    ->Unit(benchmark::kMicrosecond);
 
 void BM_Ed25519_Sign(benchmark::State& state) {
   const Bytes seed(32, 7);

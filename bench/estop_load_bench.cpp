@@ -37,10 +37,13 @@ namespace fs = std::filesystem;
 namespace {
 
 double now_ms() {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
+  return std::chrono::duration<double, std::milli>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
 }
 int64_t wall_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
       .count();
 }
 
@@ -63,17 +66,22 @@ class Conn {
     if (fd_ >= 0) close(fd_);
   }
   // Returns the HTTP status (0 on failure); body in `body`.
-  int post(const std::string& path, const std::string& body, const std::string& token, std::string* out = nullptr) {
+  int post(const std::string& path, const std::string& body, const std::string& token,
+           std::string* out = nullptr) {
     if (fd_ < 0) return 0;
-    std::string req = "POST " + path + " HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " + token +
-                      "\r\nContent-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) +
-                      "\r\n\r\n" + body;
-    if (send(fd_, req.data(), req.size(), MSG_NOSIGNAL) != static_cast<ssize_t>(req.size())) return 0;
+    std::string req =
+        "POST " + path + " HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " + token +
+        "\r\nContent-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) +
+        "\r\n\r\n" + body;
+    if (send(fd_, req.data(), req.size(), MSG_NOSIGNAL) != static_cast<ssize_t>(req.size()))
+      return 0;
     return read_response(out);
   }
   int get(const std::string& path, std::string* out) {
     std::string req = "GET " + path + " HTTP/1.1\r\nHost: x\r\n\r\n";
-    if (fd_ < 0 || send(fd_, req.data(), req.size(), MSG_NOSIGNAL) != static_cast<ssize_t>(req.size())) return 0;
+    if (fd_ < 0 ||
+        send(fd_, req.data(), req.size(), MSG_NOSIGNAL) != static_cast<ssize_t>(req.size()))
+      return 0;
     return read_response(out);
   }
 
@@ -84,7 +92,8 @@ class Conn {
       if (end != std::string::npos) {
         size_t cl = 0;
         size_t p = buf_.find("Content-Length: ");
-        if (p != std::string::npos && p < end) cl = std::strtoul(buf_.c_str() + p + 16, nullptr, 10);
+        if (p != std::string::npos && p < end)
+          cl = std::strtoul(buf_.c_str() + p + 16, nullptr, 10);
         if (buf_.size() >= end + 4 + cl) {
           int status = std::atoi(buf_.c_str() + 9);
           if (out) *out = buf_.substr(end + 4, cl);
@@ -104,7 +113,8 @@ class Conn {
   std::string buf_;
 };
 
-std::string command_body(const std::string& action, json::Object params, const std::string& type = "COMMAND") {
+std::string command_body(const std::string& action, json::Object params,
+                         const std::string& type = "COMMAND") {
   json::Object payload{{"action", action}};
   for (auto& m : params) payload.set(m.first, m.second);
   return json::dump(json::Value(json::Object{{"version", "1.0.0"},
@@ -128,10 +138,14 @@ int main(int argc, char** argv) {
   int clients = 64, stops = 40, warmup_ms = 1000;
   for (int i = 1; i + 1 < argc; i += 2) {
     std::string a = argv[i];
-    if (a == "--rcand") rcand = argv[i + 1];
-    else if (a == "--clients") clients = std::atoi(argv[i + 1]);
-    else if (a == "--stops") stops = std::atoi(argv[i + 1]);
-    else if (a == "--warmup-ms") warmup_ms = std::atoi(argv[i + 1]);
+    if (a == "--rcand")
+      rcand = argv[i + 1];
+    else if (a == "--clients")
+      clients = std::atoi(argv[i + 1]);
+    else if (a == "--stops")
+      stops = std::atoi(argv[i + 1]);
+    else if (a == "--warmup-ms")
+      warmup_ms = std::atoi(argv[i + 1]);
   }
   char tmpl[] = "/tmp/rcand-bench-XXXXXX";
   std::string dir = mkdtemp(tmpl);
@@ -141,8 +155,8 @@ int main(int argc, char** argv) {
   if (pid == 0) {
     dup2(errpipe[1], 2);
     close(errpipe[0]);
-    execl(rcand.c_str(), rcand.c_str(), "--data-dir", (dir + "/node").c_str(), "--port", "0", "--log-level", "warn",
-          static_cast<char*>(nullptr));
+    execl(rcand.c_str(), rcand.c_str(), "--data-dir", (dir + "/node").c_str(), "--port", "0",
+          "--log-level", "warn", static_cast<char*>(nullptr));
     _exit(127);
   }
   close(errpipe[1]);
@@ -197,9 +211,12 @@ int main(int argc, char** argv) {
       Conn conn(port);
       std::string tok = token("load-" + std::to_string(c));
       while (!stop.load(std::memory_order_relaxed)) {
-        int s = conn.post("/rcan/v1/command", command_body("move", {{"linear", 0.2}, {"duration_ms", 100}}), tok);
-        if (s == 200) ok++;
-        else if (s == 423 || s == 429) refused++;
+        int s = conn.post("/rcan/v1/command",
+                          command_body("move", {{"linear", 0.2}, {"duration_ms", 100}}), tok);
+        if (s == 200)
+          ok++;
+        else if (s == 423 || s == 429)
+          refused++;
         else {
           failed++;
           if (s == 0) break;
@@ -219,8 +236,9 @@ int main(int argc, char** argv) {
     double e = now_ms();
     if (st == 200) lat.push_back(e - s);
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    std::string body = "{\"version\":\"1.0.0\",\"type\":\"SAFETY\",\"message_id\":\"" + new_uuid_v4() +
-                       "\",\"timestamp_ms\":" + std::to_string(wall_ms()) + ",\"payload\":{\"safety_event\":\"RESUME\"}}";
+    std::string body = "{\"version\":\"1.0.0\",\"type\":\"SAFETY\",\"message_id\":\"" +
+                       new_uuid_v4() + "\",\"timestamp_ms\":" + std::to_string(wall_ms()) +
+                       ",\"payload\":{\"safety_event\":\"RESUME\"}}";
     Conn r2(port);
     r2.post("/rcan/v1/command", body, admin);
     std::this_thread::sleep_for(std::chrono::milliseconds(200));
@@ -245,13 +263,14 @@ int main(int argc, char** argv) {
               static_cast<double>(done) / elapsed, static_cast<unsigned long long>(refused.load()),
               static_cast<unsigned long long>(failed.load()));
   std::printf("  POST /api/stop answered: %zu of %d\n", lat.size(), stops);
-  std::printf("  ESTOP request→answer ms: p50 %.2f  p99 %.2f  max %.2f\n", pct(lat, 0.5), pct(lat, 0.99),
-              lat.empty() ? 0.0 : *std::max_element(lat.begin(), lat.end()));
+  std::printf("  ESTOP request→answer ms: p50 %.2f  p99 %.2f  max %.2f\n", pct(lat, 0.5),
+              pct(lat, 0.99), lat.empty() ? 0.0 : *std::max_element(lat.begin(), lat.end()));
   // The node's own timer: estop() call → driver stop (histogram, microseconds).
   for (const char* name : {"rcan_pipeline_stage_seconds_sum{stage=\"estop_to_driver\"}",
                            "rcan_pipeline_stage_seconds_count{stage=\"estop_to_driver\"}"}) {
     size_t p = metrics.find(name);
-    if (p != std::string::npos) std::printf("  node %s\n", metrics.substr(p, metrics.find('\n', p) - p).c_str());
+    if (p != std::string::npos)
+      std::printf("  node %s\n", metrics.substr(p, metrics.find('\n', p) - p).c_str());
   }
   return lat.size() == static_cast<size_t>(stops) ? 0 : 1;
 }

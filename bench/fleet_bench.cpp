@@ -13,7 +13,8 @@
 // Repeats each round --rounds times and prints percentiles over all robot×round samples.
 //
 //   fleet_bench [--robots 200] [--rounds 5] [--estop-qos 1|2] [--segment-kib 1024]
-//               [--mosquitto /usr/sbin/mosquitto] [--perf-ctl FIFO --profile-round N] [--warm-up 0|1]
+//               [--mosquitto /usr/sbin/mosquitto] [--perf-ctl FIFO --profile-round N] [--warm-up
+//               0|1]
 //
 // --warm-up 1: one broadcast `status` before round 1, so that the first ESTOP is no longer each
 // robot's first message (the fleet token is verified then); separates first-message costs from
@@ -47,15 +48,15 @@
 #include <thread>
 #include <vector>
 
-#include "node/safety/actuation_safety.h"
 #include "base/clock.h"
-#include "node/fleet/fleet.h"
 #include "base/log.h"
-#include "node/bindings/mqtt_node.h"
 #include "node/api/node.h"
+#include "node/bindings/mqtt_node.h"
+#include "node/fleet/fleet.h"
+#include "node/safety/actuation_safety.h"
 #include "node/safety/safety.h"
-#include "node/services/node_services.h"
 #include "node/safety/sim_robot.h"
+#include "node/services/node_services.h"
 #include "rcan/audit/audit_log.h"
 #include "rcan/crypto/jwt.h"
 #include "rcan/errors.h"
@@ -100,10 +101,13 @@ std::map<std::string, long> wakeups_by_thread() {
 }
 
 double mono_ms() {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
+  return std::chrono::duration<double, std::milli>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
 }
 int64_t wall_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
       .count();
 }
 
@@ -129,9 +133,12 @@ class TimedActuation final : public node::Actuation {
     latched_at.store(mono_ms());
     return r;
   }
-  Status resume(Role role, const std::string& source) override { return inner_.resume(role, source); }
+  Status resume(Role role, const std::string& source) override {
+    return inner_.resume(role, source);
+  }
   void stop(const std::string& source) override { inner_.stop(source); }
-  Result<node::PreparedCommand> prepare(const Message& msg, int64_t deadline, const std::string& sid) override {
+  Result<node::PreparedCommand> prepare(const Message& msg, int64_t deadline,
+                                        const std::string& sid) override {
     return inner_.prepare(msg, deadline, sid);
   }
   Result<json::Value> apply(const node::PreparedCommand& cmd) override { return inner_.apply(cmd); }
@@ -159,9 +166,11 @@ struct Robot {
 
 // The pipeline's stage timers (wall time per stage, node/metrics.h), summed over all robots:
 // stage → {sum_us, count}. A round's deltas show where its time went.
-constexpr const char* kStages[] = {"parse", "shape", "token", "decode", "auth", "replay", "fleet", "authorize",
+constexpr const char* kStages[] = {"parse",        "shape",    "token", "decode",
+                                   "auth",         "replay",   "fleet", "authorize",
                                    "safety_state", "dispatch", "audit", "total"};
-std::map<std::string, std::pair<double, uint64_t>> stage_totals(const std::vector<std::unique_ptr<Robot>>& robots) {
+std::map<std::string, std::pair<double, uint64_t>> stage_totals(
+    const std::vector<std::unique_ptr<Robot>>& robots) {
   std::map<std::string, std::pair<double, uint64_t>> out;
   for (const auto& r : robots)
     for (const char* name : kStages) {
@@ -181,8 +190,9 @@ double pct(std::vector<double> v, double p) {
 }
 
 void report(const char* what, const std::vector<double>& v, size_t expected) {
-  std::printf("%-34s n=%zu/%zu  p50 %.2f ms  p90 %.2f ms  p99 %.2f ms  max %.2f ms\n", what, v.size(), expected,
-              pct(v, 50), pct(v, 90), pct(v, 99), v.empty() ? 0.0 : *std::max_element(v.begin(), v.end()));
+  std::printf("%-34s n=%zu/%zu  p50 %.2f ms  p90 %.2f ms  p99 %.2f ms  max %.2f ms\n", what,
+              v.size(), expected, pct(v, 50), pct(v, 90), pct(v, 99),
+              v.empty() ? 0.0 : *std::max_element(v.begin(), v.end()));
 }
 
 // The coordinator's side: one client subscribed to every member's reply topic.
@@ -203,17 +213,20 @@ class Coordinator {
       std::string member = m.topic.substr(std::string("rcan/fleet/bench/robot/").size());
       member = member.substr(0, member.find('/'));
       std::lock_guard<std::mutex> lk(mu_);
-      if (rt->as_string() != awaiting_ || (ty->as_string() != "ACK" && ty->as_string() != "ERROR")) return;
+      if (rt->as_string() != awaiting_ || (ty->as_string() != "ACK" && ty->as_string() != "ERROR"))
+        return;
       if (ty->as_string() == "ERROR") ++errors_;
       if (acked_.emplace(member, t).second) cv_.notify_all();
     });
     (void)client_->start();
-    for (int i = 0; i < 1000 && !client_->connected(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    for (int i = 0; i < 1000 && !client_->connected(); ++i)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
     std::this_thread::sleep_for(std::chrono::milliseconds(200));
   }
   // Publishes and waits for `n` answers (up to `timeout_ms`); returns member → arrival time.
-  std::map<std::string, double> round(const std::string& topic, const json::Value& msg, const std::string& id, int qos,
-                                      bool retain, size_t n, double* t0, int timeout_ms, int* errors) {
+  std::map<std::string, double> round(const std::string& topic, const json::Value& msg,
+                                      const std::string& id, int qos, bool retain, size_t n,
+                                      double* t0, int timeout_ms, int* errors) {
     {
       std::lock_guard<std::mutex> lk(mu_);
       awaiting_ = id;
@@ -256,19 +269,28 @@ struct Options {
 bool parse_options(int argc, char** argv, Options& o) {
   for (int i = 1; i + 1 < argc; i += 2) {
     std::string a = argv[i];
-    if (a == "--robots") o.robots_n = std::atoi(argv[i + 1]);
-    else if (a == "--rounds") o.rounds = std::atoi(argv[i + 1]);
-    else if (a == "--estop-qos") o.estop_qos = std::atoi(argv[i + 1]);
-    else if (a == "--mosquitto") o.mosquitto = argv[i + 1];
-    else if (a == "--perf-ctl") o.perf_ctl = argv[i + 1];
-    else if (a == "--profile-round") o.profile_round = std::atoi(argv[i + 1]);
-    else if (a == "--warm-up") o.warm_up = std::atoi(argv[i + 1]);
-    else if (a == "--segment-kib") o.segment_bytes = std::strtoull(argv[i + 1], nullptr, 10) << 10;
+    if (a == "--robots")
+      o.robots_n = std::atoi(argv[i + 1]);
+    else if (a == "--rounds")
+      o.rounds = std::atoi(argv[i + 1]);
+    else if (a == "--estop-qos")
+      o.estop_qos = std::atoi(argv[i + 1]);
+    else if (a == "--mosquitto")
+      o.mosquitto = argv[i + 1];
+    else if (a == "--perf-ctl")
+      o.perf_ctl = argv[i + 1];
+    else if (a == "--profile-round")
+      o.profile_round = std::atoi(argv[i + 1]);
+    else if (a == "--warm-up")
+      o.warm_up = std::atoi(argv[i + 1]);
+    else if (a == "--segment-kib")
+      o.segment_bytes = std::strtoull(argv[i + 1], nullptr, 10) << 10;
   }
-  if (o.robots_n < 1 || o.robots_n > 2000 || o.rounds < 1 || o.rounds > 1000 || o.segment_bytes < (64u << 10) ||
-      (o.estop_qos != 1 && o.estop_qos != 2)) {
+  if (o.robots_n < 1 || o.robots_n > 2000 || o.rounds < 1 || o.rounds > 1000 ||
+      o.segment_bytes < (64u << 10) || (o.estop_qos != 1 && o.estop_qos != 2)) {
     std::fprintf(stderr,
-                 "usage: fleet_bench [--robots 1..2000] [--rounds 1..1000] [--estop-qos 1|2] [--segment-kib N] "
+                 "usage: fleet_bench [--robots 1..2000] [--rounds 1..1000] [--estop-qos 1|2] "
+                 "[--segment-kib N] "
                  "[--mosquitto PATH] [--perf-ctl FIFO --profile-round N] [--warm-up 0|1]\n");
     return false;
   }
@@ -302,12 +324,14 @@ struct Fleet {
 void start_broker(Fleet& f) {
   uint16_t port = free_port();
   std::ofstream(f.dir / "mosquitto.conf") << "listener " << port
-                                          << " 127.0.0.1\nset_tcp_nodelay true\nallow_anonymous true\npersistence false\nmax_queued_messages 10000\n";
+                                          << " 127.0.0.1\nset_tcp_nodelay true\nallow_anonymous "
+                                             "true\npersistence false\nmax_queued_messages 10000\n";
   f.broker = fork();
   if (f.broker == 0) {
     int devnull = ::open("/dev/null", O_WRONLY);
     dup2(devnull, 2);
-    execl(f.opt.mosquitto.c_str(), f.opt.mosquitto.c_str(), "-c", (f.dir / "mosquitto.conf").c_str(), nullptr);
+    execl(f.opt.mosquitto.c_str(), f.opt.mosquitto.c_str(), "-c",
+          (f.dir / "mosquitto.conf").c_str(), nullptr);
     _exit(127);
   }
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
@@ -317,7 +341,8 @@ void start_broker(Fleet& f) {
 // One fleet token for all (HS256 issuer shared by the fleet).
 void issue_fleet_token(Fleet& f) {
   std::string secret = "fleet-bench-secret-0123456789abcdef0123456789";
-  auto signing = jwt::SigningKey::hs256_secret({reinterpret_cast<const uint8_t*>(secret.data()), secret.size()});
+  auto signing = jwt::SigningKey::hs256_secret(
+      {reinterpret_cast<const uint8_t*>(secret.data()), secret.size()});
   f.verify = *signing->verification_key();
   json::Array fleet_claim;
   for (int i = 0; i < f.opt.robots_n; ++i) {
@@ -370,7 +395,8 @@ std::unique_ptr<Robot> start_robot(const Fleet& f, const config::FleetConfig& fc
   auth.trust.add("fleet-issuer", *f.verify);
   auth.verify.audience = ruri;
   auth.verify.fleet_ids = {dev, ruri, r->member};
-  r->svc = std::make_unique<node::NodeServices>(ns, rcan::Clock::system(), std::move(auth), *r->timed, *r->audit);
+  r->svc = std::make_unique<node::NodeServices>(ns, rcan::Clock::system(), std::move(auth),
+                                                *r->timed, *r->audit);
   config::FleetConfig mine = fc;
   mine.member_id = r->member;
   r->svc->fleet = std::make_shared<node::FleetMembership>(node::FleetMembership{mine, {}});
@@ -420,13 +446,15 @@ bool start_robots(Fleet& f) {
   }
   if (failed.load()) return false;
   for (int i = 0; i < 3000; ++i) {
-    bool all = std::all_of(f.robots.begin(), f.robots.end(), [](const auto& r) { return r->mqtt->connected(); });
+    bool all = std::all_of(f.robots.begin(), f.robots.end(),
+                           [](const auto& r) { return r->mqtt->connected(); });
     if (all) break;
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   std::this_thread::sleep_for(std::chrono::milliseconds(500));  // subscriptions settle
   std::printf(
-      "fleet_bench: %d robots (full node stacks, one MQTT connection each, estop subscription QoS %d) on one "
+      "fleet_bench: %d robots (full node stacks, one MQTT connection each, estop subscription QoS "
+      "%d) on one "
       "Mosquitto, up in %.0f ms\n",
       f.opt.robots_n, f.opt.estop_qos, mono_ms() - t_start);
   return true;
@@ -437,8 +465,8 @@ void report_idle_cost(int robots_n) {
   double c0 = cpu_now(), w0 = mono_ms();
   std::this_thread::sleep_for(std::chrono::seconds(2));
   double share = (cpu_now() - c0) / ((mono_ms() - w0) / 1000.0);
-  std::printf("idle: %.1f%% of one core for %d robots (%.0f us of CPU per robot per second)\n", share * 100, robots_n,
-              share * 1e6 / robots_n);
+  std::printf("idle: %.1f%% of one core for %d robots (%.0f us of CPU per robot per second)\n",
+              share * 100, robots_n, share * 1e6 / robots_n);
 }
 
 // What the rounds measured, over all robot×round samples.
@@ -454,10 +482,12 @@ void warm_up(const Fleet& f, Coordinator& coord) {
   std::string wid = new_uuid_v4();
   double tw = 0;
   int werr = 0;
-  auto wacks = coord.round("rcan/fleet/bench/cmd",
-                           f.message("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "bench"}}, wid),
-                           wid, 1, false, f.size(), &tw, 10000, &werr);
-  std::printf("warm-up: broadcast status answered by %zu/%d robots\n", wacks.size(), f.opt.robots_n);
+  auto wacks = coord.round(
+      "rcan/fleet/bench/cmd",
+      f.message("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "bench"}}, wid),
+      wid, 1, false, f.size(), &tw, 10000, &werr);
+  std::printf("warm-up: broadcast status answered by %zu/%d robots\n", wacks.size(),
+              f.opt.robots_n);
   std::this_thread::sleep_for(std::chrono::milliseconds(500));
 }
 
@@ -479,16 +509,18 @@ void estop_round(const Fleet& f, Coordinator& coord, int round, Results& res) {
   };
   auto wake0 = wakeups_by_thread();
   perf("enable");
-  auto acks = coord.round("rcan/fleet/bench/estop",
-                          f.message("SAFETY", json::Object{{"safety_event", "ESTOP"}, {"fleet_id", "bench"}}, id), id,
-                          2, true, n, &t0, 10000, &errors);
+  auto acks = coord.round(
+      "rcan/fleet/bench/estop",
+      f.message("SAFETY", json::Object{{"safety_event", "ESTOP"}, {"fleet_id", "bench"}}, id), id,
+      2, true, n, &t0, 10000, &errors);
   for (auto& [m, t] : acks) res.estop_ack.push_back(t - t0);
   perf("disable");
   const double round_cpu_ms = (cpu_now() - cpu0) * 1000;
   const double round_faults = static_cast<double>(faults_now() - faults0) / o.robots_n;
   auto stages1 = stage_totals(f.robots);
   res.estop_cpu_ms += round_cpu_ms;
-  for (auto& [name, n_wakes] : wakeups_by_thread()) res.estop_wakeups[name] += n_wakes - wake0[name];
+  for (auto& [name, n_wakes] : wakeups_by_thread())
+    res.estop_wakeups[name] += n_wakes - wake0[name];
   std::vector<double> round_latch;
   for (auto& r : f.robots) {
     double t = r->timed->latched_at.load();
@@ -496,10 +528,13 @@ void estop_round(const Fleet& f, Coordinator& coord, int round, Results& res) {
   }
   // Round 1 is each robot's first message: the fleet JWT is verified (later rounds find it
   // in the robot's verified-token cache) and every path runs for the first time.
-  std::printf("  round %d: ESTOP latched on %zu/%zu  p50 %.2f ms  p99 %.2f ms  max %.2f ms  CPU %.0f us/robot  %.1f page faults/robot%s\n",
-              round + 1, round_latch.size(), n, pct(round_latch, 50), pct(round_latch, 99),
-              round_latch.empty() ? 0.0 : *std::max_element(round_latch.begin(), round_latch.end()),
-              round_cpu_ms * 1000 / o.robots_n, round_faults, round == 0 && o.warm_up == 0 ? "  (first message)" : "");
+  std::printf(
+      "  round %d: ESTOP latched on %zu/%zu  p50 %.2f ms  p99 %.2f ms  max %.2f ms  CPU %.0f "
+      "us/robot  %.1f page faults/robot%s\n",
+      round + 1, round_latch.size(), n, pct(round_latch, 50), pct(round_latch, 99),
+      round_latch.empty() ? 0.0 : *std::max_element(round_latch.begin(), round_latch.end()),
+      round_cpu_ms * 1000 / o.robots_n, round_faults,
+      round == 0 && o.warm_up == 0 ? "  (first message)" : "");
   std::printf("           stage means (wall, us):");
   for (const char* name : kStages) {
     const double dsum = stages1[name].first - stages0[name].first;
@@ -517,24 +552,27 @@ void resume_and_command(const Fleet& f, Coordinator& coord, Results& res) {
   double t0 = 0;
   int errors = 0;
   std::string rid = new_uuid_v4();
-  auto acks = coord.round("rcan/fleet/bench/estop",
-                          f.message("SAFETY", json::Object{{"safety_event", "RESUME"}, {"fleet_id", "bench"}}, rid),
-                          rid, 2, true, n, &t0, 10000, &errors);
+  auto acks = coord.round(
+      "rcan/fleet/bench/estop",
+      f.message("SAFETY", json::Object{{"safety_event", "RESUME"}, {"fleet_id", "bench"}}, rid),
+      rid, 2, true, n, &t0, 10000, &errors);
   res.failures += errors + static_cast<int>(n - acks.size());
   std::string sid = new_uuid_v4();
-  acks = coord.round("rcan/fleet/bench/cmd",
-                     f.message("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "bench"}}, sid), sid,
-                     1, false, n, &t0, 10000, &errors);
+  acks = coord.round(
+      "rcan/fleet/bench/cmd",
+      f.message("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "bench"}}, sid),
+      sid, 1, false, n, &t0, 10000, &errors);
   for (auto& [m, t] : acks) res.status_ack.push_back(t - t0);
   res.failures += errors + static_cast<int>(n - acks.size());
   std::string mid = new_uuid_v4();
-  acks = coord.round("rcan/fleet/bench/cmd",
-                     f.message("FLEET_COMMAND",
-                               json::Object{{"command", "move"},
-                                            {"fleet_id", "bench"},
-                                            {"params", json::Object{{"linear", 0.1}, {"duration_ms", 50}}}},
-                               mid),
-                     mid, 1, false, n, &t0, 10000, &errors);
+  acks = coord.round(
+      "rcan/fleet/bench/cmd",
+      f.message("FLEET_COMMAND",
+                json::Object{{"command", "move"},
+                             {"fleet_id", "bench"},
+                             {"params", json::Object{{"linear", 0.1}, {"duration_ms", 50}}}},
+                mid),
+      mid, 1, false, n, &t0, 10000, &errors);
   for (auto& [m, t] : acks) res.move_ack.push_back(t - t0);
   res.failures += errors + static_cast<int>(n - acks.size());
 }
@@ -544,11 +582,13 @@ void print_report(const Fleet& f, const Results& res) {
   size_t expected = f.size() * static_cast<size_t>(rounds);
   report("fleet ESTOP publish -> latched", res.latch, expected);
   report("fleet ESTOP publish -> ACK back", res.estop_ack, expected);
-  std::printf("fleet ESTOP CPU (all robots, publish to last ACK): %.1f ms per round, %.0f us per robot\n",
-              res.estop_cpu_ms / rounds, res.estop_cpu_ms * 1000 / rounds / robots_n);
+  std::printf(
+      "fleet ESTOP CPU (all robots, publish to last ACK): %.1f ms per round, %.0f us per robot\n",
+      res.estop_cpu_ms / rounds, res.estop_cpu_ms * 1000 / rounds / robots_n);
   std::printf("fleet ESTOP thread wake-ups per robot:");
   for (auto& [name, n_wakes] : res.estop_wakeups)
-    if (n_wakes > 0) std::printf(" %s %.2f", name.c_str(), static_cast<double>(n_wakes) / rounds / robots_n);
+    if (n_wakes > 0)
+      std::printf(" %s %.2f", name.c_str(), static_cast<double>(n_wakes) / rounds / robots_n);
   std::printf("\n");
   report("broadcast status -> ACK back", res.status_ack, expected);
   report("broadcast move -> ACK back", res.move_ack, expected);

@@ -26,7 +26,8 @@ const std::string kCommand =
     R"("timestamp_ms":1795000000123,"payload":{"action":"move","linear":0.2,"duration_ms":100}})";
 
 Object applied() {
-  return Object{{"action", "move"}, {"linear", 0.2}, {"angular", 0.0}, {"duration_ms", int64_t{100}}};
+  return Object{
+      {"action", "move"}, {"linear", 0.2}, {"angular", 0.0}, {"duration_ms", int64_t{100}}};
 }
 
 Object detail() {
@@ -36,8 +37,10 @@ Object detail() {
 }
 
 Value envelope() {
-  Object payload{{"command", "move"},
-                 {"result", Object{{"accepted", true}, {"odometry_m", 12.25}, {"pose", Array{1.5, -0.25, 0.7853}}}}};
+  Object payload{
+      {"command", "move"},
+      {"result",
+       Object{{"accepted", true}, {"odometry_m", 12.25}, {"pose", Array{1.5, -0.25, 0.7853}}}}};
   Object o;
   o.set("version", "1.2");
   o.set("message_id", "9b2e4c6a-1d3f-4a5b-8c7d-0e1f2a3b4c5d");

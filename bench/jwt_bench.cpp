@@ -33,12 +33,20 @@ std::string private_pem(EVP_PKEY* pk) {
 jwt::SigningKey make_key(jwt::Alg alg) {
   Result<jwt::SigningKey> k = Error(ErrorCode::kInternal, "");
   switch (alg) {
-    case jwt::Alg::kEdDSA: k = jwt::SigningKey::from_pem(private_pem(EVP_PKEY_Q_keygen(nullptr, nullptr, "ED25519"))); break;
-    case jwt::Alg::kES256: k = jwt::SigningKey::from_pem(private_pem(EVP_PKEY_Q_keygen(nullptr, nullptr, "EC", "P-256"))); break;
-    case jwt::Alg::kRS256:
-      k = jwt::SigningKey::from_pem(private_pem(EVP_PKEY_Q_keygen(nullptr, nullptr, "RSA", size_t{2048})));
+    case jwt::Alg::kEdDSA:
+      k = jwt::SigningKey::from_pem(private_pem(EVP_PKEY_Q_keygen(nullptr, nullptr, "ED25519")));
       break;
-    case jwt::Alg::kHS256: k = jwt::SigningKey::hs256_secret(Bytes(48, 0x5a)); break;
+    case jwt::Alg::kES256:
+      k = jwt::SigningKey::from_pem(
+          private_pem(EVP_PKEY_Q_keygen(nullptr, nullptr, "EC", "P-256")));
+      break;
+    case jwt::Alg::kRS256:
+      k = jwt::SigningKey::from_pem(
+          private_pem(EVP_PKEY_Q_keygen(nullptr, nullptr, "RSA", size_t{2048})));
+      break;
+    case jwt::Alg::kHS256:
+      k = jwt::SigningKey::hs256_secret(Bytes(48, 0x5a));
+      break;
   }
   if (!k.ok()) {
     std::fprintf(stderr, "key generation failed: %s\n", k.error().message.c_str());

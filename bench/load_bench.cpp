@@ -44,8 +44,8 @@
 
 #include <algorithm>
 #include <atomic>
-#include <chrono>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -63,15 +63,15 @@
 #include <thread>
 #include <vector>
 
+#include "bench_support.h"
+#include "config/config.h"
 #include "rcan/audit/secret.h"
 #include "rcan/crypto/jwt.h"
 #include "rcan/crypto/keys.h"
 #include "rcan/crypto/message_sig.h"
 #include "rcan/encoding.h"
 #include "rcan/json.h"
-#include "config/config.h"
 #include "transport/beast.h"
-#include "bench_support.h"
 
 namespace fs = std::filesystem;
 namespace asio = boost::asio;
@@ -155,7 +155,8 @@ asio::awaitable<void> baseline_conn(beast::tcp_stream stream) {
 int serve_baseline(uint16_t port, int threads) {
   signal(SIGPIPE, SIG_IGN);
   asio::io_context ioc{threads};
-  tcp::acceptor acceptor(asio::make_strand(ioc), tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
+  tcp::acceptor acceptor(asio::make_strand(ioc),
+                         tcp::endpoint(asio::ip::make_address("127.0.0.1"), port));
   asio::co_spawn(
       acceptor.get_executor(),
       [&]() -> asio::awaitable<void> {
@@ -164,7 +165,8 @@ int serve_baseline(uint16_t port, int threads) {
           if (ec) co_return;
           sock.set_option(tcp::no_delay(true), ec);
           auto ex = sock.get_executor();
-          asio::co_spawn(ex, baseline_conn(beast::tcp_stream(std::move(sock))), [](std::exception_ptr) {});
+          asio::co_spawn(ex, baseline_conn(beast::tcp_stream(std::move(sock))),
+                         [](std::exception_ptr) {});
         }
       },
       [](std::exception_ptr) {});
@@ -189,8 +191,9 @@ MakeCommand seed_move() {
   return [] {
     Outgoing o;
     o.id = fast_uuid();
-    o.body = R"({"version":"1.0.0","message_id":")" + o.id + R"(","type":"COMMAND","timestamp_ms":)" +
-             std::to_string(wall_ms()) + R"(,"payload":{"action":"move","linear":0.2,"duration_ms":100}})";
+    o.body = R"({"version":"1.0.0","message_id":")" + o.id +
+             R"(","type":"COMMAND","timestamp_ms":)" + std::to_string(wall_ms()) +
+             R"(,"payload":{"action":"move","linear":0.2,"duration_ms":100}})";
     return o;
   };
 }
@@ -199,8 +202,8 @@ enum class Expect { kNodeAck, kBaseline };
 
 // Checks one answer. `allow_estop`: a 423 estop_active refusal is a correct answer too (the
 // ESTOP phase latches the robot while clients keep sending).
-bool check_answer(Expect e, int status, const std::string& body, const std::string& id, bool allow_estop,
-                  bool& refused, std::string& why) {
+bool check_answer(Expect e, int status, const std::string& body, const std::string& id,
+                  bool allow_estop, bool& refused, std::string& why) {
   refused = false;
   if (e == Expect::kBaseline) {
     auto v = json::parse(body, json::ParseOptions{});
@@ -242,7 +245,9 @@ struct RunResult {
   double seconds = 0;
   std::vector<double> lat_us;  // sorted
   std::vector<std::string> failures;
-  double throughput() const { return seconds > 0 ? static_cast<double>(ok + refused) / seconds : 0; }
+  double throughput() const {
+    return seconds > 0 ? static_cast<double>(ok + refused) / seconds : 0;
+  }
 };
 
 struct Shared {
@@ -287,7 +292,8 @@ asio::awaitable<void> http_client(std::shared_ptr<Shared> sh) {
   const RunOptions& o = *sh->opt;
   ClientTally tally;
   beast::tcp_stream s(co_await asio::this_coro::executor);
-  auto [cec] = co_await s.async_connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), o.port), kNoThrow);
+  auto [cec] = co_await s.async_connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), o.port),
+                                        kNoThrow);
   if (cec) {
     std::lock_guard<std::mutex> l(sh->mu);
     ++sh->res.connect_failures;
@@ -301,7 +307,8 @@ asio::awaitable<void> http_client(std::shared_ptr<Shared> sh) {
   req.set(http::field::content_type, "application/json");
   req.keep_alive(true);
   uint64_t sent = 0;
-  while (sh->phase.load(std::memory_order_relaxed) < 2 && (o.max_requests == 0 || sent < o.max_requests)) {
+  while (sh->phase.load(std::memory_order_relaxed) < 2 &&
+         (o.max_requests == 0 || sent < o.max_requests)) {
     Outgoing out = o.make();
     if (out.body.empty()) break;  // a finite supply ran out
     req.body() = std::move(out.body);
@@ -322,8 +329,8 @@ asio::awaitable<void> http_client(std::shared_ptr<Shared> sh) {
     }
     bool refused = false;
     std::string why;
-    bool good = check_answer(o.expect, static_cast<int>(res.result_int()), res.body(), out.id, o.allow_estop,
-                             refused, why);
+    bool good = check_answer(o.expect, static_cast<int>(res.result_int()), res.body(), out.id,
+                             o.allow_estop, refused, why);
     tally.record(*sh, good, refused, t0, std::move(why));
   }
   beast::error_code ec;
@@ -351,7 +358,8 @@ asio::awaitable<void> ws_client(std::shared_ptr<Shared> sh) {
     cec = wec ? wec : rec;
     if (!cec && o.expect == Expect::kNodeAck &&
         beast::buffers_to_string(in.data()).find("CONNECT_ACK") == std::string::npos) {
-      tally.record(*sh, false, false, 0, "CONNECT refused: " + beast::buffers_to_string(in.data()).substr(0, 200));
+      tally.record(*sh, false, false, 0,
+                   "CONNECT refused: " + beast::buffers_to_string(in.data()).substr(0, 200));
       tally.merge_into(*sh);
       co_return;
     }
@@ -362,7 +370,8 @@ asio::awaitable<void> ws_client(std::shared_ptr<Shared> sh) {
     co_return;
   }
   uint64_t sent = 0;
-  while (sh->phase.load(std::memory_order_relaxed) < 2 && (o.max_requests == 0 || sent < o.max_requests)) {
+  while (sh->phase.load(std::memory_order_relaxed) < 2 &&
+         (o.max_requests == 0 || sent < o.max_requests)) {
     Outgoing out = o.make();
     if (out.body.empty()) break;
     int64_t t0 = mono_us();
@@ -383,7 +392,8 @@ asio::awaitable<void> ws_client(std::shared_ptr<Shared> sh) {
         goto out;
       }
       std::string text = beast::buffers_to_string(in.data());
-      if (o.expect == Expect::kNodeAck && text.find(out.id) == std::string::npos) continue;  // an event
+      if (o.expect == Expect::kNodeAck && text.find(out.id) == std::string::npos)
+        continue;  // an event
       bool refused = false;
       std::string why;
       int status = 200;
@@ -418,8 +428,10 @@ RunResult run_load(const RunOptions& o) {
     t_measure = mono_us();
     sh->phase = 1;
     if (o.on_measuring) o.on_measuring();
-    auto until = std::chrono::steady_clock::now() + std::chrono::microseconds(static_cast<int64_t>(o.seconds * 1e6));
-    while (std::chrono::steady_clock::now() < until && !g_abort_load.load() && !sh->clients_done.load())
+    auto until = std::chrono::steady_clock::now() +
+                 std::chrono::microseconds(static_cast<int64_t>(o.seconds * 1e6));
+    while (std::chrono::steady_clock::now() < until && !g_abort_load.load() &&
+           !sh->clients_done.load())
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
     t_end = mono_us();
     sh->phase = 2;
@@ -514,7 +526,8 @@ double machine_busy_s() {
   st >> cpu;
   for (uint64_t& x : v) st >> x;
   if (cpu != "cpu") return 0;
-  const uint64_t busy = v[0] + v[1] + v[2] + v[5] + v[6] + v[7];  // user nice system irq softirq steal
+  const uint64_t busy =
+      v[0] + v[1] + v[2] + v[5] + v[6] + v[7];  // user nice system irq softirq steal
   return static_cast<double>(busy) / static_cast<double>(sysconf(_SC_CLK_TCK));
 }
 
@@ -551,7 +564,8 @@ DiskProbe probe_disk(const std::string& dir, size_t bytes, double seconds) {
   constexpr size_t kFileBytes = size_t{32} << 20;
   const std::vector<char> zeros(size_t{1} << 20, 0);
   for (size_t off = 0; off < kFileBytes; off += zeros.size())
-    if (::pwrite(fd, zeros.data(), zeros.size(), static_cast<off_t>(off)) != static_cast<ssize_t>(zeros.size()))
+    if (::pwrite(fd, zeros.data(), zeros.size(), static_cast<off_t>(off)) !=
+        static_cast<ssize_t>(zeros.size()))
       return failed("zero-fill");
   if (::fsync(fd) != 0) return failed("fsync");
   std::string rec(bytes, 'x');
@@ -584,8 +598,8 @@ DiskProbe probe_disk(const std::string& dir, size_t bytes, double seconds) {
   d.per_s = n / elapsed_s;
   d.p50_us = pct(lat, 0.50);
   d.p99_us = pct(lat, 0.99);
-  const double thread_cpu_us =
-      static_cast<double>(c1.tv_sec - c0.tv_sec) * 1e6 + static_cast<double>(c1.tv_nsec - c0.tv_nsec) / 1e3;
+  const double thread_cpu_us = static_cast<double>(c1.tv_sec - c0.tv_sec) * 1e6 +
+                               static_cast<double>(c1.tv_nsec - c0.tv_nsec) / 1e3;
   d.thread_cpu_us = thread_cpu_us / n;
   d.machine_cpu_us = busy * 1e6 / n;
   return d;
@@ -599,7 +613,8 @@ std::map<std::string, std::vector<double>> estop_lines(Child& c) {
     if (!v.ok() || !v->is_object()) continue;
     const json::Value* t = v->get("transport");
     const json::Value* us = v->get("arrival_to_driver_us");
-    if (t && t->is_string() && us && us->is_number()) out[t->as_string()].push_back(us->to_double());
+    if (t && t->is_string() && us && us->is_number())
+      out[t->as_string()].push_back(us->to_double());
   }
   for (auto& [k, vec] : out) std::sort(vec.begin(), vec.end());
   return out;
@@ -636,22 +651,36 @@ bool parse_options(int argc, char** argv, Options& o) {
       o.baseline_threads = std::atoi(next().c_str());
       return true;
     }
-    if (a == "--rcand") o.rcand = next();
-    else if (a == "--seconds") o.seconds = std::atof(next().c_str());
-    else if (a == "--warmup") o.warmup = std::atof(next().c_str());
-    else if (a == "--clients") o.clients_list = next();
-    else if (a == "--phases") o.phases = next();
-    else if (a == "--io-threads") o.io_threads = std::atoi(next().c_str());
-    else if (a == "--estops") o.estops = std::atoi(next().c_str());
-    else if (a == "--smoke") o.smoke = std::atol(next().c_str());
-    else if (a == "--mldsa-pool") o.mldsa_pool = std::atol(next().c_str());
-    else if (a == "--data-root") o.data_root = next();
-    else if (a == "--pairs") o.pairs = std::max(1, std::atoi(next().c_str()));
+    if (a == "--rcand")
+      o.rcand = next();
+    else if (a == "--seconds")
+      o.seconds = std::atof(next().c_str());
+    else if (a == "--warmup")
+      o.warmup = std::atof(next().c_str());
+    else if (a == "--clients")
+      o.clients_list = next();
+    else if (a == "--phases")
+      o.phases = next();
+    else if (a == "--io-threads")
+      o.io_threads = std::atoi(next().c_str());
+    else if (a == "--estops")
+      o.estops = std::atoi(next().c_str());
+    else if (a == "--smoke")
+      o.smoke = std::atol(next().c_str());
+    else if (a == "--mldsa-pool")
+      o.mldsa_pool = std::atol(next().c_str());
+    else if (a == "--data-root")
+      o.data_root = next();
+    else if (a == "--pairs")
+      o.pairs = std::max(1, std::atoi(next().c_str()));
     else {
-      std::fprintf(stderr,
-                   "usage: load_bench [--rcand PATH] [--seconds S] [--warmup S] [--clients 1,16,64]\n"
-                   "                  [--phases disk,startup,memory,http,ws,stages,estop,mldsa] [--io-threads N]\n"
-                   "                  [--estops N] [--mldsa-pool N] [--data-root DIR] [--pairs N] [--smoke N]\n");
+      std::fprintf(
+          stderr,
+          "usage: load_bench [--rcand PATH] [--seconds S] [--warmup S] [--clients 1,16,64]\n"
+          "                  [--phases disk,startup,memory,http,ws,stages,estop,mldsa] "
+          "[--io-threads N]\n"
+          "                  [--estops N] [--mldsa-pool N] [--data-root DIR] [--pairs N] [--smoke "
+          "N]\n");
       return false;
     }
   }
@@ -735,12 +764,15 @@ void run_disk_phase(Bench& b) {
   constexpr size_t kGroupBytes = 3000;  // about five command records: a group commit at 16 clients
   b.disk = probe_disk(b.root, kGroupBytes, 1.0);
   const DiskProbe& disk = b.disk;
-  std::printf("\ndisk under the data dir, alone (append %zu bytes + fdatasync, as a group commit)\n", kGroupBytes);
+  std::printf(
+      "\ndisk under the data dir, alone (append %zu bytes + fdatasync, as a group commit)\n",
+      kGroupBytes);
   if (disk.ok)
-    std::printf("  %.0f syncs/s  p50 %.0f us  p99 %.0f us;  CPU per sync: syncing thread %.1f us, "
-                "whole machine %.1f us  (n=%llu)\n",
-                disk.per_s, disk.p50_us, disk.p99_us, disk.thread_cpu_us, disk.machine_cpu_us,
-                static_cast<unsigned long long>(disk.syncs));
+    std::printf(
+        "  %.0f syncs/s  p50 %.0f us  p99 %.0f us;  CPU per sync: syncing thread %.1f us, "
+        "whole machine %.1f us  (n=%llu)\n",
+        disk.per_s, disk.p50_us, disk.p99_us, disk.thread_cpu_us, disk.machine_cpu_us,
+        static_cast<unsigned long long>(disk.syncs));
   else
     std::printf("  probe failed (%s)\n", disk.error.c_str());
 }
@@ -749,10 +781,10 @@ void run_disk_phase(Bench& b) {
 bool start_baseline(Bench& b) {
   // The embedded node starts with io_threads 2 (docs/CONFIG.md); the baseline uses the same.
   b.bport = free_port();
-  b.baseline = std::make_unique<Child>(std::vector<std::string>{fs::canonical("/proc/self/exe").string(),
-                                                                "--serve-baseline", std::to_string(b.bport),
-                                                                std::to_string(b.opt.io_threads)},
-                                       "");
+  b.baseline = std::make_unique<Child>(
+      std::vector<std::string>{fs::canonical("/proc/self/exe").string(), "--serve-baseline",
+                               std::to_string(b.bport), std::to_string(b.opt.io_threads)},
+      "");
   if (wait_ready(*b.baseline, b.bport) < 0) {
     std::fprintf(stderr, "the baseline server did not start\n");
     return false;
@@ -787,7 +819,8 @@ void run_pair(Bench& b, bool ws, int c, bool stage_run, std::vector<double>& tpu
   std::thread sampler;
   std::atomic<bool> sampling{true};
   sampler = std::thread([&] {
-    std::this_thread::sleep_for(std::chrono::microseconds(static_cast<int64_t>((warmup + seconds / 2) * 1e6)));
+    std::this_thread::sleep_for(
+        std::chrono::microseconds(static_cast<int64_t>((warmup + seconds / 2) * 1e6)));
     if (sampling) mid = proc_stat(b.node.child->pid());
   });
   if (stage_run) b.before16 = scrape(b.node.port);
@@ -804,35 +837,41 @@ void run_pair(Bench& b, bool ws, int c, bool stage_run, std::vector<double>& tpu
   ProcStat q1 = proc_stat(b.baseline->pid());
   print_row("rcand", c, rn);
   print_row("bare Beast server", c, rb);
-  double ncpu = (p1.cpu_s - p0.cpu_s) / static_cast<double>(std::max<uint64_t>(1, rn.ok + rn.refused + rn.failed));
+  double ncpu = (p1.cpu_s - p0.cpu_s) /
+                static_cast<double>(std::max<uint64_t>(1, rn.ok + rn.refused + rn.failed));
   double bcpu = (q1.cpu_s - q0.cpu_s) / static_cast<double>(std::max<uint64_t>(1, rb.ok));
   tput_ratio.push_back(rn.throughput() / std::max(1.0, rb.throughput()));
   p99_ratio.push_back(pct(rn.lat_us, 0.99) / std::max(1.0, pct(rb.lat_us, 0.99)));
-  std::printf("  %-22s %3d  throughput %.0f%%  p99 %.2fx  (server CPU per request: rcand %.0f us, bare %.0f us; "
-              "rcand RSS under load %.1f MB)\n",
-              "rcand / bare", c, 100.0 * tput_ratio.back(), p99_ratio.back(), ncpu * 1e6, bcpu * 1e6,
-              static_cast<double>(mid.rss_kb) / 1024.0);
+  std::printf(
+      "  %-22s %3d  throughput %.0f%%  p99 %.2fx  (server CPU per request: rcand %.0f us, bare "
+      "%.0f us; "
+      "rcand RSS under load %.1f MB)\n",
+      "rcand / bare", c, 100.0 * tput_ratio.back(), p99_ratio.back(), ncpu * 1e6, bcpu * 1e6,
+      static_cast<double>(mid.rss_kb) / 1024.0);
   if (rn.failed || rn.connect_failures || rb.failed || rb.connect_failures) b.all_ok = false;
 }
 
 // --pairs N > 1: the medians and ranges of the N ratios at `c` clients.
-void print_pair_spread(int c, int pairs, const std::vector<double>& tput_ratio, const std::vector<double>& p99_ratio) {
+void print_pair_spread(int c, int pairs, const std::vector<double>& tput_ratio,
+                       const std::vector<double>& p99_ratio) {
   auto median = [](std::vector<double> v) {
     std::sort(v.begin(), v.end());
     return v.size() % 2 ? v[v.size() / 2] : (v[v.size() / 2 - 1] + v[v.size() / 2]) / 2;
   };
   auto [tlo, thi] = std::minmax_element(tput_ratio.begin(), tput_ratio.end());
   auto [plo, phi] = std::minmax_element(p99_ratio.begin(), p99_ratio.end());
-  std::printf("  %-22s %3d  over %d pairs: throughput median %.0f%% (%.0f–%.0f%%), p99 median %.2fx "
-              "(%.2f–%.2fx)\n",
-              "rcand / bare", c, pairs, 100.0 * median(tput_ratio), 100.0 * *tlo, 100.0 * *thi,
-              median(p99_ratio), *plo, *phi);
+  std::printf(
+      "  %-22s %3d  over %d pairs: throughput median %.0f%% (%.0f–%.0f%%), p99 median %.2fx "
+      "(%.2f–%.2fx)\n",
+      "rcand / bare", c, pairs, 100.0 * median(tput_ratio), 100.0 * *tlo, 100.0 * *thi,
+      median(p99_ratio), *plo, *phi);
 }
 
 // The http / ws phases: rcand against the bare server at each client count.
 void compare(Bench& b, bool ws) {
-  std::printf("\n%s COMMAND (EdDSA JWT, move), %s\n", ws ? "WebSocket" : "HTTP keep-alive",
-              ws ? "one stream per client, one frame in flight each" : "one request in flight per client");
+  std::printf(
+      "\n%s COMMAND (EdDSA JWT, move), %s\n", ws ? "WebSocket" : "HTTP keep-alive",
+      ws ? "one stream per client, one frame in flight each" : "one request in flight per client");
   for (int c : parse_list(b.opt.clients_list)) {
     std::vector<double> tput_ratio, p99_ratio;
     for (int pair = 0; pair < b.opt.pairs; ++pair) {
@@ -846,9 +885,12 @@ void compare(Bench& b, bool ws) {
 void print_stages(Bench& bench) {
   MetricsSnap &before16 = bench.before16, &after16 = bench.after16;
   const double warmup = bench.opt.warmup, seconds = bench.opt.seconds;
-  std::printf("\ncommand path, node's own stage timers over the 16-client HTTP run (mean / ~p99 by bucket)\n");
-  const char* order[] = {"parse", "shape", "token", "decode", "replay", "auth", "authorize", "rate_limit",
-                         "safety_state", "injection", "dispatch", "audit", "apply", "respond", "total"};
+  std::printf(
+      "\ncommand path, node's own stage timers over the 16-client HTTP run (mean / ~p99 by "
+      "bucket)\n");
+  const char* order[] = {"parse",    "shape",     "token",      "decode",       "replay",
+                         "auth",     "authorize", "rate_limit", "safety_state", "injection",
+                         "dispatch", "audit",     "apply",      "respond",      "total"};
   for (const char* s : order) {
     auto a = after16.find(s);
     if (a == after16.end()) continue;
@@ -871,14 +913,16 @@ void print_stages(Bench& bench) {
   const double syncs = delta("rcan_audit_syncs_total");
   const double records = delta("audit");
   if (groups > 0)
-    std::printf("  audit group commits %.0f: %.2f command records per group, %.0f fdatasyncs/s\n", groups,
-                records / groups, syncs / (warmup + seconds));
+    std::printf("  audit group commits %.0f: %.2f command records per group, %.0f fdatasyncs/s\n",
+                groups, records / groups, syncs / (warmup + seconds));
   if (groups > 0 && bench.disk.ok) {
     // An estimate from two measurements: the run's sync rate times what one sync cost alone.
     const double share = syncs / (warmup + seconds) * bench.disk.machine_cpu_us / 1e6;
-    std::printf("  those syncs at the disk probe's CPU per sync: ~%.2f CPUs of %u (%.0f%% of the machine)\n", share,
-                std::thread::hardware_concurrency(),
-                100.0 * share / std::max(1u, std::thread::hardware_concurrency()));
+    std::printf(
+        "  those syncs at the disk probe's CPU per sync: ~%.2f CPUs of %u (%.0f%% of the "
+        "machine)\n",
+        share, std::thread::hardware_concurrency(),
+        100.0 * share / std::max(1u, std::thread::hardware_concurrency()));
   }
 }
 
@@ -887,7 +931,8 @@ void measure_idle(Bench& b) {
   settle(b.node.child->pid());
   b.idle = proc_stat(b.node.child->pid());
   if (b.phase("memory")) {
-    std::printf("\nmemory (VmRSS)\n  idle after start-up: %.1f MB\n", static_cast<double>(b.idle.rss_kb) / 1024.0);
+    std::printf("\nmemory (VmRSS)\n  idle after start-up: %.1f MB\n",
+                static_cast<double>(b.idle.rss_kb) / 1024.0);
   }
 }
 
@@ -901,21 +946,25 @@ void run_memory_phase(Bench& b) {
   ProcStat mid;
   std::thread t1([&] { run_load(h); });
   std::thread t2([&] { run_load(w); });
-  std::this_thread::sleep_for(std::chrono::milliseconds(static_cast<int64_t>((0.3 + h.seconds / 2) * 1000)));
+  std::this_thread::sleep_for(
+      std::chrono::milliseconds(static_cast<int64_t>((0.3 + h.seconds / 2) * 1000)));
   mid = proc_stat(b.node.child->pid());
   t1.join();
   t2.join();
   ProcStat after = proc_stat(b.node.child->pid());
-  std::printf("\nmemory (VmRSS)\n  idle %.1f MB; under 64 HTTP + 64 WebSocket clients %.1f MB; after %.1f MB; "
-              "high-water (VmHWM) %.1f MB\n",
-              static_cast<double>(b.idle.rss_kb) / 1024.0, static_cast<double>(mid.rss_kb) / 1024.0,
-              static_cast<double>(after.rss_kb) / 1024.0, static_cast<double>(after.hwm_kb) / 1024.0);
+  std::printf(
+      "\nmemory (VmRSS)\n  idle %.1f MB; under 64 HTTP + 64 WebSocket clients %.1f MB; after %.1f "
+      "MB; "
+      "high-water (VmHWM) %.1f MB\n",
+      static_cast<double>(b.idle.rss_kb) / 1024.0, static_cast<double>(mid.rss_kb) / 1024.0,
+      static_cast<double>(after.rss_kb) / 1024.0, static_cast<double>(after.hwm_kb) / 1024.0);
 }
 
 // A SAFETY RESUME after each ESTOP; true when the node accepted it.
 bool send_resume(const Bench& b) {
   std::string body = R"({"version":"1.0.0","type":"SAFETY","message_id":")" + fast_uuid() +
-                     R"(","timestamp_ms":)" + std::to_string(wall_ms()) + R"(,"payload":{"safety_event":"RESUME"}})";
+                     R"(","timestamp_ms":)" + std::to_string(wall_ms()) +
+                     R"(,"payload":{"safety_event":"RESUME"}})";
   return sync_http(b.node.port, http::verb::post, "/rcan/v1/command", body, b.token) == 200;
 }
 
@@ -941,7 +990,8 @@ int http_estops(Bench& b, std::vector<double>& http_rtt) {
     http::response<http::string_body> res;
     http::read(s, buf, res);
     http_rtt.push_back(static_cast<double>(mono_us() - t0));
-    if (res.result_int() == 200 && res.body().find("estop_latched") != std::string::npos) ++answered;
+    if (res.result_int() == 200 && res.body().find("estop_latched") != std::string::npos)
+      ++answered;
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
     if (!send_resume(b)) b.all_ok = false;
   }
@@ -954,7 +1004,8 @@ int ws_estops(Bench& b, std::vector<double>& ws_rtt) {
   int ws_answered = 0;
   asio::io_context io;
   websocket::stream<beast::tcp_stream> ws(io);
-  beast::get_lowest_layer(ws).connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), b.node.port));
+  beast::get_lowest_layer(ws).connect(
+      tcp::endpoint(asio::ip::make_address("127.0.0.1"), b.node.port));
   beast::get_lowest_layer(ws).socket().set_option(tcp::no_delay(true));
   ws.handshake("127.0.0.1", "/rcan/v1/stream");
   ws.text(true);
@@ -964,8 +1015,9 @@ int ws_estops(Bench& b, std::vector<double>& ws_rtt) {
   for (int i = 0; i < b.opt.estops; ++i) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
     std::string id = fast_uuid();
-    std::string frame = R"({"version":"1.0.0","type":"SAFETY","message_id":")" + id + R"(","timestamp_ms":)" +
-                        std::to_string(wall_ms()) + R"(,"payload":{"safety_event":"ESTOP","reason":"load_bench"}})";
+    std::string frame = R"({"version":"1.0.0","type":"SAFETY","message_id":")" + id +
+                        R"(","timestamp_ms":)" + std::to_string(wall_ms()) +
+                        R"(,"payload":{"safety_event":"ESTOP","reason":"load_bench"}})";
     int64_t t0 = mono_us();
     ws.write(asio::buffer(frame));
     for (;;) {
@@ -1006,12 +1058,14 @@ void run_estop_phase(Bench& b) {
   for (const char* tr : {"http", "ws"}) {
     auto& v = node_lat[tr];
     auto& rtt = std::string(tr) == "http" ? http_rtt : ws_rtt;
-    std::printf("  %-4s node arrival→Driver::stop  p50 %6.0f  p99 %6.0f  max %6.0f us (n=%zu);  "
-                "client round trip p50 %6.0f  p99 %6.0f us\n",
-                tr, pct(v, 0.5), pct(v, 0.99), v.empty() ? 0.0 : v.back(), v.size(), pct(rtt, 0.5),
-                pct(rtt, 0.99));
+    std::printf(
+        "  %-4s node arrival→Driver::stop  p50 %6.0f  p99 %6.0f  max %6.0f us (n=%zu);  "
+        "client round trip p50 %6.0f  p99 %6.0f us\n",
+        tr, pct(v, 0.5), pct(v, 0.99), v.empty() ? 0.0 : v.back(), v.size(), pct(rtt, 0.5),
+        pct(rtt, 0.99));
   }
-  std::printf("  answered estop_latched: http %d/%d, ws %d/%d\n", answered, estops, ws_answered, estops);
+  std::printf("  answered estop_latched: http %d/%d, ws %d/%d\n", answered, estops, ws_answered,
+              estops);
   if (answered != estops || ws_answered != estops) b.all_ok = false;
   g_abort_load = true;
   gen.join();
@@ -1034,10 +1088,12 @@ void write_mldsa_config(const Bench& b, const keys::RobotKeys& peer) {
     size_t p = yaml.find(from);
     if (p != std::string::npos) yaml.replace(p, from.size(), to);
   };
-  replace("security:\n", "security:\n  trusted_robot_keys:\n    - {name: bench-peer, mldsa65_pub_file: " + root +
-                             "/peer/mldsa65.pub}\n");
+  replace("security:\n",
+          "security:\n  trusted_robot_keys:\n    - {name: bench-peer, mldsa65_pub_file: " + root +
+              "/peer/mldsa65.pub}\n");
   replace("  jwt:\n    leeway_s: 60\n",
-          "  jwt:\n    leeway_s: 60\n    issuers:\n      - {issuer: bench-issuer, key_file: " + root + "/issuer.jwk}\n");
+          "  jwt:\n    leeway_s: 60\n    issuers:\n      - {issuer: bench-issuer, key_file: " +
+              root + "/issuer.jwk}\n");
   {
     std::ofstream cf(root + "/mldsa.rcan.yaml");
     cf << yaml;
@@ -1061,18 +1117,20 @@ std::vector<Outgoing> sign_pool(const PeerSigner& peer, size_t pool_size) {
     signers.emplace_back([&, t] {
       for (size_t i = t; i < pool_size; i += nt) {
         std::string id = fast_uuid();
-        json::Object msg{{"rcan", "3.2"},
-                         {"msg_id", id},
-                         {"timestamp", static_cast<double>(wall_ms()) / 1000.0},
-                         {"cmd", "move"},
-                         {"target", peer.target},
-                         {"params", json::Object{{"linear", 0.2}, {"duration_ms", 100}}},
-                         {"sender_type", "robot"},
-                         {"delegation_chain", json::Array{json::Object{{"issuer_ruri", peer.ruri},
-                                                                       {"human_subject", "operator"},
-                                                                       {"timestamp", wall_ms() / 1000},
-                                                                       {"scope", "control"}}}}};
-        if (!msgsig::sign_mldsa65(msg, peer.keys.mldsa65_sk.span(), peer.keys.pub.mldsa65_pk).ok()) continue;
+        json::Object msg{
+            {"rcan", "3.2"},
+            {"msg_id", id},
+            {"timestamp", static_cast<double>(wall_ms()) / 1000.0},
+            {"cmd", "move"},
+            {"target", peer.target},
+            {"params", json::Object{{"linear", 0.2}, {"duration_ms", 100}}},
+            {"sender_type", "robot"},
+            {"delegation_chain", json::Array{json::Object{{"issuer_ruri", peer.ruri},
+                                                          {"human_subject", "operator"},
+                                                          {"timestamp", wall_ms() / 1000},
+                                                          {"scope", "control"}}}}};
+        if (!msgsig::sign_mldsa65(msg, peer.keys.mldsa65_sk.span(), peer.keys.pub.mldsa65_pk).ok())
+          continue;
         pool[i] = Outgoing{json::dump(json::Value(std::move(msg))), id};
       }
     });
@@ -1105,10 +1163,11 @@ void run_mldsa_clients(Bench& b, const Node& m, const PeerSigner& peer, int c) {
   RunResult r = run_load(o);
   ProcStat p1 = proc_stat(m.child->pid());
   print_row("rcand ML-DSA-65", c, r);
-  std::printf("  server CPU per signed command: %.0f us  (%zu messages signed beforehand in %.1f s%s)\n",
-              (p1.cpu_s - p0.cpu_s) * 1e6 / static_cast<double>(std::max<uint64_t>(1, r.ok + r.failed)),
-              pool_size, sign_s,
-              next->load() >= pool.size() ? "; the supply ran out: raise --mldsa-pool" : "");
+  std::printf(
+      "  server CPU per signed command: %.0f us  (%zu messages signed beforehand in %.1f s%s)\n",
+      (p1.cpu_s - p0.cpu_s) * 1e6 / static_cast<double>(std::max<uint64_t>(1, r.ok + r.failed)),
+      pool_size, sign_s,
+      next->load() >= pool.size() ? "; the supply ran out: raise --mldsa-pool" : "");
   if (r.failed || r.connect_failures || r.ok == 0) b.all_ok = false;
 }
 
@@ -1141,7 +1200,9 @@ bool run_mldsa_phase(Bench& b) {
     target = target.substr(0, last) + "/v1" + target.substr(last);
   }
   const PeerSigner signer{*peer, m.ruri, target, robot_token};
-  std::printf("\nML-DSA-65-signed COMMANDs (rcan-py shape, peer-robot key, delegation chain), HTTP keep-alive\n");
+  std::printf(
+      "\nML-DSA-65-signed COMMANDs (rcan-py shape, peer-robot key, delegation chain), HTTP "
+      "keep-alive\n");
   for (int c : {16, 64}) run_mldsa_clients(b, m, signer, c);
   m.child->stop();
   return true;
@@ -1173,9 +1234,11 @@ int main(int argc, char** argv) {
   if (!start_first_node(b)) return 1;
   if (opt.smoke > 0) return run_smoke(b);
 
-  std::printf("load_bench: rcand %s, %d io threads, generator on 1 thread, %u CPUs, %.1f s per run\n",
-              b.node.ruri.c_str(), opt.io_threads, std::thread::hardware_concurrency(), opt.seconds);
-  std::printf("  data dir (audit log, fdatasync per group commit) under %s\n", opt.data_root.c_str());
+  std::printf(
+      "load_bench: rcand %s, %d io threads, generator on 1 thread, %u CPUs, %.1f s per run\n",
+      b.node.ruri.c_str(), opt.io_threads, std::thread::hardware_concurrency(), opt.seconds);
+  std::printf("  data dir (audit log, fdatasync per group commit) under %s\n",
+              opt.data_root.c_str());
   if (b.phase("disk")) run_disk_phase(b);
   if (!start_baseline(b)) return 1;
   if (b.phase("startup") && !run_startup_phase(b)) return 1;
@@ -1187,6 +1250,7 @@ int main(int argc, char** argv) {
   if (b.phase("estop")) run_estop_phase(b);
   if (b.phase("mldsa") && !run_mldsa_phase(b)) return 1;
 
-  std::printf("\n%s\n", b.all_ok ? "all responses checked: OK" : "SOME RESPONSES WERE WRONG (see failures above)");
+  std::printf("\n%s\n", b.all_ok ? "all responses checked: OK"
+                                 : "SOME RESPONSES WERE WRONG (see failures above)");
   return b.all_ok ? 0 : 1;
 }

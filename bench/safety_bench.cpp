@@ -21,8 +21,8 @@
 #include <thread>
 #include <vector>
 
-#include "node/safety/actuation_safety.h"
 #include "base/clock.h"
+#include "node/safety/actuation_safety.h"
 #include "node/safety/safety.h"
 #include "node/safety/sim_robot.h"
 
@@ -63,7 +63,9 @@ struct Pct {
 Pct pct(std::vector<int64_t> v) {
   if (v.empty()) return {0, 0, 0};
   std::sort(v.begin(), v.end());
-  auto at = [&](double q) { return static_cast<double>(v[std::min(v.size() - 1, static_cast<size_t>(q * v.size()))]); };
+  auto at = [&](double q) {
+    return static_cast<double>(v[std::min(v.size() - 1, static_cast<size_t>(q * v.size()))]);
+  };
   return {at(0.50) / 1000.0, at(0.99) / 1000.0, static_cast<double>(v.back()) / 1000.0};
 }
 
@@ -113,11 +115,14 @@ void run_latency(int threads, int trials) {
   core.stop();
   const Pct a = pct(to_stop), b = pct(to_return);
   const LatencyStats internal = core.estop_latency();
-  std::printf("estop  threads=%-3d trials=%d  call->driver.stop(): p50 %7.2f us  p99 %8.2f us  max %8.2f us | "
-              "call->return: p50 %7.2f us  p99 %8.2f us  max %8.2f us | core-recorded p99 %.2f us | "
-              "fence timeouts %d | dispatches ok=%llu refused=%llu\n",
-              threads, trials, a.p50, a.p99, a.max, b.p50, b.p99, b.max, internal.p99_ns / 1000.0, unfenced,
-              static_cast<unsigned long long>(accepted.load()), static_cast<unsigned long long>(refused.load()));
+  std::printf(
+      "estop  threads=%-3d trials=%d  call->driver.stop(): p50 %7.2f us  p99 %8.2f us  max %8.2f "
+      "us | "
+      "call->return: p50 %7.2f us  p99 %8.2f us  max %8.2f us | core-recorded p99 %.2f us | "
+      "fence timeouts %d | dispatches ok=%llu refused=%llu\n",
+      threads, trials, a.p50, a.p99, a.max, b.p50, b.p99, b.max, internal.p99_ns / 1000.0, unfenced,
+      static_cast<unsigned long long>(accepted.load()),
+      static_cast<unsigned long long>(refused.load()));
 }
 
 void run_throughput(int threads, int ms) {
@@ -149,9 +154,11 @@ void run_throughput(int threads, int ms) {
   for (auto& th : ts) th.join();
   const double secs = static_cast<double>(now_ns() - t0) / 1e9;
   core.stop();
-  std::printf("dispatch threads=%-3d  %10.0f dispatches/s  (%.2f us each per thread; refused %llu)\n", n,
-              static_cast<double>(ok.load()) / secs, 1e6 * secs * n / std::max<double>(1, static_cast<double>(ok.load())),
-              static_cast<unsigned long long>(bad.load()));
+  std::printf(
+      "dispatch threads=%-3d  %10.0f dispatches/s  (%.2f us each per thread; refused %llu)\n", n,
+      static_cast<double>(ok.load()) / secs,
+      1e6 * secs * n / std::max<double>(1, static_cast<double>(ok.load())),
+      static_cast<unsigned long long>(bad.load()));
 }
 
 }  // namespace
@@ -189,7 +196,8 @@ void run_actuation(int ms) {
   }
   std::printf("SafetyActuation move: prepare %.2f us, apply %.2f us (mean of %lld)\n",
               static_cast<double>(prep_ns) / 1e3 / static_cast<double>(n),
-              static_cast<double>(apply_ns) / 1e3 / static_cast<double>(n), static_cast<long long>(n));
+              static_cast<double>(apply_ns) / 1e3 / static_cast<double>(n),
+              static_cast<long long>(n));
 }
 
 int main(int argc, char** argv) {

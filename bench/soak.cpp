@@ -33,7 +33,8 @@
 //      holds at least as many records as commands were answered.
 //
 //   soak [--minutes 60] [--clients 64] [--interval-ms 250] [--rss-slack-mb 8] [--window-s 60]
-//        [--segment-mib 8] [--only KIND] [--rcand PATH] [--rcan PATH] [--data-root /tmp] [--tsv FILE]
+//        [--segment-mib 8] [--only KIND] [--rcand PATH] [--rcan PATH] [--data-root /tmp] [--tsv
+//        FILE]
 //        [--keep]
 // --window-s: the length of a sampling "minute" (shorter only to try the program out).
 // Exit status 0 when every judgement holds.
@@ -82,7 +83,14 @@ enum Kind { kHttpCmd = 0, kStatus, kWs, kGate, kKinds };
 constexpr std::array<const char*, kKinds> kKindName{"http_cmd", "status", "ws", "gate"};
 
 // The §16 gate cases a gate client cycles through.
-enum GateCase { kChatBlocked = 0, kChatPass, kTeleopAllowed, kNavEscalated, kNavNoLayer, kGateCases };
+enum GateCase {
+  kChatBlocked = 0,
+  kChatPass,
+  kTeleopAllowed,
+  kNavEscalated,
+  kNavNoLayer,
+  kGateCases
+};
 
 // What one sampling minute collected from the clients.
 struct Window {
@@ -146,10 +154,11 @@ struct Ctx {
 
 std::string now_ms() { return std::to_string(wall_ms()); }
 
-std::string command_json(const std::string& id, const std::string& action, const std::string& params,
-                         const std::string& ai = "") {
-  std::string s = R"({"version":"1.0.0","message_id":")" + id + R"(","type":"COMMAND","timestamp_ms":)" + now_ms() +
-                  R"(,"payload":{"action":")" + action + "\"" + params + "}";
+std::string command_json(const std::string& id, const std::string& action,
+                         const std::string& params, const std::string& ai = "") {
+  std::string s = R"({"version":"1.0.0","message_id":")" + id +
+                  R"(","type":"COMMAND","timestamp_ms":)" + now_ms() + R"(,"payload":{"action":")" +
+                  action + "\"" + params + "}";
   if (!ai.empty()) s += R"(,"ai":)" + ai;
   return s + "}";
 }
@@ -157,8 +166,8 @@ std::string command_json(const std::string& id, const std::string& action, const
 std::string ai_json(double confidence, const std::string& layer) {
   char c[32];
   std::snprintf(c, sizeof c, "%.2f", confidence);
-  return R"({"provider":"soak","model":"soak-)" + layer + R"(","confidence":)" + c + R"(,"layer":")" + layer +
-         R"(","escalated":false})";
+  return R"({"provider":"soak","model":"soak-)" + layer + R"(","confidence":)" + c +
+         R"(,"layer":")" + layer + R"(","escalated":false})";
 }
 
 // The plain commands (HTTP and streams): an arm move, a status query, the gripper. None of
@@ -168,32 +177,44 @@ std::string plain_command(uint64_t n, const std::string& id) {
   switch (n % 3) {
     case 0: {
       char joints[96];
-      std::snprintf(joints, sizeof joints, R"(,"joints":[%.2f,0.1,0,0,0,0])", 0.05 * static_cast<double>(n % 10));
+      std::snprintf(joints, sizeof joints, R"(,"joints":[%.2f,0.1,0,0,0,0])",
+                    0.05 * static_cast<double>(n % 10));
       return command_json(id, "arm_move", joints);
     }
-    case 1: return command_json(id, "status", "");
-    default: return command_json(id, n % 2 ? "gripper_open" : "gripper_close", "");
+    case 1:
+      return command_json(id, "status", "");
+    default:
+      return command_json(id, n % 2 ? "gripper_open" : "gripper_close", "");
   }
 }
 
 std::string gate_command(GateCase c, const std::string& id) {
   switch (c) {
-    case kChatBlocked: return command_json(id, "chat", R"(,"text":"soak")", ai_json(0.3, "fast"));
-    case kChatPass: return command_json(id, "chat", R"(,"text":"soak")", ai_json(0.9, "fast"));
+    case kChatBlocked:
+      return command_json(id, "chat", R"(,"text":"soak")", ai_json(0.3, "fast"));
+    case kChatPass:
+      return command_json(id, "chat", R"(,"text":"soak")", ai_json(0.9, "fast"));
     case kTeleopAllowed:
-      return command_json(id, "teleop", R"(,"linear":0.1,"duration_ms":100)", ai_json(0.2, "reactive"));
+      return command_json(id, "teleop", R"(,"linear":0.1,"duration_ms":100)",
+                          ai_json(0.2, "reactive"));
     case kNavEscalated:
       return command_json(id, "move", R"(,"linear":0.2,"duration_ms":100,"instruction":"soak")",
                           ai_json(0.3, "fast"));
-    default: return command_json(id, "move", R"(,"linear":0.2,"duration_ms":100)", ai_json(0.1, "planner"));
+    default:
+      return command_json(id, "move", R"(,"linear":0.2,"duration_ms":100)",
+                          ai_json(0.1, "planner"));
   }
 }
 
-bool check_gate(GateCase c, int status, const std::string& body, const std::string& id, std::string& why) {
+bool check_gate(GateCase c, int status, const std::string& body, const std::string& id,
+                std::string& why) {
   switch (c) {
     case kChatBlocked:
-      return check_node_error(status, body, id, 403, "CONFIDENCE_GATE_FAIL", "confidence_below_gate", why);
-    case kNavNoLayer: return check_node_error(status, body, id, 403, "CONFIDENCE_GATE_FAIL", "no_higher_layer", why);
+      return check_node_error(status, body, id, 403, "CONFIDENCE_GATE_FAIL",
+                              "confidence_below_gate", why);
+    case kNavNoLayer:
+      return check_node_error(status, body, id, 403, "CONFIDENCE_GATE_FAIL", "no_higher_layer",
+                              why);
     case kNavEscalated:
       if (!check_node_ack(status, body, id, why)) return false;
       if (body.find("\"watermark_token\":\"rcan-wm-v1:") == std::string::npos) {
@@ -201,7 +222,8 @@ bool check_gate(GateCase c, int status, const std::string& body, const std::stri
         return false;
       }
       return true;
-    default: return check_node_ack(status, body, id, why);
+    default:
+      return check_node_ack(status, body, id, why);
   }
 }
 
@@ -216,7 +238,8 @@ asio::awaitable<void> pace(std::chrono::steady_clock::time_point& next) {
 
 std::chrono::milliseconds stagger(std::chrono::milliseconds interval) {
   thread_local std::mt19937 rng{std::random_device{}()};
-  return std::chrono::milliseconds(std::uniform_int_distribution<int64_t>(0, interval.count())(rng));
+  return std::chrono::milliseconds(
+      std::uniform_int_distribution<int64_t>(0, interval.count())(rng));
 }
 
 // COMMANDs over one keep-alive connection (reopened after a transport error).
@@ -231,7 +254,8 @@ asio::awaitable<void> http_client(Ctx& c, Kind kind, uint64_t seq) {
     if (!s) {
       s = std::make_unique<beast::tcp_stream>(ex);
       s->expires_after(std::chrono::seconds(10));
-      auto [cec] = co_await s->async_connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), c.port), kNoThrow);
+      auto [cec] = co_await s->async_connect(
+          tcp::endpoint(asio::ip::make_address("127.0.0.1"), c.port), kNoThrow);
       if (cec) {
         c.stats.fail(kind, "connect: " + cec.message());
         s.reset();
@@ -265,7 +289,8 @@ asio::awaitable<void> http_client(Ctx& c, Kind kind, uint64_t seq) {
     }
     std::string why;
     int status = static_cast<int>(res.result_int());
-    bool good = kind == kGate ? check_gate(gc, status, res.body(), id, why) : check_node_ack(status, res.body(), id, why);
+    bool good = kind == kGate ? check_gate(gc, status, res.body(), id, why)
+                              : check_node_ack(status, res.body(), id, why);
     if (good) {
       c.stats.ok(kind, t0);
       if (kind == kGate) c.stats.gate(gc);
@@ -290,7 +315,8 @@ asio::awaitable<void> status_client(Ctx& c) {
     int64_t t0 = mono_us();
     beast::tcp_stream s(ex);
     s.expires_after(std::chrono::seconds(30));
-    auto [cec] = co_await s.async_connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), c.port), kNoThrow);
+    auto [cec] = co_await s.async_connect(
+        tcp::endpoint(asio::ip::make_address("127.0.0.1"), c.port), kNoThrow);
     if (cec) {
       c.stats.fail(kStatus, "connect: " + cec.message());
       continue;
@@ -318,7 +344,8 @@ asio::awaitable<void> status_client(Ctx& c) {
     if (res.result_int() == 200 && ruri && ruri->is_string() && ruri->as_string() == c.ruri) {
       c.stats.ok(kStatus, t0);
     } else {
-      c.stats.fail(kStatus, "status " + std::to_string(res.result_int()) + ": " + res.body().substr(0, 300));
+      c.stats.fail(kStatus,
+                   "status " + std::to_string(res.result_int()) + ": " + res.body().substr(0, 300));
     }
   }
 }
@@ -336,7 +363,8 @@ asio::awaitable<void> ws_client(Ctx& c, uint64_t seq) {
     websocket::stream<beast::tcp_stream> ws(ex);
     auto& low = beast::get_lowest_layer(ws);
     low.expires_after(std::chrono::seconds(10));
-    auto [cec] = co_await low.async_connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), c.port), kNoThrow);
+    auto [cec] = co_await low.async_connect(
+        tcp::endpoint(asio::ip::make_address("127.0.0.1"), c.port), kNoThrow);
     if (!cec) {
       low.socket().set_option(tcp::no_delay(true));
       auto [hec] = co_await ws.async_handshake("127.0.0.1", "/rcan/v1/stream", kNoThrow);
@@ -367,7 +395,9 @@ asio::awaitable<void> ws_client(Ctx& c, uint64_t seq) {
     c.stats.stream_opened();
     {
       low.expires_after(std::chrono::seconds(10));
-      auto [wec, wn] = co_await ws.async_write(asio::buffer(std::string(R"({"type":"SUBSCRIBE","topics":["telemetry"],"hz":5})")), kNoThrow);
+      auto [wec, wn] = co_await ws.async_write(
+          asio::buffer(std::string(R"({"type":"SUBSCRIBE","topics":["telemetry"],"hz":5})")),
+          kNoThrow);
       if (wec) {
         c.stats.fail(kWs, "SUBSCRIBE: " + wec.message());
         next += c.interval;
@@ -418,7 +448,8 @@ asio::awaitable<void> ws_client(Ctx& c, uint64_t seq) {
     }
     c.stats.telemetry(telemetry);
     // 5 Hz telemetry for a few seconds must have brought some frames.
-    if (!broken && std::chrono::steady_clock::now() - opened > std::chrono::seconds(5) && telemetry == 0)
+    if (!broken && std::chrono::steady_clock::now() - opened > std::chrono::seconds(5) &&
+        telemetry == 0)
       c.stats.fail(kWs, "no telemetry on a stream open for more than 5 s");
     if (!broken) {
       low.expires_after(std::chrono::seconds(5));
@@ -448,23 +479,25 @@ std::string fmt(const char* f, double v) {
 }
 
 std::vector<std::string> header() {
-  std::vector<std::string> h{"min", "rss_mb", "rss_max_mb", "rss_anon_mb", "fds_med", "fds_max", "threads_med",
-                             "threads_max", "audit_mb", "audit_records"};
+  std::vector<std::string> h{"min",      "rss_mb",       "rss_max_mb",  "rss_anon_mb",
+                             "fds_med",  "fds_max",      "threads_med", "threads_max",
+                             "audit_mb", "audit_records"};
   for (const char* k : kKindName) {
     h.push_back(std::string(k) + "_n");
     h.push_back(std::string(k) + "_p50_ms");
     h.push_back(std::string(k) + "_p99_ms");
   }
-  h.insert(h.end(), {"gate_blocked", "gate_passed", "gate_allowed", "gate_escalated", "gate_no_layer",
-                     "telemetry", "streams", "errors"});
+  h.insert(h.end(), {"gate_blocked", "gate_passed", "gate_allowed", "gate_escalated",
+                     "gate_no_layer", "telemetry", "streams", "errors"});
   return h;
 }
 
 std::vector<std::string> cells(Row& r) {
-  std::vector<std::string> c{std::to_string(r.minute), fmt("%.1f", r.rss_mb), fmt("%.1f", r.rss_max_mb),
-                             fmt("%.1f", r.anon_mb), std::to_string(r.fds), std::to_string(r.fds_max),
-                             std::to_string(r.threads), std::to_string(r.threads_max), fmt("%.1f", r.audit_mb),
-                             std::to_string(r.audit_records)};
+  std::vector<std::string> c{std::to_string(r.minute),  fmt("%.1f", r.rss_mb),
+                             fmt("%.1f", r.rss_max_mb), fmt("%.1f", r.anon_mb),
+                             std::to_string(r.fds),     std::to_string(r.fds_max),
+                             std::to_string(r.threads), std::to_string(r.threads_max),
+                             fmt("%.1f", r.audit_mb),   std::to_string(r.audit_records)};
   uint64_t errors = 0;
   for (int k = 0; k < kKinds; ++k) {
     auto& v = r.w.lat_ms[static_cast<size_t>(k)];
@@ -481,8 +514,8 @@ std::vector<std::string> cells(Row& r) {
   return c;
 }
 
-std::string join(const std::vector<std::string>& v, const std::string& sep, const std::string& pre = "",
-                 const std::string& post = "") {
+std::string join(const std::vector<std::string>& v, const std::string& sep,
+                 const std::string& pre = "", const std::string& post = "") {
   std::string s = pre;
   for (size_t i = 0; i < v.size(); ++i) s += (i ? sep : "") + v[i];
   return s + post;
@@ -496,7 +529,8 @@ uint64_t audit_records(uint16_t port) {
   std::string line;
   uint64_t n = 0;
   while (std::getline(is, line))
-    if (line.rfind("rcan_audit_records_total{", 0) == 0) n += std::strtoull(line.c_str() + line.rfind(' ') + 1, nullptr, 10);
+    if (line.rfind("rcan_audit_records_total{", 0) == 0)
+      n += std::strtoull(line.c_str() + line.rfind(' ') + 1, nullptr, 10);
   return n;
 }
 
@@ -539,22 +573,36 @@ bool parse_options(int argc, char** argv, Options& o) {
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
     auto next = [&]() -> std::string { return i + 1 < argc ? argv[++i] : ""; };
-    if (a == "--minutes") o.minutes = std::atof(next().c_str());
-    else if (a == "--clients") o.clients = std::atoi(next().c_str());
-    else if (a == "--interval-ms") o.interval_ms = std::atoi(next().c_str());
-    else if (a == "--rss-slack-mb") o.rss_slack_mb = std::atof(next().c_str());
-    else if (a == "--window-s") o.window_s = std::atof(next().c_str());
-    else if (a == "--segment-mib") o.segment_mib = std::atol(next().c_str());
-    else if (a == "--only") o.only = next();
-    else if (a == "--rcand") o.rcand = next();
-    else if (a == "--rcan") o.rcan_cli = next();
-    else if (a == "--data-root") o.data_root = next();
-    else if (a == "--tsv") o.tsv_path = next();
-    else if (a == "--keep") o.keep = true;
+    if (a == "--minutes")
+      o.minutes = std::atof(next().c_str());
+    else if (a == "--clients")
+      o.clients = std::atoi(next().c_str());
+    else if (a == "--interval-ms")
+      o.interval_ms = std::atoi(next().c_str());
+    else if (a == "--rss-slack-mb")
+      o.rss_slack_mb = std::atof(next().c_str());
+    else if (a == "--window-s")
+      o.window_s = std::atof(next().c_str());
+    else if (a == "--segment-mib")
+      o.segment_mib = std::atol(next().c_str());
+    else if (a == "--only")
+      o.only = next();
+    else if (a == "--rcand")
+      o.rcand = next();
+    else if (a == "--rcan")
+      o.rcan_cli = next();
+    else if (a == "--data-root")
+      o.data_root = next();
+    else if (a == "--tsv")
+      o.tsv_path = next();
+    else if (a == "--keep")
+      o.keep = true;
     else {
-      std::fprintf(stderr,
-                   "usage: soak [--minutes 60] [--clients 64] [--interval-ms 250] [--rss-slack-mb 8]\n"
-                   "            [--window-s 60] [--segment-mib 8] [--only KIND] [--rcand PATH] [--rcan PATH] [--data-root DIR] [--tsv FILE] [--keep]\n");
+      std::fprintf(
+          stderr,
+          "usage: soak [--minutes 60] [--clients 64] [--interval-ms 250] [--rss-slack-mb 8]\n"
+          "            [--window-s 60] [--segment-mib 8] [--only KIND] [--rcand PATH] [--rcan "
+          "PATH] [--data-root DIR] [--tsv FILE] [--keep]\n");
       return false;
     }
   }
@@ -564,8 +612,10 @@ bool parse_options(int argc, char** argv, Options& o) {
     std::fprintf(stderr, "soak: --only http_cmd|status|ws|gate\n");
     return false;
   }
-  if (o.clients < 8 || o.interval_ms < 1 || o.window_s < 1 || o.segment_mib < 1 || o.segment_mib > 4096) {
-    std::fprintf(stderr, "soak: --clients ≥ 8, --interval-ms ≥ 1, --window-s ≥ 1, --segment-mib 1–4096\n");
+  if (o.clients < 8 || o.interval_ms < 1 || o.window_s < 1 || o.segment_mib < 1 ||
+      o.segment_mib > 4096) {
+    std::fprintf(stderr,
+                 "soak: --clients ≥ 8, --interval-ms ≥ 1, --window-s ≥ 1, --segment-mib 1–4096\n");
     return false;
   }
   return true;
@@ -607,7 +657,8 @@ bool first_start(Soak& s) {
 // start.
 std::string start_layer(Soak& s) {
   s.layer = std::make_unique<Child>(
-      std::vector<std::string>{s.opt.rcand, "--sim-layer", "--port", "0", "--layer", "planner", "--confidence", "0.95"},
+      std::vector<std::string>{s.opt.rcand, "--sim-layer", "--port", "0", "--layer", "planner",
+                               "--confidence", "0.95"},
       "");
   Child& layer = *s.layer;
   std::string layer_url;
@@ -619,13 +670,15 @@ std::string start_layer(Soak& s) {
     else
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
-  if (layer_url.empty()) std::fprintf(stderr, "the sim layer did not start:\n%s\n", layer.head().c_str());
+  if (layer_url.empty())
+    std::fprintf(stderr, "the sim layer did not start:\n%s\n", layer.head().c_str());
   return layer_url;
 }
 
 // Replaces `block` of the embedded configuration with `with`; false (after naming what is
 // missing) when the configuration has no such block.
-bool replace_block(std::string& yaml, const std::string& block, const std::string& with, const char* missing) {
+bool replace_block(std::string& yaml, const std::string& block, const std::string& with,
+                   const char* missing) {
   size_t p = yaml.find(block);
   if (p == std::string::npos) {
     std::fprintf(stderr, "soak: the embedded configuration has no %s\n", missing);
@@ -637,13 +690,15 @@ bool replace_block(std::string& yaml, const std::string& block, const std::strin
 
 // The §16 confidence gates and the planner layer, in place of the embedded agent block.
 bool configure_gates(std::string& yaml, const std::string& layer_url) {
-  const std::string agent_default = "agent:\n  provider: none\n  confidence_gates: []\n  hitl_gates: []\n";
+  const std::string agent_default =
+      "agent:\n  provider: none\n  confidence_gates: []\n  hitl_gates: []\n";
   return replace_block(yaml, agent_default,
                        "agent:\n  provider: none\n  confidence_gates:\n"
                        "    - {scope: nav, min_confidence: 0.8, on_fail: escalate}\n"
                        "    - {scope: chat, min_confidence: 0.5, on_fail: block}\n"
                        "    - {scope: teleop, min_confidence: 0.6, on_fail: allow}\n"
-                       "  hitl_gates: []\n  layers:\n    planner: {url: \"" + layer_url + "\", timeout_ms: 5000}\n",
+                       "  hitl_gates: []\n  layers:\n    planner: {url: \"" +
+                           layer_url + "\", timeout_ms: 5000}\n",
                        "agent block to replace");
 }
 
@@ -662,7 +717,8 @@ bool configure_issuer(std::string& yaml, const Soak& s) {
   }
   std::ofstream(s.root + "/issuer.pub.pem") << *pem;
   yaml.replace(jp, jwt_default.size(),
-               jwt_default + "    issuers:\n      - {issuer: rcand-local, key_file: " + s.root + "/issuer.pub.pem}\n");
+               jwt_default + "    issuers:\n      - {issuer: rcand-local, key_file: " + s.root +
+                   "/issuer.pub.pem}\n");
   return true;
 }
 
@@ -671,18 +727,21 @@ bool configure_issuer(std::string& yaml, const Soak& s) {
 // segments make several rotations happen within the run and that bound visible.
 bool configure_audit(std::string& yaml, long segment_mib) {
   const std::string audit_default = "  audit:\n    sync: per_group\n";
-  return replace_block(yaml, audit_default,
-                       audit_default + "    max_segment_bytes: " + std::to_string(segment_mib * 1024 * 1024) + "\n",
-                       "audit block to extend");
+  return replace_block(
+      yaml, audit_default,
+      audit_default + "    max_segment_bytes: " + std::to_string(segment_mib * 1024 * 1024) + "\n",
+      "audit block to extend");
 }
 
 // The configuration with the gates: <root>/soak.rcan.yaml.
 bool write_config(const Soak& s, const std::string& layer_url) {
   std::string yaml = default_yaml_for(s.node.dir);
-  if (!configure_gates(yaml, layer_url) || !configure_issuer(yaml, s) || !configure_audit(yaml, s.opt.segment_mib))
+  if (!configure_gates(yaml, layer_url) || !configure_issuer(yaml, s) ||
+      !configure_audit(yaml, s.opt.segment_mib))
     return false;
   // No mDNS: the soak measures the node, not the machine's Avahi daemon.
-  if (size_t mp = yaml.find("enable_mdns: true"); mp != std::string::npos) yaml.replace(mp, 17, "enable_mdns: false");
+  if (size_t mp = yaml.find("enable_mdns: true"); mp != std::string::npos)
+    yaml.replace(mp, 17, "enable_mdns: false");
   {
     std::ofstream cf(s.root + "/soak.rcan.yaml");
     cf << yaml;
@@ -696,15 +755,19 @@ bool restart_configured(Soak& s) {
   std::string ruri = node.ruri;
   node.ruri.clear();
   if (!start_node(node, s.opt.rcand, {"--config", s.root + "/soak.rcan.yaml"}, "")) return false;
-  if (node.ruri != ruri) std::fprintf(stderr, "soak: note: RURI %s after restart (was %s)\n", node.ruri.c_str(), ruri.c_str());
+  if (node.ruri != ruri)
+    std::fprintf(stderr, "soak: note: RURI %s after restart (was %s)\n", node.ruri.c_str(),
+                 ruri.c_str());
   s.pid = node.child->pid();
   const int64_t lifetime_s = static_cast<int64_t>(s.opt.n_minutes * s.opt.window_s) + 3600;
   Ctx& ctx = s.ctx;
   ctx.port = node.port;
   ctx.ruri = node.ruri;
-  ctx.token = token_for(node.dir + "/issuer/ed25519.seed", "rcand-local", node.ruri, "soak", lifetime_s);
+  ctx.token =
+      token_for(node.dir + "/issuer/ed25519.seed", "rcand-local", node.ruri, "soak", lifetime_s);
   ctx.interval = std::chrono::milliseconds(s.opt.interval_ms);
-  ctx.stream_life = std::chrono::seconds(std::max<int64_t>(5, static_cast<int64_t>(s.opt.window_s)));
+  ctx.stream_life =
+      std::chrono::seconds(std::max<int64_t>(5, static_cast<int64_t>(s.opt.window_s)));
   if (ctx.token.empty()) {
     std::fprintf(stderr, "soak: cannot issue a token\n");
     return false;
@@ -737,12 +800,15 @@ ClientMix client_mix(const Options& o) {
 
 void print_intro(const Soak& s, const ClientMix& mix) {
   const Options& o = s.opt;
-  std::printf("soak: rcand %s (pid %d), %d minutes of %.0f s, %d clients (http_cmd %d, status %d, ws %d, gate %d), "
-              "one request per %d ms each, audit segments of %ld MiB\n",
-              s.node.ruri.c_str(), static_cast<int>(s.pid), o.n_minutes, o.window_s, o.clients, mix.n_cmd,
-              mix.n_status, mix.n_ws, mix.n_gate, o.interval_ms, o.segment_mib);
+  std::printf(
+      "soak: rcand %s (pid %d), %d minutes of %.0f s, %d clients (http_cmd %d, status %d, ws %d, "
+      "gate %d), "
+      "one request per %d ms each, audit segments of %ld MiB\n",
+      s.node.ruri.c_str(), static_cast<int>(s.pid), o.n_minutes, o.window_s, o.clients, mix.n_cmd,
+      mix.n_status, mix.n_ws, mix.n_gate, o.interval_ms, o.segment_mib);
   std::printf("  idle before load: VmRSS %.1f MB, fds %d, threads %ld; data dir %s\n",
-              static_cast<double>(s.idle0.rss_kb) / 1024.0, s.idle_fds0, s.idle0.threads, s.node.dir.c_str());
+              static_cast<double>(s.idle0.rss_kb) / 1024.0, s.idle_fds0, s.idle0.threads,
+              s.node.dir.c_str());
   std::fflush(stdout);
 }
 
@@ -756,10 +822,13 @@ void spawn_clients(asio::io_context& io, Ctx& ctx, const ClientMix& mix) {
       ctx.stats.fail(kHttpCmd, std::string("a client ended on an exception: ") + ex.what());
     }
   };
-  for (int i = 0; i < mix.n_cmd; ++i) asio::co_spawn(io, http_client(ctx, kHttpCmd, static_cast<uint64_t>(i)), done);
-  for (int i = 0; i < mix.n_gate; ++i) asio::co_spawn(io, http_client(ctx, kGate, static_cast<uint64_t>(i)), done);
+  for (int i = 0; i < mix.n_cmd; ++i)
+    asio::co_spawn(io, http_client(ctx, kHttpCmd, static_cast<uint64_t>(i)), done);
+  for (int i = 0; i < mix.n_gate; ++i)
+    asio::co_spawn(io, http_client(ctx, kGate, static_cast<uint64_t>(i)), done);
   for (int i = 0; i < mix.n_status; ++i) asio::co_spawn(io, status_client(ctx), done);
-  for (int i = 0; i < mix.n_ws; ++i) asio::co_spawn(io, ws_client(ctx, static_cast<uint64_t>(i)), done);
+  for (int i = 0; i < mix.n_ws; ++i)
+    asio::co_spawn(io, ws_client(ctx, static_cast<uint64_t>(i)), done);
 }
 
 // Minute `m`'s row: rcand sampled every second until the minute ends (`died` when it is gone),
@@ -768,10 +837,12 @@ Row sample_minute(Soak& s, int m, std::chrono::steady_clock::time_point t_start,
   const pid_t pid = s.pid;
   Row r;
   r.minute = m;
-  const auto end = t_start + std::chrono::milliseconds(static_cast<int64_t>(m * s.opt.window_s * 1000));
+  const auto end =
+      t_start + std::chrono::milliseconds(static_cast<int64_t>(m * s.opt.window_s * 1000));
   std::vector<long> fd_samples, thread_samples;
   while (std::chrono::steady_clock::now() < end) {
-    std::this_thread::sleep_until(std::min(end, std::chrono::steady_clock::now() + std::chrono::seconds(1)));
+    std::this_thread::sleep_until(
+        std::min(end, std::chrono::steady_clock::now() + std::chrono::seconds(1)));
     if (!s.node.child->alive()) {
       died = true;
       break;
@@ -859,11 +930,13 @@ uint64_t judge_errors(Soak& s, const std::vector<Row>& rows, bool died, Verdicts
   for (auto& r : rows)
     for (int k = 0; k < kKinds; ++k) every_kind = every_kind && r.w.ok[static_cast<size_t>(k)] > 0;
   for (auto& r : rows)
-    for (int g = 0; g < kGateCases; ++g) every_kind = every_kind && r.w.gate[static_cast<size_t>(g)] > 0;
+    for (int g = 0; g < kGateCases; ++g)
+      every_kind = every_kind && r.w.gate[static_cast<size_t>(g)] > 0;
   for (auto& r : rows) every_kind = every_kind && r.w.telemetry > 0;
   if (s.opt.only.empty())
     v.judge(every_kind && !rows.empty(),
-            "every minute answered every traffic kind and every gate case, and the streams received telemetry");
+            "every minute answered every traffic kind and every gate case, and the streams "
+            "received telemetry");
   return commands;
 }
 
@@ -882,18 +955,21 @@ void judge_growth(const Soak& s, const std::vector<Row>& rows, bool died, Verdic
   if (!died && static_cast<int>(rows.size()) == n_minutes) {
     double rss_e = window_max(early_from, early_to, [](const Row& r) { return r.rss_max_mb; });
     double rss_l = window_max(last_from, last_to, [](const Row& r) { return r.rss_max_mb; });
-    std::snprintf(line, sizeof line,
-                  "memory: max VmRSS minutes %d-%d = %.1f MB ≤ max VmRSS minutes %d-%d (%.1f MB) + %.0f MB",
-                  last_from, last_to, rss_l, early_from, early_to, rss_e, s.opt.rss_slack_mb);
+    std::snprintf(
+        line, sizeof line,
+        "memory: max VmRSS minutes %d-%d = %.1f MB ≤ max VmRSS minutes %d-%d (%.1f MB) + %.0f MB",
+        last_from, last_to, rss_l, early_from, early_to, rss_e, s.opt.rss_slack_mb);
     v.judge(rss_l <= rss_e + s.opt.rss_slack_mb, line);
     double fd_e = window_max(early_from, early_to, [](const Row& r) { return r.fds; });
     double fd_l = window_max(last_from, last_to, [](const Row& r) { return r.fds; });
-    std::snprintf(line, sizeof line, "fds under load: median minutes %d-%d = %.0f ≤ median minutes %d-%d = %.0f",
+    std::snprintf(line, sizeof line,
+                  "fds under load: median minutes %d-%d = %.0f ≤ median minutes %d-%d = %.0f",
                   last_from, last_to, fd_l, early_from, early_to, fd_e);
     v.judge(fd_l <= fd_e, line);
     double th_e = window_max(early_from, early_to, [](const Row& r) { return r.threads; });
     double th_l = window_max(last_from, last_to, [](const Row& r) { return r.threads; });
-    std::snprintf(line, sizeof line, "threads under load: median minutes %d-%d = %.0f ≤ median minutes %d-%d = %.0f",
+    std::snprintf(line, sizeof line,
+                  "threads under load: median minutes %d-%d = %.0f ≤ median minutes %d-%d = %.0f",
                   last_from, last_to, th_l, early_from, early_to, th_e);
     v.judge(th_l <= th_e, line);
   } else {
@@ -916,13 +992,16 @@ void judge_idle_and_audit(const Soak& s, Verdicts& v) {
     idle1 = proc_stat(pid);
     if (idle_fds1 == idle_fds0 && idle1.threads == idle0.threads) break;
   }
-  std::snprintf(line, sizeof line, "idle after the load: fds %d (before: %d), threads %ld (before: %ld), VmRSS %.1f MB (before: %.1f MB)",
-                idle_fds1, idle_fds0, idle1.threads, idle0.threads, static_cast<double>(idle1.rss_kb) / 1024.0,
+  std::snprintf(line, sizeof line,
+                "idle after the load: fds %d (before: %d), threads %ld (before: %ld), VmRSS %.1f "
+                "MB (before: %.1f MB)",
+                idle_fds1, idle_fds0, idle1.threads, idle0.threads,
+                static_cast<double>(idle1.rss_kb) / 1024.0,
                 static_cast<double>(idle0.rss_kb) / 1024.0);
   v.judge(idle_fds1 == idle_fds0 && idle1.threads == idle0.threads, line);
   const uint64_t audit1 = dir_data_bytes(s.node.dir + "/audit");
-  std::snprintf(line, sizeof line, "audit grows: %.1f MB → %.1f MB", static_cast<double>(s.audit0) / 1048576.0,
-                static_cast<double>(audit1) / 1048576.0);
+  std::snprintf(line, sizeof line, "audit grows: %.1f MB → %.1f MB",
+                static_cast<double>(s.audit0) / 1048576.0, static_cast<double>(audit1) / 1048576.0);
   v.judge(audit1 > s.audit0, line);
 }
 
@@ -933,14 +1012,18 @@ void judge_shutdown(Soak& s, uint64_t commands, Verdicts& v) {
   v.judge(WIFEXITED(st) && WEXITSTATUS(st) == 0, "rcand stopped cleanly on SIGTERM (exit 0)");
   s.layer->stop();
   std::string vout;
-  int vrc = run_capture(shell_quote(s.opt.rcan_cli) + " audit verify --data-dir " + shell_quote(s.node.dir) +
-                            " --secret-file " + shell_quote(s.node.dir + "/audit.secret"),
+  int vrc = run_capture(shell_quote(s.opt.rcan_cli) + " audit verify --data-dir " +
+                            shell_quote(s.node.dir) + " --secret-file " +
+                            shell_quote(s.node.dir + "/audit.secret"),
                         vout);
   while (!vout.empty() && vout.back() == '\n') vout.pop_back();
   unsigned long long records = 0;
-  if (size_t p = vout.find("ok: "); p != std::string::npos) records = std::strtoull(vout.c_str() + p + 4, nullptr, 10);
-  std::snprintf(line, sizeof line, "audit chain: `rcan audit verify` exit %d (%s); %llu records ≥ %llu commands answered",
-                vrc, vout.substr(0, 200).c_str(), records, static_cast<unsigned long long>(commands));
+  if (size_t p = vout.find("ok: "); p != std::string::npos)
+    records = std::strtoull(vout.c_str() + p + 4, nullptr, 10);
+  std::snprintf(
+      line, sizeof line,
+      "audit chain: `rcan audit verify` exit %d (%s); %llu records ≥ %llu commands answered", vrc,
+      vout.substr(0, 200).c_str(), records, static_cast<unsigned long long>(commands));
   v.judge(vrc == 0 && records >= commands, line);
 }
 
@@ -950,7 +1033,8 @@ bool print_results(const Soak& s, std::vector<Row>& rows, const Verdicts& v) {
   std::vector<std::string> sep(header().size(), "---:");
   std::printf("%s\n", join(sep, "|", "|", "|").c_str());
   for (auto& r : rows) std::printf("%s\n", join(cells(r), " | ", "| ", " |").c_str());
-  std::printf("\nlatency in ms (client round trip, per request kind, within the minute); sizes in MiB\n\n");
+  std::printf(
+      "\nlatency in ms (client round trip, per request kind, within the minute); sizes in MiB\n\n");
   bool all = true;
   for (auto& [ok, what] : v.list) {
     std::printf("%s  %s\n", ok ? "PASS" : "FAIL", what.c_str());

@@ -24,7 +24,8 @@ void check(bool cond) {
 // whose optional field holds the other empty value (e.g. "confidence": "") therefore reads
 // back different — in rcan-py exactly as here — and only other records must round-trip.
 bool line_form_is_lossless(const rcan::json::Object& fields) {
-  for (const char* k : {"confidence", "model_identity", "operator", "safety_reason", "previous_hash"}) {
+  for (const char* k :
+       {"confidence", "model_identity", "operator", "safety_reason", "previous_hash"}) {
     const rcan::json::Value* v = fields.find(k);
     if (v == nullptr) continue;
     const bool is_reason = std::string_view(k) == "safety_reason";
@@ -62,7 +63,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   int lines = 0;
   while (start <= text.size() && lines < 64) {
     size_t nl = text.find('\n', start);
-    std::string_view line = text.substr(start, nl == std::string_view::npos ? std::string_view::npos : nl - start);
+    std::string_view line =
+        text.substr(start, nl == std::string_view::npos ? std::string_view::npos : nl - start);
     ++lines;
     auto rec = rcanpy_parse_line(line);
     if (rec.ok()) {

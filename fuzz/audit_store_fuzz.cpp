@@ -31,7 +31,9 @@ namespace {
 // Created on first use, removed at exit (the string outlives the exit handler: never freed).
 const std::string& base_dir() {
   static const std::string* dir = [] {
-    std::string base = ::access("/dev/shm", W_OK) == 0 ? "/dev/shm" : std::filesystem::temp_directory_path().string();
+    std::string base = ::access("/dev/shm", W_OK) == 0
+                           ? "/dev/shm"
+                           : std::filesystem::temp_directory_path().string();
     auto* d = new std::string(base + "/rcan-fuzz-audit-XXXXXX");
     if (!::mkdtemp(d->data())) fail("mkdtemp failed");
     std::atexit([] {
@@ -58,7 +60,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   std::error_code ec;
   std::filesystem::remove_all(dir, ec);
   std::filesystem::create_directories(dir, ec);
-  static constexpr const char* kFiles[] = {"seg-00000001.log", "seg-00000001.idx", "seg-00000002.log", "CLEAN"};
+  static constexpr const char* kFiles[] = {"seg-00000001.log", "seg-00000001.idx",
+                                           "seg-00000002.log", "CLEAN"};
   static constexpr std::string_view kCut = "\n--8<--\n";
   for (const char* name : kFiles) {
     const size_t cut = in.find(kCut);
@@ -69,7 +72,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
 
   // Offline reading (no recovery, no lock).
   size_t lines = 0;
-  (void)audit::export_dir(dir, 0, INT64_MAX / 2, [&](std::string_view) { return ++lines < 100000; });
+  (void)audit::export_dir(dir, 0, INT64_MAX / 2,
+                          [&](std::string_view) { return ++lines < 100000; });
   (void)audit::list_segments(dir);
 
   // Recovery.
@@ -82,7 +86,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   auto log = audit::AuditLog::open(dir, std::move(o));
   const bool verbose = std::getenv("RCAN_FUZZ_VERBOSE") != nullptr;
   if (verbose)
-    std::fprintf(stderr, "  offline: %zu lines; open: %s\n", lines, log.ok() ? "ok" : log.error().message.c_str());
+    std::fprintf(stderr, "  offline: %zu lines; open: %s\n", lines,
+                 log.ok() ? "ok" : log.error().message.c_str());
   if (!log.ok()) {
     if (log.error().message.empty()) fail("open failed without a message");
     return 0;
@@ -112,8 +117,10 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const uint64_t before = (*log)->stats().last_seq;
   auto r = (*log)->append(std::move(e));
   if (verbose)
-    std::fprintf(stderr, "  seqs %llu..%llu, append: %s\n", static_cast<unsigned long long>(st.first_seq),
-                 static_cast<unsigned long long>(st.last_seq), r.ok() ? "ok" : r.error().message.c_str());
-  if (r.ok() && r->seq != before + 1) fail("appended seq " + std::to_string(r->seq) + " after " + std::to_string(before));
+    std::fprintf(
+        stderr, "  seqs %llu..%llu, append: %s\n", static_cast<unsigned long long>(st.first_seq),
+        static_cast<unsigned long long>(st.last_seq), r.ok() ? "ok" : r.error().message.c_str());
+  if (r.ok() && r->seq != before + 1)
+    fail("appended seq " + std::to_string(r->seq) + " after " + std::to_string(before));
   return 0;
 }

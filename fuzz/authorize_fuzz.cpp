@@ -11,10 +11,12 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace rcan;
-  auto v = json::parse(std::string_view(reinterpret_cast<const char*>(data), size), {.max_depth = 16, .max_bytes = 65536});
+  auto v = json::parse(std::string_view(reinterpret_cast<const char*>(data), size),
+                       {.max_depth = 16, .max_bytes = 65536});
   if (!v.ok()) return 0;
   auto a = node::parse_authorize(*v);
-  if (a.ok() && (a->target.empty() || a->target.size() > 128 || a->authorize_id.empty() || a->reason.size() > 512))
+  if (a.ok() && (a->target.empty() || a->target.size() > 128 || a->authorize_id.empty() ||
+                 a->reason.size() > 512))
     std::abort();
   auto p = node::PendingItem::from_json(*v);
   if (p.ok()) {

@@ -20,7 +20,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   size_t start = 0;
   while (start <= bytes.size()) {
     size_t z = bytes.find('\0', start);
-    items.emplace_back(bytes.substr(start, z == std::string_view::npos ? std::string_view::npos : z - start));
+    items.emplace_back(
+        bytes.substr(start, z == std::string_view::npos ? std::string_view::npos : z - start));
     if (z == std::string_view::npos) break;
     start = z + 1;
   }

@@ -28,7 +28,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
           rcan::client::wire::ParsedResponse q;
           size_t u2 = 0;
           std::string e2;
-          if (rcan::client::wire::parse_response(bytes.substr(0, cut), false, q, u2, e2, 1u << 16) == Parse::kComplete)
+          if (rcan::client::wire::parse_response(bytes.substr(0, cut), false, q, u2, e2,
+                                                 1u << 16) == Parse::kComplete)
             std::abort();
         }
       }
@@ -45,8 +46,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     std::string again = rcan::client::wire::ws_frame(f.opcode, f.payload, mask);
     rcan::client::wire::WsFrame g;
     size_t u2 = 0;
-    if (rcan::client::wire::ws_parse(again, g, u2, err, 1u << 16) != Parse::kComplete || g.payload != f.payload ||
-        g.opcode != f.opcode || u2 != again.size())
+    if (rcan::client::wire::ws_parse(again, g, u2, err, 1u << 16) != Parse::kComplete ||
+        g.payload != f.payload || g.opcode != f.opcode || u2 != again.size())
       std::abort();
   }
   return 0;

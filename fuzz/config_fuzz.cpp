@@ -37,6 +37,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     if (!(g.min_confidence >= 0 && g.min_confidence <= 1)) std::abort();
   for (const auto& h : c.agent.hitl_gates)
     if (h.auth_timeout_ms == 0 || h.authorized_roles.empty()) std::abort();
-  if (c.data_dir.empty() || c.security.key_dir.empty() || c.security.audit.dir.empty()) std::abort();
+  if (c.data_dir.empty() || c.security.key_dir.empty() || c.security.audit.dir.empty())
+    std::abort();
   return 0;
 }

@@ -6,8 +6,8 @@
 #include <cstdlib>
 #include <string_view>
 
-#include "node/control/consent.h"
 #include "base/http_client.h"
+#include "node/control/consent.h"
 #include "node/control/ownership.h"
 #include "node/control/partition.h"
 #include "node/control/sessions.h"

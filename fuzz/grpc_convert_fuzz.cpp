@@ -16,7 +16,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   auto v = rcan::transport::grpc_to_json(m, 64 * 1024);
   if (!v.ok()) {
     auto c = v.error().code;
-    if (c != rcan::ErrorCode::kMalformedJson && c != rcan::ErrorCode::kSchemaValidationFailed) std::abort();
+    if (c != rcan::ErrorCode::kMalformedJson && c != rcan::ErrorCode::kSchemaValidationFailed)
+      std::abort();
     return 0;
   }
   const rcan::json::Value* type = v->get("type");

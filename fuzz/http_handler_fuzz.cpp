@@ -26,7 +26,9 @@ namespace {
 
 [[noreturn]] void fail(const std::string& what, const rcan::transport::HttpResponse* r = nullptr) {
   std::fprintf(stderr, "http_handler_fuzz: %s\n", what.c_str());
-  if (r) std::fprintf(stderr, "  status %d, content-type %s, body: %.2000s\n", r->status, r->content_type.c_str(), r->body.c_str());
+  if (r)
+    std::fprintf(stderr, "  status %d, content-type %s, body: %.2000s\n", r->status,
+                 r->content_type.c_str(), r->body.c_str());
   std::abort();
 }
 
@@ -51,9 +53,10 @@ void check_response(const rcan::transport::HttpResponse& r) {
   if (r.status < 400) return;
   const rcan::json::Value* type = v->is_object() ? v->get("type") : nullptr;
   const rcan::json::Value* payload = v->is_object() ? v->get("payload") : nullptr;
-  const rcan::json::Value* code = payload && payload->is_object() ? payload->get("error_code") : nullptr;
-  const bool profile = type && type->is_string() && type->as_string() == "ERROR" && code && code->is_string() &&
-                       !code->as_string().empty();
+  const rcan::json::Value* code =
+      payload && payload->is_object() ? payload->get("error_code") : nullptr;
+  const bool profile = type && type->is_string() && type->as_string() == "ERROR" && code &&
+                       code->is_string() && !code->as_string().empty();
   // The §16.6 watermark lookup answers in the seed's own shape ({"error", "code"}).
   const rcan::json::Value* err = v->is_object() ? v->get("error") : nullptr;
   const bool seed_shape = err && err->is_string() && !err->as_string().empty();
@@ -94,8 +97,8 @@ void handle_one(rcan::transport::HttpRequest req, bool websocket) {
   if (!answer->cv.wait_for(lock, std::chrono::seconds(10), [&] { return answer->calls > 0; }))
     fail("no answer within 10 s");
   if (verbose())
-    std::fprintf(stderr, "  %s %s -> %d %.300s\n", method.c_str(), target.c_str(), answer->response.status,
-                 answer->response.body.c_str());
+    std::fprintf(stderr, "  %s %s -> %d %.300s\n", method.c_str(), target.c_str(),
+                 answer->response.status, answer->response.body.c_str());
   check_response(answer->response);
 }
 
@@ -108,7 +111,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   std::string_view rest(reinterpret_cast<const char*>(data), size);
   for (int n = 0; n < 8 && !rest.empty(); ++n) {  // keep-alive: up to 8 requests per input
     ParseOutcome out = rcan::transport::detail::parse_request_bytes(rest, 8 * 1024, 64 * 1024);
-    if (out.kind != ParseOutcome::Kind::kRequest || out.consumed == 0 || out.consumed > rest.size()) break;
+    if (out.kind != ParseOutcome::Kind::kRequest || out.consumed == 0 || out.consumed > rest.size())
+      break;
     // Placeholders are expanded after parsing, so that Content-Length counts the input's bytes.
     out.request.path = h.expand(out.request.path);
     out.request.target = h.expand(out.request.target);

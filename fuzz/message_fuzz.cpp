@@ -13,7 +13,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   std::string_view text(reinterpret_cast<const char*>(data), size);
   auto m = rcan::parse_message(text);
   if (!m.ok()) {
-    rcan::json::Value body = rcan::error_body(m.error(), "", 0, "00000000-0000-4000-8000-000000000000");
+    rcan::json::Value body =
+        rcan::error_body(m.error(), "", 0, "00000000-0000-4000-8000-000000000000");
     if (rcan::json::dump(body).empty()) std::abort();
     return 0;
   }

@@ -13,7 +13,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   std::string_view text(reinterpret_cast<const char*>(data), size);
   size_t nl = text.find('\n');
   std::string_view topic = text.substr(0, nl);
-  std::string_view payload = nl == std::string_view::npos ? std::string_view() : text.substr(nl + 1);
+  std::string_view payload =
+      nl == std::string_view::npos ? std::string_view() : text.substr(nl + 1);
   using rcan::mqtt::TopicKind;
   auto t = rcan::mqtt::parse_topic("rcan", topic);
   switch (t.kind) {
@@ -24,7 +25,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       if (rcan::mqtt::fleet_topics("rcan", t.fleet_id).estop() != topic) std::abort();
       break;
     case rcan::mqtt::TopicKind::kMemberCmd:
-      if (rcan::mqtt::fleet_topics("rcan", t.fleet_id).member(t.member).cmd() != topic) std::abort();
+      if (rcan::mqtt::fleet_topics("rcan", t.fleet_id).member(t.member).cmd() != topic)
+        std::abort();
       break;
     case rcan::mqtt::TopicKind::kSwarmAnnounce:
       if (rcan::mqtt::swarm_topics("rcan", t.swarm_id).announce() != topic) std::abort();
@@ -36,7 +38,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       if (rcan::mqtt::swarm_topics("rcan", t.swarm_id).join() != topic) std::abort();
       break;
     case rcan::mqtt::TopicKind::kRobotCmd:
-    case rcan::mqtt::TopicKind::kOther: break;
+    case rcan::mqtt::TopicKind::kOther:
+      break;
   }
   auto p = rcan::mqtt::parse_payload(payload);
   if (p.ok() && !p->is_object()) std::abort();

@@ -25,11 +25,11 @@
 #include <string>
 #include <string_view>
 
-#include "node/safety/actuation_safety.h"
-#include "node/ai/ai_services.h"
 #include "base/clock.h"
 #include "config/config.h"
+#include "node/ai/ai_services.h"
 #include "node/api/node.h"
+#include "node/safety/actuation_safety.h"
 #include "node/safety/safety.h"
 #include "node/safety/sim_robot.h"
 #include "rcan/crypto/jwt.h"
@@ -72,12 +72,14 @@ class NodeHarness {
       if (at == std::string_view::npos) break;
       out.append(in.substr(i, at - i));
       size_t end = in.find('@', at + 1);
-      std::string_view name = end == std::string_view::npos ? std::string_view() : in.substr(at + 1, end - at - 1);
+      std::string_view name =
+          end == std::string_view::npos ? std::string_view() : in.substr(at + 1, end - at - 1);
       std::string rep;
       bool known = true;
       if (name == "UUID") {
         rep = new_uuid_v4();
-      } else if (name.size() == 5 && name.substr(0, 4) == "UUID" && name[4] >= '1' && name[4] <= '9') {
+      } else if (name.size() == 5 && name.substr(0, 4) == "UUID" && name[4] >= '1' &&
+                 name[4] <= '9') {
         std::string& u = numbered_[static_cast<size_t>(name[4] - '1')];
         if (u.empty()) u = new_uuid_v4();
         rep = u;
@@ -110,7 +112,8 @@ class NodeHarness {
   }
 
   static int role_index(std::string_view name) {
-    static constexpr std::array<std::string_view, 5> kNames{"GUEST", "USER", "LEASEE", "OWNER", "CREATOR"};
+    static constexpr std::array<std::string_view, 5> kNames{"GUEST", "USER", "LEASEE", "OWNER",
+                                                            "CREATOR"};
     for (size_t i = 0; i < kNames.size(); ++i)
       if (name == kNames[i]) return static_cast<int>(i);
     return -1;
@@ -123,7 +126,9 @@ class NodeHarness {
 
   NodeHarness() {
     // tmpfs when there is one: the audit log syncs every group.
-    std::string base = ::access("/dev/shm", W_OK) == 0 ? "/dev/shm" : std::filesystem::temp_directory_path().string();
+    std::string base = ::access("/dev/shm", W_OK) == 0
+                           ? "/dev/shm"
+                           : std::filesystem::temp_directory_path().string();
     std::string tmpl = base + "/rcan-fuzz-node-XXXXXX";
     if (!::mkdtemp(tmpl.data())) die("mkdtemp failed");
     dir_ = tmpl;
@@ -141,7 +146,8 @@ class NodeHarness {
         "confidence_gates:\n    - {scope: control, min_confidence: 0.7, on_fail: log}\n"
         "    - {scope: admin, min_confidence: 0.9, on_fail: block}");
     put("hitl_gates: []",
-        "hitl_gates:\n    - action_types: [arm_deploy]\n      require_auth: true\n      auth_timeout_ms: 200\n"
+        "hitl_gates:\n    - action_types: [arm_deploy]\n      require_auth: true\n      "
+        "auth_timeout_ms: 200\n"
         "      on_timeout: block");
     config::ConfigOptions co;
     co.device_id = device;
@@ -178,15 +184,17 @@ class NodeHarness {
     auth.verify.audience = ruri_;
     auth.verify.fleet_ids = {device, ruri_};
     const int64_t now_s = rcan::Clock::system().wall_ms() / 1000;
-    static constexpr std::array<const char*, 5> kClaims{"guest", "user", "leasee", "owner", "creator"};
+    static constexpr std::array<const char*, 5> kClaims{"guest", "user", "leasee", "owner",
+                                                        "creator"};
     for (size_t i = 0; i < kClaims.size(); ++i) {
-      json::Object claims{{"iss", std::string(kIssuer)},
-                          {"sub", std::string("fuzz-") + kClaims[i]},
-                          {"aud", ruri_},
-                          {"role", kClaims[i]},
-                          {"scope", json::Array{"status", "chat", "control", "config", "training", "admin"}},
-                          {"iat", now_s},
-                          {"exp", now_s + 7 * 24 * 3600}};
+      json::Object claims{
+          {"iss", std::string(kIssuer)},
+          {"sub", std::string("fuzz-") + kClaims[i]},
+          {"aud", ruri_},
+          {"role", kClaims[i]},
+          {"scope", json::Array{"status", "chat", "control", "config", "training", "admin"}},
+          {"iat", now_s},
+          {"exp", now_s + 7 * 24 * 3600}};
       auto t = jwt::issue(claims, *signing);
       if (!t.ok()) die("token: " + t.error().message);
       tokens_[i] = *t;
@@ -196,9 +204,11 @@ class NodeHarness {
     ns.ruri = ruri_;
     ns.rrn = "RRN-000000000042";
     ns.name = "fuzz-robot";
-    ns.rate_per_minute = {0, 0, 0, 0, 0, 0};  // no rate limit: the fuzzer sends thousands per second
+    ns.rate_per_minute = {0, 0, 0,
+                          0, 0, 0};  // no rate limit: the fuzzer sends thousands per second
     ns.state_dir = dir_;
-    services_ = std::make_unique<node::NodeServices>(ns, rcan::Clock::system(), std::move(auth), *act_, *audit_);
+    services_ = std::make_unique<node::NodeServices>(ns, rcan::Clock::system(), std::move(auth),
+                                                     *act_, *audit_);
 
     auto robot_keys = keys::generate();
     if (!robot_keys.ok()) die("robot keys: " + robot_keys.error().message);
@@ -207,7 +217,8 @@ class NodeHarness {
     ai.pending_file = dir_ + "/hitl_pending.json";
     services_->ai = std::make_shared<node::AiServices>(*services_, std::move(ai));
     node_ = std::make_unique<node::Node>(*services_);
-    if (Status s = services_->ai->start(node_->pipeline()); !s.ok()) die("ai: " + s.error().message);
+    if (Status s = services_->ai->start(node_->pipeline()); !s.ok())
+      die("ai: " + s.error().message);
     core_->start();
     node_->start();
   }

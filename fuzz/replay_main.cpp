@@ -4,8 +4,8 @@
 // rcan_fuzz_<name>, and the generated table below lists them.
 //
 //   fuzz_replay --list
-//   fuzz_replay NAME --dir FUZZ_DIR   every file in FUZZ_DIR/corpus/NAME and FUZZ_DIR/regressions/NAME
-//   fuzz_replay NAME FILE…            the given inputs
+//   fuzz_replay NAME --dir FUZZ_DIR   every file in FUZZ_DIR/corpus/NAME and
+//   FUZZ_DIR/regressions/NAME fuzz_replay NAME FILE…            the given inputs
 //
 // A target that misbehaves aborts (the test fails with the input's name printed last). With
 // --dir the seed corpus must not be empty.
@@ -34,7 +34,8 @@ std::vector<std::string> files_in(const fs::path& dir) {
   if (!fs::is_directory(dir, ec)) return out;
   for (const auto& e : fs::directory_iterator(dir, ec)) {
     const std::string name = e.path().filename().string();
-    if (e.is_regular_file() && name != "README" && name != "README.md" && name[0] != '.') out.push_back(e.path().string());
+    if (e.is_regular_file() && name != "README" && name != "README.md" && name[0] != '.')
+      out.push_back(e.path().string());
   }
   std::sort(out.begin(), out.end());
   return out;
@@ -80,7 +81,8 @@ int main(int argc, char** argv) {
     const fs::path dir = argv[3];
     files = files_in(dir / "corpus" / argv[1]);
     if (files.empty()) {
-      std::fprintf(stderr, "fuzz_replay: %s has no seed corpus in %s\n", argv[1], (dir / "corpus" / argv[1]).c_str());
+      std::fprintf(stderr, "fuzz_replay: %s has no seed corpus in %s\n", argv[1],
+                   (dir / "corpus" / argv[1]).c_str());
       return 1;
     }
     auto reg = files_in(dir / "regressions" / argv[1]);

@@ -31,6 +31,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   std::span<const uint8_t> key(data, size);
   std::string t = watermark::compute(key, "RRN-000000000001", token, "2026-04-10T14:32:01.123456");
   if (!watermark::valid_format(t)) std::abort();
-  if (!watermark::verify(key, "RRN-000000000001", token, "2026-04-10T14:32:01.123456", t)) std::abort();
+  if (!watermark::verify(key, "RRN-000000000001", token, "2026-04-10T14:32:01.123456", t))
+    std::abort();
   return 0;
 }

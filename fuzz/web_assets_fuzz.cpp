@@ -38,7 +38,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const rcan::node::WebAsset* a = rcan::node::find_web_asset(req.path);
   switch (r.status) {
     case 200:
-      check(a != nullptr && r.body.size() == a->size && r.body == std::string_view(reinterpret_cast<const char*>(a->data), a->size));
+      check(a != nullptr && r.body.size() == a->size &&
+            r.body == std::string_view(reinterpret_cast<const char*>(a->data), a->size));
       break;
     case 304:
       check(a != nullptr && r.body.empty());

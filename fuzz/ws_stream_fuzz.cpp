@@ -38,7 +38,8 @@ class Sink final : public rcan::transport::StreamSink {
     if (std::getenv("RCAN_FUZZ_VERBOSE")) std::fprintf(stderr, "  <- %.300s\n", text.c_str());
     auto v = rcan::json::parse(text, {.max_depth = 256, .max_bytes = 1u << 30});
     const rcan::json::Value* type = v.ok() && v->is_object() ? v->get("type") : nullptr;
-    if (!type || !type->is_string() || type->as_string().empty()) fail("a frame is not a typed JSON object", text);
+    if (!type || !type->is_string() || type->as_string().empty())
+      fail("a frame is not a typed JSON object", text);
     std::lock_guard<std::mutex> lock(mu_);
     if (closed_) return false;  // like the transport: calls after close are ignored
     // Telemetry and broadcast events arrive on their own; they answer nothing.
@@ -51,7 +52,8 @@ class Sink final : public rcan::transport::StreamSink {
     if (code < 1000 || code > 4999 || code == 1004 || code == 1005 || code == 1006 || code == 1015)
       fail("invalid close code " + std::to_string(code), reason);
     if (reason.size() > 123) fail("close reason longer than a control frame allows", reason);
-    if (std::getenv("RCAN_FUZZ_VERBOSE")) std::fprintf(stderr, "  <- close %u %s\n", code, reason.c_str());
+    if (std::getenv("RCAN_FUZZ_VERBOSE"))
+      std::fprintf(stderr, "  <- close %u %s\n", code, reason.c_str());
     std::lock_guard<std::mutex> lock(mu_);
     closed_ = true;
     cv_.notify_all();
@@ -103,7 +105,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   rcan::transport::HttpRequest up;
   up.method = "GET";
   up.target = std::string(first.empty() ? "/rcan/v1/stream" : first);
-  if (rcan::transport::detail::split_target(up.target, up.path, up.query)) return 0;  // the transport answers 400
+  if (rcan::transport::detail::split_target(up.target, up.path, up.query))
+    return 0;  // the transport answers 400
   up.headers = {{"upgrade", "websocket"}, {"connection", "Upgrade"}};
   if (!authorization.empty()) up.headers.emplace_back("authorization", std::string(authorization));
   up.remote_addr = "127.0.0.1:40002";
@@ -111,7 +114,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   rcan::transport::HttpResponse refusal;
   auto session = h.node().open(up, sink, refusal);
   if (!session) {
-    if (refusal.status < 400 || refusal.status > 499) fail("refusal status " + std::to_string(refusal.status), refusal.body);
+    if (refusal.status < 400 || refusal.status > 499)
+      fail("refusal status " + std::to_string(refusal.status), refusal.body);
     return 0;
   }
   for (int n = 0; n < 32 && !rest.empty() && !sink->closed(); ++n) {

@@ -19,7 +19,8 @@ constexpr const char* kPendingHelp =
     "  who asked, time left. OWNER and CREATOR see all; others their own.\n"
     "  Exit: 0 listed, 1 refused by the node, 2 usage or unreachable.\n";
 constexpr const char* kAuthorizeHelp =
-    "usage: rcan authorize MESSAGE_ID --approve|--deny [--reason TEXT] [--url URL] [--token-file F] [--json]\n"
+    "usage: rcan authorize MESSAGE_ID --approve|--deny [--reason TEXT] [--url URL] [--token-file "
+    "F] [--json]\n"
     "  Sends an AUTHORIZE for a held command (POST /rcan/v1/authorize). Only OWNER or CREATOR\n"
     "  tokens are accepted. On approve the node dispatches it and prints the result.\n"
     "  Exit: 0 accepted, 1 refused by the node (its error is printed), 2 usage or unreachable.\n";
@@ -29,7 +30,8 @@ constexpr const char* kThoughtsHelp =
     "  token. Exit: 0 found, 1 refused or unknown, 2 usage or unreachable.\n";
 
 int64_t now_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
       .count();
 }
 
@@ -54,8 +56,8 @@ int connect_opts(const char* verb, const Options& o, Conn& c) {
   return 0;
 }
 
-int send(const char* verb, const Conn& c, const std::string& method, const std::string& path, const std::string& body,
-         std::pair<int, std::string>& out) {
+int send(const char* verb, const Conn& c, const std::string& method, const std::string& path,
+         const std::string& body, std::pair<int, std::string>& out) {
   auto r = request(c.target, method, path, body, c.token);
   if (!r.ok()) {
     std::fprintf(stderr, "rcan %s: %s\n", verb, r.error().message.c_str());
@@ -66,15 +68,18 @@ int send(const char* verb, const Conn& c, const std::string& method, const std::
 }
 
 int pending_main(const Args& args) {
-  if (!args.empty() && (args[0] == "--help" || args[0] == "-h")) return std::fputs(kPendingHelp, stdout), 0;
+  if (!args.empty() && (args[0] == "--help" || args[0] == "-h"))
+    return std::fputs(kPendingHelp, stdout), 0;
   Options o(args, {"json"}, {"url", "token-file"});
   Conn c;
   if (int rc = connect_opts("pending", o, c)) return rc;
-  if (!o.positional().empty()) return usage_error("pending", "unexpected argument " + o.positional()[0]);
+  if (!o.positional().empty())
+    return usage_error("pending", "unexpected argument " + o.positional()[0]);
   std::pair<int, std::string> r;
   if (int rc = send("pending", c, "GET", "/rcan/v1/pending", "", r)) return rc;
   auto v = json::parse(r.second);
-  if (o.has("json") || r.first != 200 || !v.ok() || !v->get("pending") || !v->get("pending")->is_array()) {
+  if (o.has("json") || r.first != 200 || !v.ok() || !v->get("pending") ||
+      !v->get("pending")->is_array()) {
     std::cout << r.second << "\n";
     return r.first == 200 ? 0 : 1;
   }
@@ -86,21 +91,25 @@ int pending_main(const Args& args) {
       return f ? (f->is_string() ? f->as_string() : json::dump(*f)) : std::string("-");
     };
     const json::Value* left = i.get("timeout_remaining_ms");
-    std::printf("%s  %-16s by %-16s %6.1f s left (on timeout: %s)\n", s("message_id").c_str(), s("action_type").c_str(),
-                s("requested_by").c_str(), left && left->is_int() ? static_cast<double>(left->as_int()) / 1000 : 0.0,
+    std::printf("%s  %-16s by %-16s %6.1f s left (on timeout: %s)\n", s("message_id").c_str(),
+                s("action_type").c_str(), s("requested_by").c_str(),
+                left && left->is_int() ? static_cast<double>(left->as_int()) / 1000 : 0.0,
                 s("on_timeout").c_str());
   }
   return 0;
 }
 
 int authorize_main(const Args& args) {
-  if (!args.empty() && (args[0] == "--help" || args[0] == "-h")) return std::fputs(kAuthorizeHelp, stdout), 0;
+  if (!args.empty() && (args[0] == "--help" || args[0] == "-h"))
+    return std::fputs(kAuthorizeHelp, stdout), 0;
   Options o(args, {"approve", "deny", "json"}, {"url", "token-file", "reason"});
   Conn c;
   if (int rc = connect_opts("authorize", o, c)) return rc;
   if (o.positional().size() != 1) return usage_error("authorize", "give exactly one MESSAGE_ID");
-  if (o.has("approve") == o.has("deny")) return usage_error("authorize", "give --approve or --deny");
-  json::Object payload{{"message_id", o.positional()[0]}, {"decision", o.has("approve") ? "approve" : "deny"}};
+  if (o.has("approve") == o.has("deny"))
+    return usage_error("authorize", "give --approve or --deny");
+  json::Object payload{{"message_id", o.positional()[0]},
+                       {"decision", o.has("approve") ? "approve" : "deny"}};
   if (o.has("reason")) payload.set("reason", o.get("reason"));
   json::Object m{{"version", "1.0.0"},
                  {"message_id", new_uuid_v4()},
@@ -108,7 +117,8 @@ int authorize_main(const Args& args) {
                  {"timestamp_ms", now_ms()},
                  {"payload", payload}};
   std::pair<int, std::string> r;
-  if (int rc = send("authorize", c, "POST", "/rcan/v1/authorize", json::dump(json::Value(m)), r)) return rc;
+  if (int rc = send("authorize", c, "POST", "/rcan/v1/authorize", json::dump(json::Value(m)), r))
+    return rc;
   if (o.has("json") || r.first != 200) {
     std::cout << r.second << "\n";
   } else {
@@ -117,7 +127,8 @@ int authorize_main(const Args& args) {
     const json::Value* wm = p ? p->get("watermark_token") : nullptr;
     if (o.has("approve"))
       std::printf("approved %s: dispatched (HTTP %d)%s%s\n", o.positional()[0].c_str(), r.first,
-                  wm && wm->is_string() ? ", watermark " : "", wm && wm->is_string() ? wm->as_string().c_str() : "");
+                  wm && wm->is_string() ? ", watermark " : "",
+                  wm && wm->is_string() ? wm->as_string().c_str() : "");
     else
       std::printf("denied %s: dropped (HTTP %d)\n", o.positional()[0].c_str(), r.first);
   }
@@ -125,15 +136,18 @@ int authorize_main(const Args& args) {
 }
 
 int thoughts_main(const Args& args) {
-  if (args.empty() || args[0] == "--help" || args[0] == "-h") return std::fputs(kThoughtsHelp, stdout), args.empty() ? 2 : 0;
-  if (args[0] != "get") return usage_error("thoughts", "unknown subcommand " + args[0] + " (try: get)");
+  if (args.empty() || args[0] == "--help" || args[0] == "-h")
+    return std::fputs(kThoughtsHelp, stdout), args.empty() ? 2 : 0;
+  if (args[0] != "get")
+    return usage_error("thoughts", "unknown subcommand " + args[0] + " (try: get)");
   Options o(Args(args.begin() + 1, args.end()), {}, {"url", "token-file"});
   Conn c;
   if (int rc = connect_opts("thoughts", o, c)) return rc;
   if (o.positional().size() != 1) return usage_error("thoughts", "give exactly one THOUGHT_ID");
   const std::string& id = o.positional()[0];
   for (char ch : id)
-    if (!(std::isalnum(static_cast<unsigned char>(ch)) || ch == '-' || ch == '_' || ch == '.' || ch == ':'))
+    if (!(std::isalnum(static_cast<unsigned char>(ch)) || ch == '-' || ch == '_' || ch == '.' ||
+          ch == ':'))
       return usage_error("thoughts", "a thought id holds letters, digits and - _ . : only");
   std::pair<int, std::string> r;
   if (int rc = send("thoughts", c, "GET", "/api/thoughts/" + id, "", r)) return rc;
@@ -141,8 +155,10 @@ int thoughts_main(const Args& args) {
   return r.first == 200 ? 0 : 1;
 }
 
-const Registration kPending{"pending", "list commands held by a HiTL gate on a running node", &pending_main};
-const Registration kAuthorize{"authorize", "approve or deny a held command (OWNER/CREATOR)", &authorize_main};
+const Registration kPending{"pending", "list commands held by a HiTL gate on a running node",
+                            &pending_main};
+const Registration kAuthorize{"authorize", "approve or deny a held command (OWNER/CREATOR)",
+                              &authorize_main};
 const Registration kThoughts{"thoughts", "read the thought log of a running node", &thoughts_main};
 
 }  // namespace

@@ -1,12 +1,11 @@
 // rcan audit — export, verify and inspect audit logs offline (docs/AUDIT.md).
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
-#include <fstream>
 #include <filesystem>
+#include <fstream>
 #include <iostream>
-
-#include <chrono>
 #include <thread>
 
 #include "cli.h"
@@ -44,7 +43,8 @@ constexpr const char* kHelp =
     "      including segment links. With neither FILE nor a directory it fetches the running\n"
     "      node's chain (--url, --token-file).\n"
     "  rcan audit new-secret --out F\n"
-    "      Writes a new chain secret (64 hex characters, mode 0600, no newline). Never overwrites.\n"
+    "      Writes a new chain secret (64 hex characters, mode 0600, no newline). Never "
+    "overwrites.\n"
     "  Exit: 0 ok, 1 verification failed (or refused by the node), 2 usage or unreadable input,\n"
     "        3 node unreachable.\n";
 
@@ -59,7 +59,8 @@ Result<std::string> secret_from(const Options& o) {
     return Error(ErrorCode::kSchemaValidationFailed, "give --secret-file or --secret, not both");
   if (o.has("secret-file")) return audit::read_secret_file(o.get("secret-file"));
   if (o.has("secret")) {
-    if (o.get("secret").empty()) return Error(ErrorCode::kSchemaValidationFailed, "--secret is empty");
+    if (o.get("secret").empty())
+      return Error(ErrorCode::kSchemaValidationFailed, "--secret is empty");
     return o.get("secret");
   }
   return Error(ErrorCode::kSchemaValidationFailed,
@@ -83,11 +84,13 @@ int remote_export(const Options& o) {
   std::optional<int64_t> from, to;
   int64_t v = 0;
   if (o.has("from")) {
-    if (!parse_i64(o.get("from"), &v)) return usage_error("audit export", "--from must be milliseconds since the epoch");
+    if (!parse_i64(o.get("from"), &v))
+      return usage_error("audit export", "--from must be milliseconds since the epoch");
     from = v;
   }
   if (o.has("to")) {
-    if (!parse_i64(o.get("to"), &v)) return usage_error("audit export", "--to must be milliseconds since the epoch");
+    if (!parse_i64(o.get("to"), &v))
+      return usage_error("audit export", "--to must be milliseconds since the epoch");
     to = v;
   }
   if (o.get("format", "jsonl") != "jsonl")
@@ -115,7 +118,8 @@ int tail_main(const Args& args) {
   valued.insert(valued.end(), net_valued().begin(), net_valued().end());
   Options o(norm, flags, valued);
   if (!o.ok()) return usage_error("audit tail", o.error());
-  if (!o.positional().empty()) return usage_error("audit tail", "unexpected argument " + o.positional()[0]);
+  if (!o.positional().empty())
+    return usage_error("audit tail", "unexpected argument " + o.positional()[0]);
   int64_t n = 20;
   if (o.has("lines") && (!parse_i64(o.get("lines"), &n) || n < 1 || n > 1000))
     return usage_error("audit tail", "-n must be 1..1000");
@@ -133,8 +137,8 @@ int tail_main(const Args& args) {
       std::string seqs;
       for (int64_t s : page->unreadable)
         if (s > last_seen) seqs += (seqs.empty() ? "" : ", ") + std::to_string(s);
-      std::cerr << "warning: audit records that failed their check on the node are not shown: seq " << seqs
-                << " (rcan audit verify --data-dir on the robot names the fault)\n";
+      std::cerr << "warning: audit records that failed their check on the node are not shown: seq "
+                << seqs << " (rcan audit verify --data-dir on the robot names the fault)\n";
     }
     std::vector<std::vector<std::string>> rows;
     for (const auto& e : page->entries) {
@@ -152,10 +156,12 @@ int tail_main(const Args& args) {
       };
       const json::Value* ts = e.get("timestamp_ms");
       std::string outcome = f("outcome");
-      outcome = outcome == "ok" ? green(outcome) : outcome == "blocked" ? red(outcome) : yellow(outcome);
+      outcome = outcome == "ok"        ? green(outcome)
+                : outcome == "blocked" ? red(outcome)
+                                       : yellow(outcome);
       std::string reason = f("reason");
-      rows.push_back({std::to_string(s), when(ts && ts->is_int() ? ts->as_int() : 0), f("principal"), f("event"),
-                      outcome, reason == "null" ? "-" : reason});
+      rows.push_back({std::to_string(s), when(ts && ts->is_int() ? ts->as_int() : 0),
+                      f("principal"), f("event"), outcome, reason == "null" ? "-" : reason});
     }
     if (!json_out && !rows.empty()) {
       if (!header) {
@@ -176,12 +182,14 @@ int tail_main(const Args& args) {
 }
 
 int export_main(const Args& args) {
-  std::vector<std::string> flags, valued{"data-dir", "from", "to", "format", "secret-file", "secret", "out"};
+  std::vector<std::string> flags,
+      valued{"data-dir", "from", "to", "format", "secret-file", "secret", "out"};
   flags.insert(flags.end(), net_flags().begin(), net_flags().end());
   valued.insert(valued.end(), net_valued().begin(), net_valued().end());
   Options o(args, flags, valued);
   if (!o.ok()) return usage_error("audit export", o.error());
-  if (!o.positional().empty()) return usage_error("audit export", "unexpected argument " + o.positional()[0]);
+  if (!o.positional().empty())
+    return usage_error("audit export", "unexpected argument " + o.positional()[0]);
   if (o.get("data-dir").empty()) return remote_export(o);
   int64_t from = INT64_MIN, to = INT64_MAX;
   if (o.has("from") && !parse_i64(o.get("from"), &from))
@@ -189,7 +197,8 @@ int export_main(const Args& args) {
   if (o.has("to") && !parse_i64(o.get("to"), &to))
     return usage_error("audit export", "--to must be milliseconds since the epoch");
   std::string format = o.get("format", "jsonl");
-  if (format != "jsonl" && format != "rcanpy") return usage_error("audit export", "--format is jsonl or rcanpy");
+  if (format != "jsonl" && format != "rcanpy")
+    return usage_error("audit export", "--format is jsonl or rcanpy");
   std::optional<audit::RcanpyExporter> rcanpy;
   if (format == "rcanpy") {
     auto secret = secret_from(o);
@@ -211,7 +220,8 @@ int export_main(const Args& args) {
       po.max_bytes = 8u << 20;
       auto v = json::parse(line, po);
       if (!v.ok() || !v->is_object()) {
-        err = "malformed record in the log: " + (v.ok() ? std::string("not an object") : v.error().message);
+        err = "malformed record in the log: " +
+              (v.ok() ? std::string("not an object") : v.error().message);
         return false;
       }
       auto l = rcanpy->add(v->as_object());
@@ -240,7 +250,8 @@ int export_main(const Args& args) {
 }
 
 int verify_main(const Args& args) {
-  std::vector<std::string> flags{"partial"}, valued{"secret-file", "secret", "format", "data-dir", "expect-last-seq"};
+  std::vector<std::string> flags{"partial"},
+      valued{"secret-file", "secret", "format", "data-dir", "expect-last-seq"};
   flags.insert(flags.end(), net_flags().begin(), net_flags().end());
   valued.insert(valued.end(), net_valued().begin(), net_valued().end());
   Options o(args, flags, valued);
@@ -249,7 +260,8 @@ int verify_main(const Args& args) {
   if (!secret.ok()) return usage_error("audit verify", secret.error().message);
   std::string format = o.get("format", "native");
   if (format == "jsonl") format = "native";
-  if (format != "native" && format != "rcanpy") return usage_error("audit verify", "--format is native or rcanpy");
+  if (format != "native" && format != "rcanpy")
+    return usage_error("audit verify", "--format is native or rcanpy");
 
   audit::VerifyReport rep;
   // A directory given as FILE is a data directory (or its audit/ subdirectory), as with
@@ -260,10 +272,13 @@ int verify_main(const Args& args) {
   if (o.has("data-dir") || positional_dir) {
     if (o.has("data-dir") && !o.positional().empty())
       return usage_error("audit verify", "give FILE or --data-dir, not both");
-    if (format != "native") return usage_error("audit verify", "a data directory holds native segments");
-    rep = audit::verify_dir(resolve_dir(positional_dir ? o.positional()[0] : o.get("data-dir")), *secret);
+    if (format != "native")
+      return usage_error("audit verify", "a data directory holds native segments");
+    rep = audit::verify_dir(resolve_dir(positional_dir ? o.positional()[0] : o.get("data-dir")),
+                            *secret);
   } else {
-    if (o.positional().size() > 1) return usage_error("audit verify", "expected one FILE (or - for stdin)");
+    if (o.positional().size() > 1)
+      return usage_error("audit verify", "expected one FILE (or - for stdin)");
     std::string text;
     if (o.positional().empty()) {
       // The running node's chain, fetched and verified here with the secret.
@@ -349,7 +364,8 @@ int audit_main(const Args& args) {
   if (args[0] == "verify") return verify_main(rest);
   if (args[0] == "new-secret") return new_secret_main(rest);
   if (args[0] == "tail") return tail_main(rest);
-  return usage_error("audit", "unknown subcommand " + args[0] + " (export, verify, tail, new-secret)");
+  return usage_error("audit",
+                     "unknown subcommand " + args[0] + " (export, verify, tail, new-secret)");
 }
 
 const Registration kReg{"audit", "export, verify and tail audit logs (node or files)", &audit_main};

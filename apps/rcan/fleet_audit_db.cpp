@@ -49,11 +49,12 @@ struct FleetAuditDb::Impl {
   }
 
   // Runs a parameterised statement; rows as vectors of optional strings (null → nullopt).
-  Result<std::vector<std::vector<std::optional<std::string>>>> query(const char* sql,
-                                                                     const std::vector<std::string>& params) {
+  Result<std::vector<std::vector<std::optional<std::string>>>> query(
+      const char* sql, const std::vector<std::string>& params) {
     std::vector<const char*> values;
     for (const auto& p : params) values.push_back(p.c_str());
-    PGresult* r = PQexecParams(conn, sql, static_cast<int>(values.size()), nullptr, values.data(), nullptr, nullptr, 0);
+    PGresult* r = PQexecParams(conn, sql, static_cast<int>(values.size()), nullptr, values.data(),
+                               nullptr, nullptr, 0);
     ExecStatusType st = PQresultStatus(r);
     if (st != PGRES_COMMAND_OK && st != PGRES_TUPLES_OK) {
       std::string msg = PQresultErrorMessage(r);
@@ -64,7 +65,8 @@ struct FleetAuditDb::Impl {
     for (int i = 0; i < PQntuples(r); ++i) {
       std::vector<std::optional<std::string>> row;
       for (int j = 0; j < PQnfields(r); ++j)
-        row.push_back(PQgetisnull(r, i, j) ? std::nullopt : std::optional<std::string>(PQgetvalue(r, i, j)));
+        row.push_back(PQgetisnull(r, i, j) ? std::nullopt
+                                           : std::optional<std::string>(PQgetvalue(r, i, j)));
       rows.push_back(std::move(row));
     }
     PQclear(r);
@@ -88,7 +90,8 @@ Result<std::unique_ptr<FleetAuditDb>> FleetAuditDb::open(const std::string& conn
   db->impl_ = std::make_unique<Impl>();
   db->impl_->conn = PQconnectdb(conninfo.c_str());
   if (PQstatus(db->impl_->conn) != CONNECTION_OK)
-    return Error(ErrorCode::kInternal, std::string("PostgreSQL connection: ") + PQerrorMessage(db->impl_->conn));
+    return Error(ErrorCode::kInternal,
+                 std::string("PostgreSQL connection: ") + PQerrorMessage(db->impl_->conn));
   PGresult* r = PQexec(db->impl_->conn, kFleetAuditSchema);
   bool ok = PQresultStatus(r) == PGRES_COMMAND_OK;
   std::string msg = PQresultErrorMessage(r);
@@ -106,8 +109,10 @@ std::string str_of(const json::Value& v, const char* key) {
 
 }  // namespace
 
-Result<std::vector<AuditProblem>> FleetAuditDb::ingest(const std::string& fleet_id, const std::string& member,
-                                                       const json::Value& record, const std::string* secret) {
+Result<std::vector<AuditProblem>> FleetAuditDb::ingest(const std::string& fleet_id,
+                                                       const std::string& member,
+                                                       const json::Value& record,
+                                                       const std::string* secret) {
   std::vector<AuditProblem> problems;
   auto problem = [&](int64_t seq, std::string what, std::string detail) {
     problems.push_back(AuditProblem{fleet_id, member, seq, std::move(what), std::move(detail)});
@@ -115,8 +120,8 @@ Result<std::vector<AuditProblem>> FleetAuditDb::ingest(const std::string& fleet_
   const json::Value* seqv = record.is_object() ? record.get("seq") : nullptr;
   std::string hmac = str_of(record, "hmac");
   const json::Value* prevv = record.is_object() ? record.get("prev_hash") : nullptr;
-  if (seqv == nullptr || !seqv->is_int() || seqv->as_int() < 1 || hmac.empty() || prevv == nullptr ||
-      !(prevv->is_null() || prevv->is_string())) {
+  if (seqv == nullptr || !seqv->is_int() || seqv->as_int() < 1 || hmac.empty() ||
+      prevv == nullptr || !(prevv->is_null() || prevv->is_string())) {
     problem(0, "malformed", "not a sealed audit record (seq, prev_hash, hmac)");
     for (const auto& p : problems) (void)impl_->record_problem(p, json::dump(record));
     return problems;
@@ -130,14 +135,16 @@ Result<std::vector<AuditProblem>> FleetAuditDb::ingest(const std::string& fleet_
   if (secret != nullptr) {
     hmac_ok = hmac_sha256_hex(*secret, preimage) == hmac;
     if (!*hmac_ok) {
-      problem(seq, "hmac_mismatch", "the record's hmac does not verify with the robot's chain secret (tampered)");
+      problem(seq, "hmac_mismatch",
+              "the record's hmac does not verify with the robot's chain secret (tampered)");
       for (const auto& p : problems)
         if (auto s = impl_->record_problem(p, line); !s.ok()) return s.error();
       return problems;
     }
   }
-  auto existing = impl_->query("SELECT line FROM rcan_fleet_audit WHERE fleet_id=$1 AND member=$2 AND seq=$3",
-                               {fleet_id, member, std::to_string(seq)});
+  auto existing =
+      impl_->query("SELECT line FROM rcan_fleet_audit WHERE fleet_id=$1 AND member=$2 AND seq=$3",
+                   {fleet_id, member, std::to_string(seq)});
   if (!existing.ok()) return existing.error();
   if (!existing->empty()) {
     if ((*existing)[0][0].value_or("") == line) return problems;  // a redelivery: already stored
@@ -154,21 +161,26 @@ Result<std::vector<AuditProblem>> FleetAuditDb::ingest(const std::string& fleet_
   if (!before->empty()) {
     int64_t prev_seq = std::strtoll((*before)[0][0]->c_str(), nullptr, 10);
     if (prev_seq != seq - 1)
-      problem(seq, "gap", "records " + std::to_string(prev_seq + 1) + ".." + std::to_string(seq - 1) + " are missing");
+      problem(seq, "gap",
+              "records " + std::to_string(prev_seq + 1) + ".." + std::to_string(seq - 1) +
+                  " are missing");
     else if ((*before)[0][1].value_or("") != prev)
-      problem(seq, "break", "prev_hash does not match the record_hash of seq " + std::to_string(prev_seq));
+      problem(seq, "break",
+              "prev_hash does not match the record_hash of seq " + std::to_string(prev_seq));
   }
-  auto after = impl_->query(
-      "SELECT line FROM rcan_fleet_audit WHERE fleet_id=$1 AND member=$2 AND seq=$3",
-      {fleet_id, member, std::to_string(seq + 1)});
+  auto after =
+      impl_->query("SELECT line FROM rcan_fleet_audit WHERE fleet_id=$1 AND member=$2 AND seq=$3",
+                   {fleet_id, member, std::to_string(seq + 1)});
   if (!after.ok()) return after.error();
   if (!after->empty()) {
     auto next = json::parse((*after)[0][0].value_or(""));
     if (next.ok() && str_of(*next, "prev_hash") != hash)
-      problem(seq + 1, "break", "prev_hash does not match the record_hash of seq " + std::to_string(seq));
+      problem(seq + 1, "break",
+              "prev_hash does not match the record_hash of seq " + std::to_string(seq));
   }
   auto ins = impl_->query(
-      "INSERT INTO rcan_fleet_audit (fleet_id, member, seq, line, prev_hash, record_hash, hmac, hmac_verified) "
+      "INSERT INTO rcan_fleet_audit (fleet_id, member, seq, line, prev_hash, record_hash, hmac, "
+      "hmac_verified) "
       "VALUES ($1, $2, $3, $4, NULLIF($5, ''), $6, $7, "
       "CASE $8 WHEN 'true' THEN true WHEN 'false' THEN false ELSE NULL END)",
       {fleet_id, member, std::to_string(seq), line, prev, hash, hmac,
@@ -179,9 +191,9 @@ Result<std::vector<AuditProblem>> FleetAuditDb::ingest(const std::string& fleet_
   return problems;
 }
 
-Result<std::vector<AuditProblem>> FleetAuditDb::verify(const std::string& fleet_id,
-                                                       const std::map<std::string, std::string>& secrets,
-                                                       int64_t* records_checked) {
+Result<std::vector<AuditProblem>> FleetAuditDb::verify(
+    const std::string& fleet_id, const std::map<std::string, std::string>& secrets,
+    int64_t* records_checked) {
   auto rows = impl_->query(
       "SELECT fleet_id, member, seq, line, record_hash FROM rcan_fleet_audit "
       "WHERE $1 = '' OR fleet_id = $1 ORDER BY fleet_id, member, seq",
@@ -210,14 +222,18 @@ Result<std::vector<AuditProblem>> FleetAuditDb::verify(const std::string& fleet_
     }
     std::string preimage = json::canonical_without(rec->as_object(), "hmac");
     std::string hash = sha256_hex(preimage);
-    if (hash != row[4].value_or("")) bad("record_hash_mismatch", "the stored line was altered after ingest");
+    if (hash != row[4].value_or(""))
+      bad("record_hash_mismatch", "the stored line was altered after ingest");
     const json::Value* s = rec->get("seq");
-    if (s == nullptr || !s->is_int() || s->as_int() != seq) bad("malformed", "the line's seq differs from the row's");
-    if (auto sec = secrets.find(m); sec != secrets.end() && hmac_sha256_hex(sec->second, preimage) != str_of(*rec, "hmac"))
+    if (s == nullptr || !s->is_int() || s->as_int() != seq)
+      bad("malformed", "the line's seq differs from the row's");
+    if (auto sec = secrets.find(m);
+        sec != secrets.end() && hmac_sha256_hex(sec->second, preimage) != str_of(*rec, "hmac"))
       bad("hmac_mismatch", "the record's hmac does not verify with the robot's chain secret");
     if (!first) {
       if (seq != last_seq + 1)
-        bad("gap", "records " + std::to_string(last_seq + 1) + ".." + std::to_string(seq - 1) + " are missing");
+        bad("gap", "records " + std::to_string(last_seq + 1) + ".." + std::to_string(seq - 1) +
+                       " are missing");
       else if (str_of(*rec, "prev_hash") != last_hash)
         bad("break", "prev_hash does not match the record_hash of seq " + std::to_string(last_seq));
     }

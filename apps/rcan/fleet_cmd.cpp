@@ -15,10 +15,10 @@
 #include "cli.h"
 #include "fleet_audit_db.h"
 #include "rcan/audit/secret.h"
-#include "rcan/mqtt_topics.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
 #include "rcan/json.h"
+#include "rcan/mqtt_topics.h"
 #include "transport/mqtt_client.h"
 
 namespace rcan::cli {
@@ -41,7 +41,8 @@ constexpr const char* kHelp =
     "      stops every robot it moved and reports the failed step.\n"
     "  rcan fleet status FLEET\n"
     "      Prints each member's retained status (online or offline).\n"
-    "  rcan fleet audit collect FLEET (--out DIR | --db CONNINFO) [--secrets-dir D] [--duration-ms N]\n"
+    "  rcan fleet audit collect FLEET (--out DIR | --db CONNINFO) [--secrets-dir D] [--duration-ms "
+    "N]\n"
     "      Subscribes to the members' audit topics for N ms (default 5000) and checks each\n"
     "      robot's chain on ingest: seq continuity (gap), prev_hash links (break), and with\n"
     "      D/<member>.secret the HMAC (a tampered record is refused). --out appends the records\n"
@@ -55,11 +56,13 @@ constexpr const char* kHelp =
     "  Exit: 0 success, 1 a robot refused, failed or timed out, 2 usage or connection error.\n";
 
 int64_t wall_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
       .count();
 }
 int64_t mono_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
       .count();
 }
 
@@ -73,7 +76,8 @@ std::vector<std::string> split_list(const std::string& s) {
   size_t start = 0;
   while (start <= s.size() && !s.empty()) {
     size_t comma = s.find(',', start);
-    std::string item = s.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    std::string item =
+        s.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
     if (!item.empty()) out.push_back(item);
     if (comma == std::string::npos) break;
     start = comma + 1;
@@ -94,14 +98,16 @@ class Session {
 
   Status open(const Options& o, const std::vector<std::string>& subscriptions) {
     transport::MqttOptions mo;
-    mo.url = o.get("broker", std::getenv("RCAN_MQTT_URL") ? std::getenv("RCAN_MQTT_URL") : "mqtt://127.0.0.1:1883");
+    mo.url = o.get("broker", std::getenv("RCAN_MQTT_URL") ? std::getenv("RCAN_MQTT_URL")
+                                                          : "mqtt://127.0.0.1:1883");
     mo.ca_file = o.get("ca-file");
     mo.username = o.get("username");
     if (o.has("password-file")) {
       auto pw = read_file(o.get("password-file"));
       if (!pw.ok()) return pw.error();
       mo.password = *pw;
-      while (!mo.password.empty() && (mo.password.back() == '\n' || mo.password.back() == '\r')) mo.password.pop_back();
+      while (!mo.password.empty() && (mo.password.back() == '\n' || mo.password.back() == '\r'))
+        mo.password.pop_back();
     }
     client_ = std::make_unique<transport::MqttClient>(mo);
     for (const auto& s : subscriptions) client_->subscribe(s, 1);
@@ -164,22 +170,28 @@ struct Common {
   int64_t timeout_ms = 10000;
 };
 
-const std::vector<std::string> kValued{"broker", "token", "prefix", "ca-file", "username", "password-file",
-                                       "timeout-ms", "members", "reason", "params", "out", "duration-ms",
-                                       "db", "secrets-dir", "fleet"};
+const std::vector<std::string> kValued{"broker",   "token",         "prefix",     "ca-file",
+                                       "username", "password-file", "timeout-ms", "members",
+                                       "reason",   "params",        "out",        "duration-ms",
+                                       "db",       "secrets-dir",   "fleet"};
 const std::vector<std::string> kFlags{"wait-complete"};
 
 Result<Common> common(const Options& o, bool need_token) {
   Common c;
   c.prefix = o.get("prefix", "rcan");
-  if (!mqtt::valid_topic_prefix(c.prefix)) return Error(ErrorCode::kSchemaValidationFailed, "--prefix is not a valid topic prefix");
-  std::string tf = o.get("token", std::getenv("RCAN_TOKEN_FILE") ? std::getenv("RCAN_TOKEN_FILE") : "");
+  if (!mqtt::valid_topic_prefix(c.prefix))
+    return Error(ErrorCode::kSchemaValidationFailed, "--prefix is not a valid topic prefix");
+  std::string tf =
+      o.get("token", std::getenv("RCAN_TOKEN_FILE") ? std::getenv("RCAN_TOKEN_FILE") : "");
   if (need_token) {
-    if (tf.empty()) return Error(ErrorCode::kSchemaValidationFailed, "--token FILE is required (a fleet JWT)");
+    if (tf.empty())
+      return Error(ErrorCode::kSchemaValidationFailed, "--token FILE is required (a fleet JWT)");
     auto t = read_file(tf);
     if (!t.ok()) return t.error();
     c.token = *t;
-    while (!c.token.empty() && (c.token.back() == '\n' || c.token.back() == '\r' || c.token.back() == ' ')) c.token.pop_back();
+    while (!c.token.empty() &&
+           (c.token.back() == '\n' || c.token.back() == '\r' || c.token.back() == ' '))
+      c.token.pop_back();
   }
   if (o.has("timeout-ms")) {
     const std::string text = o.get("timeout-ms");  // `end` points into it
@@ -210,8 +222,8 @@ bool valid_ids(const std::vector<std::string>& ids) {
 
 // Waits for the reply to `ids` (message_id → member) on the member reply topics: ACK/ERROR,
 // and with `complete`, the COMPLETED/ABORTED event. Returns {member: result}.
-json::Object await_replies(Session& s, const std::map<std::string, std::string>& ids, bool complete, int64_t timeout_ms,
-                           bool* all_ok) {
+json::Object await_replies(Session& s, const std::map<std::string, std::string>& ids, bool complete,
+                           int64_t timeout_ms, bool* all_ok) {
   std::map<std::string, json::Object> results;
   std::set<std::string> open;
   for (const auto& [id, member] : ids) open.insert(id);
@@ -244,11 +256,13 @@ json::Object await_replies(Session& s, const std::map<std::string, std::string>&
   *all_ok = true;
   for (const auto& [id, member] : ids) {
     auto it = results.find(id);
-    json::Object r = it == results.end() ? json::Object{{"member", member}, {"result", "timeout"}} : it->second;
+    json::Object r =
+        it == results.end() ? json::Object{{"member", member}, {"result", "timeout"}} : it->second;
     std::string res = str_of(json::Value(r), "result");
     if (open.count(id) != 0 && res == "acknowledged") r.set("result", "timeout");
     res = str_of(json::Value(r), "result");
-    if (res != (complete ? "completed" : "acknowledged") && !(complete && res == "completed")) *all_ok = false;
+    if (res != (complete ? "completed" : "acknowledged") && !(complete && res == "completed"))
+      *all_ok = false;
     out.set(member, std::move(r));
   }
   return out;
@@ -261,7 +275,8 @@ int estop_or_resume(const Options& o, bool estop) {
   auto c = common(o, true);
   if (!c.ok()) return usage_error(verb, c.error().message);
   auto members = split_list(o.get("members"));
-  if (!mqtt::valid_topic_segment(fleet) || !valid_ids(members)) return usage_error(verb, "bad fleet or member id");
+  if (!mqtt::valid_topic_segment(fleet) || !valid_ids(members))
+    return usage_error(verb, "bad fleet or member id");
   auto topics = mqtt::fleet_topics(c->prefix, fleet);
   Session s;
   s.set_timeout(c->timeout_ms);
@@ -273,7 +288,8 @@ int estop_or_resume(const Options& o, bool estop) {
   std::string id = new_uuid_v4();
   json::Value msg = message("SAFETY", std::move(payload), c->token, id);
   // Retained: the fleet's standing state, for members that connect later.
-  if (Status st = s.publish(topics.estop(), msg, 2, true); !st.ok()) return usage_error(verb, st.error().message);
+  if (Status st = s.publish(topics.estop(), msg, 2, true); !st.ok())
+    return usage_error(verb, st.error().message);
   std::map<std::string, std::string> ids;
   for (const auto& m : members) ids[id + "\x1f" + m] = m;
   // Every member answers the same message id on its own reply topic.
@@ -289,7 +305,8 @@ int estop_or_resume(const Options& o, bool estop) {
       for (const auto& mem : members) {
         if (m->topic != topics.member(mem).reply() || open.count(mem) == 0) continue;
         std::string type = str_of(m->body, "type");
-        results.set(mem, json::Object{{"result", type == "ACK" ? "acknowledged" : "refused"}, {"reply", m->body}});
+        results.set(mem, json::Object{{"result", type == "ACK" ? "acknowledged" : "refused"},
+                                      {"reply", m->body}});
         if (type != "ACK") ok = false;
         open.erase(mem);
       }
@@ -309,16 +326,19 @@ int estop_or_resume(const Options& o, bool estop) {
 }
 
 int command_main(const Options& o) {
-  if (o.positional().size() != 3) return usage_error("fleet command", "give the fleet id and the action");
+  if (o.positional().size() != 3)
+    return usage_error("fleet command", "give the fleet id and the action");
   const std::string fleet = o.positional()[1], action = o.positional()[2];
   auto c = common(o, true);
   if (!c.ok()) return usage_error("fleet command", c.error().message);
   auto members = split_list(o.get("members"));
-  if (!mqtt::valid_topic_segment(fleet) || !valid_ids(members)) return usage_error("fleet command", "bad fleet or member id");
+  if (!mqtt::valid_topic_segment(fleet) || !valid_ids(members))
+    return usage_error("fleet command", "bad fleet or member id");
   json::Object payload{{"command", action}, {"fleet_id", fleet}};
   if (o.has("params")) {
     auto p = json::parse(o.get("params"));
-    if (!p.ok() || !p->is_object()) return usage_error("fleet command", "--params must be a JSON object");
+    if (!p.ok() || !p->is_object())
+      return usage_error("fleet command", "--params must be a JSON object");
     payload.set("params", *p);
   }
   auto topics = mqtt::fleet_topics(c->prefix, fleet);
@@ -326,9 +346,12 @@ int command_main(const Options& o) {
   s.set_timeout(c->timeout_ms);
   std::vector<std::string> subs;
   for (const auto& m : members) subs.push_back(topics.member(m).reply());
-  if (Status st = s.open(o, subs); !st.ok()) return usage_error("fleet command", st.error().message);
+  if (Status st = s.open(o, subs); !st.ok())
+    return usage_error("fleet command", st.error().message);
   std::string id = new_uuid_v4();
-  if (Status st = s.publish(topics.cmd(), message("FLEET_COMMAND", std::move(payload), c->token, id), 1, false); !st.ok())
+  if (Status st = s.publish(topics.cmd(),
+                            message("FLEET_COMMAND", std::move(payload), c->token, id), 1, false);
+      !st.ok())
     return usage_error("fleet command", st.error().message);
   bool complete = o.has("wait-complete");
   json::Object results;
@@ -362,7 +385,8 @@ int command_main(const Options& o) {
     ok = false;
   }
   s.close();
-  print(json::Value(json::Object{{"fleet_id", fleet}, {"message_id", id}, {"ok", ok}, {"members", std::move(results)}}));
+  print(json::Value(json::Object{
+      {"fleet_id", fleet}, {"message_id", id}, {"ok", ok}, {"members", std::move(results)}}));
   return ok ? 0 : 1;
 }
 
@@ -381,8 +405,8 @@ struct Step {
   json::Value reply;
 };
 
-Result<std::vector<Step>> parse_choreography(const json::Value& doc, std::string* fleet, std::string* type,
-                                             int64_t default_timeout) {
+Result<std::vector<Step>> parse_choreography(const json::Value& doc, std::string* fleet,
+                                             std::string* type, int64_t default_timeout) {
   auto bad = [](std::string m) { return Error(ErrorCode::kSchemaValidationFailed, std::move(m)); };
   if (!doc.is_object()) return bad("the choreography must be a JSON object");
   std::string cmd = str_of(doc, "command");
@@ -393,16 +417,19 @@ Result<std::vector<Step>> parse_choreography(const json::Value& doc, std::string
   if (const json::Value* t = doc.get("targets"); t != nullptr) {
     if (!t->is_array()) return bad("targets must be an array of robot ids");
     for (const auto& r : t->as_array()) {
-      if (!r.is_string() || !mqtt::valid_topic_segment(r.as_string())) return bad("targets must be robot ids");
+      if (!r.is_string() || !mqtt::valid_topic_segment(r.as_string()))
+        return bad("targets must be robot ids");
       targets.insert(r.as_string());
     }
   }
   const json::Value* ch = doc.get("choreography");
   if (ch == nullptr || !ch->is_object()) return bad("choreography is required");
   *type = str_of(*ch, "type");
-  if (*type != "sequential" && *type != "parallel") return bad("choreography.type must be sequential or parallel");
+  if (*type != "sequential" && *type != "parallel")
+    return bad("choreography.type must be sequential or parallel");
   const json::Value* steps = ch->get("steps");
-  if (steps == nullptr || !steps->is_array() || steps->as_array().empty() || steps->as_array().size() > 1000)
+  if (steps == nullptr || !steps->is_array() || steps->as_array().empty() ||
+      steps->as_array().size() > 1000)
     return bad("choreography.steps must be a non-empty array (at most 1000)");
   std::vector<Step> out;
   std::set<std::string> seen;
@@ -413,8 +440,10 @@ Result<std::vector<Step>> parse_choreography(const json::Value& doc, std::string
     if (!sv.is_object()) return bad(where + " must be an object");
     s.robot = str_of(sv, "robot");
     s.action = str_of(sv, "action");
-    if (!mqtt::valid_topic_segment(s.robot)) return bad(where + ": robot is missing or not a valid id");
-    if (!targets.empty() && targets.count(s.robot) == 0) return bad(where + ": robot " + s.robot + " is not in targets");
+    if (!mqtt::valid_topic_segment(s.robot))
+      return bad(where + ": robot is missing or not a valid id");
+    if (!targets.empty() && targets.count(s.robot) == 0)
+      return bad(where + ": robot " + s.robot + " is not in targets");
     if (s.action.empty() || s.action.size() > 128) return bad(where + ": action is required");
     if (const json::Value* p = sv.get("params"); p != nullptr) {
       if (!p->is_object()) return bad(where + ": params must be an object");
@@ -424,17 +453,22 @@ Result<std::vector<Step>> parse_choreography(const json::Value& doc, std::string
     }
     if (const json::Value* w = sv.get("wait_for"); w != nullptr) {
       std::vector<std::string> names;
-      if (w->is_string()) names.push_back(w->as_string());
+      if (w->is_string())
+        names.push_back(w->as_string());
       else if (w->is_array())
-        for (const auto& n : w->as_array()) names.push_back(n.is_string() ? n.as_string() : std::string());
-      else return bad(where + ": wait_for must be a robot id or a list of them");
+        for (const auto& n : w->as_array())
+          names.push_back(n.is_string() ? n.as_string() : std::string());
+      else
+        return bad(where + ": wait_for must be a robot id or a list of them");
       for (const auto& n : names)
-        if (seen.count(n) == 0) return bad(where + ": wait_for names " + n + ", which has no earlier step");
+        if (seen.count(n) == 0)
+          return bad(where + ": wait_for names " + n + ", which has no earlier step");
       s.wait_for = std::move(names);
     }
     s.timeout_ms = default_timeout;
     if (const json::Value* t = sv.get("timeout_ms"); t != nullptr) {
-      if (!t->is_int() || t->as_int() < 1 || t->as_int() > 3'600'000) return bad(where + ": timeout_ms must be 1..3600000");
+      if (!t->is_int() || t->as_int() < 1 || t->as_int() > 3'600'000)
+        return bad(where + ": timeout_ms must be 1..3600000");
       s.timeout_ms = t->as_int();
     }
     seen.insert(s.robot);
@@ -450,7 +484,8 @@ int run_main(const Options& o) {
   auto text = read_file(o.positional()[1]);
   if (!text.ok()) return usage_error("fleet run", text.error().message);
   auto doc = json::parse(*text);
-  if (!doc.ok()) return usage_error("fleet run", "the choreography is not JSON: " + doc.error().message);
+  if (!doc.ok())
+    return usage_error("fleet run", "the choreography is not JSON: " + doc.error().message);
   std::string fleet, type;
   auto steps = parse_choreography(*doc, &fleet, &type, c->timeout_ms);
   if (!steps.ok()) return usage_error("fleet run", steps.error().message);
@@ -492,7 +527,9 @@ int run_main(const Options& o) {
                            {"choreography_id", choreography_id},
                            {"step", static_cast<int64_t>(s.index)}};
       s.message_id = new_uuid_v4();
-      Status ps = sess.publish(topics.member(s.robot).cmd(), message("FLEET_COMMAND", std::move(payload), c->token, s.message_id), 1, false);
+      Status ps = sess.publish(topics.member(s.robot).cmd(),
+                               message("FLEET_COMMAND", std::move(payload), c->token, s.message_id),
+                               1, false);
       if (!ps.ok()) {
         failed = s.index;
         fail_reason = "publish failed: " + ps.error().message;
@@ -506,7 +543,8 @@ int run_main(const Options& o) {
     // The earliest step deadline.
     int64_t deadline = mono_ms() + 1000;
     for (const auto& s : st)
-      if (s.state == Step::State::kSent || s.state == Step::State::kAcked) deadline = std::min(deadline, s.sent_mono + s.timeout_ms);
+      if (s.state == Step::State::kSent || s.state == Step::State::kAcked)
+        deadline = std::min(deadline, s.sent_mono + s.timeout_ms);
     auto m = sess.next(deadline);
     if (m) {
       std::string reply_to = str_of(m->body, "reply_to");
@@ -522,18 +560,21 @@ int run_main(const Options& o) {
           s.state = Step::State::kFailed;
           s.reply = m->body;
           failed = s.index;
-          fail_reason = t == "ERROR" && p != nullptr ? "refused: " + str_of(*p, "error_code") + " " + str_of(*p, "error")
-                                                     : "aborted: " + (p != nullptr ? str_of(*p, "reason") : std::string());
+          fail_reason = t == "ERROR" && p != nullptr
+                            ? "refused: " + str_of(*p, "error_code") + " " + str_of(*p, "error")
+                            : "aborted: " + (p != nullptr ? str_of(*p, "reason") : std::string());
         }
       }
     }
     int64_t now = mono_ms();
     for (auto& s : st) {
       if (failed) break;
-      if ((s.state == Step::State::kSent || s.state == Step::State::kAcked) && now >= s.sent_mono + s.timeout_ms) {
-        fail_reason = std::string(s.state == Step::State::kAcked ? "timeout waiting for completion"
-                                                                 : "timeout waiting for acknowledgement") +
-                      " after " + std::to_string(s.timeout_ms) + " ms";
+      if ((s.state == Step::State::kSent || s.state == Step::State::kAcked) &&
+          now >= s.sent_mono + s.timeout_ms) {
+        fail_reason =
+            std::string(s.state == Step::State::kAcked ? "timeout waiting for completion"
+                                                       : "timeout waiting for acknowledgement") +
+            " after " + std::to_string(s.timeout_ms) + " ms";
         s.state = Step::State::kFailed;
         failed = s.index;
       }
@@ -564,8 +605,11 @@ int run_main(const Options& o) {
     std::string id = new_uuid_v4();
     stop_ids[id] = r;
     (void)sess.publish(topics.member(r).cmd(),
-                       message("SAFETY", json::Object{{"safety_event", "STOP"}, {"fleet_id", fleet},
-                                                      {"reason", "choreography step " + std::to_string(*failed) + " failed"}},
+                       message("SAFETY",
+                               json::Object{{"safety_event", "STOP"},
+                                            {"fleet_id", fleet},
+                                            {"reason", "choreography step " +
+                                                           std::to_string(*failed) + " failed"}},
                                c->token, id),
                        1, false);
   }
@@ -592,9 +636,11 @@ int status_main(const Options& o) {
   auto topics = mqtt::fleet_topics(c->prefix, fleet);
   Session s;
   s.set_timeout(c->timeout_ms);
-  if (Status st = s.open(o, {topics.base + "/robot/+/status"}); !st.ok()) return usage_error("fleet status", st.error().message);
+  if (Status st = s.open(o, {topics.base + "/robot/+/status"}); !st.ok())
+    return usage_error("fleet status", st.error().message);
   json::Object members;
-  int64_t deadline = mono_ms() + std::min<int64_t>(c->timeout_ms, 500);  // retained statuses arrive at once
+  int64_t deadline =
+      mono_ms() + std::min<int64_t>(c->timeout_ms, 500);  // retained statuses arrive at once
   while (auto m = s.next(deadline)) {
     std::string member = m->topic.substr(topics.base.size() + 7);
     member = member.substr(0, member.find('/'));
@@ -646,7 +692,8 @@ int audit_collect_main(const Options& o) {
   if (!c.ok()) return usage_error("fleet audit collect", c.error().message);
   const std::string fleet = o.positional()[2];
   if (!mqtt::valid_topic_segment(fleet) || o.has("out") == o.has("db"))
-    return usage_error("fleet audit collect", "give the fleet id and one of --out DIR or --db CONNINFO");
+    return usage_error("fleet audit collect",
+                       "give the fleet id and one of --out DIR or --db CONNINFO");
   auto secrets = load_secrets(o);
   if (!secrets.ok()) return usage_error("fleet audit collect", secrets.error().message);
   std::unique_ptr<FleetAuditDb> db;
@@ -657,14 +704,16 @@ int audit_collect_main(const Options& o) {
   }
   int64_t duration = 5000;
   if (o.has("duration-ms")) duration = std::strtoll(o.get("duration-ms").c_str(), nullptr, 10);
-  if (duration < 1 || duration > 86'400'000) return usage_error("fleet audit collect", "--duration-ms must be 1..86400000");
+  if (duration < 1 || duration > 86'400'000)
+    return usage_error("fleet audit collect", "--duration-ms must be 1..86400000");
   std::error_code ec;
   if (o.has("out")) std::filesystem::create_directories(o.get("out"), ec);
   if (ec) return usage_error("fleet audit collect", "cannot create " + o.get("out"));
   auto topics = mqtt::fleet_topics(c->prefix, fleet);
   Session s;
   s.set_timeout(c->timeout_ms);
-  if (Status st = s.open(o, {topics.base + "/robot/+/audit"}); !st.ok()) return usage_error("fleet audit collect", st.error().message);
+  if (Status st = s.open(o, {topics.base + "/robot/+/audit"}); !st.ok())
+    return usage_error("fleet audit collect", st.error().message);
   struct Chain {
     uint64_t last_seq = 0;
     std::string last_hash;
@@ -680,30 +729,35 @@ int audit_collect_main(const Options& o) {
     Chain& ch = chains[member];
     auto sec = secrets->find(member);
     if (db) {
-      auto found = db->ingest(fleet, member, m->body, sec == secrets->end() ? nullptr : &sec->second);
+      auto found =
+          db->ingest(fleet, member, m->body, sec == secrets->end() ? nullptr : &sec->second);
       if (!found.ok()) {
         s.close();
         return usage_error("fleet audit collect", found.error().message);
       }
       for (const auto& p : *found) ch.problems.push_back(p.to_json());
-      if (found->empty() || found->front().problem == "gap" || found->front().problem == "break") ++ch.records;
+      if (found->empty() || found->front().problem == "gap" || found->front().problem == "break")
+        ++ch.records;
       const json::Value* sq = m->body.get("seq");
-      if (sq != nullptr && sq->is_int() && sq->as_int() > 0) ch.last_seq = std::max<uint64_t>(ch.last_seq, static_cast<uint64_t>(sq->as_int()));
+      if (sq != nullptr && sq->is_int() && sq->as_int() > 0)
+        ch.last_seq = std::max<uint64_t>(ch.last_seq, static_cast<uint64_t>(sq->as_int()));
       continue;
     }
     if (sec != secrets->end() && m->body.is_object()) {
       std::string pre = json::canonical_without(m->body.as_object(), "hmac");
       if (hmac_sha256_hex(sec->second, pre) != str_of(m->body, "hmac")) {
         const json::Value* sq = m->body.get("seq");
-        ch.problems.emplace_back(json::Object{{"problem", "hmac_mismatch"},
-                                              {"seq", sq != nullptr && sq->is_int() ? sq->as_int() : 0}});
+        ch.problems.emplace_back(
+            json::Object{{"problem", "hmac_mismatch"},
+                         {"seq", sq != nullptr && sq->is_int() ? sq->as_int() : 0}});
         continue;  // a tampered record is not kept
       }
     }
     const json::Value* seq = m->body.get("seq");
     std::string prev = str_of(m->body, "prev_hash");
     // The chain links each record to the SHA-256 of its predecessor's canonical form without hmac.
-    std::string hash = m->body.is_object() ? sha256_hex(json::canonical_without(m->body.as_object(), "hmac")) : "";
+    std::string hash =
+        m->body.is_object() ? sha256_hex(json::canonical_without(m->body.as_object(), "hmac")) : "";
     if (seq == nullptr || !seq->is_int() || seq->as_int() < 1) {
       ch.problems.emplace_back(json::Object{{"problem", "malformed"}});
       continue;
@@ -711,7 +765,8 @@ int audit_collect_main(const Options& o) {
     uint64_t n = static_cast<uint64_t>(seq->as_int());
     if (ch.records > 0) {
       if (n <= ch.last_seq) {
-        ch.problems.emplace_back(json::Object{{"problem", "duplicate_or_reordered"}, {"seq", static_cast<int64_t>(n)}});
+        ch.problems.emplace_back(
+            json::Object{{"problem", "duplicate_or_reordered"}, {"seq", static_cast<int64_t>(n)}});
         continue;
       }
       if (n != ch.last_seq + 1)
@@ -719,7 +774,8 @@ int audit_collect_main(const Options& o) {
                                               {"after_seq", static_cast<int64_t>(ch.last_seq)},
                                               {"seq", static_cast<int64_t>(n)}});
       else if (!ch.last_hash.empty() && prev != ch.last_hash)
-        ch.problems.emplace_back(json::Object{{"problem", "break"}, {"seq", static_cast<int64_t>(n)}});
+        ch.problems.emplace_back(
+            json::Object{{"problem", "break"}, {"seq", static_cast<int64_t>(n)}});
     }
     ch.last_seq = n;
     ch.last_hash = hash;
@@ -753,12 +809,16 @@ int fleet_main(const Args& args) {
   if (sub == "command") return command_main(o);
   if (sub == "run") return run_main(o);
   if (sub == "status") return status_main(o);
-  if (sub == "audit" && o.positional().size() >= 2 && o.positional()[1] == "collect") return audit_collect_main(o);
-  if (sub == "audit" && o.positional().size() == 2 && o.positional()[1] == "verify") return audit_verify_main(o);
-  return usage_error("fleet", "unknown subcommand " + sub + " (estop | resume | command | run | status | audit collect)");
+  if (sub == "audit" && o.positional().size() >= 2 && o.positional()[1] == "collect")
+    return audit_collect_main(o);
+  if (sub == "audit" && o.positional().size() == 2 && o.positional()[1] == "verify")
+    return audit_verify_main(o);
+  return usage_error("fleet", "unknown subcommand " + sub +
+                                  " (estop | resume | command | run | status | audit collect)");
 }
 
-const Registration kReg{"fleet", "drive a fleet over MQTT: estop, command, run a choreography, audit", &fleet_main};
+const Registration kReg{
+    "fleet", "drive a fleet over MQTT: estop, command, run a choreography, audit", &fleet_main};
 
 }  // namespace
 }  // namespace rcan::cli

@@ -10,7 +10,8 @@ namespace {
 
 constexpr const char* kHelp =
     "usage: rcan json canonical        read JSON on stdin, write rcan-canonical-json-v1 bytes\n"
-    "       rcan json python-dumps     read JSON on stdin, write Python json.dumps(sort_keys=True,\n"
+    "       rcan json python-dumps     read JSON on stdin, write Python "
+    "json.dumps(sort_keys=True,\n"
     "                                  separators=(',',':')) bytes (rcan-py pre-image writer)\n"
     "Exit: 0 ok; 1 malformed input (an error body is printed on stdout).\n";
 
@@ -20,7 +21,8 @@ int json_main(const Args& args) {
     return args.empty() ? 2 : 0;
   }
   const std::string& sub = args[0];
-  if (sub != "canonical" && sub != "python-dumps") return usage_error("json", "unknown subcommand " + sub);
+  if (sub != "canonical" && sub != "python-dumps")
+    return usage_error("json", "unknown subcommand " + sub);
   if (args.size() > 1) return usage_error("json", "unexpected argument " + args[1]);
   std::string in = read_stdin();
   json::ParseOptions opts;

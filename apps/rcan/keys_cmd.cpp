@@ -29,8 +29,9 @@ void print_summary(const keys::PublicKeys& pub, const std::string& dir, bool as_
   if (as_json) {
     json::Object ml;
     ml.set("kid", pub.kid());
-    ml.set("public_key_sha256", sha256_hex(std::string_view(reinterpret_cast<const char*>(pub.mldsa65_pk.data()),
-                                                            pub.mldsa65_pk.size())));
+    ml.set("public_key_sha256",
+           sha256_hex(std::string_view(reinterpret_cast<const char*>(pub.mldsa65_pk.data()),
+                                       pub.mldsa65_pk.size())));
     ml.set("jwk", keys::mldsa65_jwk(pub.mldsa65_pk));
     json::Object ed;
     ed.set("public_key_hex", to_hex(pub.ed25519_pk));
@@ -71,7 +72,8 @@ int keys_main(const Args& args) {
   if (sub == "generate") {
     Options o(rest, {}, {"dir"});
     if (!o.ok()) return usage_error("keys generate", o.error());
-    if (o.get("dir").empty() || !o.positional().empty()) return usage_error("keys generate", "--dir D is required");
+    if (o.get("dir").empty() || !o.positional().empty())
+      return usage_error("keys generate", "--dir D is required");
     auto k = keys::generate();
     if (!k.ok()) return usage_error("keys generate", k.error().message);
     return write_keys(sub, o.get("dir"), *k);
@@ -83,8 +85,10 @@ int keys_main(const Args& args) {
       return usage_error("keys derive", "--dir D is required");
     auto ms = from_hex(o.get("mldsa-seed"));
     auto es = from_hex(o.get("ed25519-seed"));
-    if (!ms || ms->size() != 32) return usage_error("keys derive", "--mldsa-seed must be 64 hex digits");
-    if (!es || es->size() != 32) return usage_error("keys derive", "--ed25519-seed must be 64 hex digits");
+    if (!ms || ms->size() != 32)
+      return usage_error("keys derive", "--mldsa-seed must be 64 hex digits");
+    if (!es || es->size() != 32)
+      return usage_error("keys derive", "--ed25519-seed must be 64 hex digits");
     auto k = keys::derive(*ms, *es);
     secure_wipe(ms->data(), ms->size());
     secure_wipe(es->data(), es->size());
@@ -94,7 +98,8 @@ int keys_main(const Args& args) {
   if (sub == "show") {
     Options o(rest, {"json"}, {"dir"});
     if (!o.ok()) return usage_error("keys show", o.error());
-    if (o.get("dir").empty() || !o.positional().empty()) return usage_error("keys show", "--dir D is required");
+    if (o.get("dir").empty() || !o.positional().empty())
+      return usage_error("keys show", "--dir D is required");
     auto pub = keys::load_public_dir(o.get("dir"));
     if (!pub.ok()) {
       std::fprintf(stderr, "rcan keys show: %s\n", pub.error().message.c_str());

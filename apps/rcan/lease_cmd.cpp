@@ -38,7 +38,8 @@ int perform(const std::string& verb, const Options& o, const Call& c) {
   std::string err;
   std::string token = node_token(o, true, err);
   if (!err.empty()) return usage_error(verb, err);
-  auto r = node_request(node_url(o), c.method, c.path, c.body.empty() ? "" : json::dump(json::Value(c.body)), token);
+  auto r = node_request(node_url(o), c.method, c.path,
+                        c.body.empty() ? "" : json::dump(json::Value(c.body)), token);
   if (!r.ok()) {
     std::fprintf(stderr, "rcan %s: %s\n", verb.c_str(), r.error().message.c_str());
     return 2;
@@ -59,7 +60,8 @@ int lease_main(const Args& args) {
     std::fputs(kLeaseUsage, args.empty() ? stderr : stdout);
     return args.empty() ? 2 : 0;
   }
-  Options o(Args(args.begin() + 1, args.end()), {}, {"url", "token-file", "leasee", "duration", "user", "role"});
+  Options o(Args(args.begin() + 1, args.end()), {},
+            {"url", "token-file", "leasee", "duration", "user", "role"});
   if (!o.ok()) return usage_error("lease", o.error());
   const std::string& sub = args[0];
   Call c;
@@ -70,18 +72,23 @@ int lease_main(const Args& args) {
   int64_t secs = 0;
   if (sub == "grant") {
     if (o.get("leasee").empty()) return usage_error("lease", "grant needs --leasee SUB");
-    if (!duration("1h", secs)) return usage_error("lease", "--duration must be like 90s, 30m, 2h or 1d");
-    c = {"POST", "/rcan/v1/leases", json::Object{{"leasee", o.get("leasee")}, {"duration_s", secs}}};
+    if (!duration("1h", secs))
+      return usage_error("lease", "--duration must be like 90s, 30m, 2h or 1d");
+    c = {"POST", "/rcan/v1/leases",
+         json::Object{{"leasee", o.get("leasee")}, {"duration_s", secs}}};
   } else if (sub == "list") {
     c = {"GET", "/rcan/v1/leases", {}};
   } else if (sub == "revoke") {
     if (o.positional().size() != 1) return usage_error("lease", "revoke needs LEASE_ID");
     c = {"DELETE", "/rcan/v1/leases/" + o.positional()[0], {}};
   } else if (sub == "allow") {
-    if (o.positional().size() != 1 || o.get("user").empty()) return usage_error("lease", "allow needs LEASE_ID --user SUB");
-    if (!duration("1h", secs)) return usage_error("lease", "--duration must be like 90s, 30m, 2h or 1d");
+    if (o.positional().size() != 1 || o.get("user").empty())
+      return usage_error("lease", "allow needs LEASE_ID --user SUB");
+    if (!duration("1h", secs))
+      return usage_error("lease", "--duration must be like 90s, 30m, 2h or 1d");
     c = {"POST", "/rcan/v1/leases/" + o.positional()[0] + "/grants",
-         json::Object{{"user_id", o.get("user")}, {"role", o.get("role", "user")}, {"duration_s", secs}}};
+         json::Object{
+             {"user_id", o.get("user")}, {"role", o.get("role", "user")}, {"duration_s", secs}}};
   } else {
     return usage_error("lease", "unknown subcommand " + sub + " (grant, list, revoke, allow)");
   }
@@ -100,7 +107,8 @@ int transfer_main(const Args& args) {
     std::fputs(kTransferUsage, args.empty() ? stderr : stdout);
     return args.empty() ? 2 : 0;
   }
-  Options o(Args(args.begin() + 1, args.end()), {}, {"url", "token-file", "to", "note", "agreement"});
+  Options o(Args(args.begin() + 1, args.end()), {},
+            {"url", "token-file", "to", "note", "agreement"});
   if (!o.ok()) return usage_error("transfer", o.error());
   const std::string& sub = args[0];
   Call c;
@@ -113,13 +121,16 @@ int transfer_main(const Args& args) {
     if (o.positional().size() != 1 || o.get("agreement").empty())
       return usage_error("transfer", "accept needs TRANSFER_ID --agreement REF");
     c = {"POST", "/rcan/v1/transfer",
-         json::Object{{"action", "accept"}, {"transfer_id", o.positional()[0]}, {"agreement", o.get("agreement")}}};
+         json::Object{{"action", "accept"},
+                      {"transfer_id", o.positional()[0]},
+                      {"agreement", o.get("agreement")}}};
   } else if (sub == "cancel") {
     c = {"POST", "/rcan/v1/transfer", json::Object{{"action", "cancel"}}};
   } else if (sub == "status") {
     c = {"GET", "/rcan/v1/transfer", {}};
   } else {
-    return usage_error("transfer", "unknown subcommand " + sub + " (request, accept, cancel, status)");
+    return usage_error("transfer",
+                       "unknown subcommand " + sub + " (request, accept, cancel, status)");
   }
   return perform("transfer", o, c);
 }
@@ -135,7 +146,8 @@ int consent_main(const Args& args) {
     std::fputs(kConsentUsage, args.empty() ? stderr : stdout);
     return args.empty() ? 2 : 0;
   }
-  Options o(Args(args.begin() + 1, args.end()), {}, {"url", "token-file", "kind", "duration", "reason"});
+  Options o(Args(args.begin() + 1, args.end()), {},
+            {"url", "token-file", "kind", "duration", "reason"});
   if (!o.ok()) return usage_error("consent", o.error());
   const std::string& sub = args[0];
   Call c;
@@ -161,9 +173,12 @@ int consent_main(const Args& args) {
   return perform("consent", o, c);
 }
 
-const Registration kLease{"lease", "grant, list, revoke leases on a running node (OWNER)", &lease_main};
-const Registration kTransfer{"transfer", "ownership transfer: request, accept, cancel, status", &transfer_main};
-const Registration kConsent{"consent", "consent requests: list, grant, deny (OWNER)", &consent_main};
+const Registration kLease{"lease", "grant, list, revoke leases on a running node (OWNER)",
+                          &lease_main};
+const Registration kTransfer{"transfer", "ownership transfer: request, accept, cancel, status",
+                             &transfer_main};
+const Registration kConsent{"consent", "consent requests: list, grant, deny (OWNER)",
+                            &consent_main};
 
 }  // namespace
 }  // namespace rcan::cli

@@ -3,9 +3,9 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
 #include <iostream>
 #include <iterator>
-#include <fstream>
 #include <sstream>
 
 #include "cli.h"
@@ -25,12 +25,13 @@ void print_help() {
   auto list = verbs();
   std::sort(list.begin(), list.end(), [](const Verb& a, const Verb& b) { return a.name < b.name; });
   for (const auto& v : list) std::printf("  %-12s %s\n", v.name.c_str(), v.summary.c_str());
-  std::printf("\n'rcan <verb> --help' describes a verb. Verbs that talk to a node take --url (default\n"
-              "$RCAN_URL), --token-file (default $RCAN_TOKEN_FILE) and --json; rcand prints both\n"
-              "variables on its first run. Bash completion: source <(rcan completion bash).\n"
-              "Exit codes: 0 success, 1 negative answer (refused by the node, invalid input, failed\n"
-              "verification), 2 usage or malformed input, 3 node unreachable, 4 waiting for a human\n"
-              "authorization.\n");
+  std::printf(
+      "\n'rcan <verb> --help' describes a verb. Verbs that talk to a node take --url (default\n"
+      "$RCAN_URL), --token-file (default $RCAN_TOKEN_FILE) and --json; rcand prints both\n"
+      "variables on its first run. Bash completion: source <(rcan completion bash).\n"
+      "Exit codes: 0 success, 1 negative answer (refused by the node, invalid input, failed\n"
+      "verification), 2 usage or malformed input, 3 node unreachable, 4 waiting for a human\n"
+      "authorization.\n");
 }
 
 }  // namespace
@@ -78,11 +79,17 @@ Options::Options(const Args& args, const std::vector<std::string>& flags,
         inline_value = true;
       }
       if (std::find(flags.begin(), flags.end(), name) != flags.end()) {
-        if (inline_value) { error_ = "--" + name + " takes no value"; return; }
+        if (inline_value) {
+          error_ = "--" + name + " takes no value";
+          return;
+        }
         values_.emplace_back(name, "");
       } else if (std::find(valued.begin(), valued.end(), name) != valued.end()) {
         if (!inline_value) {
-          if (i + 1 >= args.size()) { error_ = "--" + name + " needs a value"; return; }
+          if (i + 1 >= args.size()) {
+            error_ = "--" + name + " needs a value";
+            return;
+          }
           value = args[++i];
         }
         values_.emplace_back(name, value);
@@ -97,7 +104,8 @@ Options::Options(const Args& args, const std::vector<std::string>& flags,
 }
 
 bool Options::has(const std::string& name) const {
-  return std::any_of(values_.begin(), values_.end(), [&](const auto& p) { return p.first == name; });
+  return std::any_of(values_.begin(), values_.end(),
+                     [&](const auto& p) { return p.first == name; });
 }
 
 std::string Options::get(const std::string& name, const std::string& def) const {

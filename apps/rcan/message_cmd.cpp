@@ -21,7 +21,8 @@ constexpr const char* kHelp =
 int send_main(const Args& args) {
   Options o(args, net_flags(), net_valued());
   if (!o.ok()) return usage_error("message send", o.error());
-  if (!o.positional().empty()) return usage_error("message send", "unexpected argument " + o.positional()[0]);
+  if (!o.positional().empty())
+    return usage_error("message send", "unexpected argument " + o.positional()[0]);
   std::string err;
   auto co = client_options(o, true, err);
   if (!err.empty()) return usage_error("message send", err);
@@ -46,10 +47,12 @@ int message_main(const Args& args) {
     return args.empty() ? 2 : 0;
   }
   if (args[0] == "send") return send_main(Args(args.begin() + 1, args.end()));
-  if (args[0] != "check") return usage_error("message", "unknown subcommand " + args[0] + " (check, send)");
+  if (args[0] != "check")
+    return usage_error("message", "unknown subcommand " + args[0] + " (check, send)");
   Options opt(Args(args.begin() + 1, args.end()), {}, {"max-bytes"});
   if (!opt.ok()) return usage_error("message", opt.error());
-  if (!opt.positional().empty()) return usage_error("message", "unexpected argument " + opt.positional()[0]);
+  if (!opt.positional().empty())
+    return usage_error("message", "unexpected argument " + opt.positional()[0]);
   CodecLimits limits;
   if (opt.has("max-bytes")) {
     try {

@@ -50,7 +50,9 @@ client::ClientOptions client_options(const Options& o, bool need_token, std::str
     while (!s.empty() && (s.back() == '\n' || s.back() == '\r' || s.back() == ' ')) s.pop_back();
     co.token = s;
   } else if (need_token) {
-    err = "a token is required: --token-file F or RCAN_TOKEN_FILE (rcand prints both on its first run)";
+    err =
+        "a token is required: --token-file F or RCAN_TOKEN_FILE (rcand prints both on its first "
+        "run)";
     return co;
   }
   if (o.has("timeout")) {
@@ -104,7 +106,9 @@ int report_error(const std::string& verb, const client::ClientError& e, bool jso
     if (e.body.is_object()) {
       std::cout << json::dump(e.body) << "\n";
     } else {
-      json::Object o{{"error_code", e.code}, {"error", e.message}, {"http_status", static_cast<int64_t>(e.http_status)}};
+      json::Object o{{"error_code", e.code},
+                     {"error", e.message},
+                     {"http_status", static_cast<int64_t>(e.http_status)}};
       std::cout << json::dump(json::Value(std::move(o))) << "\n";
     }
   }
@@ -113,25 +117,29 @@ int report_error(const std::string& verb, const client::ClientError& e, bool jso
     line += e.message;
   } else {
     line += e.code + " (HTTP " + std::to_string(e.http_status) + "): " + e.message;
-    if (!e.reason.empty() && e.message.find(e.reason) == std::string::npos) line += " [" + e.reason + "]";
+    if (!e.reason.empty() && e.message.find(e.reason) == std::string::npos)
+      line += " [" + e.reason + "]";
     if (e.retry_after_s > 0) line += " — retry after " + std::to_string(e.retry_after_s) + " s";
   }
   std::fprintf(stderr, "%s\n", line.c_str());
   return e.unreachable() ? kExitUnreachable : kExitRefused;
 }
 
-void print_table(const std::vector<std::string>& header, const std::vector<std::vector<std::string>>& rows) {
+void print_table(const std::vector<std::string>& header,
+                 const std::vector<std::vector<std::string>>& rows) {
   std::vector<size_t> w(header.size(), 0);
   for (size_t i = 0; i < header.size(); ++i) w[i] = visible_width(header[i]);
   for (const auto& r : rows)
-    for (size_t i = 0; i < r.size() && i < w.size(); ++i) w[i] = std::max(w[i], visible_width(r[i]));
+    for (size_t i = 0; i < r.size() && i < w.size(); ++i)
+      w[i] = std::max(w[i], visible_width(r[i]));
   auto line = [&](const std::vector<std::string>& r, bool head) {
     std::string out;
     for (size_t i = 0; i < w.size(); ++i) {
       std::string cell = i < r.size() ? r[i] : "";
       if (head) cell = bold(cell);
       out += cell;
-      if (i + 1 < w.size()) out += std::string(w[i] - visible_width(i < r.size() ? r[i] : "") + 2, ' ');
+      if (i + 1 < w.size())
+        out += std::string(w[i] - visible_width(i < r.size() ? r[i] : "") + 2, ' ');
     }
     while (!out.empty() && out.back() == ' ') out.pop_back();
     std::printf("%s\n", out.c_str());

@@ -51,7 +51,8 @@ std::string dim(const std::string& s);
 int report_error(const std::string& verb, const client::ClientError& e, bool json);
 
 // A simple left-aligned table; column widths from the content (ANSI-aware).
-void print_table(const std::vector<std::string>& header, const std::vector<std::vector<std::string>>& rows);
+void print_table(const std::vector<std::string>& header,
+                 const std::vector<std::vector<std::string>>& rows);
 
 // "1.5s ago", "3m ago", "2026-11-22 02:33:01Z" for a wall-clock ms.
 std::string when(int64_t ms);

@@ -17,7 +17,8 @@ namespace rcan::cli {
 namespace {
 
 int64_t now_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
       .count();
 }
 
@@ -29,8 +30,8 @@ std::vector<std::string> with_net(std::vector<std::string> v, bool flags) {
 
 // Parses options common to simple verbs; returns false (with `rc` set) on usage errors.
 bool setup(const char* verb, const Args& args, const std::vector<std::string>& flags,
-           const std::vector<std::string>& valued, bool need_token, size_t max_positional, Options*& out,
-           client::ClientOptions& co, int& rc) {
+           const std::vector<std::string>& valued, bool need_token, size_t max_positional,
+           Options*& out, client::ClientOptions& co, int& rc) {
   static std::unique_ptr<Options> holder;
   holder = std::make_unique<Options>(args, with_net(flags, true), with_net(valued, false));
   out = holder.get();
@@ -55,7 +56,8 @@ void print_reply(const client::Reply& r, const char* what) {
   std::string type = r.type.empty() ? "OK" : r.type;
   std::printf("%s %s", green(type).c_str(), what);
   if (r.payload.is_object()) {
-    for (const char* k : {"session_id", "action", "status", "result", "state", "target_user_id", "window_ms"})
+    for (const char* k :
+         {"session_id", "action", "status", "result", "state", "target_user_id", "window_ms"})
       if (const json::Value* f = r.payload.get(k)) std::printf("  %s=%s", k, brief(*f, 60).c_str());
   }
   std::printf("\n");
@@ -90,7 +92,8 @@ int status_main(const Args& args) {
   std::printf("%-10s %s\n", "name", s->name.c_str());
   std::printf("%-10s %s\n", "rrn", s->rrn.c_str());
   std::printf("%-10s %s (%s)\n", "version", s->rcan_version.c_str(), extensions.c_str());
-  std::printf("%-10s %s\n", "estop", s->estop_active ? red("ACTIVE").c_str() : green("clear").c_str());
+  std::printf("%-10s %s\n", "estop",
+              s->estop_active ? red("ACTIVE").c_str() : green("clear").c_str());
   std::printf("%-10s %s\n", "mode", s->mode.c_str());
   std::printf("%-10s %s\n", "audit", s->audit_available ? "available" : red("UNAVAILABLE").c_str());
   std::printf("%-10s %s\n", "caps", caps.c_str());
@@ -145,7 +148,8 @@ int claim_main(const Args& args) {
   }
   std::string caps;
   for (const auto& e : g->capabilities) caps += (caps.empty() ? "" : ",") + e;
-  std::printf("%s session %s as %s\n", green("GRANTED").c_str(), bold(g->session_id).c_str(), g->role.c_str());
+  std::printf("%s session %s as %s\n", green("GRANTED").c_str(), bold(g->session_id).c_str(),
+              g->role.c_str());
   std::printf("  capabilities: %s\n  heartbeat timeout: %lld ms\n  expires in: %s\n", caps.c_str(),
               static_cast<long long>(g->heartbeat_timeout_ms),
               g->expires_in_s < 0 ? "never" : (std::to_string(g->expires_in_s) + " s").c_str());
@@ -166,8 +170,10 @@ int release_main(const Args& args) {
   client::Client c(co);
   auto r = c.release(o->positional().empty() ? "" : o->positional()[0]);
   if (!r.ok()) return report_error("release", r.error(), want_json(*o));
-  if (want_json(*o)) std::cout << json::dump(r->raw) << "\n";
-  else print_reply(*r, "control released");
+  if (want_json(*o))
+    std::cout << json::dump(r->raw) << "\n";
+  else
+    print_reply(*r, "control released");
   return 0;
 }
 
@@ -189,8 +195,10 @@ int handoff_main(const Args& args) {
   client::Client c(co);
   auto r = c.handoff(o->positional()[0], o->get("to"), o->get("role"), o->get("reason"));
   if (!r.ok()) return report_error("handoff", r.error(), want_json(*o));
-  if (want_json(*o)) std::cout << json::dump(r->raw) << "\n";
-  else print_reply(*r, ("control handed to " + o->get("to")).c_str());
+  if (want_json(*o))
+    std::cout << json::dump(r->raw) << "\n";
+  else
+    print_reply(*r, ("control handed to " + o->get("to")).c_str());
   return 0;
 }
 
@@ -215,8 +223,11 @@ int safety_main(const char* verb, const char* help, const Args& args) {
   bool stop = std::string(verb) == "estop";
   auto r = stop ? c.estop(o->get("reason")) : c.resume(o->get("reason"));
   if (!r.ok()) return report_error(verb, r.error(), want_json(*o));
-  if (want_json(*o)) std::cout << json::dump(r->raw) << "\n";
-  else std::printf("%s\n", stop ? red("ESTOP latched").c_str() : green("resumed: ESTOP cleared").c_str());
+  if (want_json(*o))
+    std::cout << json::dump(r->raw) << "\n";
+  else
+    std::printf("%s\n",
+                stop ? red("ESTOP latched").c_str() : green("resumed: ESTOP cleared").c_str());
   return 0;
 }
 
@@ -229,7 +240,8 @@ int resume_main(const Args& a) { return safety_main("resume", kResumeHelp, a); }
 constexpr const char* kCommandHelp =
     "usage: rcan command ACTION [--PARAM VALUE …] [options]\n"
     "       rcan command '{\"action\":\"move\",\"linear\":0.3}'    (a payload object)\n"
-    "       rcan command '{\"type\":\"COMMAND\",…}' | rcan command - < msg.json   (a whole message)\n"
+    "       rcan command '{\"type\":\"COMMAND\",…}' | rcan command - < msg.json   (a whole "
+    "message)\n"
     "  Sends one COMMAND over HTTP (POST /rcan/v1/command) and prints the answer.\n"
     "  Friendly form: every --name value becomes payload parameter name (dashes become\n"
     "  underscores); values that parse as JSON (numbers, true/false, arrays) are sent as such.\n"
@@ -248,7 +260,8 @@ int command_main(const Args& args) {
   }
   if (help_requested(args, (std::string(kCommandHelp) + kNetHelp).c_str())) return 0;
   // Split: our options vs payload parameters.
-  const std::vector<std::string> own_valued{"url", "token-file", "timeout", "ca-file", "ttl-ms", "priority", "confidence", "scope"};
+  const std::vector<std::string> own_valued{"url",    "token-file", "timeout",    "ca-file",
+                                            "ttl-ms", "priority",   "confidence", "scope"};
   const std::vector<std::string> own_flags{"json", "insecure"};
   Args own;
   std::vector<std::pair<std::string, std::string>> params;
@@ -287,7 +300,8 @@ int command_main(const Args& args) {
   }
   Options o(own, own_flags, own_valued);
   if (!o.ok()) return usage_error("command", o.error());
-  if (positional.size() != 1) return usage_error("command", "give one ACTION, a JSON object, or - (see --help)");
+  if (positional.size() != 1)
+    return usage_error("command", "give one ACTION, a JSON object, or - (see --help)");
   std::string err;
   client::ClientOptions co = client_options(o, true, err);
   if (!err.empty()) return usage_error("command", err);
@@ -295,7 +309,8 @@ int command_main(const Args& args) {
   json::Value message;
   std::string first = positional[0];
   if (first == "-" || (!first.empty() && first[0] == '{')) {
-    if (!params.empty()) return usage_error("command", "parameters go inside the JSON when JSON is given");
+    if (!params.empty())
+      return usage_error("command", "parameters go inside the JSON when JSON is given");
     std::string text = first == "-" ? read_stdin() : first;
     auto v = json::parse(text, {.max_depth = 64, .max_bytes = 1u << 20});
     if (!v.ok()) return usage_error("command", "not JSON: " + v.error().message);
@@ -303,7 +318,8 @@ int command_main(const Args& args) {
     bool whole = v->get("type") || v->get("message_type") || v->get("cmd");
     if (!whole) {
       const json::Value* act = v->get("action");
-      if (!act || !act->is_string()) return usage_error("command", "a payload object needs an \"action\"");
+      if (!act || !act->is_string())
+        return usage_error("command", "a payload object needs an \"action\"");
       client::Command c;
       c.action = act->as_string();
       for (const auto& [k, val] : v->as_object())
@@ -324,12 +340,17 @@ int command_main(const Args& args) {
     c.action = first;
     for (const auto& [k, val] : params) {
       auto v = json::parse(val, {.max_depth = 16, .max_bytes = 65536});
-      if (v.ok()) c.params.set(k, *v);
-      else c.params.set(k, val);
+      if (v.ok())
+        c.params.set(k, *v);
+      else
+        c.params.set(k, val);
     }
     if (first == "heartbeat") {
-      json::Object m{{"version", "1.0.0"}, {"message_id", new_uuid_v4()}, {"type", "HEARTBEAT"},
-                     {"timestamp_ms", now_ms()}, {"payload", json::Object{}}};
+      json::Object m{{"version", "1.0.0"},
+                     {"message_id", new_uuid_v4()},
+                     {"type", "HEARTBEAT"},
+                     {"timestamp_ms", now_ms()},
+                     {"payload", json::Object{}}};
       message = json::Value(std::move(m));
     } else {
       message = client::command_message(c, now_ms());
@@ -340,7 +361,8 @@ int command_main(const Args& args) {
     char* end = nullptr;
     const std::string value_text = o.get("ttl-ms");  // outlives `end`
     long long v = std::strtoll(value_text.c_str(), &end, 10);
-    if (!end || *end || v < 0) return usage_error("command", "--ttl-ms must be a non-negative integer");
+    if (!end || *end || v < 0)
+      return usage_error("command", "--ttl-ms must be a non-negative integer");
     m.set("ttl_ms", static_cast<int64_t>(v));
   }
   if (o.has("priority")) m.set("priority", o.get("priority"));
@@ -349,7 +371,8 @@ int command_main(const Args& args) {
     char* end = nullptr;
     const std::string value_text = o.get("confidence");  // outlives `end`
     double c = std::strtod(value_text.c_str(), &end);
-    if (!end || *end || !(c >= 0 && c <= 1)) return usage_error("command", "--confidence must be within 0..1");
+    if (!end || *end || !(c >= 0 && c <= 1))
+      return usage_error("command", "--confidence must be within 0..1");
     m.set("ai", json::Object{{"confidence", c}});
   }
   client::Client c(co);
@@ -358,17 +381,21 @@ int command_main(const Args& args) {
   if (want_json(o)) {
     std::cout << json::dump(r->raw) << "\n";
   } else if (r->pending()) {
-    std::string id = r->payload.is_object() && r->payload.get("message_id") ? brief(*r->payload.get("message_id")) : r->reply_to;
-    std::printf("%s the command waits for a human authorization (message %s)\n"
-                "  approve: rcan authorize %s --approve   deny: rcan authorize %s --deny\n",
-                yellow("PENDING_AUTH").c_str(), id.c_str(), id.c_str(), id.c_str());
+    std::string id = r->payload.is_object() && r->payload.get("message_id")
+                         ? brief(*r->payload.get("message_id"))
+                         : r->reply_to;
+    std::printf(
+        "%s the command waits for a human authorization (message %s)\n"
+        "  approve: rcan authorize %s --approve   deny: rcan authorize %s --deny\n",
+        yellow("PENDING_AUTH").c_str(), id.c_str(), id.c_str(), id.c_str());
   } else {
     std::printf("%s", green(r->type.empty() ? "OK" : r->type).c_str());
     if (const json::Value* mid = message.get("message_id"); mid && mid->is_string())
       std::printf(" %s", dim(mid->as_string()).c_str());
     std::printf("\n");
     if (r->payload.is_object())
-      for (const auto& [k, v] : r->payload.as_object()) std::printf("  %-14s %s\n", k.c_str(), brief(v, 100).c_str());
+      for (const auto& [k, v] : r->payload.as_object())
+        std::printf("  %-14s %s\n", k.c_str(), brief(v, 100).c_str());
   }
   return r->pending() ? kExitPending : kExitOk;
 }
@@ -384,19 +411,23 @@ constexpr const char* kStreamHelp =
     "  Ctrl-C. On a lost connection it reconnects with backoff 1, 2, 4, 8, 16, 30 s (±0.5 s).\n"
     "  --send-stdin sends each stdin line (a JSON message or payload object with \"action\")\n"
     "  over the stream; answers are printed like events. --count/--seconds stop after that many\n"
-    "  frames / seconds. --json prints every frame as one JSON line. Connection states go to stderr.\n";
+    "  frames / seconds. --json prints every frame as one JSON line. Connection states go to "
+    "stderr.\n";
 
 std::atomic<bool> g_interrupted{false};
 void on_sigint(int) { g_interrupted.store(true); }
 
 std::string render_frame(const json::Value& v) {
   std::string type = v.get("type") && v.get("type")->is_string() ? v.get("type")->as_string() : "?";
-  std::string ts = when(v.get("timestamp_ms") && v.get("timestamp_ms")->is_int() ? v.get("timestamp_ms")->as_int() : now_ms());
+  std::string ts = when(v.get("timestamp_ms") && v.get("timestamp_ms")->is_int()
+                            ? v.get("timestamp_ms")->as_int()
+                            : now_ms());
   ts = ts.size() > 11 ? ts.substr(11) : ts;
   if (type == "STREAM") {
     const json::Value* p = v.get("payload");
     std::string line = dim(ts) + " telemetry";
-    if (v.get("estop_active") && v.get("estop_active")->is_bool() && v.get("estop_active")->as_bool())
+    if (v.get("estop_active") && v.get("estop_active")->is_bool() &&
+        v.get("estop_active")->as_bool())
       line += " " + red("ESTOP");
     if (p && p->is_object()) {
       if (const json::Value* b = p->get("base"); b && b->is_object()) {
@@ -414,14 +445,21 @@ std::string render_frame(const json::Value& v) {
   }
   if (type == "ERROR") {
     const json::Value* p = v.get("payload");
-    std::string code = p && p->get("error_code") ? brief(*p->get("error_code")) : brief(v.get("name") ? *v.get("name") : json::Value());
+    std::string code = p && p->get("error_code")
+                           ? brief(*p->get("error_code"))
+                           : brief(v.get("name") ? *v.get("name") : json::Value());
     std::string msg = p && p->get("error") ? brief(*p->get("error"), 120) : "";
     return dim(ts) + " " + red("ERROR " + code) + " " + msg;
   }
-  std::string line = dim(ts) + " " + (type == "EVENT" || type == "AVAILABLE" || type == "PENDING_AUTH" ? yellow(type) : bold(type));
+  std::string line =
+      dim(ts) + " " +
+      (type == "EVENT" || type == "AVAILABLE" || type == "PENDING_AUTH" ? yellow(type)
+                                                                        : bold(type));
   for (const char* k : {"event", "session_id", "reply_to", "reserved_for"})
-    if (const json::Value* f = v.get(k); f && f->is_string() && !f->as_string().empty()) line += std::string(" ") + k + "=" + f->as_string();
-  if (const json::Value* p = v.get("payload"); p && p->is_object() && !p->as_object().empty()) line += " " + brief(*p, 120);
+    if (const json::Value* f = v.get(k); f && f->is_string() && !f->as_string().empty())
+      line += std::string(" ") + k + "=" + f->as_string();
+  if (const json::Value* p = v.get("payload"); p && p->is_object() && !p->as_object().empty())
+    line += " " + brief(*p, 120);
   return line;
 }
 
@@ -430,23 +468,28 @@ int stream_main(const Args& args) {
   Options* o;
   client::ClientOptions co;
   int rc = 0;
-  if (!setup("stream", args, {"no-telemetry", "send-stdin"}, {"hz", "count", "seconds", "max-attempts"}, true, 0, o, co, rc))
+  if (!setup("stream", args, {"no-telemetry", "send-stdin"},
+             {"hz", "count", "seconds", "max-attempts"}, true, 0, o, co, rc))
     return rc;
   double hz = 2;
   if (o->has("hz")) {
     char* end = nullptr;
     const std::string value_text = o->get("hz");  // outlives `end`
     hz = std::strtod(value_text.c_str(), &end);
-    if (!end || *end || !(hz >= 0.2 && hz <= 50)) return usage_error("stream", "--hz must be within 0.2..50");
+    if (!end || *end || !(hz >= 0.2 && hz <= 50))
+      return usage_error("stream", "--hz must be within 0.2..50");
   }
   if (o->has("no-telemetry")) hz = 0;
   long count = -1, seconds = -1, attempts = -1;
-  for (auto [name, dst] : {std::pair<const char*, long*>{"count", &count}, {"seconds", &seconds}, {"max-attempts", &attempts}}) {
+  for (auto [name, dst] : {std::pair<const char*, long*>{"count", &count},
+                           {"seconds", &seconds},
+                           {"max-attempts", &attempts}}) {
     if (!o->has(name)) continue;
     char* end = nullptr;
     const std::string value_text = o->get(name);  // outlives `end`
     *dst = std::strtol(value_text.c_str(), &end, 10);
-    if (!end || *end || *dst < 1) return usage_error("stream", std::string("--") + name + " must be a positive integer");
+    if (!end || *end || *dst < 1)
+      return usage_error("stream", std::string("--") + name + " must be a positive integer");
   }
   bool json_out = want_json(*o);
   std::atomic<long> frames{0};
@@ -456,16 +499,16 @@ int stream_main(const Args& args) {
   so.max_attempts = static_cast<int>(attempts);
   client::Stream* sp = nullptr;
   so.on_message = [&](const json::Value& v) {
-    if (json_out) std::cout << json::dump(v) << "\n" << std::flush;
-    else std::cout << render_frame(v) << "\n" << std::flush;
+    if (json_out)
+      std::cout << json::dump(v) << "\n" << std::flush;
+    else
+      std::cout << render_frame(v) << "\n" << std::flush;
     if (count > 0 && ++frames >= count && sp) sp->stop();
   };
-  so.on_state = [&](const std::string& s) {
-    std::fprintf(stderr, "rcan stream: %s\n", s.c_str());
-  };
+  so.on_state = [&](const std::string& s) { std::fprintf(stderr, "rcan stream: %s\n", s.c_str()); };
   client::Stream stream(so);
   sp = &stream;
-  struct sigaction sa{};
+  struct sigaction sa {};
   sa.sa_handler = on_sigint;
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
@@ -474,8 +517,8 @@ int stream_main(const Args& args) {
   std::thread watchdog([&] {
     while (!done.load()) {
       std::this_thread::sleep_for(std::chrono::milliseconds(50));
-      if (g_interrupted.load() ||
-          (seconds > 0 && std::chrono::steady_clock::now() - started >= std::chrono::seconds(seconds))) {
+      if (g_interrupted.load() || (seconds > 0 && std::chrono::steady_clock::now() - started >=
+                                                      std::chrono::seconds(seconds))) {
         stream.stop();
         return;
       }
@@ -544,15 +587,18 @@ constexpr const char* kDiscoverHelp =
 
 int discover_main(const Args& args) {
   if (help_requested(args, kDiscoverHelp)) return 0;
-  Options o(args, {"json", "insecure", "no-mdns"}, {"hosts", "timeout", "ca-file", "url", "token-file"});
+  Options o(args, {"json", "insecure", "no-mdns"},
+            {"hosts", "timeout", "ca-file", "url", "token-file"});
   if (!o.ok()) return usage_error("discover", o.error());
-  if (!o.positional().empty()) return usage_error("discover", "unexpected argument " + o.positional()[0]);
+  if (!o.positional().empty())
+    return usage_error("discover", "unexpected argument " + o.positional()[0]);
   client::DiscoverOptions d;
   if (o.has("timeout")) {
     char* end = nullptr;
     const std::string value_text = o.get("timeout");  // outlives `end`
     long v = std::strtol(value_text.c_str(), &end, 10);
-    if (!end || *end || v < 100 || v > 600000) return usage_error("discover", "--timeout must be 100..600000 ms");
+    if (!end || *end || v < 100 || v > 600000)
+      return usage_error("discover", "--timeout must be 100..600000 ms");
     d.timeout_ms = static_cast<int>(v);
   }
   d.mdns = !o.has("no-mdns");
@@ -562,7 +608,8 @@ int discover_main(const Args& args) {
   size_t start = 0;
   while (start < hosts.size()) {
     size_t comma = hosts.find(',', start);
-    std::string h = hosts.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    std::string h =
+        hosts.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
     if (!h.empty()) d.hosts.push_back(h);
     if (comma == std::string::npos) break;
     start = comma + 1;
@@ -574,16 +621,18 @@ int discover_main(const Args& args) {
     d.hosts.push_back(url.empty() ? "http://127.0.0.1:8080" : url);
   }
   auto rep = client::discover(d);
-  if (!rep.mdns_error.empty() && d.mdns) std::fprintf(stderr, "rcan discover: mDNS: %s\n", rep.mdns_error.c_str());
+  if (!rep.mdns_error.empty() && d.mdns)
+    std::fprintf(stderr, "rcan discover: mDNS: %s\n", rep.mdns_error.c_str());
   if (want_json(o)) {
     json::Array list;
     for (const auto& r : rep.robots) {
       json::Object txt;
       for (const auto& [k, v] : r.txt) txt.set(k, v);
-      json::Object e{{"name", r.name},   {"url", r.url},         {"ruri", r.ruri},
-                     {"model", r.model}, {"version", r.version}, {"status", r.status_word},
-                     {"source", r.source}, {"reachable", r.reachable}, {"interface", r.interface},
-                     {"txt", txt}};
+      json::Object e{{"name", r.name},           {"url", r.url},
+                     {"ruri", r.ruri},           {"model", r.model},
+                     {"version", r.version},     {"status", r.status_word},
+                     {"source", r.source},       {"reachable", r.reachable},
+                     {"interface", r.interface}, {"txt", txt}};
       list.push_back(json::Value(std::move(e)));
     }
     json::Object out{{"robots", list}};
@@ -595,7 +644,10 @@ int discover_main(const Args& args) {
     std::vector<std::vector<std::string>> rows;
     for (const auto& r : rep.robots) {
       std::string st = r.status_word.empty() ? "-" : r.status_word;
-      st = st == "estop" ? red(st) : st == "available" ? green(st) : st == "claimed" ? yellow(st) : st;
+      st = st == "estop"       ? red(st)
+           : st == "available" ? green(st)
+           : st == "claimed"   ? yellow(st)
+                               : st;
       rows.push_back({r.name, r.url + (r.reachable ? "" : " (unreachable)"), r.ruri, st, r.source});
     }
     print_table({"NAME", "URL", "RURI", "STATUS", "SOURCE"}, rows);
@@ -603,14 +655,16 @@ int discover_main(const Args& args) {
   return rep.robots.empty() ? kExitRefused : kExitOk;
 }
 
-const Registration kStatus{"status", "show a node's status, ESTOP state and sessions", &status_main};
+const Registration kStatus{"status", "show a node's status, ESTOP state and sessions",
+                           &status_main};
 const Registration kClaim{"claim", "claim control of a robot", &claim_main};
 const Registration kRelease{"release", "release control", &release_main};
 const Registration kHandoff{"handoff", "hand control to another user", &handoff_main};
 const Registration kEstop{"estop", "latch ESTOP (any authenticated role)", &estop_main};
 const Registration kResume{"resume", "clear a latched ESTOP (LEASEE or above)", &resume_main};
 const Registration kCommand{"command", "send a command (friendly form or raw JSON)", &command_main};
-const Registration kStream{"stream", "live telemetry and events over the WebSocket stream", &stream_main};
+const Registration kStream{"stream", "live telemetry and events over the WebSocket stream",
+                           &stream_main};
 const Registration kDiscover{"discover", "find robots via mDNS and host probing", &discover_main};
 
 }  // namespace

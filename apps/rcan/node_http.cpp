@@ -18,8 +18,9 @@ Result<Target> parse_url(const std::string& url) {
   return t;
 }
 
-Result<std::pair<int, std::string>> request(const Target& t, const std::string& method, const std::string& path,
-                                            const std::string& body, const std::string& token) {
+Result<std::pair<int, std::string>> request(const Target& t, const std::string& method,
+                                            const std::string& path, const std::string& body,
+                                            const std::string& token) {
   client::ClientOptions co;
   co.url = t.host;
   co.token = token;
@@ -54,7 +55,9 @@ std::string node_url(const Options& o) {
   return url.empty() ? "http://127.0.0.1:8080" : url;
 }
 
-std::string node_token(const Options& o, bool required, std::string& err) { return token_from(o, required, err); }
+std::string node_token(const Options& o, bool required, std::string& err) {
+  return token_from(o, required, err);
+}
 
 Result<std::pair<int, std::string>> node_request(const std::string& url, const std::string& method,
                                                  const std::string& path, const std::string& body,
@@ -63,6 +66,5 @@ Result<std::pair<int, std::string>> node_request(const std::string& url, const s
   if (!t.ok()) return t.error();
   return request(*t, method, path, body, token);
 }
-
 
 }  // namespace rcan::cli

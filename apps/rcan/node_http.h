@@ -17,8 +17,9 @@ struct Target {
 // http://host[:port][/…] → host and port.
 Result<Target> parse_url(const std::string& url);
 // One HTTP/1.1 request; returns {status, body}.
-Result<std::pair<int, std::string>> request(const Target& t, const std::string& method, const std::string& path,
-                                            const std::string& body, const std::string& token);
+Result<std::pair<int, std::string>> request(const Target& t, const std::string& method,
+                                            const std::string& path, const std::string& body,
+                                            const std::string& token);
 // The bearer token from --token-file or $RCAN_TOKEN_FILE; `err` set when required and absent.
 std::string token_from(const Options& o, bool required, std::string& err);
 

@@ -22,19 +22,23 @@ struct Check {
 
 int selfcheck_main(const Args& args) {
   if (!args.empty() && (args[0] == "--help" || args[0] == "-h")) {
-    std::puts("usage: rcan selfcheck\n  Runs known-answer checks (canonical JSON, Python pre-images, RURI,\n  roles, message codec, SHA-256, HMAC) and exits 0 when all pass.");
+    std::puts(
+        "usage: rcan selfcheck\n  Runs known-answer checks (canonical JSON, Python pre-images, "
+        "RURI,\n  roles, message codec, SHA-256, HMAC) and exits 0 when all pass.");
     return 0;
   }
   std::vector<Check> checks{
       {"canonical JSON (rcan-canonical-json-v1)",
        [] {
          auto v = json::parse(R"({"b":[1.0,{"z":null,"a":"Café ☕"}],"a":-0.0,"c":1e-05})");
-         return v.ok() && json::canonical(*v) == R"({"a":0,"b":[1,{"a":"Café ☕","z":null}],"c":1e-05})";
+         return v.ok() &&
+                json::canonical(*v) == R"({"a":0,"b":[1,{"a":"Café ☕","z":null}],"c":1e-05})";
        }},
       {"Python json.dumps pre-image",
        [] {
          auto v = json::parse(R"({"t":1740721483.0,"n":"café","x":1e16,"i":7})");
-         return v.ok() && json::python_dumps(*v) == R"({"i":7,"n":"caf\u00e9","t":1740721483.0,"x":1e+16})";
+         return v.ok() &&
+                json::python_dumps(*v) == R"({"i":7,"n":"caf\u00e9","t":1740721483.0,"x":1e+16})";
        }},
       {"RURI parse and normalise",
        [] {
@@ -45,8 +49,10 @@ int selfcheck_main(const Args& args) {
        }},
       {"capability matrix",
        [] {
-         return !role_allows(Role::kGuest, Capability::kTeleop) && role_allows(Role::kUser, Capability::kNavigation) &&
-                !role_allows(Role::kUser, Capability::kArm) && role_allows(Role::kLeasee, Capability::kArm) &&
+         return !role_allows(Role::kGuest, Capability::kTeleop) &&
+                role_allows(Role::kUser, Capability::kNavigation) &&
+                !role_allows(Role::kUser, Capability::kArm) &&
+                role_allows(Role::kLeasee, Capability::kArm) &&
                 !role_allows(Role::kOwner, Capability::kModelDeployment);
        }},
       {"message codec (both shapes)",
@@ -58,7 +64,10 @@ int selfcheck_main(const Args& args) {
                 m->timestamp_ms == 1740721482934;
        }},
       {"SHA-256 (FIPS 180-4 'abc')",
-       [] { return sha256_hex("abc") == "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"; }},
+       [] {
+         return sha256_hex("abc") ==
+                "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad";
+       }},
       {"HMAC-SHA256 (RFC 4231 case 2)",
        [] {
          return hmac_sha256_hex("Jefe", "what do ya want for nothing?") ==

@@ -33,19 +33,23 @@ int sign_main(const Args& args) {
   }
   Options o(args, {"deterministic"}, {"key-dir", "alg", "context"});
   if (!o.ok()) return usage_error("sign", o.error());
-  if (!o.positional().empty()) return usage_error("sign", "unexpected argument " + o.positional()[0]);
+  if (!o.positional().empty())
+    return usage_error("sign", "unexpected argument " + o.positional()[0]);
   if (o.get("key-dir").empty()) return usage_error("sign", "--key-dir D is required");
   std::string alg = o.get("alg");
-  if (alg != "ml-dsa-65" && alg != "ed25519") return usage_error("sign", "--alg must be ml-dsa-65 or ed25519");
+  if (alg != "ml-dsa-65" && alg != "ed25519")
+    return usage_error("sign", "--alg must be ml-dsa-65 or ed25519");
   Bytes ctx;
   if (o.has("context")) {
     auto c = from_hex(o.get("context"));
     if (!c) return usage_error("sign", "--context must be hex");
-    if (c->size() > mldsa65::kMaxContextBytes) return usage_error("sign", "--context is longer than 255 bytes");
+    if (c->size() > mldsa65::kMaxContextBytes)
+      return usage_error("sign", "--context is longer than 255 bytes");
     ctx = *c;
   }
   if (alg == "ed25519" && (o.has("context") || o.has("deterministic")))
-    return usage_error("sign", "--context and --deterministic apply to ml-dsa-65 only (Ed25519 is deterministic)");
+    return usage_error(
+        "sign", "--context and --deterministic apply to ml-dsa-65 only (Ed25519 is deterministic)");
   auto k = keys::load_dir(o.get("key-dir"));
   if (!k.ok()) {
     std::fprintf(stderr, "rcan sign: %s\n", k.error().message.c_str());
@@ -76,20 +80,24 @@ int verify_main(const Args& args) {
   }
   Options o(args, {}, {"pub", "alg", "sig", "context"});
   if (!o.ok()) return usage_error("verify", o.error());
-  if (!o.positional().empty()) return usage_error("verify", "unexpected argument " + o.positional()[0]);
+  if (!o.positional().empty())
+    return usage_error("verify", "unexpected argument " + o.positional()[0]);
   std::string alg = o.get("alg");
-  if (alg != "ml-dsa-65" && alg != "ed25519") return usage_error("verify", "--alg must be ml-dsa-65 or ed25519");
+  if (alg != "ml-dsa-65" && alg != "ed25519")
+    return usage_error("verify", "--alg must be ml-dsa-65 or ed25519");
   if (o.get("pub").empty()) return usage_error("verify", "--pub FILE is required");
   if (!o.has("sig")) return usage_error("verify", "--sig B64 is required");
   Bytes ctx;
   if (o.has("context")) {
     if (alg == "ed25519") return usage_error("verify", "--context applies to ml-dsa-65 only");
     auto c = from_hex(o.get("context"));
-    if (!c || c->size() > mldsa65::kMaxContextBytes) return usage_error("verify", "--context must be hex, at most 255 bytes");
+    if (!c || c->size() > mldsa65::kMaxContextBytes)
+      return usage_error("verify", "--context must be hex, at most 255 bytes");
     ctx = *c;
   }
   std::string sig_text = o.get("sig");
-  while (!sig_text.empty() && (sig_text.back() == '\n' || sig_text.back() == '\r')) sig_text.pop_back();
+  while (!sig_text.empty() && (sig_text.back() == '\n' || sig_text.back() == '\r'))
+    sig_text.pop_back();
   auto sig = base64_decode(sig_text);
   if (!sig) sig = base64url_decode(sig_text);
   if (!sig) return usage_error("verify", "--sig is not base64");
@@ -97,8 +105,10 @@ int verify_main(const Args& args) {
   if (!pub.ok()) return usage_error("verify", pub.error().message);
   Bytes pk = *pub;
   if (alg == "ed25519" && pk.size() != ed25519::kPublicKeyBytes) {
-    auto from_pem = ed25519::public_key_from_pem(std::string_view(reinterpret_cast<const char*>(pk.data()), pk.size()));
-    if (!from_pem.ok()) return usage_error("verify", o.get("pub") + " is neither a 32-byte Ed25519 key nor its PEM");
+    auto from_pem = ed25519::public_key_from_pem(
+        std::string_view(reinterpret_cast<const char*>(pk.data()), pk.size()));
+    if (!from_pem.ok())
+      return usage_error("verify", o.get("pub") + " is neither a 32-byte Ed25519 key nor its PEM");
     pk = *from_pem;
   }
   if (alg == "ml-dsa-65" && pk.size() != mldsa65::kPublicKeyBytes)
@@ -110,8 +120,10 @@ int verify_main(const Args& args) {
   return ok ? 0 : 1;
 }
 
-const Registration kSignReg{"sign", "sign stdin with a key directory (ML-DSA-65 or Ed25519)", &sign_main};
-const Registration kVerifyReg{"verify", "verify an ML-DSA-65 or Ed25519 signature over stdin", &verify_main};
+const Registration kSignReg{"sign", "sign stdin with a key directory (ML-DSA-65 or Ed25519)",
+                            &sign_main};
+const Registration kVerifyReg{"verify", "verify an ML-DSA-65 or Ed25519 signature over stdin",
+                              &verify_main};
 
 }  // namespace
 }  // namespace rcan::cli

@@ -26,14 +26,16 @@ constexpr const char* kHelp =
     "      (PEM public key, JWK or JWKS; or an HS256 secret file) it verifies the token the way\n"
     "      the robot does: issuer --iss (default: the token's own iss, trusted because you named\n"
     "      the key), audience --aud (skipped when absent), fleet --device (skipped when absent).\n"
-    "  Exit: 0 issued / valid (or decoded, without a key), 1 invalid, 2 usage or malformed token.\n";
+    "  Exit: 0 issued / valid (or decoded, without a key), 1 invalid, 2 usage or malformed "
+    "token.\n";
 
 std::vector<std::string> split_csv(const std::string& s) {
   std::vector<std::string> out;
   size_t start = 0;
   while (start <= s.size()) {
     size_t comma = s.find(',', start);
-    std::string part = s.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    std::string part =
+        s.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
     if (!part.empty()) out.push_back(part);
     if (comma == std::string::npos) break;
     start = comma + 1;
@@ -42,21 +44,24 @@ std::vector<std::string> split_csv(const std::string& s) {
 }
 
 int64_t unix_now() {
-  return std::chrono::duration_cast<std::chrono::seconds>(std::chrono::system_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::seconds>(
+             std::chrono::system_clock::now().time_since_epoch())
       .count();
 }
 
 int issue_main(const Args& args) {
   Options o(args, {},
-            {"key", "sub", "role", "scope", "aud", "ttl", "iss", "alg", "kid", "fleet", "sender-type",
-             "cloud-provider", "function-name"});
+            {"key", "sub", "role", "scope", "aud", "ttl", "iss", "alg", "kid", "fleet",
+             "sender-type", "cloud-provider", "function-name"});
   if (!o.ok()) return usage_error("token issue", o.error());
-  if (!o.positional().empty()) return usage_error("token issue", "unexpected argument " + o.positional()[0]);
+  if (!o.positional().empty())
+    return usage_error("token issue", "unexpected argument " + o.positional()[0]);
   if (!o.has("key") || o.get("key").empty())
     return usage_error("token issue", "--key FILE is required (there is no default signing key)");
   if (o.get("sub").empty()) return usage_error("token issue", "--sub is required");
   if (o.get("aud").empty()) return usage_error("token issue", "--aud is required");
-  if (o.get("aud").rfind("rcan://", 0) != 0) return usage_error("token issue", "--aud must be an rcan:// RURI");
+  if (o.get("aud").rfind("rcan://", 0) != 0)
+    return usage_error("token issue", "--aud must be an rcan:// RURI");
   std::string role = o.get("role");
   if (jwt::role_level(role) == 0)
     return usage_error("token issue", "--role must be one of creator, owner, leasee, user, guest");
@@ -73,11 +78,13 @@ int issue_main(const Args& args) {
     return usage_error("token issue", "--alg " + o.get("alg") + " does not match the key (a " +
                                           std::string(jwt::alg_name(key->alg())) + " key)");
   std::string sender_type = o.get("sender-type");
-  if (!sender_type.empty() && sender_type != "human" && sender_type != "robot" && sender_type != "cloud_function" &&
-      sender_type != "system")
-    return usage_error("token issue", "--sender-type must be human, robot, cloud_function or system");
+  if (!sender_type.empty() && sender_type != "human" && sender_type != "robot" &&
+      sender_type != "cloud_function" && sender_type != "system")
+    return usage_error("token issue",
+                       "--sender-type must be human, robot, cloud_function or system");
   if (sender_type == "cloud_function" && o.get("cloud-provider").empty())
-    return usage_error("token issue", "--sender-type cloud_function needs --cloud-provider (RCAN 8.5)");
+    return usage_error("token issue",
+                       "--sender-type cloud_function needs --cloud-provider (RCAN 8.5)");
 
   int64_t now = unix_now();
   uint8_t jti[16];
@@ -122,7 +129,8 @@ int inspect_main(const Args& args) {
   Options o(args, {}, {"key", "secret", "iss", "aud", "device", "leeway", "now"});
   if (!o.ok()) return usage_error("token inspect", o.error());
   if (o.positional().size() > 1) return usage_error("token inspect", "give at most one token");
-  if (o.has("key") && o.has("secret")) return usage_error("token inspect", "give --key or --secret, not both");
+  if (o.has("key") && o.has("secret"))
+    return usage_error("token inspect", "give --key or --secret, not both");
   std::string token = trim(o.positional().empty() ? read_stdin() : o.positional()[0]);
   auto d = jwt::decode(token);
   json::Object out;

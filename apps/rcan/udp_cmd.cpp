@@ -13,8 +13,8 @@
 
 #include "cli.h"
 #include "rcan/encoding.h"
-#include "rcan/json.h"
 #include "rcan/hash.h"
+#include "rcan/json.h"
 #include "rcan/udp_wire.h"
 
 namespace rcan::cli {
@@ -58,12 +58,15 @@ int discover_main(const Args& args) {
     return 0;
   }
   uint16_t port = 8082;
-  if (o.has("port") && parse_port(o.get("port"), port)) return usage_error("udp-discover", "--port must be 1..65535");
+  if (o.has("port") && parse_port(o.get("port"), port))
+    return usage_error("udp-discover", "--port must be 1..65535");
   std::string host = o.get("host", "255.255.255.255");
   int timeout_ms = std::atoi(o.get("timeout-ms", "1000").c_str());
-  if (timeout_ms <= 0 || timeout_ms > 60000) return usage_error("udp-discover", "--timeout-ms must be 1..60000");
+  if (timeout_ms <= 0 || timeout_ms > 60000)
+    return usage_error("udp-discover", "--timeout-ms must be 1..60000");
   sockaddr_in to{};
-  if (!to_addr(host, port, to)) return usage_error("udp-discover", "--host must be an IPv4 address");
+  if (!to_addr(host, port, to))
+    return usage_error("udp-discover", "--host must be an IPv4 address");
   int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
   if (fd < 0) return usage_error("udp-discover", "cannot open a UDP socket");
   int on = 1;
@@ -73,13 +76,16 @@ int discover_main(const Args& args) {
   auto d = udp::encode_discover(nonce);
   if (::sendto(fd, d.data(), d.size(), 0, reinterpret_cast<sockaddr*>(&to), sizeof to) < 0) {
     ::close(fd);
-    std::fprintf(stderr, "rcan udp-discover: cannot send to %s:%u: %s\n", host.c_str(), port, std::strerror(errno));
+    std::fprintf(stderr, "rcan udp-discover: cannot send to %s:%u: %s\n", host.c_str(), port,
+                 std::strerror(errno));
     return 1;
   }
   int found = 0;
   auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
   while (true) {
-    auto left = std::chrono::duration_cast<std::chrono::milliseconds>(until - std::chrono::steady_clock::now()).count();
+    auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+                    until - std::chrono::steady_clock::now())
+                    .count();
     if (left <= 0) break;
     pollfd p{fd, POLLIN, 0};
     if (::poll(&p, 1, static_cast<int>(left)) <= 0) break;
@@ -89,12 +95,14 @@ int discover_main(const Args& args) {
     ssize_t n = ::recvfrom(fd, buf, sizeof buf, 0, reinterpret_cast<sockaddr*>(&from), &len);
     if (n <= 0) continue;
     udp::Parsed pr = udp::parse({buf, static_cast<size_t>(n)});
-    if (!pr.ok() || pr.d.kind != udp::Kind::kAnnounce || pr.d.nonce != nonce) continue;  // not our answer
+    if (!pr.ok() || pr.d.kind != udp::Kind::kAnnounce || pr.d.nonce != nonce)
+      continue;  // not our answer
     auto body = json::parse(pr.d.body, {.max_depth = 16, .max_bytes = udp::kMaxAnnounceSize});
     if (!body.ok()) continue;
     char ip[INET_ADDRSTRLEN] = {0};
     inet_ntop(AF_INET, &from.sin_addr, ip, sizeof ip);
-    json::Object line{{"from", std::string(ip) + ":" + std::to_string(ntohs(from.sin_port))}, {"announce", *body}};
+    json::Object line{{"from", std::string(ip) + ":" + std::to_string(ntohs(from.sin_port))},
+                      {"announce", *body}};
     std::cout << json::dump(json::Value(line)) << "\n" << std::flush;
     ++found;
   }
@@ -103,28 +111,35 @@ int discover_main(const Args& args) {
 }
 
 int heartbeat_main(const Args& args) {
-  Options o(args, {"help"}, {"host", "port", "key-id", "key-b64", "count", "interval-ms", "first-seq"});
+  Options o(args, {"help"},
+            {"host", "port", "key-id", "key-b64", "count", "interval-ms", "first-seq"});
   if (!o.ok()) return usage_error("udp-heartbeat", o.error());
   if (o.has("help")) {
     std::fputs(kHeartbeatHelp, stdout);
     return 0;
   }
   uint16_t port = 0;
-  if (parse_port(o.get("port"), port)) return usage_error("udp-heartbeat", "--port must be 1..65535");
+  if (parse_port(o.get("port"), port))
+    return usage_error("udp-heartbeat", "--port must be 1..65535");
   auto id = from_hex(o.get("key-id"));
   auto key = base64_decode(o.get("key-b64"));
-  if (!id || id->size() != udp::kKeyIdSize) return usage_error("udp-heartbeat", "--key-id must be 32 hex digits");
-  if (!key || key->size() != udp::kKeySize) return usage_error("udp-heartbeat", "--key-b64 must hold 32 bytes");
+  if (!id || id->size() != udp::kKeyIdSize)
+    return usage_error("udp-heartbeat", "--key-id must be 32 hex digits");
+  if (!key || key->size() != udp::kKeySize)
+    return usage_error("udp-heartbeat", "--key-b64 must hold 32 bytes");
   long count = std::atol(o.get("count", "1").c_str());
   long interval = std::atol(o.get("interval-ms", "500").c_str());
-  if (count < 1 || interval < 1) return usage_error("udp-heartbeat", "--count and --interval-ms must be positive");
-  uint64_t seq = o.has("first-seq")
-                     ? std::strtoull(o.get("first-seq").c_str(), nullptr, 10)
-                     : static_cast<uint64_t>(std::chrono::duration_cast<std::chrono::microseconds>(
-                                                 std::chrono::system_clock::now().time_since_epoch())
-                                                 .count());
+  if (count < 1 || interval < 1)
+    return usage_error("udp-heartbeat", "--count and --interval-ms must be positive");
+  uint64_t seq =
+      o.has("first-seq")
+          ? std::strtoull(o.get("first-seq").c_str(), nullptr, 10)
+          : static_cast<uint64_t>(std::chrono::duration_cast<std::chrono::microseconds>(
+                                      std::chrono::system_clock::now().time_since_epoch())
+                                      .count());
   sockaddr_in to{};
-  if (!to_addr(o.get("host", "127.0.0.1"), port, to)) return usage_error("udp-heartbeat", "--host must be an IPv4 address");
+  if (!to_addr(o.get("host", "127.0.0.1"), port, to))
+    return usage_error("udp-heartbeat", "--host must be an IPv4 address");
   udp::KeyId kid{};
   udp::Key k{};
   std::memcpy(kid.data(), id->data(), kid.size());
@@ -135,7 +150,8 @@ int heartbeat_main(const Args& args) {
   int rc = 0;
   for (long i = 0; i < count; ++i) {
     auto hb = udp::encode_heartbeat(kid, seq + static_cast<uint64_t>(i), k);
-    if (::sendto(fd, hb.data(), hb.size(), 0, reinterpret_cast<sockaddr*>(&to), sizeof to) < 0) rc = 1;
+    if (::sendto(fd, hb.data(), hb.size(), 0, reinterpret_cast<sockaddr*>(&to), sizeof to) < 0)
+      rc = 1;
     if (i + 1 < count) std::this_thread::sleep_for(std::chrono::milliseconds(interval));
   }
   secure_wipe(k.data(), k.size());
@@ -143,9 +159,10 @@ int heartbeat_main(const Args& args) {
   return rc;
 }
 
-const Registration kDiscoverReg{"udp-discover", "find nodes with a UDP DISCOVER (broadcast or unicast)", &discover_main};
-const Registration kHeartbeatReg{"udp-heartbeat", "send authenticated UDP heartbeats for a control session",
-                                 &heartbeat_main};
+const Registration kDiscoverReg{
+    "udp-discover", "find nodes with a UDP DISCOVER (broadcast or unicast)", &discover_main};
+const Registration kHeartbeatReg{
+    "udp-heartbeat", "send authenticated UDP heartbeats for a control session", &heartbeat_main};
 
 }  // namespace
 }  // namespace rcan::cli

@@ -70,14 +70,17 @@ int node_verify(const Args& args) {
   auto v = c.watermark_verify(o.positional()[0], o.get("rrn"));
   if (!v.ok()) return report_error("watermark verify", v.error(), want_json(o));
   if (want_json(o)) {
-    json::Object out{{"valid", v->valid}, {"rrn", v->rrn}, {"watermark_token", v->watermark_token},
+    json::Object out{{"valid", v->valid},
+                     {"rrn", v->rrn},
+                     {"watermark_token", v->watermark_token},
                      {"audit_entry", v->audit_entry}};
     std::cout << json::dump(json::Value(std::move(out))) << "\n";
   } else {
     std::printf("%s %s (rrn %s)\n", v->valid ? green("valid").c_str() : red("invalid").c_str(),
                 v->watermark_token.c_str(), v->rrn.c_str());
     if (v->audit_entry.is_object())
-      for (const auto& [k, val] : v->audit_entry.as_object()) std::printf("  %-16s %s\n", k.c_str(), brief(val, 100).c_str());
+      for (const auto& [k, val] : v->audit_entry.as_object())
+        std::printf("  %-16s %s\n", k.c_str(), brief(val, 100).c_str());
   }
   return v->valid ? 0 : 1;
 }
@@ -90,7 +93,8 @@ int watermark_main(const Args& args) {
   Args rest(args.begin() + 1, args.end());
   if (args[0] == "compute") return compute_or_verify(rest, false);
   if (args[0] == "verify") {
-    bool local = std::any_of(rest.begin(), rest.end(), [](const std::string& a) { return a.rfind("--key-file", 0) == 0; });
+    bool local = std::any_of(rest.begin(), rest.end(),
+                             [](const std::string& a) { return a.rfind("--key-file", 0) == 0; });
     if (local) return compute_or_verify(rest, true);
     return node_verify(rest);
   }

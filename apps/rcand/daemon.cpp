@@ -105,7 +105,8 @@ Status Daemon::load_configuration(const DaemonOptions& options) {
   if (!options.log_level_given) {
     if (auto lvl = parse_log_level(cfg_.log_level)) set_log_level(*lvl);
   }
-  for (const auto& w : cfg_.warnings) log(LogLevel::kWarn, "config_warning", json::Object{{"warning", w}});
+  for (const auto& w : cfg_.warnings)
+    log(LogLevel::kWarn, "config_warning", json::Object{{"warning", w}});
   return make_private_dir(cfg_.data_dir);
 }
 
@@ -121,13 +122,15 @@ Status Daemon::open_identity() {
   auto trust = jwt::TrustStore::from_config(cfg_.security.jwt.issuers);
   if (!trust.ok()) return failed("security.jwt.issuers: ", trust.error());
   if (local_) {
-    if (Status s = ensure_issuer_and_token(*local_, cfg_.data_dir, cfg_.ruri, *trust, info_.token_created);
+    if (Status s =
+            ensure_issuer_and_token(*local_, cfg_.data_dir, cfg_.ruri, *trust, info_.token_created);
         !s.ok())
       return s;
   }
   if (trust->empty())
-    return Error(ErrorCode::kInternal,
-                 "no token issuer is configured (security.jwt.issuers); every request would be refused");
+    return Error(
+        ErrorCode::kInternal,
+        "no token issuer is configured (security.jwt.issuers); every request would be refused");
   trust_ = std::move(trust).value();
   return Status::Ok();
 }
@@ -145,9 +148,12 @@ Status Daemon::open_audit_log() {
 // 4. The safety core over the simulated robot, with its persisted ESTOP latch.
 Status Daemon::start_safety_core() {
   node::SimRobotConfig sim;
-  core_ = std::make_unique<node::SafetyCore>(std::make_unique<node::SimRobot>(sim), safety_config(cfg_, sim));
-  if (Status s = core_->open(cfg_.data_dir + "/safety"); !s.ok()) return failed("safety state: ", s.error());
-  actuation_ = std::make_unique<node::SafetyActuation>(*core_, cfg_.robot.name.empty() ? "rcan robot" : cfg_.robot.name);
+  core_ = std::make_unique<node::SafetyCore>(std::make_unique<node::SimRobot>(sim),
+                                             safety_config(cfg_, sim));
+  if (Status s = core_->open(cfg_.data_dir + "/safety"); !s.ok())
+    return failed("safety state: ", s.error());
+  actuation_ = std::make_unique<node::SafetyActuation>(
+      *core_, cfg_.robot.name.empty() ? "rcan robot" : cfg_.robot.name);
   return Status::Ok();
 }
 
@@ -159,9 +165,11 @@ Status Daemon::start_node() {
   auto auth = auth_options(cfg_, std::move(*trust_), ns.rrn);
   trust_.reset();
   if (!auth.ok()) return auth.error();
-  services_ = std::make_unique<node::NodeServices>(ns, Clock::system(), std::move(auth).value(), *actuation_, *audit_);
+  services_ = std::make_unique<node::NodeServices>(ns, Clock::system(), std::move(auth).value(),
+                                                   *actuation_, *audit_);
   if (!cfg_.fleet.fleet_id.empty())
-    services_->fleet = std::make_shared<node::FleetMembership>(node::FleetMembership{cfg_.fleet, {}});
+    services_->fleet =
+        std::make_shared<node::FleetMembership>(node::FleetMembership{cfg_.fleet, {}});
   configure_control(*services_, cfg_);
   node::AiOptions ai_opts = node::ai_options(cfg_);  // §16 gates, layers, HiTL, watermark
   ai_opts.watermark_key = robot_keys_->mldsa65_sk.clone();
@@ -177,7 +185,8 @@ Status Daemon::start_node() {
   node_->start();
   on_stop([this](int) { node_->shutdown(); });
   on_stop([this](int) { services_->ai->shutdown(); });
-  if (Status s = services_->ai->start(node_->pipeline()); !s.ok()) return failed("HiTL pending file: ", s.error());
+  if (Status s = services_->ai->start(node_->pipeline()); !s.ok())
+    return failed("HiTL pending file: ", s.error());
   return Status::Ok();
 }
 
@@ -193,9 +202,11 @@ Status Daemon::start_transports() {
   http_ = std::make_unique<transport::HttpServer>(so, *node_, *node_);
   auto port = http_->start();
   if (!port.ok())
-    return failed("cannot listen on " + so.bind_address + ":" + std::to_string(so.port) + ": ", port.error());
+    return failed("cannot listen on " + so.bind_address + ":" + std::to_string(so.port) + ": ",
+                  port.error());
   on_stop([this](int drain_ms) { http_->stop(drain_ms); });
-  services_->settings.port = *port;  // the bound port (differs from the configured one for --port 0)
+  services_->settings.port =
+      *port;  // the bound port (differs from the configured one for --port 0)
 
   if (cfg_.mqtt.enabled) {
     auto mo = node::mqtt_node_options(cfg_);
@@ -209,7 +220,8 @@ Status Daemon::start_transports() {
     on_stop([this](int) { mdns_.reset(); });
   }
 
-  const std::string host = so.bind_address == "0.0.0.0" ? std::string("127.0.0.1") : so.bind_address;
+  const std::string host =
+      so.bind_address == "0.0.0.0" ? std::string("127.0.0.1") : so.bind_address;
   info_.url = std::string(so.tls ? "https" : "http") + "://" + host + ":" + std::to_string(*port);
   info_.ruri = cfg_.ruri;
   info_.local = local_.has_value();

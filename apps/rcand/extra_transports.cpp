@@ -9,7 +9,8 @@ void ExtraTransports::stop(int drain_ms) {
   if (udp) udp->stop();
 }
 
-Result<std::unique_ptr<ExtraTransports>> start_extra_transports(const config::NodeConfig& cfg, node::Node& node) {
+Result<std::unique_ptr<ExtraTransports>> start_extra_transports(const config::NodeConfig& cfg,
+                                                                node::Node& node) {
   auto t = std::make_unique<ExtraTransports>();
   if (cfg.udp.enabled) {
     node::UdpOptions uo;
@@ -19,7 +20,8 @@ Result<std::unique_ptr<ExtraTransports>> start_extra_transports(const config::No
     uo.discovery = cfg.udp.discovery;
     uo.discovery_per_source_per_min = cfg.udp.discovery_per_source_per_min;
     t->udp = std::make_unique<node::UdpService>(uo, node.services());
-    if (auto p = t->udp->start(); !p.ok()) return Error(ErrorCode::kInternal, "udp: " + p.error().message);
+    if (auto p = t->udp->start(); !p.ok())
+      return Error(ErrorCode::kInternal, "udp: " + p.error().message);
   }
   if (cfg.grpc.enabled) {
     node::GrpcOptions go;

@@ -19,6 +19,7 @@ struct ExtraTransports {
 };
 
 // Starts what the config enables. Errors name the block (e.g. "grpc: cannot listen on …").
-Result<std::unique_ptr<ExtraTransports>> start_extra_transports(const config::NodeConfig& cfg, node::Node& node);
+Result<std::unique_ptr<ExtraTransports>> start_extra_transports(const config::NodeConfig& cfg,
+                                                                node::Node& node);
 
 }  // namespace rcan::rcand

@@ -6,8 +6,8 @@
 #include <string>
 #include <vector>
 
-#include "rcan/result.h"
 #include "node/bindings/grpc_module.h"
+#include "rcan/result.h"
 
 namespace rcan::rcand {
 
@@ -20,7 +20,7 @@ std::vector<std::string> grpc_module_candidates(const std::string& configured);
 // dlopen()s the first candidate that exists and creates a transport. Errors (INTERNAL) name
 // the paths tried, or the loader's message (missing library, wrong ABI version).
 Result<std::unique_ptr<node::GrpcTransport>> load_grpc_transport(const std::string& configured,
-                                                                      const node::GrpcOptions& opt,
-                                                                      node::Node& node);
+                                                                 const node::GrpcOptions& opt,
+                                                                 node::Node& node);
 
 }  // namespace rcan::rcand

@@ -45,13 +45,16 @@ Result<LocalIdentity> ensure_local_identity(const std::string& data_dir) {
   std::string device_file = data_dir + "/device_id";
   if (auto t = read_text(device_file); t.ok()) {
     id.device_id = *t;
-    while (!id.device_id.empty() && (id.device_id.back() == '\n' || id.device_id.back() == '\r')) id.device_id.pop_back();
+    while (!id.device_id.empty() && (id.device_id.back() == '\n' || id.device_id.back() == '\r'))
+      id.device_id.pop_back();
   } else {
     uint8_t b[4];
     if (!random_bytes(b, sizeof b)) return Error(ErrorCode::kInternal, "no randomness");
     id.device_id = to_hex(b, sizeof b);
     std::string text = id.device_id + "\n";
-    if (Status s = keys::write_new_file(device_file, {reinterpret_cast<const uint8_t*>(text.data()), text.size()}, 0644); !s.ok())
+    if (Status s = keys::write_new_file(
+            device_file, {reinterpret_cast<const uint8_t*>(text.data()), text.size()}, 0644);
+        !s.ok())
       return s.error();
     id.created = true;
   }
@@ -60,8 +63,9 @@ Result<LocalIdentity> ensure_local_identity(const std::string& data_dir) {
   return id;
 }
 
-Status ensure_issuer_and_token(const LocalIdentity& id, const std::string& data_dir, const std::string& ruri,
-                               jwt::TrustStore& trust, bool& token_created) {
+Status ensure_issuer_and_token(const LocalIdentity& id, const std::string& data_dir,
+                               const std::string& ruri, jwt::TrustStore& trust,
+                               bool& token_created) {
   if (Status s = make_private_dir(data_dir + "/issuer"); !s.ok()) return s;
   if (!fs::exists(id.issuer_seed_file)) {
     Bytes seed = ed25519::random_seed();
@@ -88,7 +92,9 @@ Status ensure_issuer_and_token(const LocalIdentity& id, const std::string& data_
     auto token = jwt::issue(claims, *signing);
     if (!token.ok()) return token.error();
     std::string text = *token + "\n";
-    if (Status s = keys::write_new_file(id.owner_token_file, {reinterpret_cast<const uint8_t*>(text.data()), text.size()}, 0600);
+    if (Status s = keys::write_new_file(
+            id.owner_token_file, {reinterpret_cast<const uint8_t*>(text.data()), text.size()},
+            0600);
         !s.ok())
       return s;
     token_created = true;
@@ -104,10 +110,9 @@ Result<keys::RobotKeys> robot_keys(const config::NodeConfig& cfg, bool embedded)
   }
   auto loaded = keys::load_dir(cfg.security.key_dir);
   if (!loaded.ok())
-    return Error(ErrorCode::kInternal, "robot keys in " + cfg.security.key_dir + ": " +
-                                           loaded.error().message +
-                                           " (create them with: rcan keys generate --dir " +
-                                           cfg.security.key_dir + ")");
+    return Error(ErrorCode::kInternal,
+                 "robot keys in " + cfg.security.key_dir + ": " + loaded.error().message +
+                     " (create them with: rcan keys generate --dir " + cfg.security.key_dir + ")");
   return loaded;
 }
 

@@ -33,8 +33,10 @@ int sim_layer_main(int argc, char** argv);  // sim_layer.cpp: `rcand --sim-layer
 namespace {
 
 constexpr const char* kUsage =
-    "usage: rcand [--config FILE] [--port N] [--bind ADDR] [--data-dir DIR] [--log-level debug|info|warn|error]\n"
-    "       rcand --sim-layer [--port N] [--layer reactive|fast|planner] [--confidence C] [--delay-ms D]\n"
+    "usage: rcand [--config FILE] [--port N] [--bind ADDR] [--data-dir DIR] [--log-level "
+    "debug|info|warn|error]\n"
+    "       rcand --sim-layer [--port N] [--layer reactive|fast|planner] [--confidence C] "
+    "[--delay-ms D]\n"
     "\n"
     "Without --config, rcand runs the embedded simulated robot. On its first run it creates, in\n"
     "the data directory (default $RCAND_DATA_DIR, else ~/.local/share/rcand): robot keys, the\n"
@@ -47,7 +49,8 @@ int fail(const std::string& what) {
   return 1;
 }
 
-std::optional<rcand::DaemonOptions> parse_args(int argc, char** argv, std::optional<std::string>& log_level,
+std::optional<rcand::DaemonOptions> parse_args(int argc, char** argv,
+                                               std::optional<std::string>& log_level,
                                                int& exit_code) {
   rcand::DaemonOptions a;
   for (int i = 1; i < argc; ++i) {
@@ -123,23 +126,26 @@ int main(int argc, char** argv) {
   if (Status s = daemon.start(*options); !s.ok()) return fail(s.error().message);
   const rcand::ServingInfo& info = daemon.info();
   if (info.local) {
-    std::fprintf(stderr,
-                 "\nrcand is serving the simulated robot %s at %s\n"
-                 "%s token: %s (mode 0600)\n"
-                 "Use it from another terminal:\n"
-                 "  export RCAN_URL=%s RCAN_TOKEN_FILE=%s\n"
-                 "  rcan status        # then: rcan claim, rcan command move --linear 0.3, rcan estop\n"
-                 "Dashboard: %s/ (sign in with the token in that file; docs/DASHBOARD.md)\n\n",
-                 info.ruri.c_str(), info.url.c_str(), info.token_created ? "New OWNER" : "OWNER",
-                 info.identity.owner_token_file.c_str(), info.url.c_str(),
-                 info.identity.owner_token_file.c_str(), info.url.c_str());
+    std::fprintf(
+        stderr,
+        "\nrcand is serving the simulated robot %s at %s\n"
+        "%s token: %s (mode 0600)\n"
+        "Use it from another terminal:\n"
+        "  export RCAN_URL=%s RCAN_TOKEN_FILE=%s\n"
+        "  rcan status        # then: rcan claim, rcan command move --linear 0.3, rcan estop\n"
+        "Dashboard: %s/ (sign in with the token in that file; docs/DASHBOARD.md)\n\n",
+        info.ruri.c_str(), info.url.c_str(), info.token_created ? "New OWNER" : "OWNER",
+        info.identity.owner_token_file.c_str(), info.url.c_str(),
+        info.identity.owner_token_file.c_str(), info.url.c_str());
   }
 
   // Run until SIGTERM / SIGINT.
   int sig = 0;
   sigwait(&signals, &sig);
-  log(LogLevel::kInfo, "shutting_down", json::Object{{"signal", sig == SIGTERM ? "SIGTERM" : "SIGINT"}});
+  log(LogLevel::kInfo, "shutting_down",
+      json::Object{{"signal", sig == SIGTERM ? "SIGTERM" : "SIGINT"}});
   daemon.stop(2000);
-  log(LogLevel::kInfo, "stopped", json::Object{{"audit_last_seq", static_cast<int64_t>(daemon.audit_last_seq())}});
+  log(LogLevel::kInfo, "stopped",
+      json::Object{{"audit_last_seq", static_cast<int64_t>(daemon.audit_last_seq())}});
   return 0;
 }

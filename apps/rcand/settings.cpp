@@ -39,7 +39,7 @@ node::SafetyConfig safety_config(const config::NodeConfig& cfg, const node::SimR
   sc.limits.workspace.min_y = cfg.safety.workspace.y_min;
   sc.limits.workspace.max_y = cfg.safety.workspace.y_max;
   sc.policy = cfg.safety.speed_policy == config::LimitPolicy::kReject ? node::LimitPolicy::kReject
-                                                                       : node::LimitPolicy::kClamp;
+                                                                      : node::LimitPolicy::kClamp;
   sc.estop_on_startup = cfg.safety.estop_on_startup;
   sc.default_heartbeat_ms = cfg.safety.heartbeat_timeout_ms;
   sc.tick_period_ms = cfg.driver.sim.tick_hz ? 1000 / cfg.driver.sim.tick_hz : 20;
@@ -59,13 +59,18 @@ node::NodeSettings node_settings(const config::NodeConfig& cfg, const keys::Robo
     ns.rrn = b;
   }
   ns.name = cfg.robot.name.empty() ? "rcan-robot" : cfg.robot.name;
-  ns.manufacturer = cfg.robot.manufacturer.empty() ? cfg.ruri_parts.manufacturer : cfg.robot.manufacturer;
+  ns.manufacturer =
+      cfg.robot.manufacturer.empty() ? cfg.ruri_parts.manufacturer : cfg.robot.manufacturer;
   ns.model = cfg.robot.model.empty() ? cfg.ruri_parts.model : cfg.robot.model;
   if (!cfg.capabilities.empty()) ns.capabilities = cfg.capabilities;
   ns.port = cfg.server.port;
   ns.role_policy = cfg.rbac.policy;
-  ns.rate_per_minute = {0, cfg.rbac.rate_limits.guest, cfg.rbac.rate_limits.user, cfg.rbac.rate_limits.leasee,
-                        cfg.rbac.rate_limits.owner, cfg.rbac.rate_limits.creator};
+  ns.rate_per_minute = {0,
+                        cfg.rbac.rate_limits.guest,
+                        cfg.rbac.rate_limits.user,
+                        cfg.rbac.rate_limits.leasee,
+                        cfg.rbac.rate_limits.owner,
+                        cfg.rbac.rate_limits.creator};
   ns.replay.window_ms = int64_t{cfg.security.replay_window_s} * 1000;
   ns.replay.capacity = cfg.security.msg_id_cache_size;
   ns.injection_patterns.clear();
@@ -91,13 +96,15 @@ Status load_keys(const std::vector<config::TrustedRobotKey>& list, const char* w
     if (!rk.mldsa65_pub_file.empty()) {
       auto b = keys::read_public_file(rk.mldsa65_pub_file);
       if (!b.ok())
-        return Error(ErrorCode::kInternal, std::string("security.") + what + " " + rk.name + ": " + b.error().message);
+        return Error(ErrorCode::kInternal,
+                     std::string("security.") + what + " " + rk.name + ": " + b.error().message);
       into.mldsa65.push_back(*b);
     }
     if (!rk.ed25519_pub_file.empty()) {
       auto b = keys::read_public_file(rk.ed25519_pub_file);
       if (!b.ok())
-        return Error(ErrorCode::kInternal, std::string("security.") + what + " " + rk.name + ": " + b.error().message);
+        return Error(ErrorCode::kInternal,
+                     std::string("security.") + what + " " + rk.name + ": " + b.error().message);
       into.ed25519.push_back(*b);
     }
   }
@@ -117,9 +124,12 @@ Result<node::AuthOptions> auth_options(const config::NodeConfig& cfg, jwt::Trust
     auth.verify.fleet_audiences.push_back("rcan://fleet/" + cfg.fleet.fleet_id);  // v1.5 fleet JWT
   }
   auth.verify.leeway_s = cfg.security.jwt.leeway_s;
-  if (Status s = load_keys(cfg.security.trusted_robot_keys, "trusted_robot_keys", auth.robot_keys); !s.ok())
+  if (Status s = load_keys(cfg.security.trusted_robot_keys, "trusted_robot_keys", auth.robot_keys);
+      !s.ok())
     return s.error();
-  if (Status s = load_keys(cfg.security.trusted_signer_keys, "trusted_signer_keys", auth.signer_keys); !s.ok())
+  if (Status s =
+          load_keys(cfg.security.trusted_signer_keys, "trusted_signer_keys", auth.signer_keys);
+      !s.ok())
     return s.error();
   return auth;
 }
@@ -129,7 +139,8 @@ void configure_control(node::NodeServices& services, const config::NodeConfig& c
   co.handoff_window_ms = services.settings.handoff_window_ms;
   co.queue_max = cfg.control.queue_max;
   co.queue_wait_ms = int64_t{cfg.control.queue_wait_s} * 1000;
-  co.fleet_policy = node::fleet_policy_from_name(cfg.control.fleet_policy).value_or(node::FleetPolicy::kRole);
+  co.fleet_policy =
+      node::fleet_policy_from_name(cfg.control.fleet_policy).value_or(node::FleetPolicy::kRole);
   co.guest_session_s = services.settings.guest_limits.session_seconds;
   co.max_session_ms = int64_t{cfg.control.max_session_s} * 1000;
   services.sessions.set_options(co);

@@ -9,8 +9,8 @@
 #include <cstring>
 #include <string>
 
-#include "node/ai/brain_layers.h"
 #include "base/log.h"
+#include "node/ai/brain_layers.h"
 #include "transport/http_server.h"
 
 using namespace rcan;
@@ -19,8 +19,9 @@ namespace {
 
 class NoStreams final : public transport::StreamHandler {
  public:
-  std::unique_ptr<transport::StreamSession> open(const transport::HttpRequest&, std::shared_ptr<transport::StreamSink>,
-                                            transport::HttpResponse& refusal) override {
+  std::unique_ptr<transport::StreamSession> open(const transport::HttpRequest&,
+                                                 std::shared_ptr<transport::StreamSink>,
+                                                 transport::HttpResponse& refusal) override {
     refusal.status = 404;
     refusal.body = R"({"error":"a brain layer has no streams"})";
     return nullptr;
@@ -43,18 +44,22 @@ int sim_layer_main(int argc, char** argv) {
     char* end = nullptr;
     if (a == "--port") {
       long p = std::strtol(v.c_str(), &end, 10);
-      if (!end || *end || p < 0 || p > 65535) return std::fprintf(stderr, "rcand --sim-layer: bad --port\n"), 2;
+      if (!end || *end || p < 0 || p > 65535)
+        return std::fprintf(stderr, "rcand --sim-layer: bad --port\n"), 2;
       port = static_cast<int>(p);
     } else if (a == "--layer") {
-      if (node::layer_rank(v) < 0) return std::fprintf(stderr, "rcand --sim-layer: --layer reactive|fast|planner\n"), 2;
+      if (node::layer_rank(v) < 0)
+        return std::fprintf(stderr, "rcand --sim-layer: --layer reactive|fast|planner\n"), 2;
       o.layer = v;
     } else if (a == "--confidence") {
       double c = std::strtod(v.c_str(), &end);
-      if (!end || *end || !(c >= 0 && c <= 1)) return std::fprintf(stderr, "rcand --sim-layer: --confidence 0..1\n"), 2;
+      if (!end || *end || !(c >= 0 && c <= 1))
+        return std::fprintf(stderr, "rcand --sim-layer: --confidence 0..1\n"), 2;
       o.confidence = c;
     } else if (a == "--delay-ms") {
       long d = std::strtol(v.c_str(), &end, 10);
-      if (!end || *end || d < 0 || d > 600000) return std::fprintf(stderr, "rcand --sim-layer: bad --delay-ms\n"), 2;
+      if (!end || *end || d < 0 || d > 600000)
+        return std::fprintf(stderr, "rcand --sim-layer: bad --delay-ms\n"), 2;
       o.delay_ms = static_cast<int>(d);
     } else if (a == "--bind") {
       bind = v;

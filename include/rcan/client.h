@@ -36,12 +36,12 @@
 namespace rcan::client {
 
 struct ClientError {
-  std::string code;      // profile error code ("CONTROL_CONFLICT") or a client code (above)
-  int http_status = 0;   // 0 when no HTTP answer arrived
-  std::string message;   // human-readable (the body's `error`, or what failed)
-  std::string reason;    // payload.detail.reason or payload.reason when present
+  std::string code;           // profile error code ("CONTROL_CONFLICT") or a client code (above)
+  int http_status = 0;        // 0 when no HTTP answer arrived
+  std::string message;        // human-readable (the body's `error`, or what failed)
+  std::string reason;         // payload.detail.reason or payload.reason when present
   int64_t retry_after_s = 0;  // from Retry-After on 429
-  json::Value body;      // the parsed body when it was JSON
+  json::Value body;           // the parsed body when it was JSON
   // The code as the library's enum when it is one of the profile's.
   std::optional<ErrorCode> known() const { return error_from_name(code); }
   bool unreachable() const { return http_status == 0; }
@@ -55,10 +55,10 @@ using Result = rcan::Result<T, ClientError>;
 
 struct Endpoint {
   bool tls = false;
-  std::string host;        // name or address (IPv6 without brackets)
+  std::string host;  // name or address (IPv6 without brackets)
   uint16_t port = 0;
-  std::string base_path;   // "" or "/prefix" (no trailing slash)
-  std::string url() const; // scheme://host:port[/prefix]
+  std::string base_path;    // "" or "/prefix" (no trailing slash)
+  std::string url() const;  // scheme://host:port[/prefix]
 };
 // http[s]://host[:port][/prefix]; a bare "host[:port]" means http. Default ports 80/443.
 Result<Endpoint> parse_endpoint(std::string_view url);
@@ -102,7 +102,7 @@ struct Grant {  // GRANTED from POST /rcan/v1/auth/claim
 
 struct Reply {  // any RCAN message the node answered with (ACK, RELEASED, AVAILABLE, …)
   int http_status = 200;
-  std::string type;        // "ACK", "PENDING_AUTH", …
+  std::string type;  // "ACK", "PENDING_AUTH", …
   std::string message_id;
   std::string reply_to;
   json::Value payload;
@@ -148,10 +148,10 @@ struct WatermarkVerdict {
 struct Command {
   std::string action;
   json::Object params;
-  std::string priority;                // "" = node default; LOW|NORMAL|HIGH|SAFETY
-  int64_t ttl_ms = 0;                  // 0 = none
-  std::optional<double> confidence;    // §16 ai.confidence
-  std::string scope;                   // "" = not stated
+  std::string priority;              // "" = node default; LOW|NORMAL|HIGH|SAFETY
+  int64_t ttl_ms = 0;                // 0 = none
+  std::optional<double> confidence;  // §16 ai.confidence
+  std::string scope;                 // "" = not stated
 };
 // The message a Command becomes (fresh message_id and timestamp_ms).
 json::Value command_message(const Command& c, int64_t now_ms);
@@ -192,26 +192,29 @@ class Client {
   Result<Reply> heartbeat();
   // §16 (PROFILE §8): GET /rcan/v1/pending and POST /rcan/v1/authorize.
   Result<std::vector<PendingAuth>> pending();
-  Result<Reply> authorize(const std::string& message_id, bool approve, const std::string& reason = "");
+  Result<Reply> authorize(const std::string& message_id, bool approve,
+                          const std::string& reason = "");
   // GET /api/audit?limit= (latest records).
   Result<AuditPage> audit_recent(int limit = 50);
   // GET /api/v1/audit?from=&to=&format=jsonl (OWNER + config): JSONL, verifiable offline.
-  Result<std::string> audit_export(std::optional<int64_t> from_ms = {}, std::optional<int64_t> to_ms = {});
+  Result<std::string> audit_export(std::optional<int64_t> from_ms = {},
+                                   std::optional<int64_t> to_ms = {});
   Result<Thought> thought(const std::string& id);
   // Public: no token is sent.
   Result<WatermarkVerdict> watermark_verify(const std::string& token, const std::string& rrn = "");
   // One raw request relative to the endpoint (path starts with '/').
-  Result<RawResponse> request(const std::string& method, const std::string& path, const std::string& body = {},
-                              bool with_token = true);
+  Result<RawResponse> request(const std::string& method, const std::string& path,
+                              const std::string& body = {}, bool with_token = true);
 
  private:
-  Result<json::Value> call_json(const std::string& method, const std::string& path, const std::string& body,
-                                bool with_token, int* status = nullptr);
+  Result<json::Value> call_json(const std::string& method, const std::string& path,
+                                const std::string& body, bool with_token, int* status = nullptr);
   ClientOptions opts_;
 };
 
 // Turns an HTTP answer into an error (non-2xx) using the profile's body when present.
-ClientError error_from_response(int status, std::string_view body, std::string_view retry_after = {});
+ClientError error_from_response(int status, std::string_view body,
+                                std::string_view retry_after = {});
 
 // ---------------------------------------------------------------------------------------
 // WebSocket stream (spec Appendix B) with reconnect and backoff
@@ -222,10 +225,10 @@ std::chrono::milliseconds backoff_delay(int attempt, std::mt19937_64& rng);
 
 struct StreamOptions {
   ClientOptions client;
-  double telemetry_hz = 0;         // > 0: SUBSCRIBE to telemetry after CONNECT_ACK
-  int ping_interval_ms = 30000;    // app PING after this long without sending
-  int pong_timeout_ms = 5000;      // no PONG in time → reconnect
-  int max_attempts = -1;           // connection attempts in a row before giving up; -1 = forever
+  double telemetry_hz = 0;       // > 0: SUBSCRIBE to telemetry after CONNECT_ACK
+  int ping_interval_ms = 30000;  // app PING after this long without sending
+  int pong_timeout_ms = 5000;    // no PONG in time → reconnect
+  int max_attempts = -1;         // connection attempts in a row before giving up; -1 = forever
   std::function<void(const json::Value&)> on_message;  // every frame after CONNECT_ACK
   // Connection state changes: "connecting", "connected", "disconnected: <why>",
   // "retrying in <ms> ms", "refused: <why>" (CONNECT refused: no retry), "stopped".
@@ -267,23 +270,23 @@ class Stream {
 // Discovery
 
 struct DiscoveredRobot {
-  std::string source;   // "mdns" or "probe"
-  std::string name;     // mDNS instance name or the host probed
-  std::string url;      // where the node answers (scheme://address:port)
-  std::string host;     // address used
+  std::string source;  // "mdns" or "probe"
+  std::string name;    // mDNS instance name or the host probed
+  std::string url;     // where the node answers (scheme://address:port)
+  std::string host;    // address used
   uint16_t port = 0;
-  std::string interface;  // mDNS: interface name
-  std::map<std::string, std::string> txt;  // mDNS TXT (keys lower-cased)
+  std::string interface;                          // mDNS: interface name
+  std::map<std::string, std::string> txt;         // mDNS TXT (keys lower-cased)
   std::string ruri, model, version, status_word;  // from TXT or the status answer
-  bool reachable = false;                  // GET /rcan/v1/status answered 200
+  bool reachable = false;                         // GET /rcan/v1/status answered 200
   std::optional<RobotStatus> status;
 };
 
 struct DiscoverOptions {
-  int timeout_ms = 2000;               // mDNS browse window; per-probe timeout
+  int timeout_ms = 2000;  // mDNS browse window; per-probe timeout
   bool mdns = true;
-  std::vector<std::string> hosts;      // probe these: host, host:port or URLs (default port 8080)
-  bool probe_mdns_results = true;      // confirm each mDNS result with GET /rcan/v1/status
+  std::vector<std::string> hosts;  // probe these: host, host:port or URLs (default port 8080)
+  bool probe_mdns_results = true;  // confirm each mDNS result with GET /rcan/v1/status
   std::string ca_file;
   bool insecure = false;
 };
@@ -301,7 +304,7 @@ Result<DiscoveredRobot> probe(const std::string& host, const DiscoverOptions& op
 struct MdnsService {
   std::string name, interface, address, hostname;
   uint16_t port = 0;
-  bool local = false;  // published by this host
+  bool local = false;            // published by this host
   std::vector<std::string> txt;  // raw "key=value" items
 };
 // Browses _rcan._tcp through the Avahi daemon for `timeout_ms`. Error (code

@@ -8,32 +8,32 @@
 namespace rcan {
 
 enum class ErrorCode {
-  kMalformedJson,            // 400 body is not JSON
-  kSchemaValidationFailed,   // 400
-  kInvalidRuri,              // 400
-  kVersionIncompatible,      // 400
-  kAuthRequired,             // 401
-  kAuthInvalid,              // 401
-  kSessionExpired,           // 401
-  kInsufficientPrivileges,   // 403
-  kConfidenceGateFail,       // 403
-  kHitlDenied,               // 403
-  kNotFound,                 // 404
-  kMethodNotAllowed,         // 405
-  kMessageStale,             // 408
-  kHitlTimeout,              // 408
-  kReplayDetected,           // 409
-  kControlConflict,          // 409
-  kBodyTooLarge,             // 413
-  kCommandRejected,          // 422 (prompt_injection) or 423 (estop_active): see http_status()
-  kRateLimited,              // 429
-  kInternal,                 // 500
-  kNotImplemented,           // 501
-  kSafeStop,                 // 503
-  kLockdown,                 // 503
-  kAuditUnavailable,         // 503
-  kSignatureInvalid,         // 401 message signature did not verify
-  kMissingDelegationChain,   // 400
+  kMalformedJson,           // 400 body is not JSON
+  kSchemaValidationFailed,  // 400
+  kInvalidRuri,             // 400
+  kVersionIncompatible,     // 400
+  kAuthRequired,            // 401
+  kAuthInvalid,             // 401
+  kSessionExpired,          // 401
+  kInsufficientPrivileges,  // 403
+  kConfidenceGateFail,      // 403
+  kHitlDenied,              // 403
+  kNotFound,                // 404
+  kMethodNotAllowed,        // 405
+  kMessageStale,            // 408
+  kHitlTimeout,             // 408
+  kReplayDetected,          // 409
+  kControlConflict,         // 409
+  kBodyTooLarge,            // 413
+  kCommandRejected,         // 422 (prompt_injection) or 423 (estop_active): see http_status()
+  kRateLimited,             // 429
+  kInternal,                // 500
+  kNotImplemented,          // 501
+  kSafeStop,                // 503
+  kLockdown,                // 503
+  kAuditUnavailable,        // 503
+  kSignatureInvalid,        // 401 message signature did not verify
+  kMissingDelegationChain,  // 400
 };
 
 // Wire name, e.g. "INSUFFICIENT_PRIVILEGES".

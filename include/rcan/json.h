@@ -35,18 +35,18 @@ class Value {
  public:
   enum class Kind : uint8_t { kNull, kBool, kInt, kBigInt, kDouble, kString, kArray, kObject };
 
-  Value() = default;                                        // null
-  Value(std::nullptr_t) {}                                  // NOLINT
-  Value(bool b) : kind_(Kind::kBool), b_(b) {}              // NOLINT
-  Value(int i) : kind_(Kind::kInt), i_(i) {}                // NOLINT
-  Value(int64_t i) : kind_(Kind::kInt), i_(i) {}            // NOLINT
-  Value(uint64_t u);                                        // NOLINT big when > INT64_MAX
-  Value(double d) : kind_(Kind::kDouble), d_(d) {}          // NOLINT
-  Value(const char* s) : kind_(Kind::kString), s_(s) {}     // NOLINT
+  Value() = default;                                                // null
+  Value(std::nullptr_t) {}                                          // NOLINT
+  Value(bool b) : kind_(Kind::kBool), b_(b) {}                      // NOLINT
+  Value(int i) : kind_(Kind::kInt), i_(i) {}                        // NOLINT
+  Value(int64_t i) : kind_(Kind::kInt), i_(i) {}                    // NOLINT
+  Value(uint64_t u);                                                // NOLINT big when > INT64_MAX
+  Value(double d) : kind_(Kind::kDouble), d_(d) {}                  // NOLINT
+  Value(const char* s) : kind_(Kind::kString), s_(s) {}             // NOLINT
   Value(std::string s) : kind_(Kind::kString), s_(std::move(s)) {}  // NOLINT
   Value(std::string_view s) : kind_(Kind::kString), s_(s) {}        // NOLINT
-  Value(Array a);                                           // NOLINT
-  Value(Object o);                                          // NOLINT
+  Value(Array a);                                                   // NOLINT
+  Value(Object o);                                                  // NOLINT
 
   // An integer written as decimal digits (optional leading '-'), kept exactly.
   static Value big_int(std::string digits);
@@ -60,7 +60,7 @@ class Value {
   Kind kind() const { return kind_; }
   bool is_null() const { return kind_ == Kind::kNull; }
   bool is_bool() const { return kind_ == Kind::kBool; }
-  bool is_int() const { return kind_ == Kind::kInt; }          // fits int64
+  bool is_int() const { return kind_ == Kind::kInt; }  // fits int64
   bool is_integer() const { return kind_ == Kind::kInt || kind_ == Kind::kBigInt; }
   bool is_double() const { return kind_ == Kind::kDouble; }
   bool is_number() const { return is_integer() || is_double(); }
@@ -73,7 +73,7 @@ class Value {
   double as_double() const { return d_; }
   // Any number as double (big integers are converted, possibly inexactly).
   double to_double() const;
-  const std::string& as_string() const { return s_; }   // string, or big-int digits
+  const std::string& as_string() const { return s_; }  // string, or big-int digits
   const std::string& big_digits() const { return s_; }
   const Array& as_array() const { return *a_; }
   Array& as_array() { return *a_; }
@@ -132,12 +132,11 @@ class Object {
   std::vector<Member> members_;
 };
 
-
 struct ParseOptions {
-  size_t max_depth = 64;               // nesting of arrays/objects
-  size_t max_bytes = 1 << 20;          // input size
-  size_t max_string_bytes = 1 << 20;   // one decoded string
-  size_t max_number_chars = 400;       // one number lexeme
+  size_t max_depth = 64;              // nesting of arrays/objects
+  size_t max_bytes = 1 << 20;         // input size
+  size_t max_string_bytes = 1 << 20;  // one decoded string
+  size_t max_number_chars = 400;      // one number lexeme
   bool allow_duplicate_keys = false;
 };
 

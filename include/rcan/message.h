@@ -26,12 +26,35 @@ namespace rcan {
 
 enum class MessageType : uint8_t {
   // Seed §3.1 (0-based in the seed's own table).
-  kDiscover, kStatus, kCommand, kStream, kEvent, kHandoff, kAck, kError,
+  kDiscover,
+  kStatus,
+  kCommand,
+  kStream,
+  kEvent,
+  kHandoff,
+  kAck,
+  kError,
   // Profile §3 additions.
-  kAnnounce, kGranted, kDenied, kReleased, kAvailable, kHeartbeat, kSafety, kPendingAuth,
-  kAuthorize, kConsentRequest, kTransferRequest, kTransferAccept, kFleetCommand,
+  kAnnounce,
+  kGranted,
+  kDenied,
+  kReleased,
+  kAvailable,
+  kHeartbeat,
+  kSafety,
+  kPendingAuth,
+  kAuthorize,
+  kConsentRequest,
+  kTransferRequest,
+  kTransferAccept,
+  kFleetCommand,
   // Used by later parts of the node (sessions, consent, transfer, swarms).
-  kClaim, kRelease, kConsentGrant, kConsentDeny, kTransferCancel, kSwarmAnnounce,
+  kClaim,
+  kRelease,
+  kConsentGrant,
+  kConsentDeny,
+  kTransferCancel,
+  kSwarmAnnounce,
 };
 enum class Priority : uint8_t { kLow = 0, kNormal = 1, kHigh = 2, kSafety = 3 };
 enum class SenderType : uint8_t { kHuman, kRobot, kCloudFunction, kSystem };

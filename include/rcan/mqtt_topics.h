@@ -51,30 +51,36 @@ struct FleetTopics {
   std::string base;  // <prefix>/fleet/<fleet_id>
   std::string cmd() const { return base + "/cmd"; }
   std::string estop() const { return base + "/estop"; }
-  RobotTopics member(std::string_view member) const { return RobotTopics{base + "/robot/" + std::string(member)}; }
+  RobotTopics member(std::string_view member) const {
+    return RobotTopics{base + "/robot/" + std::string(member)};
+  }
 };
 FleetTopics fleet_topics(std::string_view prefix, std::string_view fleet_id);
 
 struct SwarmTopics {
   std::string base;  // <prefix>/swarm/<swarm_id>
   std::string announce() const { return base + "/announce"; }
-  std::string heartbeat(std::string_view member) const { return base + "/heartbeat/" + std::string(member); }
+  std::string heartbeat(std::string_view member) const {
+    return base + "/heartbeat/" + std::string(member);
+  }
   std::string heartbeats() const { return base + "/heartbeat/+"; }
   std::string join() const { return base + "/join"; }
-  std::string join_answer(std::string_view member) const { return base + "/join/" + std::string(member); }
+  std::string join_answer(std::string_view member) const {
+    return base + "/join/" + std::string(member);
+  }
 };
 SwarmTopics swarm_topics(std::string_view prefix, std::string_view swarm_id);
 
 // What an inbound topic addresses.
 enum class TopicKind {
-  kRobotCmd,        // this robot's own cmd topic
-  kFleetCmd,        // fleet broadcast
-  kFleetEstop,      // the retained fleet ESTOP
-  kMemberCmd,       // this robot within its fleet
+  kRobotCmd,    // this robot's own cmd topic
+  kFleetCmd,    // fleet broadcast
+  kFleetEstop,  // the retained fleet ESTOP
+  kMemberCmd,   // this robot within its fleet
   kSwarmAnnounce,
   kSwarmHeartbeat,  // member = who beats
   kSwarmJoin,
-  kOther,           // a topic this node does not act on
+  kOther,  // a topic this node does not act on
 };
 
 struct InboundTopic {

@@ -15,8 +15,8 @@ namespace rcan {
 // Seed §2.1 hierarchy. The numeric value is the level.
 enum class Role : uint8_t { kGuest = 1, kUser = 2, kLeasee = 3, kOwner = 4, kCreator = 5 };
 
-std::string_view role_name(Role r);                  // "OWNER"
-std::string_view role_claim_name(Role r);            // "owner" (JWT `role` claim)
+std::string_view role_name(Role r);        // "OWNER"
+std::string_view role_claim_name(Role r);  // "owner" (JWT `role` claim)
 // Seed names, either case ("owner", "OWNER"). nullopt for anything else.
 std::optional<Role> role_from_name(std::string_view name);
 // rcan-py numeric `rcan_role`: 1 GUEST, 2 and 2.5 USER, 3 OWNER, 5 CREATOR; others nullopt.
@@ -40,7 +40,7 @@ enum class Capability : uint8_t {
   kHardwareDiagnostics,
 };
 inline constexpr int kCapabilityCount = 13;
-std::string_view capability_name(Capability c);   // "arm", "navigation", …
+std::string_view capability_name(Capability c);  // "arm", "navigation", …
 std::optional<Capability> capability_from_name(std::string_view name);
 
 // The matrix cell: ✅ full, ⚙ conditional, ❌ none.

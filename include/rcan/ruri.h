@@ -28,8 +28,8 @@ struct Ruri {
   std::string registry;
   std::string manufacturer;
   std::string model;
-  std::string version;     // kSdk5 only
-  std::string device_id;   // kDiscovered: the IPv4 address
+  std::string version;    // kSdk5 only
+  std::string device_id;  // kDiscovered: the IPv4 address
   std::optional<uint16_t> port;
   std::string capability;  // without the leading '/', may contain '/'
 

@@ -1,7 +1,8 @@
 // UDP datagrams of the node (docs/TRANSPORT.md §UDP): HEARTBEAT (a control session's deadman,
 // authenticated with the per-session key issued at claim), DISCOVER and ANNOUNCE. Pure
 // encoding and parsing: no sockets (librcan). Shared by the node's UDP service
-// (src/node/bindings/udp_service.cpp), the CLI (rcan udp-discover), tests and fuzz/udp_datagram_fuzz.cpp.
+// (src/node/bindings/udp_service.cpp), the CLI (rcan udp-discover), tests and
+// fuzz/udp_datagram_fuzz.cpp.
 //
 // Every datagram starts with the same 8-byte header:
 //   0..3  magic "RCAN" (0x52 0x43 0x41 0x4E)
@@ -46,13 +47,13 @@ using Nonce = std::array<uint8_t, 8>;
 
 enum class ParseError {
   kNone,
-  kTooShort,    // shorter than the header
+  kTooShort,  // shorter than the header
   kBadMagic,
   kBadVersion,
   kBadKind,
   kBadFlags,
-  kBadLength,   // wrong size for its kind
-  kBadBody,     // ANNOUNCE body not a JSON object
+  kBadLength,  // wrong size for its kind
+  kBadBody,    // ANNOUNCE body not a JSON object
 };
 std::string_view parse_error_name(ParseError e);
 
@@ -80,7 +81,8 @@ Parsed parse(std::span<const uint8_t> bytes);
 // (constant-time comparison).
 bool verify_heartbeat(std::span<const uint8_t> bytes, const Key& key);
 
-std::array<uint8_t, kHeartbeatSize> encode_heartbeat(const KeyId& key_id, uint64_t seq, const Key& key);
+std::array<uint8_t, kHeartbeatSize> encode_heartbeat(const KeyId& key_id, uint64_t seq,
+                                                     const Key& key);
 std::array<uint8_t, kDiscoverSize> encode_discover(const Nonce& nonce);
 std::string encode_announce(const Nonce& nonce, std::string_view json_body);
 

@@ -173,7 +173,8 @@ class AuditLog::Impl {
   LineCheck check_line(std::string_view line, uint64_t seq, bool verify_hmac) const;
   Result<std::string> exact_line(Result<std::string> line, uint64_t seq) const;
   static Error hmac_refusal(uint64_t seq);
-  Result<std::string> sealed_line(uint64_t seg_id, Result<IndexEntry> e, uint64_t seq, bool verify_hmac) const;
+  Result<std::string> sealed_line(uint64_t seg_id, Result<IndexEntry> e, uint64_t seq,
+                                  bool verify_hmac) const;
   Result<std::vector<IndexEntry>> entries_of(const Segment& s) const;
   void start_indexer(uint64_t id, std::shared_ptr<const std::vector<IndexEntry>> entries);
   void prepare_spare();
@@ -295,10 +296,11 @@ Status AuditLog::Impl::open() {
   }
   opened_ = true;
   prepare_spare();
-  if (pipelined_) syncer_ = std::thread([this] {
-    pthread_setname_np(pthread_self(), "audit-sync");
-    syncer_loop();
-  });
+  if (pipelined_)
+    syncer_ = std::thread([this] {
+      pthread_setname_np(pthread_self(), "audit-sync");
+      syncer_loop();
+    });
   writer_ = std::thread([this] {
     pthread_setname_np(pthread_self(), "audit-writer");
     writer_loop();
@@ -350,7 +352,8 @@ Status AuditLog::Impl::rebuild_index(uint64_t id, Segment* seg) {
   if (!s.ok()) return s;
   if (bad) return err;
   if (entries.empty())
-    return unavailable("audit log: sealed segment " + internal::segment_file_name(id) + " is empty");
+    return unavailable("audit log: sealed segment " + internal::segment_file_name(id) +
+                       " is empty");
   std::string data = internal::build_index(entries);
   s = env_->write_file_synced(idx_path(id) + ".tmp", data);
   if (s.ok()) s = env_->rename_file(idx_path(id) + ".tmp", idx_path(id));
@@ -537,8 +540,7 @@ Status AuditLog::Impl::recover_active(uint64_t id, bool clean) {
     rec.kind = "recovery";
     rec.event = "AUDIT_RECOVERY";
     rec.outcome = cut > 0 ? "repaired" : "ok";
-    rec.reason = cut > 0 ? "torn tail cut after unclean shutdown"
-                         : "unclean shutdown; log intact";
+    rec.reason = cut > 0 ? "torn tail cut after unclean shutdown" : "unclean shutdown; log intact";
     rec.detail.set("unclean_shutdown", !clean);
     rec.detail.set("segment", static_cast<int64_t>(id));
     rec.detail.set("last_good_seq", static_cast<int64_t>(next_seq_ - 1));
@@ -575,7 +577,8 @@ Status AuditLog::Impl::write_records(std::vector<AuditEntry> entries) {
     json::Object obj = system_object(std::move(copy));
     int64_t ts = obj.find("timestamp_ms")->as_int();
     std::string mid = obj.find("message_id")->as_string();
-    SealedRecord r = internal::seal_prepared(internal::prepare(obj), next_seq_, last_hash_, *hasher_);
+    SealedRecord r =
+        internal::seal_prepared(internal::prepare(obj), next_seq_, last_hash_, *hasher_);
     idx.push_back(make_entry(r.seq, active_bytes_ + buf.size(), r.line.size(), ts, mid, {}));
     buf += r.line;
     buf += '\n';
@@ -755,8 +758,9 @@ bool AuditLog::Impl::try_recover() {
   rec.detail.set("failure", why);
   rec.detail.set("last_good_seq", static_cast<int64_t>(head_seq));
   // Sealed but never acknowledged (their appenders were told the log failed): not in the chain.
-  rec.detail.set("unacknowledged_discarded",
-                 static_cast<int64_t>(failed_next_seq_ > head_seq + 1 ? failed_next_seq_ - head_seq - 1 : 0));
+  rec.detail.set(
+      "unacknowledged_discarded",
+      static_cast<int64_t>(failed_next_seq_ > head_seq + 1 ? failed_next_seq_ - head_seq - 1 : 0));
   rec.detail.set("cut_segment", static_cast<int64_t>(head_seg));
   rec.detail.set("cut_at_offset", static_cast<int64_t>(head_end));
   if (!write_records({cp, rec}).ok()) return false;
@@ -788,7 +792,8 @@ void AuditLog::Impl::sync_and_ack(std::vector<Ticket>& tickets) {
   }
   {
     std::lock_guard<std::mutex> l(state_mu_);
-    for (auto& t : tickets) active_index_.insert(active_index_.end(), t.index.begin(), t.index.end());
+    for (auto& t : tickets)
+      active_index_.insert(active_index_.end(), t.index.begin(), t.index.end());
     durable_offset_ = tickets.back().end_offset;
     durable_seq_ = tickets.back().last_seq;
     head_seg_ = active_id_;
@@ -1094,7 +1099,8 @@ Status AuditLog::Impl::apply_retention() {
   rec.detail.set("removed_segments", json::Value(std::move(removed)));
   rec.detail.set("removed_through_seq", static_cast<int64_t>(victims.back().last_seq));
   rec.detail.set("first_kept_seq", static_cast<int64_t>(victims.back().last_seq + 1));
-  if (opts_.retention_max_bytes) rec.detail.set("max_bytes", static_cast<int64_t>(opts_.retention_max_bytes));
+  if (opts_.retention_max_bytes)
+    rec.detail.set("max_bytes", static_cast<int64_t>(opts_.retention_max_bytes));
   if (opts_.retention_max_age_ms) rec.detail.set("max_age_ms", opts_.retention_max_age_ms);
   Status s = write_records({rec});
   if (!s.ok()) return s;
@@ -1195,7 +1201,8 @@ Status AuditLog::Impl::export_range(int64_t from, int64_t to, const LineSink& si
     const Segment* seg;  // null for the active segment
   };
   std::vector<Part> parts;
-  for (const auto& seg : snap.sealed) parts.push_back({seg.id, UINT64_MAX, seg.min_ts, seg.max_ts, &seg});
+  for (const auto& seg : snap.sealed)
+    parts.push_back({seg.id, UINT64_MAX, seg.min_ts, seg.max_ts, &seg});
   if (!snap.active.empty()) {
     int64_t mn = snap.active.front().ts, mx = mn;
     for (const auto& e : snap.active) {
@@ -1228,11 +1235,12 @@ Status AuditLog::Impl::export_range(int64_t from, int64_t to, const LineSink& si
       }
     }
     size_t k = 0;
-    Status s = internal::for_each_line(env_, seg_path(p.id), p.limit, [&](uint64_t, std::string_view line) {
-      int64_t ts = all_in ? from : (k < entries->size() ? (*entries)[k].ts : INT64_MIN);
-      ++k;
-      return out.line(line, ts);
-    });
+    Status s = internal::for_each_line(
+        env_, seg_path(p.id), p.limit, [&](uint64_t, std::string_view line) {
+          int64_t ts = all_in ? from : (k < entries->size() ? (*entries)[k].ts : INT64_MIN);
+          ++k;
+          return out.line(line, ts);
+        });
     if (!s.ok()) return s;
   }
   return Status::Ok();
@@ -1254,7 +1262,9 @@ Result<std::vector<std::string>> AuditLog::Impl::find(bool watermark, std::strin
     out.push_back(std::move(*line));
     return Status::Ok();
   };
-  auto consider = [&](uint64_t seg_id, const IndexEntry& e) { return consider_line(e.seq, read_line(seg_id, e)); };
+  auto consider = [&](uint64_t seg_id, const IndexEntry& e) {
+    return consider_line(e.seq, read_line(seg_id, e));
+  };
   auto scan_mem = [&](uint64_t seg_id, const std::vector<IndexEntry>& entries) -> Status {
     for (const auto& e : entries) {
       if (watermark ? (e.has_wm && e.wm_hash == h) : e.mid_hash == h) {
@@ -1272,13 +1282,15 @@ Result<std::vector<std::string>> AuditLog::Impl::find(bool watermark, std::strin
       auto seqs = internal::index_lookup(env_, idx_path(seg.id), *seg.header, watermark, h);
       if (!seqs.ok()) return seqs.error();
       for (uint64_t seq : *seqs) {
-        if (seq < seg.header->first_seq || seq > seg.header->last_seq) continue;  // a damaged hash table
+        if (seq < seg.header->first_seq || seq > seg.header->last_seq)
+          continue;  // a damaged hash table
         // A damaged entry is looked up in the segment, not trusted (the HMAC is checked below,
         // after the key: a hash collision is a miss, not an error).
-        s = consider_line(seq, sealed_line(seg.id,
-                                           internal::read_index_entry(env_, idx_path(seg.id), *seg.header,
-                                                                      seq - seg.header->first_seq),
-                                           seq, false));
+        s = consider_line(
+            seq, sealed_line(seg.id,
+                             internal::read_index_entry(env_, idx_path(seg.id), *seg.header,
+                                                        seq - seg.header->first_seq),
+                             seq, false));
         if (!s.ok()) break;
       }
     }
@@ -1296,8 +1308,10 @@ Result<std::string> AuditLog::Impl::get(uint64_t seq) const {
     if (seq < seg.first_seq || seq > seg.last_seq) continue;
     if (seg.mem) return exact_line(read_line(seg.id, (*seg.mem)[seq - seg.first_seq]), seq);
     if (seg.header)
-      return sealed_line(seg.id, internal::read_index_entry(env_, idx_path(seg.id), *seg.header, seq - seg.first_seq),
-                         seq, true);
+      return sealed_line(
+          seg.id,
+          internal::read_index_entry(env_, idx_path(seg.id), *seg.header, seq - seg.first_seq), seq,
+          true);
   }
   if (!snap.active.empty() && seq >= snap.active.front().seq && seq <= snap.active.back().seq)
     return exact_line(read_line(snap.active_id, snap.active[seq - snap.active.front().seq]), seq);
@@ -1305,12 +1319,14 @@ Result<std::string> AuditLog::Impl::get(uint64_t seq) const {
 }
 
 // Whether `line` is the record with this seq (and, with verify_hmac, verifies with the secret).
-AuditLog::Impl::LineCheck AuditLog::Impl::check_line(std::string_view line, uint64_t seq, bool verify_hmac) const {
+AuditLog::Impl::LineCheck AuditLog::Impl::check_line(std::string_view line, uint64_t seq,
+                                                     bool verify_hmac) const {
   auto v = json::parse(line, internal::record_parse_options());
   if (!v.ok() || !v->is_object()) return LineCheck::kOtherLine;
   auto k = internal::record_keys(*v);
   if (!k || k->seq != seq) return LineCheck::kOtherLine;
-  if (verify_hmac && !check_record(v->as_object(), opts_.secret).hmac_ok) return LineCheck::kBadHmac;
+  if (verify_hmac && !check_record(v->as_object(), opts_.secret).hmac_ok)
+    return LineCheck::kBadHmac;
   return LineCheck::kOk;
 }
 
@@ -1324,11 +1340,15 @@ Error AuditLog::Impl::hmac_refusal(uint64_t seq) {
 Result<std::string> AuditLog::Impl::exact_line(Result<std::string> line, uint64_t seq) const {
   if (!line.ok()) return line;
   switch (check_line(*line, seq, true)) {
-    case LineCheck::kOk: return line;
-    case LineCheck::kBadHmac: return hmac_refusal(seq);
-    case LineCheck::kOtherLine: break;
+    case LineCheck::kOk:
+      return line;
+    case LineCheck::kBadHmac:
+      return hmac_refusal(seq);
+    case LineCheck::kOtherLine:
+      break;
   }
-  return unavailable("audit log: the stored line for seq " + std::to_string(seq) + " is not that record");
+  return unavailable("audit log: the stored line for seq " + std::to_string(seq) +
+                     " is not that record");
 }
 
 // Record `seq` of a sealed segment through its .idx entry. The index file is not covered by the
@@ -1342,26 +1362,31 @@ Result<std::string> AuditLog::Impl::sealed_line(uint64_t seg_id, Result<IndexEnt
     auto line = read_line(seg_id, *e);
     if (line.ok()) {
       switch (check_line(*line, seq, verify_hmac)) {
-        case LineCheck::kOk: return line;
-        case LineCheck::kBadHmac: return hmac_refusal(seq);
-        case LineCheck::kOtherLine: break;
+        case LineCheck::kOk:
+          return line;
+        case LineCheck::kBadHmac:
+          return hmac_refusal(seq);
+        case LineCheck::kOtherLine:
+          break;
       }
     }
   }
   index_fallbacks_.fetch_add(1, std::memory_order_relaxed);
   std::optional<std::string> found;
-  Status s = internal::for_each_line(env_, seg_path(seg_id), UINT64_MAX, [&](uint64_t, std::string_view line) {
-    // Records are in seq order: stop at the first one at or past `seq`.
-    auto v = json::parse(line, internal::record_parse_options());
-    auto k = v.ok() ? internal::record_keys(*v) : std::nullopt;
-    if (!k || k->seq < seq) return true;
-    if (k->seq == seq) found.emplace(line);
-    return false;
-  });
+  Status s = internal::for_each_line(env_, seg_path(seg_id), UINT64_MAX,
+                                     [&](uint64_t, std::string_view line) {
+                                       // Records are in seq order: stop at the first one at or past
+                                       // `seq`.
+                                       auto v = json::parse(line, internal::record_parse_options());
+                                       auto k = v.ok() ? internal::record_keys(*v) : std::nullopt;
+                                       if (!k || k->seq < seq) return true;
+                                       if (k->seq == seq) found.emplace(line);
+                                       return false;
+                                     });
   if (!s.ok()) return s.error();
   if (!found)
-    return unavailable("audit log: seq " + std::to_string(seq) + " is missing from sealed segment " +
-                       internal::segment_file_name(seg_id));
+    return unavailable("audit log: seq " + std::to_string(seq) +
+                       " is missing from sealed segment " + internal::segment_file_name(seg_id));
   if (check_line(*found, seq, verify_hmac) != LineCheck::kOk) return hmac_refusal(seq);
   return std::move(*found);
 }

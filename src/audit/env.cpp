@@ -154,7 +154,7 @@ class PosixEnv final : public Env {
     if (fd < 0) return io_error("open", path, errno);
     // A length from a corrupt index must not become a huge allocation: never more than the
     // file holds past `offset` (a short result, which the callers report).
-    struct stat st{};
+    struct stat st {};
     if (::fstat(fd, &st) != 0) {
       int e = errno;
       ::close(fd);
@@ -181,7 +181,7 @@ class PosixEnv final : public Env {
   }
 
   Result<uint64_t> file_size(const std::string& path) override {
-    struct stat st{};
+    struct stat st {};
     if (::stat(path.c_str(), &st) != 0) return io_error("stat", path, errno);
     return static_cast<uint64_t>(st.st_size);
   }

@@ -27,7 +27,7 @@ std::string secret_setup_hint() {
 }
 
 Result<std::string> read_secret_file(const std::string& path) {
-  struct stat st{};
+  struct stat st {};
   if (::stat(path.c_str(), &st) != 0)
     return secret_error("cannot read audit secret file " + path + ": " + std::strerror(errno));
   if (!S_ISREG(st.st_mode)) return secret_error("audit secret " + path + " is not a regular file");

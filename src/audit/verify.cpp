@@ -86,8 +86,8 @@ bool ChainVerifier::add_line(std::string_view line) {
       const json::Value* plh = detail_field(*v, "prev_last_hash");
       if (!plh || !plh->is_string() || plh->as_string() != ph->as_string())
         return fail(seq, "wrong segment link: checkpoint prev_last_hash differs from prev_hash");
-      if (segment_ != 0 && (segment != segment_ + 1 ||
-                            !int_equals(detail_field(*v, "prev_segment"), segment_)))
+      if (segment_ != 0 &&
+          (segment != segment_ + 1 || !int_equals(detail_field(*v, "prev_segment"), segment_)))
         return fail(seq, "wrong segment link: segment " + std::to_string(segment) +
                              " does not follow segment " + std::to_string(segment_));
     }
@@ -178,7 +178,7 @@ VerifyReport verify_dir(const std::string& dir, std::string_view secret) {
 
 namespace {
 
-constexpr const char* kRequired[] = {"schema_version", "record_id", "timestamp", "action",
+constexpr const char* kRequired[] = {"schema_version", "record_id", "timestamp",      "action",
                                      "params",         "robot_uri", "safety_approved"};
 constexpr const char* kOptional[] = {"confidence", "model_identity", "operator", "safety_reason",
                                      "previous_hash"};
@@ -224,7 +224,8 @@ Result<RcanpyRecord> rcanpy_parse_line(std::string_view line) {
     }
   }
   if (const json::Value* h = v->get("hmac")) {
-    if (!h->is_string()) return Error(ErrorCode::kSchemaValidationFailed, "hmac is not a string", "hmac");
+    if (!h->is_string())
+      return Error(ErrorCode::kSchemaValidationFailed, "hmac is not a string", "hmac");
     r.hmac = h->as_string();
   }
   return r;

@@ -1,5 +1,6 @@
 #include "base/http_client.h"
 
+#include <fcntl.h>
 #include <netdb.h>
 #include <poll.h>
 #include <sys/socket.h>
@@ -8,7 +9,6 @@
 #include <cerrno>
 #include <chrono>
 #include <cstring>
-#include <fcntl.h>
 
 #include "base/clock.h"
 #include "rcan/errors.h"
@@ -60,7 +60,8 @@ Result<HttpUrl> parse_http_url(std::string_view url) {
   }
   if (u.host.empty()) return bad("no host");
   for (char c : u.host)
-    if (static_cast<unsigned char>(c) <= ' ' || c == '@' || c == '/' || c == 0x7f) return bad("bad host");
+    if (static_cast<unsigned char>(c) <= ' ' || c == '@' || c == '/' || c == 0x7f)
+      return bad("bad host");
   for (char c : u.path)
     if (static_cast<unsigned char>(c) <= ' ' || c == 0x7f) return bad("bad path");
   return u;
@@ -77,15 +78,15 @@ int parse_status_line(std::string_view line) {
   return code >= 100 && code <= 599 ? code : 0;
 }
 
-Result<HttpAnswer> http_request(std::string_view method, std::string_view url, std::string_view body,
-                                int timeout_ms, size_t max_body) {
+Result<HttpAnswer> http_request(std::string_view method, std::string_view url,
+                                std::string_view body, int timeout_ms, size_t max_body) {
   auto u = parse_http_url(url);
   if (!u.ok()) return u.error();
   return http_request(method, *u, body, timeout_ms, max_body);
 }
 
-Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std::string_view body, int timeout_ms,
-                                size_t max_body) {
+Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std::string_view body,
+                                int timeout_ms, size_t max_body) {
   int64_t deadline = Clock::system().mono_ms() + timeout_ms;
   addrinfo hints{};
   hints.ai_family = AF_UNSPEC;
@@ -106,17 +107,22 @@ Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std
     return fail(what);
   };
   if (rc != 0) {
-    if (errno != EINPROGRESS) return close_fail("connect to " + url.host + ":" + port + " failed: " + std::strerror(errno));
-    if (!wait_fd(fd, POLLOUT, deadline)) return close_fail("connect to " + url.host + ":" + port + " timed out");
+    if (errno != EINPROGRESS)
+      return close_fail("connect to " + url.host + ":" + port + " failed: " + std::strerror(errno));
+    if (!wait_fd(fd, POLLOUT, deadline))
+      return close_fail("connect to " + url.host + ":" + port + " timed out");
     int err = 0;
     socklen_t len = sizeof err;
     ::getsockopt(fd, SOL_SOCKET, SO_ERROR, &err, &len);
-    if (err != 0) return close_fail("connect to " + url.host + ":" + port + " failed: " + std::strerror(err));
+    if (err != 0)
+      return close_fail("connect to " + url.host + ":" + port + " failed: " + std::strerror(err));
   }
-  std::string req = std::string(method) + " " + url.path + " HTTP/1.1\r\nHost: " + url.host + ":" + port +
+  std::string req = std::string(method) + " " + url.path + " HTTP/1.1\r\nHost: " + url.host + ":" +
+                    port +
                     "\r\nAccept: application/json\r\nConnection: close\r\nUser-Agent: rcand\r\n";
   if (!body.empty() || method == "POST")
-    req += "Content-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) + "\r\n";
+    req +=
+        "Content-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) + "\r\n";
   req += "\r\n";
   req.append(body);
   size_t sent = 0;
@@ -137,7 +143,8 @@ Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std
     if (header_end != std::string::npos && content_length != std::string::npos &&
         resp.size() >= header_end + 4 + content_length)
       break;
-    if (!wait_fd(fd, POLLIN, deadline)) return close_fail("no answer within " + std::to_string(timeout_ms) + " ms");
+    if (!wait_fd(fd, POLLIN, deadline))
+      return close_fail("no answer within " + std::to_string(timeout_ms) + " ms");
     ssize_t n = ::recv(fd, buf, sizeof buf, 0);
     if (n < 0) {
       if (errno == EAGAIN || errno == EINTR) continue;
@@ -152,7 +159,8 @@ Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std
         std::string head = resp.substr(0, header_end);
         for (auto& c : head) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
         size_t cl = head.find("\r\ncontent-length:");
-        if (cl != std::string::npos) content_length = std::strtoul(head.c_str() + cl + 17, nullptr, 10);
+        if (cl != std::string::npos)
+          content_length = std::strtoul(head.c_str() + cl + 17, nullptr, 10);
         if (head.find("transfer-encoding: chunked") != std::string::npos)
           return close_fail("chunked answers are not supported");
       }
@@ -162,10 +170,12 @@ Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std
   if (resp.empty()) return fail("no answer");
   size_t eol = resp.find("\r\n");
   HttpAnswer a;
-  a.status = parse_status_line(std::string_view(resp).substr(0, eol == std::string::npos ? resp.size() : eol));
+  a.status = parse_status_line(
+      std::string_view(resp).substr(0, eol == std::string::npos ? resp.size() : eol));
   if (header_end == std::string::npos || a.status == 0) return fail("malformed HTTP answer");
   a.body = resp.substr(header_end + 4);
-  if (content_length != std::string::npos && a.body.size() > content_length) a.body.resize(content_length);
+  if (content_length != std::string::npos && a.body.size() > content_length)
+    a.body.resize(content_length);
   if (a.body.size() > max_body) return fail("answer too large");
   return a;
 }

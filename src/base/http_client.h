@@ -33,13 +33,14 @@ struct HttpAnswer {
 // method is POST) and reads the answer, at most `max_body` bytes, within `timeout_ms`
 // overall. Errors: kInternal with what went wrong (connect refused, timeout, malformed or
 // chunked or oversized answer).
-Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std::string_view body, int timeout_ms,
-                                size_t max_body = 256 * 1024);
-// The same from a URL string (errors of parse_http_url first).
-Result<HttpAnswer> http_request(std::string_view method, std::string_view url, std::string_view body,
+Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std::string_view body,
                                 int timeout_ms, size_t max_body = 256 * 1024);
-inline Result<HttpAnswer> http_post_json(const HttpUrl& url, const std::string& json_body, int timeout_ms,
-                                         size_t max_body = 256 * 1024) {
+// The same from a URL string (errors of parse_http_url first).
+Result<HttpAnswer> http_request(std::string_view method, std::string_view url,
+                                std::string_view body, int timeout_ms,
+                                size_t max_body = 256 * 1024);
+inline Result<HttpAnswer> http_post_json(const HttpUrl& url, const std::string& json_body,
+                                         int timeout_ms, size_t max_body = 256 * 1024) {
   return http_request("POST", url, json_body, timeout_ms, max_body);
 }
 

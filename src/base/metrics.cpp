@@ -96,7 +96,8 @@ std::string Metrics::render() const {
   out += "# HELP rcan_audit_records_total Audit records written, by event.\n";
   out += "# TYPE rcan_audit_records_total counter\n";
   for (const auto& [k, v] : audit_events_)
-    out += "rcan_audit_records_total{event=\"" + escape_label(k) + "\"} " + std::to_string(v) + "\n";
+    out +=
+        "rcan_audit_records_total{event=\"" + escape_label(k) + "\"} " + std::to_string(v) + "\n";
   out += "# HELP rcan_pipeline_stage_seconds Time spent per pipeline stage.\n";
   out += "# TYPE rcan_pipeline_stage_seconds histogram\n";
   for (const auto& [name, h] : stages_) {
@@ -108,8 +109,10 @@ std::string Metrics::render() const {
     }
     out += "rcan_pipeline_stage_seconds_bucket{stage=\"" + name + "\",le=\"+Inf\"} " +
            std::to_string(h->count()) + "\n";
-    out += "rcan_pipeline_stage_seconds_sum{stage=\"" + name + "\"} " + num(h->sum_us() / 1e6) + "\n";
-    out += "rcan_pipeline_stage_seconds_count{stage=\"" + name + "\"} " + std::to_string(h->count()) + "\n";
+    out +=
+        "rcan_pipeline_stage_seconds_sum{stage=\"" + name + "\"} " + num(h->sum_us() / 1e6) + "\n";
+    out += "rcan_pipeline_stage_seconds_count{stage=\"" + name + "\"} " +
+           std::to_string(h->count()) + "\n";
   }
   for (const auto& f : fns_) {
     out += "# HELP " + f.name + " " + f.help + "\n# TYPE " + f.name + " " + f.type + "\n";

@@ -20,14 +20,16 @@ namespace rcan {
 class Histogram {
  public:
   // Finer between 100 µs and 2.5 ms, where a durable command's stages fall.
-  static constexpr std::array<double, 20> kBucketsUs{10,   25,   50,   100,   150,   200,   250,
-                                                     300,  400,  500,  750,   1000,  1500,  2500,
-                                                     5000, 10000, 25000, 50000, 100000, 1000000};
+  static constexpr std::array<double, 20> kBucketsUs{
+      10,  25,   50,   100,  150,  200,   250,   300,   400,    500,
+      750, 1000, 1500, 2500, 5000, 10000, 25000, 50000, 100000, 1000000};
   void observe_us(double us);
   // Approximate quantile (0..1) from the buckets, in microseconds.
   double quantile_us(double q) const;
   uint64_t count() const { return count_.load(std::memory_order_relaxed); }
-  double sum_us() const { return static_cast<double>(sum_ns_.load(std::memory_order_relaxed)) / 1000.0; }
+  double sum_us() const {
+    return static_cast<double>(sum_ns_.load(std::memory_order_relaxed)) / 1000.0;
+  }
   uint64_t bucket(size_t i) const { return buckets_[i].load(std::memory_order_relaxed); }
 
  private:

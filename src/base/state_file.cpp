@@ -15,7 +15,8 @@ Status write_state_file(const std::string& path, const json::Value& v) {
   std::string text = json::dump(v) + "\n";
   std::string tmp = path + ".tmp";
   int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
-  if (fd < 0) return Error(ErrorCode::kInternal, "cannot write " + tmp + ": " + std::strerror(errno));
+  if (fd < 0)
+    return Error(ErrorCode::kInternal, "cannot write " + tmp + ": " + std::strerror(errno));
   ::fchmod(fd, 0600);
   size_t off = 0;
   while (off < text.size()) {
@@ -36,7 +37,8 @@ Status write_state_file(const std::string& path, const json::Value& v) {
     ::unlink(tmp.c_str());
     return Error(ErrorCode::kInternal, "cannot rename " + tmp + ": " + std::strerror(errno));
   }
-  std::string dir = path.substr(0, path.find_last_of('/') == std::string::npos ? 0 : path.find_last_of('/'));
+  std::string dir =
+      path.substr(0, path.find_last_of('/') == std::string::npos ? 0 : path.find_last_of('/'));
   if (!dir.empty()) {
     int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
     if (dfd >= 0) {
@@ -53,11 +55,13 @@ Result<json::Value> read_state_file(const std::string& path) {
   std::string text;
   char buf[8192];
   ssize_t n;
-  while ((n = ::read(fd, buf, sizeof buf)) > 0 && text.size() < (4u << 20)) text.append(buf, static_cast<size_t>(n));
+  while ((n = ::read(fd, buf, sizeof buf)) > 0 && text.size() < (4u << 20))
+    text.append(buf, static_cast<size_t>(n));
   ::close(fd);
   auto v = json::parse(text, {.max_depth = 32, .max_bytes = 4u << 20});
   if (!v.ok() || !v->is_object())
-    return Error(ErrorCode::kSchemaValidationFailed, "state file " + path + " is not a JSON object");
+    return Error(ErrorCode::kSchemaValidationFailed,
+                 "state file " + path + " is not a JSON object");
   return std::move(v).value();
 }
 

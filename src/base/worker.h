@@ -16,10 +16,11 @@ namespace rcan {
 class Worker {
  public:
   explicit Worker(int threads = 1) {
-    for (int i = 0; i < threads; ++i) threads_.emplace_back([this] {
-      pthread_setname_np(pthread_self(), "node-worker");
-      loop();
-    });
+    for (int i = 0; i < threads; ++i)
+      threads_.emplace_back([this] {
+        pthread_setname_np(pthread_self(), "node-worker");
+        loop();
+      });
   }
   ~Worker() { shutdown(); }
   Worker(const Worker&) = delete;

@@ -1,4 +1,6 @@
 // rcan::client — the HTTP calls, typed answers and host probing (include/rcan/client.h).
+#include "rcan/client.h"
+
 #include <algorithm>
 #include <cctype>
 #include <chrono>
@@ -6,16 +8,10 @@
 #include <future>
 
 #include "client/net.h"
-#include "rcan/client.h"
 #include "rcan/errors.h"
 
 namespace rcan::client {
 namespace {
-
-int64_t wall_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
 
 std::string str_of(const json::Value& v, std::string_view key) {
   const json::Value* f = v.get(key);
@@ -109,8 +105,10 @@ Result<Endpoint> parse_endpoint(std::string_view url) {
     return bad("the scheme must be http or https");
   }
   std::string_view authority = rest.substr(0, rest.find('/'));
-  std::string_view path = rest.size() > authority.size() ? rest.substr(authority.size()) : std::string_view();
-  if (authority.find('@') != std::string_view::npos) return bad("user information is not supported");
+  std::string_view path =
+      rest.size() > authority.size() ? rest.substr(authority.size()) : std::string_view();
+  if (authority.find('@') != std::string_view::npos)
+    return bad("user information is not supported");
   std::string_view port_text;
   if (!authority.empty() && authority.front() == '[') {
     size_t close = authority.find(']');
@@ -132,7 +130,8 @@ Result<Endpoint> parse_endpoint(std::string_view url) {
   }
   if (ep.host.empty()) return bad("no host");
   for (char c : ep.host)
-    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '-' || c == ':' || c == '_' || c == '%'))
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '-' || c == ':' ||
+          c == '_' || c == '%'))
       return bad("invalid character in the host");
   ep.port = ep.tls ? 443 : 80;
   if (!port_text.empty()) {
@@ -175,7 +174,8 @@ ClientError error_from_response(int status, std::string_view body, std::string_v
     if (std::string m = str_of(*p, "error"); !m.empty()) e.message = m;
     e.reason = str_of(*p, "reason");
     if (e.reason.empty())
-      if (const json::Value* d = p->get("detail"); d && d->is_object()) e.reason = str_of(*d, "reason");
+      if (const json::Value* d = p->get("detail"); d && d->is_object())
+        e.reason = str_of(*d, "reason");
   } else {
     // Other shapes: {"error","code"} (§16.6 verify), {"error_code", …}, {"error": …}.
     for (const char* k : {"error_code", "code"})
@@ -183,8 +183,10 @@ ClientError error_from_response(int status, std::string_view body, std::string_v
         e.code = c;
         break;
       }
-    if (std::string m = str_of(*v, "error"); !m.empty()) e.message = m;
-    else if (std::string m2 = str_of(*v, "message"); !m2.empty()) e.message = m2;
+    if (std::string m = str_of(*v, "error"); !m.empty())
+      e.message = m;
+    else if (std::string m2 = str_of(*v, "message"); !m2.empty())
+      e.message = m2;
     e.reason = str_of(*v, "reason");
   }
   return e;
@@ -204,9 +206,11 @@ Result<RobotStatus> parse_status(std::string_view body) {
   if (s.rcan_version.empty()) s.rcan_version = str_of(*v, "version");
   s.extensions = strings_of(*v, "extensions");
   s.capabilities = strings_of(*v, "capabilities");
-  if (const json::Value* e = v->get("estop_active"); e && e->is_bool()) s.estop_active = e->as_bool();
+  if (const json::Value* e = v->get("estop_active"); e && e->is_bool())
+    s.estop_active = e->as_bool();
   s.mode = str_of(*v, "mode");
-  if (const json::Value* a = v->get("audit_available"); a && a->is_bool()) s.audit_available = a->as_bool();
+  if (const json::Value* a = v->get("audit_available"); a && a->is_bool())
+    s.audit_available = a->as_bool();
   if (const json::Value* l = v->get("sessions"); l && l->is_array()) {
     for (const auto& e : l->as_array()) {
       if (!e.is_object()) continue;
@@ -245,20 +249,22 @@ json::Value command_message(const Command& c, int64_t now_ms) {
 
 Client::Client(ClientOptions options) : opts_(std::move(options)) {}
 
-Result<RawResponse> Client::request(const std::string& method, const std::string& path, const std::string& body,
-                                    bool with_token) {
+Result<RawResponse> Client::request(const std::string& method, const std::string& path,
+                                    const std::string& body, bool with_token) {
   auto ep = parse_endpoint(opts_.url);
   if (!ep.ok()) return ep.error();
   std::vector<std::pair<std::string, std::string>> h;
   if (with_token && !opts_.token.empty()) h.emplace_back("Authorization", "Bearer " + opts_.token);
-  return net::http_exchange(*ep, method, path, body, h, opts_.timeout_ms, opts_.ca_file, opts_.insecure);
+  return net::http_exchange(*ep, method, path, body, h, opts_.timeout_ms, opts_.ca_file,
+                            opts_.insecure);
 }
 
-Result<json::Value> Client::call_json(const std::string& method, const std::string& path, const std::string& body,
-                                      bool with_token, int* status) {
+Result<json::Value> Client::call_json(const std::string& method, const std::string& path,
+                                      const std::string& body, bool with_token, int* status) {
   auto r = request(method, path, body, with_token);
   if (!r.ok()) return r.error();
-  if (r->status < 200 || r->status > 299) return error_from_response(r->status, r->body, r->header("retry-after"));
+  if (r->status < 200 || r->status > 299)
+    return error_from_response(r->status, r->body, r->header("retry-after"));
   if (status) *status = r->status;
   auto v = json::parse(r->body, parse_opts());
   if (!v.ok()) return schema_error("the answer is not JSON: " + v.error().message);
@@ -294,7 +300,8 @@ Result<Reply> Client::release(const std::string& session_id) {
   json::Object body;
   if (!session_id.empty()) body.set("session_id", session_id);
   int status = 200;
-  auto v = call_json("DELETE", "/rcan/v1/auth/release", json::dump(json::Value(body)), true, &status);
+  auto v =
+      call_json("DELETE", "/rcan/v1/auth/release", json::dump(json::Value(body)), true, &status);
   if (!v.ok()) return v.error();
   return reply_from(status, *v);
 }
@@ -317,7 +324,7 @@ Result<Reply> Client::send(const json::Value& message) {
   return reply_from(status, *v);
 }
 
-Result<Reply> Client::command(const Command& c) { return send(command_message(c, wall_ms())); }
+Result<Reply> Client::command(const Command& c) { return send(command_message(c, net::wall_ms())); }
 
 Result<Reply> Client::estop(const std::string& reason) {
   json::Object body;
@@ -331,12 +338,9 @@ Result<Reply> Client::estop(const std::string& reason) {
 Result<Reply> Client::resume(const std::string& reason) {
   json::Object payload{{"safety_event", "RESUME"}};
   if (!reason.empty()) payload.set("reason", reason);
-  json::Object m{{"version", "1.0.0"},
-                 {"message_id", new_uuid_v4()},
-                 {"type", "SAFETY"},
-                 {"priority", "SAFETY"},
-                 {"timestamp_ms", wall_ms()},
-                 {"payload", std::move(payload)}};
+  json::Object m{
+      {"version", "1.0.0"},   {"message_id", new_uuid_v4()},    {"type", "SAFETY"},
+      {"priority", "SAFETY"}, {"timestamp_ms", net::wall_ms()}, {"payload", std::move(payload)}};
   return send(json::Value(std::move(m)));
 }
 
@@ -344,7 +348,7 @@ Result<Reply> Client::heartbeat() {
   json::Object m{{"version", "1.0.0"},
                  {"message_id", new_uuid_v4()},
                  {"type", "HEARTBEAT"},
-                 {"timestamp_ms", wall_ms()},
+                 {"timestamp_ms", net::wall_ms()},
                  {"payload", json::Object{}}};
   return send(json::Value(std::move(m)));
 }
@@ -380,16 +384,18 @@ Result<std::vector<PendingAuth>> Client::pending() {
   return out;
 }
 
-Result<Reply> Client::authorize(const std::string& message_id, bool approve, const std::string& reason) {
+Result<Reply> Client::authorize(const std::string& message_id, bool approve,
+                                const std::string& reason) {
   json::Object payload{{"message_id", message_id}, {"decision", approve ? "approve" : "deny"}};
   if (!reason.empty()) payload.set("reason", reason);
   json::Object m{{"version", "1.0.0"},
                  {"message_id", new_uuid_v4()},
                  {"type", "AUTHORIZE"},
-                 {"timestamp_ms", wall_ms()},
+                 {"timestamp_ms", net::wall_ms()},
                  {"payload", std::move(payload)}};
   int status = 200;
-  auto v = call_json("POST", "/rcan/v1/authorize", json::dump(json::Value(std::move(m))), true, &status);
+  auto v =
+      call_json("POST", "/rcan/v1/authorize", json::dump(json::Value(std::move(m))), true, &status);
   if (!v.ok()) return v.error();
   return reply_from(status, *v);
 }
@@ -402,13 +408,15 @@ Result<AuditPage> Client::audit_recent(int limit) {
   AuditPage page;
   page.entries = list->as_array();
   page.last_seq = v->is_object() ? int_of(*v, "last_seq", 0) : 0;
-  if (const json::Value* bad = v->is_object() ? v->get("unreadable") : nullptr; bad && bad->is_array())
+  if (const json::Value* bad = v->is_object() ? v->get("unreadable") : nullptr;
+      bad && bad->is_array())
     for (const auto& s : bad->as_array())
       if (s.is_int()) page.unreadable.push_back(s.as_int());
   return page;
 }
 
-Result<std::string> Client::audit_export(std::optional<int64_t> from_ms, std::optional<int64_t> to_ms) {
+Result<std::string> Client::audit_export(std::optional<int64_t> from_ms,
+                                         std::optional<int64_t> to_ms) {
   std::string q = "/api/v1/audit?format=jsonl";
   if (from_ms) q += "&from=" + std::to_string(*from_ms);
   if (to_ms) q += "&to=" + std::to_string(*to_ms);
@@ -430,14 +438,16 @@ Result<Thought> Client::thought(const std::string& id) {
   t.model = str_of(*v, "model");
   t.layer = str_of(*v, "layer");
   t.instruction = str_of(*v, "instruction");
-  if (const json::Value* c = v->get("confidence"); c && c->is_number()) t.confidence = c->to_double();
+  if (const json::Value* c = v->get("confidence"); c && c->is_number())
+    t.confidence = c->to_double();
   if (const json::Value* r = v->get("reasoning"); r && r->is_string()) t.reasoning = r->as_string();
   if (const json::Value* a = v->get("action")) t.action = *a;
   t.raw = *v;
   return t;
 }
 
-Result<WatermarkVerdict> Client::watermark_verify(const std::string& token, const std::string& rrn) {
+Result<WatermarkVerdict> Client::watermark_verify(const std::string& token,
+                                                  const std::string& rrn) {
   std::string q = "/api/v1/watermark/verify?token=" + url_encode(token);
   if (!rrn.empty()) q += "&rrn=" + url_encode(rrn);
   auto v = call_json("GET", q, "", false);
@@ -471,9 +481,13 @@ Result<DiscoveredRobot> probe(const std::string& host, const DiscoverOptions& op
   if (url.find("://") == std::string::npos) {
     // host, host:port, [v6] or [v6]:port; the default RCAN port is 8080.
     bool has_port = false;
-    if (!url.empty() && url.front() == '[') has_port = url.find("]:") != std::string::npos;
-    else has_port = std::count(url.begin(), url.end(), ':') == 1;
-    if (!has_port) url = (url.find(':') != std::string::npos && url.front() != '[' ? "[" + url + "]" : url) + ":8080";
+    if (!url.empty() && url.front() == '[')
+      has_port = url.find("]:") != std::string::npos;
+    else
+      has_port = std::count(url.begin(), url.end(), ':') == 1;
+    if (!has_port)
+      url = (url.find(':') != std::string::npos && url.front() != '[' ? "[" + url + "]" : url) +
+            ":8080";
     url = "http://" + url;
   }
   auto ep = parse_endpoint(url);
@@ -494,7 +508,8 @@ Result<DiscoveredRobot> probe(const std::string& host, const DiscoverOptions& op
   r.port = ep->port;
   r.ruri = st->ruri;
   r.version = st->rcan_version;
-  if (const json::Value* d = st->raw.get("discovery"); d && d->is_object()) r.model = str_of(*d, "model");
+  if (const json::Value* d = st->raw.get("discovery"); d && d->is_object())
+    r.model = str_of(*d, "model");
   r.status_word = st->estop_active ? "estop" : (st->active_sessions > 0 ? "claimed" : "available");
   r.reachable = true;
   r.status = std::move(st).value();
@@ -548,8 +563,9 @@ DiscoverReport discover(const DiscoverOptions& options) {
           }
         }
         // The same service seen on several interfaces/protocols: keep one per URL.
-        bool dup = std::any_of(rep.robots.begin(), rep.robots.end(),
-                               [&](const DiscoveredRobot& o) { return o.url == r.url && o.name == r.name; });
+        bool dup = std::any_of(rep.robots.begin(), rep.robots.end(), [&](const DiscoveredRobot& o) {
+          return o.url == r.url && o.name == r.name;
+        });
         if (!dup) rep.robots.push_back(std::move(r));
       }
     }
@@ -557,8 +573,9 @@ DiscoverReport discover(const DiscoverOptions& options) {
   for (auto& f : probes) {
     auto r = f.get();
     if (r.ok()) {
-      bool dup = std::any_of(rep.robots.begin(), rep.robots.end(),
-                             [&](const DiscoveredRobot& o) { return o.url == r->url && o.reachable; });
+      bool dup = std::any_of(rep.robots.begin(), rep.robots.end(), [&](const DiscoveredRobot& o) {
+        return o.url == r->url && o.reachable;
+      });
       if (!dup) rep.robots.push_back(std::move(r).value());
     }
   }
@@ -569,7 +586,8 @@ DiscoverReport discover(const DiscoverOptions& options) {
 
 std::chrono::milliseconds backoff_delay(int attempt, std::mt19937_64& rng) {
   static constexpr int64_t kSteps[] = {1000, 2000, 4000, 8000, 16000, 30000};
-  int64_t base = kSteps[std::min<size_t>(static_cast<size_t>(std::max(attempt, 0)), std::size(kSteps) - 1)];
+  int64_t base =
+      kSteps[std::min<size_t>(static_cast<size_t>(std::max(attempt, 0)), std::size(kSteps) - 1)];
   std::uniform_int_distribution<int64_t> jitter(-500, 500);
   return std::chrono::milliseconds(std::max<int64_t>(0, base + jitter(rng)));
 }

@@ -21,9 +21,10 @@ struct BrowseState {
   std::string failure;
 };
 
-void on_resolved(AvahiServiceResolver* r, AvahiIfIndex iface, AvahiProtocol, AvahiResolverEvent event,
-                 const char* name, const char*, const char*, const char* host, const AvahiAddress* a, uint16_t port,
-                 AvahiStringList* txt, AvahiLookupResultFlags flags, void* data) {
+void on_resolved(AvahiServiceResolver* r, AvahiIfIndex iface, AvahiProtocol,
+                 AvahiResolverEvent event, const char* name, const char*, const char*,
+                 const char* host, const AvahiAddress* a, uint16_t port, AvahiStringList* txt,
+                 AvahiLookupResultFlags flags, void* data) {
   auto* st = static_cast<BrowseState*>(data);
   if (event == AVAHI_RESOLVER_FOUND && a) {
     MdnsService s;
@@ -37,21 +38,23 @@ void on_resolved(AvahiServiceResolver* r, AvahiIfIndex iface, AvahiProtocol, Ava
     char ifname[IF_NAMESIZE] = {0};
     if (iface >= 0 && if_indextoname(static_cast<unsigned>(iface), ifname)) s.interface = ifname;
     for (AvahiStringList* l = txt; l; l = avahi_string_list_get_next(l))
-      s.txt.emplace_back(reinterpret_cast<const char*>(avahi_string_list_get_text(l)), avahi_string_list_get_size(l));
+      s.txt.emplace_back(reinterpret_cast<const char*>(avahi_string_list_get_text(l)),
+                         avahi_string_list_get_size(l));
     st->found.push_back(std::move(s));
   }
   --st->outstanding;
   avahi_service_resolver_free(r);
 }
 
-void on_browse(AvahiServiceBrowser* b, AvahiIfIndex iface, AvahiProtocol proto, AvahiBrowserEvent event,
-               const char* name, const char* type, const char* domain, AvahiLookupResultFlags, void* data) {
+void on_browse(AvahiServiceBrowser* b, AvahiIfIndex iface, AvahiProtocol proto,
+               AvahiBrowserEvent event, const char* name, const char* type, const char* domain,
+               AvahiLookupResultFlags, void* data) {
   auto* st = static_cast<BrowseState*>(data);
   AvahiClient* c = avahi_service_browser_get_client(b);
   switch (event) {
     case AVAHI_BROWSER_NEW:
-      if (avahi_service_resolver_new(c, iface, proto, name, type, domain, AVAHI_PROTO_INET, static_cast<AvahiLookupFlags>(0),
-                                     on_resolved, st))
+      if (avahi_service_resolver_new(c, iface, proto, name, type, domain, AVAHI_PROTO_INET,
+                                     static_cast<AvahiLookupFlags>(0), on_resolved, st))
         ++st->outstanding;
       break;
     case AVAHI_BROWSER_ALL_FOR_NOW:
@@ -86,7 +89,8 @@ Result<std::vector<MdnsService>> browse_mdns(int timeout_ms) {
     return e;
   }
   int err = 0;
-  AvahiClient* client = avahi_client_new(avahi_simple_poll_get(st.poll), static_cast<AvahiClientFlags>(0), on_client, &st, &err);
+  AvahiClient* client = avahi_client_new(avahi_simple_poll_get(st.poll),
+                                         static_cast<AvahiClientFlags>(0), on_client, &st, &err);
   if (!client) {
     avahi_simple_poll_free(st.poll);
     ClientError e;
@@ -94,16 +98,20 @@ Result<std::vector<MdnsService>> browse_mdns(int timeout_ms) {
     e.message = std::string("mDNS browsing needs the Avahi daemon: ") + avahi_strerror(err);
     return e;
   }
-  AvahiServiceBrowser* browser = avahi_service_browser_new(client, AVAHI_IF_UNSPEC, AVAHI_PROTO_INET, "_rcan._tcp", nullptr,
-                                                           static_cast<AvahiLookupFlags>(0), on_browse, &st);
+  AvahiServiceBrowser* browser =
+      avahi_service_browser_new(client, AVAHI_IF_UNSPEC, AVAHI_PROTO_INET, "_rcan._tcp", nullptr,
+                                static_cast<AvahiLookupFlags>(0), on_browse, &st);
   if (!browser) st.failure = avahi_strerror(avahi_client_errno(client));
   auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
   while (browser && st.failure.empty()) {
-    auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now()).count();
+    auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+                    deadline - std::chrono::steady_clock::now())
+                    .count();
     if (left <= 0) break;
     // Done early once the daemon has said "all for now" and every resolution finished.
     if (st.all_for_now && st.outstanding == 0 && !st.found.empty()) break;
-    if (avahi_simple_poll_iterate(st.poll, static_cast<int>(std::min<int64_t>(left, 100))) != 0) break;
+    if (avahi_simple_poll_iterate(st.poll, static_cast<int>(std::min<int64_t>(left, 100))) != 0)
+      break;
   }
   if (browser) avahi_service_browser_free(browser);
   avahi_client_free(client);  // frees outstanding resolvers too

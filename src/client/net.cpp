@@ -19,12 +19,20 @@
 #include "rcan/hash.h"
 
 namespace rcan::client::net {
-namespace {
 
 int64_t mono_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
       .count();
 }
+
+int64_t wall_ms() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+namespace {
 
 std::string ssl_error_text() {
   unsigned long e = ERR_get_error();
@@ -72,7 +80,8 @@ void Conn::close() {
 
 bool Conn::pending() const { return ssl_ && SSL_pending(ssl_) > 0; }
 
-Result<bool> Conn::open(const Endpoint& ep, int timeout_ms, const std::string& ca_file, bool insecure) {
+Result<bool> Conn::open(const Endpoint& ep, int timeout_ms, const std::string& ca_file,
+                        bool insecure) {
   close();
   int64_t deadline = mono_ms() + timeout_ms;
   addrinfo hints{};
@@ -82,10 +91,12 @@ Result<bool> Conn::open(const Endpoint& ep, int timeout_ms, const std::string& c
   std::string port = std::to_string(ep.port);
   int gai = ::getaddrinfo(ep.host.c_str(), port.c_str(), &hints, &res);
   if (gai != 0 || !res)
-    return transport_error("CONNECTION_FAILED", "cannot resolve " + ep.host + ": " + gai_strerror(gai));
+    return transport_error("CONNECTION_FAILED",
+                           "cannot resolve " + ep.host + ": " + gai_strerror(gai));
   std::string last = "no address";
   for (addrinfo* ai = res; ai; ai = ai->ai_next) {
-    int fd = ::socket(ai->ai_family, ai->ai_socktype | SOCK_CLOEXEC | SOCK_NONBLOCK, ai->ai_protocol);
+    int fd =
+        ::socket(ai->ai_family, ai->ai_socktype | SOCK_CLOEXEC | SOCK_NONBLOCK, ai->ai_protocol);
     if (fd < 0) continue;
     int rc = ::connect(fd, ai->ai_addr, ai->ai_addrlen);
     if (rc != 0 && errno == EINPROGRESS) {
@@ -109,8 +120,8 @@ Result<bool> Conn::open(const Endpoint& ep, int timeout_ms, const std::string& c
   }
   ::freeaddrinfo(res);
   if (fd_ < 0)
-    return transport_error("CONNECTION_FAILED",
-                           "cannot connect to " + ep.host + ":" + port + ": " + last + " (is rcand running?)");
+    return transport_error("CONNECTION_FAILED", "cannot connect to " + ep.host + ":" + port + ": " +
+                                                    last + " (is rcand running?)");
   int one = 1;
   ::setsockopt(fd_, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
   if (!ep.tls) return true;
@@ -122,7 +133,9 @@ Result<bool> Conn::open(const Endpoint& ep, int timeout_ms, const std::string& c
     SSL_CTX_set_verify(ctx_, SSL_VERIFY_PEER, nullptr);
     int ok = ca_file.empty() ? SSL_CTX_set_default_verify_paths(ctx_)
                              : SSL_CTX_load_verify_locations(ctx_, ca_file.c_str(), nullptr);
-    if (ok != 1) return transport_error("TLS_FAILED", "cannot load trust anchors " + ca_file + ": " + ssl_error_text());
+    if (ok != 1)
+      return transport_error("TLS_FAILED",
+                             "cannot load trust anchors " + ca_file + ": " + ssl_error_text());
   }
   ssl_ = SSL_new(ctx_);
   if (!ssl_) return transport_error("TLS_FAILED", ssl_error_text());
@@ -132,9 +145,12 @@ Result<bool> Conn::open(const Endpoint& ep, int timeout_ms, const std::string& c
     X509_VERIFY_PARAM* param = SSL_get0_param(ssl_);
     in6_addr a6;
     in_addr a4;
-    bool is_ip = inet_pton(AF_INET, ep.host.c_str(), &a4) == 1 || inet_pton(AF_INET6, ep.host.c_str(), &a6) == 1;
-    if (is_ip) X509_VERIFY_PARAM_set1_ip_asc(param, ep.host.c_str());
-    else SSL_set1_host(ssl_, ep.host.c_str());
+    bool is_ip = inet_pton(AF_INET, ep.host.c_str(), &a4) == 1 ||
+                 inet_pton(AF_INET6, ep.host.c_str(), &a6) == 1;
+    if (is_ip)
+      X509_VERIFY_PARAM_set1_ip_asc(param, ep.host.c_str());
+    else
+      SSL_set1_host(ssl_, ep.host.c_str());
   }
   while (true) {
     int r = SSL_connect(ssl_);
@@ -143,9 +159,12 @@ Result<bool> Conn::open(const Endpoint& ep, int timeout_ms, const std::string& c
     int left = static_cast<int>(deadline - mono_ms());
     if (e == SSL_ERROR_WANT_READ && left > 0 && wait_fd(fd_, POLLIN, left)) continue;
     if (e == SSL_ERROR_WANT_WRITE && left > 0 && wait_fd(fd_, POLLOUT, left)) continue;
-    if (left <= 0) return transport_error("TIMEOUT", "TLS handshake with " + ep.host + " timed out");
+    if (left <= 0)
+      return transport_error("TIMEOUT", "TLS handshake with " + ep.host + " timed out");
     long v = SSL_get_verify_result(ssl_);
-    std::string why = v != X509_V_OK ? std::string("certificate: ") + X509_verify_cert_error_string(v) : ssl_error_text();
+    std::string why = v != X509_V_OK
+                          ? std::string("certificate: ") + X509_verify_cert_error_string(v)
+                          : ssl_error_text();
     return transport_error("TLS_FAILED", "TLS with " + ep.host + ":" + port + " failed: " + why);
   }
   return true;
@@ -158,7 +177,8 @@ Result<bool> Conn::write_all(std::string_view data, int timeout_ms) {
     int left = static_cast<int>(deadline - mono_ms());
     if (left <= 0) return transport_error("TIMEOUT", "sending timed out");
     if (ssl_) {
-      int r = SSL_write(ssl_, data.data() + off, static_cast<int>(std::min<size_t>(data.size() - off, 1 << 30)));
+      int r = SSL_write(ssl_, data.data() + off,
+                        static_cast<int>(std::min<size_t>(data.size() - off, 1 << 30)));
       if (r > 0) {
         off += static_cast<size_t>(r);
         continue;
@@ -177,7 +197,8 @@ Result<bool> Conn::write_all(std::string_view data, int timeout_ms) {
       wait_fd(fd_, POLLOUT, left);
       continue;
     }
-    return transport_error("CONNECTION_FAILED", std::string("send failed: ") + std::strerror(errno));
+    return transport_error("CONNECTION_FAILED",
+                           std::string("send failed: ") + std::strerror(errno));
   }
   return true;
 }
@@ -212,26 +233,32 @@ Result<size_t> Conn::read_some(std::string& buf, int timeout_ms) {
     if (r == 0) return size_t{0};
     if (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR) {
       int left = static_cast<int>(deadline - mono_ms());
-      if (left <= 0 || !wait_fd(fd_, POLLIN, left)) return transport_error("TIMEOUT", "no answer in time");
+      if (left <= 0 || !wait_fd(fd_, POLLIN, left))
+        return transport_error("TIMEOUT", "no answer in time");
       continue;
     }
     if (errno == ECONNRESET) return size_t{0};
-    return transport_error("CONNECTION_FAILED", std::string("receive failed: ") + std::strerror(errno));
+    return transport_error("CONNECTION_FAILED",
+                           std::string("receive failed: ") + std::strerror(errno));
   }
 }
 
-Result<RawResponse> http_exchange(const Endpoint& ep, const std::string& method, const std::string& path,
-                                  const std::string& body, const std::vector<std::pair<std::string, std::string>>& headers,
+Result<RawResponse> http_exchange(const Endpoint& ep, const std::string& method,
+                                  const std::string& path, const std::string& body,
+                                  const std::vector<std::pair<std::string, std::string>>& headers,
                                   int timeout_ms, const std::string& ca_file, bool insecure) {
   int64_t deadline = mono_ms() + timeout_ms;
   Conn c;
   if (auto o = c.open(ep, timeout_ms, ca_file, insecure); !o.ok()) return o.error();
   std::string host = ep.host.find(':') != std::string::npos ? "[" + ep.host + "]" : ep.host;
-  std::string req = method + " " + ep.base_path + path + " HTTP/1.1\r\nHost: " + host + ":" + std::to_string(ep.port) +
-                    "\r\nConnection: close\r\nUser-Agent: rcan-client/0.1\r\nAccept: application/json\r\n";
+  std::string req =
+      method + " " + ep.base_path + path + " HTTP/1.1\r\nHost: " + host + ":" +
+      std::to_string(ep.port) +
+      "\r\nConnection: close\r\nUser-Agent: rcan-client/0.1\r\nAccept: application/json\r\n";
   for (const auto& [k, v] : headers) req += k + ": " + v + "\r\n";
   if (!body.empty() || method == "POST" || method == "PUT")
-    req += "Content-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) + "\r\n";
+    req +=
+        "Content-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) + "\r\n";
   req += "\r\n";
   req += body;
   if (auto w = c.write_all(req, static_cast<int>(deadline - mono_ms())); !w.ok()) return w.error();
@@ -249,24 +276,28 @@ Result<RawResponse> http_exchange(const Endpoint& ep, const std::string& method,
       r.body = std::move(pr.body);
       return r;
     }
-    if (p == wire::Parse::kError) return transport_error("BAD_RESPONSE", "bad HTTP answer from " + ep.url() + ": " + err);
+    if (p == wire::Parse::kError)
+      return transport_error("BAD_RESPONSE", "bad HTTP answer from " + ep.url() + ": " + err);
     int left = static_cast<int>(deadline - mono_ms());
-    if (left <= 0) return transport_error("TIMEOUT", "no complete answer from " + ep.url() + " in time");
+    if (left <= 0)
+      return transport_error("TIMEOUT", "no complete answer from " + ep.url() + " in time");
     auto n = c.read_some(buf, left);
     if (!n.ok()) return n.error();
     if (*n == 0) eof = true;
   }
 }
 
-Result<bool> ws_handshake(Conn& conn, const Endpoint& ep, const std::string& path, const std::string& token,
-                          int timeout_ms, std::string& leftover) {
+Result<bool> ws_handshake(Conn& conn, const Endpoint& ep, const std::string& path,
+                          const std::string& token, int timeout_ms, std::string& leftover) {
   uint8_t raw[16];
   random_bytes(raw, sizeof raw);
   std::string key = base64_encode(raw, sizeof raw);
   std::string host = ep.host.find(':') != std::string::npos ? "[" + ep.host + "]" : ep.host;
-  std::string req = "GET " + ep.base_path + path + " HTTP/1.1\r\nHost: " + host + ":" + std::to_string(ep.port) +
+  std::string req = "GET " + ep.base_path + path + " HTTP/1.1\r\nHost: " + host + ":" +
+                    std::to_string(ep.port) +
                     "\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Version: 13\r\n"
-                    "Sec-WebSocket-Key: " + key + "\r\nUser-Agent: rcan-client/0.1\r\n";
+                    "Sec-WebSocket-Key: " +
+                    key + "\r\nUser-Agent: rcan-client/0.1\r\n";
   if (!token.empty()) req += "Authorization: Bearer " + token + "\r\n";
   req += "\r\n";
   if (auto w = conn.write_all(req, timeout_ms); !w.ok()) return w.error();
@@ -279,8 +310,10 @@ Result<bool> ws_handshake(Conn& conn, const Endpoint& ep, const std::string& pat
       size_t consumed = 0;
       std::string err;
       // Parse the head only (a refusal carries a body; a 101 has none).
-      wire::Parse p = wire::parse_response(std::string_view(buf).substr(0, head_end + 4), false, pr, consumed, err);
-      if (p == wire::Parse::kError) return transport_error("BAD_RESPONSE", "bad upgrade answer: " + err);
+      wire::Parse p = wire::parse_response(std::string_view(buf).substr(0, head_end + 4), false, pr,
+                                           consumed, err);
+      if (p == wire::Parse::kError)
+        return transport_error("BAD_RESPONSE", "bad upgrade answer: " + err);
       if (pr.status != 101) {
         // Read the refusal body for its error code.
         std::string all = buf;
@@ -294,7 +327,8 @@ Result<bool> ws_handshake(Conn& conn, const Endpoint& ep, const std::string& pat
               if (k == "retry-after") ra = v;
             return error_from_response(full.status, full.body, ra);
           }
-          if (q == wire::Parse::kError || mono_ms() >= deadline) return error_from_response(pr.status, "", "");
+          if (q == wire::Parse::kError || mono_ms() >= deadline)
+            return error_from_response(pr.status, "", "");
           auto n = conn.read_some(all, static_cast<int>(deadline - mono_ms()));
           if (!n.ok()) return error_from_response(pr.status, "", "");
           if (*n == 0) eof = true;
@@ -303,16 +337,19 @@ Result<bool> ws_handshake(Conn& conn, const Endpoint& ep, const std::string& pat
       std::string accept;
       for (auto& [k, v] : pr.headers)
         if (k == "sec-websocket-accept") accept = v;
-      if (accept != wire::ws_accept(key)) return transport_error("BAD_RESPONSE", "bad Sec-WebSocket-Accept");
+      if (accept != wire::ws_accept(key))
+        return transport_error("BAD_RESPONSE", "bad Sec-WebSocket-Accept");
       leftover = buf.substr(head_end + 4);
       return true;
     }
-    if (buf.size() > wire::kMaxHeaderBytes) return transport_error("BAD_RESPONSE", "upgrade answer too large");
+    if (buf.size() > wire::kMaxHeaderBytes)
+      return transport_error("BAD_RESPONSE", "upgrade answer too large");
     int left = static_cast<int>(deadline - mono_ms());
     if (left <= 0) return transport_error("TIMEOUT", "WebSocket upgrade timed out");
     auto n = conn.read_some(buf, left);
     if (!n.ok()) return n.error();
-    if (*n == 0) return transport_error("CONNECTION_FAILED", "connection closed during the WebSocket upgrade");
+    if (*n == 0)
+      return transport_error("CONNECTION_FAILED", "connection closed during the WebSocket upgrade");
   }
 }
 

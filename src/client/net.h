@@ -12,6 +12,10 @@
 
 namespace rcan::client::net {
 
+// The client's clocks in milliseconds: steady (deadlines, timers) and Unix (message timestamps).
+int64_t mono_ms();
+int64_t wall_ms();
+
 class Conn {
  public:
   Conn() = default;
@@ -39,12 +43,13 @@ class Conn {
 ClientError transport_error(const std::string& code, const std::string& message);
 
 // One request on a fresh connection (Connection: close).
-Result<RawResponse> http_exchange(const Endpoint& ep, const std::string& method, const std::string& path,
-                                  const std::string& body, const std::vector<std::pair<std::string, std::string>>& headers,
+Result<RawResponse> http_exchange(const Endpoint& ep, const std::string& method,
+                                  const std::string& path, const std::string& body,
+                                  const std::vector<std::pair<std::string, std::string>>& headers,
                                   int timeout_ms, const std::string& ca_file, bool insecure);
 
 // Upgrades `conn` to a WebSocket on `path`. `leftover` receives bytes read past the 101.
-Result<bool> ws_handshake(Conn& conn, const Endpoint& ep, const std::string& path, const std::string& token,
-                          int timeout_ms, std::string& leftover);
+Result<bool> ws_handshake(Conn& conn, const Endpoint& ep, const std::string& path,
+                          const std::string& token, int timeout_ms, std::string& leftover);
 
 }  // namespace rcan::client::net

@@ -12,18 +12,8 @@
 #include "rcan/hash.h"
 
 namespace rcan::client {
-namespace {
-
-int64_t mono_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
-int64_t wall_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
-
-}  // namespace
+using net::mono_ms;
+using net::wall_ms;
 
 Stream::Stream(StreamOptions options) : opts_(std::move(options)) {
   if (::pipe2(wake_fd_, O_CLOEXEC | O_NONBLOCK) != 0) wake_fd_[0] = wake_fd_[1] = -1;
@@ -126,14 +116,18 @@ bool Stream::Connection::open() {
     return false;
   }
   timeout_ = s_.opts_.client.timeout_ms;
-  if (auto o = conn_.open(*ep, timeout_, s_.opts_.client.ca_file, s_.opts_.client.insecure); !o.ok()) {
+  if (auto o = conn_.open(*ep, timeout_, s_.opts_.client.ca_file, s_.opts_.client.insecure);
+      !o.ok()) {
     end_.error = o.error();
     end_.refused = o.error().code == "TLS_FAILED";
     return false;
   }
-  if (auto h = net::ws_handshake(conn_, *ep, "/rcan/v1/stream", s_.opts_.client.token, timeout_, buf_); !h.ok()) {
+  if (auto h =
+          net::ws_handshake(conn_, *ep, "/rcan/v1/stream", s_.opts_.client.token, timeout_, buf_);
+      !h.ok()) {
     end_.error = h.error();
-    end_.refused = h.error().http_status == 401 || h.error().http_status == 403 || h.error().http_status == 404;
+    end_.refused = h.error().http_status == 401 || h.error().http_status == 403 ||
+                   h.error().http_status == 404;
     return false;
   }
   json::Object connect{{"type", "CONNECT"},
@@ -141,7 +135,8 @@ bool Stream::Connection::open() {
                        {"token", s_.opts_.client.token},
                        {"caps", json::Object{{"client", "rcan-client"}}}};
   last_send_ = mono_ms();
-  if (!send_text(json::dump(json::Value(connect)))) return fail("CONNECTION_FAILED", "could not send CONNECT");
+  if (!send_text(json::dump(json::Value(connect))))
+    return fail("CONNECTION_FAILED", "could not send CONNECT");
   ack_deadline_ = mono_ms() + 10000;
   return true;
 }
@@ -210,11 +205,14 @@ bool Stream::Connection::handle_buffered_frames() {
 }
 
 void Stream::Connection::handle_close(const std::string& payload) {
-  int code = payload.size() >= 2 ? (static_cast<uint8_t>(payload[0]) << 8) | static_cast<uint8_t>(payload[1]) : 1005;
+  int code = payload.size() >= 2
+                 ? (static_cast<uint8_t>(payload[0]) << 8) | static_cast<uint8_t>(payload[1])
+                 : 1005;
   std::string reason = payload.size() > 2 ? payload.substr(2) : "";
   send_control(8, payload.substr(0, 2));
-  end_.error = net::transport_error("CONNECTION_CLOSED", "closed by the node: " + std::to_string(code) +
-                                                             (reason.empty() ? "" : " " + reason));
+  end_.error =
+      net::transport_error("CONNECTION_CLOSED", "closed by the node: " + std::to_string(code) +
+                                                    (reason.empty() ? "" : " " + reason));
   // 4001 ConnectionRefused / 4002 AuthExpired / 1008 policy: retrying cannot help.
   if (code == 4001 || code == 4002 || code == 1008) end_.refused = !end_.connected || code == 4002;
   if (code == 4001 || code == 4002) {
@@ -232,20 +230,25 @@ bool Stream::Connection::handle_message(const json::Value& v) {
       s_.connected_.store(true);
       {
         std::lock_guard<std::mutex> lock(s_.mu_);
-        if (const json::Value* sid = v.get("session_id"); sid && sid->is_string()) s_.session_id_ = sid->as_string();
+        if (const json::Value* sid = v.get("session_id"); sid && sid->is_string())
+          s_.session_id_ = sid->as_string();
       }
       failures_ = 0;
       if (s_.opts_.on_state) s_.opts_.on_state("connected");
       if (s_.opts_.on_message) s_.opts_.on_message(v);
       if (s_.opts_.telemetry_hz > 0) {
-        json::Object sub{{"type", "SUBSCRIBE"}, {"topics", json::Array{"telemetry"}}, {"hz", s_.opts_.telemetry_hz}};
+        json::Object sub{{"type", "SUBSCRIBE"},
+                         {"topics", json::Array{"telemetry"}},
+                         {"hz", s_.opts_.telemetry_hz}};
         send_text(json::dump(json::Value(sub)));
       }
       if (s_.wake_fd_[1] >= 0) (void)!::write(s_.wake_fd_[1], "x", 1);  // flush the outbox
     } else if (t == "ERROR") {
       end_.error = error_from_response(401, json::dump(v));
-      if (const json::Value* n = v.get("name"); n && n->is_string()) end_.error.code = n->as_string();
-      if (const json::Value* m = v.get("message"); m && m->is_string()) end_.error.message = m->as_string();
+      if (const json::Value* n = v.get("name"); n && n->is_string())
+        end_.error.code = n->as_string();
+      if (const json::Value* m = v.get("message"); m && m->is_string())
+        end_.error.message = m->as_string();
       end_.error.http_status = 401;  // refused by the node (not a transport failure)
       end_.refused = true;
       return false;
@@ -275,7 +278,8 @@ bool Stream::Connection::handle_timers(int64_t now) {
 }
 
 bool Stream::Connection::wait_and_flush(int64_t now, bool& readable) {
-  int64_t wait = end_.connected ? s_.opts_.ping_interval_ms - (now - last_send_) : ack_deadline_ - now;
+  int64_t wait =
+      end_.connected ? s_.opts_.ping_interval_ms - (now - last_send_) : ack_deadline_ - now;
   if (pong_deadline_) wait = std::min(wait, pong_deadline_ - now);
   wait = std::max<int64_t>(1, std::min<int64_t>(wait, 1000));
   readable = conn_.pending();
@@ -299,7 +303,8 @@ bool Stream::Connection::wait_and_flush(int64_t now, bool& readable) {
   for (size_t i = 0; i < out.size(); ++i) {
     if (!send_text(out[i])) {
       std::lock_guard<std::mutex> lock(s_.mu_);
-      s_.outbox_.insert(s_.outbox_.begin(), out.begin() + static_cast<std::ptrdiff_t>(i), out.end());
+      s_.outbox_.insert(s_.outbox_.begin(), out.begin() + static_cast<std::ptrdiff_t>(i),
+                        out.end());
       return fail("CONNECTION_FAILED", "send failed");
     }
     last_send_ = mono_ms();
@@ -338,7 +343,8 @@ ClientError Stream::run() {
       int64_t left = until - mono_ms();
       if (left <= 0) break;
       pollfd p{wake_fd_[0], POLLIN, 0};
-      if (::poll(&p, wake_fd_[0] >= 0 ? 1 : 0, static_cast<int>(std::min<int64_t>(left, 1000))) > 0) {
+      if (::poll(&p, wake_fd_[0] >= 0 ? 1 : 0, static_cast<int>(std::min<int64_t>(left, 1000))) >
+          0) {
         char drain[64];
         while (::read(wake_fd_[0], drain, sizeof drain) > 0) {
         }

@@ -18,7 +18,8 @@ std::string lower(std::string_view s) {
 
 std::string_view trim(std::string_view s) {
   while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
-  while (!s.empty() && (s.back() == ' ' || s.back() == '\t' || s.back() == '\r')) s.remove_suffix(1);
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\t' || s.back() == '\r'))
+    s.remove_suffix(1);
   return s;
 }
 
@@ -27,10 +28,14 @@ bool parse_size(std::string_view s, int base, uint64_t& out) {
   uint64_t v = 0;
   for (char c : s) {
     int d;
-    if (c >= '0' && c <= '9') d = c - '0';
-    else if (base == 16 && c >= 'a' && c <= 'f') d = c - 'a' + 10;
-    else if (base == 16 && c >= 'A' && c <= 'F') d = c - 'A' + 10;
-    else return false;
+    if (c >= '0' && c <= '9')
+      d = c - '0';
+    else if (base == 16 && c >= 'a' && c <= 'f')
+      d = c - 'a' + 10;
+    else if (base == 16 && c >= 'A' && c <= 'F')
+      d = c - 'A' + 10;
+    else
+      return false;
     v = v * static_cast<uint64_t>(base) + static_cast<uint64_t>(d);
   }
   out = v;
@@ -38,7 +43,8 @@ bool parse_size(std::string_view s, int base, uint64_t& out) {
 }
 
 // Decodes a chunked body starting at `pos`. kComplete sets `end` past the trailer.
-Parse dechunk(std::string_view buf, size_t pos, std::string& body, size_t& end, std::string& error, size_t max_body) {
+Parse dechunk(std::string_view buf, size_t pos, std::string& body, size_t& end, std::string& error,
+              size_t max_body) {
   body.clear();
   while (true) {
     size_t eol = buf.find("\r\n", pos);
@@ -90,8 +96,8 @@ Parse dechunk(std::string_view buf, size_t pos, std::string& body, size_t& end, 
 
 }  // namespace
 
-Parse parse_response(std::string_view buf, bool eof, ParsedResponse& out, size_t& consumed, std::string& error,
-                     size_t max_body) {
+Parse parse_response(std::string_view buf, bool eof, ParsedResponse& out, size_t& consumed,
+                     std::string& error, size_t max_body) {
   size_t start = 0;
   while (true) {
     size_t head_end = buf.find("\r\n\r\n", start);
@@ -101,7 +107,8 @@ Parse parse_response(std::string_view buf, bool eof, ParsedResponse& out, size_t
         return Parse::kError;
       }
       if (eof) {
-        error = buf.size() == start ? "connection closed without an answer" : "truncated response header";
+        error = buf.size() == start ? "connection closed without an answer"
+                                    : "truncated response header";
         return Parse::kError;
       }
       return Parse::kIncomplete;
@@ -128,14 +135,16 @@ Parse parse_response(std::string_view buf, bool eof, ParsedResponse& out, size_t
     size_t pos = line_end == std::string_view::npos ? head.size() : line_end + 2;
     while (pos < head.size()) {
       size_t e = head.find("\r\n", pos);
-      std::string_view line = head.substr(pos, e == std::string_view::npos ? std::string_view::npos : e - pos);
+      std::string_view line =
+          head.substr(pos, e == std::string_view::npos ? std::string_view::npos : e - pos);
       pos = e == std::string_view::npos ? head.size() : e + 2;
       size_t colon = line.find(':');
       if (colon == std::string_view::npos || colon == 0) {
         error = "malformed header field";
         return Parse::kError;
       }
-      out.headers.emplace_back(lower(line.substr(0, colon)), std::string(trim(line.substr(colon + 1))));
+      out.headers.emplace_back(lower(line.substr(0, colon)),
+                               std::string(trim(line.substr(colon + 1))));
     }
     size_t body_start = head_end + 4;
     if (code >= 100 && code < 200 && code != 101) {  // interim: skip it
@@ -210,14 +219,17 @@ std::string ws_frame(uint8_t opcode, std::string_view payload, const uint8_t mas
     f.push_back(static_cast<char>(n & 0xff));
   } else {
     f.push_back(static_cast<char>(0x80 | 127));
-    for (int i = 7; i >= 0; --i) f.push_back(static_cast<char>((static_cast<uint64_t>(n) >> (8 * i)) & 0xff));
+    for (int i = 7; i >= 0; --i)
+      f.push_back(static_cast<char>((static_cast<uint64_t>(n) >> (8 * i)) & 0xff));
   }
   f.append(reinterpret_cast<const char*>(mask), 4);
-  for (size_t i = 0; i < n; ++i) f.push_back(static_cast<char>(payload[i] ^ static_cast<char>(mask[i % 4])));
+  for (size_t i = 0; i < n; ++i)
+    f.push_back(static_cast<char>(payload[i] ^ static_cast<char>(mask[i % 4])));
   return f;
 }
 
-Parse ws_parse(std::string_view buf, WsFrame& out, size_t& consumed, std::string& error, size_t max_payload) {
+Parse ws_parse(std::string_view buf, WsFrame& out, size_t& consumed, std::string& error,
+               size_t max_payload) {
   if (buf.size() < 2) return Parse::kIncomplete;
   auto b0 = static_cast<uint8_t>(buf[0]);
   auto b1 = static_cast<uint8_t>(buf[1]);
@@ -245,7 +257,8 @@ Parse ws_parse(std::string_view buf, WsFrame& out, size_t& consumed, std::string
   } else if (len == 127) {
     if (buf.size() < 10) return Parse::kIncomplete;
     len = 0;
-    for (int i = 0; i < 8; ++i) len = (len << 8) | static_cast<uint8_t>(buf[2 + static_cast<size_t>(i)]);
+    for (int i = 0; i < 8; ++i)
+      len = (len << 8) | static_cast<uint8_t>(buf[2 + static_cast<size_t>(i)]);
     pos = 10;
     if (len >> 63) {
       error = "bad frame length";
@@ -271,7 +284,8 @@ Parse ws_parse(std::string_view buf, WsFrame& out, size_t& consumed, std::string
   out.opcode = opcode;
   out.payload.assign(buf.substr(pos, len));
   if (masked)
-    for (size_t i = 0; i < out.payload.size(); ++i) out.payload[i] = static_cast<char>(out.payload[i] ^ static_cast<char>(mask[i % 4]));
+    for (size_t i = 0; i < out.payload.size(); ++i)
+      out.payload[i] = static_cast<char>(out.payload[i] ^ static_cast<char>(mask[i % 4]));
   consumed = pos + len;
   return Parse::kComplete;
 }

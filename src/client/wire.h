@@ -24,8 +24,8 @@ enum class Parse { kIncomplete, kComplete, kError };
 // Parses one HTTP/1.1 response from the start of `buf`. `eof` says the peer has closed
 // (a response without Content-Length or chunking ends there). On kComplete `consumed` is
 // the number of bytes used; on kError `error` says why. 1xx interim responses are skipped.
-Parse parse_response(std::string_view buf, bool eof, ParsedResponse& out, size_t& consumed, std::string& error,
-                     size_t max_body = kMaxBodyBytes);
+Parse parse_response(std::string_view buf, bool eof, ParsedResponse& out, size_t& consumed,
+                     std::string& error, size_t max_body = kMaxBodyBytes);
 
 // A masked client frame (FIN set) carrying `payload`.
 std::string ws_frame(uint8_t opcode, std::string_view payload, const uint8_t mask[4]);

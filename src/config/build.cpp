@@ -1,8 +1,6 @@
 // Pass 2 of config loading: build() maps the typed tree onto NodeConfig, one step per block.
 // The steps run in a fixed order: a later step may read what an earlier one set, and the
 // order decides which error a file with several faults reports first.
-#include "config/config_internal.h"
-
 #include <algorithm>
 #include <cctype>
 #include <cmath>
@@ -10,6 +8,7 @@
 #include <set>
 
 #include "base/http_client.h"
+#include "config/config_internal.h"
 
 namespace rcan::config::internal {
 namespace {
@@ -49,7 +48,8 @@ void build_identity(const At& root, const ConfigOptions& opts, NodeConfig& c) {
   At ver = root["rcan_version"];
   if (!ver) fail("rcan_version", "required key is missing", "missing_key");
   if (!version_ok(ver.str()))
-    fail(ver.path, "expected a version like \"1.2\" or \"1.3.0\", got \"" + printable(ver.str()) + "\"",
+    fail(ver.path,
+         "expected a version like \"1.2\" or \"1.3.0\", got \"" + printable(ver.str()) + "\"",
          "invalid_value");
   c.rcan_version = ver.str();
 
@@ -70,8 +70,9 @@ void build_identity(const At& root, const ConfigOptions& opts, NodeConfig& c) {
            "or UUID",
            "invalid_value");
     if (!is_hex_id(opts.device_id))
-      fail(id_at.path, "the device id substituted for {device_id} must be 8 lower-case hex "
-                       "digits or a lower-case UUID",
+      fail(id_at.path,
+           "the device id substituted for {device_id} must be 8 lower-case hex "
+           "digits or a lower-case UUID",
            "invalid_value");
     ruri_text.replace(p, std::string_view("{device_id}").size(), opts.device_id);
   }
@@ -125,8 +126,10 @@ void build_robot(const At& root, NodeConfig& c) {
   pick(robot["model"], meta["model"], c.robot.model);
   pick(robot["description"], meta["description"], c.robot.description);
   c.robot.type = robot["type"] ? robot["type"].str() : root["physics"]["type"].str();
-  if (At d = robot["dof"]) c.robot.dof = d.u32(0);
-  else if (At pd = root["physics"]["dof"]) c.robot.dof = pd.u32(0);
+  if (At d = robot["dof"])
+    c.robot.dof = d.u32(0);
+  else if (At pd = root["physics"]["dof"])
+    c.robot.dof = pd.u32(0);
   c.robot.payload_kg = robot["payload_kg"].opt_num();
   c.robot.reach_mm = robot["reach_mm"].opt_num();
   c.robot.serial_pattern = robot["serial_pattern"].str();
@@ -157,7 +160,8 @@ void build_capabilities(const At& root, NodeConfig& c) {
     return out;
   };
   if (caps.is_array() && proto_caps)
-    fail(proto_caps.path, "capabilities are given twice (capabilities and rcan_protocol.capabilities)",
+    fail(proto_caps.path,
+         "capabilities are given twice (capabilities and rcan_protocol.capabilities)",
          "invalid_value");
   if (caps.is_array()) {
     c.capabilities = check_caps(caps);
@@ -207,8 +211,8 @@ void build_node_and_server(const At& root, const ConfigOptions& opts, NodeConfig
   c.server.io_threads = server["io_threads"].u32(2);
   same_or_fail(server["enable_mdns"], server["enable_mdns"].flag(false), proto["enable_mdns"],
                proto["enable_mdns"].flag(false));
-  c.server.enable_mdns = server["enable_mdns"] ? server["enable_mdns"].flag(false)
-                                                : proto["enable_mdns"].flag(false);
+  c.server.enable_mdns =
+      server["enable_mdns"] ? server["enable_mdns"].flag(false) : proto["enable_mdns"].flag(false);
   At tls = server["tls"];
   c.server.tls.enabled = tls["enabled"].flag(false);
   c.server.tls.cert_file = resolve_path(tls["cert_file"].str(), base);
@@ -249,13 +253,15 @@ void build_security(const At& root, const std::string& base, NodeConfig& c) {
   }
   if (sec["key_dir"] && sec["key_dir"].str().empty())
     fail(sec["key_dir"].path, "must not be empty", "invalid_value");
-  if (aud["dir"] && aud["dir"].str().empty()) fail(aud["dir"].path, "must not be empty", "invalid_value");
+  if (aud["dir"] && aud["dir"].str().empty())
+    fail(aud["dir"].path, "must not be empty", "invalid_value");
   if (aud["chain_secret_file"] && aud["chain_secret_file"].str().empty())
     fail(aud["chain_secret_file"].path, "must not be empty", "invalid_value");
   c.security.audit.sync_policy = aud["sync"].str("per_group") == "interval"
                                      ? audit::SyncPolicy::kInterval
                                      : audit::SyncPolicy::kPerGroup;
-  c.security.audit.sync_interval_ms = aud["sync_interval_ms"].u32(c.security.audit.sync_interval_ms);
+  c.security.audit.sync_interval_ms =
+      aud["sync_interval_ms"].u32(c.security.audit.sync_interval_ms);
   c.security.audit.max_segment_bytes =
       aud["max_segment_bytes"].u64(c.security.audit.max_segment_bytes);
   c.security.audit.retention_max_bytes = aud["retention"]["max_bytes"].u64(0);
@@ -380,7 +386,8 @@ void build_agent_and_brain(const At& root, NodeConfig& c) {
   c.agent.min_obstacle_m = mo_a ? mo_a.opt_num() : mo_r.opt_num();
   for (const char* k : {"confidence_gates", "hitl_gates"}) {
     if (agent[k] && brain[k])
-      fail(brain[k].path, std::string("gates are given twice (agent.") + k + " and brain." + k + ")",
+      fail(brain[k].path,
+           std::string("gates are given twice (agent.") + k + " and brain." + k + ")",
            "invalid_value");
   }
   c.agent.confidence_gates = build_confidence_gates(
@@ -403,12 +410,11 @@ void build_agent_and_brain(const At& root, NodeConfig& c) {
 void build_safety(const At& root, NodeConfig& c) {
   At s = root["safety"];
   if (At lsw = s["local_safety_wins"]; lsw && !lsw.flag(true))
-    fail(lsw.path, "must be true: local safety always wins over network commands",
-         "invalid_value");
+    fail(lsw.path, "must be true: local safety always wins over network commands", "invalid_value");
   same_or_fail(s["max_linear_speed_mps"], s["max_linear_speed_mps"].num(), s["max_linear_x"],
                s["max_linear_x"].num());
-  same_or_fail(s["max_angular_speed_radps"], s["max_angular_speed_radps"].num(),
-               s["max_angular_z"], s["max_angular_z"].num());
+  same_or_fail(s["max_angular_speed_radps"], s["max_angular_speed_radps"].num(), s["max_angular_z"],
+               s["max_angular_z"].num());
   SafetyConfig& sf = c.safety;
   sf.max_linear_speed_mps = s["max_linear_speed_mps"]
                                 ? s["max_linear_speed_mps"].num()
@@ -421,8 +427,10 @@ void build_safety(const At& root, NodeConfig& c) {
       std::fabs(s["emergency_stop_distance"].num() * 1000.0 - s["estop_distance_mm"].num()) > 1e-6)
     fail(s["estop_distance_mm"].path, "conflicts with safety.emergency_stop_distance (give one)",
          "invalid_value");
-  if (s["emergency_stop_distance"]) sf.estop_distance_m = s["emergency_stop_distance"].num();
-  else if (s["estop_distance_mm"]) sf.estop_distance_m = s["estop_distance_mm"].num() / 1000.0;
+  if (s["emergency_stop_distance"])
+    sf.estop_distance_m = s["emergency_stop_distance"].num();
+  else if (s["estop_distance_mm"])
+    sf.estop_distance_m = s["estop_distance_mm"].num() / 1000.0;
   sf.collision_monitor_stop_m = s["collision_monitor_stop_m"].opt_num();
   sf.collision_monitor_slowdown_m = s["collision_monitor_slowdown_m"].opt_num();
   if (sf.collision_monitor_stop_m && sf.collision_monitor_slowdown_m &&

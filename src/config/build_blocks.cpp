@@ -1,7 +1,5 @@
 // Pass 2 helpers shared by build.cpp's steps: path resolution, rate and duration formats,
 // gates and layers, derived capabilities and paths, and the fleet and transport blocks.
-#include "config/config_internal.h"
-
 #include <algorithm>
 #include <cctype>
 #include <cstdlib>
@@ -9,6 +7,7 @@
 #include <regex>
 #include <unordered_map>
 
+#include "config/config_internal.h"
 #include "rcan/mqtt_topics.h"
 #include "transport/mqtt_client.h"
 
@@ -42,10 +41,14 @@ RateSpec parse_rate(const At& a, RateSpec def) {
   std::transform(unit.begin(), unit.end(), unit.begin(),
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   uint32_t window = 0;
-  if (is_one_of(unit, {"s", "sec", "second"})) window = 1;
-  else if (is_one_of(unit, {"m", "min", "minute"})) window = 60;
-  else if (is_one_of(unit, {"h", "hr", "hour"})) window = 3600;
-  else if (is_one_of(unit, {"d", "day"})) window = 86400;
+  if (is_one_of(unit, {"s", "sec", "second"}))
+    window = 1;
+  else if (is_one_of(unit, {"m", "min", "minute"}))
+    window = 60;
+  else if (is_one_of(unit, {"h", "hr", "hour"}))
+    window = 3600;
+  else if (is_one_of(unit, {"d", "day"}))
+    window = 86400;
   else
     fail(a.path, "unknown rate unit \"" + printable(unit) + "\" (second, minute, hour, day)",
          "invalid_value");
@@ -62,8 +65,8 @@ uint32_t parse_duration_s(const At& a, uint32_t def) {
   size_t pos = 0;
   bool any = false;
   auto bad = [&] {
-    fail(a.path, "expected a duration like \"15min\", \"900s\" or \"1h30m\", got \"" +
-                     printable(s) + "\"",
+    fail(a.path,
+         "expected a duration like \"15min\", \"900s\" or \"1h30m\", got \"" + printable(s) + "\"",
          "invalid_value");
   };
   while (pos < s.size()) {
@@ -77,11 +80,16 @@ uint32_t parse_duration_s(const At& a, uint32_t def) {
     std::transform(unit.begin(), unit.end(), unit.begin(),
                    [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
     uint64_t mult = 0;
-    if (is_one_of(unit, {"s", "sec", "secs", "second", "seconds"})) mult = 1;
-    else if (is_one_of(unit, {"m", "min", "mins", "minute", "minutes"})) mult = 60;
-    else if (is_one_of(unit, {"h", "hr", "hrs", "hour", "hours"})) mult = 3600;
-    else if (is_one_of(unit, {"d", "day", "days"})) mult = 86400;
-    else bad();
+    if (is_one_of(unit, {"s", "sec", "secs", "second", "seconds"}))
+      mult = 1;
+    else if (is_one_of(unit, {"m", "min", "mins", "minute", "minutes"}))
+      mult = 60;
+    else if (is_one_of(unit, {"h", "hr", "hrs", "hour", "hours"}))
+      mult = 3600;
+    else if (is_one_of(unit, {"d", "day", "days"}))
+      mult = 86400;
+    else
+      bad();
     total += std::stoull(m[1].str()) * mult;
     if (total > 31'536'000) fail(a.path, "duration longer than a year", "out_of_range");
     pos += static_cast<size_t>(m.length(0));
@@ -101,7 +109,8 @@ std::vector<ConfidenceGate> build_confidence_gates(const At& a) {
     static const std::regex scope_re(R"(^[a-z][a-z0-9_.:-]*$)");
     if (!std::regex_match(gate.scope, scope_re))
       fail(g["scope"].path,
-           "invalid scope \"" + printable(gate.scope) + "\" (lower-case name like control, nav, admin)",
+           "invalid scope \"" + printable(gate.scope) +
+               "\" (lower-case name like control, nav, admin)",
            "invalid_value");
     auto [it, inserted] = scope_at.emplace(gate.scope, g.path);
     if (!inserted)
@@ -126,8 +135,10 @@ std::vector<HitlGate> build_hitl_gates(const At& a) {
     if (g["action_types"] && g["action_type"])
       fail(g["action_type"].path, "give either action_types or action_type, not both",
            "invalid_value");
-    if (g["action_type"]) gate.action_types.push_back(g["action_type"].str());
-    else gate.action_types = g["action_types"].strs();
+    if (g["action_type"])
+      gate.action_types.push_back(g["action_type"].str());
+    else
+      gate.action_types = g["action_types"].strs();
     gate.require_auth = g["require_auth"].flag(true);
     if (gate.require_auth && gate.action_types.empty())
       fail(g["action_types"].path, "a gate with require_auth needs at least one action type",
@@ -137,20 +148,20 @@ std::vector<HitlGate> build_hitl_gates(const At& a) {
         fail(g["action_types"][j].path, "empty action type", "invalid_value");
     }
     gate.auth_timeout_ms = g["auth_timeout_ms"].u32(30000);
-    gate.on_timeout = g["on_timeout"].str("block") == "allow" ? HitlOnTimeout::kAllow
-                                                               : HitlOnTimeout::kBlock;
+    gate.on_timeout =
+        g["on_timeout"].str("block") == "allow" ? HitlOnTimeout::kAllow : HitlOnTimeout::kBlock;
     gate.notify = g["notify"].strs();
     if (At roles = g["authorized_roles"]) {
       gate.authorized_roles.clear();
       for (size_t j = 0; j < roles.size(); ++j) {
         std::string name = roles[j].str();
         std::optional<Role> r = role_from_name(name);
-        if (!r)
-          fail(roles[j].path, "unknown role \"" + printable(name) + "\"", "invalid_value");
+        if (!r) fail(roles[j].path, "unknown role \"" + printable(name) + "\"", "invalid_value");
         if (*r != Role::kOwner && *r != Role::kCreator)
           fail(roles[j].path,
                "HiTL approval needs OWNER or CREATOR (seed §16.4); authorized_roles may only "
-               "narrow that set, not add " + std::string(role_name(*r)),
+               "narrow that set, not add " +
+                   std::string(role_name(*r)),
                "invalid_value");
         if (std::find(gate.authorized_roles.begin(), gate.authorized_roles.end(), *r) ==
             gate.authorized_roles.end())
@@ -212,8 +223,8 @@ void parse_fleet_blocks(const At& root, const std::string& base, NodeConfig& c) 
     fail(mq["client_id"].path, "expected 1-128 characters of [A-Za-z0-9._-]", "invalid_value");
   c.mqtt.topic_prefix = mq["topic_prefix"].str(c.mqtt.topic_prefix);
   if (!mqtt::valid_topic_prefix(c.mqtt.topic_prefix))
-    fail(mq["topic_prefix"].path, "expected '/'-separated segments of [A-Za-z0-9._-] (no wildcards)",
-         "invalid_value");
+    fail(mq["topic_prefix"].path,
+         "expected '/'-separated segments of [A-Za-z0-9._-] (no wildcards)", "invalid_value");
   c.mqtt.keepalive_s = mq["keepalive_s"].u32(c.mqtt.keepalive_s);
   c.mqtt.username = mq["username"].str();
   c.mqtt.password_file = resolve_path(mq["password_file"].str(), base);
@@ -234,22 +245,27 @@ void parse_fleet_blocks(const At& root, const std::string& base, NodeConfig& c) 
 
   auto segment = [](const At& at) {
     if (at && !mqtt::valid_topic_segment(at.str()))
-      fail(at.path, "expected 1-128 characters of [A-Za-z0-9._-], got \"" + printable(at.str()) + "\"",
+      fail(at.path,
+           "expected 1-128 characters of [A-Za-z0-9._-], got \"" + printable(at.str()) + "\"",
            "invalid_value");
   };
   auto segments = [&](const At& list) {
     for (size_t i = 0; i < list.size(); ++i) segment(list[i]);
   };
   if (At fl = root["fleet"]) {
-    if (!c.mqtt.enabled) fail(fl.path, "a fleet needs the MQTT transport (mqtt.enabled: true)", "invalid_value");
+    if (!c.mqtt.enabled)
+      fail(fl.path, "a fleet needs the MQTT transport (mqtt.enabled: true)", "invalid_value");
     segment(fl["fleet_id"]);
     segments(fl["robots"]);
     segment(fl["member_id"]);
     c.fleet.fleet_id = fl["fleet_id"].str();
     c.fleet.robots = fl["robots"].strs();
     c.fleet.member_id = fl["member_id"].str(c.ruri_parts.device_id);
-    if (std::find(c.fleet.robots.begin(), c.fleet.robots.end(), c.fleet.member_id) == c.fleet.robots.end())
-      fail(fl["robots"].path, "must list this robot (\"" + printable(c.fleet.member_id) + "\", fleet.member_id or the RURI device id)",
+    if (std::find(c.fleet.robots.begin(), c.fleet.robots.end(), c.fleet.member_id) ==
+        c.fleet.robots.end())
+      fail(fl["robots"].path,
+           "must list this robot (\"" + printable(c.fleet.member_id) +
+               "\", fleet.member_id or the RURI device id)",
            "invalid_value");
     c.fleet.access_mode = fl["access_mode"].str(c.fleet.access_mode);
     c.fleet.broadcast = fl["commands"]["broadcast"].flag(true);
@@ -258,27 +274,33 @@ void parse_fleet_blocks(const At& root, const std::string& base, NodeConfig& c) 
   }
   At sw = root["swarm"];
   if (At id = sw["swarm_id"]) {
-    if (!c.mqtt.enabled) fail(id.path, "a swarm needs the MQTT transport (mqtt.enabled: true)", "invalid_value");
+    if (!c.mqtt.enabled)
+      fail(id.path, "a swarm needs the MQTT transport (mqtt.enabled: true)", "invalid_value");
     segment(id);
     segments(sw["members"]);
     segment(sw["member_id"]);
     segment(sw["leader"]);
     c.swarm.swarm_id = id.str();
     c.swarm.members = sw["members"].strs();
-    c.swarm.member_id = sw["member_id"].str(c.fleet.member_id.empty() ? c.ruri_parts.device_id : c.fleet.member_id);
-    if (std::find(c.swarm.members.begin(), c.swarm.members.end(), c.swarm.member_id) == c.swarm.members.end())
+    c.swarm.member_id =
+        sw["member_id"].str(c.fleet.member_id.empty() ? c.ruri_parts.device_id : c.fleet.member_id);
+    if (std::find(c.swarm.members.begin(), c.swarm.members.end(), c.swarm.member_id) ==
+        c.swarm.members.end())
       c.swarm.members.push_back(c.swarm.member_id);
     std::sort(c.swarm.members.begin(), c.swarm.members.end());
-    c.swarm.members.erase(std::unique(c.swarm.members.begin(), c.swarm.members.end()), c.swarm.members.end());
+    c.swarm.members.erase(std::unique(c.swarm.members.begin(), c.swarm.members.end()),
+                          c.swarm.members.end());
     c.swarm.leader = sw["leader"].str(c.swarm.members.front());
-    if (std::find(c.swarm.members.begin(), c.swarm.members.end(), c.swarm.leader) == c.swarm.members.end())
+    if (std::find(c.swarm.members.begin(), c.swarm.members.end(), c.swarm.leader) ==
+        c.swarm.members.end())
       fail(sw["leader"].path, "the leader must be one of swarm.members", "invalid_value");
     c.swarm.formation = sw["formation"].str(c.swarm.formation);
     c.swarm.join_policy = sw["join_policy"].str(c.swarm.join_policy);
     c.swarm.heartbeat_ms = sw["heartbeat_ms"].u32(c.swarm.heartbeat_ms);
     c.swarm.leader_timeout_ms = sw["leader_timeout_ms"].u32(c.swarm.leader_timeout_ms);
     if (c.swarm.leader_timeout_ms < 2 * c.swarm.heartbeat_ms)
-      fail(sw["leader_timeout_ms"].path, "must be at least twice swarm.heartbeat_ms", "out_of_range");
+      fail(sw["leader_timeout_ms"].path, "must be at least twice swarm.heartbeat_ms",
+           "out_of_range");
   }
 }
 
@@ -314,9 +336,11 @@ void build_transports(const At& root, NodeConfig& c, const std::string& base) {
   c.udp.discovery = u["discovery"].flag(true);
   c.udp.discovery_per_source_per_min = u["discovery_per_source_per_min"].u32(30);
   if (c.udp.enabled && !c.udp.heartbeat && !c.udp.discovery)
-    fail(u["enabled"].path, "udp is enabled but both heartbeat and discovery are off", "invalid_value");
+    fail(u["enabled"].path, "udp is enabled but both heartbeat and discovery are off",
+         "invalid_value");
   if (c.grpc.enabled && c.grpc.port != 0 && c.grpc.port == c.server.port)
-    fail(g["port"].path, "must differ from server.port (" + std::to_string(c.server.port) + ")", "invalid_value");
+    fail(g["port"].path, "must differ from server.port (" + std::to_string(c.server.port) + ")",
+         "invalid_value");
 }
 
 }  // namespace rcan::config::internal

@@ -39,11 +39,16 @@ GuestLimits GuestLimitsConfig::to_guest_limits() const {
 
 uint32_t RateLimits::for_role(Role r) const {
   switch (r) {
-    case Role::kGuest: return guest;
-    case Role::kUser: return user;
-    case Role::kLeasee: return leasee;
-    case Role::kOwner: return owner;
-    case Role::kCreator: return creator;
+    case Role::kGuest:
+      return guest;
+    case Role::kUser:
+      return user;
+    case Role::kLeasee:
+      return leasee;
+    case Role::kOwner:
+      return owner;
+    case Role::kCreator:
+      return creator;
   }
   return guest;
 }
@@ -75,9 +80,12 @@ std::string_view limit_policy_name(LimitPolicy p) {
 }
 std::string_view gate_on_fail_name(GateOnFail f) {
   switch (f) {
-    case GateOnFail::kBlock: return "block";
-    case GateOnFail::kEscalate: return "escalate";
-    case GateOnFail::kAllow: return "allow";
+    case GateOnFail::kBlock:
+      return "block";
+    case GateOnFail::kEscalate:
+      return "escalate";
+    case GateOnFail::kAllow:
+      return "allow";
   }
   return "block";
 }
@@ -87,8 +95,9 @@ std::string_view hitl_on_timeout_name(HitlOnTimeout t) {
 
 Result<NodeConfig> parse_config_text(std::string_view yaml, const ConfigOptions& opts) {
   if (yaml.size() > kMaxConfigBytes)
-    return internal::make_error("", "config file too large: " + std::to_string(yaml.size()) +
-                                        " bytes (at most " + std::to_string(kMaxConfigBytes) + ")",
+    return internal::make_error("",
+                                "config file too large: " + std::to_string(yaml.size()) +
+                                    " bytes (at most " + std::to_string(kMaxConfigBytes) + ")",
                                 "too_large", "");
   if (yaml.find('\0') != std::string_view::npos)
     return internal::make_error("", "config file contains a NUL byte", "malformed_yaml", "");
@@ -252,9 +261,10 @@ Status apply_overrides(NodeConfig& cfg, std::optional<int> port,
   if (port) {
     // 0 asks the kernel for a free port (tests, several nodes on one host); the node logs it.
     if (*port < 0 || *port > 65535)
-      return Error(ErrorCode::kSchemaValidationFailed,
-                   "--port: out of range: " + std::to_string(*port) + " (must be between 0 and 65535)",
-                   "server.port", "out_of_range");
+      return Error(
+          ErrorCode::kSchemaValidationFailed,
+          "--port: out of range: " + std::to_string(*port) + " (must be between 0 and 65535)",
+          "server.port", "out_of_range");
   }
   if (data_dir && data_dir->empty())
     return Error(ErrorCode::kSchemaValidationFailed, "--data-dir: must not be empty",

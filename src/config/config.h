@@ -60,10 +60,10 @@ struct ServerLimits {
 };
 
 struct ServerConfig {
-  uint16_t port = 8080;                     // server.port | rcan_protocol.port
-  std::string bind_address = "127.0.0.1";   // server.bind; "0.0.0.0" to expose on a robot
+  uint16_t port = 8080;                    // server.port | rcan_protocol.port
+  std::string bind_address = "127.0.0.1";  // server.bind; "0.0.0.0" to expose on a robot
   uint32_t io_threads = 2;
-  bool enable_mdns = false;                 // server.enable_mdns | rcan_protocol.enable_mdns
+  bool enable_mdns = false;  // server.enable_mdns | rcan_protocol.enable_mdns
   TlsConfig tls;
   ServerLimits limits;
 };
@@ -73,9 +73,9 @@ struct GrpcConfig {  // `grpc` (docs/CONFIG.md, docs/TRANSPORT.md §gRPC)
   uint16_t port = 8081;                    // 0 = any free port (logged)
   std::string bind_address = "127.0.0.1";  // grpc.bind
   TlsConfig tls;
-  std::string client_ca_file;              // grpc.tls.client_ca_file: require client certificates
+  std::string client_ca_file;  // grpc.tls.client_ca_file: require client certificates
   uint32_t max_streams = 64;
-  std::string module;                      // grpc.module: path of librcand_grpc.so (default: beside rcand)
+  std::string module;  // grpc.module: path of librcand_grpc.so (default: beside rcand)
 };
 
 struct UdpConfig {  // `udp` (docs/CONFIG.md, docs/TRANSPORT.md §UDP)
@@ -109,7 +109,7 @@ struct TrustedRobotKey {
 };
 
 struct InjectionPattern {
-  std::string text;    // case-insensitive substring, or an ECMAScript regex when `regex`
+  std::string text;  // case-insensitive substring, or an ECMAScript regex when `regex`
   bool regex = false;
 };
 
@@ -177,7 +177,8 @@ struct RateLimits {  // per principal per minute, 0 = unlimited (PROFILE §5)
 };
 
 struct RbacConfig {
-  RolePolicy policy;  // rbac.grants.{user_arm,user_record,leasee_training,leasee_diagnostics,owner_safety_config}
+  RolePolicy
+      policy;  // rbac.grants.{user_arm,user_record,leasee_training,leasee_diagnostics,owner_safety_config}
   RateLimits rate_limits;
   GuestLimitsConfig guest_limits;  // rbac.guest_limits | top-level guest_limits (seed shape)
 };
@@ -201,9 +202,9 @@ struct WatchdogConfig {  // top-level `watchdog` (profile schema)
 };
 
 struct SafetyConfig {
-  bool local_safety_wins = true;  // must be true when present
-  double max_linear_speed_mps = 0.5;     // max_linear_speed_mps | max_linear_x
-  double max_angular_speed_radps = 1.0;  // max_angular_speed_radps | max_angular_z
+  bool local_safety_wins = true;             // must be true when present
+  double max_linear_speed_mps = 0.5;         // max_linear_speed_mps | max_linear_x
+  double max_angular_speed_radps = 1.0;      // max_angular_speed_radps | max_angular_z
   std::optional<double> max_speed_override;  // 0..1, fraction applied on top of the caps
   std::optional<double> estop_distance_m;    // emergency_stop_distance (m) | estop_distance_mm
   std::optional<double> collision_monitor_stop_m;
@@ -232,7 +233,7 @@ struct SafetyConfig {
 };
 
 enum class GateOnFail { kBlock, kEscalate, kAllow };  // "log" is read as kAllow
-enum class HitlOnTimeout { kBlock, kAllow };         // "escalate" is read as kBlock
+enum class HitlOnTimeout { kBlock, kAllow };          // "escalate" is read as kBlock
 
 struct ConfidenceGate {
   std::string scope;  // control, nav, admin, observe, configure, safety, … (unique)
@@ -259,7 +260,7 @@ struct AgentConfig {
   std::string model;
   std::optional<uint32_t> latency_budget_ms;
   bool safety_stop = true;
-  std::optional<double> min_obstacle_m;  // agent.min_obstacle_m | reactive.min_obstacle_m
+  std::optional<double> min_obstacle_m;          // agent.min_obstacle_m | reactive.min_obstacle_m
   std::vector<ConfidenceGate> confidence_gates;  // agent.* | brain.* (alias)
   std::vector<HitlGate> hitl_gates;              // agent.* | brain.* (alias)
   std::optional<AgentLayer> reactive_layer;      // agent.layers.reactive
@@ -312,17 +313,17 @@ struct OfflineConfig {  // v1.5 `offline`
   uint32_t grace_period_s = 86400;
   uint32_t cross_owner_grace_s = 3600;
   uint32_t max_key_ttl_s = 86400;
-  std::string issuer_url;            // probed for reachability (seed §6.1); empty: off
+  std::string issuer_url;  // probed for reachability (seed §6.1); empty: off
   uint32_t issuer_poll_ms = 5000;
   uint32_t issuer_timeout_ms = 1000;
 };
 
-struct ControlConfig {  // this node's `control` block (docs/SESSIONS.md)
+struct ControlConfig {                // this node's `control` block (docs/SESSIONS.md)
   std::string fleet_policy = "role";  // role | fleet_wins | individual_wins
   uint32_t handoff_window_s = 30;
   uint32_t queue_max = 16;
   uint32_t queue_wait_s = 300;
-  uint32_t max_session_s = 0;  // caps every role's session TTL; 0 = the role TTLs
+  uint32_t max_session_s = 0;          // caps every role's session TTL; 0 = the role TTLs
   uint32_t transfer_window_s = 86400;  // seed §6.2: 24 h
   uint32_t consent_ttl_s = 86400;
   std::string consent_webhook;  // http:// URL; empty: stream only
@@ -350,7 +351,7 @@ struct NodeConfig {
   HardwareCapabilities hardware_capabilities;
   std::string channel_admin_scope;  // rcan_protocol.channel_admin_scope
 
-  std::string data_dir;         // node.data_dir, default default_data_dir()
+  std::string data_dir;            // node.data_dir, default default_data_dir()
   std::string log_level = "info";  // trace|debug|info|warn|error
   ServerConfig server;
   GrpcConfig grpc;
@@ -421,8 +422,9 @@ std::string_view default_config_yaml();
 // else the passwd home directory. Error when no home directory can be found.
 Result<std::string> default_data_dir();
 
-// `--port N` and `--data-dir D`. Port must be 0..65535 (0: any free port, logged at start). A new data_dir (made absolute)
-// moves key_dir, audit.dir and audit.chain_secret_file with it unless the file set them.
+// `--port N` and `--data-dir D`. Port must be 0..65535 (0: any free port, logged at start). A new
+// data_dir (made absolute) moves key_dir, audit.dir and audit.chain_secret_file with it unless the
+// file set them.
 Status apply_overrides(NodeConfig& cfg, std::optional<int> port,
                        std::optional<std::string> data_dir);
 

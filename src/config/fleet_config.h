@@ -15,38 +15,38 @@ struct MqttConfig {
   std::string topic_prefix = "rcan";
   uint32_t keepalive_s = 10;
   std::string username;
-  std::string password_file;                     // 0600; required with username
-  std::string ca_file;                           // required with mqtts://
-  std::string cert_file;                         // client certificate (with key_file)
+  std::string password_file;  // 0600; required with username
+  std::string ca_file;        // required with mqtts://
+  std::string cert_file;      // client certificate (with key_file)
   std::string key_file;
   uint32_t reconnect_min_s = 1;
   uint32_t reconnect_max_s = 30;
-  uint32_t telemetry_hz = 1;                     // 0 = no telemetry over MQTT
-  bool publish_audit = true;                     // audit records on the audit topic
+  uint32_t telemetry_hz = 1;  // 0 = no telemetry over MQTT
+  bool publish_audit = true;  // audit records on the audit topic
   // QoS of the robot's subscription to its fleet's estop topic (docs/FLEET.md): 1 acts on the
   // first PUBLISH that arrives; 2 only after the PUBREL round trip through the broker.
   int estop_qos = 1;
 };
 
 struct FleetConfig {
-  std::string fleet_id;                    // empty: the robot is in no fleet
-  std::string member_id;                   // this robot's name in `robots`; default the RURI device id
-  std::vector<std::string> robots;         // the members (seed §2.3)
-  std::string access_mode = "coordinated"; // coordinated | independent
-  bool broadcast = true;                   // commands.broadcast
-  bool individual = true;                  // commands.individual
-  bool choreographed = true;               // commands.choreographed
+  std::string fleet_id;             // empty: the robot is in no fleet
+  std::string member_id;            // this robot's name in `robots`; default the RURI device id
+  std::vector<std::string> robots;  // the members (seed §2.3)
+  std::string access_mode = "coordinated";  // coordinated | independent
+  bool broadcast = true;                    // commands.broadcast
+  bool individual = true;                   // commands.individual
+  bool choreographed = true;                // commands.choreographed
 };
 
-struct SwarmConfig {  // the seed §5.2 keys of `swarm` (the other keys stay in NodeConfig::kept)
-  std::string swarm_id;                    // empty: no swarm
-  std::string member_id;                   // default the fleet member id, else the device id
+struct SwarmConfig {     // the seed §5.2 keys of `swarm` (the other keys stay in NodeConfig::kept)
+  std::string swarm_id;  // empty: no swarm
+  std::string member_id;  // default the fleet member id, else the device id
   std::vector<std::string> members;
-  std::string leader;                      // default: the first member in sorted order
+  std::string leader;  // default: the first member in sorted order
   std::string formation = "follow-leader";
-  std::string join_policy = "closed";      // open | approval | closed
+  std::string join_policy = "closed";  // open | approval | closed
   uint32_t heartbeat_ms = 500;
-  uint32_t leader_timeout_ms = 2000;       // a leader silent this long is replaced
+  uint32_t leader_timeout_ms = 2000;  // a leader silent this long is replaced
 };
 
 }  // namespace rcan::config

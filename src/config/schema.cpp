@@ -1,9 +1,9 @@
 // The `.rcan.yaml` schema: the Schema builders and config_schema(), every key of every block
 // in the order the validator lists them.
-#include "config/config_internal.h"
-
 #include <cstdio>
 #include <iterator>
+
+#include "config/config_internal.h"
 
 namespace rcan::config::internal {
 namespace {
@@ -38,8 +38,8 @@ SP Num(std::optional<double> lo = std::nullopt, std::optional<double> hi = std::
   s.min_exclusive = lo_exclusive;
   return make(std::move(s));
 }
-SP Pos() { return Num(0.0, std::nullopt, true); }    // > 0
-SP NonNeg() { return Num(0.0); }                      // ≥ 0
+SP Pos() { return Num(0.0, std::nullopt, true); }  // > 0
+SP NonNeg() { return Num(0.0); }                   // ≥ 0
 SP Bool() {
   Schema s;
   s.k = Schema::K::kBool;
@@ -104,10 +104,10 @@ SubSchemas sub_schemas() {
                          {"capabilities", StrList()},
                          {"blocked", StrList()}});
   SP policy = Enum({"clamp", "reject"});
-  SP agent_providers = Enum({"none", "local", "sim", "openai", "anthropic", "google", "mistral",
-                             "ollama", "openrouter", "huggingface", "llamacpp", "llama.cpp",
-                             "llama-cpp", "mlx", "mlx-lm", "vllm-mlx", "apple", "claude_oauth",
-                             "groq"});
+  SP agent_providers =
+      Enum({"none", "local", "sim", "openai", "anthropic", "google", "mistral", "ollama",
+            "openrouter", "huggingface", "llamacpp", "llama.cpp", "llama-cpp", "mlx", "mlx-lm",
+            "vllm-mlx", "apple", "claude_oauth", "groq"});
   SP channel = Free();  // OpenCastor channels carry provider-specific credentials keys
 
   return {.gates_c = gates_c,
@@ -161,37 +161,37 @@ Props identity_and_robot() {
 // `brain` and `agent`.
 Props brain_and_agent(const SubSchemas& sub) {
   return {
-      {"brain", Obj({{"provider", Enum({"openai", "anthropic", "google", "mistral", "local", "none"})},
-                     {"model", Str(256)},
-                     {"fast_brain", Str(256)},
-                     {"api_key_env", Str(256)},
-                     {"max_tokens", Int(1, 10'000'000)},
-                     {"temperature", Num(0.0, 2.0)},
-                     {"confidence_gates", sub.gates_c},
-                     {"hitl_gates", sub.gates_h}})},
-      {"agent", Obj({{"provider", sub.agent_providers},
-                     {"model", Str(256)},
-                     {"vision_enabled", Bool()},
-                     {"latency_budget_ms", Int(0, 600'000)},
-                     {"safety_stop", Bool()},
-                     {"api_key", Str()},
-                     {"base_url", Str()},
-                     {"agentic_vision", Bool()},
-                     {"tools", StrList()},
-                     {"secondary_models", Arr(Obj({{"provider", Str(128)},
-                                                   {"model", Str(256)},
-                                                   {"role", Str(128)}}))},
-                     {"prompt_caching", Bool()},
-                     {"cache_alert_threshold", Num(0.0, 1.0)},
-                     {"min_obstacle_m", NonNeg()},
-                     {"confidence_gates", sub.gates_c},
-                     {"hitl_gates", sub.gates_h},
-                     {"layers",
-                      Obj({{"reactive", sub.layer}, {"fast", sub.layer}, {"planner", sub.layer}})},
-                     {"runtimes", Arr(Obj({{"id", Str(128)},
-                                           {"harness", Str(128)},
-                                           {"default", Bool()},
-                                           {"models", StrList()}}))}})},
+      {"brain",
+       Obj({{"provider", Enum({"openai", "anthropic", "google", "mistral", "local", "none"})},
+            {"model", Str(256)},
+            {"fast_brain", Str(256)},
+            {"api_key_env", Str(256)},
+            {"max_tokens", Int(1, 10'000'000)},
+            {"temperature", Num(0.0, 2.0)},
+            {"confidence_gates", sub.gates_c},
+            {"hitl_gates", sub.gates_h}})},
+      {"agent",
+       Obj({{"provider", sub.agent_providers},
+            {"model", Str(256)},
+            {"vision_enabled", Bool()},
+            {"latency_budget_ms", Int(0, 600'000)},
+            {"safety_stop", Bool()},
+            {"api_key", Str()},
+            {"base_url", Str()},
+            {"agentic_vision", Bool()},
+            {"tools", StrList()},
+            {"secondary_models",
+             Arr(Obj({{"provider", Str(128)}, {"model", Str(256)}, {"role", Str(128)}}))},
+            {"prompt_caching", Bool()},
+            {"cache_alert_threshold", Num(0.0, 1.0)},
+            {"min_obstacle_m", NonNeg()},
+            {"confidence_gates", sub.gates_c},
+            {"hitl_gates", sub.gates_h},
+            {"layers", Obj({{"reactive", sub.layer}, {"fast", sub.layer}, {"planner", sub.layer}})},
+            {"runtimes", Arr(Obj({{"id", Str(128)},
+                                  {"harness", Str(128)},
+                                  {"default", Bool()},
+                                  {"models", StrList()}}))}})},
   };
 }
 
@@ -212,11 +212,14 @@ Props safety_blocks(const SubSchemas& sub) {
             {"obstacle_stop_cm", NonNeg()},
             {"estop_on_startup", Bool()},
             {"estop_clear_requires_presence", Bool()},
-            {"joint_limits", Arr(Obj({{"name", Str(64)}, {"min", Num()}, {"max", Num()}},
-                                     {"min", "max"}),
-                                 64)},
-            {"workspace", Obj({{"x_min", Num()}, {"x_max", Num()}, {"y_min", Num()},
-                               {"y_max", Num()}, {"z_min", Num()}, {"z_max", Num()}},
+            {"joint_limits",
+             Arr(Obj({{"name", Str(64)}, {"min", Num()}, {"max", Num()}}, {"min", "max"}), 64)},
+            {"workspace", Obj({{"x_min", Num()},
+                               {"x_max", Num()},
+                               {"y_min", Num()},
+                               {"y_max", Num()},
+                               {"z_min", Num()},
+                               {"z_max", Num()}},
                               {"x_min", "x_max", "y_min", "y_max"})},
             {"limit_policy", Either({sub.policy, Obj({{"speed", sub.policy},
                                                       {"joints", sub.policy},
@@ -270,27 +273,26 @@ Props profile_blocks(const SubSchemas& sub) {
                       {"rtde_port", Int(1, 65535)},
                       {"dashboard_port", Int(1, 65535)},
                       {"recipe_file", Str(1024)}})},
-      {"messaging", Obj({{"whatsapp", Obj({{"enabled", Bool()}, {"recipient", Str(256)}})},
-                         {"slack", Obj({{"enabled", Bool()},
-                                        {"channel", Str(256)},
-                                        {"webhook_url", Str(2048)}})}})},
+      {"messaging",
+       Obj({{"whatsapp", Obj({{"enabled", Bool()}, {"recipient", Str(256)}})},
+            {"slack",
+             Obj({{"enabled", Bool()}, {"channel", Str(256)}, {"webhook_url", Str(2048)}})}})},
       // OpenCastor style (schemas/rcan-config.schema.json)
-      {"physics",
-       Obj({{"type", Enum({"differential_drive", "ackermann", "serial_manipulator",
-                           "parallel_manipulator", "holonomic", "custom", "mecanum",
-                           "four_wheel_drive", "self_balancing", "omni"})},
-            {"dof", Int(1, 1000)},
-            {"chassis", Obj({{"wheel_base_mm", NonNeg()},
-                             {"wheelbase_mm", NonNeg()},
-                             {"track_width_mm", NonNeg()},
-                             {"wheel_radius_mm", NonNeg()}})},
-            {"kinematics", Arr(Obj({{"id", Str(128)},
-                                    {"length_mm", NonNeg()},
-                                    {"mass_g", NonNeg()},
-                                    {"axis", Enum({"x", "y", "z"})},
-                                    {"limits_deg", Arr(Num(), 2)}},
-                                   {"id", "length_mm", "axis"}),
-                               64)}})},
+      {"physics", Obj({{"type", Enum({"differential_drive", "ackermann", "serial_manipulator",
+                                      "parallel_manipulator", "holonomic", "custom", "mecanum",
+                                      "four_wheel_drive", "self_balancing", "omni"})},
+                       {"dof", Int(1, 1000)},
+                       {"chassis", Obj({{"wheel_base_mm", NonNeg()},
+                                        {"wheelbase_mm", NonNeg()},
+                                        {"track_width_mm", NonNeg()},
+                                        {"wheel_radius_mm", NonNeg()}})},
+                       {"kinematics", Arr(Obj({{"id", Str(128)},
+                                               {"length_mm", NonNeg()},
+                                               {"mass_g", NonNeg()},
+                                               {"axis", Enum({"x", "y", "z"})},
+                                               {"limits_deg", Arr(Num(), 2)}},
+                                              {"id", "length_mm", "axis"}),
+                                          64)}})},
       {"drivers", Arr(Obj({{"id", Str(128)},
                            {"link_id", Str(128)},
                            {"protocol", Str(128)},
@@ -310,16 +312,17 @@ Props profile_blocks(const SubSchemas& sub) {
                              {"enable_jwt", Bool()},
                              {"registry", Str()},
                              {"channel_admin_scope", Str(64)}})},
-      {"tiered_brain", Obj({{"planner_interval", Int(1, 1'000'000)},
-                            {"uncertainty_threshold", Num(0.0, 1.0)}})},
-      {"reactive", Obj({{"hailo_vision", Bool()},
-                        {"hailo_confidence", Num(0.0, 1.0)},
-                        {"hailo_model_path", Str(1024)},
-                        {"hailo_stop_distance_m", NonNeg()},
-                        {"hailo_warn_distance_m", NonNeg()},
-                        {"hailo_calibration", NonNeg()},
-                        {"min_obstacle_m", NonNeg()},
-                        {"fallback_provider", Obj({{"provider", Str(128)}, {"model", Str(256)}})}})},
+      {"tiered_brain",
+       Obj({{"planner_interval", Int(1, 1'000'000)}, {"uncertainty_threshold", Num(0.0, 1.0)}})},
+      {"reactive",
+       Obj({{"hailo_vision", Bool()},
+            {"hailo_confidence", Num(0.0, 1.0)},
+            {"hailo_model_path", Str(1024)},
+            {"hailo_stop_distance_m", NonNeg()},
+            {"hailo_warn_distance_m", NonNeg()},
+            {"hailo_calibration", NonNeg()},
+            {"min_obstacle_m", NonNeg()},
+            {"fallback_provider", Obj({{"provider", Str(128)}, {"model", Str(256)}})}})},
       {"learner", Obj({{"enabled", Bool()},
                        {"provider", Str(128)},
                        {"model", Str(256)},
@@ -343,9 +346,9 @@ Props profile_blocks(const SubSchemas& sub) {
                         {"telegram", sub.channel},
                         {"discord", sub.channel},
                         {"slack", sub.channel}})},
-      {"agent_roster", Arr(Obj({{"name", Str(128)}, {"enabled", Bool()}, {"config", Free()}},
-                               {"name", "enabled"}),
-                           256)},
+      {"agent_roster",
+       Arr(Obj({{"name", Str(128)}, {"enabled", Bool()}, {"config", Free()}}, {"name", "enabled"}),
+           256)},
   };
 }
 
@@ -377,14 +380,14 @@ Props fleet_blocks() {
                     {"telemetry_hz", Int(0, 50)},
                     {"publish_audit", Bool()},
                     {"estop_qos", Int(1, 2)}})},
-      {"fleet", Obj({{"fleet_id", Str(128)},
-                     {"member_id", Str(128)},
-                     {"robots", Arr(Str(128), 10'000)},
-                     {"access_mode", Enum({"coordinated", "independent"})},
-                     {"commands", Obj({{"broadcast", Bool()},
-                                       {"individual", Bool()},
-                                       {"choreographed", Bool()}})}},
-                    {"fleet_id", "robots"})},
+      {"fleet",
+       Obj({{"fleet_id", Str(128)},
+            {"member_id", Str(128)},
+            {"robots", Arr(Str(128), 10'000)},
+            {"access_mode", Enum({"coordinated", "independent"})},
+            {"commands",
+             Obj({{"broadcast", Bool()}, {"individual", Bool()}, {"choreographed", Bool()}})}},
+           {"fleet_id", "robots"})},
       {"connection", Free()},
       {"notes", Either({Str(65536), Free()})},
       {"ros2", Obj({{"enabled", Bool()}, {"namespace", Str(256)}, {"domain_id", Int(0, 232)}})},
@@ -423,16 +426,17 @@ Props node_blocks() {
       // this node's own blocks
       {"node", Obj({{"data_dir", Str()},
                     {"log_level", Enum({"trace", "debug", "info", "warn", "error"})}})},
-      {"server", Obj({{"port", Int(1, 65535)},
-                      {"bind", Str(256)},
-                      {"io_threads", Int(1, 64)},
-                      {"enable_mdns", Bool()},
-                      {"tls", Obj({{"enabled", Bool()}, {"cert_file", Str()}, {"key_file", Str()}})},
-                      {"limits", Obj({{"max_body_bytes", Int(1024, 64 << 20)},
-                                      {"max_header_bytes", Int(1024, 1 << 20)},
-                                      {"read_timeout_ms", Int(100, 600'000)},
-                                      {"idle_timeout_ms", Int(100, 86'400'000)},
-                                      {"max_connections", Int(1, 1'000'000)}})}})},
+      {"server",
+       Obj({{"port", Int(1, 65535)},
+            {"bind", Str(256)},
+            {"io_threads", Int(1, 64)},
+            {"enable_mdns", Bool()},
+            {"tls", Obj({{"enabled", Bool()}, {"cert_file", Str()}, {"key_file", Str()}})},
+            {"limits", Obj({{"max_body_bytes", Int(1024, 64 << 20)},
+                            {"max_header_bytes", Int(1024, 1 << 20)},
+                            {"read_timeout_ms", Int(100, 600'000)},
+                            {"idle_timeout_ms", Int(100, 86'400'000)},
+                            {"max_connections", Int(1, 1'000'000)}})}})},
       {"grpc", Obj({{"enabled", Bool()},
                     {"port", Int(0, 65535)},
                     {"bind", Str(256)},
@@ -472,20 +476,18 @@ Props security_blocks(const SubSchemas& sub) {
                                              {"issuer", "key_file"}),
                                          64)},
                          {"leeway_s", Int(0, 3600)}})},
-            {"trusted_robot_keys", Arr(Obj({{"name", Str(128)},
-                                            {"mldsa65_pub_file", Str()},
-                                            {"ed25519_pub_file", Str()}},
-                                           {"name"}),
-                                       256)},
-            {"trusted_signer_keys", Arr(Obj({{"name", Str(128)},
-                                             {"mldsa65_pub_file", Str()},
-                                             {"ed25519_pub_file", Str()}},
-                                            {"name"}),
-                                        256)},
-            {"injection", Obj({{"use_defaults", Bool()},
-                               {"patterns", Arr(Either({Str(256), Obj({{"regex", Str(256)}},
-                                                                      {"regex"})}),
-                                                512)}})},
+            {"trusted_robot_keys",
+             Arr(Obj({{"name", Str(128)}, {"mldsa65_pub_file", Str()}, {"ed25519_pub_file", Str()}},
+                     {"name"}),
+                 256)},
+            {"trusted_signer_keys",
+             Arr(Obj({{"name", Str(128)}, {"mldsa65_pub_file", Str()}, {"ed25519_pub_file", Str()}},
+                     {"name"}),
+                 256)},
+            {"injection",
+             Obj({{"use_defaults", Bool()},
+                  {"patterns",
+                   Arr(Either({Str(256), Obj({{"regex", Str(256)}}, {"regex"})}), 512)}})},
             {"commitment", Obj({{"enabled", Bool()},
                                 {"key_mode", Enum({"classical", "quantum", "hybrid"})},
                                 {"qber_threshold", Num(0.0, 1.0)}})},
@@ -521,14 +523,22 @@ Props security_blocks(const SubSchemas& sub) {
 
 std::string expected_name(const Schema& s) {
   switch (s.k) {
-    case Schema::K::kString: return s.enums.empty() ? "a string" : "one of the listed strings";
-    case Schema::K::kInt: return "an integer";
-    case Schema::K::kNumber: return "a number";
-    case Schema::K::kBool: return "a boolean";
-    case Schema::K::kObject: return "a mapping";
-    case Schema::K::kArray: return "a list";
-    case Schema::K::kFree: return "a value";
-    case Schema::K::kEither: break;
+    case Schema::K::kString:
+      return s.enums.empty() ? "a string" : "one of the listed strings";
+    case Schema::K::kInt:
+      return "an integer";
+    case Schema::K::kNumber:
+      return "a number";
+    case Schema::K::kBool:
+      return "a boolean";
+    case Schema::K::kObject:
+      return "a mapping";
+    case Schema::K::kArray:
+      return "a list";
+    case Schema::K::kFree:
+      return "a value";
+    case Schema::K::kEither:
+      break;
   }
   std::string out;
   for (size_t i = 0; i < s.alts.size(); ++i) {

@@ -1,7 +1,5 @@
 // Pass 1 of config loading (YAML → typed JSON against the schema), the module's error
 // helpers, and parse_document(), which maps every failure to an Error value.
-#include "config/config_internal.h"
-
 #include <yaml-cpp/depthguard.h>
 #include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
@@ -18,6 +16,8 @@
 #include <set>
 #include <sstream>
 #include <unordered_map>
+
+#include "config/config_internal.h"
 
 namespace rcan::config::internal {
 
@@ -109,12 +109,14 @@ bool parse_int(std::string_view s, Scalar& out) {
   if (!all_digits(body, base)) return false;
   out.kind = ScalarKind::kInt;
   // Magnitude limit: INT64_MAX, or INT64_MAX + 1 for a negative number.
-  const uint64_t limit = static_cast<uint64_t>(std::numeric_limits<int64_t>::max()) + (neg ? 1u : 0u);
+  const uint64_t limit =
+      static_cast<uint64_t>(std::numeric_limits<int64_t>::max()) + (neg ? 1u : 0u);
   uint64_t v = 0;
   for (char c : body) {
-    unsigned digit = std::isdigit(static_cast<unsigned char>(c))
-                         ? static_cast<unsigned>(c - '0')
-                         : static_cast<unsigned>(std::tolower(static_cast<unsigned char>(c)) - 'a' + 10);
+    unsigned digit =
+        std::isdigit(static_cast<unsigned char>(c))
+            ? static_cast<unsigned>(c - '0')
+            : static_cast<unsigned>(std::tolower(static_cast<unsigned char>(c)) - 'a' + 10);
     if (v > (limit - digit) / static_cast<unsigned>(base)) {
       out.int_overflow = true;
       return true;
@@ -140,7 +142,8 @@ bool parse_float(std::string_view s, Scalar& out) {
   }
   if (is_one_of(body, {".inf", ".Inf", ".INF"})) {
     out.kind = ScalarKind::kFloat;
-    out.d = neg ? -std::numeric_limits<double>::infinity() : std::numeric_limits<double>::infinity();
+    out.d =
+        neg ? -std::numeric_limits<double>::infinity() : std::numeric_limits<double>::infinity();
     return true;
   }
   if (s.size() == body.size() && is_one_of(body, {".nan", ".NaN", ".NAN"})) {
@@ -198,19 +201,28 @@ Scalar resolve(const YAML::Node& n) {
 
 std::string describe(const YAML::Node& n) {
   switch (n.Type()) {
-    case YAML::NodeType::Map: return "a mapping";
-    case YAML::NodeType::Sequence: return "a list";
+    case YAML::NodeType::Map:
+      return "a mapping";
+    case YAML::NodeType::Sequence:
+      return "a list";
     case YAML::NodeType::Null:
-    case YAML::NodeType::Undefined: return "null";
-    case YAML::NodeType::Scalar: break;
+    case YAML::NodeType::Undefined:
+      return "null";
+    case YAML::NodeType::Scalar:
+      break;
   }
   Scalar s = resolve(n);
   switch (s.kind) {
-    case ScalarKind::kNull: return "null";
-    case ScalarKind::kBool: return "boolean " + s.text;
-    case ScalarKind::kInt: return "integer " + printable(s.text);
-    case ScalarKind::kFloat: return "number " + printable(s.text);
-    case ScalarKind::kString: break;
+    case ScalarKind::kNull:
+      return "null";
+    case ScalarKind::kBool:
+      return "boolean " + s.text;
+    case ScalarKind::kInt:
+      return "integer " + printable(s.text);
+    case ScalarKind::kFloat:
+      return "number " + printable(s.text);
+    case ScalarKind::kString:
+      break;
   }
   return "string \"" + printable(s.text) + "\"";
 }
@@ -226,7 +238,8 @@ class DiscardEvents : public YAML::EventHandler {
   void OnDocumentEnd() override {}
   void OnNull(const YAML::Mark&, YAML::anchor_t) override {}
   void OnAlias(const YAML::Mark&, YAML::anchor_t) override {}
-  void OnScalar(const YAML::Mark&, const std::string&, YAML::anchor_t, const std::string&) override {}
+  void OnScalar(const YAML::Mark&, const std::string&, YAML::anchor_t,
+                const std::string&) override {}
   void OnSequenceStart(const YAML::Mark&, const std::string&, YAML::anchor_t,
                        YAML::EmitterStyle::value) override {}
   void OnSequenceEnd() override {}
@@ -304,21 +317,26 @@ class Validator {
     check_tag(n, path);
     remember(n, path);
     switch (s.k) {
-      case Schema::K::kString: return walk_string(n, s, path);
-      case Schema::K::kInt: return walk_int(n, s, path);
-      case Schema::K::kNumber: return walk_number(n, s, path);
+      case Schema::K::kString:
+        return walk_string(n, s, path);
+      case Schema::K::kInt:
+        return walk_int(n, s, path);
+      case Schema::K::kNumber:
+        return walk_number(n, s, path);
       case Schema::K::kBool: {
         if (!n.IsScalar()) wrong_type(n, s, path);
         Scalar sc = resolve(n);
         if (sc.kind != ScalarKind::kBool) wrong_type(n, s, path);
         return json::Value(sc.b);
       }
-      case Schema::K::kObject: return walk_object(n, s, path, depth);
+      case Schema::K::kObject:
+        return walk_object(n, s, path, depth);
       case Schema::K::kArray: {
         if (!n.IsSequence()) wrong_type(n, s, path);
         if (n.size() > s.max_items)
-          error(n, path, "too many items: " + std::to_string(n.size()) + " (at most " +
-                             std::to_string(s.max_items) + ")",
+          error(n, path,
+                "too many items: " + std::to_string(n.size()) + " (at most " +
+                    std::to_string(s.max_items) + ")",
                 "out_of_range");
         json::Array out;
         size_t i = 0;
@@ -336,30 +354,41 @@ class Validator {
         // e.g. an out-of-range integer is reported as such.
         wrong_type(n, s, path);
       }
-      case Schema::K::kFree: return walk_free(n, path, depth);
+      case Schema::K::kFree:
+        return walk_free(n, path, depth);
     }
     wrong_type(n, s, path);
   }
 
   static bool accepts_kind(const YAML::Node& n, const Schema& s) {
     switch (s.k) {
-      case Schema::K::kObject: return n.IsMap();
-      case Schema::K::kArray: return n.IsSequence();
-      case Schema::K::kFree: return n.IsMap() || n.IsSequence() || n.IsScalar();
-      case Schema::K::kEither: return false;
+      case Schema::K::kObject:
+        return n.IsMap();
+      case Schema::K::kArray:
+        return n.IsSequence();
+      case Schema::K::kFree:
+        return n.IsMap() || n.IsSequence() || n.IsScalar();
+      case Schema::K::kEither:
+        return false;
       case Schema::K::kString:
       case Schema::K::kInt:
       case Schema::K::kNumber:
-      case Schema::K::kBool: break;
+      case Schema::K::kBool:
+        break;
     }
     if (!n.IsScalar()) return false;
     Scalar sc = resolve(n);
     switch (s.k) {
-      case Schema::K::kString: return sc.kind == ScalarKind::kString;
-      case Schema::K::kInt: return sc.kind == ScalarKind::kInt;
-      case Schema::K::kNumber: return sc.kind == ScalarKind::kInt || sc.kind == ScalarKind::kFloat;
-      case Schema::K::kBool: return sc.kind == ScalarKind::kBool;
-      default: return false;
+      case Schema::K::kString:
+        return sc.kind == ScalarKind::kString;
+      case Schema::K::kInt:
+        return sc.kind == ScalarKind::kInt;
+      case Schema::K::kNumber:
+        return sc.kind == ScalarKind::kInt || sc.kind == ScalarKind::kFloat;
+      case Schema::K::kBool:
+        return sc.kind == ScalarKind::kBool;
+      default:
+        return false;
     }
   }
 
@@ -373,8 +402,9 @@ class Validator {
     }
     if (!json::valid_utf8(sc.text)) error(n, path, "string is not valid UTF-8", "invalid_value");
     if (sc.text.size() > s.max_len)
-      error(n, path, "string too long: " + std::to_string(sc.text.size()) + " bytes (at most " +
-                         std::to_string(s.max_len) + ")",
+      error(n, path,
+            "string too long: " + std::to_string(sc.text.size()) + " bytes (at most " +
+                std::to_string(s.max_len) + ")",
             "out_of_range");
     if (!s.enums.empty() && std::find(s.enums.begin(), s.enums.end(), sc.text) == s.enums.end())
       error(n, path,
@@ -403,8 +433,7 @@ class Validator {
     if (!n.IsScalar()) wrong_type(n, s, path);
     Scalar sc = resolve(n);
     if (sc.kind != ScalarKind::kInt) wrong_type(n, s, path);
-    if (sc.int_overflow)
-      error(n, path, "out of range: " + printable(sc.text), "out_of_range");
+    if (sc.int_overflow) error(n, path, "out of range: " + printable(sc.text), "out_of_range");
     check_range(n, s, path, static_cast<double>(sc.i), printable(sc.text));
     return json::Value(sc.i);
   }
@@ -458,8 +487,7 @@ class Validator {
       out.append_unchecked(k, walk(it->second, *prop, child, depth + 1));
     }
     for (const auto& r : s.required) {
-      if (!seen.count(r))
-        error(n, key_segment(path, r), "required key is missing", "missing_key");
+      if (!seen.count(r)) error(n, key_segment(path, r), "required key is missing", "missing_key");
     }
     return json::Value(std::move(out));
   }
@@ -494,15 +522,18 @@ class Validator {
     if (!n.IsScalar()) return json::Value();
     Scalar sc = resolve(n);
     switch (sc.kind) {
-      case ScalarKind::kNull: return json::Value();
-      case ScalarKind::kBool: return json::Value(sc.b);
+      case ScalarKind::kNull:
+        return json::Value();
+      case ScalarKind::kBool:
+        return json::Value(sc.b);
       case ScalarKind::kInt:
         if (sc.int_overflow) return json::Value(sc.text);
         return json::Value(sc.i);
       case ScalarKind::kFloat:
         if (!std::isfinite(sc.d)) return json::Value(sc.text);
         return json::Value(sc.d);
-      case ScalarKind::kString: break;
+      case ScalarKind::kString:
+        break;
     }
     if (!json::valid_utf8(sc.text)) error(n, path, "string is not valid UTF-8", "invalid_value");
     return json::Value(std::move(sc.text));

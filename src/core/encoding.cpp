@@ -72,9 +72,10 @@ std::optional<Bytes> b64_decode_core(std::string_view s, const std::array<int8_t
   if (rest != 0) {  // 2 symbols → 1 byte (4 bits left over), 3 → 2 bytes (2 bits left over)
     const int a = table[in[0]], b = table[in[1]], c = rest == 3 ? table[in[2]] : 0;
     if ((a | b | c) < 0) return std::nullopt;
-    const uint32_t v =
-        (static_cast<uint32_t>(a) << 18) | (static_cast<uint32_t>(b) << 12) | (static_cast<uint32_t>(c) << 6);
-    if ((rest == 2 ? (v & 0xFFFF) : (v & 0xFF)) != 0) return std::nullopt;  // non-canonical: unused bits set
+    const uint32_t v = (static_cast<uint32_t>(a) << 18) | (static_cast<uint32_t>(b) << 12) |
+                       (static_cast<uint32_t>(c) << 6);
+    if ((rest == 2 ? (v & 0xFFFF) : (v & 0xFF)) != 0)
+      return std::nullopt;  // non-canonical: unused bits set
     o[0] = static_cast<uint8_t>(v >> 16);
     if (rest == 3) o[1] = static_cast<uint8_t>(v >> 8);
   }

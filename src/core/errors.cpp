@@ -1,10 +1,10 @@
 #include "rcan/errors.h"
 
+#include <unistd.h>
+
 #include <array>
 #include <cstdio>
 #include <cstring>
-
-#include <unistd.h>
 
 #include "rcan/hash.h"
 

@@ -140,10 +140,14 @@ void Value::move_from(Value&& other) noexcept {
 
 double Value::to_double() const {
   switch (kind_) {
-    case Kind::kInt: return static_cast<double>(i_);
-    case Kind::kDouble: return d_;
-    case Kind::kBigInt: return std::strtod(s_.c_str(), nullptr);
-    default: return 0.0;
+    case Kind::kInt:
+      return static_cast<double>(i_);
+    case Kind::kDouble:
+      return d_;
+    case Kind::kBigInt:
+      return std::strtod(s_.c_str(), nullptr);
+    default:
+      return 0.0;
   }
 }
 
@@ -165,14 +169,21 @@ int64_t int_field(const Value& v, std::string_view key, int64_t def) {
 bool Value::operator==(const Value& other) const {
   if (kind_ != other.kind_) return false;
   switch (kind_) {
-    case Kind::kNull: return true;
-    case Kind::kBool: return b_ == other.b_;
-    case Kind::kInt: return i_ == other.i_;
-    case Kind::kDouble: return d_ == other.d_;
+    case Kind::kNull:
+      return true;
+    case Kind::kBool:
+      return b_ == other.b_;
+    case Kind::kInt:
+      return i_ == other.i_;
+    case Kind::kDouble:
+      return d_ == other.d_;
     case Kind::kBigInt:
-    case Kind::kString: return s_ == other.s_;
-    case Kind::kArray: return *a_ == *other.a_;
-    case Kind::kObject: return *o_ == *other.o_;
+    case Kind::kString:
+      return s_ == other.s_;
+    case Kind::kArray:
+      return *a_ == *other.a_;
+    case Kind::kObject:
+      return *o_ == *other.o_;
   }
   return false;
 }
@@ -309,8 +320,10 @@ class Parser {
     if (pos_ >= s_.size()) return set_error("unexpected end of input");
     char c = s_[pos_];
     switch (c) {
-      case '{': return parse_object(out, depth + 1);
-      case '[': return parse_array(out, depth + 1);
+      case '{':
+        return parse_object(out, depth + 1);
+      case '[':
+        return parse_array(out, depth + 1);
       case '"': {
         std::string str;
         if (!parse_string(str)) return false;
@@ -331,11 +344,12 @@ class Parser {
         return true;
       default:
         if (c == '-' || (c >= '0' && c <= '9')) return parse_number(out);
-        return set_error(std::string("unexpected character '") +
-                         (static_cast<unsigned char>(c) >= 0x20 && static_cast<unsigned char>(c) < 0x7f
-                              ? std::string(1, c)
-                              : "\\x" + to_hex2(static_cast<unsigned char>(c))) +
-                         "'");
+        return set_error(
+            std::string("unexpected character '") +
+            (static_cast<unsigned char>(c) >= 0x20 && static_cast<unsigned char>(c) < 0x7f
+                 ? std::string(1, c)
+                 : "\\x" + to_hex2(static_cast<unsigned char>(c))) +
+            "'");
     }
   }
 
@@ -345,7 +359,8 @@ class Parser {
   }
 
   bool parse_object(Value& out, size_t depth) {
-    if (depth > opts_.max_depth) return set_error("nesting deeper than " + std::to_string(opts_.max_depth));
+    if (depth > opts_.max_depth)
+      return set_error("nesting deeper than " + std::to_string(opts_.max_depth));
     ++pos_;  // '{'
     Object obj;
     std::unordered_set<std::string> seen;
@@ -409,7 +424,8 @@ class Parser {
   }
 
   bool parse_array(Value& out, size_t depth) {
-    if (depth > opts_.max_depth) return set_error("nesting deeper than " + std::to_string(opts_.max_depth));
+    if (depth > opts_.max_depth)
+      return set_error("nesting deeper than " + std::to_string(opts_.max_depth));
     ++pos_;  // '['
     Array arr;
     skip_ws();
@@ -443,10 +459,14 @@ class Parser {
     for (int k = 0; k < 4; ++k) {
       char c = s_[pos_ + k];
       int d;
-      if (c >= '0' && c <= '9') d = c - '0';
-      else if (c >= 'a' && c <= 'f') d = c - 'a' + 10;
-      else if (c >= 'A' && c <= 'F') d = c - 'A' + 10;
-      else return set_error("invalid \\u escape");
+      if (c >= '0' && c <= '9')
+        d = c - '0';
+      else if (c >= 'a' && c <= 'f')
+        d = c - 'a' + 10;
+      else if (c >= 'A' && c <= 'F')
+        d = c - 'A' + 10;
+      else
+        return set_error("invalid \\u escape");
       v = (v << 4) | static_cast<uint32_t>(d);
     }
     pos_ += 4;
@@ -469,14 +489,30 @@ class Parser {
         if (pos_ >= s_.size()) return set_error("unterminated escape");
         char e = s_[pos_++];
         switch (e) {
-          case '"': out.push_back('"'); break;
-          case '\\': out.push_back('\\'); break;
-          case '/': out.push_back('/'); break;
-          case 'b': out.push_back('\b'); break;
-          case 'f': out.push_back('\f'); break;
-          case 'n': out.push_back('\n'); break;
-          case 'r': out.push_back('\r'); break;
-          case 't': out.push_back('\t'); break;
+          case '"':
+            out.push_back('"');
+            break;
+          case '\\':
+            out.push_back('\\');
+            break;
+          case '/':
+            out.push_back('/');
+            break;
+          case 'b':
+            out.push_back('\b');
+            break;
+          case 'f':
+            out.push_back('\f');
+            break;
+          case 'n':
+            out.push_back('\n');
+            break;
+          case 'r':
+            out.push_back('\r');
+            break;
+          case 't':
+            out.push_back('\t');
+            break;
           case 'u': {
             uint32_t cp;
             if (!hex4(cp)) return false;
@@ -493,7 +529,9 @@ class Parser {
             append_utf8(out, cp);
             break;
           }
-          default: --pos_; return set_error("invalid escape character");
+          default:
+            --pos_;
+            return set_error("invalid escape character");
         }
         continue;
       }
@@ -553,7 +591,8 @@ class Parser {
     std::string_view lex = s_.substr(start, pos_ - start);
     if (lex.size() > opts_.max_number_chars) {
       pos_ = start;
-      return set_error("number longer than " + std::to_string(opts_.max_number_chars) + " characters");
+      return set_error("number longer than " + std::to_string(opts_.max_number_chars) +
+                       " characters");
     }
     if (!is_float) {
       int64_t v = 0;
@@ -712,13 +751,27 @@ void write_string_raw(std::string& out, std::string_view s) {
       continue;
     }
     switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\b': out += "\\b"; break;
-      case '\f': out += "\\f"; break;
-      case '\n': out += "\\n"; break;
-      case '\r': out += "\\r"; break;
-      case '\t': out += "\\t"; break;
+      case '"':
+        out += "\\\"";
+        break;
+      case '\\':
+        out += "\\\\";
+        break;
+      case '\b':
+        out += "\\b";
+        break;
+      case '\f':
+        out += "\\f";
+        break;
+      case '\n':
+        out += "\\n";
+        break;
+      case '\r':
+        out += "\\r";
+        break;
+      case '\t':
+        out += "\\t";
+        break;
       default:
         if (c < 0x20) {
           out += "\\u00";
@@ -756,19 +809,38 @@ void write_string_ascii(std::string& out, const std::string& s) {
   while (i < s.size()) {
     unsigned char c = static_cast<unsigned char>(s[i]);
     if (c >= 0x20 && c < 0x7f) {
-      if (c == '"') out += "\\\"";
-      else if (c == '\\') out += "\\\\";
-      else out.push_back(static_cast<char>(c));
+      if (c == '"')
+        out += "\\\"";
+      else if (c == '\\')
+        out += "\\\\";
+      else
+        out.push_back(static_cast<char>(c));
       ++i;
       continue;
     }
     switch (c) {
-      case '\b': out += "\\b"; ++i; continue;
-      case '\f': out += "\\f"; ++i; continue;
-      case '\n': out += "\\n"; ++i; continue;
-      case '\r': out += "\\r"; ++i; continue;
-      case '\t': out += "\\t"; ++i; continue;
-      default: break;
+      case '\b':
+        out += "\\b";
+        ++i;
+        continue;
+      case '\f':
+        out += "\\f";
+        ++i;
+        continue;
+      case '\n':
+        out += "\\n";
+        ++i;
+        continue;
+      case '\r':
+        out += "\\r";
+        ++i;
+        continue;
+      case '\t':
+        out += "\\t";
+        ++i;
+        continue;
+      default:
+        break;
     }
     uint32_t cp;
     size_t len = decode_utf8(s, i, cp);
@@ -817,14 +889,22 @@ void write_object(std::string& out, const Object& obj, Style style, bool sort_ke
 void write_value(std::string& out, const Value& v, Style style, bool sort_keys, bool compact) {
   const char* item_sep = compact ? "," : ", ";
   switch (v.kind()) {
-    case Value::Kind::kNull: out += "null"; break;
-    case Value::Kind::kBool: out += v.as_bool() ? "true" : "false"; break;
+    case Value::Kind::kNull:
+      out += "null";
+      break;
+    case Value::Kind::kBool:
+      out += v.as_bool() ? "true" : "false";
+      break;
     case Value::Kind::kInt:
     case Value::Kind::kBigInt:
-    case Value::Kind::kDouble: write_number(out, v, style); break;
+    case Value::Kind::kDouble:
+      write_number(out, v, style);
+      break;
     case Value::Kind::kString:
-      if (style == Style::kPython) write_string_ascii(out, v.as_string());
-      else write_string_raw(out, v.as_string());
+      if (style == Style::kPython)
+        write_string_ascii(out, v.as_string());
+      else
+        write_string_raw(out, v.as_string());
       break;
     case Value::Kind::kArray: {
       out.push_back('[');
@@ -837,7 +917,9 @@ void write_value(std::string& out, const Value& v, Style style, bool sort_keys, 
       out.push_back(']');
       break;
     }
-    case Value::Kind::kObject: write_object(out, v.as_object(), style, sort_keys, compact); break;
+    case Value::Kind::kObject:
+      write_object(out, v.as_object(), style, sort_keys, compact);
+      break;
   }
 }
 
@@ -850,15 +932,18 @@ void write_object(std::string& out, const Object& obj, Style style, bool sort_ke
   for (const auto& m : members) order.push_back(&m);
   if (sort_keys) {
     // UTF-8 byte order equals code point order (char_traits<char> compares unsigned).
-    std::sort(order.begin(), order.end(), [](const Member* a, const Member* b) { return a->first < b->first; });
+    std::sort(order.begin(), order.end(),
+              [](const Member* a, const Member* b) { return a->first < b->first; });
   }
   out.push_back('{');
   bool first = true;
   for (const Member* m : order) {
     if (!first) out += item_sep;
     first = false;
-    if (style == Style::kPython) write_string_ascii(out, m->first);
-    else write_string_raw(out, m->first);
+    if (style == Style::kPython)
+      write_string_ascii(out, m->first);
+    else
+      write_string_raw(out, m->first);
     out += key_sep;
     write_value(out, m->second, style, sort_keys, compact);
   }

@@ -49,7 +49,8 @@ Error schema(std::string field, std::string msg) {
 
 // A required field that is absent: detail.missing_field names it (conformance L1-SCHEMA-001).
 Error missing(std::string field, std::string msg) {
-  return Error(ErrorCode::kSchemaValidationFailed, std::move(msg), std::move(field), "missing_field");
+  return Error(ErrorCode::kSchemaValidationFailed, std::move(msg), std::move(field),
+               "missing_field");
 }
 
 // Typed field readers: absent → nullopt (ok); wrong type → error.
@@ -59,12 +60,14 @@ class Reader {
 
   const json::Value* get(std::string_view k) const { return o_.find(k); }
 
-  Result<std::optional<std::string>> str(std::string_view k, size_t max_len, bool allow_null = false) const {
+  Result<std::optional<std::string>> str(std::string_view k, size_t max_len,
+                                         bool allow_null = false) const {
     const json::Value* v = o_.find(k);
     if (!v || (allow_null && v->is_null())) return std::optional<std::string>{};
     if (!v->is_string()) return schema(std::string(k), std::string(k) + " must be a string");
     if (v->as_string().size() > max_len)
-      return schema(std::string(k), std::string(k) + " is longer than " + std::to_string(max_len) + " bytes");
+      return schema(std::string(k),
+                    std::string(k) + " is longer than " + std::to_string(max_len) + " bytes");
     return std::optional<std::string>{v->as_string()};
   }
 
@@ -102,7 +105,8 @@ Result<std::vector<std::string>> read_scope(const json::Value* v, const CodecLim
   auto add = [&](const std::string& s) -> Status {
     if (s.empty() || s.size() > 64) return schema("scope", "a scope is 1 to 64 characters");
     for (char c : s) {
-      bool ok = (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_' || c == '.' || c == '-' || c == ':';
+      bool ok = (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_' || c == '.' ||
+                c == '-' || c == ':';
       if (!ok) return schema("scope", "a scope uses a-z, 0-9, '_', '.', '-', ':'");
     }
     out.push_back(s);
@@ -152,21 +156,25 @@ Result<AiBlock> read_ai(const json::Value& v) {
   if (!model.ok()) return schema("ai.model", "ai.model must be a string");
   if (!*model || (*model)->empty()) return incomplete("ai.model");
   ai.model = **model;
-  for (auto [key, dest] : {std::pair{"model_version", &ai.model_version}, std::pair{"layer", &ai.layer},
-                           std::pair{"thought_id", &ai.thought_id}}) {
+  for (auto [key, dest] :
+       {std::pair{"model_version", &ai.model_version}, std::pair{"layer", &ai.layer},
+        std::pair{"thought_id", &ai.thought_id}}) {
     auto s = r.str(key, 128, true);
-    if (!s.ok()) return schema(std::string("ai.") + key, std::string("ai.") + key + " must be a string");
+    if (!s.ok())
+      return schema(std::string("ai.") + key, std::string("ai.") + key + " must be a string");
     *dest = *s;
   }
   if (const json::Value* c = o.find("confidence"); c && !c->is_null()) {
     if (!c->is_number()) return schema("ai.confidence", "ai.confidence must be a number");
     double d = c->to_double();
-    if (!(d >= 0.0 && d <= 1.0)) return schema("ai.confidence", "ai.confidence must be within [0, 1]");
+    if (!(d >= 0.0 && d <= 1.0))
+      return schema("ai.confidence", "ai.confidence must be within [0, 1]");
     ai.confidence = d;
   }
   if (const json::Value* l = o.find("inference_latency_ms"); l && !l->is_null()) {
     if (!l->is_number() || l->to_double() < 0)
-      return schema("ai.inference_latency_ms", "ai.inference_latency_ms must be a non-negative number");
+      return schema("ai.inference_latency_ms",
+                    "ai.inference_latency_ms must be a non-negative number");
     ai.inference_latency_ms = l->to_double();
   }
   if (const json::Value* e = o.find("escalated"); e && !e->is_null()) {
@@ -180,11 +188,13 @@ Result<SignatureBlock> read_sig(const json::Value& v) {
   if (!v.is_object()) return schema("sig", "sig must be an object {alg, kid, value}");
   Reader r(v.as_object());
   SignatureBlock s;
-  for (auto [key, dest, max] : {std::tuple{"alg", &s.alg, size_t{32}}, std::tuple{"kid", &s.kid, size_t{64}},
-                                std::tuple{"value", &s.value, size_t{16384}}}) {
+  for (auto [key, dest, max] :
+       {std::tuple{"alg", &s.alg, size_t{32}}, std::tuple{"kid", &s.kid, size_t{64}},
+        std::tuple{"value", &s.value, size_t{16384}}}) {
     auto f = r.str(key, max);
     if (!f.ok() || !*f || (*f)->empty())
-      return schema(std::string("sig.") + key, std::string("sig.") + key + " must be a non-empty string");
+      return schema(std::string("sig.") + key,
+                    std::string("sig.") + key + " must be a non-empty string");
     *dest = **f;
   }
   return s;
@@ -197,7 +207,8 @@ Status read_common(const json::Object& o, Message& m, const CodecLimits& lim) {
   if (!st.ok()) return st.error();
   if (*st) {
     auto s = sender_type_from_name(**st);
-    if (!s) return schema("sender_type", "sender_type must be human, robot, cloud_function or system");
+    if (!s)
+      return schema("sender_type", "sender_type must be human, robot, cloud_function or system");
     m.sender_type = *s;
     m.sender_type_explicit = true;
   }
@@ -217,14 +228,16 @@ Status read_common(const json::Object& o, Message& m, const CodecLimits& lim) {
   if (const json::Value* dc = o.find("delegation_chain"); dc && !dc->is_null()) {
     if (!dc->is_array()) return schema("delegation_chain", "delegation_chain must be an array");
     if (dc->as_array().size() > lim.max_delegation_hops)
-      return schema("delegation_chain", "delegation_chain has more than " + std::to_string(lim.max_delegation_hops) + " hops");
+      return schema("delegation_chain", "delegation_chain has more than " +
+                                            std::to_string(lim.max_delegation_hops) + " hops");
     for (const auto& hop : dc->as_array())
-      if (!hop.is_object()) return schema("delegation_chain", "each delegation hop must be an object");
+      if (!hop.is_object())
+        return schema("delegation_chain", "each delegation hop must be an object");
     if (!dc->as_array().empty()) m.delegation_chain = *dc;
   }
   if (m.sender_type == SenderType::kRobot && m.delegation_chain.is_null()) {
-    return Error(ErrorCode::kMissingDelegationChain, "sender_type robot requires a delegation_chain",
-                 "delegation_chain");
+    return Error(ErrorCode::kMissingDelegationChain,
+                 "sender_type robot requires a delegation_chain", "delegation_chain");
   }
   if (const json::Value* s = o.find("sig"); s && !s->is_null()) {
     auto sig = read_sig(*s);
@@ -272,7 +285,8 @@ Result<Message> decode_seed(const json::Object& o, const CodecLimits& lim) {
   if (!tv) return missing("type", "type is required");
   if (tv->is_string()) {
     auto type = message_type_from_name(tv->as_string());
-    if (!type) return schema("type", "unknown message type '" + tv->as_string().substr(0, 40) + "'");
+    if (!type)
+      return schema("type", "unknown message type '" + tv->as_string().substr(0, 40) + "'");
     m.type = *type;
   } else if (tv->is_int()) {
     if (!*ver || !is_version_1_0(**ver))
@@ -313,7 +327,8 @@ Result<Message> decode_seed(const json::Object& o, const CodecLimits& lim) {
     } else if (pr->is_int()) {
       if (!*ver || !is_version_1_0(**ver))
         return schema("priority", "a numeric priority needs an explicit version 1.0.x");
-      if (pr->as_int() < 0 || pr->as_int() > 3) return schema("priority", "numeric priority must be 0..3");
+      if (pr->as_int() < 0 || pr->as_int() > 3)
+        return schema("priority", "numeric priority must be 0..3");
       m.priority = static_cast<Priority>(pr->as_int());
     } else {
       return schema("priority", "priority must be a string name");
@@ -321,7 +336,8 @@ Result<Message> decode_seed(const json::Object& o, const CodecLimits& lim) {
   }
   if (m.type == MessageType::kSafety) m.priority = Priority::kSafety;
   // 6. addressing.
-  for (auto [key, dest] : {std::pair{"source_ruri", &m.source_ruri}, std::pair{"target_ruri", &m.target_ruri}}) {
+  for (auto [key, dest] :
+       {std::pair{"source_ruri", &m.source_ruri}, std::pair{"target_ruri", &m.target_ruri}}) {
     auto f = r.str(key, 512, true);
     if (!f.ok()) return f.error();
     if (*f && !(*f)->empty()) {
@@ -355,7 +371,8 @@ Result<Message> decode_rcanpy(const json::Object& o, const CodecLimits& lim) {
   Reader r(o);
   auto rc = r.str("rcan", 32);
   if (!rc.ok()) return rc.error();
-  if (!*rc || (*rc)->empty()) return missing("rcan", "rcan (protocol version) is required in the rcan-py shape");
+  if (!*rc || (*rc)->empty())
+    return missing("rcan", "rcan (protocol version) is required in the rcan-py shape");
   m.version = **rc;
   auto rv = r.str("rcan_version", 32, true);
   if (!rv.ok()) return rv.error();
@@ -364,7 +381,8 @@ Result<Message> decode_rcanpy(const json::Object& o, const CodecLimits& lim) {
   if (!*cmd || (*cmd)->empty()) return missing("cmd", "cmd is required in the rcan-py shape");
   auto target = r.str("target", 512);
   if (!target.ok()) return target.error();
-  if (!*target || (*target)->empty()) return missing("target", "target is required in the rcan-py shape");
+  if (!*target || (*target)->empty())
+    return missing("target", "target is required in the rcan-py shape");
   {
     // rcan-py strips surrounding whitespace and one trailing '/'.
     std::string t = **target;
@@ -378,7 +396,8 @@ Result<Message> decode_rcanpy(const json::Object& o, const CodecLimits& lim) {
   if (!id.ok()) return id.error();
   if (!*id) return missing("msg_id", "msg_id is required");
   // rcan-py uses uuid4 ids but does not require them; any short printable id is accepted.
-  if ((*id)->empty() || (*id)->size() > 128) return schema("msg_id", "msg_id must be 1 to 128 characters");
+  if ((*id)->empty() || (*id)->size() > 128)
+    return schema("msg_id", "msg_id must be 1 to 128 characters");
   for (char c : **id) {
     if (static_cast<unsigned char>(c) <= 0x20 || static_cast<unsigned char>(c) >= 0x7f)
       return schema("msg_id", "msg_id must be printable ASCII without spaces");
@@ -395,7 +414,8 @@ Result<Message> decode_rcanpy(const json::Object& o, const CodecLimits& lim) {
     if (!params->is_object()) return schema("params", "params must be an object");
     payload = params->as_object();
   }
-  if (const json::Value* a = payload.find("action"); a && !(a->is_string() && a->as_string() == **cmd))
+  if (const json::Value* a = payload.find("action");
+      a && !(a->is_string() && a->as_string() == **cmd))
     return schema("params.action", "params.action disagrees with cmd");
   payload.set("action", **cmd);
   m.payload = std::move(payload);
@@ -435,10 +455,14 @@ std::optional<MessageType> message_type_from_name(std::string_view name) {
 
 std::string_view priority_name(Priority p) {
   switch (p) {
-    case Priority::kLow: return "LOW";
-    case Priority::kNormal: return "NORMAL";
-    case Priority::kHigh: return "HIGH";
-    case Priority::kSafety: return "SAFETY";
+    case Priority::kLow:
+      return "LOW";
+    case Priority::kNormal:
+      return "NORMAL";
+    case Priority::kHigh:
+      return "HIGH";
+    case Priority::kSafety:
+      return "SAFETY";
   }
   return "NORMAL";
 }
@@ -453,10 +477,14 @@ std::optional<Priority> priority_from_name(std::string_view name) {
 
 std::string_view sender_type_name(SenderType s) {
   switch (s) {
-    case SenderType::kHuman: return "human";
-    case SenderType::kRobot: return "robot";
-    case SenderType::kCloudFunction: return "cloud_function";
-    case SenderType::kSystem: return "system";
+    case SenderType::kHuman:
+      return "human";
+    case SenderType::kRobot:
+      return "robot";
+    case SenderType::kCloudFunction:
+      return "cloud_function";
+    case SenderType::kSystem:
+      return "system";
   }
   return "human";
 }

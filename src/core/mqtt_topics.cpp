@@ -11,7 +11,8 @@ std::vector<std::string_view> split(std::string_view s) {
   size_t start = 0;
   while (true) {
     size_t slash = s.find('/', start);
-    out.push_back(s.substr(start, slash == std::string_view::npos ? std::string_view::npos : slash - start));
+    out.push_back(
+        s.substr(start, slash == std::string_view::npos ? std::string_view::npos : slash - start));
     if (slash == std::string_view::npos) break;
     start = slash + 1;
     if (out.size() > 64) break;  // deeper than any topic of ours
@@ -24,8 +25,8 @@ std::vector<std::string_view> split(std::string_view s) {
 bool valid_topic_segment(std::string_view s) {
   if (s.empty() || s.size() > kMaxTopicSegmentBytes) return false;
   for (char c : s) {
-    bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '.' ||
-              c == '_' || c == '-';
+    bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
+              c == '.' || c == '_' || c == '-';
     if (!ok) return false;
   }
   return true;
@@ -42,10 +43,11 @@ Result<RobotTopics> robot_topics(std::string_view prefix, const Ruri& ruri) {
   const std::string& device = ruri.device_id;
   for (const std::string* seg : {&ruri.registry, &ruri.manufacturer, &ruri.model, &device}) {
     if (!valid_topic_segment(*seg))
-      return Error(ErrorCode::kInvalidRuri, "RURI segment \"" + *seg + "\" cannot be an MQTT topic segment", "ruri");
+      return Error(ErrorCode::kInvalidRuri,
+                   "RURI segment \"" + *seg + "\" cannot be an MQTT topic segment", "ruri");
   }
-  return RobotTopics{std::string(prefix) + "/robot/" + ruri.registry + "/" + ruri.manufacturer + "/" + ruri.model +
-                     "/" + device};
+  return RobotTopics{std::string(prefix) + "/robot/" + ruri.registry + "/" + ruri.manufacturer +
+                     "/" + ruri.model + "/" + device};
 }
 
 FleetTopics fleet_topics(std::string_view prefix, std::string_view fleet_id) {
@@ -92,7 +94,8 @@ InboundTopic parse_topic(std::string_view prefix, std::string_view topic) {
 
 Result<json::Value> parse_payload(std::string_view payload) {
   if (payload.size() > kMaxMqttPayloadBytes)
-    return Error(ErrorCode::kBodyTooLarge, "the MQTT payload exceeds " + std::to_string(kMaxMqttPayloadBytes) + " bytes");
+    return Error(ErrorCode::kBodyTooLarge,
+                 "the MQTT payload exceeds " + std::to_string(kMaxMqttPayloadBytes) + " bytes");
   json::ParseOptions po;
   po.max_depth = 32;
   po.max_bytes = kMaxMqttPayloadBytes;
@@ -102,7 +105,8 @@ Result<json::Value> parse_payload(std::string_view payload) {
     e.code = ErrorCode::kMalformedJson;
     return e;
   }
-  if (!v->is_object()) return Error(ErrorCode::kSchemaValidationFailed, "an MQTT payload must be a JSON object");
+  if (!v->is_object())
+    return Error(ErrorCode::kSchemaValidationFailed, "an MQTT payload must be a JSON object");
   return v;
 }
 

@@ -8,27 +8,27 @@ namespace rcan {
 namespace {
 
 constexpr std::array<std::string_view, kCapabilityCount> kCapNames{
-    "view_status",    "chat",          "teleop",          "arm",
-    "navigation",     "record",        "training",        "install_skills",
-    "ota",            "safety_config", "user_management", "model_deployment",
+    "view_status", "chat",          "teleop",          "arm",
+    "navigation",  "record",        "training",        "install_skills",
+    "ota",         "safety_config", "user_management", "model_deployment",
     "diagnostics"};
 
 using A = Access;
 // Rows: capability; columns: GUEST, USER, LEASEE, OWNER, CREATOR (seed §2.2, right to left).
 constexpr std::array<std::array<A, 5>, kCapabilityCount> kMatrix{{
-    {A::kFull, A::kFull, A::kFull, A::kFull, A::kFull},                // view status
-    {A::kFull, A::kFull, A::kFull, A::kFull, A::kFull},                // chat (guest rate-limited)
-    {A::kNone, A::kFull, A::kFull, A::kFull, A::kFull},                // teleop
-    {A::kNone, A::kConditional, A::kFull, A::kFull, A::kFull},         // arm
-    {A::kNone, A::kFull, A::kFull, A::kFull, A::kFull},                // navigation
-    {A::kNone, A::kConditional, A::kFull, A::kFull, A::kFull},         // record episodes
-    {A::kNone, A::kNone, A::kConditional, A::kFull, A::kFull},         // training contribute
-    {A::kNone, A::kNone, A::kNone, A::kFull, A::kFull},                // install skills
-    {A::kNone, A::kNone, A::kNone, A::kFull, A::kFull},                // OTA updates
-    {A::kNone, A::kNone, A::kNone, A::kConditional, A::kFull},         // safety config
-    {A::kNone, A::kNone, A::kConditional, A::kFull, A::kFull},         // user management
-    {A::kNone, A::kNone, A::kNone, A::kNone, A::kFull},                // model deployment
-    {A::kNone, A::kNone, A::kConditional, A::kFull, A::kFull},         // hardware diagnostics
+    {A::kFull, A::kFull, A::kFull, A::kFull, A::kFull},         // view status
+    {A::kFull, A::kFull, A::kFull, A::kFull, A::kFull},         // chat (guest rate-limited)
+    {A::kNone, A::kFull, A::kFull, A::kFull, A::kFull},         // teleop
+    {A::kNone, A::kConditional, A::kFull, A::kFull, A::kFull},  // arm
+    {A::kNone, A::kFull, A::kFull, A::kFull, A::kFull},         // navigation
+    {A::kNone, A::kConditional, A::kFull, A::kFull, A::kFull},  // record episodes
+    {A::kNone, A::kNone, A::kConditional, A::kFull, A::kFull},  // training contribute
+    {A::kNone, A::kNone, A::kNone, A::kFull, A::kFull},         // install skills
+    {A::kNone, A::kNone, A::kNone, A::kFull, A::kFull},         // OTA updates
+    {A::kNone, A::kNone, A::kNone, A::kConditional, A::kFull},  // safety config
+    {A::kNone, A::kNone, A::kConditional, A::kFull, A::kFull},  // user management
+    {A::kNone, A::kNone, A::kNone, A::kNone, A::kFull},         // model deployment
+    {A::kNone, A::kNone, A::kConditional, A::kFull, A::kFull},  // hardware diagnostics
 }};
 
 std::string lower(std::string_view s) {
@@ -41,22 +41,32 @@ std::string lower(std::string_view s) {
 
 std::string_view role_name(Role r) {
   switch (r) {
-    case Role::kGuest: return "GUEST";
-    case Role::kUser: return "USER";
-    case Role::kLeasee: return "LEASEE";
-    case Role::kOwner: return "OWNER";
-    case Role::kCreator: return "CREATOR";
+    case Role::kGuest:
+      return "GUEST";
+    case Role::kUser:
+      return "USER";
+    case Role::kLeasee:
+      return "LEASEE";
+    case Role::kOwner:
+      return "OWNER";
+    case Role::kCreator:
+      return "CREATOR";
   }
   return "GUEST";
 }
 
 std::string_view role_claim_name(Role r) {
   switch (r) {
-    case Role::kGuest: return "guest";
-    case Role::kUser: return "user";
-    case Role::kLeasee: return "leasee";
-    case Role::kOwner: return "owner";
-    case Role::kCreator: return "creator";
+    case Role::kGuest:
+      return "guest";
+    case Role::kUser:
+      return "user";
+    case Role::kLeasee:
+      return "leasee";
+    case Role::kOwner:
+      return "owner";
+    case Role::kCreator:
+      return "creator";
   }
   return "guest";
 }
@@ -96,13 +106,20 @@ bool role_allows(Role r, Capability c, const RolePolicy& policy) {
   if (a == Access::kFull) return true;
   if (a == Access::kNone) return false;
   switch (c) {
-    case Capability::kArm: return r == Role::kUser && policy.user_arm;
-    case Capability::kRecordEpisodes: return r == Role::kUser && policy.user_record;
-    case Capability::kTrainingContribute: return r == Role::kLeasee && policy.leasee_training;
-    case Capability::kHardwareDiagnostics: return r == Role::kLeasee && policy.leasee_diagnostics;
-    case Capability::kUserManagement: return r == Role::kLeasee;  // within the lease's sessions
-    case Capability::kSafetyConfig: return r == Role::kOwner && policy.owner_safety_config;
-    default: return false;
+    case Capability::kArm:
+      return r == Role::kUser && policy.user_arm;
+    case Capability::kRecordEpisodes:
+      return r == Role::kUser && policy.user_record;
+    case Capability::kTrainingContribute:
+      return r == Role::kLeasee && policy.leasee_training;
+    case Capability::kHardwareDiagnostics:
+      return r == Role::kLeasee && policy.leasee_diagnostics;
+    case Capability::kUserManagement:
+      return r == Role::kLeasee;  // within the lease's sessions
+    case Capability::kSafetyConfig:
+      return r == Role::kOwner && policy.owner_safety_config;
+    default:
+      return false;
   }
 }
 
@@ -116,19 +133,26 @@ std::optional<Role> scope_min_role(std::string_view scope) {
 
 std::string_view capability_scope(Capability c) {
   switch (c) {
-    case Capability::kViewStatus: return "status";
-    case Capability::kChat: return "chat";
+    case Capability::kViewStatus:
+      return "status";
+    case Capability::kChat:
+      return "chat";
     case Capability::kTeleop:
     case Capability::kArm:
     case Capability::kNavigation:
-    case Capability::kRecordEpisodes: return "control";
-    case Capability::kTrainingContribute: return "training";
+    case Capability::kRecordEpisodes:
+      return "control";
+    case Capability::kTrainingContribute:
+      return "training";
     case Capability::kInstallSkills:
     case Capability::kOtaUpdates:
     case Capability::kUserManagement:
-    case Capability::kHardwareDiagnostics: return "config";
-    case Capability::kSafetyConfig: return "safety";
-    case Capability::kModelDeployment: return "deploy";
+    case Capability::kHardwareDiagnostics:
+      return "config";
+    case Capability::kSafetyConfig:
+      return "safety";
+    case Capability::kModelDeployment:
+      return "deploy";
   }
   return "control";
 }
@@ -139,7 +163,8 @@ Capability capability_for_action(std::string_view action) {
   if (starts("status") || starts("get_status") || starts("query")) return Capability::kViewStatus;
   if (starts("chat")) return Capability::kChat;
   if (starts("teleop")) return Capability::kTeleop;
-  if (starts("move") || starts("nav") || starts("drive") || starts("goto")) return Capability::kNavigation;
+  if (starts("move") || starts("nav") || starts("drive") || starts("goto"))
+    return Capability::kNavigation;
   if (starts("arm") || starts("joint") || starts("gripper")) return Capability::kArm;
   if (starts("record")) return Capability::kRecordEpisodes;
   if (starts("train")) return Capability::kTrainingContribute;
@@ -154,22 +179,32 @@ Capability capability_for_action(std::string_view action) {
 
 uint32_t rate_limit_per_minute(Role r) {
   switch (r) {
-    case Role::kGuest: return 10;
-    case Role::kUser: return 100;
-    case Role::kLeasee: return 500;
-    case Role::kOwner: return 1000;
-    case Role::kCreator: return 0;
+    case Role::kGuest:
+      return 10;
+    case Role::kUser:
+      return 100;
+    case Role::kLeasee:
+      return 500;
+    case Role::kOwner:
+      return 1000;
+    case Role::kCreator:
+      return 0;
   }
   return 10;
 }
 
 uint32_t session_ttl_seconds(Role r) {
   switch (r) {
-    case Role::kGuest: return 15 * 60;
-    case Role::kUser: return 3600;
-    case Role::kLeasee: return 2 * 3600;
-    case Role::kOwner: return 8 * 3600;
-    case Role::kCreator: return 0;
+    case Role::kGuest:
+      return 15 * 60;
+    case Role::kUser:
+      return 3600;
+    case Role::kLeasee:
+      return 2 * 3600;
+    case Role::kOwner:
+      return 8 * 3600;
+    case Role::kCreator:
+      return 0;
   }
   return 15 * 60;
 }
@@ -179,8 +214,8 @@ Status authorize(Role role, const std::vector<std::string>& scopes, Capability c
   std::string_view needed = capability_scope(capability);
   auto min_role = scope_min_role(needed);
   // status is implied for every authenticated principal (role-implied scope).
-  bool has_scope = needed == "status" ||
-                   std::find(scopes.begin(), scopes.end(), needed) != scopes.end();
+  bool has_scope =
+      needed == "status" || std::find(scopes.begin(), scopes.end(), needed) != scopes.end();
   if (!has_scope) {
     return Error(ErrorCode::kInsufficientPrivileges,
                  std::string(role_name(role)) + " token lacks scope " + std::string(needed) +
@@ -193,10 +228,10 @@ Status authorize(Role role, const std::vector<std::string>& scopes, Capability c
                  "scope");
   }
   if (!role_allows(role, capability, policy)) {
-    return Error(ErrorCode::kInsufficientPrivileges,
-                 std::string(role_name(role)) + " may not use " +
-                     std::string(capability_name(capability)),
-                 "role");
+    return Error(
+        ErrorCode::kInsufficientPrivileges,
+        std::string(role_name(role)) + " may not use " + std::string(capability_name(capability)),
+        "role");
   }
   return Status::Ok();
 }

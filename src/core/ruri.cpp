@@ -32,15 +32,22 @@ std::string quoted(std::string_view s) {
 std::optional<std::string> check_label(std::string_view s, std::string_view name,
                                        std::string_view extra, size_t min_len) {
   if (s.empty()) return "the " + std::string(name) + " segment is empty";
-  if (has_upper(s)) return "the " + std::string(name) + " segment " + quoted(s) + " has upper-case letters; RURIs are lower case";
+  if (has_upper(s))
+    return "the " + std::string(name) + " segment " + quoted(s) +
+           " has upper-case letters; RURIs are lower case";
   if (s.size() < min_len)
-    return "the " + std::string(name) + " segment " + quoted(s) + " is shorter than " + std::to_string(min_len) + " characters";
+    return "the " + std::string(name) + " segment " + quoted(s) + " is shorter than " +
+           std::to_string(min_len) + " characters";
   if (!is_lower_alnum(s.front()) || !is_lower_alnum(s.back()))
-    return "the " + std::string(name) + " segment " + quoted(s) + " must start and end with a letter or digit";
+    return "the " + std::string(name) + " segment " + quoted(s) +
+           " must start and end with a letter or digit";
   for (char c : s) {
-    if (c == '*') return "the " + std::string(name) + " segment is a wildcard; wildcards are only allowed in a JWT aud";
+    if (c == '*')
+      return "the " + std::string(name) +
+             " segment is a wildcard; wildcards are only allowed in a JWT aud";
     if (!is_lower_alnum(c) && extra.find(c) == std::string_view::npos)
-      return "the " + std::string(name) + " segment " + quoted(s) + " contains the character " + quoted(std::string_view(&c, 1)) + ", allowed are a-z, 0-9 and " + quoted(extra);
+      return "the " + std::string(name) + " segment " + quoted(s) + " contains the character " +
+             quoted(std::string_view(&c, 1)) + ", allowed are a-z, 0-9 and " + quoted(extra);
   }
   return std::nullopt;
 }
@@ -75,12 +82,14 @@ std::optional<std::string> check_capability(const std::vector<std::string_view>&
   out.clear();
   for (size_t i = from; i < parts.size(); ++i) {
     std::string_view p = parts[i];
-    if (has_upper(p)) return "the capability " + quoted(p) + " has upper-case letters; RURIs are lower case";
+    if (has_upper(p))
+      return "the capability " + quoted(p) + " has upper-case letters; RURIs are lower case";
     if (i == from && !(p.front() >= 'a' && p.front() <= 'z'))
       return "the capability " + quoted(p) + " must start with a letter";
     for (char c : p)
       if (!is_lower_alnum(c) && c != '-')
-        return "the capability " + quoted(p) + " contains " + quoted(std::string_view(&c, 1)) + ", allowed are a-z, 0-9 and '-'";
+        return "the capability " + quoted(p) + " contains " + quoted(std::string_view(&c, 1)) +
+               ", allowed are a-z, 0-9 and '-'";
     if (!out.empty()) out.push_back('/');
     out.append(p);
   }
@@ -120,11 +129,15 @@ Result<Ruri> parse_canonical(const std::vector<std::string_view>& parts) {
     dev = dev.substr(0, colon);
     if (auto e = parse_port(port, r.port)) return invalid("port", *e);
   }
-  if (dev == "*") return invalid("device-id", "the device-id segment is a wildcard; wildcards are only allowed in a JWT aud");
+  if (dev == "*")
+    return invalid("device-id",
+                   "the device-id segment is a wildcard; wildcards are only allowed in a JWT aud");
   if (has_upper(dev))
-    return invalid("device-id", "the device-id " + quoted(dev) + " has upper-case letters; RURIs are lower case");
+    return invalid("device-id", "the device-id " + quoted(dev) +
+                                    " has upper-case letters; RURIs are lower case");
   if (!is_device_id(dev))
-    return invalid("device-id", "the device-id " + quoted(dev) + " must be 8 hex digits or a UUID (8-4-4-4-12)");
+    return invalid("device-id",
+                   "the device-id " + quoted(dev) + " must be 8 hex digits or a UUID (8-4-4-4-12)");
   if (parts.size() > 4) {
     if (auto e = check_capability(parts, 4, r.capability)) return invalid("capability", *e);
   }
@@ -184,8 +197,10 @@ std::optional<Ruri> parse_shorthand(const std::vector<std::string_view>& parts) 
   size_t d1 = head.find('.');
   if (d1 == std::string_view::npos) return std::nullopt;
   size_t d2 = head.find('.', d1 + 1);
-  if (d2 == std::string_view::npos || head.find('.', d2 + 1) != std::string_view::npos) return std::nullopt;
-  std::string_view mfr = head.substr(0, d1), model = head.substr(d1 + 1, d2 - d1 - 1), id = head.substr(d2 + 1);
+  if (d2 == std::string_view::npos || head.find('.', d2 + 1) != std::string_view::npos)
+    return std::nullopt;
+  std::string_view mfr = head.substr(0, d1), model = head.substr(d1 + 1, d2 - d1 - 1),
+                   id = head.substr(d2 + 1);
   auto label = [](std::string_view s) {
     if (s.empty() || !is_lower_alnum(s[0])) return false;
     for (char c : s)
@@ -210,10 +225,14 @@ std::optional<Ruri> parse_shorthand(const std::vector<std::string_view>& parts) 
 
 std::string_view ruri_form_name(Ruri::Form f) {
   switch (f) {
-    case Ruri::Form::kCanonical: return "canonical";
-    case Ruri::Form::kShorthand: return "shorthand";
-    case Ruri::Form::kSdk5: return "sdk5";
-    case Ruri::Form::kDiscovered: return "discovered";
+    case Ruri::Form::kCanonical:
+      return "canonical";
+    case Ruri::Form::kShorthand:
+      return "shorthand";
+    case Ruri::Form::kSdk5:
+      return "sdk5";
+    case Ruri::Form::kDiscovered:
+      return "discovered";
   }
   return "canonical";
 }
@@ -258,7 +277,8 @@ Result<Ruri> parse_ruri_text(std::string_view text) {
   size_t i = 0;
   while (true) {
     size_t j = rest.find('/', i);
-    std::string_view p = rest.substr(i, j == std::string_view::npos ? std::string_view::npos : j - i);
+    std::string_view p =
+        rest.substr(i, j == std::string_view::npos ? std::string_view::npos : j - i);
     if (p.empty()) return invalid("ruri", "empty segment (two consecutive '/' or a trailing '//')");
     parts.push_back(p);
     if (j == std::string_view::npos) break;
@@ -268,9 +288,11 @@ Result<Ruri> parse_ruri_text(std::string_view text) {
   if (parts.size() == 3 && parts[0] == "local.rcan" && parts[1] == "discovered") {
     std::string_view hp = parts[2];
     size_t colon = hp.rfind(':');
-    if (colon == std::string_view::npos) return invalid("port", "a discovered RURI needs <ip>:<port>");
+    if (colon == std::string_view::npos)
+      return invalid("port", "a discovered RURI needs <ip>:<port>");
     if (!parse_ipv4(hp.substr(0, colon)))
-      return invalid("device-id", "a discovered RURI needs a dotted IPv4 address, got " + quoted(hp.substr(0, colon)));
+      return invalid("device-id", "a discovered RURI needs a dotted IPv4 address, got " +
+                                      quoted(hp.substr(0, colon)));
     Ruri r;
     r.form = Ruri::Form::kDiscovered;
     r.registry = "local.rcan";
@@ -363,7 +385,8 @@ Result<Rrn> parse_rrn(std::string_view text) {
     std::string_view pfx = rest.substr(0, dash);
     if (pfx.size() < 2 || pfx.size() > 8) return bad("an RRN prefix has 2 to 8 characters");
     for (char c : pfx)
-      if (!((c >= 'A' && c <= 'Z') || is_digit(c))) return bad("an RRN prefix is upper-case letters and digits");
+      if (!((c >= 'A' && c <= 'Z') || is_digit(c)))
+        return bad("an RRN prefix is upper-case letters and digits");
     r.prefix = std::string(pfx);
     rest = rest.substr(dash + 1);
   }

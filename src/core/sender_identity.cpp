@@ -10,9 +10,11 @@ Status check_token_sender_claims(const TokenIdentity& token) {
                  "token claims an unknown sender_type '" + token.sender_type->substr(0, 32) + "'",
                  "sender_type");
   }
-  if (*st == SenderType::kCloudFunction && (!token.cloud_provider || token.cloud_provider->empty())) {
+  if (*st == SenderType::kCloudFunction &&
+      (!token.cloud_provider || token.cloud_provider->empty())) {
     return Error(ErrorCode::kAuthInvalid,
-                 "token claims sender_type cloud_function without cloud_provider", "cloud_provider");
+                 "token claims sender_type cloud_function without cloud_provider",
+                 "cloud_provider");
   }
   return Status::Ok();
 }
@@ -52,8 +54,10 @@ Result<SenderIdentity> resolve_sender(const Message& msg, const TokenIdentity& t
                  "sender_type system is reserved for the node's own messages", "sender_type");
   }
   if (id.sender_type == SenderType::kCloudFunction) {
-    id.cloud_provider = !msg.cloud_provider.empty() ? msg.cloud_provider : token.cloud_provider.value_or("");
-    id.function_name = !msg.function_name.empty() ? msg.function_name : token.function_name.value_or("");
+    id.cloud_provider =
+        !msg.cloud_provider.empty() ? msg.cloud_provider : token.cloud_provider.value_or("");
+    id.function_name =
+        !msg.function_name.empty() ? msg.function_name : token.function_name.value_or("");
     id.function_region = msg.function_region;
     if (id.cloud_provider.empty()) {
       return Error(ErrorCode::kSchemaValidationFailed,
@@ -63,7 +67,8 @@ Result<SenderIdentity> resolve_sender(const Message& msg, const TokenIdentity& t
       return Error(ErrorCode::kSchemaValidationFailed,
                    "sender_type cloud_function requires function_name", "function_name");
     }
-    if (token.cloud_provider && !msg.cloud_provider.empty() && *token.cloud_provider != msg.cloud_provider) {
+    if (token.cloud_provider && !msg.cloud_provider.empty() &&
+        *token.cloud_provider != msg.cloud_provider) {
       return Error(ErrorCode::kInsufficientPrivileges,
                    "message cloud_provider disagrees with its token", "cloud_provider");
     }

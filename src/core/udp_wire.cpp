@@ -24,14 +24,22 @@ void put_header(uint8_t* out, Kind k) {
 
 std::string_view parse_error_name(ParseError e) {
   switch (e) {
-    case ParseError::kNone: return "none";
-    case ParseError::kTooShort: return "too_short";
-    case ParseError::kBadMagic: return "bad_magic";
-    case ParseError::kBadVersion: return "bad_version";
-    case ParseError::kBadKind: return "bad_kind";
-    case ParseError::kBadFlags: return "bad_flags";
-    case ParseError::kBadLength: return "bad_length";
-    case ParseError::kBadBody: return "bad_body";
+    case ParseError::kNone:
+      return "none";
+    case ParseError::kTooShort:
+      return "too_short";
+    case ParseError::kBadMagic:
+      return "bad_magic";
+    case ParseError::kBadVersion:
+      return "bad_version";
+    case ParseError::kBadKind:
+      return "bad_kind";
+    case ParseError::kBadFlags:
+      return "bad_flags";
+    case ParseError::kBadLength:
+      return "bad_length";
+    case ParseError::kBadBody:
+      return "bad_body";
   }
   return "unknown";
 }
@@ -89,22 +97,27 @@ Parsed parse(std::span<const uint8_t> b) {
       if (!v.ok() || !v->is_object()) p.error = ParseError::kBadBody;
       return p;
     }
-    default: p.error = ParseError::kBadKind; return p;
+    default:
+      p.error = ParseError::kBadKind;
+      return p;
   }
 }
 
 bool verify_heartbeat(std::span<const uint8_t> b, const Key& key) {
   if (b.size() != kHeartbeatSize) return false;
   Digest256 mac = hmac_sha256(key.data(), key.size(), b.data(), 32);
-  return constant_time_equal(std::string_view(reinterpret_cast<const char*>(mac.data()), mac.size()),
-                             std::string_view(reinterpret_cast<const char*>(b.data() + 32), kMacSize));
+  return constant_time_equal(
+      std::string_view(reinterpret_cast<const char*>(mac.data()), mac.size()),
+      std::string_view(reinterpret_cast<const char*>(b.data() + 32), kMacSize));
 }
 
-std::array<uint8_t, kHeartbeatSize> encode_heartbeat(const KeyId& key_id, uint64_t seq, const Key& key) {
+std::array<uint8_t, kHeartbeatSize> encode_heartbeat(const KeyId& key_id, uint64_t seq,
+                                                     const Key& key) {
   std::array<uint8_t, kHeartbeatSize> out{};
   put_header(out.data(), Kind::kHeartbeat);
   std::memcpy(out.data() + 8, key_id.data(), kKeyIdSize);
-  for (int i = 0; i < 8; ++i) out[static_cast<size_t>(24 + i)] = static_cast<uint8_t>(seq >> (56 - 8 * i));
+  for (int i = 0; i < 8; ++i)
+    out[static_cast<size_t>(24 + i)] = static_cast<uint8_t>(seq >> (56 - 8 * i));
   Digest256 mac = hmac_sha256(key.data(), key.size(), out.data(), 32);
   std::memcpy(out.data() + 32, mac.data(), kMacSize);
   return out;

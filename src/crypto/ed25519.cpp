@@ -95,8 +95,8 @@ bool verify(std::span<const uint8_t> public_key, std::span<const uint8_t> messag
             std::span<const uint8_t> signature) {
   if (public_key.size() != kPublicKeyBytes || signature.size() != kSignatureBytes) return false;
   if (!scalar_is_canonical(signature.data() + 32)) return false;
-  PkeyPtr pkey(EVP_PKEY_new_raw_public_key(EVP_PKEY_ED25519, nullptr, public_key.data(),
-                                           public_key.size()));
+  PkeyPtr pkey(
+      EVP_PKEY_new_raw_public_key(EVP_PKEY_ED25519, nullptr, public_key.data(), public_key.size()));
   MdCtxPtr ctx(EVP_MD_CTX_new());
   if (!pkey || !ctx ||
       EVP_DigestVerifyInit(ctx.get(), nullptr, nullptr, nullptr, pkey.get()) != 1) {
@@ -110,8 +110,8 @@ Result<std::string> public_key_to_pem(std::span<const uint8_t> public_key) {
   if (public_key.size() != kPublicKeyBytes) {
     return Error(ErrorCode::kInternal, "Ed25519 public key must be 32 bytes", "public_key");
   }
-  PkeyPtr pkey(EVP_PKEY_new_raw_public_key(EVP_PKEY_ED25519, nullptr, public_key.data(),
-                                           public_key.size()));
+  PkeyPtr pkey(
+      EVP_PKEY_new_raw_public_key(EVP_PKEY_ED25519, nullptr, public_key.data(), public_key.size()));
   BioPtr bio(BIO_new(BIO_s_mem()));
   if (!pkey || !bio || PEM_write_bio_PUBKEY(bio.get(), pkey.get()) != 1) {
     return Error(ErrorCode::kInternal, "cannot write the Ed25519 public key as PEM");

@@ -9,7 +9,8 @@ namespace rcan::hybrid {
 namespace {
 
 Error invalid(std::string msg, std::string field = "sig") {
-  return Error(ErrorCode::kSignatureInvalid, "hybrid signature: " + std::move(msg), std::move(field));
+  return Error(ErrorCode::kSignatureInvalid, "hybrid signature: " + std::move(msg),
+               std::move(field));
 }
 
 std::span<const uint8_t> as_bytes(std::string_view s) {
@@ -18,11 +19,13 @@ std::span<const uint8_t> as_bytes(std::string_view s) {
 
 }  // namespace
 
-std::string preimage(const json::Object& signed_body) { return json::canonical_without(signed_body, "sig"); }
+std::string preimage(const json::Object& signed_body) {
+  return json::canonical_without(signed_body, "sig");
+}
 
 Result<json::Object> sign_body(const json::Object& body, std::span<const uint8_t> mldsa_sk,
-                               std::span<const uint8_t> mldsa_pk, std::span<const uint8_t> ed25519_seed,
-                               const SignOptions& opts) {
+                               std::span<const uint8_t> mldsa_pk,
+                               std::span<const uint8_t> ed25519_seed, const SignOptions& opts) {
   if (mldsa_sk.size() != mldsa65::kSecretKeyBytes || mldsa_pk.size() != mldsa65::kPublicKeyBytes)
     return Error(ErrorCode::kInternal, "hybrid sign: ML-DSA-65 key has the wrong size");
   if (ed25519_seed.size() != ed25519::kSeedBytes)
@@ -48,8 +51,10 @@ Result<json::Object> sign_body(const json::Object& body, std::span<const uint8_t
   return out;
 }
 
-Status verify_body(const json::Object& body, std::span<const uint8_t> trusted_pk, const VerifyOptions& opts) {
-  if (trusted_pk.size() != mldsa65::kPublicKeyBytes) return invalid("trusted ML-DSA-65 key must be 1952 bytes");
+Status verify_body(const json::Object& body, std::span<const uint8_t> trusted_pk,
+                   const VerifyOptions& opts) {
+  if (trusted_pk.size() != mldsa65::kPublicKeyBytes)
+    return invalid("trusted ML-DSA-65 key must be 1952 bytes");
   const json::Value* sig = body.find("sig");
   if (!sig) return invalid("the body has no sig");
   if (!sig->is_object()) return invalid("sig is not an object");
@@ -64,9 +69,12 @@ Status verify_body(const json::Object& body, std::span<const uint8_t> trusted_pk
   if (!ed) return invalid("sig.ed25519 is missing or not base64", "sig.ed25519");
   auto edpub = field("ed25519_pub");
   if (!edpub) return invalid("sig.ed25519_pub is missing or not base64", "sig.ed25519_pub");
-  if (ml->size() != mldsa65::kSignatureBytes) return invalid("sig.ml_dsa is not 3309 bytes", "sig.ml_dsa");
-  if (ed->size() != ed25519::kSignatureBytes) return invalid("sig.ed25519 is not 64 bytes", "sig.ed25519");
-  if (edpub->size() != ed25519::kPublicKeyBytes) return invalid("sig.ed25519_pub is not 32 bytes", "sig.ed25519_pub");
+  if (ml->size() != mldsa65::kSignatureBytes)
+    return invalid("sig.ml_dsa is not 3309 bytes", "sig.ml_dsa");
+  if (ed->size() != ed25519::kSignatureBytes)
+    return invalid("sig.ed25519 is not 64 bytes", "sig.ed25519");
+  if (edpub->size() != ed25519::kPublicKeyBytes)
+    return invalid("sig.ed25519_pub is not 32 bytes", "sig.ed25519_pub");
   if (opts.expected_ed25519_pub && *opts.expected_ed25519_pub != *edpub)
     return invalid("sig.ed25519_pub is not the expected Ed25519 key", "sig.ed25519_pub");
 
@@ -83,8 +91,10 @@ Status verify_body(const json::Object& body, std::span<const uint8_t> trusted_pk
   }
 
   std::string pre = preimage(body);
-  if (!mldsa65::verify(trusted_pk, as_bytes(pre), *ml)) return invalid("ML-DSA-65 signature does not verify", "sig.ml_dsa");
-  if (!ed25519::verify(*edpub, as_bytes(pre), *ed)) return invalid("Ed25519 signature does not verify", "sig.ed25519");
+  if (!mldsa65::verify(trusted_pk, as_bytes(pre), *ml))
+    return invalid("ML-DSA-65 signature does not verify", "sig.ml_dsa");
+  if (!ed25519::verify(*edpub, as_bytes(pre), *ed))
+    return invalid("Ed25519 signature does not verify", "sig.ed25519");
   return Status::Ok();
 }
 

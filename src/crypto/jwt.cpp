@@ -86,8 +86,10 @@ Result<Alg> classify(EVP_PKEY* pk) {
   }
   if (id == EVP_PKEY_RSA) {
     int bits = EVP_PKEY_get_bits(pk);
-    if (bits < kMinRsaBits) return key_error("RSA key of " + std::to_string(bits) + " bits: at least 2048 required");
-    if (bits > kMaxRsaBits) return key_error("RSA key of " + std::to_string(bits) + " bits: at most 8192 supported");
+    if (bits < kMinRsaBits)
+      return key_error("RSA key of " + std::to_string(bits) + " bits: at least 2048 required");
+    if (bits > kMaxRsaBits)
+      return key_error("RSA key of " + std::to_string(bits) + " bits: at most 8192 supported");
     return Alg::kRS256;
   }
   return key_error("unsupported key type (need Ed25519, EC P-256 or RSA)");
@@ -128,7 +130,8 @@ std::optional<Bytes> es256_raw_to_der(std::span<const uint8_t> raw) {
 
 std::optional<Bytes> es256_der_to_raw(std::span<const uint8_t> der) {
   const unsigned char* p = der.data();
-  std::unique_ptr<ECDSA_SIG, EcdsaSigFree> sig(d2i_ECDSA_SIG(nullptr, &p, static_cast<long>(der.size())));
+  std::unique_ptr<ECDSA_SIG, EcdsaSigFree> sig(
+      d2i_ECDSA_SIG(nullptr, &p, static_cast<long>(der.size())));
   if (!sig) return std::nullopt;
   const BIGNUM* r = nullptr;
   const BIGNUM* s = nullptr;
@@ -139,12 +142,14 @@ std::optional<Bytes> es256_der_to_raw(std::span<const uint8_t> der) {
   return raw;
 }
 
-bool evp_verify(EVP_PKEY* pk, const EVP_MD* md, std::string_view input, std::span<const uint8_t> sig) {
+bool evp_verify(EVP_PKEY* pk, const EVP_MD* md, std::string_view input,
+                std::span<const uint8_t> sig) {
   MdCtxPtr ctx(EVP_MD_CTX_new());
   if (!ctx) return false;
-  bool ok = EVP_DigestVerifyInit(ctx.get(), nullptr, md, nullptr, pk) == 1 &&
-            EVP_DigestVerify(ctx.get(), sig.data(), sig.size(),
-                             reinterpret_cast<const unsigned char*>(input.data()), input.size()) == 1;
+  bool ok =
+      EVP_DigestVerifyInit(ctx.get(), nullptr, md, nullptr, pk) == 1 &&
+      EVP_DigestVerify(ctx.get(), sig.data(), sig.size(),
+                       reinterpret_cast<const unsigned char*>(input.data()), input.size()) == 1;
   ERR_clear_error();
   return ok;
 }
@@ -152,7 +157,8 @@ bool evp_verify(EVP_PKEY* pk, const EVP_MD* md, std::string_view input, std::spa
 int no_password(char*, int, int, void*) { return -1; }
 
 std::string trim_secret_newline(std::string_view s) {
-  if (s.size() >= 2 && s.substr(s.size() - 2) == "\r\n") return std::string(s.substr(0, s.size() - 2));
+  if (s.size() >= 2 && s.substr(s.size() - 2) == "\r\n")
+    return std::string(s.substr(0, s.size() - 2));
   if (!s.empty() && s.back() == '\n') return std::string(s.substr(0, s.size() - 1));
   return std::string(s);
 }
@@ -164,10 +170,14 @@ std::string trim_secret_newline(std::string_view s) {
 
 std::string_view alg_name(Alg alg) {
   switch (alg) {
-    case Alg::kEdDSA: return "EdDSA";
-    case Alg::kES256: return "ES256";
-    case Alg::kRS256: return "RS256";
-    case Alg::kHS256: return "HS256";
+    case Alg::kEdDSA:
+      return "EdDSA";
+    case Alg::kES256:
+      return "ES256";
+    case Alg::kRS256:
+      return "RS256";
+    case Alg::kHS256:
+      return "HS256";
   }
   return "?";
 }
@@ -229,7 +239,8 @@ Result<VerificationKey> VerificationKey::ed25519_raw(std::span<const uint8_t> ra
 
 Result<VerificationKey> VerificationKey::hs256_secret(std::span<const uint8_t> secret) {
   if (secret.size() < kMinHs256SecretBytes)
-    return key_error("HS256 secret must be at least 32 bytes, got " + std::to_string(secret.size()));
+    return key_error("HS256 secret must be at least 32 bytes, got " +
+                     std::to_string(secret.size()));
   if (secret.size() > 4096) return key_error("HS256 secret larger than 4096 bytes");
   VerificationKey k;
   k.alg_ = Alg::kHS256;
@@ -243,11 +254,13 @@ Result<VerificationKey> VerificationKey::from_jwk(const json::Value& jwk, bool a
   const json::Value* kty = jwk.get("kty");
   if (!kty || !kty->is_string()) return key_error("JWK has no kty", "kty");
   const std::string& t = kty->as_string();
-  if (const json::Value* use = jwk.get("use"); use && !(use->is_string() && use->as_string() == "sig"))
+  if (const json::Value* use = jwk.get("use");
+      use && !(use->is_string() && use->as_string() == "sig"))
     return key_error("JWK use must be \"sig\"", "use");
   std::string kid;
   if (const json::Value* k = jwk.get("kid")) {
-    if (!k->is_string() || k->as_string().size() > 256) return key_error("JWK kid must be a short string", "kid");
+    if (!k->is_string() || k->as_string().size() > 256)
+      return key_error("JWK kid must be a short string", "kid");
     kid = k->as_string();
   }
   Result<VerificationKey> out = key_error("unsupported JWK");
@@ -255,7 +268,8 @@ Result<VerificationKey> VerificationKey::from_jwk(const json::Value& jwk, bool a
     const json::Value* crv = jwk.get("crv");
     if (!crv || !crv->is_string() || crv->as_string() != "Ed25519")
       return key_error("OKP JWK must have crv Ed25519", "crv");
-    if (jwk.get("d")) return key_error("JWK contains a private key (d); a public key is expected", "d");
+    if (jwk.get("d"))
+      return key_error("JWK contains a private key (d); a public key is expected", "d");
     auto x = jwk_b64(jwk, "x");
     if (!x || x->size() != 32) return key_error("Ed25519 JWK x must be 32 bytes of base64url", "x");
     out = ed25519_raw(*x);
@@ -263,7 +277,8 @@ Result<VerificationKey> VerificationKey::from_jwk(const json::Value& jwk, bool a
     const json::Value* crv = jwk.get("crv");
     if (!crv || !crv->is_string() || crv->as_string() != "P-256")
       return key_error("EC JWK must have crv P-256", "crv");
-    if (jwk.get("d")) return key_error("JWK contains a private key (d); a public key is expected", "d");
+    if (jwk.get("d"))
+      return key_error("JWK contains a private key (d); a public key is expected", "d");
     auto x = jwk_b64(jwk, "x");
     auto y = jwk_b64(jwk, "y");
     if (!x || x->size() != 32) return key_error("P-256 JWK x must be 32 bytes of base64url", "x");
@@ -275,7 +290,8 @@ Result<VerificationKey> VerificationKey::from_jwk(const json::Value& jwk, bool a
     std::unique_ptr<OSSL_PARAM_BLD, ParamBldFree> bld(OSSL_PARAM_BLD_new());
     if (!bld) return Error(ErrorCode::kInternal, "out of memory");
     OSSL_PARAM_BLD_push_utf8_string(bld.get(), OSSL_PKEY_PARAM_GROUP_NAME, "P-256", 0);
-    OSSL_PARAM_BLD_push_octet_string(bld.get(), OSSL_PKEY_PARAM_PUB_KEY, point.data(), point.size());
+    OSSL_PARAM_BLD_push_octet_string(bld.get(), OSSL_PKEY_PARAM_PUB_KEY, point.data(),
+                                     point.size());
     std::unique_ptr<OSSL_PARAM, ParamFree> params(OSSL_PARAM_BLD_to_param(bld.get()));
     PkeyCtxPtr ctx(EVP_PKEY_CTX_new_from_name(nullptr, "EC", nullptr));
     EVP_PKEY* raw = nullptr;
@@ -296,7 +312,8 @@ Result<VerificationKey> VerificationKey::from_jwk(const json::Value& jwk, bool a
     k.impl_->pkey = std::move(pk);
     out = std::move(k);
   } else if (t == "RSA") {
-    if (jwk.get("d")) return key_error("JWK contains a private key (d); a public key is expected", "d");
+    if (jwk.get("d"))
+      return key_error("JWK contains a private key (d); a public key is expected", "d");
     auto n = jwk_b64(jwk, "n");
     auto e = jwk_b64(jwk, "e");
     if (!n || n->size() < kMinRsaBits / 8 - 1 || n->size() > kMaxRsaBits / 8 + 1)
@@ -329,8 +346,8 @@ Result<VerificationKey> VerificationKey::from_jwk(const json::Value& jwk, bool a
     out = std::move(k);
   } else if (t == "oct") {
     if (!allow_secret)
-      return key_error("symmetric (oct) JWK refused: HS256 keys must be configured as a shared secret",
-                       "kty");
+      return key_error(
+          "symmetric (oct) JWK refused: HS256 keys must be configured as a shared secret", "kty");
     auto k = jwk_b64(jwk, "k");
     if (!k) return key_error("oct JWK k is malformed", "k");
     out = hs256_secret(*k);
@@ -341,7 +358,8 @@ Result<VerificationKey> VerificationKey::from_jwk(const json::Value& jwk, bool a
   if (!out.ok()) return out;
   if (const json::Value* a = jwk.get("alg")) {
     if (!a->is_string() || a->as_string() != alg_name(out->alg()))
-      return key_error("JWK alg does not match its key type (expected " + std::string(alg_name(out->alg())) + ")",
+      return key_error("JWK alg does not match its key type (expected " +
+                           std::string(alg_name(out->alg())) + ")",
                        "alg");
   }
   out->kid_ = std::move(kid);
@@ -353,7 +371,8 @@ bool VerificationKey::verify(std::string_view input, std::span<const uint8_t> si
   switch (alg_) {
     case Alg::kHS256: {
       if (sig.size() != 32 || impl_->secret.empty()) return false;
-      Digest256 mac = hmac_sha256(impl_->secret.data(), impl_->secret.size(), input.data(), input.size());
+      Digest256 mac =
+          hmac_sha256(impl_->secret.data(), impl_->secret.size(), input.data(), input.size());
       bool ok = constant_time_equal(
           std::string_view(reinterpret_cast<const char*>(mac.data()), mac.size()),
           std::string_view(reinterpret_cast<const char*>(sig.data()), sig.size()));
@@ -384,11 +403,14 @@ Result<std::vector<VerificationKey>> parse_jwk_set(std::string_view text) {
   if (!doc.ok()) return key_error("JWK/JWKS is not valid JSON: " + doc.error().message);
   std::vector<VerificationKey> out;
   if (const json::Value* ks = doc->get("keys")) {
-    if (!ks->is_array() || ks->as_array().empty()) return key_error("JWKS keys must be a non-empty array", "keys");
+    if (!ks->is_array() || ks->as_array().empty())
+      return key_error("JWKS keys must be a non-empty array", "keys");
     size_t i = 0;
     for (const auto& k : ks->as_array()) {
       auto vk = VerificationKey::from_jwk(k, false);
-      if (!vk.ok()) return key_error("JWKS key " + std::to_string(i) + ": " + vk.error().message, vk.error().field);
+      if (!vk.ok())
+        return key_error("JWKS key " + std::to_string(i) + ": " + vk.error().message,
+                         vk.error().field);
       out.push_back(std::move(vk).value());
       ++i;
     }
@@ -400,7 +422,8 @@ Result<std::vector<VerificationKey>> parse_jwk_set(std::string_view text) {
   return out;
 }
 
-Result<std::vector<VerificationKey>> load_verification_keys(const std::string& path, bool hs256_secret) {
+Result<std::vector<VerificationKey>> load_verification_keys(const std::string& path,
+                                                            bool hs256_secret) {
   if (hs256_secret) {
     auto s = keys::read_secret_file(path, 0);
     if (!s.ok()) return s.error();
@@ -435,10 +458,12 @@ void TrustStore::add(std::string issuer, VerificationKey key, std::string kid) {
 }
 
 bool TrustStore::knows_issuer(std::string_view issuer) const {
-  return std::any_of(entries_.begin(), entries_.end(), [&](const Entry& e) { return e.issuer == issuer; });
+  return std::any_of(entries_.begin(), entries_.end(),
+                     [&](const Entry& e) { return e.issuer == issuer; });
 }
 
-std::vector<const VerificationKey*> TrustStore::candidates(std::string_view issuer, std::string_view kid) const {
+std::vector<const VerificationKey*> TrustStore::candidates(std::string_view issuer,
+                                                           std::string_view kid) const {
   std::vector<const VerificationKey*> with_kid, without_kid;
   for (const auto& e : entries_) {
     if (e.issuer != issuer) continue;
@@ -458,7 +483,8 @@ Result<TrustStore> TrustStore::from_config(const std::vector<IssuerConfig>& issu
   TrustStore ts;
   for (const auto& ic : issuers) {
     if (ic.issuer.empty()) return key_error("trusted issuer with an empty name", "issuer");
-    if (ic.key_file.empty()) return key_error("trusted issuer " + ic.issuer + " has no key file", "key_file");
+    if (ic.key_file.empty())
+      return key_error("trusted issuer " + ic.issuer + " has no key file", "key_file");
     bool secret = false;
     if (ic.kind == "hs256_secret") {
       secret = true;
@@ -481,35 +507,47 @@ Result<Decoded> decode(std::string_view token, size_t max_token_bytes) {
   if (token.empty()) return Error(ErrorCode::kAuthRequired, "no token");
   if (token.size() > max_token_bytes)
     return auth_invalid("token is " + std::to_string(token.size()) + " bytes, limit " +
-                        std::to_string(max_token_bytes), "", "oversize");
+                            std::to_string(max_token_bytes),
+                        "", "oversize");
   size_t d1 = token.find('.');
   size_t d2 = d1 == std::string_view::npos ? d1 : token.find('.', d1 + 1);
   if (d1 == std::string_view::npos || d2 == std::string_view::npos ||
       token.find('.', d2 + 1) != std::string_view::npos)
-    return auth_invalid("not a JWS compact token (needs exactly three dot-separated parts)", "", "malformed");
+    return auth_invalid("not a JWS compact token (needs exactly three dot-separated parts)", "",
+                        "malformed");
   std::string_view h64 = token.substr(0, d1);
   std::string_view p64 = token.substr(d1 + 1, d2 - d1 - 1);
   std::string_view s64 = token.substr(d2 + 1);
   if (h64.empty() || p64.empty()) return auth_invalid("empty header or payload", "", "malformed");
   auto hb = b64url_segment(h64);
-  if (!hb) return auth_invalid("header is not base64url (no padding allowed)", "header", "malformed");
+  if (!hb)
+    return auth_invalid("header is not base64url (no padding allowed)", "header", "malformed");
   auto pb = b64url_segment(p64);
-  if (!pb) return auth_invalid("payload is not base64url (no padding allowed)", "payload", "malformed");
+  if (!pb)
+    return auth_invalid("payload is not base64url (no padding allowed)", "payload", "malformed");
   auto sb = b64url_segment(s64);
-  if (!sb) return auth_invalid("signature is not base64url (no padding allowed)", "signature", "malformed");
+  if (!sb)
+    return auth_invalid("signature is not base64url (no padding allowed)", "signature",
+                        "malformed");
 
   json::ParseOptions hopts;
   hopts.max_depth = 4;
   hopts.max_bytes = hb->size();
-  auto header = json::parse(std::string_view(reinterpret_cast<const char*>(hb->data()), hb->size()), hopts);
-  if (!header.ok()) return auth_invalid("header is not JSON: " + header.error().message, "header", "malformed");
-  if (!header->is_object()) return auth_invalid("header is not a JSON object", "header", "malformed");
+  auto header =
+      json::parse(std::string_view(reinterpret_cast<const char*>(hb->data()), hb->size()), hopts);
+  if (!header.ok())
+    return auth_invalid("header is not JSON: " + header.error().message, "header", "malformed");
+  if (!header->is_object())
+    return auth_invalid("header is not a JSON object", "header", "malformed");
   json::ParseOptions popts;
   popts.max_depth = 16;
   popts.max_bytes = pb->size();
-  auto claims = json::parse(std::string_view(reinterpret_cast<const char*>(pb->data()), pb->size()), popts);
-  if (!claims.ok()) return auth_invalid("claims are not JSON: " + claims.error().message, "payload", "malformed");
-  if (!claims->is_object()) return auth_invalid("claims are not a JSON object", "payload", "malformed");
+  auto claims =
+      json::parse(std::string_view(reinterpret_cast<const char*>(pb->data()), pb->size()), popts);
+  if (!claims.ok())
+    return auth_invalid("claims are not JSON: " + claims.error().message, "payload", "malformed");
+  if (!claims->is_object())
+    return auth_invalid("claims are not a JSON object", "payload", "malformed");
 
   Decoded d;
   d.header.raw = std::move(header->as_object());
@@ -571,7 +609,8 @@ Result<std::optional<int64_t>> numeric_date(const json::Object& c, const char* n
   if (v->is_int()) return std::optional<int64_t>{v->as_int()};
   if (v->is_double()) {
     double d = v->as_double();
-    if (std::isfinite(d) && std::fabs(d) < 1e15) return std::optional<int64_t>{static_cast<int64_t>(std::floor(d))};
+    if (std::isfinite(d) && std::fabs(d) < 1e15)
+      return std::optional<int64_t>{static_cast<int64_t>(std::floor(d))};
   }
   return auth_invalid(std::string(name) + " is not a valid NumericDate", name, "malformed");
 }
@@ -588,7 +627,8 @@ Status collect_scopes(const json::Object& c, const char* name, std::vector<std::
     size_t i = 0;
     while (i < s.size()) {
       size_t sp = s.find(' ', i);
-      std::string_view tok = s.substr(i, sp == std::string_view::npos ? std::string_view::npos : sp - i);
+      std::string_view tok =
+          s.substr(i, sp == std::string_view::npos ? std::string_view::npos : sp - i);
       if (!tok.empty()) add(tok);
       if (sp == std::string_view::npos) break;
       i = sp + 1;
@@ -598,18 +638,21 @@ Status collect_scopes(const json::Object& c, const char* name, std::vector<std::
   if (v->is_array()) {
     for (const auto& e : v->as_array()) {
       if (!e.is_string() || e.as_string().empty())
-        return auth_invalid(std::string(name) + " must contain only non-empty strings", name, "malformed");
+        return auth_invalid(std::string(name) + " must contain only non-empty strings", name,
+                            "malformed");
       add(e.as_string());
     }
     return Status::Ok();
   }
-  return auth_invalid(std::string(name) + " must be an array or a space-separated string", name, "malformed");
+  return auth_invalid(std::string(name) + " must be an array or a space-separated string", name,
+                      "malformed");
 }
 
 Result<std::string> optional_string(const json::Object& c, const char* name) {
   const json::Value* v = c.find(name);
   if (!v) return std::string();
-  if (!v->is_string()) return auth_invalid(std::string(name) + " must be a string", name, "malformed");
+  if (!v->is_string())
+    return auth_invalid(std::string(name) + " must be a string", name, "malformed");
   return v->as_string();
 }
 
@@ -652,9 +695,11 @@ Result<Claims> check_claims(json::Object c, const VerifyOptions& opts, int64_t n
   const int64_t leeway = std::max<int64_t>(0, opts.leeway_s);
   if (!out.exp) return auth_invalid("exp is missing", "exp", "missing_claim");
   if (now >= *out.exp + leeway) return auth_invalid("token expired", "exp", "expired");
-  if (out.nbf && now + leeway < *out.nbf) return auth_invalid("token not yet valid (nbf)", "nbf", "not_yet_valid");
+  if (out.nbf && now + leeway < *out.nbf)
+    return auth_invalid("token not yet valid (nbf)", "nbf", "not_yet_valid");
   if (opts.require_iat && !out.iat) return auth_invalid("iat is missing", "iat", "missing_claim");
-  if (out.iat && now + leeway < *out.iat) return auth_invalid("token issued in the future (iat)", "iat", "iat_in_future");
+  if (out.iat && now + leeway < *out.iat)
+    return auth_invalid("token issued in the future (iat)", "iat", "iat_in_future");
 
   // Audience.
   if (const json::Value* aud = c.find("aud")) {
@@ -662,23 +707,30 @@ Result<Claims> check_claims(json::Object c, const VerifyOptions& opts, int64_t n
       out.aud.push_back(aud->as_string());
     } else if (aud->is_array() && !aud->as_array().empty()) {
       for (const auto& a : aud->as_array()) {
-        if (!a.is_string()) return auth_invalid("aud must contain only strings", "aud", "malformed");
+        if (!a.is_string())
+          return auth_invalid("aud must contain only strings", "aud", "malformed");
         out.aud.push_back(a.as_string());
       }
     } else {
-      return auth_invalid("aud must be a string or a non-empty array of strings", "aud", "malformed");
+      return auth_invalid("aud must be a string or a non-empty array of strings", "aud",
+                          "malformed");
     }
   }
   if (!opts.skip_audience) {
     if (out.aud.empty()) return auth_invalid("aud is missing", "aud", "missing_claim");
-    if (opts.audience.empty()) return auth_invalid("this verifier has no audience (robot RURI) configured", "aud", "aud_mismatch");
+    if (opts.audience.empty())
+      return auth_invalid("this verifier has no audience (robot RURI) configured", "aud",
+                          "aud_mismatch");
     bool fleet_token = c.find("fleet") != nullptr;
     bool match = std::any_of(out.aud.begin(), out.aud.end(), [&](const std::string& a) {
-      if (fleet_token && std::find(opts.fleet_audiences.begin(), opts.fleet_audiences.end(), a) != opts.fleet_audiences.end())
+      if (fleet_token && std::find(opts.fleet_audiences.begin(), opts.fleet_audiences.end(), a) !=
+                             opts.fleet_audiences.end())
         return true;
       return aud_matches(a, opts.audience);
     });
-    if (!match) return auth_invalid("aud does not match this robot (" + opts.audience + ")", "aud", "aud_mismatch");
+    if (!match)
+      return auth_invalid("aud does not match this robot (" + opts.audience + ")", "aud",
+                          "aud_mismatch");
   }
 
   // §8.5 sender identity.
@@ -696,8 +748,8 @@ Result<Claims> check_claims(json::Object c, const VerifyOptions& opts, int64_t n
     if (s != "human" && s != "robot" && s != "cloud_function" && s != "system")
       return auth_invalid("unknown sender_type \"" + s + "\"", "sender_type", "bad_sender_type");
     if (s == "cloud_function" && out.cloud_provider.empty())
-      return auth_invalid("sender_type cloud_function without cloud_provider (RCAN §8.5)", "cloud_provider",
-                          "missing_cloud_provider");
+      return auth_invalid("sender_type cloud_function without cloud_provider (RCAN §8.5)",
+                          "cloud_provider", "missing_cloud_provider");
   }
 
   // Role.
@@ -705,11 +757,13 @@ Result<Claims> check_claims(json::Object c, const VerifyOptions& opts, int64_t n
   if (const json::Value* r = c.find("role")) {
     if (!r->is_string()) return auth_invalid("role must be a string", "role", "bad_role");
     level_named = role_level(r->as_string());
-    if (level_named == 0) return auth_invalid("unknown role \"" + r->as_string() + "\"", "role", "bad_role");
+    if (level_named == 0)
+      return auth_invalid("unknown role \"" + r->as_string() + "\"", "role", "bad_role");
   }
   if (const json::Value* r = c.find("rcan_role")) {
     level_numeric = role_level_from_rcan_role(*r);
-    if (level_numeric == 0) return auth_invalid("rcan_role must be 1, 2, 2.5, 3 or 5", "rcan_role", "bad_role");
+    if (level_numeric == 0)
+      return auth_invalid("rcan_role must be 1, 2, 2.5, 3 or 5", "rcan_role", "bad_role");
   }
   if (level_named && level_numeric && level_named != level_numeric)
     return auth_invalid("role and rcan_role disagree", "role", "bad_role");
@@ -727,7 +781,8 @@ Result<Claims> check_claims(json::Object c, const VerifyOptions& opts, int64_t n
   }
   if (!opts.required_scope.empty()) {
     if (!out.has_scope(opts.required_scope))
-      return Error(ErrorCode::kInsufficientPrivileges, "token lacks scope " + opts.required_scope, "scope");
+      return Error(ErrorCode::kInsufficientPrivileges, "token lacks scope " + opts.required_scope,
+                   "scope");
     if (out.role_level < scope_min_level(opts.required_scope))
       return Error(ErrorCode::kInsufficientPrivileges,
                    "role " + out.role + " may not use scope " + opts.required_scope, "scope");
@@ -735,16 +790,19 @@ Result<Claims> check_claims(json::Object c, const VerifyOptions& opts, int64_t n
 
   // Fleet.
   if (const json::Value* f = c.find("fleet")) {
-    if (!f->is_array()) return auth_invalid("fleet must be an array of strings", "fleet", "malformed");
+    if (!f->is_array())
+      return auth_invalid("fleet must be an array of strings", "fleet", "malformed");
     std::vector<std::string> fleet;
     for (const auto& e : f->as_array()) {
-      if (!e.is_string()) return auth_invalid("fleet must be an array of strings", "fleet", "malformed");
+      if (!e.is_string())
+        return auth_invalid("fleet must be an array of strings", "fleet", "malformed");
       fleet.push_back(e.as_string());
     }
     bool member = std::any_of(fleet.begin(), fleet.end(), [&](const std::string& id) {
       return std::find(opts.fleet_ids.begin(), opts.fleet_ids.end(), id) != opts.fleet_ids.end();
     });
-    if (!member && !opts.skip_fleet) return auth_invalid("this device is not in the token's fleet", "fleet", "fleet_mismatch");
+    if (!member && !opts.skip_fleet)
+      return auth_invalid("this device is not in the token's fleet", "fleet", "fleet_mismatch");
     out.fleet = std::move(fleet);
   }
   out.raw = std::move(c);
@@ -761,16 +819,19 @@ Result<Claims> JwtVerifier::verify(std::string_view token, int64_t now) const {
   if (lower(alg_s) == "none") return auth_invalid("alg none is not accepted", "alg", "alg_none");
   auto alg = alg_from_name(alg_s);
   if (!alg) return auth_invalid("unsupported alg \"" + alg_s + "\"", "alg", "bad_alg");
-  if (d->header.raw.find("crit")) return auth_invalid("crit header parameters are not supported", "crit", "crit");
+  if (d->header.raw.find("crit"))
+    return auth_invalid("crit header parameters are not supported", "crit", "crit");
 
   const json::Value* iss = d->claims.find("iss");
   if (!iss || !iss->is_string() || iss->as_string().empty())
     return auth_invalid("iss is missing", "iss", "missing_claim");
   if (!trust_.knows_issuer(iss->as_string()))
-    return auth_invalid("issuer \"" + iss->as_string() + "\" is not trusted", "iss", "untrusted_issuer");
+    return auth_invalid("issuer \"" + iss->as_string() + "\" is not trusted", "iss",
+                        "untrusted_issuer");
   auto cands = trust_.candidates(iss->as_string(), d->header.kid);
   if (cands.empty())
-    return auth_invalid("issuer has no key with kid \"" + d->header.kid + "\"", "kid", "unknown_kid");
+    return auth_invalid("issuer has no key with kid \"" + d->header.kid + "\"", "kid",
+                        "unknown_kid");
   bool any_alg = false, verified = false;
   for (const VerificationKey* k : cands) {
     if (k->alg() != *alg) continue;
@@ -781,8 +842,9 @@ Result<Claims> JwtVerifier::verify(std::string_view token, int64_t now) const {
     }
   }
   if (!any_alg)
-    return auth_invalid("alg " + alg_s + " does not match the issuer's key type (algorithm confusion refused)",
-                        "alg", "alg_mismatch");
+    return auth_invalid(
+        "alg " + alg_s + " does not match the issuer's key type (algorithm confusion refused)",
+        "alg", "alg_mismatch");
   if (!verified) return auth_invalid("signature does not verify", "signature", "bad_signature");
   return check_claims(std::move(d->claims), opts_, now);
 }
@@ -837,7 +899,8 @@ Result<SigningKey> SigningKey::ed25519_seed(std::span<const uint8_t> seed) {
 
 Result<SigningKey> SigningKey::hs256_secret(std::span<const uint8_t> secret) {
   if (secret.size() < kMinHs256SecretBytes)
-    return key_error("HS256 secret must be at least 32 bytes, got " + std::to_string(secret.size()));
+    return key_error("HS256 secret must be at least 32 bytes, got " +
+                     std::to_string(secret.size()));
   SigningKey k;
   k.alg_ = Alg::kHS256;
   k.impl_ = std::make_unique<Impl>();
@@ -851,7 +914,8 @@ Result<SigningKey> SigningKey::from_file(const std::string& path, bool hs256) {
   Result<SigningKey> k = key_error("unreachable");
   if (hs256) {
     std::string t = trim_secret_newline(s->view());
-    k = hs256_secret(std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(t.data()), t.size()));
+    k = hs256_secret(
+        std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(t.data()), t.size()));
     secure_wipe(t.data(), t.size());
   } else if (s->size() == 32 && s->view().find("-----BEGIN") == std::string_view::npos) {
     k = ed25519_seed(s->span());
@@ -888,7 +952,8 @@ Result<VerificationKey> SigningKey::verification_key() const {
 Result<Bytes> SigningKey::sign(std::string_view input) const {
   const auto* in = reinterpret_cast<const unsigned char*>(input.data());
   if (alg_ == Alg::kHS256) {
-    Digest256 mac = hmac_sha256(impl_->secret.data(), impl_->secret.size(), input.data(), input.size());
+    Digest256 mac =
+        hmac_sha256(impl_->secret.data(), impl_->secret.size(), input.data(), input.size());
     return Bytes(mac.begin(), mac.end());
   }
   MdCtxPtr ctx(EVP_MD_CTX_new());
@@ -920,8 +985,9 @@ Result<std::string> issue(const json::Object& claims, const SigningKey& key, std
   if (!kid.empty()) header.set("kid", std::string(kid));
   std::string h = json::dump(json::Value(std::move(header)));
   std::string p = json::dump(json::Value(claims));
-  std::string input = base64url_encode(reinterpret_cast<const uint8_t*>(h.data()), h.size(), false) + "." +
-                      base64url_encode(reinterpret_cast<const uint8_t*>(p.data()), p.size(), false);
+  std::string input =
+      base64url_encode(reinterpret_cast<const uint8_t*>(h.data()), h.size(), false) + "." +
+      base64url_encode(reinterpret_cast<const uint8_t*>(p.data()), p.size(), false);
   auto sig = key.sign(input);
   if (!sig.ok()) return sig.error();
   return input + "." + base64url_encode(*sig, false);

@@ -80,8 +80,8 @@ Result<SecretBytes> read_secret_file(const std::string& path, size_t expected_si
   }
   if (!S_ISREG(st.st_mode)) {
     ::close(fd);
-    return Error(ErrorCode::kSchemaValidationFailed, "secret file " + path + " is not a regular file",
-                 path);
+    return Error(ErrorCode::kSchemaValidationFailed,
+                 "secret file " + path + " is not a regular file", path);
   }
   if ((st.st_mode & 077) != 0) {
     ::close(fd);
@@ -152,11 +152,14 @@ Status write_new_file(const std::string& path, std::span<const uint8_t> data, un
   return Status::Ok();
 }
 
-Result<RobotKeys> derive(std::span<const uint8_t> mldsa65_seed, std::span<const uint8_t> ed25519_seed) {
+Result<RobotKeys> derive(std::span<const uint8_t> mldsa65_seed,
+                         std::span<const uint8_t> ed25519_seed) {
   if (mldsa65_seed.size() != mldsa65::kSeedBytes)
-    return Error(ErrorCode::kSchemaValidationFailed, "ML-DSA-65 seed must be 32 bytes", "mldsa65_seed");
+    return Error(ErrorCode::kSchemaValidationFailed, "ML-DSA-65 seed must be 32 bytes",
+                 "mldsa65_seed");
   if (ed25519_seed.size() != ed25519::kSeedBytes)
-    return Error(ErrorCode::kSchemaValidationFailed, "Ed25519 seed must be 32 bytes", "ed25519_seed");
+    return Error(ErrorCode::kSchemaValidationFailed, "Ed25519 seed must be 32 bytes",
+                 "ed25519_seed");
   auto kp = mldsa65::keygen_from_seed(mldsa65_seed);
   if (!kp.ok()) return kp.error();
   auto edpk = ed25519::public_key_from_seed(ed25519_seed);
@@ -180,7 +183,8 @@ Result<RobotKeys> generate() {
 }
 
 Status write_dir(const std::string& dir, const RobotKeys& keys) {
-  if (keys.mldsa65_seed.size() != mldsa65::kSeedBytes || keys.ed25519_seed.size() != ed25519::kSeedBytes ||
+  if (keys.mldsa65_seed.size() != mldsa65::kSeedBytes ||
+      keys.ed25519_seed.size() != ed25519::kSeedBytes ||
       keys.pub.mldsa65_pk.size() != mldsa65::kPublicKeyBytes ||
       keys.pub.ed25519_pk.size() != ed25519::kPublicKeyBytes)
     return Error(ErrorCode::kInternal, "incomplete key set");
@@ -244,12 +248,14 @@ Result<PublicKeys> load_public_dir(const std::string& dir) {
   if (!mp.ok()) return mp.error();
   if (mp->size() != mldsa65::kPublicKeyBytes)
     return Error(ErrorCode::kSchemaValidationFailed,
-                 join(dir, kMldsaPubFile) + " must be exactly 1952 bytes", std::string(kMldsaPubFile));
+                 join(dir, kMldsaPubFile) + " must be exactly 1952 bytes",
+                 std::string(kMldsaPubFile));
   auto ep = read_public_file(join(dir, kEd25519PubFile), ed25519::kPublicKeyBytes + 1);
   if (!ep.ok()) return ep.error();
   if (ep->size() != ed25519::kPublicKeyBytes)
     return Error(ErrorCode::kSchemaValidationFailed,
-                 join(dir, kEd25519PubFile) + " must be exactly 32 bytes", std::string(kEd25519PubFile));
+                 join(dir, kEd25519PubFile) + " must be exactly 32 bytes",
+                 std::string(kEd25519PubFile));
   PublicKeys p;
   p.mldsa65_pk = std::move(mp).value();
   p.ed25519_pk = std::move(ep).value();
@@ -273,7 +279,8 @@ Result<Bytes> mldsa65_pk_from_jwk(const json::Value& jwk) {
   };
   if (!jwk.is_object()) return bad("not a JSON object");
   const json::Value* kty = jwk.get("kty");
-  if (!kty || !kty->is_string() || kty->as_string() != "OKP") return bad("kty must be \"OKP\"", "kty");
+  if (!kty || !kty->is_string() || kty->as_string() != "OKP")
+    return bad("kty must be \"OKP\"", "kty");
   const json::Value* crv = jwk.get("crv");
   const json::Value* alg = jwk.get("alg");
   bool crv_ok = crv && crv->is_string() && crv->as_string() == "ML-DSA-65";
@@ -282,7 +289,8 @@ Result<Bytes> mldsa65_pk_from_jwk(const json::Value& jwk) {
   if (crv && !crv_ok) return bad("crv must be \"ML-DSA-65\"", "crv");
   if (alg && !alg_ok) return bad("alg must be \"ml-dsa-65\"", "alg");
   if (!crv_ok && !alg_ok) return bad("neither crv nor alg names ML-DSA-65");
-  if (const json::Value* use = jwk.get("use"); use && !(use->is_string() && use->as_string() == "sig"))
+  if (const json::Value* use = jwk.get("use");
+      use && !(use->is_string() && use->as_string() == "sig"))
     return bad("use must be \"sig\"", "use");
   const json::Value* x = jwk.get("x");
   if (!x || !x->is_string()) return bad("x is missing", "x");

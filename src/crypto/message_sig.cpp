@@ -1,7 +1,6 @@
 // Message `sig` blocks (see include/rcan/crypto/message_sig.h).
 #include "rcan/crypto/message_sig.h"
 
-
 #include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/keys.h"
 #include "rcan/crypto/mldsa65.h"
@@ -13,7 +12,8 @@ namespace {
 constexpr std::string_view kRcanPySpecVersion = "3.2";
 
 Error sig_error(std::string msg, std::string field = "sig") {
-  return Error(ErrorCode::kSignatureInvalid, "message signature: " + std::move(msg), std::move(field));
+  return Error(ErrorCode::kSignatureInvalid, "message signature: " + std::move(msg),
+               std::move(field));
 }
 Error schema(std::string msg, std::string field) {
   return Error(ErrorCode::kSchemaValidationFailed, std::move(msg), std::move(field));
@@ -29,10 +29,10 @@ bool lower_hex8(std::string_view s) {
 // Python str.strip() whitespace, for the characters that can occur in UTF-8 text.
 size_t leading_space(std::string_view s) {
   static const std::string_view kUnicodeSpaces[] = {
-      "\xc2\x85", "\xc2\xa0", "\xe1\x9a\x80", "\xe2\x80\x80", "\xe2\x80\x81", "\xe2\x80\x82",
-      "\xe2\x80\x83", "\xe2\x80\x84", "\xe2\x80\x85", "\xe2\x80\x86", "\xe2\x80\x87", "\xe2\x80\x88",
-      "\xe2\x80\x89", "\xe2\x80\x8a", "\xe2\x80\xa8", "\xe2\x80\xa9", "\xe2\x80\xaf", "\xe2\x81\x9f",
-      "\xe3\x80\x80"};
+      "\xc2\x85",     "\xc2\xa0",     "\xe1\x9a\x80", "\xe2\x80\x80", "\xe2\x80\x81",
+      "\xe2\x80\x82", "\xe2\x80\x83", "\xe2\x80\x84", "\xe2\x80\x85", "\xe2\x80\x86",
+      "\xe2\x80\x87", "\xe2\x80\x88", "\xe2\x80\x89", "\xe2\x80\x8a", "\xe2\x80\xa8",
+      "\xe2\x80\xa9", "\xe2\x80\xaf", "\xe2\x81\x9f", "\xe3\x80\x80"};
   unsigned char c = s.empty() ? 0 : static_cast<unsigned char>(s[0]);
   if (c == ' ' || (c >= 0x09 && c <= 0x0d) || (c >= 0x1c && c <= 0x1f)) return 1;
   for (auto u : kUnicodeSpaces)
@@ -41,10 +41,10 @@ size_t leading_space(std::string_view s) {
 }
 size_t trailing_space(std::string_view s) {
   static const std::string_view kUnicodeSpaces[] = {
-      "\xc2\x85", "\xc2\xa0", "\xe1\x9a\x80", "\xe2\x80\x80", "\xe2\x80\x81", "\xe2\x80\x82",
-      "\xe2\x80\x83", "\xe2\x80\x84", "\xe2\x80\x85", "\xe2\x80\x86", "\xe2\x80\x87", "\xe2\x80\x88",
-      "\xe2\x80\x89", "\xe2\x80\x8a", "\xe2\x80\xa8", "\xe2\x80\xa9", "\xe2\x80\xaf", "\xe2\x81\x9f",
-      "\xe3\x80\x80"};
+      "\xc2\x85",     "\xc2\xa0",     "\xe1\x9a\x80", "\xe2\x80\x80", "\xe2\x80\x81",
+      "\xe2\x80\x82", "\xe2\x80\x83", "\xe2\x80\x84", "\xe2\x80\x85", "\xe2\x80\x86",
+      "\xe2\x80\x87", "\xe2\x80\x88", "\xe2\x80\x89", "\xe2\x80\x8a", "\xe2\x80\xa8",
+      "\xe2\x80\xa9", "\xe2\x80\xaf", "\xe2\x81\x9f", "\xe3\x80\x80"};
   unsigned char c = s.empty() ? 0 : static_cast<unsigned char>(s.back());
   if (c == ' ' || (c >= 0x09 && c <= 0x0d) || (c >= 0x1c && c <= 0x1f)) return 1;
   for (auto u : kUnicodeSpaces)
@@ -55,8 +55,8 @@ size_t trailing_space(std::string_view s) {
 bool rcanpy_segment(std::string_view s) {
   if (s.empty()) return false;
   for (char c : s) {
-    bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '.' ||
-              c == '_' || c == '-';
+    bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
+              c == '.' || c == '_' || c == '-';
     if (!ok) return false;
   }
   return true;
@@ -69,7 +69,8 @@ Result<std::string> rcanpy_target(std::string_view t) {
   constexpr std::string_view kScheme = "rcan://";
   auto bad = [&](std::string why) {
     return Error(ErrorCode::kInvalidRuri,
-                 "target is not an rcan-py RobotURI (rcan://registry/manufacturer/model/version/device-id): " +
+                 "target is not an rcan-py RobotURI "
+                 "(rcan://registry/manufacturer/model/version/device-id): " +
                      std::move(why),
                  "target");
   };
@@ -80,8 +81,11 @@ Result<std::string> rcanpy_target(std::string_view t) {
   size_t count = 0, start = 0;
   for (;;) {
     size_t slash = rest.find('/', start);
-    std::string_view seg = rest.substr(start, slash == std::string_view::npos ? std::string_view::npos : slash - start);
-    if (!rcanpy_segment(seg)) return bad("segment " + std::to_string(count + 1) + " is empty or has a character outside [A-Za-z0-9._-]");
+    std::string_view seg = rest.substr(
+        start, slash == std::string_view::npos ? std::string_view::npos : slash - start);
+    if (!rcanpy_segment(seg))
+      return bad("segment " + std::to_string(count + 1) +
+                 " is empty or has a character outside [A-Za-z0-9._-]");
     if (count) out += '/';
     out += seg;
     ++count;
@@ -154,14 +158,17 @@ Result<std::string> rcanpy_preimage(const json::Object& msg) {
   if (!msg_id || !msg_id->is_string() || msg_id->as_string().empty())
     return schema("rcan-py message: msg_id must be a non-empty string", "msg_id");
   const json::Value* ts = msg.find("timestamp");
-  if (!ts || !ts->is_number()) return schema("rcan-py message: timestamp must be a number", "timestamp");
+  if (!ts || !ts->is_number())
+    return schema("rcan-py message: timestamp must be a number", "timestamp");
   const json::Value* cmd = msg.find("cmd");
   if (!cmd || !cmd->is_string() || cmd->as_string().empty())
     return schema("rcan-py message: cmd must be a non-empty string", "cmd");
   const json::Value* target = msg.find("target");
-  if (!target || !target->is_string()) return schema("rcan-py message: target must be a string", "target");
+  if (!target || !target->is_string())
+    return schema("rcan-py message: target must be a string", "target");
   const json::Value* params = msg.find("params");
-  if (params && !params->is_object()) return schema("rcan-py message: params must be an object", "params");
+  if (params && !params->is_object())
+    return schema("rcan-py message: params must be an object", "params");
 
   auto tgt = rcanpy_target(target->as_string());
   if (!tgt.ok()) return tgt.error();
@@ -214,7 +221,8 @@ Result<SigBlock> verify(const json::Object& msg, const TrustedKeys& trusted) {
 
 Status sign_mldsa65(json::Object& msg, std::span<const uint8_t> sk, std::span<const uint8_t> pk,
                     const SignOptions& opts) {
-  if (pk.size() != mldsa65::kPublicKeyBytes) return Error(ErrorCode::kInternal, "ML-DSA-65 public key must be 1952 bytes");
+  if (pk.size() != mldsa65::kPublicKeyBytes)
+    return Error(ErrorCode::kInternal, "ML-DSA-65 public key must be 1952 bytes");
   auto pre = preimage(msg);
   if (!pre.ok()) return pre.error();
   mldsa65::SignOptions so;

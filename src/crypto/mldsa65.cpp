@@ -112,7 +112,7 @@ constexpr uint32_t bitrev8(uint32_t x) {
 }
 
 constexpr int64_t kMont = (int64_t{1} << 32) % kQ;  // 2^32 mod q
-constexpr int64_t kZeta = 1753;                    // primitive 512-th root of unity mod q
+constexpr int64_t kZeta = 1753;                     // primitive 512-th root of unity mod q
 static_assert(pow_mod(kZeta, 256) == kQ - 1);
 
 // zetas[m] = zeta^brv8(m) · 2^32 mod q (Montgomery form), centered.
@@ -401,7 +401,8 @@ void unpack_bits(const uint8_t* in, Put put) {
 RCAN_MLDSA_INLINE void unpack_z20(Poly& z, const uint8_t* in) {
   for (size_t i = 0; i < kN / 2; ++i) {
     const uint8_t* b = in + 5 * i;
-    const uint32_t f0 = b[0] | static_cast<uint32_t>(b[1]) << 8 | static_cast<uint32_t>(b[2] & 0x0f) << 16;
+    const uint32_t f0 =
+        b[0] | static_cast<uint32_t>(b[1]) << 8 | static_cast<uint32_t>(b[2] & 0x0f) << 16;
     const uint32_t f1 = static_cast<uint32_t>(b[2]) >> 4 | static_cast<uint32_t>(b[3]) << 4 |
                         static_cast<uint32_t>(b[4]) << 12;
     z.c[2 * i] = kGamma1 - static_cast<int32_t>(f0);
@@ -527,9 +528,8 @@ void pack_t0(uint8_t* out, const Poly& t0) {
   pack_bits<13>(out, [&](size_t i) { return static_cast<uint32_t>((1 << (kD - 1)) - t0.c[i]); });
 }
 void unpack_t0(Poly& t0, const uint8_t* in) {
-  unpack_bits<13>(in, [&](size_t i, uint32_t v) {
-    t0.c[i] = (1 << (kD - 1)) - static_cast<int32_t>(v);
-  });
+  unpack_bits<13>(
+      in, [&](size_t i, uint32_t v) { t0.c[i] = (1 << (kD - 1)) - static_cast<int32_t>(v); });
 }
 void pack_z(uint8_t* out, const Poly& z) {
   pack_bits<20>(out, [&](size_t i) { return static_cast<uint32_t>(kGamma1 - z.c[i]); });
@@ -583,7 +583,8 @@ struct KeygenSecrets {
   Poly acc;
 };
 
-RCAN_MLDSA_INLINE bool keygen_body(const uint8_t xi[32], uint8_t pk[kPublicKeyBytes], uint8_t sk[kSecretKeyBytes]) {
+RCAN_MLDSA_INLINE bool keygen_body(const uint8_t xi[32], uint8_t pk[kPublicKeyBytes],
+                                   uint8_t sk[kSecretKeyBytes]) {
   Shake x;
   KeygenSecrets sec;
   Poly a_entry, t1;
@@ -601,7 +602,8 @@ RCAN_MLDSA_INLINE bool keygen_body(const uint8_t xi[32], uint8_t pk[kPublicKeyBy
   const uint8_t* key = sec.expanded + 96;
 
   for (int r = 0; r < kL; ++r) expand_s_entry(x, sec.s1[r], rho_prime, static_cast<uint16_t>(r));
-  for (int r = 0; r < kK; ++r) expand_s_entry(x, sec.s2[r], rho_prime, static_cast<uint16_t>(r + kL));
+  for (int r = 0; r < kK; ++r)
+    expand_s_entry(x, sec.s2[r], rho_prime, static_cast<uint16_t>(r + kL));
   for (int r = 0; r < kL; ++r) {
     sec.s1_hat[r] = sec.s1[r];
     ntt_impl(sec.s1_hat[r].c);
@@ -613,7 +615,8 @@ RCAN_MLDSA_INLINE bool keygen_body(const uint8_t xi[32], uint8_t pk[kPublicKeyBy
     int64_t acc[kN] = {};
     for (int j = 0; j < kL; ++j) {
       expand_a_entry(x, a_entry, rho, static_cast<uint8_t>(i), static_cast<uint8_t>(j));
-      for (size_t n = 0; n < kN; ++n) acc[n] += static_cast<int64_t>(a_entry.c[n]) * sec.s1_hat[j].c[n];
+      for (size_t n = 0; n < kN; ++n)
+        acc[n] += static_cast<int64_t>(a_entry.c[n]) * sec.s1_hat[j].c[n];
     }
     for (size_t n = 0; n < kN; ++n) sec.acc.c[n] = mont_reduce(acc[n]);
     secure_wipe(acc, sizeof acc);
@@ -663,8 +666,8 @@ enum class SignStatus { kOk, kHashFailure, kIterationLimit };
 // so timing reveals the number of iterations (κ/ℓ) and nothing else — which is what FIPS 204
 // (and every implementation of it) leaks by design, since the rejected candidates are
 // independent of the accepted signature. Rejected z, h and c are never output.
-RCAN_MLDSA_INLINE SignStatus sign_body(const uint8_t* sk, const MessageParts& m_prime, const uint8_t rnd[32],
-                                         uint8_t sig[kSignatureBytes]) {
+RCAN_MLDSA_INLINE SignStatus sign_body(const uint8_t* sk, const MessageParts& m_prime,
+                                       const uint8_t rnd[32], uint8_t sig[kSignatureBytes]) {
   Shake x;
   SignSecrets sec;
   Poly a[kK][kL];
@@ -819,7 +822,8 @@ RCAN_MLDSA_INLINE void prepare_body(const uint8_t* pk, PreparedKey& k) {
   k.ok = x.ok();
 }
 
-RCAN_MLDSA_INLINE bool verify_body(const PreparedKey& k, const MessageParts& m_prime, const uint8_t* sig) {
+RCAN_MLDSA_INLINE bool verify_body(const PreparedKey& k, const MessageParts& m_prime,
+                                   const uint8_t* sig) {
   uint8_t hint[kK][kN];
   if (!unpack_hint(hint, sig + kSigHintOffset)) return false;
   Poly z_hat[kL];
@@ -847,7 +851,8 @@ RCAN_MLDSA_INLINE bool verify_body(const PreparedKey& k, const MessageParts& m_p
     int64_t acc[kN];
     for (size_t n = 0; n < kN; ++n) acc[n] = -static_cast<int64_t>(c_hat.c[n]) * k.t1_hat[i].c[n];
     for (int j = 0; j < kL; ++j)
-      for (size_t n = 0; n < kN; ++n) acc[n] += static_cast<int64_t>(k.a_hat[i][j].c[n]) * z_hat[j].c[n];
+      for (size_t n = 0; n < kN; ++n)
+        acc[n] += static_cast<int64_t>(k.a_hat[i][j].c[n]) * z_hat[j].c[n];
     for (size_t n = 0; n < kN; ++n) w.c[n] = mont_reduce(acc[n]);
     intt_impl(w.c);
     for (size_t n = 0; n < kN; ++n) w.c[n] = use_hint_impl(caddq(w.c[n]), hint[i][n]);
@@ -870,7 +875,8 @@ RCAN_MLDSA_INLINE bool verify_body(const PreparedKey& k, const MessageParts& m_p
 // (all written as straight-line lane-wise code). The same C++ source, hence the same
 // constant-time properties, backs both; the choice is made once from CPUID.
 bool keygen_generic(const uint8_t* xi, uint8_t* pk, uint8_t* sk) { return keygen_body(xi, pk, sk); }
-SignStatus sign_generic(const uint8_t* sk, const MessageParts& m, const uint8_t* rnd, uint8_t* sig) {
+SignStatus sign_generic(const uint8_t* sk, const MessageParts& m, const uint8_t* rnd,
+                        uint8_t* sig) {
   return sign_body(sk, m, rnd, sig);
 }
 bool verify_generic(const PreparedKey& k, const MessageParts& m, const uint8_t* sig) {
@@ -889,7 +895,9 @@ void prepare_generic(const uint8_t* pk, PreparedKey& k) { prepare_body(pk, k); }
                                          const uint8_t* sig) {
   return verify_body(k, m, sig);
 }
-[[gnu::target("avx2")]] void prepare_avx2(const uint8_t* pk, PreparedKey& k) { prepare_body(pk, k); }
+[[gnu::target("avx2")]] void prepare_avx2(const uint8_t* pk, PreparedKey& k) {
+  prepare_body(pk, k);
+}
 bool cpu_has_avx2() {
   __builtin_cpu_init();
   return __builtin_cpu_supports("avx2") != 0;
@@ -948,8 +956,10 @@ std::shared_ptr<const PreparedKey> prepared_key(const uint8_t* pk) {
   auto k = prepare(pk);
   if (!k->ok) return k;  // never cache a failed preparation
   std::lock_guard<std::mutex> lock(mu);
-  if (cache.size() < kPreparedCacheSize) cache.push_back(k);
-  else cache.back() = k;
+  if (cache.size() < kPreparedCacheSize)
+    cache.push_back(k);
+  else
+    cache.back() = k;
   std::rotate(cache.begin(), cache.end() - 1, cache.end());
   return k;
 }

@@ -7,7 +7,7 @@
 
 namespace rcan::mldsa65::internal {
 
-inline constexpr int32_t kQ = 8380417;            // 2^23 - 2^13 + 1
+inline constexpr int32_t kQ = 8380417;             // 2^23 - 2^13 + 1
 inline constexpr int32_t kGamma2 = (kQ - 1) / 32;  // 261888
 inline constexpr size_t kN = 256;
 

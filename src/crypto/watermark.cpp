@@ -37,8 +37,8 @@ bool valid_format(std::string_view token) {
 
 Status check_format(std::string_view token) {
   auto bad = [](std::string m) {
-    return Error(ErrorCode::kSchemaValidationFailed, "Invalid watermark token format: " + std::move(m),
-                 "watermark_token");
+    return Error(ErrorCode::kSchemaValidationFailed,
+                 "Invalid watermark token format: " + std::move(m), "watermark_token");
   };
   if (token.size() < kPrefix.size() || token.substr(0, kPrefix.size()) != kPrefix)
     return bad("it must start with \"rcan-wm-v1:\"");
@@ -85,17 +85,20 @@ Result<Bytes> load_key(const std::string& path) {
   std::string file = path;
   struct stat st {};
   if (::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode))
-    file = (path.empty() || path.back() == '/' ? path : path + "/") + std::string(keys::kMldsaSeedFile);
+    file = (path.empty() || path.back() == '/' ? path : path + "/") +
+           std::string(keys::kMldsaSeedFile);
   auto secret = keys::read_secret_file(file, 0);
   if (!secret.ok()) return secret.error();
-  if (secret->size() == mldsa65::kSecretKeyBytes) return Bytes(secret->data(), secret->data() + secret->size());
+  if (secret->size() == mldsa65::kSecretKeyBytes)
+    return Bytes(secret->data(), secret->data() + secret->size());
   if (secret->size() == mldsa65::kSeedBytes) {
     auto kp = mldsa65::keygen_from_seed(secret->span());
     if (!kp.ok()) return kp.error();
     return Bytes(kp->secret_key);
   }
   return Error(ErrorCode::kSchemaValidationFailed,
-               file + " is neither a 4032-byte ML-DSA-65 secret key nor a 32-byte ML-DSA-65 seed (" +
+               file +
+                   " is neither a 4032-byte ML-DSA-65 secret key nor a 32-byte ML-DSA-65 seed (" +
                    std::to_string(secret->size()) + " bytes)",
                file);
 }

@@ -155,7 +155,7 @@ Result<std::unique_ptr<WritableFile>> FaultInjectionEnv::open_appendable(const s
 }
 
 Result<std::unique_ptr<WritableFile>> FaultInjectionEnv::open_writable_at(const std::string& path,
-                                                                        uint64_t offset) {
+                                                                          uint64_t offset) {
   bool existed = base_->exists(path);
   if (!existed) {
     Status s = before_mutation("create " + path);

@@ -17,13 +17,15 @@ using PMsg = v1::RCANMessage;
 
 // Proto enum number → wire name. Index = enum value.
 constexpr std::array<std::string_view, 21> kTypeNames{
-    "DISCOVER", "STATUS",    "COMMAND",  "STREAM",   "EVENT",           "HANDOFF",          "ACK",
-    "ERROR",    "ANNOUNCE",  "GRANTED",  "DENIED",   "RELEASED",        "AVAILABLE",        "HEARTBEAT",
-    "SAFETY",   "PENDING_AUTH", "AUTHORIZE", "CONSENT_REQUEST", "TRANSFER_REQUEST", "TRANSFER_ACCEPT",
+    "DISCOVER",     "STATUS",    "COMMAND",         "STREAM",           "EVENT",
+    "HANDOFF",      "ACK",       "ERROR",           "ANNOUNCE",         "GRANTED",
+    "DENIED",       "RELEASED",  "AVAILABLE",       "HEARTBEAT",        "SAFETY",
+    "PENDING_AUTH", "AUTHORIZE", "CONSENT_REQUEST", "TRANSFER_REQUEST", "TRANSFER_ACCEPT",
     "FLEET_COMMAND"};
 constexpr std::array<std::string_view, 4> kPriorityNames{"LOW", "NORMAL", "HIGH", "SAFETY"};
 
-Result<json::Value> json_object_field(const std::string& bytes, const char* field, size_t max_bytes) {
+Result<json::Value> json_object_field(const std::string& bytes, const char* field,
+                                      size_t max_bytes) {
   json::ParseOptions po;
   po.max_bytes = max_bytes;
   po.max_depth = 32;
@@ -35,7 +37,8 @@ Result<json::Value> json_object_field(const std::string& bytes, const char* fiel
     return e;
   }
   if (!v->is_object())
-    return Error(ErrorCode::kSchemaValidationFailed, std::string(field) + " must be a JSON object", field);
+    return Error(ErrorCode::kSchemaValidationFailed, std::string(field) + " must be a JSON object",
+                 field);
   return v;
 }
 
@@ -65,7 +68,8 @@ Result<json::Value> grpc_to_json(const v1::RCANMessage& m, size_t max_json_bytes
   std::string type = grpc_type_name(static_cast<int>(m.type()));
   if (type.empty())
     return Error(ErrorCode::kSchemaValidationFailed,
-                 "type " + std::to_string(static_cast<int>(m.type())) + " is not a message type", "type");
+                 "type " + std::to_string(static_cast<int>(m.type())) + " is not a message type",
+                 "type");
   o.set("type", type);
   if (m.payload().empty()) {
     o.set("payload", json::Object{});
@@ -78,8 +82,8 @@ Result<json::Value> grpc_to_json(const v1::RCANMessage& m, size_t max_json_bytes
   if (m.ttl_ms() != 0) o.set("ttl_ms", static_cast<int64_t>(m.ttl_ms()));
   int prio = static_cast<int>(m.priority());
   if (prio < 0 || static_cast<size_t>(prio) >= kPriorityNames.size())
-    return Error(ErrorCode::kSchemaValidationFailed, "priority " + std::to_string(prio) + " is not a priority",
-                 "priority");
+    return Error(ErrorCode::kSchemaValidationFailed,
+                 "priority " + std::to_string(prio) + " is not a priority", "priority");
   if (prio != 0) o.set("priority", std::string(kPriorityNames[static_cast<size_t>(prio)]));
   str("reply_to", m.reply_to());
   if (m.scope_size() > 0) {
@@ -123,9 +127,10 @@ void json_to_grpc(const json::Value& body, v1::RCANMessage& out) {
   out.set_source_ruri(s("source_ruri"));
   out.set_target_ruri(s("target_ruri"));
   out.set_reply_to(s("reply_to"));
-  if (const json::Value* ts = body.get("timestamp_ms"); ts && ts->is_int()) out.set_timestamp_ms(ts->as_int());
-  if (const json::Value* ttl = body.get("ttl_ms"); ttl && ttl->is_int() && ttl->as_int() >= 0 &&
-                                                   ttl->as_int() <= INT32_MAX)
+  if (const json::Value* ts = body.get("timestamp_ms"); ts && ts->is_int())
+    out.set_timestamp_ms(ts->as_int());
+  if (const json::Value* ttl = body.get("ttl_ms");
+      ttl && ttl->is_int() && ttl->as_int() >= 0 && ttl->as_int() <= INT32_MAX)
     out.set_ttl_ms(static_cast<int32_t>(ttl->as_int()));
   std::string prio = s("priority");
   for (size_t i = 0; i < kPriorityNames.size(); ++i)
@@ -154,43 +159,65 @@ int grpc_status_code(std::string_view error_code, int http_status) {
       case ErrorCode::kSchemaValidationFailed:
       case ErrorCode::kInvalidRuri:
       case ErrorCode::kVersionIncompatible:
-      case ErrorCode::kMissingDelegationChain: return StatusCode::INVALID_ARGUMENT;
+      case ErrorCode::kMissingDelegationChain:
+        return StatusCode::INVALID_ARGUMENT;
       case ErrorCode::kAuthRequired:
       case ErrorCode::kAuthInvalid:
       case ErrorCode::kSessionExpired:
-      case ErrorCode::kSignatureInvalid: return StatusCode::UNAUTHENTICATED;
+      case ErrorCode::kSignatureInvalid:
+        return StatusCode::UNAUTHENTICATED;
       case ErrorCode::kInsufficientPrivileges:
       case ErrorCode::kConfidenceGateFail:
-      case ErrorCode::kHitlDenied: return StatusCode::PERMISSION_DENIED;
-      case ErrorCode::kNotFound: return StatusCode::NOT_FOUND;
+      case ErrorCode::kHitlDenied:
+        return StatusCode::PERMISSION_DENIED;
+      case ErrorCode::kNotFound:
+        return StatusCode::NOT_FOUND;
       case ErrorCode::kMethodNotAllowed:
-      case ErrorCode::kNotImplemented: return StatusCode::UNIMPLEMENTED;
+      case ErrorCode::kNotImplemented:
+        return StatusCode::UNIMPLEMENTED;
       case ErrorCode::kMessageStale:
-      case ErrorCode::kHitlTimeout: return StatusCode::DEADLINE_EXCEEDED;
-      case ErrorCode::kReplayDetected: return StatusCode::ALREADY_EXISTS;
-      case ErrorCode::kControlConflict: return StatusCode::ABORTED;
+      case ErrorCode::kHitlTimeout:
+        return StatusCode::DEADLINE_EXCEEDED;
+      case ErrorCode::kReplayDetected:
+        return StatusCode::ALREADY_EXISTS;
+      case ErrorCode::kControlConflict:
+        return StatusCode::ABORTED;
       case ErrorCode::kBodyTooLarge:
-      case ErrorCode::kRateLimited: return StatusCode::RESOURCE_EXHAUSTED;
-      case ErrorCode::kCommandRejected: return StatusCode::FAILED_PRECONDITION;
-      case ErrorCode::kInternal: return StatusCode::INTERNAL;
+      case ErrorCode::kRateLimited:
+        return StatusCode::RESOURCE_EXHAUSTED;
+      case ErrorCode::kCommandRejected:
+        return StatusCode::FAILED_PRECONDITION;
+      case ErrorCode::kInternal:
+        return StatusCode::INTERNAL;
       case ErrorCode::kSafeStop:
       case ErrorCode::kLockdown:
-      case ErrorCode::kAuditUnavailable: return StatusCode::UNAVAILABLE;
+      case ErrorCode::kAuditUnavailable:
+        return StatusCode::UNAVAILABLE;
     }
   }
   switch (http_status) {
-    case 400: return StatusCode::INVALID_ARGUMENT;
-    case 401: return StatusCode::UNAUTHENTICATED;
-    case 403: return StatusCode::PERMISSION_DENIED;
-    case 404: return StatusCode::NOT_FOUND;
-    case 408: return StatusCode::DEADLINE_EXCEEDED;
-    case 409: return StatusCode::ABORTED;
+    case 400:
+      return StatusCode::INVALID_ARGUMENT;
+    case 401:
+      return StatusCode::UNAUTHENTICATED;
+    case 403:
+      return StatusCode::PERMISSION_DENIED;
+    case 404:
+      return StatusCode::NOT_FOUND;
+    case 408:
+      return StatusCode::DEADLINE_EXCEEDED;
+    case 409:
+      return StatusCode::ABORTED;
     case 413:
-    case 429: return StatusCode::RESOURCE_EXHAUSTED;
+    case 429:
+      return StatusCode::RESOURCE_EXHAUSTED;
     case 422:
-    case 423: return StatusCode::FAILED_PRECONDITION;
-    case 503: return StatusCode::UNAVAILABLE;
-    default: return http_status >= 500 ? StatusCode::INTERNAL : StatusCode::UNKNOWN;
+    case 423:
+      return StatusCode::FAILED_PRECONDITION;
+    case 503:
+      return StatusCode::UNAVAILABLE;
+    default:
+      return http_status >= 500 ? StatusCode::INTERNAL : StatusCode::UNKNOWN;
   }
 }
 

@@ -26,15 +26,16 @@ inline std::string_view bearer_token(std::string_view authorization) {
 }
 
 struct HttpRequest {
-  std::string method;  // "GET", "POST", "DELETE", …
-  std::string target;  // as received: path plus query
-  std::string path;    // percent-decoded path without the query
-  std::vector<std::pair<std::string, std::string>> query;    // decoded, in order
+  std::string method;                                      // "GET", "POST", "DELETE", …
+  std::string target;                                      // as received: path plus query
+  std::string path;                                        // percent-decoded path without the query
+  std::vector<std::pair<std::string, std::string>> query;  // decoded, in order
   std::vector<std::pair<std::string, std::string>> headers;  // names lower-cased, in order
   std::string body;
   std::string remote_addr;  // "ip:port"
   bool tls = false;
-  int64_t received_mono_us = 0;  // steady clock when the transport had read the request (0: unknown)
+  int64_t received_mono_us =
+      0;  // steady clock when the transport had read the request (0: unknown)
 
   // First header / query value with that (lower-case) name; empty when absent.
   std::string_view header(std::string_view name) const {

@@ -28,10 +28,10 @@
 #include <utility>
 #include <vector>
 
-#include "transport/http_api.h"
 #include "rcan/errors.h"
 #include "rcan/json.h"
 #include "transport/beast.h"
+#include "transport/http_api.h"
 
 namespace rcan::transport::detail {
 
@@ -162,7 +162,8 @@ inline std::optional<TransportError> split_target(
       }
     }
   }
-  if (t.empty() || t.front() != '/') return bad_request("bad_target", "request target must be a path");
+  if (t.empty() || t.front() != '/')
+    return bad_request("bad_target", "request target must be a path");
   const size_t q = t.find('?');
   const std::string_view raw_path = t.substr(0, q);
   if (!percent_decode(raw_path, false, path))
@@ -217,13 +218,13 @@ inline bool has_token(std::string_view value, std::string_view token) {
 // Converts a parsed message (the body is moved out). Fails on a bad target.
 template <class Fields>
 std::optional<TransportError> to_http_request(http::request<http::string_body, Fields>& msg,
-                                              std::string remote_addr, bool tls,
-                                              HttpRequest& out) {
+                                              std::string remote_addr, bool tls, HttpRequest& out) {
   out.method = std::string(msg.method_string());
   out.target = std::string(msg.target());
   if (auto err = split_target(out.target, out.path, out.query)) return err;
   out.headers.clear();
-  for (const auto& f : msg) out.headers.emplace_back(ascii_lower(f.name_string()), std::string(f.value()));
+  for (const auto& f : msg)
+    out.headers.emplace_back(ascii_lower(f.name_string()), std::string(f.value()));
   out.body = std::move(msg.body());
   out.remote_addr = std::move(remote_addr);
   out.tls = tls;
@@ -260,8 +261,8 @@ inline std::optional<TransportError> check_websocket_upgrade(const HttpRequest& 
 // Configures a request parser with the server's limits.
 template <class Parser>
 void apply_limits(Parser& parser, size_t max_header_bytes, size_t max_body_bytes) {
-  parser.header_limit(static_cast<std::uint32_t>(
-      max_header_bytes > UINT32_MAX ? UINT32_MAX : max_header_bytes));
+  parser.header_limit(
+      static_cast<std::uint32_t>(max_header_bytes > UINT32_MAX ? UINT32_MAX : max_header_bytes));
   parser.body_limit(static_cast<std::uint64_t>(max_body_bytes));
 }
 
@@ -270,10 +271,10 @@ void apply_limits(Parser& parser, size_t max_header_bytes, size_t max_body_bytes
 struct ParseOutcome {
   enum class Kind { kRequest, kNeedMore, kError, kSilent } kind = Kind::kNeedMore;
   HttpRequest request;     // kRequest
-  TransportError error;          // kError
-  std::string error_body;        // kError
-  bool websocket = false;        // kRequest wanting an upgrade (check already applied)
-  size_t consumed = 0;           // bytes of `bytes` used by this request
+  TransportError error;    // kError
+  std::string error_body;  // kError
+  bool websocket = false;  // kRequest wanting an upgrade (check already applied)
+  size_t consumed = 0;     // bytes of `bytes` used by this request
 };
 
 inline ParseOutcome parse_request_bytes(std::string_view bytes, size_t max_header_bytes,

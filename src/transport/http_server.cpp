@@ -33,10 +33,10 @@
 #include <utility>
 #include <vector>
 
+#include "base/clock.h"
 #include "base/log.h"
 #include "transport/beast.h"
 #include "transport/http_parse.h"
-#include "base/clock.h"
 
 namespace rcan::transport {
 namespace beast = boost::beast;
@@ -128,7 +128,8 @@ inline std::string response_bytes(HttpResponse r, unsigned version, bool head, b
   }
   const bool no_body = r.status == 204 || r.status == 304;
   const std::string date = http_date();
-  const std::string_view reason = http::obsolete_reason(http::int_to_status(static_cast<unsigned>(r.status)));
+  const std::string_view reason =
+      http::obsolete_reason(http::int_to_status(static_cast<unsigned>(r.status)));
   std::string out;
   out.reserve(192 + r.body.size() + r.content_type.size());
   out += version == 10 ? "HTTP/1.0 " : "HTTP/1.1 ";
@@ -234,7 +235,9 @@ class WsSink final : public StreamSink {
   using Kick = std::function<void()>;
   using Closer = std::function<void(uint16_t, std::string, bool overflow)>;
   WsSink(std::string remote, size_t limit, Kick kick, Closer closer)
-      : remote_(std::move(remote)), limit_(limit), kick_(std::move(kick)),
+      : remote_(std::move(remote)),
+        limit_(limit),
+        kick_(std::move(kick)),
         closer_(std::move(closer)) {}
 
   bool send_text(std::string text) override {
@@ -535,16 +538,19 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
         srv_.weak_from_this(), [weak = this->weak_from_this(), seq](HttpResponse r) {
           auto self = weak.lock();
           if (!self) return;
-          asio::post(self->ex_, [self, seq, r = std::move(r)]() mutable { self->deliver(seq, std::move(r)); });
+          asio::post(self->ex_,
+                     [self, seq, r = std::move(r)]() mutable { self->deliver(seq, std::move(r)); });
         });
     try {
       srv_.http.handle(std::move(req), [slot](HttpResponse r) { slot->fire(std::move(r)); });
     } catch (const std::exception& e) {
       rcan::log(LogLevel::kError, "http.handler_exception", {{"error", e.what()}});
-      slot->fire(error_response({500, ErrorCode::kInternal, "handler_exception", "internal error"}));
+      slot->fire(
+          error_response({500, ErrorCode::kInternal, "handler_exception", "internal error"}));
     } catch (...) {
       rcan::log(LogLevel::kError, "http.handler_exception");
-      slot->fire(error_response({500, ErrorCode::kInternal, "handler_exception", "internal error"}));
+      slot->fire(
+          error_response({500, ErrorCode::kInternal, "handler_exception", "internal error"}));
     }
     slot.reset();  // the handler's copies keep it; a dropped respond answers 500
     if (!response_) co_await response_timer_.async_wait(kNoThrow);
@@ -554,7 +560,8 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     phase_ = Phase::kWriting;
     const int status = response_->status;
     if (response_->answered_mono_us > 0)
-      srv_.http.answer_waited(std::max<int64_t>(0, rcan::steady_us() - response_->answered_mono_us));
+      srv_.http.answer_waited(
+          std::max<int64_t>(0, rcan::steady_us() - response_->answered_mono_us));
     const std::string wire = response_bytes(std::move(*response_), version, head, keep_alive);
     response_.reset();
     lowest().expires_after(Ms(opt_.read_timeout_ms));
@@ -706,7 +713,8 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
         in.clear();
         auto [rec, rn] = co_await ws_->async_read(in, kNoThrow);
         if (rec) {
-          rcan::log(LogLevel::kDebug, "ws.read_end", {{"remote", remote_}, {"error", rec.message()}});
+          rcan::log(LogLevel::kDebug, "ws.read_end",
+                    {{"remote", remote_}, {"error", rec.message()}});
           if (rec == websocket::error::message_too_big) ++srv_.rejected_limits;
           break;
         }
@@ -932,12 +940,17 @@ Result<uint16_t> HttpServer::Impl::start() {
                            detail::ssl::context::no_tlsv1 | detail::ssl::context::no_tlsv1_1 |
                            detail::ssl::context::single_dh_use);
       ssl_ctx->use_certificate_chain_file(opt.cert_file, ec);
-      if (ec) return Error(ErrorCode::kSchemaValidationFailed, "cannot load TLS certificate: " + ec.message(), "cert_file");
+      if (ec)
+        return Error(ErrorCode::kSchemaValidationFailed,
+                     "cannot load TLS certificate: " + ec.message(), "cert_file");
       ssl_ctx->use_private_key_file(opt.key_file, detail::ssl::context::pem, ec);
-      if (ec) return Error(ErrorCode::kSchemaValidationFailed, "cannot load TLS key: " + ec.message(), "key_file");
+      if (ec)
+        return Error(ErrorCode::kSchemaValidationFailed, "cannot load TLS key: " + ec.message(),
+                     "key_file");
     }
     const auto addr = asio::ip::make_address(opt.bind_address, ec);
-    if (ec) return Error(ErrorCode::kSchemaValidationFailed, "invalid bind address", "bind_address");
+    if (ec)
+      return Error(ErrorCode::kSchemaValidationFailed, "invalid bind address", "bind_address");
     const detail::tcp::endpoint ep(addr, opt.port);
     acceptor.emplace(asio::make_strand(ioc));
     acceptor->open(ep.protocol(), ec);
@@ -946,9 +959,8 @@ Result<uint16_t> HttpServer::Impl::start() {
     if (!ec) acceptor->listen(asio::socket_base::max_listen_connections, ec);
     if (ec) {
       acceptor.reset();
-      return Error(ErrorCode::kInternal,
-                   "cannot listen on " + opt.bind_address + ":" + std::to_string(opt.port) + ": " +
-                       ec.message());
+      return Error(ErrorCode::kInternal, "cannot listen on " + opt.bind_address + ":" +
+                                             std::to_string(opt.port) + ": " + ec.message());
     }
     port = acceptor->local_endpoint().port();
   } catch (const std::exception& e) {

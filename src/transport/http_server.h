@@ -19,23 +19,23 @@
 #include <memory>
 #include <string>
 
-#include "transport/http_api.h"
 #include "rcan/result.h"
+#include "transport/http_api.h"
 
 namespace rcan::transport {
 
 struct ServerOptions {
   std::string bind_address = "127.0.0.1";
-  uint16_t port = 8080;                 // 0 = ephemeral (tests); start() returns the bound port
-  int io_threads = 2;                   // threads running the io_context (≥ 1)
-  size_t max_body_bytes = 64 * 1024;    // larger Content-Length → 413 before reading the body
-  size_t max_header_bytes = 8 * 1024;   // request line + header fields → 431 when exceeded
-  int read_timeout_ms = 10000;          // whole request, first byte to last (defeats slow-loris)
-  int idle_timeout_ms = 60000;          // keep-alive idle wait for the next request's first byte
-  size_t max_connections = 1024;        // beyond it: accepted, answered 503, closed
+  uint16_t port = 8080;                // 0 = ephemeral (tests); start() returns the bound port
+  int io_threads = 2;                  // threads running the io_context (≥ 1)
+  size_t max_body_bytes = 64 * 1024;   // larger Content-Length → 413 before reading the body
+  size_t max_header_bytes = 8 * 1024;  // request line + header fields → 431 when exceeded
+  int read_timeout_ms = 10000;         // whole request, first byte to last (defeats slow-loris)
+  int idle_timeout_ms = 60000;         // keep-alive idle wait for the next request's first byte
+  size_t max_connections = 1024;       // beyond it: accepted, answered 503, closed
   size_t ws_max_message_bytes = 64 * 1024;  // larger message → close 1009
-  size_t ws_send_queue_limit = 256;     // queued frames per WebSocket; beyond it → close 1008
-  int ws_handshake_timeout_ms = 10000;  // WebSocket opening/closing handshake limit
+  size_t ws_send_queue_limit = 256;         // queued frames per WebSocket; beyond it → close 1008
+  int ws_handshake_timeout_ms = 10000;      // WebSocket opening/closing handshake limit
   // TLS: when set, the port serves HTTPS/WSS only. PEM files.
   bool tls = false;
   std::string cert_file;
@@ -43,9 +43,9 @@ struct ServerOptions {
 };
 
 struct ServerStats {
-  uint64_t connections_open = 0;      // TCP connections currently served (HTTP and WS)
-  uint64_t connections_total = 0;     // accepted and served since start()
-  uint64_t ws_sessions_open = 0;      // WebSocket sessions currently open
+  uint64_t connections_open = 0;   // TCP connections currently served (HTTP and WS)
+  uint64_t connections_total = 0;  // accepted and served since start()
+  uint64_t ws_sessions_open = 0;   // WebSocket sessions currently open
   uint64_t ws_sessions_total = 0;
   uint64_t requests_total = 0;        // HTTP requests handed to the HttpHandler
   uint64_t rejected_connections = 0;  // refused with 503 for max_connections (or while stopping)

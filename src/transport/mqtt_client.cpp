@@ -1,13 +1,13 @@
 #include "transport/mqtt_client.h"
 
-#include <pthread.h>
 #include <mosquitto.h>
+#include <pthread.h>
 
 #include <cctype>
 #include <chrono>
-#include <thread>
 #include <cstdlib>
 #include <string_view>
+#include <thread>
 
 #include "rcan/encoding.h"
 #include "rcan/hash.h"
@@ -53,7 +53,8 @@ Result<BrokerUrl> parse_broker_url(std::string_view url) {
   }
   if (host.empty() || host.size() > 253) return bad("the broker URL needs a host");
   for (char c : host)
-    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '-' || c == '_' || c == ':'))
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '-' || c == '_' ||
+          c == ':'))
       return bad("the broker host has an invalid character");
   if (!port.empty() || rest.find(':') != std::string_view::npos) {
     if (port.empty() || port.size() > 5) return bad("the broker port must be 1..65535");
@@ -105,7 +106,8 @@ struct MqttCallbacks {
     MqttMessage out;
     out.topic = msg->topic;
     if (msg->payload != nullptr && msg->payloadlen > 0)
-      out.payload.assign(static_cast<const char*>(msg->payload), static_cast<size_t>(msg->payloadlen));
+      out.payload.assign(static_cast<const char*>(msg->payload),
+                         static_cast<size_t>(msg->payloadlen));
     out.qos = msg->qos;
     out.retained = msg->retain;
     self->on_message_(out);
@@ -126,7 +128,8 @@ void MqttClient::subscribe(const std::string& filter, int qos) {
     std::lock_guard<std::mutex> lk(mu_);
     subs_.emplace_back(filter, qos);
   }
-  if (impl_->m != nullptr && connected_.load()) mosquitto_subscribe(impl_->m, nullptr, filter.c_str(), qos);
+  if (impl_->m != nullptr && connected_.load())
+    mosquitto_subscribe(impl_->m, nullptr, filter.c_str(), qos);
 }
 
 Status MqttClient::start() {
@@ -156,12 +159,14 @@ Status MqttClient::start() {
                                 static_cast<unsigned>(opts_.reconnect_max_s), true);
   if (!opts_.username.empty()) {
     if (mosquitto_username_pw_set(m, opts_.username.c_str(),
-                                  opts_.password.empty() ? nullptr : opts_.password.c_str()) != MOSQ_ERR_SUCCESS)
+                                  opts_.password.empty() ? nullptr : opts_.password.c_str()) !=
+        MOSQ_ERR_SUCCESS)
       return Error(ErrorCode::kInternal, "cannot set the MQTT credentials");
   }
   if (url->tls) {
     if (opts_.ca_file.empty())
-      return Error(ErrorCode::kSchemaValidationFailed, "an mqtts:// broker needs a CA file", "tls.ca_file");
+      return Error(ErrorCode::kSchemaValidationFailed, "an mqtts:// broker needs a CA file",
+                   "tls.ca_file");
     int rc = mosquitto_tls_set(m, opts_.ca_file.c_str(), nullptr,
                                opts_.cert_file.empty() ? nullptr : opts_.cert_file.c_str(),
                                opts_.key_file.empty() ? nullptr : opts_.key_file.c_str(), nullptr);
@@ -170,14 +175,16 @@ Status MqttClient::start() {
     mosquitto_tls_opts_set(m, 1, "tlsv1.2", nullptr);  // verify the broker's certificate
   }
   if (!opts_.will.topic.empty()) {
-    int rc = mosquitto_will_set(m, opts_.will.topic.c_str(), static_cast<int>(opts_.will.payload.size()),
-                                opts_.will.payload.data(), opts_.will.qos, opts_.will.retain);
+    int rc =
+        mosquitto_will_set(m, opts_.will.topic.c_str(), static_cast<int>(opts_.will.payload.size()),
+                           opts_.will.payload.data(), opts_.will.qos, opts_.will.retain);
     if (rc != MOSQ_ERR_SUCCESS)
       return Error(ErrorCode::kInternal, std::string("MQTT will: ") + mosquitto_strerror(rc));
   }
   int rc = mosquitto_loop_start(m);
   if (rc != MOSQ_ERR_SUCCESS)
-    return Error(ErrorCode::kInternal, std::string("MQTT network thread: ") + mosquitto_strerror(rc));
+    return Error(ErrorCode::kInternal,
+                 std::string("MQTT network thread: ") + mosquitto_strerror(rc));
   started_ = true;
   // A broker that is down now is retried by the network thread with the backoff above.
   rc = mosquitto_connect_async(m, url->host.c_str(), url->port, opts_.keepalive_s);
@@ -189,11 +196,13 @@ Status MqttClient::start() {
   return Status::Ok();
 }
 
-Status MqttClient::publish(const std::string& topic, const std::string& payload, int qos, bool retain) {
-  if (impl_->m == nullptr || stopped_.load()) return Error(ErrorCode::kInternal, "the MQTT client is not running");
+Status MqttClient::publish(const std::string& topic, const std::string& payload, int qos,
+                           bool retain) {
+  if (impl_->m == nullptr || stopped_.load())
+    return Error(ErrorCode::kInternal, "the MQTT client is not running");
   if (qos > 0) inflight_.fetch_add(1);
-  int rc = mosquitto_publish(impl_->m, nullptr, topic.c_str(), static_cast<int>(payload.size()), payload.data(), qos,
-                             retain);
+  int rc = mosquitto_publish(impl_->m, nullptr, topic.c_str(), static_cast<int>(payload.size()),
+                             payload.data(), qos, retain);
   if (rc != MOSQ_ERR_SUCCESS && rc != MOSQ_ERR_NO_CONN) {
     if (qos > 0) inflight_.fetch_sub(1);
     return Error(ErrorCode::kInternal, std::string("MQTT publish: ") + mosquitto_strerror(rc));

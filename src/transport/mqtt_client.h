@@ -39,13 +39,13 @@ struct MqttWill {
 
 struct MqttOptions {
   std::string url = "mqtt://127.0.0.1:1883";
-  std::string client_id;           // empty → random (a clean session is then forced)
+  std::string client_id;  // empty → random (a clean session is then forced)
   bool clean_session = true;
   int keepalive_s = 10;
   std::string username;
-  std::string password;            // read from a 0600 file by the caller
-  std::string ca_file;             // TLS: CA bundle (required with mqtts)
-  std::string cert_file;           // TLS client certificate (optional, with key_file)
+  std::string password;   // read from a 0600 file by the caller
+  std::string ca_file;    // TLS: CA bundle (required with mqtts)
+  std::string cert_file;  // TLS client certificate (optional, with key_file)
   std::string key_file;
   int reconnect_min_s = 1;
   int reconnect_max_s = 30;

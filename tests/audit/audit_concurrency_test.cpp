@@ -1,11 +1,11 @@
 // Many appenders + a concurrent exporter end in one valid chain; a real SIGKILL of a
 // process that is appending loses no acknowledged record.
-#include <algorithm>
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <map>
@@ -45,7 +45,8 @@ TEST(AuditConcurrency, ManyAppendersAndAnExporterMakeOneValidChain) {
       auto rep = verify_jsonl(join(lines), kSecret);
       if (!rep.ok) {
         ++export_failures;
-        ADD_FAILURE() << "concurrent export did not verify: " << rep.why << " at " << rep.first_bad_seq;
+        ADD_FAILURE() << "concurrent export did not verify: " << rep.why << " at "
+                      << rep.first_bad_seq;
       }
       ++exports;
     }
@@ -202,7 +203,8 @@ void kill_child_and_check(int delay_ms) {
   std::string data;
   char buf[65536];
   ssize_t n;
-  while (std::count(data.begin(), data.end(), '\n') <= 10 && (n = ::read(fds[0], buf, sizeof buf)) > 0)
+  while (std::count(data.begin(), data.end(), '\n') <= 10 &&
+         (n = ::read(fds[0], buf, sizeof buf)) > 0)
     data.append(buf, static_cast<size_t>(n));
   std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms));
   ASSERT_EQ(::kill(pid, SIGKILL), 0);

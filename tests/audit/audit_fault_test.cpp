@@ -4,7 +4,6 @@
 // fsync'ed (optionally leaving a torn tail), and the log is reopened. Every acknowledged
 // record must be there, the chain must verify, and a recovery record must say so.
 #include <gtest/gtest.h>
-
 #include <unistd.h>
 
 #include <atomic>
@@ -15,9 +14,9 @@
 
 #include "audit_util.h"
 #include "rcan/audit/audit_log.h"
-#include "testing/fault_env.h"
 #include "rcan/audit/verify.h"
 #include "test_support.h"
+#include "testing/fault_env.h"
 
 namespace rcan::audit {
 namespace {
@@ -40,7 +39,7 @@ struct Acked {
 AuditOptions fault_options(Env* env, bool retention) {
   AuditOptions o = options(1500);  // a rotation every few records
   o.env = env;
-  o.background_index = false;      // deterministic operation order
+  o.background_index = false;  // deterministic operation order
   if (retention) o.retention_max_bytes = 6000;
   return o;
 }
@@ -101,7 +100,8 @@ void check_recovered(const std::string& dir, const std::vector<Acked>& acked, bo
     auto line = (*log)->get(a.seq);
     if (!line.ok()) {
       // Only retention may have removed it, and then it is older than the first kept seq.
-      EXPECT_LT(a.seq, (*log)->stats().first_seq) << ctx << ": acknowledged seq " << a.seq << " lost";
+      EXPECT_LT(a.seq, (*log)->stats().first_seq)
+          << ctx << ": acknowledged seq " << a.seq << " lost";
       continue;
     }
     EXPECT_EQ(parse(*line).get("message_id")->as_string(), a.message_id) << ctx << " seq " << a.seq;
@@ -184,8 +184,9 @@ TEST(AuditFault, CrashInsideRecovery) {
         log = Error();  // drop it
         ASSERT_TRUE(env.drop_unsynced(0.5).ok());
       }
-      check_recovered(dir, acked, true,
-                      "first crash " + std::to_string(first) + ", second " + std::to_string(second));
+      check_recovered(
+          dir, acked, true,
+          "first crash " + std::to_string(first) + ", second " + std::to_string(second));
       if (::testing::Test::HasFailure()) return;
     }
   }
@@ -217,7 +218,8 @@ TEST(AuditFault, DiskFailureFailsClosed) {
 // operations of a group commit (the write, the sync), with and without torn appends, and in
 // the middle of a rotation.
 void fail_then_recover(uint64_t fail_at, bool torn, bool pipelined) {
-  SCOPED_TRACE("fail_at " + std::to_string(fail_at) + (torn ? " torn" : "") + (pipelined ? " pipelined" : ""));
+  SCOPED_TRACE("fail_at " + std::to_string(fail_at) + (torn ? " torn" : "") +
+               (pipelined ? " pipelined" : ""));
   TempDir tmp;
   const std::string dir = tmp.path() + "/log";
   FaultInjectionEnv env(Env::posix());
@@ -273,10 +275,13 @@ void fail_then_recover(uint64_t fail_at, bool torn, bool pipelined) {
   for (const auto& l : lines) {
     json::Value v = parse(l);
     ids.insert(v.get("message_id")->as_string());
-    if (v.get("event")->as_string() == "AUDIT_RECOVERY" && v.get("outcome")->as_string() == "repaired") ++recoveries;
+    if (v.get("event")->as_string() == "AUDIT_RECOVERY" &&
+        v.get("outcome")->as_string() == "repaired")
+      ++recoveries;
   }
   for (const auto& a : acked) EXPECT_TRUE(ids.count(a.message_id)) << a.message_id;
-  for (const auto& r : refused) EXPECT_FALSE(ids.count(r)) << r << " was refused but is in the chain";
+  for (const auto& r : refused)
+    EXPECT_FALSE(ids.count(r)) << r << " was refused but is in the chain";
   EXPECT_GE(recoveries, 1);
   VerifyReport rep = verify_jsonl(join(lines), kSecret);
   EXPECT_TRUE(rep.ok) << rep.why << " at seq " << rep.first_bad_seq;

@@ -1,4 +1,6 @@
 // AuditLog: records, chain, reopen, rotation, retention, indexes, tampering detection, CLI.
+#include "rcan/audit/audit_log.h"
+
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
@@ -8,12 +10,11 @@
 
 #include "audit/fast_seal.h"
 #include "audit_util.h"
-#include "rcan/audit/audit_log.h"
-#include "testing/fault_env.h"
 #include "rcan/audit/secret.h"
 #include "rcan/audit/verify.h"
 #include "rcan/hash.h"
 #include "test_support.h"
+#include "testing/fault_env.h"
 
 namespace rcan::audit {
 namespace {
@@ -82,8 +83,7 @@ TEST(Audit, FastSealIsByteIdenticalToCanonicalSeal) {
     std::string prev = i == 0 ? "" : std::string(64, 'a' + (i % 6));
     SealedRecord slow = seal(to_object(e), static_cast<uint64_t>(i + 1), prev, kSecret);
     for (const auto& prep : {internal::prepare(to_object(e)), internal::prepare(e)}) {
-      SealedRecord fast =
-          internal::seal_prepared(prep, static_cast<uint64_t>(i + 1), prev, hasher);
+      SealedRecord fast = internal::seal_prepared(prep, static_cast<uint64_t>(i + 1), prev, hasher);
       EXPECT_EQ(fast.preimage, slow.preimage);
       EXPECT_EQ(fast.line, slow.line);
       EXPECT_EQ(fast.hmac, slow.hmac);
@@ -119,10 +119,26 @@ TEST(Audit, RecordCarriesProfileFieldsAndOmitsUnknownConfidence) {
   ASSERT_TRUE(log->append(plain).ok());
   auto lines = export_lines(*log);
   auto rec = parse(lines[1]);
-  for (const char* f : {"principal", "ruri", "timestamp_ms", "message_id", "event", "outcome",
-                        "seq", "sender_type", "sub", "cloud_provider", "function_name", "ai",
-                        "gate_bypassed", "hitl_timeout_bypass", "watermark_token", "action",
-                        "reason", "prev_hash", "hmac", "detail"})
+  for (const char* f : {"principal",
+                        "ruri",
+                        "timestamp_ms",
+                        "message_id",
+                        "event",
+                        "outcome",
+                        "seq",
+                        "sender_type",
+                        "sub",
+                        "cloud_provider",
+                        "function_name",
+                        "ai",
+                        "gate_bypassed",
+                        "hitl_timeout_bypass",
+                        "watermark_token",
+                        "action",
+                        "reason",
+                        "prev_hash",
+                        "hmac",
+                        "detail"})
     EXPECT_NE(rec.get(f), nullptr) << f;
   EXPECT_EQ(rec.get("ai")->get("confidence"), nullptr);
   EXPECT_TRUE(rec.get("ai")->get("escalated")->as_bool());
@@ -193,7 +209,7 @@ TEST(Audit, SecretFileRules) {
 
   std::string made = tmp.file("new.secret");
   ASSERT_TRUE(create_secret_file(made).ok());
-  struct stat st{};
+  struct stat st {};
   ASSERT_EQ(::stat(made.c_str(), &st), 0);
   EXPECT_EQ(st.st_mode & 0777, 0600u);
   auto m = read_secret_file(made);
@@ -352,9 +368,9 @@ TEST(AuditTamper, ForgedReplacementWithWrongKeyFails) {
   TempDir tmp;
   auto lines = make_chain(tmp, 10);
   auto prev = parse(lines[5]);  // seq 6
-  SealedRecord s = seal(to_object(entry(7)), 7,
-                        sha256_hex(json::canonical_without(prev.as_object(), "hmac")),
-                        "wrong-key-wrong-key-wrong-key");
+  SealedRecord s =
+      seal(to_object(entry(7)), 7, sha256_hex(json::canonical_without(prev.as_object(), "hmac")),
+           "wrong-key-wrong-key-wrong-key");
   lines[6] = s.line;
   auto rep = verify_jsonl(join(lines), kSecret);
   EXPECT_EQ(rep.first_bad_seq, 7u);
@@ -567,7 +583,8 @@ TEST(AuditStorage, DamagedIndexEntryNeverAnswersWithAnotherRecord) {
   const std::string idx = dir + "/seg-00000001.idx";
   ASSERT_TRUE(std::filesystem::exists(idx));
   std::string data = rcan::test::read_file(idx);
-  constexpr size_t kHeader = 64, kEntry = 32;  // docs/AUDIT.md §6: header, then (seq, offset, length, ts)
+  constexpr size_t kHeader = 64,
+                   kEntry = 32;  // docs/AUDIT.md §6: header, then (seq, offset, length, ts)
   auto get64 = [&](size_t at) {
     uint64_t v = 0;
     std::memcpy(&v, data.data() + at, 8);
@@ -630,7 +647,8 @@ TEST(AuditStorage, DamagedIndexEntryNeverAnswersWithAnotherRecord) {
   const uint64_t last = log->stats().last_seq;
   const std::string active = dir + "/" + [&] {
     char name[32];
-    std::snprintf(name, sizeof name, "seg-%08llu.log", static_cast<unsigned long long>(log->stats().active_segment));
+    std::snprintf(name, sizeof name, "seg-%08llu.log",
+                  static_cast<unsigned long long>(log->stats().active_segment));
     return std::string(name);
   }();
   ASSERT_TRUE(tamper(active, last));
@@ -663,7 +681,8 @@ TEST(AuditCli, ExportAndVerify) {
   auto ok = rcan::test::run_cli({"audit", "verify", jsonl, "--secret-file", secret_file});
   EXPECT_EQ(ok.exit_code, 0) << ok.out << ok.err;
   EXPECT_NE(ok.out.find("records"), std::string::npos);
-  auto dirv = rcan::test::run_cli({"audit", "verify", "--data-dir", dir, "--secret-file", secret_file});
+  auto dirv =
+      rcan::test::run_cli({"audit", "verify", "--data-dir", dir, "--secret-file", secret_file});
   EXPECT_EQ(dirv.exit_code, 0) << dirv.out << dirv.err;
   // A directory given in FILE's place is verified as a data directory, not read as a file.
   auto dirp = rcan::test::run_cli({"audit", "verify", dir, "--secret-file", secret_file});

@@ -37,7 +37,8 @@ TEST(AuditRcanpy, VectorRecordsByteForByte) {
 
 TEST(AuditRcanpy, VectorChainVerifies) {
   auto v = rcan::test::load_vector("audit-rcanpy-v0.3.json");
-  std::string text = rcan::test::read_file(std::string(RCAN_VECTORS_DIR) + "/audit-rcanpy-v0.3.jsonl");
+  std::string text =
+      rcan::test::read_file(std::string(RCAN_VECTORS_DIR) + "/audit-rcanpy-v0.3.jsonl");
   auto rep = verify_rcanpy_jsonl(text, vector_secret(v));
   EXPECT_TRUE(rep.ok) << rep.why;
   EXPECT_EQ(rep.count, 5u);
@@ -59,7 +60,8 @@ TEST(AuditRcanpy, TamperedVariantsFailAtTheExpectedIndex) {
       EXPECT_TRUE(rep.ok) << name << ": " << rep.why;  // e.g. a cut tail: not detectable
     } else {
       EXPECT_FALSE(rep.ok) << name;
-      EXPECT_EQ(rep.first_bad_index, static_cast<uint64_t>(expected->as_int())) << name << ": " << rep.why;
+      EXPECT_EQ(rep.first_bad_index, static_cast<uint64_t>(expected->as_int()))
+          << name << ": " << rep.why;
     }
   }
   // rcan-py's own (lenient) start rule accepts a chain missing its first record.
@@ -131,8 +133,8 @@ TEST(AuditRcanpy, CliExportAndVerify) {
   }
   std::string secret_file = tmp.file("secret");
   write_file(secret_file, kSecret);
-  auto ex = rcan::test::run_cli(
-      {"audit", "export", "--data-dir", tmp.path() + "/data", "--format", "rcanpy", "--secret-file", secret_file});
+  auto ex = rcan::test::run_cli({"audit", "export", "--data-dir", tmp.path() + "/data", "--format",
+                                 "rcanpy", "--secret-file", secret_file});
   ASSERT_EQ(ex.exit_code, 0) << ex.err;
   std::string f = tmp.file("chain.jsonl");
   write_file(f, ex.out);
@@ -142,13 +144,15 @@ TEST(AuditRcanpy, CliExportAndVerify) {
 
   auto v = rcan::test::load_vector("audit-rcanpy-v0.3.json");
   std::string vf = std::string(RCAN_VECTORS_DIR) + "/audit-rcanpy-v0.3.jsonl";
-  auto vec = rcan::test::run_cli({"audit", "verify", "--format", "rcanpy", vf, "--secret", vector_secret(v)});
+  auto vec = rcan::test::run_cli(
+      {"audit", "verify", "--format", "rcanpy", vf, "--secret", vector_secret(v)});
   EXPECT_EQ(vec.exit_code, 0) << vec.out;
   for (const auto& t : v.get("tampered_variants")->as_array()) {
     if (t.get("name")->as_string() != "deleted_first_record") continue;
     std::string text;
     for (const auto& l : t.get("jsonl_lines")->as_array()) text += l.as_string() + "\n";
-    auto r = rcan::test::run_cli({"audit", "verify", "--format", "rcanpy", "-", "--secret", vector_secret(v)}, text);
+    auto r = rcan::test::run_cli(
+        {"audit", "verify", "--format", "rcanpy", "-", "--secret", vector_secret(v)}, text);
     EXPECT_EQ(r.exit_code, 1);
     EXPECT_NE(r.out.find("index 0"), std::string::npos) << r.out;
   }

@@ -70,16 +70,18 @@ TEST(CliJson, BadInputGivesErrorBodyAndExitOne) {
 }
 
 TEST(CliMessage, NormalisesAnRcanPyMessageToTheSeedShape) {
-  auto r = test::run_cli({"message", "check"},
-                         R"({"rcan":"3.2","msg_id":"11111111-2222-4333-8444-555555555555","timestamp":1740721482.934,)"
-                         R"("cmd":"move_forward","target":"rcan://registry.rcan.dev/acme/robotarm/v2/unit-001","params":{"speed":0.5}})");
+  auto r = test::run_cli(
+      {"message", "check"},
+      R"({"rcan":"3.2","msg_id":"11111111-2222-4333-8444-555555555555","timestamp":1740721482.934,)"
+      R"("cmd":"move_forward","target":"rcan://registry.rcan.dev/acme/robotarm/v2/unit-001","params":{"speed":0.5}})");
   EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
   json::Value v = parse_out(r.out);
   EXPECT_EQ(v.get("type")->as_string(), "COMMAND");
   EXPECT_EQ(v.get("message_id")->as_string(), "11111111-2222-4333-8444-555555555555");
   EXPECT_EQ(v.get("timestamp_ms")->as_int(), 1740721482934);
   EXPECT_EQ(v.get("payload")->get("action")->as_string(), "move_forward");
-  EXPECT_EQ(v.get("target_ruri")->as_string(), "rcan://registry.rcan.dev/acme/robotarm/v2/unit-001");
+  EXPECT_EQ(v.get("target_ruri")->as_string(),
+            "rcan://registry.rcan.dev/acme/robotarm/v2/unit-001");
   EXPECT_EQ(v.get("priority")->as_string(), "NORMAL");
   EXPECT_EQ(v.get("sender_type")->as_string(), "human");
 }
@@ -93,8 +95,9 @@ TEST(CliMessage, SchemaFailureNamesTheMissingField) {
 }
 
 TEST(CliMessage, HostileBodiesNeverCrash) {
-  for (const std::string& body : {std::string(""), std::string("\xff\xfe"), std::string("null"),
-                                  std::string(70000, 'x'), std::string("{\"payload\":") + std::string(5000, '[')}) {
+  for (const std::string& body :
+       {std::string(""), std::string("\xff\xfe"), std::string("null"), std::string(70000, 'x'),
+        std::string("{\"payload\":") + std::string(5000, '[')}) {
     auto r = test::run_cli({"message", "check"}, body);
     EXPECT_EQ(r.exit_code, 1);
     json::Value v = parse_out(r.out);

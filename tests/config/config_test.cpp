@@ -21,7 +21,8 @@ const std::string kProfiles = kData + "/profiles/";
 const std::string kFixtures = kData + "/config/";
 const std::string kExample = std::string(RCAN_TESTDATA_DIR) + "/../../examples/sim-robot.rcan.yaml";
 
-constexpr const char* kHead = "rcan_version: \"1.2\"\nruri: rcan://local.rcan/rcan/sim-rover/0a1b2c3d\n";
+constexpr const char* kHead =
+    "rcan_version: \"1.2\"\nruri: rcan://local.rcan/rcan/sim-rover/0a1b2c3d\n";
 
 ConfigOptions opts_with_dir() {
   ConfigOptions o;
@@ -34,7 +35,8 @@ Result<NodeConfig> parse(const std::string& body) {
 }
 
 // Asserts failure; returns the error for further checks.
-Error expect_error(const Result<NodeConfig>& r, const std::string& field, const std::string& reason) {
+Error expect_error(const Result<NodeConfig>& r, const std::string& field,
+                   const std::string& reason) {
   EXPECT_FALSE(r.ok());
   if (r.ok()) return {};
   const Error& e = r.error();
@@ -105,15 +107,20 @@ TEST_P(ProfileTest, LoadsAfterDeviceIdSubstitution) {
 
 INSTANTIATE_TEST_SUITE_P(
     AllProfiles, ProfileTest,
-    ::testing::Values(
-        Profile{"spot.rcan.yaml", "rcan://local.rcan/boston-dynamics/spot/", "mobile_quadruped", 0.75, 0.95},
-        Profile{"ur5e.rcan.yaml", "rcan://local.rcan/universal-robots/ur5e/", "collaborative_arm", 0.90, 0.98},
-        Profile{"ur10e.rcan.yaml", "rcan://local.rcan/universal-robots/ur10e/", "collaborative_arm", 0.90, 0.98},
-        Profile{"franka-research-3.rcan.yaml", "rcan://local.rcan/franka-robotics/franka-research-3/",
-                "collaborative_arm", 0.85, 0.97},
-        Profile{"iiwa7.rcan.yaml", "rcan://local.rcan/kuka/iiwa7/", "collaborative_arm", 0.90, 0.97},
-        Profile{"mobile-differential-drive.rcan.yaml", "rcan://local.rcan/generic/differential-drive/",
-                "mobile_differential", 0.70, 0.92}));
+    ::testing::Values(Profile{"spot.rcan.yaml", "rcan://local.rcan/boston-dynamics/spot/",
+                              "mobile_quadruped", 0.75, 0.95},
+                      Profile{"ur5e.rcan.yaml", "rcan://local.rcan/universal-robots/ur5e/",
+                              "collaborative_arm", 0.90, 0.98},
+                      Profile{"ur10e.rcan.yaml", "rcan://local.rcan/universal-robots/ur10e/",
+                              "collaborative_arm", 0.90, 0.98},
+                      Profile{"franka-research-3.rcan.yaml",
+                              "rcan://local.rcan/franka-robotics/franka-research-3/",
+                              "collaborative_arm", 0.85, 0.97},
+                      Profile{"iiwa7.rcan.yaml", "rcan://local.rcan/kuka/iiwa7/",
+                              "collaborative_arm", 0.90, 0.97},
+                      Profile{"mobile-differential-drive.rcan.yaml",
+                              "rcan://local.rcan/generic/differential-drive/",
+                              "mobile_differential", 0.70, 0.92}));
 
 TEST(ConfigProfiles, VendorKeysAreKept) {
   ConfigOptions o = opts_with_dir();
@@ -278,8 +285,10 @@ TEST(ConfigDefault, DataDirFromEnvironment) {
   EXPECT_EQ(r->security.key_dir, "/home/u/.local/share/rcand/keys");
 
   auto restore = [](const char* n, const char* old, const std::string& v) {
-    if (old) setenv(n, v.c_str(), 1);
-    else unsetenv(n);
+    if (old)
+      setenv(n, v.c_str(), 1);
+    else
+      unsetenv(n);
   };
   restore("RCAND_DATA_DIR", old_rcand, s_rcand);
   restore("XDG_DATA_HOME", old_xdg, s_xdg);
@@ -343,7 +352,7 @@ TEST(ConfigFixtures, FullConfig) {
   EXPECT_EQ(c.rbac.guest_limits.query_rate.window_s, 1u);
   EXPECT_EQ(c.rbac.guest_limits.session_duration_s, 5400u);
   GuestLimits gl = c.rbac.guest_limits.to_guest_limits();
-  EXPECT_EQ(gl.chat_per_minute, 1u);    // 20/hour rounds down, at least 1
+  EXPECT_EQ(gl.chat_per_minute, 1u);  // 20/hour rounds down, at least 1
   EXPECT_EQ(gl.query_per_minute, 120u);
   EXPECT_EQ(gl.concurrent_sessions, 1u);
   EXPECT_DOUBLE_EQ(c.safety.max_linear_speed_mps, 1.5);
@@ -363,13 +372,15 @@ TEST(ConfigFixtures, FullConfig) {
   ASSERT_EQ(c.agent.confidence_gates.size(), 3u);
   EXPECT_EQ(c.agent.confidence_gates[1].on_fail, GateOnFail::kAllow);  // log → allow
   ASSERT_EQ(c.agent.hitl_gates.size(), 2u);
-  EXPECT_EQ(c.agent.hitl_gates[0].action_types, (std::vector<std::string>{"arm_deploy", "nav_goal"}));
+  EXPECT_EQ(c.agent.hitl_gates[0].action_types,
+            (std::vector<std::string>{"arm_deploy", "nav_goal"}));
   EXPECT_EQ(c.agent.hitl_gates[0].on_timeout, HitlOnTimeout::kAllow);
   EXPECT_EQ(c.agent.hitl_gates[0].authorized_roles, (std::vector<Role>{Role::kOwner}));
   EXPECT_EQ(c.agent.hitl_gates[1].action_types, (std::vector<std::string>{"arm_extend"}));
   EXPECT_EQ(c.agent.hitl_gates[1].auth_timeout_ms, 30000u);
   EXPECT_EQ(c.agent.hitl_gates[1].on_timeout, HitlOnTimeout::kBlock);  // escalate → block
-  EXPECT_EQ(c.agent.hitl_gates[1].authorized_roles, (std::vector<Role>{Role::kOwner, Role::kCreator}));
+  EXPECT_EQ(c.agent.hitl_gates[1].authorized_roles,
+            (std::vector<Role>{Role::kOwner, Role::kCreator}));
   ASSERT_TRUE(c.agent.reactive_layer.has_value());
   EXPECT_EQ(c.agent.reactive_layer->timeout_ms, 50u);
   EXPECT_FALSE(c.agent.fast_layer.has_value());
@@ -395,7 +406,8 @@ TEST(ConfigFixtures, OpenCastorStyle) {
   EXPECT_EQ(c.robot.dof, 2u);
   EXPECT_EQ(c.server.port, 8000);  // rcan_protocol.port
   EXPECT_TRUE(c.server.enable_mdns);
-  EXPECT_EQ(c.capabilities, (std::vector<std::string>{"status", "chat", "nav", "teleop", "vision"}));
+  EXPECT_EQ(c.capabilities,
+            (std::vector<std::string>{"status", "chat", "nav", "teleop", "vision"}));
   EXPECT_EQ(c.registry_url, "https://registry.rcan.dev");
   EXPECT_TRUE(c.enable_jwt_false_ignored);
   ASSERT_EQ(c.warnings.size(), 1u);
@@ -451,7 +463,8 @@ TEST(ConfigErrors, Fixtures) {
     SCOPED_TRACE(c.file);
     auto start = std::chrono::steady_clock::now();
     auto r = load_config(kFixtures + c.file, opts_with_dir());
-    auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - start);
+    auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(
+        std::chrono::steady_clock::now() - start);
     EXPECT_LT(ms.count(), 2000);
     ASSERT_FALSE(r.ok());
     EXPECT_EQ(r.error().code, ErrorCode::kSchemaValidationFailed);
@@ -471,9 +484,11 @@ TEST(ConfigErrors, Fixtures) {
 TEST(ConfigErrors, UnknownKeys) {
   expect_error(parse("colour: red\n"), "colour", "unknown_key");
   expect_error(parse("server:\n  prot: 1\n"), "server.prot", "unknown_key");
-  expect_error(parse("server:\n  limits:\n    max_body: 1\n"), "server.limits.max_body", "unknown_key");
-  expect_error(parse("agent:\n  hitl_gates:\n    - {action_types: [a], require_auth: true, notfy: [x]}\n"),
-               "agent.hitl_gates[0].notfy", "unknown_key");
+  expect_error(parse("server:\n  limits:\n    max_body: 1\n"), "server.limits.max_body",
+               "unknown_key");
+  expect_error(
+      parse("agent:\n  hitl_gates:\n    - {action_types: [a], require_auth: true, notfy: [x]}\n"),
+      "agent.hitl_gates[0].notfy", "unknown_key");
   expect_error(parse("bridge:\n  type: ros2\n  topic: /x\n"), "bridge.topic", "unknown_key");
   expect_error(parse("capabilities:\n  motion: [walk]\n  flying: [hover]\n"), "capabilities.flying",
                "unknown_key");
@@ -483,7 +498,8 @@ TEST(ConfigErrors, UnknownKeys) {
   // Keys needing quoting are shown in brackets.
   expect_error(parse("\"we.ird key\": 1\n"), "[\"we.ird key\"]", "unknown_key");
   // Merge keys are refused rather than silently half-supported.
-  expect_error(parse("safety:\n  <<: {local_safety_wins: true}\n"), "safety[\"<<\"]", "unknown_key");
+  expect_error(parse("safety:\n  <<: {local_safety_wins: true}\n"), "safety[\"<<\"]",
+               "unknown_key");
 }
 
 TEST(ConfigErrors, WrongTypes) {
@@ -496,7 +512,7 @@ TEST(ConfigErrors, WrongTypes) {
   e = expect_error(parse("robot:\n  name: 42\n"), "robot.name", "wrong_type");
   EXPECT_NE(e.message.find("quote it"), std::string::npos);
   expect_error(parse("robot:\n  name: no\n"), "robot.name", "wrong_type");  // the Norway problem
-  expect_error(parse("robot:\n  name:\n"), "robot.name", "wrong_type");    // null
+  expect_error(parse("robot:\n  name:\n"), "robot.name", "wrong_type");     // null
   expect_error(parse("capabilities: status\n"), "capabilities", "wrong_type");
   expect_error(parse("capabilities: [status, [nested]]\n"), "capabilities[1]", "wrong_type");
   expect_error(parse("agent:\n  hitl_gates:\n    - {action_types: [a], require_auth: \"true\"}\n"),
@@ -517,26 +533,32 @@ TEST(ConfigErrors, Ranges) {
   expect_error(parse("server:\n  port: 0\n"), "server.port", "out_of_range");
   expect_error(parse("server:\n  port: 65536\n"), "server.port", "out_of_range");
   expect_error(parse("server:\n  port: 99999999999999999999999\n"), "server.port", "out_of_range");
-  expect_error(parse("safety:\n  max_linear_speed_mps: 0\n"), "safety.max_linear_speed_mps", "out_of_range");
+  expect_error(parse("safety:\n  max_linear_speed_mps: 0\n"), "safety.max_linear_speed_mps",
+               "out_of_range");
   expect_error(parse("safety:\n  max_angular_speed_radps: -1\n"), "safety.max_angular_speed_radps",
                "out_of_range");
-  expect_error(parse("security:\n  replay_window_s: 301\n"), "security.replay_window_s", "out_of_range");
-  expect_error(parse("agent:\n  confidence_gates:\n    - {scope: control, min_confidence: 1.5, on_fail: block}\n"),
+  expect_error(parse("security:\n  replay_window_s: 301\n"), "security.replay_window_s",
+               "out_of_range");
+  expect_error(parse("agent:\n  confidence_gates:\n    - {scope: control, min_confidence: 1.5, "
+                     "on_fail: block}\n"),
                "agent.confidence_gates[0].min_confidence", "out_of_range");
-  expect_error(parse("agent:\n  confidence_gates:\n    - {scope: control, min_confidence: 0.5, on_fail: ignore}\n"),
+  expect_error(parse("agent:\n  confidence_gates:\n    - {scope: control, min_confidence: 0.5, "
+                     "on_fail: ignore}\n"),
                "agent.confidence_gates[0].on_fail", "invalid_value");
-  expect_error(parse("agent:\n  hitl_gates:\n    - {action_types: [a], require_auth: true, auth_timeout_ms: 0}\n"),
+  expect_error(parse("agent:\n  hitl_gates:\n    - {action_types: [a], require_auth: true, "
+                     "auth_timeout_ms: 0}\n"),
                "agent.hitl_gates[0].auth_timeout_ms", "out_of_range");
   expect_error(parse("watchdog:\n  timeout_s: 301\n"), "watchdog.timeout_s", "out_of_range");
-  expect_error(parse("safety:\n  joint_limits:\n    - {min: 1, max: -1}\n"), "safety.joint_limits[0].max",
-               "out_of_range");
+  expect_error(parse("safety:\n  joint_limits:\n    - {min: 1, max: -1}\n"),
+               "safety.joint_limits[0].max", "out_of_range");
   expect_error(parse("safety:\n  workspace: {x_min: 1, x_max: 1, y_min: 0, y_max: 1}\n"),
                "safety.workspace.x_max", "out_of_range");
   expect_error(parse("safety:\n  workspace: {x_min: 0, x_max: 1}\n"), "safety.workspace.y_min",
                "missing_key");
-  expect_error(parse("safety:\n  max_speed_override: 1.5\n"), "safety.max_speed_override", "out_of_range");
-  expect_error(parse("driver:\n  sim: {tick_hz: 10, telemetry_hz: 20}\n"), "driver.sim.telemetry_hz",
+  expect_error(parse("safety:\n  max_speed_override: 1.5\n"), "safety.max_speed_override",
                "out_of_range");
+  expect_error(parse("driver:\n  sim: {tick_hz: 10, telemetry_hz: 20}\n"),
+               "driver.sim.telemetry_hz", "out_of_range");
   expect_error(parse("bridge:\n  ros_domain_id: 233\n"), "bridge.ros_domain_id", "out_of_range");
   expect_error(parse("mqtt:\n  estop_qos: 0\n"), "mqtt.estop_qos", "out_of_range");
   expect_error(parse("mqtt:\n  estop_qos: 3\n"), "mqtt.estop_qos", "out_of_range");
@@ -552,7 +574,8 @@ TEST(ConfigMqtt, EstopSubscriptionQos) {
 }
 
 TEST(ConfigErrors, Semantics) {
-  expect_error(parse("safety:\n  local_safety_wins: false\n"), "safety.local_safety_wins", "invalid_value");
+  expect_error(parse("safety:\n  local_safety_wins: false\n"), "safety.local_safety_wins",
+               "invalid_value");
   expect_error(parse("driver:\n  type: ros2\n"), "driver.type", "invalid_value");
   expect_error(parse("agent:\n  confidence_gates:\n"
                      "    - {scope: control, min_confidence: 0.5, on_fail: block}\n"
@@ -560,72 +583,89 @@ TEST(ConfigErrors, Semantics) {
                "agent.confidence_gates[1].scope", "invalid_value");
   expect_error(parse("agent:\n  confidence_gates:\n    - {scope: control, min_confidence: 0.5}\n"),
                "agent.confidence_gates[0].on_fail", "missing_key");
-  expect_error(parse("agent:\n  hitl_gates:\n    - {action_types: [a]}\n"), "agent.hitl_gates[0].require_auth",
-               "missing_key");
-  expect_error(parse("agent:\n  hitl_gates:\n    - {action_types: [a], require_auth: true, authorized_roles: [OWNER, LEASEE]}\n"),
+  expect_error(parse("agent:\n  hitl_gates:\n    - {action_types: [a]}\n"),
+               "agent.hitl_gates[0].require_auth", "missing_key");
+  expect_error(parse("agent:\n  hitl_gates:\n    - {action_types: [a], require_auth: true, "
+                     "authorized_roles: [OWNER, LEASEE]}\n"),
                "agent.hitl_gates[0].authorized_roles[1]", "invalid_value");
-  expect_error(parse("agent:\n  hitl_gates:\n    - {action_types: [a], action_type: b, require_auth: true}\n"),
-               "agent.hitl_gates[0].action_type", "invalid_value");
-  expect_error(parse("agent:\n  hitl_gates:\n    - {require_auth: true}\n"), "agent.hitl_gates[0].action_types",
-               "missing_key");
-  expect_error(parse("agent:\n  hitl_gates: []\nbrain:\n  hitl_gates: []\n"), "brain.hitl_gates", "invalid_value");
+  expect_error(
+      parse(
+          "agent:\n  hitl_gates:\n    - {action_types: [a], action_type: b, require_auth: true}\n"),
+      "agent.hitl_gates[0].action_type", "invalid_value");
+  expect_error(parse("agent:\n  hitl_gates:\n    - {require_auth: true}\n"),
+               "agent.hitl_gates[0].action_types", "missing_key");
+  expect_error(parse("agent:\n  hitl_gates: []\nbrain:\n  hitl_gates: []\n"), "brain.hitl_gates",
+               "invalid_value");
   expect_error(parse("server: {port: 8080}\nrcan_protocol: {port: 8000}\n"), "rcan_protocol.port",
                "invalid_value");
   expect_error(parse("safety: {max_linear_speed_mps: 1, max_linear_x: 2}\n"), "safety.max_linear_x",
                "invalid_value");
   expect_error(parse("safety: {emergency_stop_distance: 0.3, estop_distance_mm: 500}\n"),
                "safety.estop_distance_mm", "invalid_value");
-  expect_error(parse("guest_limits: {chat_rate: 10/fortnight}\n"), "guest_limits.chat_rate", "invalid_value");
-  expect_error(parse("guest_limits: {chat_rate: lots}\n"), "guest_limits.chat_rate", "invalid_value");
-  expect_error(parse("guest_limits: {session_duration: 15 parsecs}\n"), "guest_limits.session_duration",
+  expect_error(parse("guest_limits: {chat_rate: 10/fortnight}\n"), "guest_limits.chat_rate",
                "invalid_value");
-  expect_error(parse("guest_limits: {}\nrbac: {guest_limits: {}}\n"), "guest_limits", "invalid_value");
-  expect_error(parse("server:\n  tls: {enabled: true, key_file: k.pem}\n"), "server.tls.cert_file", "missing_key");
+  expect_error(parse("guest_limits: {chat_rate: lots}\n"), "guest_limits.chat_rate",
+               "invalid_value");
+  expect_error(parse("guest_limits: {session_duration: 15 parsecs}\n"),
+               "guest_limits.session_duration", "invalid_value");
+  expect_error(parse("guest_limits: {}\nrbac: {guest_limits: {}}\n"), "guest_limits",
+               "invalid_value");
+  expect_error(parse("server:\n  tls: {enabled: true, key_file: k.pem}\n"), "server.tls.cert_file",
+               "missing_key");
   expect_error(parse("server:\n  bind: \"0.0.0.0; rm -rf\"\n"), "server.bind", "invalid_value");
   expect_error(parse("security:\n  injection:\n    patterns: [{regex: \"(unclosed\"}]\n"),
                "security.injection.patterns[0].regex", "invalid_value");
-  expect_error(parse("security:\n  trusted_robot_keys: [{name: a}]\n"), "security.trusted_robot_keys[0]",
-               "missing_key");
-  expect_error(parse("security:\n  trusted_signer_keys: [{name: a}]\n"), "security.trusted_signer_keys[0]",
-               "missing_key");
+  expect_error(parse("security:\n  trusted_robot_keys: [{name: a}]\n"),
+               "security.trusted_robot_keys[0]", "missing_key");
+  expect_error(parse("security:\n  trusted_signer_keys: [{name: a}]\n"),
+               "security.trusted_signer_keys[0]", "missing_key");
   expect_error(parse("security:\n  trusted_robot_keys: [{name: a, ed25519_pub_file: a.pub}]\n"
                      "  trusted_signer_keys: [{name: a, ed25519_pub_file: b.pub}]\n"),
                "security.trusted_signer_keys[0].name", "invalid_value");
-  expect_error(parse("agent:\n  layers:\n    fast: {url: ftp://x}\n"), "agent.layers.fast.url", "invalid_value");
+  expect_error(parse("agent:\n  layers:\n    fast: {url: ftp://x}\n"), "agent.layers.fast.url",
+               "invalid_value");
   expect_error(parse("rrn: RRN-12\n"), "rrn", "invalid_value");
-  expect_error(parse("metadata: {robot_uuid: not-a-uuid}\n"), "metadata.robot_uuid", "invalid_value");
+  expect_error(parse("metadata: {robot_uuid: not-a-uuid}\n"), "metadata.robot_uuid",
+               "invalid_value");
   expect_error(parse("capabilities: [Status]\n"), "capabilities[0]", "invalid_value");
 }
 
 TEST(ConfigErrors, Identity) {
   ConfigOptions o = opts_with_dir();
   expect_error(parse_config_text("rcan_version: \"1.2\"\n", o), "ruri", "missing_key");
-  expect_error(parse_config_text("ruri: rcan://local.rcan/a1/b1/0a1b2c3d\n", o), "rcan_version", "missing_key");
-  expect_error(parse_config_text("rcan_version: \"v1\"\nruri: rcan://local.rcan/a1/b1/0a1b2c3d\n", o),
-               "rcan_version", "invalid_value");
-  expect_error(parse_config_text("rcan_version: \"1.2\"\nruri: rcan://local.rcan/a1/b1/zz\n", o), "ruri",
-               "invalid_value");
-  expect_error(parse_config_text("rcan_version: \"1.2\"\nruri: rcan://local.rcan/a1/b1/0a1b2c3d/arm\n", o),
+  expect_error(parse_config_text("ruri: rcan://local.rcan/a1/b1/0a1b2c3d\n", o), "rcan_version",
+               "missing_key");
+  expect_error(
+      parse_config_text("rcan_version: \"v1\"\nruri: rcan://local.rcan/a1/b1/0a1b2c3d\n", o),
+      "rcan_version", "invalid_value");
+  expect_error(parse_config_text("rcan_version: \"1.2\"\nruri: rcan://local.rcan/a1/b1/zz\n", o),
                "ruri", "invalid_value");
-  expect_error(parse_config_text("rcan_version: \"1.2\"\nruri: rcan://local.rcan/discovered/10.0.0.1:8080\n", o),
+  expect_error(
+      parse_config_text("rcan_version: \"1.2\"\nruri: rcan://local.rcan/a1/b1/0a1b2c3d/arm\n", o),
+      "ruri", "invalid_value");
+  expect_error(parse_config_text(
+                   "rcan_version: \"1.2\"\nruri: rcan://local.rcan/discovered/10.0.0.1:8080\n", o),
                "ruri", "invalid_value");
   expect_error(parse_config_text("rcan_version: \"1.2\"\nruri: rcan://local.rcan/a1/b1/0a1b2c3d\n"
                                  "metadata: {ruri: rcan://local.rcan/a1/b1/0a1b2c3d}\n",
                                  o),
                "metadata.ruri", "invalid_value");
   // metadata.ruri alone is enough, and version strings of both styles pass.
-  auto r = parse_config_text("rcan_version: \"1.3.0-rc.1\"\nmetadata: {ruri: rcan://a1.b1.0a1b2c3d}\n", o);
+  auto r = parse_config_text(
+      "rcan_version: \"1.3.0-rc.1\"\nmetadata: {ruri: rcan://a1.b1.0a1b2c3d}\n", o);
   ASSERT_TRUE(r.ok()) << r.error().message;
   EXPECT_EQ(r->ruri, "rcan://local.rcan/a1/b1/0a1b2c3d");
   // Shorthand with a device id that is not hex (found by config_fuzz): its expanded form is a
   // RURI the parser accepts again, so it loads, normalised.
-  auto sh = parse_config_text("rcan_version: \"1.2\"\nruri: rcan://opencastor.rover.0a1bj2c3d\n", o);
+  auto sh =
+      parse_config_text("rcan_version: \"1.2\"\nruri: rcan://opencastor.rover.0a1bj2c3d\n", o);
   ASSERT_TRUE(sh.ok()) << sh.error().message;
   EXPECT_EQ(sh->ruri, "rcan://local.rcan/opencastor/rover/0a1bj2c3d");
   // A bad substituted device id is refused.
   o.device_id = "XYZ";
-  expect_error(parse_config_text("rcan_version: \"1.2\"\nruri: rcan://local.rcan/a1/b1/{device_id}\n", o),
-               "ruri", "invalid_value");
+  expect_error(
+      parse_config_text("rcan_version: \"1.2\"\nruri: rcan://local.rcan/a1/b1/{device_id}\n", o),
+      "ruri", "invalid_value");
 }
 
 TEST(ConfigErrors, MalformedAndEmpty) {
@@ -637,7 +677,8 @@ TEST(ConfigErrors, MalformedAndEmpty) {
   EXPECT_NE(e.message.find("line"), std::string::npos);
   expect_error(parse_config_text("a: *nope\n", o), "", "malformed_yaml");
   // (yaml-cpp 0.7 accepts a double-quoted scalar left open at the end of the text.)
-  expect_error(parse_config_text(std::string(kHead) + "---\nrcan_version: \"1.2\"\n", o), "", "malformed_yaml");
+  expect_error(parse_config_text(std::string(kHead) + "---\nrcan_version: \"1.2\"\n", o), "",
+               "malformed_yaml");
   expect_error(parse_config_text(std::string("a: b\0c", 6), o), "", "malformed_yaml");
   expect_error(parse_config_text("just a string\n", o), "", "wrong_type");
   // A stray flow token at document level: yaml-cpp 0.7's LoadAll() would loop forever here.
@@ -654,10 +695,12 @@ TEST(ConfigErrors, MalformedAndEmpty) {
 TEST(ConfigErrors, DuplicateKeys) {
   Error e = expect_error(parse("robot:\n  name: a\n  name: b\n"), "robot.name", "duplicate_key");
   EXPECT_NE(e.message.find("line 5"), std::string::npos) << e.message;
-  expect_error(parse_config_text(std::string(kHead) + "rcan_version: \"1.3\"\n", opts_with_dir()), "rcan_version",
+  expect_error(parse_config_text(std::string(kHead) + "rcan_version: \"1.3\"\n", opts_with_dir()),
+               "rcan_version", "duplicate_key");
+  expect_error(parse("bridge:\n  launch_args: {a: 1, a: 2}\n"), "bridge.launch_args.a",
                "duplicate_key");
-  expect_error(parse("bridge:\n  launch_args: {a: 1, a: 2}\n"), "bridge.launch_args.a", "duplicate_key");
-  expect_error(parse("agent:\n  confidence_gates:\n    - {scope: a, scope: b, min_confidence: 1, on_fail: block}\n"),
+  expect_error(parse("agent:\n  confidence_gates:\n    - {scope: a, scope: b, min_confidence: 1, "
+                     "on_fail: block}\n"),
                "agent.confidence_gates[0].scope", "duplicate_key");
 }
 
@@ -668,7 +711,9 @@ TEST(ConfigHostile, BillionLaughsFinishesQuickly) {
   // 10^9 leaves through nine levels of aliases, in a free-form block and in a typed list.
   for (const char* where : {"bridge:\n  launch_args:\n", "notes:\n", "connection:\n"}) {
     std::string text = std::string(kHead) + where;
-    text += "    a: &a [\"lol\",\"lol\",\"lol\",\"lol\",\"lol\",\"lol\",\"lol\",\"lol\",\"lol\",\"lol\"]\n";
+    text +=
+        "    a: &a "
+        "[\"lol\",\"lol\",\"lol\",\"lol\",\"lol\",\"lol\",\"lol\",\"lol\",\"lol\",\"lol\"]\n";
     char prev = 'a';
     for (char c = 'b'; c <= 'j'; ++c) {
       text += std::string("    ") + c + ": &" + c + " [";
@@ -678,7 +723,8 @@ TEST(ConfigHostile, BillionLaughsFinishesQuickly) {
     }
     auto start = std::chrono::steady_clock::now();
     auto r = parse_config_text(text, opts_with_dir());
-    auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - start);
+    auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(
+        std::chrono::steady_clock::now() - start);
     ASSERT_FALSE(r.ok());
     EXPECT_EQ(r.error().reason, "too_large") << r.error().message;
     EXPECT_LT(ms.count(), 2000);
@@ -701,11 +747,13 @@ TEST(ConfigHostile, RecursiveAliasAndDeepNesting) {
   }
   auto r = parse_config_text(std::string(100000, '['), opts_with_dir());
   ASSERT_FALSE(r.ok());
-  std::string nested = std::string(kHead) + "notes: " + std::string(200, '[') + std::string(200, ']') + "\n";
+  std::string nested =
+      std::string(kHead) + "notes: " + std::string(200, '[') + std::string(200, ']') + "\n";
   r = parse_config_text(nested, opts_with_dir());
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.error().reason, "too_large");
-  auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - start);
+  auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() -
+                                                                  start);
   EXPECT_LT(ms.count(), 3000);
 }
 
@@ -790,12 +838,15 @@ TEST(ConfigPaths, RelativeAndHome) {
   const char* home = std::getenv("HOME");
   std::string saved = home ? home : "";
   setenv("HOME", "/home/robot", 1);
-  auto r = parse_config_text(std::string(kHead) +
-                                 "node: {data_dir: ../../var/lib/rcand}\n"
-                                 "security:\n  key_dir: ~/keys\n  audit: {chain_secret_file: secret}\n",
-                             o);
-  if (home) setenv("HOME", saved.c_str(), 1);
-  else unsetenv("HOME");
+  auto r =
+      parse_config_text(std::string(kHead) +
+                            "node: {data_dir: ../../var/lib/rcand}\n"
+                            "security:\n  key_dir: ~/keys\n  audit: {chain_secret_file: secret}\n",
+                        o);
+  if (home)
+    setenv("HOME", saved.c_str(), 1);
+  else
+    unsetenv("HOME");
   ASSERT_TRUE(r.ok()) << r.error().message;
   EXPECT_EQ(r->data_dir, "/var/lib/rcand");
   EXPECT_EQ(r->security.key_dir, "/home/robot/keys");
@@ -804,9 +855,10 @@ TEST(ConfigPaths, RelativeAndHome) {
 }
 
 TEST(ConfigScalars, YamlForms) {
-  auto r = parse("server:\n  port: 0x1F90\n  enable_mdns: yes\nsafety:\n  max_linear_speed_mps: 1\n"
-                 "  max_angular_speed_radps: .5\n  estop_on_startup: False\n"
-                 "robot:\n  name: \"no\"\n  model: 'x'\n  description: |\n    multi\n    line\n");
+  auto r = parse(
+      "server:\n  port: 0x1F90\n  enable_mdns: yes\nsafety:\n  max_linear_speed_mps: 1\n"
+      "  max_angular_speed_radps: .5\n  estop_on_startup: False\n"
+      "robot:\n  name: \"no\"\n  model: 'x'\n  description: |\n    multi\n    line\n");
   ASSERT_TRUE(r.ok()) << r.error().message;
   EXPECT_EQ(r->server.port, 8080);
   EXPECT_TRUE(r->server.enable_mdns);

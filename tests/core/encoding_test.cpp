@@ -1,7 +1,8 @@
 // Hex, base64, base64url, hashes and the error catalogue.
+#include "rcan/encoding.h"
+
 #include <gtest/gtest.h>
 
-#include "rcan/encoding.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
 
@@ -58,11 +59,11 @@ TEST(Encoding, Base64EveryLengthRoundTripsAndEveryPositionRefuses) {
     }
     data.push_back(static_cast<uint8_t>(i * 37 + 11));
   }
-  EXPECT_TRUE(base64url_decode("Zm9vYg").has_value());            // canonical 2-symbol tail
-  EXPECT_FALSE(base64url_decode("Zm9vYh").has_value());           // 4 unused bits not zero
-  EXPECT_TRUE(base64url_decode("Zm9vYmE").has_value());           // canonical 3-symbol tail
-  EXPECT_FALSE(base64url_decode("Zm9vYmF").has_value());          // 2 unused bits not zero
-  EXPECT_FALSE(base64url_decode("Zm9vY").has_value());            // length 1 mod 4
+  EXPECT_TRUE(base64url_decode("Zm9vYg").has_value());    // canonical 2-symbol tail
+  EXPECT_FALSE(base64url_decode("Zm9vYh").has_value());   // 4 unused bits not zero
+  EXPECT_TRUE(base64url_decode("Zm9vYmE").has_value());   // canonical 3-symbol tail
+  EXPECT_FALSE(base64url_decode("Zm9vYmF").has_value());  // 2 unused bits not zero
+  EXPECT_FALSE(base64url_decode("Zm9vY").has_value());    // length 1 mod 4
 }
 
 TEST(Hash, KnownAnswers) {

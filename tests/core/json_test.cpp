@@ -88,7 +88,8 @@ TEST(Writers, InvalidUtf8InAStringStillGivesValidJson) {
     EXPECT_NE(back->get("k\u00ff"), nullptr) << text;
   }
   // Valid UTF-8 is written unchanged.
-  EXPECT_EQ(dump(Value(std::string("ok-\xc3\xa9-\xf0\x9f\x98\x80"))), "\"ok-\xc3\xa9-\xf0\x9f\x98\x80\"");
+  EXPECT_EQ(dump(Value(std::string("ok-\xc3\xa9-\xf0\x9f\x98\x80"))),
+            "\"ok-\xc3\xa9-\xf0\x9f\x98\x80\"");
 }
 
 // The writer copies runs of characters that need no escape at once: escapes at a run's start,
@@ -96,8 +97,8 @@ TEST(Writers, InvalidUtf8InAStringStillGivesValidJson) {
 TEST(Writers, EscapesBetweenRunsOfPlainCharacters) {
   const std::string s = std::string("\"lead plain \"quoted\" back\\slash\ttab\x01") + "ctl\x7f" +
                         "del caf\xc3\xa9 end\n";
-  const std::string want = std::string(R"("\"lead plain \"quoted\" back\\slash\ttab\u0001ctl)") + "\x7f" +
-                           "del caf\xc3\xa9 end\\n\"";
+  const std::string want = std::string(R"("\"lead plain \"quoted\" back\\slash\ttab\u0001ctl)") +
+                           "\x7f" + "del caf\xc3\xa9 end\\n\"";
   EXPECT_EQ(dump(Value(s)), want);
   auto back = parse(dump(Value(s)));
   ASSERT_TRUE(back.ok());
@@ -111,7 +112,8 @@ TEST(PythonDumps, DefaultSeparatorsAndEnsureAscii) {
   ASSERT_TRUE(v.ok());
   EXPECT_EQ(python_dumps(*v, true, false),
             R"({"a": {"y": null, "z": true}, "b": [1, 2.0, "\u00e9\ud83d\ude00\u007f"]})");
-  EXPECT_EQ(python_dumps(*v, false, true), R"({"b":[1,2.0,"\u00e9\ud83d\ude00\u007f"],"a":{"z":true,"y":null}})");
+  EXPECT_EQ(python_dumps(*v, false, true),
+            R"({"b":[1,2.0,"\u00e9\ud83d\ude00\u007f"],"a":{"z":true,"y":null}})");
 }
 
 // Reads tests/data/<file>: lines "<hex bits of a double> <expected text>" ('#' comments).
@@ -146,7 +148,8 @@ TEST(IntegralDouble, ExactDecimalExpansionLikePythonInt) {
 }
 
 TEST(JsonParse, KeepsIntVersusFloatAndBigIntegersExactly) {
-  auto v = parse(R"({"i":1,"f":1.0,"big":123456789012345678901234567890,"neg":-9223372036854775808,"e":1e2})");
+  auto v = parse(
+      R"({"i":1,"f":1.0,"big":123456789012345678901234567890,"neg":-9223372036854775808,"e":1e2})");
   ASSERT_TRUE(v.ok());
   EXPECT_TRUE(v->get("i")->is_int());
   EXPECT_TRUE(v->get("f")->is_double());
@@ -154,7 +157,9 @@ TEST(JsonParse, KeepsIntVersusFloatAndBigIntegersExactly) {
   EXPECT_EQ(v->get("big")->big_digits(), "123456789012345678901234567890");
   EXPECT_EQ(v->get("neg")->as_int(), INT64_MIN);
   EXPECT_TRUE(v->get("e")->is_double());
-  EXPECT_EQ(dump(*v), R"({"i":1,"f":1.0,"big":123456789012345678901234567890,"neg":-9223372036854775808,"e":100.0})");
+  EXPECT_EQ(
+      dump(*v),
+      R"({"i":1,"f":1.0,"big":123456789012345678901234567890,"neg":-9223372036854775808,"e":100.0})");
 }
 
 TEST(JsonParse, DecodesEscapesAndSurrogatePairs) {
@@ -173,7 +178,8 @@ class JsonHostile : public ::testing::TestWithParam<Hostile> {};
 TEST_P(JsonHostile, IsAnErrorNamingAnOffsetNeverACrash) {
   auto v = parse(GetParam().text);
   ASSERT_FALSE(v.ok());
-  EXPECT_TRUE(v.error().code == ErrorCode::kMalformedJson || v.error().code == ErrorCode::kBodyTooLarge);
+  EXPECT_TRUE(v.error().code == ErrorCode::kMalformedJson ||
+              v.error().code == ErrorCode::kBodyTooLarge);
   EXPECT_FALSE(v.error().message.empty());
 }
 
@@ -192,7 +198,8 @@ std::vector<Hostile> hostile_inputs() {
       {"single_quotes", "{'a':1}"},
       {"unquoted_key", "{a:1}"},
       {"duplicate_key", R"({"a":1,"a":2})"},
-      {"duplicate_key_many", R"({"k0":0,"k1":1,"k2":2,"k3":3,"k4":4,"k5":5,"k6":6,"k7":7,"k8":8,"k3":9})"},
+      {"duplicate_key_many",
+       R"({"k0":0,"k1":1,"k2":2,"k3":3,"k4":4,"k5":5,"k6":6,"k7":7,"k8":8,"k3":9})"},
       {"duplicate_key_escaped", R"({"a":1,"\u0061":2})"},
       {"leading_zero", "[01]"},
       {"plus_sign", "[+1]"},
@@ -217,7 +224,8 @@ std::vector<Hostile> hostile_inputs() {
       {"utf8_bom", "\xef\xbb\xbf{}"},
       {"nul_byte", std::string("{\"a\":1}\0", 8)},
       {"deep_arrays", std::string(100000, '[')},
-      {"deep_objects", [] {
+      {"deep_objects",
+       [] {
          std::string s;
          for (int i = 0; i < 5000; ++i) s += "{\"a\":";
          return s;

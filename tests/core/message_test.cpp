@@ -11,11 +11,13 @@ namespace {
 
 constexpr const char* kId = "0b0a6d4e-5f3c-4a2b-9c1d-2e3f4a5b6c7d";
 
-std::string seed_msg(const std::string& extra = "", const std::string& payload = R"({"action":"move","linear":0.3})") {
+std::string seed_msg(const std::string& extra = "",
+                     const std::string& payload = R"({"action":"move","linear":0.3})") {
   return std::string(R"({"version":"1.0.0","message_id":")") + kId +
          R"(","source_ruri":"rcan://local.rcan/acme/app/12345678","target_ruri":"rcan://local.rcan/acme/rover/abcdef12",)"
-         R"("type":"COMMAND","payload":)" + payload + R"(,"timestamp_ms":1740721482934,"ttl_ms":30000,"priority":"NORMAL")" +
-         extra + "}";
+         R"("type":"COMMAND","payload":)" +
+         payload + R"(,"timestamp_ms":1740721482934,"ttl_ms":30000,"priority":"NORMAL")" + extra +
+         "}";
 }
 
 Error decode_error(const std::string& body) {
@@ -49,8 +51,9 @@ TEST(MessageCodec, SeedShapeRoundTrip) {
 }
 
 TEST(MessageCodec, ReferenceClientShapeWithMessageTypeKey) {
-  std::string body = std::string(R"({"version":"1.0.0","message_id":")") + kId +
-                     R"(","message_type":"STATUS","payload":{},"timestamp_ms":1740000000000,"priority":"LOW"})";
+  std::string body =
+      std::string(R"({"version":"1.0.0","message_id":")") + kId +
+      R"(","message_type":"STATUS","payload":{},"timestamp_ms":1740000000000,"priority":"LOW"})";
   auto m = parse_message(body);
   ASSERT_TRUE(m.ok()) << m.error().message;
   EXPECT_EQ(m->type, MessageType::kStatus);
@@ -58,7 +61,8 @@ TEST(MessageCodec, ReferenceClientShapeWithMessageTypeKey) {
 }
 
 TEST(MessageCodec, NumericTypesOnlyUnderAnExplicitSeedVersion) {
-  std::string base = std::string(R"({"message_id":")") + kId + R"(","payload":{},"timestamp_ms":1740000000000,)";
+  std::string base =
+      std::string(R"({"message_id":")") + kId + R"(","payload":{},"timestamp_ms":1740000000000,)";
   auto ok = parse_message(base + R"("version":"1.0.0","type":2,"priority":3})");
   ASSERT_TRUE(ok.ok()) << ok.error().message;
   EXPECT_EQ(ok->type, MessageType::kCommand);
@@ -66,7 +70,8 @@ TEST(MessageCodec, NumericTypesOnlyUnderAnExplicitSeedVersion) {
   EXPECT_EQ(decode_error(base + R"("version":"1.2","type":2})").field, "type");
   EXPECT_EQ(decode_error(base + R"("type":2})").field, "type");
   EXPECT_EQ(decode_error(base + R"("version":"1.0.0","type":8})").field, "type");
-  EXPECT_EQ(decode_error(base + R"("version":"1.0.0","type":"COMMAND","priority":9})").field, "priority");
+  EXPECT_EQ(decode_error(base + R"("version":"1.0.0","type":"COMMAND","priority":9})").field,
+            "priority");
 }
 
 TEST(MessageCodec, RcanPyShapeNormalisesToACommand) {
@@ -90,8 +95,9 @@ TEST(MessageCodec, RcanPyShapeNormalisesToACommand) {
 }
 
 TEST(MessageCodec, RcanPyTimestampSecondsBecomeMilliseconds) {
-  auto m = parse_message(std::string(R"({"rcan":"3.2","msg_id":")") + kId +
-                         R"(","timestamp":1740721482.934,"cmd":"move_forward","target":"rcan://local.rcan/acme/rover/abcdef12","params":{"distance_m":1.5},"confidence":0.87})");
+  auto m = parse_message(
+      std::string(R"({"rcan":"3.2","msg_id":")") + kId +
+      R"(","timestamp":1740721482.934,"cmd":"move_forward","target":"rcan://local.rcan/acme/rover/abcdef12","params":{"distance_m":1.5},"confidence":0.87})");
   ASSERT_TRUE(m.ok()) << m.error().message;
   EXPECT_EQ(m->timestamp_ms, 1740721482934);
   EXPECT_EQ(*m->confidence, 0.87);
@@ -100,19 +106,24 @@ TEST(MessageCodec, RcanPyTimestampSecondsBecomeMilliseconds) {
 }
 
 TEST(MessageCodec, AiBlockAtTopLevelOrInPayloadConfidenceNeverDefaulted) {
-  auto m = parse_message(seed_msg(R"(,"ai":{"provider":"anthropic","model":"claude-sonnet-4-6","layer":"planner","thought_id":"th_1"})"));
+  auto m = parse_message(seed_msg(
+      R"(,"ai":{"provider":"anthropic","model":"claude-sonnet-4-6","layer":"planner","thought_id":"th_1"})"));
   ASSERT_TRUE(m.ok()) << m.error().message;
   ASSERT_TRUE(m->ai.has_value());
   EXPECT_FALSE(m->ai->confidence.has_value());
   json::Value ai = m->ai->to_json();
   EXPECT_EQ(ai.get("confidence"), nullptr);
   EXPECT_EQ(ai.get("escalated")->as_bool(), false);
-  auto p = parse_message(seed_msg("", R"({"action":"move","ai":{"provider":"openai","model":"gpt-4o","confidence":0.91}})"));
+  auto p = parse_message(seed_msg(
+      "", R"({"action":"move","ai":{"provider":"openai","model":"gpt-4o","confidence":0.91}})"));
   ASSERT_TRUE(p.ok()) << p.error().message;
   ASSERT_TRUE(p->ai.has_value());
   EXPECT_EQ(*p->ai->confidence, 0.91);
   // Both places at once is ambiguous.
-  EXPECT_EQ(decode_error(seed_msg(R"(,"ai":{"provider":"a","model":"b"})", R"({"ai":{"provider":"a","model":"b"}})")).field, "ai");
+  EXPECT_EQ(decode_error(seed_msg(R"(,"ai":{"provider":"a","model":"b"})",
+                                  R"({"ai":{"provider":"a","model":"b"}})"))
+                .field,
+            "ai");
 }
 
 TEST(MessageCodec, AiBlockMissingAMustFieldIsAuditIncomplete) {
@@ -129,15 +140,20 @@ TEST(MessageCodec, AiBlockMissingAMustFieldIsAuditIncomplete) {
 }
 
 TEST(MessageCodec, CloudFunctionNeedsProviderAndFunctionName) {
-  EXPECT_EQ(decode_error(seed_msg(R"(,"sender_type":"cloud_function","function_name":"f")")).field, "cloud_provider");
-  EXPECT_EQ(decode_error(seed_msg(R"(,"sender_type":"cloud_function","cloud_provider":"firebase")")).field, "function_name");
-  auto m = parse_message(seed_msg(R"(,"sender_type":"cloud_function","cloud_provider":"firebase","function_name":"castor-bridge-v2","function_region":"us-central1")"));
+  EXPECT_EQ(decode_error(seed_msg(R"(,"sender_type":"cloud_function","function_name":"f")")).field,
+            "cloud_provider");
+  EXPECT_EQ(decode_error(seed_msg(R"(,"sender_type":"cloud_function","cloud_provider":"firebase")"))
+                .field,
+            "function_name");
+  auto m = parse_message(seed_msg(
+      R"(,"sender_type":"cloud_function","cloud_provider":"firebase","function_name":"castor-bridge-v2","function_region":"us-central1")"));
   ASSERT_TRUE(m.ok()) << m.error().message;
   EXPECT_EQ(m->sender_type, SenderType::kCloudFunction);
   EXPECT_TRUE(m->sender_type_explicit);
   EXPECT_EQ(m->function_region, "us-central1");
   EXPECT_EQ(decode_error(seed_msg(R"(,"sender_type":"service")")).field, "sender_type");
-  EXPECT_EQ(decode_error(seed_msg(R"(,"sender_type":"robot")")).code, ErrorCode::kMissingDelegationChain);
+  EXPECT_EQ(decode_error(seed_msg(R"(,"sender_type":"robot")")).code,
+            ErrorCode::kMissingDelegationChain);
 }
 
 TEST(MessageCodec, VersionChecks) {
@@ -149,14 +165,16 @@ TEST(MessageCodec, VersionChecks) {
   junk.replace(junk.find("1.0.0"), 5, "x.y");
   EXPECT_EQ(decode_error(junk).field, "version");
   // The rcan-py shape is accepted whatever its rcan field says.
-  auto m = parse_message(std::string(R"({"rcan":"9.9","msg_id":")") + kId +
-                         R"(","timestamp":1740721482,"cmd":"status","target":"rcan://local.rcan/acme/rover/abcdef12"})");
+  auto m = parse_message(
+      std::string(R"({"rcan":"9.9","msg_id":")") + kId +
+      R"(","timestamp":1740721482,"cmd":"status","target":"rcan://local.rcan/acme/rover/abcdef12"})");
   EXPECT_TRUE(m.ok());
 }
 
 TEST(MessageCodec, SafetyTypeImpliesSafetyPriority) {
-  std::string body = std::string(R"({"version":"1.0.0","message_id":")") + kId +
-                     R"(","type":"SAFETY","payload":{"safety_event":"ESTOP"},"timestamp_ms":1740000000000})";
+  std::string body =
+      std::string(R"({"version":"1.0.0","message_id":")") + kId +
+      R"(","type":"SAFETY","payload":{"safety_event":"ESTOP"},"timestamp_ms":1740000000000})";
   auto m = parse_message(body);
   ASSERT_TRUE(m.ok());
   EXPECT_TRUE(m->is_safety());
@@ -182,47 +200,91 @@ TEST_P(MessageRejects, WithTheOffendingField) {
 
 std::vector<BadField> bad_fields() {
   std::string id = kId;
-  std::string head = R"({"version":"1.0.0","type":"COMMAND","payload":{},"timestamp_ms":1740000000000,)";
+  std::string head =
+      R"({"version":"1.0.0","type":"COMMAND","payload":{},"timestamp_ms":1740000000000,)";
   return {
       {"missing_payload", R"({"version":"1.x","type":"COMMAND"})", "payload"},
       {"payload_not_object", R"({"version":"1.0.0","type":"COMMAND","payload":[1]})", "payload"},
       {"missing_type", R"({"version":"1.0.0","payload":{}})", "type"},
       {"unknown_type", R"({"version":"1.0.0","type":"LAUNCH","payload":{}})", "type"},
       {"lowercase_type", R"({"version":"1.0.0","type":"command","payload":{}})", "type"},
-      {"type_disagrees", R"({"version":"1.0.0","type":"COMMAND","message_type":"STATUS","payload":{}})", "type"},
-      {"missing_message_id", R"({"version":"1.0.0","type":"COMMAND","payload":{},"timestamp_ms":1})", "message_id"},
+      {"type_disagrees",
+       R"({"version":"1.0.0","type":"COMMAND","message_type":"STATUS","payload":{}})", "type"},
+      {"missing_message_id",
+       R"({"version":"1.0.0","type":"COMMAND","payload":{},"timestamp_ms":1})", "message_id"},
       {"non_uuid_message_id", head + R"("message_id":"msg-001"})", "message_id"},
       {"numeric_message_id", head + R"("message_id":42})", "message_id"},
-      {"missing_timestamp", R"({"version":"1.0.0","type":"COMMAND","payload":{},"message_id":")" + id + "\"}", "timestamp_ms"},
-      {"float_timestamp", R"({"version":"1.0.0","type":"COMMAND","payload":{},"timestamp_ms":1.5,"message_id":")" + id + "\"}", "timestamp_ms"},
-      {"negative_timestamp", R"({"version":"1.0.0","type":"COMMAND","payload":{},"timestamp_ms":-5,"message_id":")" + id + "\"}", "timestamp_ms"},
-      {"huge_timestamp", R"({"version":"1.0.0","type":"COMMAND","payload":{},"timestamp_ms":99999999999999999999,"message_id":")" + id + "\"}", "timestamp_ms"},
+      {"missing_timestamp",
+       R"({"version":"1.0.0","type":"COMMAND","payload":{},"message_id":")" + id + "\"}",
+       "timestamp_ms"},
+      {"float_timestamp",
+       R"({"version":"1.0.0","type":"COMMAND","payload":{},"timestamp_ms":1.5,"message_id":")" +
+           id + "\"}",
+       "timestamp_ms"},
+      {"negative_timestamp",
+       R"({"version":"1.0.0","type":"COMMAND","payload":{},"timestamp_ms":-5,"message_id":")" + id +
+           "\"}",
+       "timestamp_ms"},
+      {"huge_timestamp",
+       R"({"version":"1.0.0","type":"COMMAND","payload":{},"timestamp_ms":99999999999999999999,"message_id":")" +
+           id + "\"}",
+       "timestamp_ms"},
       {"negative_ttl", head + R"("message_id":")" + id + R"(","ttl_ms":-1})", "ttl_ms"},
       {"string_ttl", head + R"("message_id":")" + id + R"(","ttl_ms":"30"})", "ttl_ms"},
       {"bad_priority", head + R"("message_id":")" + id + R"(","priority":"URGENT"})", "priority"},
-      {"bad_source_ruri", head + R"("message_id":")" + id + R"(","source_ruri":"http://x"})", "source_ruri.scheme"},
-      {"bad_target_ruri", head + R"("message_id":")" + id + R"(","target_ruri":"rcan://local.rcan/a1/b2"})", "target_ruri.device-id"},
+      {"bad_source_ruri", head + R"("message_id":")" + id + R"(","source_ruri":"http://x"})",
+       "source_ruri.scheme"},
+      {"bad_target_ruri",
+       head + R"("message_id":")" + id + R"(","target_ruri":"rcan://local.rcan/a1/b2"})",
+       "target_ruri.device-id"},
       {"token_not_string", head + R"("message_id":")" + id + R"(","auth_token":{}})", "auth_token"},
-      {"huge_token", head + R"("message_id":")" + id + R"(","auth_token":")" + std::string(9000, 'a') + "\"}", "auth_token"},
+      {"huge_token",
+       head + R"("message_id":")" + id + R"(","auth_token":")" + std::string(9000, 'a') + "\"}",
+       "auth_token"},
       {"scope_number", head + R"("message_id":")" + id + R"(","scope":5})", "scope"},
       {"scope_bad_chars", head + R"("message_id":")" + id + R"(","scope":["CONTROL"]})", "scope"},
-      {"too_many_scopes", head + R"("message_id":")" + id + R"(","scope":[)" + [] {
-         std::string s;
-         for (int i = 0; i < 40; ++i) s += (i ? ",\"s" : "\"s") + std::to_string(i) + "\"";
-         return s;
-       }() + "]}", "scope"},
-      {"sig_missing_value", head + R"("message_id":")" + id + R"(","sig":{"alg":"ed25519","kid":"ab"}})", "sig.value"},
-      {"delegation_not_array", head + R"("message_id":")" + id + R"(","delegation_chain":"x"})", "delegation_chain"},
-      {"delegation_too_long", head + R"("message_id":")" + id + R"(","delegation_chain":[{},{},{},{},{}]})", "delegation_chain"},
+      {"too_many_scopes",
+       head + R"("message_id":")" + id + R"(","scope":[)" +
+           [] {
+             std::string s;
+             for (int i = 0; i < 40; ++i) s += (i ? ",\"s" : "\"s") + std::to_string(i) + "\"";
+             return s;
+           }() +
+           "]}",
+       "scope"},
+      {"sig_missing_value",
+       head + R"("message_id":")" + id + R"(","sig":{"alg":"ed25519","kid":"ab"}})", "sig.value"},
+      {"delegation_not_array", head + R"("message_id":")" + id + R"(","delegation_chain":"x"})",
+       "delegation_chain"},
+      {"delegation_too_long",
+       head + R"("message_id":")" + id + R"(","delegation_chain":[{},{},{},{},{}]})",
+       "delegation_chain"},
       {"not_an_object", "[1,2,3]", ""},
-      {"rcanpy_missing_target", R"({"rcan":"3.2","cmd":"x","msg_id":")" + id + R"(","timestamp":1})", "target"},
-      {"rcanpy_bad_target", R"({"rcan":"3.2","cmd":"x","target":"rcan://nope","msg_id":")" + id + R"(","timestamp":1})", "target.manufacturer"},
-      {"rcanpy_msg_id_with_space", R"({"rcan":"3.2","cmd":"x","target":"rcan://local.rcan/acme/rover/abcdef12","timestamp":1,"msg_id":"a b"})", "msg_id"},
-      {"rcanpy_missing_msg_id", R"({"rcan":"3.2","cmd":"x","target":"rcan://local.rcan/acme/rover/abcdef12","timestamp":1})", "msg_id"},
-      {"rcanpy_string_timestamp", R"({"rcan":"3.2","cmd":"x","target":"rcan://local.rcan/acme/rover/abcdef12","timestamp":"now","msg_id":")" + id + "\"}", "timestamp"},
-      {"rcanpy_params_array", R"({"rcan":"3.2","cmd":"x","target":"rcan://local.rcan/acme/rover/abcdef12","timestamp":1,"params":[],"msg_id":")" + id + "\"}", "params"},
-      {"rcanpy_confidence_range", R"({"rcan":"3.2","cmd":"x","target":"rcan://local.rcan/acme/rover/abcdef12","timestamp":1,"confidence":2,"msg_id":")" + id + "\"}", "confidence"},
-      {"rcanpy_missing_cmd", R"({"rcan":"3.2","target":"rcan://local.rcan/acme/rover/abcdef12"})", "cmd"},
+      {"rcanpy_missing_target",
+       R"({"rcan":"3.2","cmd":"x","msg_id":")" + id + R"(","timestamp":1})", "target"},
+      {"rcanpy_bad_target",
+       R"({"rcan":"3.2","cmd":"x","target":"rcan://nope","msg_id":")" + id + R"(","timestamp":1})",
+       "target.manufacturer"},
+      {"rcanpy_msg_id_with_space",
+       R"({"rcan":"3.2","cmd":"x","target":"rcan://local.rcan/acme/rover/abcdef12","timestamp":1,"msg_id":"a b"})",
+       "msg_id"},
+      {"rcanpy_missing_msg_id",
+       R"({"rcan":"3.2","cmd":"x","target":"rcan://local.rcan/acme/rover/abcdef12","timestamp":1})",
+       "msg_id"},
+      {"rcanpy_string_timestamp",
+       R"({"rcan":"3.2","cmd":"x","target":"rcan://local.rcan/acme/rover/abcdef12","timestamp":"now","msg_id":")" +
+           id + "\"}",
+       "timestamp"},
+      {"rcanpy_params_array",
+       R"({"rcan":"3.2","cmd":"x","target":"rcan://local.rcan/acme/rover/abcdef12","timestamp":1,"params":[],"msg_id":")" +
+           id + "\"}",
+       "params"},
+      {"rcanpy_confidence_range",
+       R"({"rcan":"3.2","cmd":"x","target":"rcan://local.rcan/acme/rover/abcdef12","timestamp":1,"confidence":2,"msg_id":")" +
+           id + "\"}",
+       "confidence"},
+      {"rcanpy_missing_cmd", R"({"rcan":"3.2","target":"rcan://local.rcan/acme/rover/abcdef12"})",
+       "cmd"},
   };
 }
 
@@ -244,7 +306,8 @@ TEST(MessageCodec, BodyLimitAndMalformedJson) {
 
 TEST(MessageShape, OnlyPayloadIsNeededBeforeAuthentication) {
   // The live checker's RBAC probe: no id, no timestamp, a string scope, an unknown field.
-  auto probe = json::parse(R"({"type":"COMMAND","version":"1.2","scope":"control","payload":{"action":"move_forward","speed_mps":0.1},"__test_role_override":"GUEST"})");
+  auto probe = json::parse(
+      R"({"type":"COMMAND","version":"1.2","scope":"control","payload":{"action":"move_forward","speed_mps":0.1},"__test_role_override":"GUEST"})");
   ASSERT_TRUE(probe.ok());
   EXPECT_TRUE(check_shape(*probe).ok());
   auto schema = json::parse(R"({"version":"1.2","type":"COMMAND"})");
@@ -252,7 +315,12 @@ TEST(MessageShape, OnlyPayloadIsNeededBeforeAuthentication) {
   Status st = check_shape(*schema);
   ASSERT_FALSE(st.ok());
   EXPECT_EQ(st.error().field, "payload");
-  EXPECT_EQ(error_body(st.error(), "", 0).get("payload")->get("detail")->get("missing_field")->as_string(), "payload");
+  EXPECT_EQ(error_body(st.error(), "", 0)
+                .get("payload")
+                ->get("detail")
+                ->get("missing_field")
+                ->as_string(),
+            "payload");
 }
 
 }  // namespace

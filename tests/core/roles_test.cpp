@@ -99,7 +99,7 @@ TEST(Authorize, GuestControlIsInsufficientPrivileges) {
 TEST(Authorize, ScopeRoleAndMatrixAllApply) {
   EXPECT_TRUE(authorize(Role::kUser, {"control"}, Capability::kNavigation).ok());
   EXPECT_FALSE(authorize(Role::kUser, {"status"}, Capability::kNavigation).ok());  // scope missing
-  EXPECT_FALSE(authorize(Role::kUser, {"control"}, Capability::kArm).ok());        // matrix ⚙ not granted
+  EXPECT_FALSE(authorize(Role::kUser, {"control"}, Capability::kArm).ok());  // matrix ⚙ not granted
   EXPECT_TRUE(authorize(Role::kUser, {"control"}, Capability::kArm, RolePolicy{true}).ok());
   EXPECT_TRUE(authorize(Role::kGuest, {}, Capability::kViewStatus).ok());  // status is implied
   EXPECT_FALSE(authorize(Role::kOwner, {"config"}, Capability::kModelDeployment).ok());

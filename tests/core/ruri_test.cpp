@@ -14,12 +14,16 @@ namespace {
 // Expected canonical form, or "!<segment>" for an INVALID_RURI naming that segment.
 const std::map<std::string, std::string>& profile_verdicts() {
   static const std::map<std::string, std::string> v{
-      {"rcan://registry.rcan.dev/acme/robotarm/v2/unit-001", "rcan://registry.rcan.dev/acme/robotarm/v2/unit-001"},
-      {"rcan://registry.rcan.dev/acme/robotarm/v2/unit-001/", "rcan://registry.rcan.dev/acme/robotarm/v2/unit-001"},
+      {"rcan://registry.rcan.dev/acme/robotarm/v2/unit-001",
+       "rcan://registry.rcan.dev/acme/robotarm/v2/unit-001"},
+      {"rcan://registry.rcan.dev/acme/robotarm/v2/unit-001/",
+       "rcan://registry.rcan.dev/acme/robotarm/v2/unit-001"},
       {"rcan://continuon.cloud/continuon/companion-v1/d3a4b5c6-7890-1234-5678-abcdef012345",
        "rcan://continuon.cloud/continuon/companion-v1/d3a4b5c6-7890-1234-5678-abcdef012345"},
-      {"rcan://continuon.cloud/continuon/companion-v1/d3a4b5c6/arm", "rcan://continuon.cloud/continuon/companion-v1/d3a4b5c6/arm"},
-      {"rcan://local.rcan/discovered/192.168.1.42:8080", "rcan://local.rcan/discovered/192.168.1.42:8080"},
+      {"rcan://continuon.cloud/continuon/companion-v1/d3a4b5c6/arm",
+       "rcan://continuon.cloud/continuon/companion-v1/d3a4b5c6/arm"},
+      {"rcan://local.rcan/discovered/192.168.1.42:8080",
+       "rcan://local.rcan/discovered/192.168.1.42:8080"},
       {"rcan://registry.example.com:9000/universal-robots/ur10e/v1/ur10e-0042", "!registry"},
       {"rcan://rcan.dev/boston-dynamics/spot/bd-spot-001a2b3c", "!device-id"},
       {"rcan://robot.local:8000/bob", "!registry"},
@@ -31,16 +35,21 @@ const std::map<std::string, std::string>& profile_verdicts() {
       {"RCAN://registry.rcan.dev/acme/arm/v1/x", "!scheme"},
       {" rcan://registry.rcan.dev/acme/arm/v1/x ", "!ruri"},
       {"rcan://registry.rcan.dev/acme/arm/v1/x?sig=abc", "!ruri"},
-      {"rcan://continuon.cloud/continuon/companion-v1/d3a4b5c6", "rcan://continuon.cloud/continuon/companion-v1/d3a4b5c6"},
+      {"rcan://continuon.cloud/continuon/companion-v1/d3a4b5c6",
+       "rcan://continuon.cloud/continuon/companion-v1/d3a4b5c6"},
       {"rcan://continuon.cloud/continuon/companion-v1/*", "!device-id"},
       // The expanded v1.1 shorthand (device id of 4..36 alphanumerics under local.rcan).
       {"rcan://local.rcan/opencastor/rover/abc123", "rcan://local.rcan/opencastor/rover/abc123"},
       {"rcan://rcan.dev/org/robot/v1/unit-001", "rcan://rcan.dev/org/robot/v1/unit-001"},
-      {"rcan://local.rcan/opencastor/rover/abc12345", "rcan://local.rcan/opencastor/rover/abc12345"},
+      {"rcan://local.rcan/opencastor/rover/abc12345",
+       "rcan://local.rcan/opencastor/rover/abc12345"},
       {"rcan://local.rcan/opencastor/rover", "!device-id"},
-      {"rcan://local.rcan/unitree/go2/a1b2c3d4:9000/teleop", "rcan://local.rcan/unitree/go2/a1b2c3d4:9000/teleop"},
-      {"rcan://registry.rrf.ai/opencastor/rover/abc12345", "rcan://registry.rrf.ai/opencastor/rover/abc12345"},
-      {"rcan://continuon.cloud/unitree/go2/a1b2c3d4", "rcan://continuon.cloud/unitree/go2/a1b2c3d4"},
+      {"rcan://local.rcan/unitree/go2/a1b2c3d4:9000/teleop",
+       "rcan://local.rcan/unitree/go2/a1b2c3d4:9000/teleop"},
+      {"rcan://registry.rrf.ai/opencastor/rover/abc12345",
+       "rcan://registry.rrf.ai/opencastor/rover/abc12345"},
+      {"rcan://continuon.cloud/unitree/go2/a1b2c3d4",
+       "rcan://continuon.cloud/unitree/go2/a1b2c3d4"},
       {"rcan://my-server.lan/acme/bot-x1/12345678-1234", "!device-id"},
       {"rcan://local.rcan/opencastor", "!model"},
       {"rcan://", "!registry"},
@@ -48,15 +57,18 @@ const std::map<std::string, std::string>& profile_verdicts() {
       {"rcan://UPPERCASE/mfr/mdl/12345678", "!registry"},
       {"rcan://local.rcan/mfr/mdl/short", "rcan://local.rcan/mfr/mdl/short"},
       {"rcan://robots.acme-corp.com/acme/patrol-bot/a1b2c3d4e5f6", "!device-id"},
-      {"rcan://local.rcan/generic/differential-drive/00000001", "rcan://local.rcan/generic/differential-drive/00000001"},
+      {"rcan://local.rcan/generic/differential-drive/00000001",
+       "rcan://local.rcan/generic/differential-drive/00000001"},
       {"rcan://registry.example.com:9000/universal-robots/ur10e/ur10e-0042-aabb", "!registry"},
-      {"rcan://rcan.dev/franka-robotics/fr3/fr3-00ff11ee22dd/gripper", "rcan://rcan.dev/franka-robotics/fr3/fr3-00ff11ee22dd/gripper"},
+      {"rcan://rcan.dev/franka-robotics/fr3/fr3-00ff11ee22dd/gripper",
+       "rcan://rcan.dev/franka-robotics/fr3/fr3-00ff11ee22dd/gripper"},
       {"rcan://opencastor.rover.abc123/nav", "rcan://local.rcan/opencastor/rover/abc123/nav"},
       {"rcan://robots.acme.corp/acme/arm/a1b2c3d4", "rcan://robots.acme.corp/acme/arm/a1b2c3d4"},
       {"rcan://local.rcan/acme/arm/a1b2c3d4:70000", "!port"},
       {"rcan://local.rcan/acme/arm/a1b2c3d4/", "rcan://local.rcan/acme/arm/a1b2c3d4"},
       {"rcan://local.rcan/acme/arm/A1B2C3D4", "!device-id"},
-      {"rcan://local.rcan/acme/arm/a1b2c3d4/nav/waypoints", "rcan://local.rcan/acme/arm/a1b2c3d4/nav/waypoints"},
+      {"rcan://local.rcan/acme/arm/a1b2c3d4/nav/waypoints",
+       "rcan://local.rcan/acme/arm/a1b2c3d4/nav/waypoints"},
   };
   return v;
 }
@@ -138,21 +150,23 @@ TEST(Ruri, ErrorsNameSegmentAndRule) {
 
 TEST(Ruri, ShorthandOutputIsAFixedPoint) {
   // Found by fuzzing: a shorthand whose id is not hex must still re-parse after expansion.
-  for (const char* in : {"rcan://a.b.0a1bj2c3d", "rcan://opencastor.rover.abc123/nav", "rcan://x.y.zzzz"}) {
+  for (const char* in :
+       {"rcan://a.b.0a1bj2c3d", "rcan://opencastor.rover.abc123/nav", "rcan://x.y.zzzz"}) {
     auto r = parse_ruri(in);
     ASSERT_TRUE(r.ok()) << in << ": " << r.error().message;
     auto again = parse_ruri(r->str());
     ASSERT_TRUE(again.ok()) << r->str() << ": " << again.error().message;
     EXPECT_EQ(again->str(), r->str());
   }
-  EXPECT_FALSE(parse_ruri("rcan://local.rcan/acme/arm/abc").ok());  // 3 characters: too short
+  EXPECT_FALSE(parse_ruri("rcan://local.rcan/acme/arm/abc").ok());    // 3 characters: too short
   EXPECT_FALSE(parse_ruri("rcan://other.reg/acme/arm/abc123").ok());  // only under local.rcan
 }
 
 TEST(Ruri, HostileInputIsRejectedCleanly) {
   for (std::string s : {std::string(10000, 'a'), std::string("rcan://") + std::string(600, 'a'),
-                        std::string("rcan://\0x/a/b/c", 14), std::string("rcan://\xff\xfe/a/b/12345678"),
-                        std::string("rcan:////////"), std::string("rcan://a.b.c"), std::string("rcan://./../../..")}) {
+                        std::string("rcan://\0x/a/b/c", 14),
+                        std::string("rcan://\xff\xfe/a/b/12345678"), std::string("rcan:////////"),
+                        std::string("rcan://a.b.c"), std::string("rcan://./../../..")}) {
     auto r = parse_ruri(s);
     EXPECT_FALSE(r.ok()) << s;
     if (!r.ok()) {
@@ -193,8 +207,9 @@ TEST(Rrn, CanonicalAndAcceptedForms) {
   ASSERT_TRUE(r.ok());
   EXPECT_EQ(r->prefix, "BD");
   EXPECT_EQ(r->str(), "RRN-BD-000000000042");
-  for (const char* bad : {"RRN-1234567", "RRN-12345678901234567", "rrn-000000000001", "RRN-00000000000a",
-                          "RRN-b-000000000001", "RRN--000000000001", "", "RRN-"}) {
+  for (const char* bad :
+       {"RRN-1234567", "RRN-12345678901234567", "rrn-000000000001", "RRN-00000000000a",
+        "RRN-b-000000000001", "RRN--000000000001", "", "RRN-"}) {
     EXPECT_FALSE(parse_rrn(bad).ok()) << bad;
   }
 }

@@ -71,7 +71,8 @@ TEST(SenderIdentity, RobotKeyMeansRobotAndRobotNeedsKeyAndChain) {
   id = resolve_sender(r, t, true);
   ASSERT_FALSE(id.ok());  // robot without a delegation chain
   EXPECT_EQ(id.error().code, ErrorCode::kMissingDelegationChain);
-  r.delegation_chain = json::Array{json::Object{{"issuer_ruri", "rcan://local.rcan/a1/b1/12345678"}}};
+  r.delegation_chain =
+      json::Array{json::Object{{"issuer_ruri", "rcan://local.rcan/a1/b1/12345678"}}};
   id = resolve_sender(r, t, true);
   ASSERT_TRUE(id.ok()) << id.error().message;
   EXPECT_EQ(id->sender_type, SenderType::kRobot);

@@ -60,8 +60,8 @@ TEST(Ed25519Vectors, InvalidCasesAreRejected) {
     const auto* valid = c.get("valid");
     ASSERT_TRUE(valid != nullptr && valid->is_bool());
     EXPECT_FALSE(valid->as_bool());
-    EXPECT_FALSE(ed25519::verify(hex(str(c, "pk_hex")), hex(str(c, "msg_hex")),
-                                 hex(str(c, "sig_hex"))))
+    EXPECT_FALSE(
+        ed25519::verify(hex(str(c, "pk_hex")), hex(str(c, "msg_hex")), hex(str(c, "sig_hex"))))
         << str(c, "why");
   }
 }
@@ -106,7 +106,7 @@ TEST(Ed25519, MalformedInputsAreRejected) {
   EXPECT_FALSE(ed25519::verify(Bytes(pk->begin(), pk->end() - 1), msg, *sig));
   EXPECT_FALSE(ed25519::verify(*pk, msg, {}));
   EXPECT_FALSE(ed25519::verify(*pk, msg, Bytes(64, 0)));
-  EXPECT_FALSE(ed25519::verify(*pk, msg, Bytes(64, 0xff)));  // S >= L
+  EXPECT_FALSE(ed25519::verify(*pk, msg, Bytes(64, 0xff)));   // S >= L
   EXPECT_FALSE(ed25519::verify(Bytes(32, 0xff), msg, *sig));  // not a point encoding
 }
 

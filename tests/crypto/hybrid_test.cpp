@@ -26,7 +26,8 @@ const Keys& keys() {
   static Keys k = [] {
     auto kg = test::load_vector("mldsa65-keygen.json");
     const auto& cs = kg.get("cases")->as_array();
-    return Keys{test::hex(cs[0].get("pk_hex")->as_string()), test::hex(cs[0].get("sk_hex")->as_string()),
+    return Keys{test::hex(cs[0].get("pk_hex")->as_string()),
+                test::hex(cs[0].get("sk_hex")->as_string()),
                 test::hex(cs[1].get("pk_hex")->as_string())};
   }();
   return k;
@@ -78,7 +79,8 @@ TEST(Hybrid, SignBodyReproducesTheRcanPyBody) {
   auto v = test::load_vector("hybrid-sign-body.json");
   json::Object want;
   for (const auto& c : v.get("cases")->as_array())
-    if (c.get("name")->as_string() == "signed_by_rcan_py") want = parse_obj(c.get("signed_json")->as_string());
+    if (c.get("name")->as_string() == "signed_by_rcan_py")
+      want = parse_obj(c.get("signed_json")->as_string());
   ASSERT_FALSE(want.empty());
   json::Object body{{"rrn", "RRN-000000000042"}, {"name", "bot"}, {"n", 50.0}};
   SignOptions o;
@@ -86,7 +88,8 @@ TEST(Hybrid, SignBodyReproducesTheRcanPyBody) {
   auto signed_body = sign_body(body, keys().sk0, keys().pk0, kEdSeed, o);
   ASSERT_TRUE(signed_body.ok()) << signed_body.error().message;
   EXPECT_EQ(*signed_body, want);
-  EXPECT_EQ(json::dump(json::Value(*signed_body)).substr(0, 41), R"({"rrn":"RRN-000000000042","name":"bot","n)");
+  EXPECT_EQ(json::dump(json::Value(*signed_body)).substr(0, 41),
+            R"({"rrn":"RRN-000000000042","name":"bot","n)");
   EXPECT_TRUE(verify_body(*signed_body, keys().pk0).ok());
 }
 
@@ -94,7 +97,8 @@ TEST(Hybrid, NewNestedBodyWithPlaceholderSigIsReproduced) {
   auto v = test::load_vector("hybrid-sign-body.json");
   json::Object want;
   for (const auto& c : v.get("cases")->as_array())
-    if (c.get("name")->as_string() == "new_nested_body") want = parse_obj(c.get("signed_json")->as_string());
+    if (c.get("name")->as_string() == "new_nested_body")
+      want = parse_obj(c.get("signed_json")->as_string());
   ASSERT_FALSE(want.empty());
   json::Object input = want;
   input.erase("pq_signing_pub");
@@ -109,7 +113,8 @@ TEST(Hybrid, NewNestedBodyWithPlaceholderSigIsReproduced) {
 }
 
 TEST(Hybrid, ProducedBodiesVerifyAndRejectTampering) {
-  json::Object body{{"rrn", "RRN-000000000007"}, {"caps", json::Array{"arm", "nav"}}, {"ratio", 0.25}};
+  json::Object body{
+      {"rrn", "RRN-000000000007"}, {"caps", json::Array{"arm", "nav"}}, {"ratio", 0.25}};
   auto out = sign_body(body, keys().sk0, keys().pk0, kEdSeed);
   ASSERT_TRUE(out.ok());
   EXPECT_TRUE(verify_body(*out, keys().pk0).ok());
@@ -129,7 +134,8 @@ TEST(Hybrid, ProducedBodiesVerifyAndRejectTampering) {
   EXPECT_FALSE(verify_body(t, keys().pk0).ok());
   // Malformed sig members never crash and name the field.
   for (const char* member : {"ml_dsa", "ed25519", "ed25519_pub"}) {
-    for (const json::Value& bad : {json::Value(1), json::Value("!!!"), json::Value("AAAA"), json::Value()}) {
+    for (const json::Value& bad :
+         {json::Value(1), json::Value("!!!"), json::Value("AAAA"), json::Value()}) {
       t = *out;
       json::Object sig = t.find("sig")->as_object();
       sig.set(member, bad);

@@ -2,11 +2,10 @@
 // (pyca/cryptography), plus tokens built here to pin every rejection rule.
 #include "rcan/crypto/jwt.h"
 
+#include <gtest/gtest.h>
 #include <sys/stat.h>
 
 #include <fstream>
-
-#include <gtest/gtest.h>
 
 #include "test_support.h"
 
@@ -81,7 +80,8 @@ std::string b64(std::string_view s) {
 }
 
 // A token with an arbitrary header and claims text, signed by `key`.
-std::string raw_token(const std::string& header_json, const std::string& claims_json, const SigningKey& key) {
+std::string raw_token(const std::string& header_json, const std::string& claims_json,
+                      const SigningKey& key) {
   std::string input = b64(header_json) + "." + b64(claims_json);
   auto sig = key.sign(input);
   EXPECT_TRUE(sig.ok());
@@ -100,7 +100,8 @@ Result<Claims> check(const std::string& token, VerifyOptions opts = robot_opts()
   return v.verify(token, kNow);
 }
 
-void expect_rejected(const Result<Claims>& r, const std::string& reason, ErrorCode code = ErrorCode::kAuthInvalid) {
+void expect_rejected(const Result<Claims>& r, const std::string& reason,
+                     ErrorCode code = ErrorCode::kAuthInvalid) {
   ASSERT_FALSE(r.ok()) << "expected rejection (" << reason << ")";
   EXPECT_EQ(r.error().code, code) << r.error().message;
   if (!reason.empty()) {
@@ -149,7 +150,8 @@ TEST(Jwt, EachAlgorithmVerifiesWithPemJwkAndJwks) {
     SCOPED_TRACE(alg);
     std::string tok;
     for (const auto& c : doc->get("cases")->as_array())
-      if (c.get("name")->as_string() == std::string("valid_") + alg) tok = c.get("token")->as_string();
+      if (c.get("name")->as_string() == std::string("valid_") + alg)
+        tok = c.get("token")->as_string();
     JwtVerifier v(from_jwks, robot_opts());
     auto r = v.verify(tok, kNow);
     ASSERT_TRUE(r.ok()) << r.error().message;
@@ -205,7 +207,8 @@ TEST(Jwt, SigningKeyFromFileRefusesWorldReadableKeysAndAcceptsRawSeed) {
 
 TEST(Jwt, AlgNoneIsRejectedInEverySpelling) {
   for (const char* alg : {"none", "None", "NONE", "nOnE"}) {
-    std::string t = b64(std::string("{\"alg\":\"") + alg + "\"}") + "." + b64(json::dump(json::Value(base_claims()))) + ".";
+    std::string t = b64(std::string("{\"alg\":\"") + alg + "\"}") + "." +
+                    b64(json::dump(json::Value(base_claims()))) + ".";
     expect_rejected(check(t), "alg_none");
   }
 }
@@ -214,7 +217,8 @@ TEST(Jwt, UnsupportedAlgorithmsAreRejected) {
   auto key = skey_pem("ed25519_priv.pem");
   std::string claims = json::dump(json::Value(base_claims()));
   for (const char* alg : {"HS512", "RS512", "PS256", "ES384", "eddsa", "", "Ed25519"}) {
-    expect_rejected(check(raw_token(std::string("{\"alg\":\"") + alg + "\"}", claims, key)), "bad_alg");
+    expect_rejected(check(raw_token(std::string("{\"alg\":\"") + alg + "\"}", claims, key)),
+                    "bad_alg");
   }
   expect_rejected(check(raw_token("{\"alg\":7}", claims, key)), "malformed");
   expect_rejected(check(raw_token("{\"typ\":\"JWT\"}", claims, key)), "malformed");
@@ -342,7 +346,7 @@ TEST(Jwt, TimeClaimsHonourLeeway) {
     return check(ed_token(c), o);
   };
   EXPECT_TRUE(at("exp", kNow + 1).ok());
-  EXPECT_TRUE(at("exp", kNow - 59).ok());                    // within the 60 s leeway
+  EXPECT_TRUE(at("exp", kNow - 59).ok());  // within the 60 s leeway
   expect_rejected(at("exp", kNow - 60), "expired");
   VerifyOptions strict = robot_opts();
   strict.leeway_s = 0;
@@ -381,7 +385,8 @@ TEST(Jwt, AudienceMustMatchTheRobotRuri) {
   EXPECT_TRUE(with_aud(kRobot).ok());
   EXPECT_TRUE(with_aud("rcan://continuon.cloud/*/*/d3a4b5c6").ok());
   EXPECT_TRUE(with_aud(json::Array{"rcan://x.example/a/b/*", kAud}).ok());
-  expect_rejected(with_aud("rcan://continuon.cloud/continuon/companion-v1/00000000"), "aud_mismatch");
+  expect_rejected(with_aud("rcan://continuon.cloud/continuon/companion-v1/00000000"),
+                  "aud_mismatch");
   expect_rejected(with_aud("rcan://continuon.cloud/continuon/*"), "aud_mismatch");
   expect_rejected(with_aud("*"), "aud_mismatch");
   expect_rejected(with_aud(json::Array{}), "malformed");
@@ -406,8 +411,8 @@ TEST(Jwt, RolesFromRoleOrRcanRole) {
     const char* name;
     int level;
   };
-  for (auto [name, level] : {Named{"creator", 5}, Named{"owner", 4}, Named{"leasee", 3}, Named{"user", 2},
-                             Named{"guest", 1}}) {
+  for (auto [name, level] : {Named{"creator", 5}, Named{"owner", 4}, Named{"leasee", 3},
+                             Named{"user", 2}, Named{"guest", 1}}) {
     auto r = role("role", name);
     ASSERT_TRUE(r.ok()) << name;
     EXPECT_EQ(r->role_level, level);
@@ -420,14 +425,18 @@ TEST(Jwt, RolesFromRoleOrRcanRole) {
     json::Value v;
     int level;
   };
-  for (const auto& [v, level] : std::vector<Num>{{json::Value(1), 1}, {json::Value(2), 2}, {json::Value(2.5), 2},
-                                                 {json::Value(2.0), 2}, {json::Value(3), 4}, {json::Value(5), 5}}) {
+  for (const auto& [v, level] : std::vector<Num>{{json::Value(1), 1},
+                                                 {json::Value(2), 2},
+                                                 {json::Value(2.5), 2},
+                                                 {json::Value(2.0), 2},
+                                                 {json::Value(3), 4},
+                                                 {json::Value(5), 5}}) {
     auto r = role("rcan_role", v);
     ASSERT_TRUE(r.ok()) << json::dump(v);
     EXPECT_EQ(r->role_level, level) << json::dump(v);
   }
-  for (const auto& v : {json::Value(0), json::Value(4), json::Value(6), json::Value(2.4), json::Value("m2m_trusted"),
-                        json::Value("3"), json::Value(true)})
+  for (const auto& v : {json::Value(0), json::Value(4), json::Value(6), json::Value(2.4),
+                        json::Value("m2m_trusted"), json::Value("3"), json::Value(true)})
     expect_rejected(role("rcan_role", v), "bad_role");
   // Both present: must agree.
   auto c = base_claims();
@@ -550,25 +559,28 @@ TEST(Jwt, KeyLoadingRefusesWeakWrongOrPrivateKeys) {
   ASSERT_FALSE(p384.ok());
   EXPECT_NE(p384.error().message.find("P-256"), std::string::npos);
   EXPECT_FALSE(VerificationKey::from_pem(data("rsa2048_priv.pem")).ok());
-  EXPECT_FALSE(VerificationKey::from_pem("-----BEGIN PUBLIC KEY-----\nAAAA\n-----END PUBLIC KEY-----\n").ok());
+  EXPECT_FALSE(
+      VerificationKey::from_pem("-----BEGIN PUBLIC KEY-----\nAAAA\n-----END PUBLIC KEY-----\n")
+          .ok());
   EXPECT_FALSE(VerificationKey::from_pem("").ok());
   test::TempDir dir;
   EXPECT_FALSE(load_verification_keys(private_copy(dir, "p256_priv.pem")).ok());
   // JWKs with problems.
-  for (const char* bad : {
-           R"({"kty":"OKP","crv":"Ed25519"})",
-           R"({"kty":"OKP","crv":"Ed448","x":"AAAA"})",
-           R"({"kty":"OKP","crv":"Ed25519","x":"AAAA"})",
-           R"({"kty":"EC","crv":"P-256","x":"AAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAA","y":"AAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAA"})",
-           R"({"kty":"EC","crv":"P-384","x":"AA","y":"AA"})",
-           R"({"kty":"RSA","n":"AQAB","e":"AQAB"})",
-           R"({"kty":"XYZ"})",
-           R"({"kty":5})",
-           R"([])",
-           R"({"keys":[]})",
-           R"({"keys":"x"})",
-           R"(not json)",
-       }) {
+  for (
+      const char* bad : {
+          R"({"kty":"OKP","crv":"Ed25519"})",
+          R"({"kty":"OKP","crv":"Ed448","x":"AAAA"})",
+          R"({"kty":"OKP","crv":"Ed25519","x":"AAAA"})",
+          R"({"kty":"EC","crv":"P-256","x":"AAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAA","y":"AAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAA"})",
+          R"({"kty":"EC","crv":"P-384","x":"AA","y":"AA"})",
+          R"({"kty":"RSA","n":"AQAB","e":"AQAB"})",
+          R"({"kty":"XYZ"})",
+          R"({"kty":5})",
+          R"([])",
+          R"({"keys":[]})",
+          R"({"keys":"x"})",
+          R"(not json)",
+      }) {
     SCOPED_TRACE(bad);
     auto r = parse_jwk_set(bad);
     ASSERT_FALSE(r.ok());
@@ -620,7 +632,8 @@ TEST(Jwt, ParseDuration) {
   EXPECT_EQ(parse_duration("15m"), 900);
   EXPECT_EQ(parse_duration("7d"), 7 * 86400);
   EXPECT_EQ(parse_duration("30s"), 30);
-  for (const char* bad : {"", "h", "0", "-5m", "1.5h", "1w", "99999999999999d", " 1h"}) EXPECT_FALSE(parse_duration(bad)) << bad;
+  for (const char* bad : {"", "h", "0", "-5m", "1.5h", "1w", "99999999999999d", " 1h"})
+    EXPECT_FALSE(parse_duration(bad)) << bad;
 }
 
 TEST(Jwt, DecodeExposesHeaderAndClaims) {
@@ -640,8 +653,9 @@ TEST(Jwt, DecodeExposesHeaderAndClaims) {
 TEST(JwtCli, IssueAndInspectRoundTrip) {
   test::TempDir dir;
   std::string key = private_copy(dir, "p256_priv.pem");
-  auto issued = test::run_cli({"token", "issue", "--key", key, "--sub", "alice", "--role", "owner", "--scope",
-                               "control,config", "--aud", kAud, "--ttl", "1h", "--iss", kIss});
+  auto issued =
+      test::run_cli({"token", "issue", "--key", key, "--sub", "alice", "--role", "owner", "--scope",
+                     "control,config", "--aud", kAud, "--ttl", "1h", "--iss", kIss});
   ASSERT_EQ(issued.exit_code, 0) << issued.err;
   std::string tok = issued.out;
   while (!tok.empty() && (tok.back() == '\n' || tok.back() == '\r')) tok.pop_back();
@@ -650,13 +664,15 @@ TEST(JwtCli, IssueAndInspectRoundTrip) {
   EXPECT_EQ(d->header.alg, "ES256");
   EXPECT_EQ(d->claims.find("role")->as_string(), "owner");
 
-  auto ok = test::run_cli({"token", "inspect", "--key", kData + "p256_pub.pem", "--iss", kIss, "--aud", kRobot}, tok);
+  auto ok = test::run_cli(
+      {"token", "inspect", "--key", kData + "p256_pub.pem", "--iss", kIss, "--aud", kRobot}, tok);
   EXPECT_EQ(ok.exit_code, 0) << ok.out << ok.err;
   EXPECT_NE(ok.out.find("\"valid\":true"), std::string::npos) << ok.out;
-  auto wrong_key = test::run_cli({"token", "inspect", "--key", kData + "ed25519_pub.pem", "--aud", kRobot, tok});
+  auto wrong_key =
+      test::run_cli({"token", "inspect", "--key", kData + "ed25519_pub.pem", "--aud", kRobot, tok});
   EXPECT_EQ(wrong_key.exit_code, 1) << wrong_key.out << wrong_key.err;
-  auto wrong_aud = test::run_cli(
-      {"token", "inspect", "--key", kData + "p256_pub.pem", "--aud", "rcan://a.example/b/c/00000000", tok});
+  auto wrong_aud = test::run_cli({"token", "inspect", "--key", kData + "p256_pub.pem", "--aud",
+                                  "rcan://a.example/b/c/00000000", tok});
   EXPECT_EQ(wrong_aud.exit_code, 1);
   auto decode_only = test::run_cli({"token", "inspect", tok});
   EXPECT_EQ(decode_only.exit_code, 0);
@@ -666,21 +682,27 @@ TEST(JwtCli, IssueAndInspectRoundTrip) {
 }
 
 TEST(JwtCli, IssueRefusesWithoutKeyAndWithBadArguments) {
-  EXPECT_EQ(test::run_cli({"token", "issue", "--sub", "a", "--role", "owner", "--aud", kAud, "--ttl", "1h"}).exit_code, 2);
+  EXPECT_EQ(test::run_cli(
+                {"token", "issue", "--sub", "a", "--role", "owner", "--aud", kAud, "--ttl", "1h"})
+                .exit_code,
+            2);
   test::TempDir dir;
   std::string key = private_copy(dir, "ed25519_priv.pem");
-  EXPECT_EQ(test::run_cli({"token", "issue", "--key", key, "--sub", "a", "--role", "root", "--aud", kAud, "--ttl", "1h"})
+  EXPECT_EQ(test::run_cli({"token", "issue", "--key", key, "--sub", "a", "--role", "root", "--aud",
+                           kAud, "--ttl", "1h"})
                 .exit_code,
             2);
-  EXPECT_EQ(test::run_cli({"token", "issue", "--key", key, "--sub", "a", "--role", "owner", "--aud", kAud, "--ttl", "x"})
+  EXPECT_EQ(test::run_cli({"token", "issue", "--key", key, "--sub", "a", "--role", "owner", "--aud",
+                           kAud, "--ttl", "x"})
                 .exit_code,
             2);
-  EXPECT_EQ(test::run_cli({"token", "issue", "--key", key, "--sub", "a", "--role", "owner", "--aud", kAud, "--ttl",
-                           "1h", "--alg", "RS256"})
+  EXPECT_EQ(test::run_cli({"token", "issue", "--key", key, "--sub", "a", "--role", "owner", "--aud",
+                           kAud, "--ttl", "1h", "--alg", "RS256"})
                 .exit_code,
             2);
   std::string loose = private_copy(dir, "rsa2048_priv.pem", 0644);
-  auto r = test::run_cli({"token", "issue", "--key", loose, "--sub", "a", "--role", "owner", "--aud", kAud, "--ttl", "1h"});
+  auto r = test::run_cli({"token", "issue", "--key", loose, "--sub", "a", "--role", "owner",
+                          "--aud", kAud, "--ttl", "1h"});
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.err.find("group/world"), std::string::npos) << r.err;
 }
@@ -688,12 +710,15 @@ TEST(JwtCli, IssueRefusesWithoutKeyAndWithBadArguments) {
 TEST(JwtCli, Hs256IssueNeedsExplicitAlgAndVerifiesWithSecret) {
   test::TempDir dir;
   std::string secret = private_copy(dir, "hs256.secret");
-  auto issued = test::run_cli({"token", "issue", "--key", secret, "--alg", "HS256", "--sub", "svc", "--role", "user",
-                               "--scope", "status", "--aud", kAud, "--ttl", "10m", "--iss", kIss});
+  auto issued =
+      test::run_cli({"token", "issue", "--key", secret, "--alg", "HS256", "--sub", "svc", "--role",
+                     "user", "--scope", "status", "--aud", kAud, "--ttl", "10m", "--iss", kIss});
   ASSERT_EQ(issued.exit_code, 0) << issued.err;
-  auto ok = test::run_cli({"token", "inspect", "--secret", secret, "--iss", kIss, "--aud", kRobot}, issued.out);
+  auto ok = test::run_cli({"token", "inspect", "--secret", secret, "--iss", kIss, "--aud", kRobot},
+                          issued.out);
   EXPECT_EQ(ok.exit_code, 0) << ok.out << ok.err;
-  auto confused = test::run_cli({"token", "inspect", "--key", kData + "rsa2048_pub.pem", "--aud", kRobot}, issued.out);
+  auto confused = test::run_cli(
+      {"token", "inspect", "--key", kData + "rsa2048_pub.pem", "--aud", kRobot}, issued.out);
   EXPECT_EQ(confused.exit_code, 1);
 }
 

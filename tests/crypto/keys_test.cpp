@@ -2,12 +2,11 @@
 // loose permissions / overwrites / mismatches, JWK, and the keys/sign/verify verbs.
 #include "rcan/crypto/keys.h"
 
+#include <gtest/gtest.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <fstream>
-
-#include <gtest/gtest.h>
 
 #include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/mldsa65.h"
@@ -122,9 +121,7 @@ TEST(Keys, LoadRefusesLooseModesSymlinksWrongSizesAndMismatches) {
   EXPECT_FALSE(load_dir(link_dir.path()).ok());
 
   // Wrong size.
-  {
-    std::ofstream(tmp.file("ed25519.seed"), std::ios::trunc) << std::string(33, 'x');
-  }
+  { std::ofstream(tmp.file("ed25519.seed"), std::ios::trunc) << std::string(33, 'x'); }
   auto r = load_dir(tmp.path());
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.error().message.find("exactly 32 bytes"), std::string::npos);
@@ -134,7 +131,8 @@ TEST(Keys, LoadRefusesLooseModesSymlinksWrongSizesAndMismatches) {
   ASSERT_TRUE(write_dir(tmp3.path(), derived0()).ok());
   chmod(tmp3.file("ed25519.pub").c_str(), 0644);
   {
-    std::ofstream(tmp3.file("ed25519.pub"), std::ios::trunc | std::ios::binary) << std::string(32, '\x01');
+    std::ofstream(tmp3.file("ed25519.pub"), std::ios::trunc | std::ios::binary)
+        << std::string(32, '\x01');
   }
   r = load_dir(tmp3.path());
   ASSERT_FALSE(r.ok());
@@ -166,7 +164,8 @@ TEST(Keys, MlDsaJwkHasTheRcanPyShape) {
   ASSERT_TRUE(back.ok());
   EXPECT_EQ(*back, k.pub.mldsa65_pk);
   // rcan-ts shape.
-  json::Object ts{{"kty", "OKP"}, {"alg", "ML-DSA-65"}, {"use", "sig"}, {"x", jwk.get("x")->as_string()}};
+  json::Object ts{
+      {"kty", "OKP"}, {"alg", "ML-DSA-65"}, {"use", "sig"}, {"x", jwk.get("x")->as_string()}};
   EXPECT_TRUE(mldsa65_pk_from_jwk(json::Value(ts)).ok());
   // Broken ones.
   json::Value bad = jwk;
@@ -204,7 +203,8 @@ std::string trim(std::string s) {
 TEST(KeysCli, DeriveShowAndRefuseSecondWrite) {
   test::TempDir tmp;
   std::string dir = tmp.file("k");
-  auto r = test::run_cli({"keys", "derive", "--dir", dir, "--mldsa-seed", kSeed0, "--ed25519-seed", kEdSeed7});
+  auto r = test::run_cli(
+      {"keys", "derive", "--dir", dir, "--mldsa-seed", kSeed0, "--ed25519-seed", kEdSeed7});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("d666806e"), std::string::npos);
   auto show = test::run_cli({"keys", "show", "--dir", dir, "--json"});
@@ -215,11 +215,13 @@ TEST(KeysCli, DeriveShowAndRefuseSecondWrite) {
   EXPECT_EQ(doc->get("mldsa65")->get("jwk")->get("crv")->as_string(), "ML-DSA-65");
   EXPECT_EQ(doc->get("ed25519")->get("public_key_hex")->as_string(), kEdPub7);
   EXPECT_EQ(doc->get("ed25519")->get("kid")->as_string(), "5cc558a6");
-  EXPECT_NE(doc->get("ed25519")->get("pem")->as_string().find("BEGIN PUBLIC KEY"), std::string::npos);
+  EXPECT_NE(doc->get("ed25519")->get("pem")->as_string().find("BEGIN PUBLIC KEY"),
+            std::string::npos);
   auto again = test::run_cli({"keys", "generate", "--dir", dir});
   EXPECT_EQ(again.exit_code, 1);
   EXPECT_NE(again.err.find("already exists"), std::string::npos);
-  EXPECT_EQ(test::run_cli({"keys", "derive", "--dir", tmp.file("x"), "--mldsa-seed", "zz", "--ed25519-seed", kEdSeed7})
+  EXPECT_EQ(test::run_cli({"keys", "derive", "--dir", tmp.file("x"), "--mldsa-seed", "zz",
+                           "--ed25519-seed", kEdSeed7})
                 .exit_code,
             2);
   EXPECT_EQ(test::run_cli({"keys", "generate"}).exit_code, 2);
@@ -238,13 +240,15 @@ TEST(KeysCli, SignAndVerifyMatchTheVectors) {
     if (msg_hex.size() > 400) continue;
     if (!(msg_hex == "616263" || (!ctx_hex.empty() && ctx_hex.size() <= 64))) continue;
     SCOPED_TRACE(c.get("seed_hex")->as_string() + " ctx " + ctx_hex);
-    std::string dir = tmp.file("k" + c.get("seed_hex")->as_string().substr(0, 8) + ctx_hex.substr(0, 4));
-    auto d = test::run_cli({"keys", "derive", "--dir", dir, "--mldsa-seed", c.get("seed_hex")->as_string(),
-                            "--ed25519-seed", kEdSeed7});
+    std::string dir =
+        tmp.file("k" + c.get("seed_hex")->as_string().substr(0, 8) + ctx_hex.substr(0, 4));
+    auto d = test::run_cli({"keys", "derive", "--dir", dir, "--mldsa-seed",
+                            c.get("seed_hex")->as_string(), "--ed25519-seed", kEdSeed7});
     if (d.exit_code != 0 && d.err.find("already exists") != std::string::npos) continue;
     ASSERT_EQ(d.exit_code, 0) << d.err;
     std::string msg = to_string(test::hex(msg_hex));
-    std::vector<std::string> args = {"sign", "--key-dir", dir, "--alg", "ml-dsa-65", "--deterministic"};
+    std::vector<std::string> args = {"sign",  "--key-dir", dir,
+                                     "--alg", "ml-dsa-65", "--deterministic"};
     if (!ctx_hex.empty()) {
       args.push_back("--context");
       args.push_back(ctx_hex);
@@ -255,7 +259,8 @@ TEST(KeysCli, SignAndVerifyMatchTheVectors) {
     ASSERT_TRUE(sig.has_value());
     EXPECT_EQ(sha256_of(*sig), c.get("sig_sha256")->as_string());
     std::string pub = dir + "/mldsa65.pub";
-    std::vector<std::string> vargs = {"verify", "--pub", pub, "--alg", "ml-dsa-65", "--sig", trim(s.out)};
+    std::vector<std::string> vargs = {"verify",    "--pub", pub,        "--alg",
+                                      "ml-dsa-65", "--sig", trim(s.out)};
     if (!ctx_hex.empty()) {
       vargs.push_back("--context");
       vargs.push_back(ctx_hex);
@@ -268,29 +273,45 @@ TEST(KeysCli, SignAndVerifyMatchTheVectors) {
 TEST(KeysCli, Ed25519SignVerifyAndMalformedInput) {
   test::TempDir tmp;
   std::string dir = tmp.file("k");
-  ASSERT_EQ(test::run_cli({"keys", "derive", "--dir", dir, "--mldsa-seed", kSeed0, "--ed25519-seed", kEdSeed7})
+  ASSERT_EQ(test::run_cli({"keys", "derive", "--dir", dir, "--mldsa-seed", kSeed0, "--ed25519-seed",
+                           kEdSeed7})
                 .exit_code,
             0);
   const std::string msg = "rcan ed25519 cli test";
   auto s = test::run_cli({"sign", "--key-dir", dir, "--alg", "ed25519"}, msg);
   ASSERT_EQ(s.exit_code, 0) << s.err;
   // pyca/cryptography signature of the same message with seed 07*32.
-  EXPECT_EQ(trim(s.out),
-            "3C7kMBhSfRbPbMJCTISA/Y0sadq+oq3PZR4WhdXxZRSpiM4NEWqIjhxTAMLWAMeGKM8WN/reDKYre8up766zDQ==");
+  EXPECT_EQ(
+      trim(s.out),
+      "3C7kMBhSfRbPbMJCTISA/Y0sadq+oq3PZR4WhdXxZRSpiM4NEWqIjhxTAMLWAMeGKM8WN/reDKYre8up766zDQ==");
   std::string pub = dir + "/ed25519.pub";
   std::string sig = trim(s.out);
-  EXPECT_EQ(test::run_cli({"verify", "--pub", pub, "--alg", "ed25519", "--sig", sig}, msg).exit_code, 0);
-  EXPECT_EQ(test::run_cli({"verify", "--pub", pub, "--alg", "ed25519", "--sig", sig}, msg + "!").exit_code, 1);
+  EXPECT_EQ(
+      test::run_cli({"verify", "--pub", pub, "--alg", "ed25519", "--sig", sig}, msg).exit_code, 0);
+  EXPECT_EQ(test::run_cli({"verify", "--pub", pub, "--alg", "ed25519", "--sig", sig}, msg + "!")
+                .exit_code,
+            1);
   // Wrong algorithm for the key file, malformed signature, unknown alg, missing args.
-  EXPECT_EQ(test::run_cli({"verify", "--pub", pub, "--alg", "ml-dsa-65", "--sig", sig}, msg).exit_code, 2);
-  EXPECT_EQ(test::run_cli({"verify", "--pub", pub, "--alg", "ed25519", "--sig", "@@@"}, msg).exit_code, 2);
-  EXPECT_EQ(test::run_cli({"verify", "--pub", pub, "--alg", "ed25519", "--sig", "AAAA"}, msg).exit_code, 1);
-  EXPECT_EQ(test::run_cli({"verify", "--pub", pub, "--alg", "rsa", "--sig", sig}, msg).exit_code, 2);
+  EXPECT_EQ(
+      test::run_cli({"verify", "--pub", pub, "--alg", "ml-dsa-65", "--sig", sig}, msg).exit_code,
+      2);
+  EXPECT_EQ(
+      test::run_cli({"verify", "--pub", pub, "--alg", "ed25519", "--sig", "@@@"}, msg).exit_code,
+      2);
+  EXPECT_EQ(
+      test::run_cli({"verify", "--pub", pub, "--alg", "ed25519", "--sig", "AAAA"}, msg).exit_code,
+      1);
+  EXPECT_EQ(test::run_cli({"verify", "--pub", pub, "--alg", "rsa", "--sig", sig}, msg).exit_code,
+            2);
   EXPECT_EQ(test::run_cli({"verify", "--alg", "ed25519", "--sig", sig}, msg).exit_code, 2);
-  EXPECT_EQ(test::run_cli({"sign", "--key-dir", dir, "--alg", "ed25519", "--context", "00"}, msg).exit_code, 2);
-  EXPECT_EQ(test::run_cli({"sign", "--key-dir", dir, "--alg", "ml-dsa-65", "--context", std::string(512, 'a')}, msg)
+  EXPECT_EQ(test::run_cli({"sign", "--key-dir", dir, "--alg", "ed25519", "--context", "00"}, msg)
                 .exit_code,
             2);
+  EXPECT_EQ(
+      test::run_cli(
+          {"sign", "--key-dir", dir, "--alg", "ml-dsa-65", "--context", std::string(512, 'a')}, msg)
+          .exit_code,
+      2);
   chmod((dir + "/ed25519.seed").c_str(), 0644);
   auto loose = test::run_cli({"sign", "--key-dir", dir, "--alg", "ed25519"}, msg);
   EXPECT_EQ(loose.exit_code, 1);

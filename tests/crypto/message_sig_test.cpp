@@ -27,7 +27,8 @@ const Fixture& key0() {
   static Fixture f = [] {
     auto kg = test::load_vector("mldsa65-keygen.json");
     const auto& c = kg.get("cases")->as_array()[0];
-    return Fixture{test::hex(c.get("pk_hex")->as_string()), test::hex(c.get("sk_hex")->as_string())};
+    return Fixture{test::hex(c.get("pk_hex")->as_string()),
+                   test::hex(c.get("sk_hex")->as_string())};
   }();
   return f;
 }
@@ -139,7 +140,8 @@ TEST(MessageSig, MalformedSigBlocksAreRejectedWithAField) {
       {R"({"alg":"ml-dsa-65","kid":"d666806e","value":"@@@@"})", "sig.value"},
       {R"({"alg":"ml-dsa-65","kid":"d666806e","value":"AAAA"})", "sig.value"},
       {R"({"alg":"ed25519","kid":"d666806e","value":")" + good_value + "\"}", "sig.value"},
-      {R"({"alg":"ml-dsa-65","kid":"d666806e","value":")" + std::string(9000, 'A') + "\"}", "sig.value"},
+      {R"({"alg":"ml-dsa-65","kid":"d666806e","value":")" + std::string(9000, 'A') + "\"}",
+       "sig.value"},
   };
   for (const auto& [text, field] : bad) {
     SCOPED_TRACE(text.substr(0, 80));
@@ -174,7 +176,8 @@ TEST(MessageSig, RcanPyShapeRequiresItsFields) {
       {"timestamp", json::Value("1.5"), ErrorCode::kSchemaValidationFailed},
       {"cmd", json::Value(""), ErrorCode::kSchemaValidationFailed},
       {"params", json::Value(json::Array{}), ErrorCode::kSchemaValidationFailed},
-      {"target", json::Value("rcan://continuon.cloud/continuon/companion-v1/d3a4b5c6"), ErrorCode::kInvalidRuri},
+      {"target", json::Value("rcan://continuon.cloud/continuon/companion-v1/d3a4b5c6"),
+       ErrorCode::kInvalidRuri},
       {"target", json::Value("http://r/a/b/c/d"), ErrorCode::kInvalidRuri},
       {"target", json::Value("rcan://r/a b/c/d/e"), ErrorCode::kInvalidRuri},
       {"target", json::Value("rcan://r//c/d/e"), ErrorCode::kInvalidRuri},
@@ -200,7 +203,8 @@ TEST(MessageSig, RcanPyShapeRequiresItsFields) {
   // Python whitespace (incl. U+00A0) around the target is stripped like str.strip().
   m = ok;
   m.set("target", "\xc2\xa0\t rcan://r.example/acme/arm/v1/unit-1/ \n");
-  EXPECT_NE(rcanpy_preimage(m)->find("\"target\":\"rcan://r.example/acme/arm/v1/unit-1\""), std::string::npos);
+  EXPECT_NE(rcanpy_preimage(m)->find("\"target\":\"rcan://r.example/acme/arm/v1/unit-1\""),
+            std::string::npos);
 }
 
 TEST(MessageSig, Ed25519OverSeedShapeCanonicalJson) {
@@ -228,7 +232,8 @@ TEST(MessageSig, Ed25519OverSeedShapeCanonicalJson) {
   EXPECT_TRUE(verify(msg, t).ok());
   // Key order on the wire does not matter; content does.
   json::Object reordered;
-  for (auto it = msg.members().rbegin(); it != msg.members().rend(); ++it) reordered.set(it->first, it->second);
+  for (auto it = msg.members().rbegin(); it != msg.members().rend(); ++it)
+    reordered.set(it->first, it->second);
   EXPECT_TRUE(verify(reordered, t).ok());
   json::Object tampered = msg;
   tampered.set("sender_type", "human");

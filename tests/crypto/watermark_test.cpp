@@ -1,11 +1,10 @@
 // §16.6 watermark: tests/vectors/watermark.json byte-exact, malformed tokens, key loading, CLI.
 #include "rcan/crypto/watermark.h"
 
+#include <gtest/gtest.h>
 #include <sys/stat.h>
 
 #include <fstream>
-
-#include <gtest/gtest.h>
 
 #include "rcan/crypto/keys.h"
 #include "rcan/crypto/mldsa65.h"
@@ -15,7 +14,8 @@ namespace rcan::watermark {
 namespace {
 
 void write_file(const std::string& path, const Bytes& b, unsigned mode) {
-  std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
+  std::ofstream(path, std::ios::binary)
+      .write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
   chmod(path.c_str(), mode);
 }
 
@@ -56,12 +56,15 @@ TEST(Watermark, VerifyRejectsOtherInputsAndMalformedTokens) {
   std::string t = compute(key, "RRN-000000000001", "thought-abc123", "2026-04-10T14:32:01.123456");
   EXPECT_TRUE(verify(key, "RRN-000000000001", "thought-abc123", "2026-04-10T14:32:01.123456", t));
   EXPECT_FALSE(verify(key, "RRN-000000000002", "thought-abc123", "2026-04-10T14:32:01.123456", t));
-  EXPECT_FALSE(verify(Bytes(64, 0x79), "RRN-000000000001", "thought-abc123", "2026-04-10T14:32:01.123456", t));
-  EXPECT_FALSE(verify(key, "RRN-000000000001", "thought-abc123", "2026-04-10T14:32:01.123456", t + "\n"));
+  EXPECT_FALSE(verify(Bytes(64, 0x79), "RRN-000000000001", "thought-abc123",
+                      "2026-04-10T14:32:01.123456", t));
+  EXPECT_FALSE(
+      verify(key, "RRN-000000000001", "thought-abc123", "2026-04-10T14:32:01.123456", t + "\n"));
   std::string upper = t;
   for (auto& ch : upper)
     if (ch >= 'a' && ch <= 'f') ch = static_cast<char>(ch - 32);
-  EXPECT_FALSE(verify(key, "RRN-000000000001", "thought-abc123", "2026-04-10T14:32:01.123456", upper));
+  EXPECT_FALSE(
+      verify(key, "RRN-000000000001", "thought-abc123", "2026-04-10T14:32:01.123456", upper));
 }
 
 TEST(Watermark, TimestampFormatIsUtcMicroseconds) {
@@ -84,7 +87,8 @@ TEST(Watermark, KeyFromRawSecretKeySeedOrKeyDirectory) {
     auto key = load_key(path);
     ASSERT_TRUE(key.ok()) << path << ": " << key.error().message;
     EXPECT_EQ(key->size(), mldsa65::kSecretKeyBytes);
-    EXPECT_EQ(compute(*key, "RRN-000000000001", "thought-abc123", "2026-04-10T14:32:01.123456"), expected);
+    EXPECT_EQ(compute(*key, "RRN-000000000001", "thought-abc123", "2026-04-10T14:32:01.123456"),
+              expected);
   }
   write_file(dir.file("loose.sk"), sk, 0644);
   auto loose = load_key(dir.file("loose.sk"));
@@ -102,24 +106,30 @@ TEST(WatermarkCli, ComputeCheckAndVerify) {
   Bytes sk = test::hex(kg.get("cases")->as_array()[0].get("sk_hex")->as_string());
   test::TempDir dir;
   write_file(dir.file("robot.sk"), sk, 0600);
-  auto r = test::run_cli({"watermark", "compute", "--key-file", dir.file("robot.sk"), "--rrn", "RRN-000000000001",
-                          "--thought-id", "thought-abc123", "--timestamp", "2026-04-10T14:32:01.123456"});
+  auto r = test::run_cli({"watermark", "compute", "--key-file", dir.file("robot.sk"), "--rrn",
+                          "RRN-000000000001", "--thought-id", "thought-abc123", "--timestamp",
+                          "2026-04-10T14:32:01.123456"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(r.out, "rcan-wm-v1:c9d8cade857a95562fb6d69563889ad0\n");
-  auto v = test::run_cli({"watermark", "verify", "--key-file", dir.file("robot.sk"), "--rrn", "RRN-000000000001",
-                          "--thought-id", "thought-abc123", "--timestamp", "2026-04-10T14:32:01.123456",
-                          "rcan-wm-v1:c9d8cade857a95562fb6d69563889ad0"});
+  auto v =
+      test::run_cli({"watermark", "verify", "--key-file", dir.file("robot.sk"), "--rrn",
+                     "RRN-000000000001", "--thought-id", "thought-abc123", "--timestamp",
+                     "2026-04-10T14:32:01.123456", "rcan-wm-v1:c9d8cade857a95562fb6d69563889ad0"});
   EXPECT_EQ(v.exit_code, 0) << v.out << v.err;
-  v = test::run_cli({"watermark", "verify", "--key-file", dir.file("robot.sk"), "--rrn", "RRN-000000000001",
-                     "--thought-id", "thought-abc124", "--timestamp", "2026-04-10T14:32:01.123456",
-                     "rcan-wm-v1:c9d8cade857a95562fb6d69563889ad0"});
+  v = test::run_cli({"watermark", "verify", "--key-file", dir.file("robot.sk"), "--rrn",
+                     "RRN-000000000001", "--thought-id", "thought-abc124", "--timestamp",
+                     "2026-04-10T14:32:01.123456", "rcan-wm-v1:c9d8cade857a95562fb6d69563889ad0"});
   EXPECT_EQ(v.exit_code, 1);
-  EXPECT_EQ(test::run_cli({"watermark", "check", "rcan-wm-v1:c9d8cade857a95562fb6d69563889ad0"}).exit_code, 0);
-  EXPECT_EQ(test::run_cli({"watermark", "check", "rcan-wm-v1:c9d8cade857a95562fb6d69563889ad0\n"}).exit_code, 1);
+  EXPECT_EQ(test::run_cli({"watermark", "check", "rcan-wm-v1:c9d8cade857a95562fb6d69563889ad0"})
+                .exit_code,
+            0);
+  EXPECT_EQ(test::run_cli({"watermark", "check", "rcan-wm-v1:c9d8cade857a95562fb6d69563889ad0\n"})
+                .exit_code,
+            1);
   EXPECT_EQ(test::run_cli({"watermark", "compute", "--rrn", "x"}).exit_code, 2);
   write_file(dir.file("loose.sk"), sk, 0644);
-  EXPECT_EQ(test::run_cli({"watermark", "compute", "--key-file", dir.file("loose.sk"), "--rrn", "R", "--thought-id",
-                           "t", "--timestamp", "x"})
+  EXPECT_EQ(test::run_cli({"watermark", "compute", "--key-file", dir.file("loose.sk"), "--rrn", "R",
+                           "--thought-id", "t", "--timestamp", "x"})
                 .exit_code,
             2);
 }

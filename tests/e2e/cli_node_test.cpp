@@ -35,12 +35,14 @@ class CliNodeTest : public ::testing::Test {
   // The CLI with the node's URL and the OWNER token in the environment, as rcand suggests.
   static test::RunResult cli(const std::vector<std::string>& args, const std::string& in = {},
                              const std::string& token_file = "") {
-    return test::run_cli(args, in,
-                         {"RCAN_URL=" + daemon_->url(),
-                          "RCAN_TOKEN_FILE=" + (token_file.empty() ? daemon_->owner_token_file() : token_file),
-                          "NO_COLOR=1"});
+    return test::run_cli(
+        args, in,
+        {"RCAN_URL=" + daemon_->url(),
+         "RCAN_TOKEN_FILE=" + (token_file.empty() ? daemon_->owner_token_file() : token_file),
+         "NO_COLOR=1"});
   }
-  static std::string token_file(const std::string& role, const std::vector<std::string>& scopes, const std::string& sub) {
+  static std::string token_file(const std::string& role, const std::vector<std::string>& scopes,
+                                const std::string& sub) {
     std::string path = dir_->file(sub + ".token");
     std::ofstream(path) << daemon_->token(role, scopes, sub) << "\n";
     return path;
@@ -54,9 +56,10 @@ test::RcandDaemon* CliNodeTest::daemon_ = nullptr;
 TEST_F(CliNodeTest, EveryVerbHasHelpAndTheMainHelpListsThem) {
   auto top = test::run_cli({"--help"});
   ASSERT_EQ(top.exit_code, 0);
-  for (const char* verb : {"discover", "status", "claim", "release", "handoff", "command", "stream", "estop", "resume",
-                           "pending", "authorize", "audit", "thoughts", "watermark", "keys", "token", "ruri", "json",
-                           "message", "completion"}) {
+  for (const char* verb :
+       {"discover", "status", "claim",   "release",   "handoff", "command",   "stream",
+        "estop",    "resume", "pending", "authorize", "audit",   "thoughts",  "watermark",
+        "keys",     "token",  "ruri",    "json",      "message", "completion"}) {
     EXPECT_NE(top.out.find(std::string("  ") + verb + " "), std::string::npos) << verb;
     auto h = test::run_cli({verb, "--help"});
     EXPECT_EQ(h.exit_code, 0) << verb << ": " << h.err;
@@ -80,7 +83,9 @@ TEST_F(CliNodeTest, DiscoverProbesHostsAndTheEnvironmentsNode) {
   ASSERT_EQ(t.exit_code, 0) << t.err;
   EXPECT_NE(t.out.find("NAME"), std::string::npos);
   EXPECT_NE(t.out.find(daemon_->ruri()), std::string::npos);
-  EXPECT_EQ(test::run_cli({"discover", "--no-mdns", "--hosts", "127.0.0.1:1", "--timeout", "500"}).exit_code, 1);
+  EXPECT_EQ(test::run_cli({"discover", "--no-mdns", "--hosts", "127.0.0.1:1", "--timeout", "500"})
+                .exit_code,
+            1);
   EXPECT_EQ(test::run_cli({"discover", "--timeout", "abc"}).exit_code, 2);
 }
 
@@ -109,10 +114,12 @@ TEST_F(CliNodeTest, ClaimDriveStopResumeRelease) {
   EXPECT_EQ(conflict.exit_code, 1);
   EXPECT_NE(conflict.err.find("CONTROL_CONFLICT"), std::string::npos) << conflict.err;
 
-  auto move = cli({"command", "move", "--linear", "0.3", "--angular", "0", "--duration-ms", "300"}, "", alice);
+  auto move = cli({"command", "move", "--linear", "0.3", "--angular", "0", "--duration-ms", "300"},
+                  "", alice);
   ASSERT_EQ(move.exit_code, 0) << move.err;
   EXPECT_NE(move.out.find("ACK"), std::string::npos);
-  auto payload = cli({"command", R"({"action":"chat","text":"where are you?"})", "--json"}, "", alice);
+  auto payload =
+      cli({"command", R"({"action":"chat","text":"where are you?"})", "--json"}, "", alice);
   ASSERT_EQ(payload.exit_code, 0) << payload.err;
   EXPECT_EQ(parse(payload.out).get("type")->as_string(), "ACK");
   auto whole = cli({"command", "-"}, R"({"type":"COMMAND","payload":{"action":"status"}})", alice);
@@ -148,8 +155,9 @@ TEST_F(CliNodeTest, MessageSendChecksLocallyThenSendsAsIs) {
                     std::chrono::system_clock::now().time_since_epoch())
                     .count();
   std::string id = new_uuid_v4();
-  std::string msg = R"({"version":"1.0.0","type":"COMMAND","message_id":")" + id + R"(","timestamp_ms":)" +
-                    std::to_string(now) + R"(,"payload":{"action":"chat","text":"hello"}})";
+  std::string msg = R"({"version":"1.0.0","type":"COMMAND","message_id":")" + id +
+                    R"(","timestamp_ms":)" + std::to_string(now) +
+                    R"(,"payload":{"action":"chat","text":"hello"}})";
   auto r = cli({"message", "send"}, msg);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(parse(r.out).get("type")->as_string(), "ACK");
@@ -197,10 +205,11 @@ TEST_F(CliNodeTest, StreamPrintsTelemetryAndEvents) {
                   "{\"action\":\"chat\",\"text\":\"hi\"}\n");
   ASSERT_EQ(sent.exit_code, 0) << sent.err;
   EXPECT_NE(sent.out.find("\"reply_to\""), std::string::npos) << sent.out;
-  auto denied = test::run_cli({"stream", "--count", "1", "--url", daemon_->url(), "--token-file", "/dev/null"});
+  auto denied = test::run_cli(
+      {"stream", "--count", "1", "--url", daemon_->url(), "--token-file", "/dev/null"});
   EXPECT_EQ(denied.exit_code, 1) << denied.err;  // CONNECT refused, not retried
-  EXPECT_EQ(test::run_cli({"stream", "--url", "http://127.0.0.1:1", "--token-file", daemon_->owner_token_file(),
-                           "--max-attempts", "1"})
+  EXPECT_EQ(test::run_cli({"stream", "--url", "http://127.0.0.1:1", "--token-file",
+                           daemon_->owner_token_file(), "--max-attempts", "1"})
                 .exit_code,
             3);
 }
@@ -242,10 +251,12 @@ TEST(CliFakeNode, WatermarkVerifyAndThePendingExitCode) {
   std::string tok = dir.file("t");
   std::ofstream(tok) << test::FakeNode::kGoodToken << "\n";
   std::vector<std::string> env{"RCAN_URL=" + fake.url(), "RCAN_TOKEN_FILE=" + tok, "NO_COLOR=1"};
-  auto w = test::run_cli({"watermark", "verify", test::FakeNode::kWatermark, "--rrn", "RRN-000000000001"}, "", env);
+  auto w = test::run_cli(
+      {"watermark", "verify", test::FakeNode::kWatermark, "--rrn", "RRN-000000000001"}, "", env);
   ASSERT_EQ(w.exit_code, 0) << w.err;
   EXPECT_NE(w.out.find("valid"), std::string::npos);
-  auto wm = test::run_cli({"watermark", "verify", "rcan-wm-v1:00000000000000000000000000000000"}, "", env);
+  auto wm = test::run_cli({"watermark", "verify", "rcan-wm-v1:00000000000000000000000000000000"},
+                          "", env);
   EXPECT_EQ(wm.exit_code, 1);
   EXPECT_NE(wm.err.find("HTTP_404"), std::string::npos);
 
@@ -263,9 +274,11 @@ TEST(CliCompletion, BashScriptIsValidAndKnowsTheVerbs) {
   std::ofstream(f) << c.out;
   auto check = test::run({"/bin/bash", "-n", f});
   EXPECT_EQ(check.exit_code, 0) << check.err;
-  auto use = test::run({"/bin/bash", "-c",
-                        "source " + f + "; COMP_WORDS=(rcan cla); COMP_CWORD=1; _rcan; echo \"${COMPREPLY[*]}\"; "
-                        "COMP_WORDS=(rcan audit ta); COMP_CWORD=2; _rcan; echo \"${COMPREPLY[*]}\""});
+  auto use =
+      test::run({"/bin/bash", "-c",
+                 "source " + f +
+                     "; COMP_WORDS=(rcan cla); COMP_CWORD=1; _rcan; echo \"${COMPREPLY[*]}\"; "
+                     "COMP_WORDS=(rcan audit ta); COMP_CWORD=2; _rcan; echo \"${COMPREPLY[*]}\""});
   ASSERT_EQ(use.exit_code, 0) << use.err;
   EXPECT_EQ(use.out, "claim\ntail\n");
 }

@@ -2,6 +2,8 @@
 // audit, the WebSocket stream) and against an in-process fake node for the §16 endpoints,
 // the watermark verify endpoint, stream reconnects and TLS. Pure parts: URLs, TXT records,
 // error bodies, backoff.
+#include "rcan/client.h"
+
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -10,9 +12,8 @@
 
 #include "client/wire.h"
 #include "fake_node.h"
-#include "rcan/audit/verify.h"
 #include "rcan/audit/secret.h"
-#include "rcan/client.h"
+#include "rcan/audit/verify.h"
 #include "rcand_daemon.h"
 #include "test_support.h"
 
@@ -61,7 +62,8 @@ TEST_F(ClientNodeTest, StatusIsTypedAndDetailedWithAToken) {
   ASSERT_TRUE(d.ok());
   EXPECT_TRUE(d->robot.is_object());
   EXPECT_FALSE(d->rrn.empty());
-  EXPECT_NE(std::find(d->extensions.begin(), d->extensions.end(), "16.6-watermark"), d->extensions.end());
+  EXPECT_NE(std::find(d->extensions.begin(), d->extensions.end(), "16.6-watermark"),
+            d->extensions.end());
 }
 
 TEST_F(ClientNodeTest, ErrorsCarryTheProfileCodeAndHttpStatus) {
@@ -199,7 +201,8 @@ TEST_F(ClientNodeTest, StreamDeliversAckEventsAndTelemetryAndCommandAnswers) {
   };
   client::Stream s(so);
   std::thread t([&] { (void)s.run(); });
-  auto count_type = [&](const std::string& type, const std::string& key = "", const std::string& val = "") {
+  auto count_type = [&](const std::string& type, const std::string& key = "",
+                        const std::string& val = "") {
     size_t n = 0;
     for (const auto& f : frames) {
       const json::Value* ty = f.get("type");
@@ -214,7 +217,8 @@ TEST_F(ClientNodeTest, StreamDeliversAckEventsAndTelemetryAndCommandAnswers) {
   };
   {
     std::unique_lock<std::mutex> lock(mu);
-    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10), [&] { return count_type("STREAM") >= 2; }));
+    ASSERT_TRUE(
+        cv.wait_for(lock, std::chrono::seconds(10), [&] { return count_type("STREAM") >= 2; }));
     EXPECT_EQ(count_type("CONNECT_ACK"), 1u);
   }
   EXPECT_TRUE(s.connected());
@@ -225,14 +229,17 @@ TEST_F(ClientNodeTest, StreamDeliversAckEventsAndTelemetryAndCommandAnswers) {
   std::string id = s.send_command(chat);
   {
     std::unique_lock<std::mutex> lock(mu);
-    EXPECT_TRUE(cv.wait_for(lock, std::chrono::seconds(10), [&] { return count_type("ACK", "reply_to", id) == 1; }));
+    EXPECT_TRUE(cv.wait_for(lock, std::chrono::seconds(10),
+                            [&] { return count_type("ACK", "reply_to", id) == 1; }));
   }
   ASSERT_TRUE(Client(opts()).estop("stream test").ok());
   {
     std::unique_lock<std::mutex> lock(mu);
     EXPECT_TRUE(cv.wait_for(lock, std::chrono::seconds(10), [&] {
       for (const auto& f : frames)
-        if (json::dump(f).find("ESTOP") != std::string::npos && f.get("type")->as_string() != "STREAM") return true;
+        if (json::dump(f).find("ESTOP") != std::string::npos &&
+            f.get("type")->as_string() != "STREAM")
+          return true;
       return false;
     }));
   }
@@ -400,9 +407,10 @@ TEST(ClientFakeNode, UnreachableStreamGivesUpAfterMaxAttempts) {
 TEST(ClientTls, HttpsAndWssVerifyTheCertificate) {
   test::TempDir dir;
   const std::string cert = dir.file("cert.pem"), key = dir.file("key.pem");
-  auto gen = test::run({"/usr/bin/openssl", "req", "-x509", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1",
-                        "-nodes", "-days", "1", "-subj", "/CN=127.0.0.1", "-addext", "subjectAltName=IP:127.0.0.1",
-                        "-keyout", key, "-out", cert});
+  auto gen =
+      test::run({"/usr/bin/openssl", "req", "-x509", "-newkey", "ec", "-pkeyopt",
+                 "ec_paramgen_curve:prime256v1", "-nodes", "-days", "1", "-subj", "/CN=127.0.0.1",
+                 "-addext", "subjectAltName=IP:127.0.0.1", "-keyout", key, "-out", cert});
   ASSERT_EQ(gen.exit_code, 0) << gen.err;
   test::FakeNode fake(true, cert, key);
   ASSERT_NE(fake.port(), 0);
@@ -454,12 +462,14 @@ TEST(ClientPure, EndpointsParse) {
   auto c = client::parse_endpoint("10.0.0.5");
   ASSERT_TRUE(c.ok());
   EXPECT_EQ(c->port, 80);
-  for (const char* bad : {"ftp://x", "http://", "http://h:0", "http://h:99999", "http://u@h", "http://h:8a", "http://[::1"})
+  for (const char* bad : {"ftp://x", "http://", "http://h:0", "http://h:99999", "http://u@h",
+                          "http://h:8a", "http://[::1"})
     EXPECT_FALSE(client::parse_endpoint(bad).ok()) << bad;
 }
 
 TEST(ClientPure, TxtRecordsFollowRfc6763) {
-  auto m = client::parse_txt({"ruri=rcan://local.rcan/a/b/c", "Status=estop", "status=available", "flag", "=x", "caps="});
+  auto m = client::parse_txt(
+      {"ruri=rcan://local.rcan/a/b/c", "Status=estop", "status=available", "flag", "=x", "caps="});
   EXPECT_EQ(m["ruri"], "rcan://local.rcan/a/b/c");
   EXPECT_EQ(m["status"], "estop");  // first wins, keys case-insensitive
   EXPECT_EQ(m.count("flag"), 1u);
@@ -470,13 +480,15 @@ TEST(ClientPure, TxtRecordsFollowRfc6763) {
 
 TEST(ClientPure, ErrorBodiesOfEveryShape) {
   auto e = client::error_from_response(
-      429, R"({"type":"ERROR","payload":{"error_code":"RATE_LIMITED","error":"slow down","detail":{"reason":"per_minute"}}})",
+      429,
+      R"({"type":"ERROR","payload":{"error_code":"RATE_LIMITED","error":"slow down","detail":{"reason":"per_minute"}}})",
       "7");
   EXPECT_EQ(e.code, "RATE_LIMITED");
   EXPECT_EQ(e.message, "slow down");
   EXPECT_EQ(e.reason, "per_minute");
   EXPECT_EQ(e.retry_after_s, 7);
-  auto w = client::error_from_response(404, R"({"error":"Watermark token not found in audit log","code":"HTTP_404"})");
+  auto w = client::error_from_response(
+      404, R"({"error":"Watermark token not found in audit log","code":"HTTP_404"})");
   EXPECT_EQ(w.code, "HTTP_404");
   auto h = client::error_from_response(502, "<html>bad gateway</html>");
   EXPECT_EQ(h.code, "HTTP_502");
@@ -496,12 +508,16 @@ TEST(ClientPure, BackoffFollowsAppendixB) {
 
 TEST(ClientPure, HttpResponsesParseIncrementally) {
   using client::wire::Parse;
-  std::string resp = "HTTP/1.1 100 Continue\r\n\r\nHTTP/1.1 200 OK\r\nTransfer-Encoding: chunked\r\n\r\n4\r\nrcan\r\n3\r\n-ok\r\n0\r\n\r\n";
+  std::string resp =
+      "HTTP/1.1 100 Continue\r\n\r\nHTTP/1.1 200 OK\r\nTransfer-Encoding: "
+      "chunked\r\n\r\n4\r\nrcan\r\n3\r\n-ok\r\n0\r\n\r\n";
   for (size_t cut = 0; cut < resp.size(); ++cut) {
     client::wire::ParsedResponse pr;
     size_t used = 0;
     std::string err;
-    EXPECT_EQ(client::wire::parse_response(std::string_view(resp).substr(0, cut), false, pr, used, err), Parse::kIncomplete)
+    EXPECT_EQ(
+        client::wire::parse_response(std::string_view(resp).substr(0, cut), false, pr, used, err),
+        Parse::kIncomplete)
         << cut;
   }
   client::wire::ParsedResponse pr;
@@ -514,10 +530,12 @@ TEST(ClientPure, HttpResponsesParseIncrementally) {
   std::string closed = "HTTP/1.0 200 OK\r\n\r\nuntil close";
   ASSERT_EQ(client::wire::parse_response(closed, true, pr, used, err), Parse::kComplete);
   EXPECT_EQ(pr.body, "until close");
-  EXPECT_EQ(client::wire::parse_response("HTTP/1.1 200 OK\r\nContent-Length: 5\r\nContent-Length: 6\r\n\r\n", false, pr,
-                                         used, err),
+  EXPECT_EQ(client::wire::parse_response(
+                "HTTP/1.1 200 OK\r\nContent-Length: 5\r\nContent-Length: 6\r\n\r\n", false, pr,
+                used, err),
             Parse::kError);
-  EXPECT_EQ(client::wire::parse_response("SSH-2.0-OpenSSH\r\n\r\n", false, pr, used, err), Parse::kError);
+  EXPECT_EQ(client::wire::parse_response("SSH-2.0-OpenSSH\r\n\r\n", false, pr, used, err),
+            Parse::kError);
 }
 
 TEST(ClientPure, WebSocketFramesRoundTrip) {
@@ -534,11 +552,13 @@ TEST(ClientPure, WebSocketFramesRoundTrip) {
     EXPECT_EQ(client::wire::ws_parse(std::string_view(f).substr(0, f.size() - 1), out, used, err),
               client::wire::Parse::kIncomplete);
   }
-  EXPECT_EQ(client::wire::ws_accept("dGhlIHNhbXBsZSBub25jZQ=="), "s3pPLMBiTxaQ9kYGzzhZRbK+xOo=");  // RFC 6455 §1.3
+  EXPECT_EQ(client::wire::ws_accept("dGhlIHNhbXBsZSBub25jZQ=="),
+            "s3pPLMBiTxaQ9kYGzzhZRbK+xOo=");  // RFC 6455 §1.3
 }
 
 TEST(ClientPure, StatusBodiesParseOrFailCleanly) {
-  auto s = client::parse_status(R"({"ruri":"rcan://local.rcan/a/b/c","estop_active":true,"sessions":[{"session_id":"s1","role":"USER"}]})");
+  auto s = client::parse_status(
+      R"({"ruri":"rcan://local.rcan/a/b/c","estop_active":true,"sessions":[{"session_id":"s1","role":"USER"}]})");
   ASSERT_TRUE(s.ok());
   EXPECT_TRUE(s->estop_active);
   ASSERT_EQ(s->sessions.size(), 1u);

@@ -15,9 +15,10 @@ TEST(DemoAi, TheReadmeDemoRunsEndToEnd) {
   std::string bin = rcand.substr(0, rcand.rfind('/'));
   auto r = test::run({"/bin/bash", script, bin});
   ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
-  for (const char* want : {"CONFIDENCE_GATE_ESCALATED blocked", "COMMAND ok", "no_higher_layer", "approved ",
-                           "denied ", "HITL_TIMEOUT blocked", "HITL_AUTHORIZE_REFUSED", "\"valid\":true",
-                           "HTTP_404", "HTTP_400", "records verified", "demo complete"})
+  for (const char* want :
+       {"CONFIDENCE_GATE_ESCALATED blocked", "COMMAND ok", "no_higher_layer", "approved ",
+        "denied ", "HITL_TIMEOUT blocked", "HITL_AUTHORIZE_REFUSED", "\"valid\":true", "HTTP_404",
+        "HTTP_400", "records verified", "demo complete"})
     EXPECT_NE(r.out.find(want), std::string::npos) << want << "\n" << r.out;
 }
 

@@ -44,11 +44,12 @@ struct Namespace {
   }
   bool start_avahi() {
     std::string conf = dir + "/avahi.conf";
-    return avahi.start(exec({"/bin/sh", "-c",
-                             "mkdir -p /run/avahi-daemon && mount -t tmpfs tmpfs /run/avahi-daemon && "
-                             "exec /usr/sbin/avahi-daemon -f " + conf +
-                                 " --no-drop-root --no-chroot --no-rlimits --no-proc-title"}),
-                       env()) &&
+    return avahi.start(
+               exec({"/bin/sh", "-c",
+                     "mkdir -p /run/avahi-daemon && mount -t tmpfs tmpfs /run/avahi-daemon && "
+                     "exec /usr/sbin/avahi-daemon -f " +
+                         conf + " --no-drop-root --no-chroot --no-rlimits --no-proc-title"}),
+               env()) &&
            avahi.wait_for_line("Server startup complete", 15000).has_value();
   }
 };
@@ -56,9 +57,13 @@ struct Namespace {
 class NetnsDiscovery : public ::testing::Test {
  protected:
   void SetUp() override {
-    if (::geteuid() != 0) GTEST_SKIP() << "skipped: network namespaces need root (running as uid " << ::geteuid() << ")";
+    if (::geteuid() != 0)
+      GTEST_SKIP() << "skipped: network namespaces need root (running as uid " << ::geteuid()
+                   << ")";
     for (const char* bin : {kIp, "/usr/sbin/avahi-daemon", "/usr/bin/dbus-daemon", "/bin/sh"})
-      if (!exists(bin)) GTEST_SKIP() << "skipped: " << bin << " is not installed (scripts/install-deps.sh installs it)";
+      if (!exists(bin))
+        GTEST_SKIP() << "skipped: " << bin
+                     << " is not installed (scripts/install-deps.sh installs it)";
     ::unsetenv("DBUS_SYSTEM_BUS_ADDRESS");  // children get each namespace's own bus only
     std::string tag = std::to_string(::getpid() % 100000);
     a_.name = "rcanA" + tag;
@@ -68,14 +73,17 @@ class NetnsDiscovery : public ::testing::Test {
     a_.addr = "10.77.0.1";
     b_.addr = "10.77.0.2";
     auto add = test::run({kIp, "netns", "add", a_.name});
-    if (add.exit_code != 0) GTEST_SKIP() << "skipped: cannot create a network namespace: " << add.err;
+    if (add.exit_code != 0)
+      GTEST_SKIP() << "skipped: cannot create a network namespace: " << add.err;
     created_ = true;
     ASSERT_EQ(test::run({kIp, "netns", "add", b_.name}).exit_code, 0);
     auto link = test::run({kIp, "link", "add", a_.veth, "type", "veth", "peer", "name", b_.veth});
     if (link.exit_code != 0) GTEST_SKIP() << "skipped: cannot create a veth pair: " << link.err;
     for (Namespace* n : {&a_, &b_}) {
       ASSERT_EQ(test::run({kIp, "link", "set", n->veth, "netns", n->name}).exit_code, 0);
-      ASSERT_EQ(test::run({kIp, "-n", n->name, "addr", "add", n->addr + "/24", "dev", n->veth}).exit_code, 0);
+      ASSERT_EQ(
+          test::run({kIp, "-n", n->name, "addr", "add", n->addr + "/24", "dev", n->veth}).exit_code,
+          0);
       ASSERT_EQ(test::run({kIp, "-n", n->name, "link", "set", n->veth, "up"}).exit_code, 0);
       ASSERT_EQ(test::run({kIp, "-n", n->name, "link", "set", "lo", "up"}).exit_code, 0);
       n->dir = tmp_.path() + "/" + n->name;
@@ -84,17 +92,23 @@ class NetnsDiscovery : public ::testing::Test {
       std::ofstream(n->dir + "/dbus.conf")
           << "<!DOCTYPE busconfig PUBLIC \"-//freedesktop//DTD D-Bus Bus Configuration 1.0//EN\"\n"
              " \"http://www.freedesktop.org/standards/dbus/1.0/busconfig.dtd\">\n"
-             "<busconfig><type>system</type><listen>unix:path=" << n->bus << "</listen><auth>EXTERNAL</auth>\n"
-             "<policy context=\"default\"><allow user=\"*\"/><allow own=\"*\"/><allow send_destination=\"*\"/>"
+             "<busconfig><type>system</type><listen>unix:path="
+          << n->bus
+          << "</listen><auth>EXTERNAL</auth>\n"
+             "<policy context=\"default\"><allow user=\"*\"/><allow own=\"*\"/><allow "
+             "send_destination=\"*\"/>"
              "<allow receive_sender=\"*\"/></policy></busconfig>\n";
       std::ofstream(n->dir + "/avahi.conf")
           << "[server]\nhost-name=" << n->name << "\ndomain-name=local\nuse-ipv4=yes\nuse-ipv6=no\n"
-          << "allow-interfaces=" << n->veth << "\nenable-dbus=yes\nratelimit-interval-usec=1000000\n"
+          << "allow-interfaces=" << n->veth
+          << "\nenable-dbus=yes\nratelimit-interval-usec=1000000\n"
           << "ratelimit-burst=1000\n[wide-area]\nenable-wide-area=no\n[publish]\npublish-hinfo=no\n"
           << "publish-workstation=no\n";
-      ASSERT_TRUE(n->dbus.start(n->exec({"/usr/bin/dbus-daemon", "--config-file=" + n->dir + "/dbus.conf", "--nofork",
-                                         "--nopidfile"})));
-      for (int i = 0; i < 250 && !exists(n->bus); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      ASSERT_TRUE(
+          n->dbus.start(n->exec({"/usr/bin/dbus-daemon", "--config-file=" + n->dir + "/dbus.conf",
+                                 "--nofork", "--nopidfile"})));
+      for (int i = 0; i < 250 && !exists(n->bus); ++i)
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
       ASSERT_TRUE(exists(n->bus)) << n->dbus.err();
       ASSERT_TRUE(n->start_avahi()) << n->avahi.err();
     }
@@ -115,7 +129,9 @@ class NetnsDiscovery : public ::testing::Test {
   void start_node() {
     node_ = std::make_unique<test::Process>();
     node_dir_ = tmp_.path() + "/node";
-    ASSERT_TRUE(node_->start(a_.exec({RCAND_PATH, "--data-dir", node_dir_, "--port", "8080", "--bind", "0.0.0.0"}), a_.env()));
+    ASSERT_TRUE(node_->start(
+        a_.exec({RCAND_PATH, "--data-dir", node_dir_, "--port", "8080", "--bind", "0.0.0.0"}),
+        a_.env()));
     auto line = node_->wait_for_line("\"event\":\"listening\"", 30000);
     ASSERT_TRUE(line.has_value()) << node_->err();
     ruri_ = parse(*line).get("ruri")->as_string();
@@ -138,7 +154,8 @@ class NetnsDiscovery : public ::testing::Test {
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(300));
     }
-    ADD_FAILURE() << "never saw status " << status << "; last answer: " << json::dump(last) << "\n" << node_->err();
+    ADD_FAILURE() << "never saw status " << status << "; last answer: " << json::dump(last) << "\n"
+                  << node_->err();
     return {};
   }
 
@@ -156,7 +173,8 @@ TEST_F(NetnsDiscovery, RobotInOneNamespaceIsFoundFromTheOtherWithItsTxtKeys) {
   EXPECT_EQ(robot.get("ruri")->as_string(), ruri_);
   EXPECT_EQ(robot.get("source")->as_string(), "mdns");
   EXPECT_EQ(robot.get("url")->as_string(), "http://" + a_.addr + ":8080");
-  EXPECT_TRUE(robot.get("reachable")->as_bool());  // confirmed with GET /rcan/v1/status across the veth
+  EXPECT_TRUE(
+      robot.get("reachable")->as_bool());  // confirmed with GET /rcan/v1/status across the veth
   const json::Value* txt = robot.get("txt");
   for (const char* k : {"ruri", "model", "caps", "roles", "role", "version", "name", "status"})
     EXPECT_NE(txt->get(k), nullptr) << "TXT key " << k << " missing: " << json::dump(*txt);
@@ -164,7 +182,8 @@ TEST_F(NetnsDiscovery, RobotInOneNamespaceIsFoundFromTheOtherWithItsTxtKeys) {
   EXPECT_EQ(txt->get("caps")->as_string(), "status,chat,teleop,nav,arm");
   // The table form names the robot and where it answers.
   auto table = cli_in(b_, {"discover", "--hosts", "", "--timeout", "1500"});
-  EXPECT_NE(table.out.find("http://" + a_.addr + ":8080"), std::string::npos) << table.out << table.err;
+  EXPECT_NE(table.out.find("http://" + a_.addr + ":8080"), std::string::npos)
+      << table.out << table.err;
 }
 
 TEST_F(NetnsDiscovery, StatusFollowsEstopClaimAndRelease) {
@@ -172,7 +191,9 @@ TEST_F(NetnsDiscovery, StatusFollowsEstopClaimAndRelease) {
   discover_until("available");
   std::string url = "http://" + a_.addr + ":8080";
   std::string tok = node_dir_ + "/owner.token";
-  ASSERT_EQ(cli_in(b_, {"estop", "--url", url, "--token-file", tok, "--reason", "mdns test"}).exit_code, 0);
+  ASSERT_EQ(
+      cli_in(b_, {"estop", "--url", url, "--token-file", tok, "--reason", "mdns test"}).exit_code,
+      0);
   discover_until("estop");
   ASSERT_EQ(cli_in(b_, {"resume", "--url", url, "--token-file", tok}).exit_code, 0);
   discover_until("available");
@@ -199,7 +220,8 @@ TEST_F(NetnsDiscovery, AdvertisementReturnsAfterTheAvahiDaemonRestarts) {
 // falls back to probing.
 TEST(NoAvahi, NodeKeepsServingAndSaysSoOnce) {
   test::TempDir dir;
-  test::RcandDaemon d(dir.path() + "/node", {}, {"DBUS_SYSTEM_BUS_ADDRESS=unix:path=" + dir.path() + "/no-such-bus"});
+  test::RcandDaemon d(dir.path() + "/node", {},
+                      {"DBUS_SYSTEM_BUS_ADDRESS=unix:path=" + dir.path() + "/no-such-bus"});
   ASSERT_NE(d.port(), 0);
   auto st = test::run_cli({"status", "--url", d.url()});
   EXPECT_EQ(st.exit_code, 0) << st.err;

@@ -13,8 +13,8 @@
 #include <unistd.h>
 
 #include <cerrno>
-#include <cstdlib>
 #include <chrono>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -26,7 +26,6 @@
 #include <thread>
 
 #include "node/admission/replay.h"
-#include "transport/mqtt_client.h"
 #include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/jwt.h"
 #include "rcan/encoding.h"
@@ -34,6 +33,7 @@
 #include "rcan/hash.h"
 #include "rcan/json.h"
 #include "test_support.h"
+#include "transport/mqtt_client.h"
 
 namespace rcan {
 namespace {
@@ -42,7 +42,8 @@ namespace fs = std::filesystem;
 using test::HttpReply;
 
 int64_t real_wall_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
       .count();
 }
 
@@ -81,7 +82,8 @@ class Node {
  public:
   static constexpr const char* kRuri = "rcan://local.rcan/acme/rover/0a1b2c3d";
 
-  Node(const std::string& root, std::string security_yaml, std::string extra_yaml, std::vector<std::string> env = {})
+  Node(const std::string& root, std::string security_yaml, std::string extra_yaml,
+       std::vector<std::string> env = {})
       : root_(root), env_(std::move(env)) {
     // rcand links jemalloc, which cannot start under libfaketime (CMakeLists.txt): a node
     // with a preloaded library runs the same daemon built on the C library's malloc.
@@ -91,7 +93,8 @@ class Node {
     fs::create_directories(data_);
     fs::permissions(data_, fs::perms::owner_all);
     EXPECT_EQ(test::run_cli({"keys", "generate", "--dir", data_ + "/keys"}).exit_code, 0);
-    EXPECT_EQ(test::run_cli({"audit", "new-secret", "--out", data_ + "/audit.secret"}).exit_code, 0);
+    EXPECT_EQ(test::run_cli({"audit", "new-secret", "--out", data_ + "/audit.secret"}).exit_code,
+              0);
     seed_file_ = root_ + "/issuer.seed";
     uint8_t seed[32];
     EXPECT_TRUE(random_bytes(seed, sizeof seed));
@@ -105,20 +108,22 @@ class Node {
     auto pem = ed25519::public_key_to_pem(*pk);
     EXPECT_TRUE(pem.ok());
     write_text(root_ + "/issuer.pub.pem", *pem);
-    write_text(root_ + "/robot.rcan.yaml",
-               std::string("rcan_version: \"1.2\"\nruri: ") + kRuri +
-                   "\nrobot:\n  name: fault-rover\n  manufacturer: acme\n  model: rover\n  type: mobile\n"
-                   "safety:\n  local_safety_wins: true\n"
-                   "driver:\n  type: sim\n  sim:\n    tick_hz: 200\n"
-                   "security:\n  jwt:\n    issuers:\n      - issuer: test.local\n        key_file: " +
-                   root_ + "/issuer.pub.pem\n" + security_yaml + extra_yaml);
+    write_text(
+        root_ + "/robot.rcan.yaml",
+        std::string("rcan_version: \"1.2\"\nruri: ") + kRuri +
+            "\nrobot:\n  name: fault-rover\n  manufacturer: acme\n  model: rover\n  type: mobile\n"
+            "safety:\n  local_safety_wins: true\n"
+            "driver:\n  type: sim\n  sim:\n    tick_hz: 200\n"
+            "security:\n  jwt:\n    issuers:\n      - issuer: test.local\n        key_file: " +
+            root_ + "/issuer.pub.pem\n" + security_yaml + extra_yaml);
   }
   ~Node() { stop(); }
 
   bool start() {
     proc_ = std::make_unique<test::Process>();
-    if (!proc_->start({binary_, "--config", root_ + "/robot.rcan.yaml", "--port", "0", "--data-dir", data_},
-                      env_)) {
+    if (!proc_->start(
+            {binary_, "--config", root_ + "/robot.rcan.yaml", "--port", "0", "--data-dir", data_},
+            env_)) {
       ADD_FAILURE() << "cannot start rcand";
       return false;
     }
@@ -142,15 +147,15 @@ class Node {
 
   // A token from the test issuer; iat/exp are relative to `now_s` (the node's clock by default
   // the real one), valid from `before_s` before it to `after_s` after it.
-  std::string token(const std::string& role, std::vector<std::string> scopes, const std::string& sub,
-                    int64_t before_s = 5, int64_t after_s = 3600) const {
+  std::string token(const std::string& role, std::vector<std::string> scopes,
+                    const std::string& sub, int64_t before_s = 5, int64_t after_s = 3600) const {
     auto key = jwt::SigningKey::from_file(seed_file_);
     EXPECT_TRUE(key.ok());
     int64_t now = real_wall_ms() / 1000;
     json::Array sc;
     for (auto& s : scopes) sc.emplace_back(s);
-    json::Object claims{{"iss", "test.local"}, {"sub", sub},          {"aud", kRuri},
-                        {"role", role},         {"scope", sc},         {"iat", now - before_s},
+    json::Object claims{{"iss", "test.local"}, {"sub", sub},  {"aud", kRuri},
+                        {"role", role},        {"scope", sc}, {"iat", now - before_s},
                         {"exp", now + after_s}};
     auto t = jwt::issue(claims, *key);
     EXPECT_TRUE(t.ok());
@@ -163,11 +168,15 @@ class Node {
     if (!tok.empty()) h.emplace_back("Authorization", "Bearer " + tok);
     return test::http(port_, method, path, body, h);
   }
-  HttpReply get(const std::string& path, const std::string& tok = "") const { return call("GET", path, "", tok); }
+  HttpReply get(const std::string& path, const std::string& tok = "") const {
+    return call("GET", path, "", tok);
+  }
   HttpReply post(const std::string& path, const std::string& body, const std::string& tok) const {
     return call("POST", path, body, tok);
   }
-  json::Value status(const std::string& tok) const { return parse(get("/rcan/v1/status", tok).body); }
+  json::Value status(const std::string& tok) const {
+    return parse(get("/rcan/v1/status", tok).body);
+  }
 
   // One metric line `name value` on /metrics (-1 when absent).
   double metric(const std::string& name) const {
@@ -182,7 +191,8 @@ class Node {
   uint16_t port_ = 0;
 };
 
-std::string command(const std::string& action, json::Object params = {}, std::string id = "", int64_t ts = 0) {
+std::string command(const std::string& action, json::Object params = {}, std::string id = "",
+                    int64_t ts = 0) {
   json::Object payload{{"action", action}};
   for (auto& m : params) payload.set(m.first, m.second);
   json::Object m{{"version", "1.0.0"},
@@ -195,7 +205,8 @@ std::string command(const std::string& action, json::Object params = {}, std::st
 
 // `rcan audit verify --data-dir` on a stopped node's audit directory, and its records.
 void expect_chain_verifies(const std::string& audit_dir, const std::string& secret_file) {
-  auto v = test::run_cli({"audit", "verify", "--data-dir", audit_dir, "--secret-file", secret_file});
+  auto v =
+      test::run_cli({"audit", "verify", "--data-dir", audit_dir, "--secret-file", secret_file});
   EXPECT_EQ(v.exit_code, 0) << v.out << v.err;
   EXPECT_NE(v.out.find("ok:"), std::string::npos) << v.out;
 }
@@ -286,15 +297,18 @@ class Tmpfs {
 // The whole story against one real node whose audit directory is `audit_dir`: `fill` makes its
 // store refuse writes, `unfill` gives the space back.
 // `failing_op` is what the recovery record must name as the operation that failed.
-void audit_store_outage(const std::string& root, const std::string& audit_dir, const std::function<void()>& fill,
-                        const std::function<void()>& unfill, const std::string& failing_op) {
+void audit_store_outage(const std::string& root, const std::string& audit_dir,
+                        const std::function<void()>& fill, const std::function<void()>& unfill,
+                        const std::string& failing_op) {
   // 64 KiB segments: a preallocated segment and its spare take 128 KiB.
-  Node node(root + "/node", "  audit:\n    dir: " + audit_dir + "\n    max_segment_bytes: 65536\n", "");
+  Node node(root + "/node", "  audit:\n    dir: " + audit_dir + "\n    max_segment_bytes: 65536\n",
+            "");
   ASSERT_TRUE(node.start());
   const std::string owner = node.token("owner", {"status", "control", "config"}, "owner-1");
 
   // Healthy: a drive is accepted and recorded.
-  HttpReply first = node.post("/rcan/v1/command", command("move", {{"linear", 0.1}, {"duration_ms", 100}}), owner);
+  HttpReply first = node.post("/rcan/v1/command",
+                              command("move", {{"linear", 0.1}, {"duration_ms", 100}}), owner);
   ASSERT_EQ(first.status, 200) << first.body;
   EXPECT_TRUE(node.status(owner).get("audit_available")->as_bool());
 
@@ -338,10 +352,12 @@ void audit_store_outage(const std::string& root, const std::string& audit_dir, c
   // Nothing is dispatched without its record: a drive is refused and the robot does not move.
   std::string drive_id = new_uuid_v4();
   HttpReply drive =
-      node.post("/rcan/v1/command", command("move", {{"linear", 0.2}, {"duration_ms", 300}}, drive_id), owner);
+      node.post("/rcan/v1/command",
+                command("move", {{"linear", 0.2}, {"duration_ms", 300}}, drive_id), owner);
   EXPECT_EQ(drive.status, 503) << drive.body;
   EXPECT_EQ(error_code(drive), "AUDIT_UNAVAILABLE");
-  std::this_thread::sleep_for(std::chrono::milliseconds(400));  // longer than the drive would have run
+  std::this_thread::sleep_for(
+      std::chrono::milliseconds(400));  // longer than the drive would have run
   json::Value still = node.status(owner);
   EXPECT_EQ(base_number(still, "odometry_m"), odometry);
   EXPECT_EQ(base_number(still, "target_linear_mps"), 0.0);
@@ -355,11 +371,12 @@ void audit_store_outage(const std::string& root, const std::string& audit_dir, c
   EXPECT_TRUE(node.status(owner).get("estop_active")->as_bool());
   // RESUME re-enables motion: not without its record. The latch holds.
   auto resume_msg = [] {
-    return json::dump(json::Value(json::Object{{"version", "1.0.0"},
-                                               {"message_id", new_uuid_v4()},
-                                               {"type", "SAFETY"},
-                                               {"timestamp_ms", real_wall_ms()},
-                                               {"payload", json::Object{{"safety_event", "RESUME"}}}}));
+    return json::dump(
+        json::Value(json::Object{{"version", "1.0.0"},
+                                 {"message_id", new_uuid_v4()},
+                                 {"type", "SAFETY"},
+                                 {"timestamp_ms", real_wall_ms()},
+                                 {"payload", json::Object{{"safety_event", "RESUME"}}}}));
   };
   HttpReply early = node.post("/rcan/v1/command", resume_msg(), owner);
   EXPECT_EQ(early.status, 503) << early.body;
@@ -368,7 +385,8 @@ void audit_store_outage(const std::string& root, const std::string& audit_dir, c
 
   // Space returns: the node recovers by itself, without a restart.
   unfill();
-  ASSERT_TRUE(eventually([&] { return node.status(owner).get("audit_available")->as_bool(); }, 15000))
+  ASSERT_TRUE(
+      eventually([&] { return node.status(owner).get("audit_available")->as_bool(); }, 15000))
       << "the audit log did not recover";
   EXPECT_EQ(node.get("/healthz").status, 200);
   EXPECT_EQ(node.metric("rcan_audit_available"), 1.0);
@@ -377,11 +395,10 @@ void audit_store_outage(const std::string& root, const std::string& audit_dir, c
   ASSERT_EQ(resume.status, 200) << resume.body;
   std::string after_id = new_uuid_v4();
   HttpReply after =
-      node.post("/rcan/v1/command", command("move", {{"linear", 0.2}, {"duration_ms", 200}}, after_id), owner);
+      node.post("/rcan/v1/command",
+                command("move", {{"linear", 0.2}, {"duration_ms", 200}}, after_id), owner);
   ASSERT_EQ(after.status, 200) << after.body;
-  EXPECT_TRUE(eventually([&] {
-    return base_number(node.status(owner), "odometry_m") > odometry;
-  }));
+  EXPECT_TRUE(eventually([&] { return base_number(node.status(owner), "odometry_m") > odometry; }));
 
   // The chain: every acknowledged record is there, the refused ones are not, the recovery is
   // recorded, and `rcan audit verify` passes on the directory.
@@ -413,8 +430,9 @@ TEST(DiskFull, CommandsAreRefusedEstopWorksAndTheNodeRecoversWhenSpaceReturns) {
   Tmpfs disk(mnt, 1u << 20);
   if (!disk.ok()) GTEST_SKIP() << "cannot mount a tmpfs for the audit store (" << disk.why() << ")";
   // A full file system: the audit log's write() itself fails with ENOSPC.
-  audit_store_outage(tmp.path(), mnt + "/audit", [&] { ASSERT_GT(disk.fill("filler"), 0u); }, [&] { disk.unfill(); },
-                     "pwrite");
+  audit_store_outage(
+      tmp.path(), mnt + "/audit", [&] { ASSERT_GT(disk.fill("filler"), 0u); },
+      [&] { disk.unfill(); }, "pwrite");
 }
 
 // An ext2 file system on a loop device whose backing file is sparse and lives on a small tmpfs.
@@ -465,10 +483,12 @@ class LoopFs {
 TEST(DiskFull, WritebackErrorsUnderTheFileSystemFailClosedAndRecoverToo) {
   test::TempDir tmp;
   LoopFs disk(tmp.file("backing"), tmp.file("auditfs"));
-  if (!disk.ok()) GTEST_SKIP() << "cannot set up an ext2 loop device over a tmpfs (" << disk.why() << ")";
-  audit_store_outage(tmp.path(), tmp.file("auditfs") + "/audit",
-                     [&] { ASSERT_GT(disk.backing().fill("filler"), 0u); }, [&] { disk.backing().unfill(); },
-                     "fdatasync");
+  if (!disk.ok())
+    GTEST_SKIP() << "cannot set up an ext2 loop device over a tmpfs (" << disk.why() << ")";
+  audit_store_outage(
+      tmp.path(), tmp.file("auditfs") + "/audit",
+      [&] { ASSERT_GT(disk.backing().fill("filler"), 0u); }, [&] { disk.backing().unfill(); },
+      "fdatasync");
 }
 
 // ------------------------------------------------------------------------------------------
@@ -481,7 +501,8 @@ TEST(ClockSteps, ReplayMemoryEvictedBeforeAStepBackDoesNotRefuseTheNewTime) {
   o.capacity = 3;
   node::ReplayGuard g(o);
   const int64_t t = 1'750'000'000'000;
-  for (int i = 0; i < 4; ++i) ASSERT_TRUE(g.check("m" + std::to_string(i), t + i, false, t + 10).ok());
+  for (int i = 0; i < 4; ++i)
+    ASSERT_TRUE(g.check("m" + std::to_string(i), t + i, false, t + 10).ok());
   EXPECT_EQ(g.evictions(), 1u);
   // The evicted id cannot come back while it could be fresh.
   auto again = g.check("m0", t, false, t + 20);
@@ -535,7 +556,8 @@ class SteppedClock {
     // by default; libfaketime only wraps clock calls, so the check is turned off (and the
     // sanitizer options the test runner set are kept).
     const char* asan = std::getenv("ASAN_OPTIONS");
-    e.push_back(std::string("ASAN_OPTIONS=") + (asan != nullptr && *asan != '\0' ? std::string(asan) + ":" : "") +
+    e.push_back(std::string("ASAN_OPTIONS=") +
+                (asan != nullptr && *asan != '\0' ? std::string(asan) + ":" : "") +
                 "verify_asan_link_order=0");
     return e;
   }
@@ -554,14 +576,17 @@ int64_t node_clock_ms(const Node& n) {
 
 TEST(ClockSteps, RealNodeUnderFaketimeKeepsReplayTtlAndAuditOrdering) {
   const std::string lib = faketime_library();
-  if (lib.empty()) GTEST_SKIP() << "libfaketime is not installed (scripts/install-deps.sh installs faketime)";
+  if (lib.empty())
+    GTEST_SKIP() << "libfaketime is not installed (scripts/install-deps.sh installs faketime)";
   test::TempDir tmp;
   SteppedClock clock(tmp.file("faketime.rc"));
   Node node(tmp.file("node"), "  msg_id_cache_size: 100\n", "", clock.env(lib));
   ASSERT_TRUE(node.start());
-  ASSERT_LT(std::llabs(node_clock_ms(node) - real_wall_ms()), 5000) << "libfaketime moved the clock at +0";
+  ASSERT_LT(std::llabs(node_clock_ms(node) - real_wall_ms()), 5000)
+      << "libfaketime moved the clock at +0";
   // Tokens valid across the whole test whatever the node's clock says (iat 2 h back, exp 3 h on).
-  const std::string owner = node.token("owner", {"status", "control", "config"}, "owner-1", 7200, 10800);
+  const std::string owner =
+      node.token("owner", {"status", "control", "config"}, "owner-1", 7200, 10800);
   const std::string user = node.token("user", {"status", "control"}, "user-1", 7200, 10800);
   auto send = [&](const std::string& id, int64_t ts, const std::string& tok) {
     return node.post("/rcan/v1/command", command("status", {}, id, ts), tok);
@@ -603,8 +628,9 @@ TEST(ClockSteps, RealNodeUnderFaketimeKeepsReplayTtlAndAuditOrdering) {
 
   // ---- The wall clock steps back one hour.
   clock.set(-3600);
-  ASSERT_TRUE(eventually([&] { return std::llabs(node_clock_ms(node) - clock.node_now_ms()) < 5000; }))
-      << "the node's clock did not step back";
+  ASSERT_TRUE(eventually([&] {
+    return std::llabs(node_clock_ms(node) - clock.node_now_ms()) < 5000;
+  })) << "the node's clock did not step back";
   // A message stamped with the node's (new) time is fresh, although the replay memory evicted
   // ids from before the step.
   std::string fresh = new_uuid_v4();
@@ -628,13 +654,17 @@ TEST(ClockSteps, RealNodeUnderFaketimeKeepsReplayTtlAndAuditOrdering) {
   EXPECT_GT(ttl1, 0);
   EXPECT_LE(ttl1, ttl0);
   // Nor did the lease's: its end moved with the step (after the next control tick).
-  EXPECT_TRUE(eventually([&] { int64_t r = lease_remaining_s(); return r > 3000 && r <= lease0; }))
-      << "lease remaining " << lease_remaining_s() << " s after the step back";
+  EXPECT_TRUE(eventually([&] {
+    int64_t r = lease_remaining_s();
+    return r > 3000 && r <= lease0;
+  })) << "lease remaining "
+      << lease_remaining_s() << " s after the step back";
 
   // ---- The wall clock steps forward two hours (one hour ahead of the real time).
   clock.set(3600);
-  ASSERT_TRUE(eventually([&] { return std::llabs(node_clock_ms(node) - clock.node_now_ms()) < 5000; }))
-      << "the node's clock did not step forward";
+  ASSERT_TRUE(eventually([&] {
+    return std::llabs(node_clock_ms(node) - clock.node_now_ms()) < 5000;
+  })) << "the node's clock did not step forward";
   std::string ahead = new_uuid_v4();
   int64_t ahead_ts = clock.node_now_ms();
   HttpReply r5 = send(ahead, ahead_ts, user);
@@ -647,11 +677,14 @@ TEST(ClockSteps, RealNodeUnderFaketimeKeepsReplayTtlAndAuditOrdering) {
   int64_t ttl2 = session_expires_in();
   EXPECT_GT(ttl2, 0) << "the control session expired with the wall-clock step";
   EXPECT_LE(ttl2, ttl1);
-  EXPECT_TRUE(eventually([&] { int64_t r = lease_remaining_s(); return r > 3000 && r <= lease0; }))
-      << "lease remaining " << lease_remaining_s() << " s after the step forward";
-  HttpReply drive = node.post("/rcan/v1/command", command("move", {{"linear", 0.1}, {"duration_ms", 100}}, "",
-                                                          clock.node_now_ms()),
-                              user);
+  EXPECT_TRUE(eventually([&] {
+    int64_t r = lease_remaining_s();
+    return r > 3000 && r <= lease0;
+  })) << "lease remaining "
+      << lease_remaining_s() << " s after the step forward";
+  HttpReply drive = node.post(
+      "/rcan/v1/command",
+      command("move", {{"linear", 0.1}, {"duration_ms", 100}}, "", clock.node_now_ms()), user);
   EXPECT_EQ(drive.status, 200) << drive.body;
 
   // ---- The audit chain: seq strictly increasing, timestamps follow the node's clock (back
@@ -676,7 +709,8 @@ TEST(ClockSteps, RealNodeUnderFaketimeKeepsReplayTtlAndAuditOrdering) {
 
 TEST(ClockSteps, AStepForwardDoesNotTimeOutOrAutoAllowAHeldCommand) {
   const std::string lib = faketime_library();
-  if (lib.empty()) GTEST_SKIP() << "libfaketime is not installed (scripts/install-deps.sh installs faketime)";
+  if (lib.empty())
+    GTEST_SKIP() << "libfaketime is not installed (scripts/install-deps.sh installs faketime)";
   test::TempDir tmp;
   SteppedClock clock(tmp.file("faketime.rc"));
   // Drives wait for an OWNER's approval for a minute; on timeout they would be let through.
@@ -685,10 +719,12 @@ TEST(ClockSteps, AStepForwardDoesNotTimeOutOrAutoAllowAHeldCommand) {
             "      auth_timeout_ms: 60000\n      on_timeout: allow\n",
             clock.env(lib));
   ASSERT_TRUE(node.start());
-  const std::string owner = node.token("owner", {"status", "control", "config"}, "owner-1", 7200, 10800);
+  const std::string owner =
+      node.token("owner", {"status", "control", "config"}, "owner-1", 7200, 10800);
   const std::string user = node.token("user", {"status", "control"}, "user-1", 7200, 10800);
   std::string id = new_uuid_v4();
-  HttpReply held = node.post("/rcan/v1/command", command("move", {{"linear", 0.2}, {"duration_ms", 200}}, id), user);
+  HttpReply held = node.post("/rcan/v1/command",
+                             command("move", {{"linear", 0.2}, {"duration_ms", 200}}, id), user);
   ASSERT_EQ(held.status, 202) << held.body;
   auto pending = [&] {
     json::Value v = parse(node.get("/rcan/v1/pending", owner).body);
@@ -699,11 +735,13 @@ TEST(ClockSteps, AStepForwardDoesNotTimeOutOrAutoAllowAHeldCommand) {
   const double odometry = base_number(node.status(owner), "odometry_m");
   // Two hours of wall clock in one step: the approval window has not run out.
   clock.set(7200);
-  ASSERT_TRUE(eventually([&] { return std::llabs(node_clock_ms(node) - clock.node_now_ms()) < 5000; }))
-      << "the node's clock did not step";
+  ASSERT_TRUE(eventually([&] {
+    return std::llabs(node_clock_ms(node) - clock.node_now_ms()) < 5000;
+  })) << "the node's clock did not step";
   std::this_thread::sleep_for(std::chrono::milliseconds(1000));  // several passes of the hold timer
   EXPECT_EQ(pending(), 1u) << "the held command timed out with the wall-clock step";
-  EXPECT_EQ(base_number(node.status(owner), "odometry_m"), odometry) << "the held drive ran unapproved";
+  EXPECT_EQ(base_number(node.status(owner), "odometry_m"), odometry)
+      << "the held drive ran unapproved";
   ASSERT_EQ(node.stop(), 0);
   for (const auto& r : exported(node.data_dir() + "/audit"))
     EXPECT_NE(str(r, "event"), "HITL_TIMEOUT") << json::dump(r);
@@ -730,7 +768,8 @@ class Broker {
  public:
   explicit Broker(const std::string& dir) : dir_(dir), port_(free_port()) {
     write_text(dir_ + "/mosquitto.conf",
-               "listener " + std::to_string(port_) + " 127.0.0.1\nallow_anonymous true\npersistence false\n");
+               "listener " + std::to_string(port_) +
+                   " 127.0.0.1\nallow_anonymous true\npersistence false\n");
   }
   ~Broker() { stop(); }
   bool start() {
@@ -800,12 +839,13 @@ TEST(BrokerOutage, RobotKeepsServingHttpAndMqttCommandsResumeWithoutRunningTwice
   const std::string topic = "rcan/robot/local.rcan/acme/rover/0a1b2c3d/cmd";
   const std::string reply = "rcan/robot/local.rcan/acme/rover/0a1b2c3d/reply";
   auto mqtt_cmd = [&](const std::string& id) {
-    return json::Value(json::Object{{"version", "1.0.0"},
-                                    {"message_id", id},
-                                    {"type", "COMMAND"},
-                                    {"timestamp_ms", real_wall_ms()},
-                                    {"auth_token", owner},
-                                    {"payload", json::Object{{"action", "move"}, {"linear", 0.1}, {"duration_ms", 100}}}});
+    return json::Value(json::Object{
+        {"version", "1.0.0"},
+        {"message_id", id},
+        {"type", "COMMAND"},
+        {"timestamp_ms", real_wall_ms()},
+        {"auth_token", owner},
+        {"payload", json::Object{{"action", "move"}, {"linear", 0.1}, {"duration_ms", 100}}}});
   };
   const std::string a = new_uuid_v4();
   json::Value msg_a = mqtt_cmd(a);
@@ -822,8 +862,12 @@ TEST(BrokerOutage, RobotKeepsServingHttpAndMqttCommandsResumeWithoutRunningTwice
   ASSERT_TRUE(node.proc().wait_for_line("mqtt_disconnected", 10000)) << node.proc().err();
   HttpReply st = node.get("/rcan/v1/status", owner);
   ASSERT_EQ(st.status, 200);
-  EXPECT_EQ(str(parse(st.body), "mode"), "NORMAL");  // a broker is not the issuer: no partition mode
-  EXPECT_EQ(node.post("/rcan/v1/command", command("move", {{"linear", 0.1}, {"duration_ms", 100}}), owner).status, 200);
+  EXPECT_EQ(str(parse(st.body), "mode"),
+            "NORMAL");  // a broker is not the issuer: no partition mode
+  EXPECT_EQ(
+      node.post("/rcan/v1/command", command("move", {{"linear", 0.1}, {"duration_ms", 100}}), owner)
+          .status,
+      200);
   EXPECT_EQ(node.post("/api/stop", "", owner).status, 200);
   EXPECT_TRUE(node.status(owner).get("estop_active")->as_bool());
   HttpReply resume = node.post(
@@ -904,8 +948,8 @@ TEST(IssuerOutage, HungIssuerDegradesToLockdownAndEstopStillWorks) {
   HttpReply claim = node.post("/rcan/v1/auth/claim", "{}", stranger);
   EXPECT_EQ(claim.status, 503);
   EXPECT_EQ(error_code(claim), "LOCKDOWN");
-  HttpReply drive =
-      node.post("/rcan/v1/command", command("move", {{"linear", 0.1}, {"duration_ms", 100}}), stranger);
+  HttpReply drive = node.post("/rcan/v1/command",
+                              command("move", {{"linear", 0.1}, {"duration_ms", 100}}), stranger);
   EXPECT_EQ(drive.status, 503);
   EXPECT_EQ(error_code(drive), "LOCKDOWN");
   // The robot still serves, and a stop is never refused for anything but authentication.
@@ -917,7 +961,8 @@ TEST(IssuerOutage, HungIssuerDegradesToLockdownAndEstopStillWorks) {
   bool estop_tagged = false;
   for (const auto& r : exported(node.data_dir() + "/audit")) {
     const json::Value* d = r.get("detail");
-    if (str(r, "event") == "ESTOP" && d && str(*d, "partition_mode") == "LOCKDOWN") estop_tagged = true;
+    if (str(r, "event") == "ESTOP" && d && str(*d, "partition_mode") == "LOCKDOWN")
+      estop_tagged = true;
   }
   EXPECT_TRUE(estop_tagged) << "the ESTOP record is not tagged for sync (log_for_sync)";
   expect_chain_verifies(node.data_dir() + "/audit", node.secret_file());

@@ -21,11 +21,11 @@
 #include <thread>
 
 #include "config/config.h"
-#include "rcan/mqtt_topics.h"
 #include "rcan/crypto/jwt.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
 #include "rcan/json.h"
+#include "rcan/mqtt_topics.h"
 #include "test_support.h"
 #include "transport/mqtt_client.h"
 
@@ -35,7 +35,8 @@ namespace {
 namespace fs = std::filesystem;
 
 int64_t wall_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
       .count();
 }
 
@@ -67,7 +68,8 @@ uint16_t free_port() {
   return ntohs(a.sin_port);
 }
 
-void write_file(const std::string& path, const std::string& text, fs::perms perms = fs::perms::owner_read | fs::perms::owner_write) {
+void write_file(const std::string& path, const std::string& text,
+                fs::perms perms = fs::perms::owner_read | fs::perms::owner_write) {
   std::ofstream(path) << text;
   fs::permissions(path, perms);
 }
@@ -76,8 +78,9 @@ void write_file(const std::string& path, const std::string& text, fs::perms perm
 class Broker {
  public:
   explicit Broker(const std::string& dir) : dir_(dir), port_(free_port()) {
-    write_file(dir_ + "/mosquitto.conf", "listener " + std::to_string(port_) +
-                                             " 127.0.0.1\nallow_anonymous true\npersistence false\n");
+    write_file(dir_ + "/mosquitto.conf",
+               "listener " + std::to_string(port_) +
+                   " 127.0.0.1\nallow_anonymous true\npersistence false\n");
     start();
   }
   ~Broker() { stop(); }
@@ -117,7 +120,8 @@ class Watcher {
       cv_.notify_all();
     });
     EXPECT_TRUE(client_->start().ok());
-    for (int i = 0; i < 500 && !client_->connected(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    for (int i = 0; i < 500 && !client_->connected(); ++i)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
     EXPECT_TRUE(client_->connected());
     std::this_thread::sleep_for(std::chrono::milliseconds(150));  // subscriptions registered
   }
@@ -158,7 +162,8 @@ class Watcher {
 class Postgres {
  public:
   Postgres() : port_(free_port()) {
-    std::vector<char> tmpl{'/', 't', 'm', 'p', '/', 'r', 'c', 'a', 'n', '-', 'p', 'g', '-', 'X', 'X', 'X', 'X', 'X', 'X', '\0'};
+    std::vector<char> tmpl{'/', 't', 'm', 'p', '/', 'r', 'c', 'a', 'n', '-',
+                           'p', 'g', '-', 'X', 'X', 'X', 'X', 'X', 'X', '\0'};
     dir_ = ::mkdtemp(tmpl.data());
     for (const auto& e : fs::directory_iterator("/usr/lib/postgresql"))
       if (fs::exists(e.path() / "bin/postgres")) bin_ = (e.path() / "bin").string();
@@ -171,11 +176,12 @@ class Postgres {
         as_ = {"/usr/bin/setpriv", "--reuid=postgres", "--regid=postgres", "--init-groups"};
       }
     }
-    auto init = test::run(with_user({bin_ + "/initdb", "-D", dir_ + "/data", "-A", "trust", "-U", "rcan", "--no-sync",
-                                     "-E", "UTF8"}));
+    auto init = test::run(with_user({bin_ + "/initdb", "-D", dir_ + "/data", "-A", "trust", "-U",
+                                     "rcan", "--no-sync", "-E", "UTF8"}));
     EXPECT_EQ(init.exit_code, 0) << init.out << init.err;
-    EXPECT_TRUE(proc_.start(with_user({bin_ + "/postgres", "-D", dir_ + "/data", "-p", std::to_string(port_), "-k", dir_,
-                                       "-c", "listen_addresses=127.0.0.1", "-c", "fsync=off"})));
+    EXPECT_TRUE(proc_.start(
+        with_user({bin_ + "/postgres", "-D", dir_ + "/data", "-p", std::to_string(port_), "-k",
+                   dir_, "-c", "listen_addresses=127.0.0.1", "-c", "fsync=off"})));
     EXPECT_TRUE(proc_.wait_for_line("ready to accept connections", 30000)) << proc_.err();
   }
   ~Postgres() {
@@ -183,7 +189,9 @@ class Postgres {
     std::error_code ec;
     fs::remove_all(dir_, ec);
   }
-  std::string conninfo() const { return "host=127.0.0.1 port=" + std::to_string(port_) + " user=rcan dbname=postgres"; }
+  std::string conninfo() const {
+    return "host=127.0.0.1 port=" + std::to_string(port_) + " user=rcan dbname=postgres";
+  }
   test::RunResult sql(const std::string& statement) const {
     return test::run({bin_ + "/psql", conninfo(), "-v", "ON_ERROR_STOP=1", "-At", "-c", statement});
   }
@@ -202,20 +210,22 @@ class Postgres {
 // One fleet member: its own data directory, keys, chain secret and config.
 class Robot {
  public:
-  Robot(const std::string& root, const std::string& name, const std::string& device, const std::string& broker,
-        const std::string& secret_file, const std::string& extra_yaml = "", const std::string& mqtt_extra = "")
+  Robot(const std::string& root, const std::string& name, const std::string& device,
+        const std::string& broker, const std::string& secret_file,
+        const std::string& extra_yaml = "", const std::string& mqtt_extra = "")
       : dir_(root + "/" + name), name_(name) {
     fs::create_directories(dir_);
     fs::permissions(dir_, fs::perms::owner_all);
     EXPECT_EQ(test::run_cli({"keys", "generate", "--dir", dir_ + "/keys"}).exit_code, 0);
     EXPECT_EQ(test::run_cli({"audit", "new-secret", "--out", dir_ + "/audit.secret"}).exit_code, 0);
     ruri_ = "rcan://local.rcan/rcan/sim-rover/" + device;
-    std::string yaml = "rcan_version: \"1.2\"\nruri: " + ruri_ + "\nnode: {data_dir: " + dir_ +
-                       "}\nsecurity:\n  jwt:\n    issuers: [{issuer: fleet-issuer, key_file: " + secret_file +
-                       ", kind: hs256_secret}]\nmqtt: {enabled: true, broker: \"" + broker +
-                       "\", telemetry_hz: 0, keepalive_s: 5, reconnect: {min_s: 1, max_s: 2}" + mqtt_extra +
-                       "}\nfleet: {fleet_id: alpha, member_id: " + name +
-                       ", robots: [robot-a, robot-b, robot-c]}\n" + extra_yaml;
+    std::string yaml =
+        "rcan_version: \"1.2\"\nruri: " + ruri_ + "\nnode: {data_dir: " + dir_ +
+        "}\nsecurity:\n  jwt:\n    issuers: [{issuer: fleet-issuer, key_file: " + secret_file +
+        ", kind: hs256_secret}]\nmqtt: {enabled: true, broker: \"" + broker +
+        "\", telemetry_hz: 0, keepalive_s: 5, reconnect: {min_s: 1, max_s: 2}" + mqtt_extra +
+        "}\nfleet: {fleet_id: alpha, member_id: " + name +
+        ", robots: [robot-a, robot-b, robot-c]}\n" + extra_yaml;
     write_file(dir_ + "/robot.yaml", yaml);
     start();
   }
@@ -246,7 +256,9 @@ class Robot {
     return parse(r.body);
   }
   std::string audit(const std::string& token) const {
-    return test::http(port_, "GET", "/api/audit?limit=1000", "", {{"Authorization", "Bearer " + token}}).body;
+    return test::http(port_, "GET", "/api/audit?limit=1000", "",
+                      {{"Authorization", "Bearer " + token}})
+        .body;
   }
 
  private:
@@ -270,7 +282,8 @@ class FleetTest : public ::testing::Test {
   }
   // An HS256 token from the fleet issuer, for every sim-rover of the registry; `fleet`
   // lists the members it may command (empty: no fleet claim).
-  std::string token(const std::string& role, std::vector<std::string> fleet, const std::string& sub = "coordinator",
+  std::string token(const std::string& role, std::vector<std::string> fleet,
+                    const std::string& sub = "coordinator",
                     const std::string& aud = "rcan://local.rcan/rcan/sim-rover/*") {
     auto key = jwt::SigningKey::from_file(secret_, true);
     EXPECT_TRUE(key.ok());
@@ -291,10 +304,10 @@ class FleetTest : public ::testing::Test {
     EXPECT_TRUE(t.ok());
     return t.ok() ? *t : "";
   }
-  Robot& add_robot(const std::string& name, const std::string& device, const std::string& extra_yaml = "",
-                   const std::string& mqtt_extra = "") {
-    robots_[name] =
-        std::make_unique<Robot>(tmp_.path(), name, device, broker_->url(), secret_, extra_yaml, mqtt_extra);
+  Robot& add_robot(const std::string& name, const std::string& device,
+                   const std::string& extra_yaml = "", const std::string& mqtt_extra = "") {
+    robots_[name] = std::make_unique<Robot>(tmp_.path(), name, device, broker_->url(), secret_,
+                                            extra_yaml, mqtt_extra);
     return *robots_[name];
   }
   void three_robots(const std::string& extra_yaml = "") {
@@ -340,8 +353,8 @@ class FleetTest : public ::testing::Test {
 
 TEST_F(FleetTest, FleetCommandReachesEveryMemberAndCompletes) {
   three_robots();
-  auto r = fleet({"command", "alpha", "move", "--params", R"({"linear":0.2,"duration_ms":200})", "--members",
-                  "robot-a,robot-b,robot-c", "--wait-complete"});
+  auto r = fleet({"command", "alpha", "move", "--params", R"({"linear":0.2,"duration_ms":200})",
+                  "--members", "robot-a,robot-b,robot-c", "--wait-complete"});
   ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
   json::Value out = parse(r.out);
   for (const char* m : {"robot-a", "robot-b", "robot-c"}) {
@@ -361,7 +374,9 @@ TEST_F(FleetTest, FleetCommandReachesEveryMemberAndCompletes) {
 TEST_F(FleetTest, SequentialChoreographyHonoursWaitFor) {
   three_robots();
   Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/+/reply"});
-  write_file(tmp_.file("seq.json"), R"({"command":"COORDINATED_MOVE","fleet_id":"alpha","targets":["robot-a","robot-b","robot-c"],
+  write_file(
+      tmp_.file("seq.json"),
+      R"({"command":"COORDINATED_MOVE","fleet_id":"alpha","targets":["robot-a","robot-b","robot-c"],
     "choreography":{"type":"sequential","steps":[
       {"robot":"robot-a","action":"move","params":{"linear":0.2,"duration_ms":300}},
       {"robot":"robot-b","action":"move","params":{"x":0,"linear":0.1,"duration_ms":200},"wait_for":"robot-a"},
@@ -376,7 +391,8 @@ TEST_F(FleetTest, SequentialChoreographyHonoursWaitFor) {
     for (size_t i = 0; i < msgs.size(); ++i) {
       if (msgs[i].topic != "rcan/fleet/alpha/robot/" + robot + "/reply") continue;
       std::string t = str_of(msgs[i].body, "type");
-      if ((what == "ACK" && t == "ACK") || (what == "COMPLETED" && payload_str(msgs[i].body, "event") == "COMPLETED"))
+      if ((what == "ACK" && t == "ACK") ||
+          (what == "COMPLETED" && payload_str(msgs[i].body, "event") == "COMPLETED"))
         return static_cast<long>(i);
     }
     return -1L;
@@ -434,15 +450,19 @@ TEST_F(FleetTest, RetainedFleetEstopIsObeyedByALateJoiner) {
   auto r = fleet({"estop", "alpha", "--members", "robot-a,robot-b", "--reason", "test"});
   ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
   for (const char* m : {"robot-a", "robot-b"})
-    EXPECT_NE(json::dump(robots_[m]->status(fleet_token_)).find("\"estop_active\":true"), std::string::npos) << m;
+    EXPECT_NE(json::dump(robots_[m]->status(fleet_token_)).find("\"estop_active\":true"),
+              std::string::npos)
+        << m;
   // robot-c starts after the ESTOP was published: the retained message latches it too.
   Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/robot-c/reply"});
   add_robot("robot-c", "0000000c");
   auto ack = w.wait([](const Watcher::Msg& m) { return str_of(m.body, "type") == "ACK"; });
   ASSERT_TRUE(ack);
-  EXPECT_NE(json::dump(robots_["robot-c"]->status(fleet_token_)).find("\"estop_active\":true"), std::string::npos);
+  EXPECT_NE(json::dump(robots_["robot-c"]->status(fleet_token_)).find("\"estop_active\":true"),
+            std::string::npos);
   // A command is refused while latched.
-  auto c = fleet({"command", "alpha", "move", "--params", R"({"linear":0.1,"duration_ms":100})", "--members", "robot-c"});
+  auto c = fleet({"command", "alpha", "move", "--params", R"({"linear":0.1,"duration_ms":100})",
+                  "--members", "robot-c"});
   EXPECT_EQ(c.exit_code, 1);
   EXPECT_NE(c.out.find("estop_active"), std::string::npos) << c.out;
   // RESUME replaces the retained ESTOP; a robot joining after that is not stopped.
@@ -450,19 +470,21 @@ TEST_F(FleetTest, RetainedFleetEstopIsObeyedByALateJoiner) {
   ASSERT_EQ(res.exit_code, 0) << res.out << res.err;
   robots_["robot-c"]->restart();
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
-  EXPECT_NE(json::dump(robots_["robot-c"]->status(fleet_token_)).find("\"estop_active\":false"), std::string::npos);
+  EXPECT_NE(json::dump(robots_["robot-c"]->status(fleet_token_)).find("\"estop_active\":false"),
+            std::string::npos);
 }
 
 // A fleet ESTOP subscription at QoS 1 (the default: act on the first copy) may see the same
 // ESTOP twice — a redelivery after a reconnect, a publisher's retry. A stop is idempotent and
-// a fresh SAFETY stop is never refused as a replay (src/node/admission/replay.h): the second copy stops
-// the (already stopped) robot again, is answered, and its record says it was a duplicate
+// a fresh SAFETY stop is never refused as a replay (src/node/admission/replay.h): the second copy
+// stops the (already stopped) robot again, is answered, and its record says it was a duplicate
 // (`duplicate_safety_message`). The same at QoS 2 (mqtt.estop_qos: 2).
 TEST_F(FleetTest, FleetEstopDeliveredTwiceIsHarmlessAtEitherQos) {
   add_robot("robot-a", "0000000a");
   add_robot("robot-b", "0000000b", "", ", estop_qos: 2");
   std::string id = new_uuid_v4();
-  json::Value msg = command_msg("SAFETY", json::Object{{"safety_event", "ESTOP"}}, fleet_token_, id);
+  json::Value msg =
+      command_msg("SAFETY", json::Object{{"safety_event", "ESTOP"}}, fleet_token_, id);
   Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/+/reply"});
   w.publish("rcan/fleet/alpha/estop", msg);
   w.publish("rcan/fleet/alpha/estop", msg);  // exactly what an at-least-once redelivery looks like
@@ -473,19 +495,25 @@ TEST_F(FleetTest, FleetEstopDeliveredTwiceIsHarmlessAtEitherQos) {
       if (attempt > 0) std::this_thread::sleep_for(std::chrono::milliseconds(50));
       auto seen = w.all();
       acks = static_cast<int>(std::count_if(seen.begin(), seen.end(), [&](const Watcher::Msg& x) {
-        return x.topic == reply && str_of(x.body, "reply_to") == id && str_of(x.body, "type") == "ACK";
+        return x.topic == reply && str_of(x.body, "reply_to") == id &&
+               str_of(x.body, "type") == "ACK";
       }));
     }
     EXPECT_EQ(acks, 2) << m;
-    EXPECT_NE(json::dump(robots_[m]->status(fleet_token_)).find("\"estop_active\":true"), std::string::npos) << m;
+    EXPECT_NE(json::dump(robots_[m]->status(fleet_token_)).find("\"estop_active\":true"),
+              std::string::npos)
+        << m;
     int first = 0, duplicates = 0;
     json::Value entries = parse(robots_[m]->audit(fleet_token_));
     for (const auto& e : entries.get("entries")->as_array()) {
       if (str_of(e, "message_id") != id || str_of(e, "event") != "ESTOP") continue;
       const json::Value* detail = e.get("detail");
-      const json::Value* dup = detail != nullptr ? detail->get("duplicate_safety_message") : nullptr;
-      if (dup != nullptr && dup->is_bool() && dup->as_bool()) ++duplicates;
-      else ++first;
+      const json::Value* dup =
+          detail != nullptr ? detail->get("duplicate_safety_message") : nullptr;
+      if (dup != nullptr && dup->is_bool() && dup->as_bool())
+        ++duplicates;
+      else
+        ++first;
     }
     EXPECT_EQ(first, 1) << m;
     EXPECT_EQ(duplicates, 1) << m;
@@ -495,21 +523,25 @@ TEST_F(FleetTest, FleetEstopDeliveredTwiceIsHarmlessAtEitherQos) {
 TEST_F(FleetTest, LastWillShowsTheRobotOffline) {
   add_robot("robot-a", "0000000a");
   add_robot("robot-b", "0000000b");
-  Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/robot-a/status", "rcan/fleet/alpha/robot/robot-b/status"});
+  Watcher w(broker_->url(),
+            {"rcan/fleet/alpha/robot/robot-a/status", "rcan/fleet/alpha/robot/robot-b/status"});
   // A graceful stop says so itself (a clean disconnect sends no will).
   EXPECT_EQ(robots_["robot-b"]->proc().stop(SIGTERM, 10000), 0);
   auto gone = w.wait([](const Watcher::Msg& m) {
-    return m.topic == "rcan/fleet/alpha/robot/robot-b/status" && m.body.get("online") && !m.body.get("online")->as_bool();
+    return m.topic == "rcan/fleet/alpha/robot/robot-b/status" && m.body.get("online") &&
+           !m.body.get("online")->as_bool();
   });
   ASSERT_TRUE(gone);
   EXPECT_EQ(str_of(gone->body, "reason"), "shutdown");
   auto online = w.wait([](const Watcher::Msg& m) {
-    return m.topic == "rcan/fleet/alpha/robot/robot-a/status" && m.body.get("online") && m.body.get("online")->as_bool();
+    return m.topic == "rcan/fleet/alpha/robot/robot-a/status" && m.body.get("online") &&
+           m.body.get("online")->as_bool();
   });
   ASSERT_TRUE(online);
   robots_["robot-a"]->kill9();
   auto offline = w.wait([](const Watcher::Msg& m) {
-    return m.topic == "rcan/fleet/alpha/robot/robot-a/status" && m.body.get("online") && !m.body.get("online")->as_bool();
+    return m.topic == "rcan/fleet/alpha/robot/robot-a/status" && m.body.get("online") &&
+           !m.body.get("online")->as_bool();
   });
   ASSERT_TRUE(offline);
   EXPECT_EQ(str_of(offline->body, "reason"), "connection_lost");
@@ -524,8 +556,9 @@ TEST_F(FleetTest, ReconnectAfterBrokerRestartNeverRunsACommandTwice) {
   std::string cmd_topic = "rcan/robot/local.rcan/rcan/sim-rover/0000000a/cmd";
   std::string reply_topic = "rcan/robot/local.rcan/rcan/sim-rover/0000000a/reply";
   std::string id = new_uuid_v4();
-  json::Value msg = command_msg("COMMAND", json::Object{{"action", "move"}, {"linear", 0.1}, {"duration_ms", 100}},
-                                token("owner", {}), id);
+  json::Value msg = command_msg(
+      "COMMAND", json::Object{{"action", "move"}, {"linear", 0.1}, {"duration_ms", 100}},
+      token("owner", {}), id);
   {
     Watcher w(broker_->url(), {reply_topic});
     w.publish(cmd_topic, msg);
@@ -570,7 +603,9 @@ TEST_F(FleetTest, BrokerRestartInTheMiddleOfARunExecutesNoStepTwice) {
       {"robot":"robot-b","action":"move","params":{"linear":0.1,"duration_ms":300},"timeout_ms":8000},
       {"robot":"robot-c","action":"move","params":{"linear":0.1,"duration_ms":300},"timeout_ms":8000}]}})");
   test::RunResult run;
-  std::thread coordinator([&] { run = fleet({"run", tmp_.file("long.json"), "--timeout-ms", "3000"}); });
+  std::thread coordinator([&] {
+    run = fleet({"run", tmp_.file("long.json"), "--timeout-ms", "3000"});
+  });
   // Step 0 (1.5 s of motion) is under way: take the broker away and bring it back.
   std::this_thread::sleep_for(std::chrono::milliseconds(700));
   broker_->stop();
@@ -588,7 +623,8 @@ TEST_F(FleetTest, BrokerRestartInTheMiddleOfARunExecutesNoStepTwice) {
     std::map<int64_t, int> per_step;
     for (const auto& e : entries.get("entries")->as_array()) {
       const json::Value* d = e.get("detail");
-      if (str_of(e, "event") != "COMMAND" || d == nullptr || str_of(*d, "choreography_id") != cid) continue;
+      if (str_of(e, "event") != "COMMAND" || d == nullptr || str_of(*d, "choreography_id") != cid)
+        continue;
       ++per_step[d->get("fleet_step")->as_int()];
     }
     for (auto& [step, n] : per_step) EXPECT_EQ(n, 1) << name << " step " << step;
@@ -608,11 +644,12 @@ TEST_F(FleetTest, FleetJwtIsCheckedPerRobot) {
   std::string partial = token("owner", {"robot-a", "robot-b"});
   std::string id = new_uuid_v4();
   w.publish("rcan/fleet/alpha/cmd",
-            command_msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "alpha"}}, partial, id));
+            command_msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "alpha"}},
+                        partial, id));
   auto reply_of = [&](const std::string& robot, const std::string& mid) {
     return w.wait([&](const Watcher::Msg& m) {
-      return m.topic == "rcan/fleet/alpha/robot/" + robot + "/reply" && str_of(m.body, "reply_to") == mid &&
-             str_of(m.body, "type") != "EVENT";
+      return m.topic == "rcan/fleet/alpha/robot/" + robot + "/reply" &&
+             str_of(m.body, "reply_to") == mid && str_of(m.body, "type") != "EVENT";
     });
   };
   for (const char* m : {"robot-a", "robot-b"}) {
@@ -634,7 +671,8 @@ TEST_F(FleetTest, FleetJwtIsCheckedPerRobot) {
   // …nor name another fleet…
   std::string id3 = new_uuid_v4();
   w.publish("rcan/fleet/alpha/robot/robot-a/cmd",
-            command_msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "beta"}}, fleet_token_, id3));
+            command_msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "beta"}},
+                        fleet_token_, id3));
   auto r3 = reply_of("robot-a", id3);
   ASSERT_TRUE(r3);
   EXPECT_EQ(payload_str(r3->body, "error_code"), "INSUFFICIENT_PRIVILEGES");
@@ -655,25 +693,29 @@ TEST_F(FleetTest, FleetJwtIsCheckedPerRobot) {
               {"rcan://fleet/beta", {"robot-a"}, "AUTH_INVALID"}};
   for (const auto& ac : auds) {
     std::string aid = new_uuid_v4();
-    w.publish("rcan/fleet/alpha/robot/robot-a/cmd",
-              command_msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "alpha"}},
-                          token("owner", ac.fleet, "coordinator", ac.aud), aid));
+    w.publish(
+        "rcan/fleet/alpha/robot/robot-a/cmd",
+        command_msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "alpha"}},
+                    token("owner", ac.fleet, "coordinator", ac.aud), aid));
     auto ar = reply_of("robot-a", aid);
     ASSERT_TRUE(ar) << ac.aud;
-    std::string got = str_of(ar->body, "type") == "ACK" ? "ACK" : payload_str(ar->body, "error_code");
+    std::string got =
+        str_of(ar->body, "type") == "ACK" ? "ACK" : payload_str(ar->body, "error_code");
     EXPECT_EQ(got, ac.expect) << ac.aud << " fleet claim: " << ac.fleet.size();
   }
   // A forged token (wrong secret) is refused everywhere.
   std::string id5 = new_uuid_v4();
   std::string forged = partial.substr(0, partial.rfind('.') + 1) + "AAAA";
-  w.publish("rcan/fleet/alpha/estop", command_msg("SAFETY", json::Object{{"safety_event", "ESTOP"}}, forged, id5));
+  w.publish("rcan/fleet/alpha/estop",
+            command_msg("SAFETY", json::Object{{"safety_event", "ESTOP"}}, forged, id5));
   auto r5 = reply_of("robot-a", id5);
   ASSERT_TRUE(r5);
   EXPECT_EQ(payload_str(r5->body, "error_code"), "AUTH_INVALID");
   // Malformed payloads get the error body, never a crash.
   w.publish("rcan/fleet/alpha/robot/robot-b/cmd", json::Value("not an object"));
   auto bad = w.wait([&](const Watcher::Msg& m) {
-    return m.topic == "rcan/fleet/alpha/robot/robot-b/reply" && payload_str(m.body, "error_code") == "SCHEMA_VALIDATION_FAILED";
+    return m.topic == "rcan/fleet/alpha/robot/robot-b/reply" &&
+           payload_str(m.body, "error_code") == "SCHEMA_VALIDATION_FAILED";
   });
   EXPECT_TRUE(bad);
   EXPECT_TRUE(robots_["robot-b"]->proc().running());
@@ -691,19 +733,24 @@ TEST_F(FleetTest, RobotsNeverPublishTheCommandersToken) {
   std::string forged = fleet_token_.substr(0, fleet_token_.rfind('.') + 1) + "AAAA";
   std::string fleet_id = new_uuid_v4();
   w.publish("rcan/fleet/alpha/cmd",
-            command_msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "alpha"}}, fleet_token_, fleet_id));
+            command_msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "alpha"}},
+                        fleet_token_, fleet_id));
   std::vector<std::pair<std::string, std::string>> waits;  // (robot, message id)
   for (const char* robot : {"robot-a", "robot-b", "robot-c"}) waits.emplace_back(robot, fleet_id);
   for (const std::string& tok : {plain, forged}) {
     std::string id = new_uuid_v4();
-    w.publish("rcan/fleet/alpha/robot/robot-a/cmd", command_msg("COMMAND", json::Object{{"action", "status"}}, tok, id));
+    w.publish("rcan/fleet/alpha/robot/robot-a/cmd",
+              command_msg("COMMAND", json::Object{{"action", "status"}}, tok, id));
     waits.emplace_back("robot-a", id);
   }
   for (const auto& [robot, id] : waits)
     ASSERT_TRUE(w.wait([&](const Watcher::Msg& m) {
-      return m.topic == "rcan/fleet/alpha/robot/" + robot + "/reply" && str_of(m.body, "reply_to") == id;
-    })) << robot << " " << id;
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the audit mirror publishes after the record
+      return m.topic == "rcan/fleet/alpha/robot/" + robot + "/reply" &&
+             str_of(m.body, "reply_to") == id;
+    })) << robot
+        << " " << id;
+  std::this_thread::sleep_for(
+      std::chrono::milliseconds(300));  // the audit mirror publishes after the record
   size_t outbound = 0;
   for (const auto& m : w.all()) {
     bool inbound = m.topic.ends_with("/cmd") || m.topic.ends_with("/estop");
@@ -714,7 +761,8 @@ TEST_F(FleetTest, RobotsNeverPublishTheCommandersToken) {
       EXPECT_EQ(text.find(tok), std::string::npos) << m.topic;
       size_t dot = tok.rfind('.');
       if (dot != std::string::npos && tok.size() - dot > 20) {
-        EXPECT_EQ(text.find(tok.substr(dot + 1)), std::string::npos) << m.topic << ": " << text.substr(0, 300);
+        EXPECT_EQ(text.find(tok.substr(dot + 1)), std::string::npos)
+            << m.topic << ": " << text.substr(0, 300);
       }
     }
   }
@@ -723,48 +771,54 @@ TEST_F(FleetTest, RobotsNeverPublishTheCommandersToken) {
 
 TEST_F(FleetTest, SwarmLeaderFailoverAndJoinPolicy) {
   const std::string swarm =
-      "swarm: {swarm_id: s42, members: [robot-a, robot-b, robot-c], leader: robot-a, formation: follow-leader,"
+      "swarm: {swarm_id: s42, members: [robot-a, robot-b, robot-c], leader: robot-a, formation: "
+      "follow-leader,"
       " join_policy: approval, heartbeat_ms: 100, leader_timeout_ms: 600}\n";
   three_robots(swarm);
   Watcher w(broker_->url(), {"rcan/swarm/s42/announce", "rcan/swarm/s42/join/+"});
-  auto first = w.wait([](const Watcher::Msg& m) { return payload_str(m.body, "leader") == "robot-a"; });
+  auto first =
+      w.wait([](const Watcher::Msg& m) { return payload_str(m.body, "leader") == "robot-a"; });
   ASSERT_TRUE(first);
   EXPECT_EQ(str_of(first->body, "type"), "SWARM_ANNOUNCE");
   EXPECT_EQ(payload_str(first->body, "formation"), "follow-leader");
   EXPECT_EQ(payload_str(first->body, "join_policy"), "approval");
   // Join under the approval policy: pending, then granted by an OWNER's approval.
   std::string jid = new_uuid_v4();
-  w.publish("rcan/swarm/s42/join", json::Value(json::Object{{"type", "SWARM_JOIN"},
-                                                            {"message_id", jid},
-                                                            {"timestamp_ms", wall_ms()},
-                                                            {"auth_token", token("user", {}, "robot-d")},
-                                                            {"payload", json::Object{{"member", "robot-d"}}}}));
+  w.publish("rcan/swarm/s42/join",
+            json::Value(json::Object{{"type", "SWARM_JOIN"},
+                                     {"message_id", jid},
+                                     {"timestamp_ms", wall_ms()},
+                                     {"auth_token", token("user", {}, "robot-d")},
+                                     {"payload", json::Object{{"member", "robot-d"}}}}));
   auto pending = w.wait([&](const Watcher::Msg& m) { return str_of(m.body, "reply_to") == jid; });
   ASSERT_TRUE(pending);
   EXPECT_EQ(str_of(pending->body, "type"), "PENDING_AUTH");
   std::string aid = new_uuid_v4();
-  w.publish("rcan/swarm/s42/join", json::Value(json::Object{{"type", "SWARM_APPROVE"},
-                                                            {"message_id", aid},
-                                                            {"timestamp_ms", wall_ms()},
-                                                            {"auth_token", token("owner", {})},
-                                                            {"payload", json::Object{{"member", "robot-d"}}}}));
+  w.publish("rcan/swarm/s42/join",
+            json::Value(json::Object{{"type", "SWARM_APPROVE"},
+                                     {"message_id", aid},
+                                     {"timestamp_ms", wall_ms()},
+                                     {"auth_token", token("owner", {})},
+                                     {"payload", json::Object{{"member", "robot-d"}}}}));
   auto granted = w.wait([&](const Watcher::Msg& m) { return str_of(m.body, "reply_to") == aid; });
   ASSERT_TRUE(granted);
   EXPECT_EQ(str_of(granted->body, "type"), "GRANTED");
   // A join with a bad token is denied.
   std::string bid = new_uuid_v4();
-  w.publish("rcan/swarm/s42/join", json::Value(json::Object{{"type", "SWARM_JOIN"},
-                                                            {"message_id", bid},
-                                                            {"timestamp_ms", wall_ms()},
-                                                            {"auth_token", "not-a-token"},
-                                                            {"payload", json::Object{{"member", "robot-e"}}}}));
+  w.publish("rcan/swarm/s42/join",
+            json::Value(json::Object{{"type", "SWARM_JOIN"},
+                                     {"message_id", bid},
+                                     {"timestamp_ms", wall_ms()},
+                                     {"auth_token", "not-a-token"},
+                                     {"payload", json::Object{{"member", "robot-e"}}}}));
   auto denied = w.wait([&](const Watcher::Msg& m) { return str_of(m.body, "reply_to") == bid; });
   ASSERT_TRUE(denied);
   EXPECT_EQ(str_of(denied->body, "type"), "DENIED");
   // The leader goes silent: robot-b (first live member in order) takes over and announces.
   robots_["robot-a"]->kill9();
-  auto next = w.wait(
-      [](const Watcher::Msg& m) { return payload_str(m.body, "reason") == "leader_silent"; }, 15000);
+  auto next =
+      w.wait([](const Watcher::Msg& m) { return payload_str(m.body, "reason") == "leader_silent"; },
+             15000);
   ASSERT_TRUE(next);
   EXPECT_EQ(payload_str(next->body, "leader"), "robot-b");
   EXPECT_EQ(payload_str(next->body, "previous_leader"), "robot-a");
@@ -774,7 +828,8 @@ TEST_F(FleetTest, SwarmLeaderFailoverAndJoinPolicy) {
   // The change is audited on the new leader (the record is written just after the announce).
   bool audited = false;
   for (int i = 0; i < 100 && !audited; ++i) {
-    audited = robots_["robot-b"]->audit(fleet_token_).find("SWARM_LEADER_CHANGE") != std::string::npos;
+    audited =
+        robots_["robot-b"]->audit(fleet_token_).find("SWARM_LEADER_CHANGE") != std::string::npos;
     if (!audited) std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   EXPECT_TRUE(audited);
@@ -788,19 +843,21 @@ TEST_F(FleetTest, FleetAuditIntoPostgresCatchesTamperingAndGaps) {
   fs::permissions(tmp_.file("secrets"), fs::perms::owner_all);
   for (auto& [name, robot] : robots_) {
     fs::copy_file(robot->dir() + "/audit.secret", tmp_.file("secrets/" + name + ".secret"));
-    fs::permissions(tmp_.file("secrets/" + name + ".secret"), fs::perms::owner_read | fs::perms::owner_write);
+    fs::permissions(tmp_.file("secrets/" + name + ".secret"),
+                    fs::perms::owner_read | fs::perms::owner_write);
   }
   Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/+/audit"});
   test::RunResult collected;
   std::thread collector([&] {
-    collected = fleet({"audit", "collect", "alpha", "--db", pg.conninfo(), "--secrets-dir", tmp_.file("secrets"),
-                       "--duration-ms", "6000"});
+    collected = fleet({"audit", "collect", "alpha", "--db", pg.conninfo(), "--secrets-dir",
+                       tmp_.file("secrets"), "--duration-ms", "6000"});
   });
   std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // the collector is subscribed
   auto r = fleet({"command", "alpha", "status", "--members", "robot-a,robot-b,robot-c"});
   EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
   auto rec = w.wait([](const Watcher::Msg& m) {
-    return m.topic == "rcan/fleet/alpha/robot/robot-a/audit" && str_of(m.body, "event") == "COMMAND";
+    return m.topic == "rcan/fleet/alpha/robot/robot-a/audit" &&
+           str_of(m.body, "event") == "COMMAND";
   });
   ASSERT_TRUE(rec);
   int64_t seq = rec->body.get("seq")->as_int();
@@ -811,7 +868,8 @@ TEST_F(FleetTest, FleetAuditIntoPostgresCatchesTamperingAndGaps) {
   w.publish("rcan/fleet/alpha/robot/robot-a/audit", json::Value(tampered));
   // 2. A correctly sealed record (with robot-b's own secret) far ahead of its chain: a gap.
   std::string secret = test::read_file(tmp_.file("secrets/robot-b.secret"));
-  auto b_rec = w.wait([](const Watcher::Msg& m) { return m.topic == "rcan/fleet/alpha/robot/robot-b/audit"; });
+  auto b_rec = w.wait(
+      [](const Watcher::Msg& m) { return m.topic == "rcan/fleet/alpha/robot/robot-b/audit"; });
   ASSERT_TRUE(b_rec);
   json::Object gap = b_rec->body.as_object();
   int64_t gap_seq = gap.find("seq")->as_int() + 50;
@@ -828,18 +886,23 @@ TEST_F(FleetTest, FleetAuditIntoPostgresCatchesTamperingAndGaps) {
   EXPECT_NE(b_problems.find("\"gap\""), std::string::npos) << b_problems;
   EXPECT_EQ(json::dump(*out.get("robots")->get("robot-c")->get("problems")), "[]");
   // The database holds the genuine chains (the tampered record is not stored, only flagged).
-  auto stored = pg.sql("SELECT count(*) FROM rcan_fleet_audit WHERE member='robot-a' AND seq=" + std::to_string(seq + 100));
+  auto stored = pg.sql("SELECT count(*) FROM rcan_fleet_audit WHERE member='robot-a' AND seq=" +
+                       std::to_string(seq + 100));
   EXPECT_EQ(stored.out, "0\n") << stored.err;
   auto flagged = pg.sql("SELECT problem FROM rcan_fleet_audit_problems WHERE member='robot-a'");
   EXPECT_NE(flagged.out.find("hmac_mismatch"), std::string::npos) << flagged.out << flagged.err;
   // Re-verification from the database: robot-b's gap is still there…
-  auto v = fleet({"audit", "verify", "--db", pg.conninfo(), "--fleet", "alpha", "--secrets-dir", tmp_.file("secrets")});
+  auto v = fleet({"audit", "verify", "--db", pg.conninfo(), "--fleet", "alpha", "--secrets-dir",
+                  tmp_.file("secrets")});
   EXPECT_EQ(v.exit_code, 1) << v.out << v.err;
   EXPECT_NE(v.out.find("\"gap\""), std::string::npos) << v.out;
   EXPECT_EQ(v.out.find("robot-a"), std::string::npos) << v.out;
   // …and a row altered inside the database after ingest is caught.
-  auto upd = pg.sql("UPDATE rcan_fleet_audit SET line = replace(line, '\"outcome\":\"ok\"', '\"outcome\":\"blocked\"') "
-                    "WHERE member='robot-a' AND seq=" + std::to_string(seq));
+  auto upd = pg.sql(
+      "UPDATE rcan_fleet_audit SET line = replace(line, '\"outcome\":\"ok\"', "
+      "'\"outcome\":\"blocked\"') "
+      "WHERE member='robot-a' AND seq=" +
+      std::to_string(seq));
   EXPECT_EQ(upd.exit_code, 0) << upd.err;
   auto v2 = fleet({"audit", "verify", "--db", pg.conninfo(), "--fleet", "alpha"});
   EXPECT_EQ(v2.exit_code, 1);
@@ -853,8 +916,9 @@ TEST(FleetJwt, FleetAudienceNeedsAFleetClaim) {
   o.fleet_ids = {"robot-a"};
   o.fleet_audiences = {"rcan://fleet/alpha"};
   int64_t now = 1'800'000'000;
-  json::Object base{{"iss", "i"}, {"sub", "s"}, {"role", "owner"}, {"scope", json::Array{"control"}},
-                    {"iat", now}, {"exp", now + 60}};
+  json::Object base{{"iss", "i"},      {"sub", "s"},
+                    {"role", "owner"}, {"scope", json::Array{"control"}},
+                    {"iat", now},      {"exp", now + 60}};
   auto with = [&](const char* aud, bool fleet_claim) {
     json::Object c = base;
     c.set("aud", aud);
@@ -870,12 +934,15 @@ TEST(FleetJwt, FleetAudienceNeedsAFleetClaim) {
 }
 
 TEST(FleetConfig, MqttFleetAndSwarmBlocksAreStrict) {
-  const std::string base = "rcan_version: \"1.2\"\nruri: rcan://local.rcan/rcan/sim-rover/0000000a\nnode: {data_dir: /tmp/x}\n";
-  auto ok = config::parse_config_text(base +
-                                      "mqtt: {enabled: true, broker: \"mqtt://broker.local:1884\"}\n"
-                                      "fleet: {fleet_id: alpha, member_id: robot-a, robots: [robot-a, robot-b],"
-                                      " commands: {broadcast: false}}\n"
-                                      "swarm: {swarm_id: s1, member_id: robot-a, members: [robot-b, robot-a]}\n");
+  const std::string base =
+      "rcan_version: \"1.2\"\nruri: rcan://local.rcan/rcan/sim-rover/0000000a\nnode: {data_dir: "
+      "/tmp/x}\n";
+  auto ok = config::parse_config_text(
+      base +
+      "mqtt: {enabled: true, broker: \"mqtt://broker.local:1884\"}\n"
+      "fleet: {fleet_id: alpha, member_id: robot-a, robots: [robot-a, robot-b],"
+      " commands: {broadcast: false}}\n"
+      "swarm: {swarm_id: s1, member_id: robot-a, members: [robot-b, robot-a]}\n");
   ASSERT_TRUE(ok.ok()) << ok.error().message;
   EXPECT_TRUE(ok->mqtt.enabled);
   EXPECT_EQ(ok->fleet.fleet_id, "alpha");
@@ -892,7 +959,8 @@ TEST(FleetConfig, MqttFleetAndSwarmBlocksAreStrict) {
       {"mqtt: {enabled: true, brokr: x}\n", "mqtt.brokr"},
       {"fleet: {fleet_id: alpha, robots: [a]}\n", "fleet"},
       {"mqtt: {enabled: true}\nfleet: {fleet_id: alpha, robots: [robot-b]}\n", "fleet.robots"},
-      {"mqtt: {enabled: true}\nfleet: {fleet_id: \"al/pha\", robots: [0000000a]}\n", "fleet.fleet_id"},
+      {"mqtt: {enabled: true}\nfleet: {fleet_id: \"al/pha\", robots: [0000000a]}\n",
+       "fleet.fleet_id"},
       {"mqtt: {enabled: true}\nswarm: {swarm_id: s, members: [a], leader: z}\n", "swarm.leader"},
       {"mqtt: {enabled: true}\nswarm: {swarm_id: s, join_policy: maybe}\n", "swarm.join_policy"},
   };

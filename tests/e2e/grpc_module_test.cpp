@@ -29,7 +29,8 @@ struct StartResult {
   int exit_code = -1;
   std::string err;
 };
-StartResult start_configured(const test::TempDir& dir, const std::string& rcand, const std::string& grpc_yaml) {
+StartResult start_configured(const test::TempDir& dir, const std::string& rcand,
+                             const std::string& grpc_yaml) {
   std::string data = dir.file("data");
   fs::create_directories(data);
   EXPECT_EQ(test::run_cli({"keys", "generate", "--dir", data + "/keys"}).exit_code, 0);
@@ -41,11 +42,12 @@ StartResult start_configured(const test::TempDir& dir, const std::string& rcand,
   EXPECT_TRUE(pem.ok());
   std::ofstream(dir.file("issuer.pub.pem")) << *pem;
   std::string cfg = dir.file("robot.rcan.yaml");
-  std::ofstream(cfg) << "rcan_version: \"1.2\"\nruri: rcan://local.rcan/acme/rover/0a1b2c3d\n"
-                     << "robot:\n  name: test-rover\n  manufacturer: acme\n  model: rover\n  type: mobile\n"
-                     << "security:\n  jwt:\n    issuers:\n      - issuer: test.local\n        key_file: "
-                     << dir.file("issuer.pub.pem") << "\n"
-                     << grpc_yaml;
+  std::ofstream(cfg)
+      << "rcan_version: \"1.2\"\nruri: rcan://local.rcan/acme/rover/0a1b2c3d\n"
+      << "robot:\n  name: test-rover\n  manufacturer: acme\n  model: rover\n  type: mobile\n"
+      << "security:\n  jwt:\n    issuers:\n      - issuer: test.local\n        key_file: "
+      << dir.file("issuer.pub.pem") << "\n"
+      << grpc_yaml;
   test::RunResult r = test::run({rcand, "--config", cfg, "--port", "0", "--data-dir", data});
   return {r.exit_code, r.err};
 }
@@ -54,12 +56,14 @@ TEST(GrpcModule, NodeWithoutGrpcMapsNoGrpcProtobufAbslAvahiOrDbus) {
   test::TempDir dir;
   // No D-Bus system bus: mDNS (on in the embedded default) reports itself unavailable and
   // Avahi is never loaded.
-  test::RcandDaemon d(dir.path() + "/node", {}, {"DBUS_SYSTEM_BUS_ADDRESS=unix:path=" + dir.path() + "/no-bus"});
+  test::RcandDaemon d(dir.path() + "/node", {},
+                      {"DBUS_SYSTEM_BUS_ADDRESS=unix:path=" + dir.path() + "/no-bus"});
   ASSERT_NE(d.port(), 0);
   EXPECT_EQ(test::http(d.port(), "GET", "/healthz").status, 200);
   std::string maps = maps_of(d.proc().pid());
   ASSERT_NE(maps.find("libcrypto"), std::string::npos) << maps;  // the maps are the node's
-  for (const char* lib : {"librcand_grpc", "libgrpc", "libprotobuf", "libabsl", "libupb", "libavahi", "libdbus"})
+  for (const char* lib :
+       {"librcand_grpc", "libgrpc", "libprotobuf", "libabsl", "libupb", "libavahi", "libdbus"})
     EXPECT_EQ(maps.find(lib), std::string::npos) << lib << " is mapped:\n" << maps;
   d.proc().drain(200);
   EXPECT_NE(d.proc().err().find("no D-Bus system bus"), std::string::npos) << d.proc().err();
@@ -83,7 +87,8 @@ TEST(GrpcModule, MissingModuleIsAClearStartupError) {
   fs::permissions(rcand, fs::perms::owner_all);
   StartResult r = start_configured(dir, rcand, "grpc:\n  enabled: true\n  port: 0\n");
   EXPECT_EQ(r.exit_code, 1) << r.err;
-  EXPECT_NE(r.err.find("grpc.enabled is true but the gRPC module librcand_grpc.so was not found"), std::string::npos)
+  EXPECT_NE(r.err.find("grpc.enabled is true but the gRPC module librcand_grpc.so was not found"),
+            std::string::npos)
       << r.err;
   EXPECT_NE(r.err.find(dir.file("bin/librcand_grpc.so")), std::string::npos) << r.err;
 
@@ -97,18 +102,22 @@ TEST(GrpcModule, MissingModuleIsAClearStartupError) {
 
 TEST(GrpcModule, ConfiguredModulePathIsUsedAndABadOneRefused) {
   test::TempDir dir;
-  StartResult missing = start_configured(dir, RCAND_PATH,
-                                         "grpc:\n  enabled: true\n  port: 0\n  module: " + dir.file("none.so") + "\n");
+  StartResult missing = start_configured(
+      dir, RCAND_PATH,
+      "grpc:\n  enabled: true\n  port: 0\n  module: " + dir.file("none.so") + "\n");
   EXPECT_EQ(missing.exit_code, 1) << missing.err;
-  EXPECT_NE(missing.err.find("was not found (looked in: " + dir.file("none.so") + ")"), std::string::npos)
+  EXPECT_NE(missing.err.find("was not found (looked in: " + dir.file("none.so") + ")"),
+            std::string::npos)
       << missing.err;
 
   test::TempDir dir2;
   std::ofstream(dir2.file("junk.so")) << "not a shared object\n";
-  StartResult junk = start_configured(dir2, RCAND_PATH,
-                                      "grpc:\n  enabled: true\n  port: 0\n  module: " + dir2.file("junk.so") + "\n");
+  StartResult junk = start_configured(
+      dir2, RCAND_PATH,
+      "grpc:\n  enabled: true\n  port: 0\n  module: " + dir2.file("junk.so") + "\n");
   EXPECT_EQ(junk.exit_code, 1) << junk.err;
-  EXPECT_NE(junk.err.find("cannot load the gRPC module " + dir2.file("junk.so")), std::string::npos) << junk.err;
+  EXPECT_NE(junk.err.find("cannot load the gRPC module " + dir2.file("junk.so")), std::string::npos)
+      << junk.err;
 
   // A shared library that is not an rcand module: libc (this test's own, from its maps).
   std::string self_maps = maps_of(::getpid());
@@ -117,7 +126,8 @@ TEST(GrpcModule, ConfiguredModulePathIsUsedAndABadOneRefused) {
   size_t from = self_maps.rfind(' ', at) + 1;
   std::string libc = self_maps.substr(from, self_maps.find('\n', at) - from);
   test::TempDir dir3;
-  StartResult foreign = start_configured(dir3, RCAND_PATH, "grpc:\n  enabled: true\n  port: 0\n  module: " + libc + "\n");
+  StartResult foreign = start_configured(
+      dir3, RCAND_PATH, "grpc:\n  enabled: true\n  port: 0\n  module: " + libc + "\n");
   EXPECT_EQ(foreign.exit_code, 1) << foreign.err;
   EXPECT_NE(foreign.err.find("is not an rcand gRPC module"), std::string::npos) << foreign.err;
 }

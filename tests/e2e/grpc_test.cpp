@@ -24,11 +24,13 @@ using test::parse_json;
 using v1::RCANMessage;
 
 std::unique_ptr<v1::Rcan::Stub> stub_for(uint16_t port) {
-  auto ch = grpc::CreateChannel("127.0.0.1:" + std::to_string(port), grpc::InsecureChannelCredentials());
+  auto ch =
+      grpc::CreateChannel("127.0.0.1:" + std::to_string(port), grpc::InsecureChannelCredentials());
   return v1::Rcan::NewStub(ch);
 }
 
-RCANMessage command_msg(const std::string& action, json::Object params, const std::string& id = "") {
+RCANMessage command_msg(const std::string& action, json::Object params,
+                        const std::string& id = "") {
   RCANMessage m;
   m.set_version("1.0.0");
   m.set_message_id(id.empty() ? new_uuid_v4() : id);
@@ -41,7 +43,8 @@ RCANMessage command_msg(const std::string& action, json::Object params, const st
   return m;
 }
 
-RCANMessage typed_msg(RCANMessage::MessageType t, json::Object payload, const std::string& id = "") {
+RCANMessage typed_msg(RCANMessage::MessageType t, json::Object payload,
+                      const std::string& id = "") {
   RCANMessage m;
   m.set_version("1.0.0");
   m.set_message_id(id.empty() ? new_uuid_v4() : id);
@@ -83,7 +86,8 @@ class StreamClient {
   }
   bool send(const RCANMessage& m) { return rw_->Write(m); }
   // The next message matching `pred` within timeout_ms (others are kept in `seen`).
-  std::optional<RCANMessage> wait_for(const std::function<bool(const RCANMessage&)>& pred, int timeout_ms) {
+  std::optional<RCANMessage> wait_for(const std::function<bool(const RCANMessage&)>& pred,
+                                      int timeout_ms) {
     std::unique_lock<std::mutex> lock(mu_);
     auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
     while (true) {
@@ -166,7 +170,8 @@ TEST_F(GrpcTest, UnarySendDispatchesThroughThePipelineAndIsAudited) {
 
   bool found = false;
   for (const auto& e : n().audit(owner)) {
-    if (e.get("message_id") && e.get("message_id")->is_string() && e.get("message_id")->as_string() == req.message_id()) {
+    if (e.get("message_id") && e.get("message_id")->is_string() &&
+        e.get("message_id")->as_string() == req.message_id()) {
       found = true;
       EXPECT_EQ(e.get("event")->as_string(), "COMMAND");
       EXPECT_EQ(e.get("outcome")->as_string(), "ok");
@@ -190,7 +195,8 @@ Refusal send_expecting_error(v1::Rcan::Stub& stub, const RCANMessage& m, const s
   if (!token.empty()) ctx.AddMetadata("authorization", "Bearer " + token);
   RCANMessage resp;
   grpc::Status s = stub.Send(&ctx, m, &resp);
-  Refusal r{s.error_code(), trailing(ctx, "rcan-error-code"), trailing(ctx, "rcan-http-status"), {}};
+  Refusal r{
+      s.error_code(), trailing(ctx, "rcan-error-code"), trailing(ctx, "rcan-http-status"), {}};
   EXPECT_FALSE(s.ok());
   EXPECT_TRUE(r.details.ParseFromString(s.error_details()));
   return r;
@@ -208,7 +214,8 @@ TEST_F(GrpcTest, ErrorsMapOntoStatusCodesWithTheProfileBodyAsDetails) {
   EXPECT_EQ(r.details.type(), RCANMessage::ERROR);
   EXPECT_EQ(payload_of(r.details).get("error_code")->as_string(), "AUTH_REQUIRED");
   // A forged token.
-  r = send_expecting_error(*stub, command_msg("move", {{"linear", 0.1}}), owner.substr(0, owner.size() - 4) + "AAAA");
+  r = send_expecting_error(*stub, command_msg("move", {{"linear", 0.1}}),
+                           owner.substr(0, owner.size() - 4) + "AAAA");
   EXPECT_EQ(r.code, grpc::StatusCode::UNAUTHENTICATED);
   EXPECT_EQ(r.rcan_code, "AUTH_INVALID");
   // A guest may not drive.
@@ -283,7 +290,8 @@ TEST_F(GrpcTest, StreamCarriesCommandsAnswersAndSafetyEvents) {
   EXPECT_EQ(err->type(), RCANMessage::ERROR);
   EXPECT_EQ(payload_of(*err).get("error_code")->as_string(), "MALFORMED_JSON");
   // ESTOP over the stream: ACK, and the event pushed to the stream.
-  RCANMessage estop = typed_msg(RCANMessage::SAFETY_MESSAGE, {{"safety_event", "ESTOP"}, {"reason", "grpc test"}});
+  RCANMessage estop =
+      typed_msg(RCANMessage::SAFETY_MESSAGE, {{"safety_event", "ESTOP"}, {"reason", "grpc test"}});
   ASSERT_TRUE(s.send(estop));
   auto estop_ack = s.reply_to(estop.message_id());
   ASSERT_TRUE(estop_ack.has_value());
@@ -349,33 +357,35 @@ TEST(GrpcConvert, EveryErrorCodeHasAStatusAndMessagesConvertBothWays) {
     ErrorCode code;
     grpc::StatusCode want;
   };
-  for (const Row& r : std::vector<Row>{{ErrorCode::kMalformedJson, grpc::INVALID_ARGUMENT},
-                                       {ErrorCode::kSchemaValidationFailed, grpc::INVALID_ARGUMENT},
-                                       {ErrorCode::kInvalidRuri, grpc::INVALID_ARGUMENT},
-                                       {ErrorCode::kVersionIncompatible, grpc::INVALID_ARGUMENT},
-                                       {ErrorCode::kMissingDelegationChain, grpc::INVALID_ARGUMENT},
-                                       {ErrorCode::kAuthRequired, grpc::UNAUTHENTICATED},
-                                       {ErrorCode::kAuthInvalid, grpc::UNAUTHENTICATED},
-                                       {ErrorCode::kSessionExpired, grpc::UNAUTHENTICATED},
-                                       {ErrorCode::kSignatureInvalid, grpc::UNAUTHENTICATED},
-                                       {ErrorCode::kInsufficientPrivileges, grpc::PERMISSION_DENIED},
-                                       {ErrorCode::kConfidenceGateFail, grpc::PERMISSION_DENIED},
-                                       {ErrorCode::kHitlDenied, grpc::PERMISSION_DENIED},
-                                       {ErrorCode::kNotFound, grpc::NOT_FOUND},
-                                       {ErrorCode::kMethodNotAllowed, grpc::UNIMPLEMENTED},
-                                       {ErrorCode::kNotImplemented, grpc::UNIMPLEMENTED},
-                                       {ErrorCode::kMessageStale, grpc::DEADLINE_EXCEEDED},
-                                       {ErrorCode::kHitlTimeout, grpc::DEADLINE_EXCEEDED},
-                                       {ErrorCode::kReplayDetected, grpc::ALREADY_EXISTS},
-                                       {ErrorCode::kControlConflict, grpc::ABORTED},
-                                       {ErrorCode::kBodyTooLarge, grpc::RESOURCE_EXHAUSTED},
-                                       {ErrorCode::kRateLimited, grpc::RESOURCE_EXHAUSTED},
-                                       {ErrorCode::kCommandRejected, grpc::FAILED_PRECONDITION},
-                                       {ErrorCode::kInternal, grpc::INTERNAL},
-                                       {ErrorCode::kSafeStop, grpc::UNAVAILABLE},
-                                       {ErrorCode::kLockdown, grpc::UNAVAILABLE},
-                                       {ErrorCode::kAuditUnavailable, grpc::UNAVAILABLE}}) {
-    EXPECT_EQ(grpc_status_code(error_name(r.code), http_status(r.code)), r.want) << error_name(r.code);
+  for (const Row& r :
+       std::vector<Row>{{ErrorCode::kMalformedJson, grpc::INVALID_ARGUMENT},
+                        {ErrorCode::kSchemaValidationFailed, grpc::INVALID_ARGUMENT},
+                        {ErrorCode::kInvalidRuri, grpc::INVALID_ARGUMENT},
+                        {ErrorCode::kVersionIncompatible, grpc::INVALID_ARGUMENT},
+                        {ErrorCode::kMissingDelegationChain, grpc::INVALID_ARGUMENT},
+                        {ErrorCode::kAuthRequired, grpc::UNAUTHENTICATED},
+                        {ErrorCode::kAuthInvalid, grpc::UNAUTHENTICATED},
+                        {ErrorCode::kSessionExpired, grpc::UNAUTHENTICATED},
+                        {ErrorCode::kSignatureInvalid, grpc::UNAUTHENTICATED},
+                        {ErrorCode::kInsufficientPrivileges, grpc::PERMISSION_DENIED},
+                        {ErrorCode::kConfidenceGateFail, grpc::PERMISSION_DENIED},
+                        {ErrorCode::kHitlDenied, grpc::PERMISSION_DENIED},
+                        {ErrorCode::kNotFound, grpc::NOT_FOUND},
+                        {ErrorCode::kMethodNotAllowed, grpc::UNIMPLEMENTED},
+                        {ErrorCode::kNotImplemented, grpc::UNIMPLEMENTED},
+                        {ErrorCode::kMessageStale, grpc::DEADLINE_EXCEEDED},
+                        {ErrorCode::kHitlTimeout, grpc::DEADLINE_EXCEEDED},
+                        {ErrorCode::kReplayDetected, grpc::ALREADY_EXISTS},
+                        {ErrorCode::kControlConflict, grpc::ABORTED},
+                        {ErrorCode::kBodyTooLarge, grpc::RESOURCE_EXHAUSTED},
+                        {ErrorCode::kRateLimited, grpc::RESOURCE_EXHAUSTED},
+                        {ErrorCode::kCommandRejected, grpc::FAILED_PRECONDITION},
+                        {ErrorCode::kInternal, grpc::INTERNAL},
+                        {ErrorCode::kSafeStop, grpc::UNAVAILABLE},
+                        {ErrorCode::kLockdown, grpc::UNAVAILABLE},
+                        {ErrorCode::kAuditUnavailable, grpc::UNAVAILABLE}}) {
+    EXPECT_EQ(grpc_status_code(error_name(r.code), http_status(r.code)), r.want)
+        << error_name(r.code);
     // The HTTP fallback agrees wherever the HTTP status alone is unambiguous.
     int http = http_status(r.code);
     if (http != 409 && http != 405 && http != 501 && http != 500) {
@@ -404,11 +414,13 @@ TEST(GrpcConvert, EveryErrorCodeHasAStatusAndMessagesConvertBothWays) {
   EXPECT_EQ(sj->get("type")->as_string(), "SAFETY");
   EXPECT_EQ(sj->get("priority")->as_string(), "SAFETY");
   RCANMessage back;
-  transport::json_to_grpc(json::Value(json::Object{{"type", "EVENT"}, {"event", "ESTOP"}, {"timestamp_ms", 5}}), back);
+  transport::json_to_grpc(
+      json::Value(json::Object{{"type", "EVENT"}, {"event", "ESTOP"}, {"timestamp_ms", 5}}), back);
   EXPECT_EQ(back.type(), RCANMessage::EVENT);
   EXPECT_EQ(back.timestamp_ms(), 5);
   EXPECT_EQ(payload_of(back).get("event")->as_string(), "ESTOP");
-  transport::json_to_grpc(json::Value(json::Object{{"type", "CONNECT_ACK"}, {"role", "OWNER"}}), back);
+  transport::json_to_grpc(json::Value(json::Object{{"type", "CONNECT_ACK"}, {"role", "OWNER"}}),
+                          back);
   EXPECT_EQ(back.type(), RCANMessage::EVENT);
   EXPECT_EQ(payload_of(back).get("type")->as_string(), "CONNECT_ACK");
 }
@@ -416,19 +428,21 @@ TEST(GrpcConvert, EveryErrorCodeHasAStatusAndMessagesConvertBothWays) {
 TEST(GrpcTls, TlsFromConfigAndPlaintextClientsRefused) {
   test::TempDir certs;
   auto gen = test::run({"/usr/bin/openssl", "req", "-x509", "-newkey", "ec", "-pkeyopt",
-                        "ec_paramgen_curve:prime256v1", "-nodes", "-keyout", certs.file("key.pem"), "-out",
-                        certs.file("cert.pem"), "-days", "1", "-subj", "/CN=localhost", "-addext",
-                        "subjectAltName=DNS:localhost,IP:127.0.0.1"});
+                        "ec_paramgen_curve:prime256v1", "-nodes", "-keyout", certs.file("key.pem"),
+                        "-out", certs.file("cert.pem"), "-days", "1", "-subj", "/CN=localhost",
+                        "-addext", "subjectAltName=DNS:localhost,IP:127.0.0.1"});
   ASSERT_EQ(gen.exit_code, 0) << gen.err;
-  ConfiguredNode node("grpc:\n  enabled: true\n  port: 0\n  tls:\n    enabled: true\n    cert_file: " +
-                          certs.file("cert.pem") + "\n    key_file: " + certs.file("key.pem") + "\n",
-                      2000, /*transports=*/false);
+  ConfiguredNode node(
+      "grpc:\n  enabled: true\n  port: 0\n  tls:\n    enabled: true\n    cert_file: " +
+          certs.file("cert.pem") + "\n    key_file: " + certs.file("key.pem") + "\n",
+      2000, /*transports=*/false);
   ASSERT_NE(node.grpc_port(), 0) << node.proc().err();
   EXPECT_NE(node.proc().err().find("\"tls\":true"), std::string::npos);
   std::string owner = node.token("owner", {"status"});
   grpc::SslCredentialsOptions so;
   so.pem_root_certs = test::read_file(certs.file("cert.pem"));
-  auto ch = grpc::CreateChannel("127.0.0.1:" + std::to_string(node.grpc_port()), grpc::SslCredentials(so));
+  auto ch = grpc::CreateChannel("127.0.0.1:" + std::to_string(node.grpc_port()),
+                                grpc::SslCredentials(so));
   auto stub = v1::Rcan::NewStub(ch);
   {
     grpc::ClientContext ctx;
@@ -452,7 +466,8 @@ TEST(GrpcTls, TlsFromConfigAndPlaintextClientsRefused) {
   size_t start = 0;
   while (start < err.size()) {
     size_t end = err.find('\n', start);
-    std::string line = err.substr(start, end == std::string::npos ? std::string::npos : end - start);
+    std::string line =
+        err.substr(start, end == std::string::npos ? std::string::npos : end - start);
     if (!line.empty()) {
       EXPECT_EQ(line[0], '{') << line;
     }
@@ -502,7 +517,8 @@ TEST(GrpcRobustness, ClientsVanishingMidStreamLeaveTheNodeServingAndItStopsClean
 }
 
 TEST(GrpcLimits, StreamsBeyondMaxStreamsAreRefused) {
-  ConfiguredNode node("grpc:\n  enabled: true\n  port: 0\n  max_streams: 1\n", 2000, /*transports=*/false);
+  ConfiguredNode node("grpc:\n  enabled: true\n  port: 0\n  max_streams: 1\n", 2000,
+                      /*transports=*/false);
   ASSERT_NE(node.grpc_port(), 0) << node.proc().err();
   std::string owner = node.token("owner", {"status"});
   auto stub = stub_for(node.grpc_port());
@@ -548,16 +564,17 @@ struct Step {
 };
 
 std::vector<Step> sequence() {
-  return {{"cmd", "move", {{"linear", 0.2}, {"duration_ms", 200}}},
-          {"status", "", {}},
-          {"heartbeat", "", {}},
-          {"cmd", "chat", {{"text", "hello"}}},
-          {"cmd", "move", {{"linear", 5.0}, {"duration_ms", 100}}},  // clamped
-          {"cmd", "arm_move", {{"joints", json::Array{9.0, 0, 0, 0, 0, 0}}}},  // out of range: rejected
-          {"replay", "", {}},
-          {"estop", "", {}},
-          {"cmd", "move", {{"linear", 0.1}, {"duration_ms", 100}}},  // refused: latched
-          {"resume", "", {}}};
+  return {
+      {"cmd", "move", {{"linear", 0.2}, {"duration_ms", 200}}},
+      {"status", "", {}},
+      {"heartbeat", "", {}},
+      {"cmd", "chat", {{"text", "hello"}}},
+      {"cmd", "move", {{"linear", 5.0}, {"duration_ms", 100}}},            // clamped
+      {"cmd", "arm_move", {{"joints", json::Array{9.0, 0, 0, 0, 0, 0}}}},  // out of range: rejected
+      {"replay", "", {}},
+      {"estop", "", {}},
+      {"cmd", "move", {{"linear", 0.1}, {"duration_ms", 100}}},  // refused: latched
+      {"resume", "", {}}};
 }
 
 json::Object message_json(const Step& st, const std::string& id, const std::string& replay_id) {
@@ -593,7 +610,8 @@ RCANMessage to_proto(const json::Object& m) {
   RCANMessage p;
   p.set_version(m.find("version")->as_string());
   p.set_message_id(m.find("message_id")->as_string());
-  p.set_type(static_cast<RCANMessage::MessageType>(transport::grpc_type_from_name(m.find("type")->as_string())));
+  p.set_type(static_cast<RCANMessage::MessageType>(
+      transport::grpc_type_from_name(m.find("type")->as_string())));
   p.set_payload(json::dump(*m.find("payload")));
   p.set_timestamp_ms(m.find("timestamp_ms")->as_int());
   if (m.find("priority")) p.set_priority(RCANMessage::SAFETY);
@@ -601,7 +619,8 @@ RCANMessage to_proto(const json::Object& m) {
 }
 
 // The records of `ids`, in chain order, without the fields that legitimately differ.
-std::vector<json::Value> normalised(const std::vector<json::Value>& records, const std::vector<std::string>& ids) {
+std::vector<json::Value> normalised(const std::vector<json::Value>& records,
+                                    const std::vector<std::string>& ids) {
   std::set<std::string> want(ids.begin(), ids.end());
   std::vector<json::Value> out;
   for (const auto& r : records) {
@@ -609,13 +628,16 @@ std::vector<json::Value> normalised(const std::vector<json::Value>& records, con
     if (!id || !id->is_string() || !want.count(id->as_string())) continue;
     json::Value c = r;
     auto& o = c.as_object();
-    size_t index = static_cast<size_t>(std::find(ids.begin(), ids.end(), id->as_string()) - ids.begin());
+    size_t index =
+        static_cast<size_t>(std::find(ids.begin(), ids.end(), id->as_string()) - ids.begin());
     o.set("message_id", "#" + std::to_string(index));
-    for (const char* k : {"seq", "prev_hash", "hmac", "timestamp_ms", "watermark_token"}) o.erase(k);
+    for (const char* k : {"seq", "prev_hash", "hmac", "timestamp_ms", "watermark_token"})
+      o.erase(k);
     if (json::Value* d = c.get("detail"); d && d->is_object()) {
       d->as_object().erase("transport");
       d->as_object().erase("route");
-      for (const char* k : {"latency_us", "stop_latency_us", "elapsed_ms", "duration_us"}) d->as_object().erase(k);
+      for (const char* k : {"latency_us", "stop_latency_us", "elapsed_ms", "duration_us"})
+        d->as_object().erase(k);
     }
     out.push_back(std::move(c));
   }
@@ -625,7 +647,8 @@ std::vector<json::Value> normalised(const std::vector<json::Value>& records, con
 TEST(GrpcAuditParity, SameSequenceOverGrpcAndWebSocketGivesTheSameAuditRecords) {
   ConfiguredNode node;
   ASSERT_NE(node.grpc_port(), 0) << node.proc().err();
-  std::string owner = node.token("owner", {"control", "status", "chat", "config"}, "parity-operator");
+  std::string owner =
+      node.token("owner", {"control", "status", "chat", "config"}, "parity-operator");
 
   auto run = [&](bool over_grpc) -> std::vector<std::string> {
     std::vector<std::string> ids;
@@ -677,7 +700,8 @@ TEST(GrpcAuditParity, SameSequenceOverGrpcAndWebSocketGivesTheSameAuditRecords) 
   std::vector<json::Value> b = normalised(records, ws_ids);
   ASSERT_GE(a.size(), sequence().size()) << "records for the gRPC run";
   ASSERT_EQ(a.size(), b.size());
-  for (size_t i = 0; i < a.size(); ++i) EXPECT_EQ(json::dump(a[i]), json::dump(b[i])) << "record " << i;
+  for (size_t i = 0; i < a.size(); ++i)
+    EXPECT_EQ(json::dump(a[i]), json::dump(b[i])) << "record " << i;
   // And the transports really differed.
   size_t grpc_records = 0, ws_records = 0;
   for (const auto& r : records) {
@@ -688,8 +712,8 @@ TEST(GrpcAuditParity, SameSequenceOverGrpcAndWebSocketGivesTheSameAuditRecords) 
   }
   EXPECT_GE(grpc_records, a.size());
   EXPECT_GE(ws_records, b.size());
-  std::printf("audit parity: %zu records per run identical apart from transport fields; e.g. %s\n", a.size(),
-              json::dump(a.front()).c_str());
+  std::printf("audit parity: %zu records per run identical apart from transport fields; e.g. %s\n",
+              a.size(), json::dump(a.front()).c_str());
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -700,14 +724,15 @@ TEST(GrpcPython, PythonGrpcioClientDrivesSendAndStream) {
     GTEST_SKIP() << "no /usr/bin/python3";
   }
   auto probe = test::run({"/usr/bin/python3", "-c", "import grpc, google.protobuf"});
-  ASSERT_EQ(probe.exit_code, 0) << "python3-grpcio / python3-protobuf missing (scripts/install-deps.sh): "
-                                << probe.err;
+  ASSERT_EQ(probe.exit_code, 0)
+      << "python3-grpcio / python3-protobuf missing (scripts/install-deps.sh): " << probe.err;
   ConfiguredNode node;
   ASSERT_NE(node.grpc_port(), 0) << node.proc().err();
   std::string owner = node.token("owner", {"control", "status"}, "python-client");
   test::TempDir gen;
-  auto pc = test::run({"/usr/bin/protoc", std::string("-I") + RCAN_PROTO_DIR, "--python_out=" + gen.path(),
-                       "--grpc_out=" + gen.path(), "--plugin=protoc-gen-grpc=/usr/bin/grpc_python_plugin",
+  auto pc = test::run({"/usr/bin/protoc", std::string("-I") + RCAN_PROTO_DIR,
+                       "--python_out=" + gen.path(), "--grpc_out=" + gen.path(),
+                       "--plugin=protoc-gen-grpc=/usr/bin/grpc_python_plugin",
                        std::string(RCAN_PROTO_DIR) + "/rcan.proto"});
   ASSERT_EQ(pc.exit_code, 0) << pc.err;
   auto r = test::run({"/usr/bin/python3", std::string(RCAN_PY_DIR) + "/grpc_client.py", gen.path(),
@@ -724,8 +749,8 @@ TEST(GrpcPython, PythonGrpcioClientDrivesSendAndStream) {
   bool found = false;
   for (const auto& e : node.audit(owner)) {
     const json::Value* d = e.get("detail");
-    if (e.get("sub") && e.get("sub")->is_string() && e.get("sub")->as_string() == "python-client" && d &&
-        d->get("transport") && d->get("transport")->as_string() == "grpc")
+    if (e.get("sub") && e.get("sub")->is_string() && e.get("sub")->as_string() == "python-client" &&
+        d && d->get("transport") && d->get("transport")->as_string() == "grpc")
       found = true;
   }
   EXPECT_TRUE(found);

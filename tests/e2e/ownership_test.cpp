@@ -44,7 +44,9 @@ class OwnershipE2E : public ::testing::Test {
     auto r = n().get("/rcan/v1/status");
     json::Value v = parse_json(r.body);
     const json::Value* m = v.get("mode");
-    return m != nullptr && m->is_string() ? m->as_string() : "(no mode: " + std::to_string(r.status) + " " + r.body + ")";
+    return m != nullptr && m->is_string()
+               ? m->as_string()
+               : "(no mode: " + std::to_string(r.status) + " " + r.body + ")";
   }
   test::TempDir dir_;
   std::unique_ptr<ConfiguredNode> node_;
@@ -63,10 +65,18 @@ TEST_F(OwnershipE2E, LeaseExpiryMidCommandRevokesEverythingDerivedFromIt) {
   EXPECT_EQ(out.status, 409);
   EXPECT_NE(out.body.find("leased"), std::string::npos) << out.body;
   std::string lee_file = write_token(dir_.file("lee.token"), leasee);
-  EXPECT_EQ(cli({"lease", "allow", lease_id, "--user", "u-in-lease", "--role", "owner"}, lee_file).exit_code, 1);
-  ASSERT_EQ(cli({"lease", "allow", lease_id, "--user", "u-in-lease", "--role", "user", "--duration", "1h"}, lee_file).exit_code,
+  EXPECT_EQ(cli({"lease", "allow", lease_id, "--user", "u-in-lease", "--role", "owner"}, lee_file)
+                .exit_code,
+            1);
+  ASSERT_EQ(cli({"lease", "allow", lease_id, "--user", "u-in-lease", "--role", "user", "--duration",
+                 "1h"},
+                lee_file)
+                .exit_code,
             0);
-  EXPECT_EQ(cli({"lease", "allow", lease_id, "--user", "x"}, write_token(dir_.file("out.token"), outsider)).exit_code, 1);
+  EXPECT_EQ(cli({"lease", "allow", lease_id, "--user", "x"},
+                write_token(dir_.file("out.token"), outsider))
+                .exit_code,
+            1);
   auto list = cli({"lease", "list"}, lee_file);
   ASSERT_EQ(list.exit_code, 0) << list.err;
   json::Value leases = parse_json(list.out);
@@ -86,16 +96,20 @@ TEST_F(OwnershipE2E, LeaseExpiryMidCommandRevokesEverythingDerivedFromIt) {
   EXPECT_EQ(g.get("payload")->get("role")->as_string(), "LEASEE");
   EXPECT_LE(g.get("payload")->get("expires_in")->as_int(), 3);
   // A long drive is under way when the lease ends.
-  ASSERT_EQ(n().post("/rcan/v1/command", test::command_msg("move", {{"linear", 0.3}, {"duration_ms", 5000}}), leasee).status,
+  ASSERT_EQ(n().post("/rcan/v1/command",
+                     test::command_msg("move", {{"linear", 0.3}, {"duration_ms", 5000}}), leasee)
+                .status,
             200);
   auto revoked = ls.wait_for("SESSION_REVOKED", 8000);
   ASSERT_TRUE(revoked.has_value());
-  EXPECT_EQ(revoked->get("session_id")->as_string(), g.get("payload")->get("session_id")->as_string());
+  EXPECT_EQ(revoked->get("session_id")->as_string(),
+            g.get("payload")->get("session_id")->as_string());
   ASSERT_TRUE(ConfiguredNode::eventually([&] {
     json::Value st = parse_json(n().get("/rcan/v1/status", owner_).body);
     return st.get("robot")->get("robot")->get("base")->get("linear_mps")->to_double() == 0.0;
   }));
-  HttpReply after = n().post("/rcan/v1/command", test::command_msg("move", {{"linear", 0.1}}), leasee);
+  HttpReply after =
+      n().post("/rcan/v1/command", test::command_msg("move", {{"linear", 0.1}}), leasee);
   EXPECT_EQ(after.status, 401);
   EXPECT_EQ(test::error_code_of(after), "SESSION_EXPIRED");
   EXPECT_FALSE(n().audit_eventually("LEASE_ENDED", owner_).empty());
@@ -107,16 +121,18 @@ TEST_F(OwnershipE2E, LeaseExpiryMidCommandRevokesEverythingDerivedFromIt) {
   std::string id2 = parse_json(g2.out).get("lease_id")->as_string();
   EXPECT_EQ(cli({"lease", "revoke", id2}, lee_file).exit_code, 1);  // only an OWNER revokes
   EXPECT_EQ(cli({"lease", "revoke", id2}, owner_file_).exit_code, 0);
-  EXPECT_EQ(parse_json(cli({"lease", "list"}, owner_file_).out).get("leases")->as_array().size(), 0u);
+  EXPECT_EQ(parse_json(cli({"lease", "list"}, owner_file_).out).get("leases")->as_array().size(),
+            0u);
 }
 
 TEST_F(OwnershipE2E, TransferAcceptedClearsPersonalDataKeepsTheChainAndCapsTheFormerOwner) {
   start();
-  std::string bob = n().token("owner", "bob", {"control", "config", "status"}), eve = n().token("owner", "eve"),
-              user = n().token("user", "someone");
+  std::string bob = n().token("owner", "bob", {"control", "config", "status"}),
+              eve = n().token("owner", "eve"), user = n().token("user", "someone");
   std::string bob_file = write_token(dir_.file("bob.token"), bob);
   ASSERT_EQ(n().post("/rcan/v1/auth/claim", "{}", user).status, 200);
-  ASSERT_EQ(cli({"lease", "grant", "--leasee", "lee", "--duration", "1h"}, owner_file_).exit_code, 0);
+  ASSERT_EQ(cli({"lease", "grant", "--leasee", "lee", "--duration", "1h"}, owner_file_).exit_code,
+            0);
   test::Stream us(n().port(), user);
   auto req = cli({"transfer", "request", "--to", "bob", "--note", "sold"}, owner_file_);
   ASSERT_EQ(req.exit_code, 0) << req.out << req.err;
@@ -126,7 +142,10 @@ TEST_F(OwnershipE2E, TransferAcceptedClearsPersonalDataKeepsTheChainAndCapsTheFo
   json::Value sv = parse_json(st.out);
   EXPECT_EQ(sv.get("state")->as_string(), "TRANSFER_PENDING");
   EXPECT_EQ(sv.get("pending")->get("to")->as_string(), "bob");
-  EXPECT_EQ(cli({"transfer", "accept", tid, "--agreement", "x"}, write_token(dir_.file("eve.token"), eve)).exit_code, 1);
+  EXPECT_EQ(
+      cli({"transfer", "accept", tid, "--agreement", "x"}, write_token(dir_.file("eve.token"), eve))
+          .exit_code,
+      1);
   auto acc = cli({"transfer", "accept", tid, "--agreement", "invoice-42"}, bob_file);
   ASSERT_EQ(acc.exit_code, 0) << acc.out << acc.err;
   json::Value av = parse_json(acc.out);
@@ -168,20 +187,24 @@ TEST_F(OwnershipE2E, TransferCancelAndATransferAcceptedAfterExpiryChangesNothing
   auto r1 = cli({"transfer", "request", "--to", "bob"}, owner_file_);
   ASSERT_EQ(r1.exit_code, 0) << r1.out;
   EXPECT_EQ(cli({"transfer", "cancel"}, owner_file_).exit_code, 0);
-  EXPECT_EQ(parse_json(cli({"transfer", "status"}, owner_file_).out).get("state")->as_string(), "OWNED");
+  EXPECT_EQ(parse_json(cli({"transfer", "status"}, owner_file_).out).get("state")->as_string(),
+            "OWNED");
   EXPECT_FALSE(n().audit("TRANSFER_CANCEL", owner_).empty());
   auto r2 = cli({"transfer", "request", "--to", "bob"}, owner_file_);
   ASSERT_EQ(r2.exit_code, 0);
   std::string tid = parse_json(r2.out).get("transfer_id")->as_string();
-  ASSERT_TRUE(ConfiguredNode::eventually([&] { return !n().audit("TRANSFER_EXPIRED", owner_).empty(); }, 5000));
-  HttpReply late = n().post("/rcan/v1/transfer",
-                            "{\"action\":\"accept\",\"transfer_id\":\"" + tid + "\",\"agreement\":\"paid\"}", bob);
+  ASSERT_TRUE(ConfiguredNode::eventually(
+      [&] { return !n().audit("TRANSFER_EXPIRED", owner_).empty(); }, 5000));
+  HttpReply late = n().post(
+      "/rcan/v1/transfer",
+      "{\"action\":\"accept\",\"transfer_id\":\"" + tid + "\",\"agreement\":\"paid\"}", bob);
   EXPECT_EQ(late.status, 404) << late.body;  // the expired transfer is gone
   json::Value st = parse_json(n().get("/rcan/v1/transfer", owner_).body);
   EXPECT_EQ(st.get("state")->as_string(), "OWNED");
   EXPECT_TRUE(st.get("owner")->is_null());
   // The owner still acts as the owner.
-  EXPECT_EQ(cli({"lease", "grant", "--leasee", "lee", "--duration", "10m"}, owner_file_).exit_code, 0);
+  EXPECT_EQ(cli({"lease", "grant", "--leasee", "lee", "--duration", "10m"}, owner_file_).exit_code,
+            0);
 }
 
 TEST_F(OwnershipE2E, ConsentFromACloudFunctionNotifiesTheOwnerWithItsIdentity) {
@@ -189,8 +212,9 @@ TEST_F(OwnershipE2E, ConsentFromACloudFunctionNotifiesTheOwnerWithItsIdentity) {
   ASSERT_TRUE(hook.start());
   start("control:\n  consent_webhook: " + hook.url("/notify") + "\n");
   test::Stream os(n().port(), owner_);
-  std::string fn = n().token("user", "firebase-cloud-functions", {"control"}, 3600,
-                             json::Object{{"sender_type", "cloud_function"}, {"cloud_provider", "firebase"}});
+  std::string fn =
+      n().token("user", "firebase-cloud-functions", {"control"}, 3600,
+                json::Object{{"sender_type", "cloud_function"}, {"cloud_provider", "firebase"}});
   json::Object msg{{"type", "CONSENT_REQUEST"},
                    {"sender_type", "cloud_function"},
                    {"cloud_provider", "firebase"},
@@ -203,17 +227,21 @@ TEST_F(OwnershipE2E, ConsentFromACloudFunctionNotifiesTheOwnerWithItsIdentity) {
   json::Value rv = parse_json(r.body);
   std::string cid = rv.get("consent_id")->as_string();
   const std::string body =
-      "Firebase function 'castor-bridge-v2' (on behalf of Craig) is requesting\naccess to Robot B with scope: [control]";
+      "Firebase function 'castor-bridge-v2' (on behalf of Craig) is requesting\naccess to Robot B "
+      "with scope: [control]";
   auto ev = os.wait_for("CONSENT_REQUEST");
   ASSERT_TRUE(ev.has_value());
-  EXPECT_EQ(ev->get("notification")->get("title")->as_string(), "\xE2\x9A\xA0\xEF\xB8\x8F Service Consent Request");
+  EXPECT_EQ(ev->get("notification")->get("title")->as_string(),
+            "\xE2\x9A\xA0\xEF\xB8\x8F Service Consent Request");
   EXPECT_EQ(ev->get("notification")->get("body")->as_string(), body);
-  EXPECT_EQ(ev->get("notification")->get("highlight")->as_string(), "cloud_function: castor-bridge-v2 via firebase");
+  EXPECT_EQ(ev->get("notification")->get("highlight")->as_string(),
+            "cloud_function: castor-bridge-v2 via firebase");
   ASSERT_TRUE(ConfiguredNode::eventually([&] { return !hook.bodies().empty(); }));
   json::Value posted = parse_json(hook.bodies()[0]);
   EXPECT_EQ(posted.get("body")->as_string(), body);
   EXPECT_EQ(posted.get("highlight")->as_string(), "cloud_function: castor-bridge-v2 via firebase");
-  ASSERT_TRUE(ConfiguredNode::eventually([&] { return !n().audit("CONSENT_NOTIFIED", owner_).empty(); }));
+  ASSERT_TRUE(
+      ConfiguredNode::eventually([&] { return !n().audit("CONSENT_NOTIFIED", owner_).empty(); }));
   // A cloud function cannot pass itself off as one without its identity.
   json::Object bad = msg;
   bad.erase("function_name");
@@ -229,16 +257,19 @@ TEST_F(OwnershipE2E, ConsentFromACloudFunctionNotifiesTheOwnerWithItsIdentity) {
   EXPECT_EQ(gv.get("status")->as_string(), "GRANTED");
   json::Value leases = parse_json(n().get("/rcan/v1/leases", owner_).body);
   ASSERT_EQ(leases.get("leases")->as_array().size(), 1u);
-  EXPECT_EQ(leases.get("leases")->as_array()[0].get("leasee")->as_string(), "firebase-cloud-functions");
+  EXPECT_EQ(leases.get("leases")->as_array()[0].get("leasee")->as_string(),
+            "firebase-cloud-functions");
   EXPECT_EQ(cli({"consent", "grant", cid}, owner_file_).exit_code, 1);  // decided once
   std::string craig = n().token("user", "Craig", {"control"});
-  HttpReply hr = n().post("/rcan/v1/consent", "{\"payload\":{\"scopes\":[\"status\",\"chat\"]}}", craig);
+  HttpReply hr =
+      n().post("/rcan/v1/consent", "{\"payload\":{\"scopes\":[\"status\",\"chat\"]}}", craig);
   ASSERT_EQ(hr.status, 202) << hr.body;
   json::Value hv = parse_json(hr.body);
   EXPECT_EQ(hv.get("notification")->get("title")->as_string(), "Consent Request");
   EXPECT_EQ(hv.get("notification")->get("body")->as_string(),
             "Craig is requesting access to Robot B with scope: [status, chat]");
-  auto deny = cli({"consent", "deny", hv.get("consent_id")->as_string(), "--reason", "not today"}, owner_file_);
+  auto deny = cli({"consent", "deny", hv.get("consent_id")->as_string(), "--reason", "not today"},
+                  owner_file_);
   ASSERT_EQ(deny.exit_code, 0) << deny.out;
   EXPECT_EQ(parse_json(deny.out).get("status")->as_string(), "DENIED");
   // Audited with the sender identity.
@@ -252,7 +283,8 @@ TEST_F(OwnershipE2E, ConsentFromACloudFunctionNotifiesTheOwnerWithItsIdentity) {
   ASSERT_EQ(granted.size(), 1u);
   EXPECT_EQ(granted[0].get("detail")->get("requester_sender_type")->as_string(), "cloud_function");
   EXPECT_EQ(n().audit("CONSENT_DENIED", owner_).size(), 1u);
-  EXPECT_GE(n().audit_eventually("CONSENT_REFUSED", owner_, 2).size(), 2u);  // the bad request and the non-owner's grant
+  EXPECT_GE(n().audit_eventually("CONSENT_REFUSED", owner_, 2).size(),
+            2u);  // the bad request and the non-owner's grant
 }
 
 TEST_F(OwnershipE2E, PartitionEnteringAndLeavingOfflineAutonomousAndLockdown) {
@@ -275,7 +307,8 @@ TEST_F(OwnershipE2E, PartitionEnteringAndLeavingOfflineAutonomousAndLockdown) {
   EXPECT_EQ(cb.status, 503);
   EXPECT_EQ(test::error_code_of(cb), "LOCKDOWN");
   HttpReply drive = n().post("/rcan/v1/command", test::command_msg("move", {{"linear", 0.1}}), b);
-  EXPECT_EQ(drive.status, 503);  // no session-less control for a principal the node cannot vouch for
+  EXPECT_EQ(drive.status,
+            503);  // no session-less control for a principal the node cannot vouch for
   EXPECT_EQ(test::error_code_of(drive), "LOCKDOWN");
   HttpReply ca2 = n().post("/rcan/v1/auth/claim", "{}", a);
   ASSERT_EQ(ca2.status, 200) << ca2.body;  // continues with cached credentials
@@ -285,7 +318,10 @@ TEST_F(OwnershipE2E, PartitionEnteringAndLeavingOfflineAutonomousAndLockdown) {
   EXPECT_TRUE(claims.back().get("detail")->get("sync_pending")->as_bool());
   // The cache runs out: LOCKDOWN. The existing session is kept; no new ones.
   ASSERT_TRUE(ConfiguredNode::eventually([&] { return mode() == "LOCKDOWN"; }, 8000));
-  EXPECT_EQ(n().post("/rcan/v1/command", test::command_msg("move", {{"linear", 0.1}, {"duration_ms", 100}}), a).status, 200);
+  EXPECT_EQ(n().post("/rcan/v1/command",
+                     test::command_msg("move", {{"linear", 0.1}, {"duration_ms", 100}}), a)
+                .status,
+            200);
   EXPECT_EQ(n().post("/rcan/v1/auth/claim", "{}", b).status, 503);
   json::Value st = parse_json(n().get("/rcan/v1/status", owner_).body);
   EXPECT_EQ(st.get("partition")->get("issuer_reachable")->as_bool(), false);
@@ -293,7 +329,8 @@ TEST_F(OwnershipE2E, PartitionEnteringAndLeavingOfflineAutonomousAndLockdown) {
   test::TinyHttpServer again;
   ASSERT_TRUE(again.start(issuer_port));
   ASSERT_TRUE(ConfiguredNode::eventually([&] { return mode() == "NORMAL"; }));
-  EXPECT_EQ(n().post("/rcan/v1/auth/claim", "{}", b).status, 409);  // a's session still holds: plain conflict
+  EXPECT_EQ(n().post("/rcan/v1/auth/claim", "{}", b).status,
+            409);  // a's session still holds: plain conflict
   auto modes = n().audit_eventually("PARTITION_MODE", owner_, 3);
   ASSERT_GE(modes.size(), 3u);
   EXPECT_EQ(modes[modes.size() - 3].get("detail")->get("to")->as_string(), "OFFLINE_AUTONOMOUS");
@@ -304,14 +341,16 @@ TEST_F(OwnershipE2E, PartitionEnteringAndLeavingOfflineAutonomousAndLockdown) {
 TEST_F(OwnershipE2E, LeasesTransferConsentAndTheCredentialCacheSurviveARestart) {
   test::TinyHttpServer issuer;
   ASSERT_TRUE(issuer.start());
-  start("offline:\n  issuer_url: " + issuer.url("/jwks.json") + "\n  issuer_poll_ms: 100\n  max_key_ttl_s: 600\n");
+  start("offline:\n  issuer_url: " + issuer.url("/jwks.json") +
+        "\n  issuer_poll_ms: 100\n  max_key_ttl_s: 600\n");
   std::string a = n().token("user", "known");
   ASSERT_EQ(n().post("/rcan/v1/auth/claim", "{}", a).status, 200);
   auto lease = cli({"lease", "grant", "--leasee", "known", "--duration", "1h"}, owner_file_);
   ASSERT_EQ(lease.exit_code, 0);
   std::string lease_id = parse_json(lease.out).get("lease_id")->as_string();
   ASSERT_EQ(cli({"transfer", "request", "--to", "bob"}, owner_file_).exit_code, 0);
-  HttpReply cr = n().post("/rcan/v1/consent", "{\"payload\":{\"scopes\":[\"control\"]}}", n().token("user", "asker"));
+  HttpReply cr = n().post("/rcan/v1/consent", "{\"payload\":{\"scopes\":[\"control\"]}}",
+                          n().token("user", "asker"));
   ASSERT_EQ(cr.status, 202);
   std::string cid = parse_json(cr.body).get("consent_id")->as_string();
   EXPECT_EQ(n().stop(), 0);

@@ -33,7 +33,8 @@ using test::HttpReply;
 using Headers = std::vector<std::pair<std::string, std::string>>;
 
 int64_t now_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
       .count();
 }
 
@@ -53,11 +54,11 @@ std::string slurp_tree(const std::string& dir) {
   return all;
 }
 
-std::string cmd_json(const std::string& id, const std::string& action, const std::string& extra_payload = "",
-                     const std::string& extra_top = "") {
+std::string cmd_json(const std::string& id, const std::string& action,
+                     const std::string& extra_payload = "", const std::string& extra_top = "") {
   return R"({"version":"1.0.0","message_id":")" + id + R"(","type":"COMMAND","timestamp_ms":)" +
-         std::to_string(now_ms()) + R"(,"payload":{"action":")" + action + "\"" + extra_payload + "}" + extra_top +
-         "}";
+         std::to_string(now_ms()) + R"(,"payload":{"action":")" + action + "\"" + extra_payload +
+         "}" + extra_top + "}";
 }
 
 std::string code_of(const HttpReply& r) {
@@ -117,11 +118,11 @@ TEST(Security, NoOpenModeEveryRouteThatActsOrRevealsNeedsAVerifiedToken) {
   const std::string forged = forged_token(d.ruri());
   const std::string good = d.token("owner", {"status", "control", "config"}, "owner-1");
   // alg "none" with the claims of an OWNER.
-  const std::string none_tok =
-      b64url(R"({"alg":"none","typ":"JWT"})") + "." +
-      b64url(R"({"iss":"rcand-local","sub":"x","aud":")" + d.ruri() + R"(","role":"owner","scope":["control"],"exp":)" +
-             std::to_string(now_ms() / 1000 + 600) + "}") +
-      ".";
+  const std::string none_tok = b64url(R"({"alg":"none","typ":"JWT"})") + "." +
+                               b64url(R"({"iss":"rcand-local","sub":"x","aud":")" + d.ruri() +
+                                      R"(","role":"owner","scope":["control"],"exp":)" +
+                                      std::to_string(now_ms() / 1000 + 600) + "}") +
+                               ".";
   struct Route {
     const char* method;
     std::string path;
@@ -146,15 +147,18 @@ TEST(Security, NoOpenModeEveryRouteThatActsOrRevealsNeedsAVerifiedToken) {
   };
   for (const auto& r : routes) {
     for (const std::string& tok : {std::string(), forged, none_tok, std::string("not-a-jwt")}) {
-      HttpReply a = test::http(d.port(), r.method, r.path, r.body(), tok.empty() ? Headers{} : bearer(tok));
-      EXPECT_EQ(a.status, 401) << r.method << " " << r.path << " token " << tok.substr(0, 16) << ": " << a.body;
+      HttpReply a =
+          test::http(d.port(), r.method, r.path, r.body(), tok.empty() ? Headers{} : bearer(tok));
+      EXPECT_EQ(a.status, 401) << r.method << " " << r.path << " token " << tok.substr(0, 16)
+                               << ": " << a.body;
       EXPECT_TRUE(code_of(a) == "AUTH_REQUIRED" || code_of(a) == "AUTH_INVALID")
           << r.method << " " << r.path << ": " << a.body;
     }
   }
   // The body's auth_token is a token like any other: a forged one is refused too.
-  HttpReply body_forged = test::http(d.port(), "POST", "/rcan/v1/command",
-                                     cmd_json(new_uuid_v4(), "status", "", R"(,"auth_token":")" + forged + "\""));
+  HttpReply body_forged =
+      test::http(d.port(), "POST", "/rcan/v1/command",
+                 cmd_json(new_uuid_v4(), "status", "", R"(,"auth_token":")" + forged + "\""));
   EXPECT_EQ(body_forged.status, 401) << body_forged.body;
   // Streams: no CONNECT token, a forged one, and the v1.1 telemetry socket without a token.
   for (const std::string& tok : {std::string(), forged}) {
@@ -204,8 +208,13 @@ TEST(Security, EveryNodeGeneratesItsOwnSecretsPrivateAndNotCompiledIn) {
     auto a_key = jwt::SigningKey::from_file(a_dir + "/issuer/ed25519.seed");
     ASSERT_TRUE(a_key.ok());
     int64_t now = now_ms() / 1000;
-    auto cross = jwt::issue(json::Object{{"iss", "rcand-local"}, {"sub", "x"}, {"aud", b.ruri()}, {"role", "owner"},
-                                         {"scope", json::Array{"status"}}, {"iat", now}, {"exp", now + 600}},
+    auto cross = jwt::issue(json::Object{{"iss", "rcand-local"},
+                                         {"sub", "x"},
+                                         {"aud", b.ruri()},
+                                         {"role", "owner"},
+                                         {"scope", json::Array{"status"}},
+                                         {"iat", now},
+                                         {"exp", now + 600}},
                             *a_key);
     ASSERT_TRUE(cross.ok());
     EXPECT_EQ(test::http(b.port(), "GET", "/api/audit", "", bearer(*cross)).status, 401);
@@ -224,11 +233,13 @@ TEST(Security, EveryNodeGeneratesItsOwnSecretsPrivateAndNotCompiledIn) {
     EXPECT_NE(a_bytes, b_bytes) << s << " is the same on two fresh nodes";
     // Not a compiled-in value (raw bytes, or as hex).
     EXPECT_EQ(rcand_binary.find(a_bytes), std::string::npos) << s << " appears in the rcand binary";
-    EXPECT_EQ(rcand_binary.find(to_hex(reinterpret_cast<const uint8_t*>(a_bytes.data()), std::min<size_t>(a_bytes.size(), 32))),
+    EXPECT_EQ(rcand_binary.find(to_hex(reinterpret_cast<const uint8_t*>(a_bytes.data()),
+                                       std::min<size_t>(a_bytes.size(), 32))),
               std::string::npos)
         << s;
     // Not a degenerate value.
-    EXPECT_NE(a_bytes.find_first_not_of(a_bytes[0]), std::string::npos) << s << " is one repeated byte";
+    EXPECT_NE(a_bytes.find_first_not_of(a_bytes[0]), std::string::npos)
+        << s << " is one repeated byte";
     // Mode 0600: nothing for group or others.
     struct stat st {};
     ASSERT_EQ(::stat((a_dir + "/" + s).c_str(), &st), 0) << s;
@@ -242,8 +253,8 @@ TEST(Security, EveryNodeGeneratesItsOwnSecretsPrivateAndNotCompiledIn) {
   // A secret that became readable by others stops start-up, naming the file; so does a
   // world-readable issuer seed.
   for (const std::string& s : {std::string("audit.secret"), std::string("issuer/ed25519.seed")}) {
-    fs::permissions(a_dir + "/" + s, fs::perms::owner_read | fs::perms::owner_write | fs::perms::group_read |
-                                         fs::perms::others_read);
+    fs::permissions(a_dir + "/" + s, fs::perms::owner_read | fs::perms::owner_write |
+                                         fs::perms::group_read | fs::perms::others_read);
     test::Process p;
     ASSERT_TRUE(p.start({RCAND_PATH, "--data-dir", a_dir, "--port", "0"}));
     EXPECT_EQ(p.stop(0, 15000), 1) << s << ":\n" << p.err();
@@ -276,21 +287,25 @@ TEST(Security, TokensNeverReachTheLogTheAuditFilesOrErrorBodiesAndAreNotTakenFro
   };
 
   EXPECT_EQ(keep(test::http(d.port(), "POST", "/rcan/v1/command",
-                            cmd_json(new_uuid_v4(), "move", R"(,"linear":0.1,"duration_ms":100)"), bearer(header_tok)))
+                            cmd_json(new_uuid_v4(), "move", R"(,"linear":0.1,"duration_ms":100)"),
+                            bearer(header_tok)))
                 .status,
             200);
-  EXPECT_EQ(keep(test::http(d.port(), "POST", "/rcan/v1/command",
-                            cmd_json(new_uuid_v4(), "status", "", R"(,"auth_token":")" + body_tok + "\"")))
+  EXPECT_EQ(keep(test::http(
+                     d.port(), "POST", "/rcan/v1/command",
+                     cmd_json(new_uuid_v4(), "status", "", R"(,"auth_token":")" + body_tok + "\"")))
                 .status,
             200);
-  EXPECT_EQ(keep(test::http(d.port(), "POST", "/rcan/v1/command", cmd_json(new_uuid_v4(), "status"), bearer(broken)))
+  EXPECT_EQ(keep(test::http(d.port(), "POST", "/rcan/v1/command", cmd_json(new_uuid_v4(), "status"),
+                            bearer(broken)))
                 .status,
             401);
   EXPECT_EQ(keep(test::http(d.port(), "GET", "/rcan/v1/status", "", bearer(broken))).status, 401);
   // A bad message with a good token: the error names the problem, not the token.
-  EXPECT_EQ(keep(test::http(d.port(), "POST", "/rcan/v1/command", R"({"type":"COMMAND","payload":{"action":7}})",
-                            bearer(header_tok)))
-                .status / 100,
+  EXPECT_EQ(keep(test::http(d.port(), "POST", "/rcan/v1/command",
+                            R"({"type":"COMMAND","payload":{"action":7}})", bearer(header_tok)))
+                    .status /
+                100,
             4);
   // A token in the query string is not a credential for HTTP routes.
   HttpReply q = keep(test::http(d.port(), "GET", "/api/audit?token=" + query_tok));
@@ -298,7 +313,8 @@ TEST(Security, TokensNeverReachTheLogTheAuditFilesOrErrorBodiesAndAreNotTakenFro
   HttpReply q2 = keep(test::http(d.port(), "POST", "/rcan/v1/command?token=" + query_tok,
                                  cmd_json(new_uuid_v4(), "status")));
   EXPECT_EQ(q2.status, 401) << q2.body;
-  // The stream's CONNECT token, a refused CONNECT token and the v1.1 telemetry socket's query token.
+  // The stream's CONNECT token, a refused CONNECT token and the v1.1 telemetry socket's query
+  // token.
   {
     test::WsClient ws;
     ASSERT_EQ(ws.connect(d.port(), "/rcan/v1/stream"), 101);
@@ -330,7 +346,8 @@ TEST(Security, TokensNeverReachTheLogTheAuditFilesOrErrorBodiesAndAreNotTakenFro
   // The audit export as the owner sees it.
   HttpReply exported = test::http(d.port(), "GET", "/api/v1/audit?format=jsonl", "", bearer(owner));
   ASSERT_EQ(exported.status, 200) << exported.body;
-  EXPECT_NE(exported.body.find("header-user"), std::string::npos) << "the export does not show the callers";
+  EXPECT_NE(exported.body.find("header-user"), std::string::npos)
+      << "the export does not show the callers";
   EXPECT_NE(exported.body.find("body-user"), std::string::npos);
   EXPECT_NE(exported.body.find("ws-user"), std::string::npos);
 
@@ -341,7 +358,8 @@ TEST(Security, TokensNeverReachTheLogTheAuditFilesOrErrorBodiesAndAreNotTakenFro
   ASSERT_FALSE(files.empty());
   std::string all_bodies;
   for (auto& b : bodies) all_bodies += b + "\n";
-  for (const std::string& t : {owner, header_tok, body_tok, ws_tok, query_tok, url_ws_tok, broken}) {
+  for (const std::string& t :
+       {owner, header_tok, body_tok, ws_tok, query_tok, url_ws_tok, broken}) {
     EXPECT_EQ(leak_of(log, t), "") << "a token in rcand's log";
     EXPECT_EQ(leak_of(files, t), "") << "a token in the audit files";
     EXPECT_EQ(leak_of(exported.body, t), "") << "a token in the audit export";
@@ -396,7 +414,8 @@ TEST(Security, DashboardCarriesNoTokenOrSecretAndTheNodeSendsNoCorsGrant) {
       test::http(d.port(), "GET", "/rcan/v1/status", "", evil),
       test::http(d.port(), "GET", "/rcan/v1/status", "", evil_auth),
       test::http(d.port(), "GET", "/", "", evil),
-      test::http(d.port(), "POST", "/rcan/v1/command", cmd_json(new_uuid_v4(), "status"), evil_auth),
+      test::http(d.port(), "POST", "/rcan/v1/command", cmd_json(new_uuid_v4(), "status"),
+                 evil_auth),
       test::http(d.port(), "OPTIONS", "/rcan/v1/command", "",
                  {{"Origin", "http://evil.example"},
                   {"Access-Control-Request-Method", "POST"},
@@ -404,7 +423,8 @@ TEST(Security, DashboardCarriesNoTokenOrSecretAndTheNodeSendsNoCorsGrant) {
   };
   for (const auto& r : answers) {
     ASSERT_NE(r.status, 0);
-    for (const auto& h : r.headers) EXPECT_NE(h.first.rfind("access-control-", 0), 0u) << h.first << ": " << h.second;
+    for (const auto& h : r.headers)
+      EXPECT_NE(h.first.rfind("access-control-", 0), 0u) << h.first << ": " << h.second;
   }
   EXPECT_GE(answers.back().status, 400) << "a preflight must not succeed";
 }
@@ -424,9 +444,11 @@ TEST(Security, SignaturesAreVerifiedNeverTakenOnTrust) {
   // A well-formed Ed25519 signature by a key the node does not trust, on a plain command and on
   // one claiming to come from a robot; then the same with the payload changed after signing.
   auto signed_by_stranger = [&](bool robot, bool tamper) {
-    auto v = json::parse(cmd_json(new_uuid_v4(), "move", R"(,"linear":0.2,"duration_ms":100)",
-                                  robot ? R"(,"sender_type":"robot","source_ruri":"rcan://local.rcan/acme/peer/0a0b0c0d")" + chain
-                                        : std::string()));
+    auto v = json::parse(cmd_json(
+        new_uuid_v4(), "move", R"(,"linear":0.2,"duration_ms":100)",
+        robot ? R"(,"sender_type":"robot","source_ruri":"rcan://local.rcan/acme/peer/0a0b0c0d")" +
+                    chain
+              : std::string()));
     json::Object m = v->as_object();
     Bytes seed = ed25519::random_seed();
     EXPECT_TRUE(msgsig::sign_ed25519(m, seed).ok());
@@ -439,35 +461,41 @@ TEST(Security, SignaturesAreVerifiedNeverTakenOnTrust) {
   };
   for (bool robot : {false, true}) {
     for (bool tamper : {false, true}) {
-      HttpReply r = test::http(d.port(), "POST", "/rcan/v1/command", signed_by_stranger(robot, tamper), bearer(tok));
+      HttpReply r = test::http(d.port(), "POST", "/rcan/v1/command",
+                               signed_by_stranger(robot, tamper), bearer(tok));
       EXPECT_EQ(r.status, 401) << "robot " << robot << " tamper " << tamper << ": " << r.body;
       EXPECT_EQ(code_of(r), "SIGNATURE_INVALID") << r.body;
     }
   }
   // A sig block that is not a signature at all.
-  HttpReply junk = test::http(d.port(), "POST", "/rcan/v1/command",
-                              cmd_json(new_uuid_v4(), "status", "", R"(,"sig":{"alg":"ed25519","kid":"00000000","value":"AAAA"})"),
-                              bearer(tok));
+  HttpReply junk =
+      test::http(d.port(), "POST", "/rcan/v1/command",
+                 cmd_json(new_uuid_v4(), "status", "",
+                          R"(,"sig":{"alg":"ed25519","kid":"00000000","value":"AAAA"})"),
+                 bearer(tok));
   EXPECT_EQ(junk.status / 100, 4) << junk.body;
   EXPECT_NE(junk.status, 200);
   // Signature-looking headers on an unsigned robot claim: headers are never credentials.
   Headers sig_headers{{"X-RCAN-Signature", "ed25519=" + std::string(86, 'A')},
                       {"Signature", "keyId=\"peer\",signature=\"AAAA\""},
                       {"X-Robot-Key", "trusted"}};
-  HttpReply no_token = test::http(d.port(), "POST", "/rcan/v1/command",
-                                  cmd_json(new_uuid_v4(), "status", "", R"(,"sender_type":"robot")"), sig_headers);
+  HttpReply no_token =
+      test::http(d.port(), "POST", "/rcan/v1/command",
+                 cmd_json(new_uuid_v4(), "status", "", R"(,"sender_type":"robot")"), sig_headers);
   EXPECT_EQ(no_token.status, 401) << no_token.body;
   Headers with_token = sig_headers;
   with_token.emplace_back("Authorization", "Bearer " + tok);
-  HttpReply robot_claim = test::http(d.port(), "POST", "/rcan/v1/command",
-                                     cmd_json(new_uuid_v4(), "move", R"(,"linear":0.2,"duration_ms":100)",
-                                              R"(,"sender_type":"robot")" + chain),
-                                     with_token);
+  HttpReply robot_claim =
+      test::http(d.port(), "POST", "/rcan/v1/command",
+                 cmd_json(new_uuid_v4(), "move", R"(,"linear":0.2,"duration_ms":100)",
+                          R"(,"sender_type":"robot")" + chain),
+                 with_token);
   EXPECT_NE(robot_claim.status, 200) << robot_claim.body;
   EXPECT_TRUE(robot_claim.status == 401 || robot_claim.status == 403) << robot_claim.body;
   // The same command without the robot claim is accepted: the refusals above were the signature's.
-  HttpReply plain = test::http(d.port(), "POST", "/rcan/v1/command",
-                               cmd_json(new_uuid_v4(), "move", R"(,"linear":0.2,"duration_ms":100)"), bearer(tok));
+  HttpReply plain = test::http(
+      d.port(), "POST", "/rcan/v1/command",
+      cmd_json(new_uuid_v4(), "move", R"(,"linear":0.2,"duration_ms":100)"), bearer(tok));
   EXPECT_EQ(plain.status, 200) << plain.body;
 }
 
@@ -478,21 +506,25 @@ TEST(Security, TheRoleComesFromTheVerifiedTokenNeverFromTheMessageOrHeaders) {
   ASSERT_NE(d.port(), 0);
   const std::string guest = d.token("guest", {"status"}, "guest-1");
   const std::string user = d.token("user", {"status", "control"}, "user-1");
-  Headers claims{{"X-RCAN-Role", "owner"}, {"X-Forwarded-User", "owner-1"}, {"X-Real-IP", "127.0.0.1"}};
-  const std::string self_promotion = R"(,"role":"creator","rcan_role":5,"principal":"owner-1","scope":["control"])";
+  Headers claims{
+      {"X-RCAN-Role", "owner"}, {"X-Forwarded-User", "owner-1"}, {"X-Real-IP", "127.0.0.1"}};
+  const std::string self_promotion =
+      R"(,"role":"creator","rcan_role":5,"principal":"owner-1","scope":["control"])";
   // A GUEST may not drive, whatever it says about itself.
   Headers g = claims;
   g.emplace_back("Authorization", "Bearer " + guest);
-  HttpReply drive = test::http(d.port(), "POST", "/rcan/v1/command",
-                               cmd_json(new_uuid_v4(), "move", R"(,"linear":0.2,"duration_ms":100)", self_promotion), g);
+  HttpReply drive = test::http(
+      d.port(), "POST", "/rcan/v1/command",
+      cmd_json(new_uuid_v4(), "move", R"(,"linear":0.2,"duration_ms":100)", self_promotion), g);
   EXPECT_EQ(drive.status, 403) << drive.body;
   // A USER may not clear an ESTOP (LEASEE or above), whatever it says about itself.
   ASSERT_EQ(test::http(d.port(), "POST", "/api/stop", "{}", bearer(user)).status, 200);
   Headers u = claims;
   u.emplace_back("Authorization", "Bearer " + user);
-  std::string resume = R"({"version":"1.0.0","message_id":")" + new_uuid_v4() + R"(","type":"SAFETY","timestamp_ms":)" +
-                       std::to_string(now_ms()) + R"(,"payload":{"safety_event":"RESUME","role":"owner"})" +
-                       self_promotion + "}";
+  std::string resume = R"({"version":"1.0.0","message_id":")" + new_uuid_v4() +
+                       R"(","type":"SAFETY","timestamp_ms":)" + std::to_string(now_ms()) +
+                       R"(,"payload":{"safety_event":"RESUME","role":"owner"})" + self_promotion +
+                       "}";
   HttpReply r = test::http(d.port(), "POST", "/rcan/v1/command", resume, u);
   EXPECT_EQ(r.status, 403) << r.body;
   EXPECT_EQ(code_of(r), "INSUFFICIENT_PRIVILEGES") << r.body;
@@ -550,7 +582,9 @@ class CaptureServer {
     thread_.join();
     ::close(fd_);
   }
-  std::string url(const std::string& path) const { return "http://127.0.0.1:" + std::to_string(port_) + path; }
+  std::string url(const std::string& path) const {
+    return "http://127.0.0.1:" + std::to_string(port_) + path;
+  }
   std::string all() {
     std::lock_guard<std::mutex> l(mu_);
     std::string s;
@@ -586,7 +620,8 @@ class CaptureServer {
         size_t he = req.find("\r\n\r\n");
         if (he != std::string::npos) {
           std::string lower = req.substr(0, he);
-          std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char ch) { return std::tolower(ch); });
+          std::transform(lower.begin(), lower.end(), lower.begin(),
+                         [](unsigned char ch) { return std::tolower(ch); });
           size_t cl = lower.find("content-length: ");
           size_t want = cl == std::string::npos ? 0 : std::stoul(lower.substr(cl + 16));
           if (req.size() >= he + 4 + want) break;
@@ -620,9 +655,12 @@ TEST(Security, LayerCallsWebhooksAndOtherStreamsNeverCarryTheCallersToken) {
       "      require_auth: true\n"
       "      auth_timeout_ms: 60000\n"
       "      on_timeout: block\n"
-      "      notify: [ws, \"" + cap.url("/hook") + "\"]\n"
+      "      notify: [ws, \"" +
+      cap.url("/hook") +
+      "\"]\n"
       "  layers:\n"
-      "    planner: {url: \"" + cap.url("/planner") + "\", timeout_ms: 5000}\n";
+      "    planner: {url: \"" +
+      cap.url("/planner") + "\", timeout_ms: 5000}\n";
   ai_test::AiNode n(dir.path(), agent);
   ASSERT_NE(n.port(), 0);
   const std::string caller = n.leasee();
@@ -631,8 +669,12 @@ TEST(Security, LayerCallsWebhooksAndOtherStreamsNeverCarryTheCallersToken) {
   ASSERT_TRUE(ai_test::connect_stream(owner_ws, n.port(), n.owner()));
   // An escalated command (header token and, again, the body's auth_token).
   std::string esc = new_uuid_v4();
-  HttpReply r1 = n.command(caller, cmd_json(esc, "move", R"(,"linear":0.2,"duration_ms":100,"instruction":"dock")",
-                                            R"(,"auth_token":")" + caller + R"(","ai":{"provider":"p","model":"m","confidence":0.2,"layer":"fast","thought_id":"th_sec_1"},"thought":{"reasoning":"maybe the dock"})"));
+  HttpReply r1 = n.command(
+      caller,
+      cmd_json(
+          esc, "move", R"(,"linear":0.2,"duration_ms":100,"instruction":"dock")",
+          R"(,"auth_token":")" + caller +
+              R"(","ai":{"provider":"p","model":"m","confidence":0.2,"layer":"fast","thought_id":"th_sec_1"},"thought":{"reasoning":"maybe the dock"})"));
   ASSERT_EQ(r1.status, 200) << r1.body;
   EXPECT_EQ(cap.count_path("/planner"), 1u);
   // A held command: webhook and owner stream are told.
@@ -642,7 +684,8 @@ TEST(Security, LayerCallsWebhooksAndOtherStreamsNeverCarryTheCallersToken) {
   ASSERT_EQ(r2.status, 202) << r2.body;
   auto pending = ai_test::wait_frame(owner_ws, "PENDING_AUTH", held);
   ASSERT_TRUE(pending.has_value());
-  for (int i = 0; i < 100 && cap.count_path("/hook") == 0; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  for (int i = 0; i < 100 && cap.count_path("/hook") == 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
   ASSERT_EQ(cap.count_path("/hook"), 1u) << cap.all();
   HttpReply pend = n.get("/rcan/v1/pending", n.owner());
   ASSERT_EQ(pend.status, 200);
@@ -653,14 +696,17 @@ TEST(Security, LayerCallsWebhooksAndOtherStreamsNeverCarryTheCallersToken) {
   EXPECT_NE(sent.find(esc), std::string::npos) << "the layer call is not in the capture";
   EXPECT_NE(sent.find(held), std::string::npos) << "the webhook call is not in the capture";
   std::string lower = sent;
-  std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char ch) { return std::tolower(ch); });
+  std::transform(lower.begin(), lower.end(), lower.begin(),
+                 [](unsigned char ch) { return std::tolower(ch); });
   EXPECT_EQ(lower.find("authorization:"), std::string::npos) << sent;
   EXPECT_EQ(lower.find("bearer"), std::string::npos) << sent;
   EXPECT_EQ(leak_of(sent, caller), "") << "the caller's token went to a layer or webhook";
-  EXPECT_EQ(leak_of(json::dump(*pending), caller), "") << "the caller's token went to the owner's stream";
+  EXPECT_EQ(leak_of(json::dump(*pending), caller), "")
+      << "the caller's token went to the owner's stream";
   EXPECT_EQ(leak_of(pend.body, caller), "");
   EXPECT_EQ(leak_of(thought.body, caller), "");
-  EXPECT_EQ(leak_of(slurp_tree(dir.path() + "/data"), caller), "") << "the caller's token is stored on disk";
+  EXPECT_EQ(leak_of(slurp_tree(dir.path() + "/data"), caller), "")
+      << "the caller's token is stored on disk";
   EXPECT_EQ(leak_of(n.log(), caller), "");
 }
 

@@ -2,20 +2,22 @@
 // consent notifications) with explicit clocks, the diagrams in docs/SESSIONS.md checked against
 // the code's transition tables, and the claim / release / handoff / queue / pre-emption /
 // expiry / guest-limit transitions and races against a real rcand over HTTP and WebSocket.
+#include "node/control/sessions.h"
+
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <chrono>
 #include <fstream>
 #include <sstream>
 #include <thread>
 
+#include "base/http_client.h"
 #include "config/config.h"
 #include "node/control/consent.h"
 #include "node/control/control_machine.h"
-#include "base/http_client.h"
 #include "node/control/ownership.h"
 #include "node/control/partition.h"
-#include "node/control/sessions.h"
 #include "node_fixture.h"
 #include "rcan/errors.h"
 
@@ -78,7 +80,8 @@ TEST(SessionMachine, SameRoleQueuesFifoAndTheHeadIsPromotedOnRelease) {
   EXPECT_EQ(b->outcome, ClaimOutcome::kQueued);
   EXPECT_EQ(b->queue_position, 1u);
   EXPECT_EQ(c->queue_position, 2u);
-  EXPECT_EQ(t.claim(who("b", Role::kUser), std::nullopt, now, kWall)->queue_position, 1u);  // unchanged on re-ask
+  EXPECT_EQ(t.claim(who("b", Role::kUser), std::nullopt, now, kWall)->queue_position,
+            1u);  // unchanged on re-ask
   // A lower role is denied outright; it does not queue.
   auto g = t.claim(who("g", Role::kGuest), std::nullopt, now, kWall);
   ASSERT_FALSE(g.ok());
@@ -161,7 +164,8 @@ TEST(SessionMachine, HandoffReservesTheWindowUntilItCloses) {
 }
 
 TEST(SessionMachine, FleetPolicyDecidesSameRoleFleetAgainstIndividual) {
-  for (auto policy : {node::FleetPolicy::kRole, node::FleetPolicy::kFleetWins, node::FleetPolicy::kIndividualWins}) {
+  for (auto policy : {node::FleetPolicy::kRole, node::FleetPolicy::kFleetWins,
+                      node::FleetPolicy::kIndividualWins}) {
     SessionTable t;
     node::ControlOptions o;
     o.fleet_policy = policy;
@@ -169,20 +173,22 @@ TEST(SessionMachine, FleetPolicyDecidesSameRoleFleetAgainstIndividual) {
     ASSERT_TRUE(t.claim(who("ind", Role::kUser), std::nullopt, false, 0, kWall).ok());
     auto f = t.claim(who("fleet", Role::kUser), std::nullopt, true, 1, kWall);
     ASSERT_TRUE(f.ok());
-    EXPECT_EQ(f->outcome, policy == node::FleetPolicy::kFleetWins ? ClaimOutcome::kGranted : ClaimOutcome::kQueued)
+    EXPECT_EQ(f->outcome, policy == node::FleetPolicy::kFleetWins ? ClaimOutcome::kGranted
+                                                                  : ClaimOutcome::kQueued)
         << node::fleet_policy_name(policy);
     SessionTable t2;
     t2.set_options(o);
     ASSERT_TRUE(t2.claim(who("fleet", Role::kUser), std::nullopt, true, 0, kWall).ok());
     auto i = t2.claim(who("ind", Role::kUser), std::nullopt, false, 1, kWall);
-    EXPECT_EQ(i->outcome, policy == node::FleetPolicy::kIndividualWins ? ClaimOutcome::kGranted : ClaimOutcome::kQueued);
+    EXPECT_EQ(i->outcome, policy == node::FleetPolicy::kIndividualWins ? ClaimOutcome::kGranted
+                                                                       : ClaimOutcome::kQueued);
   }
 }
 
 TEST(SessionMachine, LeaseBoundsSessionsAndItsEndRevokesEverythingDerived) {
   SessionTable t;
-  Principal owner = who("owner", Role::kOwner), leasee = who("lee", Role::kLeasee), user = who("u", Role::kUser),
-            outsider = who("out", Role::kUser);
+  Principal owner = who("owner", Role::kOwner), leasee = who("lee", Role::kLeasee),
+            user = who("u", Role::kUser), outsider = who("out", Role::kUser);
   EXPECT_FALSE(t.grant_lease(user, "lee", 10000, kWall).ok());
   auto l = t.grant_lease(owner, "lee", 10000, kWall);
   ASSERT_TRUE(l.ok());
@@ -223,7 +229,8 @@ TEST(SessionMachine, LeaseBoundsSessionsAndItsEndRevokesEverythingDerived) {
 TEST(OwnershipMachine, RequestAcceptCancelExpireAndFormerOwnersAreCapped) {
   node::Ownership o;
   o.set_window_ms(1000);
-  Principal owner = who("alice", Role::kOwner), bob = who("bob", Role::kUser), eve = who("eve", Role::kOwner);
+  Principal owner = who("alice", Role::kOwner), bob = who("bob", Role::kUser),
+            eve = who("eve", Role::kOwner);
   EXPECT_FALSE(o.request(bob, "bob", "", kWall).ok());
   auto r = o.request(owner, "bob", "sale", kWall);
   ASSERT_TRUE(r.ok());
@@ -252,7 +259,8 @@ TEST(OwnershipMachine, RequestAcceptCancelExpireAndFormerOwnersAreCapped) {
   Principal old = owner;
   o.cap(old);
   EXPECT_EQ(old.role, Role::kGuest);
-  EXPECT_FALSE(o.request(eve, "eve", "", kWall + 3000).ok());  // another OWNER token is not the owner now
+  EXPECT_FALSE(
+      o.request(eve, "eve", "", kWall + 3000).ok());  // another OWNER token is not the owner now
   node::Ownership copy;
   copy.load_json(o.persist_json());
   EXPECT_EQ(copy.owner(), "bob");
@@ -273,20 +281,23 @@ TEST(ConsentNotification, CloudFunctionIdentityIsInTitleBodyAndHighlight) {
   json::Value n = node::consent_notification(r, "Robot B");
   EXPECT_EQ(n.get("title")->as_string(), "\xE2\x9A\xA0\xEF\xB8\x8F Service Consent Request");
   EXPECT_EQ(n.get("body")->as_string(),
-            "Firebase function 'castor-bridge-v2' (on behalf of Craig) is requesting\naccess to Robot B with scope: [control]");
+            "Firebase function 'castor-bridge-v2' (on behalf of Craig) is requesting\naccess to "
+            "Robot B with scope: [control]");
   EXPECT_EQ(n.get("highlight")->as_string(), "cloud_function: castor-bridge-v2 via firebase");
   node::ConsentRequest h;
   h.requester_sub = "Craig";
   h.scopes = {"control"};
   json::Value hn = node::consent_notification(h, "Robot B");
   EXPECT_EQ(hn.get("title")->as_string(), "Consent Request");
-  EXPECT_EQ(hn.get("body")->as_string(), "Craig is requesting access to Robot B with scope: [control]");
+  EXPECT_EQ(hn.get("body")->as_string(),
+            "Craig is requesting access to Robot B with scope: [control]");
   EXPECT_EQ(hn.get("highlight"), nullptr);
 }
 
 TEST(PartitionMachine, ModesFollowReachabilityAndTheCache) {
   node::PartitionMonitor m;
-  EXPECT_EQ(m.record(false, kWall).second, node::NetMode::kNormal);  // nothing configured: nothing to reach
+  EXPECT_EQ(m.record(false, kWall).second,
+            node::NetMode::kNormal);  // nothing configured: nothing to reach
   node::PartitionOptions o;
   o.issuer_url = "http://127.0.0.1:9/jwks";
   o.key_ttl_ms = 10000;
@@ -327,11 +338,12 @@ TEST(ControlConfig, TheControlBlockAndTheIssuerProbeAreValidated) {
   config::ConfigOptions o;
   o.device_id = "0a1b2c3d";
   std::string base(config::default_config_yaml());
-  auto ok = config::parse_config_text(base +
-                                          "control:\n  fleet_policy: fleet_wins\n  handoff_window_s: 5\n"
-                                          "  consent_webhook: http://127.0.0.1:9000/hook\n"
-                                          "offline:\n  issuer_url: http://issuer.local/jwks.json\n  issuer_poll_ms: 250\n",
-                                      o);
+  auto ok = config::parse_config_text(
+      base +
+          "control:\n  fleet_policy: fleet_wins\n  handoff_window_s: 5\n"
+          "  consent_webhook: http://127.0.0.1:9000/hook\n"
+          "offline:\n  issuer_url: http://issuer.local/jwks.json\n  issuer_poll_ms: 250\n",
+      o);
   ASSERT_TRUE(ok.ok()) << ok.error().message;
   EXPECT_EQ(ok->control.fleet_policy, "fleet_wins");
   EXPECT_EQ(ok->control.handoff_window_s, 5u);
@@ -398,7 +410,8 @@ TEST_F(SessionsE2E, TwoClaimsAtOnceGrantOneAndQueueTheOtherWhichIsPromotedOnRele
   json::Value q = parse_json(n().get("/rcan/v1/auth/queue", owner_).body);
   ASSERT_EQ(q.get("queue")->as_array().size(), 1u);
   // The holder releases: the queued claimant is promoted and told on its stream.
-  HttpReply rel = n().call("DELETE", "/rcan/v1/auth/release", "{\"session_id\":\"" + session_of(won) + "\"}", winner);
+  HttpReply rel = n().call("DELETE", "/rcan/v1/auth/release",
+                           "{\"session_id\":\"" + session_of(won) + "\"}", winner);
   ASSERT_EQ(rel.status, 200) << rel.body;
   auto promoted = waiting.wait_for("PROMOTED");
   ASSERT_TRUE(promoted.has_value());
@@ -413,12 +426,14 @@ TEST_F(SessionsE2E, TwoClaimsAtOnceGrantOneAndQueueTheOtherWhichIsPromotedOnRele
 
 TEST_F(SessionsE2E, ClaimDuringTheHandoffWindowIsDeniedUntilItCloses) {
   start("control:\n  handoff_window_s: 1\n");
-  std::string alice = n().token("user", "alice"), carol = n().token("owner", "carol", {"control", "config"});
+  std::string alice = n().token("user", "alice"),
+              carol = n().token("owner", "carol", {"control", "config"});
   test::Stream watcher(n().port(), owner_);
   HttpReply c = n().post("/rcan/v1/auth/claim", "{}", alice);
   ASSERT_EQ(c.status, 200);
-  HttpReply h = n().post("/rcan/v1/handoff",
-                         "{\"session_id\":\"" + session_of(c) + "\",\"target_user_id\":\"bob\"}", alice);
+  HttpReply h =
+      n().post("/rcan/v1/handoff",
+               "{\"session_id\":\"" + session_of(c) + "\",\"target_user_id\":\"bob\"}", alice);
   ASSERT_EQ(h.status, 200) << h.body;
   auto avail = watcher.wait_for("AVAILABLE");
   ASSERT_TRUE(avail.has_value());
@@ -427,7 +442,11 @@ TEST_F(SessionsE2E, ClaimDuringTheHandoffWindowIsDeniedUntilItCloses) {
   EXPECT_EQ(parse_json(n().get("/rcan/v1/status").body).get("control")->as_string(), "RESERVED");
   // Nobody came: the window closes and the first claim wins again.
   ASSERT_TRUE(ConfiguredNode::eventually(
-      [&] { return parse_json(n().get("/rcan/v1/status").body).get("control")->as_string() == "AVAILABLE"; }, 4000));
+      [&] {
+        return parse_json(n().get("/rcan/v1/status").body).get("control")->as_string() ==
+               "AVAILABLE";
+      },
+      4000));
   EXPECT_EQ(n().post("/rcan/v1/auth/claim", "{}", carol).status, 200);
   EXPECT_FALSE(n().audit_eventually("HANDOFF_WINDOW_CLOSED", owner_).empty());
 }
@@ -438,27 +457,43 @@ TEST_F(SessionsE2E, PreemptionWhileCommandsAreInFlightDropsThemAndTellsTheHolder
   test::Stream us(n().port(), user);
   HttpReply c = n().post("/rcan/v1/auth/claim", "{}", user);
   ASSERT_EQ(c.status, 200);
-  ASSERT_EQ(n().post("/rcan/v1/command", test::command_msg("move", {{"linear", 0.3}, {"duration_ms", 5000}}), user).status,
+  ASSERT_EQ(n().post("/rcan/v1/command",
+                     test::command_msg("move", {{"linear", 0.3}, {"duration_ms", 5000}}), user)
+                .status,
             200);
-  // A burst of the holder's commands races the owner's pre-emption.
+  // A burst of the holder's commands races the owner's pre-emption: ten before the claim, the
+  // rest (up to 60 in all: the USER rate limit is 100 per minute) while and after it is
+  // granted. The burst pauses after ten until the claim is on its way, so that on a fast
+  // machine it cannot finish before the claim even starts.
   std::atomic<bool> stop{false};
+  std::atomic<bool> claiming{false};
   std::vector<int> statuses;
   std::mutex mu;
   std::atomic<int> sent{0};
-  std::thread burst([&] {  // at most 60: the USER rate limit is 100 per minute
-    while (!stop.load() && sent.fetch_add(1) < 60) {
-      HttpReply r = n().post("/rcan/v1/command", test::command_msg("move", {{"linear", 0.2}, {"duration_ms", 5000}}), user);
+  std::atomic<int> conflicts{0};
+  std::thread burst([&] {
+    while (!stop.load() && sent.load() < 60) {
+      if (sent.load() >= 10 && !claiming.load()) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        continue;
+      }
+      sent.fetch_add(1);
+      HttpReply r =
+          n().post("/rcan/v1/command",
+                   test::command_msg("move", {{"linear", 0.2}, {"duration_ms", 5000}}), user);
       std::lock_guard<std::mutex> lock(mu);
       statuses.push_back(r.status);
       if (r.status != 200) {
         EXPECT_EQ(test::error_code_of(r), "CONTROL_CONFLICT") << r.body;
+        ++conflicts;
       }
     }
   });
   ConfiguredNode::eventually([&] { return sent.load() >= 10; });
+  claiming = true;
   HttpReply o = n().post("/rcan/v1/auth/claim", "{}", owner_);
   ASSERT_EQ(o.status, 200) << o.body;
-  ConfiguredNode::eventually([&] { return sent.load() >= 30; });
+  ConfiguredNode::eventually([&] { return conflicts.load() >= 1 || sent.load() >= 60; });
   stop = true;
   burst.join();
   auto pre = us.wait_for("PREEMPTED");
@@ -466,7 +501,8 @@ TEST_F(SessionsE2E, PreemptionWhileCommandsAreInFlightDropsThemAndTellsTheHolder
   EXPECT_EQ(pre->get("session_id")->as_string(), session_of(c));
   EXPECT_EQ(pre->get("by_role")->as_string(), "OWNER");
   // After the grant, the former holder cannot drive, and the robot is not driving its command.
-  EXPECT_EQ(n().post("/rcan/v1/command", test::command_msg("move", {{"linear", 0.2}}), user).status, 409);
+  EXPECT_EQ(n().post("/rcan/v1/command", test::command_msg("move", {{"linear", 0.2}}), user).status,
+            409);
   json::Value st = parse_json(n().get("/rcan/v1/status", owner_).body);
   json::Value robot = *st.get("robot");
   std::string dump = json::dump(robot);
@@ -494,28 +530,35 @@ TEST_F(SessionsE2E, ExpiredSessionGetsSessionExpiredUntilItClaimsAgainAndRenewal
   ASSERT_EQ(c.status, 200);
   EXPECT_LE(parse_json(c.body).get("payload")->get("expires_in")->as_int(), 1);
   // Commands do not renew: the session expires on time even while the holder drives.
-  ASSERT_EQ(n().post("/rcan/v1/command", test::command_msg("move", {{"linear", 0.1}, {"duration_ms", 100}}), user).status,
+  ASSERT_EQ(n().post("/rcan/v1/command",
+                     test::command_msg("move", {{"linear", 0.1}, {"duration_ms", 100}}), user)
+                .status,
             200);
   auto ev = us.wait_for("SESSION_EXPIRED", 4000);
   ASSERT_TRUE(ev.has_value());
   HttpReply late = n().post("/rcan/v1/command", test::command_msg("move", {{"linear", 0.1}}), user);
   EXPECT_EQ(late.status, 401);
   EXPECT_EQ(test::error_code_of(late), "SESSION_EXPIRED");
-  HttpReply renew = n().post("/rcan/v1/auth/renew", "{\"session_id\":\"" + session_of(c) + "\"}", user);
+  HttpReply renew =
+      n().post("/rcan/v1/auth/renew", "{\"session_id\":\"" + session_of(c) + "\"}", user);
   EXPECT_EQ(renew.status, 401);
   EXPECT_EQ(test::error_code_of(renew), "SESSION_EXPIRED");
   HttpReply again = n().post("/rcan/v1/auth/claim", "{}", user);
   ASSERT_EQ(again.status, 200);
-  HttpReply r2 = n().post("/rcan/v1/auth/renew", "{\"session_id\":\"" + session_of(again) + "\"}", user);
+  HttpReply r2 =
+      n().post("/rcan/v1/auth/renew", "{\"session_id\":\"" + session_of(again) + "\"}", user);
   EXPECT_EQ(r2.status, 200) << r2.body;
-  EXPECT_EQ(n().post("/rcan/v1/command", test::command_msg("move", {{"linear", 0.1}, {"duration_ms", 100}}), user).status,
+  EXPECT_EQ(n().post("/rcan/v1/command",
+                     test::command_msg("move", {{"linear", 0.1}, {"duration_ms", 100}}), user)
+                .status,
             200);
   EXPECT_FALSE(n().audit_eventually("SESSION_EXPIRED", owner_).empty());
 }
 
 TEST_F(SessionsE2E, SafetyConflictStopsAndAlertsEverySession) {
   start();
-  std::string user = n().token("user", "holder"), other = n().token("guest", "bystander", {"status"});
+  std::string user = n().token("user", "holder"),
+              other = n().token("guest", "bystander", {"status"});
   test::Stream hs(n().port(), user), os(n().port(), other);
   ASSERT_EQ(n().post("/rcan/v1/auth/claim", "{}", user).status, 200);
   HttpReply stop = n().post("/api/stop", "{\"reason\":\"person in the way\"}", other);
@@ -531,7 +574,8 @@ TEST_F(SessionsE2E, GuestLimitsFromConfig) {
   start(
       "guest_limits:\n  chat_rate: 2/minute\n  query_rate: 30/minute\n  session_duration: 15min\n"
       "  concurrent_sessions: 2\n  capabilities: [status_read, chat_text]\n  blocked: [control]\n");
-  std::string g1 = n().token("guest", "g1", {"status", "chat"}), g2 = n().token("guest", "g2", {"status", "chat"}),
+  std::string g1 = n().token("guest", "g1", {"status", "chat"}),
+              g2 = n().token("guest", "g2", {"status", "chat"}),
               g3 = n().token("guest", "g3", {"status", "chat"});
   auto chat = [&](const std::string& t) {
     return n().post("/rcan/v1/command", test::command_msg("chat", {{"text", "hello"}}), t);
@@ -567,19 +611,23 @@ TEST_F(SessionsE2E, HostileInputOnTheControlRoutesGetsTheErrorBody) {
       {"GET", "/rcan/v1/auth/claim", "", 405, "METHOD_NOT_ALLOWED"},
       {"POST", "/rcan/v1/auth/renew", "{}", 400, "SCHEMA_VALIDATION_FAILED"},
       {"POST", "/rcan/v1/auth/renew", "{\"session_id\":\"nope\"}", 404, "NOT_FOUND"},
-      {"POST", "/rcan/v1/leases", "{\"leasee\":\"x\",\"duration_s\":-5}", 400, "SCHEMA_VALIDATION_FAILED"},
-      {"POST", "/rcan/v1/leases", "{\"leasee\":\"x\",\"duration_s\":99999999999}", 400, "SCHEMA_VALIDATION_FAILED"},
+      {"POST", "/rcan/v1/leases", "{\"leasee\":\"x\",\"duration_s\":-5}", 400,
+       "SCHEMA_VALIDATION_FAILED"},
+      {"POST", "/rcan/v1/leases", "{\"leasee\":\"x\",\"duration_s\":99999999999}", 400,
+       "SCHEMA_VALIDATION_FAILED"},
       {"POST", "/rcan/v1/leases", "{\"duration_s\":60}", 400, "SCHEMA_VALIDATION_FAILED"},
       {"DELETE", "/rcan/v1/leases/no-such-lease", "", 404, "NOT_FOUND"},
       {"POST", "/rcan/v1/leases/x/other", "{}", 404, "NOT_FOUND"},
       {"PUT", "/rcan/v1/leases", "{}", 405, "METHOD_NOT_ALLOWED"},
       {"POST", "/rcan/v1/transfer", "{\"action\":\"steal\"}", 400, "SCHEMA_VALIDATION_FAILED"},
       {"POST", "/rcan/v1/transfer", "{\"action\":\"request\"}", 400, "SCHEMA_VALIDATION_FAILED"},
-      {"POST", "/rcan/v1/transfer", "{\"action\":\"accept\",\"agreement\":\"x\"}", 404, "NOT_FOUND"},
-      {"POST", "/rcan/v1/consent", "{\"payload\":{\"scopes\":[\"root\"]}}", 400, "SCHEMA_VALIDATION_FAILED"},
-      {"POST", "/rcan/v1/consent", "{\"payload\":{}}", 400, "SCHEMA_VALIDATION_FAILED"},
-      {"POST", "/rcan/v1/consent", "{\"type\":\"COMMAND\",\"payload\":{\"scopes\":[\"control\"]}}", 400,
+      {"POST", "/rcan/v1/transfer", "{\"action\":\"accept\",\"agreement\":\"x\"}", 404,
+       "NOT_FOUND"},
+      {"POST", "/rcan/v1/consent", "{\"payload\":{\"scopes\":[\"root\"]}}", 400,
        "SCHEMA_VALIDATION_FAILED"},
+      {"POST", "/rcan/v1/consent", "{\"payload\":{}}", 400, "SCHEMA_VALIDATION_FAILED"},
+      {"POST", "/rcan/v1/consent", "{\"type\":\"COMMAND\",\"payload\":{\"scopes\":[\"control\"]}}",
+       400, "SCHEMA_VALIDATION_FAILED"},
       {"POST", "/rcan/v1/consent/unknown/grant", "{}", 404, "NOT_FOUND"},
       {"POST", "/rcan/v1/consent/unknown/steal", "{}", 404, "NOT_FOUND"},
   };
@@ -591,7 +639,9 @@ TEST_F(SessionsE2E, HostileInputOnTheControlRoutesGetsTheErrorBody) {
   // No token, a bad token, a guest: refused and audited.
   EXPECT_EQ(n().post("/rcan/v1/leases", "{\"leasee\":\"x\"}", "").status, 401);
   EXPECT_EQ(n().post("/rcan/v1/leases", "{\"leasee\":\"x\"}", "garbage").status, 401);
-  EXPECT_EQ(n().post("/rcan/v1/leases", "{\"leasee\":\"x\"}", n().token("guest", "g", {"status"})).status, 403);
+  EXPECT_EQ(
+      n().post("/rcan/v1/leases", "{\"leasee\":\"x\"}", n().token("guest", "g", {"status"})).status,
+      403);
   EXPECT_EQ(n().audit_eventually("LEASE_DENIED", owner_, 3).size(), 3u);
   EXPECT_EQ(n().get("/healthz").status, 200);
 }

@@ -24,12 +24,12 @@ std::string sdk_target() {
 
 json::Object rcanpy_move(const std::string& sender_type) {
   json::Object m{{"rcan", "3.2"},
-                      {"msg_id", new_uuid_v4()},
-                      {"timestamp", static_cast<double>(now_wall_ms()) / 1000.0},
-                      {"cmd", "move"},
-                      {"target", sdk_target()},
-                      {"params", json::Object{{"linear", 0.1}, {"duration_ms", 100}}},
-                      {"sender_type", sender_type}};
+                 {"msg_id", new_uuid_v4()},
+                 {"timestamp", static_cast<double>(now_wall_ms()) / 1000.0},
+                 {"cmd", "move"},
+                 {"target", sdk_target()},
+                 {"params", json::Object{{"linear", 0.1}, {"duration_ms", 100}}},
+                 {"sender_type", sender_type}};
   if (sender_type == "robot")  // a robot acts for a human (§8.5 delegation chain)
     m.set("delegation_chain", json::Array{json::Object{{"issuer_ruri", ConfiguredNode::kRuri},
                                                        {"human_subject", "operator-1"},
@@ -45,11 +45,12 @@ class SignedMessages : public ::testing::Test {
     // Three identities made with the CLI: an operator (signer), a peer robot, a stranger.
     for (const char* who : {"operator", "peer", "stranger"})
       ASSERT_EQ(run_cli({"keys", "generate", "--dir", dir_->path() + "/" + who}).exit_code, 0);
-    std::string extra = "  trusted_signer_keys:\n    - {name: operator, mldsa65_pub_file: " + dir_->path() +
-                        "/operator/mldsa65.pub, ed25519_pub_file: " + dir_->path() +
-                        "/operator/ed25519.pub}\n"
-                        "  trusted_robot_keys:\n    - {name: peer, mldsa65_pub_file: " +
-                        dir_->path() + "/peer/mldsa65.pub}\n";
+    std::string extra =
+        "  trusted_signer_keys:\n    - {name: operator, mldsa65_pub_file: " + dir_->path() +
+        "/operator/mldsa65.pub, ed25519_pub_file: " + dir_->path() +
+        "/operator/ed25519.pub}\n"
+        "  trusted_robot_keys:\n    - {name: peer, mldsa65_pub_file: " +
+        dir_->path() + "/peer/mldsa65.pub}\n";
     node_ = std::make_unique<ConfiguredNode>(dir_->path() + "/node", extra);
     ASSERT_TRUE(node_->start());
     token_ = node_->token("user", "operator-1", {"control", "status"});
@@ -73,7 +74,9 @@ class SignedMessages : public ::testing::Test {
       json::Value v = parse_json(r.body);
       if (const json::Value* es = v.get("entries"); es && es->is_array())
         for (const auto& e : es->as_array())
-          if (const json::Value* m = e.get("message_id"); m && m->is_string() && m->as_string() == msg_id) found = e;
+          if (const json::Value* m = e.get("message_id");
+              m && m->is_string() && m->as_string() == msg_id)
+            found = e;
       return !found.is_null();
     });
     return found;
@@ -133,7 +136,8 @@ TEST_F(SignedMessages, TamperedAfterSigningIsRefused) {
   auto op = keys_of("operator");
   json::Object msg = rcanpy_move("human");
   ASSERT_TRUE(msgsig::sign_mldsa65(msg, op.mldsa65_sk.span(), op.pub.mldsa65_pk).ok());
-  msg.set("params", json::Object{{"linear", 0.5}, {"duration_ms", 100}});  // covered by the signature
+  msg.set("params",
+          json::Object{{"linear", 0.5}, {"duration_ms", 100}});  // covered by the signature
   HttpReply r = send(msg);
   EXPECT_GE(r.status, 400) << r.body;
   EXPECT_EQ(error_code_of(r), "SIGNATURE_INVALID") << r.body;

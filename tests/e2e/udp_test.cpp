@@ -13,8 +13,8 @@
 #include <cstring>
 #include <thread>
 
-#include "configured_node.h"
 #include "config/config.h"
+#include "configured_node.h"
 #include "rcan/encoding.h"
 #include "rcan/udp_wire.h"
 
@@ -22,9 +22,8 @@ namespace rcan {
 namespace {
 
 using test::ConfiguredNode;
-using test::parse_json;
 using test::HttpReply;
-
+using test::parse_json;
 
 // ---------------------------------------------------------------------------------------------
 // Wire format
@@ -95,7 +94,8 @@ TEST(UdpWire, MalformedDatagramsAreNamed) {
   ASSERT_TRUE(pa.ok());
   EXPECT_EQ(pa.d.body, R"({"type":"ANNOUNCE"})");
   std::string bad = udp::encode_announce(n, "[1]");
-  EXPECT_EQ(udp::parse({reinterpret_cast<const uint8_t*>(bad.data()), bad.size()}).error, udp::ParseError::kBadBody);
+  EXPECT_EQ(udp::parse({reinterpret_cast<const uint8_t*>(bad.data()), bad.size()}).error,
+            udp::ParseError::kBadBody);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -112,7 +112,8 @@ class UdpSocket {
     a.sin_family = AF_INET;
     a.sin_port = htons(port);
     a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    return ::sendto(fd_, data, n, 0, reinterpret_cast<sockaddr*>(&a), sizeof a) == static_cast<ssize_t>(n);
+    return ::sendto(fd_, data, n, 0, reinterpret_cast<sockaddr*>(&a), sizeof a) ==
+           static_cast<ssize_t>(n);
   }
   template <size_t N>
   bool send(uint16_t port, const std::array<uint8_t, N>& a) const {
@@ -165,7 +166,8 @@ Grant claim(const ConfiguredNode& n, const std::string& token) {
   return g;
 }
 
-std::vector<json::Value> events_named(const std::vector<json::Value>& records, const std::string& event) {
+std::vector<json::Value> events_named(const std::vector<json::Value>& records,
+                                      const std::string& event) {
   std::vector<json::Value> out;
   for (const auto& r : records)
     if (r.get("event") && r.get("event")->as_string() == event) out.push_back(r);
@@ -181,7 +183,9 @@ TEST(UdpHeartbeat, HeartbeatsKeepTheSessionAliveAndTheirLossSafeStopsTheRobot) {
   EXPECT_EQ(g.timeout_ms, 1000);
   EXPECT_EQ(g.interval_ms, 250);
   // Drive (under the session) and keep it alive over UDP for three timeouts.
-  HttpReply drive = n.post("/rcan/v1/command", test::command_json("move", {{"linear", 0.2}, {"duration_ms", 4000}}), owner);
+  HttpReply drive =
+      n.post("/rcan/v1/command",
+             test::command_json("move", {{"linear", 0.2}, {"duration_ms", 4000}}), owner);
   ASSERT_EQ(drive.status, 200) << drive.body;
   UdpSocket s;
   uint64_t seq = 0;
@@ -191,14 +195,16 @@ TEST(UdpHeartbeat, HeartbeatsKeepTheSessionAliveAndTheirLossSafeStopsTheRobot) {
     std::this_thread::sleep_for(std::chrono::milliseconds(g.interval_ms));
   }
   json::Value st = parse_json(n.get("/rcan/v1/status", owner).body);
-  EXPECT_FALSE(st.get("robot")->get("safe_stop")->as_bool()) << "heartbeats did not keep the session alive";
+  EXPECT_FALSE(st.get("robot")->get("safe_stop")->as_bool())
+      << "heartbeats did not keep the session alive";
   EXPECT_TRUE(events_named(n.audit(owner), "NETWORK_LOSS_SAFE_STOP").empty());
   EXPECT_GE(n.metric("rcan_udp_heartbeats_accepted_total"), static_cast<double>(seq) - 1);
   // Silence: the deadman safe-stops the robot.
   bool stopped = false;
   for (int i = 0; i < 100 && !stopped; ++i) {
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    stopped = parse_json(n.get("/rcan/v1/status", owner).body).get("robot")->get("safe_stop")->as_bool();
+    stopped =
+        parse_json(n.get("/rcan/v1/status", owner).body).get("robot")->get("safe_stop")->as_bool();
   }
   ASSERT_TRUE(stopped);
   std::vector<json::Value> loss;
@@ -212,9 +218,12 @@ TEST(UdpHeartbeat, HeartbeatsKeepTheSessionAliveAndTheirLossSafeStopsTheRobot) {
   // stop (the safety core's elapsed_ms at the moment it stopped the driver).
   int64_t elapsed = loss[0].get("detail")->get("elapsed_ms")->as_int();
   int64_t overshoot = elapsed - g.timeout_ms;
-  std::printf("heartbeat loss -> safe-stop: %lld ms after the last heartbeat (deadline %lld ms, +%lld ms; %s)\n",
-              static_cast<long long>(elapsed), static_cast<long long>(g.timeout_ms),
-              static_cast<long long>(overshoot), overshoot <= 10 ? "within deadline + 10 ms" : "OVER deadline + 10 ms");
+  std::printf(
+      "heartbeat loss -> safe-stop: %lld ms after the last heartbeat (deadline %lld ms, +%lld ms; "
+      "%s)\n",
+      static_cast<long long>(elapsed), static_cast<long long>(g.timeout_ms),
+      static_cast<long long>(overshoot),
+      overshoot <= 10 ? "within deadline + 10 ms" : "OVER deadline + 10 ms");
   EXPECT_GT(elapsed, g.timeout_ms);
   EXPECT_LE(overshoot, 250);  // generous: the suite shares two cores
   json::Value robot = *parse_json(n.get("/rcan/v1/status", owner).body).get("robot");
@@ -237,7 +246,8 @@ TEST(UdpHeartbeat, ASessionPromotedFromTheQueueGetsItsKeyOnItsStream) {
   // B listens on its stream, then queues behind A.
   test::WsClient ws;
   ASSERT_EQ(ws.connect(n.http_port(), "/rcan/v1/stream"), 101);
-  ASSERT_TRUE(ws.send_text(json::dump(json::Value(json::Object{{"type", "CONNECT"}, {"token", b}}))));
+  ASSERT_TRUE(
+      ws.send_text(json::dump(json::Value(json::Object{{"type", "CONNECT"}, {"token", b}}))));
   auto ack = ws.recv_text(5000);
   ASSERT_TRUE(ack && ack->find("CONNECT_ACK") != std::string::npos) << (ack ? *ack : "no answer");
   HttpReply q = n.post("/rcan/v1/auth/claim", "{}", b);
@@ -288,20 +298,20 @@ TEST(UdpHeartbeat, ForgedReplayedAndMalformedDatagramsAreIgnoredAndCounted) {
   std::string owner = n.token("owner", {"control", "status", "config"}, "udp-owner");
   Grant g = claim(n, owner);
   UdpSocket s;
-  ASSERT_TRUE(s.send(g.port, udp::encode_heartbeat(g.key_id, 5, g.key)));   // accepted
-  ASSERT_TRUE(s.send(g.port, udp::encode_heartbeat(g.key_id, 5, g.key)));   // replayed
-  ASSERT_TRUE(s.send(g.port, udp::encode_heartbeat(g.key_id, 4, g.key)));   // replayed (older)
+  ASSERT_TRUE(s.send(g.port, udp::encode_heartbeat(g.key_id, 5, g.key)));  // accepted
+  ASSERT_TRUE(s.send(g.port, udp::encode_heartbeat(g.key_id, 5, g.key)));  // replayed
+  ASSERT_TRUE(s.send(g.port, udp::encode_heartbeat(g.key_id, 4, g.key)));  // replayed (older)
   udp::Key wrong = g.key;
   wrong[0] ^= 0xff;
-  ASSERT_TRUE(s.send(g.port, udp::encode_heartbeat(g.key_id, 6, wrong)));   // forged: bad MAC
+  ASSERT_TRUE(s.send(g.port, udp::encode_heartbeat(g.key_id, 6, wrong)));  // forged: bad MAC
   udp::KeyId other = g.key_id;
   other[15] ^= 1;
-  ASSERT_TRUE(s.send(g.port, udp::encode_heartbeat(other, 7, g.key)));      // forged: unknown key id
-  ASSERT_TRUE(s.send(g.port, "hello", 5));                                  // malformed
+  ASSERT_TRUE(s.send(g.port, udp::encode_heartbeat(other, 7, g.key)));  // forged: unknown key id
+  ASSERT_TRUE(s.send(g.port, "hello", 5));                              // malformed
   auto v2 = udp::encode_heartbeat(g.key_id, 8, g.key);
   v2[4] = 2;
-  ASSERT_TRUE(s.send(g.port, v2));                                          // malformed: version
-  ASSERT_TRUE(s.send(g.port, v2.data(), 40));                               // malformed: length
+  ASSERT_TRUE(s.send(g.port, v2));             // malformed: version
+  ASSERT_TRUE(s.send(g.port, v2.data(), 40));  // malformed: length
   double accepted = -1, replayed = -1, forged = -1, malformed = -1;
   for (int i = 0; i < 40; ++i) {
     accepted = n.metric("rcan_udp_heartbeats_accepted_total");
@@ -330,7 +340,8 @@ TEST(UdpHeartbeat, ForgedReplayedAndMalformedDatagramsAreIgnoredAndCounted) {
   EXPECT_EQ(loss[0].get("detail")->get("session_id")->as_string(), g.session_id);
   // After release, even a valid heartbeat of the old key is stale.
   HttpReply rel = test::http(n.http_port(), "DELETE", "/rcan/v1/auth/release",
-                             "{\"session_id\":\"" + g.session_id + "\"}", {{"Authorization", "Bearer " + owner}});
+                             "{\"session_id\":\"" + g.session_id + "\"}",
+                             {{"Authorization", "Bearer " + owner}});
   ASSERT_EQ(rel.status, 200) << rel.body;
   ASSERT_TRUE(s.send(g.port, udp::encode_heartbeat(g.key_id, 1000, g.key)));
   double stale = -1;
@@ -371,8 +382,8 @@ TEST(UdpDiscovery, DiscoverIsAnsweredWithAnnounceAndRateLimitedPerSource) {
 TEST(UdpCli, UdpDiscoverAndUdpHeartbeatVerbsTalkToTheNode) {
   ConfiguredNode n({}, /*heartbeat_timeout_ms=*/2000);
   ASSERT_NE(n.udp_port(), 0) << n.proc().err();
-  auto r = test::run_cli({"udp-discover", "--host", "127.0.0.1", "--port", std::to_string(n.udp_port()),
-                          "--timeout-ms", "3000"});
+  auto r = test::run_cli({"udp-discover", "--host", "127.0.0.1", "--port",
+                          std::to_string(n.udp_port()), "--timeout-ms", "3000"});
   ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
   json::Value line = parse_json(r.out.substr(0, r.out.find('\n')));
   EXPECT_EQ(line.get("announce")->get("payload")->get("ruri")->as_string(), ConfiguredNode::kRuri);
@@ -383,9 +394,9 @@ TEST(UdpCli, UdpDiscoverAndUdpHeartbeatVerbsTalkToTheNode) {
   json::Value granted = parse_json(c.body);
   const json::Value* u = granted.get("payload")->get("udp_heartbeat");
   ASSERT_NE(u, nullptr);
-  auto hb = test::run_cli({"udp-heartbeat", "--port", std::to_string(u->get("port")->as_int()), "--key-id",
-                           u->get("key_id")->as_string(), "--key-b64", u->get("key_b64")->as_string(), "--count",
-                           "3", "--interval-ms", "20"});
+  auto hb = test::run_cli({"udp-heartbeat", "--port", std::to_string(u->get("port")->as_int()),
+                           "--key-id", u->get("key_id")->as_string(), "--key-b64",
+                           u->get("key_b64")->as_string(), "--count", "3", "--interval-ms", "20"});
   ASSERT_EQ(hb.exit_code, 0) << hb.err;
   double accepted = 0;
   for (int i = 0; i < 40 && accepted < 3; ++i) {
@@ -394,15 +405,19 @@ TEST(UdpCli, UdpDiscoverAndUdpHeartbeatVerbsTalkToTheNode) {
   }
   EXPECT_EQ(accepted, 3);
   // Nothing answers on a port with no node: exit 1.
-  auto none = test::run_cli({"udp-discover", "--host", "127.0.0.1", "--port", "9", "--timeout-ms", "300"});
+  auto none =
+      test::run_cli({"udp-discover", "--host", "127.0.0.1", "--port", "9", "--timeout-ms", "300"});
   EXPECT_EQ(none.exit_code, 1);
-  EXPECT_EQ(test::run_cli({"udp-heartbeat", "--port", "1", "--key-id", "zz", "--key-b64", "AA=="}).exit_code, 2);
+  EXPECT_EQ(test::run_cli({"udp-heartbeat", "--port", "1", "--key-id", "zz", "--key-b64", "AA=="})
+                .exit_code,
+            2);
 }
 
 // ---------------------------------------------------------------------------------------------
 // Config blocks
 
-constexpr const char* kHead = "rcan_version: \"1.2\"\nruri: rcan://local.rcan/rcan/sim-rover/0a1b2c3d\n";
+constexpr const char* kHead =
+    "rcan_version: \"1.2\"\nruri: rcan://local.rcan/rcan/sim-rover/0a1b2c3d\n";
 
 Result<config::NodeConfig> parse_cfg(const std::string& body) {
   config::ConfigOptions o;
@@ -413,7 +428,8 @@ Result<config::NodeConfig> parse_cfg(const std::string& body) {
 TEST(TransportConfig, GrpcAndUdpBlocksAreStrictlyValidated) {
   auto ok = parse_cfg(
       "grpc:\n  enabled: true\n  port: 9443\n  bind: 0.0.0.0\n  max_streams: 8\n"
-      "  tls: {enabled: true, cert_file: /etc/rcand/cert.pem, key_file: /etc/rcand/key.pem, client_ca_file: /etc/rcand/ca.pem}\n"
+      "  tls: {enabled: true, cert_file: /etc/rcand/cert.pem, key_file: /etc/rcand/key.pem, "
+      "client_ca_file: /etc/rcand/ca.pem}\n"
       "udp:\n  enabled: true\n  port: 8082\n  bind: 0.0.0.0\n  discovery_per_source_per_min: 10\n");
   ASSERT_TRUE(ok.ok()) << ok.error().message;
   EXPECT_TRUE(ok->grpc.enabled);
@@ -435,11 +451,14 @@ TEST(TransportConfig, GrpcAndUdpBlocksAreStrictlyValidated) {
            {"grpc:\n  prot: 1\n", "grpc.prot", "unknown_key"},
            {"grpc:\n  port: 70000\n", "grpc.port", "out_of_range"},
            {"grpc:\n  enabled: yes please\n", "grpc.enabled", "wrong_type"},
-           {"grpc:\n  tls: {enabled: true, key_file: k.pem}\n", "grpc.tls.cert_file", "missing_key"},
+           {"grpc:\n  tls: {enabled: true, key_file: k.pem}\n", "grpc.tls.cert_file",
+            "missing_key"},
            {"grpc:\n  tls: {client_ca_file: ca.pem}\n", "grpc.tls.client_ca_file", "invalid_value"},
            {"grpc:\n  enabled: true\n  port: 8080\n", "grpc.port", "invalid_value"},
-           {"udp:\n  enabled: true\n  heartbeat: false\n  discovery: false\n", "udp.enabled", "invalid_value"},
-           {"udp:\n  discovery_per_source_per_min: 0\n", "udp.discovery_per_source_per_min", "out_of_range"},
+           {"udp:\n  enabled: true\n  heartbeat: false\n  discovery: false\n", "udp.enabled",
+            "invalid_value"},
+           {"udp:\n  discovery_per_source_per_min: 0\n", "udp.discovery_per_source_per_min",
+            "out_of_range"},
            {"udp:\n  bind: \"a b\"\n", "udp.bind", "invalid_value"},
        }) {
     auto r = parse_cfg(b.yaml);

@@ -1,6 +1,8 @@
 // The embedded dashboard: what is compiled in (every file referenced, no inline script or
 // style, no HTML-parsing DOM sinks in the scripts) and how rcand serves it (content types,
 // CSP and the other security headers, ETag revalidation, HEAD, 404/405), against a real rcand.
+#include "node/api/web_assets.h"
+
 #include <gtest/gtest.h>
 #include <signal.h>
 
@@ -8,7 +10,6 @@
 #include <set>
 #include <string>
 
-#include "node/api/web_assets.h"
 #include "rcan/json.h"
 #include "test_support.h"
 
@@ -61,7 +62,8 @@ TEST(WebAssets, EveryReferencedFileExistsAndEveryImportResolves) {
     if (!ends_with(p, ".js")) continue;
     std::string js = text_of(a);
     for (std::sregex_iterator it(js.begin(), js.end(), imp), end; it != end; ++it)
-      EXPECT_NE(find_web_asset("/ui/js/" + (*it)[1].str()), nullptr) << p << " imports " << (*it)[1].str();
+      EXPECT_NE(find_web_asset("/ui/js/" + (*it)[1].str()), nullptr)
+          << p << " imports " << (*it)[1].str();
   }
 }
 
@@ -79,8 +81,9 @@ TEST(WebAssets, NoInlineScriptStyleOrHtmlSinks) {
     std::string p = a.path;
     if (!ends_with(p, ".js")) continue;
     std::string js = text_of(a);
-    for (const char* sink : {"innerHTML", "outerHTML", "insertAdjacentHTML", "document.write", "eval(",
-                             "new Function", "DOMParser", "createContextualFragment", ".style."})
+    for (const char* sink :
+         {"innerHTML", "outerHTML", "insertAdjacentHTML", "document.write", "eval(", "new Function",
+          "DOMParser", "createContextualFragment", ".style."})
       EXPECT_EQ(js.find(sink), std::string::npos) << p << " uses " << sink;
   }
 }
@@ -106,7 +109,8 @@ TEST(WebAssets, ResponsesCarryCspEtagAndRevalidate) {
     EXPECT_EQ(c.status, 304) << inm;
     EXPECT_TRUE(c.body.empty());
   }
-  for (std::string inm : {std::string("\"nope\""), std::string(""), std::string(","), etag.substr(1)}) {
+  for (std::string inm :
+       {std::string("\"nope\""), std::string(""), std::string(","), etag.substr(1)}) {
     req.headers = {{"if-none-match", inm}};
     EXPECT_EQ(rcan::node::web_response(req, 1).status, 200) << inm;
   }
@@ -138,7 +142,8 @@ TEST(WebAssetsRcand, ServedAtRootWithSecurityHeaders) {
   ASSERT_EQ(page.status, 200);
   EXPECT_EQ(page.header("content-type"), "text/html; charset=utf-8");
   EXPECT_EQ(page.header("content-security-policy"), rcan::node::web_csp());
-  EXPECT_NE(page.header("content-security-policy").find("frame-ancestors 'none'"), std::string::npos);
+  EXPECT_NE(page.header("content-security-policy").find("frame-ancestors 'none'"),
+            std::string::npos);
   EXPECT_EQ(page.header("x-content-type-options"), "nosniff");
   EXPECT_EQ(page.header("x-frame-options"), "DENY");
   EXPECT_EQ(page.header("referrer-policy"), "no-referrer");
@@ -156,10 +161,13 @@ TEST(WebAssetsRcand, ServedAtRootWithSecurityHeaders) {
   {
     rcan::test::HttpClient c(port);
     ASSERT_TRUE(c.connected());
-    std::string raw = c.raw("HEAD /ui/js/main.js HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n", 5000);
+    std::string raw =
+        c.raw("HEAD /ui/js/main.js HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n", 5000);
     EXPECT_EQ(raw.rfind("HTTP/1.1 200", 0), 0u) << raw;
     EXPECT_NE(raw.find("Content-Type: text/javascript; charset=utf-8"), std::string::npos) << raw;
-    EXPECT_NE(raw.find("Content-Length: " + std::to_string(find_web_asset("/ui/js/main.js")->size)), std::string::npos) << raw;
+    EXPECT_NE(raw.find("Content-Length: " + std::to_string(find_web_asset("/ui/js/main.js")->size)),
+              std::string::npos)
+        << raw;
     EXPECT_TRUE(raw.substr(raw.find("\r\n\r\n") + 4).empty()) << raw;
   }
 

@@ -37,25 +37,35 @@ const json::Value& in(const json::Value& c, const char* k) { return *c.get("inpu
 const json::Value& expect(const json::Value& c, const char* k) { return *c.get("expect")->get(k); }
 
 std::string gate_yaml(const std::string& scope, double min, const std::string& on_fail) {
-  return "agent:\n  confidence_gates:\n    - {scope: " + scope + ", min_confidence: " + json::dump(json::Value(min)) +
-         ", on_fail: " + on_fail + "}\n";
+  return "agent:\n  confidence_gates:\n    - {scope: " + scope +
+         ", min_confidence: " + json::dump(json::Value(min)) + ", on_fail: " + on_fail + "}\n";
 }
 
 TEST(Conformance, EveryL2AndL3CaseIsAccountedFor) {
   // Where each case runs. §19 INVOKE and §21 registry are not part of this node.
-  const std::map<std::string, std::string> where{
-      {"L2-SAFE-001", "here"},   {"L2-INJECT-001", "here"},   {"L2-HMAC-001", "here"},
-      {"L2-CONF-001", "here"},   {"L2-CONF-002", "here"},     {"L2-SAFE-002", "rcand_test RcandDeadman"},
-      {"L2-INVOKE-001", "not implemented (§19)"},             {"L3-AI-001", "here"},
-      {"L3-HITL-001", "here"},   {"L3-HITL-002", "here"},     {"L3-THOUGHT-001", "here"},
-      {"L3-CHAIN-001", "here"},  {"L3-AI-002", "here"},       {"L3-REGISTRY-001", "not implemented (§21)"},
-      {"L3-REGISTRY-002", "not implemented (§21)"},           {"L3-INVOKE-001", "not implemented (§19)"}};
+  const std::map<std::string, std::string> where{{"L2-SAFE-001", "here"},
+                                                 {"L2-INJECT-001", "here"},
+                                                 {"L2-HMAC-001", "here"},
+                                                 {"L2-CONF-001", "here"},
+                                                 {"L2-CONF-002", "here"},
+                                                 {"L2-SAFE-002", "rcand_test RcandDeadman"},
+                                                 {"L2-INVOKE-001", "not implemented (§19)"},
+                                                 {"L3-AI-001", "here"},
+                                                 {"L3-HITL-001", "here"},
+                                                 {"L3-HITL-002", "here"},
+                                                 {"L3-THOUGHT-001", "here"},
+                                                 {"L3-CHAIN-001", "here"},
+                                                 {"L3-AI-002", "here"},
+                                                 {"L3-REGISTRY-001", "not implemented (§21)"},
+                                                 {"L3-REGISTRY-002", "not implemented (§21)"},
+                                                 {"L3-INVOKE-001", "not implemented (§19)"}};
   json::Value suite = test::load_vector("rcan-conformance-v1.3.json");
   size_t n = 0;
   for (const char* level : {"L2", "L3"})
     for (const auto& c : suite.get("levels")->get(level)->as_array()) {
       ++n;
-      EXPECT_TRUE(where.count(c.get("id")->as_string())) << "unaccounted case " << c.get("id")->as_string();
+      EXPECT_TRUE(where.count(c.get("id")->as_string()))
+          << "unaccounted case " << c.get("id")->as_string();
     }
   EXPECT_EQ(n, where.size());
 }
@@ -69,13 +79,16 @@ TEST(Conformance, L2_CONF_001_BlockGate) {
   AiNode n(dir.path(), gate_yaml("teleop", gate.get("min_confidence")->to_double(),
                                  gate.get("on_fail")->as_string()));
   std::string id = new_uuid_v4();
-  HttpReply r = n.command(n.leasee(), cmd(id, action, {}, ai_block("sim", "m", ai_cmd.get("confidence")->to_double(), "fast")));
+  HttpReply r = n.command(
+      n.leasee(),
+      cmd(id, action, {}, ai_block("sim", "m", ai_cmd.get("confidence")->to_double(), "fast")));
   EXPECT_FALSE(expect(c, "dispatched").as_bool());
   EXPECT_EQ(r.status, 403) << r.body;
   EXPECT_EQ(n.records(id, "COMMAND").size(), 0u);
   // Seed §16.3 wins over the case's COMMAND_REJECTED.
   EXPECT_EQ(error_code(r), "CONFIDENCE_GATE_FAIL");
-  EXPECT_EQ(parse(r.body).get("payload")->get("reason")->as_string(), expect(c, "reason").as_string());
+  EXPECT_EQ(parse(r.body).get("payload")->get("reason")->as_string(),
+            expect(c, "reason").as_string());
 }
 
 TEST(Conformance, L2_CONF_002_EscalateGoesToTheNextLayerNotAQueue) {
@@ -87,7 +100,8 @@ TEST(Conformance, L2_CONF_002_EscalateGoesToTheNextLayerNotAQueue) {
   {
     // No higher layer: not dispatched (the case's "dispatched": false), blocked per the seed.
     test::TempDir dir;
-    AiNode n(dir.path(), gate_yaml("teleop", gate.get("min_confidence")->to_double(), gate.get("on_fail")->as_string()));
+    AiNode n(dir.path(), gate_yaml("teleop", gate.get("min_confidence")->to_double(),
+                                   gate.get("on_fail")->as_string()));
     std::string id = new_uuid_v4();
     HttpReply r = n.command(n.leasee(), cmd(id, action, {}, ai_block("sim", "m", conf, "fast")));
     EXPECT_EQ(expect(c, "dispatched").as_bool(), false);
@@ -98,11 +112,14 @@ TEST(Conformance, L2_CONF_002_EscalateGoesToTheNextLayerNotAQueue) {
   // With a planner layer: escalated (the case's "escalated": true) and, passing, dispatched.
   SimLayerProc planner("planner", 0.9);
   test::TempDir dir;
-  AiNode n(dir.path(), gate_yaml("teleop", gate.get("min_confidence")->to_double(), gate.get("on_fail")->as_string()) +
-                           "  layers:\n    planner: {url: \"" + planner.url() + "\", timeout_ms: 3000}\n");
+  AiNode n(dir.path(), gate_yaml("teleop", gate.get("min_confidence")->to_double(),
+                                 gate.get("on_fail")->as_string()) +
+                           "  layers:\n    planner: {url: \"" + planner.url() +
+                           "\", timeout_ms: 3000}\n");
   std::string id = new_uuid_v4();
   HttpReply r = n.command(n.leasee(), cmd(id, action, {}, ai_block("sim", "m", conf, "fast")));
-  EXPECT_EQ(n.record(id, "CONFIDENCE_GATE_ESCALATED").get("reason")->as_string(), expect(c, "reason").as_string());
+  EXPECT_EQ(n.record(id, "CONFIDENCE_GATE_ESCALATED").get("reason")->as_string(),
+            expect(c, "reason").as_string());
   // The planner's command (escalated: true) passed the gate and reached the robot, which has
   // no pick_object skill: the dispatcher refuses it as unknown_action, naming the escalation.
   EXPECT_EQ(parse(r.body).get("payload")->get("reason")->as_string(), "unknown_action") << r.body;
@@ -155,8 +172,9 @@ TEST(Conformance, L3_HITL_001_GateHoldsTheCommand) {
   const json::Value& g = in(c, "hitl_gates_config").as_array()[0];
   std::string action_type = g.get("action_type")->as_string();
   auto yaml = [&](const std::string& roles) {
-    return "agent:\n  hitl_gates:\n    - {action_type: " + action_type + ", require_auth: " +
-           (g.get("require_auth")->as_bool() ? "true" : "false") + ", authorized_roles: [" + roles + "]}\n";
+    return "agent:\n  hitl_gates:\n    - {action_type: " + action_type +
+           ", require_auth: " + (g.get("require_auth")->as_bool() ? "true" : "false") +
+           ", authorized_roles: [" + roles + "]}\n";
   };
   test::TempDir dir;
   {
@@ -183,9 +201,13 @@ TEST(Conformance, L3_HITL_001_GateHoldsTheCommand) {
 TEST(Conformance, L3_HITL_002_OwnerApprovesGuestIsRefused) {
   const json::Value& c = conformance_case("L3-HITL-002");
   test::TempDir dir;
-  AiNode n(dir.path(), "agent:\n  hitl_gates:\n    - {action_types: [arm_move], require_auth: true}\n");
+  AiNode n(dir.path(),
+           "agent:\n  hitl_gates:\n    - {action_types: [arm_move], require_auth: true}\n");
   std::string id = new_uuid_v4();
-  ASSERT_EQ(n.command(n.leasee(), cmd(id, "arm_move", {{"joints", json::Array{0.1, 0, 0, 0, 0, 0}}})).status, 202);
+  ASSERT_EQ(
+      n.command(n.leasee(), cmd(id, "arm_move", {{"joints", json::Array{0.1, 0, 0, 0, 0, 0}}}))
+          .status,
+      202);
   for (const auto& attempt : in(c, "authorize_attempts").as_array()) {
     std::string role = attempt.get("principal_role")->as_string();
     for (auto& ch : role) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
@@ -209,8 +231,9 @@ TEST(Conformance, L3_THOUGHT_001_ReasoningNeedsConfigScope) {
   test::TempDir dir;
   AiNode n(dir.path(), "");
   json::Object thought{{"reasoning", "private chain of thought"}};
-  ASSERT_EQ(n.command(n.leasee(), cmd(new_uuid_v4(), "status", {}, ai_block("sim", "m", 0.8, "planner", tid),
-                                      ",\"thought\":" + json::dump(json::Value(thought))))
+  ASSERT_EQ(n.command(n.leasee(),
+                      cmd(new_uuid_v4(), "status", {}, ai_block("sim", "m", 0.8, "planner", tid),
+                          ",\"thought\":" + json::dump(json::Value(thought))))
                 .status,
             200);
   const json::Value& who = in(c, "requesting_principal");
@@ -221,8 +244,10 @@ TEST(Conformance, L3_THOUGHT_001_ReasoningNeedsConfigScope) {
   HttpReply r = n.get("/api/thoughts/" + tid, n.token(role, scopes));
   EXPECT_EQ(r.status, expect(c, "http_status").as_int()) << r.body;
   json::Value v = parse(r.body);
-  for (const auto& k : expect(c, "response_contains").as_array()) EXPECT_NE(v.get(k.as_string()), nullptr) << k.as_string();
-  for (const auto& k : expect(c, "response_excludes").as_array()) EXPECT_EQ(v.get(k.as_string()), nullptr) << k.as_string();
+  for (const auto& k : expect(c, "response_contains").as_array())
+    EXPECT_NE(v.get(k.as_string()), nullptr) << k.as_string();
+  for (const auto& k : expect(c, "response_excludes").as_array())
+    EXPECT_EQ(v.get(k.as_string()), nullptr) << k.as_string();
 }
 
 TEST(Conformance, L2_SAFE_001_EstopRejectsCommands) {
@@ -237,7 +262,8 @@ TEST(Conformance, L2_SAFE_001_EstopRejectsCommands) {
   std::string id = new_uuid_v4();
   HttpReply r = n.command(n.leasee(), cmd(id, action, payload));
   EXPECT_EQ(error_code(r), expect(c, "error_code").as_string()) << r.body;
-  EXPECT_EQ(parse(r.body).get("payload")->get("reason")->as_string(), expect(c, "reason").as_string());
+  EXPECT_EQ(parse(r.body).get("payload")->get("reason")->as_string(),
+            expect(c, "reason").as_string());
   EXPECT_EQ(n.records(id, "COMMAND").size(), 0u);
 }
 
@@ -249,8 +275,10 @@ TEST(Conformance, L2_INJECT_001_InjectionIsBlockedAndAudited) {
   std::string id = new_uuid_v4();
   HttpReply r = n.command(n.token("user", {"status", "chat", "control"}), cmd(id, "chat", payload));
   EXPECT_EQ(error_code(r), expect(c, "error_code").as_string()) << r.body;
-  EXPECT_EQ(parse(r.body).get("payload")->get("reason")->as_string(), expect(c, "reason").as_string());
-  EXPECT_EQ(n.record(id, expect(c, "audit_event").as_string()).get("outcome")->as_string(), "blocked");
+  EXPECT_EQ(parse(r.body).get("payload")->get("reason")->as_string(),
+            expect(c, "reason").as_string());
+  EXPECT_EQ(n.record(id, expect(c, "audit_event").as_string()).get("outcome")->as_string(),
+            "blocked");
 }
 
 TEST(Conformance, L3_CHAIN_001_And_L2_HMAC_001_ExportVerifiesOfflineAndTamperingIsFound) {
@@ -258,12 +286,15 @@ TEST(Conformance, L3_CHAIN_001_And_L2_HMAC_001_ExportVerifiesOfflineAndTampering
   const json::Value& hmac = conformance_case("L2-HMAC-001");
   test::TempDir dir;
   AiNode n(dir.path(), "");
-  for (int i = 0; i < 3; ++i) ASSERT_EQ(n.command(n.leasee(), cmd(new_uuid_v4(), "status", {})).status, 200);
-  HttpReply exp = n.get("/api/v1/audit?format=" + in(chain, "export_format").as_string(), n.owner());
+  for (int i = 0; i < 3; ++i)
+    ASSERT_EQ(n.command(n.leasee(), cmd(new_uuid_v4(), "status", {})).status, 200);
+  HttpReply exp =
+      n.get("/api/v1/audit?format=" + in(chain, "export_format").as_string(), n.owner());
   ASSERT_EQ(exp.status, 200);
   std::string file = dir.file("export.jsonl");
   std::ofstream(file) << exp.body;
-  auto ok = test::run_cli({"audit", "verify", file, "--secret-file", dir.path() + "/data/audit.secret"});
+  auto ok =
+      test::run_cli({"audit", "verify", file, "--secret-file", dir.path() + "/data/audit.secret"});
   EXPECT_EQ(ok.exit_code, 0) << ok.out << ok.err;  // chain_valid: true, no network
   EXPECT_TRUE(expect(chain, "chain_valid").as_bool());
   // Tamper the field the L2-HMAC-001 case names in the record at its seq.
@@ -273,15 +304,18 @@ TEST(Conformance, L3_CHAIN_001_And_L2_HMAC_001_ExportVerifiesOfflineAndTampering
   std::istringstream lines(exp.body);
   while (std::getline(lines, line)) {
     json::Value v = parse(line);
-    if (v.get("seq")->as_int() == seq) v.as_object().set(field, in(hmac, "tamper").get("new_value")->as_string());
+    if (v.get("seq")->as_int() == seq)
+      v.as_object().set(field, in(hmac, "tamper").get("new_value")->as_string());
     tampered += json::canonical(v) + "\n";
   }
   std::ofstream(dir.file("tampered.jsonl")) << tampered;
-  auto bad = test::run_cli({"audit", "verify", dir.file("tampered.jsonl"), "--secret-file", dir.path() + "/data/audit.secret"});
+  auto bad = test::run_cli({"audit", "verify", dir.file("tampered.jsonl"), "--secret-file",
+                            dir.path() + "/data/audit.secret"});
   EXPECT_EQ(bad.exit_code, 1);
   EXPECT_FALSE(expect(hmac, "chain_valid").as_bool());
-  EXPECT_NE((bad.out + bad.err).find("seq " + std::to_string(expect(hmac, "first_invalid_seq").as_int())),
-            std::string::npos)
+  EXPECT_NE(
+      (bad.out + bad.err).find("seq " + std::to_string(expect(hmac, "first_invalid_seq").as_int())),
+      std::string::npos)
       << bad.out << bad.err;
 }
 

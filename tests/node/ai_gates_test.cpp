@@ -49,14 +49,19 @@ class AiGates : public ::testing::Test {
         "      require_auth: true\n"
         "      auth_timeout_ms: 1500\n"
         "      on_timeout: block\n"
-        "      notify: [ws, \"" + hook_->url() + "\"]\n"
+        "      notify: [ws, \"" +
+        hook_->url() +
+        "\"]\n"
         "    - action_types: [arm_home]\n"
         "      require_auth: true\n"
         "      auth_timeout_ms: 800\n"
         "      on_timeout: allow\n"
         "  layers:\n"
-        "    fast: {url: \"" + fast_->url() + "\", timeout_ms: 3000}\n"
-        "    planner: {url: \"" + planner_->url() + "\", timeout_ms: 3000}\n";
+        "    fast: {url: \"" +
+        fast_->url() +
+        "\", timeout_ms: 3000}\n"
+        "    planner: {url: \"" +
+        planner_->url() + "\", timeout_ms: 3000}\n";
     node_ = std::make_unique<AiNode>(dir_.path(), agent);
   }
   AiNode& n() { return *node_; }
@@ -70,7 +75,8 @@ class AiGates : public ::testing::Test {
 TEST_F(AiGates, AiBlockIsCopiedIntoTheAuditRecordAndConfidenceIsNeverDefaulted) {
   // Not gated (status): the ai block lands in the record as sent.
   std::string id = new_uuid_v4();
-  HttpReply r = n().command(n().leasee(), cmd(id, "status", {}, ai_block("openai", "gpt-4o", 0.91, "planner")));
+  HttpReply r = n().command(n().leasee(),
+                            cmd(id, "status", {}, ai_block("openai", "gpt-4o", 0.91, "planner")));
   ASSERT_EQ(r.status, 200) << r.body;
   json::Value rec = n().record(id, "COMMAND");
   ASSERT_TRUE(rec.get("ai")) << json::dump(rec);
@@ -92,7 +98,8 @@ TEST_F(AiGates, AiBlockWithoutAMustFieldOrWithABadConfidenceIsRefused) {
   HttpReply r = n().command(n().leasee(), cmd(new_uuid_v4(), "status", {}, no_model));
   EXPECT_EQ(r.status, 400) << r.body;
   EXPECT_EQ(error_code(r), "SCHEMA_VALIDATION_FAILED");
-  EXPECT_EQ(parse(r.body).get("payload")->get("detail")->get("reason")->as_string(), "AUDIT_INCOMPLETE_AI_IDENTITY");
+  EXPECT_EQ(parse(r.body).get("payload")->get("detail")->get("reason")->as_string(),
+            "AUDIT_INCOMPLETE_AI_IDENTITY");
   json::Object empty_provider{{"provider", ""}, {"model", "m"}};
   EXPECT_EQ(error_code(n().command(n().leasee(), cmd(new_uuid_v4(), "status", {}, empty_provider))),
             "SCHEMA_VALIDATION_FAILED");
@@ -102,7 +109,8 @@ TEST_F(AiGates, AiBlockWithoutAMustFieldOrWithABadConfidenceIsRefused) {
 
 TEST_F(AiGates, BlockGateRefusesBelowAndWithoutConfidenceAndPassesAtTheThreshold) {
   std::string low = new_uuid_v4();
-  HttpReply r = n().command(n().leasee(), cmd(low, "chat", {{"text", "hi"}}, ai_block("sim", "m", 0.3, "fast")));
+  HttpReply r = n().command(n().leasee(),
+                            cmd(low, "chat", {{"text", "hi"}}, ai_block("sim", "m", 0.3, "fast")));
   EXPECT_EQ(r.status, 403) << r.body;
   EXPECT_EQ(error_code(r), "CONFIDENCE_GATE_FAIL");
   EXPECT_EQ(parse(r.body).get("payload")->get("reason")->as_string(), "confidence_below_gate");
@@ -112,13 +120,16 @@ TEST_F(AiGates, BlockGateRefusesBelowAndWithoutConfidenceAndPassesAtTheThreshold
   EXPECT_DOUBLE_EQ(rec.get("ai")->get("confidence")->to_double(), 0.3);
   // Absent confidence is a miss.
   json::Object none{{"provider", "sim"}, {"model", "m"}};
-  EXPECT_EQ(n().command(n().leasee(), cmd(new_uuid_v4(), "chat", {{"text", "hi"}}, none)).status, 403);
+  EXPECT_EQ(n().command(n().leasee(), cmd(new_uuid_v4(), "chat", {{"text", "hi"}}, none)).status,
+            403);
   // rcan-py's top-level confidence counts as the command's confidence too.
-  HttpReply top = n().command(n().leasee(), cmd(new_uuid_v4(), "chat", {{"text", "hi"}}, {}, ",\"confidence\":0.2"));
+  HttpReply top = n().command(
+      n().leasee(), cmd(new_uuid_v4(), "chat", {{"text", "hi"}}, {}, ",\"confidence\":0.2"));
   EXPECT_EQ(error_code(top), "CONFIDENCE_GATE_FAIL") << top.body;
   // Strict comparison: exactly at min_confidence passes.
   std::string at = new_uuid_v4();
-  HttpReply ok = n().command(n().leasee(), cmd(at, "chat", {{"text", "hi"}}, ai_block("sim", "m", 0.5, "fast")));
+  HttpReply ok = n().command(n().leasee(),
+                             cmd(at, "chat", {{"text", "hi"}}, ai_block("sim", "m", 0.5, "fast")));
   EXPECT_EQ(ok.status, 200) << ok.body;
 }
 
@@ -141,10 +152,13 @@ TEST_F(AiGates, AllowGateDispatchesAndMarksTheRecordGateBypassed) {
 
 TEST_F(AiGates, EscalationClimbsLayersUntilTheGatePassesThenDispatchesWithAWatermark) {
   std::string id = new_uuid_v4();
-  json::Object thought{{"reasoning", "the dock is probably ahead"}, {"instruction", "go to the dock"}};
-  HttpReply r = n().command(n().leasee(), cmd(id, "move", {{"linear", 0.2}, {"duration_ms", 100}, {"instruction", "go to the dock"}},
-                                              ai_block("sim", "sim-reactive", 0.3, "reactive", "th_reactive_1"),
-                                              ",\"thought\":" + json::dump(json::Value(thought))));
+  json::Object thought{{"reasoning", "the dock is probably ahead"},
+                       {"instruction", "go to the dock"}};
+  HttpReply r = n().command(
+      n().leasee(),
+      cmd(id, "move", {{"linear", 0.2}, {"duration_ms", 100}, {"instruction", "go to the dock"}},
+          ai_block("sim", "sim-reactive", 0.3, "reactive", "th_reactive_1"),
+          ",\"thought\":" + json::dump(json::Value(thought))));
   ASSERT_EQ(r.status, 200) << r.body;
   json::Value ack = parse(r.body);
   EXPECT_EQ(ack.get("type")->as_string(), "ACK");
@@ -197,7 +211,8 @@ TEST_F(AiGates, HitlGateHoldsNotifiesOwnersOnlyAndTheOwnerApproves) {
   ASSERT_TRUE(connect_stream(owner_ws, n().port(), n().owner()));
   ASSERT_TRUE(connect_stream(leasee_ws, n().port(), n().leasee()));
   std::string id = new_uuid_v4();
-  HttpReply r = n().command(n().leasee(), cmd(id, "arm_move", {{"joints", json::Array{0.1, 0.0, 0.0, 0.0, 0.0, 0.0}}}));
+  HttpReply r = n().command(
+      n().leasee(), cmd(id, "arm_move", {{"joints", json::Array{0.1, 0.0, 0.0, 0.0, 0.0, 0.0}}}));
   ASSERT_EQ(r.status, 202) << r.body;
   json::Value pa = parse(r.body);
   EXPECT_EQ(pa.get("type")->as_string(), "PENDING_AUTH");
@@ -233,15 +248,20 @@ TEST_F(AiGates, HitlGateHoldsNotifiesOwnersOnlyAndTheOwnerApproves) {
   // The originator's stream hears the result.
   auto ack = wait_frame(leasee_ws, "ACK", id);
   EXPECT_TRUE(ack) << "the originator's stream got no ACK";
-  EXPECT_EQ(parse(n().get("/rcan/v1/pending", n().owner()).body).get("pending")->as_array().size(), 0u);
+  EXPECT_EQ(parse(n().get("/rcan/v1/pending", n().owner()).body).get("pending")->as_array().size(),
+            0u);
   // A second decision on the same id finds nothing.
   EXPECT_EQ(n().authorize(n().owner(), id, "approve").status, 404);
 }
 
 TEST_F(AiGates, AuthorizeBelowOwnerIsRefusedAndAudited) {
   std::string id = new_uuid_v4();
-  ASSERT_EQ(n().command(n().leasee(), cmd(id, "arm_move", {{"joints", json::Array{0.1, 0, 0, 0, 0, 0}}})).status, 202);
-  for (const std::string& tok : {n().token("guest", {"status"}), n().leasee(), n().token("user", {"status", "control"})}) {
+  ASSERT_EQ(
+      n().command(n().leasee(), cmd(id, "arm_move", {{"joints", json::Array{0.1, 0, 0, 0, 0, 0}}}))
+          .status,
+      202);
+  for (const std::string& tok :
+       {n().token("guest", {"status"}), n().leasee(), n().token("user", {"status", "control"})}) {
     HttpReply r = n().authorize(tok, id, "approve");
     EXPECT_EQ(r.status, 403) << r.body;
     EXPECT_EQ(error_code(r), "INSUFFICIENT_PRIVILEGES");
@@ -251,7 +271,9 @@ TEST_F(AiGates, AuthorizeBelowOwnerIsRefusedAndAudited) {
   EXPECT_EQ(n().records(id, "COMMAND").size(), 0u);
   EXPECT_EQ(n().post("/rcan/v1/authorize", "{}", "").status, 401);
   // CREATOR may.
-  EXPECT_EQ(n().authorize(n().token("creator", {"status", "control", "config"}), id, "approve").status, 200);
+  EXPECT_EQ(
+      n().authorize(n().token("creator", {"status", "control", "config"}), id, "approve").status,
+      200);
 }
 
 TEST_F(AiGates, DenyOnTheStreamDropsTheCommandAndTellsTheOriginator) {
@@ -262,9 +284,11 @@ TEST_F(AiGates, DenyOnTheStreamDropsTheCommandAndTellsTheOriginator) {
   // Sent on the originator's own stream: the 202 answer arrives there.
   leasee_ws.send_text(cmd(id, "arm_move", {{"joints", json::Array{0.1, 0, 0, 0, 0, 0}}}));
   ASSERT_TRUE(wait_frame(leasee_ws, "PENDING_AUTH"));
-  json::Object authz{{"type", "AUTHORIZE"},
-                     {"message_id", new_uuid_v4()},
-                     {"payload", json::Object{{"message_id", id}, {"decision", "deny"}, {"reason", "person nearby"}}}};
+  json::Object authz{
+      {"type", "AUTHORIZE"},
+      {"message_id", new_uuid_v4()},
+      {"payload",
+       json::Object{{"message_id", id}, {"decision", "deny"}, {"reason", "person nearby"}}}};
   owner_ws.send_text(json::dump(json::Value(authz)));
   auto answer = wait_frame(owner_ws, "ACK");
   ASSERT_TRUE(answer);
@@ -282,7 +306,10 @@ TEST_F(AiGates, TimeoutBlocksOrAllowsPerGate) {
   test::WsClient leasee_ws;
   ASSERT_TRUE(connect_stream(leasee_ws, n().port(), n().leasee()));
   std::string blocked = new_uuid_v4();
-  ASSERT_EQ(n().command(n().leasee(), cmd(blocked, "arm_move", {{"joints", json::Array{0.1, 0, 0, 0, 0, 0}}})).status, 202);
+  ASSERT_EQ(n().command(n().leasee(),
+                        cmd(blocked, "arm_move", {{"joints", json::Array{0.1, 0, 0, 0, 0, 0}}}))
+                .status,
+            202);
   std::string allowed = new_uuid_v4();
   ASSERT_EQ(n().command(n().leasee(), cmd(allowed, "arm_home", {})).status, 202);
   // Both outcomes reach the originator's stream, in whatever order the timers fire.
@@ -292,9 +319,12 @@ TEST_F(AiGates, TimeoutBlocksOrAllowsPerGate) {
     ASSERT_TRUE(f) << "the originator's stream went quiet";
     const json::Value* r = f->get("reply_to");
     std::string about = r && r->is_string() ? r->as_string() : "";
-    if (about == blocked) err = f;
-    else if (about == allowed) ack = f;
-    else --i;  // another event
+    if (about == blocked)
+      err = f;
+    else if (about == allowed)
+      ack = f;
+    else
+      --i;  // another event
   }
   ASSERT_TRUE(err && ack);
   EXPECT_EQ(err->get("payload")->get("error_code")->as_string(), "HITL_TIMEOUT");
@@ -308,10 +338,13 @@ TEST_F(AiGates, TimeoutBlocksOrAllowsPerGate) {
 
 TEST_F(AiGates, ThoughtLogNeedsATokenShowsReasoningOnlyWithConfigScopeAnd404sUnknownIds) {
   std::string id = new_uuid_v4();
-  json::Object thought{{"reasoning", "secret prompt text"}, {"instruction", "say hi"},
+  json::Object thought{{"reasoning", "secret prompt text"},
+                       {"instruction", "say hi"},
                        {"context_snapshot", json::Object{{"battery", 0.5}}}};
-  HttpReply sent = n().command(n().leasee(), cmd(id, "chat", {{"text", "hi"}}, ai_block("sim", "m", 0.9, "fast", "th_chat_1"),
-                                                 ",\"thought\":" + json::dump(json::Value(thought))));
+  HttpReply sent =
+      n().command(n().leasee(),
+                  cmd(id, "chat", {{"text", "hi"}}, ai_block("sim", "m", 0.9, "fast", "th_chat_1"),
+                      ",\"thought\":" + json::dump(json::Value(thought))));
   ASSERT_EQ(sent.status, 200) << sent.body;
   HttpReply full = n().get("/api/thoughts/th_chat_1", n().owner());
   ASSERT_EQ(full.status, 200) << full.body;
@@ -326,17 +359,23 @@ TEST_F(AiGates, ThoughtLogNeedsATokenShowsReasoningOnlyWithConfigScopeAnd404sUnk
   EXPECT_EQ(parse(partial.body).get("reasoning"), nullptr);
   EXPECT_NE(parse(partial.body).get("confidence"), nullptr);
   // An OWNER without the config scope does not see reasoning either.
-  EXPECT_EQ(parse(n().get("/api/thoughts/th_chat_1", n().token("owner", {"status", "control"})).body).get("reasoning"),
-            nullptr);
+  EXPECT_EQ(
+      parse(n().get("/api/thoughts/th_chat_1", n().token("owner", {"status", "control"})).body)
+          .get("reasoning"),
+      nullptr);
   EXPECT_EQ(n().get("/api/thoughts/th_chat_1").status, 401);
   EXPECT_EQ(n().get("/api/thoughts/th_nope", n().owner()).status, 404);
   // The thought is never dispatched: the COMMAND record's applied action has no thought.
   EXPECT_EQ(json::dump(n().record(id, "COMMAND")).find("secret prompt text"), std::string::npos);
   // The CLI reads it too.
-  auto cli = test::run_cli({"thoughts", "get", "th_chat_1", "--url", n().url(), "--token-file", n().owner_file()});
+  auto cli = test::run_cli(
+      {"thoughts", "get", "th_chat_1", "--url", n().url(), "--token-file", n().owner_file()});
   EXPECT_EQ(cli.exit_code, 0) << cli.err;
   EXPECT_NE(cli.out.find("secret prompt text"), std::string::npos);
-  EXPECT_EQ(test::run_cli({"thoughts", "get", "th_nope", "--url", n().url(), "--token-file", n().owner_file()}).exit_code, 1);
+  EXPECT_EQ(test::run_cli({"thoughts", "get", "th_nope", "--url", n().url(), "--token-file",
+                           n().owner_file()})
+                .exit_code,
+            1);
 }
 
 TEST_F(AiGates, WatermarkIsInPayloadAndRecordAndVerifiesPubliclyExactlyAsTheSeedShows) {
@@ -362,10 +401,14 @@ TEST_F(AiGates, WatermarkIsInPayloadAndRecordAndVerifiesPubliclyExactlyAsTheSeed
   EXPECT_EQ(n().get("/api/v1/watermark/verify?token=" + wm).status, 200);
   HttpReply foreign = n().get("/api/v1/watermark/verify?token=" + wm + "&rrn=RRN-000000000999");
   EXPECT_EQ(foreign.status, 404);
-  EXPECT_EQ(foreign.body, R"({"error":"Watermark token not found in audit log","code":"HTTP_404"})");
-  HttpReply unknown = n().get("/api/v1/watermark/verify?token=rcan-wm-v1:0123456789abcdef0123456789abcdef&rrn=" + n().rrn());
+  EXPECT_EQ(foreign.body,
+            R"({"error":"Watermark token not found in audit log","code":"HTTP_404"})");
+  HttpReply unknown =
+      n().get("/api/v1/watermark/verify?token=rcan-wm-v1:0123456789abcdef0123456789abcdef&rrn=" +
+              n().rrn());
   EXPECT_EQ(unknown.status, 404);
-  EXPECT_EQ(unknown.body, R"({"error":"Watermark token not found in audit log","code":"HTTP_404"})");
+  EXPECT_EQ(unknown.body,
+            R"({"error":"Watermark token not found in audit log","code":"HTTP_404"})");
   for (std::string bad : {"rcan-wm-v1:0123", "rcan-wm-v1:0123456789ABCDEF0123456789ABCDEF", "x"}) {
     HttpReply b = n().get("/api/v1/watermark/verify?token=" + bad + "&rrn=" + n().rrn());
     EXPECT_EQ(b.status, 400) << bad;
@@ -386,9 +429,10 @@ TEST_F(AiGates, ForwardedCommandKeepsItsWatermark) {
   json::Array chain{json::Object{{"issuer_ruri", "rcan://local.rcan/acme/fleet-brain/11111111"},
                                  {"human_subject", "ops"},
                                  {"timestamp", 1}}};
-  HttpReply r = n().command(n().leasee(), cmd(id, "status", {{"watermark_token", upstream}},
-                                              ai_block("sim", "m", 0.9, "planner", "th_fwd_1"),
-                                              ",\"delegation_chain\":" + json::dump(json::Value(chain))));
+  HttpReply r =
+      n().command(n().leasee(), cmd(id, "status", {{"watermark_token", upstream}},
+                                    ai_block("sim", "m", 0.9, "planner", "th_fwd_1"),
+                                    ",\"delegation_chain\":" + json::dump(json::Value(chain))));
   ASSERT_EQ(r.status, 200) << r.body;
   EXPECT_EQ(parse(r.body).get("payload")->get("watermark_token")->as_string(), upstream);
   EXPECT_EQ(n().record(id, "COMMAND").get("watermark_token")->as_string(), upstream);
@@ -407,22 +451,30 @@ TEST(AiHitlRestart, HeldCommandsSurviveARestartAndTheCliDecides) {
   std::string agent =
       "agent:\n"
       "  hitl_gates:\n"
-      "    - {action_types: [arm_move], require_auth: true, auth_timeout_ms: 120000, on_timeout: block, notify: [ws]}\n"
-      "    - {action_types: [arm_home], require_auth: true, auth_timeout_ms: 300, on_timeout: allow}\n";
+      "    - {action_types: [arm_move], require_auth: true, auth_timeout_ms: 120000, on_timeout: "
+      "block, notify: [ws]}\n"
+      "    - {action_types: [arm_home], require_auth: true, auth_timeout_ms: 300, on_timeout: "
+      "allow}\n";
   std::string held = new_uuid_v4();
   std::string homing = new_uuid_v4();
   std::string second = new_uuid_v4();
   {
     AiNode node(dir.path(), agent);
-    ASSERT_EQ(node.command(node.leasee(), cmd(held, "arm_move", {{"joints", json::Array{0.1, 0, 0, 0, 0, 0}}})).status, 202);
-    ASSERT_EQ(node.command(node.leasee(), cmd(second, "arm_move", {{"joints", json::Array{0.2, 0, 0, 0, 0, 0}}})).status,
+    ASSERT_EQ(node.command(node.leasee(),
+                           cmd(held, "arm_move", {{"joints", json::Array{0.1, 0, 0, 0, 0, 0}}}))
+                  .status,
+              202);
+    ASSERT_EQ(node.command(node.leasee(),
+                           cmd(second, "arm_move", {{"joints", json::Array{0.2, 0, 0, 0, 0, 0}}}))
+                  .status,
               202);
     namespace fs = std::filesystem;
     std::string file = dir.path() + "/data/hitl-pending.json";
     // Held, then stop: it times out while the node is down or just after it is back.
     ASSERT_EQ(node.command(node.leasee(), cmd(homing, "arm_home", {})).status, 202);
     ASSERT_TRUE(fs::exists(file));
-    EXPECT_EQ(fs::status(file).permissions() & (fs::perms::group_all | fs::perms::others_all), fs::perms::none);
+    EXPECT_EQ(fs::status(file).permissions() & (fs::perms::group_all | fs::perms::others_all),
+              fs::perms::none);
     EXPECT_NE(test::read_file(file).find(held), std::string::npos);
     EXPECT_EQ(test::read_file(file).find("auth_token"), std::string::npos);
     EXPECT_EQ(node.terminate(), 0);
@@ -436,27 +488,33 @@ TEST(AiHitlRestart, HeldCommandsSurviveARestartAndTheCliDecides) {
   EXPECT_EQ(list.exit_code, 0) << list.err;
   EXPECT_NE(list.out.find(held), std::string::npos) << list.out;
   EXPECT_NE(list.out.find("arm_move"), std::string::npos);
-  auto ok = test::run_cli({"authorize", held, "--approve", "--reason", "checked", "--url", node.url(), "--token-file",
-                           node.owner_file()});
+  auto ok = test::run_cli({"authorize", held, "--approve", "--reason", "checked", "--url",
+                           node.url(), "--token-file", node.owner_file()});
   EXPECT_EQ(ok.exit_code, 0) << ok.out << ok.err;
   EXPECT_EQ(node.record(held, "COMMAND").get("outcome")->as_string(), "ok");
-  auto no = test::run_cli({"authorize", second, "--deny", "--url", node.url(), "--token-file", node.owner_file()});
+  auto no = test::run_cli(
+      {"authorize", second, "--deny", "--url", node.url(), "--token-file", node.owner_file()});
   EXPECT_EQ(no.exit_code, 0) << no.out << no.err;
   EXPECT_EQ(node.records(second, "COMMAND").size(), 0u);
   EXPECT_EQ(node.records(second, "HITL_DENIED", 1).size(), 1u);
   // A LEASEE's CLI attempt is refused (exit 1) and audited.
-  auto lower = test::run_cli({"authorize", second, "--approve", "--url", node.url(), "--token-file", node.leasee_file()});
+  auto lower = test::run_cli(
+      {"authorize", second, "--approve", "--url", node.url(), "--token-file", node.leasee_file()});
   EXPECT_EQ(lower.exit_code, 1);
   EXPECT_NE(lower.out.find("INSUFFICIENT_PRIVILEGES"), std::string::npos);
-  EXPECT_EQ(test::run_cli({"authorize", held, "--url", node.url(), "--token-file", node.owner_file()}).exit_code, 2);
-  auto verify = test::run_cli({"audit", "verify", "--data-dir", dir.path() + "/data", "--secret-file",
-                               dir.path() + "/data/audit.secret"});
+  EXPECT_EQ(
+      test::run_cli({"authorize", held, "--url", node.url(), "--token-file", node.owner_file()})
+          .exit_code,
+      2);
+  auto verify = test::run_cli({"audit", "verify", "--data-dir", dir.path() + "/data",
+                               "--secret-file", dir.path() + "/data/audit.secret"});
   EXPECT_EQ(verify.exit_code, 0) << verify.out << verify.err;
 }
 
 TEST(AiHitlRestart, AnUnreadablePendingFileIsMovedAsideAndAudited) {
   test::TempDir dir;
-  std::string agent = "agent:\n  hitl_gates:\n    - {action_types: [arm_move], require_auth: true}\n";
+  std::string agent =
+      "agent:\n  hitl_gates:\n    - {action_types: [arm_move], require_auth: true}\n";
   {
     AiNode node(dir.path(), agent);
     EXPECT_EQ(node.terminate(), 0);
@@ -468,7 +526,8 @@ TEST(AiHitlRestart, AnUnreadablePendingFileIsMovedAsideAndAudited) {
   for (const auto& e : std::filesystem::directory_iterator(dir.path() + "/data"))
     moved = moved || e.path().filename().string().rfind("hitl-pending.json.unreadable-", 0) == 0;
   EXPECT_TRUE(moved);
-  EXPECT_EQ(parse(node.get("/rcan/v1/pending", node.owner()).body).get("pending")->as_array().size(), 0u);
+  EXPECT_EQ(
+      parse(node.get("/rcan/v1/pending", node.owner()).body).get("pending")->as_array().size(), 0u);
   // The record is written asynchronously at start-up: wait for it to be durable.
   HttpReply audit;
   for (int i = 0; i < 250; ++i) {
@@ -488,10 +547,12 @@ TEST(AiLayers, AFailingOrSlowLayerBlocksWithoutHoldingThePipeline) {
       "    - {scope: nav, min_confidence: 0.8, on_fail: escalate}\n"
       "  layers:\n"
       "    fast: {url: \"http://127.0.0.1:1/\", timeout_ms: 500}\n"
-      "    planner: {url: \"" + slow.url() + "\", timeout_ms: 2500}\n";
+      "    planner: {url: \"" +
+      slow.url() + "\", timeout_ms: 2500}\n";
   AiNode node(dir.path(), agent);
-  HttpReply dead = node.command(node.leasee(), cmd(new_uuid_v4(), "move", {{"linear", 0.1}, {"duration_ms", 100}},
-                                                   ai_block("sim", "m", 0.2, "reactive")));
+  HttpReply dead = node.command(node.leasee(),
+                                cmd(new_uuid_v4(), "move", {{"linear", 0.1}, {"duration_ms", 100}},
+                                    ai_block("sim", "m", 0.2, "reactive")));
   EXPECT_EQ(dead.status, 403) << dead.body;
   EXPECT_EQ(parse(dead.body).get("payload")->get("reason")->as_string(), "escalation_failed");
   // The slow planner times out; meanwhile the node keeps answering.
@@ -499,18 +560,21 @@ TEST(AiLayers, AFailingOrSlowLayerBlocksWithoutHoldingThePipeline) {
   HttpReply slow_reply;
   std::string slow_id = new_uuid_v4();
   std::thread t([&] {
-    slow_reply = node.command(node.leasee(), cmd(slow_id, "move", {{"linear", 0.1}, {"duration_ms", 100}},
-                                                 ai_block("sim", "m", 0.2, "fast")));
+    slow_reply =
+        node.command(node.leasee(), cmd(slow_id, "move", {{"linear", 0.1}, {"duration_ms", 100}},
+                                        ai_block("sim", "m", 0.2, "fast")));
     slow_done = true;
   });
   // Wait until the layer has the request, then show other commands still flow.
-  for (int i = 0; i < 200 && slow.requests_seen() == 0; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  for (int i = 0; i < 200 && slow.requests_seen() == 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
   ASSERT_EQ(slow.requests_seen(), 1);
   for (int i = 0; i < 3; ++i) {
     HttpReply quick = node.command(node.leasee(), cmd(new_uuid_v4(), "status", {}));
     EXPECT_EQ(quick.status, 200);
   }
-  EXPECT_FALSE(slow_done.load()) << "the escalation finished before the other commands: nothing was shown";
+  EXPECT_FALSE(slow_done.load())
+      << "the escalation finished before the other commands: nothing was shown";
   t.join();
   EXPECT_EQ(slow_reply.status, 403) << slow_reply.body;
   EXPECT_EQ(parse(slow_reply.body).get("payload")->get("reason")->as_string(), "escalation_failed");

@@ -6,17 +6,17 @@
 #include <gtest/gtest.h>
 #include <pthread.h>
 
-#include <cmath>
-#include <limits>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <fstream>
+#include <limits>
 #include <string_view>
 #include <thread>
 #include <vector>
 
-#include "node/safety/actuation_safety.h"
 #include "base/clock.h"
+#include "node/safety/actuation_safety.h"
 #include "node/safety/sim_robot.h"
 #include "test_support.h"
 
@@ -190,9 +190,7 @@ TEST(SafetyEstop, CorruptStateComesUpLatched) {
   for (const char* body : {"{not json", "", "{\"format\":\"other\",\"estop_active\":false}",
                            "{\"format\":\"rcan-safety-state-v1\",\"estop_active\":\"no\"}", "[]"}) {
     rcan::test::TempDir dir;
-    {
-      std::ofstream(dir.file("safety_state.json")) << body;
-    }
+    { std::ofstream(dir.file("safety_state.json")) << body; }
     {
       Rig r;
       ASSERT_TRUE(r.core->open(dir.path()).ok());
@@ -349,8 +347,8 @@ TEST(SafetyLimits, RejectPolicyFromConfig) {
 
 TEST(SafetyLimits, ConfigCannotExceedHardwareEnvelope) {
   SafetyConfig cfg;
-  cfg.limits.max_linear_mps = 100.0;      // sim hardware max 1.5
-  cfg.limits.joint_max_rad.fill(100.0);   // sim hardware max 3.1 / 2.0 / 2.5
+  cfg.limits.max_linear_mps = 100.0;     // sim hardware max 1.5
+  cfg.limits.joint_max_rad.fill(100.0);  // sim hardware max 3.1 / 2.0 / 2.5
   Rig r(cfg);
   EXPECT_DOUBLE_EQ(r.core->limits().max_linear_mps, 1.5);
   EXPECT_DOUBLE_EQ(r.core->limits().joint_max_rad[1], 2.0);
@@ -397,7 +395,8 @@ TEST(SafetyLimits, NonFiniteValuesAreSchemaErrors) {
   auto e = r.core->dispatch(ActuatorCommand::make_drive(std::nan(""), 0, 100));
   ASSERT_FALSE(e.ok());
   EXPECT_EQ(e.error().code, ErrorCode::kSchemaValidationFailed);
-  e = r.core->dispatch(ActuatorCommand::make_arm({0, std::numeric_limits<double>::infinity(), 0, 0, 0, 0}));
+  e = r.core->dispatch(
+      ActuatorCommand::make_arm({0, std::numeric_limits<double>::infinity(), 0, 0, 0, 0}));
   ASSERT_FALSE(e.ok());
   EXPECT_EQ(e.error().code, ErrorCode::kSchemaValidationFailed);
   e = r.core->dispatch(ActuatorCommand{});
@@ -678,7 +677,8 @@ TEST(SafetyThread, RestingLoopWakesForCommandsAndDeadlines) {
   // A session registered while resting: its deadman fires on time, not after the 5 s rest.
   core.register_session("s", 200);
   core.set_session_control("s", true);
-  for (int i = 0; i < 150 && lost.load() == 0; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  for (int i = 0; i < 150 && lost.load() == 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
   EXPECT_EQ(lost.load(), 1);
   EXPECT_TRUE(core.safe_stop_active());
   core.stop();
@@ -811,11 +811,13 @@ Message command_msg(json::Object payload) {
 
 TEST(TranslateCommand, FlatParametersWinOverParamsOverParameters) {
   SafetyLimits limits;
-  auto c = translate_command(command_msg(json::Object{{"action", "move"},
-                                                      {"linear", 0.1},
-                                                      {"params", json::Object{{"linear", 0.5}, {"angular", 0.2}}},
-                                                      {"parameters", json::Object{{"angular", 0.9}, {"duration_ms", 300}}}}),
-                             limits);
+  auto c =
+      translate_command(command_msg(json::Object{
+                            {"action", "move"},
+                            {"linear", 0.1},
+                            {"params", json::Object{{"linear", 0.5}, {"angular", 0.2}}},
+                            {"parameters", json::Object{{"angular", 0.9}, {"duration_ms", 300}}}}),
+                        limits);
   ASSERT_TRUE(c.ok()) << c.error().message;
   ASSERT_TRUE(c->drive.has_value());
   EXPECT_DOUBLE_EQ(c->drive->linear_mps, 0.1);
@@ -823,8 +825,9 @@ TEST(TranslateCommand, FlatParametersWinOverParamsOverParameters) {
   EXPECT_EQ(c->drive->duration_ms, 300);
   // Joints may come from "parameters" alone.
   auto arm = translate_command(
-      command_msg(json::Object{{"action", "set_joints"},
-                               {"parameters", json::Object{{"joints", json::Array{0.1, 0.2, 0.3, 0.4, 0.5, 0.6}}}}}),
+      command_msg(json::Object{
+          {"action", "set_joints"},
+          {"parameters", json::Object{{"joints", json::Array{0.1, 0.2, 0.3, 0.4, 0.5, 0.6}}}}}),
       limits);
   ASSERT_TRUE(arm.ok()) << arm.error().message;
   ASSERT_TRUE(arm->arm.has_value());
@@ -834,12 +837,14 @@ TEST(TranslateCommand, FlatParametersWinOverParamsOverParameters) {
 TEST(TranslateCommand, AFlatNullHidesTheNestedValue) {
   // The flat key is present (as null): it decides, and null means "not given".
   auto c = translate_command(
-      command_msg(json::Object{{"action", "move"}, {"linear", nullptr}, {"params", json::Object{{"linear", 0.4}}}}),
+      command_msg(json::Object{
+          {"action", "move"}, {"linear", nullptr}, {"params", json::Object{{"linear", 0.4}}}}),
       SafetyLimits{});
   ASSERT_FALSE(c.ok());
   EXPECT_EQ(c.error().code, ErrorCode::kSchemaValidationFailed);
   auto bad = translate_command(
-      command_msg(json::Object{{"action", "move"}, {"params", json::Object{{"linear", "fast"}}}}), SafetyLimits{});
+      command_msg(json::Object{{"action", "move"}, {"params", json::Object{{"linear", "fast"}}}}),
+      SafetyLimits{});
   ASSERT_FALSE(bad.ok());
   EXPECT_EQ(bad.error().field, "payload.linear");
 }
@@ -847,7 +852,8 @@ TEST(TranslateCommand, AFlatNullHidesTheNestedValue) {
 TEST(SafetyActuationApply, AppliesWhatPrepareCheckedAndAnswersChat) {
   Rig r;
   SafetyActuation act(*r.core, "test-bot");
-  auto pc = act.prepare(command_msg(json::Object{{"action", "MOVE"}, {"linear", 0.2}, {"duration_ms", 500}}), 0, "");
+  auto pc = act.prepare(
+      command_msg(json::Object{{"action", "MOVE"}, {"linear", 0.2}, {"duration_ms", 500}}), 0, "");
   ASSERT_TRUE(pc.ok()) << pc.error().message;
   EXPECT_EQ(pc->action_name, "move");
   ASSERT_TRUE(pc->command.has_value());
@@ -865,7 +871,8 @@ TEST(SafetyActuationApply, AppliesWhatPrepareCheckedAndAnswersChat) {
   EXPECT_EQ(refused.error().reason, "estop_active");
 
   // Informational actions carry no actuator command; chat answers the text that was asked.
-  auto chat = act.prepare(command_msg(json::Object{{"action", "chat"}, {"text", "Who are you?"}}), 0, "");
+  auto chat =
+      act.prepare(command_msg(json::Object{{"action", "chat"}, {"text", "Who are you?"}}), 0, "");
   ASSERT_TRUE(chat.ok());
   EXPECT_FALSE(chat->command.has_value());
   auto reply = act.apply(*chat);

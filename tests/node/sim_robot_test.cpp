@@ -6,7 +6,6 @@
 
 #include <cmath>
 #include <limits>
-#include <cmath>
 #include <numbers>
 #include <thread>
 #include <vector>
@@ -111,8 +110,8 @@ TEST(SimRobot, ArmJointsReachTargetsAtMaxSpeed) {
   ASSERT_TRUE(r.apply(ActuatorCommand::make_arm(target, 1.0)).ok());
   run(r, 500);
   auto s = r.state();
-  EXPECT_NEAR(s.joints_rad[0], 0.5, 1e-9);    // still moving at 1 rad/s
-  EXPECT_NEAR(s.joints_rad[1], -0.5, 1e-9);   // reached
+  EXPECT_NEAR(s.joints_rad[0], 0.5, 1e-9);   // still moving at 1 rad/s
+  EXPECT_NEAR(s.joints_rad[1], -0.5, 1e-9);  // reached
   EXPECT_NEAR(s.joints_rad[2], 0.25, 1e-9);
   EXPECT_NEAR(s.joints_rad[4], 0.5, 1e-9);
   EXPECT_FALSE(s.stopped);
@@ -124,7 +123,7 @@ TEST(SimRobot, ArmJointsReachTargetsAtMaxSpeed) {
 
 TEST(SimRobot, ArmSpeedCappedByHardwareAndTargetsByRange) {
   SimRobot r(no_battery());
-  JointArray target{10.0, 0, 0, 0, 0, 0};                 // beyond hardware range 3.1
+  JointArray target{10.0, 0, 0, 0, 0, 0};                              // beyond hardware range 3.1
   ASSERT_TRUE(r.apply(ActuatorCommand::make_arm(target, 50.0)).ok());  // speed capped to 2
   run(r, 1000);
   EXPECT_NEAR(r.state().joints_rad[0], 2.0, 1e-9);
@@ -229,7 +228,8 @@ TEST(SimRobot, TelemetryJsonHasRequiredFields) {
   s.loop_count = 7;
   s.loop_latency_ms = 0.25;
   auto o = s.to_json();
-  for (const char* k : {"ts", "loop_latency_ms", "loop_count", "paused", "base", "arm", "battery_v"})
+  for (const char* k :
+       {"ts", "loop_latency_ms", "loop_count", "paused", "base", "arm", "battery_v"})
     EXPECT_TRUE(o.contains(k)) << k;
   EXPECT_EQ(o.find("ts")->as_int(), 1'750'000'000'000);
   EXPECT_EQ(o.find("loop_count")->as_int(), 7);

@@ -1,11 +1,12 @@
 // The verified-token cache (node/token_cache.h) through the Authenticator: a cached token is
 // never accepted where full verification would refuse it.
+#include "node/admission/token_cache.h"
+
 #include <gtest/gtest.h>
 
 #include <array>
 
 #include "node/admission/authenticator.h"
-#include "node/admission/token_cache.h"
 #include "rcan/crypto/jwt.h"
 
 using namespace rcan;
@@ -33,8 +34,13 @@ Authenticator make_auth(const jwt::SigningKey& key, size_t cache_entries = 4096)
 
 std::string token(const jwt::SigningKey& key, const std::string& sub, int64_t iat, int64_t exp,
                   std::optional<int64_t> nbf = std::nullopt) {
-  json::Object c{{"iss", "test-issuer"}, {"sub", sub}, {"aud", kAud}, {"role", "user"},
-                 {"scope", json::Array{"status", "control"}}, {"iat", iat}, {"exp", exp}};
+  json::Object c{{"iss", "test-issuer"},
+                 {"sub", sub},
+                 {"aud", kAud},
+                 {"role", "user"},
+                 {"scope", json::Array{"status", "control"}},
+                 {"iat", iat},
+                 {"exp", exp}};
   if (nbf) c.set("nbf", *nbf);
   return *jwt::issue(c, key);
 }

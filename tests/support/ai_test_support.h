@@ -34,7 +34,8 @@
 namespace rcan::ai_test {
 
 inline int64_t wall_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
       .count();
 }
 
@@ -51,9 +52,13 @@ inline std::string error_code(const test::HttpReply& r) {
   return c && c->is_string() ? c->as_string() : "";
 }
 
-inline json::Object ai_block(const std::string& provider, const std::string& model, double confidence,
-                             const std::string& layer, const std::string& thought_id = "") {
-  json::Object o{{"provider", provider}, {"model", model}, {"confidence", confidence}, {"layer", layer},
+inline json::Object ai_block(const std::string& provider, const std::string& model,
+                             double confidence, const std::string& layer,
+                             const std::string& thought_id = "") {
+  json::Object o{{"provider", provider},
+                 {"model", model},
+                 {"confidence", confidence},
+                 {"layer", layer},
                  {"escalated", false}};
   if (!thought_id.empty()) o.set("thought_id", thought_id);
   return o;
@@ -102,7 +107,9 @@ class SimLayerProc {
   int requests_seen() {
     proc_.drain(50);
     int n = 0;
-    for (size_t at = 0; (at = proc_.err().find("\"event\":\"layer_request\"", at)) != std::string::npos; ++at) ++n;
+    for (size_t at = 0;
+         (at = proc_.err().find("\"event\":\"layer_request\"", at)) != std::string::npos; ++at)
+      ++n;
     return n;
   }
 
@@ -189,28 +196,32 @@ class AiNode {
   static constexpr const char* kRrn = "RRN-000000000042";
 
   // `expect_start` false: the daemon is expected to refuse its configuration (exit 1).
-  AiNode(const std::string& dir, const std::string& agent_yaml, bool fresh = true, bool expect_start = true)
+  AiNode(const std::string& dir, const std::string& agent_yaml, bool fresh = true,
+         bool expect_start = true)
       : dir_(dir) {
     std::string data = dir_ + "/data";
     if (fresh) {
       std::filesystem::create_directories(data);
       std::filesystem::permissions(data, std::filesystem::perms::owner_all);
       EXPECT_EQ(test::run_cli({"keys", "generate", "--dir", data + "/keys"}).exit_code, 0);
-      EXPECT_EQ(test::run_cli({"audit", "new-secret", "--out", data + "/audit.secret"}).exit_code, 0);
+      EXPECT_EQ(test::run_cli({"audit", "new-secret", "--out", data + "/audit.secret"}).exit_code,
+                0);
       Bytes seed(32);
       EXPECT_TRUE(random_bytes(seed.data(), seed.size()));
       {
         std::ofstream out(dir_ + "/issuer.seed", std::ios::binary);
-        out.write(reinterpret_cast<const char*>(seed.data()), static_cast<std::streamsize>(seed.size()));
+        out.write(reinterpret_cast<const char*>(seed.data()),
+                  static_cast<std::streamsize>(seed.size()));
       }
-      std::filesystem::permissions(dir_ + "/issuer.seed",
-                                   std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
+      std::filesystem::permissions(dir_ + "/issuer.seed", std::filesystem::perms::owner_read |
+                                                              std::filesystem::perms::owner_write);
       auto pk = ed25519::public_key_from_seed(seed);
       auto pem = ed25519::public_key_to_pem(*pk);
       std::ofstream(dir_ + "/issuer.pub.pem") << *pem;
       std::ofstream cfg(dir_ + "/robot.rcan.yaml");
       cfg << "rcan_version: \"1.2\"\nruri: " << kRuri << "\nrrn: " << kRrn
-          << "\nrobot: {name: ai-rover, manufacturer: acme, model: ai-rover, type: mobile_differential_with_arm}\n"
+          << "\nrobot: {name: ai-rover, manufacturer: acme, model: ai-rover, type: "
+             "mobile_differential_with_arm}\n"
              "capabilities: [status, chat, teleop, nav, arm]\n"
              "safety: {local_safety_wins: true, max_linear_speed_mps: 0.5}\n"
              "security:\n  jwt:\n    issuers: [{issuer: ai-test, key_file: "
@@ -221,7 +232,8 @@ class AiNode {
     leasee_ = token("leasee", {"status", "chat", "control"});
     write_token(owner_file(), owner_);
     write_token(leasee_file(), leasee_);
-    proc_.start({RCAND_PATH, "--config", dir_ + "/robot.rcan.yaml", "--data-dir", data, "--port", "0"});
+    proc_.start(
+        {RCAND_PATH, "--config", dir_ + "/robot.rcan.yaml", "--data-dir", data, "--port", "0"});
     if (!expect_start) {
       exit_code_ = proc_.stop(0, 15000);
       return;
@@ -253,8 +265,9 @@ class AiNode {
     int64_t now = wall_ms() / 1000;
     json::Array sc;
     for (auto& s : scopes) sc.emplace_back(s);
-    json::Object claims{{"iss", "ai-test"}, {"sub", role + "-1"}, {"aud", kRuri}, {"role", role},
-                        {"scope", sc},      {"iat", now - 5},     {"exp", now + 3600}};
+    json::Object claims{{"iss", "ai-test"}, {"sub", role + "-1"}, {"aud", kRuri},
+                        {"role", role},     {"scope", sc},        {"iat", now - 5},
+                        {"exp", now + 3600}};
     auto t = jwt::issue(claims, *key);
     EXPECT_TRUE(t.ok());
     return t.ok() ? *t : "";
@@ -265,7 +278,8 @@ class AiNode {
     if (!token.empty()) h.emplace_back("Authorization", "Bearer " + token);
     return test::http(port_, "GET", path, "", h);
   }
-  test::HttpReply post(const std::string& path, const std::string& body, const std::string& token) const {
+  test::HttpReply post(const std::string& path, const std::string& body,
+                       const std::string& token) const {
     std::vector<std::pair<std::string, std::string>> h;
     if (!token.empty()) h.emplace_back("Authorization", "Bearer " + token);
     return test::http(port_, "POST", path, body, h, 20000);
@@ -273,8 +287,8 @@ class AiNode {
   test::HttpReply command(const std::string& token, const std::string& body) const {
     return post("/rcan/v1/command", body, token);
   }
-  test::HttpReply authorize(const std::string& token, const std::string& id, const std::string& decision,
-                            const std::string& reason = "") const {
+  test::HttpReply authorize(const std::string& token, const std::string& id,
+                            const std::string& decision, const std::string& reason = "") const {
     json::Object payload{{"message_id", id}, {"decision", decision}};
     if (!reason.empty()) payload.set("reason", reason);
     json::Object m{{"type", "AUTHORIZE"}, {"message_id", new_uuid_v4()}, {"payload", payload}};
@@ -283,7 +297,8 @@ class AiNode {
 
   // Audit records with this message_id and event, waiting (up to 5 s) until at least
   // `at_least` are durable.
-  std::vector<json::Value> records(const std::string& id, const std::string& event, size_t at_least = 0) const {
+  std::vector<json::Value> records(const std::string& id, const std::string& event,
+                                   size_t at_least = 0) const {
     std::vector<json::Value> out;
     for (int i = 0; i < 100; ++i) {
       out.clear();
@@ -293,7 +308,8 @@ class AiNode {
         for (const auto& e : es->as_array()) {
           const json::Value* mid = e.get("message_id");
           const json::Value* ev = e.get("event");
-          if (mid && mid->is_string() && mid->as_string() == id && ev && ev->as_string() == event) out.push_back(e);
+          if (mid && mid->is_string() && mid->as_string() == id && ev && ev->as_string() == event)
+            out.push_back(e);
         }
       if (out.size() >= at_least) break;
       std::this_thread::sleep_for(std::chrono::milliseconds(50));
@@ -316,7 +332,8 @@ class AiNode {
  private:
   static void write_token(const std::string& path, const std::string& tok) {
     std::ofstream(path) << tok << "\n";
-    std::filesystem::permissions(path, std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
+    std::filesystem::permissions(
+        path, std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
   }
   std::string dir_;
   test::Process proc_;
@@ -333,11 +350,12 @@ inline bool connect_stream(test::WsClient& ws, uint16_t port, const std::string&
 }
 
 // The next frame of `type` (and, when given, whose reply_to or payload.message_id is `id`).
-inline std::optional<json::Value> wait_frame(test::WsClient& ws, const std::string& type, const std::string& id = "",
-                                             int timeout_ms = 8000) {
+inline std::optional<json::Value> wait_frame(test::WsClient& ws, const std::string& type,
+                                             const std::string& id = "", int timeout_ms = 8000) {
   auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
   while (std::chrono::steady_clock::now() < deadline) {
-    auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+        deadline - std::chrono::steady_clock::now());
     auto f = ws.recv_text(static_cast<int>(std::max<int64_t>(left.count(), 1)));
     if (!f) return std::nullopt;
     json::Value v = parse(*f);
@@ -347,7 +365,9 @@ inline std::optional<json::Value> wait_frame(test::WsClient& ws, const std::stri
     const json::Value* r = v.get("reply_to");
     const json::Value* p = v.get("payload");
     const json::Value* pm = p ? p->get("message_id") : nullptr;
-    if ((r && r->is_string() && r->as_string() == id) || (pm && pm->is_string() && pm->as_string() == id)) return v;
+    if ((r && r->is_string() && r->as_string() == id) ||
+        (pm && pm->is_string() && pm->as_string() == id))
+      return v;
   }
   return std::nullopt;
 }

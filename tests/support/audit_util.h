@@ -14,7 +14,8 @@
 
 namespace rcan::audit::testutil {
 
-inline constexpr const char* kSecret = "0123456789abcdef0123456789abcdef0123456789abcdef0123456789abcdef";
+inline constexpr const char* kSecret =
+    "0123456789abcdef0123456789abcdef0123456789abcdef0123456789abcdef";
 
 inline AuditEntry entry(int i) {
   AuditEntry e;

@@ -40,7 +40,8 @@ class ConfiguredNode {
 
   // `extra_yaml` is appended to the config (top-level blocks). heartbeat_timeout_ms and the
   // control-loop rate are set here; gRPC and UDP are on (port 0) unless `transports` is false.
-  explicit ConfiguredNode(std::string extra_yaml = {}, int heartbeat_timeout_ms = 2000, bool transports = true) {
+  explicit ConfiguredNode(std::string extra_yaml = {}, int heartbeat_timeout_ms = 2000,
+                          bool transports = true) {
     data_ = dir_.file("data");
     std::filesystem::create_directories(data_);
     EXPECT_EQ(run_cli({"keys", "generate", "--dir", data_ + "/keys"}).exit_code, 0);
@@ -52,8 +53,8 @@ class ConfiguredNode {
       std::ofstream out(seed_file_, std::ios::binary);
       out.write(reinterpret_cast<const char*>(seed), sizeof seed);
     }
-    std::filesystem::permissions(seed_file_,
-                                 std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
+    std::filesystem::permissions(
+        seed_file_, std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
     auto key = jwt::SigningKey::from_file(seed_file_);
     EXPECT_TRUE(key.ok());
     Bytes seed_bytes = to_bytes(read_file(seed_file_));
@@ -71,10 +72,13 @@ class ConfiguredNode {
       std::ofstream out(cfg);
       out << "rcan_version: \"1.2\"\nruri: " << kRuri << "\n"
           << "robot:\n  name: test-rover\n  manufacturer: acme\n  model: rover\n  type: mobile\n"
-          << "safety:\n  local_safety_wins: true\n  heartbeat_timeout_ms: " << heartbeat_timeout_ms << "\n"
+          << "safety:\n  local_safety_wins: true\n  heartbeat_timeout_ms: " << heartbeat_timeout_ms
+          << "\n"
           << "driver:\n  type: sim\n  sim:\n    tick_hz: 200\n"
-          << "security:\n  jwt:\n    issuers:\n      - issuer: test.local\n        key_file: " << pub_file << "\n";
-      if (transports) out << "grpc:\n  enabled: true\n  port: 0\nudp:\n  enabled: true\n  port: 0\n";
+          << "security:\n  jwt:\n    issuers:\n      - issuer: test.local\n        key_file: "
+          << pub_file << "\n";
+      if (transports)
+        out << "grpc:\n  enabled: true\n  port: 0\nudp:\n  enabled: true\n  port: 0\n";
       out << extra_yaml;
     }
     if (!proc_.start({RCAND_PATH, "--config", cfg, "--port", "0", "--data-dir", data_})) {
@@ -94,8 +98,9 @@ class ConfiguredNode {
       if (at == std::string::npos) return 0;
       size_t start = proc_.err().rfind('\n', at);
       size_t end = proc_.err().find('\n', at);
-      json::Value l = parse_json(proc_.err().substr(start == std::string::npos ? 0 : start + 1,
-                                                    end == std::string::npos ? std::string::npos : end - start - 1));
+      json::Value l = parse_json(
+          proc_.err().substr(start == std::string::npos ? 0 : start + 1,
+                             end == std::string::npos ? std::string::npos : end - start - 1));
       const json::Value* p = l.get("port");
       return p && p->is_int() ? static_cast<uint16_t>(p->as_int()) : 0;
     };
@@ -113,8 +118,8 @@ class ConfiguredNode {
   Process& proc() { return proc_; }
   int terminate() { return proc_.stop(SIGTERM, 15000); }
 
-  std::string token(const std::string& role, std::vector<std::string> scopes, const std::string& sub = "",
-                    int64_t ttl_s = 3600) const {
+  std::string token(const std::string& role, std::vector<std::string> scopes,
+                    const std::string& sub = "", int64_t ttl_s = 3600) const {
     auto key = jwt::SigningKey::from_file(seed_file_);
     EXPECT_TRUE(key.ok());
     int64_t now = now_wall_ms() / 1000;
@@ -137,7 +142,8 @@ class ConfiguredNode {
     if (!tok.empty()) h.emplace_back("Authorization", "Bearer " + tok);
     return http(http_port_, "GET", path, "", h);
   }
-  HttpReply post(const std::string& path, const std::string& body, const std::string& tok = "") const {
+  HttpReply post(const std::string& path, const std::string& body,
+                 const std::string& tok = "") const {
     std::vector<std::pair<std::string, std::string>> h;
     if (!tok.empty()) h.emplace_back("Authorization", "Bearer " + tok);
     return http(http_port_, "POST", path, body, h);
@@ -155,9 +161,7 @@ class ConfiguredNode {
   }
 
   // The value of one metric line `name value` on /metrics (-1 when absent).
-  double metric(const std::string& name) const {
-    return metric_value(get("/metrics").body, name);
-  }
+  double metric(const std::string& name) const { return metric_value(get("/metrics").body, name); }
 
  private:
   TempDir dir_;
@@ -167,7 +171,8 @@ class ConfiguredNode {
   uint16_t http_port_ = 0, grpc_port_ = 0, udp_port_ = 0;
 };
 
-inline std::string command_json(const std::string& action, json::Object params = {}, std::string id = "") {
+inline std::string command_json(const std::string& action, json::Object params = {},
+                                std::string id = "") {
   json::Object payload{{"action", action}};
   for (auto& m : params) payload.set(m.first, m.second);
   json::Object m{{"version", "1.0.0"},

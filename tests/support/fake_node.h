@@ -10,9 +10,9 @@
 #include <string>
 #include <vector>
 
-#include "transport/http_api.h"
 #include "rcan/errors.h"
 #include "rcan/json.h"
+#include "transport/http_api.h"
 #include "transport/http_server.h"
 
 namespace rcan::test {
@@ -23,7 +23,8 @@ class FakeNode final : public transport::HttpHandler, public transport::StreamHa
   static constexpr const char* kConfigToken = "config-token";
   static constexpr const char* kWatermark = "rcan-wm-v1:0123456789abcdef0123456789abcdef";
 
-  explicit FakeNode(bool tls = false, std::string cert = {}, std::string key = {}, uint16_t port = 0) {
+  explicit FakeNode(bool tls = false, std::string cert = {}, std::string key = {},
+                    uint16_t port = 0) {
     transport::ServerOptions o;
     o.port = port;
     o.tls = tls;
@@ -36,15 +37,18 @@ class FakeNode final : public transport::HttpHandler, public transport::StreamHa
   }
   ~FakeNode() override { server_->stop(500); }
   uint16_t port() const { return port_; }
-  std::string url() const { return std::string(tls_ ? "https" : "http") + "://127.0.0.1:" + std::to_string(port_); }
+  std::string url() const {
+    return std::string(tls_ ? "https" : "http") + "://127.0.0.1:" + std::to_string(port_);
+  }
 
   // What the fake saw.
   std::mutex mu;
   std::vector<json::Value> authorizations;
   std::vector<std::string> pending_ids{"7f1c2a9e-0000-4000-8000-000000000001"};
   std::atomic<int> stream_connects{0};
-  std::atomic<int> drop_streams_after_ack{0};  // > 0: close that many streams right after CONNECT_ACK
-  std::vector<std::string> stream_frames;      // every text frame received after CONNECT
+  std::atomic<int> drop_streams_after_ack{
+      0};                                  // > 0: close that many streams right after CONNECT_ACK
+  std::vector<std::string> stream_frames;  // every text frame received after CONNECT
 
   void handle(transport::HttpRequest req, Respond respond) override {
     auto token = bearer(req);
@@ -73,7 +77,8 @@ class FakeNode final : public transport::HttpHandler, public transport::StreamHa
     }
     if (p == "/rcan/v1/pending" || p == "/rcan/v1/authorize" || p.rfind("/api/thoughts/", 0) == 0) {
       if (token.empty()) return err(401, ErrorCode::kAuthRequired, "a bearer token is required");
-      if (token != kGoodToken && token != kConfigToken) return err(401, ErrorCode::kAuthInvalid, "token rejected");
+      if (token != kGoodToken && token != kConfigToken)
+        return err(401, ErrorCode::kAuthInvalid, "token rejected");
     }
     if (p == "/rcan/v1/command" && req.method == "POST") {
       // Every command waits for a human (a HiTL gate on everything): 202 PENDING_AUTH.
@@ -98,20 +103,21 @@ class FakeNode final : public transport::HttpHandler, public transport::StreamHa
       json::Array list;
       std::lock_guard<std::mutex> lock(mu);
       for (const auto& id : pending_ids)
-        list.push_back(json::Value(json::Object{
-            {"type", "PENDING_AUTH"},
-            {"message_id", "env-" + id},
-            {"payload", json::Object{{"message_id", id},
-                                     {"action_type", "arm_move"},
-                                     {"description", "move the arm near a person"},
-                                     {"principal", "user-7"},
-                                     {"auth_timeout_ms", 30000},
-                                     {"expires_at_ms", int64_t{1795000000000}}}}}));
+        list.push_back(json::Value(
+            json::Object{{"type", "PENDING_AUTH"},
+                         {"message_id", "env-" + id},
+                         {"payload", json::Object{{"message_id", id},
+                                                  {"action_type", "arm_move"},
+                                                  {"description", "move the arm near a person"},
+                                                  {"principal", "user-7"},
+                                                  {"auth_timeout_ms", 30000},
+                                                  {"expires_at_ms", int64_t{1795000000000}}}}}));
       return ok(json::Object{{"pending", list}});
     }
     if (p == "/rcan/v1/authorize" && req.method == "POST") {
       auto v = json::parse(req.body);
-      if (!v.ok() || !v->is_object()) return err(400, ErrorCode::kMalformedJson, "body is not JSON");
+      if (!v.ok() || !v->is_object())
+        return err(400, ErrorCode::kMalformedJson, "body is not JSON");
       const json::Value* t = v->get("type");
       const json::Value* pl = v->get("payload");
       if (!t || !t->is_string() || t->as_string() != "AUTHORIZE" || !pl || !pl->is_object())
@@ -122,13 +128,15 @@ class FakeNode final : public transport::HttpHandler, public transport::StreamHa
         return err(400, ErrorCode::kSchemaValidationFailed, "decision must be approve or deny");
       std::lock_guard<std::mutex> lock(mu);
       bool known = false;
-      for (const auto& pid : pending_ids) known = known || (id && id->is_string() && id->as_string() == pid);
+      for (const auto& pid : pending_ids)
+        known = known || (id && id->is_string() && id->as_string() == pid);
       if (!known) return err(404, ErrorCode::kNotFound, "nothing pending with that message_id");
       authorizations.push_back(*v);
-      return ok(json::Object{{"type", "ACK"},
-                             {"message_id", "ack-1"},
-                             {"reply_to", v->get("message_id") ? *v->get("message_id") : json::Value()},
-                             {"payload", json::Object{{"decision", d->as_string()}}}});
+      return ok(
+          json::Object{{"type", "ACK"},
+                       {"message_id", "ack-1"},
+                       {"reply_to", v->get("message_id") ? *v->get("message_id") : json::Value()},
+                       {"payload", json::Object{{"decision", d->as_string()}}}});
     }
     if (p.rfind("/api/thoughts/", 0) == 0) {
       std::string id = p.substr(14);
@@ -175,31 +183,36 @@ class FakeNode final : public transport::HttpHandler, public transport::StreamHa
       if (!connected) {
         const json::Value* tok = v.ok() ? v->get("token") : nullptr;
         if (!tok || !tok->is_string() || tok->as_string() != kGoodToken) {
-          sink->send_text(R"({"type":"ERROR","code":8001,"name":"ConnectionRefused","message":"bad token"})");
+          sink->send_text(
+              R"({"type":"ERROR","code":8001,"name":"ConnectionRefused","message":"bad token"})");
           sink->close(4001, "connection refused");
           return;
         }
         connected = true;
         int n = ++node.stream_connects;
-        sink->send_text(json::dump(json::Value(json::Object{{"type", "CONNECT_ACK"},
-                                                            {"session_id", "s-" + std::to_string(n)},
-                                                            {"server_version", "1.0.0"}})));
+        sink->send_text(
+            json::dump(json::Value(json::Object{{"type", "CONNECT_ACK"},
+                                                {"session_id", "s-" + std::to_string(n)},
+                                                {"server_version", "1.0.0"}})));
         if (node.drop_streams_after_ack.load() > 0) {
           --node.drop_streams_after_ack;
           sink->close(1001, "going away");
           return;
         }
-        sink->send_text(R"({"type":"EVENT","event":"HELLO","session_id":"s-)" + std::to_string(n) + R"("})");
+        sink->send_text(R"({"type":"EVENT","event":"HELLO","session_id":"s-)" + std::to_string(n) +
+                        R"("})");
         return;
       }
       {
         std::lock_guard<std::mutex> lock(node.mu);
         node.stream_frames.push_back(text);
       }
-      if (v.ok() && v->get("type") && v->get("type")->is_string() && v->get("type")->as_string() == "COMMAND") {
+      if (v.ok() && v->get("type") && v->get("type")->is_string() &&
+          v->get("type")->as_string() == "COMMAND") {
         const json::Value* id = v->get("message_id");
-        sink->send_text(json::dump(json::Value(
-            json::Object{{"type", "ACK"}, {"reply_to", id ? *id : json::Value()}, {"payload", json::Object{}}})));
+        sink->send_text(json::dump(json::Value(json::Object{{"type", "ACK"},
+                                                            {"reply_to", id ? *id : json::Value()},
+                                                            {"payload", json::Object{}}})));
       }
     }
     void on_binary() override { sink->close(1003, "binary"); }
@@ -209,8 +222,9 @@ class FakeNode final : public transport::HttpHandler, public transport::StreamHa
     bool connected = false;
   };
 
-  std::unique_ptr<transport::StreamSession> open(const transport::HttpRequest& upgrade, std::shared_ptr<transport::StreamSink> sink,
-                                            transport::HttpResponse& refusal) override {
+  std::unique_ptr<transport::StreamSession> open(const transport::HttpRequest& upgrade,
+                                                 std::shared_ptr<transport::StreamSink> sink,
+                                                 transport::HttpResponse& refusal) override {
     if (upgrade.path != "/rcan/v1/stream") {
       refusal.status = 404;
       refusal.body = json::dump(error_body(Error(ErrorCode::kNotFound, "no stream here"), "", 1));

@@ -20,7 +20,8 @@
 namespace rcan::test {
 
 inline int64_t now_wall_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
       .count();
 }
 
@@ -65,7 +66,8 @@ class ConfiguredNode {
     seed_file_ = dir_ + "/issuer.seed";
     {
       std::ofstream out(seed_file_, std::ios::binary);
-      out.write(reinterpret_cast<const char*>(seed.data()), static_cast<std::streamsize>(seed.size()));
+      out.write(reinterpret_cast<const char*>(seed.data()),
+                static_cast<std::streamsize>(seed.size()));
     }
     fs::permissions(seed_file_, fs::perms::owner_read | fs::perms::owner_write);
     auto pk = ed25519::public_key_from_seed(seed);
@@ -88,7 +90,8 @@ class ConfiguredNode {
 
   bool start() {
     proc_ = std::make_unique<Process>();
-    proc_->start({RCAND_PATH, "--config", dir_ + "/robot.rcan.yaml", "--port", "0", "--data-dir", data_});
+    proc_->start(
+        {RCAND_PATH, "--config", dir_ + "/robot.rcan.yaml", "--port", "0", "--data-dir", data_});
     auto line = proc_->wait_for_line("\"event\":\"listening\"", 30000);
     if (!line) {
       ADD_FAILURE() << "rcand did not start:\n" << proc_->err();
@@ -107,15 +110,16 @@ class ConfiguredNode {
   const std::string& data_dir() const { return data_; }
   Process& proc() { return *proc_; }
 
-  std::string token(const std::string& role, const std::string& sub, std::vector<std::string> scopes = {"control"},
-                    int64_t ttl_s = 3600, json::Object extra = {}) const {
+  std::string token(const std::string& role, const std::string& sub,
+                    std::vector<std::string> scopes = {"control"}, int64_t ttl_s = 3600,
+                    json::Object extra = {}) const {
     auto key = jwt::SigningKey::from_file(seed_file_);
     EXPECT_TRUE(key.ok());
     int64_t now = now_wall_ms() / 1000;
     json::Array sc;
     for (auto& s : scopes) sc.emplace_back(s);
-    json::Object claims{{"iss", "ops.example"}, {"sub", sub},      {"aud", kRuri},
-                        {"role", role},         {"scope", sc},      {"iat", now - 5},
+    json::Object claims{{"iss", "ops.example"}, {"sub", sub},  {"aud", kRuri},
+                        {"role", role},         {"scope", sc}, {"iat", now - 5},
                         {"exp", now + ttl_s}};
     for (auto& m : extra) claims.set(m.first, m.second);
     auto t = jwt::issue(claims, *key);
@@ -129,7 +133,9 @@ class ConfiguredNode {
     if (!token.empty()) h.emplace_back("Authorization", "Bearer " + token);
     return http(port_, method, path, body, h);
   }
-  HttpReply get(const std::string& path, const std::string& token = "") const { return call("GET", path, "", token); }
+  HttpReply get(const std::string& path, const std::string& token = "") const {
+    return call("GET", path, "", token);
+  }
   HttpReply post(const std::string& path, const std::string& body, const std::string& token) const {
     return call("POST", path, body, token);
   }
@@ -147,8 +153,8 @@ class ConfiguredNode {
 
   // Audit records of `event` once at least `min` are durable (events on the streams run ahead
   // of the records they announce); what is there after `timeout_ms` otherwise.
-  std::vector<json::Value> audit_eventually(const std::string& event, const std::string& token, size_t min = 1,
-                                            int timeout_ms = 5000) const {
+  std::vector<json::Value> audit_eventually(const std::string& event, const std::string& token,
+                                            size_t min = 1, int timeout_ms = 5000) const {
     std::vector<json::Value> out;
     eventually([&] { return (out = audit(event, token)).size() >= min; }, timeout_ms);
     return out;
@@ -183,8 +189,9 @@ class Stream {
   std::optional<json::Value> wait_for(const std::string& name, int timeout_ms = 5000) {
     auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
     for (;;) {
-      int left = static_cast<int>(
-          std::chrono::duration_cast<std::chrono::milliseconds>(end - std::chrono::steady_clock::now()).count());
+      int left = static_cast<int>(std::chrono::duration_cast<std::chrono::milliseconds>(
+                                      end - std::chrono::steady_clock::now())
+                                      .count());
       if (left <= 0) return std::nullopt;
       auto f = ws_.recv_text(left);
       if (!f) return std::nullopt;
@@ -193,7 +200,8 @@ class Stream {
       frames_.push_back(*f);
       const json::Value* ev = v->get("event");
       const json::Value* ty = v->get("type");
-      if ((ev && ev->is_string() && ev->as_string() == name) || (ty && ty->is_string() && ty->as_string() == name))
+      if ((ev && ev->is_string() && ev->as_string() == name) ||
+          (ty && ty->is_string() && ty->as_string() == name))
         return *v;
     }
   }
@@ -234,7 +242,8 @@ class TinyHttpServer {
     a.sin_family = AF_INET;
     a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
     a.sin_port = htons(port);
-    if (::bind(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 || ::listen(fd_, 16) != 0) return false;
+    if (::bind(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 || ::listen(fd_, 16) != 0)
+      return false;
     socklen_t len = sizeof a;
     ::getsockname(fd_, reinterpret_cast<sockaddr*>(&a), &len);
     port_ = ntohs(a.sin_port);
@@ -249,7 +258,9 @@ class TinyHttpServer {
     fd_ = -1;
   }
   uint16_t port() const { return port_; }
-  std::string url(const std::string& path) const { return "http://127.0.0.1:" + std::to_string(port_) + path; }
+  std::string url(const std::string& path) const {
+    return "http://127.0.0.1:" + std::to_string(port_) + path;
+  }
   std::vector<std::string> bodies() {
     std::lock_guard<std::mutex> lock(mu_);
     return bodies_;
@@ -283,7 +294,9 @@ class TinyHttpServer {
         }
       }
       hits_.fetch_add(1);
-      const char* resp = "HTTP/1.1 200 OK\r\nContent-Type: application/json\r\nContent-Length: 2\r\nConnection: close\r\n\r\n{}";
+      const char* resp =
+          "HTTP/1.1 200 OK\r\nContent-Type: application/json\r\nContent-Length: 2\r\nConnection: "
+          "close\r\n\r\n{}";
       (void)::send(c, resp, std::strlen(resp), MSG_NOSIGNAL);
       ::close(c);
     }

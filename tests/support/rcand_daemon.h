@@ -49,7 +49,8 @@ class RcandDaemon {
   Process& proc() { return proc_; }
 
   // A token from the daemon's local issuer, written to `path` (mode 0600).
-  std::string token(const std::string& role, const std::vector<std::string>& scopes, const std::string& sub) const {
+  std::string token(const std::string& role, const std::vector<std::string>& scopes,
+                    const std::string& sub) const {
     auto key = jwt::SigningKey::from_file(dir_ + "/issuer/ed25519.seed");
     EXPECT_TRUE(key.ok());
     int64_t now = std::chrono::duration_cast<std::chrono::seconds>(
@@ -57,8 +58,8 @@ class RcandDaemon {
                       .count();
     json::Array sc;
     for (const auto& s : scopes) sc.emplace_back(s);
-    json::Object claims{{"iss", "rcand-local"}, {"sub", sub},       {"aud", ruri_},
-                        {"role", role},         {"scope", sc},      {"iat", now - 5},
+    json::Object claims{{"iss", "rcand-local"}, {"sub", sub},  {"aud", ruri_},
+                        {"role", role},         {"scope", sc}, {"iat", now - 5},
                         {"exp", now + 3600}};
     auto t = jwt::issue(claims, *key);
     EXPECT_TRUE(t.ok());

@@ -1,6 +1,7 @@
 #include "test_support.h"
 
 #include <fcntl.h>
+#include <gtest/gtest.h>
 #include <poll.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -10,9 +11,6 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
-
-#include <gtest/gtest.h>
 #include <sstream>
 
 extern char** environ;
@@ -135,22 +133,40 @@ RunResult run(const std::vector<std::string>& argv, const std::string& stdin_dat
     pollfd fds[3];
     int n = 0;
     int out_i = -1, err_i = -1, in_i = -1;
-    if (out_open) { fds[n] = {out_pipe[0], POLLIN, 0}; out_i = n++; }
-    if (err_open) { fds[n] = {err_pipe[0], POLLIN, 0}; err_i = n++; }
-    if (in_fd >= 0) { fds[n] = {in_fd, POLLOUT, 0}; in_i = n++; }
+    if (out_open) {
+      fds[n] = {out_pipe[0], POLLIN, 0};
+      out_i = n++;
+    }
+    if (err_open) {
+      fds[n] = {err_pipe[0], POLLIN, 0};
+      err_i = n++;
+    }
+    if (in_fd >= 0) {
+      fds[n] = {in_fd, POLLOUT, 0};
+      in_i = n++;
+    }
     if (poll(fds, static_cast<nfds_t>(n), 60000) <= 0) break;
     if (out_i >= 0 && fds[out_i].revents) {
       ssize_t k = read(out_pipe[0], buf, sizeof buf);
-      if (k <= 0) out_open = false; else r.out.append(buf, static_cast<size_t>(k));
+      if (k <= 0)
+        out_open = false;
+      else
+        r.out.append(buf, static_cast<size_t>(k));
     }
     if (err_i >= 0 && fds[err_i].revents) {
       ssize_t k = read(err_pipe[0], buf, sizeof buf);
-      if (k <= 0) err_open = false; else r.err.append(buf, static_cast<size_t>(k));
+      if (k <= 0)
+        err_open = false;
+      else
+        r.err.append(buf, static_cast<size_t>(k));
     }
     if (in_i >= 0 && fds[in_i].revents) {
       ssize_t k = write(in_fd, stdin_data.data() + written, stdin_data.size() - written);
       if (k > 0) written += static_cast<size_t>(k);
-      if (k < 0 || written == stdin_data.size()) { close(in_fd); in_fd = -1; }
+      if (k < 0 || written == stdin_data.size()) {
+        close(in_fd);
+        in_fd = -1;
+      }
     }
   }
   if (in_fd >= 0) close(in_fd);
@@ -258,7 +274,8 @@ bool parse_response(std::string& buf, HttpReply& r, bool eof) {
     std::string value = line.substr(c + 1);
     while (!value.empty() && value.front() == ' ') value.erase(0, 1);
     if (name == "content-length") content_length = std::stoul(value);
-    if (name == "transfer-encoding" && lower(value).find("chunked") != std::string::npos) chunked = true;
+    if (name == "transfer-encoding" && lower(value).find("chunked") != std::string::npos)
+      chunked = true;
     r.headers.emplace_back(name, value);
   }
   size_t body_start = end + 4;
@@ -296,8 +313,10 @@ bool parse_response(std::string& buf, HttpReply& r, bool eof) {
   return true;
 }
 
-std::string build_request(const std::string& method, const std::string& target, const std::string& body,
-                          const std::vector<std::pair<std::string, std::string>>& headers, bool close_conn) {
+std::string build_request(const std::string& method, const std::string& target,
+                          const std::string& body,
+                          const std::vector<std::pair<std::string, std::string>>& headers,
+                          bool close_conn) {
   std::string req = method + " " + target + " HTTP/1.1\r\nHost: 127.0.0.1\r\n";
   bool has_ct = false;
   for (const auto& h : headers) {
@@ -331,7 +350,8 @@ Process::~Process() {
     ADD_FAILURE() << "UndefinedBehaviorSanitizer report in a child process's stderr:\n" << err_;
 }
 
-bool Process::start(const std::vector<std::string>& argv, const std::vector<std::string>& extra_env) {
+bool Process::start(const std::vector<std::string>& argv,
+                    const std::vector<std::string>& extra_env) {
   int pipefd[2];
   if (pipe2(pipefd, O_CLOEXEC) != 0) return false;
   std::vector<std::string> env_strings = child_env(extra_env);
@@ -415,7 +435,8 @@ int Process::stop(int sig, int timeout_ms) {
   return exit_status_;
 }
 
-HttpReply http(uint16_t port, const std::string& method, const std::string& target, const std::string& body,
+HttpReply http(uint16_t port, const std::string& method, const std::string& target,
+               const std::string& body,
                const std::vector<std::pair<std::string, std::string>> headers, int timeout_ms) {
   HttpReply r;
   int fd = connect_loopback(port);
@@ -441,8 +462,10 @@ HttpClient::~HttpClient() {
   if (fd_ >= 0) close(fd_);
 }
 
-HttpReply HttpClient::request(const std::string& method, const std::string& target, const std::string& body,
-                              const std::vector<std::pair<std::string, std::string>>& headers, int timeout_ms) {
+HttpReply HttpClient::request(const std::string& method, const std::string& target,
+                              const std::string& body,
+                              const std::vector<std::pair<std::string, std::string>>& headers,
+                              int timeout_ms) {
   HttpReply r;
   if (fd_ < 0) return r;
   int64_t deadline = now_ms() + timeout_ms;
@@ -534,7 +557,8 @@ std::optional<std::string> WsClient::recv_text(int timeout_ms) {
       } else if (len == 127) {
         if (buf_.size() < 10) goto more;
         len = 0;
-        for (int i = 0; i < 8; ++i) len = (len << 8) | static_cast<uint8_t>(buf_[2 + static_cast<size_t>(i)]);
+        for (int i = 0; i < 8; ++i)
+          len = (len << 8) | static_cast<uint8_t>(buf_[2 + static_cast<size_t>(i)]);
         hdr = 10;
       }
       if (buf_.size() >= hdr + len) {
@@ -543,7 +567,9 @@ std::optional<std::string> WsClient::recv_text(int timeout_ms) {
         uint8_t op = b0 & 0x0f;
         if (op == 0x1) return payload;
         if (op == 0x8) {
-          close_code_ = payload.size() >= 2 ? (static_cast<uint8_t>(payload[0]) << 8) | static_cast<uint8_t>(payload[1]) : 1005;
+          close_code_ = payload.size() >= 2 ? (static_cast<uint8_t>(payload[0]) << 8) |
+                                                  static_cast<uint8_t>(payload[1])
+                                            : 1005;
           return std::nullopt;
         }
         if (op == 0x9) send_frame(0xA, payload);

@@ -117,7 +117,8 @@ class HttpClient {
   HttpClient(const HttpClient&) = delete;
   HttpClient& operator=(const HttpClient&) = delete;
   bool connected() const { return fd_ >= 0; }
-  HttpReply request(const std::string& method, const std::string& target, const std::string& body = {},
+  HttpReply request(const std::string& method, const std::string& target,
+                    const std::string& body = {},
                     const std::vector<std::pair<std::string, std::string>>& headers = {},
                     int timeout_ms = 10000);
   // Raw bytes (for hostile input); returns what came back before close/timeout.

@@ -5,6 +5,7 @@
 
 #include <arpa/inet.h>
 #include <fcntl.h>
+#include <gtest/gtest.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <openssl/err.h>
@@ -25,8 +26,6 @@
 #include <string>
 #include <thread>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "base/log.h"
 #include "rcan/json.h"
@@ -119,8 +118,8 @@ class Client {
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
     auto left = [&] {
       return static_cast<int>(std::max<int64_t>(
-          0, std::chrono::duration_cast<std::chrono::milliseconds>(
-                 deadline - std::chrono::steady_clock::now())
+          0, std::chrono::duration_cast<std::chrono::milliseconds>(deadline -
+                                                                   std::chrono::steady_clock::now())
                  .count()));
     };
     size_t end;
@@ -204,9 +203,9 @@ class Client {
     uint8_t opcode = 0;
     std::string payload;
     int close_code() const {
-      return payload.size() >= 2 ? (static_cast<uint8_t>(payload[0]) << 8) |
-                                       static_cast<uint8_t>(payload[1])
-                                 : -1;
+      return payload.size() >= 2
+                 ? (static_cast<uint8_t>(payload[0]) << 8) | static_cast<uint8_t>(payload[1])
+                 : -1;
     }
   };
   // Next data or close frame (pings are skipped).
@@ -214,10 +213,10 @@ class Client {
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
     for (;;) {
       auto left = [&] {
-        return static_cast<int>(std::max<int64_t>(
-            0, std::chrono::duration_cast<std::chrono::milliseconds>(
-                   deadline - std::chrono::steady_clock::now())
-                   .count()));
+        return static_cast<int>(
+            std::max<int64_t>(0, std::chrono::duration_cast<std::chrono::milliseconds>(
+                                     deadline - std::chrono::steady_clock::now())
+                                     .count()));
       };
       while (buf_.size() < 2)
         if (!fill(left())) return std::nullopt;
@@ -255,7 +254,8 @@ class Client {
 std::string get(const std::string& target, const std::string& extra = {}) {
   return "GET " + target + " HTTP/1.1\r\nHost: localhost\r\n" + extra + "\r\n";
 }
-std::string post(const std::string& target, const std::string& body, const std::string& extra = {}) {
+std::string post(const std::string& target, const std::string& body,
+                 const std::string& extra = {}) {
   return "POST " + target + " HTTP/1.1\r\nHost: localhost\r\nContent-Type: application/json\r\n" +
          "Content-Length: " + std::to_string(body.size()) + "\r\n" + extra + "\r\n" + body;
 }
@@ -296,12 +296,9 @@ class FakeHttp : public transport::HttpHandler {
       HttpResponse r;
       r.content_type = "text/plain";
       r.body = "hi";
-      r.headers = {{"X-Good", "yes"},
-                   {"X-Bad", "a\r\nInjected: 1"},
-                   {"Content-Length", "999"},
-                   {"Bad Name", "x"},
-                   {"Connection", "upgrade"},
-                   {"Cache-Control", "max-age=5"}};
+      r.headers = {{"X-Good", "yes"},         {"X-Bad", "a\r\nInjected: 1"},
+                   {"Content-Length", "999"}, {"Bad Name", "x"},
+                   {"Connection", "upgrade"}, {"Cache-Control", "max-age=5"}};
       respond(r);
       return;
     }
@@ -315,14 +312,10 @@ class FakeHttp : public transport::HttpHandler {
     json::Object q;
     json::Array qa;
     for (auto& [k, v] : req.query) qa.push_back(json::Array{json::Value(k), json::Value(v)});
-    json::Object o{{"method", req.method},
-                   {"path", req.path},
-                   {"target", req.target},
-                   {"query", qa},
-                   {"body", req.body},
-                   {"remote", req.remote_addr},
-                   {"tls", req.tls},
-                   {"x_test", std::string(req.header("x-test"))}};
+    json::Object o{{"method", req.method}, {"path", req.path},
+                   {"target", req.target}, {"query", qa},
+                   {"body", req.body},     {"remote", req.remote_addr},
+                   {"tls", req.tls},       {"x_test", std::string(req.header("x-test"))}};
     HttpResponse r;
     r.body = json::dump(json::Value(std::move(o)));
     respond(std::move(r));
@@ -358,7 +351,8 @@ struct WsEvents {
 
 class FakeSession : public transport::StreamSession {
  public:
-  FakeSession(std::shared_ptr<transport::StreamSink> sink, WsEvents& ev) : sink_(std::move(sink)), ev_(ev) {}
+  FakeSession(std::shared_ptr<transport::StreamSink> sink, WsEvents& ev)
+      : sink_(std::move(sink)), ev_(ev) {}
   ~FakeSession() override {
     if (flood_.joinable()) flood_.join();
   }
@@ -418,8 +412,8 @@ class FakeSession : public transport::StreamSession {
 class FakeStreams : public transport::StreamHandler {
  public:
   std::unique_ptr<transport::StreamSession> open(const HttpRequest& upgrade,
-                                            std::shared_ptr<transport::StreamSink> sink,
-                                            HttpResponse& refusal) override {
+                                                 std::shared_ptr<transport::StreamSink> sink,
+                                                 HttpResponse& refusal) override {
     if (upgrade.path == "/refuse") {
       refusal.status = 401;
       refusal.body = R"({"refused":true})";
@@ -507,7 +501,8 @@ TEST_F(HttpServerTest, ResponsePostedFromAnotherThreadLater) {
 TEST_F(HttpServerTest, PipelinedRequestsAreAnsweredInOrder) {
   start();
   Client c(port_);
-  ASSERT_TRUE(c.send(get("/delay?ms=150&n=first") + get("/echo?n=second") + get("/delay?ms=10&n=third")));
+  ASSERT_TRUE(
+      c.send(get("/delay?ms=150&n=first") + get("/echo?n=second") + get("/delay?ms=10&n=third")));
   auto r1 = c.read_response();
   auto r2 = c.read_response();
   auto r3 = c.read_response();
@@ -551,8 +546,9 @@ TEST_F(HttpServerTest, ChunkedBodyIsReassembledAndLimited) {
   start(o);
   {
     Client c(port_);
-    ASSERT_TRUE(c.send("POST /echo HTTP/1.1\r\nHost: x\r\nTransfer-Encoding: chunked\r\n\r\n"
-                       "5\r\nhello\r\n6\r\n world\r\n0\r\n\r\n"));
+    ASSERT_TRUE(
+        c.send("POST /echo HTTP/1.1\r\nHost: x\r\nTransfer-Encoding: chunked\r\n\r\n"
+               "5\r\nhello\r\n6\r\n world\r\n0\r\n\r\n"));
     auto r = c.read_response();
     ASSERT_TRUE(r);
     EXPECT_EQ(r->status, 200);
@@ -619,7 +615,8 @@ TEST_F(HttpServerTest, MalformedRequestsAre400WithTheErrorBody) {
 TEST_F(HttpServerTest, PathAndQueryArePercentDecodedAndHeaderNamesLowerCased) {
   start();
   Client c(port_);
-  ASSERT_TRUE(c.send(get("/a%20b/c%2Fd%C3%A9?x=1%202&y=%C3%A9&flag&z=a+b&&=v", "X-TEST: Mixed\r\n")));
+  ASSERT_TRUE(
+      c.send(get("/a%20b/c%2Fd%C3%A9?x=1%202&y=%C3%A9&flag&z=a+b&&=v", "X-TEST: Mixed\r\n")));
   auto r = c.read_response();
   ASSERT_TRUE(r);
   ASSERT_EQ(r->status, 200);
@@ -688,7 +685,8 @@ TEST_F(HttpServerTest, ConnectionCloseRequestIsHonoured) {
 TEST_F(HttpServerTest, ExpectContinueGets100ThenTheAnswer) {
   start();
   Client c(port_);
-  ASSERT_TRUE(c.send("POST /echo HTTP/1.1\r\nHost: x\r\nContent-Length: 4\r\nExpect: 100-continue\r\n\r\n"));
+  ASSERT_TRUE(c.send(
+      "POST /echo HTTP/1.1\r\nHost: x\r\nContent-Length: 4\r\nExpect: 100-continue\r\n\r\n"));
   auto cont = c.read_response();
   ASSERT_TRUE(cont);
   EXPECT_EQ(cont->status, 100);
@@ -970,8 +968,9 @@ TEST_F(HttpServerTest, MalformedWebSocketUpgradesAreRejected) {
   start();
   {
     Client c(port_);
-    ASSERT_TRUE(c.send("GET /ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-                       "Sec-WebSocket-Key: short\r\nSec-WebSocket-Version: 13\r\n\r\n"));
+    ASSERT_TRUE(
+        c.send("GET /ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+               "Sec-WebSocket-Key: short\r\nSec-WebSocket-Version: 13\r\n\r\n"));
     auto r = c.read_response();
     ASSERT_TRUE(r);
     EXPECT_EQ(r->status, 400);
@@ -979,8 +978,9 @@ TEST_F(HttpServerTest, MalformedWebSocketUpgradesAreRejected) {
   }
   {
     Client c(port_);
-    ASSERT_TRUE(c.send("GET /ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-                       "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 8\r\n\r\n"));
+    ASSERT_TRUE(
+        c.send("GET /ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+               "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 8\r\n\r\n"));
     auto r = c.read_response();
     ASSERT_TRUE(r);
     EXPECT_EQ(r->status, 426);
@@ -988,9 +988,10 @@ TEST_F(HttpServerTest, MalformedWebSocketUpgradesAreRejected) {
   }
   {
     Client c(port_);
-    ASSERT_TRUE(c.send("POST /ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-                       "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
-                       "Content-Length: 0\r\n\r\n"));
+    ASSERT_TRUE(
+        c.send("POST /ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+               "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+               "Content-Length: 0\r\n\r\n"));
     auto r = c.read_response();
     ASSERT_TRUE(r);
     EXPECT_EQ(r->status, 400);
@@ -1206,7 +1207,8 @@ TEST_F(HttpServerTest, TlsServesHttpsAndWss) {
     SSL_free(ssl);
     return got;
   };
-  const std::string https = tls_exchange(get("/echo?over=tls", "Connection: close\r\n"), 1, "\"tls\":true");
+  const std::string https =
+      tls_exchange(get("/echo?over=tls", "Connection: close\r\n"), 1, "\"tls\":true");
   EXPECT_NE(https.find("HTTP/1.1 200"), std::string::npos) << https;
   EXPECT_NE(https.find("\"tls\":true"), std::string::npos) << https;
   const std::string wss = tls_exchange(
@@ -1230,7 +1232,8 @@ TEST(NodeLog, WritesOneJsonObjectPerLineAndFiltersByLevel) {
   rcan::set_log_sink([&](std::string_view l) { lines.emplace_back(l); });
   rcan::set_log_level(rcan::LogLevel::kInfo);
   rcan::log(rcan::LogLevel::kDebug, "dropped");
-  rcan::log(rcan::LogLevel::kWarn, "http.test", {{"status", 413}, {"level", "spoof"}, {"why", "a\"b\nc"}});
+  rcan::log(rcan::LogLevel::kWarn, "http.test",
+            {{"status", 413}, {"level", "spoof"}, {"why", "a\"b\nc"}});
   rcan::set_log_sink({});
   rcan::set_log_level(rcan::LogLevel::kError);
   ASSERT_EQ(lines.size(), 1u);

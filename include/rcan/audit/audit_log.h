@@ -56,8 +56,8 @@ struct AuditOptions {
   // the background), so that fdatasync after an append flushes data only and needs no
   // file-system journal commit for a size change. See docs/AUDIT.md §Durability.
   bool preallocate = true;
-  size_t max_group_records = 4096;           // records per group commit at most
-  size_t max_record_bytes = 1 << 20;         // larger entries are rejected
+  size_t max_group_records = 4096;    // records per group commit at most
+  size_t max_record_bytes = 1 << 20;  // larger entries are rejected
   // Write a sealed segment's .idx and the spare preallocated segment on background
   // threads (false: inline in the writer,
   // which makes the sequence of file operations deterministic for fault-injection tests).

@@ -36,8 +36,8 @@ struct AuditEntry {
   std::string ruri;
   int64_t timestamp_ms = 0;  // 0 → stamped by the log's clock when sealed
   std::string message_id;
-  std::string event;         // e.g. COMMAND, COMMAND_REJECTED, HITL_APPROVED, ESTOP
-  std::string outcome;       // ok | blocked | error (seed §6)
+  std::string event;    // e.g. COMMAND, COMMAND_REJECTED, HITL_APPROVED, ESTOP
+  std::string outcome;  // ok | blocked | error (seed §6)
 
   std::string sender_type = "human";  // human | robot | cloud_function | system
   std::optional<std::string> sub;     // JWT subject

@@ -31,10 +31,10 @@ struct VerifyOptions {
 
 struct VerifyReport {
   bool ok = false;
-  uint64_t count = 0;          // records verified before the first failure (all when ok)
-  uint64_t first_seq = 0;      // native: seq of the first record
-  uint64_t last_seq = 0;       // native: seq of the last good record
-  std::string last_hash;       // hash of the last good record
+  uint64_t count = 0;      // records verified before the first failure (all when ok)
+  uint64_t first_seq = 0;  // native: seq of the first record
+  uint64_t last_seq = 0;   // native: seq of the last good record
+  std::string last_hash;   // hash of the last good record
   // On failure: the seq that is bad (native; the expected seq when the line has none),
   // the 0-based line index (both formats), and why.
   uint64_t first_bad_seq = 0;

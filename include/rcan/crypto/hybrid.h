@@ -31,8 +31,8 @@ struct SignOptions {
 
 // Returns the signed body. `mldsa_sk` 4032 bytes, `mldsa_pk` 1952 bytes, `ed25519_seed` 32.
 Result<json::Object> sign_body(const json::Object& body, std::span<const uint8_t> mldsa_sk,
-                               std::span<const uint8_t> mldsa_pk, std::span<const uint8_t> ed25519_seed,
-                               const SignOptions& opts = {});
+                               std::span<const uint8_t> mldsa_pk,
+                               std::span<const uint8_t> ed25519_seed, const SignOptions& opts = {});
 
 struct VerifyOptions {
   // Require pq_signing_pub == trusted key and pq_kid == kid(trusted key).

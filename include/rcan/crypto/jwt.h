@@ -72,7 +72,7 @@ class VerificationKey {
   ~VerificationKey();
 
   Alg alg() const { return alg_; }
-  const std::string& kid() const { return kid_; }   // from a JWK, else empty
+  const std::string& kid() const { return kid_; }  // from a JWK, else empty
   void set_kid(std::string kid) { kid_ = std::move(kid); }
 
   // Verifies `sig` over `signing_input` with this key's algorithm. False on any error.
@@ -104,7 +104,8 @@ class TrustStore {
   bool knows_issuer(std::string_view issuer) const;
   // Keys of `issuer`; when `kid` is non-empty only keys with that kid (keys without a kid
   // match any kid only when the issuer has no key with that kid).
-  std::vector<const VerificationKey*> candidates(std::string_view issuer, std::string_view kid) const;
+  std::vector<const VerificationKey*> candidates(std::string_view issuer,
+                                                 std::string_view kid) const;
 
   // One configured issuer: {issuer, key file, kind}. kind is "auto" (PEM/JWK/JWKS public
   // keys) or "hs256_secret" (shared-secret file).
@@ -160,14 +161,14 @@ struct Claims {
   std::vector<std::string> aud;
   std::optional<int64_t> exp, nbf, iat;
   std::string jti;
-  std::string role;      // "creator" | "owner" | "leasee" | "user" | "guest"
-  int role_level = 0;    // 5..1
+  std::string role;    // "creator" | "owner" | "leasee" | "user" | "guest"
+  int role_level = 0;  // 5..1
   std::vector<std::string> scopes;
   std::optional<std::vector<std::string>> fleet;
-  std::string sender_type;     // as claimed; empty when absent
+  std::string sender_type;  // as claimed; empty when absent
   std::string cloud_provider;
   std::string function_name;
-  json::Object raw;            // every claim as received
+  json::Object raw;  // every claim as received
 
   bool has_scope(std::string_view s) const;
 };
@@ -245,7 +246,8 @@ class SigningKey {
 };
 
 // Builds and signs a token: header {"alg","typ":"JWT"[,"kid"]}, the given claims (in order).
-Result<std::string> issue(const json::Object& claims, const SigningKey& key, std::string_view kid = {});
+Result<std::string> issue(const json::Object& claims, const SigningKey& key,
+                          std::string_view kid = {});
 
 // Parses a duration "90", "90s", "15m", "1h", "7d" into seconds (> 0, ≤ 10 years).
 std::optional<int64_t> parse_duration(std::string_view s);

@@ -49,9 +49,7 @@ class SecretBytes {
   size_t size() const { return b_.size(); }
   bool empty() const { return b_.empty(); }
   std::span<const uint8_t> span() const { return {b_.data(), b_.size()}; }
-  std::string_view view() const {
-    return {reinterpret_cast<const char*>(b_.data()), b_.size()};
-  }
+  std::string_view view() const { return {reinterpret_cast<const char*>(b_.data()), b_.size()}; }
   SecretBytes clone() const { return SecretBytes(Bytes(b_)); }
 
  private:
@@ -60,8 +58,8 @@ class SecretBytes {
 
 // Public half of a robot identity.
 struct PublicKeys {
-  Bytes mldsa65_pk;   // 1952 bytes
-  Bytes ed25519_pk;   // 32 bytes
+  Bytes mldsa65_pk;         // 1952 bytes
+  Bytes ed25519_pk;         // 32 bytes
   std::string kid() const;  // ML-DSA-65 kid
 };
 
@@ -74,7 +72,8 @@ struct RobotKeys {
 };
 
 // Deterministic keys from the two 32-byte seeds (recovery, tests).
-Result<RobotKeys> derive(std::span<const uint8_t> mldsa65_seed, std::span<const uint8_t> ed25519_seed);
+Result<RobotKeys> derive(std::span<const uint8_t> mldsa65_seed,
+                         std::span<const uint8_t> ed25519_seed);
 // Fresh random seeds from the OS CSPRNG.
 Result<RobotKeys> generate();
 

@@ -19,7 +19,8 @@ Authenticator::Authenticator(AuthOptions opts) : opts_(std::move(opts)) {
 Authenticator::~Authenticator() = default;
 
 Result<Principal> Authenticator::authenticate_token(std::string_view token, int64_t now_s) const {
-  if (token.empty()) return Error(ErrorCode::kAuthRequired, "a bearer token is required", "auth_token");
+  if (token.empty())
+    return Error(ErrorCode::kAuthRequired, "a bearer token is required", "auth_token");
   if (auto hit = cache_->find(token, now_s)) return std::move(*hit);
   auto claims = verifier_->verify(token, now_s);
   if (!claims.ok()) {
@@ -36,7 +37,8 @@ Result<Principal> Authenticator::authenticate_token(std::string_view token, int6
   p.role = *role;
   p.scopes = claims->scopes;
   p.token_exp = claims->exp;
-  if (claims->fleet) p.fleet = std::make_shared<const std::vector<std::string>>(std::move(*claims->fleet));
+  if (claims->fleet)
+    p.fleet = std::make_shared<const std::vector<std::string>>(std::move(*claims->fleet));
   p.token_identity.sub = claims->sub;
   if (!claims->sender_type.empty()) p.token_identity.sender_type = claims->sender_type;
   if (!claims->cloud_provider.empty()) p.token_identity.cloud_provider = claims->cloud_provider;

@@ -70,7 +70,8 @@ class Authenticator {
   // SIGNATURE_INVALID; AUTH_REQUIRED when signatures are required and absent.
   Result<SignatureCheck> check_signature(const Message& msg) const;
   // §8.5: the sender identity the audit record carries.
-  Result<SenderIdentity> sender(const Message& msg, const Principal& p, const SignatureCheck& sig) const;
+  Result<SenderIdentity> sender(const Message& msg, const Principal& p,
+                                const SignatureCheck& sig) const;
 
   const jwt::VerifyOptions& verify_options() const { return opts_.verify; }
 

@@ -28,12 +28,18 @@ std::string fold(const std::string& s) {
 }  // namespace
 
 std::vector<std::string> InjectionScreen::default_patterns() {
-  return {"ignore previous instructions", "ignore all previous instructions",
-          "ignore prior instructions",    "disregard previous instructions",
-          "disregard all prior",          "forget your instructions",
-          "you are now",                  "system prompt",
-          "override safety",              "disable safety",
-          "bypass safety",                "developer mode"};
+  return {"ignore previous instructions",
+          "ignore all previous instructions",
+          "ignore prior instructions",
+          "disregard previous instructions",
+          "disregard all prior",
+          "forget your instructions",
+          "you are now",
+          "system prompt",
+          "override safety",
+          "disable safety",
+          "bypass safety",
+          "developer mode"};
 }
 
 InjectionScreen::InjectionScreen(std::vector<std::string> patterns) {
@@ -53,7 +59,8 @@ std::optional<std::string> InjectionScreen::scan_text(const std::string& text) c
 
 std::optional<std::string> InjectionScreen::scan(const json::Value& value) const {
   switch (value.kind()) {
-    case json::Value::Kind::kString: return scan_text(value.as_string());
+    case json::Value::Kind::kString:
+      return scan_text(value.as_string());
     case json::Value::Kind::kArray:
       for (const auto& e : value.as_array())
         if (auto hit = scan(e)) return hit;
@@ -64,7 +71,8 @@ std::optional<std::string> InjectionScreen::scan(const json::Value& value) const
         if (auto hit = scan(m.second)) return hit;
       }
       return std::nullopt;
-    default: return std::nullopt;
+    default:
+      return std::nullopt;
   }
 }
 

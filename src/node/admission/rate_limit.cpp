@@ -21,7 +21,8 @@ RateLimiter::Decision RateLimiter::take(const std::string& principal, uint32_t p
   Decision d;
   if (per_minute == 0) return d;
   std::lock_guard<std::mutex> lock(mu_);
-  if (now_mono_ms - last_sweep_ms_ > 10'000 || buckets_.size() >= max_principals_) sweep(now_mono_ms);
+  if (now_mono_ms - last_sweep_ms_ > 10'000 || buckets_.size() >= max_principals_)
+    sweep(now_mono_ms);
   auto it = buckets_.find(principal);
   if (it == buckets_.end()) {
     if (buckets_.size() >= max_principals_) {
@@ -30,7 +31,9 @@ RateLimiter::Decision RateLimiter::take(const std::string& principal, uint32_t p
       d.retry_after_ms = 1000;
       return d;
     }
-    it = buckets_.emplace(principal, Bucket{static_cast<double>(per_minute), now_mono_ms, per_minute}).first;
+    it = buckets_
+             .emplace(principal, Bucket{static_cast<double>(per_minute), now_mono_ms, per_minute})
+             .first;
   }
   Bucket& b = it->second;
   double rate_per_ms = per_minute / 60'000.0;

@@ -62,7 +62,8 @@ Result<ReplayGuard::Verdict> ReplayGuard::check(const std::string& message_id, i
   expire(now_wall_ms);
   if (!safety && refused(timestamp_ms)) {
     return Error(ErrorCode::kMessageStale,
-                 "timestamp_ms is older than the replay memory under this load; resend with a fresh timestamp",
+                 "timestamp_ms is older than the replay memory under this load; resend with a "
+                 "fresh timestamp",
                  "timestamp_ms");
   }
   Verdict v;

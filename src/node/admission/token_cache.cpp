@@ -15,10 +15,12 @@ std::optional<Principal> TokenCache::find(std::string_view token, int64_t now_s)
   return it->second.principal;
 }
 
-void TokenCache::insert(std::string_view token, const Principal& p, int64_t valid_from_s, int64_t valid_until_s) {
+void TokenCache::insert(std::string_view token, const Principal& p, int64_t valid_from_s,
+                        int64_t valid_until_s) {
   if (capacity_ == 0 || valid_until_s <= valid_from_s) return;
   std::lock_guard<std::mutex> lock(mu_);
-  if (map_.size() >= capacity_ && map_.find(std::string(token)) == map_.end()) map_.erase(map_.begin());
+  if (map_.size() >= capacity_ && map_.find(std::string(token)) == map_.end())
+    map_.erase(map_.begin());
   map_.insert_or_assign(std::string(token), Entry{p, valid_from_s, valid_until_s});
 }
 

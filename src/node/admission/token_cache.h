@@ -30,7 +30,8 @@ class TokenCache {
   // The principal of `token` when it was verified before and its time window holds at `now_s`.
   std::optional<Principal> find(std::string_view token, int64_t now_s);
   // Remembers a verified token, valid for now_s in [valid_from_s, valid_until_s).
-  void insert(std::string_view token, const Principal& p, int64_t valid_from_s, int64_t valid_until_s);
+  void insert(std::string_view token, const Principal& p, int64_t valid_from_s,
+              int64_t valid_until_s);
 
   size_t size() const;
   uint64_t hits() const {

@@ -8,8 +8,8 @@
 #include <cstdio>
 
 #include "base/http_client.h"
-#include "node/ai/brain_layers.h"
 #include "base/log.h"
+#include "node/ai/brain_layers.h"
 #include "node/services/node_services.h"
 #include "rcan/crypto/watermark.h"
 #include "rcan/errors.h"
@@ -67,7 +67,8 @@ Status AiServices::start(Pipeline& pipeline) {
   }
   if (!items->empty() || skipped)
     log(LogLevel::kInfo, "hitl_pending_restored",
-        json::Object{{"pending", static_cast<int64_t>(items->size())}, {"skipped", static_cast<int64_t>(skipped)}});
+        json::Object{{"pending", static_cast<int64_t>(items->size())},
+                     {"skipped", static_cast<int64_t>(skipped)}});
   timer_ = std::thread([this] {
     pthread_setname_np(pthread_self(), "hitl-timer");
     timer_loop();
@@ -106,18 +107,20 @@ const config::ConfidenceGate* AiServices::gate_for(const Context& ctx) const {
 
 std::optional<std::pair<int, config::AgentLayer>> AiServices::layer_above(int rank) const {
   for (int r = std::max(rank + 1, 0); r < 3; ++r)
-    if (opts_.layers[static_cast<size_t>(r)]) return std::make_pair(r, *opts_.layers[static_cast<size_t>(r)]);
+    if (opts_.layers[static_cast<size_t>(r)])
+      return std::make_pair(r, *opts_.layers[static_cast<size_t>(r)]);
   return std::nullopt;
 }
 
-void AiServices::escalate(const std::shared_ptr<Context>& ctx, const config::ConfidenceGate& gate, int to_rank,
-                          const config::AgentLayer& layer) {
+void AiServices::escalate(const std::shared_ptr<Context>& ctx, const config::ConfidenceGate& gate,
+                          int to_rank, const config::AgentLayer& layer) {
   const Message& m = *ctx->msg;
   std::string to(layer_name(to_rank));
   std::string from = m.ai && m.ai->layer ? *m.ai->layer : "";
   std::string from_thought = m.ai && m.ai->thought_id ? *m.ai->thought_id : m.message_id;
   // The refused command is recorded with its own ai block before the layer is asked.
-  auto e = svc_.entry(ctx->principal.display(), m.message_id, "CONFIDENCE_GATE_ESCALATED", "blocked");
+  auto e =
+      svc_.entry(ctx->principal.display(), m.message_id, "CONFIDENCE_GATE_ESCALATED", "blocked");
   e.sender_type = std::string(sender_type_name(ctx->sender.sender_type));
   if (!ctx->sender.sub.empty()) e.sub = ctx->sender.sub;
   if (m.ai) e.ai = *m.ai;
@@ -166,8 +169,8 @@ void AiServices::escalate(const std::shared_ptr<Context>& ctx, const config::Con
       ctx->audit_detail.set("escalation", esc);
       refuse(svc_, ctx,
              Error(ErrorCode::kConfidenceGateFail,
-                   "confidence below the " + g.scope + " gate and escalation to the " + to + " layer failed: " +
-                       problem.substr(0, 256),
+                   "confidence below the " + g.scope + " gate and escalation to the " + to +
+                       " layer failed: " + problem.substr(0, 256),
                    "ai.confidence", "escalation_failed"),
              "CONFIDENCE_GATE_FAIL");
       return;
@@ -189,7 +192,8 @@ void AiServices::escalate(const std::shared_ptr<Context>& ctx, const config::Con
     if (ctx->pipeline) ctx->pipeline->run_from(ctx, "authorize");
   });
   if (!posted)
-    refuse(svc_, ctx, Error(ErrorCode::kSafeStop, "the node is busy; escalation could not be queued"),
+    refuse(svc_, ctx,
+           Error(ErrorCode::kSafeStop, "the node is busy; escalation could not be queued"),
            "CONFIDENCE_GATE_FAIL");
 }
 
@@ -303,20 +307,23 @@ void AiServices::post_webhooks(const PendingItem& item, const json::Value& event
       auto r = u.ok() ? http_post_json(*u, body, timeout) : Result<HttpAnswer>(u.error());
       if (!r.ok() || r->status / 100 != 2)
         log(LogLevel::kWarn, "hitl_webhook_failed",
-            json::Object{{"url", url.substr(0, 256)},
-                         {"message_id", id},
-                         {"error", r.ok() ? "HTTP " + std::to_string(r->status) : r.error().message}});
+            json::Object{
+                {"url", url.substr(0, 256)},
+                {"message_id", id},
+                {"error", r.ok() ? "HTTP " + std::to_string(r->status) : r.error().message}});
     });
   }
 }
 
 void AiServices::notify_owners(json::Value event) {
-  if (event.is_object()) event.as_object().set("_deliver", json::Object{{"min_role", role_level(Role::kOwner)}});
+  if (event.is_object())
+    event.as_object().set("_deliver", json::Object{{"min_role", role_level(Role::kOwner)}});
   svc_.events.publish(event);
 }
 
 void AiServices::notify_principal(const std::string& principal_key, json::Value event) {
-  if (event.is_object()) event.as_object().set("_deliver", json::Object{{"principal", principal_key}});
+  if (event.is_object())
+    event.as_object().set("_deliver", json::Object{{"principal", principal_key}});
   svc_.events.publish(event);
 }
 
@@ -359,7 +366,8 @@ std::shared_ptr<Context> AiServices::rebuild(const PendingItem& item, Error& err
     if (holder) {
       if (holder->principal_key != ctx->principal.key()) {
         err = Error(ErrorCode::kControlConflict,
-                    "another principal holds control now; the approved command was not dispatched", "session");
+                    "another principal holds control now; the approved command was not dispatched",
+                    "session");
         return ctx;
       }
       ctx->session_id = holder->id;
@@ -369,23 +377,25 @@ std::shared_ptr<Context> AiServices::rebuild(const PendingItem& item, Error& err
   return ctx;
 }
 
-void AiServices::dispatch_held(const PendingItem& item, json::Object extra_detail, bool timeout_bypass,
-                               std::function<void(Outcome)> done) {
+void AiServices::dispatch_held(const PendingItem& item, json::Object extra_detail,
+                               bool timeout_bypass, std::function<void(Outcome)> done) {
   Error err(ErrorCode::kInternal, "");
   auto ctx = rebuild(item, err);
   ctx->audit_detail.set("hitl", extra_detail);
   ctx->hitl_timeout_bypass = timeout_bypass;
   ctx->done = std::move(done);
   if (!err.message.empty() || !ctx->msg || !pipeline_) {
-    if (err.message.empty()) err = Error(ErrorCode::kInternal, "the held command could not be restored");
+    if (err.message.empty())
+      err = Error(ErrorCode::kInternal, "the held command could not be restored");
     refuse(svc_, ctx, err, "COMMAND_REJECTED");
     return;
   }
   pipeline_->run_from(ctx, "watermark");
 }
 
-void AiServices::authorize(const Principal& p, const json::Value& body, const std::string& transport,
-                           const std::string& route, std::function<void(int, json::Value)> done) {
+void AiServices::authorize(const Principal& p, const json::Value& body,
+                           const std::string& transport, const std::string& route,
+                           std::function<void(int, json::Value)> done) {
   auto parsed = parse_authorize(body);
   if (!parsed.ok()) return done(http_status(parsed.error().code), svc_.error(parsed.error()));
   // The decision changes the pending file: it runs on the disk worker, in order.
@@ -395,8 +405,9 @@ void AiServices::authorize(const Principal& p, const json::Value& body, const st
   if (!posted) done(503, svc_.error(Error(ErrorCode::kSafeStop, "the node is busy; try again")));
 }
 
-void AiServices::decide(const Principal& p, const AuthorizeRequest& request, const std::string& transport,
-                        const std::string& route, const std::function<void(int, json::Value)>& done) {
+void AiServices::decide(const Principal& p, const AuthorizeRequest& request,
+                        const std::string& transport, const std::string& route,
+                        const std::function<void(int, json::Value)>& done) {
   const AuthorizeRequest* req = &request;
   std::optional<PendingItem> item;
   {
@@ -408,8 +419,8 @@ void AiServices::decide(const Principal& p, const AuthorizeRequest& request, con
     if (it != pending_.end()) item = it->second;
   }
   std::string original = item ? item->message_id : req->target;
-  bool allowed = item ? std::find(item->authorized_roles.begin(), item->authorized_roles.end(), p.role) !=
-                            item->authorized_roles.end()
+  bool allowed = item ? std::find(item->authorized_roles.begin(), item->authorized_roles.end(),
+                                  p.role) != item->authorized_roles.end()
                       : role_level(p.role) >= role_level(Role::kOwner);
   auto record = [&](const std::string& event, const std::string& outcome) {
     auto e = svc_.entry(p.display(), original, event, outcome);
@@ -428,12 +439,15 @@ void AiServices::decide(const Principal& p, const AuthorizeRequest& request, con
     auto e = record("HITL_AUTHORIZE_REFUSED", "blocked");
     e.reason = "INSUFFICIENT_PRIVILEGES";
     svc_.write_audit(std::move(e));
-    Error err(ErrorCode::kInsufficientPrivileges,
-              std::string(role_name(p.role)) + " may not authorize held commands (OWNER or CREATOR only)", "role");
+    Error err(
+        ErrorCode::kInsufficientPrivileges,
+        std::string(role_name(p.role)) + " may not authorize held commands (OWNER or CREATOR only)",
+        "role");
     return done(http_status(err.code), svc_.error(err, req->authorize_id));
   }
   if (!item) {
-    Error err(ErrorCode::kNotFound, "no command is waiting for authorization under " + req->target.substr(0, 64),
+    Error err(ErrorCode::kNotFound,
+              "no command is waiting for authorization under " + req->target.substr(0, 64),
               "payload.message_id");
     return done(404, svc_.error(err, req->authorize_id));
   }
@@ -463,11 +477,11 @@ void AiServices::decide(const Principal& p, const AuthorizeRequest& request, con
                    (req->reason.empty() ? "" : ": " + req->reason),
                "", "hitl_denied");
   notify_principal(originator, svc_.error(denied, item->message_id));
-  done(200, svc_.envelope(MessageType::kAck,
-                          json::Object{{"message_id", item->message_id},
-                                       {"decision", "deny"},
-                                       {"dispatched", false}},
-                          req->authorize_id));
+  done(200, svc_.envelope(
+                MessageType::kAck,
+                json::Object{
+                    {"message_id", item->message_id}, {"decision", "deny"}, {"dispatched", false}},
+                req->authorize_id));
 }
 
 bool AiServices::absorb_wall_step_locked(int64_t now_mono_ms, int64_t now_wall_ms) {
@@ -535,13 +549,16 @@ void AiServices::settle_timeout(PendingItem item) {
     return;
   }
   json::Object hitl{{"decision", "timeout"}, {"on_timeout", "allow"}};
-  dispatch_held(item, hitl, true, [this, originator](Outcome out) { notify_principal(originator, out.body); });
+  dispatch_held(item, hitl, true,
+                [this, originator](Outcome out) { notify_principal(originator, out.body); });
 }
 
 // ------------------------------------------------------------------------------------------
 
-std::string AiServices::watermark(const std::string& thought_id, const std::string& timestamp_iso) const {
-  return watermark::compute(opts_.watermark_key.span(), svc_.settings.rrn, thought_id, timestamp_iso);
+std::string AiServices::watermark(const std::string& thought_id,
+                                  const std::string& timestamp_iso) const {
+  return watermark::compute(opts_.watermark_key.span(), svc_.settings.rrn, thought_id,
+                            timestamp_iso);
 }
 
 }  // namespace rcan::node

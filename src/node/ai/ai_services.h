@@ -16,11 +16,11 @@
 #include <thread>
 #include <vector>
 
+#include "base/worker.h"
 #include "config/config.h"
 #include "node/ai/hitl.h"
-#include "node/pipeline/pipeline.h"
 #include "node/ai/thoughts.h"
-#include "base/worker.h"
+#include "node/pipeline/pipeline.h"
 #include "rcan/crypto/keys.h"
 
 namespace rcan::node {
@@ -31,8 +31,8 @@ struct AiOptions {
   std::vector<config::ConfidenceGate> confidence_gates;
   std::vector<config::HitlGate> hitl_gates;
   std::array<std::optional<config::AgentLayer>, 3> layers;  // reactive, fast, planner
-  std::string pending_file;          // held commands survive restarts here (0600)
-  keys::SecretBytes watermark_key;   // the robot's ML-DSA-65 secret key (4032 bytes)
+  std::string pending_file;         // held commands survive restarts here (0600)
+  keys::SecretBytes watermark_key;  // the robot's ML-DSA-65 secret key (4032 bytes)
   size_t thought_capacity = 1000;
   int webhook_timeout_ms = 2000;
 };
@@ -58,14 +58,15 @@ class AiServices {
   // The next configured layer strictly above `rank` (-1: the lowest configured).
   std::optional<std::pair<int, config::AgentLayer>> layer_above(int rank) const;
   // Posts the escalation to the worker; the context is finished or resumed from there.
-  void escalate(const std::shared_ptr<Context>& ctx, const config::ConfidenceGate& gate, int to_rank,
-                const config::AgentLayer& layer);
+  void escalate(const std::shared_ptr<Context>& ctx, const config::ConfidenceGate& gate,
+                int to_rank, const config::AgentLayer& layer);
 
   // --- HiTL gates (§16.4)
   const config::HitlGate* hitl_gate_for(const std::string& action_type) const;
   // Holds the command: persists it, audits HITL_PENDING, notifies, answers 202 (from the disk
   // worker, once the pending file holds it).
-  void hold(const std::shared_ptr<Context>& ctx, const config::HitlGate& gate, const std::string& action_type);
+  void hold(const std::shared_ptr<Context>& ctx, const config::HitlGate& gate,
+            const std::string& action_type);
   // An AUTHORIZE from `p` (authenticated). `done` gets the answer for the authorizer.
   void authorize(const Principal& p, const json::Value& body, const std::string& transport,
                  const std::string& route, std::function<void(int status, json::Value body)> done);

@@ -1,10 +1,9 @@
 #include "node/ai/brain_layers.h"
 
-#include "base/clock.h"
-
 #include <chrono>
 #include <thread>
 
+#include "base/clock.h"
 #include "base/log.h"
 #include "rcan/errors.h"
 
@@ -26,10 +25,14 @@ int layer_rank(std::string_view layer) {
 
 std::string_view layer_name(int rank) {
   switch (rank) {
-    case 0: return "reactive";
-    case 1: return "fast";
-    case 2: return "planner";
-    default: return "";
+    case 0:
+      return "reactive";
+    case 1:
+      return "fast";
+    case 2:
+      return "planner";
+    default:
+      return "";
   }
 }
 
@@ -41,8 +44,10 @@ Result<LayerReply> parse_layer_reply(std::string_view body) {
   const json::Value* cmd = v->get("command");
   if (!cmd || !cmd->is_object()) return schema("command", "command must be an object");
   const json::Value* action = cmd->get("action");
-  if (!action || !action->is_string() || action->as_string().empty() || action->as_string().size() > 128)
-    return schema("command.action", "command.action must be a non-empty string (at most 128 characters)");
+  if (!action || !action->is_string() || action->as_string().empty() ||
+      action->as_string().size() > 128)
+    return schema("command.action",
+                  "command.action must be a non-empty string (at most 128 characters)");
   if (cmd->get("ai") || cmd->get("watermark_token"))
     return schema("command", "command may not carry ai or watermark_token");
   r.command = cmd->as_object();
@@ -56,17 +61,14 @@ Result<LayerReply> parse_layer_reply(std::string_view body) {
   return r;
 }
 
-Result<Message> escalated_message(const Message& original, const LayerReply& reply, std::string_view layer,
-                                  const CodecLimits& limits) {
+Result<Message> escalated_message(const Message& original, const LayerReply& reply,
+                                  std::string_view layer, const CodecLimits& limits) {
   json::Object ai = reply.ai.as_object();
   ai.set("layer", std::string(layer));
   ai.set("escalated", true);
-  json::Object m{{"version", "1.0.0"},
-                 {"message_id", original.message_id},
-                 {"type", "COMMAND"},
-                 {"timestamp_ms", original.timestamp_ms},
-                 {"payload", reply.command},
-                 {"ai", ai}};
+  json::Object m{{"version", "1.0.0"},       {"message_id", original.message_id},
+                 {"type", "COMMAND"},        {"timestamp_ms", original.timestamp_ms},
+                 {"payload", reply.command}, {"ai", ai}};
   if (original.ttl_ms > 0) m.set("ttl_ms", original.ttl_ms);
   auto decoded = decode_message(json::Value(m), limits);
   if (!decoded.ok()) return decoded.error();
@@ -85,22 +87,26 @@ Result<Message> escalated_message(const Message& original, const LayerReply& rep
   return out;
 }
 
-json::Value layer_request(const Message& m, std::string_view to_layer, const std::string& robot_ruri,
-                          const std::string& scope, double min_confidence) {
+json::Value layer_request(const Message& m, std::string_view to_layer,
+                          const std::string& robot_ruri, const std::string& scope,
+                          double min_confidence) {
   std::string instruction;
-  if (const json::Value* i = m.payload.find("instruction"); i && i->is_string()) instruction = i->as_string();
+  if (const json::Value* i = m.payload.find("instruction"); i && i->is_string())
+    instruction = i->as_string();
   if (instruction.empty()) instruction = m.action();
   json::Object payload = m.payload;
   payload.erase("thought");
-  json::Object ctx{{"robot_ruri", robot_ruri},
-                   {"message_id", m.message_id},
-                   {"from_layer", m.ai && m.ai->layer ? json::Value(*m.ai->layer) : json::Value()},
-                   {"scope", scope},
-                   {"min_confidence", min_confidence},
-                   {"command", payload},
-                   {"ai", m.ai ? m.ai->to_json() : json::Value()},
-                   {"thought_id", m.ai && m.ai->thought_id ? json::Value(*m.ai->thought_id) : json::Value()}};
-  return json::Object{{"layer", std::string(to_layer)}, {"instruction", instruction}, {"context", ctx}};
+  json::Object ctx{
+      {"robot_ruri", robot_ruri},
+      {"message_id", m.message_id},
+      {"from_layer", m.ai && m.ai->layer ? json::Value(*m.ai->layer) : json::Value()},
+      {"scope", scope},
+      {"min_confidence", min_confidence},
+      {"command", payload},
+      {"ai", m.ai ? m.ai->to_json() : json::Value()},
+      {"thought_id", m.ai && m.ai->thought_id ? json::Value(*m.ai->thought_id) : json::Value()}};
+  return json::Object{
+      {"layer", std::string(to_layer)}, {"instruction", instruction}, {"context", ctx}};
 }
 
 void SimLayer::handle(transport::HttpRequest req, Respond respond) {
@@ -118,7 +124,8 @@ void SimLayer::handle(transport::HttpRequest req, Respond respond) {
     return respond(std::move(r));
   }
   std::string instruction;
-  if (const json::Value* i = v->get("instruction"); i && i->is_string()) instruction = i->as_string().substr(0, 1024);
+  if (const json::Value* i = v->get("instruction"); i && i->is_string())
+    instruction = i->as_string().substr(0, 1024);
   json::Object command{{"action", "status"}};
   json::Value context = json::Object{};
   if (const json::Value* c = v->get("context"); c && c->is_object()) {
@@ -133,8 +140,10 @@ void SimLayer::handle(transport::HttpRequest req, Respond respond) {
       }
     }
   }
-  log(LogLevel::kInfo, "layer_request", json::Object{{"layer", opts_.layer}, {"instruction", instruction}});
-  std::string action = command.find("action")->is_string() ? command.find("action")->as_string() : "status";
+  log(LogLevel::kInfo, "layer_request",
+      json::Object{{"layer", opts_.layer}, {"instruction", instruction}});
+  std::string action =
+      command.find("action")->is_string() ? command.find("action")->as_string() : "status";
   std::string thought_id = "th_" + new_uuid_v4();
   json::Object ai{{"provider", "sim"},
                   {"model", "sim-" + opts_.layer},
@@ -148,7 +157,10 @@ void SimLayer::handle(transport::HttpRequest req, Respond respond) {
                        {"reasoning", "the " + opts_.layer + " layer re-examined '" + instruction +
                                          "' with the full context and confirms action " + action},
                        {"context_snapshot", context}};
-  json::Object out{{"command", command}, {"ai", ai}, {"thought", thought}, {"timestamp_ms", Clock::system().wall_ms()}};
+  json::Object out{{"command", command},
+                   {"ai", ai},
+                   {"thought", thought},
+                   {"timestamp_ms", Clock::system().wall_ms()}};
   r.body = json::dump(json::Value(out));
   if (opts_.delay_ms > 0) {
     // Answer late without holding a transport thread.

@@ -20,10 +20,10 @@
 #include <string>
 #include <string_view>
 
-#include "transport/http_api.h"
 #include "rcan/json.h"
 #include "rcan/message.h"
 #include "rcan/result.h"
+#include "transport/http_api.h"
 
 namespace rcan::node {
 
@@ -44,12 +44,13 @@ Result<LayerReply> parse_layer_reply(std::string_view body);
 // The escalated COMMAND: a copy of `original` whose payload is the layer's command and whose
 // ai block is the layer's, with layer = `layer` and escalated = true. The ai block is
 // validated as on any COMMAND (§16.2).
-Result<Message> escalated_message(const Message& original, const LayerReply& reply, std::string_view layer,
-                                  const CodecLimits& limits = {});
+Result<Message> escalated_message(const Message& original, const LayerReply& reply,
+                                  std::string_view layer, const CodecLimits& limits = {});
 
 // The request body sent to a layer.
-json::Value layer_request(const Message& m, std::string_view to_layer, const std::string& robot_ruri,
-                          const std::string& scope, double min_confidence);
+json::Value layer_request(const Message& m, std::string_view to_layer,
+                          const std::string& robot_ruri, const std::string& scope,
+                          double min_confidence);
 
 // The built-in simulated layer (`rcand --sim-layer`): answers every POST with the command it
 // was given (or {"action":"status"}), an ai block naming provider "sim", model

@@ -1,10 +1,11 @@
 // The §16 pipeline stages in the gate slot (docs/AI.md): the confidence gate (with the
 // thought log and escalation to brain layers), the HiTL gate and the watermark.
+#include "node/ai/gate_stages.h"
+
 #include <chrono>
 
 #include "node/ai/ai_services.h"
 #include "node/ai/brain_layers.h"
-#include "node/ai/gate_stages.h"
 #include "node/services/node_services.h"
 #include "rcan/crypto/watermark.h"
 #include "rcan/errors.h"
@@ -50,8 +51,8 @@ class ConfidenceGateStage final : public Stage {
       ctx->audit_detail.set("confidence_gate", detail);
       return Result::kContinue;
     }
-    std::string why = confidence ? "confidence " + json::dump(json::Value(*confidence)) + " is below " +
-                                       json::dump(json::Value(gate->min_confidence))
+    std::string why = confidence ? "confidence " + json::dump(json::Value(*confidence)) +
+                                       " is below " + json::dump(json::Value(gate->min_confidence))
                                  : std::string("no confidence was reported");
     switch (gate->on_fail) {
       case config::GateOnFail::kAllow:
@@ -62,12 +63,13 @@ class ConfidenceGateStage final : public Stage {
       case config::GateOnFail::kBlock:
         detail.set("result", "blocked");
         ctx->audit_detail.set("confidence_gate", detail);
-        refuse(svc_, ctx,
-               Error(ErrorCode::kConfidenceGateFail, why + " for the " + gate->scope + " confidence gate",
-                     "ai.confidence", "confidence_below_gate"),
-               "CONFIDENCE_GATE_FAIL");
-        return Result::kAnswered;
-      case config::GateOnFail::kEscalate: break;
+        return refuse(svc_, ctx,
+                      Error(ErrorCode::kConfidenceGateFail,
+                            why + " for the " + gate->scope + " confidence gate", "ai.confidence",
+                            "confidence_below_gate"),
+                      "CONFIDENCE_GATE_FAIL");
+      case config::GateOnFail::kEscalate:
+        break;
     }
     int rank = m.ai && m.ai->layer ? layer_rank(*m.ai->layer) : -1;
     auto above = ai->layer_above(rank);
@@ -75,12 +77,12 @@ class ConfidenceGateStage final : public Stage {
       detail.set("result", "blocked");
       detail.set("escalation", "no higher brain layer is configured");
       ctx->audit_detail.set("confidence_gate", detail);
-      refuse(svc_, ctx,
-             Error(ErrorCode::kConfidenceGateFail,
-                   why + " for the " + gate->scope + " confidence gate and no higher brain layer is available",
-                   "ai.confidence", "no_higher_layer"),
-             "CONFIDENCE_GATE_FAIL");
-      return Result::kAnswered;
+      return refuse(svc_, ctx,
+                    Error(ErrorCode::kConfidenceGateFail,
+                          why + " for the " + gate->scope +
+                              " confidence gate and no higher brain layer is available",
+                          "ai.confidence", "no_higher_layer"),
+                    "CONFIDENCE_GATE_FAIL");
     }
     detail.set("result", "escalated");
     ctx->audit_detail.set("confidence_gate", detail);
@@ -121,7 +123,8 @@ class WatermarkStage final : public Stage {
     Message& m = *ctx->msg;
     const json::Value* existing = m.payload.find("watermark_token");
     bool forwarded = m.delegation_chain.is_array() && !m.delegation_chain.as_array().empty();
-    if (forwarded && existing && existing->is_string() && watermark::valid_format(existing->as_string())) {
+    if (forwarded && existing && existing->is_string() &&
+        watermark::valid_format(existing->as_string())) {
       ctx->watermark_token = existing->as_string();
       ctx->audit_detail.set("watermark", json::Object{{"forwarded", true}});
       return Result::kContinue;
@@ -131,7 +134,8 @@ class WatermarkStage final : public Stage {
     std::string token = svc_.ai->watermark(thought_id, ts);
     m.payload.set("watermark_token", token);
     ctx->watermark_token = token;
-    ctx->audit_detail.set("watermark", json::Object{{"timestamp_iso", ts}, {"thought_id", thought_id},
+    ctx->audit_detail.set("watermark", json::Object{{"timestamp_iso", ts},
+                                                    {"thought_id", thought_id},
                                                     {"rrn", svc_.settings.rrn}});
     return Result::kContinue;
   }

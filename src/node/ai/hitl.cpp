@@ -18,7 +18,6 @@ Error schema(const std::string& field, const std::string& msg, const std::string
   return Error(ErrorCode::kSchemaValidationFailed, msg, field, reason);
 }
 
-
 json::Array strings(const std::vector<std::string>& v) {
   json::Array a;
   for (const auto& s : v) a.emplace_back(s);
@@ -80,7 +79,8 @@ Result<PendingItem> PendingItem::from_json(const json::Value& v) {
   if (p.message_id.empty()) return schema("message_id", "message_id is required");
   p.action_type = json::string_field(v, "action_type");
   p.description = json::string_field(v, "description");
-  p.auth_timeout_ms = static_cast<uint32_t>(std::clamp<int64_t>(json::int_field(v, "auth_timeout_ms"), 1, 86'400'000));
+  p.auth_timeout_ms = static_cast<uint32_t>(
+      std::clamp<int64_t>(json::int_field(v, "auth_timeout_ms"), 1, 86'400'000));
   p.created_ms = json::int_field(v, "created_ms");
   p.expires_at_ms = json::int_field(v, "expires_at_ms");
   p.allow_on_timeout = json::string_field(v, "on_timeout") == "allow";
@@ -100,7 +100,8 @@ Result<PendingItem> PendingItem::from_json(const json::Value& v) {
   p.role = *role;
   p.scopes = strings_of(v.get("scopes"));
   if (const json::Value* s = v.get("sender"); s && s->is_object()) {
-    if (auto st = sender_type_from_name(json::string_field(*s, "sender_type"))) p.sender.sender_type = *st;
+    if (auto st = sender_type_from_name(json::string_field(*s, "sender_type")))
+      p.sender.sender_type = *st;
     p.sender.sub = json::string_field(*s, "sub");
     p.sender.cloud_provider = json::string_field(*s, "cloud_provider");
     p.sender.function_name = json::string_field(*s, "function_name");
@@ -108,11 +109,14 @@ Result<PendingItem> PendingItem::from_json(const json::Value& v) {
   }
   p.transport = json::string_field(v, "transport");
   p.route = json::string_field(v, "route");
-  if (const json::Value* d = v.get("audit_detail"); d && d->is_object()) p.audit_detail = d->as_object();
-  if (const json::Value* g = v.get("gate_bypassed"); g && g->is_bool()) p.gate_bypassed = g->as_bool();
+  if (const json::Value* d = v.get("audit_detail"); d && d->is_object())
+    p.audit_detail = d->as_object();
+  if (const json::Value* g = v.get("gate_bypassed"); g && g->is_bool())
+    p.gate_bypassed = g->as_bool();
   p.thought_id = json::string_field(v, "thought_id");
   p.model = json::string_field(v, "model");
-  if (const json::Value* c = v.get("confidence"); c && c->is_number()) p.confidence = c->to_double();
+  if (const json::Value* c = v.get("confidence"); c && c->is_number())
+    p.confidence = c->to_double();
   return p;
 }
 
@@ -188,12 +192,16 @@ Result<std::vector<PendingItem>> load_pending(const std::string& path, size_t* s
   std::string text;
   char buf[8192];
   size_t n;
-  while ((n = std::fread(buf, 1, sizeof buf, f)) > 0 && text.size() < (64u << 20)) text.append(buf, n);
+  while ((n = std::fread(buf, 1, sizeof buf, f)) > 0 && text.size() < (64u << 20))
+    text.append(buf, n);
   std::fclose(f);
   auto v = json::parse(text, {.max_depth = 64, .max_bytes = 64u << 20});
-  if (!v.ok()) return Error(ErrorCode::kInternal, "the pending file " + path + " is not JSON: " + v.error().message);
+  if (!v.ok())
+    return Error(ErrorCode::kInternal,
+                 "the pending file " + path + " is not JSON: " + v.error().message);
   const json::Value* arr = v->get("pending");
-  if (!arr || !arr->is_array()) return Error(ErrorCode::kInternal, "the pending file " + path + " has no pending list");
+  if (!arr || !arr->is_array())
+    return Error(ErrorCode::kInternal, "the pending file " + path + " has no pending list");
   for (const auto& e : arr->as_array()) {
     auto p = PendingItem::from_json(e);
     if (p.ok())
@@ -211,12 +219,14 @@ Result<AuthorizeRequest> parse_authorize(const json::Value& body) {
     if (!t->is_string() || t->as_string() != "AUTHORIZE")
       return schema("type", "type must be AUTHORIZE");
   }
-  if (const json::Value* id = body.get("message_id"); id && id->is_string()) r.authorize_id = id->as_string();
+  if (const json::Value* id = body.get("message_id"); id && id->is_string())
+    r.authorize_id = id->as_string();
   const json::Value* payload = body.get("payload");
   if (payload && !payload->is_object()) return schema("payload", "payload must be an object");
   const json::Value& p = payload ? *payload : body;
   for (const char* k : {"ref_message_id", "pending_id", "message_id", "thought_id"}) {
-    if (!payload && std::string_view(k) == "message_id") continue;  // flat form: message_id is the target
+    if (!payload && std::string_view(k) == "message_id")
+      continue;  // flat form: message_id is the target
     const json::Value* v = p.get(k);
     if (v && v->is_string() && !v->as_string().empty()) {
       r.target = v->as_string();
@@ -228,9 +238,11 @@ Result<AuthorizeRequest> parse_authorize(const json::Value& body) {
     r.authorize_id.clear();
   }
   if (r.target.empty() || r.target.size() > 128)
-    return schema("payload.message_id", "the held command's message_id is required", "missing_field");
+    return schema("payload.message_id", "the held command's message_id is required",
+                  "missing_field");
   const json::Value* d = p.get("decision");
-  if (!d || !d->is_string()) return schema("payload.decision", "decision is required (approve or deny)", "missing_field");
+  if (!d || !d->is_string())
+    return schema("payload.decision", "decision is required (approve or deny)", "missing_field");
   std::string dec = lower(d->as_string());
   if (dec == "approve" || dec == "approved")
     r.approve = true;

@@ -54,7 +54,8 @@ Result<std::vector<PendingItem>> load_pending(const std::string& path, size_t* s
 
 // An AUTHORIZE, from POST /rcan/v1/authorize or the stream. Accepted forms:
 //   {"type":"AUTHORIZE","message_id":…, "payload":{"message_id"|"ref_message_id"|"pending_id"|
-//    "thought_id": …, "decision": "approve"|"deny" (also APPROVE, REJECT, reject, DENY), "reason"?}}
+//    "thought_id": …, "decision": "approve"|"deny" (also APPROVE, REJECT, reject, DENY),
+//    "reason"?}}
 //   or the payload members at the top level.
 struct AuthorizeRequest {
   std::string authorize_id;  // the AUTHORIZE message's own message_id (generated when absent)

@@ -23,7 +23,8 @@ json::Value Thought::to_json(bool with_reasoning) const {
   o.set("model", model);
   o.set("layer", layer.empty() ? json::Value() : json::Value(layer));
   o.set("instruction", instruction);
-  o.set("context_snapshot", context_snapshot.is_object() ? context_snapshot : json::Value(json::Object{}));
+  o.set("context_snapshot",
+        context_snapshot.is_object() ? context_snapshot : json::Value(json::Object{}));
   o.set("action", action);
   o.set("confidence", confidence ? json::Value(*confidence) : json::Value());
   if (with_reasoning) o.set("reasoning", reasoning);
@@ -52,7 +53,8 @@ Thought thought_from_command(const Message& m, const json::Value* thought, int64
     if (const json::Value* i = m.payload.find("instruction"); i && i->is_string())
       t.instruction = i->as_string().substr(0, kMaxText);
   if (thought && thought->is_object()) {
-    if (const json::Value* c = thought->get("context_snapshot"); c && c->is_object()) t.context_snapshot = *c;
+    if (const json::Value* c = thought->get("context_snapshot"); c && c->is_object())
+      t.context_snapshot = *c;
     std::string from = str_of(thought, "escalated_from", 128);
     if (!from.empty()) t.escalated_from = from;
   }

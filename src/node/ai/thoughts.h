@@ -28,7 +28,7 @@ struct Thought {
   std::optional<double> confidence;
   std::string reasoning;
   std::optional<std::string> escalated_from;  // the thought (or message) it escalated from
-  std::string message_id;                      // the command it produced
+  std::string message_id;                     // the command it produced
 
   // The §16.5 response body; reasoning only when `with_reasoning`.
   json::Value to_json(bool with_reasoning) const;

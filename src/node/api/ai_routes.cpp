@@ -10,8 +10,9 @@
 namespace rcan::node {
 namespace {
 
-void answer(NodeServices& svc, const transport::HttpHandler::Respond& respond, const std::string& route, int status,
-            const json::Value& body, std::vector<std::pair<std::string, std::string>> headers = {}) {
+void answer(NodeServices& svc, const transport::HttpHandler::Respond& respond,
+            const std::string& route, int status, const json::Value& body,
+            std::vector<std::pair<std::string, std::string>> headers = {}) {
   svc.metrics.count_request(route, status);
   transport::HttpResponse r;
   r.status = status;
@@ -20,7 +21,8 @@ void answer(NodeServices& svc, const transport::HttpHandler::Respond& respond, c
   respond(std::move(r));
 }
 
-void answer_error(NodeServices& svc, const transport::HttpHandler::Respond& respond, const std::string& route, const Error& e) {
+void answer_error(NodeServices& svc, const transport::HttpHandler::Respond& respond,
+                  const std::string& route, const Error& e) {
   answer(svc, respond, route, http_status(e.code, e.reason), svc.error(e));
 }
 
@@ -28,8 +30,9 @@ Result<Principal> bearer(NodeServices& svc, const transport::HttpRequest& req) {
   return svc.authenticate_header(req.header("authorization"));
 }
 
-bool wrong_method(NodeServices& svc, const transport::HttpRequest& req, const transport::HttpHandler::Respond& respond,
-                  const std::string& route, const char* allowed) {
+bool wrong_method(NodeServices& svc, const transport::HttpRequest& req,
+                  const transport::HttpHandler::Respond& respond, const std::string& route,
+                  const char* allowed) {
   if (req.method == allowed) return false;
   answer(svc, respond, route, 405,
          svc.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed on " + route)),
@@ -37,7 +40,8 @@ bool wrong_method(NodeServices& svc, const transport::HttpRequest& req, const tr
   return true;
 }
 
-void authorize_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req, const transport::HttpHandler::Respond& respond) {
+void authorize_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req,
+                     const transport::HttpHandler::Respond& respond) {
   const std::string route = "/rcan/v1/authorize";
   if (wrong_method(svc, req, respond, route, "POST")) return;
   auto p = bearer(svc, req);
@@ -50,11 +54,13 @@ void authorize_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& 
   }
   auto body = json::parse(req.body, {.max_depth = 16, .max_bytes = 64 * 1024});
   if (!body.ok()) return answer_error(svc, respond, route, body.error());
-  ai.authorize(*p, *body, "http", route,
-               [&svc, respond, route](int status, json::Value out) { answer(svc, respond, route, status, out); });
+  ai.authorize(*p, *body, "http", route, [&svc, respond, route](int status, json::Value out) {
+    answer(svc, respond, route, status, out);
+  });
 }
 
-void pending_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req, const transport::HttpHandler::Respond& respond) {
+void pending_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req,
+                   const transport::HttpHandler::Respond& respond) {
   const std::string route = "/rcan/v1/pending";
   if (wrong_method(svc, req, respond, route, "GET")) return;
   auto p = bearer(svc, req);
@@ -64,14 +70,16 @@ void pending_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& re
     // Below OWNER: only one's own held commands.
     json::Array mine;
     for (const auto& i : list.get("pending")->as_array())
-      if (const json::Value* by = i.get("requested_by"); by && by->is_string() && by->as_string() == p->sub)
+      if (const json::Value* by = i.get("requested_by");
+          by && by->is_string() && by->as_string() == p->sub)
         mine.push_back(i);
     list = json::Object{{"pending", mine}, {"count", static_cast<int64_t>(mine.size())}};
   }
   answer(svc, respond, route, 200, list);
 }
 
-void thought_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req, const transport::HttpHandler::Respond& respond) {
+void thought_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req,
+                   const transport::HttpHandler::Respond& respond) {
   const std::string route = "/api/thoughts";
   if (wrong_method(svc, req, respond, route, "GET")) return;
   auto p = bearer(svc, req);
@@ -80,13 +88,15 @@ void thought_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& re
   std::string id = req.path.substr(std::string("/api/thoughts/").size());
   auto t = id.empty() || id.size() > 128 ? std::nullopt : ai.thoughts().get(id);
   if (!t)
-    return answer_error(svc, respond, route,
-                        Error(ErrorCode::kNotFound, "no thought with id " + id.substr(0, 128), "thought_id"));
+    return answer_error(
+        svc, respond, route,
+        Error(ErrorCode::kNotFound, "no thought with id " + id.substr(0, 128), "thought_id"));
   bool reasoning = p->has_scope("config") && role_level(p->role) >= role_level(Role::kOwner);
   answer(svc, respond, route, 200, t->to_json(reasoning));
 }
 
-void verify_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req, const transport::HttpHandler::Respond& respond) {
+void verify_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req,
+                  const transport::HttpHandler::Respond& respond) {
   const std::string route = "/api/v1/watermark/verify";
   if (wrong_method(svc, req, respond, route, "GET")) return;
   auto seed_error = [&svc, respond, route](int status, const char* msg) {
@@ -124,28 +134,36 @@ void verify_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req
 
 }  // namespace
 
-bool ai_route(NodeServices& svc, transport::HttpRequest& req, transport::HttpHandler::Respond& respond) {
+bool ai_route(NodeServices& svc, transport::HttpRequest& req,
+              transport::HttpHandler::Respond& respond) {
   const std::string& p = req.path;
-  bool ours = p == "/rcan/v1/authorize" || p == "/rcan/v1/pending" || p == "/api/v1/watermark/verify" ||
-              p.rfind("/api/thoughts/", 0) == 0;
+  bool ours = p == "/rcan/v1/authorize" || p == "/rcan/v1/pending" ||
+              p == "/api/v1/watermark/verify" || p.rfind("/api/thoughts/", 0) == 0;
   if (!ours) return false;
   if (!svc.ai) {
-    answer_error(svc, respond, p, Error(ErrorCode::kNotFound, "AI accountability is not enabled on this node"));
+    answer_error(svc, respond, p,
+                 Error(ErrorCode::kNotFound, "AI accountability is not enabled on this node"));
     return true;
   }
   AiServices& ai = *svc.ai;
-  if (p == "/rcan/v1/authorize") authorize_route(svc, ai, req, respond);
-  else if (p == "/rcan/v1/pending") pending_route(svc, ai, req, respond);
-  else if (p == "/api/v1/watermark/verify") verify_route(svc, ai, req, respond);
-  else thought_route(svc, ai, req, respond);
+  if (p == "/rcan/v1/authorize")
+    authorize_route(svc, ai, req, respond);
+  else if (p == "/rcan/v1/pending")
+    pending_route(svc, ai, req, respond);
+  else if (p == "/api/v1/watermark/verify")
+    verify_route(svc, ai, req, respond);
+  else
+    thought_route(svc, ai, req, respond);
   return true;
 }
 
 bool ai_stream_message(NodeServices& svc, const std::string& type, const json::Value& body,
-                       const std::optional<Principal>& principal, const std::function<void(std::string)>& send) {
+                       const std::optional<Principal>& principal,
+                       const std::function<void(std::string)>& send) {
   if (type != "AUTHORIZE") return false;
   if (!svc.ai || !principal) {
-    send(json::dump(svc.error(Error(ErrorCode::kNotFound, "AI accountability is not enabled on this node"))));
+    send(json::dump(
+        svc.error(Error(ErrorCode::kNotFound, "AI accountability is not enabled on this node"))));
     return true;
   }
   svc.ai->authorize(*principal, body, "ws", "/rcan/v1/stream",

@@ -6,8 +6,8 @@
 
 #include "base/http_client.h"
 #include "base/log.h"
-#include "node/api/node.h"
 #include "base/state_file.h"
+#include "node/api/node.h"
 #include "rcan/errors.h"
 
 namespace rcan::node {
@@ -38,12 +38,15 @@ bool starts_with(std::string_view s, std::string_view p) { return s.substr(0, p.
 
 }  // namespace
 
-Result<Principal> Node::route_principal(const transport::HttpRequest& req, const json::Value& body, const std::string& route,
-                                        const std::string& denied_event, Role min_role, std::string_view scope) {
+Result<Principal> Node::route_principal(const transport::HttpRequest& req, const json::Value& body,
+                                        const std::string& route, const std::string& denied_event,
+                                        Role min_role, std::string_view scope) {
   std::string token(req.bearer());
-  Result<Principal> pr = Error(ErrorCode::kAuthRequired, "a bearer token is required", "authorization");
+  Result<Principal> pr =
+      Error(ErrorCode::kAuthRequired, "a bearer token is required", "authorization");
   if (token.empty() && !req.header("authorization").empty()) {
-    pr = Error(ErrorCode::kAuthInvalid, "the Authorization header must be 'Bearer <token>'", "authorization");
+    pr = Error(ErrorCode::kAuthInvalid, "the Authorization header must be 'Bearer <token>'",
+               "authorization");
   } else {
     if (token.empty()) token = str_field(body, "auth_token", 16384);
     if (!token.empty()) pr = svc_.authenticate(token);
@@ -62,7 +65,8 @@ Result<Principal> Node::route_principal(const transport::HttpRequest& req, const
   Principal p = std::move(pr).value();
   if (role_level(p.role) < role_level(min_role) || (!scope.empty() && !p.has_scope(scope))) {
     Error err(ErrorCode::kInsufficientPrivileges,
-              std::string(role_name(p.role)) + " may not use " + route + " (needs " + std::string(role_name(min_role)) +
+              std::string(role_name(p.role)) + " may not use " + route + " (needs " +
+                  std::string(role_name(min_role)) +
                   (scope.empty() ? std::string() : " and scope " + std::string(scope)) + ")",
               "role");
     refuse_audit(err, &p);
@@ -79,37 +83,44 @@ void Node::publish_to(const std::string& principal_key, json::Object ev) {
 void Node::control_start() {
   if (!svc_.settings.state_dir.empty()) {
     int64_t now = svc_.clock.wall_ms();
-    if (auto v = read_state_file(svc_.settings.state_dir + "/leases.json"); v.ok()) svc_.sessions.load_json(*v, now);
-    if (auto v = read_state_file(svc_.settings.state_dir + "/ownership.json"); v.ok()) svc_.ownership.load_json(*v);
-    if (auto v = read_state_file(svc_.settings.state_dir + "/consent.json"); v.ok()) svc_.consent.load_json(*v);
+    if (auto v = read_state_file(svc_.settings.state_dir + "/leases.json"); v.ok())
+      svc_.sessions.load_json(*v, now);
+    if (auto v = read_state_file(svc_.settings.state_dir + "/ownership.json"); v.ok())
+      svc_.ownership.load_json(*v);
+    if (auto v = read_state_file(svc_.settings.state_dir + "/consent.json"); v.ok())
+      svc_.consent.load_json(*v);
     if (auto v = read_state_file(svc_.settings.state_dir + "/credentials.json"); v.ok())
       svc_.partition.load_json(*v, now);
   }
-  svc_.metrics.add_gauge("rcan_partition_mode", "0 NORMAL, 1 OFFLINE_AUTONOMOUS, 2 LOCKDOWN.",
-                         [this] { return static_cast<double>(static_cast<int>(svc_.partition.mode())); });
+  svc_.metrics.add_gauge(
+      "rcan_partition_mode", "0 NORMAL, 1 OFFLINE_AUTONOMOUS, 2 LOCKDOWN.",
+      [this] { return static_cast<double>(static_cast<int>(svc_.partition.mode())); });
   svc_.metrics.add_gauge("rcan_control_queue", "Claimants waiting for control.",
                          [this] { return static_cast<double>(svc_.sessions.queue_size()); });
   svc_.metrics.add_gauge("rcan_leases_active", "Running leases.", [this] {
     return static_cast<double>(svc_.sessions.leases(svc_.clock.wall_ms()).size());
   });
-  svc_.metrics.add_gauge("rcan_transfer_pending", "1 while an ownership transfer is pending.", [this] {
-    return svc_.ownership.state(svc_.clock.wall_ms()) == OwnershipState::kTransferPending ? 1.0 : 0.0;
-  });
-  svc_.partition.start([this] { return svc_.clock.wall_ms(); },
-                       [this](NetMode old, NetMode now) {
-                         auto e = svc_.entry("system", "", "PARTITION_MODE", "ok");
-                         e.sender_type = "system";
-                         e.reason = std::string(net_mode_name(now));
-                         e.detail.set("from", std::string(net_mode_name(old)));
-                         e.detail.set("to", std::string(net_mode_name(now)));
-                         svc_.write_audit(std::move(e));
-                         svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
-                                                                      {"event", "PARTITION_MODE"},
-                                                                      {"mode", std::string(net_mode_name(now))},
-                                                                      {"from", std::string(net_mode_name(old))},
-                                                                      {"timestamp_ms", svc_.clock.wall_ms()}}));
-                         save_control_state();
-                       });
+  svc_.metrics.add_gauge(
+      "rcan_transfer_pending", "1 while an ownership transfer is pending.", [this] {
+        return svc_.ownership.state(svc_.clock.wall_ms()) == OwnershipState::kTransferPending ? 1.0
+                                                                                              : 0.0;
+      });
+  svc_.partition.start(
+      [this] { return svc_.clock.wall_ms(); },
+      [this](NetMode old, NetMode now) {
+        auto e = svc_.entry("system", "", "PARTITION_MODE", "ok");
+        e.sender_type = "system";
+        e.reason = std::string(net_mode_name(now));
+        e.detail.set("from", std::string(net_mode_name(old)));
+        e.detail.set("to", std::string(net_mode_name(now)));
+        svc_.write_audit(std::move(e));
+        svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
+                                                     {"event", "PARTITION_MODE"},
+                                                     {"mode", std::string(net_mode_name(now))},
+                                                     {"from", std::string(net_mode_name(old))},
+                                                     {"timestamp_ms", svc_.clock.wall_ms()}}));
+        save_control_state();
+      });
   std::lock_guard<std::mutex> lock(control_mu_);
   last_control_state_ = std::string(control_state_name(svc_.sessions.state(svc_.clock.mono_ms())));
 }
@@ -130,7 +141,8 @@ void Node::save_control_state() {
     if (s.ok())
       saved_versions_[i] = v[i];
     else
-      log(LogLevel::kError, "state_write_failed", json::Object{{"file", names[i]}, {"error", s.error().message}});
+      log(LogLevel::kError, "state_write_failed",
+          json::Object{{"file", names[i]}, {"error", s.error().message}});
   }
 }
 
@@ -186,8 +198,9 @@ void Node::announce_control_changes() {
       ev.set("session_id", s.id);
       ev.set("role", std::string(role_name(s.role)));
       ev.set("capabilities", capabilities_of(s.role, svc_.settings.role_policy));
-      ev.set("expires_in", s.expires_mono_ms ? json::Value((s.expires_mono_ms - svc_.clock.mono_ms()) / 1000)
-                                             : json::Value());
+      ev.set("expires_in", s.expires_mono_ms
+                               ? json::Value((s.expires_mono_ms - svc_.clock.mono_ms()) / 1000)
+                               : json::Value());
       ev.set("heartbeat_timeout_ms", svc_.settings.heartbeat_timeout_ms);
       // What a direct grant carries (e.g. the UDP heartbeat key) reaches a promoted holder on
       // its own streams only.
@@ -224,7 +237,9 @@ void Node::announce_control_changes() {
     }
   }
   if (changed) {
-    json::Object ev{{"type", "EVENT"}, {"event", "CONTROL_STATE"}, {"state", now_state},
+    json::Object ev{{"type", "EVENT"},
+                    {"event", "CONTROL_STATE"},
+                    {"state", now_state},
                     {"timestamp_ms", svc_.clock.wall_ms()}};
     if (now_state == "AVAILABLE") ev.set("window_ms", svc_.settings.handoff_window_ms);
     svc_.events.publish(json::Value(std::move(ev)));
@@ -236,13 +251,15 @@ void Node::announce_control_changes() {
 
 bool Node::control_route(transport::HttpRequest& req, Respond& respond) {
   const std::string& p = req.path;
-  bool ours = p == "/rcan/v1/auth/claim" || p == "/rcan/v1/auth/release" || p == "/rcan/v1/handoff" ||
-              p == "/rcan/v1/auth/renew" || p == "/rcan/v1/auth/queue" || starts_with(p, "/rcan/v1/leases") ||
-              p == "/rcan/v1/transfer" || starts_with(p, "/rcan/v1/consent");
+  bool ours = p == "/rcan/v1/auth/claim" || p == "/rcan/v1/auth/release" ||
+              p == "/rcan/v1/handoff" || p == "/rcan/v1/auth/renew" || p == "/rcan/v1/auth/queue" ||
+              starts_with(p, "/rcan/v1/leases") || p == "/rcan/v1/transfer" ||
+              starts_with(p, "/rcan/v1/consent");
   if (!ours) return false;
   json::Value body = json::Object{};
   if (!req.body.empty()) {
-    auto v = json::parse(req.body, {.max_depth = 16, .max_bytes = svc_.settings.codec.max_body_bytes});
+    auto v =
+        json::parse(req.body, {.max_depth = 16, .max_bytes = svc_.settings.codec.max_body_bytes});
     if (!v.ok()) {
       answer_error(respond, p, v.error());
       return true;
@@ -254,9 +271,10 @@ bool Node::control_route(transport::HttpRequest& req, Respond& respond) {
     body = std::move(v).value();
   }
   auto wrong_method = [&](const char* allowed) {
-    answer_json(respond, p, 405,
-                svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed on " + p)),
-                {{"Allow", allowed}});
+    answer_json(
+        respond, p, 405,
+        svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed on " + p)),
+        {{"Allow", allowed}});
     return true;
   };
   const std::string& m = req.method;
@@ -290,7 +308,8 @@ bool Node::control_route(transport::HttpRequest& req, Respond& respond) {
                   left ? json::Value(json::Object{{"left", true}})
                        : svc_.error(Error(ErrorCode::kNotFound, "not in the control queue")));
     } else {
-      answer_json(respond, p, 200, json::Object{{"queue", svc_.sessions.queue_json(svc_.clock.mono_ms())}});
+      answer_json(respond, p, 200,
+                  json::Object{{"queue", svc_.sessions.queue_json(svc_.clock.mono_ms())}});
     }
   } else if (starts_with(p, "/rcan/v1/leases")) {
     lease_route(req, respond, body);
@@ -310,7 +329,8 @@ void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json
   if (const json::Value* r = body.get("role"); r && r->is_string()) {
     requested = role_from_name(r->as_string());
     if (!requested)
-      return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "unknown role", "role"));
+      return answer_error(respond, route,
+                          Error(ErrorCode::kSchemaValidationFailed, "unknown role", "role"));
   }
   bool fleet = !str_field(body, "fleet_id").empty();
   int64_t now_mono = svc_.clock.mono_ms(), now_wall = svc_.clock.wall_ms();
@@ -328,12 +348,14 @@ void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json
   bool renewal = holder && holder->principal_key == pr->key();
   NetMode mode = svc_.partition.mode();
   if (!renewal && mode == NetMode::kLockdown)
-    return deny(Error(ErrorCode::kLockdown, "LOCKDOWN: the token issuer is unreachable and the credential cache has "
-                                            "expired; no new sessions"),
+    return deny(Error(ErrorCode::kLockdown,
+                      "LOCKDOWN: the token issuer is unreachable and the credential cache has "
+                      "expired; no new sessions"),
                 "LOCKDOWN");
   if (!renewal && mode == NetMode::kOfflineAutonomous && !svc_.partition.cached(*pr, now_wall))
-    return deny(Error(ErrorCode::kLockdown, "OFFLINE_AUTONOMOUS: this principal is not in the credential cache; "
-                                            "new principals cannot be authenticated while the issuer is unreachable"),
+    return deny(Error(ErrorCode::kLockdown,
+                      "OFFLINE_AUTONOMOUS: this principal is not in the credential cache; "
+                      "new principals cannot be authenticated while the issuer is unreachable"),
                 "OFFLINE_UNCACHED");
   if (mode == NetMode::kNormal) svc_.partition.note_validated(*pr, now_wall);
   svc_.ownership.note_user(pr->sub);
@@ -348,11 +370,14 @@ void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json
     e.reason = "CONTROL_CONFLICT";
     e.detail.set("queue_position", static_cast<int64_t>(c->queue_position));
     svc_.write_audit(std::move(e));
-    json::Value err = svc_.error(Error(ErrorCode::kControlConflict,
-                                       "the robot is controlled by another principal of the same role; you are "
-                                       "number " + std::to_string(c->queue_position) + " in the queue",
-                                       "session", "queued"));
-    err.as_object().find("payload")->as_object().set("queue_position", static_cast<int64_t>(c->queue_position));
+    json::Value err =
+        svc_.error(Error(ErrorCode::kControlConflict,
+                         "the robot is controlled by another principal of the same role; you are "
+                         "number " +
+                             std::to_string(c->queue_position) + " in the queue",
+                         "session", "queued"));
+    err.as_object().find("payload")->as_object().set("queue_position",
+                                                     static_cast<int64_t>(c->queue_position));
     err.as_object().find("payload")->as_object().set("queued", true);
     answer_json(respond, route, 409, std::move(err));
     return announce_control_changes();
@@ -382,21 +407,24 @@ void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json
   if (c->preempted) e.detail.set("preempted_session", c->preempted->id);
   if (!c->session.lease_id.empty()) e.detail.set("lease_id", c->session.lease_id);
   if (fleet) e.detail.set("fleet_id", str_field(body, "fleet_id"));
-  json::Object payload{{"session_id", c->session.id},
-                       {"role", std::string(role_name(c->session.role))},
-                       {"capabilities", capabilities_of(c->session.role, svc_.settings.role_policy)},
-                       {"heartbeat_timeout_ms", svc_.settings.heartbeat_timeout_ms},
-                       {"renewed", renewed}};
+  json::Object payload{
+      {"session_id", c->session.id},
+      {"role", std::string(role_name(c->session.role))},
+      {"capabilities", capabilities_of(c->session.role, svc_.settings.role_policy)},
+      {"heartbeat_timeout_ms", svc_.settings.heartbeat_timeout_ms},
+      {"renewed", renewed}};
   if (c->session.expires_mono_ms)
     payload.set("expires_in", (c->session.expires_mono_ms - now_mono) / 1000);
   else
     payload.set("expires_in", json::Value());
   if (!c->session.lease_id.empty()) payload.set("lease_id", c->session.lease_id);
-  if (svc_.on_grant) svc_.on_grant(c->session.id, payload);  // e.g. udp_heartbeat (src/node/bindings/udp_service.h)
+  if (svc_.on_grant)
+    svc_.on_grant(c->session.id, payload);  // e.g. udp_heartbeat (src/node/bindings/udp_service.h)
   announce_control_changes();
-  svc_.write_audit(std::move(e), [this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
-    answer_json(respond, route, 200, svc_.envelope(MessageType::kGranted, payload));
-  });
+  svc_.write_audit(
+      std::move(e), [this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
+        answer_json(respond, route, 200, svc_.envelope(MessageType::kGranted, payload));
+      });
 }
 
 void Node::renew_route(transport::HttpRequest& req, Respond& respond, const json::Value& body) {
@@ -407,7 +435,8 @@ void Node::renew_route(transport::HttpRequest& req, Respond& respond, const json
   if (session_id.empty()) session_id = std::string(req.header("x-rcan-session")).substr(0, 256);
   if (session_id.empty())
     return answer_error(respond, route,
-                        Error(ErrorCode::kSchemaValidationFailed, "session_id is required", "session_id", "missing_field"));
+                        Error(ErrorCode::kSchemaValidationFailed, "session_id is required",
+                              "session_id", "missing_field"));
   auto r = svc_.sessions.renew(session_id, *pr, svc_.clock.mono_ms(), svc_.clock.wall_ms());
   if (!r.ok()) {
     auto e = svc_.entry(pr->display(), session_id, "RENEW_DENIED", "blocked");
@@ -420,12 +449,15 @@ void Node::renew_route(transport::HttpRequest& req, Respond& respond, const json
   svc_.act.session_heartbeat(r->id);
   auto e = svc_.entry(pr->display(), r->id, "CLAIM_RENEWED", "ok");
   e.sub = pr->sub;
-  json::Object payload{{"session_id", r->id}, {"role", std::string(role_name(r->role))}, {"renewed", true}};
-  payload.set("expires_in", r->expires_mono_ms ? json::Value((r->expires_mono_ms - svc_.clock.mono_ms()) / 1000)
-                                               : json::Value());
-  svc_.write_audit(std::move(e), [this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
-    answer_json(respond, route, 200, svc_.envelope(MessageType::kGranted, payload));
-  });
+  json::Object payload{
+      {"session_id", r->id}, {"role", std::string(role_name(r->role))}, {"renewed", true}};
+  payload.set("expires_in", r->expires_mono_ms
+                                ? json::Value((r->expires_mono_ms - svc_.clock.mono_ms()) / 1000)
+                                : json::Value());
+  svc_.write_audit(
+      std::move(e), [this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
+        answer_json(respond, route, 200, svc_.envelope(MessageType::kGranted, payload));
+      });
 }
 
 void Node::release_route(transport::HttpRequest& req, Respond& respond, const json::Value& body) {
@@ -439,7 +471,8 @@ void Node::release_route(transport::HttpRequest& req, Respond& respond, const js
   }
   if (session_id.empty())
     return answer_error(respond, route,
-                        Error(ErrorCode::kSchemaValidationFailed, "session_id is required", "session_id", "missing_field"));
+                        Error(ErrorCode::kSchemaValidationFailed, "session_id is required",
+                              "session_id", "missing_field"));
   auto r = svc_.sessions.release(session_id, *pr, svc_.clock.mono_ms(), svc_.clock.wall_ms());
   if (!r.ok()) return answer_error(respond, route, r.error());
   svc_.act.session_ended(session_id);
@@ -452,7 +485,8 @@ void Node::release_route(transport::HttpRequest& req, Respond& respond, const js
                                                  {"window_ms", svc_.settings.handoff_window_ms},
                                                  {"timestamp_ms", svc_.clock.wall_ms()}}));
   announce_control_changes();
-  answer_json(respond, route, 200, svc_.envelope(MessageType::kReleased, json::Object{{"session_id", session_id}}));
+  answer_json(respond, route, 200,
+              svc_.envelope(MessageType::kReleased, json::Object{{"session_id", session_id}}));
 }
 
 void Node::handoff_route(transport::HttpRequest& req, Respond& respond, const json::Value& body) {
@@ -462,20 +496,24 @@ void Node::handoff_route(transport::HttpRequest& req, Respond& respond, const js
   std::string session_id = str_field(body, "session_id");
   std::string target = str_field(body, "target_user_id");
   if (session_id.empty() || target.empty())
-    return answer_error(respond, route,
-                        Error(ErrorCode::kSchemaValidationFailed, "session_id and target_user_id are required",
-                              session_id.empty() ? "session_id" : "target_user_id", "missing_field"));
+    return answer_error(
+        respond, route,
+        Error(ErrorCode::kSchemaValidationFailed, "session_id and target_user_id are required",
+              session_id.empty() ? "session_id" : "target_user_id", "missing_field"));
   std::optional<Role> target_role;
   if (std::string r = str_field(body, "target_role"); !r.empty()) {
     target_role = role_from_name(r);
     if (!target_role) {
-      json::Value err = svc_.error(Error(ErrorCode::kSchemaValidationFailed, "unknown target_role", "target_role"));
-      err.as_object().set("valid_roles", json::Array{"CREATOR", "OWNER", "LEASEE", "USER", "GUEST"});
+      json::Value err = svc_.error(
+          Error(ErrorCode::kSchemaValidationFailed, "unknown target_role", "target_role"));
+      err.as_object().set("valid_roles",
+                          json::Array{"CREATOR", "OWNER", "LEASEE", "USER", "GUEST"});
       return answer_json(respond, route, 400, std::move(err));
     }
   }
   int64_t window = svc_.settings.handoff_window_ms;
-  auto r = svc_.sessions.handoff(session_id, *pr, target, target_role, window, svc_.clock.mono_ms());
+  auto r =
+      svc_.sessions.handoff(session_id, *pr, target, target_role, window, svc_.clock.mono_ms());
   if (!r.ok()) return answer_error(respond, route, r.error());
   svc_.act.session_ended(session_id);
   svc_.events.publish(json::Value(json::Object{{"type", "AVAILABLE"},
@@ -489,10 +527,12 @@ void Node::handoff_route(transport::HttpRequest& req, Respond& respond, const js
   if (target_role) e.detail.set("target_role", std::string(role_name(*target_role)));
   if (std::string reason = str_field(body, "reason", 512); !reason.empty()) e.reason = reason;
   announce_control_changes();
-  json::Object payload{{"session_id", session_id}, {"target_user_id", target}, {"window_ms", window}};
-  svc_.write_audit(std::move(e), [this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
-    answer_json(respond, route, 200, svc_.envelope(MessageType::kAvailable, payload));
-  });
+  json::Object payload{
+      {"session_id", session_id}, {"target_user_id", target}, {"window_ms", window}};
+  svc_.write_audit(
+      std::move(e), [this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
+        answer_json(respond, route, 200, svc_.envelope(MessageType::kAvailable, payload));
+      });
 }
 
 // Leases: GET /rcan/v1/leases, POST /rcan/v1/leases {leasee, duration_s},
@@ -504,60 +544,77 @@ void Node::lease_route(transport::HttpRequest& req, Respond& respond, const json
   std::string lease_id;
   bool grants = false;
   if (!rest.empty()) {
-    if (rest[0] != '/') return answer_error(respond, route, Error(ErrorCode::kNotFound, "no route for " + req.path.substr(0, 128)));
+    if (rest[0] != '/')
+      return answer_error(respond, route,
+                          Error(ErrorCode::kNotFound, "no route for " + req.path.substr(0, 128)));
     rest = rest.substr(1);
     size_t slash = rest.find('/');
     lease_id = rest.substr(0, slash);
     if (slash != std::string::npos) {
       if (rest.substr(slash) != "/grants")
-        return answer_error(respond, route, Error(ErrorCode::kNotFound, "no route for " + req.path.substr(0, 128)));
+        return answer_error(respond, route,
+                            Error(ErrorCode::kNotFound, "no route for " + req.path.substr(0, 128)));
       grants = true;
     }
   }
   int64_t now_wall = svc_.clock.wall_ms();
   auto method_error = [&](const char* allowed) {
-    answer_json(respond, route, 405, svc_.error(Error(ErrorCode::kMethodNotAllowed, m + " is not allowed here")),
+    answer_json(respond, route, 405,
+                svc_.error(Error(ErrorCode::kMethodNotAllowed, m + " is not allowed here")),
                 {{"Allow", allowed}});
   };
   if (lease_id.empty()) {
     if (m == "GET") {
       auto pr = route_principal(req, body, route, "LEASE_DENIED", Role::kLeasee, "");
       if (!pr.ok()) return answer_error(respond, route, pr.error());
-      return answer_json(respond, route, 200, json::Object{{"leases", svc_.sessions.leases_json(now_wall)}});
+      return answer_json(respond, route, 200,
+                         json::Object{{"leases", svc_.sessions.leases_json(now_wall)}});
     }
     if (m != "POST") return method_error("GET, POST");
     auto pr = route_principal(req, body, route, "LEASE_DENIED", Role::kOwner, "config");
     if (!pr.ok()) return answer_error(respond, route, pr.error());
     int64_t dur = seconds_field(body, "duration_s", 3600);
     if (dur < 0)
-      return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "duration_s must be 1 s .. 366 days", "duration_s"));
+      return answer_error(respond, route,
+                          Error(ErrorCode::kSchemaValidationFailed,
+                                "duration_s must be 1 s .. 366 days", "duration_s"));
     auto l = svc_.sessions.grant_lease(*pr, str_field(body, "leasee"), dur * 1000, now_wall,
-                                                svc_.clock.mono_ms());
+                                       svc_.clock.mono_ms());
     if (!l.ok()) return answer_error(respond, route, l.error());
     auto e = svc_.entry(pr->display(), l->id, "LEASE_GRANTED", "ok");
     e.sub = pr->sub;
     e.detail.set("lease_id", l->id);
     e.detail.set("leasee", l->leasee_sub);
     e.detail.set("end_ms", l->end_wall_ms);
-    svc_.events.publish(json::Value(json::Object{{"type", "EVENT"}, {"event", "LEASE_GRANTED"}, {"lease_id", l->id},
-                                                 {"leasee", l->leasee_sub}, {"end_ms", l->end_wall_ms},
+    svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
+                                                 {"event", "LEASE_GRANTED"},
+                                                 {"lease_id", l->id},
+                                                 {"leasee", l->leasee_sub},
+                                                 {"end_ms", l->end_wall_ms},
                                                  {"timestamp_ms", now_wall}}));
     announce_control_changes();
     json::Value answer = l->to_json(now_wall);
-    return svc_.write_audit(std::move(e), [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable { answer_json(respond, route, 201, std::move(answer)); });
+    return svc_.write_audit(std::move(e),
+                            [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
+                              answer_json(respond, route, 201, std::move(answer));
+                            });
   }
   if (grants) {
     if (m != "POST") return method_error("POST");
     auto pr = route_principal(req, body, route, "LEASE_DENIED", Role::kLeasee, "");
     if (!pr.ok()) return answer_error(respond, route, pr.error());
     auto role = role_from_name(str_field(body, "role").empty() ? "user" : str_field(body, "role"));
-    if (!role) return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "unknown role", "role"));
+    if (!role)
+      return answer_error(respond, route,
+                          Error(ErrorCode::kSchemaValidationFailed, "unknown role", "role"));
     int64_t dur = seconds_field(body, "duration_s", 3600);
     if (dur < 0)
-      return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "duration_s must be positive", "duration_s"));
+      return answer_error(
+          respond, route,
+          Error(ErrorCode::kSchemaValidationFailed, "duration_s must be positive", "duration_s"));
     std::string sub = str_field(body, "user_id");
     auto l = svc_.sessions.grant_within_lease(*pr, lease_id, sub, *role, dur * 1000, now_wall,
-                                                svc_.clock.mono_ms());
+                                              svc_.clock.mono_ms());
     if (!l.ok()) return answer_error(respond, route, l.error());
     auto e = svc_.entry(pr->display(), lease_id, "LEASE_ACCESS_GRANTED", "ok");
     e.sub = pr->sub;
@@ -566,7 +623,10 @@ void Node::lease_route(transport::HttpRequest& req, Respond& respond, const json
     e.detail.set("role", std::string(role_name(*role)));
     announce_control_changes();
     json::Value answer = l->to_json(now_wall);
-    return svc_.write_audit(std::move(e), [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable { answer_json(respond, route, 200, std::move(answer)); });
+    return svc_.write_audit(std::move(e),
+                            [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
+                              answer_json(respond, route, 200, std::move(answer));
+                            });
   }
   if (m != "DELETE") return method_error("DELETE");
   auto pr = route_principal(req, body, route, "LEASE_DENIED", Role::kOwner, "config");
@@ -578,7 +638,10 @@ void Node::lease_route(transport::HttpRequest& req, Respond& respond, const json
   e.detail.set("lease_id", lease_id);
   announce_control_changes();
   json::Value answer = json::Object{{"lease_id", lease_id}, {"revoked", true}};
-  svc_.write_audit(std::move(e), [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable { answer_json(respond, route, 200, std::move(answer)); });
+  svc_.write_audit(std::move(e),
+                   [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
+                     answer_json(respond, route, 200, std::move(answer));
+                   });
 }
 
 // GET /rcan/v1/transfer: the ownership state. POST {action: request|accept|cancel, …}.
@@ -588,25 +651,33 @@ void Node::transfer_route(transport::HttpRequest& req, Respond& respond, const j
   if (req.method == "GET") {
     auto pr = route_principal(req, body, route, "TRANSFER_DENIED", Role::kGuest, "");
     if (!pr.ok()) return answer_error(respond, route, pr.error());
-    return answer_json(respond, route, 200, svc_.ownership.to_json(now_wall, role_level(pr->role) >= role_level(Role::kOwner)));
+    return answer_json(
+        respond, route, 200,
+        svc_.ownership.to_json(now_wall, role_level(pr->role) >= role_level(Role::kOwner)));
   }
   if (req.method != "POST")
-    return answer_json(respond, route, 405, svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed here")),
-                       {{"Allow", "GET, POST"}});
+    return answer_json(
+        respond, route, 405,
+        svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed here")),
+        {{"Allow", "GET, POST"}});
   std::string action = str_field(body, "action");
   if (action != "request" && action != "accept" && action != "cancel")
     return answer_error(respond, route,
-                        Error(ErrorCode::kSchemaValidationFailed, "action must be request, accept or cancel", "action"));
-  auto pr = route_principal(req, body, route, "TRANSFER_DENIED", action == "request" ? Role::kOwner : Role::kGuest,
+                        Error(ErrorCode::kSchemaValidationFailed,
+                              "action must be request, accept or cancel", "action"));
+  auto pr = route_principal(req, body, route, "TRANSFER_DENIED",
+                            action == "request" ? Role::kOwner : Role::kGuest,
                             action == "request" ? "config" : "");
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   Result<PendingTransfer> r = Error(ErrorCode::kInternal, "unreachable");
   std::string event;
   if (action == "request") {
-    r = svc_.ownership.request(*pr, str_field(body, "new_owner"), str_field(body, "note", 512), now_wall);
+    r = svc_.ownership.request(*pr, str_field(body, "new_owner"), str_field(body, "note", 512),
+                               now_wall);
     event = "TRANSFER_REQUEST";
   } else if (action == "accept") {
-    r = svc_.ownership.accept(*pr, str_field(body, "transfer_id"), str_field(body, "agreement", 512), now_wall);
+    r = svc_.ownership.accept(*pr, str_field(body, "transfer_id"),
+                              str_field(body, "agreement", 512), now_wall);
     event = "TRANSFER_ACCEPT";
   } else {
     r = svc_.ownership.cancel(*pr, now_wall);
@@ -639,10 +710,13 @@ void Node::transfer_route(transport::HttpRequest& req, Respond& respond, const j
   answer.as_object().set("transfer_id", r->id);
   answer.as_object().set("step", event);
   std::string id = r->id;
-  svc_.events.publish(json::Value(json::Object{{"type", "EVENT"}, {"event", event}, {"transfer_id", id},
-                                               {"timestamp_ms", now_wall}}));
+  svc_.events.publish(json::Value(json::Object{
+      {"type", "EVENT"}, {"event", event}, {"transfer_id", id}, {"timestamp_ms", now_wall}}));
   announce_control_changes();
-  svc_.write_audit(std::move(e), [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable { answer_json(respond, route, 200, std::move(answer)); });
+  svc_.write_audit(std::move(e),
+                   [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
+                     answer_json(respond, route, 200, std::move(answer));
+                   });
 }
 
 // POST /rcan/v1/consent: a CONSENT_REQUEST message. GET: the list (OWNER).
@@ -661,15 +735,18 @@ void Node::consent_route(transport::HttpRequest& req, Respond& respond, const js
       return answer_json(respond, route, 200, json::Object{{"requests", a}});
     }
     if (req.method != "POST")
-      return answer_json(respond, route, 405, svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed here")),
-                         {{"Allow", "GET, POST"}});
+      return answer_json(
+          respond, route, 405,
+          svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed here")),
+          {{"Allow", "GET, POST"}});
     return consent_request_route(req, respond, body);
   }
   consent_decision_route(req, respond, body, rest);
 }
 
 // POST /rcan/v1/consent: records a CONSENT_REQUEST (202) and notifies the owner.
-void Node::consent_request_route(transport::HttpRequest& req, Respond& respond, const json::Value& body) {
+void Node::consent_request_route(transport::HttpRequest& req, Respond& respond,
+                                 const json::Value& body) {
   const std::string route = "/rcan/v1/consent";
   int64_t now_wall = svc_.clock.wall_ms();
   auto pr = route_principal(req, body, route, "CONSENT_REFUSED", Role::kGuest, "");
@@ -691,7 +768,8 @@ void Node::consent_request_route(transport::HttpRequest& req, Respond& respond, 
   auto msg = decode_message(msg_body, svc_.settings.codec);
   if (!msg.ok()) return refused(msg.error());
   if (msg->type != MessageType::kConsentRequest)
-    return refused(Error(ErrorCode::kSchemaValidationFailed, "type must be CONSENT_REQUEST", "type"));
+    return refused(
+        Error(ErrorCode::kSchemaValidationFailed, "type must be CONSENT_REQUEST", "type"));
   auto sig = svc_.auth.check_signature(*msg);
   if (!sig.ok()) return refused(sig.error());
   auto sender = svc_.auth.sender(*msg, *pr, *sig);
@@ -710,16 +788,21 @@ void Node::consent_request_route(transport::HttpRequest& req, Respond& respond, 
   if (const json::Value* s = msg->payload.find("scopes"); s && s->is_array()) {
     for (const auto& x : s->as_array()) {
       if (!x.is_string() || !scope_min_role(x.as_string()))
-        return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "unknown scope", "payload.scopes"));
+        return answer_error(
+            respond, route,
+            Error(ErrorCode::kSchemaValidationFailed, "unknown scope", "payload.scopes"));
       if (c.scopes.size() < 16) c.scopes.push_back(x.as_string());
     }
   }
   if (c.scopes.empty())
     return answer_error(respond, route,
-                        Error(ErrorCode::kSchemaValidationFailed, "payload.scopes is required", "payload.scopes", "missing_field"));
+                        Error(ErrorCode::kSchemaValidationFailed, "payload.scopes is required",
+                              "payload.scopes", "missing_field"));
   if (const json::Value* d = msg->payload.find("duration_s")) {
     if (!d->is_int() || d->as_int() <= 0 || d->as_int() > 366 * 86400)
-      return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "duration_s must be positive", "payload.duration_s"));
+      return answer_error(respond, route,
+                          Error(ErrorCode::kSchemaValidationFailed, "duration_s must be positive",
+                                "payload.duration_s"));
     c.duration_s = d->as_int();
   }
   auto added = svc_.consent.add(c, now_wall);
@@ -731,13 +814,19 @@ void Node::consent_request_route(transport::HttpRequest& req, Respond& respond, 
   if (!added->cloud_provider.empty()) e.cloud_provider = added->cloud_provider;
   if (!added->function_name.empty()) e.function_name = added->function_name;
   e.detail.set("consent_id", added->id);
-  e.detail.set("scopes", added->to_json().get("scopes") ? *added->to_json().get("scopes") : json::Value());
+  e.detail.set("scopes",
+               added->to_json().get("scopes") ? *added->to_json().get("scopes") : json::Value());
   e.detail.set("notification", note);
   json::Value answer = added->to_json();
   answer.as_object().set("notification", note);
-  svc_.write_audit(std::move(e), [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable { answer_json(respond, route, 202, std::move(answer)); });
-  svc_.events.publish(json::Value(json::Object{{"type", "EVENT"}, {"event", "CONSENT_REQUEST"},
-                                               {"consent_id", added->id}, {"notification", note},
+  svc_.write_audit(std::move(e),
+                   [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
+                     answer_json(respond, route, 202, std::move(answer));
+                   });
+  svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
+                                               {"event", "CONSENT_REQUEST"},
+                                               {"consent_id", added->id},
+                                               {"notification", note},
                                                {"timestamp_ms", now_wall}}));
   if (!svc_.settings.consent_webhook.empty()) {
     std::string url = svc_.settings.consent_webhook;
@@ -745,10 +834,12 @@ void Node::consent_request_route(transport::HttpRequest& req, Respond& respond, 
     std::string cid = added->id;
     worker_.post([this, url, text, cid] {
       auto r = http_request("POST", url, text, 2000);
-      auto we = svc_.entry("system", cid, "CONSENT_NOTIFIED", r.ok() && r->status < 300 ? "ok" : "error");
+      auto we =
+          svc_.entry("system", cid, "CONSENT_NOTIFIED", r.ok() && r->status < 300 ? "ok" : "error");
       we.sender_type = "system";
       we.detail.set("consent_id", cid);
-      we.detail.set("webhook_status", r.ok() ? json::Value(static_cast<int64_t>(r->status)) : json::Value());
+      we.detail.set("webhook_status",
+                    r.ok() ? json::Value(static_cast<int64_t>(r->status)) : json::Value());
       if (!r.ok()) we.reason = r.error().message;
       svc_.write_audit(std::move(we));
     });
@@ -757,20 +848,24 @@ void Node::consent_request_route(transport::HttpRequest& req, Respond& respond, 
 }
 
 // POST /rcan/v1/consent/<id>/grant {kind: lease|grant, duration_s} or /<id>/deny {reason} (OWNER).
-void Node::consent_decision_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
-                                  const std::string& rest) {
+void Node::consent_decision_route(transport::HttpRequest& req, Respond& respond,
+                                  const json::Value& body, const std::string& rest) {
   const std::string route = "/rcan/v1/consent";
   int64_t now_wall = svc_.clock.wall_ms();
   size_t slash = rest.find('/', 1);
   if (rest[0] != '/' || slash == std::string::npos)
-    return answer_error(respond, route, Error(ErrorCode::kNotFound, "no route for " + req.path.substr(0, 128)));
+    return answer_error(respond, route,
+                        Error(ErrorCode::kNotFound, "no route for " + req.path.substr(0, 128)));
   std::string id = rest.substr(1, slash - 1);
   std::string verb = rest.substr(slash + 1);
   if (verb != "grant" && verb != "deny")
-    return answer_error(respond, route, Error(ErrorCode::kNotFound, "no route for " + req.path.substr(0, 128)));
+    return answer_error(respond, route,
+                        Error(ErrorCode::kNotFound, "no route for " + req.path.substr(0, 128)));
   if (req.method != "POST")
-    return answer_json(respond, route, 405, svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed here")),
-                       {{"Allow", "POST"}});
+    return answer_json(
+        respond, route, 405,
+        svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed here")),
+        {{"Allow", "POST"}});
   auto pr = route_principal(req, body, route, "CONSENT_REFUSED", Role::kOwner, "config");
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   auto pending = svc_.consent.get(id);
@@ -781,32 +876,37 @@ void Node::consent_decision_route(transport::HttpRequest& req, Respond& respond,
     int64_t dur = seconds_field(body, "duration_s", pending->duration_s);
     if (dur < 0 || (kind != "lease" && kind != "grant"))
       return answer_error(respond, route,
-                          Error(ErrorCode::kSchemaValidationFailed, "kind must be lease or grant; duration_s positive", "kind"));
+                          Error(ErrorCode::kSchemaValidationFailed,
+                                "kind must be lease or grant; duration_s positive", "kind"));
     if (pending->status != "PENDING" || now_wall >= pending->expires_ms) {
       auto d = svc_.consent.decide(id, true, pr->sub, kind, "", now_wall);
-      return answer_error(respond, route, d.ok() ? Error(ErrorCode::kInternal, "unexpected") : d.error());
+      return answer_error(respond, route,
+                          d.ok() ? Error(ErrorCode::kInternal, "unexpected") : d.error());
     }
     if (kind == "lease") {
       auto l = svc_.sessions.grant_lease(*pr, pending->requester_sub, dur * 1000, now_wall,
-                                                svc_.clock.mono_ms());
+                                         svc_.clock.mono_ms());
       if (!l.ok()) return answer_error(respond, route, l.error());
       lease_id = l->id;
     } else {
-      bool control = std::find(pending->scopes.begin(), pending->scopes.end(), "control") != pending->scopes.end();
+      bool control = std::find(pending->scopes.begin(), pending->scopes.end(), "control") !=
+                     pending->scopes.end();
       auto running = svc_.sessions.leases(now_wall);
       if (running.empty())
         return answer_error(respond, route,
-                            Error(ErrorCode::kControlConflict, "kind grant needs a running lease; use kind lease", "kind"));
+                            Error(ErrorCode::kControlConflict,
+                                  "kind grant needs a running lease; use kind lease", "kind"));
       auto l = svc_.sessions.grant_within_lease(*pr, running.front().id, pending->requester_sub,
-                                                control ? Role::kUser : Role::kGuest, dur * 1000, now_wall,
-                                                svc_.clock.mono_ms());
+                                                control ? Role::kUser : Role::kGuest, dur * 1000,
+                                                now_wall, svc_.clock.mono_ms());
       if (!l.ok()) return answer_error(respond, route, l.error());
       lease_id = l->id;
     }
   }
   auto d = svc_.consent.decide(id, verb == "grant", pr->sub, kind, lease_id, now_wall);
   if (!d.ok()) return answer_error(respond, route, d.error());
-  auto e = svc_.entry(pr->display(), id, verb == "grant" ? "CONSENT_GRANTED" : "CONSENT_DENIED", "ok");
+  auto e =
+      svc_.entry(pr->display(), id, verb == "grant" ? "CONSENT_GRANTED" : "CONSENT_DENIED", "ok");
   e.sub = pr->sub;
   e.sender_type = "human";
   e.detail.set("consent_id", id);
@@ -815,13 +915,17 @@ void Node::consent_decision_route(transport::HttpRequest& req, Respond& respond,
   if (!d->function_name.empty()) e.detail.set("requester_function", d->function_name);
   if (!lease_id.empty()) e.detail.set("lease_id", lease_id);
   if (std::string reason = str_field(body, "reason", 512); !reason.empty()) e.reason = reason;
-  svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
-                                               {"event", verb == "grant" ? "CONSENT_GRANTED" : "CONSENT_DENIED"},
-                                               {"consent_id", id},
-                                               {"timestamp_ms", now_wall}}));
+  svc_.events.publish(
+      json::Value(json::Object{{"type", "EVENT"},
+                               {"event", verb == "grant" ? "CONSENT_GRANTED" : "CONSENT_DENIED"},
+                               {"consent_id", id},
+                               {"timestamp_ms", now_wall}}));
   announce_control_changes();
   json::Value answer = d->to_json();
-  svc_.write_audit(std::move(e), [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable { answer_json(respond, route, 200, std::move(answer)); });
+  svc_.write_audit(std::move(e),
+                   [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
+                     answer_json(respond, route, 200, std::move(answer));
+                   });
 }
 
 }  // namespace rcan::node

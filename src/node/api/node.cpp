@@ -6,13 +6,13 @@
 #include <chrono>
 #include <cstdlib>
 
+#include "base/clock.h"
+#include "base/log.h"
 #include "node/api/ai_routes.h"
 #include "node/api/stage_order.h"
-#include "base/log.h"
 #include "node/api/web_assets.h"
 #include "node/discovery/mdns.h"
 #include "rcan/errors.h"
-#include "base/clock.h"
 
 namespace rcan::node {
 
@@ -25,7 +25,7 @@ struct StreamState {
   std::mutex mu;
   bool connected = false;
   std::optional<Principal> principal;
-  std::string upgrade_token;   // from the upgrade request, if any
+  std::string upgrade_token;  // from the upgrade request, if any
   std::string stream_id;
   bool telemetry = false;
   int64_t telemetry_period_ms = 200;
@@ -46,7 +46,8 @@ struct StreamSessionImpl final : public transport::StreamSession {
     node.unregister_stream(st);
   }
   void refuse_connect(const std::string& why) {
-    json::Object err{{"type", "ERROR"}, {"code", 8001}, {"name", "ConnectionRefused"}, {"message", why}};
+    json::Object err{
+        {"type", "ERROR"}, {"code", 8001}, {"name", "ConnectionRefused"}, {"message", why}};
     st->sink->send_text(json::dump(json::Value(err)));
     st->sink->close(4001, "connection refused");
   }
@@ -71,8 +72,9 @@ void StreamSessionImpl::on_text(std::string text) {
       st->sink->close(1002, "the first frame must be a CONNECT message");
       return;
     }
-    Error e = v.ok() ? Error(ErrorCode::kSchemaValidationFailed, "a frame must hold one JSON object")
-                     : v.error();
+    Error e = v.ok()
+                  ? Error(ErrorCode::kSchemaValidationFailed, "a frame must hold one JSON object")
+                  : v.error();
     st->sink->send_text(json::dump(svc.error(e)));
     return;
   }
@@ -127,8 +129,8 @@ void StreamSessionImpl::on_text(std::string text) {
     double hz = svc.settings.telemetry_hz;
     if (const json::Value* h = v->get("hz"); h && h->is_number()) hz = h->to_double();
     if (!(hz >= 0.2 && hz <= 50)) {
-      st->sink->send_text(json::dump(svc.error(Error(ErrorCode::kSchemaValidationFailed,
-                                                     "hz must be within 0.2..50", "hz"))));
+      st->sink->send_text(json::dump(
+          svc.error(Error(ErrorCode::kSchemaValidationFailed, "hz must be within 0.2..50", "hz"))));
       return;
     }
     {
@@ -148,7 +150,8 @@ void StreamSessionImpl::on_text(std::string text) {
       who = st->principal;
     }
     auto state = st;
-    ai_stream_message(svc, t, *v, who, [state](std::string s) { state->sink->send_text(std::move(s)); });
+    ai_stream_message(svc, t, *v, who,
+                      [state](std::string s) { state->sink->send_text(std::move(s)); });
     return;
   }
   // Everything else is an RCAN message through the pipeline, as this stream's principal.
@@ -163,7 +166,8 @@ void StreamSessionImpl::on_text(std::string text) {
     in.preauthenticated = st->principal;
   }
   auto state = st;
-  node.submit(std::move(in), [state](Outcome out) { state->sink->send_text(json::dump(out.body)); });
+  node.submit(std::move(in),
+              [state](Outcome out) { state->sink->send_text(json::dump(out.body)); });
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -194,7 +198,8 @@ Node::Node(NodeServices& services)
       bool ok;
       {
         std::lock_guard<std::mutex> lock(st->mu);
-        ok = st->connected && !st->closed && (to.empty() || (st->principal && st->principal->key() == to));
+        ok = st->connected && !st->closed &&
+             (to.empty() || (st->principal && st->principal->key() == to));
       }
       if (ok && addressed) {
         json::Value addressed_ev = ev;
@@ -215,14 +220,17 @@ Node::Node(NodeServices& services)
                          [this] { return static_cast<double>(svc_.audit_inflight.load()); });
   svc_.metrics.add_gauge("rcan_audit_available", "0 when the audit log cannot record.",
                          [this] { return svc_.audit.available() ? 1.0 : 0.0; });
-  svc_.metrics.add_counter_fn("rcan_audit_recoveries_total", "Times the audit log came back after a failure.",
-                              [this] { return static_cast<double>(svc_.audit.stats().recoveries); });
-  svc_.metrics.add_counter_fn("rcan_audit_index_fallbacks_total",
-                              "Audit reads whose index entry did not lead to the record, answered from the segment itself.",
-                              [this] { return static_cast<double>(svc_.audit.stats().index_fallbacks); });
+  svc_.metrics.add_counter_fn(
+      "rcan_audit_recoveries_total", "Times the audit log came back after a failure.",
+      [this] { return static_cast<double>(svc_.audit.stats().recoveries); });
+  svc_.metrics.add_counter_fn(
+      "rcan_audit_index_fallbacks_total",
+      "Audit reads whose index entry did not lead to the record, answered from the segment itself.",
+      [this] { return static_cast<double>(svc_.audit.stats().index_fallbacks); });
   // Records per group commit = records / groups; syncs per second = the disk's flush rate.
-  svc_.metrics.add_counter_fn("rcan_audit_group_commits_total", "Audit group commits (one write each).",
-                              [this] { return static_cast<double>(svc_.audit.stats().groups_committed); });
+  svc_.metrics.add_counter_fn(
+      "rcan_audit_group_commits_total", "Audit group commits (one write each).",
+      [this] { return static_cast<double>(svc_.audit.stats().groups_committed); });
   svc_.metrics.add_counter_fn("rcan_audit_syncs_total", "fdatasync calls of the audit log.",
                               [this] { return static_cast<double>(svc_.audit.stats().syncs); });
   svc_.metrics.add_counter_fn("rcan_audit_failures_total", "Audit appends that failed.",
@@ -354,8 +362,8 @@ void Node::pump() {
   }
 }
 
-void Node::on_safety_event(const std::string& type, const std::string& session_id, int64_t elapsed_ms,
-                           const std::string& detail) {
+void Node::on_safety_event(const std::string& type, const std::string& session_id,
+                           int64_t elapsed_ms, const std::string& detail) {
   auto e = svc_.entry("system", "", type, "ok");
   e.sender_type = "system";
   e.reason = type;
@@ -370,11 +378,13 @@ void Node::on_safety_event(const std::string& type, const std::string& session_i
                                                {"timestamp_ms", svc_.clock.wall_ms()}}));
 }
 
-std::unique_ptr<transport::StreamSession> Node::open(const transport::HttpRequest& upgrade, std::shared_ptr<transport::StreamSink> sink,
-                                          transport::HttpResponse& refusal) {
+std::unique_ptr<transport::StreamSession> Node::open(const transport::HttpRequest& upgrade,
+                                                     std::shared_ptr<transport::StreamSink> sink,
+                                                     transport::HttpResponse& refusal) {
   if (upgrade.path != "/rcan/v1/stream" && upgrade.path != "/ws/telemetry") {
     refusal.status = 404;
-    refusal.body = json::dump(svc_.error(Error(ErrorCode::kNotFound, "no stream at " + upgrade.path)));
+    refusal.body =
+        json::dump(svc_.error(Error(ErrorCode::kNotFound, "no stream at " + upgrade.path)));
     return nullptr;
   }
   auto st = std::make_shared<StreamState>();
@@ -423,9 +433,7 @@ Result<Principal> Node::bearer_principal(const transport::HttpRequest& req) cons
   return svc_.authenticate_header(req.header("authorization"));
 }
 
-void Node::handle(transport::HttpRequest req, Respond respond) {
-  route(req, respond);
-}
+void Node::handle(transport::HttpRequest req, Respond respond) { route(req, respond); }
 
 namespace {
 
@@ -433,7 +441,8 @@ bool method_is(const transport::HttpRequest& req, std::string_view m) { return r
 
 }  // namespace
 
-void Node::run_pipeline(transport::HttpRequest& req, Respond& respond, const std::string& route, json::Value body) {
+void Node::run_pipeline(transport::HttpRequest& req, Respond& respond, const std::string& route,
+                        json::Value body) {
   Ingress in;
   // The reference client wraps the message: {"session_id": …, "message": {…}}.
   if (body.is_object() && !body.get("type") && !body.get("cmd") && !body.get("message_type")) {
@@ -481,9 +490,10 @@ void Node::route(transport::HttpRequest& req, Respond& respond) {
     return true;
   };
   auto wrong_method = [&](const char* allowed) {
-    answer_json(respond, p, 405,
-                svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed on " + p)),
-                {{"Allow", allowed}});
+    answer_json(
+        respond, p, 405,
+        svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed on " + p)),
+        {{"Allow", allowed}});
   };
 
   if (is_web_path(p)) {  // the operator dashboard (docs/DASHBOARD.md)
@@ -513,9 +523,11 @@ void Node::route(transport::HttpRequest& req, Respond& respond) {
     json::Value body;
     if (!parse_body(body, true)) return;
     std::string reply;
-    if (const json::Value* id = body.get("message_id"); id && id->is_string()) reply = id->as_string().substr(0, 64);
-    return answer_json(respond, p, 200,
-                       svc_.envelope(MessageType::kAnnounce, svc_.discovery_info().as_object(), reply));
+    if (const json::Value* id = body.get("message_id"); id && id->is_string())
+      reply = id->as_string().substr(0, 64);
+    return answer_json(
+        respond, p, 200,
+        svc_.envelope(MessageType::kAnnounce, svc_.discovery_info().as_object(), reply));
   }
   if (p == "/api/discovery") {
     if (!method_is(req, "GET")) return wrong_method("GET");
@@ -530,7 +542,8 @@ void Node::route(transport::HttpRequest& req, Respond& respond) {
                      {"version", svc_.settings.rcan_version},
                      {"name", svc_.settings.name},
                      {"status", status_word(svc_)}};  // as in the mDNS TXT record
-    return answer_json(respond, p, 200, json::Object{{"service_type", "_rcan._tcp"}, {"txt_record", txt}});
+    return answer_json(respond, p, 200,
+                       json::Object{{"service_type", "_rcan._tcp"}, {"txt_record", txt}});
   }
   if (p == "/rcan/v1/status" || p == "/api/status") {
     if (!method_is(req, "GET")) return wrong_method("GET");
@@ -556,13 +569,11 @@ void Node::route(transport::HttpRequest& req, Respond& respond) {
     if (!body.is_object() || !body.get("type")) {
       json::Object payload{{"safety_event", "ESTOP"}};
       if (body.is_object())
-        if (const json::Value* r = body.get("reason"); r && r->is_string()) payload.set("reason", r->as_string());
-      json::Object m{{"version", "1.0.0"},
-                     {"message_id", new_uuid_v4()},
-                     {"type", "SAFETY"},
-                     {"priority", "SAFETY"},
-                     {"timestamp_ms", svc_.clock.wall_ms()},
-                     {"payload", payload}};
+        if (const json::Value* r = body.get("reason"); r && r->is_string())
+          payload.set("reason", r->as_string());
+      json::Object m{
+          {"version", "1.0.0"},   {"message_id", new_uuid_v4()},          {"type", "SAFETY"},
+          {"priority", "SAFETY"}, {"timestamp_ms", svc_.clock.wall_ms()}, {"payload", payload}};
       body = std::move(m);
     }
     return run_pipeline(req, respond, p, std::move(body));
@@ -589,7 +600,9 @@ void Node::audit_listing(transport::HttpRequest& req, Respond& respond) {
     std::string s(req.query_value("limit"));
     long v = std::strtol(s.c_str(), &end, 10);
     if (!end || *end || v < 1 || v > 1000)
-      return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "limit must be 1..1000", "limit"));
+      return answer_error(
+          respond, route,
+          Error(ErrorCode::kSchemaValidationFailed, "limit must be 1..1000", "limit"));
     limit = static_cast<size_t>(v);
   }
   bool posted = worker_.post([this, respond, route, limit]() mutable {
@@ -620,7 +633,8 @@ void Node::audit_listing(transport::HttpRequest& req, Respond& respond) {
            {"first_seq", unreadable.front()},
            {"error", first_error}});
     answer_json(respond, route, 200,
-                json::Object{{"entries", entries}, {"count", static_cast<int64_t>(entries.size())},
+                json::Object{{"entries", entries},
+                             {"count", static_cast<int64_t>(entries.size())},
                              {"last_seq", static_cast<int64_t>(st.last_seq)},
                              {"unreadable", unreadable}});
   });
@@ -633,7 +647,8 @@ void Node::audit_export(transport::HttpRequest& req, Respond& respond) {
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   if (role_level(pr->role) < role_level(Role::kOwner) || !pr->has_scope("config"))
     return answer_error(respond, route,
-                        Error(ErrorCode::kInsufficientPrivileges, "audit export needs OWNER and scope config", "scope"));
+                        Error(ErrorCode::kInsufficientPrivileges,
+                              "audit export needs OWNER and scope config", "scope"));
   auto parse_time = [&](std::string_view name, int64_t def, int64_t& out) -> bool {
     if (!req.has_query(name)) {
       out = def;
@@ -649,10 +664,13 @@ void Node::audit_export(transport::HttpRequest& req, Respond& respond) {
   int64_t from = 0, to = 0;
   if (!parse_time("from", 0, from) || !parse_time("to", INT64_MAX / 2, to))
     return answer_error(respond, route,
-                        Error(ErrorCode::kSchemaValidationFailed, "from/to must be Unix seconds or milliseconds", "from"));
+                        Error(ErrorCode::kSchemaValidationFailed,
+                              "from/to must be Unix seconds or milliseconds", "from"));
   std::string format = req.has_query("format") ? std::string(req.query_value("format")) : "jsonl";
   if (format != "jsonl")
-    return answer_error(respond, route, Error(ErrorCode::kSchemaValidationFailed, "format must be jsonl", "format"));
+    return answer_error(
+        respond, route,
+        Error(ErrorCode::kSchemaValidationFailed, "format must be jsonl", "format"));
   bool posted = worker_.post([this, respond, route, from, to]() mutable {
     auto text = svc_.audit.export_jsonl(from, to);
     if (!text.ok()) return answer_error(respond, route, text.error());

@@ -11,10 +11,10 @@
 #include <thread>
 #include <vector>
 
-#include "transport/http_api.h"
+#include "base/worker.h"
 #include "node/pipeline/pipeline.h"
 #include "node/services/node_services.h"
-#include "base/worker.h"
+#include "transport/http_api.h"
 
 namespace rcan::node {
 
@@ -35,12 +35,15 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
 
   void handle(transport::HttpRequest req, Respond respond) override;
   void answer_waited(int64_t us) override;
-  std::unique_ptr<transport::StreamSession> open(const transport::HttpRequest& upgrade, std::shared_ptr<transport::StreamSink> sink,
-                                      transport::HttpResponse& refusal) override;
+  std::unique_ptr<transport::StreamSession> open(const transport::HttpRequest& upgrade,
+                                                 std::shared_ptr<transport::StreamSink> sink,
+                                                 transport::HttpResponse& refusal) override;
 
   // Runs a message through the pipeline as if it came from `transport` (used by streams and
   // tests).
-  void submit(Ingress in, std::function<void(Outcome)> done) { pipeline_.submit(std::move(in), std::move(done)); }
+  void submit(Ingress in, std::function<void(Outcome)> done) {
+    pipeline_.submit(std::move(in), std::move(done));
+  }
 
   NodeServices& services() { return svc_; }
   Pipeline& pipeline() { return pipeline_; }
@@ -56,7 +59,8 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   void answer_json(Respond& respond, const std::string& route, int status, json::Value body,
                    std::vector<std::pair<std::string, std::string>> headers = {});
   void answer_error(Respond& respond, const std::string& route, const Error& err);
-  void run_pipeline(transport::HttpRequest& req, Respond& respond, const std::string& route, json::Value body);
+  void run_pipeline(transport::HttpRequest& req, Respond& respond, const std::string& route,
+                    json::Value body);
   // Control sessions, leases, ownership transfer, consent (control_routes.cpp).
   bool control_route(transport::HttpRequest& req, Respond& respond);
   void claim_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
@@ -66,11 +70,13 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   void lease_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
   void transfer_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
   void consent_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
-  void consent_request_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
-  void consent_decision_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
-                              const std::string& rest);
-  Result<Principal> route_principal(const transport::HttpRequest& req, const json::Value& body, const std::string& route,
-                                    const std::string& denied_event, Role min_role, std::string_view scope);
+  void consent_request_route(transport::HttpRequest& req, Respond& respond,
+                             const json::Value& body);
+  void consent_decision_route(transport::HttpRequest& req, Respond& respond,
+                              const json::Value& body, const std::string& rest);
+  Result<Principal> route_principal(const transport::HttpRequest& req, const json::Value& body,
+                                    const std::string& route, const std::string& denied_event,
+                                    Role min_role, std::string_view scope);
   void control_start();
   void control_tick();
   void announce_control_changes();

@@ -11,7 +11,8 @@ namespace {
 
 constexpr std::string_view kCsp =
     "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
-    "connect-src 'self'; font-src 'self'; manifest-src 'self'; base-uri 'none'; form-action 'none'; "
+    "connect-src 'self'; font-src 'self'; manifest-src 'self'; base-uri 'none'; form-action "
+    "'none'; "
     "frame-ancestors 'none'; object-src 'none'";
 
 bool starts_with(std::string_view s, std::string_view p) { return s.substr(0, p.size()) == p; }
@@ -23,7 +24,8 @@ bool etag_matches(std::string_view header, std::string_view etag) {
   while (i < header.size()) {
     while (i < header.size() && (header[i] == ' ' || header[i] == ',' || header[i] == '\t')) ++i;
     size_t j = header.find(',', i);
-    std::string_view tag = header.substr(i, j == std::string_view::npos ? std::string_view::npos : j - i);
+    std::string_view tag =
+        header.substr(i, j == std::string_view::npos ? std::string_view::npos : j - i);
     while (!tag.empty() && (tag.back() == ' ' || tag.back() == '\t')) tag.remove_suffix(1);
     if (tag == "*") return true;
     if (starts_with(tag, "W/")) tag.remove_prefix(2);
@@ -40,7 +42,8 @@ void security_headers(transport::HttpResponse& r) {
   r.headers.emplace_back("Referrer-Policy", "no-referrer");
   r.headers.emplace_back("Cross-Origin-Opener-Policy", "same-origin");
   r.headers.emplace_back("Cross-Origin-Resource-Policy", "same-origin");
-  r.headers.emplace_back("Permissions-Policy", "camera=(), microphone=(), geolocation=(), payment=()");
+  r.headers.emplace_back("Permissions-Policy",
+                         "camera=(), microphone=(), geolocation=(), payment=()");
 }
 
 }  // namespace
@@ -48,7 +51,8 @@ void security_headers(transport::HttpResponse& r) {
 std::string_view web_csp() { return kCsp; }
 
 bool is_web_path(std::string_view p) {
-  return p == "/" || p == "/index.html" || p == "/ui" || starts_with(p, "/ui/") || p == "/favicon.ico";
+  return p == "/" || p == "/index.html" || p == "/ui" || starts_with(p, "/ui/") ||
+         p == "/favicon.ico";
 }
 
 const WebAsset* find_web_asset(std::string_view p) {
@@ -60,7 +64,8 @@ const WebAsset* find_web_asset(std::string_view p) {
   } else if (starts_with(p, "/ui/")) {
     file = p.substr(3);
     // The table is closed (only embedded names match), but refuse traversal-looking names early.
-    if (file.find("..") != std::string_view::npos || file.find('\\') != std::string_view::npos) return nullptr;
+    if (file.find("..") != std::string_view::npos || file.find('\\') != std::string_view::npos)
+      return nullptr;
   } else {
     return nullptr;
   }
@@ -75,13 +80,15 @@ transport::HttpResponse web_response(const transport::HttpRequest& req, int64_t 
   if (req.method != "GET" && req.method != "HEAD") {
     r.status = 405;
     r.headers.emplace_back("Allow", "GET, HEAD");
-    r.body = json::dump(error_body(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed here"), "", now_ms));
+    r.body = json::dump(error_body(
+        Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed here"), "", now_ms));
     return r;
   }
   const WebAsset* a = find_web_asset(req.path);
   if (!a) {
     r.status = 404;
-    r.body = json::dump(error_body(Error(ErrorCode::kNotFound, "no dashboard file " + req.path.substr(0, 128)), "", now_ms));
+    r.body = json::dump(error_body(
+        Error(ErrorCode::kNotFound, "no dashboard file " + req.path.substr(0, 128)), "", now_ms));
     return r;
   }
   // Revalidate every time (cheap: 304 with no body), so a new rcand never serves a stale page.

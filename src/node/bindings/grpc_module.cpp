@@ -21,8 +21,8 @@ class ModuleTransport final : public GrpcTransport {
 }  // namespace
 }  // namespace rcan::node
 
-extern "C" __attribute__((visibility("default"))) rcan::node::GrpcTransport* rcan_grpc_module_create(
-    int abi, const rcan::node::GrpcOptions* opt, rcan::node::Node* node) {
+extern "C" __attribute__((visibility("default"))) rcan::node::GrpcTransport*
+rcan_grpc_module_create(int abi, const rcan::node::GrpcOptions* opt, rcan::node::Node* node) {
   if (abi != rcan::node::kGrpcModuleAbi || !opt || !node) return nullptr;
   return new (std::nothrow) rcan::node::ModuleTransport(*opt, *node);
 }

@@ -7,8 +7,8 @@
 
 #include <cstdint>
 
-#include "rcan/result.h"
 #include "node/bindings/grpc_server.h"
+#include "rcan/result.h"
 
 namespace rcan::node {
 
@@ -31,6 +31,7 @@ class GrpcTransport {
 // nullptr when `abi` is not the module's kGrpcModuleAbi. The caller owns the result.
 #define RCAN_GRPC_MODULE_ENTRY "rcan_grpc_module_create"
 extern "C" {
-using RcanGrpcModuleCreate = rcan::node::GrpcTransport* (*)(int abi, const rcan::node::GrpcOptions* opt,
-                                                                 rcan::node::Node* node);
+using RcanGrpcModuleCreate = rcan::node::GrpcTransport* (*)(int abi,
+                                                            const rcan::node::GrpcOptions* opt,
+                                                            rcan::node::Node* node);
 }

@@ -32,7 +32,8 @@ std::string bearer_of(const grpc::CallbackServerContext* ctx) {
   const auto& md = ctx->client_metadata();
   auto it = md.find("authorization");
   if (it == md.end()) return {};
-  return std::string(transport::bearer_token(std::string_view(it->second.data(), it->second.size())));
+  return std::string(
+      transport::bearer_token(std::string_view(it->second.data(), it->second.size())));
 }
 
 std::string error_code_of(const json::Value& body) {
@@ -57,8 +58,8 @@ grpc::Status error_status(grpc::CallbackServerContext* ctx, const Outcome& out) 
     if (k == "Retry-After" || k == "retry-after") ctx->AddTrailingMetadata("retry-after", v);
   RCANMessage err;
   transport::json_to_grpc(out.body, err);
-  return grpc::Status(static_cast<grpc::StatusCode>(transport::grpc_status_code(code, out.status)), error_text_of(out.body),
-                      err.SerializeAsString());
+  return grpc::Status(static_cast<grpc::StatusCode>(transport::grpc_status_code(code, out.status)),
+                      error_text_of(out.body), err.SerializeAsString());
 }
 
 // An error refused before the message was decoded has reply_to null; the transport knows
@@ -72,7 +73,7 @@ void fill_reply_to(Outcome& out, const std::string& id) {
 // gRPC's own diagnostics (e.g. a TLS handshake refused to a plaintext client) go through the
 // node's JSON log like everything else, never as raw lines on stderr.
 void grpc_library_log(gpr_log_func_args* args) {
-  LogLevel lvl = args->severity == GPR_LOG_SEVERITY_ERROR ? LogLevel::kWarn
+  LogLevel lvl = args->severity == GPR_LOG_SEVERITY_ERROR  ? LogLevel::kWarn
                  : args->severity == GPR_LOG_SEVERITY_INFO ? LogLevel::kInfo
                                                            : LogLevel::kDebug;
   std::string file = args->file ? args->file : "";
@@ -178,8 +179,10 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
       std::lock_guard<std::mutex> lock(mu_);
       more = !reads_done_;
     }
-    if (more) StartRead(&in_);
-    else try_finish();
+    if (more)
+      StartRead(&in_);
+    else
+      try_finish();
   }
 
   void OnWriteDone(bool ok) override {
@@ -191,11 +194,15 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
         q_.clear();  // the client is gone; the pending read ends too
         broken_ = true;
       }
-      if (!q_.empty() && !broken_) next = &q_.front();
-      else writing_ = false;
+      if (!q_.empty() && !broken_)
+        next = &q_.front();
+      else
+        writing_ = false;
     }
-    if (next) StartWrite(next);
-    else try_finish();
+    if (next)
+      StartWrite(next);
+    else
+      try_finish();
   }
 
   void OnCancel() override {}
@@ -238,8 +245,10 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
         }
       }
     }
-    if (start) StartWrite(start);
-    else try_finish();
+    if (start)
+      StartWrite(start);
+    else
+      try_finish();
   }
 
   // Ends the stream with `s` once the write in progress is done (shutdown).
@@ -356,7 +365,9 @@ class Service final : public v1::Rcan::CallbackService {
     auto body = transport::grpc_to_json(*req, impl_.opt.max_message_bytes);
     if (!body.ok()) {
       finish(ctx, reactor, resp,
-             Outcome{http_status(body.error().code), svc.error(body.error(), req->message_id().substr(0, 64)), {}});
+             Outcome{http_status(body.error().code),
+                     svc.error(body.error(), req->message_id().substr(0, 64)),
+                     {}});
       return reactor;
     }
     Ingress in;
@@ -374,7 +385,8 @@ class Service final : public v1::Rcan::CallbackService {
     return reactor;
   }
 
-  grpc::ServerBidiReactor<RCANMessage, RCANMessage>* Stream(grpc::CallbackServerContext* ctx) override {
+  grpc::ServerBidiReactor<RCANMessage, RCANMessage>* Stream(
+      grpc::CallbackServerContext* ctx) override {
     impl_.calls_total.fetch_add(1);
     if (impl_.stopping.load())
       return new RefuseReactor(grpc::Status(grpc::StatusCode::UNAVAILABLE, "node shutting down"));
@@ -382,14 +394,15 @@ class Service final : public v1::Rcan::CallbackService {
       impl_.streams_open.fetch_sub(1);
       impl_.streams_refused.fetch_add(1);
       impl_.svc.metrics.count_request(kStreamRoute, 503);
-      return new RefuseReactor(grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED, "too many streams"));
+      return new RefuseReactor(
+          grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED, "too many streams"));
     }
     impl_.streams_total.fetch_add(1);
     return new StreamReactor(impl_, ctx);
   }
 
-  static void finish_with(GrpcServer::Impl& impl, grpc::CallbackServerContext* ctx, grpc::ServerUnaryReactor* reactor,
-                          RCANMessage* resp, Outcome out) {
+  static void finish_with(GrpcServer::Impl& impl, grpc::CallbackServerContext* ctx,
+                          grpc::ServerUnaryReactor* reactor, RCANMessage* resp, Outcome out) {
     impl.svc.metrics.count_request(kSendRoute, out.status);
     if (out.status >= 400) {
       reactor->Finish(error_status(ctx, out));
@@ -400,8 +413,8 @@ class Service final : public v1::Rcan::CallbackService {
   }
 
  private:
-  void finish(grpc::CallbackServerContext* ctx, grpc::ServerUnaryReactor* reactor, RCANMessage* resp,
-              Outcome out) {
+  void finish(grpc::CallbackServerContext* ctx, grpc::ServerUnaryReactor* reactor,
+              RCANMessage* resp, Outcome out) {
     finish_with(impl_, ctx, reactor, resp, std::move(out));
   }
   GrpcServer::Impl& impl_;
@@ -409,7 +422,8 @@ class Service final : public v1::Rcan::CallbackService {
 
 }  // namespace
 
-GrpcServer::GrpcServer(GrpcOptions opt, Node& node) : impl_(std::make_unique<Impl>(std::move(opt), node)) {}
+GrpcServer::GrpcServer(GrpcOptions opt, Node& node)
+    : impl_(std::make_unique<Impl>(std::move(opt), node)) {}
 
 GrpcServer::~GrpcServer() { stop(0); }
 
@@ -422,9 +436,9 @@ Result<uint16_t> GrpcServer::start() {
     if (!cert.ok()) return cert.error();
     auto key = read_file(im.opt.key_file);
     if (!key.ok()) return key.error();
-    grpc::SslServerCredentialsOptions so(im.opt.client_ca_file.empty()
-                                             ? GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE
-                                             : GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY);
+    grpc::SslServerCredentialsOptions so(
+        im.opt.client_ca_file.empty() ? GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE
+                                      : GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY);
     if (!im.opt.client_ca_file.empty()) {
       auto ca = read_file(im.opt.client_ca_file);
       if (!ca.ok()) return ca.error();
@@ -435,8 +449,9 @@ Result<uint16_t> GrpcServer::start() {
   } else {
     creds = grpc::InsecureServerCredentials();
   }
-  std::string host = im.opt.bind_address.find(':') != std::string::npos ? "[" + im.opt.bind_address + "]"
-                                                                          : im.opt.bind_address;
+  std::string host = im.opt.bind_address.find(':') != std::string::npos
+                         ? "[" + im.opt.bind_address + "]"
+                         : im.opt.bind_address;
   std::string addr = host + ":" + std::to_string(im.opt.port);
   im.service = std::make_unique<Service>(im);
   grpc::ServerBuilder b;
@@ -473,14 +488,16 @@ void GrpcServer::stop(int drain_ms) {
     std::lock_guard<std::mutex> l(link->mu);
     if (link->r) link->r->end(grpc::Status(grpc::StatusCode::UNAVAILABLE, "node shutting down"));
   }
-  im.server->Shutdown(std::chrono::system_clock::now() + std::chrono::milliseconds(std::max(0, drain_ms)));
+  im.server->Shutdown(std::chrono::system_clock::now() +
+                      std::chrono::milliseconds(std::max(0, drain_ms)));
   im.server->Wait();
   log(LogLevel::kInfo, "grpc.stopped", json::Object{});
 }
 
 GrpcStats GrpcServer::stats() const {
   const Impl& im = *impl_;
-  return GrpcStats{im.calls_total.load(), im.streams_open.load(), im.streams_total.load(), im.streams_refused.load()};
+  return GrpcStats{im.calls_total.load(), im.streams_open.load(), im.streams_total.load(),
+                   im.streams_refused.load()};
 }
 
 }  // namespace rcan::node

@@ -16,14 +16,14 @@ class Node;
 
 struct GrpcOptions {
   std::string bind_address = "127.0.0.1";
-  uint16_t port = 8081;             // 0 = any free port (the bound one is returned by start())
+  uint16_t port = 8081;  // 0 = any free port (the bound one is returned by start())
   bool tls = false;
-  std::string cert_file;            // PEM chain (tls)
-  std::string key_file;             // PEM key (tls)
-  std::string client_ca_file;       // optional: require client certificates signed by it
+  std::string cert_file;       // PEM chain (tls)
+  std::string key_file;        // PEM key (tls)
+  std::string client_ca_file;  // optional: require client certificates signed by it
   size_t max_message_bytes = 64 * 1024;
-  int max_streams = 64;             // open Stream calls; one more is refused RESOURCE_EXHAUSTED
-  size_t stream_send_queue = 256;   // answers/events queued on one stream; beyond: the stream ends
+  int max_streams = 64;            // open Stream calls; one more is refused RESOURCE_EXHAUSTED
+  size_t stream_send_queue = 256;  // answers/events queued on one stream; beyond: the stream ends
 };
 
 struct GrpcStats {

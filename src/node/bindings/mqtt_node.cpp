@@ -8,13 +8,13 @@
 #include <chrono>
 #include <cstdio>
 
-#include "config/config.h"
-#include "base/log.h"
-#include "node/api/node.h"
-#include "node/services/node_services.h"
-#include "node/fleet/swarm.h"
-#include "rcan/errors.h"
 #include "base/clock.h"
+#include "base/log.h"
+#include "config/config.h"
+#include "node/api/node.h"
+#include "node/fleet/swarm.h"
+#include "node/services/node_services.h"
+#include "rcan/errors.h"
 
 namespace rcan::node {
 
@@ -60,10 +60,12 @@ Result<MqttNodeOptions> mqtt_node_options(const config::NodeConfig& cfg) {
   if (!cfg.mqtt.password_file.empty()) {
     struct stat st {};
     if (::stat(cfg.mqtt.password_file.c_str(), &st) != 0)
-      return Error(ErrorCode::kNotFound, "cannot read mqtt.password_file " + cfg.mqtt.password_file);
+      return Error(ErrorCode::kNotFound,
+                   "cannot read mqtt.password_file " + cfg.mqtt.password_file);
     if ((st.st_mode & 077) != 0)
       return Error(ErrorCode::kInsufficientPrivileges,
-                   "mqtt.password_file " + cfg.mqtt.password_file + " must not be group/world accessible (chmod 600)");
+                   "mqtt.password_file " + cfg.mqtt.password_file +
+                       " must not be group/world accessible (chmod 600)");
     std::string pw;
     if (FILE* f = std::fopen(cfg.mqtt.password_file.c_str(), "rb")) {
       char buf[1100];
@@ -72,7 +74,8 @@ Result<MqttNodeOptions> mqtt_node_options(const config::NodeConfig& cfg) {
       pw.assign(buf, n);
     }
     while (!pw.empty() && (pw.back() == '\n' || pw.back() == '\r')) pw.pop_back();
-    if (pw.empty() || pw.size() > 1024) return Error(ErrorCode::kSchemaValidationFailed, "mqtt.password_file is empty or too long");
+    if (pw.empty() || pw.size() > 1024)
+      return Error(ErrorCode::kSchemaValidationFailed, "mqtt.password_file is empty or too long");
     o.password = std::move(pw);
   }
   return o;
@@ -111,9 +114,9 @@ Status MqttNode::start() {
   co.reconnect_max_s = static_cast<int>(mq.reconnect_max_s);
   co.will.topic = out_.status();
   co.will.payload = json::dump(json::Value(json::Object{{"online", false},
-                                             {"ruri", svc_.settings.ruri},
-                                             {"member", opts_.fleet.member_id},
-                                             {"reason", "connection_lost"}}));
+                                                        {"ruri", svc_.settings.ruri},
+                                                        {"member", opts_.fleet.member_id},
+                                                        {"reason", "connection_lost"}}));
   co.will.qos = 1;
   co.will.retain = true;
   client_ = std::make_unique<transport::MqttClient>(co);
@@ -138,7 +141,8 @@ Status MqttNode::start() {
     auto st = svc_.audit.stats();
     next_audit_seq_ = st.last_seq == 0 ? 1 : st.last_seq;  // from the latest record on
   }
-  event_sub_ = svc_.events.subscribe([this](const json::Value& ev) { publish_json(out_.events(), ev, 1, false); });
+  event_sub_ = svc_.events.subscribe(
+      [this](const json::Value& ev) { publish_json(out_.events(), ev, 1, false); });
   running_.store(true);
   if (Status s = client_->start(); !s.ok()) {
     running_.store(false);
@@ -150,15 +154,14 @@ Status MqttNode::start() {
     loop();
   });
   log(LogLevel::kInfo, "mqtt_started",
-      json::Object{{"broker", mq.broker}, {"cmd_topic", robot_.cmd()}, {"status_topic", out_.status()}});
+      json::Object{
+          {"broker", mq.broker}, {"cmd_topic", robot_.cmd()}, {"status_topic", out_.status()}});
   return Status::Ok();
 }
 
 void MqttNode::stop() {
   if (!running_.exchange(false)) return;
-  {
-    std::lock_guard<std::mutex> lk(loop_mu_);
-  }
+  { std::lock_guard<std::mutex> lk(loop_mu_); }
   loop_cv_.notify_all();
   if (loop_.joinable()) loop_.join();
   svc_.events.unsubscribe(event_sub_);
@@ -173,7 +176,8 @@ void MqttNode::on_connection(bool up) {
   if (up) {
     publish_status(true, "connected");
     if (swarm_) swarm_->on_connected(svc_.clock.mono_ms());
-    log(LogLevel::kInfo, "mqtt_connected", json::Object{{"connects", static_cast<int64_t>(client_->connects())}});
+    log(LogLevel::kInfo, "mqtt_connected",
+        json::Object{{"connects", static_cast<int64_t>(client_->connects())}});
   } else if (running_.load()) {
     log(LogLevel::kWarn, "mqtt_disconnected", json::Object{{"note", "reconnecting with backoff"}});
   }
@@ -182,7 +186,8 @@ void MqttNode::on_connection(bool up) {
 void MqttNode::publish_json(const std::string& topic, const json::Value& v, int qos, bool retain) {
   if (!client_) return;
   if (Status s = client_->publish(topic, json::dump(v), qos, retain); !s.ok())
-    log(LogLevel::kDebug, "mqtt_publish_failed", json::Object{{"topic", topic}, {"error", s.error().message}});
+    log(LogLevel::kDebug, "mqtt_publish_failed",
+        json::Object{{"topic", topic}, {"error", s.error().message}});
 }
 
 void MqttNode::publish_status(bool online, const std::string& reason) {
@@ -234,7 +239,8 @@ void MqttNode::on_message(const transport::MqttMessage& msg) {
       if (body.ok()) swarm_->on_message(t, *body, svc_.clock.mono_ms());
       return;
     }
-    case mqtt::TopicKind::kOther: return;
+    case mqtt::TopicKind::kOther:
+      return;
   }
   auto body = mqtt::parse_payload(msg.payload);
   if (!body.ok()) {
@@ -250,8 +256,9 @@ void MqttNode::on_message(const transport::MqttMessage& msg) {
   submit(*body, msg.topic, reply_topic, fleet_id, fleet_mode, standing);
 }
 
-void MqttNode::submit(const json::Value& body, const std::string& route, const std::string& reply_topic,
-                      const std::string& fleet_id, const std::string& fleet_mode, bool standing_estop) {
+void MqttNode::submit(const json::Value& body, const std::string& route,
+                      const std::string& reply_topic, const std::string& fleet_id,
+                      const std::string& fleet_mode, bool standing_estop) {
   Ingress in;
   in.body = body;
   in.transport = "mqtt";
@@ -261,7 +268,8 @@ void MqttNode::submit(const json::Value& body, const std::string& route, const s
   in.fleet_mode = fleet_mode;
   in.standing_estop = standing_estop;
   in.received_mono_us = steady_us();
-  bool is_command = upper(str_field(body, "type")) == "COMMAND" || upper(str_field(body, "type")) == "FLEET_COMMAND" ||
+  bool is_command = upper(str_field(body, "type")) == "COMMAND" ||
+                    upper(str_field(body, "type")) == "FLEET_COMMAND" ||
                     field(body, "cmd") != nullptr;
   node_.submit(std::move(in), [this, reply_topic, is_command](Outcome out) {
     if (!running_.load()) return;
@@ -272,9 +280,12 @@ void MqttNode::submit(const json::Value& body, const std::string& route, const s
       if (!cmd.empty()) {
         {
           std::lock_guard<std::mutex> lk(mu_);
-          pending_.push_back(Pending{reply_topic, str_field(b, "reply_to"), cmd, svc_.clock.mono_ms()});
+          pending_.push_back(
+              Pending{reply_topic, str_field(b, "reply_to"), cmd, svc_.clock.mono_ms()});
         }
-        { std::lock_guard<std::mutex> wake(loop_mu_); }  // the loop is waiting, or sees pending_ next
+        {
+          std::lock_guard<std::mutex> wake(loop_mu_);
+        }  // the loop is waiting, or sees pending_ next
         loop_cv_.notify_all();
       }
     }
@@ -295,7 +306,8 @@ void MqttNode::loop() {
       std::lock_guard<std::mutex> plk(mu_);
       if (!pending_.empty()) wait_ms = 20;
     }
-    if (swarm_) wait_ms = std::min<int64_t>(wait_ms, std::max<int64_t>(10, opts_.swarm.heartbeat_ms / 4));
+    if (swarm_)
+      wait_ms = std::min<int64_t>(wait_ms, std::max<int64_t>(10, opts_.swarm.heartbeat_ms / 4));
     if (telemetry_period > 0) wait_ms = std::min<int64_t>(wait_ms, telemetry_period);
     if (opts_.mqtt.publish_audit) wait_ms = std::min<int64_t>(wait_ms, 100);
     loop_cv_.wait_for(lk, std::chrono::milliseconds(wait_ms));
@@ -330,7 +342,8 @@ void MqttNode::tick_completions() {
                          {"member", opts_.fleet.member_id},
                          {"ruri", svc_.settings.ruri}};
     if (estop) payload.set("reason", "estop_active");
-    publish_json(p.reply_topic, svc_.envelope(MessageType::kEvent, std::move(payload), p.message_id), 1, false);
+    publish_json(p.reply_topic,
+                 svc_.envelope(MessageType::kEvent, std::move(payload), p.message_id), 1, false);
   }
 }
 

@@ -1,10 +1,10 @@
 // UDP service: heartbeats and discovery (udp_service.h, docs/TRANSPORT.md §UDP).
 #include "node/bindings/udp_service.h"
 
-#include <pthread.h>
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <poll.h>
+#include <pthread.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -23,12 +23,11 @@
 
 namespace rcan::node {
 
-
 namespace {
 
 struct Counters {
-  std::atomic<uint64_t> hb_ok{0}, hb_forged{0}, hb_replayed{0}, hb_stale{0}, malformed{0}, disc_ok{0},
-      disc_limited{0};
+  std::atomic<uint64_t> hb_ok{0}, hb_forged{0}, hb_replayed{0}, hb_stale{0}, malformed{0},
+      disc_ok{0}, disc_limited{0};
 };
 
 struct KeyEntry {
@@ -101,7 +100,8 @@ void UdpService::Impl::loop() {
       for (int i = 0; i < 64; ++i) {  // drain what is there, then look at the clock
         sockaddr_storage from{};
         socklen_t len = sizeof from;
-        ssize_t n = ::recvfrom(fd, buf.data(), buf.size(), MSG_DONTWAIT, reinterpret_cast<sockaddr*>(&from), &len);
+        ssize_t n = ::recvfrom(fd, buf.data(), buf.size(), MSG_DONTWAIT,
+                               reinterpret_cast<sockaddr*>(&from), &len);
         if (n < 0) break;
         on_datagram(buf.data(), static_cast<size_t>(n), from, len);
       }
@@ -114,7 +114,8 @@ void UdpService::Impl::loop() {
   }
 }
 
-void UdpService::Impl::on_datagram(const uint8_t* data, size_t n, const sockaddr_storage& from, socklen_t from_len) {
+void UdpService::Impl::on_datagram(const uint8_t* data, size_t n, const sockaddr_storage& from,
+                                   socklen_t from_len) {
   std::span<const uint8_t> bytes(data, n);
   udp::Parsed p = udp::parse(bytes);
   if (!p.ok()) {
@@ -172,7 +173,8 @@ void UdpService::Impl::heartbeat(std::span<const uint8_t> bytes, const udp::Data
   }
 }
 
-void UdpService::Impl::discover(const udp::Datagram& d, const sockaddr_storage& from, socklen_t from_len) {
+void UdpService::Impl::discover(const udp::Datagram& d, const sockaddr_storage& from,
+                                socklen_t from_len) {
   int64_t now = svc.clock.mono_ms();
   std::string ip = addr_ip(from);
   bool allowed;
@@ -185,7 +187,8 @@ void UdpService::Impl::discover(const udp::Datagram& d, const sockaddr_storage& 
     double per_min = opt.discovery_per_source_per_min;
     allowed = buckets.size() < 4096 || buckets.count(ip);
     allowed = allowed && take(global, now, opt.discovery_global_per_s, opt.discovery_global_per_s);
-    if (allowed) allowed = take(buckets[ip], now, per_min / 60.0, std::max(1.0, std::min(per_min, 5.0)));
+    if (allowed)
+      allowed = take(buckets[ip], now, per_min / 60.0, std::max(1.0, std::min(per_min, 5.0)));
   }
   if (!allowed) {
     counters->disc_limited.fetch_add(1);
@@ -196,7 +199,8 @@ void UdpService::Impl::discover(const udp::Datagram& d, const sockaddr_storage& 
   std::string body = json::dump(svc.envelope(MessageType::kAnnounce, std::move(info)));
   std::string out = udp::encode_announce(d.nonce, body);
   if (out.size() > udp::kMaxAnnounceSize) return;
-  if (::sendto(fd, out.data(), out.size(), 0, reinterpret_cast<const sockaddr*>(&from), from_len) >= 0)
+  if (::sendto(fd, out.data(), out.size(), 0, reinterpret_cast<const sockaddr*>(&from), from_len) >=
+      0)
     counters->disc_ok.fetch_add(1);
 }
 
@@ -211,7 +215,8 @@ void UdpService::Impl::sweep() {
     if (svc.sessions.find(sid, now)) continue;
     std::lock_guard<std::mutex> lock(mu);
     keys.erase(id);
-    if (auto it = by_session.find(sid); it != by_session.end() && it->second == id) by_session.erase(it);
+    if (auto it = by_session.find(sid); it != by_session.end() && it->second == id)
+      by_session.erase(it);
   }
 }
 
@@ -239,7 +244,8 @@ json::Object UdpService::Impl::grant(const std::string& session_id) {
   return o;
 }
 
-UdpService::UdpService(UdpOptions opt, NodeServices& svc) : impl_(std::make_shared<Impl>(std::move(opt), svc)) {}
+UdpService::UdpService(UdpOptions opt, NodeServices& svc)
+    : impl_(std::make_shared<Impl>(std::move(opt), svc)) {}
 
 UdpService::~UdpService() { stop(); }
 
@@ -247,7 +253,8 @@ Result<uint16_t> UdpService::start() {
   Impl& im = *impl_;
   bool v6 = im.opt.bind_address.find(':') != std::string::npos;
   int fd = ::socket(v6 ? AF_INET6 : AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
-  if (fd < 0) return Error(ErrorCode::kInternal, std::string("udp socket: ") + std::strerror(errno));
+  if (fd < 0)
+    return Error(ErrorCode::kInternal, std::string("udp socket: ") + std::strerror(errno));
   sockaddr_storage ss{};
   socklen_t len = 0;
   if (v6) {
@@ -272,35 +279,43 @@ Result<uint16_t> UdpService::start() {
   if (::bind(fd, reinterpret_cast<sockaddr*>(&ss), len) != 0) {
     std::string why = std::strerror(errno);
     ::close(fd);
-    return Error(ErrorCode::kInternal, "cannot bind udp " + im.opt.bind_address + ":" + std::to_string(im.opt.port) +
-                                           ": " + why);
+    return Error(ErrorCode::kInternal, "cannot bind udp " + im.opt.bind_address + ":" +
+                                           std::to_string(im.opt.port) + ": " + why);
   }
   sockaddr_storage bound{};
   socklen_t blen = sizeof bound;
   ::getsockname(fd, reinterpret_cast<sockaddr*>(&bound), &blen);
-  im.port = ntohs(v6 ? reinterpret_cast<sockaddr_in6&>(bound).sin6_port : reinterpret_cast<sockaddr_in&>(bound).sin_port);
+  im.port = ntohs(v6 ? reinterpret_cast<sockaddr_in6&>(bound).sin6_port
+                     : reinterpret_cast<sockaddr_in&>(bound).sin_port);
   im.fd = fd;
 
   auto c = im.counters;
   auto& m = im.svc.metrics;
-  m.add_counter_fn("rcan_udp_heartbeats_accepted_total", "UDP heartbeats that fed a session's deadman.",
+  m.add_counter_fn("rcan_udp_heartbeats_accepted_total",
+                   "UDP heartbeats that fed a session's deadman.",
                    [c] { return static_cast<double>(c->hb_ok.load()); });
-  m.add_counter_fn("rcan_udp_heartbeats_forged_total", "UDP heartbeats with an unknown key id or a bad HMAC.",
+  m.add_counter_fn("rcan_udp_heartbeats_forged_total",
+                   "UDP heartbeats with an unknown key id or a bad HMAC.",
                    [c] { return static_cast<double>(c->hb_forged.load()); });
-  m.add_counter_fn("rcan_udp_heartbeats_replayed_total", "UDP heartbeats whose sequence number was not new.",
+  m.add_counter_fn("rcan_udp_heartbeats_replayed_total",
+                   "UDP heartbeats whose sequence number was not new.",
                    [c] { return static_cast<double>(c->hb_replayed.load()); });
-  m.add_counter_fn("rcan_udp_heartbeats_stale_total", "Valid UDP heartbeats for a session that had ended.",
+  m.add_counter_fn("rcan_udp_heartbeats_stale_total",
+                   "Valid UDP heartbeats for a session that had ended.",
                    [c] { return static_cast<double>(c->hb_stale.load()); });
-  m.add_counter_fn("rcan_udp_malformed_total", "UDP datagrams that are not ours or of a kind switched off.",
+  m.add_counter_fn("rcan_udp_malformed_total",
+                   "UDP datagrams that are not ours or of a kind switched off.",
                    [c] { return static_cast<double>(c->malformed.load()); });
   m.add_counter_fn("rcan_udp_discover_answered_total", "DISCOVER datagrams answered with ANNOUNCE.",
                    [c] { return static_cast<double>(c->disc_ok.load()); });
-  m.add_counter_fn("rcan_udp_discover_limited_total", "DISCOVER datagrams dropped by the rate limits.",
+  m.add_counter_fn("rcan_udp_discover_limited_total",
+                   "DISCOVER datagrams dropped by the rate limits.",
                    [c] { return static_cast<double>(c->disc_limited.load()); });
   if (im.opt.heartbeat) {
     std::weak_ptr<Impl> weak = impl_;
     im.svc.on_grant = [weak](const std::string& session_id, json::Object& payload) {
-      if (auto i = weak.lock(); i && i->running.load()) payload.set("udp_heartbeat", i->grant(session_id));
+      if (auto i = weak.lock(); i && i->running.load())
+        payload.set("udp_heartbeat", i->grant(session_id));
     };
   }
   im.running.store(true);
@@ -330,7 +345,7 @@ void UdpService::stop() {
 
 UdpStats UdpService::stats() const {
   const Counters& c = *impl_->counters;
-  return UdpStats{c.hb_ok.load(),    c.hb_forged.load(), c.hb_replayed.load(),  c.hb_stale.load(),
+  return UdpStats{c.hb_ok.load(),     c.hb_forged.load(), c.hb_replayed.load(), c.hb_stale.load(),
                   c.malformed.load(), c.disc_ok.load(),   c.disc_limited.load()};
 }
 

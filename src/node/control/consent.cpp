@@ -36,21 +36,24 @@ json::Value consent_notification(const ConsentRequest& r, const std::string& rob
   scopes += "]";
   if (r.sender_type == "cloud_function") {
     std::string provider = r.cloud_provider;
-    if (!provider.empty()) provider[0] = static_cast<char>(std::toupper(static_cast<unsigned char>(provider[0])));
+    if (!provider.empty())
+      provider[0] = static_cast<char>(std::toupper(static_cast<unsigned char>(provider[0])));
     std::string who = r.on_behalf_of.empty() ? r.requester_sub : r.on_behalf_of;
-    return json::Object{{"title", "\xE2\x9A\xA0\xEF\xB8\x8F Service Consent Request"},
-                        {"body", provider + " function '" + r.function_name + "' (on behalf of " + who +
-                                     ") is requesting\naccess to " + robot_name + " with scope: " + scopes},
-                        {"highlight", "cloud_function: " + r.function_name + " via " + r.cloud_provider},
-                        {"consent_id", r.id},
-                        {"sender_type", r.sender_type}};
+    return json::Object{
+        {"title", "\xE2\x9A\xA0\xEF\xB8\x8F Service Consent Request"},
+        {"body", provider + " function '" + r.function_name + "' (on behalf of " + who +
+                     ") is requesting\naccess to " + robot_name + " with scope: " + scopes},
+        {"highlight", "cloud_function: " + r.function_name + " via " + r.cloud_provider},
+        {"consent_id", r.id},
+        {"sender_type", r.sender_type}};
   }
   std::string who = r.requester_sub;
   if (r.sender_type == "robot") who = "Robot " + who;
-  return json::Object{{"title", "Consent Request"},
-                      {"body", who + " is requesting access to " + robot_name + " with scope: " + scopes},
-                      {"consent_id", r.id},
-                      {"sender_type", r.sender_type}};
+  return json::Object{
+      {"title", "Consent Request"},
+      {"body", who + " is requesting access to " + robot_name + " with scope: " + scopes},
+      {"consent_id", r.id},
+      {"sender_type", r.sender_type}};
 }
 
 Result<ConsentRequest> ConsentBook::add(ConsentRequest r, int64_t now_ms) {
@@ -58,7 +61,8 @@ Result<ConsentRequest> ConsentBook::add(ConsentRequest r, int64_t now_ms) {
   size_t pending = 0;
   for (const auto& x : items_)
     if (x.status == "PENDING") ++pending;
-  if (pending >= 256) return Error(ErrorCode::kControlConflict, "too many consent requests are pending");
+  if (pending >= 256)
+    return Error(ErrorCode::kControlConflict, "too many consent requests are pending");
   if (items_.size() >= 1024) {
     for (auto it = items_.begin(); it != items_.end(); ++it)
       if (it->status != "PENDING") {
@@ -83,7 +87,8 @@ Result<ConsentRequest> ConsentBook::get(const std::string& id) {
 }
 
 Result<ConsentRequest> ConsentBook::decide(const std::string& id, bool grant, const std::string& by,
-                                           const std::string& kind, const std::string& lease_id, int64_t now_ms) {
+                                           const std::string& kind, const std::string& lease_id,
+                                           int64_t now_ms) {
   std::lock_guard<std::mutex> lock(mu_);
   for (auto& x : items_) {
     if (x.id != id) continue;
@@ -91,9 +96,11 @@ Result<ConsentRequest> ConsentBook::decide(const std::string& id, bool grant, co
       x.status = "EXPIRED";
       ++version_;
     }
-    if (x.status == "EXPIRED") return Error(ErrorCode::kSessionExpired, "the consent request expired", "consent_id");
+    if (x.status == "EXPIRED")
+      return Error(ErrorCode::kSessionExpired, "the consent request expired", "consent_id");
     if (x.status != "PENDING")
-      return Error(ErrorCode::kControlConflict, "the consent request was already " + x.status, "consent_id");
+      return Error(ErrorCode::kControlConflict, "the consent request was already " + x.status,
+                   "consent_id");
     x.status = grant ? "GRANTED" : "DENIED";
     x.decided_by = by;
     x.decided_ms = now_ms;

@@ -45,8 +45,9 @@ class ConsentBook {
   Result<ConsentRequest> add(ConsentRequest r, int64_t now_ms);
   Result<ConsentRequest> get(const std::string& id);
   // Errors: NOT_FOUND, CONTROL_CONFLICT (already decided), SESSION_EXPIRED.
-  Result<ConsentRequest> decide(const std::string& id, bool grant, const std::string& by, const std::string& kind,
-                                const std::string& lease_id, int64_t now_ms);
+  Result<ConsentRequest> decide(const std::string& id, bool grant, const std::string& by,
+                                const std::string& kind, const std::string& lease_id,
+                                int64_t now_ms);
   std::vector<ConsentRequest> expire(int64_t now_ms);
   std::vector<ConsentRequest> list();
   void clear();

@@ -16,17 +16,22 @@ bool Ownership::is_owner_locked(const Principal& p) const {
   return owner_sub_.empty() || p.sub == owner_sub_;
 }
 
-Result<PendingTransfer> Ownership::request(const Principal& p, const std::string& to_sub, const std::string& note,
-                                           int64_t now_wall_ms) {
+Result<PendingTransfer> Ownership::request(const Principal& p, const std::string& to_sub,
+                                           const std::string& note, int64_t now_wall_ms) {
   if (to_sub.empty() || to_sub.size() > 256)
-    return Error(ErrorCode::kSchemaValidationFailed, "new_owner (a user id) is required", "new_owner", "missing_field");
+    return Error(ErrorCode::kSchemaValidationFailed, "new_owner (a user id) is required",
+                 "new_owner", "missing_field");
   std::lock_guard<std::mutex> lock(mu_);
   if (!is_owner_locked(p))
-    return Error(ErrorCode::kInsufficientPrivileges, "only the robot's owner may transfer it", "role");
+    return Error(ErrorCode::kInsufficientPrivileges, "only the robot's owner may transfer it",
+                 "role");
   if (pending_ && now_wall_ms < pending_->expires_ms)
-    return Error(ErrorCode::kControlConflict, "transfer " + pending_->id + " is already pending", "transfer_id");
-  if (to_sub == p.sub) return Error(ErrorCode::kSchemaValidationFailed, "the new owner is the owner", "new_owner");
-  PendingTransfer t{new_uuid_v4(), p.sub, to_sub, now_wall_ms, now_wall_ms + window_ms_, note.substr(0, 512)};
+    return Error(ErrorCode::kControlConflict, "transfer " + pending_->id + " is already pending",
+                 "transfer_id");
+  if (to_sub == p.sub)
+    return Error(ErrorCode::kSchemaValidationFailed, "the new owner is the owner", "new_owner");
+  PendingTransfer t{new_uuid_v4(),      p.sub, to_sub, now_wall_ms, now_wall_ms + window_ms_,
+                    note.substr(0, 512)};
   pending_ = t;
   transit("TRANSFER_REQUEST", OwnershipState::kTransferPending);
   return t;
@@ -42,8 +47,9 @@ Result<PendingTransfer> Ownership::accept(const Principal& p, const std::string&
   if (p.sub != pending_->to_sub)
     return Error(ErrorCode::kInsufficientPrivileges, "only the named new owner may accept", "sub");
   if (agreement.empty())
-    return Error(ErrorCode::kSchemaValidationFailed, "agreement (payment or agreement reference) is required",
-                 "agreement", "missing_field");
+    return Error(ErrorCode::kSchemaValidationFailed,
+                 "agreement (payment or agreement reference) is required", "agreement",
+                 "missing_field");
   PendingTransfer t = *pending_;
   pending_.reset();
   if (!owner_sub_.empty()) former_owners_.insert(owner_sub_);
@@ -60,7 +66,8 @@ Result<PendingTransfer> Ownership::cancel(const Principal& p, int64_t now_wall_m
   if (!pending_ || now_wall_ms >= pending_->expires_ms)
     return Error(ErrorCode::kNotFound, "no pending transfer", "transfer_id");
   if (!is_owner_locked(p) && p.sub != pending_->to_sub)
-    return Error(ErrorCode::kInsufficientPrivileges, "only the owner or the named new owner may cancel", "role");
+    return Error(ErrorCode::kInsufficientPrivileges,
+                 "only the owner or the named new owner may cancel", "role");
   PendingTransfer t = *pending_;
   pending_.reset();
   transit("TRANSFER_CANCEL", OwnershipState::kOwned);
@@ -78,7 +85,8 @@ std::optional<PendingTransfer> Ownership::expire(int64_t now_wall_ms) {
 
 void Ownership::cap(Principal& p) const {
   std::lock_guard<std::mutex> lock(mu_);
-  if (former_owners_.count(p.sub) && role_level(p.role) < role_level(Role::kCreator)) p.role = Role::kGuest;
+  if (former_owners_.count(p.sub) && role_level(p.role) < role_level(Role::kCreator))
+    p.role = Role::kGuest;
 }
 
 void Ownership::note_user(const std::string& sub) {
@@ -102,7 +110,8 @@ void Ownership::run_clear_hooks() {
 
 OwnershipState Ownership::state(int64_t now_wall_ms) {
   std::lock_guard<std::mutex> lock(mu_);
-  if (pending_ && now_wall_ms >= pending_->expires_ms) return OwnershipState::kOwned;  // tick() records it
+  if (pending_ && now_wall_ms >= pending_->expires_ms)
+    return OwnershipState::kOwned;  // tick() records it
   return state_;
 }
 

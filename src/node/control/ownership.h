@@ -41,12 +41,12 @@ class Ownership {
 
   // Errors: INSUFFICIENT_PRIVILEGES (not the owner), CONTROL_CONFLICT (one is pending),
   // SCHEMA_VALIDATION_FAILED.
-  Result<PendingTransfer> request(const Principal& p, const std::string& to_sub, const std::string& note,
-                                  int64_t now_wall_ms);
+  Result<PendingTransfer> request(const Principal& p, const std::string& to_sub,
+                                  const std::string& note, int64_t now_wall_ms);
   // The named new owner accepts with an agreement reference. Errors: NOT_FOUND (nothing
   // pending or another id), SESSION_EXPIRED (the window passed), INSUFFICIENT_PRIVILEGES.
-  Result<PendingTransfer> accept(const Principal& p, const std::string& transfer_id, const std::string& agreement,
-                                 int64_t now_wall_ms);
+  Result<PendingTransfer> accept(const Principal& p, const std::string& transfer_id,
+                                 const std::string& agreement, int64_t now_wall_ms);
   // The owner withdraws, or the named new owner declines.
   Result<PendingTransfer> cancel(const Principal& p, int64_t now_wall_ms);
   // The pending transfer whose window passed (once).

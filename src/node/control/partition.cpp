@@ -10,9 +10,12 @@ namespace rcan::node {
 
 std::string_view net_mode_name(NetMode m) {
   switch (m) {
-    case NetMode::kNormal: return "NORMAL";
-    case NetMode::kOfflineAutonomous: return "OFFLINE_AUTONOMOUS";
-    case NetMode::kLockdown: return "LOCKDOWN";
+    case NetMode::kNormal:
+      return "NORMAL";
+    case NetMode::kOfflineAutonomous:
+      return "OFFLINE_AUTONOMOUS";
+    case NetMode::kLockdown:
+      return "LOCKDOWN";
   }
   return "NORMAL";
 }
@@ -23,7 +26,8 @@ void PartitionMonitor::configure(PartitionOptions o) { opts_ = std::move(o); }
 
 NetMode PartitionMonitor::compute_locked(int64_t now_wall_ms) const {
   if (!enabled() || reachable_) return NetMode::kNormal;
-  if (last_ok_ms_ != 0 && now_wall_ms < last_ok_ms_ + opts_.key_ttl_ms) return NetMode::kOfflineAutonomous;
+  if (last_ok_ms_ != 0 && now_wall_ms < last_ok_ms_ + opts_.key_ttl_ms)
+    return NetMode::kOfflineAutonomous;
   return NetMode::kLockdown;
 }
 
@@ -54,7 +58,8 @@ NetMode PartitionMonitor::probe_once() {
   return cur;
 }
 
-void PartitionMonitor::start(std::function<int64_t()> wall_now, std::function<void(NetMode, NetMode)> on_change) {
+void PartitionMonitor::start(std::function<int64_t()> wall_now,
+                             std::function<void(NetMode, NetMode)> on_change) {
   wall_ = std::move(wall_now);
   on_change_ = std::move(on_change);
   if (!enabled()) return;
@@ -68,7 +73,8 @@ void PartitionMonitor::start(std::function<int64_t()> wall_now, std::function<vo
     for (;;) {
       probe_once();
       std::unique_lock<std::mutex> lock(run_mu_);
-      run_cv_.wait_for(lock, std::chrono::milliseconds(opts_.poll_interval_ms), [this] { return !running_; });
+      run_cv_.wait_for(lock, std::chrono::milliseconds(opts_.poll_interval_ms),
+                       [this] { return !running_; });
       if (!running_) return;
     }
   });
@@ -111,8 +117,11 @@ json::Value PartitionMonitor::status_json(int64_t now_wall_ms) {
                  {"issuer_reachable", reachable_}};
   if (enabled()) {
     o.set("last_reachable_ms", last_ok_ms_ ? json::Value(last_ok_ms_) : json::Value());
-    o.set("keys_fresh_until_ms", last_ok_ms_ ? json::Value(last_ok_ms_ + opts_.key_ttl_ms) : json::Value());
-    o.set("offline_since_s", offline_since_ms_ ? json::Value((now_wall_ms - offline_since_ms_) / 1000) : json::Value());
+    o.set("keys_fresh_until_ms",
+          last_ok_ms_ ? json::Value(last_ok_ms_ + opts_.key_ttl_ms) : json::Value());
+    o.set("offline_since_s", offline_since_ms_
+                                 ? json::Value((now_wall_ms - offline_since_ms_) / 1000)
+                                 : json::Value());
     int64_t live = 0;
     for (const auto& [k, until] : cache_)
       if (until > now_wall_ms) ++live;
@@ -124,19 +133,22 @@ json::Value PartitionMonitor::status_json(int64_t now_wall_ms) {
 json::Value PartitionMonitor::persist_json() {
   std::lock_guard<std::mutex> lock(mu_);
   json::Array entries;
-  for (const auto& [k, until] : cache_) entries.push_back(json::Object{{"principal", k}, {"until_ms", until}});
+  for (const auto& [k, until] : cache_)
+    entries.push_back(json::Object{{"principal", k}, {"until_ms", until}});
   return json::Object{{"last_reachable_ms", last_ok_ms_}, {"principals", entries}};
 }
 
 void PartitionMonitor::load_json(const json::Value& v, int64_t now_wall_ms) {
   std::lock_guard<std::mutex> lock(mu_);
-  if (const json::Value* l = v.get("last_reachable_ms"); l && l->is_int()) last_ok_ms_ = l->as_int();
+  if (const json::Value* l = v.get("last_reachable_ms"); l && l->is_int())
+    last_ok_ms_ = l->as_int();
   cache_.clear();
   if (const json::Value* a = v.get("principals"); a && a->is_array())
     for (const auto& e : a->as_array()) {
       const json::Value* k = e.get("principal");
       const json::Value* u = e.get("until_ms");
-      if (k && k->is_string() && u && u->is_int() && u->as_int() > now_wall_ms) cache_[k->as_string()] = u->as_int();
+      if (k && k->is_string() && u && u->is_int() && u->as_int() > now_wall_ms)
+        cache_[k->as_string()] = u->as_int();
     }
   // Until the first probe answers, the node is as reachable as its cache says.
   ++version_;

@@ -30,7 +30,7 @@ enum class NetMode { kNormal = 0, kOfflineAutonomous = 1, kLockdown = 2 };
 std::string_view net_mode_name(NetMode m);
 
 struct PartitionOptions {
-  std::string issuer_url;           // empty: partition detection off
+  std::string issuer_url;  // empty: partition detection off
   int64_t poll_interval_ms = 5000;
   int timeout_ms = 1000;
   int64_t key_ttl_ms = 86'400'000;  // offline.max_key_ttl_s

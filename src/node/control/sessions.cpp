@@ -8,9 +8,12 @@ namespace rcan::node {
 
 std::string_view fleet_policy_name(FleetPolicy p) {
   switch (p) {
-    case FleetPolicy::kRole: return "role";
-    case FleetPolicy::kFleetWins: return "fleet_wins";
-    case FleetPolicy::kIndividualWins: return "individual_wins";
+    case FleetPolicy::kRole:
+      return "role";
+    case FleetPolicy::kFleetWins:
+      return "fleet_wins";
+    case FleetPolicy::kIndividualWins:
+      return "individual_wins";
   }
   return "role";
 }
@@ -66,8 +69,8 @@ const Lease* SessionTable::active_lease_locked(int64_t now_wall_ms) const {
   return nullptr;
 }
 
-bool SessionTable::lease_link_locked(const std::string& sub, Role& role, std::string& lease_id, int64_t& end_wall,
-                                     int64_t now_wall_ms) const {
+bool SessionTable::lease_link_locked(const std::string& sub, Role& role, std::string& lease_id,
+                                     int64_t& end_wall, int64_t now_wall_ms) const {
   const Lease* l = active_lease_locked(now_wall_ms);
   if (!l) return true;
   if (sub == l->leasee_sub) {
@@ -86,8 +89,9 @@ bool SessionTable::lease_link_locked(const std::string& sub, Role& role, std::st
   return role_level(role) >= role_level(Role::kOwner);  // the owner stays above any lease
 }
 
-Session SessionTable::make_session_locked(const std::string& key, const std::string& sub, Role role, bool fleet,
-                                          int64_t now_mono_ms, int64_t now_wall_ms, const std::string& id) {
+Session SessionTable::make_session_locked(const std::string& key, const std::string& sub, Role role,
+                                          bool fleet, int64_t now_mono_ms, int64_t now_wall_ms,
+                                          const std::string& id) {
   Session s;
   s.id = id.empty() ? new_uuid_v4() : id;
   s.principal_key = key;
@@ -98,7 +102,8 @@ Session SessionTable::make_session_locked(const std::string& key, const std::str
   s.granted_wall_ms = now_wall_ms;
   uint32_t ttl = role == Role::kGuest ? opts_.guest_session_s : session_ttl_seconds(role);
   s.expires_mono_ms = ttl ? now_mono_ms + int64_t{ttl} * 1000 : 0;
-  if (opts_.max_session_ms > 0 && (s.expires_mono_ms == 0 || s.expires_mono_ms > now_mono_ms + opts_.max_session_ms))
+  if (opts_.max_session_ms > 0 &&
+      (s.expires_mono_ms == 0 || s.expires_mono_ms > now_mono_ms + opts_.max_session_ms))
     s.expires_mono_ms = now_mono_ms + opts_.max_session_ms;
   Role r = role;
   int64_t end_wall = 0;
@@ -111,7 +116,8 @@ Session SessionTable::make_session_locked(const std::string& key, const std::str
   return s;
 }
 
-void SessionTable::drop_holder_locked(const std::string& event, const std::string& reason, int64_t now_mono_ms) {
+void SessionTable::drop_holder_locked(const std::string& event, const std::string& reason,
+                                      int64_t now_mono_ms) {
   (void)now_mono_ms;
   if (!holder_) return;
   ControlChange c;
@@ -140,7 +146,8 @@ void SessionTable::promote_locked(int64_t now_mono_ms, int64_t now_wall_ms) {
       ControlChange c;
       c.event = "QUEUE_DROP";
       c.queued = q;
-      c.reason = now_mono_ms - q.enqueued_mono_ms > opts_.queue_wait_ms ? "waited too long" : "the robot is leased";
+      c.reason = now_mono_ms - q.enqueued_mono_ms > opts_.queue_wait_ms ? "waited too long"
+                                                                        : "the robot is leased";
       changes_.push_back(std::move(c));
       continue;
     }
@@ -166,8 +173,8 @@ void SessionTable::expire_locked(int64_t now_mono_ms) {
   }
 }
 
-Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> requested, bool fleet,
-                                        int64_t now_mono_ms, int64_t now_wall_ms) {
+Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> requested,
+                                        bool fleet, int64_t now_mono_ms, int64_t now_wall_ms) {
   Role role = p.role;
   if (requested && role_level(*requested) < role_level(role)) role = *requested;  // only lower
   std::lock_guard<std::mutex> lock(mu_);
@@ -180,8 +187,8 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
     // Explicit renewal by re-claiming: a fresh TTL, same session id; the role may be lowered,
     // never raised above the session's (a handoff's cap stays).
     if (role_level(holder_->role) < role_level(role)) role = holder_->role;
-    Session s = make_session_locked(p.key(), p.sub, role, fleet,
-                                    now_mono_ms, now_wall_ms, holder_->id);
+    Session s =
+        make_session_locked(p.key(), p.sub, role, fleet, now_mono_ms, now_wall_ms, holder_->id);
     holder_ = s;
     transit("RENEW", ControlState::kHeld);
     r.outcome = ClaimOutcome::kRenewed;
@@ -203,7 +210,8 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
                    "control is reserved for a named handoff for " +
                        std::to_string((reserved_->until_mono_ms - now_mono_ms + 999) / 1000) + " s",
                    "session");
-    if (reserved_->max_role && role_level(*reserved_->max_role) < role_level(role)) role = *reserved_->max_role;
+    if (reserved_->max_role && role_level(*reserved_->max_role) < role_level(role))
+      role = *reserved_->max_role;
     reserved_.reset();
     holder_ = make_session_locked(p.key(), p.sub, role, fleet, now_mono_ms, now_wall_ms);
     transit("CLAIM", ControlState::kHeld);
@@ -226,7 +234,8 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
     }
     if (mine < theirs)
       return Error(ErrorCode::kControlConflict,
-                   "Robot is controlled by higher-privilege user (" + std::string(role_name(holder_->role)) + ")",
+                   "Robot is controlled by higher-privilege user (" +
+                       std::string(role_name(holder_->role)) + ")",
                    "role");
     // Same role: first claim wins, the others wait in line.
     for (size_t i = 0; i < queue_.size(); ++i) {
@@ -251,8 +260,8 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
   return r;
 }
 
-Result<Session> SessionTable::renew(const std::string& session_id, const Principal& p, int64_t now_mono_ms,
-                                    int64_t now_wall_ms) {
+Result<Session> SessionTable::renew(const std::string& session_id, const Principal& p,
+                                    int64_t now_mono_ms, int64_t now_wall_ms) {
   std::lock_guard<std::mutex> lock(mu_);
   absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   last_wall_ms_ = now_wall_ms;
@@ -260,31 +269,36 @@ Result<Session> SessionTable::renew(const std::string& session_id, const Princip
       now_mono_ms >= holder_->expires_mono_ms) {
     expire_locked(now_mono_ms);
     promote_locked(now_mono_ms, now_wall_ms);
-    return Error(ErrorCode::kSessionExpired, "the session expired; claim control again", "session_id");
+    return Error(ErrorCode::kSessionExpired, "the session expired; claim control again",
+                 "session_id");
   }
   if (!holder_ || holder_->id != session_id) {
     auto it = expired_.find(p.key());
     if (it != expired_.end() && it->second == session_id)
-      return Error(ErrorCode::kSessionExpired, "the session expired; claim control again", "session_id");
+      return Error(ErrorCode::kSessionExpired, "the session expired; claim control again",
+                   "session_id");
     return Error(ErrorCode::kNotFound, "no such control session", "session_id");
   }
   if (holder_->principal_key != p.key())
-    return Error(ErrorCode::kInsufficientPrivileges, "only the holder may renew this session", "session_id");
+    return Error(ErrorCode::kInsufficientPrivileges, "only the holder may renew this session",
+                 "session_id");
   Role role = std::min(holder_->role, p.role);
-  holder_ = make_session_locked(p.key(), p.sub, role, holder_->fleet, now_mono_ms, now_wall_ms, holder_->id);
+  holder_ = make_session_locked(p.key(), p.sub, role, holder_->fleet, now_mono_ms, now_wall_ms,
+                                holder_->id);
   transit("RENEW", ControlState::kHeld);
   return *holder_;
 }
 
-Result<Session> SessionTable::release(const std::string& session_id, const Principal& p, int64_t now_mono_ms,
-                                      int64_t now_wall_ms) {
+Result<Session> SessionTable::release(const std::string& session_id, const Principal& p,
+                                      int64_t now_mono_ms, int64_t now_wall_ms) {
   std::lock_guard<std::mutex> lock(mu_);
   if (now_wall_ms == 0) now_wall_ms = last_wall_ms_;
   expire_locked(now_mono_ms);
   if (!holder_ || holder_->id != session_id)
     return Error(ErrorCode::kNotFound, "no such control session", "session_id");
   if (holder_->principal_key != p.key() && role_level(p.role) <= role_level(holder_->role))
-    return Error(ErrorCode::kInsufficientPrivileges, "only the holder may release this session", "session_id");
+    return Error(ErrorCode::kInsufficientPrivileges, "only the holder may release this session",
+                 "session_id");
   Session s = *holder_;
   holder_.reset();
   transit("RELEASE", ControlState::kAvailable);
@@ -292,14 +306,16 @@ Result<Session> SessionTable::release(const std::string& session_id, const Princ
   return s;
 }
 
-Result<Session> SessionTable::handoff(const std::string& session_id, const Principal& p, std::string target_sub,
-                                      std::optional<Role> target_role, int64_t window_ms, int64_t now_mono_ms) {
+Result<Session> SessionTable::handoff(const std::string& session_id, const Principal& p,
+                                      std::string target_sub, std::optional<Role> target_role,
+                                      int64_t window_ms, int64_t now_mono_ms) {
   std::lock_guard<std::mutex> lock(mu_);
   expire_locked(now_mono_ms);
   if (!holder_ || holder_->id != session_id)
     return Error(ErrorCode::kNotFound, "no such control session", "session_id");
   if (holder_->principal_key != p.key())
-    return Error(ErrorCode::kInsufficientPrivileges, "only the holder may hand control off", "session_id");
+    return Error(ErrorCode::kInsufficientPrivileges, "only the holder may hand control off",
+                 "session_id");
   Session s = *holder_;
   holder_.reset();
   reserved_ = Reservation{std::move(target_sub), target_role, s.id, now_mono_ms + window_ms};
@@ -359,7 +375,8 @@ void SessionTable::tick(int64_t now_mono_ms, int64_t now_wall_ms) {
         bool granted = false;
         for (const auto& g : it->grants)
           if (g.sub == holder_->sub && g.end_wall_ms > now_wall_ms) granted = true;
-        if (!granted) drop_holder_locked("REVOKE", "the grant within lease " + it->id + " ended", now_mono_ms);
+        if (!granted)
+          drop_holder_locked("REVOKE", "the grant within lease " + it->id + " ended", now_mono_ms);
       }
       ++it;
     }
@@ -408,10 +425,12 @@ std::optional<Reservation> SessionTable::reservation(int64_t now_mono_ms) {
   return reserved_;
 }
 
-std::optional<Session> SessionTable::controller(int64_t now_mono_ms, std::vector<Session>* expired) {
+std::optional<Session> SessionTable::controller(int64_t now_mono_ms,
+                                                std::vector<Session>* expired) {
   (void)expired;
   std::lock_guard<std::mutex> lock(mu_);
-  if (holder_ && holder_->expires_mono_ms != 0 && now_mono_ms >= holder_->expires_mono_ms) return std::nullopt;
+  if (holder_ && holder_->expires_mono_ms != 0 && now_mono_ms >= holder_->expires_mono_ms)
+    return std::nullopt;
   return holder_;
 }
 
@@ -425,7 +444,8 @@ bool SessionTable::live(const std::string& session_id, int64_t now_mono_ms) {
   return find(session_id, now_mono_ms).has_value();
 }
 
-bool SessionTable::run_if_live(const std::string& session_id, int64_t now_mono_ms, const std::function<void()>& fn) {
+bool SessionTable::run_if_live(const std::string& session_id, int64_t now_mono_ms,
+                               const std::function<void()>& fn) {
   std::lock_guard<std::mutex> lock(mu_);
   if (!holder_ || holder_->id != session_id) return false;
   if (holder_->expires_mono_ms != 0 && now_mono_ms >= holder_->expires_mono_ms) return false;
@@ -444,7 +464,8 @@ ControlState SessionTable::state(int64_t now_mono_ms) {
   std::lock_guard<std::mutex> lock(mu_);
   if (holder_ && holder_->expires_mono_ms != 0 && now_mono_ms >= holder_->expires_mono_ms)
     return reserved_ ? ControlState::kReserved : ControlState::kAvailable;
-  if (!holder_ && reserved_ && now_mono_ms >= reserved_->until_mono_ms) return ControlState::kAvailable;
+  if (!holder_ && reserved_ && now_mono_ms >= reserved_->until_mono_ms)
+    return ControlState::kAvailable;
   return state_locked();
 }
 
@@ -482,18 +503,22 @@ json::Value SessionTable::queue_json(int64_t now_mono_ms) {
   return arr;
 }
 
-Result<Lease> SessionTable::grant_lease(const Principal& owner, const std::string& leasee_sub, int64_t duration_ms,
-                                        int64_t now_wall_ms, int64_t now_mono_ms) {
+Result<Lease> SessionTable::grant_lease(const Principal& owner, const std::string& leasee_sub,
+                                        int64_t duration_ms, int64_t now_wall_ms,
+                                        int64_t now_mono_ms) {
   if (role_level(owner.role) < role_level(Role::kOwner))
     return Error(ErrorCode::kInsufficientPrivileges, "only an OWNER may grant a lease", "role");
   if (leasee_sub.empty() || leasee_sub.size() > 256)
-    return Error(ErrorCode::kSchemaValidationFailed, "leasee (a user id) is required", "leasee", "missing_field");
+    return Error(ErrorCode::kSchemaValidationFailed, "leasee (a user id) is required", "leasee",
+                 "missing_field");
   if (duration_ms <= 0 || duration_ms > int64_t{366} * 86'400'000)
-    return Error(ErrorCode::kSchemaValidationFailed, "duration_s must be 1 s .. 366 days", "duration_s");
+    return Error(ErrorCode::kSchemaValidationFailed, "duration_s must be 1 s .. 366 days",
+                 "duration_s");
   std::lock_guard<std::mutex> lock(mu_);
   if (now_mono_ms >= 0) absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   if (const Lease* l = active_lease_locked(now_wall_ms))
-    return Error(ErrorCode::kControlConflict, "lease " + l->id + " is running; revoke it first", "lease");
+    return Error(ErrorCode::kControlConflict, "lease " + l->id + " is running; revoke it first",
+                 "lease");
   Lease l;
   l.id = new_uuid_v4();
   l.leasee_sub = leasee_sub;
@@ -506,20 +531,27 @@ Result<Lease> SessionTable::grant_lease(const Principal& owner, const std::strin
 }
 
 Result<Lease> SessionTable::grant_within_lease(const Principal& leasee, const std::string& lease_id,
-                                               const std::string& sub, Role role, int64_t duration_ms,
-                                               int64_t now_wall_ms, int64_t now_mono_ms) {
+                                               const std::string& sub, Role role,
+                                               int64_t duration_ms, int64_t now_wall_ms,
+                                               int64_t now_mono_ms) {
   if (role != Role::kUser && role != Role::kGuest)
-    return Error(ErrorCode::kSchemaValidationFailed, "a lease grants USER or GUEST access only", "role");
+    return Error(ErrorCode::kSchemaValidationFailed, "a lease grants USER or GUEST access only",
+                 "role");
   if (sub.empty() || sub.size() > 256)
-    return Error(ErrorCode::kSchemaValidationFailed, "user_id is required", "user_id", "missing_field");
-  if (duration_ms <= 0) return Error(ErrorCode::kSchemaValidationFailed, "duration_s must be positive", "duration_s");
+    return Error(ErrorCode::kSchemaValidationFailed, "user_id is required", "user_id",
+                 "missing_field");
+  if (duration_ms <= 0)
+    return Error(ErrorCode::kSchemaValidationFailed, "duration_s must be positive", "duration_s");
   std::lock_guard<std::mutex> lock(mu_);
   if (now_mono_ms >= 0) absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   for (auto& l : leases_) {
     if (l.id != lease_id || now_wall_ms >= l.end_wall_ms) continue;
-    bool may = (leasee.sub == l.leasee_sub && role_level(leasee.role) >= role_level(Role::kLeasee)) ||
-               role_level(leasee.role) >= role_level(Role::kOwner);
-    if (!may) return Error(ErrorCode::kInsufficientPrivileges, "only the lease's LEASEE may grant within it", "lease_id");
+    bool may =
+        (leasee.sub == l.leasee_sub && role_level(leasee.role) >= role_level(Role::kLeasee)) ||
+        role_level(leasee.role) >= role_level(Role::kOwner);
+    if (!may)
+      return Error(ErrorCode::kInsufficientPrivileges,
+                   "only the lease's LEASEE may grant within it", "lease_id");
     LeaseGrant g{sub, role, std::min(l.end_wall_ms, now_wall_ms + duration_ms)};
     bool replaced = false;
     for (auto& x : l.grants)
@@ -534,8 +566,8 @@ Result<Lease> SessionTable::grant_within_lease(const Principal& leasee, const st
   return Error(ErrorCode::kNotFound, "no running lease " + lease_id, "lease_id");
 }
 
-Result<Lease> SessionTable::revoke_lease(const Principal& p, const std::string& lease_id, int64_t now_mono_ms,
-                                         int64_t now_wall_ms) {
+Result<Lease> SessionTable::revoke_lease(const Principal& p, const std::string& lease_id,
+                                         int64_t now_mono_ms, int64_t now_wall_ms) {
   std::lock_guard<std::mutex> lock(mu_);
   for (auto it = leases_.begin(); it != leases_.end(); ++it) {
     if (it->id != lease_id) continue;
@@ -597,7 +629,8 @@ void SessionTable::load_json(const json::Value& v, int64_t now_wall_ms) {
         if (!g.is_object()) continue;
         auto r = role_from_name(json::string_field(g, "role"));
         if (!r || (*r != Role::kUser && *r != Role::kGuest)) continue;
-        l.grants.push_back(LeaseGrant{json::string_field(g, "sub"), *r, json::int_field(g, "end_ms")});
+        l.grants.push_back(
+            LeaseGrant{json::string_field(g, "sub"), *r, json::int_field(g, "end_ms")});
       }
     }
     leases_.push_back(std::move(l));

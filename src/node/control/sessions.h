@@ -106,8 +106,8 @@ struct ClaimResult {
 
 // Something the node must announce and audit.
 struct ControlChange {
-  std::string event;  // EXPIRE, PROMOTE, REVOKE, WINDOW_CLOSE, QUEUE_DROP, LEASE_END
-  Session session;    // the session concerned (EXPIRE, PROMOTE, REVOKE)
+  std::string event;   // EXPIRE, PROMOTE, REVOKE, WINDOW_CLOSE, QUEUE_DROP, LEASE_END
+  Session session;     // the session concerned (EXPIRE, PROMOTE, REVOKE)
   QueuedClaim queued;  // QUEUE_DROP
   std::string lease_id;
   std::string reason;
@@ -120,15 +120,16 @@ class SessionTable {
   const ControlOptions& options() const { return opts_; }
 
   // Errors: CONTROL_CONFLICT (higher role holds, reserved window, leased, queue full).
-  Result<ClaimResult> claim(const Principal& p, std::optional<Role> requested, bool fleet, int64_t now_mono_ms,
-                            int64_t now_wall_ms);
+  Result<ClaimResult> claim(const Principal& p, std::optional<Role> requested, bool fleet,
+                            int64_t now_mono_ms, int64_t now_wall_ms);
   // Compatibility overload (an individual claim).
   Result<ClaimResult> claim(const Principal& p, std::optional<Role> requested, int64_t now_mono_ms,
                             int64_t now_wall_ms) {
     return claim(p, requested, false, now_mono_ms, now_wall_ms);
   }
   // Explicit renewal by the holder. Errors: NOT_FOUND, INSUFFICIENT_PRIVILEGES, SESSION_EXPIRED.
-  Result<Session> renew(const std::string& session_id, const Principal& p, int64_t now_mono_ms, int64_t now_wall_ms);
+  Result<Session> renew(const std::string& session_id, const Principal& p, int64_t now_mono_ms,
+                        int64_t now_wall_ms);
   // Errors: NOT_FOUND (no such session), INSUFFICIENT_PRIVILEGES (not the holder).
   Result<Session> release(const std::string& session_id, const Principal& p, int64_t now_mono_ms,
                           int64_t now_wall_ms = 0);
@@ -152,7 +153,8 @@ class SessionTable {
   bool live(const std::string& session_id, int64_t now_mono_ms);
   // Runs `fn` only while the session is live, holding the table: a pre-emption, expiry or
   // revocation happens entirely before or entirely after it. False when not live.
-  bool run_if_live(const std::string& session_id, int64_t now_mono_ms, const std::function<void()>& fn);
+  bool run_if_live(const std::string& session_id, int64_t now_mono_ms,
+                   const std::function<void()>& fn);
   // The session this principal held that expired or was revoked (until it claims again).
   std::optional<std::string> expired_session_of(const std::string& principal_key);
   ControlState state(int64_t now_mono_ms);
@@ -164,10 +166,11 @@ class SessionTable {
   // SCHEMA_VALIDATION_FAILED, NOT_FOUND.
   // `now_mono_ms` (optional, -1 = not given) lets a wall-clock step since the last reading be
   // absorbed first, so that a lease granted just after a step is not shifted by it later.
-  Result<Lease> grant_lease(const Principal& owner, const std::string& leasee_sub, int64_t duration_ms,
-                            int64_t now_wall_ms, int64_t now_mono_ms = -1);
-  Result<Lease> grant_within_lease(const Principal& leasee, const std::string& lease_id, const std::string& sub,
-                                   Role role, int64_t duration_ms, int64_t now_wall_ms, int64_t now_mono_ms = -1);
+  Result<Lease> grant_lease(const Principal& owner, const std::string& leasee_sub,
+                            int64_t duration_ms, int64_t now_wall_ms, int64_t now_mono_ms = -1);
+  Result<Lease> grant_within_lease(const Principal& leasee, const std::string& lease_id,
+                                   const std::string& sub, Role role, int64_t duration_ms,
+                                   int64_t now_wall_ms, int64_t now_mono_ms = -1);
   Result<Lease> revoke_lease(const Principal& p, const std::string& lease_id, int64_t now_mono_ms,
                              int64_t now_wall_ms);
   std::vector<Lease> leases(int64_t now_wall_ms);
@@ -189,8 +192,8 @@ class SessionTable {
                               int64_t now_mono_ms, int64_t now_wall_ms, const std::string& id = {});
   const Lease* active_lease_locked(int64_t now_wall_ms) const;
   // The lease link and role cap of a claimant; false when a lease runs and excludes it.
-  bool lease_link_locked(const std::string& sub, Role& role, std::string& lease_id, int64_t& end_wall,
-                         int64_t now_wall_ms) const;
+  bool lease_link_locked(const std::string& sub, Role& role, std::string& lease_id,
+                         int64_t& end_wall, int64_t now_wall_ms) const;
 
   std::mutex mu_;
   ControlOptions opts_;

@@ -22,11 +22,11 @@ Loaded load() {
     l.error = std::string("cannot load libavahi-client.so.3: ") + (why ? why : "dlopen failed");
     return l;
   }
-#define RCAN_AVAHI_SYM(name)                                                                 \
-  l.api.name = reinterpret_cast<decltype(l.api.name)>(::dlsym(h, "avahi_" #name));           \
-  if (!l.api.name) {                                                                         \
-    l.error = "libavahi-client.so.3 has no avahi_" #name;                                    \
-    return l;                                                                                \
+#define RCAN_AVAHI_SYM(name)                                                       \
+  l.api.name = reinterpret_cast<decltype(l.api.name)>(::dlsym(h, "avahi_" #name)); \
+  if (!l.api.name) {                                                               \
+    l.error = "libavahi-client.so.3 has no avahi_" #name;                          \
+    return l;                                                                      \
   }
   RCAN_AVAHI_FUNCTIONS(RCAN_AVAHI_SYM)
 #undef RCAN_AVAHI_SYM

@@ -1,6 +1,7 @@
 // libavahi-client loaded on first use (dlopen), so that a node without mDNS maps neither Avahi
 // nor D-Bus/libsystemd and their dependencies (docs/NODE.md §Discovery). Only the functions
-// src/node/discovery/mdns.cpp calls; each has the exact type of its declaration in the Avahi headers.
+// src/node/discovery/mdns.cpp calls; each has the exact type of its declaration in the Avahi
+// headers.
 #pragma once
 
 #include <avahi-client/client.h>
@@ -17,12 +18,29 @@ namespace rcan::node {
 
 struct AvahiApi {
 #define RCAN_AVAHI_FN(name) decltype(&::avahi_##name) name = nullptr;
-#define RCAN_AVAHI_FUNCTIONS(X)                                                                              \
-  X(strerror) X(free) X(alternative_service_name) X(string_list_add) X(string_list_free)                      \
-  X(threaded_poll_new) X(threaded_poll_start) X(threaded_poll_stop) X(threaded_poll_free)                    \
-  X(threaded_poll_lock) X(threaded_poll_unlock) X(threaded_poll_get) X(client_new) X(client_free)            \
-  X(client_errno) X(entry_group_new) X(entry_group_is_empty) X(entry_group_add_service_strlst)               \
-  X(entry_group_update_service_txt_strlst) X(entry_group_commit) X(entry_group_reset)                        \
+// One function a line (the formatter reflows a packed list differently on each pass).
+#define RCAN_AVAHI_FUNCTIONS(X)            \
+  X(strerror)                              \
+  X(free)                                  \
+  X(alternative_service_name)              \
+  X(string_list_add)                       \
+  X(string_list_free)                      \
+  X(threaded_poll_new)                     \
+  X(threaded_poll_start)                   \
+  X(threaded_poll_stop)                    \
+  X(threaded_poll_free)                    \
+  X(threaded_poll_lock)                    \
+  X(threaded_poll_unlock)                  \
+  X(threaded_poll_get)                     \
+  X(client_new)                            \
+  X(client_free)                           \
+  X(client_errno)                          \
+  X(entry_group_new)                       \
+  X(entry_group_is_empty)                  \
+  X(entry_group_add_service_strlst)        \
+  X(entry_group_update_service_txt_strlst) \
+  X(entry_group_commit)                    \
+  X(entry_group_reset)                     \
   X(entry_group_get_client)
   RCAN_AVAHI_FUNCTIONS(RCAN_AVAHI_FN)
 #undef RCAN_AVAHI_FN

@@ -7,8 +7,8 @@
 #include <chrono>
 #include <cstdlib>
 
-#include "node/discovery/avahi_dl.h"
 #include "base/log.h"
+#include "node/discovery/avahi_dl.h"
 #include "node/services/node_services.h"
 
 namespace rcan::node {
@@ -42,7 +42,7 @@ struct MdnsAdvertiser::Impl {
   AvahiClient* client = nullptr;
   AvahiEntryGroup* group = nullptr;
   std::string name;
-  std::string status;       // wanted status (watcher thread writes under the poll lock)
+  std::string status;  // wanted status (watcher thread writes under the poll lock)
   bool established = false;
   bool said_unavailable = false;
   std::function<void()> on_stop;
@@ -58,7 +58,8 @@ struct MdnsAdvertiser::Impl {
 
   AvahiStringList* txt_list() const {
     AvahiStringList* l = nullptr;
-    for (auto it = info.txt.rbegin(); it != info.txt.rend(); ++it) l = av().string_list_add(l, it->c_str());
+    for (auto it = info.txt.rbegin(); it != info.txt.rend(); ++it)
+      l = av().string_list_add(l, it->c_str());
     l = av().string_list_add(l, ("status=" + status).c_str());
     return l;
   }
@@ -73,7 +74,9 @@ struct MdnsAdvertiser::Impl {
     said_unavailable = true;
     log(LogLevel::kWarn, "mdns_unavailable",
         json::Object{{"error", why},
-                     {"note", "the node keeps running; it is not discoverable over mDNS until an Avahi daemon runs"}});
+                     {"note",
+                      "the node keeps running; it is not discoverable over mDNS until an Avahi "
+                      "daemon runs"}});
   }
 
   // Poll thread (or under the poll lock).
@@ -81,7 +84,8 @@ struct MdnsAdvertiser::Impl {
     if (!group) {
       group = av().entry_group_new(c, &Impl::group_cb, this);
       if (!group) {
-        unavailable(std::string("cannot create an entry group: ") + av().strerror(av().client_errno(c)));
+        unavailable(std::string("cannot create an entry group: ") +
+                    av().strerror(av().client_errno(c)));
         return;
       }
     }
@@ -89,8 +93,8 @@ struct MdnsAdvertiser::Impl {
     while (true) {
       AvahiStringList* txt = txt_list();
       int r = av().entry_group_add_service_strlst(group, AVAHI_IF_UNSPEC, AVAHI_PROTO_UNSPEC,
-                                                   static_cast<AvahiPublishFlags>(0), name.c_str(), "_rcan._tcp",
-                                                   nullptr, nullptr, info.port, txt);
+                                                  static_cast<AvahiPublishFlags>(0), name.c_str(),
+                                                  "_rcan._tcp", nullptr, nullptr, info.port, txt);
       av().string_list_free(txt);
       if (r == AVAHI_ERR_COLLISION) {
         rename();
@@ -109,7 +113,8 @@ struct MdnsAdvertiser::Impl {
 
   void rename() {
     char* n = av().alternative_service_name(name.c_str());
-    log(LogLevel::kInfo, "mdns_name_collision", json::Object{{"name", name}, {"renamed_to", n ? n : ""}});
+    log(LogLevel::kInfo, "mdns_name_collision",
+        json::Object{{"name", name}, {"renamed_to", n ? n : ""}});
     if (n) {
       name = n;
       av().free(n);
@@ -120,8 +125,8 @@ struct MdnsAdvertiser::Impl {
     if (!group || !established) return;
     AvahiStringList* txt = txt_list();
     int r = av().entry_group_update_service_txt_strlst(group, AVAHI_IF_UNSPEC, AVAHI_PROTO_UNSPEC,
-                                                        static_cast<AvahiPublishFlags>(0), name.c_str(), "_rcan._tcp",
-                                                        nullptr, txt);
+                                                       static_cast<AvahiPublishFlags>(0),
+                                                       name.c_str(), "_rcan._tcp", nullptr, txt);
     av().string_list_free(txt);
     if (r < 0) {
       log(LogLevel::kWarn, "mdns_update_failed", json::Object{{"error", av().strerror(r)}});
@@ -139,7 +144,9 @@ struct MdnsAdvertiser::Impl {
         self->established = true;
         self->set_published(self->status);
         log(LogLevel::kInfo, "mdns_advertising",
-            json::Object{{"service", "_rcan._tcp"}, {"name", self->name}, {"port", static_cast<int64_t>(self->info.port)},
+            json::Object{{"service", "_rcan._tcp"},
+                         {"name", self->name},
+                         {"port", static_cast<int64_t>(self->info.port)},
                          {"status", self->status}});
         break;
       case AVAHI_ENTRY_GROUP_COLLISION:
@@ -151,7 +158,8 @@ struct MdnsAdvertiser::Impl {
       case AVAHI_ENTRY_GROUP_FAILURE:
         self->established = false;
         log(LogLevel::kWarn, "mdns_publish_failed",
-            json::Object{{"error", av().strerror(av().client_errno(av().entry_group_get_client(g)))}});
+            json::Object{
+                {"error", av().strerror(av().client_errno(av().entry_group_get_client(g)))}});
         break;
       default:
         break;
@@ -229,8 +237,10 @@ void MdnsAdvertiser::start() {
     av().threaded_poll_lock(im->poll);
     if (!im->client) {
       int err = 0;
-      im->client = av().client_new(av().threaded_poll_get(im->poll), AVAHI_CLIENT_NO_FAIL, &Impl::client_cb, im, &err);
-      if (!im->client && first) im->unavailable(std::string("cannot reach D-Bus/Avahi: ") + av().strerror(err));
+      im->client = av().client_new(av().threaded_poll_get(im->poll), AVAHI_CLIENT_NO_FAIL,
+                                   &Impl::client_cb, im, &err);
+      if (!im->client && first)
+        im->unavailable(std::string("cannot reach D-Bus/Avahi: ") + av().strerror(err));
     }
     av().threaded_poll_unlock(im->poll);
   };
@@ -308,12 +318,9 @@ MdnsInfo mdns_info_for(NodeServices& services, bool tls) {
   info.port = s.port;
   std::string caps;
   for (const auto& c : s.capabilities) caps += (caps.empty() ? "" : ",") + c;
-  info.txt = {"ruri=" + s.ruri,
-              "model=" + s.model,
-              "caps=" + caps,
-              "roles=creator,owner,leasee,user,guest",
-              "role=GUEST",
-              "version=" + s.rcan_version,
+  info.txt = {"ruri=" + s.ruri, "model=" + s.model,
+              "caps=" + caps,   "roles=creator,owner,leasee,user,guest",
+              "role=GUEST",     "version=" + s.rcan_version,
               "name=" + s.name};
   if (!s.rrn.empty()) info.txt.push_back("rrn=" + s.rrn);
   if (tls) info.txt.push_back("tls=1");

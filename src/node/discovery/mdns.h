@@ -22,10 +22,10 @@ namespace rcan::node {
 class NodeServices;
 
 struct MdnsInfo {
-  std::string name;                            // service instance name
+  std::string name;  // service instance name
   uint16_t port = 0;
-  std::vector<std::string> txt;                // fixed "key=value" items (without status)
-  std::function<std::string()> status;         // current status word
+  std::vector<std::string> txt;         // fixed "key=value" items (without status)
+  std::function<std::string()> status;  // current status word
 };
 
 // The node's discovery status word: "estop", "claimed" or "available" (mDNS TXT `status` and

@@ -37,21 +37,26 @@ class FleetStage final : public Stage {
     if (stop) return Result::kContinue;  // an ESTOP/STOP is refused only for failed authentication
     if ((!ctx->in.fleet_id.empty() && ctx->in.fleet_id != cfg.fleet_id) ||
         (!claimed.empty() && claimed != cfg.fleet_id))
-      return deny(ctx, "this robot is not in fleet " + (claimed.empty() ? ctx->in.fleet_id : claimed), "fleet_id");
+      return deny(ctx,
+                  "this robot is not in fleet " + (claimed.empty() ? ctx->in.fleet_id : claimed),
+                  "fleet_id");
     // A fleet message carries a fleet JWT; its `fleet` claim lists this robot (checked by
     // the verifier against the member id, device id, RURI and RRN).
     if (!ctx->principal.fleet)
-      return deny(ctx, "fleet commands need a fleet token (a JWT with a `fleet` claim)", "auth_token");
+      return deny(ctx, "fleet commands need a fleet token (a JWT with a `fleet` claim)",
+                  "auth_token");
     if (ctx->in.fleet_mode == "broadcast" && !cfg.broadcast)
-      return deny(ctx, "fleet " + cfg.fleet_id + " does not accept broadcast commands", "fleet_mode");
+      return deny(ctx, "fleet " + cfg.fleet_id + " does not accept broadcast commands",
+                  "fleet_mode");
     if (ctx->in.fleet_mode == "individual" && !cfg.individual)
-      return deny(ctx, "fleet " + cfg.fleet_id + " does not accept individual commands", "fleet_mode");
+      return deny(ctx, "fleet " + cfg.fleet_id + " does not accept individual commands",
+                  "fleet_mode");
     if (m.payload.find("choreography_id") != nullptr && !cfg.choreographed)
-      return deny(ctx, "fleet " + cfg.fleet_id + " does not accept choreographed commands", "choreography_id");
+      return deny(ctx, "fleet " + cfg.fleet_id + " does not accept choreographed commands",
+                  "choreography_id");
     if (fleet->conflict) {
       if (auto err = fleet->conflict(*ctx, svc_)) {
-        refuse(svc_, ctx, *err, "COMMAND_REJECTED");
-        return Result::kAnswered;
+        return refuse(svc_, ctx, *err, "COMMAND_REJECTED");
       }
     }
     return Result::kContinue;
@@ -59,9 +64,9 @@ class FleetStage final : public Stage {
 
  private:
   Result deny(const std::shared_ptr<Context>& ctx, std::string msg, std::string field) {
-    refuse(svc_, ctx, Error(ErrorCode::kInsufficientPrivileges, std::move(msg), std::move(field)),
-           "COMMAND_REJECTED");
-    return Result::kAnswered;
+    return refuse(svc_, ctx,
+                  Error(ErrorCode::kInsufficientPrivileges, std::move(msg), std::move(field)),
+                  "COMMAND_REJECTED");
   }
   NodeServices& svc_;
 };
@@ -70,6 +75,8 @@ class FleetStage final : public Stage {
 
 bool fleet_origin(const Context& ctx) { return ctx.fleet_command || !ctx.in.fleet_id.empty(); }
 
-std::unique_ptr<Stage> make_fleet_stage(NodeServices& services) { return std::make_unique<FleetStage>(services); }
+std::unique_ptr<Stage> make_fleet_stage(NodeServices& services) {
+  return std::make_unique<FleetStage>(services);
+}
 
 }  // namespace rcan::node

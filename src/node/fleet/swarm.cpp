@@ -23,8 +23,12 @@ json::Array to_array(const std::set<std::string>& s) {
 
 }  // namespace
 
-SwarmAgent::SwarmAgent(NodeServices& svc, config::SwarmConfig cfg, std::string prefix, Publish publish)
-    : svc_(svc), cfg_(std::move(cfg)), topics_(mqtt::swarm_topics(prefix, cfg_.swarm_id)), publish_(std::move(publish)) {
+SwarmAgent::SwarmAgent(NodeServices& svc, config::SwarmConfig cfg, std::string prefix,
+                       Publish publish)
+    : svc_(svc),
+      cfg_(std::move(cfg)),
+      topics_(mqtt::swarm_topics(prefix, cfg_.swarm_id)),
+      publish_(std::move(publish)) {
   members_.insert(cfg_.members.begin(), cfg_.members.end());
   leader_ = cfg_.leader;
 }
@@ -43,7 +47,8 @@ json::Value SwarmAgent::state() const {
   return announce_body("state", "");
 }
 
-json::Value SwarmAgent::announce_body(const std::string& reason, const std::string& previous) const {
+json::Value SwarmAgent::announce_body(const std::string& reason,
+                                      const std::string& previous) const {
   json::Object p{{"swarm_id", cfg_.swarm_id},
                  {"members", to_array(members_)},
                  {"leader", leader_},
@@ -89,22 +94,27 @@ void SwarmAgent::on_message(const mqtt::InboundTopic& t, const json::Value& body
   const json::Value* ep = p->get("epoch");
   const json::Value* mem = p->get("members");
   std::string leader = str_of(*p, "leader");
-  if (ep == nullptr || !ep->is_int() || ep->as_int() < 0 || mem == nullptr || !mem->is_array() || leader.empty()) return;
+  if (ep == nullptr || !ep->is_int() || ep->as_int() < 0 || mem == nullptr || !mem->is_array() ||
+      leader.empty())
+    return;
   uint64_t epoch = static_cast<uint64_t>(ep->as_int());
   std::set<std::string> members;
   for (const auto& m : mem->as_array())
     if (m.is_string() && mqtt::valid_topic_segment(m.as_string())) members.insert(m.as_string());
   if (members.count(leader) == 0 || members.size() > 1024) return;
   std::lock_guard<std::mutex> lk(mu_);
-  bool newer = epoch > epoch_ || (epoch == epoch_ && leader < leader_) || (epoch == epoch_ && leader == leader_);
+  bool newer = epoch > epoch_ || (epoch == epoch_ && leader < leader_) ||
+               (epoch == epoch_ && leader == leader_);
   if (!newer) {
     // A stale announce (e.g. the retained one of a leader we replaced): correct it.
     if (leader_ == cfg_.member_id) announce_locked("superseded", "");
     return;
   }
   if (leader != leader_)
-    log(LogLevel::kInfo, "swarm_leader", json::Object{{"swarm_id", cfg_.swarm_id}, {"leader", leader},
-                                                      {"epoch", static_cast<int64_t>(epoch)}});
+    log(LogLevel::kInfo, "swarm_leader",
+        json::Object{{"swarm_id", cfg_.swarm_id},
+                     {"leader", leader},
+                     {"epoch", static_cast<int64_t>(epoch)}});
   epoch_ = epoch;
   leader_ = leader;
   for (const auto& m : members)
@@ -138,8 +148,9 @@ void SwarmAgent::tick(int64_t now) {
   for (const auto& m : members_) {
     if (m == leader_) continue;
     auto s = last_seen_.find(m);
-    bool live = m == cfg_.member_id ||
-                (s != last_seen_.end() && now - s->second <= static_cast<int64_t>(cfg_.leader_timeout_ms));
+    bool live =
+        m == cfg_.member_id ||
+        (s != last_seen_.end() && now - s->second <= static_cast<int64_t>(cfg_.leader_timeout_ms));
     if (live) {
       next = m;
       break;
@@ -164,14 +175,16 @@ void SwarmAgent::tick(int64_t now) {
   }
 }
 
-void SwarmAgent::answer(const std::string& member, const std::string& type, const std::string& reply_to,
-                        const std::string& reason) {
-  json::Object o{{"type", type},
-                 {"message_id", new_uuid_v4()},
-                 {"reply_to", reply_to},
-                 {"source_ruri", svc_.settings.ruri},
-                 {"timestamp_ms", svc_.clock.wall_ms()},
-                 {"payload", json::Object{{"swarm_id", cfg_.swarm_id}, {"member", member}, {"reason", reason}}}};
+void SwarmAgent::answer(const std::string& member, const std::string& type,
+                        const std::string& reply_to, const std::string& reason) {
+  json::Object o{
+      {"type", type},
+      {"message_id", new_uuid_v4()},
+      {"reply_to", reply_to},
+      {"source_ruri", svc_.settings.ruri},
+      {"timestamp_ms", svc_.clock.wall_ms()},
+      {"payload",
+       json::Object{{"swarm_id", cfg_.swarm_id}, {"member", member}, {"reason", reason}}}};
   publish_(topics_.join_answer(member), json::Value(std::move(o)), 1, false);
 }
 
@@ -184,9 +197,10 @@ void SwarmAgent::handle_join(const json::Value& body) {
     std::lock_guard<std::mutex> lk(mu_);
     if (leader_ != cfg_.member_id) return;  // only the leader answers
   }
-  if ((type != "SWARM_JOIN" && type != "SWARM_APPROVE") || !mqtt::valid_topic_segment(member)) return;
-  auto record = [&](const std::string& event, const std::string& outcome, const std::string& principal,
-                    const std::string& reason) {
+  if ((type != "SWARM_JOIN" && type != "SWARM_APPROVE") || !mqtt::valid_topic_segment(member))
+    return;
+  auto record = [&](const std::string& event, const std::string& outcome,
+                    const std::string& principal, const std::string& reason) {
     auto e = svc_.entry(principal, id.empty() ? new_uuid_v4() : id, event, outcome);
     e.reason = reason;
     e.detail.set("swarm_id", cfg_.swarm_id);
@@ -202,9 +216,11 @@ void SwarmAgent::handle_join(const json::Value& body) {
     return;
   }
   const json::Value* ts = body.get("timestamp_ms");
-  auto fresh = svc_.replay.check(id, ts != nullptr && ts->is_int() ? ts->as_int() : 0, false, svc_.clock.wall_ms());
+  auto fresh = svc_.replay.check(id, ts != nullptr && ts->is_int() ? ts->as_int() : 0, false,
+                                 svc_.clock.wall_ms());
   if (id.empty() || !fresh.ok()) {
-    std::string why = id.empty() ? "missing message_id" : std::string(error_name(fresh.error().code));
+    std::string why =
+        id.empty() ? "missing message_id" : std::string(error_name(fresh.error().code));
     record(type, "blocked", principal->display(), why);
     answer(member, "DENIED", id, why);
     return;

@@ -27,8 +27,8 @@
 #include <vector>
 
 #include "config/fleet_config.h"
-#include "rcan/mqtt_topics.h"
 #include "rcan/json.h"
+#include "rcan/mqtt_topics.h"
 
 namespace rcan::node {
 
@@ -36,7 +36,8 @@ class NodeServices;
 
 class SwarmAgent {
  public:
-  using Publish = std::function<void(const std::string& topic, const json::Value& body, int qos, bool retain)>;
+  using Publish =
+      std::function<void(const std::string& topic, const json::Value& body, int qos, bool retain)>;
 
   SwarmAgent(NodeServices& svc, config::SwarmConfig cfg, std::string prefix, Publish publish);
 

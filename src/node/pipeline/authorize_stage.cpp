@@ -1,11 +1,10 @@
 // Authorisation: scopes, role, capability, the control session (pipeline.h).
-#include "node/pipeline/stages.h"
-
 #include <algorithm>
 #include <cctype>
 
 #include "base/clock.h"
 #include "base/log.h"
+#include "node/pipeline/stages.h"
 #include "node/services/node_services.h"
 #include "rcan/errors.h"
 
@@ -20,9 +19,9 @@ class AuthorizeStage final : public Stage {
     const Message& m = *ctx->msg;
     const Principal& p = ctx->principal;
     auto deny = [&](std::string msg, std::string field) {
-      refuse(svc_, ctx, Error(ErrorCode::kInsufficientPrivileges, std::move(msg), std::move(field)),
-             "COMMAND_REJECTED");
-      return Result::kAnswered;
+      return refuse(svc_, ctx,
+                    Error(ErrorCode::kInsufficientPrivileges, std::move(msg), std::move(field)),
+                    "COMMAND_REJECTED");
     };
     switch (ctx->safety) {
       case SafetyAction::kEstop:
@@ -30,9 +29,11 @@ class AuthorizeStage final : public Stage {
         return Result::kContinue;  // any authenticated principal may stop the robot
       case SafetyAction::kResume:
         if (role_level(p.role) < role_level(Role::kLeasee))
-          return deny(std::string(role_name(p.role)) + " may not clear an ESTOP (LEASEE or above)", "role");
+          return deny(std::string(role_name(p.role)) + " may not clear an ESTOP (LEASEE or above)",
+                      "role");
         return Result::kContinue;
-      case SafetyAction::kNone: break;
+      case SafetyAction::kNone:
+        break;
     }
     // Every scope the message asks for must be held and within the role.
     for (const auto& s : m.scope) {
@@ -43,21 +44,21 @@ class AuthorizeStage final : public Stage {
       if (role_level(p.role) < role_level(*min))
         return deny(std::string(role_name(p.role)) + " may not use scope " + s, "scope");
     }
-    if (m.type == MessageType::kStatus || m.type == MessageType::kHeartbeat) return Result::kContinue;
+    if (m.type == MessageType::kStatus || m.type == MessageType::kHeartbeat)
+      return Result::kContinue;
     std::string action = m.action();
     if (action.empty()) {
-      refuse(svc_, ctx,
-             Error(ErrorCode::kSchemaValidationFailed, "a COMMAND needs payload.action (or command)",
-                   "payload.action", "missing_field"),
-             "MESSAGE_REJECTED");
-      return Result::kAnswered;
+      return refuse(
+          svc_, ctx,
+          Error(ErrorCode::kSchemaValidationFailed, "a COMMAND needs payload.action (or command)",
+                "payload.action", "missing_field"),
+          "MESSAGE_REJECTED");
     }
     Capability cap = capability_for_action(action);
     ctx->capability = cap;
     Status st = authorize(p.role, p.scopes, cap, svc_.settings.role_policy);
     if (!st.ok()) {
-      refuse(svc_, ctx, st.error(), "COMMAND_REJECTED");
-      return Result::kAnswered;
+      return refuse(svc_, ctx, st.error(), "COMMAND_REJECTED");
     }
     // A held control session reserves motion for its holder; a session that expired needs an
     // explicit renewal (a new claim) before its principal drives again.
@@ -68,23 +69,24 @@ class AuthorizeStage final : public Stage {
         svc_.act.session_heartbeat(holder->id);
       } else if (auto gone = svc_.sessions.expired_session_of(p.key())) {
         ctx->audit_detail.set("session_id", *gone);
-        refuse(svc_, ctx, Error(ErrorCode::kSessionExpired, "the control session expired; claim control again", "session"),
-               "COMMAND_REJECTED");
-        return Result::kAnswered;
+        return refuse(svc_, ctx,
+                      Error(ErrorCode::kSessionExpired,
+                            "the control session expired; claim control again", "session"),
+                      "COMMAND_REJECTED");
       } else if (holder) {
-        refuse(svc_, ctx,
-               Error(ErrorCode::kControlConflict,
-                     "the robot is controlled by another principal; claim it first", "session"),
-               "COMMAND_REJECTED");
-        return Result::kAnswered;
+        return refuse(
+            svc_, ctx,
+            Error(ErrorCode::kControlConflict,
+                  "the robot is controlled by another principal; claim it first", "session"),
+            "COMMAND_REJECTED");
       } else if (NetMode nm = svc_.partition.mode();
-                 nm == NetMode::kLockdown ||
-                 (nm == NetMode::kOfflineAutonomous && !svc_.partition.cached(p, svc_.clock.wall_ms()))) {
+                 nm == NetMode::kLockdown || (nm == NetMode::kOfflineAutonomous &&
+                                              !svc_.partition.cached(p, svc_.clock.wall_ms()))) {
         // Seed §6.1: partitioned, only sessions that already exist (or cached principals) act.
-        refuse(svc_, ctx,
-               Error(ErrorCode::kLockdown, std::string(net_mode_name(nm)) + ": no new control without a session"),
-               "COMMAND_REJECTED");
-        return Result::kAnswered;
+        return refuse(svc_, ctx,
+                      Error(ErrorCode::kLockdown,
+                            std::string(net_mode_name(nm)) + ": no new control without a session"),
+                      "COMMAND_REJECTED");
       }
     }
     return Result::kContinue;
@@ -96,6 +98,8 @@ class AuthorizeStage final : public Stage {
 
 }  // namespace
 
-std::unique_ptr<Stage> make_authorize_stage(NodeServices& services) { return std::make_unique<AuthorizeStage>(services); }
+std::unique_ptr<Stage> make_authorize_stage(NodeServices& services) {
+  return std::make_unique<AuthorizeStage>(services);
+}
 
 }  // namespace rcan::node

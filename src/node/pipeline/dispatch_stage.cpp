@@ -1,11 +1,10 @@
 // The last stage: audit, then dispatch to the safety core (pipeline.h).
-#include "node/pipeline/stages.h"
-
 #include <algorithm>
 #include <cctype>
 
 #include "base/clock.h"
 #include "base/log.h"
+#include "node/pipeline/stages.h"
 #include "node/services/node_services.h"
 #include "rcan/errors.h"
 
@@ -24,15 +23,19 @@ class DispatchStage final : public Stage {
     const Message& m = *ctx->msg;
     switch (ctx->safety) {
       case SafetyAction::kEstop:
-      case SafetyAction::kStop: return stop(ctx);
-      case SafetyAction::kResume: return resume(ctx);
-      case SafetyAction::kNone: break;
+      case SafetyAction::kStop:
+        return stop(ctx);
+      case SafetyAction::kResume:
+        return resume(ctx);
+      case SafetyAction::kNone:
+        break;
     }
     if (m.type == MessageType::kStatus) {
       json::Object payload = svc_.status(true).as_object();
       auto e = accepted_entry(*ctx, "STATUS");
       svc_.write_audit(std::move(e));
-      ctx->finish(Outcome{200, svc_.envelope(MessageType::kStatus, std::move(payload), m.message_id), {}});
+      ctx->finish(
+          Outcome{200, svc_.envelope(MessageType::kStatus, std::move(payload), m.message_id), {}});
       return Result::kAnswered;
     }
     if (m.type == MessageType::kHeartbeat) {
@@ -78,7 +81,8 @@ class DispatchStage final : public Stage {
     bool estop = ctx->safety == SafetyAction::kEstop;
     std::string source = ctx->principal.display() + " via " + ctx->in.transport;
     std::string reason;
-    if (const json::Value* r = ctx->msg->payload.find("reason"); r && r->is_string()) reason = r->as_string().substr(0, 512);
+    if (const json::Value* r = ctx->msg->payload.find("reason"); r && r->is_string())
+      reason = r->as_string().substr(0, 512);
     double us = 0;
     const int64_t t_call = steady_us();
     if (estop) {
@@ -90,7 +94,9 @@ class DispatchStage final : public Stage {
     // From the request's arrival (the transport's read) to Driver::stop() returning.
     const double arrival_us = static_cast<double>(t_call - ctx->in.received_mono_us) + us;
     svc_.metrics.stage("estop_to_driver").observe_us(us);
-    svc_.metrics.stage(ctx->in.transport == "ws" ? "stop_arrival_to_driver_ws" : "stop_arrival_to_driver_http")
+    svc_.metrics
+        .stage(ctx->in.transport == "ws" ? "stop_arrival_to_driver_ws"
+                                         : "stop_arrival_to_driver_http")
         .observe_us(arrival_us);
     log(LogLevel::kInfo, estop ? "estop.latency" : "stop.latency",
         {{"transport", ctx->in.transport},
@@ -121,25 +127,25 @@ class DispatchStage final : public Stage {
                          {"result", estop ? "estop_latched" : "stopped"},
                          {"estop_active", svc_.act.estop_active()}};
     // The stop already happened; the answer waits for the record (or its failure).
-    svc_.write_audit(std::move(e), [this, ctx, id, payload](rcan::Result<audit::Receipt> r) mutable {
-      if (!r.ok()) payload.set("audit", "unavailable");
-      ctx->finish(Outcome{200, svc_.envelope(MessageType::kAck, payload, id), {}});
-    });
+    svc_.write_audit(std::move(e),
+                     [this, ctx, id, payload](rcan::Result<audit::Receipt> r) mutable {
+                       if (!r.ok()) payload.set("audit", "unavailable");
+                       ctx->finish(Outcome{200, svc_.envelope(MessageType::kAck, payload, id), {}});
+                     });
     return Result::kParked;
   }
 
   Result resume(const std::shared_ptr<Context>& ctx) {
     if (!svc_.audit.available()) {  // RESUME re-enables motion: not without its record
-      refuse(svc_, ctx,
-             Error(ErrorCode::kAuditUnavailable,
-                   "the audit log cannot record; RESUME is refused until it can (ESTOP still works)"),
-             "COMMAND_REJECTED");
-      return Result::kAnswered;
+      return refuse(
+          svc_, ctx,
+          Error(ErrorCode::kAuditUnavailable,
+                "the audit log cannot record; RESUME is refused until it can (ESTOP still works)"),
+          "COMMAND_REJECTED");
     }
     Status st = svc_.act.resume(ctx->principal.role, ctx->principal.display());
     if (!st.ok()) {
-      refuse(svc_, ctx, st.error(), "COMMAND_REJECTED");
-      return Result::kAnswered;
+      return refuse(svc_, ctx, st.error(), "COMMAND_REJECTED");
     }
     svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
                                                  {"event", "RESUME"},
@@ -148,10 +154,11 @@ class DispatchStage final : public Stage {
     auto e = accepted_entry(*ctx, "RESUME");
     std::string id = ctx->msg->message_id;
     svc_.write_audit(std::move(e), [this, ctx, id](rcan::Result<audit::Receipt>) {
-      ctx->finish(Outcome{200,
-                          svc_.envelope(MessageType::kAck,
-                                        json::Object{{"command", "RESUME"}, {"result", "estop_cleared"}}, id),
-                          {}});
+      ctx->finish(Outcome{
+          200,
+          svc_.envelope(MessageType::kAck,
+                        json::Object{{"command", "RESUME"}, {"result", "estop_cleared"}}, id),
+          {}});
     });
     return Result::kParked;
   }
@@ -166,8 +173,7 @@ class DispatchStage final : public Stage {
     }
     auto prepared = svc_.act.prepare(m, deadline, ctx->session_id);
     if (!prepared.ok()) {
-      refuse(svc_, ctx, prepared.error(), "COMMAND_REJECTED");
-      return Result::kAnswered;
+      return refuse(svc_, ctx, prepared.error(), "COMMAND_REJECTED");
     }
     auto e = accepted_entry(*ctx, "COMMAND");
     if (prepared->clamped) {
@@ -181,7 +187,8 @@ class DispatchStage final : public Stage {
       const std::string& id = ctx->msg->message_id;
       if (!r.ok()) {
         // Nothing is dispatched without its record.
-        Error err(ErrorCode::kAuditUnavailable, "the command could not be recorded and was not dispatched");
+        Error err(ErrorCode::kAuditUnavailable,
+                  "the command could not be recorded and was not dispatched");
         ctx->finish(Outcome{http_status(err.code), svc_.error(err, id), {}});
         return;
       }
@@ -198,8 +205,9 @@ class DispatchStage final : public Stage {
         drop.reason = "session_ended";
         drop.detail.set("session_id", ctx->session_id);
         svc_.write_audit(std::move(drop));
-        Error err(ErrorCode::kControlConflict, "the control session ended before the command reached the robot",
-                  "session", "session_ended");
+        Error err(ErrorCode::kControlConflict,
+                  "the control session ended before the command reached the robot", "session",
+                  "session_ended");
         ctx->finish(Outcome{http_status(err.code), svc_.error(err, id), {}});
         return;
       }
@@ -233,6 +241,8 @@ class DispatchStage final : public Stage {
 
 }  // namespace
 
-std::unique_ptr<Stage> make_dispatch_stage(NodeServices& services) { return std::make_unique<DispatchStage>(services); }
+std::unique_ptr<Stage> make_dispatch_stage(NodeServices& services) {
+  return std::make_unique<DispatchStage>(services);
+}
 
 }  // namespace rcan::node

@@ -1,11 +1,10 @@
 // The guards before dispatch: rate limits, the safety state, the injection screen (pipeline.h).
-#include "node/pipeline/stages.h"
-
 #include <algorithm>
 #include <cctype>
 
 #include "base/clock.h"
 #include "base/log.h"
+#include "node/pipeline/stages.h"
 #include "node/services/node_services.h"
 #include "rcan/errors.h"
 
@@ -17,15 +16,16 @@ class RateLimitStage final : public Stage {
   explicit RateLimitStage(NodeServices& s) : svc_(s) {}
   const char* name() const override { return "rate_limit"; }
   Result run(const std::shared_ptr<Context>& ctx) override {
-    if (ctx->safety != SafetyAction::kNone) return Result::kContinue;  // SAFETY is never rate-limited
-    auto d = svc_.rate.take(ctx->principal.key(), svc_.rate_limit(ctx->principal.role), svc_.clock.mono_ms());
+    if (ctx->safety != SafetyAction::kNone)
+      return Result::kContinue;  // SAFETY is never rate-limited
+    auto d = svc_.rate.take(ctx->principal.key(), svc_.rate_limit(ctx->principal.role),
+                            svc_.clock.mono_ms());
     if (!d.allowed) {
       Error e(ErrorCode::kRateLimited,
               std::string(role_name(ctx->principal.role)) + " rate limit of " +
                   std::to_string(svc_.rate_limit(ctx->principal.role)) + " per minute reached");
       ctx->audit_detail.set("retry_after_ms", d.retry_after_ms);
-      refuse(svc_, ctx, e, "RATE_LIMITED");
-      return Result::kAnswered;
+      return refuse(svc_, ctx, e, "RATE_LIMITED");
     }
     return Result::kContinue;
   }
@@ -45,18 +45,19 @@ class SafetyStateStage final : public Stage {
     bool moves = ctx->capability && capability_scope(*ctx->capability) != "status" &&
                  *ctx->capability != Capability::kChat;
     if (moves && svc_.act.estop_active()) {
-      refuse(svc_, ctx,
-             Error(ErrorCode::kCommandRejected, "ESTOP is active; RESUME (LEASEE or above) clears it", "",
-                   "estop_active"),
-             "COMMAND_REJECTED");
-      return Result::kAnswered;
+      return refuse(
+          svc_, ctx,
+          Error(ErrorCode::kCommandRejected, "ESTOP is active; RESUME (LEASEE or above) clears it",
+                "", "estop_active"),
+          "COMMAND_REJECTED");
     }
     if (!svc_.audit.available()) {
-      refuse(svc_, ctx,
-             Error(ErrorCode::kAuditUnavailable,
-                   "the audit log cannot record; commands are refused until it can (ESTOP still works)"),
-             "COMMAND_REJECTED");
-      return Result::kAnswered;
+      return refuse(
+          svc_, ctx,
+          Error(
+              ErrorCode::kAuditUnavailable,
+              "the audit log cannot record; commands are refused until it can (ESTOP still works)"),
+          "COMMAND_REJECTED");
     }
     return Result::kContinue;
   }
@@ -70,14 +71,15 @@ class InjectionStage final : public Stage {
   explicit InjectionStage(NodeServices& s) : svc_(s) {}
   const char* name() const override { return "injection"; }
   Result run(const std::shared_ptr<Context>& ctx) override {
-    if (ctx->safety != SafetyAction::kNone || ctx->msg->type != MessageType::kCommand) return Result::kContinue;
+    if (ctx->safety != SafetyAction::kNone || ctx->msg->type != MessageType::kCommand)
+      return Result::kContinue;
     if (auto hit = svc_.injection.scan(json::Value(ctx->msg->payload))) {
       ctx->audit_detail.set("pattern", *hit);
-      refuse(svc_, ctx,
-             Error(ErrorCode::kCommandRejected, "the command text matches a prompt-injection pattern", "payload",
-                   "prompt_injection"),
-             "INJECTION_BLOCKED");
-      return Result::kAnswered;
+      return refuse(
+          svc_, ctx,
+          Error(ErrorCode::kCommandRejected, "the command text matches a prompt-injection pattern",
+                "payload", "prompt_injection"),
+          "INJECTION_BLOCKED");
     }
     return Result::kContinue;
   }
@@ -88,8 +90,14 @@ class InjectionStage final : public Stage {
 
 }  // namespace
 
-std::unique_ptr<Stage> make_rate_limit_stage(NodeServices& services) { return std::make_unique<RateLimitStage>(services); }
-std::unique_ptr<Stage> make_safety_state_stage(NodeServices& services) { return std::make_unique<SafetyStateStage>(services); }
-std::unique_ptr<Stage> make_injection_stage(NodeServices& services) { return std::make_unique<InjectionStage>(services); }
+std::unique_ptr<Stage> make_rate_limit_stage(NodeServices& services) {
+  return std::make_unique<RateLimitStage>(services);
+}
+std::unique_ptr<Stage> make_safety_state_stage(NodeServices& services) {
+  return std::make_unique<SafetyStateStage>(services);
+}
+std::unique_ptr<Stage> make_injection_stage(NodeServices& services) {
+  return std::make_unique<InjectionStage>(services);
+}
 
 }  // namespace rcan::node

@@ -18,7 +18,8 @@ std::string guest_capability(const Message& m, std::optional<Capability> cap) {
   if (has("camera") || has("snapshot") || has("image") || has("video")) return "camera_access";
   if (has("location") || has("history") || has("position") || has("map")) return "location_history";
   if (cap == Capability::kChat) return "chat_text";
-  if (a.rfind("query", 0) == 0 || a.rfind("info", 0) == 0 || a.rfind("basic_info", 0) == 0) return "basic_info";
+  if (a.rfind("query", 0) == 0 || a.rfind("info", 0) == 0 || a.rfind("basic_info", 0) == 0)
+    return "basic_info";
   if (cap == Capability::kViewStatus) return "status_read";
   return "control";
 }
@@ -30,18 +31,20 @@ class GuestLimitStage final : public Stage {
   explicit GuestLimitStage(NodeServices& s) : svc_(s) {}
   const char* name() const override { return "guest_limits"; }
   Result run(const std::shared_ptr<Context>& ctx) override {
-    if (ctx->safety != SafetyAction::kNone || ctx->principal.role != Role::kGuest) return Result::kContinue;
+    if (ctx->safety != SafetyAction::kNone || ctx->principal.role != Role::kGuest)
+      return Result::kContinue;
     const GuestLimits& g = svc_.settings.guest_limits;
     std::string what = guest_capability(*ctx->msg, ctx->capability);
     ctx->audit_detail.set("guest_capability", what);
-    bool allowed = std::find(g.capabilities.begin(), g.capabilities.end(), what) != g.capabilities.end();
+    bool allowed =
+        std::find(g.capabilities.begin(), g.capabilities.end(), what) != g.capabilities.end();
     bool blocked = std::find(g.blocked.begin(), g.blocked.end(), what) != g.blocked.end();
     if (!allowed || blocked) {
-      refuse(svc_, ctx,
-             Error(ErrorCode::kInsufficientPrivileges, "guests may not use " + what + " (guest_limits)", "guest_limits",
-                   "guest_blocked"),
-             "COMMAND_REJECTED");
-      return Result::kAnswered;
+      return refuse(
+          svc_, ctx,
+          Error(ErrorCode::kInsufficientPrivileges,
+                "guests may not use " + what + " (guest_limits)", "guest_limits", "guest_blocked"),
+          "COMMAND_REJECTED");
     }
     // The guest session: opened by the first request, bounded in length and number.
     int64_t now = svc_.clock.mono_ms();
@@ -53,23 +56,24 @@ class GuestLimitStage final : public Stage {
         it = now - it->second >= 2 * len ? sessions_.erase(it) : std::next(it);
       auto it = sessions_.find(key);
       if (it != sessions_.end() && now - it->second >= len) {
-        refuse(svc_, ctx,
-               Error(ErrorCode::kSessionExpired,
-                     "the guest session ended after " + std::to_string(g.session_seconds) + " s", "guest_limits"),
-               "COMMAND_REJECTED");
-        return Result::kAnswered;
+        return refuse(
+            svc_, ctx,
+            Error(ErrorCode::kSessionExpired,
+                  "the guest session ended after " + std::to_string(g.session_seconds) + " s",
+                  "guest_limits"),
+            "COMMAND_REJECTED");
       }
       if (it == sessions_.end()) {
         size_t live = 0;
         for (const auto& [k, start] : sessions_)
           if (now - start < len) ++live;
         if (live >= g.concurrent_sessions) {
-          refuse(svc_, ctx,
-                 Error(ErrorCode::kRateLimited,
-                       "all " + std::to_string(g.concurrent_sessions) + " guest sessions are in use", "guest_limits",
-                       "guest_sessions_full"),
-                 "RATE_LIMITED");
-          return Result::kAnswered;
+          return refuse(
+              svc_, ctx,
+              Error(ErrorCode::kRateLimited,
+                    "all " + std::to_string(g.concurrent_sessions) + " guest sessions are in use",
+                    "guest_limits", "guest_sessions_full"),
+              "RATE_LIMITED");
         }
         sessions_[key] = now;
       }
@@ -78,13 +82,12 @@ class GuestLimitStage final : public Stage {
     auto d = svc_.rate.take(key + (what == "chat_text" ? "#chat" : "#query"), per_minute, now);
     if (!d.allowed) {
       ctx->audit_detail.set("retry_after_ms", d.retry_after_ms);
-      refuse(svc_, ctx,
-             Error(ErrorCode::kRateLimited,
-                   "guest " + std::string(what == "chat_text" ? "chat" : "query") + " rate of " +
-                       std::to_string(per_minute) + " per minute reached",
-                   "guest_limits"),
-             "RATE_LIMITED");
-      return Result::kAnswered;
+      return refuse(svc_, ctx,
+                    Error(ErrorCode::kRateLimited,
+                          "guest " + std::string(what == "chat_text" ? "chat" : "query") +
+                              " rate of " + std::to_string(per_minute) + " per minute reached",
+                          "guest_limits"),
+                    "RATE_LIMITED");
     }
     return Result::kContinue;
   }

@@ -1,11 +1,10 @@
 // The first stages: the message's shape, the presence of a token, decoding (pipeline.h).
-#include "node/pipeline/stages.h"
-
 #include <algorithm>
 #include <cctype>
 
 #include "base/clock.h"
 #include "base/log.h"
+#include "node/pipeline/stages.h"
 #include "node/services/node_services.h"
 #include "rcan/errors.h"
 
@@ -19,8 +18,7 @@ class ShapeStage final : public Stage {
   Result run(const std::shared_ptr<Context>& ctx) override {
     Status s = check_shape(ctx->in.body);
     if (!s.ok()) {
-      refuse(svc_, ctx, s.error(), "MESSAGE_REJECTED");
-      return Result::kAnswered;
+      return refuse(svc_, ctx, s.error(), "MESSAGE_REJECTED");
     }
     return Result::kContinue;
   }
@@ -37,9 +35,9 @@ class TokenPresenceStage final : public Stage {
   Result run(const std::shared_ptr<Context>& ctx) override {
     if (ctx->in.preauthenticated) return Result::kContinue;
     if (token_of(*ctx).empty()) {
-      refuse(svc_, ctx, Error(ErrorCode::kAuthRequired, "a bearer token is required", "auth_token"),
-             "AUTH_FAILED");
-      return Result::kAnswered;
+      return refuse(svc_, ctx,
+                    Error(ErrorCode::kAuthRequired, "a bearer token is required", "auth_token"),
+                    "AUTH_FAILED");
     }
     return Result::kContinue;
   }
@@ -55,8 +53,7 @@ class DecodeStage final : public Stage {
   Result run(const std::shared_ptr<Context>& ctx) override {
     auto m = decode_message(ctx->in.body, svc_.settings.codec);
     if (!m.ok()) {
-      refuse(svc_, ctx, m.error(), "MESSAGE_REJECTED");
-      return Result::kAnswered;
+      return refuse(svc_, ctx, m.error(), "MESSAGE_REJECTED");
     }
     ctx->msg = std::move(m).value();
     Message& msg = *ctx->msg;
@@ -66,26 +63,26 @@ class DecodeStage final : public Stage {
     }
     ctx->safety = safety_action_of(msg);
     if (msg.priority == Priority::kSafety && ctx->safety == SafetyAction::kNone) {
-      refuse(svc_, ctx,
-             Error(ErrorCode::kSchemaValidationFailed,
-                   "priority SAFETY is reserved for SAFETY messages (ESTOP, STOP, RESUME)", "priority"),
-             "MESSAGE_REJECTED");
-      return Result::kAnswered;
+      return refuse(svc_, ctx,
+                    Error(ErrorCode::kSchemaValidationFailed,
+                          "priority SAFETY is reserved for SAFETY messages (ESTOP, STOP, RESUME)",
+                          "priority"),
+                    "MESSAGE_REJECTED");
     }
     if (ctx->safety != SafetyAction::kNone) msg.priority = Priority::kSafety;
     switch (msg.type) {
       case MessageType::kCommand:
       case MessageType::kSafety:
       case MessageType::kStatus:
-      case MessageType::kHeartbeat: break;
+      case MessageType::kHeartbeat:
+        break;
       default:
-        refuse(svc_, ctx,
-               Error(ErrorCode::kSchemaValidationFailed,
-                     "message type " + std::string(message_type_name(msg.type)) + " is not accepted on " +
-                         ctx->in.route,
-                     "type"),
-               "MESSAGE_REJECTED");
-        return Result::kAnswered;
+        return refuse(svc_, ctx,
+                      Error(ErrorCode::kSchemaValidationFailed,
+                            "message type " + std::string(message_type_name(msg.type)) +
+                                " is not accepted on " + ctx->in.route,
+                            "type"),
+                      "MESSAGE_REJECTED");
     }
     return Result::kContinue;
   }
@@ -96,8 +93,14 @@ class DecodeStage final : public Stage {
 
 }  // namespace
 
-std::unique_ptr<Stage> make_shape_stage(NodeServices& services) { return std::make_unique<ShapeStage>(services); }
-std::unique_ptr<Stage> make_token_stage(NodeServices& services) { return std::make_unique<TokenPresenceStage>(services); }
-std::unique_ptr<Stage> make_decode_stage(NodeServices& services) { return std::make_unique<DecodeStage>(services); }
+std::unique_ptr<Stage> make_shape_stage(NodeServices& services) {
+  return std::make_unique<ShapeStage>(services);
+}
+std::unique_ptr<Stage> make_token_stage(NodeServices& services) {
+  return std::make_unique<TokenPresenceStage>(services);
+}
+std::unique_ptr<Stage> make_decode_stage(NodeServices& services) {
+  return std::make_unique<DecodeStage>(services);
+}
 
 }  // namespace rcan::node

@@ -46,17 +46,22 @@ SafetyAction safety_action_of(const Message& m) {
 
 const char* safety_action_name(SafetyAction e) {
   switch (e) {
-    case SafetyAction::kEstop: return "ESTOP";
-    case SafetyAction::kStop: return "STOP";
-    case SafetyAction::kResume: return "RESUME";
-    case SafetyAction::kNone: return "NONE";
+    case SafetyAction::kEstop:
+      return "ESTOP";
+    case SafetyAction::kStop:
+      return "STOP";
+    case SafetyAction::kResume:
+      return "RESUME";
+    case SafetyAction::kNone:
+      return "NONE";
   }
   return "NONE";
 }
 
 std::string token_of(const Context& ctx) {
   if (!ctx.in.bearer.empty()) return ctx.in.bearer;
-  if (const json::Value* t = ctx.in.body.get("auth_token"); t && t->is_string()) return t->as_string();
+  if (const json::Value* t = ctx.in.body.get("auth_token"); t && t->is_string())
+    return t->as_string();
   return {};
 }
 
@@ -66,8 +71,8 @@ void Context::finish(Outcome out) {
   if (done) done(std::move(out));
 }
 
-void refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, const Error& err,
-            const std::string& audit_event) {
+Stage::Result refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, const Error& err,
+                     const std::string& audit_event) {
   std::string reply_to;
   if (ctx->msg) reply_to = ctx->msg->message_id;
   Outcome out;
@@ -78,21 +83,25 @@ void refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, const Error&
     int64_t secs = ra && ra->is_int() ? (ra->as_int() + 999) / 1000 : 1;
     out.headers.emplace_back("Retry-After", std::to_string(std::max<int64_t>(secs, 1)));
   }
-  auto e = svc.entry(ctx->principal.display(), reply_to, audit_event.empty() ? "COMMAND_REJECTED" : audit_event,
-                     err.code == ErrorCode::kAuditUnavailable || err.code == ErrorCode::kInternal ? "error" : "blocked");
+  auto e = svc.entry(
+      ctx->principal.display(), reply_to, audit_event.empty() ? "COMMAND_REJECTED" : audit_event,
+      err.code == ErrorCode::kAuditUnavailable || err.code == ErrorCode::kInternal ? "error"
+                                                                                   : "blocked");
   e.sender_type = std::string(sender_type_name(ctx->sender.sender_type));
   if (ctx->principal.authenticated) e.sub = ctx->principal.sub;
   if (!ctx->sender.cloud_provider.empty()) e.cloud_provider = ctx->sender.cloud_provider;
   if (!ctx->sender.function_name.empty()) e.function_name = ctx->sender.function_name;
   e.reason = err.reason.empty() ? std::string(error_name(err.code)) : err.reason;
-  bool payload_free = err.code == ErrorCode::kReplayDetected || err.code == ErrorCode::kMessageStale ||
-                      err.code == ErrorCode::kMalformedJson || err.code == ErrorCode::kSchemaValidationFailed;
+  bool payload_free =
+      err.code == ErrorCode::kReplayDetected || err.code == ErrorCode::kMessageStale ||
+      err.code == ErrorCode::kMalformedJson || err.code == ErrorCode::kSchemaValidationFailed;
   if (ctx->msg && !payload_free) {
     std::string action = ctx->msg->action();
     if (!action.empty()) e.action = action.substr(0, 128);
   }
   // §16.2: a refused AI command names its model too (not for replays: those record nothing sent).
-  if (ctx->msg && ctx->msg->ai && err.code != ErrorCode::kReplayDetected && err.code != ErrorCode::kMessageStale)
+  if (ctx->msg && ctx->msg->ai && err.code != ErrorCode::kReplayDetected &&
+      err.code != ErrorCode::kMessageStale)
     e.ai = *ctx->msg->ai;
   e.detail = ctx->audit_detail;
   e.detail.set("error_code", std::string(error_name(err.code)));
@@ -101,6 +110,7 @@ void refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, const Error&
   e.detail.set("route", ctx->in.route);
   svc.write_audit(std::move(e));
   ctx->finish(std::move(out));
+  return Stage::Result::kAnswered;
 }
 
 Pipeline::Pipeline(NodeServices& services, std::vector<std::unique_ptr<Stage>> stages)
@@ -117,7 +127,8 @@ void Pipeline::submit(Ingress in, std::function<void(Outcome)> done) {
   if (ctx->in.received_mono_us == 0) ctx->in.received_mono_us = ctx->started_mono_us;
   // parse: arrival → here (routing and the JSON parse); total: arrival → answer handed over.
   parse_timer_->observe_us(static_cast<double>(ctx->started_mono_us - ctx->in.received_mono_us));
-  ctx->done = [total = total_timer_, arrival = ctx->in.received_mono_us, done = std::move(done)](Outcome out) {
+  ctx->done = [total = total_timer_, arrival = ctx->in.received_mono_us,
+               done = std::move(done)](Outcome out) {
     done(std::move(out));
     total->observe_us(static_cast<double>(steady_us() - arrival));
   };
@@ -129,7 +140,8 @@ void Pipeline::run_from(const std::shared_ptr<Context>& ctx, std::string_view st
   ctx->pipeline = this;
   for (size_t i = 0; i < stages_.size(); ++i)
     if (stage == stages_[i]->name()) return run(ctx, i);
-  refuse(svc_, ctx, Error(ErrorCode::kInternal, "no pipeline stage named " + std::string(stage)), "INTERNAL_ERROR");
+  refuse(svc_, ctx, Error(ErrorCode::kInternal, "no pipeline stage named " + std::string(stage)),
+         "INTERNAL_ERROR");
 }
 
 void Pipeline::run(const std::shared_ptr<Context>& ctx, size_t first) {
@@ -140,7 +152,8 @@ void Pipeline::run(const std::shared_ptr<Context>& ctx, size_t first) {
     if (r != Stage::Result::kContinue) return;
   }
   if (!ctx->finished()) {
-    refuse(svc_, ctx, Error(ErrorCode::kInternal, "the pipeline ended without an answer"), "INTERNAL_ERROR");
+    refuse(svc_, ctx, Error(ErrorCode::kInternal, "the pipeline ended without an answer"),
+           "INTERNAL_ERROR");
   }
 }
 

@@ -4,11 +4,11 @@
 // A pipeline is an ordered list of Stages (in the spirit of Envoy's filters). Each stage
 // receives the Context and returns:
 //   kContinue — pass it to the next stage;
-//   kAnswered — the stage refused (ctx.fail) or answered the message itself;
+//   kAnswered — the stage refused (`return refuse(...)`) or answered the message itself;
 //   kParked   — the stage took ownership and will finish the context later (audit
 //               durability, a HiTL decision); it must eventually call ctx.finish().
 // Whatever happens, the context is finished exactly once and writes exactly one audit record
-// (refusals: the record is written by Pipeline::refuse; acceptances: by the dispatch stage).
+// (refusals: the record is written by refuse(); acceptances: by the dispatch stage).
 //
 // The stages themselves are in stages.h (and, for fleets and §16, in node/fleet and node/ai);
 // the node's order is node/api/stage_order.cpp (docs/NODE.md).
@@ -40,15 +40,15 @@ class Pipeline;
 
 // What a transport hands to the pipeline.
 struct Ingress {
-  json::Value body;        // parsed JSON (the transport parsed it with its limits)
-  std::string bearer;      // token from the Authorization header or the stream's CONNECT
-  std::string transport;   // "http", "ws"
-  std::string route;       // e.g. "/rcan/v1/command"
-  std::string remote;      // peer address, for logs
+  json::Value body;       // parsed JSON (the transport parsed it with its limits)
+  std::string bearer;     // token from the Authorization header or the stream's CONNECT
+  std::string transport;  // "http", "ws"
+  std::string route;      // e.g. "/rcan/v1/command"
+  std::string remote;     // peer address, for logs
   std::optional<Principal> preauthenticated;  // a stream authenticated at CONNECT
-  std::string fleet_id;    // MQTT: the fleet topic it came in on (empty: not a fleet topic)
-  std::string fleet_mode;  // MQTT: "broadcast", "individual" or "estop" (docs/FLEET.md)
-  bool standing_estop = false;  // MQTT: the retained fleet ESTOP, obeyed whatever its age
+  std::string fleet_id;          // MQTT: the fleet topic it came in on (empty: not a fleet topic)
+  std::string fleet_mode;        // MQTT: "broadcast", "individual" or "estop" (docs/FLEET.md)
+  bool standing_estop = false;   // MQTT: the retained fleet ESTOP, obeyed whatever its age
   int64_t received_mono_us = 0;  // steady clock at arrival (transport read done); 0: at submit
 };
 
@@ -71,8 +71,8 @@ struct Context {
   std::optional<Capability> capability;
   std::string event = "COMMAND";  // audit event for acceptance
   json::Object audit_detail;
-  std::string session_id;           // control session the command runs under
-  bool fleet_command = false;       // arrived as FLEET_COMMAND (decoded as a COMMAND)
+  std::string session_id;      // control session the command runs under
+  bool fleet_command = false;  // arrived as FLEET_COMMAND (decoded as a COMMAND)
   // §16 (src/node/ai/gate_stages.cpp): written into the acceptance record by the dispatch stage.
   bool gate_bypassed = false;        // a confidence gate missed with on_fail allow
   bool hitl_timeout_bypass = false;  // a HiTL gate timed out with on_timeout allow
@@ -118,8 +118,10 @@ class Pipeline {
 };
 
 // Refuses a context: answers the error body with its HTTP status and writes the audit
-// record (event, outcome "blocked"/"error"). Used by every stage.
-void refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, const Error& err,
-            const std::string& audit_event = {});
+// record (event, outcome "blocked"/"error"). The one way a stage refuses:
+//   if (!ok) return refuse(svc_, ctx, Error(ErrorCode::kRateLimited, "…"), "RATE_LIMITED");
+// Returns Stage::Result::kAnswered.
+Stage::Result refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, const Error& err,
+                     const std::string& audit_event = {});
 
 }  // namespace rcan::node

@@ -11,8 +11,8 @@
 namespace rcan::node {
 
 // message_stages.cpp
-std::unique_ptr<Stage> make_shape_stage(NodeServices& services);  // the JSON is a message
-std::unique_ptr<Stage> make_token_stage(NodeServices& services);  // a token is present
+std::unique_ptr<Stage> make_shape_stage(NodeServices& services);   // the JSON is a message
+std::unique_ptr<Stage> make_token_stage(NodeServices& services);   // a token is present
 std::unique_ptr<Stage> make_decode_stage(NodeServices& services);  // decoded; SAFETY recognised
 // auth_stages.cpp
 std::unique_ptr<Stage> make_auth_stage(NodeServices& services);    // token, signature, §8.5

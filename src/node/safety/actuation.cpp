@@ -1,12 +1,11 @@
 // SafetyActuation: the pipeline's Actuation over the SafetyCore. It turns a COMMAND's action
 // and parameters into an ActuatorCommand (docs/NODE.md §Commands), asks the core to check it
 // (limits, ESTOP, deadline) without applying, and applies it once the audit record is durable.
-#include "node/safety/actuation_safety.h"
-
 #include <algorithm>
 #include <cctype>
 #include <cmath>
 
+#include "node/safety/actuation_safety.h"
 #include "node/safety/sim_robot.h"
 #include "rcan/errors.h"
 
@@ -29,7 +28,8 @@ class Params {
   explicit Params(const json::Object& payload) : flat_(payload) {
     int i = 0;
     for (const char* k : {"params", "parameters"})
-      if (const json::Value* inner = payload.find(k); inner && inner->is_object()) nested_[i++] = &inner->as_object();
+      if (const json::Value* inner = payload.find(k); inner && inner->is_object())
+        nested_[i++] = &inner->as_object();
   }
   // The first of the three that has `name` (even as null) decides.
   const json::Value* find(std::string_view name) const {
@@ -65,10 +65,11 @@ bool starts(const std::string& s, std::string_view p) { return s.rfind(p, 0) == 
 Result<ActuatorCommand> translate_command(const Message& msg, const SafetyLimits& limits) {
   std::string action = lower(msg.action());
   const Params params(msg.payload);
-  if (action == "move" || action == "move_forward" || action == "move_backward" || action == "drive" ||
-      action == "teleop" || starts(action, "nav") || action == "turn" || action == "turn_left" ||
-      action == "turn_right" || action == "rotate" || action == "goto") {
-    auto lin = number(params, {"linear", "linear_x", "linear_mps", "speed", "speed_mps", "velocity"});
+  if (action == "move" || action == "move_forward" || action == "move_backward" ||
+      action == "drive" || action == "teleop" || starts(action, "nav") || action == "turn" ||
+      action == "turn_left" || action == "turn_right" || action == "rotate" || action == "goto") {
+    auto lin =
+        number(params, {"linear", "linear_x", "linear_mps", "speed", "speed_mps", "velocity"});
     if (!lin.ok()) return lin.error();
     auto ang = number(params, {"angular", "angular_z", "angular_radps", "yaw_rate"});
     if (!ang.ok()) return ang.error();
@@ -81,16 +82,21 @@ Result<ActuatorCommand> translate_command(const Message& msg, const SafetyLimits
     double linear = lin->value_or(0.0);
     double angular = ang->value_or(0.0);
     if (action == "move_forward" && !*lin) linear = std::min(0.3, limits.max_linear_mps);
-    if (action == "move_backward") linear = -std::fabs(*lin ? linear : std::min(0.3, limits.max_linear_mps));
-    if ((action == "turn_left" || action == "turn_right") && !*ang) angular = std::min(0.5, limits.max_angular_radps);
+    if (action == "move_backward")
+      linear = -std::fabs(*lin ? linear : std::min(0.3, limits.max_linear_mps));
+    if ((action == "turn_left" || action == "turn_right") && !*ang)
+      angular = std::min(0.5, limits.max_angular_radps);
     if (action == "turn_right") angular = -std::fabs(angular);
     int64_t duration = 0;
-    if (*dur_ms) duration = static_cast<int64_t>(**dur_ms);
-    else if (*dur_s) duration = static_cast<int64_t>(**dur_s * 1000.0);
-    else if (*dist && std::fabs(linear) > 1e-6) duration = static_cast<int64_t>(std::fabs(**dist / linear) * 1000.0);
+    if (*dur_ms)
+      duration = static_cast<int64_t>(**dur_ms);
+    else if (*dur_s)
+      duration = static_cast<int64_t>(**dur_s * 1000.0);
+    else if (*dist && std::fabs(linear) > 1e-6)
+      duration = static_cast<int64_t>(std::fabs(**dist / linear) * 1000.0);
     if (duration < 0) return bad_param("duration_ms", "duration must not be negative");
-    if (!*lin && !*ang && action != "move_forward" && action != "move_backward" && action != "turn_left" &&
-        action != "turn_right")
+    if (!*lin && !*ang && action != "move_forward" && action != "move_backward" &&
+        action != "turn_left" && action != "turn_right")
       return bad_param("linear", "a drive command needs linear and/or angular");
     return ActuatorCommand::make_drive(linear, angular, duration);
   }
@@ -106,20 +112,23 @@ Result<ActuatorCommand> translate_command(const Message& msg, const SafetyLimits
       return bad_param("joints", "joints must be an array of 6 numbers (radians)");
     for (int i = 0; i < kArmJoints; ++i) {
       const json::Value& e = j->as_array()[static_cast<size_t>(i)];
-      if (!e.is_number() || !std::isfinite(e.to_double())) return bad_param("joints", "joints must be finite numbers");
+      if (!e.is_number() || !std::isfinite(e.to_double()))
+        return bad_param("joints", "joints must be finite numbers");
       targets[static_cast<size_t>(i)] = e.to_double();
     }
     auto speed = number(params, {"max_joint_speed_radps", "joint_speed", "speed"});
     if (!speed.ok()) return speed.error();
     return ActuatorCommand::make_arm(targets, speed->value_or(0.0));
   }
-  if (action == "gripper_open" || action == "gripper_close" || action == "grip" || action == "release_grip") {
+  if (action == "gripper_open" || action == "gripper_close" || action == "grip" ||
+      action == "release_grip") {
     ActuatorCommand c;
-    c.gripper = (action == "gripper_open" || action == "release_grip") ? GripperAction::kOpen : GripperAction::kClose;
+    c.gripper = (action == "gripper_open" || action == "release_grip") ? GripperAction::kOpen
+                                                                       : GripperAction::kClose;
     return c;
   }
-  return Error(ErrorCode::kCommandRejected, "unknown action '" + msg.action().substr(0, 64) + "'", "payload.action",
-               "unknown_action");
+  return Error(ErrorCode::kCommandRejected, "unknown action '" + msg.action().substr(0, 64) + "'",
+               "payload.action", "unknown_action");
 }
 
 SafetyActuation::SafetyActuation(SafetyCore& core, std::string robot_name)
@@ -142,7 +151,8 @@ void SafetyActuation::stop(const std::string& source) {
 }
 
 bool SafetyActuation::informational(const std::string& action) const {
-  return action == "chat" || action == "ask" || action == "status" || action == "get_status" || action == "query";
+  return action == "chat" || action == "ask" || action == "status" || action == "get_status" ||
+         action == "query";
 }
 
 Result<PreparedCommand> SafetyActuation::prepare(const Message& msg, int64_t deadline_mono_ms,
@@ -208,7 +218,9 @@ void SafetyActuation::session_started(const std::string& session_id, int64_t tim
   core_.set_session_control(session_id, true);
 }
 
-void SafetyActuation::session_heartbeat(const std::string& session_id) { (void)core_.heartbeat(session_id); }
+void SafetyActuation::session_heartbeat(const std::string& session_id) {
+  (void)core_.heartbeat(session_id);
+}
 
 void SafetyActuation::session_ended(const std::string& session_id) {
   core_.set_session_control(session_id, false);
@@ -217,6 +229,8 @@ void SafetyActuation::session_ended(const std::string& session_id) {
 
 json::Value SafetyActuation::status() const { return json::Value(core_.status().to_json()); }
 
-json::Value SafetyActuation::telemetry() const { return json::Value(core_.robot_state().to_json()); }
+json::Value SafetyActuation::telemetry() const {
+  return json::Value(core_.robot_state().to_json());
+}
 
 }  // namespace rcan::node

@@ -17,12 +17,13 @@
 namespace rcan::node {
 
 struct PreparedCommand {
-  std::string action_name;                 // the COMMAND's action, lower-cased
-  std::optional<ActuatorCommand> command;  // as checked by prepare(); none for an informational action
-  std::string question;                    // chat/ask: the text asked
-  json::Value action;      // what will be applied (after clamping), for the audit record
+  std::string action_name;  // the COMMAND's action, lower-cased
+  std::optional<ActuatorCommand>
+      command;           // as checked by prepare(); none for an informational action
+  std::string question;  // chat/ask: the text asked
+  json::Value action;    // what will be applied (after clamping), for the audit record
   bool clamped = false;
-  std::string clamp_note;  // which limit clamped it
+  std::string clamp_note;        // which limit clamped it
   int64_t deadline_mono_ms = 0;  // 0 = none
   std::string session_id;
 };

@@ -1,6 +1,6 @@
 // Driver — the one interface every actuator backend implements (the simulated robot, real
-// hardware later). Nothing calls a Driver except the SafetyCore (src/node/safety/safety.h): the core
-// validates and limits each command, serialises apply()/step()/state(), and may call stop()
+// hardware later). Nothing calls a Driver except the SafetyCore (src/node/safety/safety.h): the
+// core validates and limits each command, serialises apply()/step()/state(), and may call stop()
 // from any thread at any time.
 //
 // Contract for implementers:
@@ -56,7 +56,9 @@ struct ActuatorCommand {
 
   bool empty() const { return !drive && !arm && !gripper && !stop; }
   // True when executing the command can move something.
-  bool moves() const { return !stop && (drive.has_value() || arm.has_value() || gripper.has_value()); }
+  bool moves() const {
+    return !stop && (drive.has_value() || arm.has_value() || gripper.has_value());
+  }
 
   static ActuatorCommand make_drive(double linear_mps, double angular_radps, int64_t duration_ms) {
     ActuatorCommand c;
@@ -119,7 +121,7 @@ struct RobotState {
 
 // What a driver is and can do (for /api/status, the P66 manifest and limit prediction).
 struct DriverInfo {
-  std::string name;          // "sim"
+  std::string name;  // "sim"
   bool simulated = false;
   bool has_base = false;
   bool has_arm = false;
@@ -133,8 +135,8 @@ struct DriverInfo {
   JointArray joint_min_rad{};
   JointArray joint_max_rad{};
   // Dynamics the core uses to predict where a drive command ends.
-  double linear_accel_mps2 = 0.0;   // normal accel/decel limit (0 = instantaneous)
-  double brake_decel_mps2 = 0.0;    // deceleration after stop() (0 = instantaneous)
+  double linear_accel_mps2 = 0.0;         // normal accel/decel limit (0 = instantaneous)
+  double brake_decel_mps2 = 0.0;          // deceleration after stop() (0 = instantaneous)
   std::vector<std::string> capabilities;  // e.g. "status", "teleop", "navigation", "arm", "chat"
 
   json::Object to_json() const;

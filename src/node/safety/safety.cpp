@@ -1,7 +1,7 @@
 #include "node/safety/safety.h"
 
-#include <pthread.h>
 #include <fcntl.h>
+#include <pthread.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -79,8 +79,8 @@ json::Object SafetyLimits::to_json() const {
 json::Object DispatchOutcome::to_json() const {
   json::Array c;
   for (const auto& s : clamps) c.emplace_back(s);
-  return json::Object{{"clamped", clamped}, {"clamps", json::Value(std::move(c))},
-                      {"applied", applied.to_json()}};
+  return json::Object{
+      {"clamped", clamped}, {"clamps", json::Value(std::move(c))}, {"applied", applied.to_json()}};
 }
 
 json::Object SafetyEvent::to_json() const {
@@ -115,7 +115,10 @@ json::Object SafetyStatus::to_json() const {
     if (!safe_stop_session.empty()) s.set("session_id", safe_stop_session);
     o.set("safe_stop_detail", std::move(s));
   }
-  o.set("state", estop_active ? "estop" : safe_stop_active ? "safe_stop" : robot.stopped ? "idle" : "moving");
+  o.set("state", estop_active       ? "estop"
+                 : safe_stop_active ? "safe_stop"
+                 : robot.stopped    ? "idle"
+                                    : "moving");
   o.set("limit_policy", limit_policy_name(policy));
   o.set("limits", limits.to_json());
   o.set("robot", robot.to_json());
@@ -124,7 +127,8 @@ json::Object SafetyStatus::to_json() const {
   o.set("estop_fence_timeouts", static_cast<int64_t>(estop_fence_timeouts));
   o.set("persistence", json::Object{{"enabled", persistence_enabled},
                                     {"durable", persisted},
-                                    {"error", persist_error.empty() ? json::Value() : json::Value(persist_error)}});
+                                    {"error", persist_error.empty() ? json::Value()
+                                                                    : json::Value(persist_error)}});
   if (!startup_note.empty()) o.set("startup_note", startup_note);
   o.set("sessions", static_cast<int64_t>(sessions));
   o.set("running", running);
@@ -166,7 +170,9 @@ Status SafetyCore::open(const std::string& state_dir) {
   }
   std::error_code ec;
   fs::create_directories(state_dir, ec);
-  if (ec) return Error(ErrorCode::kInternal, "cannot create safety state dir " + state_dir + ": " + ec.message());
+  if (ec)
+    return Error(ErrorCode::kInternal,
+                 "cannot create safety state dir " + state_dir + ": " + ec.message());
   ::chmod(state_dir.c_str(), 0700);
   const std::string path = state_dir + "/" + kStateFile;
 
@@ -189,18 +195,23 @@ Status SafetyCore::open(const std::string& state_dir) {
       auto parsed = json::parse(ss.str());
       if (!parsed.ok() || !parsed->is_object()) {
         corrupt = true;
-        why = parsed.ok() ? "state file is not an object" : "state file corrupt: " + parsed.error().message;
+        why = parsed.ok() ? "state file is not an object"
+                          : "state file corrupt: " + parsed.error().message;
       } else {
         const auto* fmt = parsed->get("format");
         const auto* active = parsed->get("estop_active");
-        if (!fmt || !fmt->is_string() || fmt->as_string() != kStateFormat || !active || !active->is_bool()) {
+        if (!fmt || !fmt->is_string() || fmt->as_string() != kStateFormat || !active ||
+            !active->is_bool()) {
           corrupt = true;
           why = "state file has an unknown format";
         } else {
           loaded.active = active->as_bool();
-          if (const auto* s = parsed->get("source"); s && s->is_string()) loaded.source = s->as_string();
-          if (const auto* r = parsed->get("reason"); r && r->is_string()) loaded.reason = r->as_string();
-          if (const auto* t = parsed->get("since_ms"); t && t->is_int()) loaded.since_wall_ms = t->as_int();
+          if (const auto* s = parsed->get("source"); s && s->is_string())
+            loaded.source = s->as_string();
+          if (const auto* r = parsed->get("reason"); r && r->is_string())
+            loaded.reason = r->as_string();
+          if (const auto* t = parsed->get("since_ms"); t && t->is_int())
+            loaded.since_wall_ms = t->as_int();
         }
       }
     }
@@ -368,12 +379,9 @@ Status SafetyCore::write_state_file(const LatchState& st) {
   const std::string dir = state_dir_;
   const std::string path = dir + "/" + kStateFile;
   const std::string tmp = path + ".tmp";
-  json::Object o{{"format", kStateFormat},
-                 {"estop_active", st.active},
-                 {"source", st.source},
-                 {"reason", st.reason},
-                 {"since_ms", st.since_wall_ms},
-                 {"written_ms", clock_.wall_ms()}};
+  json::Object o{{"format", kStateFormat},       {"estop_active", st.active},
+                 {"source", st.source},          {"reason", st.reason},
+                 {"since_ms", st.since_wall_ms}, {"written_ms", clock_.wall_ms()}};
   const std::string body = json::dump(json::Value(std::move(o))) + "\n";
 
   auto fail = [](const std::string& what) {
@@ -560,7 +568,8 @@ void SafetyCore::tick() {
       if (ahead > 1e-3 && ahead > here) {
         driver_->stop();
         drive_deadline_mono_ = 0;
-        events.push_back(make_event("WORKSPACE_SAFE_STOP", 0, 0, "the base was about to leave the workspace"));
+        events.push_back(
+            make_event("WORKSPACE_SAFE_STOP", 0, 0, "the base was about to leave the workspace"));
       }
     }
     owner = motion_owner_;
@@ -577,7 +586,8 @@ void SafetyCore::tick() {
       if (s.lost || elapsed <= s.timeout_ms) continue;
       s.lost = true;
       if (s.holds_control || (moving && id == owner)) {
-        SafetyEvent ev = make_event("NETWORK_LOSS_SAFE_STOP", elapsed, s.timeout_ms, "heartbeat timeout");
+        SafetyEvent ev =
+            make_event("NETWORK_LOSS_SAFE_STOP", elapsed, s.timeout_ms, "heartbeat timeout");
         ev.session_id = id;
         events.push_back(std::move(ev));
       }
@@ -684,7 +694,8 @@ void SafetyCore::start() {
         continue;
       }
       resting_.store(false, std::memory_order_seq_cst);
-      tick_wait_cv_.wait_until(wl, next, [this] { return !running_.load(std::memory_order_acquire); });
+      tick_wait_cv_.wait_until(wl, next,
+                               [this] { return !running_.load(std::memory_order_acquire); });
       next += period;
       const auto now = std::chrono::steady_clock::now();
       if (next < now) next = now + period;  // overran: do not try to catch up
@@ -713,9 +724,11 @@ void SafetyCore::stop() {
 
 RobotState SafetyCore::decorate(RobotState st) const {
   st.ts = clock_.wall_ms();
-  st.loop_latency_ms = static_cast<double>(loop_latency_us_.load(std::memory_order_relaxed)) / 1000.0;
+  st.loop_latency_ms =
+      static_cast<double>(loop_latency_us_.load(std::memory_order_relaxed)) / 1000.0;
   st.loop_count = loop_count_.load(std::memory_order_relaxed);
-  st.paused = latched_.load(std::memory_order_acquire) || safe_stop_.load(std::memory_order_acquire);
+  st.paused =
+      latched_.load(std::memory_order_acquire) || safe_stop_.load(std::memory_order_acquire);
   return st;
 }
 

@@ -92,15 +92,15 @@ struct SafetyLimits {
 struct SafetyConfig {
   SafetyLimits limits;
   LimitPolicy policy = LimitPolicy::kClamp;
-  bool estop_on_startup = false;         // safety.estop_on_startup: always come up latched
-  int64_t tick_period_ms = 20;           // 50 Hz control loop
+  bool estop_on_startup = false;  // safety.estop_on_startup: always come up latched
+  int64_t tick_period_ms = 20;    // 50 Hz control loop
   // While the driver is at rest (Driver::at_rest()) and no drive TTL is running, the loop
   // sleeps up to this long instead — woken early by a command, a session or watchdog feed,
   // and always on time for the next heartbeat or watchdog deadline. An idle robot then costs
   // one wake-up a second instead of fifty. 0 or ≤ tick_period_ms: always the full rate.
   int64_t idle_tick_ms = 1000;
-  int64_t default_heartbeat_ms = 2000;   // register_session(id, 0) → this (latency_budget × 2)
-  int64_t watchdog_timeout_ms = 0;       // brain watchdog; 0 = disabled
+  int64_t default_heartbeat_ms = 2000;  // register_session(id, 0) → this (latency_budget × 2)
+  int64_t watchdog_timeout_ms = 0;      // brain watchdog; 0 = disabled
   // A drive still commanded this long after its deadline is stopped by tick() (safe-stop).
   int64_t drive_ttl_grace_ms = 100;
   // estop() waits at most this long for a dispatch already inside Driver::apply() (see
@@ -109,9 +109,9 @@ struct SafetyConfig {
 };
 
 struct DispatchOptions {
-  int64_t deadline_mono_ms = 0;           // 0 = no deadline; else refused when now > deadline
-  std::string session_id;                 // empty = session-less
-  std::optional<LimitPolicy> policy;      // default: SafetyConfig::policy
+  int64_t deadline_mono_ms = 0;       // 0 = no deadline; else refused when now > deadline
+  std::string session_id;             // empty = session-less
+  std::optional<LimitPolicy> policy;  // default: SafetyConfig::policy
 };
 
 struct DispatchOutcome {
@@ -148,21 +148,21 @@ struct SafetyStatus {
   std::string estop_reason;
   int64_t estop_since_wall_ms = 0;
   bool safe_stop_active = false;
-  std::string safe_stop_reason;   // "NETWORK_LOSS_SAFE_STOP", "workspace", "drive_ttl"
+  std::string safe_stop_reason;  // "NETWORK_LOSS_SAFE_STOP", "workspace", "drive_ttl"
   std::string safe_stop_session;
   int64_t safe_stop_since_wall_ms = 0;
   SafetyLimits limits;
   LimitPolicy policy = LimitPolicy::kClamp;
-  RobotState robot;               // with ts / loop_latency_ms / loop_count / paused filled
+  RobotState robot;  // with ts / loop_latency_ms / loop_count / paused filled
   DriverInfo driver;
-  LatencyStats estop_latency;     // estop() call → Driver::stop() returned
+  LatencyStats estop_latency;  // estop() call → Driver::stop() returned
   uint64_t estop_fence_timeouts = 0;
   bool persistence_enabled = false;
-  bool persisted = true;          // the latest latch state is durable
-  std::string persist_error;      // last persistence error, empty when none
-  std::string startup_note;       // e.g. "state file corrupt: …; came up latched (fail safe)"
+  bool persisted = true;      // the latest latch state is durable
+  std::string persist_error;  // last persistence error, empty when none
+  std::string startup_note;   // e.g. "state file corrupt: …; came up latched (fail safe)"
   size_t sessions = 0;
-  bool running = false;           // tick thread running
+  bool running = false;  // tick thread running
   json::Object to_json() const;
 };
 
@@ -173,7 +173,7 @@ struct EstopResult {
   bool fenced = true;
   int64_t stop_latency_ns = 0;    // call → Driver::stop() returned
   int64_t return_latency_ns = 0;  // call → estop() returning (fence included, not persistence)
-  uint64_t state_seq = 0;      // pass to wait_persisted()
+  uint64_t state_seq = 0;         // pass to wait_persisted()
 };
 
 class SafetyCore {
@@ -291,23 +291,23 @@ class SafetyCore {
 
   // Serialises Driver::apply/step/state. Held only around those calls.
   mutable std::mutex apply_mu_;
-  std::string motion_owner_;          // guarded by apply_mu_: session of the last motion command
-  int64_t drive_deadline_mono_ = 0;   // guarded by apply_mu_: 0 = no active drive
-  int64_t last_tick_mono_ = 0;        // guarded by apply_mu_
+  std::string motion_owner_;         // guarded by apply_mu_: session of the last motion command
+  int64_t drive_deadline_mono_ = 0;  // guarded by apply_mu_: 0 = no active drive
+  int64_t last_tick_mono_ = 0;       // guarded by apply_mu_
 
   // Latch metadata, safe-stop metadata, persistence bookkeeping.
   mutable std::mutex meta_mu_;
-  LatchState latch_;                  // guarded by meta_mu_
-  uint64_t latch_seq_ = 0;            // guarded by meta_mu_: bumps on every latch change
-  uint64_t persisted_seq_ = 0;        // guarded by meta_mu_
-  std::string persist_error_;         // guarded by meta_mu_
-  std::string startup_note_;          // guarded by meta_mu_
-  std::string safe_stop_reason_;      // guarded by meta_mu_
-  std::string safe_stop_session_;     // guarded by meta_mu_
+  LatchState latch_;               // guarded by meta_mu_
+  uint64_t latch_seq_ = 0;         // guarded by meta_mu_: bumps on every latch change
+  uint64_t persisted_seq_ = 0;     // guarded by meta_mu_
+  std::string persist_error_;      // guarded by meta_mu_
+  std::string startup_note_;       // guarded by meta_mu_
+  std::string safe_stop_reason_;   // guarded by meta_mu_
+  std::string safe_stop_session_;  // guarded by meta_mu_
   int64_t safe_stop_since_wall_ms_ = 0;
-  std::string state_dir_;             // set once by open()
-  bool persist_enabled_ = false;      // set once by open()
-  bool persist_quit_ = false;         // guarded by meta_mu_
+  std::string state_dir_;               // set once by open()
+  bool persist_enabled_ = false;        // set once by open()
+  bool persist_quit_ = false;           // guarded by meta_mu_
   std::condition_variable persist_cv_;  // persister wakes (meta_mu_)
   std::condition_variable durable_cv_;  // waiters in wait_persisted (meta_mu_)
   std::thread persister_;
@@ -329,12 +329,12 @@ class SafetyCore {
   std::atomic<uint64_t> loop_count_{0};
   std::atomic<int64_t> loop_latency_us_{0};
 
-  std::mutex thread_mu_;               // start()/stop()
+  std::mutex thread_mu_;  // start()/stop()
   std::thread ticker_;
   std::atomic<bool> running_{false};
   std::mutex tick_wait_mu_;
   std::condition_variable tick_wait_cv_;
-  bool wake_requested_ = false;        // guarded by tick_wait_mu_
+  bool wake_requested_ = false;  // guarded by tick_wait_mu_
   // True while the loop thread may be sleeping at its idle rate: dispatch() then brings the
   // driver up to date before applying, and anything that adds work wakes the loop.
   std::atomic<bool> resting_{false};

@@ -15,7 +15,6 @@ std::string num(double d) {
   return buf;
 }
 
-
 // Predicts a drive from the current state: v ramps from v0 to `v` at `accel` (instantly when
 // 0), holds until `duration_ms`, then ramps to 0 at `accel`; w is constant during the drive and
 // taken to stop with v. Returns true when the path moves further outside the workspace at
@@ -51,16 +50,15 @@ bool leaves_workspace(const Workspace& ws, const RobotState& st, double v, doubl
   return false;
 }
 
-
 Error limit_error(const std::string& what, const std::string& field) {
   return Error(ErrorCode::kCommandRejected, what, field, "limit_exceeded");
 }
 
-
 }  // namespace
 
 Result<ActuatorCommand> SafetyCore::limit_command(const ActuatorCommand& cmd, LimitPolicy policy,
-                                                  const RobotState& now, DispatchOutcome& out) const {
+                                                  const RobotState& now,
+                                                  DispatchOutcome& out) const {
   ActuatorCommand a = cmd;
   const bool clamp = policy == LimitPolicy::kClamp;
   auto note = [&](const std::string& s) {
@@ -73,20 +71,23 @@ Result<ActuatorCommand> SafetyCore::limit_command(const ActuatorCommand& cmd, Li
       return Error(ErrorCode::kCommandRejected, "this robot has no base", "drive", "unsupported");
     auto& d = *a.drive;
     if (!std::isfinite(d.linear_mps) || !std::isfinite(d.angular_radps))
-      return Error(ErrorCode::kSchemaValidationFailed, "drive velocities must be finite numbers", "drive");
+      return Error(ErrorCode::kSchemaValidationFailed, "drive velocities must be finite numbers",
+                   "drive");
     if (d.duration_ms <= 0) d.duration_ms = limits_.max_drive_duration_ms;
     if (d.duration_ms > limits_.max_drive_duration_ms) {
       if (!clamp)
-        return limit_error("duration_ms " + std::to_string(d.duration_ms) + " exceeds max_drive_duration_ms " +
+        return limit_error("duration_ms " + std::to_string(d.duration_ms) +
+                               " exceeds max_drive_duration_ms " +
                                std::to_string(limits_.max_drive_duration_ms),
                            "drive.duration_ms");
-      note("duration_ms " + std::to_string(d.duration_ms) + " -> " + std::to_string(limits_.max_drive_duration_ms) +
-           " (max_drive_duration_ms)");
+      note("duration_ms " + std::to_string(d.duration_ms) + " -> " +
+           std::to_string(limits_.max_drive_duration_ms) + " (max_drive_duration_ms)");
       d.duration_ms = limits_.max_drive_duration_ms;
     }
     if (std::abs(d.linear_mps) > limits_.max_linear_mps) {
       if (!clamp)
-        return limit_error("linear_mps " + num(d.linear_mps) + " exceeds max_linear_mps " + num(limits_.max_linear_mps),
+        return limit_error("linear_mps " + num(d.linear_mps) + " exceeds max_linear_mps " +
+                               num(limits_.max_linear_mps),
                            "drive.linear_mps");
       const double c = std::copysign(limits_.max_linear_mps, d.linear_mps);
       note("linear_mps " + num(d.linear_mps) + " -> " + num(c) + " (max_linear_mps)");
@@ -106,9 +107,11 @@ Result<ActuatorCommand> SafetyCore::limit_command(const ActuatorCommand& cmd, Li
     if (ws.enabled && d.linear_mps != 0.0 &&
         leaves_workspace(ws, now, d.linear_mps, d.angular_radps, d.duration_ms, accel)) {
       char rect[160];
-      std::snprintf(rect, sizeof rect, "[%g, %g] x [%g, %g]", ws.min_x, ws.max_x, ws.min_y, ws.max_y);
+      std::snprintf(rect, sizeof rect, "[%g, %g] x [%g, %g]", ws.min_x, ws.max_x, ws.min_y,
+                    ws.max_y);
       if (!clamp)
-        return limit_error(std::string("drive would leave the workspace ") + rect + " (workspace)", "drive");
+        return limit_error(std::string("drive would leave the workspace ") + rect + " (workspace)",
+                           "drive");
       // Longest duration whose path (including the deceleration) stays inside.
       int64_t lo = 0, hi = d.duration_ms;
       while (lo < hi) {
@@ -138,13 +141,15 @@ Result<ActuatorCommand> SafetyCore::limit_command(const ActuatorCommand& cmd, Li
       const double t = arm.targets_rad[i];
       const std::string j = "joint_" + std::to_string(i);
       if (!std::isfinite(t))
-        return Error(ErrorCode::kSchemaValidationFailed, j + " target must be a finite number", "arm." + j);
+        return Error(ErrorCode::kSchemaValidationFailed, j + " target must be a finite number",
+                     "arm." + j);
       if (t < limits_.joint_min_rad[i] || t > limits_.joint_max_rad[i]) {
         const bool low = t < limits_.joint_min_rad[i];
         const double bound = low ? limits_.joint_min_rad[i] : limits_.joint_max_rad[i];
         const std::string lname = low ? "joint_min_rad" : "joint_max_rad";
         if (!clamp)
-          return limit_error(j + " target " + num(t) + " outside " + lname + " " + num(bound), "arm." + j);
+          return limit_error(j + " target " + num(t) + " outside " + lname + " " + num(bound),
+                             "arm." + j);
         note(j + " target " + num(t) + " -> " + num(bound) + " (" + lname + ")");
         arm.targets_rad[i] = bound;
       }
@@ -156,8 +161,8 @@ Result<ActuatorCommand> SafetyCore::limit_command(const ActuatorCommand& cmd, Li
       arm.max_joint_speed_radps = limits_.max_joint_speed_radps;
     } else if (arm.max_joint_speed_radps > limits_.max_joint_speed_radps) {
       if (!clamp)
-        return limit_error("max_joint_speed_radps " + num(arm.max_joint_speed_radps) + " exceeds limit " +
-                               num(limits_.max_joint_speed_radps),
+        return limit_error("max_joint_speed_radps " + num(arm.max_joint_speed_radps) +
+                               " exceeds limit " + num(limits_.max_joint_speed_radps),
                            "arm.max_joint_speed_radps");
       note("max_joint_speed_radps " + num(arm.max_joint_speed_radps) + " -> " +
            num(limits_.max_joint_speed_radps) + " (max_joint_speed_radps)");
@@ -165,32 +170,36 @@ Result<ActuatorCommand> SafetyCore::limit_command(const ActuatorCommand& cmd, Li
     }
   }
   if (a.gripper && !driver_info_.has_gripper)
-    return Error(ErrorCode::kCommandRejected, "this robot has no gripper", "gripper", "unsupported");
+    return Error(ErrorCode::kCommandRejected, "this robot has no gripper", "gripper",
+                 "unsupported");
   return a;
 }
 
-Result<DispatchOutcome> SafetyCore::precheck(const ActuatorCommand& cmd, const DispatchOptions& opts,
-                                             int64_t now) const {
+Result<DispatchOutcome> SafetyCore::precheck(const ActuatorCommand& cmd,
+                                             const DispatchOptions& opts, int64_t now) const {
   DispatchOutcome out;
   if (cmd.stop) {
     out.applied = ActuatorCommand::make_stop();
     return out;
   }
   if (cmd.empty())
-    return Error(ErrorCode::kSchemaValidationFailed, "empty actuator command", "command", "missing_field");
+    return Error(ErrorCode::kSchemaValidationFailed, "empty actuator command", "command",
+                 "missing_field");
   if (latched_.load(std::memory_order_acquire))
-    return Error(ErrorCode::kCommandRejected, "ESTOP is latched; an explicit RESUME is required", "",
-                 "estop_active");
+    return Error(ErrorCode::kCommandRejected, "ESTOP is latched; an explicit RESUME is required",
+                 "", "estop_active");
   if (opts.deadline_mono_ms > 0 && now > opts.deadline_mono_ms)
-    return Error(ErrorCode::kMessageStale,
-                 "command expired " + std::to_string(now - opts.deadline_mono_ms) + " ms before dispatch", "",
-                 "ttl_expired");
+    return Error(
+        ErrorCode::kMessageStale,
+        "command expired " + std::to_string(now - opts.deadline_mono_ms) + " ms before dispatch",
+        "", "ttl_expired");
   if (!opts.session_id.empty()) {
     std::lock_guard<std::mutex> lock(sessions_mu_);
     auto it = sessions_.find(opts.session_id);
     if (it != sessions_.end() &&
         (it->second.lost || now - it->second.last_heartbeat_mono > it->second.timeout_ms)) {
-      return Error(ErrorCode::kSafeStop, "session heartbeat lost; send a heartbeat before commanding", "",
+      return Error(ErrorCode::kSafeStop,
+                   "session heartbeat lost; send a heartbeat before commanding", "",
                    "heartbeat_lost");
     }
   }
@@ -205,11 +214,13 @@ Result<DispatchOutcome> SafetyCore::precheck(const ActuatorCommand& cmd, const D
   return out;
 }
 
-Result<DispatchOutcome> SafetyCore::check(const ActuatorCommand& cmd, const DispatchOptions& opts) const {
+Result<DispatchOutcome> SafetyCore::check(const ActuatorCommand& cmd,
+                                          const DispatchOptions& opts) const {
   return precheck(cmd, opts, clock_.mono_ms());
 }
 
-Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd, const DispatchOptions& opts) {
+Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd,
+                                             const DispatchOptions& opts) {
   if (cmd.stop) {
     // A stop is always allowed, latched or not, stale or not.
     driver_->stop();
@@ -233,12 +244,14 @@ Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd, const D
     // turn even (see estop()). The latch is re-checked after making it odd.
     struct SeqGuard {
       std::atomic<uint64_t>& seq;
-      explicit SeqGuard(std::atomic<uint64_t>& s) : seq(s) { seq.fetch_add(1, std::memory_order_seq_cst); }
+      explicit SeqGuard(std::atomic<uint64_t>& s) : seq(s) {
+        seq.fetch_add(1, std::memory_order_seq_cst);
+      }
       ~SeqGuard() { seq.fetch_add(1, std::memory_order_seq_cst); }
     } guard(apply_seq_);
     if (latched_.load(std::memory_order_seq_cst))
-      return Error(ErrorCode::kCommandRejected, "ESTOP is latched; an explicit RESUME is required", "",
-                   "estop_active");
+      return Error(ErrorCode::kCommandRejected, "ESTOP is latched; an explicit RESUME is required",
+                   "", "estop_active");
     if (resting_.load(std::memory_order_seq_cst)) {
       // The loop may have slept up to idle_tick_ms: bring the driver to now first, so the
       // new motion is integrated from this moment and not from the last tick.
@@ -249,7 +262,8 @@ Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd, const D
     if (latched_.load(std::memory_order_seq_cst)) driver_->stop();
     if (!st.ok()) return st.error();
     if (out.applied.drive) {
-      drive_deadline_mono_ = out.applied.drive->duration_ms > 0 ? now + out.applied.drive->duration_ms : 0;
+      drive_deadline_mono_ =
+          out.applied.drive->duration_ms > 0 ? now + out.applied.drive->duration_ms : 0;
     }
     motion_owner_ = opts.session_id;
   }
@@ -262,6 +276,5 @@ Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd, const D
   }
   return out;
 }
-
 
 }  // namespace rcan::node

@@ -94,7 +94,8 @@ Status SimRobot::apply(const ActuatorCommand& cmd) {
   if (cmd.drive) {
     const auto& d = *cmd.drive;
     if (!std::isfinite(d.linear_mps) || !std::isfinite(d.angular_radps) || d.duration_ms < 0)
-      return Error(ErrorCode::kSchemaValidationFailed, "drive command has a non-finite value", "drive");
+      return Error(ErrorCode::kSchemaValidationFailed, "drive command has a non-finite value",
+                   "drive");
     st_.target_linear_mps = std::clamp(d.linear_mps, -cfg_.max_linear_mps, cfg_.max_linear_mps);
     st_.target_angular_radps =
         std::clamp(d.angular_radps, -cfg_.max_angular_radps, cfg_.max_angular_radps);
@@ -110,9 +111,11 @@ Status SimRobot::apply(const ActuatorCommand& cmd) {
     for (int i = 0; i < kArmJoints; ++i) {
       if (!std::isfinite(a.targets_rad[i]))
         return Error(ErrorCode::kSchemaValidationFailed, "arm target is not finite", "arm");
-      st_.joint_targets_rad[i] = std::clamp(a.targets_rad[i], cfg_.joint_min_rad[i], cfg_.joint_max_rad[i]);
+      st_.joint_targets_rad[i] =
+          std::clamp(a.targets_rad[i], cfg_.joint_min_rad[i], cfg_.joint_max_rad[i]);
     }
-    double speed = a.max_joint_speed_radps > 0.0 ? a.max_joint_speed_radps : cfg_.max_joint_speed_radps;
+    double speed =
+        a.max_joint_speed_radps > 0.0 ? a.max_joint_speed_radps : cfg_.max_joint_speed_radps;
     st_.joint_speed_radps = std::min(speed, cfg_.max_joint_speed_radps);
   }
   if (cmd.gripper) st_.gripper_closed = (*cmd.gripper == GripperAction::kClose);
@@ -134,8 +137,10 @@ void SimRobot::integrate_locked(double dt) {
   const double ang_rate = braking_ ? cfg_.brake_angular_decel_radps2 : cfg_.angular_accel_radps2;
   const double v0 = st_.linear_mps;
   const double w0 = st_.angular_radps;
-  const double v1 = lin_rate > 0 ? approach(v0, st_.target_linear_mps, lin_rate * dt) : st_.target_linear_mps;
-  const double w1 = ang_rate > 0 ? approach(w0, st_.target_angular_radps, ang_rate * dt) : st_.target_angular_radps;
+  const double v1 =
+      lin_rate > 0 ? approach(v0, st_.target_linear_mps, lin_rate * dt) : st_.target_linear_mps;
+  const double w1 = ang_rate > 0 ? approach(w0, st_.target_angular_radps, ang_rate * dt)
+                                 : st_.target_angular_radps;
   // Within a sub-step the velocity changes linearly (or saturates part-way); the mean of the
   // end points is exact when it does not saturate, and within one sub-step's error otherwise.
   auto mean_velocity = [dt](double a, double b, double rate) {
@@ -157,7 +162,8 @@ void SimRobot::integrate_locked(double dt) {
 
   // Arm.
   for (int i = 0; i < kArmJoints; ++i)
-    st_.joints_rad[i] = approach(st_.joints_rad[i], st_.joint_targets_rad[i], st_.joint_speed_radps * dt);
+    st_.joints_rad[i] =
+        approach(st_.joints_rad[i], st_.joint_targets_rad[i], st_.joint_speed_radps * dt);
 
   if (cfg_.battery) {
     drain_pct_ += (0.002 + 0.05 * std::abs(v)) * dt;
@@ -221,8 +227,9 @@ std::string fmt(const char* f, double a) {
 
 std::string pose_sentence(const RobotState& s) {
   char buf[160];
-  std::snprintf(buf, sizeof buf, "I am at x=%.2f m, y=%.2f m, heading %.0f degrees (odometry frame).",
-                s.x, s.y, s.theta * 180.0 / std::numbers::pi);
+  std::snprintf(buf, sizeof buf,
+                "I am at x=%.2f m, y=%.2f m, heading %.0f degrees (odometry frame).", s.x, s.y,
+                s.theta * 180.0 / std::numbers::pi);
   return buf;
 }
 
@@ -239,7 +246,8 @@ std::string motion_sentence(const RobotState& s, const ChatContext& ctx) {
   } else if (s.stopped) {
     out = "I am stopped and ready.";
   } else {
-    out = "I am moving: " + fmt("%.2f m/s", s.linear_mps) + ", " + fmt("%.2f rad/s", s.angular_radps) + ".";
+    out = "I am moving: " + fmt("%.2f m/s", s.linear_mps) + ", " +
+          fmt("%.2f rad/s", s.angular_radps) + ".";
   }
   return out;
 }

@@ -67,10 +67,10 @@ class SimRobot final : public Driver {
 
   const SimRobotConfig cfg_;
   mutable std::mutex mu_;
-  mutable RobotState st_;                // guarded by mu_
-  mutable bool braking_ = false;         // after stop(): decelerate at the brake rates
-  mutable uint64_t seen_stop_gen_ = 0;   // guarded by mu_
-  double drain_pct_ = 0.0;               // guarded by mu_
+  mutable RobotState st_;               // guarded by mu_
+  mutable bool braking_ = false;        // after stop(): decelerate at the brake rates
+  mutable uint64_t seen_stop_gen_ = 0;  // guarded by mu_
+  double drain_pct_ = 0.0;              // guarded by mu_
   std::atomic<uint64_t> stop_gen_{0};
 };
 

@@ -29,7 +29,8 @@ audit::AuditEntry NodeServices::entry(const std::string& principal, const std::s
   return e;
 }
 
-void NodeServices::write_audit(audit::AuditEntry e, std::function<void(Result<audit::Receipt>)> cb) {
+void NodeServices::write_audit(audit::AuditEntry e,
+                               std::function<void(Result<audit::Receipt>)> cb) {
   if (NetMode m = partition.mode(); m != NetMode::kNormal) {  // seed §6.1 log_for_sync()
     e.detail.set("partition_mode", std::string(net_mode_name(m)));
     e.detail.set("sync_pending", true);
@@ -60,7 +61,8 @@ void NodeServices::write_audit(audit::AuditEntry e, std::function<void(Result<au
         }
       }
     } else {
-      audit_unavailable.store(false);  // the log recovered (AuditLog::available() is the live state)
+      audit_unavailable.store(
+          false);  // the log recovered (AuditLog::available() is the live state)
     }
     if (cb) cb(std::move(r));
   });
@@ -75,7 +77,8 @@ Result<Principal> NodeServices::authenticate(std::string_view token) const {
 Result<Principal> NodeServices::authenticate_header(std::string_view authorization) const {
   std::string_view token = transport::bearer_token(authorization);
   if (token.empty() && !authorization.empty())
-    return Error(ErrorCode::kAuthInvalid, "the Authorization header must be 'Bearer <token>'", "authorization");
+    return Error(ErrorCode::kAuthInvalid, "the Authorization header must be 'Bearer <token>'",
+                 "authorization");
   return authenticate(token);
 }
 
@@ -129,7 +132,8 @@ json::Value NodeServices::status(bool detailed) {
   return o;
 }
 
-json::Value NodeServices::envelope(MessageType type, json::Object payload, const std::string& reply_to) const {
+json::Value NodeServices::envelope(MessageType type, json::Object payload,
+                                   const std::string& reply_to) const {
   json::Object o;
   o.set("version", settings.rcan_version);
   o.set("message_id", new_uuid_v4());

@@ -12,18 +12,18 @@
 #include <string>
 #include <vector>
 
-#include "node/safety/actuation.h"
-#include "node/admission/authenticator.h"
 #include "base/clock.h"
-#include "node/control/consent.h"
-#include "node/services/event_bus.h"
-#include "node/admission/injection.h"
 #include "base/metrics.h"
-#include "node/control/ownership.h"
-#include "node/control/partition.h"
+#include "node/admission/authenticator.h"
+#include "node/admission/injection.h"
 #include "node/admission/rate_limit.h"
 #include "node/admission/replay.h"
+#include "node/control/consent.h"
+#include "node/control/ownership.h"
+#include "node/control/partition.h"
 #include "node/control/sessions.h"
+#include "node/safety/actuation.h"
+#include "node/services/event_bus.h"
 #include "rcan/audit/audit_log.h"
 #include "rcan/message.h"
 #include "rcan/roles.h"
@@ -103,8 +103,9 @@ class NodeServices {
   std::atomic<uint64_t> audit_failures{0};
   std::atomic<bool> audit_unavailable{false};
   std::shared_ptr<AiServices> ai;  // set by the daemon before the node starts; may be null
-  // Transports that add to a GRANTED claim answer (the UDP heartbeat key, src/node/bindings/udp_service.h):
-  // called with the new session's id and the answer's payload. Set once, before serving.
+  // Transports that add to a GRANTED claim answer (the UDP heartbeat key,
+  // src/node/bindings/udp_service.h): called with the new session's id and the answer's payload.
+  // Set once, before serving.
   std::function<void(const std::string& session_id, json::Object& payload)> on_grant;
 
   // An audit entry pre-filled with the robot, time, principal and sender identity.
@@ -119,7 +120,9 @@ class NodeServices {
   std::mutex deferred_mu;
   std::vector<audit::AuditEntry> deferred_stops;
 
-  uint32_t rate_limit(Role r) const { return settings.rate_per_minute[static_cast<size_t>(role_level(r))]; }
+  uint32_t rate_limit(Role r) const {
+    return settings.rate_per_minute[static_cast<size_t>(role_level(r))];
+  }
 
   // The one way a token becomes a principal outside the pipeline's own stage: verified (JWT,
   // audience, expiry) and then limited by the node's state (a former owner's token no longer
@@ -131,7 +134,8 @@ class NodeServices {
   json::Value discovery_info() const;
   json::Value status(bool detailed);
   // A fresh message envelope from the node (type, payload), seed shape.
-  json::Value envelope(MessageType type, json::Object payload, const std::string& reply_to = {}) const;
+  json::Value envelope(MessageType type, json::Object payload,
+                       const std::string& reply_to = {}) const;
   // The profile's error body with the node's clock.
   json::Value error(const Error& err, const std::string& reply_to = {}) const;
 };
