@@ -6,7 +6,6 @@
 
 #include "base/clock.h"
 #include "base/log.h"
-#include "extra_transports.h"
 #include "node/ai/ai_services.h"
 #include "node/api/node.h"
 #include "node/bindings/mqtt_node.h"
@@ -20,6 +19,7 @@
 #include "rcan/hash.h"
 #include "settings.h"
 #include "transport/http_server.h"
+#include "transports.h"
 
 namespace fs = std::filesystem;
 
@@ -190,13 +190,15 @@ Status Daemon::start_node() {
   return Status::Ok();
 }
 
-// 6. The transports: gRPC and UDP first (their claim hook is in place before HTTP serves,
-// docs/TRANSPORT.md), HTTP/WebSocket, MQTT (docs/FLEET.md), then the mDNS advertisement.
+// 6. The transports: UDP first (its claim hook puts the heartbeat key into GRANTED answers, so it
+// is in place before HTTP serves, docs/TRANSPORT.md), HTTP/WebSocket, gRPC, MQTT (docs/FLEET.md),
+// then the mDNS advertisement. They stop in the reverse order: gRPC drains its calls before
+// HTTP and UDP stop.
 Status Daemon::start_transports() {
-  auto extra = start_extra_transports(cfg_, *node_);
-  if (!extra.ok()) return extra.error();
-  extra_ = std::move(extra).value();
-  on_stop([this](int drain_ms) { extra_->stop(drain_ms); });
+  auto udp = start_udp(cfg_, *node_);
+  if (!udp.ok()) return udp.error();
+  udp_ = std::move(udp).value();
+  if (udp_) on_stop([this](int) { udp_->stop(); });
 
   transport::ServerOptions so = server_options(cfg_);
   http_ = std::make_unique<transport::HttpServer>(so, *node_, *node_);
@@ -207,6 +209,11 @@ Status Daemon::start_transports() {
   on_stop([this](int drain_ms) { http_->stop(drain_ms); });
   services_->settings.port =
       *port;  // the bound port (differs from the configured one for --port 0)
+
+  auto grpc = start_grpc(cfg_, *node_);
+  if (!grpc.ok()) return grpc.error();
+  grpc_ = std::move(grpc).value();
+  if (grpc_) on_stop([this](int drain_ms) { grpc_->stop(drain_ms); });
 
   if (cfg_.mqtt.enabled) {
     auto mo = node::mqtt_node_options(cfg_);

@@ -6,7 +6,7 @@
 //   d.stop(2000);
 //
 // start() runs each step in the order the members are declared below — configuration,
-// identity, audit log, safety core, node services, node, §16 services, gRPC/UDP, HTTP, MQTT,
+// identity, audit log, safety core, node services, node, §16 services, UDP, HTTP, gRPC, MQTT,
 // mDNS — and records how to stop what each step started. stop() runs those records in reverse,
 // whether it is called after a signal or by start() when a step failed, so every start-up
 // failure tears down exactly what was started, newest first. The destructor calls stop(0).
@@ -32,14 +32,14 @@ class NodeServices;
 class Node;
 class MqttNode;
 class MdnsAdvertiser;
+class UdpService;
+class GrpcTransport;
 }  // namespace rcan::node
 namespace rcan::transport {
 class HttpServer;
 }
 
 namespace rcan::rcand {
-
-struct ExtraTransports;
 
 struct DaemonOptions {
   std::optional<std::string> config;    // --config: a configured robot; none: the embedded default
@@ -98,8 +98,9 @@ class Daemon {
   std::unique_ptr<node::SafetyActuation> actuation_;
   std::unique_ptr<node::NodeServices> services_;
   std::unique_ptr<node::Node> node_;
-  std::unique_ptr<ExtraTransports> extra_;
+  std::unique_ptr<node::UdpService> udp_;
   std::unique_ptr<transport::HttpServer> http_;
+  std::unique_ptr<node::GrpcTransport> grpc_;
   std::unique_ptr<node::MqttNode> mqtt_;
   std::unique_ptr<node::MdnsAdvertiser> mdns_;
 
