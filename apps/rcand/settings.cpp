@@ -93,19 +93,14 @@ namespace {
 Status load_keys(const std::vector<config::TrustedRobotKey>& list, const char* what,
                  msgsig::TrustedKeys& into) {
   for (const auto& rk : list) {
-    if (!rk.mldsa65_pub_file.empty()) {
-      auto b = keys::read_public_file(rk.mldsa65_pub_file);
+    for (auto [file, found] : {std::pair{&rk.mldsa65_pub_file, &into.mldsa65},
+                               std::pair{&rk.ed25519_pub_file, &into.ed25519}}) {
+      if (file->empty()) continue;
+      auto b = keys::read_public_file(*file);
       if (!b.ok())
         return Error(ErrorCode::kInternal,
                      std::string("security.") + what + " " + rk.name + ": " + b.error().message);
-      into.mldsa65.push_back(*b);
-    }
-    if (!rk.ed25519_pub_file.empty()) {
-      auto b = keys::read_public_file(rk.ed25519_pub_file);
-      if (!b.ok())
-        return Error(ErrorCode::kInternal,
-                     std::string("security.") + what + " " + rk.name + ": " + b.error().message);
-      into.ed25519.push_back(*b);
+      found->push_back(*b);
     }
   }
   return Status::Ok();

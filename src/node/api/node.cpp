@@ -391,8 +391,8 @@ std::unique_ptr<transport::StreamSession> Node::open(const transport::HttpReques
   st->sink = std::move(sink);
   st->stream_id = new_uuid_v4();
   st->opened_mono = svc_.clock.mono_ms();
-  if (!upgrade.bearer().empty())
-    st->upgrade_token = std::string(upgrade.bearer());
+  if (std::string_view bearer = upgrade.bearer(); !bearer.empty())
+    st->upgrade_token = std::string(bearer);
   else if (upgrade.has_query("token"))
     st->upgrade_token = std::string(upgrade.query_value("token"));
   if (upgrade.path == "/ws/telemetry") {
