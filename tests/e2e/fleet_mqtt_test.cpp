@@ -769,6 +769,40 @@ TEST_F(FleetTest, RobotsNeverPublishTheCommandersToken) {
   EXPECT_GT(outbound, 6u) << "the robots published nothing to check";
 }
 
+// The robot's events topic is read by whoever the broker lets subscribe: it carries the events
+// for everyone (ESTOP) and never one principal's (a queued claim's PROMOTED, with the UDP
+// heartbeat key that would let a reader keep the deadman fed).
+TEST_F(FleetTest, EventsTopicCarriesNoOnePrincipalsEvents) {
+  Robot& r = add_robot("robot-a", "0000000a");
+  Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/robot-a/events"});
+  auto post = [&](const std::string& path, const std::string& body, const std::string& tok) {
+    return test::http(r.port(), "POST", path, body, {{"Authorization", "Bearer " + tok}});
+  };
+  std::string a = token("user", {}, "mqtt-user-a");
+  std::string b = token("user", {}, "mqtt-user-b");
+  auto claimed = post("/rcan/v1/auth/claim", "{}", a);
+  ASSERT_EQ(claimed.status, 200) << claimed.body;
+  auto queued = post("/rcan/v1/auth/claim", "{}", b);
+  ASSERT_EQ(queued.status, 409) << queued.body;
+  ASSERT_NE(queued.body.find("\"queued\":true"), std::string::npos) << queued.body;
+  auto released = post("/rcan/v1/auth/release", "{}", a);
+  ASSERT_EQ(released.status, 200) << released.body;
+  // B now holds control (the promotion happened, on B's streams only).
+  auto again = post("/rcan/v1/auth/claim", "{}", a);
+  ASSERT_EQ(again.status, 409) << again.body;
+  // An event for everyone after it: when it is on the topic, the promotion would be too.
+  auto stop = post("/api/stop", R"({"reason":"events topic test"})", fleet_token_);
+  ASSERT_EQ(stop.status, 200) << stop.body;
+  ASSERT_TRUE(w.wait([](const Watcher::Msg& m) {
+    return json::dump(m.body).find("ESTOP") != std::string::npos;
+  })) << "no ESTOP event on the events topic";
+  for (const auto& m : w.all()) {
+    std::string text = json::dump(m.body);
+    EXPECT_EQ(text.find("PROMOTED"), std::string::npos) << text;
+    EXPECT_EQ(text.find("key_b64"), std::string::npos) << text;
+  }
+}
+
 TEST_F(FleetTest, SwarmLeaderFailoverAndJoinPolicy) {
   const std::string swarm =
       "swarm: {swarm_id: s42, members: [robot-a, robot-b, robot-c], leader: robot-a, formation: "

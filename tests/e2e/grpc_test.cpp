@@ -321,6 +321,63 @@ TEST_F(GrpcTest, StreamCarriesCommandsAnswersAndSafetyEvents) {
   EXPECT_TRUE(fin.ok()) << fin.error_message();
 }
 
+// An event for one principal (a queued claim's PROMOTED, which carries its UDP heartbeat key)
+// reaches that principal's gRPC stream and no one else's: a GUEST on another stream sees the
+// events for everyone (the ESTOP after it) but never the promotion.
+TEST_F(GrpcTest, EventsForOnePrincipalReachOnlyThatPrincipalsStream) {
+  auto stub = stub_for(n().grpc_port());
+  std::string a = n().token("user", {"control", "status"}, "grpc-user-a");
+  std::string b = n().token("user", {"control", "status"}, "grpc-user-b");
+  std::string guest = n().token("guest", {"status"}, "grpc-guest");
+  std::string owner = n().token("owner", {"control", "status"}, "grpc-owner");
+  StreamClient bs(*stub, b);
+  StreamClient gs(*stub, guest);
+  // Both streams are subscribed once they answer a STATUS.
+  for (StreamClient* s : {&bs, &gs}) {
+    RCANMessage st = typed_msg(RCANMessage::STATUS, {});
+    ASSERT_TRUE(s->send(st));
+    ASSERT_TRUE(s->reply_to(st.message_id()).has_value());
+  }
+  auto claimed = n().post("/rcan/v1/auth/claim", "{}", a);
+  ASSERT_EQ(claimed.status, 200) << claimed.body;
+  auto queued = n().post("/rcan/v1/auth/claim", "{}", b);
+  ASSERT_EQ(queued.status, 409) << queued.body;
+  ASSERT_NE(queued.body.find("\"queued\":true"), std::string::npos) << queued.body;
+  auto released = n().post("/rcan/v1/auth/release", "{}", a);
+  ASSERT_EQ(released.status, 200) << released.body;
+  auto is_promoted = [](const RCANMessage& m) {
+    return m.payload().find("PROMOTED") != std::string::npos ||
+           m.payload().find("key_b64") != std::string::npos;
+  };
+  auto promoted = bs.wait_for(is_promoted, 5000);
+  ASSERT_TRUE(promoted.has_value()) << "no PROMOTED event on B's own stream";
+  // An event for everyone, published after the promotion: once the GUEST has it, anything
+  // published before it has been forwarded (or not) already.
+  auto stop = n().post("/api/stop", R"({"reason":"grpc audience test"})", owner);
+  ASSERT_EQ(stop.status, 200) << stop.body;
+  auto estop = gs.wait_for(
+      [](const RCANMessage& m) {
+        return m.reply_to().empty() && m.payload().find("ESTOP") != std::string::npos;
+      },
+      5000);
+  ASSERT_TRUE(estop.has_value()) << "the GUEST stream got no ESTOP event";
+  EXPECT_FALSE(gs.wait_for(is_promoted, 0).has_value())
+      << "another principal's PROMOTED event (with its heartbeat key) reached a GUEST stream";
+  auto resume = n().post(
+      "/rcan/v1/command",
+      json::dump(json::Value(json::Object{{"version", "1.0.0"},
+                                          {"message_id", new_uuid_v4()},
+                                          {"type", "SAFETY"},
+                                          {"priority", "SAFETY"},
+                                          {"timestamp_ms", now_wall_ms()},
+                                          {"payload", json::Object{{"safety_event", "RESUME"}}}})),
+      owner);
+  EXPECT_EQ(resume.status, 200) << resume.body;
+  EXPECT_EQ(n().post("/rcan/v1/auth/release", "{}", b).status, 200);
+  EXPECT_TRUE(bs.finish().ok());
+  EXPECT_TRUE(gs.finish().ok());
+}
+
 TEST_F(GrpcTest, StreamWithABadTokenIsRefused) {
   auto stub = stub_for(n().grpc_port());
   grpc::ClientContext ctx;

@@ -316,15 +316,11 @@ void AiServices::post_webhooks(const PendingItem& item, const json::Value& event
 }
 
 void AiServices::notify_owners(json::Value event) {
-  if (event.is_object())
-    event.as_object().set("_deliver", json::Object{{"min_role", role_level(Role::kOwner)}});
-  svc_.events.publish(event);
+  svc_.events.publish(std::move(event), Audience::at_least(Role::kOwner));
 }
 
 void AiServices::notify_principal(const std::string& principal_key, json::Value event) {
-  if (event.is_object())
-    event.as_object().set("_deliver", json::Object{{"principal", principal_key}});
-  svc_.events.publish(event);
+  svc_.events.publish(std::move(event), Audience::principal(principal_key));
 }
 
 json::Value AiServices::pending_list() const {

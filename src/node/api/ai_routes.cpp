@@ -171,18 +171,4 @@ bool ai_stream_message(NodeServices& svc, const std::string& type, const json::V
   return true;
 }
 
-bool ai_event_for_stream(json::Value& event, const std::optional<Principal>& principal) {
-  if (!event.is_object()) return true;
-  const json::Value* d = event.get("_deliver");
-  if (!d) return true;
-  json::Value deliver = *d;
-  event.as_object().erase("_deliver");
-  if (!principal) return false;
-  if (const json::Value* r = deliver.get("min_role"); r && r->is_int())
-    return role_level(principal->role) >= r->as_int();
-  if (const json::Value* k = deliver.get("principal"); k && k->is_string())
-    return principal->key() == k->as_string();
-  return false;
-}
-
 }  // namespace rcan::node

@@ -23,8 +23,4 @@ bool ai_stream_message(NodeServices& svc, const std::string& type, const json::V
                        const std::optional<Principal>& principal,
                        const std::function<void(std::string)>& send);
 
-// Events addressed with `_deliver` ({min_role} or {principal}) go only to matching streams;
-// strips `_deliver` from `event` and says whether this stream's principal gets it.
-bool ai_event_for_stream(json::Value& event, const std::optional<Principal>& principal);
-
 }  // namespace rcan::node

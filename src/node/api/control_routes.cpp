@@ -76,8 +76,7 @@ Result<Principal> Node::route_principal(const transport::HttpRequest& req, const
 }
 
 void Node::publish_to(const std::string& principal_key, json::Object ev) {
-  ev.set("_to", principal_key);
-  svc_.events.publish(json::Value(std::move(ev)));
+  svc_.events.publish(json::Value(std::move(ev)), Audience::principal(principal_key));
 }
 
 void Node::control_start() {

@@ -176,42 +176,23 @@ Node::Node(NodeServices& services)
     : svc_(services),
       pipeline_(services, standard_stages(services)),
       respond_timer_(&services.metrics.stage("respond")) {
-  event_sub_ = svc_.events.subscribe([this](const json::Value& ev) {
-    // An event with "_to" is for the streams of that principal only (PREEMPTED, PROMOTED, …).
-    std::string to;
-    json::Value out = ev;
-    if (const json::Value* t = ev.is_object() ? ev.get("_to") : nullptr; t && t->is_string()) {
-      to = t->as_string();
-      json::Object copy;
-      for (const auto& m : ev.as_object())
-        if (m.first != "_to") copy.set(m.first, m.second);
-      out = json::Value(std::move(copy));
-    }
-    bool addressed = ev.is_object() && ev.get("_deliver");  // §16 events for some streams only
-    std::string text = addressed ? std::string() : json::dump(out);
+  event_sub_ = svc_.events.subscribe([this](const Event& ev) {
+    std::string text;  // serialised once, for the first stream that may see it
     std::vector<std::shared_ptr<StreamState>> copy;
     {
       std::lock_guard<std::mutex> lock(streams_mu_);
       copy = streams_;
     }
     for (auto& st : copy) {
-      bool ok;
+      bool admitted;
       {
         std::lock_guard<std::mutex> lock(st->mu);
-        ok = st->connected && !st->closed &&
-             (to.empty() || (st->principal && st->principal->key() == to));
+        admitted = st->connected && !st->closed &&
+                   ev.audience.admits(st->principal ? &*st->principal : nullptr);
       }
-      if (ok && addressed) {
-        json::Value addressed_ev = ev;
-        std::optional<Principal> who;
-        {
-          std::lock_guard<std::mutex> lock(st->mu);
-          who = st->principal;
-        }
-        if (ai_event_for_stream(addressed_ev, who)) st->sink->send_text(json::dump(addressed_ev));
-      } else if (ok) {
-        st->sink->send_text(text);
-      }
+      if (!admitted) continue;
+      if (text.empty()) text = json::dump(ev.body);
+      st->sink->send_text(text);
     }
   });
   svc_.metrics.add_gauge("rcan_estop_active", "1 while ESTOP is latched.",

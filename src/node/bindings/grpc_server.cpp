@@ -144,13 +144,14 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
       e.detail.set("transport", "grpc");
       svc.write_audit(std::move(e));
       std::weak_ptr<StreamLink> weak = link_;
-      event_sub_ = svc.events.subscribe([weak](const json::Value& ev) {
+      event_sub_ = svc.events.subscribe([weak, who = *p](const Event& ev) {
+        if (!ev.audience.admits(&who)) return;  // another principal's event
         auto l = weak.lock();
         if (!l) return;
         std::lock_guard<std::mutex> lock(l->mu);
         if (!l->r) return;
         RCANMessage m;
-        transport::json_to_grpc(ev, m);
+        transport::json_to_grpc(ev.body, m);
         l->r->enqueue(std::move(m));
       });
     }

@@ -141,8 +141,11 @@ Status MqttNode::start() {
     auto st = svc_.audit.stats();
     next_audit_seq_ = st.last_seq == 0 ? 1 : st.last_seq;  // from the latest record on
   }
-  event_sub_ = svc_.events.subscribe(
-      [this](const json::Value& ev) { publish_json(out_.events(), ev, 1, false); });
+  // The events topic is shared by whoever may subscribe to it at the broker: it carries the
+  // events for everyone, never one principal's or the owners' (event_bus.h).
+  event_sub_ = svc_.events.subscribe([this](const Event& ev) {
+    if (ev.audience.is_everyone()) publish_json(out_.events(), ev.body, 1, false);
+  });
   running_.store(true);
   if (Status s = client_->start(); !s.ok()) {
     running_.store(false);

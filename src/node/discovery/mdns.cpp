@@ -345,7 +345,7 @@ std::unique_ptr<MdnsAdvertiser> start_mdns(NodeServices& services, bool tls) {
   };
   auto target = std::make_shared<Target>();
   target->adv = adv.get();
-  uint64_t sub = services.events.subscribe([target](const json::Value&) {
+  uint64_t sub = services.events.subscribe([target](const Event&) {
     std::lock_guard<std::mutex> lock(target->mu);
     if (target->adv) target->adv->poke();
   });
