@@ -30,20 +30,9 @@ Result<Principal> bearer(NodeServices& svc, const transport::HttpRequest& req) {
   return svc.authenticate_header(req.header("authorization"));
 }
 
-bool wrong_method(NodeServices& svc, const transport::HttpRequest& req,
-                  const transport::HttpHandler::Respond& respond, const std::string& route,
-                  const char* allowed) {
-  if (req.method == allowed) return false;
-  answer(svc, respond, route, 405,
-         svc.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed on " + route)),
-         {{"Allow", allowed}});
-  return true;
-}
-
 void authorize_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req,
                      const transport::HttpHandler::Respond& respond) {
   const std::string route = "/rcan/v1/authorize";
-  if (wrong_method(svc, req, respond, route, "POST")) return;
   auto p = bearer(svc, req);
   if (!p.ok()) {
     auto e = svc.entry("anonymous", "", "HITL_AUTHORIZE_REFUSED", "blocked");
@@ -62,7 +51,6 @@ void authorize_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& 
 void pending_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req,
                    const transport::HttpHandler::Respond& respond) {
   const std::string route = "/rcan/v1/pending";
-  if (wrong_method(svc, req, respond, route, "GET")) return;
   auto p = bearer(svc, req);
   if (!p.ok()) return answer_error(svc, respond, route, p.error());
   json::Value list = ai.pending_list();
@@ -81,7 +69,6 @@ void pending_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& re
 void thought_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req,
                    const transport::HttpHandler::Respond& respond) {
   const std::string route = "/api/thoughts";
-  if (wrong_method(svc, req, respond, route, "GET")) return;
   auto p = bearer(svc, req);
   if (!p.ok()) return answer_error(svc, respond, route, p.error());
   // `status` is the lowest scope (GUEST): every verified token holds it (docs/AI.md).
@@ -98,7 +85,6 @@ void thought_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& re
 void verify_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req,
                   const transport::HttpHandler::Respond& respond) {
   const std::string route = "/api/v1/watermark/verify";
-  if (wrong_method(svc, req, respond, route, "GET")) return;
   auto seed_error = [&svc, respond, route](int status, const char* msg) {
     answer(svc, respond, route, status,
            json::Object{{"error", msg}, {"code", "HTTP_" + std::to_string(status)}});
@@ -134,27 +120,22 @@ void verify_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req
 
 }  // namespace
 
-bool ai_route(NodeServices& svc, transport::HttpRequest& req,
-              transport::HttpHandler::Respond& respond) {
-  const std::string& p = req.path;
-  bool ours = p == "/rcan/v1/authorize" || p == "/rcan/v1/pending" ||
-              p == "/api/v1/watermark/verify" || p.rfind("/api/thoughts/", 0) == 0;
-  if (!ours) return false;
-  if (!svc.ai) {
-    answer_error(svc, respond, p,
-                 Error(ErrorCode::kNotFound, "AI accountability is not enabled on this node"));
-    return true;
-  }
-  AiServices& ai = *svc.ai;
-  if (p == "/rcan/v1/authorize")
-    authorize_route(svc, ai, req, respond);
-  else if (p == "/rcan/v1/pending")
-    pending_route(svc, ai, req, respond);
-  else if (p == "/api/v1/watermark/verify")
-    verify_route(svc, ai, req, respond);
-  else
-    thought_route(svc, ai, req, respond);
-  return true;
+void add_ai_routes(RouteTable& table, NodeServices& svc) {
+  using Fn = void (*)(NodeServices&, AiServices&, transport::HttpRequest&,
+                      const transport::HttpHandler::Respond&);
+  auto row = [&](const char* method, const char* path, Fn fn) {
+    table.add(method, path, Body::kNone, [&svc, fn](RouteCall& c) {
+      if (!svc.ai)
+        return answer_error(
+            svc, c.respond, c.route,
+            Error(ErrorCode::kNotFound, "AI accountability is not enabled on this node"));
+      fn(svc, *svc.ai, c.req, c.respond);
+    });
+  };
+  row("POST", "/rcan/v1/authorize", &authorize_route);
+  row("GET", "/rcan/v1/pending", &pending_route);
+  row("GET", "/api/thoughts/{id}", &thought_route);
+  row("GET", "/api/v1/watermark/verify", &verify_route);
 }
 
 bool ai_stream_message(NodeServices& svc, const std::string& type, const json::Value& body,

@@ -6,17 +6,15 @@
 #include <string>
 
 #include "node/admission/authenticator.h"
+#include "node/api/route_table.h"
 #include "rcan/json.h"
 #include "transport/http_api.h"
 
 namespace rcan::node {
 
-class NodeServices;
-
-// Answers POST /rcan/v1/authorize, GET /rcan/v1/pending, GET /api/thoughts/<id> and
-// GET /api/v1/watermark/verify. False when the path is not one of them.
-bool ai_route(NodeServices& svc, transport::HttpRequest& req,
-              transport::HttpHandler::Respond& respond);
+// Adds the rows for POST /rcan/v1/authorize, GET /rcan/v1/pending, GET /api/thoughts/<id> and
+// GET /api/v1/watermark/verify; without AI accountability they answer 404.
+void add_ai_routes(RouteTable& table, NodeServices& svc);
 
 // A stream frame of type AUTHORIZE from a CONNECTed principal; false for other types.
 bool ai_stream_message(NodeServices& svc, const std::string& type, const json::Value& body,

@@ -34,8 +34,6 @@ json::Array capabilities_of(Role r, const RolePolicy& policy) {
   return caps;
 }
 
-bool starts_with(std::string_view s, std::string_view p) { return s.substr(0, p.size()) == p; }
-
 }  // namespace
 
 Result<Principal> Node::route_principal(const transport::HttpRequest& req, const json::Value& body,
@@ -248,76 +246,26 @@ void Node::announce_control_changes() {
 
 // ---------------------------------------------------------------------------------------------
 
-bool Node::control_route(transport::HttpRequest& req, Respond& respond) {
-  const std::string& p = req.path;
-  bool ours = p == "/rcan/v1/auth/claim" || p == "/rcan/v1/auth/release" ||
-              p == "/rcan/v1/handoff" || p == "/rcan/v1/auth/renew" || p == "/rcan/v1/auth/queue" ||
-              starts_with(p, "/rcan/v1/leases") || p == "/rcan/v1/transfer" ||
-              starts_with(p, "/rcan/v1/consent");
-  if (!ours) return false;
-  json::Value body = json::Object{};
-  if (!req.body.empty()) {
-    auto v =
-        json::parse(req.body, {.max_depth = 16, .max_bytes = svc_.settings.codec.max_body_bytes});
-    if (!v.ok()) {
-      answer_error(respond, p, v.error());
-      return true;
-    }
-    if (!v->is_object()) {
-      answer_error(respond, p, Error(ErrorCode::kSchemaValidationFailed, "Invalid payload"));
-      return true;
-    }
-    body = std::move(v).value();
-  }
-  auto wrong_method = [&](const char* allowed) {
-    answer_json(
-        respond, p, 405,
-        svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed on " + p)),
-        {{"Allow", allowed}});
-    return true;
-  };
+// GET /rcan/v1/auth/queue: the control queue. DELETE: leave it.
+void Node::queue_route(transport::HttpRequest& req, Respond& respond, const json::Value& body) {
+  const std::string p = "/rcan/v1/auth/queue";
   const std::string& m = req.method;
-  if (p == "/rcan/v1/auth/claim") {
-    if (m != "POST") return wrong_method("POST");
-    claim_route(req, respond, body);
-  } else if (p == "/rcan/v1/auth/release") {
-    if (m != "DELETE" && m != "POST") return wrong_method("DELETE");
-    release_route(req, respond, body);
-  } else if (p == "/rcan/v1/handoff") {
-    if (m != "POST") return wrong_method("POST");
-    handoff_route(req, respond, body);
-  } else if (p == "/rcan/v1/auth/renew") {
-    if (m != "POST") return wrong_method("POST");
-    renew_route(req, respond, body);
-  } else if (p == "/rcan/v1/auth/queue") {
-    if (m != "GET" && m != "DELETE") return wrong_method("GET, DELETE");
-    auto pr = route_principal(req, body, p, "QUEUE_DENIED", Role::kGuest, "");
-    if (!pr.ok()) {
-      answer_error(respond, p, pr.error());
-      return true;
+  auto pr = route_principal(req, body, p, "QUEUE_DENIED", Role::kGuest, "");
+  if (!pr.ok()) return answer_error(respond, p, pr.error());
+  if (m == "DELETE") {
+    bool left = svc_.sessions.leave_queue(*pr);
+    if (left) {
+      auto e = svc_.entry(pr->display(), "", "CLAIM_WITHDRAWN", "ok");
+      e.sub = pr->sub;
+      svc_.write_audit(std::move(e));
     }
-    if (m == "DELETE") {
-      bool left = svc_.sessions.leave_queue(*pr);
-      if (left) {
-        auto e = svc_.entry(pr->display(), "", "CLAIM_WITHDRAWN", "ok");
-        e.sub = pr->sub;
-        svc_.write_audit(std::move(e));
-      }
-      answer_json(respond, p, left ? 200 : 404,
-                  left ? json::Value(json::Object{{"left", true}})
-                       : svc_.error(Error(ErrorCode::kNotFound, "not in the control queue")));
-    } else {
-      answer_json(respond, p, 200,
-                  json::Object{{"queue", svc_.sessions.queue_json(svc_.clock.mono_ms())}});
-    }
-  } else if (starts_with(p, "/rcan/v1/leases")) {
-    lease_route(req, respond, body);
-  } else if (p == "/rcan/v1/transfer") {
-    transfer_route(req, respond, body);
+    answer_json(respond, p, left ? 200 : 404,
+                left ? json::Value(json::Object{{"left", true}})
+                     : svc_.error(Error(ErrorCode::kNotFound, "not in the control queue")));
   } else {
-    consent_route(req, respond, body);
+    answer_json(respond, p, 200,
+                json::Object{{"queue", svc_.sessions.queue_json(svc_.clock.mono_ms())}});
   }
-  return true;
 }
 
 void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json::Value& body) {
@@ -536,32 +484,12 @@ void Node::handoff_route(transport::HttpRequest& req, Respond& respond, const js
 
 // Leases: GET /rcan/v1/leases, POST /rcan/v1/leases {leasee, duration_s},
 // POST /rcan/v1/leases/<id>/grants {user_id, role, duration_s}, DELETE /rcan/v1/leases/<id>.
-void Node::lease_route(transport::HttpRequest& req, Respond& respond, const json::Value& body) {
+// The route table (routes.cpp) has checked the method for the path.
+void Node::lease_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                       const std::string& lease_id, bool grants) {
   const std::string route = "/rcan/v1/leases";
   const std::string& m = req.method;
-  std::string rest = req.path.substr(route.size());
-  std::string lease_id;
-  bool grants = false;
-  if (!rest.empty()) {
-    if (rest[0] != '/')
-      return answer_error(respond, route,
-                          Error(ErrorCode::kNotFound, "no route for " + req.path.substr(0, 128)));
-    rest = rest.substr(1);
-    size_t slash = rest.find('/');
-    lease_id = rest.substr(0, slash);
-    if (slash != std::string::npos) {
-      if (rest.substr(slash) != "/grants")
-        return answer_error(respond, route,
-                            Error(ErrorCode::kNotFound, "no route for " + req.path.substr(0, 128)));
-      grants = true;
-    }
-  }
   int64_t now_wall = svc_.clock.wall_ms();
-  auto method_error = [&](const char* allowed) {
-    answer_json(respond, route, 405,
-                svc_.error(Error(ErrorCode::kMethodNotAllowed, m + " is not allowed here")),
-                {{"Allow", allowed}});
-  };
   if (lease_id.empty()) {
     if (m == "GET") {
       auto pr = route_principal(req, body, route, "LEASE_DENIED", Role::kLeasee, "");
@@ -569,7 +497,6 @@ void Node::lease_route(transport::HttpRequest& req, Respond& respond, const json
       return answer_json(respond, route, 200,
                          json::Object{{"leases", svc_.sessions.leases_json(now_wall)}});
     }
-    if (m != "POST") return method_error("GET, POST");
     auto pr = route_principal(req, body, route, "LEASE_DENIED", Role::kOwner, "config");
     if (!pr.ok()) return answer_error(respond, route, pr.error());
     int64_t dur = seconds_field(body, "duration_s", 3600);
@@ -599,7 +526,6 @@ void Node::lease_route(transport::HttpRequest& req, Respond& respond, const json
                             });
   }
   if (grants) {
-    if (m != "POST") return method_error("POST");
     auto pr = route_principal(req, body, route, "LEASE_DENIED", Role::kLeasee, "");
     if (!pr.ok()) return answer_error(respond, route, pr.error());
     auto role = role_from_name(str_field(body, "role").empty() ? "user" : str_field(body, "role"));
@@ -627,7 +553,6 @@ void Node::lease_route(transport::HttpRequest& req, Respond& respond, const json
                               answer_json(respond, route, 200, std::move(answer));
                             });
   }
-  if (m != "DELETE") return method_error("DELETE");
   auto pr = route_principal(req, body, route, "LEASE_DENIED", Role::kOwner, "config");
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   auto l = svc_.sessions.revoke_lease(*pr, lease_id, svc_.clock.mono_ms(), now_wall);
@@ -654,11 +579,6 @@ void Node::transfer_route(transport::HttpRequest& req, Respond& respond, const j
         respond, route, 200,
         svc_.ownership.to_json(now_wall, role_level(pr->role) >= role_level(Role::kOwner)));
   }
-  if (req.method != "POST")
-    return answer_json(
-        respond, route, 405,
-        svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed here")),
-        {{"Allow", "GET, POST"}});
   std::string action = str_field(body, "action");
   if (action != "request" && action != "accept" && action != "cancel")
     return answer_error(respond, route,
@@ -718,29 +638,16 @@ void Node::transfer_route(transport::HttpRequest& req, Respond& respond, const j
                    });
 }
 
-// POST /rcan/v1/consent: a CONSENT_REQUEST message. GET: the list (OWNER).
-// POST /rcan/v1/consent/<id>/grant {kind: lease|grant, duration_s}, /<id>/deny {reason}.
-void Node::consent_route(transport::HttpRequest& req, Respond& respond, const json::Value& body) {
+// GET /rcan/v1/consent: the pending requests (OWNER).
+void Node::consent_list_route(transport::HttpRequest& req, Respond& respond,
+                              const json::Value& body) {
   const std::string route = "/rcan/v1/consent";
-  int64_t now_wall = svc_.clock.wall_ms();
-  std::string rest = req.path.substr(route.size());
-  if (rest.empty()) {
-    if (req.method == "GET") {
-      auto pr = route_principal(req, body, route, "CONSENT_REFUSED", Role::kOwner, "config");
-      if (!pr.ok()) return answer_error(respond, route, pr.error());
-      svc_.consent.expire(now_wall);
-      json::Array a;
-      for (const auto& c : svc_.consent.list()) a.push_back(c.to_json());
-      return answer_json(respond, route, 200, json::Object{{"requests", a}});
-    }
-    if (req.method != "POST")
-      return answer_json(
-          respond, route, 405,
-          svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed here")),
-          {{"Allow", "GET, POST"}});
-    return consent_request_route(req, respond, body);
-  }
-  consent_decision_route(req, respond, body, rest);
+  auto pr = route_principal(req, body, route, "CONSENT_REFUSED", Role::kOwner, "config");
+  if (!pr.ok()) return answer_error(respond, route, pr.error());
+  svc_.consent.expire(svc_.clock.wall_ms());
+  json::Array a;
+  for (const auto& c : svc_.consent.list()) a.push_back(c.to_json());
+  answer_json(respond, route, 200, json::Object{{"requests", a}});
 }
 
 // POST /rcan/v1/consent: records a CONSENT_REQUEST (202) and notifies the owner.
@@ -848,23 +755,10 @@ void Node::consent_request_route(transport::HttpRequest& req, Respond& respond,
 
 // POST /rcan/v1/consent/<id>/grant {kind: lease|grant, duration_s} or /<id>/deny {reason} (OWNER).
 void Node::consent_decision_route(transport::HttpRequest& req, Respond& respond,
-                                  const json::Value& body, const std::string& rest) {
+                                  const json::Value& body, const std::string& id,
+                                  const std::string& verb) {
   const std::string route = "/rcan/v1/consent";
   int64_t now_wall = svc_.clock.wall_ms();
-  size_t slash = rest.find('/', 1);
-  if (rest[0] != '/' || slash == std::string::npos)
-    return answer_error(respond, route,
-                        Error(ErrorCode::kNotFound, "no route for " + req.path.substr(0, 128)));
-  std::string id = rest.substr(1, slash - 1);
-  std::string verb = rest.substr(slash + 1);
-  if (verb != "grant" && verb != "deny")
-    return answer_error(respond, route,
-                        Error(ErrorCode::kNotFound, "no route for " + req.path.substr(0, 128)));
-  if (req.method != "POST")
-    return answer_json(
-        respond, route, 405,
-        svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed here")),
-        {{"Allow", "POST"}});
   auto pr = route_principal(req, body, route, "CONSENT_REFUSED", Role::kOwner, "config");
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   auto pending = svc_.consent.get(id);

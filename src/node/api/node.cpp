@@ -175,7 +175,9 @@ void StreamSessionImpl::on_text(std::string text) {
 Node::Node(NodeServices& services)
     : svc_(services),
       pipeline_(services, standard_stages(services)),
+      routes_(services),
       respond_timer_(&services.metrics.stage("respond")) {
+  add_routes();
   event_sub_ = svc_.events.subscribe([this](const Event& ev) {
     std::string text;  // serialised once, for the first stream that may see it
     std::vector<std::shared_ptr<StreamState>> copy;
@@ -414,13 +416,7 @@ Result<Principal> Node::bearer_principal(const transport::HttpRequest& req) cons
   return svc_.authenticate_header(req.header("authorization"));
 }
 
-void Node::handle(transport::HttpRequest req, Respond respond) { route(req, respond); }
-
-namespace {
-
-bool method_is(const transport::HttpRequest& req, std::string_view m) { return req.method == m; }
-
-}  // namespace
+void Node::handle(transport::HttpRequest req, Respond respond) { routes_.dispatch(req, respond); }
 
 void Node::run_pipeline(transport::HttpRequest& req, Respond& respond, const std::string& route,
                         json::Value body) {
@@ -451,125 +447,6 @@ void Node::run_pipeline(transport::HttpRequest& req, Respond& respond, const std
 }
 
 void Node::answer_waited(int64_t us) { respond_timer_->observe_us(static_cast<double>(us)); }
-
-void Node::route(transport::HttpRequest& req, Respond& respond) {
-  const std::string& p = req.path;
-  auto parse_body = [&](json::Value& out, bool allow_empty) -> bool {
-    if (req.body.empty() && allow_empty) {
-      out = json::Object{};
-      return true;
-    }
-    json::ParseOptions po;
-    po.max_bytes = svc_.settings.codec.max_body_bytes;
-    po.max_depth = 32;
-    auto v = json::parse(req.body, po);
-    if (!v.ok()) {
-      answer_error(respond, p, v.error());
-      return false;
-    }
-    out = std::move(v).value();
-    return true;
-  };
-  auto wrong_method = [&](const char* allowed) {
-    answer_json(
-        respond, p, 405,
-        svc_.error(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed on " + p)),
-        {{"Allow", allowed}});
-  };
-
-  if (is_web_path(p)) {  // the operator dashboard (docs/DASHBOARD.md)
-    transport::HttpResponse r = web_response(req, svc_.clock.wall_ms());
-    svc_.metrics.count_request("/ui", r.status);
-    return respond(std::move(r));
-  }
-  if (ai_route(svc_, req, respond)) return;  // §16: authorize, pending, thoughts, watermark
-  if (p == "/healthz") {
-    if (!method_is(req, "GET") && !method_is(req, "HEAD")) return wrong_method("GET");
-    bool ok = svc_.audit.available();
-    return answer_json(respond, p, ok ? 200 : 503,
-                       json::Object{{"status", ok ? "ok" : "degraded"},
-                                    {"estop_active", svc_.act.estop_active()},
-                                    {"audit_available", ok}});
-  }
-  if (p == "/metrics") {
-    if (!method_is(req, "GET")) return wrong_method("GET");
-    svc_.metrics.count_request(p, 200);
-    transport::HttpResponse r;
-    r.content_type = "text/plain; version=0.0.4";
-    r.body = svc_.metrics.render();
-    return respond(std::move(r));
-  }
-  if (p == "/rcan/v1/discover") {
-    if (!method_is(req, "POST")) return wrong_method("POST");
-    json::Value body;
-    if (!parse_body(body, true)) return;
-    std::string reply;
-    if (const json::Value* id = body.get("message_id"); id && id->is_string())
-      reply = id->as_string().substr(0, 64);
-    return answer_json(
-        respond, p, 200,
-        svc_.envelope(MessageType::kAnnounce, svc_.discovery_info().as_object(), reply));
-  }
-  if (p == "/api/discovery") {
-    if (!method_is(req, "GET")) return wrong_method("GET");
-    json::Value info = svc_.discovery_info();
-    std::string caps;
-    for (const auto& c : svc_.settings.capabilities) caps += (caps.empty() ? "" : ",") + c;
-    json::Object txt{{"ruri", svc_.settings.ruri},
-                     {"model", svc_.settings.model},
-                     {"caps", caps},
-                     {"roles", "creator,owner,leasee,user,guest"},
-                     {"role", "GUEST"},
-                     {"version", svc_.settings.rcan_version},
-                     {"name", svc_.settings.name},
-                     {"status", status_word(svc_)}};  // as in the mDNS TXT record
-    return answer_json(respond, p, 200,
-                       json::Object{{"service_type", "_rcan._tcp"}, {"txt_record", txt}});
-  }
-  if (p == "/rcan/v1/status" || p == "/api/status") {
-    if (!method_is(req, "GET")) return wrong_method("GET");
-    bool detailed = false;
-    if (!req.header("authorization").empty()) {
-      auto pr = bearer_principal(req);
-      if (!pr.ok()) return answer_error(respond, p, pr.error());
-      detailed = true;
-    }
-    return answer_json(respond, p, 200, svc_.status(detailed));
-  }
-  if (p == "/rcan/v1/command" || p == "/api/command") {
-    if (!method_is(req, "POST")) return wrong_method("POST");
-    json::Value body;
-    if (!parse_body(body, false)) return;
-    return run_pipeline(req, respond, p, std::move(body));
-  }
-  if (p == "/api/stop") {
-    if (!method_is(req, "POST")) return wrong_method("POST");
-    json::Value body;
-    if (!parse_body(body, true)) return;
-    // A bare stop request becomes a SAFETY ESTOP message from the caller.
-    if (!body.is_object() || !body.get("type")) {
-      json::Object payload{{"safety_event", "ESTOP"}};
-      if (body.is_object())
-        if (const json::Value* r = body.get("reason"); r && r->is_string())
-          payload.set("reason", r->as_string());
-      json::Object m{
-          {"version", "1.0.0"},   {"message_id", new_uuid_v4()},          {"type", "SAFETY"},
-          {"priority", "SAFETY"}, {"timestamp_ms", svc_.clock.wall_ms()}, {"payload", payload}};
-      body = std::move(m);
-    }
-    return run_pipeline(req, respond, p, std::move(body));
-  }
-  if (control_route(req, respond)) return;
-  if (p == "/api/audit") {
-    if (!method_is(req, "GET")) return wrong_method("GET");
-    return audit_listing(req, respond);
-  }
-  if (p == "/api/v1/audit") {
-    if (!method_is(req, "GET")) return wrong_method("GET");
-    return audit_export(req, respond);
-  }
-  answer_error(respond, "other", Error(ErrorCode::kNotFound, "no route for " + p.substr(0, 128)));
-}
 
 void Node::audit_listing(transport::HttpRequest& req, Respond& respond) {
   const std::string route = "/api/audit";

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "base/worker.h"
+#include "node/api/route_table.h"
 #include "node/pipeline/pipeline.h"
 #include "node/services/node_services.h"
 #include "transport/http_api.h"
@@ -55,25 +56,29 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
 
  private:
   friend struct StreamSessionImpl;
-  void route(transport::HttpRequest& req, Respond& respond);
   void answer_json(Respond& respond, const std::string& route, int status, json::Value body,
                    std::vector<std::pair<std::string, std::string>> headers = {});
   void answer_error(Respond& respond, const std::string& route, const Error& err);
   void run_pipeline(transport::HttpRequest& req, Respond& respond, const std::string& route,
                     json::Value body);
+  // The route table: every HTTP route in one list (routes.cpp).
+  void add_routes();
+  void add_control_routes();
   // Control sessions, leases, ownership transfer, consent (control_routes.cpp).
-  bool control_route(transport::HttpRequest& req, Respond& respond);
+  void queue_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
   void claim_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
   void renew_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
   void release_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
   void handoff_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
-  void lease_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
+  void lease_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                   const std::string& lease_id, bool grants);
   void transfer_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
-  void consent_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
+  void consent_list_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
   void consent_request_route(transport::HttpRequest& req, Respond& respond,
                              const json::Value& body);
   void consent_decision_route(transport::HttpRequest& req, Respond& respond,
-                              const json::Value& body, const std::string& rest);
+                              const json::Value& body, const std::string& id,
+                              const std::string& verb);
   Result<Principal> route_principal(const transport::HttpRequest& req, const json::Value& body,
                                     const std::string& route, const std::string& denied_event,
                                     Role min_role, std::string_view scope);
@@ -92,6 +97,7 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
 
   NodeServices& svc_;
   Pipeline pipeline_;
+  RouteTable routes_;
   Histogram* respond_timer_;  // stage "respond": answer handed over → its write begins
   Worker worker_{1};
   mutable std::mutex streams_mu_;

@@ -3,6 +3,7 @@
 
 #include <string>
 
+#include "node/api/route_table.h"
 #include "rcan/errors.h"
 
 namespace rcan::node {
@@ -76,14 +77,15 @@ const WebAsset* find_web_asset(std::string_view p) {
 
 transport::HttpResponse web_response(const transport::HttpRequest& req, int64_t now_ms) {
   transport::HttpResponse r;
-  security_headers(r);
   if (req.method != "GET" && req.method != "HEAD") {
-    r.status = 405;
-    r.headers.emplace_back("Allow", "GET, HEAD");
-    r.body = json::dump(error_body(
-        Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed here"), "", now_ms));
+    r = RouteTable::method_not_allowed(
+        error_body(Error(ErrorCode::kMethodNotAllowed, req.method + " is not allowed on /ui"), "",
+                   now_ms),
+        "GET, HEAD");
+    security_headers(r);
     return r;
   }
+  security_headers(r);
   const WebAsset* a = find_web_asset(req.path);
   if (!a) {
     r.status = 404;

@@ -1,0 +1,84 @@
+// RouteTable: every HTTP route of the node in one table. A row is a method, a path pattern, how
+// the body is read and the handler; the table finds the row, answers 404 for a path no row
+// has and 405 (with `Allow`) for a method the path does not serve, reads the body by the row's
+// rule and counts the answer under the row's pattern (so /metrics labels are bounded).
+//
+//   RouteTable t(services);
+//   t.add("GET", "/rcan/v1/leases", Body::kNone, [](RouteCall& c) { … });
+//   t.add("POST", "/rcan/v1/leases/{id}/grants", Body::kObjectOrEmpty, [](RouteCall& c) {
+//     const std::string& lease_id = c.params[0];  … });
+//   t.dispatch(request, respond);
+//
+// Patterns: literal segments, `{name}` for one non-empty segment (at most 128 bytes), and a
+// final `*` for one or more remaining segments. Rows are tried in the order they were added.
+#pragma once
+
+#include <functional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "node/services/node_services.h"
+#include "rcan/json.h"
+#include "transport/http_api.h"
+
+namespace rcan::node {
+
+// How a row reads the request body before its handler runs. A body that breaks the rule is
+// answered 400 (MALFORMED_JSON / SCHEMA_VALIDATION_FAILED) without calling the handler.
+enum class Body {
+  kNone,           // not read
+  kJson,           // one JSON value, required
+  kJsonOrEmpty,    // one JSON value; an empty body reads as {}
+  kObjectOrEmpty,  // a JSON object; an empty body reads as {}
+};
+
+struct RouteCall {
+  transport::HttpRequest& req;
+  transport::HttpHandler::Respond& respond;
+  const std::string& route;         // the row's pattern: the metrics label
+  json::Value body;                 // as the row's Body rule read it (null for kNone)
+  std::vector<std::string> params;  // the `{…}` and `*` segments, in order
+};
+
+using RouteHandler = std::function<void(RouteCall&)>;
+
+struct BodyLimits {
+  size_t max_bytes = 0;  // 0: the node's codec limit (server.limits.max_body_bytes)
+  int max_depth = 32;
+};
+
+class RouteTable {
+ public:
+  explicit RouteTable(NodeServices& services) : svc_(services) {}
+
+  void add(std::string method, std::string pattern, Body body, RouteHandler handler,
+           BodyLimits limits = {});
+
+  // Answers `req`: the handler of the matching row, or 404 / 405 / 400 as above.
+  void dispatch(transport::HttpRequest& req, transport::HttpHandler::Respond& respond) const;
+
+  // The one 405 answer: METHOD_NOT_ALLOWED naming the method and the route, `Allow` listing
+  // the methods the route serves.
+  static transport::HttpResponse method_not_allowed(const json::Value& error_body,
+                                                    std::string_view allow);
+
+  // Does `pattern` match `path`? Fills `params` with the variable segments when it does.
+  static bool match(std::string_view pattern, std::string_view path,
+                    std::vector<std::string>* params);
+
+ private:
+  struct Row {
+    std::string method, pattern;
+    Body body;
+    BodyLimits limits;
+    RouteHandler handler;
+  };
+  void answer(transport::HttpHandler::Respond& respond, const std::string& label, int status,
+              const json::Value& body) const;
+
+  NodeServices& svc_;
+  std::vector<Row> rows_;
+};
+
+}  // namespace rcan::node

@@ -1,0 +1,196 @@
+// The HTTP route table in-process: RouteTable's matching and refusals, and the node's own table
+// (routes.cpp) answered through Node::handle, what every HTTP transport calls, without sockets.
+#include <gtest/gtest.h>
+
+#include <future>
+#include <set>
+
+#include "in_process_node.h"
+#include "node/api/node.h"
+#include "node/api/route_table.h"
+
+namespace rcan::node {
+namespace {
+
+using transport::HttpRequest;
+using transport::HttpResponse;
+
+std::string header(const HttpResponse& r, const std::string& name) {
+  for (const auto& [k, v] : r.headers)
+    if (k == name) return v;
+  return {};
+}
+
+std::string http_error_code(const HttpResponse& r) {
+  auto v = json::parse(r.body);
+  if (!v.ok()) return {};
+  const json::Value* p = v->get("payload");
+  return p ? json::string_field(*p, "error_code") : std::string();
+}
+
+TEST(RoutePattern, LiteralsParametersAndTheRest) {
+  std::vector<std::string> p;
+  EXPECT_TRUE(RouteTable::match("/rcan/v1/leases", "/rcan/v1/leases", &p));
+  EXPECT_TRUE(p.empty());
+  EXPECT_FALSE(RouteTable::match("/rcan/v1/leases", "/rcan/v1/leases/", &p));
+  EXPECT_FALSE(RouteTable::match("/rcan/v1/leases", "/rcan/v1/leasesX", &p));
+  EXPECT_FALSE(RouteTable::match("/rcan/v1/leases", "/rcan/v1", &p));
+  EXPECT_TRUE(RouteTable::match("/rcan/v1/leases/{id}/grants", "/rcan/v1/leases/L-1/grants", &p));
+  EXPECT_EQ(p, std::vector<std::string>{"L-1"});
+  EXPECT_FALSE(RouteTable::match("/rcan/v1/leases/{id}", "/rcan/v1/leases/", &p))
+      << "a parameter is never empty";
+  EXPECT_FALSE(RouteTable::match("/rcan/v1/leases/{id}", "/rcan/v1/leases/a/b", &p));
+  EXPECT_FALSE(RouteTable::match("/x/{id}", "/x/" + std::string(129, 'a'), &p))
+      << "a parameter is at most 128 bytes";
+  EXPECT_TRUE(RouteTable::match("/ui/*", "/ui/js/main.js", &p));
+  EXPECT_EQ(p, std::vector<std::string>{"js/main.js"});
+  EXPECT_FALSE(RouteTable::match("/ui/*", "/ui/", &p));
+  EXPECT_FALSE(RouteTable::match("/ui/*", "/ui", &p));
+  EXPECT_TRUE(RouteTable::match("/", "/", &p));
+  EXPECT_FALSE(RouteTable::match("/", "/x", &p));
+  EXPECT_FALSE(RouteTable::match("/x", "", &p));
+  EXPECT_FALSE(RouteTable::match("/x", "x", &p));
+}
+
+class RoutesTest : public test_node::InProcessNode {
+ protected:
+  void SetUp() override {
+    InProcessNode::SetUp();
+    node_ = std::make_unique<Node>(*services_);
+  }
+  void TearDown() override {
+    node_.reset();
+    InProcessNode::TearDown();
+  }
+  HttpResponse call(const std::string& method, const std::string& path,
+                    const std::string& body = "", const std::string& bearer = "") {
+    HttpRequest req;
+    req.method = method;
+    req.path = path;
+    req.target = path;
+    req.body = body;
+    if (!bearer.empty()) req.headers.emplace_back("authorization", "Bearer " + bearer);
+    return answer(node_.get(), std::move(req));
+  }
+  static HttpResponse answer(transport::HttpHandler* h, HttpRequest req) {
+    auto got = std::make_shared<std::promise<HttpResponse>>();
+    auto fut = got->get_future();
+    h->handle(std::move(req), [got](HttpResponse r) { got->set_value(std::move(r)); });
+    if (fut.wait_for(std::chrono::seconds(10)) != std::future_status::ready) {
+      ADD_FAILURE() << "no answer within 10 s";
+      return HttpResponse{};
+    }
+    return fut.get();
+  }
+  std::unique_ptr<Node> node_;
+};
+
+TEST_F(RoutesTest, UnknownPathsAre404UnderOneMetricsLabel) {
+  for (const char* p : {"/nope", "/rcan/v1/leasesX", "/rcan/v1/consent/x/steal", "/api"}) {
+    HttpResponse r = call("GET", p);
+    EXPECT_EQ(r.status, 404) << p;
+    EXPECT_EQ(http_error_code(r), "NOT_FOUND") << p;
+  }
+  std::string metrics = call("GET", "/metrics").body;
+  EXPECT_NE(metrics.find("route=\"other\""), std::string::npos) << metrics;
+  EXPECT_EQ(metrics.find("leasesX"), std::string::npos);
+}
+
+TEST_F(RoutesTest, AWrongMethodIs405WithEveryMethodThePathServes) {
+  struct Case {
+    const char* method;
+    const char* path;
+    const char* allow;
+  };
+  for (const Case& c : std::vector<Case>{
+           {"POST", "/healthz", "GET, HEAD"},
+           {"GET", "/rcan/v1/command", "POST"},
+           {"PUT", "/rcan/v1/leases", "GET, POST"},
+           {"GET", "/rcan/v1/leases/L-1", "DELETE"},
+           {"GET", "/rcan/v1/auth/release", "DELETE, POST"},
+           {"PATCH", "/rcan/v1/auth/queue", "GET, DELETE"},
+           {"GET", "/rcan/v1/consent/C-1/grant", "POST"},
+           {"DELETE", "/rcan/v1/transfer", "GET, POST"},
+           {"POST", "/rcan/v1/pending", "GET"},
+           {"DELETE", "/", "GET, HEAD"},
+           {"POST", "/ui/js/main.js", "GET, HEAD"},
+       }) {
+    HttpResponse r = call(c.method, c.path, "{}");
+    EXPECT_EQ(r.status, 405) << c.method << " " << c.path;
+    EXPECT_EQ(http_error_code(r), "METHOD_NOT_ALLOWED") << c.method << " " << c.path;
+    EXPECT_EQ(header(r, "Allow"), c.allow) << c.method << " " << c.path;
+  }
+}
+
+TEST_F(RoutesTest, BodiesAreReadByTheRowsRule) {
+  const std::string owner = token("owner", "alice");
+  // A required JSON body.
+  EXPECT_EQ(http_error_code(call("POST", "/rcan/v1/command", "", owner)), "MALFORMED_JSON");
+  EXPECT_EQ(http_error_code(call("POST", "/rcan/v1/command", "{nope", owner)), "MALFORMED_JSON");
+  // An object or nothing.
+  HttpResponse arr = call("POST", "/rcan/v1/auth/claim", "[1,2]", owner);
+  EXPECT_EQ(arr.status, 400);
+  EXPECT_EQ(http_error_code(arr), "SCHEMA_VALIDATION_FAILED");
+  EXPECT_EQ(call("POST", "/rcan/v1/auth/claim", "", owner).status, 200)
+      << "an empty body reads as {}";
+  // Nesting beyond the control routes' depth.
+  std::string deep(20, '[');
+  deep = "{\"a\":" + deep + std::string(20, ']') + "}";
+  EXPECT_EQ(call("POST", "/rcan/v1/auth/renew", deep, owner).status, 400);
+  // Optional JSON: a bare stop.
+  EXPECT_EQ(call("POST", "/api/stop", "", owner).status, 200);
+  EXPECT_EQ(act_.estops(), 1u);
+}
+
+TEST_F(RoutesTest, MetricsLabelsComeFromTheTableNotFromThePath) {
+  const std::string owner = token("owner", "alice");
+  for (int i = 0; i < 20; ++i) {
+    std::string id = "lease-" + std::to_string(i);
+    call("POST", "/rcan/v1/leases/" + id + "/grants", "{bad json", owner);
+    call("DELETE", "/rcan/v1/leases/" + id, "", owner);
+    call("POST", "/rcan/v1/consent/" + id + "/grant", "[", owner);
+  }
+  std::string metrics = call("GET", "/metrics").body;
+  EXPECT_EQ(metrics.find("lease-1"), std::string::npos) << "a path segment became a label";
+  EXPECT_NE(metrics.find("/rcan/v1/leases/{id}/grants"), std::string::npos) << metrics;
+}
+
+TEST_F(RoutesTest, ParametersReachTheirHandlers) {
+  const std::string owner = token("owner", "alice");
+  HttpResponse revoke = call("DELETE", "/rcan/v1/leases/no-such-lease", "", owner);
+  EXPECT_EQ(revoke.status, 404);
+  EXPECT_NE(revoke.body.find("no-such-lease"), std::string::npos) << revoke.body;
+  HttpResponse thought = call("GET", "/api/thoughts/t-1", "", owner);
+  EXPECT_EQ(thought.status, 404);
+  EXPECT_NE(thought.body.find("AI accountability is not enabled"), std::string::npos)
+      << thought.body;
+}
+
+TEST_F(RoutesTest, EveryRowAnswersAndNoneIsShadowed) {
+  // One request per documented route: none may fall through to "no route".
+  const std::string owner = token("owner", "alice");
+  for (const auto& [method, path] : std::vector<std::pair<std::string, std::string>>{
+           {"GET", "/healthz"},
+           {"HEAD", "/healthz"},
+           {"GET", "/metrics"},
+           {"POST", "/rcan/v1/discover"},
+           {"GET", "/api/discovery"},
+           {"GET", "/rcan/v1/status"},
+           {"GET", "/api/status"},
+           {"GET", "/rcan/v1/auth/queue"},
+           {"GET", "/rcan/v1/leases"},
+           {"GET", "/rcan/v1/transfer"},
+           {"GET", "/rcan/v1/consent"},
+           {"GET", "/api/audit"},
+           {"GET", "/"},
+           {"GET", "/ui/"},
+           {"GET", "/favicon.ico"},
+       }) {
+    HttpResponse r = call(method, path, "", owner);
+    EXPECT_TRUE(r.status == 200 || r.status == 304)
+        << method << " " << path << " " << r.status << " " << r.body.substr(0, 200);
+  }
+}
+
+}  // namespace
+}  // namespace rcan::node
