@@ -10,6 +10,7 @@
 #include "base/http_client.h"
 #include "base/log.h"
 #include "node/ai/brain_layers.h"
+#include "node/pipeline/pipeline.h"
 #include "node/services/node_services.h"
 #include "rcan/crypto/watermark.h"
 #include "rcan/errors.h"
@@ -54,11 +55,11 @@ Status AiServices::start(Pipeline& pipeline) {
       return Error(ErrorCode::kInternal, items.error().message + " (and it cannot be moved aside)");
     log(LogLevel::kError, "hitl_pending_unreadable",
         json::Object{{"error", items.error().message}, {"moved_to", aside}});
-    auto e = svc_.entry("system", "", "HITL_PENDING_LOST", "error");
-    e.sender_type = "system";
-    e.reason = items.error().message.substr(0, 256);
-    e.detail.set("moved_to", aside);
-    svc_.write_audit(std::move(e));
+    svc_.record("HITL_PENDING_LOST", "error")
+        .by_system()
+        .reason(items.error().message.substr(0, 256))
+        .detail("moved_to", aside)
+        .write();
     items = std::vector<PendingItem>{};
   }
   {
@@ -119,17 +120,14 @@ void AiServices::escalate(const std::shared_ptr<Context>& ctx, const config::Con
   std::string from = m.ai && m.ai->layer ? *m.ai->layer : "";
   std::string from_thought = m.ai && m.ai->thought_id ? *m.ai->thought_id : m.message_id;
   // The refused command is recorded with its own ai block before the layer is asked.
-  auto e =
-      svc_.entry(ctx->principal.display(), m.message_id, "CONFIDENCE_GATE_ESCALATED", "blocked");
-  e.sender_type = std::string(sender_type_name(ctx->sender.sender_type));
-  if (!ctx->sender.sub.empty()) e.sub = ctx->sender.sub;
-  if (m.ai) e.ai = *m.ai;
-  if (!m.action().empty()) e.action = m.action();
-  e.reason = "confidence_below_gate_escalate";
-  e.detail = ctx->audit_detail;
-  e.detail.set("to_layer", to);
-  e.detail.set("layer_url", layer.url);
-  svc_.write_audit(std::move(e));
+  AuditRecord r = message_record(svc_, *ctx, "CONFIDENCE_GATE_ESCALATED", "blocked");
+  if (m.ai) r.entry().ai = *m.ai;
+  r.entry().detail = ctx->audit_detail;
+  r.action(m.action())
+      .reason("confidence_below_gate_escalate")
+      .detail("to_layer", to)
+      .detail("layer_url", layer.url)
+      .write();
   config::ConfidenceGate g = gate;
   bool posted = net_.post([this, ctx, g, to, from, from_thought, layer] {
     const Message& orig = *ctx->msg;
@@ -257,9 +255,7 @@ void AiServices::hold(const std::shared_ptr<Context>& ctx, const config::HitlGat
     pending_[it.message_id] = it;
   }
   cv_.notify_all();
-  auto e = svc_.entry(ctx->principal.display(), m.message_id, "HITL_PENDING", "blocked");
-  e.sender_type = std::string(sender_type_name(ctx->sender.sender_type));
-  if (!ctx->sender.sub.empty()) e.sub = ctx->sender.sub;
+  audit::AuditEntry e = std::move(message_record(svc_, *ctx, "HITL_PENDING", "blocked").entry());
   if (m.ai) e.ai = *m.ai;
   e.action = action_type;
   e.reason = "hitl_authorization_required";
@@ -419,8 +415,7 @@ void AiServices::decide(const Principal& p, const AuthorizeRequest& request,
                                   p.role) != item->authorized_roles.end()
                       : role_level(p.role) >= role_level(Role::kOwner);
   auto record = [&](const std::string& event, const std::string& outcome) {
-    auto e = svc_.entry(p.display(), original, event, outcome);
-    e.sub = p.sub;
+    audit::AuditEntry e = std::move(svc_.record(event, outcome).by(p).message(original).entry());
     if (item) e.action = item->action_type;
     e.detail.set("authorize_message_id", req->authorize_id);
     e.detail.set("decision", req->approve ? "approve" : "deny");
@@ -526,16 +521,14 @@ void AiServices::timer_loop() {
 
 void AiServices::settle_timeout(PendingItem item) {
   std::string originator = item.principal_key();
-  auto e = svc_.entry(item.sub.empty() ? "anonymous" : item.sub, item.message_id, "HITL_TIMEOUT",
-                      item.allow_on_timeout ? "ok" : "blocked");
-  e.sender_type = std::string(sender_type_name(item.sender.sender_type));
-  if (!item.sender.sub.empty()) e.sub = item.sender.sub;
-  e.action = item.action_type;
-  e.reason = item.allow_on_timeout ? "hitl_timeout_allow" : "hitl_timeout";
-  e.hitl_timeout_bypass = item.allow_on_timeout;
-  e.detail.set("auth_timeout_ms", static_cast<int64_t>(item.auth_timeout_ms));
-  e.detail.set("on_timeout", item.allow_on_timeout ? "allow" : "block");
-  svc_.write_audit(std::move(e));
+  AuditRecord r = svc_.record("HITL_TIMEOUT", item.allow_on_timeout ? "ok" : "blocked");
+  r.by_subject(item.sub).sender(item.sender).message(item.message_id);
+  r.entry().hitl_timeout_bypass = item.allow_on_timeout;
+  r.action(item.action_type)
+      .reason(item.allow_on_timeout ? "hitl_timeout_allow" : "hitl_timeout")
+      .detail("auth_timeout_ms", static_cast<int64_t>(item.auth_timeout_ms))
+      .detail("on_timeout", item.allow_on_timeout ? "allow" : "block")
+      .write();
   if (!item.allow_on_timeout) {
     Error err(ErrorCode::kHitlTimeout,
               "no OWNER or CREATOR authorized the held " + item.action_type + " command within " +

@@ -35,10 +35,10 @@ void authorize_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& 
   const std::string route = "/rcan/v1/authorize";
   auto p = bearer(svc, req);
   if (!p.ok()) {
-    auto e = svc.entry("anonymous", "", "HITL_AUTHORIZE_REFUSED", "blocked");
-    e.reason = std::string(error_name(p.error().code));
-    e.detail.set("route", route);
-    svc.write_audit(std::move(e));
+    svc.record("HITL_AUTHORIZE_REFUSED", "blocked")
+        .reason(std::string(error_name(p.error().code)))
+        .detail("route", route)
+        .write();
     return answer_error(svc, respond, route, p.error());
   }
   auto body = json::parse(req.body, {.max_depth = 16, .max_bytes = 64 * 1024});

@@ -50,11 +50,11 @@ Result<Principal> Node::route_principal(const transport::HttpRequest& req, const
     if (!token.empty()) pr = svc_.authenticate(token);
   }
   auto refuse_audit = [&](const Error& err, const Principal* p) {
-    auto e = svc_.entry(p ? p->display() : "anonymous", "", denied_event, "blocked");
-    if (p) e.sub = p->sub;
-    e.reason = std::string(error_name(err.code));
-    e.detail.set("route", route);
-    svc_.write_audit(std::move(e));
+    AuditRecord e = svc_.record(denied_event, "blocked");
+    if (p) e.by(*p);
+    e.reason(std::string(error_name(err.code)));
+    e.detail("route", route);
+    e.write();
   };
   if (!pr.ok()) {
     refuse_audit(pr.error(), nullptr);
@@ -105,12 +105,12 @@ void Node::control_start() {
   svc_.partition.start(
       [this] { return svc_.clock.wall_ms(); },
       [this](NetMode old, NetMode now) {
-        auto e = svc_.entry("system", "", "PARTITION_MODE", "ok");
-        e.sender_type = "system";
-        e.reason = std::string(net_mode_name(now));
-        e.detail.set("from", std::string(net_mode_name(old)));
-        e.detail.set("to", std::string(net_mode_name(now)));
-        svc_.write_audit(std::move(e));
+        AuditRecord e = svc_.record("PARTITION_MODE", "ok");
+        e.by_system();
+        e.reason(std::string(net_mode_name(now)));
+        e.detail("from", std::string(net_mode_name(old)));
+        e.detail("to", std::string(net_mode_name(now)));
+        e.write();
         svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
                                                      {"event", "PARTITION_MODE"},
                                                      {"mode", std::string(net_mode_name(now))},
@@ -147,23 +147,23 @@ void Node::control_tick() {
   int64_t now_wall = svc_.clock.wall_ms();
   svc_.sessions.tick(svc_.clock.mono_ms(), now_wall);
   if (auto t = svc_.ownership.expire(now_wall)) {
-    auto e = svc_.entry("system", "", "TRANSFER_EXPIRED", "ok");
-    e.sender_type = "system";
-    e.detail.set("transfer_id", t->id);
-    e.detail.set("from", t->from_sub);
-    e.detail.set("to", t->to_sub);
-    svc_.write_audit(std::move(e));
+    AuditRecord e = svc_.record("TRANSFER_EXPIRED", "ok");
+    e.by_system();
+    e.detail("transfer_id", t->id);
+    e.detail("from", t->from_sub);
+    e.detail("to", t->to_sub);
+    e.write();
     svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
                                                  {"event", "TRANSFER_EXPIRED"},
                                                  {"transfer_id", t->id},
                                                  {"timestamp_ms", now_wall}}));
   }
   for (const auto& c : svc_.consent.expire(now_wall)) {
-    auto e = svc_.entry("system", "", "CONSENT_EXPIRED", "ok");
-    e.sender_type = "system";
-    e.detail.set("consent_id", c.id);
-    e.detail.set("requester", c.requester_sub);
-    svc_.write_audit(std::move(e));
+    AuditRecord e = svc_.record("CONSENT_EXPIRED", "ok");
+    e.by_system();
+    e.detail("consent_id", c.id);
+    e.detail("requester", c.requester_sub);
+    e.write();
   }
   announce_control_changes();
 }
@@ -171,25 +171,25 @@ void Node::control_tick() {
 void Node::announce_control_changes() {
   for (auto& c : svc_.sessions.take_changes()) {
     const Session& s = c.session;
-    auto e = svc_.entry("system", s.id, "", "ok");
-    e.sender_type = "system";
-    if (!s.sub.empty()) e.sub = s.sub;
-    if (!c.reason.empty()) e.reason = c.reason;
+    AuditRecord e = svc_.record("", "ok");
+    e.by_system().message(s.id);
+    if (!s.sub.empty()) e.entry().sub = s.sub;
+    if (!c.reason.empty()) e.reason(c.reason);
     json::Object ev{{"type", "EVENT"}, {"timestamp_ms", svc_.clock.wall_ms()}};
     if (c.event == "EXPIRE" || c.event == "REVOKE") {
       svc_.act.session_ended(s.id);
       svc_.act.stop("control session " + s.id + " ended");
-      e.event = c.event == "EXPIRE" ? "SESSION_EXPIRED" : "SESSION_REVOKED";
-      e.detail.set("role", std::string(role_name(s.role)));
-      if (!c.lease_id.empty()) e.detail.set("lease_id", c.lease_id);
-      ev.set("event", e.event);
+      e.entry().event = c.event == "EXPIRE" ? "SESSION_EXPIRED" : "SESSION_REVOKED";
+      e.detail("role", std::string(role_name(s.role)));
+      if (!c.lease_id.empty()) e.detail("lease_id", c.lease_id);
+      ev.set("event", e.entry().event);
       ev.set("session_id", s.id);
       ev.set("reason", c.reason);
       publish_to(s.principal_key, std::move(ev));
     } else if (c.event == "PROMOTE") {
       svc_.act.session_started(s.id, svc_.settings.heartbeat_timeout_ms);
-      e.event = "CLAIM_PROMOTED";
-      e.detail.set("role", std::string(role_name(s.role)));
+      e.entry().event = "CLAIM_PROMOTED";
+      e.detail("role", std::string(role_name(s.role)));
       ev.set("type", "GRANTED");
       ev.set("event", "PROMOTED");
       ev.set("session_id", s.id);
@@ -204,16 +204,16 @@ void Node::announce_control_changes() {
       if (svc_.on_grant) svc_.on_grant(s.id, ev);
       publish_to(s.principal_key, std::move(ev));
     } else if (c.event == "QUEUE_DROP") {
-      e.event = "CLAIM_DROPPED";
-      e.sub = c.queued.sub;
+      e.entry().event = "CLAIM_DROPPED";
+      e.entry().sub = c.queued.sub;
       ev.set("event", "CLAIM_DROPPED");
       ev.set("reason", c.reason);
       publish_to(c.queued.principal_key, std::move(ev));
     } else if (c.event == "WINDOW_CLOSE") {
-      e.event = "HANDOFF_WINDOW_CLOSED";
+      e.entry().event = "HANDOFF_WINDOW_CLOSED";
     } else if (c.event == "LEASE_END") {
-      e.event = "LEASE_ENDED";
-      e.detail.set("lease_id", c.lease_id);
+      e.entry().event = "LEASE_ENDED";
+      e.detail("lease_id", c.lease_id);
       ev.set("event", "LEASE_ENDED");
       ev.set("lease_id", c.lease_id);
       ev.set("reason", c.reason);
@@ -221,7 +221,7 @@ void Node::announce_control_changes() {
     } else {
       continue;
     }
-    svc_.write_audit(std::move(e));
+    e.write();
   }
   // The "control state changed" event (streams, and whatever else subscribes: mDNS status).
   std::string now_state(control_state_name(svc_.sessions.state(svc_.clock.mono_ms())));
@@ -255,9 +255,9 @@ void Node::queue_route(transport::HttpRequest& req, Respond& respond, const json
   if (m == "DELETE") {
     bool left = svc_.sessions.leave_queue(*pr);
     if (left) {
-      auto e = svc_.entry(pr->display(), "", "CLAIM_WITHDRAWN", "ok");
-      e.sub = pr->sub;
-      svc_.write_audit(std::move(e));
+      AuditRecord e = svc_.record("CLAIM_WITHDRAWN", "ok");
+      e.by(*pr);
+      e.write();
     }
     answer_json(respond, p, left ? 200 : 404,
                 left ? json::Value(json::Object{{"left", true}})
@@ -282,11 +282,11 @@ void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json
   bool fleet = !str_field(body, "fleet_id").empty();
   int64_t now_mono = svc_.clock.mono_ms(), now_wall = svc_.clock.wall_ms();
   auto deny = [&](const Error& err, const std::string& reason) {
-    auto e = svc_.entry(pr->display(), "", "CLAIM_DENIED", "blocked");
-    e.sub = pr->sub;
-    e.reason = reason;
-    e.detail.set("error", err.message);
-    svc_.write_audit(std::move(e));
+    AuditRecord e = svc_.record("CLAIM_DENIED", "blocked");
+    e.by(*pr);
+    e.reason(reason);
+    e.detail("error", err.message);
+    e.write();
     answer_error(respond, route, err);
   };
   // Network partition: no new sessions in LOCKDOWN; offline, only principals validated while
@@ -312,11 +312,11 @@ void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json
     return announce_control_changes();
   }
   if (c->outcome == ClaimOutcome::kQueued) {
-    auto e = svc_.entry(pr->display(), "", "CLAIM_QUEUED", "blocked");
-    e.sub = pr->sub;
-    e.reason = "CONTROL_CONFLICT";
-    e.detail.set("queue_position", static_cast<int64_t>(c->queue_position));
-    svc_.write_audit(std::move(e));
+    AuditRecord e = svc_.record("CLAIM_QUEUED", "blocked");
+    e.by(*pr);
+    e.reason("CONTROL_CONFLICT");
+    e.detail("queue_position", static_cast<int64_t>(c->queue_position));
+    e.write();
     json::Value err =
         svc_.error(Error(ErrorCode::kControlConflict,
                          "the robot is controlled by another principal of the same role; you are "
@@ -340,20 +340,21 @@ void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json
                             {"session_id", c->preempted->id},
                             {"by_role", std::string(role_name(c->session.role))},
                             {"timestamp_ms", now_wall}});
-    auto pe = svc_.entry(pr->display(), c->preempted->id, "SESSION_PREEMPTED", "ok");
-    pe.sub = c->preempted->sub;
-    pe.detail.set("by", pr->sub);
-    pe.detail.set("by_role", std::string(role_name(c->session.role)));
-    pe.detail.set("role", std::string(role_name(c->preempted->role)));
-    svc_.write_audit(std::move(pe));
+    AuditRecord pe = svc_.record("SESSION_PREEMPTED", "ok");
+    pe.by(*pr).message(c->preempted->id);
+    pe.entry().sub = c->preempted->sub;
+    pe.detail("by", pr->sub);
+    pe.detail("by_role", std::string(role_name(c->session.role)));
+    pe.detail("role", std::string(role_name(c->preempted->role)));
+    pe.write();
   }
   svc_.act.session_started(c->session.id, svc_.settings.heartbeat_timeout_ms);
   bool renewed = c->outcome == ClaimOutcome::kRenewed;
-  auto e = svc_.entry(pr->display(), c->session.id, renewed ? "CLAIM_RENEWED" : "CLAIM", "ok");
-  e.sub = pr->sub;
-  if (c->preempted) e.detail.set("preempted_session", c->preempted->id);
-  if (!c->session.lease_id.empty()) e.detail.set("lease_id", c->session.lease_id);
-  if (fleet) e.detail.set("fleet_id", str_field(body, "fleet_id"));
+  AuditRecord e = svc_.record(renewed ? "CLAIM_RENEWED" : "CLAIM", "ok");
+  e.by(*pr).message(c->session.id);
+  if (c->preempted) e.detail("preempted_session", c->preempted->id);
+  if (!c->session.lease_id.empty()) e.detail("lease_id", c->session.lease_id);
+  if (fleet) e.detail("fleet_id", str_field(body, "fleet_id"));
   json::Object payload{
       {"session_id", c->session.id},
       {"role", std::string(role_name(c->session.role))},
@@ -368,10 +369,9 @@ void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json
   if (svc_.on_grant)
     svc_.on_grant(c->session.id, payload);  // e.g. udp_heartbeat (src/node/bindings/udp_service.h)
   announce_control_changes();
-  svc_.write_audit(
-      std::move(e), [this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
-        answer_json(respond, route, 200, svc_.envelope(MessageType::kGranted, payload));
-      });
+  e.write([this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
+    answer_json(respond, route, 200, svc_.envelope(MessageType::kGranted, payload));
+  });
 }
 
 void Node::renew_route(transport::HttpRequest& req, Respond& respond, const json::Value& body) {
@@ -386,25 +386,24 @@ void Node::renew_route(transport::HttpRequest& req, Respond& respond, const json
                               "session_id", "missing_field"));
   auto r = svc_.sessions.renew(session_id, *pr, svc_.clock.mono_ms(), svc_.clock.wall_ms());
   if (!r.ok()) {
-    auto e = svc_.entry(pr->display(), session_id, "RENEW_DENIED", "blocked");
-    e.sub = pr->sub;
-    e.reason = std::string(error_name(r.error().code));
-    svc_.write_audit(std::move(e));
+    AuditRecord e = svc_.record("RENEW_DENIED", "blocked");
+    e.by(*pr).message(session_id);
+    e.reason(std::string(error_name(r.error().code)));
+    e.write();
     announce_control_changes();
     return answer_error(respond, route, r.error());
   }
   svc_.act.session_heartbeat(r->id);
-  auto e = svc_.entry(pr->display(), r->id, "CLAIM_RENEWED", "ok");
-  e.sub = pr->sub;
+  AuditRecord e = svc_.record("CLAIM_RENEWED", "ok");
+  e.by(*pr).message(r->id);
   json::Object payload{
       {"session_id", r->id}, {"role", std::string(role_name(r->role))}, {"renewed", true}};
   payload.set("expires_in", r->expires_mono_ms
                                 ? json::Value((r->expires_mono_ms - svc_.clock.mono_ms()) / 1000)
                                 : json::Value());
-  svc_.write_audit(
-      std::move(e), [this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
-        answer_json(respond, route, 200, svc_.envelope(MessageType::kGranted, payload));
-      });
+  e.write([this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
+    answer_json(respond, route, 200, svc_.envelope(MessageType::kGranted, payload));
+  });
 }
 
 void Node::release_route(transport::HttpRequest& req, Respond& respond, const json::Value& body) {
@@ -423,9 +422,9 @@ void Node::release_route(transport::HttpRequest& req, Respond& respond, const js
   auto r = svc_.sessions.release(session_id, *pr, svc_.clock.mono_ms(), svc_.clock.wall_ms());
   if (!r.ok()) return answer_error(respond, route, r.error());
   svc_.act.session_ended(session_id);
-  auto e = svc_.entry(pr->display(), session_id, "RELEASE", "ok");
-  e.sub = pr->sub;
-  svc_.write_audit(std::move(e));
+  AuditRecord e = svc_.record("RELEASE", "ok");
+  e.by(*pr).message(session_id);
+  e.write();
   if (svc_.sessions.state(svc_.clock.mono_ms()) == ControlState::kAvailable)
     svc_.events.publish(json::Value(json::Object{{"type", "AVAILABLE"},
                                                  {"released_session", session_id},
@@ -468,18 +467,17 @@ void Node::handoff_route(transport::HttpRequest& req, Respond& respond, const js
                                                {"reserved_for", target},
                                                {"window_ms", window},
                                                {"timestamp_ms", svc_.clock.wall_ms()}}));
-  auto e = svc_.entry(pr->display(), session_id, "HANDOFF", "ok");
-  e.sub = pr->sub;
-  e.detail.set("target_user_id", target);
-  if (target_role) e.detail.set("target_role", std::string(role_name(*target_role)));
-  if (std::string reason = str_field(body, "reason", 512); !reason.empty()) e.reason = reason;
+  AuditRecord e = svc_.record("HANDOFF", "ok");
+  e.by(*pr).message(session_id);
+  e.detail("target_user_id", target);
+  if (target_role) e.detail("target_role", std::string(role_name(*target_role)));
+  if (std::string reason = str_field(body, "reason", 512); !reason.empty()) e.reason(reason);
   announce_control_changes();
   json::Object payload{
       {"session_id", session_id}, {"target_user_id", target}, {"window_ms", window}};
-  svc_.write_audit(
-      std::move(e), [this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
-        answer_json(respond, route, 200, svc_.envelope(MessageType::kAvailable, payload));
-      });
+  e.write([this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
+    answer_json(respond, route, 200, svc_.envelope(MessageType::kAvailable, payload));
+  });
 }
 
 // Leases: GET /rcan/v1/leases, POST /rcan/v1/leases {leasee, duration_s},
@@ -507,11 +505,11 @@ void Node::lease_route(transport::HttpRequest& req, Respond& respond, const json
     auto l = svc_.sessions.grant_lease(*pr, str_field(body, "leasee"), dur * 1000, now_wall,
                                        svc_.clock.mono_ms());
     if (!l.ok()) return answer_error(respond, route, l.error());
-    auto e = svc_.entry(pr->display(), l->id, "LEASE_GRANTED", "ok");
-    e.sub = pr->sub;
-    e.detail.set("lease_id", l->id);
-    e.detail.set("leasee", l->leasee_sub);
-    e.detail.set("end_ms", l->end_wall_ms);
+    AuditRecord e = svc_.record("LEASE_GRANTED", "ok");
+    e.by(*pr).message(l->id);
+    e.detail("lease_id", l->id);
+    e.detail("leasee", l->leasee_sub);
+    e.detail("end_ms", l->end_wall_ms);
     svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
                                                  {"event", "LEASE_GRANTED"},
                                                  {"lease_id", l->id},
@@ -520,10 +518,9 @@ void Node::lease_route(transport::HttpRequest& req, Respond& respond, const json
                                                  {"timestamp_ms", now_wall}}));
     announce_control_changes();
     json::Value answer = l->to_json(now_wall);
-    return svc_.write_audit(std::move(e),
-                            [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
-                              answer_json(respond, route, 201, std::move(answer));
-                            });
+    return e.write([this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
+      answer_json(respond, route, 201, std::move(answer));
+    });
   }
   if (grants) {
     auto pr = route_principal(req, body, route, "LEASE_DENIED", Role::kLeasee, "");
@@ -541,31 +538,29 @@ void Node::lease_route(transport::HttpRequest& req, Respond& respond, const json
     auto l = svc_.sessions.grant_within_lease(*pr, lease_id, sub, *role, dur * 1000, now_wall,
                                               svc_.clock.mono_ms());
     if (!l.ok()) return answer_error(respond, route, l.error());
-    auto e = svc_.entry(pr->display(), lease_id, "LEASE_ACCESS_GRANTED", "ok");
-    e.sub = pr->sub;
-    e.detail.set("lease_id", lease_id);
-    e.detail.set("user_id", sub);
-    e.detail.set("role", std::string(role_name(*role)));
+    AuditRecord e = svc_.record("LEASE_ACCESS_GRANTED", "ok");
+    e.by(*pr).message(lease_id);
+    e.detail("lease_id", lease_id);
+    e.detail("user_id", sub);
+    e.detail("role", std::string(role_name(*role)));
     announce_control_changes();
     json::Value answer = l->to_json(now_wall);
-    return svc_.write_audit(std::move(e),
-                            [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
-                              answer_json(respond, route, 200, std::move(answer));
-                            });
+    return e.write([this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
+      answer_json(respond, route, 200, std::move(answer));
+    });
   }
   auto pr = route_principal(req, body, route, "LEASE_DENIED", Role::kOwner, "config");
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   auto l = svc_.sessions.revoke_lease(*pr, lease_id, svc_.clock.mono_ms(), now_wall);
   if (!l.ok()) return answer_error(respond, route, l.error());
-  auto e = svc_.entry(pr->display(), lease_id, "LEASE_REVOKED", "ok");
-  e.sub = pr->sub;
-  e.detail.set("lease_id", lease_id);
+  AuditRecord e = svc_.record("LEASE_REVOKED", "ok");
+  e.by(*pr).message(lease_id);
+  e.detail("lease_id", lease_id);
   announce_control_changes();
   json::Value answer = json::Object{{"lease_id", lease_id}, {"revoked", true}};
-  svc_.write_audit(std::move(e),
-                   [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
-                     answer_json(respond, route, 200, std::move(answer));
-                   });
+  e.write([this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
+    answer_json(respond, route, 200, std::move(answer));
+  });
 }
 
 // GET /rcan/v1/transfer: the ownership state. POST {action: request|accept|cancel, …}.
@@ -603,27 +598,27 @@ void Node::transfer_route(transport::HttpRequest& req, Respond& respond, const j
     event = "TRANSFER_CANCEL";
   }
   if (!r.ok()) {
-    auto e = svc_.entry(pr->display(), "", "TRANSFER_DENIED", "blocked");
-    e.sub = pr->sub;
-    e.reason = std::string(error_name(r.error().code));
-    e.detail.set("action", action);
-    svc_.write_audit(std::move(e));
+    AuditRecord e = svc_.record("TRANSFER_DENIED", "blocked");
+    e.by(*pr);
+    e.reason(std::string(error_name(r.error().code)));
+    e.detail("action", action);
+    e.write();
     if (r.error().code == ErrorCode::kSessionExpired) control_tick();  // record the expiry now
     return answer_error(respond, route, r.error());
   }
-  auto e = svc_.entry(pr->display(), r->id, event, "ok");
-  e.sub = pr->sub;
-  e.detail.set("transfer_id", r->id);
-  e.detail.set("from", r->from_sub);
-  e.detail.set("to", r->to_sub);
-  e.detail.set("expires_ms", r->expires_ms);
+  AuditRecord e = svc_.record(event, "ok");
+  e.by(*pr).message(r->id);
+  e.detail("transfer_id", r->id);
+  e.detail("from", r->from_sub);
+  e.detail("to", r->to_sub);
+  e.detail("expires_ms", r->expires_ms);
   if (action == "accept") {
-    e.detail.set("agreement", str_field(body, "agreement", 512));
+    e.detail("agreement", str_field(body, "agreement", 512));
     // Personal data goes; the audit chain and skills stay.
     svc_.sessions.revoke_all("ownership transferred to " + r->to_sub, svc_.clock.mono_ms());
     svc_.consent.clear();
     svc_.ownership.run_clear_hooks();
-    e.detail.set("cleared", json::Array{"sessions", "leases", "users", "consent", "thought_log"});
+    e.detail("cleared", json::Array{"sessions", "leases", "users", "consent", "thought_log"});
   }
   json::Value answer = svc_.ownership.to_json(now_wall, true);
   answer.as_object().set("transfer_id", r->id);
@@ -632,10 +627,9 @@ void Node::transfer_route(transport::HttpRequest& req, Respond& respond, const j
   svc_.events.publish(json::Value(json::Object{
       {"type", "EVENT"}, {"event", event}, {"transfer_id", id}, {"timestamp_ms", now_wall}}));
   announce_control_changes();
-  svc_.write_audit(std::move(e),
-                   [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
-                     answer_json(respond, route, 200, std::move(answer));
-                   });
+  e.write([this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
+    answer_json(respond, route, 200, std::move(answer));
+  });
 }
 
 // GET /rcan/v1/consent: the pending requests (OWNER).
@@ -664,11 +658,11 @@ void Node::consent_request_route(transport::HttpRequest& req, Respond& respond,
   if (!msg_body.get("timestamp_ms")) msg_body.as_object().set("timestamp_ms", now_wall);
   if (!msg_body.get("payload")) msg_body.as_object().set("payload", json::Object{});
   auto refused = [&](const Error& err) {
-    auto e = svc_.entry(pr->display(), "", "CONSENT_REFUSED", "blocked");
-    e.sub = pr->sub;
-    e.reason = std::string(error_name(err.code));
-    if (!err.field.empty()) e.detail.set("field", err.field.substr(0, 128));
-    svc_.write_audit(std::move(e));
+    AuditRecord e = svc_.record("CONSENT_REFUSED", "blocked");
+    e.by(*pr);
+    e.reason(std::string(error_name(err.code)));
+    if (!err.field.empty()) e.detail("field", err.field.substr(0, 128));
+    e.write();
     answer_error(respond, route, err);
   };
   auto msg = decode_message(msg_body, svc_.settings.codec);
@@ -714,21 +708,20 @@ void Node::consent_request_route(transport::HttpRequest& req, Respond& respond,
   auto added = svc_.consent.add(c, now_wall);
   if (!added.ok()) return answer_error(respond, route, added.error());
   json::Value note = consent_notification(*added, svc_.settings.name);
-  auto e = svc_.entry(pr->display(), msg->message_id, "CONSENT_REQUEST", "ok");
-  e.sub = pr->sub;
-  e.sender_type = added->sender_type;
-  if (!added->cloud_provider.empty()) e.cloud_provider = added->cloud_provider;
-  if (!added->function_name.empty()) e.function_name = added->function_name;
-  e.detail.set("consent_id", added->id);
-  e.detail.set("scopes",
-               added->to_json().get("scopes") ? *added->to_json().get("scopes") : json::Value());
-  e.detail.set("notification", note);
+  AuditRecord e = svc_.record("CONSENT_REQUEST", "ok");
+  e.by(*pr).message(msg->message_id);
+  e.entry().sender_type = added->sender_type;
+  if (!added->cloud_provider.empty()) e.entry().cloud_provider = added->cloud_provider;
+  if (!added->function_name.empty()) e.entry().function_name = added->function_name;
+  e.detail("consent_id", added->id);
+  e.detail("scopes",
+           added->to_json().get("scopes") ? *added->to_json().get("scopes") : json::Value());
+  e.detail("notification", note);
   json::Value answer = added->to_json();
   answer.as_object().set("notification", note);
-  svc_.write_audit(std::move(e),
-                   [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
-                     answer_json(respond, route, 202, std::move(answer));
-                   });
+  e.write([this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
+    answer_json(respond, route, 202, std::move(answer));
+  });
   svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
                                                {"event", "CONSENT_REQUEST"},
                                                {"consent_id", added->id},
@@ -740,14 +733,13 @@ void Node::consent_request_route(transport::HttpRequest& req, Respond& respond,
     std::string cid = added->id;
     worker_.post([this, url, text, cid] {
       auto r = http_request("POST", url, text, 2000);
-      auto we =
-          svc_.entry("system", cid, "CONSENT_NOTIFIED", r.ok() && r->status < 300 ? "ok" : "error");
-      we.sender_type = "system";
-      we.detail.set("consent_id", cid);
-      we.detail.set("webhook_status",
-                    r.ok() ? json::Value(static_cast<int64_t>(r->status)) : json::Value());
-      if (!r.ok()) we.reason = r.error().message;
-      svc_.write_audit(std::move(we));
+      AuditRecord we = svc_.record("CONSENT_NOTIFIED", r.ok() && r->status < 300 ? "ok" : "error");
+      we.by_system().message(cid);
+      we.detail("consent_id", cid);
+      we.detail("webhook_status",
+                r.ok() ? json::Value(static_cast<int64_t>(r->status)) : json::Value());
+      if (!r.ok()) we.reason(r.error().message);
+      we.write();
     });
   }
   save_control_state();
@@ -798,16 +790,15 @@ void Node::consent_decision_route(transport::HttpRequest& req, Respond& respond,
   }
   auto d = svc_.consent.decide(id, verb == "grant", pr->sub, kind, lease_id, now_wall);
   if (!d.ok()) return answer_error(respond, route, d.error());
-  auto e =
-      svc_.entry(pr->display(), id, verb == "grant" ? "CONSENT_GRANTED" : "CONSENT_DENIED", "ok");
-  e.sub = pr->sub;
-  e.sender_type = "human";
-  e.detail.set("consent_id", id);
-  e.detail.set("requester", d->requester_sub);
-  e.detail.set("requester_sender_type", d->sender_type);
-  if (!d->function_name.empty()) e.detail.set("requester_function", d->function_name);
-  if (!lease_id.empty()) e.detail.set("lease_id", lease_id);
-  if (std::string reason = str_field(body, "reason", 512); !reason.empty()) e.reason = reason;
+  AuditRecord e = svc_.record(verb == "grant" ? "CONSENT_GRANTED" : "CONSENT_DENIED", "ok");
+  e.by(*pr).message(id);
+  e.entry().sender_type = "human";
+  e.detail("consent_id", id);
+  e.detail("requester", d->requester_sub);
+  e.detail("requester_sender_type", d->sender_type);
+  if (!d->function_name.empty()) e.detail("requester_function", d->function_name);
+  if (!lease_id.empty()) e.detail("lease_id", lease_id);
+  if (std::string reason = str_field(body, "reason", 512); !reason.empty()) e.reason(reason);
   svc_.events.publish(
       json::Value(json::Object{{"type", "EVENT"},
                                {"event", verb == "grant" ? "CONSENT_GRANTED" : "CONSENT_DENIED"},
@@ -815,10 +806,9 @@ void Node::consent_decision_route(transport::HttpRequest& req, Respond& respond,
                                {"timestamp_ms", now_wall}}));
   announce_control_changes();
   json::Value answer = d->to_json();
-  svc_.write_audit(std::move(e),
-                   [this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
-                     answer_json(respond, route, 200, std::move(answer));
-                   });
+  e.write([this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
+    answer_json(respond, route, 200, std::move(answer));
+  });
 }
 
 }  // namespace rcan::node

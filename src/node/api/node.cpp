@@ -92,10 +92,10 @@ void StreamSessionImpl::on_text(std::string text) {
     }
     auto p = svc.authenticate(token);
     if (!p.ok()) {
-      auto e = svc.entry("anonymous", "", "STREAM_REFUSED", "blocked");
-      e.reason = std::string(error_name(p.error().code));
-      e.detail.set("transport", "ws");
-      svc.write_audit(std::move(e));
+      svc.record("STREAM_REFUSED", "blocked")
+          .reason(std::string(error_name(p.error().code)))
+          .detail("transport", "ws")
+          .write();
       refuse_connect(p.error().message);
       return;
     }
@@ -104,10 +104,7 @@ void StreamSessionImpl::on_text(std::string text) {
       st->connected = true;
       st->principal = *p;
     }
-    auto e = svc.entry(p->display(), st->stream_id, "STREAM_OPEN", "ok");
-    e.sub = p->sub;
-    e.detail.set("transport", "ws");
-    svc.write_audit(std::move(e));
+    svc.record("STREAM_OPEN").by(*p).message(st->stream_id).detail("transport", "ws").write();
     json::Object ack{{"type", "CONNECT_ACK"},
                      {"session_id", st->stream_id},
                      {"server_version", svc.settings.rcan_version},
@@ -234,11 +231,11 @@ Node::~Node() {
 
 void Node::start() {
   if (running_.exchange(true)) return;
-  auto e = svc_.entry("system", "", "SYSTEM_START", "ok");
-  e.sender_type = "system";
-  e.detail.set("rcan_version", svc_.settings.rcan_version);
-  e.detail.set("estop_active", svc_.act.estop_active());
-  svc_.write_audit(std::move(e));
+  svc_.record("SYSTEM_START")
+      .by_system()
+      .detail("rcan_version", svc_.settings.rcan_version)
+      .detail("estop_active", svc_.act.estop_active())
+      .write();
   control_start();
   pump_ = std::thread([this] {
     pthread_setname_np(pthread_self(), "node-pump");
@@ -260,9 +257,8 @@ void Node::shutdown() {
   }
   for (auto& st : copy) st->sink->close(1001, "node shutting down");
   worker_.shutdown();
-  auto e = svc_.entry("system", "", "SYSTEM_STOP", "ok");
-  e.sender_type = "system";
-  (void)svc_.audit.append(std::move(e));  // blocks until durable: the last word of the run
+  // Appended synchronously (blocks until durable): the last word of the run.
+  (void)svc_.audit.append(std::move(svc_.record("SYSTEM_STOP").by_system().entry()));
 }
 
 size_t Node::stream_count() const {
@@ -347,13 +343,12 @@ void Node::pump() {
 
 void Node::on_safety_event(const std::string& type, const std::string& session_id,
                            int64_t elapsed_ms, const std::string& detail) {
-  auto e = svc_.entry("system", "", type, "ok");
-  e.sender_type = "system";
-  e.reason = type;
-  if (!session_id.empty()) e.detail.set("session_id", session_id);
-  e.detail.set("elapsed_ms", elapsed_ms);
-  if (!detail.empty()) e.detail.set("detail", detail);
-  svc_.write_audit(std::move(e));
+  AuditRecord r = svc_.record(type);
+  r.by_system().reason(type);
+  if (!session_id.empty()) r.detail("session_id", session_id);
+  r.detail("elapsed_ms", elapsed_ms);
+  if (!detail.empty()) r.detail("detail", detail);
+  r.write();
   svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
                                                {"event", type},
                                                {"session_id", session_id},

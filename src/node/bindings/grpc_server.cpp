@@ -128,10 +128,10 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
     if (!bearer_.empty()) {
       auto p = svc.authenticate(bearer_);
       if (!p.ok()) {
-        auto e = svc.entry("anonymous", "", "STREAM_REFUSED", "blocked");
-        e.reason = std::string(error_name(p.error().code));
-        e.detail.set("transport", "grpc");
-        svc.write_audit(std::move(e));
+        svc.record("STREAM_REFUSED", "blocked")
+            .reason(std::string(error_name(p.error().code)))
+            .detail("transport", "grpc")
+            .write();
         Outcome out{http_status(p.error().code), svc.error(p.error()), {}};
         register_link();
         final_ = error_status(ctx_, out);
@@ -139,10 +139,7 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
         return;
       }
       principal_ = *p;
-      auto e = svc.entry(p->display(), stream_id_, "STREAM_OPEN", "ok");
-      e.sub = p->sub;
-      e.detail.set("transport", "grpc");
-      svc.write_audit(std::move(e));
+      svc.record("STREAM_OPEN").by(*p).message(stream_id_).detail("transport", "grpc").write();
       std::weak_ptr<StreamLink> weak = link_;
       event_sub_ = svc.events.subscribe([weak, who = *p](const Event& ev) {
         if (!ev.audience.admits(&who)) return;  // another principal's event
@@ -220,10 +217,11 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
     }
     impl_.streams_open.fetch_sub(1);
     if (principal_) {
-      auto e = impl_.svc.entry(principal_->display(), stream_id_, "STREAM_CLOSED", "ok");
-      e.sub = principal_->sub;
-      e.detail.set("transport", "grpc");
-      impl_.svc.write_audit(std::move(e));
+      impl_.svc.record("STREAM_CLOSED")
+          .by(*principal_)
+          .message(stream_id_)
+          .detail("transport", "grpc")
+          .write();
     }
     delete this;
   }

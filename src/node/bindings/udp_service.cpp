@@ -162,14 +162,14 @@ void UdpService::Impl::heartbeat(std::span<const uint8_t> bytes, const udp::Data
       if (auto it = keys.find(d.key_id); it != keys.end()) it->second.audited = true;
     }
     // The first heartbeat of a key is audited; later ones are counted (rcan_udp_heartbeats_*).
-    auto e = svc.entry(session->sub, new_uuid_v4(), "HEARTBEAT", "ok");
-    e.sub = session->sub;
-    e.detail.set("transport", "udp");
-    e.detail.set("route", "udp/heartbeat");
-    e.detail.set("session_id", session_id);
-    e.detail.set("udp_seq", static_cast<int64_t>(seq & 0x7fffffffffffffffULL));
-    e.detail.set("first", true);
-    svc.write_audit(std::move(e));
+    svc.record("HEARTBEAT")
+        .by_subject(session->sub)
+        .detail("transport", "udp")
+        .detail("route", "udp/heartbeat")
+        .detail("session_id", session_id)
+        .detail("udp_seq", static_cast<int64_t>(seq & 0x7fffffffffffffffULL))
+        .detail("first", true)
+        .write();
   }
 }
 

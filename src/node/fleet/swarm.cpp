@@ -165,13 +165,13 @@ void SwarmAgent::tick(int64_t now) {
   if (next == cfg_.member_id) {
     ++epoch_;
     announce_locked("leader_silent", previous);
-    auto e = svc_.entry("system", new_uuid_v4(), "SWARM_LEADER_CHANGE", "ok");
-    e.sender_type = "system";
-    e.detail.set("swarm_id", cfg_.swarm_id);
-    e.detail.set("previous_leader", previous);
-    e.detail.set("leader", next);
-    e.detail.set("epoch", static_cast<int64_t>(epoch_));
-    svc_.write_audit(std::move(e));
+    svc_.record("SWARM_LEADER_CHANGE")
+        .by_system()
+        .detail("swarm_id", cfg_.swarm_id)
+        .detail("previous_leader", previous)
+        .detail("leader", next)
+        .detail("epoch", static_cast<int64_t>(epoch_))
+        .write();
   }
 }
 
@@ -200,18 +200,20 @@ void SwarmAgent::handle_join(const json::Value& body) {
   if ((type != "SWARM_JOIN" && type != "SWARM_APPROVE") || !mqtt::valid_topic_segment(member))
     return;
   auto record = [&](const std::string& event, const std::string& outcome,
-                    const std::string& principal, const std::string& reason) {
-    auto e = svc_.entry(principal, id.empty() ? new_uuid_v4() : id, event, outcome);
-    e.reason = reason;
-    e.detail.set("swarm_id", cfg_.swarm_id);
-    e.detail.set("member", member);
-    e.detail.set("join_policy", cfg_.join_policy);
-    svc_.write_audit(std::move(e));
+                    const Principal* principal, const std::string& reason) {
+    AuditRecord r = svc_.record(event, outcome);
+    if (principal) r.by(*principal);
+    r.message(id)
+        .reason(reason)
+        .detail("swarm_id", cfg_.swarm_id)
+        .detail("member", member)
+        .detail("join_policy", cfg_.join_policy)
+        .write();
   };
   // The same checks as every other inbound message: a verified token and a fresh, unseen id.
   auto principal = svc_.authenticate(str_of(body, "auth_token"));
   if (!principal.ok()) {
-    record(type, "blocked", "anonymous", std::string(error_name(principal.error().code)));
+    record(type, "blocked", nullptr, std::string(error_name(principal.error().code)));
     answer(member, "DENIED", id, std::string(error_name(principal.error().code)));
     return;
   }
@@ -221,7 +223,7 @@ void SwarmAgent::handle_join(const json::Value& body) {
   if (id.empty() || !fresh.ok()) {
     std::string why =
         id.empty() ? "missing message_id" : std::string(error_name(fresh.error().code));
-    record(type, "blocked", principal->display(), why);
+    record(type, "blocked", &*principal, why);
     answer(member, "DENIED", id, why);
     return;
   }
@@ -230,7 +232,7 @@ void SwarmAgent::handle_join(const json::Value& body) {
     if (role_level(principal->role) < role_level(Role::kOwner) || cfg_.join_policy != "approval" ||
         pending_.count(member) == 0) {
       lk.unlock();
-      record(type, "blocked", principal->display(), "not_allowed");
+      record(type, "blocked", &*principal, "not_allowed");
       answer(member, "DENIED", id, "approval needs OWNER and a pending request");
       return;
     }
@@ -240,7 +242,7 @@ void SwarmAgent::handle_join(const json::Value& body) {
     ++epoch_;
     announce_locked("joined", "");
     lk.unlock();
-    record(type, "ok", principal->display(), "approved");
+    record(type, "ok", &*principal, "approved");
     answer(member, "GRANTED", id, "approved");
     return;
   }
@@ -255,17 +257,17 @@ void SwarmAgent::handle_join(const json::Value& body) {
     ++epoch_;
     announce_locked("joined", "");
     lk.unlock();
-    record(type, "ok", principal->display(), "open");
+    record(type, "ok", &*principal, "open");
     answer(member, "GRANTED", id, "open");
   } else if (cfg_.join_policy == "approval") {
     pending_.insert(member);
     announce_locked("join_pending", "");
     lk.unlock();
-    record(type, "ok", principal->display(), "pending_approval");
+    record(type, "ok", &*principal, "pending_approval");
     answer(member, "PENDING_AUTH", id, "approval");
   } else {
     lk.unlock();
-    record(type, "blocked", principal->display(), "closed");
+    record(type, "blocked", &*principal, "closed");
     answer(member, "DENIED", id, "closed");
   }
 }

@@ -59,13 +59,9 @@ class DispatchStage final : public Stage {
  private:
   audit::AuditEntry accepted_entry(const Context& ctx, const std::string& event) {
     const Message& m = *ctx.msg;
-    auto e = svc_.entry(ctx.principal.display(), m.message_id, event, "ok");
-    e.sender_type = std::string(sender_type_name(ctx.sender.sender_type));
-    if (!ctx.sender.sub.empty()) e.sub = ctx.sender.sub;
-    if (!ctx.sender.cloud_provider.empty()) e.cloud_provider = ctx.sender.cloud_provider;
-    if (!ctx.sender.function_name.empty()) e.function_name = ctx.sender.function_name;
-    std::string action = m.action();
-    if (!action.empty()) e.action = action;
+    AuditRecord r = message_record(svc_, ctx, event, "ok");
+    r.action(m.action());
+    audit::AuditEntry e = std::move(r.entry());
     if (m.ai) e.ai = *m.ai;
     e.gate_bypassed = ctx.gate_bypassed;
     e.hitl_timeout_bypass = ctx.hitl_timeout_bypass;
@@ -199,12 +195,10 @@ class DispatchStage final : public Stage {
         apply();
       } else if (!svc_.sessions.run_if_live(ctx->session_id, svc_.clock.mono_ms(), apply)) {
         // Its control session ended (pre-empted, expired, revoked) while it was in flight.
-        auto drop = svc_.entry(ctx->principal.display(), id, "COMMAND_DROPPED", "blocked");
-        drop.sender_type = std::string(sender_type_name(ctx->sender.sender_type));
-        drop.sub = ctx->principal.sub;
-        drop.reason = "session_ended";
-        drop.detail.set("session_id", ctx->session_id);
-        svc_.write_audit(std::move(drop));
+        message_record(svc_, *ctx, "COMMAND_DROPPED", "blocked")
+            .reason("session_ended")
+            .detail("session_id", ctx->session_id)
+            .write();
         Error err(ErrorCode::kControlConflict,
                   "the control session ended before the command reached the robot", "session",
                   "session_ended");
@@ -216,11 +210,10 @@ class DispatchStage final : public Stage {
       if (!applied.ok()) {
         // An ESTOP overtook this command between its record and the driver: say so in a
         // record of its own and refuse.
-        auto drop = svc_.entry(ctx->principal.display(), id, "COMMAND_DROPPED", "blocked");
-        drop.sender_type = std::string(sender_type_name(ctx->sender.sender_type));
-        drop.reason = applied.error().reason.empty() ? std::string(error_name(applied.error().code))
-                                                     : applied.error().reason;
-        svc_.write_audit(std::move(drop));
+        message_record(svc_, *ctx, "COMMAND_DROPPED", "blocked")
+            .reason(applied.error().reason.empty() ? std::string(error_name(applied.error().code))
+                                                   : applied.error().reason)
+            .write();
         ctx->finish(Outcome{http_status(applied.error().code, applied.error().reason),
                             svc_.error(applied.error(), id),
                             {}});

@@ -83,14 +83,11 @@ Stage::Result refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, con
     int64_t secs = ra && ra->is_int() ? (ra->as_int() + 999) / 1000 : 1;
     out.headers.emplace_back("Retry-After", std::to_string(std::max<int64_t>(secs, 1)));
   }
-  auto e = svc.entry(
-      ctx->principal.display(), reply_to, audit_event.empty() ? "COMMAND_REJECTED" : audit_event,
+  AuditRecord r = message_record(
+      svc, *ctx, audit_event.empty() ? "COMMAND_REJECTED" : audit_event,
       err.code == ErrorCode::kAuditUnavailable || err.code == ErrorCode::kInternal ? "error"
                                                                                    : "blocked");
-  e.sender_type = std::string(sender_type_name(ctx->sender.sender_type));
-  if (ctx->principal.authenticated) e.sub = ctx->principal.sub;
-  if (!ctx->sender.cloud_provider.empty()) e.cloud_provider = ctx->sender.cloud_provider;
-  if (!ctx->sender.function_name.empty()) e.function_name = ctx->sender.function_name;
+  audit::AuditEntry& e = r.entry();
   e.reason = err.reason.empty() ? std::string(error_name(err.code)) : err.reason;
   bool payload_free =
       err.code == ErrorCode::kReplayDetected || err.code == ErrorCode::kMessageStale ||
@@ -108,9 +105,18 @@ Stage::Result refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, con
   if (!err.field.empty()) e.detail.set("field", err.field.substr(0, 128));
   e.detail.set("transport", ctx->in.transport);
   e.detail.set("route", ctx->in.route);
-  svc.write_audit(std::move(e));
+  r.write();
   ctx->finish(std::move(out));
   return Stage::Result::kAnswered;
+}
+
+AuditRecord message_record(NodeServices& svc, const Context& ctx, const std::string& event,
+                           const std::string& outcome) {
+  AuditRecord r = svc.record(event, outcome);
+  if (ctx.principal.authenticated) r.by(ctx.principal);
+  r.sender(ctx.sender);
+  if (ctx.msg) r.message(ctx.msg->message_id);
+  return r;
 }
 
 Pipeline::Pipeline(NodeServices& services, std::vector<std::unique_ptr<Stage>> stages)

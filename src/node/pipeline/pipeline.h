@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "node/admission/authenticator.h"
+#include "node/services/audit_record.h"
 #include "rcan/json.h"
 #include "rcan/message.h"
 #include "rcan/roles.h"
@@ -123,5 +124,10 @@ class Pipeline {
 // Returns Stage::Result::kAnswered.
 Stage::Result refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, const Error& err,
                      const std::string& audit_event = {});
+
+// An audit record of `event` about the context's message: its id, the principal (when
+// authenticated) and the §8.5 sender identity. The caller adds the rest and writes it.
+AuditRecord message_record(NodeServices& svc, const Context& ctx, const std::string& event,
+                           const std::string& outcome);
 
 }  // namespace rcan::node

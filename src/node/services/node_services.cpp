@@ -17,16 +17,19 @@ NodeServices::NodeServices(NodeSettings s, Clock& c, AuthOptions a, Actuation& a
       act(actuation),
       audit(log) {}
 
-audit::AuditEntry NodeServices::entry(const std::string& principal, const std::string& message_id,
-                                      const std::string& event, const std::string& outcome) const {
+AuditRecord NodeServices::record(const std::string& event, const std::string& outcome) {
   audit::AuditEntry e;
-  e.principal = principal.empty() ? "anonymous" : principal;
+  e.principal = "anonymous";
   e.ruri = settings.ruri;
   e.timestamp_ms = clock.wall_ms();
-  e.message_id = message_id.empty() ? new_uuid_v4() : message_id;
+  e.message_id = new_uuid_v4();
   e.event = event;
   e.outcome = outcome;
-  return e;
+  return AuditRecord(*this, std::move(e));
+}
+
+void AuditRecord::write(std::function<void(Result<audit::Receipt>)> cb) {
+  svc_.write_audit(std::move(e_), std::move(cb));
 }
 
 void NodeServices::write_audit(audit::AuditEntry e,

@@ -23,6 +23,7 @@
 #include "node/control/partition.h"
 #include "node/control/sessions.h"
 #include "node/safety/actuation.h"
+#include "node/services/audit_record.h"
 #include "node/services/event_bus.h"
 #include "rcan/audit/audit_log.h"
 #include "rcan/message.h"
@@ -108,9 +109,8 @@ class NodeServices {
   // Set once, before serving.
   std::function<void(const std::string& session_id, json::Object& payload)> on_grant;
 
-  // An audit entry pre-filled with the robot, time, principal and sender identity.
-  audit::AuditEntry entry(const std::string& principal, const std::string& message_id,
-                          const std::string& event, const std::string& outcome) const;
+  // A new audit record of `event` (audit_record.h): anonymous until `by…` says who.
+  AuditRecord record(const std::string& event, const std::string& outcome = "ok");
   // Appends asynchronously; `cb` (optional) runs once the record is durable or failed.
   void write_audit(audit::AuditEntry e, std::function<void(Result<audit::Receipt>)> cb = {});
 
