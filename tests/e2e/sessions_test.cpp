@@ -64,8 +64,8 @@ TEST(SessionMachine, DiagramsInTheDocsAreTheCodesTransitionTables) {
   ss << in.rdbuf();
   auto blocks = mermaid_blocks(ss.str());
   ASSERT_EQ(blocks.size(), 2u);
-  EXPECT_EQ(blocks[0], node::mermaid(node::control_transitions(), "AVAILABLE"));
-  EXPECT_EQ(blocks[1], node::mermaid(node::ownership_transitions(), "OWNED"));
+  EXPECT_EQ(blocks[0], node::mermaid(node::control_transitions()));
+  EXPECT_EQ(blocks[1], node::mermaid(node::ownership_transitions()));
 }
 
 TEST(SessionMachine, SameRoleQueuesFifoAndTheHeadIsPromotedOnRelease) {
@@ -89,7 +89,7 @@ TEST(SessionMachine, SameRoleQueuesFifoAndTheHeadIsPromotedOnRelease) {
   ASSERT_TRUE(t.release(a->session.id, who("a", Role::kUser), now + 1, kWall).ok());
   auto changes = t.take_changes();
   ASSERT_EQ(changes.size(), 1u);
-  EXPECT_EQ(changes[0].event, "PROMOTE");
+  EXPECT_EQ(changes[0].event, node::ControlEvent::kPromote);
   EXPECT_EQ(changes[0].session.sub, "b");
   EXPECT_EQ(t.controller(now + 1)->sub, "b");
   EXPECT_EQ(t.claim(who("c", Role::kUser), std::nullopt, now + 1, kWall)->queue_position, 1u);
@@ -131,7 +131,7 @@ TEST(SessionMachine, ExpiryNeedsAnExplicitRenewal) {
   t.tick((1800 + 3600) * 1000, kWall);
   auto changes = t.take_changes();
   ASSERT_EQ(changes.size(), 1u);
-  EXPECT_EQ(changes[0].event, "EXPIRE");
+  EXPECT_EQ(changes[0].event, node::ControlEvent::kExpire);
   EXPECT_EQ(t.expired_session_of(a.key()), s->session.id);
   auto late = t.renew(s->session.id, a, (1800 + 3601) * 1000, kWall);
   ASSERT_FALSE(late.ok());
@@ -150,7 +150,7 @@ TEST(SessionMachine, HandoffReservesTheWindowUntilItCloses) {
   t.tick(30010, kWall);
   auto ch = t.take_changes();
   ASSERT_EQ(ch.size(), 1u);
-  EXPECT_EQ(ch[0].event, "WINDOW_CLOSE");
+  EXPECT_EQ(ch[0].event, node::ControlEvent::kWindowClose);
   EXPECT_EQ(t.state(30010), ControlState::kAvailable);
   EXPECT_TRUE(t.claim(who("c", Role::kUser), std::nullopt, 30011, kWall).ok());
   // The named target claims inside the window, capped at the handoff's role.
@@ -211,16 +211,17 @@ TEST(SessionMachine, LeaseBoundsSessionsAndItsEndRevokesEverythingDerived) {
   t.tick(5000, kWall + 5000);
   auto ch = t.take_changes();
   ASSERT_FALSE(ch.empty());
-  EXPECT_TRUE(ch[0].event == "EXPIRE" || ch[0].event == "REVOKE");
+  EXPECT_TRUE(ch[0].event == node::ControlEvent::kExpire ||
+              ch[0].event == node::ControlEvent::kRevoke);
   auto ls = t.claim(leasee, std::nullopt, 5001, kWall + 5001);
   ASSERT_TRUE(ls.ok());
   EXPECT_EQ(ls->session.lease_id, l->id);
   t.tick(10000, kWall + 10000);
   ch = t.take_changes();
   ASSERT_EQ(ch.size(), 2u);
-  EXPECT_EQ(ch[0].event, "REVOKE");
+  EXPECT_EQ(ch[0].event, node::ControlEvent::kRevoke);
   EXPECT_EQ(ch[0].session.sub, "lee");
-  EXPECT_EQ(ch[1].event, "LEASE_END");
+  EXPECT_EQ(ch[1].event, node::ControlEvent::kLeaseEnd);
   EXPECT_TRUE(t.leases(kWall + 10000).empty());
   EXPECT_TRUE(t.claim(outsider, std::nullopt, 10001, kWall + 10001).ok());
   EXPECT_EQ(t.transition_violations(), 0u);

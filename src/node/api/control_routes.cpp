@@ -176,17 +176,17 @@ void Node::announce_control_changes() {
     if (!s.sub.empty()) e.entry().sub = s.sub;
     if (!c.reason.empty()) e.reason(c.reason);
     json::Object ev{{"type", "EVENT"}, {"timestamp_ms", svc_.clock.wall_ms()}};
-    if (c.event == "EXPIRE" || c.event == "REVOKE") {
+    if (c.event == ControlEvent::kExpire || c.event == ControlEvent::kRevoke) {
       svc_.act.session_ended(s.id);
       svc_.act.stop("control session " + s.id + " ended");
-      e.entry().event = c.event == "EXPIRE" ? "SESSION_EXPIRED" : "SESSION_REVOKED";
+      e.entry().event = c.event == ControlEvent::kExpire ? "SESSION_EXPIRED" : "SESSION_REVOKED";
       e.detail("role", std::string(role_name(s.role)));
       if (!c.lease_id.empty()) e.detail("lease_id", c.lease_id);
       ev.set("event", e.entry().event);
       ev.set("session_id", s.id);
       ev.set("reason", c.reason);
       publish_to(s.principal_key, std::move(ev));
-    } else if (c.event == "PROMOTE") {
+    } else if (c.event == ControlEvent::kPromote) {
       svc_.act.session_started(s.id, svc_.settings.heartbeat_timeout_ms);
       e.entry().event = "CLAIM_PROMOTED";
       e.detail("role", std::string(role_name(s.role)));
@@ -203,15 +203,15 @@ void Node::announce_control_changes() {
       // its own streams only.
       if (svc_.on_grant) svc_.on_grant(s.id, ev);
       publish_to(s.principal_key, std::move(ev));
-    } else if (c.event == "QUEUE_DROP") {
+    } else if (c.event == ControlEvent::kQueueDrop) {
       e.entry().event = "CLAIM_DROPPED";
       e.entry().sub = c.queued.sub;
       ev.set("event", "CLAIM_DROPPED");
       ev.set("reason", c.reason);
       publish_to(c.queued.principal_key, std::move(ev));
-    } else if (c.event == "WINDOW_CLOSE") {
+    } else if (c.event == ControlEvent::kWindowClose) {
       e.entry().event = "HANDOFF_WINDOW_CLOSED";
-    } else if (c.event == "LEASE_END") {
+    } else if (c.event == ControlEvent::kLeaseEnd) {
       e.entry().event = "LEASE_ENDED";
       e.detail("lease_id", c.lease_id);
       ev.set("event", "LEASE_ENDED");

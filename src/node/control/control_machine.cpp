@@ -24,58 +24,117 @@ std::string_view ownership_state_name(OwnershipState s) {
   return "OWNED";
 }
 
-const std::vector<Transition>& control_transitions() {
-  static const std::vector<Transition> t{
-      {"AVAILABLE", "CLAIM", "HELD"},             // first claim wins
-      {"HELD", "RENEW", "HELD"},                  // explicit renewal (re-claim or /auth/renew)
-      {"HELD", "PREEMPT", "HELD"},                // a higher role takes over
-      {"HELD", "QUEUE", "HELD"},                  // same role: the claimant waits, FIFO
-      {"HELD", "PROMOTE", "HELD"},                // holder gone, head of the queue takes over
-      {"HELD", "RELEASE", "AVAILABLE"},           // RCAN_RELEASE, AVAILABLE for the window
-      {"HELD", "EXPIRE", "AVAILABLE"},            // TTL reached without renewal
-      {"HELD", "REVOKE", "AVAILABLE"},            // lease ended, ownership transferred
-      {"HELD", "HANDOFF", "RESERVED"},            // named successor, window reserved
-      {"RESERVED", "CLAIM", "HELD"},              // the named target claims
-      {"RESERVED", "WINDOW_CLOSE", "AVAILABLE"},  // nobody came: first claim wins again
+std::string_view control_event_name(ControlEvent e) {
+  switch (e) {
+    case ControlEvent::kClaim:
+      return "CLAIM";
+    case ControlEvent::kRenew:
+      return "RENEW";
+    case ControlEvent::kPreempt:
+      return "PREEMPT";
+    case ControlEvent::kQueue:
+      return "QUEUE";
+    case ControlEvent::kPromote:
+      return "PROMOTE";
+    case ControlEvent::kRelease:
+      return "RELEASE";
+    case ControlEvent::kExpire:
+      return "EXPIRE";
+    case ControlEvent::kRevoke:
+      return "REVOKE";
+    case ControlEvent::kHandoff:
+      return "HANDOFF";
+    case ControlEvent::kWindowClose:
+      return "WINDOW_CLOSE";
+    case ControlEvent::kQueueDrop:
+      return "QUEUE_DROP";
+    case ControlEvent::kLeaseEnd:
+      return "LEASE_END";
+  }
+  return "CLAIM";
+}
+
+std::string_view ownership_event_name(OwnershipEvent e) {
+  switch (e) {
+    case OwnershipEvent::kTransferRequest:
+      return "TRANSFER_REQUEST";
+    case OwnershipEvent::kTransferAccept:
+      return "TRANSFER_ACCEPT";
+    case OwnershipEvent::kTransferCancel:
+      return "TRANSFER_CANCEL";
+    case OwnershipEvent::kTransferExpire:
+      return "TRANSFER_EXPIRE";
+  }
+  return "TRANSFER_REQUEST";
+}
+
+const std::vector<ControlTransition>& control_transitions() {
+  using S = ControlState;
+  using E = ControlEvent;
+  static const std::vector<ControlTransition> t{
+      {S::kAvailable, E::kClaim, S::kHeld},            // first claim wins
+      {S::kHeld, E::kRenew, S::kHeld},                 // explicit renewal (re-claim, /auth/renew)
+      {S::kHeld, E::kPreempt, S::kHeld},               // a higher role takes over
+      {S::kHeld, E::kQueue, S::kHeld},                 // same role: the claimant waits, FIFO
+      {S::kHeld, E::kPromote, S::kHeld},               // holder gone, head of the queue takes over
+      {S::kHeld, E::kRelease, S::kAvailable},          // RCAN_RELEASE, AVAILABLE for the window
+      {S::kHeld, E::kExpire, S::kAvailable},           // TTL reached without renewal
+      {S::kHeld, E::kRevoke, S::kAvailable},           // lease ended, ownership transferred
+      {S::kHeld, E::kHandoff, S::kReserved},           // named successor, window reserved
+      {S::kReserved, E::kClaim, S::kHeld},             // the named target claims
+      {S::kReserved, E::kWindowClose, S::kAvailable},  // nobody came: first claim wins again
   };
   return t;
 }
 
-const std::vector<Transition>& ownership_transitions() {
-  static const std::vector<Transition> t{
-      {"OWNED", "TRANSFER_REQUEST", "TRANSFER_PENDING"},
-      {"TRANSFER_PENDING", "TRANSFER_ACCEPT",
-       "OWNED"},  // new owner recorded, personal data cleared
-      {"TRANSFER_PENDING", "TRANSFER_CANCEL", "OWNED"},
-      {"TRANSFER_PENDING", "TRANSFER_EXPIRE", "OWNED"},  // the window passed
+const std::vector<OwnershipTransition>& ownership_transitions() {
+  using S = OwnershipState;
+  using E = OwnershipEvent;
+  static const std::vector<OwnershipTransition> t{
+      {S::kOwned, E::kTransferRequest, S::kTransferPending},
+      {S::kTransferPending, E::kTransferAccept, S::kOwned},  // new owner, personal data cleared
+      {S::kTransferPending, E::kTransferCancel, S::kOwned},
+      {S::kTransferPending, E::kTransferExpire, S::kOwned},  // the window passed
   };
   return t;
 }
 
 namespace {
-bool allowed(const std::vector<Transition>& t, std::string_view from, std::string_view ev,
-             std::string_view to) {
+
+template <class T, class S, class E>
+bool allowed(const std::vector<T>& t, S from, E ev, S to) {
   for (const auto& r : t)
     if (r.from == from && r.event == ev && r.to == to) return true;
   return false;
 }
+
+template <class T, class StateName, class EventName>
+std::string diagram(const std::vector<T>& table, StateName state, EventName event) {
+  std::string s = "stateDiagram-v2\n    [*] --> " +
+                  std::string(table.empty() ? std::string_view() : state(table.front().from)) +
+                  "\n";
+  for (const auto& r : table)
+    s += "    " + std::string(state(r.from)) + " --> " + std::string(state(r.to)) + " : " +
+         std::string(event(r.event)) + "\n";
+  return s;
+}
+
 }  // namespace
 
-bool control_transition_allowed(ControlState from, std::string_view event, ControlState to) {
-  return allowed(control_transitions(), control_state_name(from), event, control_state_name(to));
+bool control_transition_allowed(ControlState from, ControlEvent event, ControlState to) {
+  return allowed(control_transitions(), from, event, to);
 }
 
-bool ownership_transition_allowed(OwnershipState from, std::string_view event, OwnershipState to) {
-  return allowed(ownership_transitions(), ownership_state_name(from), event,
-                 ownership_state_name(to));
+bool ownership_transition_allowed(OwnershipState from, OwnershipEvent event, OwnershipState to) {
+  return allowed(ownership_transitions(), from, event, to);
 }
 
-std::string mermaid(const std::vector<Transition>& table, std::string_view initial) {
-  std::string s = "stateDiagram-v2\n    [*] --> " + std::string(initial) + "\n";
-  for (const auto& r : table)
-    s += "    " + std::string(r.from) + " --> " + std::string(r.to) + " : " + std::string(r.event) +
-         "\n";
-  return s;
+std::string mermaid(const std::vector<ControlTransition>& table) {
+  return diagram(table, control_state_name, control_event_name);
+}
+
+std::string mermaid(const std::vector<OwnershipTransition>& table) {
+  return diagram(table, ownership_state_name, ownership_event_name);
 }
 
 }  // namespace rcan::node

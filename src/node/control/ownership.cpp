@@ -4,7 +4,7 @@
 
 namespace rcan::node {
 
-void Ownership::transit(std::string_view event, OwnershipState to) {
+void Ownership::transit(OwnershipEvent event, OwnershipState to) {
   if (!ownership_transition_allowed(state_, event, to)) ++violations_;
   state_ = to;
   ++version_;
@@ -33,7 +33,7 @@ Result<PendingTransfer> Ownership::request(const Principal& p, const std::string
   PendingTransfer t{new_uuid_v4(),      p.sub, to_sub, now_wall_ms, now_wall_ms + window_ms_,
                     note.substr(0, 512)};
   pending_ = t;
-  transit("TRANSFER_REQUEST", OwnershipState::kTransferPending);
+  transit(OwnershipEvent::kTransferRequest, OwnershipState::kTransferPending);
   return t;
 }
 
@@ -57,7 +57,7 @@ Result<PendingTransfer> Ownership::accept(const Principal& p, const std::string&
   former_owners_.erase(t.to_sub);
   owner_sub_ = t.to_sub;
   users_.clear();
-  transit("TRANSFER_ACCEPT", OwnershipState::kOwned);
+  transit(OwnershipEvent::kTransferAccept, OwnershipState::kOwned);
   return t;
 }
 
@@ -70,7 +70,7 @@ Result<PendingTransfer> Ownership::cancel(const Principal& p, int64_t now_wall_m
                  "only the owner or the named new owner may cancel", "role");
   PendingTransfer t = *pending_;
   pending_.reset();
-  transit("TRANSFER_CANCEL", OwnershipState::kOwned);
+  transit(OwnershipEvent::kTransferCancel, OwnershipState::kOwned);
   return t;
 }
 
@@ -79,7 +79,7 @@ std::optional<PendingTransfer> Ownership::expire(int64_t now_wall_ms) {
   if (!pending_ || now_wall_ms < pending_->expires_ms) return std::nullopt;
   PendingTransfer t = *pending_;
   pending_.reset();
-  transit("TRANSFER_EXPIRE", OwnershipState::kOwned);
+  transit(OwnershipEvent::kTransferExpire, OwnershipState::kOwned);
   return t;
 }
 

@@ -70,7 +70,7 @@ class Ownership {
   uint64_t transition_violations() const { return violations_; }
 
  private:
-  void transit(std::string_view event, OwnershipState to);
+  void transit(OwnershipEvent event, OwnershipState to);
   bool is_owner_locked(const Principal& p) const;
   mutable std::mutex mu_;
   int64_t window_ms_ = 24 * 3600 * 1000LL;

@@ -52,7 +52,7 @@ ControlState SessionTable::state_locked() const {
   return ControlState::kAvailable;
 }
 
-void SessionTable::transit(std::string_view event, ControlState to) {
+void SessionTable::transit(ControlEvent event, ControlState to) {
   if (!control_transition_allowed(state_, event, to)) ++violations_;
   state_ = to;
   ++version_;
@@ -116,7 +116,7 @@ Session SessionTable::make_session_locked(const std::string& key, const std::str
   return s;
 }
 
-void SessionTable::drop_holder_locked(const std::string& event, const std::string& reason,
+void SessionTable::drop_holder_locked(ControlEvent event, const std::string& reason,
                                       int64_t now_mono_ms) {
   (void)now_mono_ms;
   if (!holder_) return;
@@ -125,7 +125,7 @@ void SessionTable::drop_holder_locked(const std::string& event, const std::strin
   c.session = *holder_;
   c.lease_id = holder_->lease_id;
   c.reason = reason;
-  if (event == "EXPIRE" || event == "REVOKE") {
+  if (event == ControlEvent::kExpire || event == ControlEvent::kRevoke) {
     expired_[holder_->principal_key] = holder_->id;
     if (expired_.size() > 4096) expired_.erase(expired_.begin());
   }
@@ -144,7 +144,7 @@ void SessionTable::promote_locked(int64_t now_mono_ms, int64_t now_wall_ms) {
     if (now_mono_ms - q.enqueued_mono_ms > opts_.queue_wait_ms ||
         !lease_link_locked(q.sub, role, lease_id, end_wall, now_wall_ms)) {
       ControlChange c;
-      c.event = "QUEUE_DROP";
+      c.event = ControlEvent::kQueueDrop;
       c.queued = q;
       c.reason = now_mono_ms - q.enqueued_mono_ms > opts_.queue_wait_ms ? "waited too long"
                                                                         : "the robot is leased";
@@ -153,9 +153,9 @@ void SessionTable::promote_locked(int64_t now_mono_ms, int64_t now_wall_ms) {
     }
     // AVAILABLE for an instant: the head of the queue claims it.
     holder_ = make_session_locked(q.principal_key, q.sub, role, q.fleet, now_mono_ms, now_wall_ms);
-    transit("CLAIM", ControlState::kHeld);
+    transit(ControlEvent::kClaim, ControlState::kHeld);
     ControlChange c;
-    c.event = "PROMOTE";
+    c.event = ControlEvent::kPromote;
     c.session = *holder_;
     changes_.push_back(std::move(c));
   }
@@ -163,12 +163,13 @@ void SessionTable::promote_locked(int64_t now_mono_ms, int64_t now_wall_ms) {
 
 void SessionTable::expire_locked(int64_t now_mono_ms) {
   if (holder_ && holder_->expires_mono_ms != 0 && now_mono_ms >= holder_->expires_mono_ms)
-    drop_holder_locked("EXPIRE", "the session's TTL ended without renewal", now_mono_ms);
+    drop_holder_locked(ControlEvent::kExpire, "the session's TTL ended without renewal",
+                       now_mono_ms);
   if (reserved_ && now_mono_ms >= reserved_->until_mono_ms) {
     reserved_.reset();
-    transit("WINDOW_CLOSE", ControlState::kAvailable);
+    transit(ControlEvent::kWindowClose, ControlState::kAvailable);
     ControlChange c;
-    c.event = "WINDOW_CLOSE";
+    c.event = ControlEvent::kWindowClose;
     changes_.push_back(std::move(c));
   }
 }
@@ -190,7 +191,7 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
     Session s =
         make_session_locked(p.key(), p.sub, role, fleet, now_mono_ms, now_wall_ms, holder_->id);
     holder_ = s;
-    transit("RENEW", ControlState::kHeld);
+    transit(ControlEvent::kRenew, ControlState::kHeld);
     r.outcome = ClaimOutcome::kRenewed;
     r.session = s;
     return r;
@@ -214,7 +215,7 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
       role = *reserved_->max_role;
     reserved_.reset();
     holder_ = make_session_locked(p.key(), p.sub, role, fleet, now_mono_ms, now_wall_ms);
-    transit("CLAIM", ControlState::kHeld);
+    transit(ControlEvent::kClaim, ControlState::kHeld);
     r.session = *holder_;
     return r;
   }
@@ -228,7 +229,7 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
     if (preempt) {
       r.preempted = holder_;
       holder_ = make_session_locked(p.key(), p.sub, role, fleet, now_mono_ms, now_wall_ms);
-      transit("PREEMPT", ControlState::kHeld);
+      transit(ControlEvent::kPreempt, ControlState::kHeld);
       r.session = *holder_;
       return r;
     }
@@ -249,13 +250,13 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
     if (queue_.size() >= opts_.queue_max)
       return Error(ErrorCode::kControlConflict, "the control queue is full", "session");
     queue_.push_back(QueuedClaim{p.key(), p.sub, role, fleet, now_mono_ms});
-    transit("QUEUE", ControlState::kHeld);
+    transit(ControlEvent::kQueue, ControlState::kHeld);
     r.outcome = ClaimOutcome::kQueued;
     r.queue_position = queue_.size();
     return r;
   }
   holder_ = make_session_locked(p.key(), p.sub, role, fleet, now_mono_ms, now_wall_ms);
-  transit("CLAIM", ControlState::kHeld);
+  transit(ControlEvent::kClaim, ControlState::kHeld);
   r.session = *holder_;
   return r;
 }
@@ -285,7 +286,7 @@ Result<Session> SessionTable::renew(const std::string& session_id, const Princip
   Role role = std::min(holder_->role, p.role);
   holder_ = make_session_locked(p.key(), p.sub, role, holder_->fleet, now_mono_ms, now_wall_ms,
                                 holder_->id);
-  transit("RENEW", ControlState::kHeld);
+  transit(ControlEvent::kRenew, ControlState::kHeld);
   return *holder_;
 }
 
@@ -301,7 +302,7 @@ Result<Session> SessionTable::release(const std::string& session_id, const Princ
                  "session_id");
   Session s = *holder_;
   holder_.reset();
-  transit("RELEASE", ControlState::kAvailable);
+  transit(ControlEvent::kRelease, ControlState::kAvailable);
   promote_locked(now_mono_ms, now_wall_ms);
   return s;
 }
@@ -319,7 +320,7 @@ Result<Session> SessionTable::handoff(const std::string& session_id, const Princ
   Session s = *holder_;
   holder_.reset();
   reserved_ = Reservation{std::move(target_sub), target_role, s.id, now_mono_ms + window_ms};
-  transit("HANDOFF", ControlState::kReserved);
+  transit(ControlEvent::kHandoff, ControlState::kReserved);
   return s;
 }
 
@@ -361,9 +362,9 @@ void SessionTable::tick(int64_t now_mono_ms, int64_t now_wall_ms) {
   for (auto it = leases_.begin(); it != leases_.end();) {
     if (now_wall_ms >= it->end_wall_ms) {
       if (holder_ && holder_->lease_id == it->id)
-        drop_holder_locked("REVOKE", "the lease " + it->id + " ended", now_mono_ms);
+        drop_holder_locked(ControlEvent::kRevoke, "the lease " + it->id + " ended", now_mono_ms);
       ControlChange c;
-      c.event = "LEASE_END";
+      c.event = ControlEvent::kLeaseEnd;
       c.lease_id = it->id;
       c.reason = "expired";
       changes_.push_back(std::move(c));
@@ -376,7 +377,8 @@ void SessionTable::tick(int64_t now_mono_ms, int64_t now_wall_ms) {
         for (const auto& g : it->grants)
           if (g.sub == holder_->sub && g.end_wall_ms > now_wall_ms) granted = true;
         if (!granted)
-          drop_holder_locked("REVOKE", "the grant within lease " + it->id + " ended", now_mono_ms);
+          drop_holder_locked(ControlEvent::kRevoke, "the grant within lease " + it->id + " ended",
+                             now_mono_ms);
       }
       ++it;
     }
@@ -394,14 +396,14 @@ std::vector<ControlChange> SessionTable::take_changes() {
 
 void SessionTable::revoke_all(const std::string& reason, int64_t now_mono_ms) {
   std::lock_guard<std::mutex> lock(mu_);
-  if (holder_) drop_holder_locked("REVOKE", reason, now_mono_ms);
+  if (holder_) drop_holder_locked(ControlEvent::kRevoke, reason, now_mono_ms);
   if (reserved_) {
     reserved_.reset();
-    transit("WINDOW_CLOSE", ControlState::kAvailable);
+    transit(ControlEvent::kWindowClose, ControlState::kAvailable);
   }
   for (auto& q : queue_) {
     ControlChange c;
-    c.event = "QUEUE_DROP";
+    c.event = ControlEvent::kQueueDrop;
     c.queued = q;
     c.reason = reason;
     changes_.push_back(std::move(c));
@@ -409,7 +411,7 @@ void SessionTable::revoke_all(const std::string& reason, int64_t now_mono_ms) {
   queue_.clear();
   for (auto& l : leases_) {
     ControlChange c;
-    c.event = "LEASE_END";
+    c.event = ControlEvent::kLeaseEnd;
     c.lease_id = l.id;
     c.reason = reason;
     changes_.push_back(std::move(c));
@@ -575,9 +577,9 @@ Result<Lease> SessionTable::revoke_lease(const Principal& p, const std::string& 
       return Error(ErrorCode::kInsufficientPrivileges, "only an OWNER may revoke a lease", "role");
     Lease l = *it;
     if (holder_ && holder_->lease_id == l.id)
-      drop_holder_locked("REVOKE", "the lease " + l.id + " was revoked", now_mono_ms);
+      drop_holder_locked(ControlEvent::kRevoke, "the lease " + l.id + " was revoked", now_mono_ms);
     ControlChange c;
-    c.event = "LEASE_END";
+    c.event = ControlEvent::kLeaseEnd;
     c.lease_id = l.id;
     c.reason = "revoked by " + p.sub;
     changes_.push_back(std::move(c));

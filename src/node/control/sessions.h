@@ -106,9 +106,10 @@ struct ClaimResult {
 
 // Something the node must announce and audit.
 struct ControlChange {
-  std::string event;   // EXPIRE, PROMOTE, REVOKE, WINDOW_CLOSE, QUEUE_DROP, LEASE_END
-  Session session;     // the session concerned (EXPIRE, PROMOTE, REVOKE)
-  QueuedClaim queued;  // QUEUE_DROP
+  ControlEvent event =
+      ControlEvent::kExpire;  // EXPIRE, PROMOTE, REVOKE, WINDOW_CLOSE, QUEUE_DROP, LEASE_END
+  Session session;            // the session concerned (EXPIRE, PROMOTE, REVOKE)
+  QueuedClaim queued;         // QUEUE_DROP
   std::string lease_id;
   std::string reason;
 };
@@ -183,10 +184,10 @@ class SessionTable {
   uint64_t version();  // bumps on every change (persistence, mDNS status)
 
  private:
-  void transit(std::string_view event, ControlState to);
+  void transit(ControlEvent event, ControlState to);
   ControlState state_locked() const;
   void expire_locked(int64_t now_mono_ms);
-  void drop_holder_locked(const std::string& event, const std::string& reason, int64_t now_mono_ms);
+  void drop_holder_locked(ControlEvent event, const std::string& reason, int64_t now_mono_ms);
   void promote_locked(int64_t now_mono_ms, int64_t now_wall_ms);
   Session make_session_locked(const std::string& key, const std::string& sub, Role role, bool fleet,
                               int64_t now_mono_ms, int64_t now_wall_ms, const std::string& id = {});
