@@ -1,5 +1,5 @@
 // libFuzzer: WebSocket text frames into the node's real stream handler (Node::open() and the
-// StreamSession it returns — CONNECT, PING, SUBSCRIBE, AUTHORIZE and every RCAN message
+// StreamReceiver it returns — CONNECT, PING, SUBSCRIBE, AUTHORIZE and every RCAN message
 // through the pipeline), as the Beast transport delivers them after its own frame decoding.
 //
 // Input: lines. The first line is the upgrade target ("/rcan/v1/stream", "/ws/telemetry?token=…",

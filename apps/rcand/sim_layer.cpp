@@ -19,9 +19,9 @@ namespace {
 
 class NoStreams final : public transport::StreamHandler {
  public:
-  std::unique_ptr<transport::StreamSession> open(const transport::HttpRequest&,
-                                                 std::shared_ptr<transport::StreamSink>,
-                                                 transport::HttpResponse& refusal) override {
+  std::unique_ptr<transport::StreamReceiver> open(const transport::HttpRequest&,
+                                                  std::shared_ptr<transport::StreamSink>,
+                                                  transport::HttpResponse& refusal) override {
     refusal.status = 404;
     refusal.body = R"({"error":"a brain layer has no streams"})";
     return nullptr;

@@ -2,7 +2,7 @@
 //
 // A transport (src/transport/) owns sockets, parsing, limits and timeouts; it knows nothing
 // of RCAN. It turns each HTTP request into an HttpRequest and hands it to an HttpHandler,
-// and each accepted WebSocket into a StreamSession fed by a StreamHandler. The node
+// and each accepted WebSocket into a StreamReceiver fed by a StreamHandler. The node
 // (src/node/) implements both handlers: routing, the pipeline, audit and safety live there.
 #pragma once
 
@@ -94,9 +94,9 @@ class StreamSink {
 
 // The node's side of one WebSocket. Callbacks come from the connection's executor, one
 // at a time, in order.
-class StreamSession {
+class StreamReceiver {
  public:
-  virtual ~StreamSession() = default;
+  virtual ~StreamReceiver() = default;
   virtual void on_text(std::string text) = 0;
   // The peer sent a binary frame (unsupported in RCAN's binding → the node closes 1003).
   virtual void on_binary() = 0;
@@ -109,9 +109,9 @@ class StreamHandler {
   virtual ~StreamHandler() = default;
   // Decides whether `upgrade` (a GET with Upgrade: websocket) may open a stream. Returning
   // nullptr refuses it: the transport then answers `refusal` instead of upgrading.
-  virtual std::unique_ptr<StreamSession> open(const HttpRequest& upgrade,
-                                              std::shared_ptr<StreamSink> sink,
-                                              HttpResponse& refusal) = 0;
+  virtual std::unique_ptr<StreamReceiver> open(const HttpRequest& upgrade,
+                                               std::shared_ptr<StreamSink> sink,
+                                               HttpResponse& refusal) = 0;
 };
 
 }  // namespace rcan::transport

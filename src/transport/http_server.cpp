@@ -344,8 +344,8 @@ class HttpServer::Impl : public std::enable_shared_from_this<HttpServer::Impl> {
   std::atomic<bool> stopping{false};
   std::atomic<uint64_t> connections_open{0};
   std::atomic<uint64_t> connections_total{0};
-  std::atomic<uint64_t> ws_sessions_open{0};
-  std::atomic<uint64_t> ws_sessions_total{0};
+  std::atomic<uint64_t> ws_streams_open{0};
+  std::atomic<uint64_t> ws_streams_total{0};
   std::atomic<uint64_t> requests_total{0};
   std::atomic<uint64_t> rejected_connections{0};
   std::atomic<uint64_t> rejected_limits{0};
@@ -670,15 +670,15 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
 
     HttpResponse refusal = error_response(
         {403, ErrorCode::kInsufficientPrivileges, "websocket_refused", "WebSocket refused"});
-    std::unique_ptr<StreamSession> session;
+    std::unique_ptr<StreamReceiver> receiver;
     try {
-      session = srv_.streams.open(req, sink_, refusal);
+      receiver = srv_.streams.open(req, sink_, refusal);
     } catch (const std::exception& e) {
       rcan::log(LogLevel::kError, "ws.open_exception", {{"error", e.what()}});
       refusal = error_response({500, ErrorCode::kInternal, "open_exception", "internal error"});
-      session.reset();
+      receiver.reset();
     }
-    if (!session) {
+    if (!receiver) {
       sink_->mark_closed(true);
       const std::string wire = response_bytes(std::move(refusal), msg.version(), false, false);
       lowest().expires_after(Ms(opt_.read_timeout_ms));
@@ -686,10 +686,10 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
       lowest().expires_never();
       co_return;
     }
-    session_ = std::move(session);
+    receiver_ = std::move(receiver);
     phase_ = Phase::kWebSocket;
-    ++srv_.ws_sessions_open;
-    ++srv_.ws_sessions_total;
+    ++srv_.ws_streams_open;
+    ++srv_.ws_streams_total;
 
     lowest().expires_never();  // the websocket stream runs its own timeouts
     ws_.emplace(std::move(stream_));
@@ -721,12 +721,12 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
         if (close_pending_) continue;  // closing: late frames are dropped
         try {
           if (ws_->got_text()) {
-            session_->on_text(beast::buffers_to_string(in.data()));
+            receiver_->on_text(beast::buffers_to_string(in.data()));
           } else {
-            session_->on_binary();
+            receiver_->on_binary();
           }
         } catch (const std::exception& e) {
-          rcan::log(LogLevel::kError, "ws.session_exception", {{"error", e.what()}});
+          rcan::log(LogLevel::kError, "ws.stream_exception", {{"error", e.what()}});
           request_ws_close(1011, "internal error", false);
         }
       }
@@ -737,12 +737,12 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     close_timer_.cancel();
     const int code = aec ? 0 : static_cast<int>(ws_->reason().code);
     try {
-      session_->on_closed();
+      receiver_->on_closed();
     } catch (const std::exception& e) {
-      rcan::log(LogLevel::kError, "ws.session_exception", {{"error", e.what()}});
+      rcan::log(LogLevel::kError, "ws.stream_exception", {{"error", e.what()}});
     }
-    session_.reset();
-    --srv_.ws_sessions_open;
+    receiver_.reset();
+    --srv_.ws_streams_open;
     rcan::log(LogLevel::kInfo, "ws.closed", {{"remote", remote_}, {"peer_close_code", code}});
   }
 
@@ -814,7 +814,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
   std::optional<HttpResponse> response_;
 
   std::shared_ptr<WsSink> sink_;
-  std::unique_ptr<StreamSession> session_;
+  std::unique_ptr<StreamReceiver> receiver_;
   bool ws_open_ = false;
   bool ws_writing_ = false;
   bool ws_close_started_ = false;
@@ -1040,8 +1040,8 @@ ServerStats HttpServer::Impl::stats() const {
   ServerStats s;
   s.connections_open = connections_open.load();
   s.connections_total = connections_total.load();
-  s.ws_sessions_open = ws_sessions_open.load();
-  s.ws_sessions_total = ws_sessions_total.load();
+  s.ws_streams_open = ws_streams_open.load();
+  s.ws_streams_total = ws_streams_total.load();
   s.requests_total = requests_total.load();
   s.rejected_connections = rejected_connections.load();
   s.rejected_limits = rejected_limits.load();

@@ -2,13 +2,13 @@
 //
 // One port serves HTTP/1.1 with keep-alive and WebSocket upgrades (plain, or TLS only when
 // `tls` is set). Each request becomes an HttpRequest handed to the HttpHandler;
-// each accepted upgrade becomes a StreamSession obtained from the StreamHandler
+// each accepted upgrade becomes a StreamReceiver obtained from the StreamHandler
 // (src/transport/http_api.h). The transport answers only transport-level failures itself —
 // oversize bodies/headers, unparsable HTTP, slow clients, too many connections — always with
 // the project's JSON error body (docs/TRANSPORT.md has the status mapping).
 //
 // Threading: `io_threads` threads run one io_context; every connection lives on its own
-// strand, so its handler calls, StreamSession callbacks and writes never run concurrently.
+// strand, so its handler calls, StreamReceiver callbacks and writes never run concurrently.
 // Handlers may answer from any thread; the answer is posted back to the connection's strand.
 //
 // This header includes no Boost: keep it that way, it is included by the daemon's main.
@@ -45,8 +45,8 @@ struct ServerOptions {
 struct ServerStats {
   uint64_t connections_open = 0;   // TCP connections currently served (HTTP and WS)
   uint64_t connections_total = 0;  // accepted and served since start()
-  uint64_t ws_sessions_open = 0;   // WebSocket sessions currently open
-  uint64_t ws_sessions_total = 0;
+  uint64_t ws_streams_open = 0;    // WebSocket streams currently open
+  uint64_t ws_streams_total = 0;
   uint64_t requests_total = 0;        // HTTP requests handed to the HttpHandler
   uint64_t rejected_connections = 0;  // refused with 503 for max_connections (or while stopping)
   uint64_t rejected_limits = 0;       // 413, 431, 408 answers and WS queue/size closes

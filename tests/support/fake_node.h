@@ -176,8 +176,8 @@ class FakeNode final : public transport::HttpHandler, public transport::StreamHa
     err(404, ErrorCode::kNotFound, "no route for " + p);
   }
 
-  struct Session final : public transport::StreamSession {
-    Session(FakeNode& n, std::shared_ptr<transport::StreamSink> s) : node(n), sink(std::move(s)) {}
+  struct Receiver final : public transport::StreamReceiver {
+    Receiver(FakeNode& n, std::shared_ptr<transport::StreamSink> s) : node(n), sink(std::move(s)) {}
     void on_text(std::string text) override {
       auto v = json::parse(text);
       if (!connected) {
@@ -222,15 +222,15 @@ class FakeNode final : public transport::HttpHandler, public transport::StreamHa
     bool connected = false;
   };
 
-  std::unique_ptr<transport::StreamSession> open(const transport::HttpRequest& upgrade,
-                                                 std::shared_ptr<transport::StreamSink> sink,
-                                                 transport::HttpResponse& refusal) override {
+  std::unique_ptr<transport::StreamReceiver> open(const transport::HttpRequest& upgrade,
+                                                  std::shared_ptr<transport::StreamSink> sink,
+                                                  transport::HttpResponse& refusal) override {
     if (upgrade.path != "/rcan/v1/stream") {
       refusal.status = 404;
       refusal.body = json::dump(error_body(Error(ErrorCode::kNotFound, "no stream here"), "", 1));
       return nullptr;
     }
-    return std::make_unique<Session>(*this, std::move(sink));
+    return std::make_unique<Receiver>(*this, std::move(sink));
   }
 
   void set_tls(bool t) { tls_ = t; }

@@ -349,11 +349,11 @@ struct WsEvents {
   }
 };
 
-class FakeSession : public transport::StreamSession {
+class FakeReceiver : public transport::StreamReceiver {
  public:
-  FakeSession(std::shared_ptr<transport::StreamSink> sink, WsEvents& ev)
+  FakeReceiver(std::shared_ptr<transport::StreamSink> sink, WsEvents& ev)
       : sink_(std::move(sink)), ev_(ev) {}
-  ~FakeSession() override {
+  ~FakeReceiver() override {
     if (flood_.joinable()) flood_.join();
   }
   void on_text(std::string text) override {
@@ -411,9 +411,9 @@ class FakeSession : public transport::StreamSession {
 
 class FakeStreams : public transport::StreamHandler {
  public:
-  std::unique_ptr<transport::StreamSession> open(const HttpRequest& upgrade,
-                                                 std::shared_ptr<transport::StreamSink> sink,
-                                                 HttpResponse& refusal) override {
+  std::unique_ptr<transport::StreamReceiver> open(const HttpRequest& upgrade,
+                                                  std::shared_ptr<transport::StreamSink> sink,
+                                                  HttpResponse& refusal) override {
     if (upgrade.path == "/refuse") {
       refusal.status = 401;
       refusal.body = R"({"refused":true})";
@@ -424,7 +424,7 @@ class FakeStreams : public transport::StreamHandler {
       std::lock_guard<std::mutex> lock(ev.mu);
       ++ev.opened;
     }
-    return std::make_unique<FakeSession>(std::move(sink), ev);
+    return std::make_unique<FakeReceiver>(std::move(sink), ev);
   }
   WsEvents ev;
 };
@@ -905,7 +905,7 @@ TEST_F(HttpServerTest, WebSocketTextFramesBothWaysAndServerClose) {
   auto f2 = c.ws_read();
   ASSERT_TRUE(f2);
   EXPECT_EQ(f2->payload, "echo:fragment");
-  EXPECT_EQ(server_->stats().ws_sessions_open, 1u);
+  EXPECT_EQ(server_->stats().ws_streams_open, 1u);
   ASSERT_TRUE(c.ws_send(0x1, "close"));
   auto cl = c.ws_read();
   ASSERT_TRUE(cl);
@@ -948,7 +948,7 @@ TEST_F(HttpServerTest, WebSocketPeerCloseCallsOnClosedOnce) {
   ASSERT_TRUE(streams_.ev.wait([&] { return streams_.ev.closed == 2; }));
   std::this_thread::sleep_for(50ms);
   EXPECT_EQ(streams_.ev.closed, 2);
-  EXPECT_EQ(server_->stats().ws_sessions_open, 0u);
+  EXPECT_EQ(server_->stats().ws_streams_open, 0u);
 }
 
 TEST_F(HttpServerTest, WebSocketRefusalIsAnsweredWithTheNodesResponse) {

@@ -34,8 +34,8 @@ struct StreamState {
   bool closed = false;
 };
 
-struct StreamSessionImpl final : public transport::StreamSession {
-  StreamSessionImpl(Node& n, std::shared_ptr<StreamState> s) : node(n), st(std::move(s)) {}
+struct NodeStream final : public transport::StreamReceiver {
+  NodeStream(Node& n, std::shared_ptr<StreamState> s) : node(n), st(std::move(s)) {}
   void on_text(std::string text) override;
   void on_binary() override { st->sink->close(1003, "binary frames are not supported"); }
   void on_closed() override {
@@ -55,7 +55,7 @@ struct StreamSessionImpl final : public transport::StreamSession {
   std::shared_ptr<StreamState> st;
 };
 
-void StreamSessionImpl::on_text(std::string text) {
+void NodeStream::on_text(std::string text) {
   const int64_t received_us = steady_us();
   NodeServices& svc = node.svc_;
   json::ParseOptions po;
@@ -356,9 +356,9 @@ void Node::on_safety_event(const std::string& type, const std::string& session_i
                                                {"timestamp_ms", svc_.clock.wall_ms()}}));
 }
 
-std::unique_ptr<transport::StreamSession> Node::open(const transport::HttpRequest& upgrade,
-                                                     std::shared_ptr<transport::StreamSink> sink,
-                                                     transport::HttpResponse& refusal) {
+std::unique_ptr<transport::StreamReceiver> Node::open(const transport::HttpRequest& upgrade,
+                                                      std::shared_ptr<transport::StreamSink> sink,
+                                                      transport::HttpResponse& refusal) {
   if (upgrade.path != "/rcan/v1/stream" && upgrade.path != "/ws/telemetry") {
     refusal.status = 404;
     refusal.body =
@@ -387,7 +387,7 @@ std::unique_ptr<transport::StreamSession> Node::open(const transport::HttpReques
     st->telemetry_period_ms = 1000 / std::max(1, svc_.settings.telemetry_hz);
   }
   register_stream(st);
-  return std::make_unique<StreamSessionImpl>(*this, st);
+  return std::make_unique<NodeStream>(*this, st);
 }
 
 // ---------------------------------------------------------------------------------------------

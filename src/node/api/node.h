@@ -36,9 +36,9 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
 
   void handle(transport::HttpRequest req, Respond respond) override;
   void answer_waited(int64_t us) override;
-  std::unique_ptr<transport::StreamSession> open(const transport::HttpRequest& upgrade,
-                                                 std::shared_ptr<transport::StreamSink> sink,
-                                                 transport::HttpResponse& refusal) override;
+  std::unique_ptr<transport::StreamReceiver> open(const transport::HttpRequest& upgrade,
+                                                  std::shared_ptr<transport::StreamSink> sink,
+                                                  transport::HttpResponse& refusal) override;
 
   // Runs a message through the pipeline as if it came from `transport` (used by streams and
   // tests).
@@ -55,7 +55,7 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
                        const std::string& detail);
 
  private:
-  friend struct StreamSessionImpl;
+  friend struct NodeStream;
   void answer_json(Respond& respond, const std::string& route, int status, json::Value body,
                    std::vector<std::pair<std::string, std::string>> headers = {});
   void answer_error(Respond& respond, const std::string& route, const Error& err);
