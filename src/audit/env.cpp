@@ -249,6 +249,18 @@ class PosixEnv final : public Env {
     return s;
   }
 
+  Status write_private_file_synced(const std::string& path, std::string_view data) override {
+    int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_NOFOLLOW, 0600);
+    if (fd < 0) return io_error("open", path, errno);
+    // The umask may have removed bits and an existing file may have had others: make it exact.
+    Status s;
+    if (::fchmod(fd, 0600) != 0) s = io_error("chmod", path, errno);
+    if (s.ok()) s = write_all(fd, data, path);
+    if (s.ok() && ::fsync(fd) != 0) s = io_error("fsync", path, errno);
+    if (::close(fd) != 0 && s.ok()) s = io_error("close", path, errno);
+    return s;
+  }
+
   Result<int> lock_file(const std::string& path) override {
     int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0600);
     if (fd < 0) return io_error("open", path, errno);
@@ -275,7 +287,25 @@ class PosixEnv final : public Env {
   }
 };
 
+// The directory holding `path` ("." for a bare name, "/" for a file at the root).
+std::string parent_dir(const std::string& path) {
+  auto pos = path.rfind('/');
+  if (pos == std::string::npos) return ".";
+  return pos == 0 ? std::string("/") : path.substr(0, pos);
+}
+
 }  // namespace
+
+Status Env::write_file_atomic(const std::string& path, std::string_view data) {
+  const std::string tmp = path + ".tmp";
+  Status s = write_private_file_synced(tmp, data);
+  if (s.ok()) s = rename_file(tmp, path);
+  if (!s.ok()) {
+    if (exists(tmp)) (void)remove_file(tmp);
+    return s;
+  }
+  return sync_dir(parent_dir(path));
+}
 
 Env* Env::posix() {
   static PosixEnv* env = new PosixEnv();  // never deleted: used by static destructors

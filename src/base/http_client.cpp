@@ -1,16 +1,8 @@
 #include "base/http_client.h"
 
-#include <fcntl.h>
-#include <netdb.h>
-#include <poll.h>
-#include <sys/socket.h>
-#include <unistd.h>
-
-#include <cerrno>
-#include <chrono>
 #include <cstring>
 
-#include "base/clock.h"
+#include "client/net.h"
 #include "rcan/errors.h"
 
 namespace rcan {
@@ -18,17 +10,34 @@ namespace {
 
 Error fail(const std::string& what) { return Error(ErrorCode::kInternal, what); }
 
-// Waits for `events` until the deadline; false on timeout or error.
-bool wait_fd(int fd, short events, int64_t deadline) {
-  while (true) {
-    int64_t left = deadline - Clock::system().mono_ms();
-    if (left <= 0) return false;
-    pollfd p{fd, events, 0};
-    int r = ::poll(&p, 1, static_cast<int>(left));
-    if (r > 0) return true;
-    if (r == 0) return false;
-    if (errno != EINTR) return false;
+// The node's wording of a failed exchange (these messages reach audit records, logs and, for
+// a brain layer, the refusal of the escalated command).
+Error describe(const client::net::ExchangeFailure& f, const HttpUrl& url, int timeout_ms) {
+  using client::net::FailedAt;
+  const std::string where = url.host + ":" + std::to_string(url.port);
+  switch (f.at) {
+    case FailedAt::kResolve:
+      return fail("cannot resolve " + url.host);
+    case FailedAt::kConnect:
+      if (f.timed_out) return fail("connect to " + where + " timed out");
+      return fail("connect to " + where + " failed: " + std::strerror(f.sys_error));
+    case FailedAt::kSend:
+      return fail(f.timed_out ? "send timed out" : "send failed");
+    case FailedAt::kReceive:
+      if (f.timed_out) return fail("no answer within " + std::to_string(timeout_ms) + " ms");
+      return fail("receive failed");
+    case FailedAt::kNoAnswer:
+      return fail("no answer");
+    case FailedAt::kTooLarge:
+      return fail("answer too large");
+    case FailedAt::kChunked:
+      return fail("chunked answers are not supported");
+    case FailedAt::kNone:
+    case FailedAt::kTls:  // http:// only: no TLS here
+    case FailedAt::kMalformed:
+      break;
   }
+  return fail("malformed HTTP answer");
 }
 
 }  // namespace
@@ -87,36 +96,7 @@ Result<HttpAnswer> http_request(std::string_view method, std::string_view url,
 
 Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std::string_view body,
                                 int timeout_ms, size_t max_body) {
-  int64_t deadline = Clock::system().mono_ms() + timeout_ms;
-  addrinfo hints{};
-  hints.ai_family = AF_UNSPEC;
-  hints.ai_socktype = SOCK_STREAM;
-  addrinfo* res = nullptr;
   std::string port = std::to_string(url.port);
-  if (::getaddrinfo(url.host.c_str(), port.c_str(), &hints, &res) != 0 || !res)
-    return fail("cannot resolve " + url.host);
-  int fd = ::socket(res->ai_family, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
-  if (fd < 0) {
-    ::freeaddrinfo(res);
-    return fail("socket failed");
-  }
-  int rc = ::connect(fd, res->ai_addr, res->ai_addrlen);
-  ::freeaddrinfo(res);
-  auto close_fail = [&](const std::string& what) -> Error {
-    ::close(fd);
-    return fail(what);
-  };
-  if (rc != 0) {
-    if (errno != EINPROGRESS)
-      return close_fail("connect to " + url.host + ":" + port + " failed: " + std::strerror(errno));
-    if (!wait_fd(fd, POLLOUT, deadline))
-      return close_fail("connect to " + url.host + ":" + port + " timed out");
-    int err = 0;
-    socklen_t len = sizeof err;
-    ::getsockopt(fd, SOL_SOCKET, SO_ERROR, &err, &len);
-    if (err != 0)
-      return close_fail("connect to " + url.host + ":" + port + " failed: " + std::strerror(err));
-  }
   std::string req = std::string(method) + " " + url.path + " HTTP/1.1\r\nHost: " + url.host + ":" +
                     port +
                     "\r\nAccept: application/json\r\nConnection: close\r\nUser-Agent: rcand\r\n";
@@ -125,58 +105,19 @@ Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std
         "Content-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) + "\r\n";
   req += "\r\n";
   req.append(body);
-  size_t sent = 0;
-  while (sent < req.size()) {
-    if (!wait_fd(fd, POLLOUT, deadline)) return close_fail("send timed out");
-    ssize_t n = ::send(fd, req.data() + sent, req.size() - sent, MSG_NOSIGNAL);
-    if (n < 0) {
-      if (errno == EAGAIN || errno == EINTR) continue;
-      return close_fail("send failed");
-    }
-    sent += static_cast<size_t>(n);
-  }
-  std::string resp;
-  char buf[16384];
-  size_t header_end = std::string::npos;
-  size_t content_length = std::string::npos;
-  while (true) {
-    if (header_end != std::string::npos && content_length != std::string::npos &&
-        resp.size() >= header_end + 4 + content_length)
-      break;
-    if (!wait_fd(fd, POLLIN, deadline))
-      return close_fail("no answer within " + std::to_string(timeout_ms) + " ms");
-    ssize_t n = ::recv(fd, buf, sizeof buf, 0);
-    if (n < 0) {
-      if (errno == EAGAIN || errno == EINTR) continue;
-      return close_fail("receive failed");
-    }
-    if (n == 0) break;
-    resp.append(buf, static_cast<size_t>(n));
-    if (resp.size() > max_body + 16384) return close_fail("answer too large");
-    if (header_end == std::string::npos) {
-      header_end = resp.find("\r\n\r\n");
-      if (header_end != std::string::npos) {
-        std::string head = resp.substr(0, header_end);
-        for (auto& c : head) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-        size_t cl = head.find("\r\ncontent-length:");
-        if (cl != std::string::npos)
-          content_length = std::strtoul(head.c_str() + cl + 17, nullptr, 10);
-        if (head.find("transfer-encoding: chunked") != std::string::npos)
-          return close_fail("chunked answers are not supported");
-      }
-    }
-  }
-  ::close(fd);
-  if (resp.empty()) return fail("no answer");
-  size_t eol = resp.find("\r\n");
+  client::Endpoint ep;
+  ep.host = url.host;
+  ep.port = url.port;
+  client::net::ExchangeOptions opts;
+  opts.timeout_ms = timeout_ms;
+  opts.max_body = max_body;
+  opts.refuse_chunked = true;
+  client::net::ExchangeFailure failure;
+  auto r = client::net::exchange(ep, req, opts, &failure);
+  if (!r.ok()) return describe(failure, url, timeout_ms);
   HttpAnswer a;
-  a.status = parse_status_line(
-      std::string_view(resp).substr(0, eol == std::string::npos ? resp.size() : eol));
-  if (header_end == std::string::npos || a.status == 0) return fail("malformed HTTP answer");
-  a.body = resp.substr(header_end + 4);
-  if (content_length != std::string::npos && a.body.size() > content_length)
-    a.body.resize(content_length);
-  if (a.body.size() > max_body) return fail("answer too large");
+  a.status = r->status;
+  a.body = std::move(r->body);
   return a;
 }
 

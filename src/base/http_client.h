@@ -1,8 +1,10 @@
 // The node's one outbound HTTP/1.1 client: brain layers, HiTL and consent webhooks, the
-// issuer reachability probe. Plain http:// only (the node has no TLS client; put a local proxy
+// issuer reachability probe. Plain http:// only (URLs are validated as such; put a local proxy
 // in front of a remote endpoint), one request per connection, every step (resolve excepted)
 // bounded by one deadline, answers capped. Blocking: call it from a worker thread, never from a
-// transport thread. The client library's own transport (rcan_client, with TLS) is separate.
+// transport thread. The connection and the answer's parsing are the client library's
+// (client::net::exchange, src/client/net.h); this file writes the node's request and words
+// its errors.
 #pragma once
 
 #include <cstdint>

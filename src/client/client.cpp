@@ -82,11 +82,6 @@ std::string url_encode(std::string_view s) {
 
 // ---------------------------------------------------------------------------------------------
 
-std::string Endpoint::url() const {
-  std::string h = host.find(':') != std::string::npos ? "[" + host + "]" : host;
-  return std::string(tls ? "https://" : "http://") + h + ":" + std::to_string(port) + base_path;
-}
-
 Result<Endpoint> parse_endpoint(std::string_view url) {
   auto bad = [&](const std::string& why) {
     ClientError e;

@@ -11,12 +11,21 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <cctype>
 #include <cerrno>
 #include <chrono>
 #include <cstring>
 
-#include "rcan/encoding.h"
-#include "rcan/hash.h"
+namespace rcan::client {
+
+// With the connection code: the exchange's errors name the endpoint, and this file (rcan_http)
+// is linked without client.cpp.
+std::string Endpoint::url() const {
+  std::string h = host.find(':') != std::string::npos ? "[" + host + "]" : host;
+  return std::string(tls ? "https://" : "http://") + h + ":" + std::to_string(port) + base_path;
+}
+
+}  // namespace rcan::client
 
 namespace rcan::client::net {
 
@@ -61,6 +70,12 @@ ClientError transport_error(const std::string& code, const std::string& message)
   return e;
 }
 
+ClientError Conn::fail(FailedAt at, bool timed_out, int sys_error, const std::string& code,
+                       const std::string& message) {
+  failure_ = ExchangeFailure{at, timed_out, sys_error};
+  return transport_error(code, message);
+}
+
 Conn::~Conn() { close(); }
 
 void Conn::close() {
@@ -91,14 +106,20 @@ Result<bool> Conn::open(const Endpoint& ep, int timeout_ms, const std::string& c
   std::string port = std::to_string(ep.port);
   int gai = ::getaddrinfo(ep.host.c_str(), port.c_str(), &hints, &res);
   if (gai != 0 || !res)
-    return transport_error("CONNECTION_FAILED",
-                           "cannot resolve " + ep.host + ": " + gai_strerror(gai));
+    return fail(FailedAt::kResolve, false, 0, "CONNECTION_FAILED",
+                "cannot resolve " + ep.host + ": " + gai_strerror(gai));
   std::string last = "no address";
+  int last_errno = 0;
+  bool timed_out = false;
   for (addrinfo* ai = res; ai; ai = ai->ai_next) {
     int fd =
         ::socket(ai->ai_family, ai->ai_socktype | SOCK_CLOEXEC | SOCK_NONBLOCK, ai->ai_protocol);
-    if (fd < 0) continue;
+    if (fd < 0) {
+      last_errno = errno;
+      continue;
+    }
     int rc = ::connect(fd, ai->ai_addr, ai->ai_addrlen);
+    timed_out = false;
     if (rc != 0 && errno == EINPROGRESS) {
       if (wait_fd(fd, POLLOUT, static_cast<int>(deadline - mono_ms()))) {
         int err = 0;
@@ -108,6 +129,7 @@ Result<bool> Conn::open(const Endpoint& ep, int timeout_ms, const std::string& c
         errno = err;
       } else {
         errno = ETIMEDOUT;
+        timed_out = true;
         rc = -1;
       }
     }
@@ -115,30 +137,31 @@ Result<bool> Conn::open(const Endpoint& ep, int timeout_ms, const std::string& c
       fd_ = fd;
       break;
     }
+    last_errno = errno;
     last = std::strerror(errno);
     ::close(fd);
   }
   ::freeaddrinfo(res);
   if (fd_ < 0)
-    return transport_error("CONNECTION_FAILED", "cannot connect to " + ep.host + ":" + port + ": " +
-                                                    last + " (is rcand running?)");
+    return fail(FailedAt::kConnect, timed_out, last_errno, "CONNECTION_FAILED",
+                "cannot connect to " + ep.host + ":" + port + ": " + last + " (is rcand running?)");
   int one = 1;
   ::setsockopt(fd_, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
   if (!ep.tls) return true;
 
   ctx_ = SSL_CTX_new(TLS_client_method());
-  if (!ctx_) return transport_error("TLS_FAILED", ssl_error_text());
+  if (!ctx_) return fail(FailedAt::kTls, false, 0, "TLS_FAILED", ssl_error_text());
   SSL_CTX_set_min_proto_version(ctx_, TLS1_2_VERSION);
   if (!insecure) {
     SSL_CTX_set_verify(ctx_, SSL_VERIFY_PEER, nullptr);
     int ok = ca_file.empty() ? SSL_CTX_set_default_verify_paths(ctx_)
                              : SSL_CTX_load_verify_locations(ctx_, ca_file.c_str(), nullptr);
     if (ok != 1)
-      return transport_error("TLS_FAILED",
-                             "cannot load trust anchors " + ca_file + ": " + ssl_error_text());
+      return fail(FailedAt::kTls, false, 0, "TLS_FAILED",
+                  "cannot load trust anchors " + ca_file + ": " + ssl_error_text());
   }
   ssl_ = SSL_new(ctx_);
-  if (!ssl_) return transport_error("TLS_FAILED", ssl_error_text());
+  if (!ssl_) return fail(FailedAt::kTls, false, 0, "TLS_FAILED", ssl_error_text());
   SSL_set_fd(ssl_, fd_);
   SSL_set_tlsext_host_name(ssl_, ep.host.c_str());
   if (!insecure) {
@@ -160,12 +183,14 @@ Result<bool> Conn::open(const Endpoint& ep, int timeout_ms, const std::string& c
     if (e == SSL_ERROR_WANT_READ && left > 0 && wait_fd(fd_, POLLIN, left)) continue;
     if (e == SSL_ERROR_WANT_WRITE && left > 0 && wait_fd(fd_, POLLOUT, left)) continue;
     if (left <= 0)
-      return transport_error("TIMEOUT", "TLS handshake with " + ep.host + " timed out");
+      return fail(FailedAt::kTls, true, 0, "TIMEOUT",
+                  "TLS handshake with " + ep.host + " timed out");
     long v = SSL_get_verify_result(ssl_);
     std::string why = v != X509_V_OK
                           ? std::string("certificate: ") + X509_verify_cert_error_string(v)
                           : ssl_error_text();
-    return transport_error("TLS_FAILED", "TLS with " + ep.host + ":" + port + " failed: " + why);
+    return fail(FailedAt::kTls, false, 0, "TLS_FAILED",
+                "TLS with " + ep.host + ":" + port + " failed: " + why);
   }
   return true;
 }
@@ -175,7 +200,7 @@ Result<bool> Conn::write_all(std::string_view data, int timeout_ms) {
   size_t off = 0;
   while (off < data.size()) {
     int left = static_cast<int>(deadline - mono_ms());
-    if (left <= 0) return transport_error("TIMEOUT", "sending timed out");
+    if (left <= 0) return fail(FailedAt::kSend, true, 0, "TIMEOUT", "sending timed out");
     if (ssl_) {
       int r = SSL_write(ssl_, data.data() + off,
                         static_cast<int>(std::min<size_t>(data.size() - off, 1 << 30)));
@@ -186,7 +211,8 @@ Result<bool> Conn::write_all(std::string_view data, int timeout_ms) {
       int e = SSL_get_error(ssl_, r);
       if (e == SSL_ERROR_WANT_WRITE && wait_fd(fd_, POLLOUT, left)) continue;
       if (e == SSL_ERROR_WANT_READ && wait_fd(fd_, POLLIN, left)) continue;
-      return transport_error("CONNECTION_FAILED", "TLS write failed: " + ssl_error_text());
+      return fail(FailedAt::kSend, false, 0, "CONNECTION_FAILED",
+                  "TLS write failed: " + ssl_error_text());
     }
     ssize_t r = ::send(fd_, data.data() + off, data.size() - off, MSG_NOSIGNAL);
     if (r > 0) {
@@ -197,8 +223,8 @@ Result<bool> Conn::write_all(std::string_view data, int timeout_ms) {
       wait_fd(fd_, POLLOUT, left);
       continue;
     }
-    return transport_error("CONNECTION_FAILED",
-                           std::string("send failed: ") + std::strerror(errno));
+    return fail(FailedAt::kSend, false, errno, "CONNECTION_FAILED",
+                std::string("send failed: ") + std::strerror(errno));
   }
   return true;
 }
@@ -217,13 +243,13 @@ Result<size_t> Conn::read_some(std::string& buf, int timeout_ms) {
       if (e == SSL_ERROR_ZERO_RETURN) return size_t{0};
       int left = static_cast<int>(deadline - mono_ms());
       if ((e == SSL_ERROR_WANT_READ || e == SSL_ERROR_WANT_WRITE)) {
-        if (left <= 0) return transport_error("TIMEOUT", "no answer in time");
-        if (!wait_fd(fd_, e == SSL_ERROR_WANT_READ ? POLLIN : POLLOUT, left))
-          return transport_error("TIMEOUT", "no answer in time");
+        if (left <= 0 || !wait_fd(fd_, e == SSL_ERROR_WANT_READ ? POLLIN : POLLOUT, left))
+          return fail(FailedAt::kReceive, true, 0, "TIMEOUT", "no answer in time");
         continue;
       }
       if (e == SSL_ERROR_SYSCALL && ERR_peek_error() == 0) return size_t{0};  // unclean close
-      return transport_error("CONNECTION_FAILED", "TLS read failed: " + ssl_error_text());
+      return fail(FailedAt::kReceive, false, 0, "CONNECTION_FAILED",
+                  "TLS read failed: " + ssl_error_text());
     }
     ssize_t r = ::recv(fd_, tmp, sizeof tmp, 0);
     if (r > 0) {
@@ -234,12 +260,82 @@ Result<size_t> Conn::read_some(std::string& buf, int timeout_ms) {
     if (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR) {
       int left = static_cast<int>(deadline - mono_ms());
       if (left <= 0 || !wait_fd(fd_, POLLIN, left))
-        return transport_error("TIMEOUT", "no answer in time");
+        return fail(FailedAt::kReceive, true, 0, "TIMEOUT", "no answer in time");
       continue;
     }
     if (errno == ECONNRESET) return size_t{0};
-    return transport_error("CONNECTION_FAILED",
-                           std::string("receive failed: ") + std::strerror(errno));
+    return fail(FailedAt::kReceive, false, errno, "CONNECTION_FAILED",
+                std::string("receive failed: ") + std::strerror(errno));
+  }
+}
+
+namespace {
+
+bool is_chunked(const wire::ParsedResponse& pr) {
+  for (const auto& [k, v] : pr.headers) {
+    if (k != "transfer-encoding") continue;
+    std::string low = v;
+    for (auto& c : low) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    if (low.find("chunked") != std::string::npos) return true;
+  }
+  return false;
+}
+
+// What the parser refused, for ExchangeFailure: its errors name an oversize "... too large".
+FailedAt refused_answer(std::string_view buf, bool eof, const std::string& err) {
+  if (eof && buf.empty()) return FailedAt::kNoAnswer;
+  if (err.find("too large") != std::string::npos) return FailedAt::kTooLarge;
+  return FailedAt::kMalformed;
+}
+
+}  // namespace
+
+Result<RawResponse> exchange(const Endpoint& ep, std::string_view request,
+                             const ExchangeOptions& opts, ExchangeFailure* failure) {
+  int64_t deadline = mono_ms() + opts.timeout_ms;
+  Conn c;
+  // A failure of the connection (it knows where it stopped), or of the exchange itself.
+  auto conn_failed = [&](const ClientError& e) -> ClientError {
+    if (failure) *failure = c.failure();
+    return e;
+  };
+  auto failed = [&](FailedAt at, bool timed_out, const ClientError& e) -> ClientError {
+    if (failure) *failure = ExchangeFailure{at, timed_out, 0};
+    return e;
+  };
+  if (auto o = c.open(ep, opts.timeout_ms, opts.ca_file, opts.insecure); !o.ok())
+    return conn_failed(o.error());
+  if (auto w = c.write_all(request, static_cast<int>(deadline - mono_ms())); !w.ok())
+    return conn_failed(w.error());
+  std::string buf;
+  bool eof = false;
+  while (true) {
+    wire::ParsedResponse pr;
+    size_t consumed = 0;
+    std::string err;
+    wire::Parse p = wire::parse_response(buf, eof, pr, consumed, err, opts.max_body);
+    if (opts.refuse_chunked && is_chunked(pr))
+      return failed(FailedAt::kChunked, false,
+                    transport_error("BAD_RESPONSE", "bad HTTP answer from " + ep.url() +
+                                                        ": chunked answers are not supported"));
+    if (p == wire::Parse::kComplete) {
+      RawResponse r;
+      r.status = pr.status;
+      r.headers = std::move(pr.headers);
+      r.body = std::move(pr.body);
+      return r;
+    }
+    if (p == wire::Parse::kError)
+      return failed(
+          refused_answer(buf, eof, err), false,
+          transport_error("BAD_RESPONSE", "bad HTTP answer from " + ep.url() + ": " + err));
+    int left = static_cast<int>(deadline - mono_ms());
+    if (left <= 0)
+      return failed(FailedAt::kReceive, true,
+                    transport_error("TIMEOUT", "no complete answer from " + ep.url() + " in time"));
+    auto n = c.read_some(buf, left);
+    if (!n.ok()) return conn_failed(n.error());
+    if (*n == 0) eof = true;
   }
 }
 
@@ -247,9 +343,6 @@ Result<RawResponse> http_exchange(const Endpoint& ep, const std::string& method,
                                   const std::string& path, const std::string& body,
                                   const std::vector<std::pair<std::string, std::string>>& headers,
                                   int timeout_ms, const std::string& ca_file, bool insecure) {
-  int64_t deadline = mono_ms() + timeout_ms;
-  Conn c;
-  if (auto o = c.open(ep, timeout_ms, ca_file, insecure); !o.ok()) return o.error();
   std::string host = ep.host.find(':') != std::string::npos ? "[" + ep.host + "]" : ep.host;
   std::string req =
       method + " " + ep.base_path + path + " HTTP/1.1\r\nHost: " + host + ":" +
@@ -261,96 +354,11 @@ Result<RawResponse> http_exchange(const Endpoint& ep, const std::string& method,
         "Content-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) + "\r\n";
   req += "\r\n";
   req += body;
-  if (auto w = c.write_all(req, static_cast<int>(deadline - mono_ms())); !w.ok()) return w.error();
-  std::string buf;
-  bool eof = false;
-  while (true) {
-    wire::ParsedResponse pr;
-    size_t consumed = 0;
-    std::string err;
-    wire::Parse p = wire::parse_response(buf, eof, pr, consumed, err);
-    if (p == wire::Parse::kComplete) {
-      RawResponse r;
-      r.status = pr.status;
-      r.headers = std::move(pr.headers);
-      r.body = std::move(pr.body);
-      return r;
-    }
-    if (p == wire::Parse::kError)
-      return transport_error("BAD_RESPONSE", "bad HTTP answer from " + ep.url() + ": " + err);
-    int left = static_cast<int>(deadline - mono_ms());
-    if (left <= 0)
-      return transport_error("TIMEOUT", "no complete answer from " + ep.url() + " in time");
-    auto n = c.read_some(buf, left);
-    if (!n.ok()) return n.error();
-    if (*n == 0) eof = true;
-  }
-}
-
-Result<bool> ws_handshake(Conn& conn, const Endpoint& ep, const std::string& path,
-                          const std::string& token, int timeout_ms, std::string& leftover) {
-  uint8_t raw[16];
-  random_bytes(raw, sizeof raw);
-  std::string key = base64_encode(raw, sizeof raw);
-  std::string host = ep.host.find(':') != std::string::npos ? "[" + ep.host + "]" : ep.host;
-  std::string req = "GET " + ep.base_path + path + " HTTP/1.1\r\nHost: " + host + ":" +
-                    std::to_string(ep.port) +
-                    "\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Version: 13\r\n"
-                    "Sec-WebSocket-Key: " +
-                    key + "\r\nUser-Agent: rcan-client/0.1\r\n";
-  if (!token.empty()) req += "Authorization: Bearer " + token + "\r\n";
-  req += "\r\n";
-  if (auto w = conn.write_all(req, timeout_ms); !w.ok()) return w.error();
-  std::string buf;
-  int64_t deadline = mono_ms() + timeout_ms;
-  while (true) {
-    size_t head_end = buf.find("\r\n\r\n");
-    if (head_end != std::string::npos) {
-      wire::ParsedResponse pr;
-      size_t consumed = 0;
-      std::string err;
-      // Parse the head only (a refusal carries a body; a 101 has none).
-      wire::Parse p = wire::parse_response(std::string_view(buf).substr(0, head_end + 4), false, pr,
-                                           consumed, err);
-      if (p == wire::Parse::kError)
-        return transport_error("BAD_RESPONSE", "bad upgrade answer: " + err);
-      if (pr.status != 101) {
-        // Read the refusal body for its error code.
-        std::string all = buf;
-        bool eof = false;
-        while (true) {
-          wire::ParsedResponse full;
-          wire::Parse q = wire::parse_response(all, eof, full, consumed, err);
-          if (q == wire::Parse::kComplete) {
-            std::string ra;
-            for (auto& [k, v] : full.headers)
-              if (k == "retry-after") ra = v;
-            return error_from_response(full.status, full.body, ra);
-          }
-          if (q == wire::Parse::kError || mono_ms() >= deadline)
-            return error_from_response(pr.status, "", "");
-          auto n = conn.read_some(all, static_cast<int>(deadline - mono_ms()));
-          if (!n.ok()) return error_from_response(pr.status, "", "");
-          if (*n == 0) eof = true;
-        }
-      }
-      std::string accept;
-      for (auto& [k, v] : pr.headers)
-        if (k == "sec-websocket-accept") accept = v;
-      if (accept != wire::ws_accept(key))
-        return transport_error("BAD_RESPONSE", "bad Sec-WebSocket-Accept");
-      leftover = buf.substr(head_end + 4);
-      return true;
-    }
-    if (buf.size() > wire::kMaxHeaderBytes)
-      return transport_error("BAD_RESPONSE", "upgrade answer too large");
-    int left = static_cast<int>(deadline - mono_ms());
-    if (left <= 0) return transport_error("TIMEOUT", "WebSocket upgrade timed out");
-    auto n = conn.read_some(buf, left);
-    if (!n.ok()) return n.error();
-    if (*n == 0)
-      return transport_error("CONNECTION_FAILED", "connection closed during the WebSocket upgrade");
-  }
+  ExchangeOptions o;
+  o.timeout_ms = timeout_ms;
+  o.ca_file = ca_file;
+  o.insecure = insecure;
+  return exchange(ep, req, o);
 }
 
 }  // namespace rcan::client::net

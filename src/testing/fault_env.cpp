@@ -258,10 +258,21 @@ Status FaultInjectionEnv::truncate_file(const std::string& path, uint64_t size) 
 }
 
 Status FaultInjectionEnv::write_file_synced(const std::string& path, std::string_view data) {
+  return synced_write(path, data, false);
+}
+
+Status FaultInjectionEnv::write_private_file_synced(const std::string& path,
+                                                    std::string_view data) {
+  return synced_write(path, data, true);
+}
+
+Status FaultInjectionEnv::synced_write(const std::string& path, std::string_view data,
+                                       bool private_file) {
   bool existed = base_->exists(path);
   Status s = before_mutation("write " + path);
   if (!s.ok()) return s;
-  s = base_->write_file_synced(path, data);
+  s = private_file ? base_->write_private_file_synced(path, data)
+                   : base_->write_file_synced(path, data);
   if (s.ok()) {
     std::lock_guard<std::mutex> l(mu_);
     files_[path] = FileState{data.size(), data.size()};

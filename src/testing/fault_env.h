@@ -7,6 +7,8 @@
 //     rename, remove, truncate, synced write) and every later one fails without taking
 //     effect — the process "dies" there. An append chosen as the failing operation can
 //     be torn: half of its bytes reach the file before it fails (set_torn_appends).
+//     Env::write_file_atomic is three of them (the temporary file's synced write, the
+//     rename, the directory sync), so each of its steps can be the one that fails.
 //   * drop_unsynced(): after the owner of the Env is gone, cuts every tracked file back
 //     to its durable length (keeping `keep_fraction` of the unsynced tail to model a
 //     torn page), and deletes files created since the last sync_dir of their directory.
@@ -52,6 +54,7 @@ class FaultInjectionEnv : public Env {
   Status rename_file(const std::string& from, const std::string& to) override;
   Status truncate_file(const std::string& path, uint64_t size) override;
   Status write_file_synced(const std::string& path, std::string_view data) override;
+  Status write_private_file_synced(const std::string& path, std::string_view data) override;
   Result<int> lock_file(const std::string& path) override;
   void unlock_file(int handle) override;
   int64_t now_ms() override;
@@ -64,6 +67,9 @@ class FaultInjectionEnv : public Env {
   bool is_failing_now();
 
  private:
+  // write_file_synced and write_private_file_synced: one mutation, tracked as durable.
+  Status synced_write(const std::string& path, std::string_view data, bool private_file);
+
   struct FileState {
     uint64_t size = 0;
     uint64_t durable = 0;

@@ -58,11 +58,24 @@ class Env {
   virtual Status truncate_file(const std::string& path, uint64_t size) = 0;
   // Creates/overwrites `path` (0600) with `data` and fsyncs it.
   virtual Status write_file_synced(const std::string& path, std::string_view data) = 0;
+  // The same for a file only its owner may read: the mode is made exactly 0600 (also when the
+  // file existed with another), and a symbolic link at `path` is refused (O_NOFOLLOW).
+  virtual Status write_private_file_synced(const std::string& path, std::string_view data) = 0;
   // Takes an exclusive advisory lock (flock) on `path`, creating it; released by unlock.
   virtual Result<int> lock_file(const std::string& path) = 0;
   virtual void unlock_file(int handle) = 0;
   // Wall clock, milliseconds since the Unix epoch.
   virtual int64_t now_ms() = 0;
+
+  // Replaces `path` with `data`, atomically and durably: writes `path`.tmp in the same directory
+  // (write_private_file_synced: mode 0600, no symbolic link followed, fsync'ed), renames it over
+  // `path`, then fsyncs the directory. A failure up to the rename leaves `path` as it was (the
+  // temporary file is removed, best effort); a failed directory fsync leaves the new contents in
+  // place, perhaps not yet durable. Errors name the step, the file and errno ("rename
+  // /d/f.tmp: No space left on device"). Made only of the operations above, so a
+  // FaultInjectionEnv can fail each of its steps. The node's state files, its HiTL pending file
+  // and the safety core's ESTOP latch are written with it.
+  Status write_file_atomic(const std::string& path, std::string_view data);
 
   // The process-wide POSIX environment (never deleted).
   static Env* posix();

@@ -1,9 +1,5 @@
 #include "node/ai/hitl.h"
 
-#include <fcntl.h>
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <cctype>
 #include <cstdio>
@@ -146,41 +142,14 @@ json::Object PendingItem::public_view(int64_t now_ms) const {
   return o;
 }
 
-Status save_pending(const std::string& path, const std::vector<PendingItem>& items) {
+Status save_pending(const std::string& path, const std::vector<PendingItem>& items,
+                    audit::Env* env) {
   json::Array arr;
   for (const auto& i : items) arr.push_back(i.to_json());
   std::string text = json::dump(json::Value(json::Object{{"version", 1}, {"pending", arr}})) + "\n";
-  std::string tmp = path + ".tmp";
-  int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_NOFOLLOW, 0600);
-  if (fd < 0) return Error(ErrorCode::kInternal, "cannot write " + tmp);
-  ::fchmod(fd, 0600);
-  size_t off = 0;
-  while (off < text.size()) {
-    ssize_t n = ::write(fd, text.data() + off, text.size() - off);
-    if (n <= 0) {
-      ::close(fd);
-      ::unlink(tmp.c_str());
-      return Error(ErrorCode::kInternal, "cannot write " + tmp);
-    }
-    off += static_cast<size_t>(n);
-  }
-  if (::fsync(fd) != 0) {
-    ::close(fd);
-    ::unlink(tmp.c_str());
-    return Error(ErrorCode::kInternal, "cannot sync " + tmp);
-  }
-  ::close(fd);
-  if (::rename(tmp.c_str(), path.c_str()) != 0) {
-    ::unlink(tmp.c_str());
-    return Error(ErrorCode::kInternal, "cannot rename " + tmp);
-  }
-  std::string dir = path.substr(0, path.rfind('/') == std::string::npos ? 0 : path.rfind('/'));
-  if (dir.empty()) dir = ".";
-  int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (dfd >= 0) {
-    ::fsync(dfd);
-    ::close(dfd);
-  }
+  if (!env) env = audit::Env::posix();
+  Status s = env->write_file_atomic(path, text);
+  if (!s.ok()) return Error(ErrorCode::kInternal, s.error().message);
   return Status::Ok();
 }
 

@@ -162,7 +162,7 @@ SafetyCore::~SafetyCore() {
   if (persister_.joinable()) persister_.join();
 }
 
-Status SafetyCore::open(const std::string& state_dir) {
+Status SafetyCore::open(const std::string& state_dir, audit::Env* env) {
   namespace fs = std::filesystem;
   {
     std::lock_guard<std::mutex> lock(meta_mu_);
@@ -174,6 +174,7 @@ Status SafetyCore::open(const std::string& state_dir) {
     return Error(ErrorCode::kInternal,
                  "cannot create safety state dir " + state_dir + ": " + ec.message());
   ::chmod(state_dir.c_str(), 0700);
+  env_ = env ? env : audit::Env::posix();
   const std::string path = state_dir + "/" + kStateFile;
 
   LatchState loaded;
@@ -376,45 +377,12 @@ LatencyStats SafetyCore::estop_latency() const {
 // ---- persistence ----------------------------------------------------------------------------
 
 Status SafetyCore::write_state_file(const LatchState& st) {
-  const std::string dir = state_dir_;
-  const std::string path = dir + "/" + kStateFile;
-  const std::string tmp = path + ".tmp";
   json::Object o{{"format", kStateFormat},       {"estop_active", st.active},
                  {"source", st.source},          {"reason", st.reason},
                  {"since_ms", st.since_wall_ms}, {"written_ms", clock_.wall_ms()}};
   const std::string body = json::dump(json::Value(std::move(o))) + "\n";
-
-  auto fail = [](const std::string& what) {
-    return Error(ErrorCode::kInternal, what + ": " + std::strerror(errno));
-  };
-  int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
-  if (fd < 0) return fail("open " + tmp);
-  size_t off = 0;
-  while (off < body.size()) {
-    ssize_t n = ::write(fd, body.data() + off, body.size() - off);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      Error e = fail("write " + tmp);
-      ::close(fd);
-      return e;
-    }
-    off += static_cast<size_t>(n);
-  }
-  if (::fsync(fd) != 0) {
-    Error e = fail("fsync " + tmp);
-    ::close(fd);
-    return e;
-  }
-  if (::close(fd) != 0) return fail("close " + tmp);
-  if (::rename(tmp.c_str(), path.c_str()) != 0) return fail("rename " + tmp);
-  int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (dfd < 0) return fail("open dir " + dir);
-  if (::fsync(dfd) != 0) {
-    Error e = fail("fsync dir " + dir);
-    ::close(dfd);
-    return e;
-  }
-  ::close(dfd);
+  Status s = env_->write_file_atomic(state_dir_ + "/" + kStateFile, body);
+  if (!s.ok()) return Error(ErrorCode::kInternal, s.error().message);
   return Status::Ok();
 }
 

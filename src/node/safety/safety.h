@@ -57,6 +57,7 @@
 
 #include "base/clock.h"
 #include "node/safety/driver.h"
+#include "rcan/audit/env.h"
 #include "rcan/json.h"
 #include "rcan/result.h"
 
@@ -189,8 +190,9 @@ class SafetyCore {
   // Loads the persisted latch from `state_dir` (created 0700 if missing) and starts the
   // persister. Missing file → not latched (unless estop_on_startup); corrupt/unreadable file →
   // latched, source "startup", startup_note says why (the bad file is kept as *.corrupt).
-  // Call once, before start(). Without open() the latch lives in memory only.
-  Status open(const std::string& state_dir);
+  // Call once, before start(). Without open() the latch lives in memory only. The latch file
+  // is written through `env` (nullptr → audit::Env::posix(); tests inject faults with it).
+  Status open(const std::string& state_dir, audit::Env* env = nullptr);
 
   void set_event_callback(EventFn fn);
 
@@ -281,6 +283,7 @@ class SafetyCore {
   Clock& clock_;
   const DriverInfo driver_info_;
   const SafetyLimits limits_;  // effective: min(config, hardware)
+  audit::Env* env_ = nullptr;  // set once by open(): the latch file's writes
 
   // The SAFETY lane flag: read by dispatch() (before and under apply_mu_) and tick().
   std::atomic<bool> latched_{false};

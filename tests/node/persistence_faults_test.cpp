@@ -1,0 +1,251 @@
+// The node's small durable files — the state files (leases, ownership, consent, credentials),
+// the HiTL pending file and the safety core's ESTOP latch — are all written with
+// audit::Env::write_file_atomic. Here: what it does on the real file system (mode, no
+// temporary left behind, no symbolic link followed), and, through FaultInjectionEnv, that a
+// write failing at any step leaves the previous file whole, and what the safety core does when
+// its latch cannot be persisted.
+#include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <fstream>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "base/clock.h"
+#include "base/state_file.h"
+#include "node/ai/hitl.h"
+#include "node/safety/safety.h"
+#include "node/safety/sim_robot.h"
+#include "rcan/audit/env.h"
+#include "rcan/errors.h"
+#include "test_support.h"
+#include "testing/fault_env.h"
+
+namespace rcan {
+namespace {
+
+using audit::Env;
+using audit::FaultInjectionEnv;
+using test::TempDir;
+
+unsigned mode_of(const std::string& path) {
+  struct stat st {};
+  EXPECT_EQ(::stat(path.c_str(), &st), 0) << path;
+  return st.st_mode & 07777;
+}
+
+bool present(const std::string& path) { return ::access(path.c_str(), F_OK) == 0; }
+
+// ---- Env::write_file_atomic on the real file system -----------------------------------------
+
+TEST(AtomicWrite, ReplacesTheFileWithMode0600AndNoTemporaryLeft) {
+  TempDir dir;
+  const std::string f = dir.file("state.json");
+  { std::ofstream(f) << "old"; }
+  ASSERT_EQ(::chmod(f.c_str(), 0644), 0);
+  const mode_t old_mask = ::umask(0);  // the mode must not depend on the umask
+  Status s = Env::posix()->write_file_atomic(f, "new contents\n");
+  ::umask(old_mask);
+  ASSERT_TRUE(s.ok()) << s.error().message;
+  EXPECT_EQ(test::read_file(f), "new contents\n");
+  EXPECT_EQ(mode_of(f), 0600u);
+  EXPECT_FALSE(present(f + ".tmp"));
+}
+
+TEST(AtomicWrite, AStaleTemporaryIsOverwritten) {
+  TempDir dir;
+  const std::string f = dir.file("state.json");
+  { std::ofstream(f + ".tmp") << "left over by a crash, and longer than the new contents"; }
+  ASSERT_EQ(::chmod((f + ".tmp").c_str(), 0644), 0);
+  ASSERT_TRUE(Env::posix()->write_file_atomic(f, "fresh").ok());
+  EXPECT_EQ(test::read_file(f), "fresh");
+  EXPECT_EQ(mode_of(f), 0600u);
+  EXPECT_FALSE(present(f + ".tmp"));
+}
+
+TEST(AtomicWrite, DoesNotWriteThroughASymlinkedTemporary) {
+  TempDir dir;
+  const std::string f = dir.file("state.json");
+  const std::string victim = dir.file("victim");
+  { std::ofstream(f) << "previous"; }
+  { std::ofstream(victim) << "not yours"; }
+  ASSERT_EQ(::symlink(victim.c_str(), (f + ".tmp").c_str()), 0);
+  Status s = Env::posix()->write_file_atomic(f, "new");
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.error().message.find("open " + f + ".tmp: "), std::string::npos) << s.error().message;
+  EXPECT_EQ(test::read_file(victim), "not yours");
+  EXPECT_EQ(test::read_file(f), "previous");
+}
+
+TEST(AtomicWrite, ErrorsNameTheStepTheFileAndErrno) {
+  TempDir dir;
+  const std::string f = dir.file("missing-dir/state.json");
+  Status s = Env::posix()->write_file_atomic(f, "x");
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.error().message, "open " + f + ".tmp: No such file or directory");
+}
+
+// ---- each step failing -----------------------------------------------------------------------
+
+TEST(AtomicWrite, ItsStepsAreThreeFaultPoints) {
+  TempDir dir;
+  FaultInjectionEnv env(Env::posix());
+  ASSERT_TRUE(env.write_file_atomic(dir.file("f"), "1").ok());
+  EXPECT_EQ(env.mutations(), 3u);  // the temporary's synced write, the rename, the dir sync
+}
+
+TEST(AtomicWrite, AFailureAtAnyStepLeavesTheOldOrTheNewFileWhole) {
+  for (uint64_t step = 1; step <= 3; ++step) {
+    SCOPED_TRACE("failing step " + std::to_string(step));
+    TempDir dir;
+    const std::string f = dir.file("state.json");
+    ASSERT_TRUE(Env::posix()->write_file_atomic(f, "old").ok());
+    FaultInjectionEnv env(Env::posix());
+    env.fail_after(step);
+    Status s = env.write_file_atomic(f, "new");
+    ASSERT_FALSE(s.ok());
+    EXPECT_NE(s.error().message.find("injected fault"), std::string::npos) << s.error().message;
+    // Before the rename the old file stands; a failed directory sync comes after it.
+    EXPECT_EQ(test::read_file(f), step < 3 ? "old" : "new");
+    // The "process" came back: the next write goes through, a leftover temporary or not.
+    env.fail_after(0);
+    ASSERT_TRUE(env.write_file_atomic(f, "again").ok());
+    EXPECT_EQ(test::read_file(f), "again");
+    EXPECT_FALSE(present(f + ".tmp"));
+  }
+}
+
+// ---- the node's state files -------------------------------------------------------------------
+
+TEST(StateFile, AFailedWriteKeepsThePreviousFile) {
+  for (uint64_t step = 1; step <= 2; ++step) {
+    SCOPED_TRACE("failing step " + std::to_string(step));
+    TempDir dir;
+    const std::string f = dir.file("leases.json");
+    ASSERT_TRUE(write_state_file(f, json::Value(json::Object{{"leases", 1}})).ok());
+    FaultInjectionEnv env(Env::posix());
+    env.fail_after(step);
+    Status s = write_state_file(f, json::Value(json::Object{{"leases", 2}}), &env);
+    ASSERT_FALSE(s.ok());
+    EXPECT_EQ(s.error().code, ErrorCode::kInternal);
+    EXPECT_NE(s.error().message.find(f + ".tmp"), std::string::npos) << s.error().message;
+    auto back = read_state_file(f);
+    ASSERT_TRUE(back.ok()) << back.error().message;
+    EXPECT_EQ(back->get("leases")->as_int(), 1);
+    EXPECT_EQ(mode_of(f), 0600u);
+  }
+}
+
+node::PendingItem held(const std::string& id) {
+  node::PendingItem p;
+  p.message_id = id;
+  p.action_type = "move";
+  p.message = json::Value(json::Object{{"type", "COMMAND"}, {"message_id", id}});
+  p.role = Role::kLeasee;
+  return p;
+}
+
+TEST(HitlPendingFile, AFailedSaveKeepsThePreviousList) {
+  for (uint64_t step = 1; step <= 2; ++step) {
+    SCOPED_TRACE("failing step " + std::to_string(step));
+    TempDir dir;
+    const std::string f = dir.file("hitl-pending.json");
+    ASSERT_TRUE(node::save_pending(f, {held("a")}).ok());
+    FaultInjectionEnv env(Env::posix());
+    env.fail_after(step);
+    Status s = node::save_pending(f, {held("a"), held("b")}, &env);
+    ASSERT_FALSE(s.ok());
+    EXPECT_EQ(s.error().code, ErrorCode::kInternal);
+    size_t skipped = 0;
+    auto back = node::load_pending(f, &skipped);
+    ASSERT_TRUE(back.ok()) << back.error().message;
+    ASSERT_EQ(back->size(), 1u);
+    EXPECT_EQ((*back)[0].message_id, "a");
+    EXPECT_EQ(skipped, 0u);
+    EXPECT_EQ(mode_of(f), 0600u);
+  }
+}
+
+// ---- the safety core's ESTOP latch -------------------------------------------------------------
+
+struct SafetyRig {
+  SafetyRig() {
+    node::SimRobotConfig sim;
+    sim.battery = false;
+    auto d = std::make_unique<node::SimRobot>(sim);
+    robot = d.get();
+    core = std::make_unique<node::SafetyCore>(std::move(d), node::SafetyConfig{}, clock);
+  }
+  ManualClock clock;
+  node::SimRobot* robot = nullptr;
+  std::unique_ptr<node::SafetyCore> core;
+};
+
+// A latch that cannot be written is still a latch: the driver is stopped and commands are
+// refused at once; the write is retried (every 200 ms) and the failure shows in status() —
+// persistence.durable false, persistence.error naming the file — until a write succeeds.
+TEST(SafetyLatchFile, AFailedWriteKeepsTheLatchReportsItAndIsRetried) {
+  TempDir dir;
+  FaultInjectionEnv env(Env::posix());
+  SafetyRig r;
+  ASSERT_TRUE(r.core->open(dir.path(), &env).ok());
+  env.fail_after(1);
+  const uint64_t stops = r.robot->stop_count();
+  auto e = r.core->estop("http", "operator pressed stop");
+  EXPECT_TRUE(e.newly_latched);
+  EXPECT_TRUE(r.core->estop_active());
+  EXPECT_GT(r.robot->stop_count(), stops);
+  auto d = r.core->dispatch(node::ActuatorCommand::make_drive(0.1, 0, 100));
+  ASSERT_FALSE(d.ok());
+  EXPECT_EQ(d.error().reason, "estop_active");
+
+  EXPECT_FALSE(r.core->wait_persisted(e.state_seq, 600));
+  auto st = r.core->status();
+  EXPECT_TRUE(st.persistence_enabled);
+  EXPECT_FALSE(st.persisted);
+  EXPECT_NE(st.persist_error.find("injected fault"), std::string::npos) << st.persist_error;
+  EXPECT_NE(st.persist_error.find("safety_state.json.tmp"), std::string::npos) << st.persist_error;
+  auto j = json::Value(st.to_json());
+  EXPECT_FALSE(j.get("persistence")->get("durable")->as_bool());
+  EXPECT_EQ(j.get("persistence")->get("error")->as_string(), st.persist_error);
+  EXPECT_FALSE(present(dir.file("safety_state.json")));
+
+  env.fail_after(0);  // the disk is back: the next retry persists the latch
+  ASSERT_TRUE(r.core->wait_persisted(e.state_seq, 5000));
+  st = r.core->status();
+  EXPECT_TRUE(st.persisted);
+  EXPECT_EQ(st.persist_error, "");
+  auto file = json::parse(test::read_file(dir.file("safety_state.json")));
+  ASSERT_TRUE(file.ok());
+  EXPECT_TRUE(file->get("estop_active")->as_bool());
+  EXPECT_EQ(mode_of(dir.file("safety_state.json")), 0600u);
+}
+
+// Clearing the latch when the disk fails: the robot may move again in this process, but the
+// file still says latched, so a restart comes up latched (fail safe).
+TEST(SafetyLatchFile, AClearThatCannotBeWrittenComesBackLatched) {
+  TempDir dir;
+  FaultInjectionEnv env(Env::posix());
+  {
+    SafetyRig r;
+    ASSERT_TRUE(r.core->open(dir.path(), &env).ok());
+    auto e = r.core->estop("cli", "rcan estop");
+    ASSERT_TRUE(r.core->wait_persisted(e.state_seq, 5000));
+    env.fail_after(1);
+    ASSERT_TRUE(r.core->resume(4, "owner").ok());
+    EXPECT_FALSE(r.core->estop_active());
+    EXPECT_TRUE(r.core->dispatch(node::ActuatorCommand::make_drive(0.1, 0, 100)).ok());
+    EXPECT_FALSE(r.core->wait_persisted(r.core->state_seq(), 300));
+    EXPECT_NE(r.core->status().persist_error.find("injected fault"), std::string::npos);
+  }  // the destructor's last attempt fails too
+  SafetyRig r;
+  ASSERT_TRUE(r.core->open(dir.path()).ok());
+  EXPECT_TRUE(r.core->estop_active());
+  EXPECT_EQ(r.core->status().estop_source, "cli");
+  EXPECT_EQ(r.core->status().startup_note, "ESTOP was latched before restart; still latched");
+}
+
+}  // namespace
+}  // namespace rcan
