@@ -142,9 +142,9 @@ class TimedActuation final : public node::Actuation {
     return inner_.prepare(msg, deadline, sid);
   }
   Result<json::Value> apply(const node::PreparedCommand& cmd) override { return inner_.apply(cmd); }
-  void session_started(const std::string& s, int64_t t) override { inner_.session_started(s, t); }
-  void session_heartbeat(const std::string& s) override { inner_.session_heartbeat(s); }
-  void session_ended(const std::string& s) override { inner_.session_ended(s); }
+  void arm_deadman(const std::string& s, int64_t t) override { inner_.arm_deadman(s, t); }
+  void feed_deadman(const std::string& s) override { inner_.feed_deadman(s); }
+  void disarm_deadman(const std::string& s) override { inner_.disarm_deadman(s); }
   json::Value status() const override { return inner_.status(); }
   json::Value telemetry() const override { return inner_.telemetry(); }
   std::atomic<double> latched_at{0};

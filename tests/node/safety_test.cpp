@@ -498,12 +498,12 @@ TEST(SafetyDeadman, FiresAfterTimeoutWithEventNotBefore) {
   Rig r;
   std::vector<SafetyEvent> events;
   r.core->set_event_callback([&](const SafetyEvent& e) { events.push_back(e); });
-  r.core->register_session("s1", 2000);
+  r.core->arm_deadman("s1", 2000);
   DispatchOptions o;
   o.session_id = "s1";
   ASSERT_TRUE(r.core->dispatch(ActuatorCommand::make_drive(0.3, 0, 5000), o).ok());
   r.run(1000);
-  ASSERT_TRUE(r.core->heartbeat("s1").ok());
+  ASSERT_TRUE(r.core->feed_deadman("s1").ok());
   r.run(2000);  // exactly the timeout since the last heartbeat: not yet
   EXPECT_TRUE(events.empty());
   EXPECT_FALSE(r.core->safe_stop_active());
@@ -531,7 +531,7 @@ TEST(SafetyDeadman, FiresAfterTimeoutWithEventNotBefore) {
   ASSERT_FALSE(d.ok());
   EXPECT_EQ(d.error().code, ErrorCode::kSafeStop);
   EXPECT_EQ(d.error().reason, "heartbeat_lost");
-  ASSERT_TRUE(r.core->heartbeat("s1").ok());
+  ASSERT_TRUE(r.core->feed_deadman("s1").ok());
   EXPECT_TRUE(r.core->safe_stop_active());  // reviving alone does not clear it
   ASSERT_TRUE(r.core->dispatch(ActuatorCommand::make_drive(0.3, 0, 500), o).ok());
   EXPECT_FALSE(r.core->safe_stop_active());  // a command from a live session does
@@ -541,8 +541,8 @@ TEST(SafetyDeadman, IdleSessionWithoutControlDoesNotStop) {
   Rig r;
   int n = 0;
   r.core->set_event_callback([&](const SafetyEvent&) { ++n; });
-  r.core->register_session("viewer", 1000);
-  r.core->register_session("driver", 60000);
+  r.core->arm_deadman("viewer", 1000);
+  r.core->arm_deadman("driver", 60000);
   DispatchOptions o;
   o.session_id = "driver";
   ASSERT_TRUE(r.core->dispatch(ActuatorCommand::make_drive(0.3, 0, 3000), o).ok());
@@ -556,8 +556,8 @@ TEST(SafetyDeadman, ControlHolderFiresEvenWhenStill) {
   Rig r;
   std::vector<SafetyEvent> events;
   r.core->set_event_callback([&](const SafetyEvent& e) { events.push_back(e); });
-  r.core->register_session("s", 0);  // default 2000 ms
-  r.core->set_session_control("s", true);
+  r.core->arm_deadman("s", 0);  // default 2000 ms
+  r.core->set_deadman_holds_control("s", true);
   r.run(2000);
   EXPECT_TRUE(events.empty());
   r.run(40);
@@ -570,15 +570,15 @@ TEST(SafetyDeadman, ControlHolderFiresEvenWhenStill) {
 
 TEST(SafetyDeadman, EndSessionStopsItsMotion) {
   Rig r;
-  r.core->register_session("s", 5000);
+  r.core->arm_deadman("s", 5000);
   DispatchOptions o;
   o.session_id = "s";
   ASSERT_TRUE(r.core->dispatch(ActuatorCommand::make_drive(0.5, 0, 5000), o).ok());
   r.run(500);
-  r.core->end_session("s");
+  r.core->disarm_deadman("s");
   r.run(1000);
   EXPECT_TRUE(r.core->robot_state().stopped);
-  EXPECT_FALSE(r.core->heartbeat("s").ok());
+  EXPECT_FALSE(r.core->feed_deadman("s").ok());
 }
 
 TEST(SafetyWatchdog, ExpiryLatchesEstop) {
@@ -624,13 +624,13 @@ TEST(SafetyThread, RestsWhileIdleOnlyUntilTheNextDeadline) {
   cfg.watchdog_timeout_ms = 700;
   Rig r(cfg);
   EXPECT_EQ(r.core->rest_for_ms(), 1000);  // at rest, nothing pending: the idle rate
-  r.core->register_session("s", 300);
+  r.core->arm_deadman("s", 300);
   EXPECT_EQ(r.core->rest_for_ms(), 301);  // wakes just after the heartbeat deadline
   r.run(100);
   EXPECT_EQ(r.core->rest_for_ms(), 201);
-  ASSERT_TRUE(r.core->heartbeat("s").ok());
+  ASSERT_TRUE(r.core->feed_deadman("s").ok());
   EXPECT_EQ(r.core->rest_for_ms(), 301);
-  r.core->end_session("s");
+  r.core->disarm_deadman("s");
   EXPECT_EQ(r.core->rest_for_ms(), 1000);
   ASSERT_TRUE(r.core->dispatch(ActuatorCommand::make_drive(0.3, 0, 200)).ok());
   EXPECT_EQ(r.core->rest_for_ms(), 0);  // moving: the full rate
@@ -675,8 +675,8 @@ TEST(SafetyThread, RestingLoopWakesForCommandsAndDeadlines) {
   EXPECT_GT(s.x, 0.2);  // 0.36 m nominal; loop jitter only shortens the drive
 
   // A session registered while resting: its deadman fires on time, not after the 5 s rest.
-  core.register_session("s", 200);
-  core.set_session_control("s", true);
+  core.arm_deadman("s", 200);
+  core.set_deadman_holds_control("s", true);
   for (int i = 0; i < 150 && lost.load() == 0; ++i)
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   EXPECT_EQ(lost.load(), 1);
@@ -707,7 +707,7 @@ TEST(SafetyThread, CommandBetweenWakeAndTickIsNotIntegratedOverTheRest) {
   core.start();
   std::this_thread::sleep_for(std::chrono::milliseconds(600));  // resting since the start
   clock.armed.store(true);
-  core.register_session("s", 60000);  // wakes the loop, whose tick() then stalls 60 ms
+  core.arm_deadman("s", 60000);  // wakes the loop, whose tick() then stalls 60 ms
   std::this_thread::sleep_for(std::chrono::milliseconds(15));
   ASSERT_TRUE(core.dispatch(ActuatorCommand::make_drive(1.0, 0, 600)).ok());
   std::this_thread::sleep_for(std::chrono::milliseconds(70));

@@ -71,9 +71,9 @@ class FakeActuation final : public Actuation {
     applied_.push_back(cmd.action_name);
     return json::Value(json::Object{{"applied", cmd.action_name}});
   }
-  void session_started(const std::string&, int64_t) override {}
-  void session_heartbeat(const std::string&) override {}
-  void session_ended(const std::string&) override {}
+  void arm_deadman(const std::string&, int64_t) override {}
+  void feed_deadman(const std::string&) override {}
+  void disarm_deadman(const std::string&) override {}
   json::Value status() const override { return json::Object{{"fake", true}}; }
   json::Value telemetry() const override { return json::Object{}; }
 

@@ -177,7 +177,7 @@ void Node::announce_control_changes() {
     if (!c.reason.empty()) e.reason(c.reason);
     json::Object ev{{"type", "EVENT"}, {"timestamp_ms", svc_.clock.wall_ms()}};
     if (c.event == ControlEvent::kExpire || c.event == ControlEvent::kRevoke) {
-      svc_.act.session_ended(s.id);
+      svc_.act.disarm_deadman(s.id);
       svc_.act.stop("control session " + s.id + " ended");
       e.entry().event = c.event == ControlEvent::kExpire ? "SESSION_EXPIRED" : "SESSION_REVOKED";
       e.detail("role", std::string(role_name(s.role)));
@@ -187,7 +187,7 @@ void Node::announce_control_changes() {
       ev.set("reason", c.reason);
       publish_to(s.principal_key, std::move(ev));
     } else if (c.event == ControlEvent::kPromote) {
-      svc_.act.session_started(s.id, svc_.settings.heartbeat_timeout_ms);
+      svc_.act.arm_deadman(s.id, svc_.settings.heartbeat_timeout_ms);
       e.entry().event = "CLAIM_PROMOTED";
       e.detail("role", std::string(role_name(s.role)));
       ev.set("type", "GRANTED");
@@ -332,7 +332,7 @@ void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json
   if (c->preempted) {
     // The displaced holder loses control now: its motion stops, its in-flight commands are
     // dropped at dispatch (their session is gone), and it is told on its stream.
-    svc_.act.session_ended(c->preempted->id);
+    svc_.act.disarm_deadman(c->preempted->id);
     svc_.act.stop("pre-empted by " + pr->display());
     publish_to(c->preempted->principal_key,
                json::Object{{"type", "EVENT"},
@@ -348,7 +348,7 @@ void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json
     pe.detail("role", std::string(role_name(c->preempted->role)));
     pe.write();
   }
-  svc_.act.session_started(c->session.id, svc_.settings.heartbeat_timeout_ms);
+  svc_.act.arm_deadman(c->session.id, svc_.settings.heartbeat_timeout_ms);
   bool renewed = c->outcome == ClaimOutcome::kRenewed;
   AuditRecord e = svc_.record(renewed ? "CLAIM_RENEWED" : "CLAIM", "ok");
   e.by(*pr).message(c->session.id);
@@ -393,7 +393,7 @@ void Node::renew_route(transport::HttpRequest& req, Respond& respond, const json
     announce_control_changes();
     return answer_error(respond, route, r.error());
   }
-  svc_.act.session_heartbeat(r->id);
+  svc_.act.feed_deadman(r->id);
   AuditRecord e = svc_.record("CLAIM_RENEWED", "ok");
   e.by(*pr).message(r->id);
   json::Object payload{
@@ -421,7 +421,7 @@ void Node::release_route(transport::HttpRequest& req, Respond& respond, const js
                               "session_id", "missing_field"));
   auto r = svc_.sessions.release(session_id, *pr, svc_.clock.mono_ms(), svc_.clock.wall_ms());
   if (!r.ok()) return answer_error(respond, route, r.error());
-  svc_.act.session_ended(session_id);
+  svc_.act.disarm_deadman(session_id);
   AuditRecord e = svc_.record("RELEASE", "ok");
   e.by(*pr).message(session_id);
   e.write();
@@ -461,7 +461,7 @@ void Node::handoff_route(transport::HttpRequest& req, Respond& respond, const js
   auto r =
       svc_.sessions.handoff(session_id, *pr, target, target_role, window, svc_.clock.mono_ms());
   if (!r.ok()) return answer_error(respond, route, r.error());
-  svc_.act.session_ended(session_id);
+  svc_.act.disarm_deadman(session_id);
   svc_.events.publish(json::Value(json::Object{{"type", "AVAILABLE"},
                                                {"released_session", session_id},
                                                {"reserved_for", target},

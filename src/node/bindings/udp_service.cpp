@@ -154,7 +154,7 @@ void UdpService::Impl::heartbeat(std::span<const uint8_t> bytes, const udp::Data
     by_session.erase(session_id);
     return;
   }
-  svc.act.session_heartbeat(session_id);
+  svc.act.feed_deadman(session_id);
   counters->hb_ok.fetch_add(1);
   if (first) {
     {

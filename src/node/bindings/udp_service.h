@@ -6,7 +6,7 @@
 // interval_ms}`. The key (32 random bytes) lives only in memory and dies with its session
 // (release, expiry, pre-emption, a new claim). A heartbeat is accepted only with a known key
 // id, a valid HMAC and a sequence number above every one accepted before for that key; it then
-// feeds the session's deadman in the safety core (Actuation::session_heartbeat) — the same
+// feeds the session's deadman in the safety core (Actuation::feed_deadman) — the same
 // deadman HTTP/WS/gRPC HEARTBEAT messages feed, so loss of heartbeats ends in the same
 // NETWORK_LOSS_SAFE_STOP. Forged, replayed, malformed and stale datagrams are dropped
 // silently and counted (metrics `rcan_udp_*`).

@@ -66,7 +66,7 @@ class AuthorizeStage final : public Stage {
       auto holder = svc_.sessions.controller(svc_.clock.mono_ms());
       if (holder && holder->principal_key == p.key()) {
         ctx->session_id = holder->id;
-        svc_.act.session_heartbeat(holder->id);
+        svc_.act.feed_deadman(holder->id);
       } else if (auto gone = svc_.sessions.expired_session_of(p.key())) {
         ctx->audit_detail.set("session_id", *gone);
         return refuse(svc_, ctx,

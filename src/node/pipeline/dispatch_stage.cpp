@@ -43,7 +43,7 @@ class DispatchStage final : public Stage {
       auto holder = svc_.sessions.controller(svc_.clock.mono_ms());
       bool fed = false;
       if (holder && holder->principal_key == ctx->principal.key()) {
-        svc_.act.session_heartbeat(holder->id);
+        svc_.act.feed_deadman(holder->id);
         fed = true;
       }
       auto e = accepted_entry(*ctx, "HEARTBEAT");

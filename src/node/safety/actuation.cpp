@@ -213,18 +213,18 @@ Result<json::Value> SafetyActuation::apply(const PreparedCommand& pc) {
   return json::Value(out->to_json());
 }
 
-void SafetyActuation::session_started(const std::string& session_id, int64_t timeout_ms) {
-  core_.register_session(session_id, timeout_ms);
-  core_.set_session_control(session_id, true);
+void SafetyActuation::arm_deadman(const std::string& session_id, int64_t timeout_ms) {
+  core_.arm_deadman(session_id, timeout_ms);
+  core_.set_deadman_holds_control(session_id, true);
 }
 
-void SafetyActuation::session_heartbeat(const std::string& session_id) {
-  (void)core_.heartbeat(session_id);
+void SafetyActuation::feed_deadman(const std::string& session_id) {
+  (void)core_.feed_deadman(session_id);
 }
 
-void SafetyActuation::session_ended(const std::string& session_id) {
-  core_.set_session_control(session_id, false);
-  core_.end_session(session_id);
+void SafetyActuation::disarm_deadman(const std::string& session_id) {
+  core_.set_deadman_holds_control(session_id, false);
+  core_.disarm_deadman(session_id);
 }
 
 json::Value SafetyActuation::status() const { return json::Value(core_.status().to_json()); }

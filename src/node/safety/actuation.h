@@ -47,9 +47,9 @@ class Actuation {
   // between prepare() and apply(); MESSAGE_STALE past its deadline.
   virtual Result<json::Value> apply(const PreparedCommand& cmd) = 0;
   // Deadman bookkeeping for control sessions.
-  virtual void session_started(const std::string& session_id, int64_t timeout_ms) = 0;
-  virtual void session_heartbeat(const std::string& session_id) = 0;
-  virtual void session_ended(const std::string& session_id) = 0;
+  virtual void arm_deadman(const std::string& session_id, int64_t timeout_ms) = 0;
+  virtual void feed_deadman(const std::string& session_id) = 0;
+  virtual void disarm_deadman(const std::string& session_id) = 0;
   // Snapshots for status and telemetry.
   virtual json::Value status() const = 0;
   virtual json::Value telemetry() const = 0;

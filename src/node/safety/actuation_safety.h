@@ -24,9 +24,9 @@ class SafetyActuation final : public Actuation {
   Result<PreparedCommand> prepare(const Message& msg, int64_t deadline_mono_ms,
                                   const std::string& session_id) override;
   Result<json::Value> apply(const PreparedCommand& cmd) override;
-  void session_started(const std::string& session_id, int64_t timeout_ms) override;
-  void session_heartbeat(const std::string& session_id) override;
-  void session_ended(const std::string& session_id) override;
+  void arm_deadman(const std::string& session_id, int64_t timeout_ms) override;
+  void feed_deadman(const std::string& session_id) override;
+  void disarm_deadman(const std::string& session_id) override;
   json::Value status() const override;
   json::Value telemetry() const override;
 

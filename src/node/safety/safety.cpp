@@ -17,6 +17,17 @@
 
 #include "base/clock.h"
 
+// How the guarantees of safety.h are kept:
+//   * estop() sets an atomic flag and calls Driver::stop() first (no lock, no I/O on that
+//     path), then fences out a dispatch() that was already inside the driver (a lock-free wait
+//     for that one apply, then a second stop()), then hands the new latch state to the
+//     persister thread, which writes it through audit::Env::write_file_atomic (temp file,
+//     fsync, rename, fsync of the directory) and retries every 200 ms until it is durable.
+//   * The deadman table (deadmen_, by control session id) is scanned by tick(); a lost
+//     deadman is revived by feed_deadman(), but only the next accepted command clears the
+//     safe-stop it caused.
+//   * The ESTOP latency statistics use the steady clock (real elapsed time), not Clock.
+
 namespace rcan::node {
 namespace {
 
@@ -324,7 +335,7 @@ Status SafetyCore::resume(int principal_role_level, std::string_view source) {
     latched_.store(false, std::memory_order_release);
   }
   {
-    std::lock_guard<std::mutex> lock(sessions_mu_);
+    std::lock_guard<std::mutex> lock(deadman_mu_);
     watchdog_last_feed_mono_ = 0;  // re-armed by the next feed
   }
   persist_cv_.notify_all();
@@ -413,10 +424,10 @@ void SafetyCore::persist_loop() {
 
 // ---- sessions / watchdog --------------------------------------------------------------------
 
-void SafetyCore::register_session(const std::string& session_id, int64_t timeout_ms) {
+void SafetyCore::arm_deadman(const std::string& session_id, int64_t timeout_ms) {
   {
-    std::lock_guard<std::mutex> lock(sessions_mu_);
-    Session& s = sessions_[session_id];
+    std::lock_guard<std::mutex> lock(deadman_mu_);
+    Deadman& s = deadmen_[session_id];
     s.timeout_ms = timeout_ms > 0 ? timeout_ms : cfg_.default_heartbeat_ms;
     s.last_heartbeat_mono = clock_.mono_ms();
     s.lost = false;
@@ -424,12 +435,12 @@ void SafetyCore::register_session(const std::string& session_id, int64_t timeout
   wake_ticker();  // a new deadline, possibly sooner than the loop's idle sleep
 }
 
-Status SafetyCore::heartbeat(const std::string& session_id) {
+Status SafetyCore::feed_deadman(const std::string& session_id) {
   bool revived = false;
   {
-    std::lock_guard<std::mutex> lock(sessions_mu_);
-    auto it = sessions_.find(session_id);
-    if (it == sessions_.end())
+    std::lock_guard<std::mutex> lock(deadman_mu_);
+    auto it = deadmen_.find(session_id);
+    if (it == deadmen_.end())
       return Error(ErrorCode::kNotFound, "unknown session", "session_id", "unknown_session");
     it->second.last_heartbeat_mono = clock_.mono_ms();
     revived = it->second.lost;
@@ -439,14 +450,14 @@ Status SafetyCore::heartbeat(const std::string& session_id) {
   return Status::Ok();
 }
 
-void SafetyCore::end_session(const std::string& session_id) {
+void SafetyCore::disarm_deadman(const std::string& session_id) {
   bool held = false;
   {
-    std::lock_guard<std::mutex> lock(sessions_mu_);
-    auto it = sessions_.find(session_id);
-    if (it == sessions_.end()) return;
+    std::lock_guard<std::mutex> lock(deadman_mu_);
+    auto it = deadmen_.find(session_id);
+    if (it == deadmen_.end()) return;
     held = it->second.holds_control;
-    sessions_.erase(it);
+    deadmen_.erase(it);
   }
   std::lock_guard<std::mutex> lock(apply_mu_);
   if (held || (!session_id.empty() && motion_owner_ == session_id)) {
@@ -458,16 +469,16 @@ void SafetyCore::end_session(const std::string& session_id) {
   }
 }
 
-void SafetyCore::set_session_control(const std::string& session_id, bool holds_control) {
-  std::lock_guard<std::mutex> lock(sessions_mu_);
-  auto it = sessions_.find(session_id);
-  if (it != sessions_.end()) it->second.holds_control = holds_control;
+void SafetyCore::set_deadman_holds_control(const std::string& session_id, bool holds_control) {
+  std::lock_guard<std::mutex> lock(deadman_mu_);
+  auto it = deadmen_.find(session_id);
+  if (it != deadmen_.end()) it->second.holds_control = holds_control;
 }
 
 void SafetyCore::feed_watchdog() {
   bool armed = false;
   {
-    std::lock_guard<std::mutex> lock(sessions_mu_);
+    std::lock_guard<std::mutex> lock(deadman_mu_);
     armed = watchdog_last_feed_mono_ == 0;
     watchdog_last_feed_mono_ = clock_.mono_ms();
     if (watchdog_last_feed_mono_ == 0) watchdog_last_feed_mono_ = 1;
@@ -548,8 +559,8 @@ void SafetyCore::tick() {
   bool watchdog_fired = false;
   int64_t watchdog_elapsed = 0;
   {
-    std::lock_guard<std::mutex> lock(sessions_mu_);
-    for (auto& [id, s] : sessions_) {
+    std::lock_guard<std::mutex> lock(deadman_mu_);
+    for (auto& [id, s] : deadmen_) {
       const int64_t elapsed = now - s.last_heartbeat_mono;
       if (s.lost || elapsed <= s.timeout_ms) continue;
       s.lost = true;
@@ -608,9 +619,9 @@ int64_t SafetyCore::rest_for_ms() const {
     if (drive_deadline_mono_ != 0 || !driver_->at_rest()) return 0;
   }
   {
-    std::lock_guard<std::mutex> lock(sessions_mu_);
+    std::lock_guard<std::mutex> lock(deadman_mu_);
     // tick() acts once a deadline has passed (elapsed > timeout): wake 1 ms after it.
-    for (const auto& [id, s] : sessions_)
+    for (const auto& [id, s] : deadmen_)
       if (!s.lost) until = std::min(until, s.last_heartbeat_mono + s.timeout_ms + 1);
     if (cfg_.watchdog_timeout_ms > 0 && watchdog_last_feed_mono_ != 0)
       until = std::min(until, watchdog_last_feed_mono_ + cfg_.watchdog_timeout_ms + 1);
@@ -737,8 +748,8 @@ SafetyStatus SafetyCore::status() const {
     s.startup_note = startup_note_;
   }
   {
-    std::lock_guard<std::mutex> lock(sessions_mu_);
-    s.sessions = sessions_.size();
+    std::lock_guard<std::mutex> lock(deadman_mu_);
+    s.sessions = deadmen_.size();
   }
   s.running = running_.load();
   return s;

@@ -1,44 +1,37 @@
-// SafetyCore — below the pipeline, owning the actuators (docs/ARCHITECTURE.md, seed §4.3,
-// spec-digest §5.6). Nothing reaches a Driver except through this class.
+// SafetyCore: the one owner of the actuators. Nothing reaches a Driver except through it
+// (docs/ARCHITECTURE.md, seed §4.3). Example:
 //
-// What it guarantees:
-//   * ESTOP is a latch. estop() sets an atomic flag and calls Driver::stop() before anything
-//     else (no lock, no I/O on that path), then fences out any dispatch() that was already
-//     inside the driver (a lock-free wait for that one apply + a second stop()), then hands the
-//     new latch state to a persister thread that writes it durably (temp file + fsync +
-//     rename + fsync of the directory). A restarted core on the same state dir comes up latched.
-//     After estop() returns, no dispatch() reaches the driver until resume().
-//   * resume() clears the latch only for role level >= 3 (LEASEE); below that it returns
-//     INSUFFICIENT_PRIVILEGES. Clearing does not move anything: the robot stays stopped until
-//     the next command. The cleared state is persisted the same way.
-//   * dispatch() refuses while latched (COMMAND_REJECTED / estop_active → HTTP 423), refuses a
-//     command past its deadline (MESSAGE_STALE), and enforces the configured limits (speeds,
-//     joint ranges, joint speed, drive duration, workspace rectangle) by clamping or rejecting
-//     (COMMAND_REJECTED / limit_exceeded, message naming the limit). Limits are fixed at
-//     construction: min(config, the driver's hardware envelope). No method raises them.
-//   * Every drive has a duration (0 → max_drive_duration_ms); the base stops when it elapses
-//     (the driver does it, and tick() enforces it again on the monotonic clock).
-//   * Deadman: sessions registered with a heartbeat timeout. tick() detects a session whose
-//     last heartbeat is older than its timeout; if that session holds control (set by the
-//     node on claim) or owns the motion in progress, the core safe-stops (Driver::stop(), no
-//     latch) and emits {type:"NETWORK_LOSS_SAFE_STOP", session_id, elapsed_ms}.
+//   SafetyCore core(std::move(driver), config, Clock::system());
+//   core.open(state_dir);                  // comes up latched if it was latched
+//   core.start();                          // the control loop
+//   auto r = core.dispatch(cmd, {.session_id = id});
+//   core.estop("operator", "button");     // from any thread, at any time
 //
-// Safe-stop rule (exact): safe-stop is entered by a deadman expiry, a workspace guard trip or
-// a drive-TTL overrun detected by tick(). It is NOT a latch. It clears when dispatch() accepts
-// a motion command whose session_id is empty (a session-less request, bounded by its own
-// duration) or names a registered session whose heartbeat is live. A command naming a session
-// whose heartbeat was lost is refused with SAFE_STOP / reason "heartbeat_lost" until that
-// session sends a heartbeat again (heartbeat() revives it; reviving alone does not clear the
-// safe-stop, only the next accepted command does). A command naming an unregistered session
-// is treated as session-less.
+// Guarantees:
+//   * ESTOP is a latch. estop() stops the driver before it returns and before anything else;
+//     from then on no dispatch() reaches the driver until resume(). The latch survives a
+//     restart (the state file in the state directory; written durably, retried until it is).
+//   * resume() clears the latch for LEASEE and above only (INSUFFICIENT_PRIVILEGES below); it
+//     moves nothing: the robot stays stopped until the next command.
+//   * dispatch() refuses while latched (COMMAND_REJECTED / estop_active, HTTP 423), past the
+//     command's deadline (MESSAGE_STALE), and outside the limits (speeds, joint ranges and
+//     speeds, drive duration, workspace), which it clamps or rejects by policy
+//     (COMMAND_REJECTED / limit_exceeded). Limits are min(config, the driver's envelope),
+//     fixed at construction; nothing raises them.
+//   * Every drive ends: its duration (0 → max_drive_duration_ms) is enforced by the driver and
+//     again by the control loop on the monotonic clock.
+//   * Deadman: a control session armed with a heartbeat timeout (arm_deadman) that goes
+//     silent while it holds control or owns the motion in progress safe-stops the robot and
+//     emits NETWORK_LOSS_SAFE_STOP {session_id, elapsed_ms}.
+//   * Safe-stop (deadman expiry, workspace guard trip, drive-TTL overrun) is not a latch: the
+//     next accepted motion command clears it. A command of a control session whose heartbeat
+//     was lost is refused (SAFE_STOP / heartbeat_lost) until that session feeds its deadman
+//     again; a command of no (or an unarmed) session is bounded by its own duration.
 //
-// Time: every deadline, TTL and heartbeat uses Clock::mono_ms(); ts/since fields use wall_ms.
-// The ESTOP latency statistics use std::chrono::steady_clock (real elapsed time).
-//
-// Threads: all public methods are thread-safe. start() runs tick() on the core's own thread
-// every tick_period_ms; stop() ends that thread and stops the driver. Tests may instead call
-// tick() by hand with a ManualClock. The event callback runs on the thread that calls tick()
-// and must not block (hand the event to an executor).
+// Time: deadlines, TTLs and heartbeats use Clock::mono_ms(); `since`/`ts` fields wall_ms.
+// Threads: every public method is thread-safe. start() runs the control loop on the core's own
+// thread; tests may call tick() by hand with a ManualClock instead. The event callback runs on
+// the thread that calls tick() and must not block.
 #pragma once
 
 #include <array>
@@ -100,7 +93,7 @@ struct SafetyConfig {
   // and always on time for the next heartbeat or watchdog deadline. An idle robot then costs
   // one wake-up a second instead of fifty. 0 or ≤ tick_period_ms: always the full rate.
   int64_t idle_tick_ms = 1000;
-  int64_t default_heartbeat_ms = 2000;  // register_session(id, 0) → this (latency_budget × 2)
+  int64_t default_heartbeat_ms = 2000;  // arm_deadman(id, 0) → this (latency_budget × 2)
   int64_t watchdog_timeout_ms = 0;      // brain watchdog; 0 = disabled
   // A drive still commanded this long after its deadline is stopped by tick() (safe-stop).
   int64_t drive_ttl_grace_ms = 100;
@@ -230,14 +223,14 @@ class SafetyCore {
 
   // Deadman. timeout_ms <= 0 → SafetyConfig::default_heartbeat_ms. Registering an existing
   // session refreshes it.
-  void register_session(const std::string& session_id, int64_t timeout_ms = 0);
+  void arm_deadman(const std::string& session_id, int64_t timeout_ms = 0);
   // Unknown session → NOT_FOUND. Revives a session whose heartbeat was lost.
-  Status heartbeat(const std::string& session_id);
+  Status feed_deadman(const std::string& session_id);
   // Removes the session; if it owned motion in progress or held control, the driver is
   // stopped (an orderly end, no event).
-  void end_session(const std::string& session_id);
+  void disarm_deadman(const std::string& session_id);
   // The node marks the session that holds control (claim/release).
-  void set_session_control(const std::string& session_id, bool holds_control);
+  void set_deadman_holds_control(const std::string& session_id, bool holds_control);
 
   // Brain watchdog (optional; SafetyConfig::watchdog_timeout_ms > 0). Armed by the first feed;
   // expiry latches ESTOP (source "watchdog") and emits WATCHDOG_TIMEOUT.
@@ -250,7 +243,7 @@ class SafetyCore {
   LatencyStats estop_latency() const;
 
  private:
-  struct Session {
+  struct Deadman {  // one per control session with a heartbeat timeout
     int64_t timeout_ms = 0;
     int64_t last_heartbeat_mono = 0;
     bool holds_control = false;
@@ -315,9 +308,9 @@ class SafetyCore {
   std::condition_variable durable_cv_;  // waiters in wait_persisted (meta_mu_)
   std::thread persister_;
 
-  mutable std::mutex sessions_mu_;
-  std::unordered_map<std::string, Session> sessions_;
-  int64_t watchdog_last_feed_mono_ = 0;  // guarded by sessions_mu_; 0 = not armed
+  mutable std::mutex deadman_mu_;
+  std::unordered_map<std::string, Deadman> deadmen_;  // by control session id
+  int64_t watchdog_last_feed_mono_ = 0;               // guarded by deadman_mu_; 0 = not armed
 
   mutable std::mutex event_mu_;
   EventFn on_event_;

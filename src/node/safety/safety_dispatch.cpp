@@ -194,9 +194,9 @@ Result<DispatchOutcome> SafetyCore::precheck(const ActuatorCommand& cmd,
         "command expired " + std::to_string(now - opts.deadline_mono_ms) + " ms before dispatch",
         "", "ttl_expired");
   if (!opts.session_id.empty()) {
-    std::lock_guard<std::mutex> lock(sessions_mu_);
-    auto it = sessions_.find(opts.session_id);
-    if (it != sessions_.end() &&
+    std::lock_guard<std::mutex> lock(deadman_mu_);
+    auto it = deadmen_.find(opts.session_id);
+    if (it != deadmen_.end() &&
         (it->second.lost || now - it->second.last_heartbeat_mono > it->second.timeout_ms)) {
       return Error(ErrorCode::kSafeStop,
                    "session heartbeat lost; send a heartbeat before commanding", "",
