@@ -10,22 +10,6 @@
 namespace rcan::node {
 namespace {
 
-void answer(NodeServices& svc, const transport::HttpHandler::Respond& respond,
-            const std::string& route, int status, const json::Value& body,
-            std::vector<std::pair<std::string, std::string>> headers = {}) {
-  svc.metrics.count_request(route, status);
-  transport::HttpResponse r;
-  r.status = status;
-  r.body = json::dump(body);
-  r.headers = std::move(headers);
-  respond(std::move(r));
-}
-
-void answer_error(NodeServices& svc, const transport::HttpHandler::Respond& respond,
-                  const std::string& route, const Error& e) {
-  answer(svc, respond, route, http_status(e.code, e.reason), svc.error(e));
-}
-
 Result<Principal> bearer(NodeServices& svc, const transport::HttpRequest& req) {
   return svc.authenticate_header(req.header("authorization"));
 }
@@ -44,7 +28,7 @@ void authorize_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& 
   auto body = json::parse(req.body, {.max_depth = 16, .max_bytes = 64 * 1024});
   if (!body.ok()) return answer_error(svc, respond, route, body.error());
   ai.authorize(*p, *body, "http", route, [&svc, respond, route](int status, json::Value out) {
-    answer(svc, respond, route, status, out);
+    answer_json(svc, respond, route, status, out);
   });
 }
 
@@ -63,7 +47,7 @@ void pending_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& re
         mine.push_back(i);
     list = json::Object{{"pending", mine}, {"count", static_cast<int64_t>(mine.size())}};
   }
-  answer(svc, respond, route, 200, list);
+  answer_json(svc, respond, route, 200, list);
 }
 
 void thought_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req,
@@ -79,15 +63,15 @@ void thought_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& re
         svc, respond, route,
         Error(ErrorCode::kNotFound, "no thought with id " + id.substr(0, 128), "thought_id"));
   bool reasoning = p->has_scope("config") && role_level(p->role) >= role_level(Role::kOwner);
-  answer(svc, respond, route, 200, t->to_json(reasoning));
+  answer_json(svc, respond, route, 200, t->to_json(reasoning));
 }
 
 void verify_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req,
                   const transport::HttpHandler::Respond& respond) {
   const std::string route = "/api/v1/watermark/verify";
   auto seed_error = [&svc, respond, route](int status, const char* msg) {
-    answer(svc, respond, route, status,
-           json::Object{{"error", msg}, {"code", "HTTP_" + std::to_string(status)}});
+    answer_json(svc, respond, route, status,
+                json::Object{{"error", msg}, {"code", "HTTP_" + std::to_string(status)}});
   };
   std::string token(req.query_value("token"));
   if (!req.has_query("token") || !watermark::valid_format(token))
@@ -109,11 +93,11 @@ void verify_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req
       }
     }
     if (!entry) return seed_error(404, "Watermark token not found in audit log");
-    answer(svc, respond, route, 200,
-           json::Object{{"valid", true},
-                        {"rrn", svc.settings.rrn},
-                        {"watermark_token", token},
-                        {"audit_entry", *entry}});
+    answer_json(svc, respond, route, 200,
+                json::Object{{"valid", true},
+                             {"rrn", svc.settings.rrn},
+                             {"watermark_token", token},
+                             {"audit_entry", *entry}});
   });
   if (!posted) answer_error(svc, respond, route, Error(ErrorCode::kSafeStop, "busy; try again"));
 }

@@ -395,16 +395,11 @@ std::unique_ptr<transport::StreamReceiver> Node::open(const transport::HttpReque
 
 void Node::answer_json(Respond& respond, const std::string& route, int status, json::Value body,
                        std::vector<std::pair<std::string, std::string>> headers) {
-  svc_.metrics.count_request(route, status);
-  transport::HttpResponse r;
-  r.status = status;
-  r.body = json::dump(body);
-  r.headers = std::move(headers);
-  respond(std::move(r));
+  node::answer_json(svc_, respond, route, status, body, std::move(headers));
 }
 
 void Node::answer_error(Respond& respond, const std::string& route, const Error& err) {
-  answer_json(respond, route, http_status(err.code, err.reason), svc_.error(err));
+  node::answer_error(svc_, respond, route, err);
 }
 
 Result<Principal> Node::bearer_principal(const transport::HttpRequest& req) const {

@@ -57,13 +57,20 @@ transport::HttpResponse RouteTable::method_not_allowed(const json::Value& error_
   return r;
 }
 
-void RouteTable::answer(transport::HttpHandler::Respond& respond, const std::string& label,
-                        int status, const json::Value& body) const {
-  svc_.metrics.count_request(label, status);
+void answer_json(NodeServices& svc, const transport::HttpHandler::Respond& respond,
+                 const std::string& route, int status, const json::Value& body,
+                 std::vector<std::pair<std::string, std::string>> headers) {
+  svc.metrics.count_request(route, status);
   transport::HttpResponse r;
   r.status = status;
   r.body = json::dump(body);
+  r.headers = std::move(headers);
   respond(std::move(r));
+}
+
+void answer_error(NodeServices& svc, const transport::HttpHandler::Respond& respond,
+                  const std::string& route, const Error& err) {
+  answer_json(svc, respond, route, http_status(err.code, err.reason), svc.error(err));
 }
 
 void RouteTable::dispatch(transport::HttpRequest& req,
@@ -84,8 +91,8 @@ void RouteTable::dispatch(transport::HttpRequest& req,
         allow += (allow.empty() ? "" : ", ") + r.method;
     }
     if (!first)
-      return answer(
-          respond, "other", 404,
+      return answer_json(
+          svc_, respond, "other", 404,
           svc_.error(Error(ErrorCode::kNotFound, "no route for " + req.path.substr(0, 128))));
     svc_.metrics.count_request(first->pattern, 405);
     return respond(
@@ -107,11 +114,12 @@ void RouteTable::dispatch(transport::HttpRequest& req,
       auto v = json::parse(req.body, po);
       if (!v.ok()) {
         const Error& e = v.error();
-        return answer(respond, row->pattern, http_status(e.code, e.reason), svc_.error(e));
+        return answer_error(svc_, respond, row->pattern, e);
       }
       if (row->body == Body::kObjectOrEmpty && !v->is_object())
-        return answer(respond, row->pattern, 400,
-                      svc_.error(Error(ErrorCode::kSchemaValidationFailed, "Invalid payload")));
+        return answer_json(
+            svc_, respond, row->pattern, 400,
+            svc_.error(Error(ErrorCode::kSchemaValidationFailed, "Invalid payload")));
       call.body = std::move(v).value();
     }
   }

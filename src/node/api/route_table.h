@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "node/services/node_services.h"
+#include "rcan/errors.h"
 #include "rcan/json.h"
 #include "transport/http_api.h"
 
@@ -48,6 +49,15 @@ struct BodyLimits {
   int max_depth = 32;
 };
 
+// Answers `body` (JSON) with `status` and `headers`, counted under `route` in /metrics: how
+// every route answers.
+void answer_json(NodeServices& svc, const transport::HttpHandler::Respond& respond,
+                 const std::string& route, int status, const json::Value& body,
+                 std::vector<std::pair<std::string, std::string>> headers = {});
+// The PROFILE.md error body of `err` with its HTTP status.
+void answer_error(NodeServices& svc, const transport::HttpHandler::Respond& respond,
+                  const std::string& route, const Error& err);
+
 class RouteTable {
  public:
   explicit RouteTable(NodeServices& services) : svc_(services) {}
@@ -74,8 +84,6 @@ class RouteTable {
     BodyLimits limits;
     RouteHandler handler;
   };
-  void answer(transport::HttpHandler::Respond& respond, const std::string& label, int status,
-              const json::Value& body) const;
 
   NodeServices& svc_;
   std::vector<Row> rows_;
