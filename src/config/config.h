@@ -43,7 +43,8 @@ inline constexpr size_t kMaxConfigNodes = 100000;   // YAML nodes walked (aliase
 inline constexpr size_t kMaxFreeDepth = 16;         // nesting inside free-form blocks
 
 // ---------------------------------------------------------------------------------------
-// Blocks
+// Blocks. A member's initializer is its key's default (a default that is computed, e.g. from
+// another key, is computed by the key's row in blocks/*.cpp, which read the keys).
 
 struct TlsConfig {
   bool enabled = false;
@@ -364,7 +365,7 @@ struct NodeConfig {
   DriverConfig driver;
   OfflineConfig offline;
   QosConfig qos;
-  MqttConfig mqtt;    // `mqtt` (node/fleet_config.h)
+  MqttConfig mqtt;    // `mqtt` (config/fleet_config.h)
   FleetConfig fleet;  // `fleet`
   SwarmConfig swarm;  // `swarm` seed §5.2 keys
   ControlConfig control;

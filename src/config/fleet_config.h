@@ -1,5 +1,5 @@
 // The `mqtt`, `fleet` and `swarm` configuration blocks (docs/CONFIG.md, docs/FLEET.md).
-// Parsed and validated by build_blocks.cpp; interpreted by mqtt_node.cpp, fleet.cpp and swarm.cpp.
+// Read by blocks/fleet.cpp; interpreted by mqtt_node.cpp, fleet.cpp and swarm.cpp.
 #pragma once
 
 #include <cstdint>
