@@ -121,6 +121,7 @@ void expect_safety_defaults(const NodeConfig& c) {
   EXPECT_EQ(s.joint_limits[5].name, "joint6");
   EXPECT_DOUBLE_EQ(s.joint_limits[3].min_rad, -3.14);
   EXPECT_DOUBLE_EQ(s.joint_limits[3].max_rad, 3.14);
+  EXPECT_TRUE(s.workspace.enabled);
   EXPECT_DOUBLE_EQ(s.workspace.x_min, -5);
   EXPECT_DOUBLE_EQ(s.workspace.x_max, 5);
   EXPECT_DOUBLE_EQ(s.workspace.y_min, -5);
@@ -132,6 +133,7 @@ void expect_safety_defaults(const NodeConfig& c) {
   EXPECT_FALSE(s.estop_on_startup);
   EXPECT_FALSE(s.estop_clear_requires_presence);
   EXPECT_EQ(s.heartbeat_timeout_ms, 2000u);
+  EXPECT_EQ(s.heartbeat_timeout_ms, kDefaultHeartbeatTimeoutMs);
   EXPECT_EQ(s.command_ttl_default_ms, 0u);
   EXPECT_TRUE(s.watchdog.enabled);
   EXPECT_EQ(s.watchdog.timeout_s, 10u);
@@ -389,7 +391,7 @@ TEST(ConfigBlockKeys, ComputedDefaultsAndAliases) {
   EXPECT_EQ(r->safety.heartbeat_timeout_ms, 100u);
   r = parse("agent: {latency_budget_ms: 0}\n");
   ASSERT_TRUE(r.ok()) << r.error().message;
-  EXPECT_EQ(r->safety.heartbeat_timeout_ms, 2000u);
+  EXPECT_EQ(r->safety.heartbeat_timeout_ms, kDefaultHeartbeatTimeoutMs);
   r = parse("agent: {latency_budget_ms: 400}\nsafety: {heartbeat_timeout_ms: 700}\n");
   ASSERT_TRUE(r.ok()) << r.error().message;
   EXPECT_EQ(r->safety.heartbeat_timeout_ms, 700u);
