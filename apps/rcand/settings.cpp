@@ -30,16 +30,13 @@ node::SafetyConfig safety_config(const config::NodeConfig& cfg, const node::SimR
     sc.limits.max_angular_radps *= *cfg.safety.max_speed_override;
   }
   sc.limits.max_joint_speed_radps = sim.max_joint_speed_radps;
+  // The configured joints, in order, onto the arm's fixed joint slots.
   for (size_t i = 0; i < cfg.safety.joint_limits.size() && i < node::kArmJoints; ++i) {
     sc.limits.joint_min_rad[i] = cfg.safety.joint_limits[i].min_rad;
     sc.limits.joint_max_rad[i] = cfg.safety.joint_limits[i].max_rad;
   }
-  sc.limits.workspace.min_x = cfg.safety.workspace.x_min;
-  sc.limits.workspace.max_x = cfg.safety.workspace.x_max;
-  sc.limits.workspace.min_y = cfg.safety.workspace.y_min;
-  sc.limits.workspace.max_y = cfg.safety.workspace.y_max;
-  sc.policy = cfg.safety.speed_policy == config::LimitPolicy::kReject ? node::LimitPolicy::kReject
-                                                                      : node::LimitPolicy::kClamp;
+  sc.limits.workspace = cfg.safety.workspace;
+  sc.policy = cfg.safety.speed_policy;
   sc.estop_on_startup = cfg.safety.estop_on_startup;
   sc.default_heartbeat_ms = cfg.safety.heartbeat_timeout_ms;
   sc.tick_period_ms = cfg.driver.sim.tick_hz ? 1000 / cfg.driver.sim.tick_hz : 20;

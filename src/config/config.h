@@ -29,6 +29,7 @@
 #include <vector>
 
 #include "config/fleet_config.h"
+#include "config/safety_types.h"
 #include "rcan/audit/audit_log.h"
 #include "rcan/crypto/jwt.h"
 #include "rcan/json.h"
@@ -43,7 +44,8 @@ inline constexpr size_t kMaxConfigNodes = 100000;   // YAML nodes walked (aliase
 inline constexpr size_t kMaxFreeDepth = 16;         // nesting inside free-form blocks
 
 // ---------------------------------------------------------------------------------------
-// Blocks
+// Blocks. A member's initializer is its key's default (a default that is computed, e.g. from
+// another key, is computed by the key's row in blocks/*.cpp, which read the keys).
 
 struct TlsConfig {
   bool enabled = false;
@@ -155,13 +157,13 @@ struct RateSpec {
   double per_minute() const { return window_s == 0 ? 0.0 : count * 60.0 / window_s; }
 };
 
-struct GuestLimitsConfig {  // seed §6.3
-  RateSpec chat_rate{10, 60};
-  RateSpec query_rate{30, 60};
-  uint32_t session_duration_s = 15 * 60;
-  uint32_t concurrent_sessions = 3;
-  std::vector<std::string> capabilities{"status_read", "chat_text", "basic_info"};
-  std::vector<std::string> blocked{"control", "camera_access", "location_history"};
+struct GuestLimitsConfig {  // seed §6.3; the defaults are rcan::GuestLimits's (roles.h)
+  RateSpec chat_rate{GuestLimits{}.chat_per_minute, 60};
+  RateSpec query_rate{GuestLimits{}.query_per_minute, 60};
+  uint32_t session_duration_s = GuestLimits{}.session_seconds;
+  uint32_t concurrent_sessions = GuestLimits{}.concurrent_sessions;
+  std::vector<std::string> capabilities = GuestLimits{}.capabilities;
+  std::vector<std::string> blocked = GuestLimits{}.blocked;
   // The roles.h shape. Rates are converted to whole events per minute, rounded down, at
   // least 1 when the configured count is non-zero.
   GuestLimits to_guest_limits() const;
@@ -181,19 +183,6 @@ struct RbacConfig {
       policy;  // rbac.grants.{user_arm,user_record,leasee_training,leasee_diagnostics,owner_safety_config}
   RateLimits rate_limits;
   GuestLimitsConfig guest_limits;  // rbac.guest_limits | top-level guest_limits (seed shape)
-};
-
-enum class LimitPolicy { kClamp, kReject };
-
-struct JointLimit {
-  std::string name;  // may be empty
-  double min_rad = 0;
-  double max_rad = 0;
-};
-
-struct Workspace {
-  double x_min = -5, x_max = 5, y_min = -5, y_max = 5;  // metres
-  std::optional<double> z_min, z_max;
 };
 
 struct WatchdogConfig {  // top-level `watchdog` (profile schema)
@@ -217,8 +206,9 @@ struct SafetyConfig {
   LimitPolicy workspace_policy = LimitPolicy::kReject;
   bool estop_on_startup = false;
   bool estop_clear_requires_presence = false;
-  uint32_t heartbeat_timeout_ms = 2000;  // default: agent.latency_budget_ms × 2 when set
-  uint32_t command_ttl_default_ms = 0;   // 0: only the message's own ttl_ms applies
+  // Default: agent.latency_budget_ms × 2 when that is set, else kDefaultHeartbeatTimeoutMs.
+  uint32_t heartbeat_timeout_ms = kDefaultHeartbeatTimeoutMs;
+  uint32_t command_ttl_default_ms = 0;  // 0: only the message's own ttl_ms applies
   WatchdogConfig watchdog;
   // Vendor keys from the profiles (kept; the simulated robot does not use them).
   std::optional<double> max_walk_speed_mps;
@@ -364,7 +354,7 @@ struct NodeConfig {
   DriverConfig driver;
   OfflineConfig offline;
   QosConfig qos;
-  MqttConfig mqtt;    // `mqtt` (node/fleet_config.h)
+  MqttConfig mqtt;    // `mqtt` (config/fleet_config.h)
   FleetConfig fleet;  // `fleet`
   SwarmConfig swarm;  // `swarm` seed §5.2 keys
   ControlConfig control;
@@ -428,8 +418,7 @@ Result<std::string> default_data_dir();
 Status apply_overrides(NodeConfig& cfg, std::optional<int> port,
                        std::optional<std::string> data_dir);
 
-// Names used in docs and logs.
-std::string_view limit_policy_name(LimitPolicy p);
+// Names used in docs and logs (limit_policy_name: safety_types.h).
 std::string_view gate_on_fail_name(GateOnFail f);
 std::string_view hitl_on_timeout_name(HitlOnTimeout t);
 

@@ -8,11 +8,14 @@
 //      YAML line/column. Node and depth budgets bound the walk (alias bombs, cycles).
 //   2. build(): maps the typed tree onto NodeConfig: aliases between the two published
 //      styles, cross-field checks (min < max, RURI, RRN), defaults and path resolution.
-// yaml-cpp exceptions and the module's own ConfigError never leave the module.
+// Both passes come from one set of tables: every key is one row (table.h) that holds its
+// schema and the code that reads it, and each block's rows live in its own file under
+// blocks/. config_schema() is the schema the rows describe; build() walks the same rows in
+// order. yaml-cpp exceptions and the module's own ConfigError never leave the module.
 //
-// Files: schema.cpp (the schema), validator.cpp (pass 1 and the mapping of failures to
-// Error values), build.cpp (pass 2, one step per block), build_blocks.cpp (the larger blocks
-// and value formats of pass 2) and config.cpp (the public API of config.h).
+// Files: table.h/table.cpp (rows, schema builders, path resolution), blocks/*.cpp (one
+// table per block; blocks/document.cpp puts them in order), validator.cpp (pass 1 and the
+// mapping of failures to Error values) and config.cpp (the public API of config.h).
 #pragma once
 
 #include <cstddef>
@@ -58,7 +61,7 @@ Error make_error(const std::string& path, const std::string& msg, const std::str
 Result<NodeConfig> parse_document(std::string_view yaml, const ConfigOptions& opts);
 
 // ---------------------------------------------------------------------------------------
-// Schema (schema.cpp)
+// Schema (built from the block tables; the builders are in table.h)
 
 struct Schema;
 using SP = std::shared_ptr<const Schema>;
@@ -82,7 +85,7 @@ struct Schema {
   std::vector<SP> alts;
 };
 
-// The whole document's schema (built once).
+// The whole document's schema (built once from the block tables, blocks/document.cpp).
 SP config_schema();
 
 std::string expected_name(const Schema& s);
@@ -90,7 +93,7 @@ std::string join_enum(const std::vector<std::string>& v);
 std::string fmt_num(double d);
 
 // ---------------------------------------------------------------------------------------
-// Pass 2: typed JSON → NodeConfig (build.cpp, build_blocks.cpp)
+// Pass 2: typed JSON → NodeConfig (the rows' readers, walked by blocks/document.cpp)
 
 // A position in the typed tree: the value (nullptr when absent) and its path.
 struct At {
@@ -142,16 +145,11 @@ void same_or_fail(const At& a, const T& va, const At& b, const T& vb) {
 
 NodeConfig build(const json::Value& root_value, const ConfigOptions& opts);
 
-// Blocks and value formats (build_blocks.cpp).
+// `p` resolved against `base_dir` (the config file's directory; empty: left relative) and
+// `~/…` against $HOME; an empty `p` stays empty.
 std::string resolve_path(const std::string& p, const std::string& base_dir);
-RateSpec parse_rate(const At& a, RateSpec def);
-uint32_t parse_duration_s(const At& a, uint32_t def);
-std::vector<ConfidenceGate> build_confidence_gates(const At& a);
-std::vector<HitlGate> build_hitl_gates(const At& a);
-std::optional<AgentLayer> build_layer(const At& a);
-std::vector<std::string> derived_capabilities(const std::string& type);
+// key_dir, audit.dir and audit.chain_secret_file under data_dir, unless the file set them
+// (blocks/security.cpp; apply_overrides() calls it again for a new data dir).
 void derive_paths(NodeConfig& c);
-void parse_fleet_blocks(const At& root, const std::string& base, NodeConfig& c);
-void build_transports(const At& root, NodeConfig& c, const std::string& base);
 
 }  // namespace rcan::config::internal

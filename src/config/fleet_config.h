@@ -1,26 +1,28 @@
 // The `mqtt`, `fleet` and `swarm` configuration blocks (docs/CONFIG.md, docs/FLEET.md).
-// Parsed and validated by build_blocks.cpp; interpreted by mqtt_node.cpp, fleet.cpp and swarm.cpp.
+// Read by blocks/fleet.cpp; interpreted by mqtt_node.cpp, fleet.cpp and swarm.cpp.
 #pragma once
 
 #include <cstdint>
 #include <string>
 #include <vector>
 
+#include "transport/mqtt_client.h"
+
 namespace rcan::config {
 
 struct MqttConfig {
   bool enabled = false;
-  std::string broker = "mqtt://127.0.0.1:1883";  // mqtt://host[:port] | mqtts://host[:port]
-  std::string client_id;                         // default "rcand-<device_id>"
+  std::string broker = transport::kDefaultBrokerUrl;  // mqtt://host[:port] | mqtts://host[:port]
+  std::string client_id;                              // default "rcand-<device_id>"
   std::string topic_prefix = "rcan";
-  uint32_t keepalive_s = 10;
+  uint32_t keepalive_s = transport::kDefaultKeepaliveS;
   std::string username;
   std::string password_file;  // 0600; required with username
   std::string ca_file;        // required with mqtts://
   std::string cert_file;      // client certificate (with key_file)
   std::string key_file;
-  uint32_t reconnect_min_s = 1;
-  uint32_t reconnect_max_s = 30;
+  uint32_t reconnect_min_s = transport::kDefaultReconnectMinS;
+  uint32_t reconnect_max_s = transport::kDefaultReconnectMaxS;
   uint32_t telemetry_hz = 1;  // 0 = no telemetry over MQTT
   bool publish_audit = true;  // audit records on the audit topic
   // QoS of the robot's subscription to its fleet's estop topic (docs/FLEET.md): 1 acts on the

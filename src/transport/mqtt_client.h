@@ -37,18 +37,24 @@ struct MqttWill {
   bool retain = true;
 };
 
+// Defaults, also those of rcand's `mqtt` block (config/fleet_config.h).
+inline constexpr const char* kDefaultBrokerUrl = "mqtt://127.0.0.1:1883";
+inline constexpr int kDefaultKeepaliveS = 10;
+inline constexpr int kDefaultReconnectMinS = 1;
+inline constexpr int kDefaultReconnectMaxS = 30;
+
 struct MqttOptions {
-  std::string url = "mqtt://127.0.0.1:1883";
+  std::string url = kDefaultBrokerUrl;
   std::string client_id;  // empty → random (a clean session is then forced)
   bool clean_session = true;
-  int keepalive_s = 10;
+  int keepalive_s = kDefaultKeepaliveS;
   std::string username;
   std::string password;   // read from a 0600 file by the caller
   std::string ca_file;    // TLS: CA bundle (required with mqtts)
   std::string cert_file;  // TLS client certificate (optional, with key_file)
   std::string key_file;
-  int reconnect_min_s = 1;
-  int reconnect_max_s = 30;
+  int reconnect_min_s = kDefaultReconnectMinS;
+  int reconnect_max_s = kDefaultReconnectMaxS;
   MqttWill will;
 };
 

@@ -62,17 +62,6 @@ SafetyLimits effective_limits(const SafetyLimits& cfg, const DriverInfo& hw) {
 
 }  // namespace
 
-double Workspace::distance_outside(double x, double y) const {
-  if (!enabled) return 0.0;
-  const double dx = std::max({min_x - x, 0.0, x - max_x});
-  const double dy = std::max({min_y - y, 0.0, y - max_y});
-  return std::hypot(dx, dy);
-}
-
-std::string_view limit_policy_name(LimitPolicy p) {
-  return p == LimitPolicy::kClamp ? "clamp" : "reject";
-}
-
 json::Object SafetyLimits::to_json() const {
   return json::Object{{"max_linear_mps", max_linear_mps},
                       {"max_angular_radps", max_angular_radps},
@@ -81,10 +70,10 @@ json::Object SafetyLimits::to_json() const {
                       {"joint_max_rad", joints_json(joint_max_rad)},
                       {"max_drive_duration_ms", max_drive_duration_ms},
                       {"workspace", json::Object{{"enabled", workspace.enabled},
-                                                 {"min_x", workspace.min_x},
-                                                 {"max_x", workspace.max_x},
-                                                 {"min_y", workspace.min_y},
-                                                 {"max_y", workspace.max_y}}}};
+                                                 {"min_x", workspace.x_min},
+                                                 {"max_x", workspace.x_max},
+                                                 {"min_y", workspace.y_min},
+                                                 {"max_y", workspace.y_max}}}};
 }
 
 json::Object DispatchOutcome::to_json() const {

@@ -49,6 +49,7 @@
 #include <vector>
 
 #include "base/clock.h"
+#include "config/safety_types.h"
 #include "node/safety/driver.h"
 #include "rcan/audit/env.h"
 #include "rcan/json.h"
@@ -56,21 +57,10 @@
 
 namespace rcan::node {
 
-enum class LimitPolicy : uint8_t { kClamp, kReject };
-std::string_view limit_policy_name(LimitPolicy p);  // "clamp" / "reject"
-
-struct Workspace {
-  bool enabled = true;
-  double min_x = -5.0;
-  double max_x = 5.0;
-  double min_y = -5.0;
-  double max_y = 5.0;
-  bool contains(double x, double y) const {
-    return !enabled || (x >= min_x && x <= max_x && y >= min_y && y <= max_y);
-  }
-  // Distance from (x, y) to the rectangle (0 inside, and when the workspace is disabled).
-  double distance_outside(double x, double y) const;
-};
+// The limit policy and the workspace rectangle are the config's own types (safety_types.h).
+using config::limit_policy_name;
+using config::LimitPolicy;
+using config::Workspace;
 
 struct SafetyLimits {
   double max_linear_mps = 1.0;
@@ -93,8 +83,9 @@ struct SafetyConfig {
   // and always on time for the next heartbeat or watchdog deadline. An idle robot then costs
   // one wake-up a second instead of fifty. 0 or ≤ tick_period_ms: always the full rate.
   int64_t idle_tick_ms = 1000;
-  int64_t default_heartbeat_ms = 2000;  // arm_deadman(id, 0) → this (latency_budget × 2)
-  int64_t watchdog_timeout_ms = 0;      // brain watchdog; 0 = disabled
+  // arm_deadman(id, 0) → this (rcand: safety.heartbeat_timeout_ms).
+  int64_t default_heartbeat_ms = config::kDefaultHeartbeatTimeoutMs;
+  int64_t watchdog_timeout_ms = 0;  // brain watchdog; 0 = disabled
   // A drive still commanded this long after its deadline is stopped by tick() (safe-stop).
   int64_t drive_ttl_grace_ms = 100;
   // estop() waits at most this long for a dispatch already inside Driver::apply() (see

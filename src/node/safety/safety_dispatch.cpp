@@ -107,8 +107,8 @@ Result<ActuatorCommand> SafetyCore::limit_command(const ActuatorCommand& cmd, Li
     if (ws.enabled && d.linear_mps != 0.0 &&
         leaves_workspace(ws, now, d.linear_mps, d.angular_radps, d.duration_ms, accel)) {
       char rect[160];
-      std::snprintf(rect, sizeof rect, "[%g, %g] x [%g, %g]", ws.min_x, ws.max_x, ws.min_y,
-                    ws.max_y);
+      std::snprintf(rect, sizeof rect, "[%g, %g] x [%g, %g]", ws.x_min, ws.x_max, ws.y_min,
+                    ws.y_max);
       if (!clamp)
         return limit_error(std::string("drive would leave the workspace ") + rect + " (workspace)",
                            "drive");

@@ -1,0 +1,67 @@
+// Control sessions and the v1.5 session blocks: `control` (this node's), `offline` (the
+// credential cache and partition watch) and `qos` (docs/CONFIG.md §Control sessions, §v1.5
+// blocks; docs/SESSIONS.md).
+#include "base/http_client.h"
+#include "config/blocks/blocks.h"
+
+namespace rcan::config::internal {
+namespace {
+
+// An optional http:// URL (empty: off).
+template <typename T>
+Row<T> http_url(std::string key, std::string T::*member) {
+  return Rows<T>::read(std::move(key), Str(2048), [member](const At& a, T& out, Ctx&) {
+    if (a) out.*member = a.str();
+    if (!(out.*member).empty() && !rcan::parse_http_url(out.*member).ok())
+      fail(a.path, "must be an http:// URL", "invalid_value");
+  });
+}
+
+Table<OfflineConfig> offline_rows() {
+  using O = Rows<OfflineConfig>;
+  return {
+      O::field("grace_period_s", Int(0, 31'536'000), &OfflineConfig::grace_period_s),
+      O::field("cross_owner_grace_s", Int(0, 31'536'000), &OfflineConfig::cross_owner_grace_s),
+      O::field("max_key_ttl_s", Int(0, 31'536'000), &OfflineConfig::max_key_ttl_s),
+      http_url("issuer_url", &OfflineConfig::issuer_url),
+      O::field("issuer_poll_ms", Int(50, 3'600'000), &OfflineConfig::issuer_poll_ms),
+      O::field("issuer_timeout_ms", Int(50, 60'000), &OfflineConfig::issuer_timeout_ms),
+  };
+}
+
+Table<ControlConfig> control_rows() {
+  using C = Rows<ControlConfig>;
+  return {
+      C::field("fleet_policy", Enum({"role", "fleet_wins", "individual_wins"}),
+               &ControlConfig::fleet_policy),
+      C::field("handoff_window_s", Int(1, 3600), &ControlConfig::handoff_window_s),
+      C::field("queue_max", Int(0, 1024), &ControlConfig::queue_max),
+      C::field("queue_wait_s", Int(1, 86400), &ControlConfig::queue_wait_s),
+      C::field("max_session_s", Int(0, 31'536'000), &ControlConfig::max_session_s),
+      C::field("transfer_window_s", Int(1, 31'536'000), &ControlConfig::transfer_window_s),
+      C::field("consent_ttl_s", Int(1, 31'536'000), &ControlConfig::consent_ttl_s),
+      http_url("consent_webhook", &ControlConfig::consent_webhook),
+  };
+}
+
+Table<QosConfig> qos_rows() {
+  using Q = Rows<QosConfig>;
+  return {
+      Q::field("ack_timeout_ms", Int(1, 600'000), &QosConfig::ack_timeout_ms),
+      Q::field("max_retries", Int(0, 100), &QosConfig::max_retries),
+      Q::field("backoff_base_ms", Int(1, 600'000), &QosConfig::backoff_base_ms),
+  };
+}
+
+}  // namespace
+
+Table<NodeConfig> control_blocks() {
+  using R = Rows<NodeConfig>;
+  return {
+      R::block("offline", offline_rows(), &NodeConfig::offline),
+      R::block("control", control_rows(), &NodeConfig::control),
+      R::block("qos", qos_rows(), &NodeConfig::qos),
+  };
+}
+
+}  // namespace rcan::config::internal
