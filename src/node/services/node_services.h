@@ -14,6 +14,7 @@
 
 #include "base/clock.h"
 #include "base/metrics.h"
+#include "config/safety_types.h"
 #include "node/admission/authenticator.h"
 #include "node/admission/injection.h"
 #include "node/admission/rate_limit.h"
@@ -68,7 +69,7 @@ struct NodeSettings {
   std::array<uint32_t, 6> rate_per_minute{0, 10, 100, 500, 1000, 0};
   ReplayOptions replay;
   std::vector<std::string> injection_patterns = InjectionScreen::default_patterns();
-  int64_t heartbeat_timeout_ms = 2000;
+  int64_t heartbeat_timeout_ms = config::kDefaultHeartbeatTimeoutMs;
   int64_t default_ttl_ms = 0;  // applied to commands that carry none (0 = none)
   CodecLimits codec;
   int telemetry_hz = 5;
