@@ -34,13 +34,13 @@ Status write_all(int fd, std::string_view data, const std::string& path) {
   return Status::Ok();
 }
 
-class PosixWritableFile final : public WritableFile {
+// An open file descriptor: sync (fdatasync) and close, shared by the two file kinds below.
+class PosixFile : public WritableFile {
  public:
-  PosixWritableFile(int fd, std::string path) : fd_(fd), path_(std::move(path)) {}
-  ~PosixWritableFile() override {
+  PosixFile(int fd, std::string path) : fd_(fd), path_(std::move(path)) {}
+  ~PosixFile() override {
     if (fd_ >= 0) ::close(fd_);
   }
-  Status append(std::string_view data) override { return write_all(fd_, data, path_); }
   Status sync() override {
     if (::fdatasync(fd_) != 0) return io_error("fdatasync", path_, errno);
     return Status::Ok();
@@ -53,18 +53,21 @@ class PosixWritableFile final : public WritableFile {
     return Status::Ok();
   }
 
- private:
+ protected:
   int fd_;
   std::string path_;
 };
 
-class PosixPositionalFile final : public WritableFile {
+class PosixWritableFile final : public PosixFile {
+ public:
+  using PosixFile::PosixFile;
+  Status append(std::string_view data) override { return write_all(fd_, data, path_); }
+};
+
+class PosixPositionalFile final : public PosixFile {
  public:
   PosixPositionalFile(int fd, std::string path, uint64_t offset)
-      : fd_(fd), path_(std::move(path)), offset_(offset) {}
-  ~PosixPositionalFile() override {
-    if (fd_ >= 0) ::close(fd_);
-  }
+      : PosixFile(fd, std::move(path)), offset_(offset) {}
   Status append(std::string_view data) override {
     const char* p = data.data();
     size_t left = data.size();
@@ -80,21 +83,8 @@ class PosixPositionalFile final : public WritableFile {
     }
     return Status::Ok();
   }
-  Status sync() override {
-    if (::fdatasync(fd_) != 0) return io_error("fdatasync", path_, errno);
-    return Status::Ok();
-  }
-  Status close() override {
-    if (fd_ < 0) return Status::Ok();
-    int rc = ::close(fd_);
-    fd_ = -1;
-    if (rc != 0) return io_error("close", path_, errno);
-    return Status::Ok();
-  }
 
  private:
-  int fd_;
-  std::string path_;
   uint64_t offset_;
 };
 
