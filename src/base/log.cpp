@@ -4,22 +4,24 @@
 #include <chrono>
 #include <cstdio>
 #include <ctime>
-#include <mutex>
 #include <utility>
+
+#include "base/thread_annotations.h"
 
 namespace rcan {
 namespace {
 
 std::atomic<int> g_level{static_cast<int>(LogLevel::kInfo)};
 
-std::mutex& log_mutex() {
-  static std::mutex m;
-  return m;
-}
+// Where lines go (stderr while `sink` is empty), and the lock that keeps each line whole.
+struct Output {
+  Mutex mu;
+  std::function<void(std::string_view)> sink GUARDED_BY(mu);
+};
 
-std::function<void(std::string_view)>& sink_ref() {
-  static std::function<void(std::string_view)> s;
-  return s;
+Output& output() {
+  static Output out;
+  return out;
 }
 
 // ISO 8601 UTC with milliseconds.
@@ -75,9 +77,10 @@ void log(LogLevel level, std::string_view event, json::Object fields) {
     line.set(k, std::move(v));
   }
   std::string text = json::dump(json::Value(std::move(line)));
-  std::lock_guard<std::mutex> lock(log_mutex());
-  if (sink_ref()) {
-    sink_ref()(text);
+  Output& out = output();
+  MutexLock lock(out.mu);
+  if (out.sink) {
+    out.sink(text);
     return;
   }
   text.push_back('\n');
@@ -86,8 +89,9 @@ void log(LogLevel level, std::string_view event, json::Object fields) {
 }
 
 void set_log_sink(std::function<void(std::string_view line)> sink) {
-  std::lock_guard<std::mutex> lock(log_mutex());
-  sink_ref() = std::move(sink);
+  Output& out = output();
+  MutexLock lock(out.mu);
+  out.sink = std::move(sink);
 }
 
 }  // namespace rcan

@@ -26,7 +26,7 @@ double Histogram::quantile_us(double q) const {
 }
 
 void Metrics::count_request(const std::string& route, int status) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   auto it = requests_.find(std::pair<std::string_view, int>(route, status));
   if (it != requests_.end()) {
     ++it->second;
@@ -36,14 +36,14 @@ void Metrics::count_request(const std::string& route, int status) {
 }
 
 Histogram& Metrics::stage(const std::string& name) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   auto& h = stages_[name];
   if (!h) h = std::make_unique<Histogram>();
   return *h;
 }
 
 void Metrics::count_audit(const std::string& event) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   auto it = audit_events_.find(event);
   if (it != audit_events_.end()) {
     ++it->second;
@@ -53,12 +53,12 @@ void Metrics::count_audit(const std::string& event) {
 }
 
 void Metrics::add_gauge(std::string name, std::string help, std::function<double()> fn) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   fns_.push_back(Fn{std::move(name), std::move(help), "gauge", std::move(fn)});
 }
 
 void Metrics::add_counter_fn(std::string name, std::string help, std::function<double()> fn) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   fns_.push_back(Fn{std::move(name), std::move(help), "counter", std::move(fn)});
 }
 
@@ -85,7 +85,7 @@ std::string escape_label(const std::string& s) {
 }  // namespace
 
 std::string Metrics::render() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   std::string out;
   out += "# HELP rcan_requests_total Requests answered, by route and HTTP status.\n";
   out += "# TYPE rcan_requests_total counter\n";

@@ -9,10 +9,11 @@
 #include <functional>
 #include <map>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <string_view>
 #include <vector>
+
+#include "base/thread_annotations.h"
 
 namespace rcan {
 
@@ -41,19 +42,19 @@ class Histogram {
 class Metrics {
  public:
   // requests_total{route,status}
-  void count_request(const std::string& route, int status);
+  void count_request(const std::string& route, int status) EXCLUDES(mu_);
   // pipeline_stage_seconds{stage}
-  Histogram& stage(const std::string& name);
+  Histogram& stage(const std::string& name) EXCLUDES(mu_);
   // rcan_audit_records_total{event}
-  void count_audit(const std::string& event);
+  void count_audit(const std::string& event) EXCLUDES(mu_);
   // Named gauges computed at render time (e.g. audit queue depth, estop state).
-  void add_gauge(std::string name, std::string help, std::function<double()> fn);
-  void add_counter_fn(std::string name, std::string help, std::function<double()> fn);
+  void add_gauge(std::string name, std::string help, std::function<double()> fn) EXCLUDES(mu_);
+  void add_counter_fn(std::string name, std::string help, std::function<double()> fn) EXCLUDES(mu_);
 
-  std::string render() const;
+  std::string render() const EXCLUDES(mu_);
 
  private:
-  mutable std::mutex mu_;
+  mutable Mutex mu_;
   // Looked up without building a key (every answer counts itself).
   struct RouteStatusLess {
     using is_transparent = void;
@@ -63,14 +64,14 @@ class Metrics {
       return c < 0 || (c == 0 && a.second < b.second);
     }
   };
-  std::map<std::pair<std::string, int>, uint64_t, RouteStatusLess> requests_;
-  std::map<std::string, uint64_t, std::less<>> audit_events_;
-  std::map<std::string, std::unique_ptr<Histogram>, std::less<>> stages_;
+  std::map<std::pair<std::string, int>, uint64_t, RouteStatusLess> requests_ GUARDED_BY(mu_);
+  std::map<std::string, uint64_t, std::less<>> audit_events_ GUARDED_BY(mu_);
+  std::map<std::string, std::unique_ptr<Histogram>, std::less<>> stages_ GUARDED_BY(mu_);
   struct Fn {
     std::string name, help, type;
     std::function<double()> fn;
   };
-  std::vector<Fn> fns_;
+  std::vector<Fn> fns_ GUARDED_BY(mu_);
 };
 
 }  // namespace rcan

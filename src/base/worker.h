@@ -4,12 +4,12 @@
 
 #include <pthread.h>
 
-#include <condition_variable>
 #include <deque>
 #include <functional>
-#include <mutex>
 #include <thread>
 #include <vector>
+
+#include "base/thread_annotations.h"
 
 namespace rcan {
 
@@ -27,8 +27,8 @@ class Worker {
   Worker& operator=(const Worker&) = delete;
 
   // Queues `fn`; false when shut down or the queue is full (the caller answers 503).
-  bool post(std::function<void()> fn, size_t max_queue = 1024) {
-    std::lock_guard<std::mutex> lock(mu_);
+  bool post(std::function<void()> fn, size_t max_queue = 1024) EXCLUDES(mu_) {
+    MutexLock lock(mu_);
     if (quit_ || q_.size() >= max_queue) return false;
     q_.push_back(std::move(fn));
     cv_.notify_one();
@@ -36,9 +36,9 @@ class Worker {
   }
 
   // Runs what is queued, then joins.
-  void shutdown() {
+  void shutdown() EXCLUDES(mu_) {
     {
-      std::lock_guard<std::mutex> lock(mu_);
+      MutexLock lock(mu_);
       if (quit_) return;
       quit_ = true;
       cv_.notify_all();
@@ -48,12 +48,12 @@ class Worker {
   }
 
  private:
-  void loop() {
+  void loop() EXCLUDES(mu_) {
     while (true) {
       std::function<void()> fn;
       {
-        std::unique_lock<std::mutex> lock(mu_);
-        cv_.wait(lock, [this] { return quit_ || !q_.empty(); });
+        MutexLock lock(mu_);
+        while (!quit_ && q_.empty()) cv_.wait(mu_);
         if (q_.empty()) return;
         fn = std::move(q_.front());
         q_.pop_front();
@@ -62,10 +62,10 @@ class Worker {
     }
   }
 
-  std::mutex mu_;
-  std::condition_variable cv_;
-  std::deque<std::function<void()>> q_;
-  bool quit_ = false;
+  Mutex mu_;
+  CondVar cv_;
+  std::deque<std::function<void()>> q_ GUARDED_BY(mu_);
+  bool quit_ GUARDED_BY(mu_) = false;
   std::vector<std::thread> threads_;
 };
 

@@ -21,11 +21,9 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
-#include <condition_variable>
 #include <ctime>
 #include <deque>
 #include <exception>
-#include <mutex>
 #include <optional>
 #include <thread>
 #include <type_traits>
@@ -35,6 +33,7 @@
 
 #include "base/clock.h"
 #include "base/log.h"
+#include "base/thread_annotations.h"
 #include "transport/beast.h"
 #include "transport/http_parse.h"
 
@@ -202,7 +201,7 @@ class ResponseSlot {
   ~ResponseSlot() {
     bool answered;
     {
-      std::lock_guard<std::mutex> lock(mu_);
+      MutexLock lock(mu_);
       answered = done_;
     }
     if (!answered) {
@@ -212,7 +211,7 @@ class ResponseSlot {
   }
   void fire(HttpResponse r) {
     {
-      std::lock_guard<std::mutex> lock(mu_);
+      MutexLock lock(mu_);
       if (done_) return;
       done_ = true;
     }
@@ -223,8 +222,8 @@ class ResponseSlot {
   }
 
  private:
-  std::mutex mu_;
-  bool done_ = false;
+  Mutex mu_;
+  bool done_ GUARDED_BY(mu_) = false;
   std::weak_ptr<HttpServer::Impl> srv_;
   std::function<void(HttpResponse)> post_;
 };
@@ -243,7 +242,7 @@ class WsSink final : public StreamSink {
   bool send_text(std::string text) override {
     enum class Outcome { kQueued, kQueuedKick, kOverflow } outcome;
     {
-      std::lock_guard<std::mutex> lock(mu_);
+      MutexLock lock(mu_);
       if (closed_) return false;
       if (queue_.size() >= limit_) {
         closed_ = true;
@@ -266,7 +265,7 @@ class WsSink final : public StreamSink {
 
   void close(uint16_t code, std::string reason) override {
     {
-      std::lock_guard<std::mutex> lock(mu_);
+      MutexLock lock(mu_);
       if (close_requested_) return;
       close_requested_ = true;
       closed_ = true;  // frames already queued still go out before the close frame
@@ -278,7 +277,7 @@ class WsSink final : public StreamSink {
 
   // Connection side (strand).
   bool pop(std::string& out) {
-    std::lock_guard<std::mutex> lock(mu_);
+    MutexLock lock(mu_);
     if (queue_.empty()) {
       kick_posted_ = false;
       return false;
@@ -288,7 +287,7 @@ class WsSink final : public StreamSink {
     return true;
   }
   void mark_closed(bool drop_queue) {
-    std::lock_guard<std::mutex> lock(mu_);
+    MutexLock lock(mu_);
     closed_ = true;
     close_requested_ = true;
     if (drop_queue) queue_.clear();
@@ -299,11 +298,11 @@ class WsSink final : public StreamSink {
   const size_t limit_;
   Kick kick_;
   Closer closer_;
-  std::mutex mu_;
-  std::deque<std::string> queue_;
-  bool closed_ = false;
-  bool close_requested_ = false;
-  bool kick_posted_ = false;
+  Mutex mu_;
+  std::deque<std::string> queue_ GUARDED_BY(mu_);
+  bool closed_ GUARDED_BY(mu_) = false;
+  bool close_requested_ GUARDED_BY(mu_) = false;
+  bool kick_posted_ GUARDED_BY(mu_) = false;
 };
 
 }  // namespace detail
@@ -313,25 +312,25 @@ class HttpServer::Impl : public std::enable_shared_from_this<HttpServer::Impl> {
   Impl(ServerOptions o, HttpHandler& h, StreamHandler& s)
       : opt(std::move(o)), http(h), streams(s), ioc(std::max(opt.io_threads, 1)) {}
 
-  Result<uint16_t> start();
-  void stop(int drain_ms);
+  Result<uint16_t> start() EXCLUDES(lifecycle_mu, mu);
+  void stop(int drain_ms) EXCLUDES(lifecycle_mu, mu);
   ServerStats stats() const;
 
   detail::asio::awaitable<void> accept_loop();
   detail::asio::awaitable<void> reject(detail::tcp::socket sock);
   template <class Stream>
-  void spawn_conn(detail::tcp::socket sock, std::string remote);
-  void conn_gone(uint64_t id) {
+  void spawn_conn(detail::tcp::socket sock, std::string remote) EXCLUDES(mu);
+  void conn_gone(uint64_t id) EXCLUDES(mu) {
     {
-      std::lock_guard<std::mutex> lock(mu);
+      MutexLock lock(mu);
       conns.erase(id);
       --connections_open;
     }
     cv.notify_all();
   }
-  std::vector<std::shared_ptr<detail::ConnBase>> snapshot() {
+  std::vector<std::shared_ptr<detail::ConnBase>> snapshot() EXCLUDES(mu) {
     std::vector<std::shared_ptr<detail::ConnBase>> out;
-    std::lock_guard<std::mutex> lock(mu);
+    MutexLock lock(mu);
     for (auto& [id, weak] : conns)
       if (auto c = weak.lock()) out.push_back(std::move(c));
     return out;
@@ -352,15 +351,15 @@ class HttpServer::Impl : public std::enable_shared_from_this<HttpServer::Impl> {
   std::atomic<uint64_t> bad_requests{0};
   std::atomic<int> rejecting{0};
 
-  std::mutex mu;  // conns, next_id, running_threads (with cv)
-  std::condition_variable cv;
-  std::unordered_map<uint64_t, std::weak_ptr<detail::ConnBase>> conns;
-  uint64_t next_id = 0;
-  int running_threads = 0;
+  Mutex mu;
+  CondVar cv;  // signalled when a connection or an I/O thread ends
+  std::unordered_map<uint64_t, std::weak_ptr<detail::ConnBase>> conns GUARDED_BY(mu);
+  uint64_t next_id GUARDED_BY(mu) = 0;
+  int running_threads GUARDED_BY(mu) = 0;
 
-  std::mutex lifecycle_mu;
-  bool started = false;
-  bool stopped = false;
+  Mutex lifecycle_mu;
+  bool started GUARDED_BY(lifecycle_mu) = false;
+  bool stopped GUARDED_BY(lifecycle_mu) = false;
   std::vector<std::thread> threads;
 
   // Declared after everything connections touch, so that it is destroyed first (frames still
@@ -842,14 +841,14 @@ template <class Stream>
 void HttpServer::Impl::spawn_conn(detail::tcp::socket sock, std::string remote) {
   uint64_t id;
   {
-    std::lock_guard<std::mutex> lock(mu);
+    MutexLock lock(mu);
     id = ++next_id;
     ++connections_open;
   }
   ++connections_total;
   auto conn = std::make_shared<detail::Conn<Stream>>(*this, id, std::move(sock), std::move(remote));
   {
-    std::lock_guard<std::mutex> lock(mu);
+    MutexLock lock(mu);
     conns[id] = conn;
   }
   auto ex = conn->executor();
@@ -924,7 +923,7 @@ detail::asio::awaitable<void> HttpServer::Impl::reject(detail::tcp::socket sock)
 
 Result<uint16_t> HttpServer::Impl::start() {
   namespace asio = detail::asio;
-  std::lock_guard<std::mutex> life(lifecycle_mu);
+  MutexLock life(lifecycle_mu);
   if (started) return Error(ErrorCode::kInternal, "server already started");
   if (opt.io_threads < 1 || opt.read_timeout_ms <= 0 || opt.idle_timeout_ms <= 0 ||
       opt.ws_handshake_timeout_ms <= 0 || opt.max_connections == 0 || opt.max_header_bytes == 0 ||
@@ -969,7 +968,7 @@ Result<uint16_t> HttpServer::Impl::start() {
   }
   asio::co_spawn(acceptor->get_executor(), accept_loop(), detail::log_coroutine_exception);
   {
-    std::lock_guard<std::mutex> lock(mu);
+    MutexLock lock(mu);
     running_threads = opt.io_threads;
   }
   for (int i = 0; i < opt.io_threads; ++i) {
@@ -986,7 +985,7 @@ Result<uint16_t> HttpServer::Impl::start() {
         }
       }
       {
-        std::lock_guard<std::mutex> lock(mu);
+        MutexLock lock(mu);
         --running_threads;
       }
       cv.notify_all();
@@ -1003,7 +1002,7 @@ Result<uint16_t> HttpServer::Impl::start() {
 
 void HttpServer::Impl::stop(int drain_ms) {
   {
-    std::lock_guard<std::mutex> life(lifecycle_mu);
+    MutexLock life(lifecycle_mu);
     if (!started || stopped) return;
     stopped = true;
   }
@@ -1017,18 +1016,25 @@ void HttpServer::Impl::stop(int drain_ms) {
   for (auto& c : snapshot()) c->begin_shutdown();
   const auto deadline = detail::SteadyClock::now() + detail::Ms(drain_ms < 0 ? 0 : drain_ms);
   {
-    std::unique_lock<std::mutex> lock(mu);
-    cv.wait_until(lock, deadline, [this] { return connections_open.load() == 0; });
+    MutexLock lock(mu);
+    while (connections_open.load() != 0) {
+      if (cv.wait_until(mu, deadline) == std::cv_status::timeout) break;
+    }
   }
   const uint64_t left = connections_open.load();
   for (auto& c : snapshot()) c->force_close();
+  bool threads_ended;
   {
-    std::unique_lock<std::mutex> lock(mu);
-    if (!cv.wait_for(lock, std::chrono::seconds(3), [this] { return running_threads == 0; })) {
-      lock.unlock();
-      rcan::log(rcan::LogLevel::kWarn, "http.stop_forced");
-      ioc.stop();
+    MutexLock lock(mu);
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(3);
+    while (running_threads != 0) {
+      if (cv.wait_until(mu, until) == std::cv_status::timeout) break;
     }
+    threads_ended = running_threads == 0;
+  }
+  if (!threads_ended) {
+    rcan::log(rcan::LogLevel::kWarn, "http.stop_forced");
+    ioc.stop();
   }
   for (auto& t : threads)
     if (t.joinable()) t.join();

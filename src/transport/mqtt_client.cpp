@@ -84,7 +84,7 @@ struct MqttCallbacks {
       self->connects_.fetch_add(1);
       std::vector<std::pair<std::string, int>> subs;
       {
-        std::lock_guard<std::mutex> lk(self->mu_);
+        MutexLock lk(self->mu_);
         subs = self->subs_;
       }
       for (const auto& [filter, qos] : subs) mosquitto_subscribe(m, nullptr, filter.c_str(), qos);
@@ -125,7 +125,7 @@ MqttClient::~MqttClient() {
 
 void MqttClient::subscribe(const std::string& filter, int qos) {
   {
-    std::lock_guard<std::mutex> lk(mu_);
+    MutexLock lk(mu_);
     subs_.emplace_back(filter, qos);
   }
   if (impl_->m != nullptr && connected_.load())

@@ -13,10 +13,10 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <vector>
 
+#include "base/thread_annotations.h"
 #include "rcan/result.h"
 
 namespace rcan::transport {
@@ -79,7 +79,7 @@ class MqttClient {
   void on_message(OnMessage cb) { on_message_ = std::move(cb); }
   void on_connection(OnConnection cb) { on_connection_ = std::move(cb); }
   // Adds a subscription (renewed on every connect; subscribed now when connected).
-  void subscribe(const std::string& filter, int qos);
+  void subscribe(const std::string& filter, int qos) EXCLUDES(mu_);
 
   // Starts the network thread and connects asynchronously (a broker that is not up yet is
   // retried with backoff). Errors: bad options, TLS files unreadable.
@@ -102,8 +102,8 @@ class MqttClient {
   MqttOptions opts_;
   OnMessage on_message_;
   OnConnection on_connection_;
-  std::mutex mu_;
-  std::vector<std::pair<std::string, int>> subs_;
+  Mutex mu_;
+  std::vector<std::pair<std::string, int>> subs_ GUARDED_BY(mu_);
   std::atomic<bool> connected_{false};
   std::atomic<uint64_t> connects_{0};
   std::atomic<bool> stopped_{false};

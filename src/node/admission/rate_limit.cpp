@@ -20,7 +20,7 @@ RateLimiter::Decision RateLimiter::take(const std::string& principal, uint32_t p
                                         int64_t now_mono_ms) {
   Decision d;
   if (per_minute == 0) return d;
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (now_mono_ms - last_sweep_ms_ > 10'000 || buckets_.size() >= max_principals_)
     sweep(now_mono_ms);
   auto it = buckets_.find(principal);
@@ -54,7 +54,7 @@ RateLimiter::Decision RateLimiter::take(const std::string& principal, uint32_t p
 }
 
 size_t RateLimiter::tracked() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   return buckets_.size();
 }
 

@@ -4,9 +4,10 @@
 #pragma once
 
 #include <cstdint>
-#include <mutex>
 #include <string>
 #include <unordered_map>
+
+#include "base/thread_annotations.h"
 
 namespace rcan::node {
 
@@ -19,8 +20,9 @@ class RateLimiter {
     int64_t retry_after_ms = 0;  // when refused: until one token is back
   };
   // `per_minute` 0 = unlimited.
-  Decision take(const std::string& principal, uint32_t per_minute, int64_t now_mono_ms);
-  size_t tracked() const;
+  Decision take(const std::string& principal, uint32_t per_minute, int64_t now_mono_ms)
+      EXCLUDES(mu_);
+  size_t tracked() const EXCLUDES(mu_);
 
  private:
   struct Bucket {
@@ -28,12 +30,12 @@ class RateLimiter {
     int64_t last_ms;
     uint32_t per_minute;
   };
-  void sweep(int64_t now_mono_ms);
+  void sweep(int64_t now_mono_ms) REQUIRES(mu_);
 
   size_t max_principals_;
-  mutable std::mutex mu_;
-  std::unordered_map<std::string, Bucket> buckets_;
-  int64_t last_sweep_ms_ = 0;
+  mutable Mutex mu_;
+  std::unordered_map<std::string, Bucket> buckets_ GUARDED_BY(mu_);
+  int64_t last_sweep_ms_ GUARDED_BY(mu_) = 0;
 };
 
 }  // namespace rcan::node

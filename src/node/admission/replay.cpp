@@ -58,7 +58,7 @@ Result<ReplayGuard::Verdict> ReplayGuard::check(const std::string& message_id, i
                      " s in the future",
                  "timestamp_ms");
   }
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   expire(now_wall_ms);
   if (!safety && refused(timestamp_ms)) {
     return Error(ErrorCode::kMessageStale,
@@ -86,12 +86,12 @@ Result<ReplayGuard::Verdict> ReplayGuard::check(const std::string& message_id, i
 }
 
 size_t ReplayGuard::size() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   return ids_.size();
 }
 
 uint64_t ReplayGuard::evictions() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   return evictions_;
 }
 

@@ -17,13 +17,13 @@
 #pragma once
 
 #include <cstdint>
-#include <mutex>
 #include <set>
 #include <string>
 #include <unordered_set>
 #include <utility>
 #include <vector>
 
+#include "base/thread_annotations.h"
 #include "rcan/result.h"
 
 namespace rcan::node {
@@ -45,22 +45,24 @@ class ReplayGuard {
   // Checks and records. Errors: kMessageStale (outside the window, or at/below the floor),
   // kReplayDetected (seen before).
   Result<Verdict> check(const std::string& message_id, int64_t timestamp_ms, bool safety,
-                        int64_t now_wall_ms);
+                        int64_t now_wall_ms) EXCLUDES(mu_);
 
-  size_t size() const;
-  uint64_t evictions() const;
+  size_t size() const EXCLUDES(mu_);
+  uint64_t evictions() const EXCLUDES(mu_);
 
  private:
-  void expire(int64_t now_wall_ms);
-  void note_evicted(int64_t ts);
-  bool refused(int64_t ts) const;
+  void expire(int64_t now_wall_ms) REQUIRES(mu_);
+  void note_evicted(int64_t ts) REQUIRES(mu_);
+  bool refused(int64_t ts) const REQUIRES(mu_);
 
   ReplayOptions opts_;
-  mutable std::mutex mu_;
-  std::set<std::pair<int64_t, std::string>> by_ts_;  // (timestamp, id), oldest first
-  std::unordered_set<std::string> ids_;
-  std::vector<std::pair<int64_t, int64_t>> refused_;  // [lo, hi] timestamp ranges of evicted ids
-  uint64_t evictions_ = 0;
+  mutable Mutex mu_;
+  // (timestamp, id), oldest first
+  std::set<std::pair<int64_t, std::string>> by_ts_ GUARDED_BY(mu_);
+  std::unordered_set<std::string> ids_ GUARDED_BY(mu_);
+  // [lo, hi] timestamp ranges of evicted ids
+  std::vector<std::pair<int64_t, int64_t>> refused_ GUARDED_BY(mu_);
+  uint64_t evictions_ GUARDED_BY(mu_) = 0;
 };
 
 }  // namespace rcan::node

@@ -4,7 +4,7 @@ namespace rcan::node {
 
 std::optional<Principal> TokenCache::find(std::string_view token, int64_t now_s) {
   if (capacity_ == 0) return std::nullopt;
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   auto it = map_.find(std::string(token));
   if (it == map_.end()) return std::nullopt;
   if (now_s < it->second.valid_from_s || now_s >= it->second.valid_until_s) {
@@ -18,14 +18,14 @@ std::optional<Principal> TokenCache::find(std::string_view token, int64_t now_s)
 void TokenCache::insert(std::string_view token, const Principal& p, int64_t valid_from_s,
                         int64_t valid_until_s) {
   if (capacity_ == 0 || valid_until_s <= valid_from_s) return;
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (map_.size() >= capacity_ && map_.find(std::string(token)) == map_.end())
     map_.erase(map_.begin());
   map_.insert_or_assign(std::string(token), Entry{p, valid_from_s, valid_until_s});
 }
 
 size_t TokenCache::size() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   return map_.size();
 }
 

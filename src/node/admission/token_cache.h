@@ -13,12 +13,12 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
-#include <mutex>
 #include <optional>
 #include <string>
 #include <string_view>
 #include <unordered_map>
 
+#include "base/thread_annotations.h"
 #include "node/admission/authenticator.h"
 
 namespace rcan::node {
@@ -28,14 +28,14 @@ class TokenCache {
   explicit TokenCache(size_t capacity) : capacity_(capacity) {}
 
   // The principal of `token` when it was verified before and its time window holds at `now_s`.
-  std::optional<Principal> find(std::string_view token, int64_t now_s);
+  std::optional<Principal> find(std::string_view token, int64_t now_s) EXCLUDES(mu_);
   // Remembers a verified token, valid for now_s in [valid_from_s, valid_until_s).
   void insert(std::string_view token, const Principal& p, int64_t valid_from_s,
-              int64_t valid_until_s);
+              int64_t valid_until_s) EXCLUDES(mu_);
 
-  size_t size() const;
-  uint64_t hits() const {
-    std::lock_guard<std::mutex> lock(mu_);
+  size_t size() const EXCLUDES(mu_);
+  uint64_t hits() const EXCLUDES(mu_) {
+    MutexLock lock(mu_);
     return hits_;
   }
 
@@ -46,9 +46,9 @@ class TokenCache {
     int64_t valid_until_s = 0;
   };
   const size_t capacity_;
-  mutable std::mutex mu_;
-  std::unordered_map<std::string, Entry> map_;
-  uint64_t hits_ = 0;
+  mutable Mutex mu_;
+  std::unordered_map<std::string, Entry> map_ GUARDED_BY(mu_);
+  uint64_t hits_ GUARDED_BY(mu_) = 0;
 };
 
 }  // namespace rcan::node

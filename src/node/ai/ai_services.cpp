@@ -63,7 +63,7 @@ Status AiServices::start(Pipeline& pipeline) {
     items = std::vector<PendingItem>{};
   }
   {
-    std::lock_guard<std::mutex> lock(mu_);
+    MutexLock lock(mu_);
     for (auto& i : *items) pending_[i.message_id] = std::move(i);
   }
   if (!items->empty() || skipped)
@@ -79,7 +79,7 @@ Status AiServices::start(Pipeline& pipeline) {
 
 void AiServices::shutdown() {
   {
-    std::lock_guard<std::mutex> lock(mu_);
+    MutexLock lock(mu_);
     if (quit_) return;
     quit_ = true;
   }
@@ -250,7 +250,7 @@ void AiServices::hold(const std::shared_ptr<Context>& ctx, const config::HitlGat
     it.model = m.ai->model;
   }
   {
-    std::lock_guard<std::mutex> lock(mu_);
+    MutexLock lock(mu_);
     if (absorb_wall_step_locked(svc_.clock.mono_ms(), now)) persist_locked();
     pending_[it.message_id] = it;
   }
@@ -274,7 +274,7 @@ void AiServices::hold(const std::shared_ptr<Context>& ctx, const config::HitlGat
   // the command.
   auto job = [this, ctx, it, event, e = std::move(e)]() mutable {
     {
-      std::lock_guard<std::mutex> lock(mu_);
+      MutexLock lock(mu_);
       persist_locked();
     }
     svc_.write_audit(std::move(e));
@@ -322,13 +322,13 @@ void AiServices::notify_principal(const std::string& principal_key, json::Value 
 json::Value AiServices::pending_list() const {
   int64_t now = svc_.clock.wall_ms();
   json::Array arr;
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   for (const auto& [id, i] : pending_) arr.push_back(i.public_view(now));
   return json::Object{{"pending", arr}, {"count", static_cast<int64_t>(arr.size())}};
 }
 
 size_t AiServices::pending_count() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   return pending_.size();
 }
 
@@ -403,7 +403,7 @@ void AiServices::decide(const Principal& p, const AuthorizeRequest& request,
   const AuthorizeRequest* req = &request;
   std::optional<PendingItem> item;
   {
-    std::lock_guard<std::mutex> lock(mu_);
+    MutexLock lock(mu_);
     auto it = pending_.find(req->target);
     if (it == pending_.end())
       for (auto i = pending_.begin(); i != pending_.end(); ++i)
@@ -443,7 +443,7 @@ void AiServices::decide(const Principal& p, const AuthorizeRequest& request,
     return done(404, svc_.error(err, req->authorize_id));
   }
   {
-    std::lock_guard<std::mutex> lock(mu_);
+    MutexLock lock(mu_);
     if (!pending_.erase(item->message_id)) {
       Error err(ErrorCode::kNotFound, "the command was decided meanwhile", "payload.message_id");
       return done(404, svc_.error(err, req->authorize_id));
@@ -493,7 +493,7 @@ bool AiServices::absorb_wall_step_locked(int64_t now_mono_ms, int64_t now_wall_m
 }
 
 void AiServices::timer_loop() {
-  std::unique_lock<std::mutex> lock(mu_);
+  ReleasableMutexLock lock(mu_);
   while (!quit_) {
     int64_t now = svc_.clock.wall_ms();
     if (absorb_wall_step_locked(svc_.clock.mono_ms(), now)) persist_locked();
@@ -515,7 +515,7 @@ void AiServices::timer_loop() {
       lock.lock();
       continue;
     }
-    cv_.wait_for(lock, std::chrono::milliseconds(std::clamp<int64_t>(next - now, 1, 200)));
+    cv_.wait_for(mu_, std::chrono::milliseconds(std::clamp<int64_t>(next - now, 1, 200)));
   }
 }
 

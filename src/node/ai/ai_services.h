@@ -5,17 +5,16 @@
 #pragma once
 
 #include <array>
-#include <condition_variable>
 #include <cstdint>
 #include <functional>
 #include <map>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "base/thread_annotations.h"
 #include "base/worker.h"
 #include "config/config.h"
 #include "node/ai/hitl.h"
@@ -49,9 +48,9 @@ class AiServices {
 
   // Binds the node's pipeline, reloads held commands from the pending file (settling those
   // that expired while the node was down) and starts the timeout timer.
-  Status start(Pipeline& pipeline);
+  Status start(Pipeline& pipeline) EXCLUDES(mu_);
   // Stops the timer and the worker (held commands stay in the pending file).
-  void shutdown();
+  void shutdown() EXCLUDES(mu_);
 
   // --- confidence gates (§16.3)
   const config::ConfidenceGate* gate_for(const Context& ctx) const;
@@ -66,12 +65,12 @@ class AiServices {
   // Holds the command: persists it, audits HITL_PENDING, notifies, answers 202 (from the disk
   // worker, once the pending file holds it).
   void hold(const std::shared_ptr<Context>& ctx, const config::HitlGate& gate,
-            const std::string& action_type);
+            const std::string& action_type) EXCLUDES(mu_);
   // An AUTHORIZE from `p` (authenticated). `done` gets the answer for the authorizer.
   void authorize(const Principal& p, const json::Value& body, const std::string& transport,
                  const std::string& route, std::function<void(int status, json::Value body)> done);
-  json::Value pending_list() const;
-  size_t pending_count() const;
+  json::Value pending_list() const EXCLUDES(mu_);
+  size_t pending_count() const EXCLUDES(mu_);
 
   // --- thought log (§16.5)
   ThoughtLog& thoughts() { return thoughts_; }
@@ -94,29 +93,30 @@ class AiServices {
     PendingItem item;
   };
   void decide(const Principal& p, const AuthorizeRequest& req, const std::string& transport,
-              const std::string& route, const std::function<void(int, json::Value)>& done);
-  void timer_loop();
+              const std::string& route, const std::function<void(int, json::Value)>& done)
+      EXCLUDES(mu_);
+  void timer_loop() EXCLUDES(mu_);
   void settle_timeout(PendingItem item);
   void dispatch_held(const PendingItem& item, json::Object extra_detail, bool timeout_bypass,
                      std::function<void(Outcome)> done);
-  void persist_locked();
+  void persist_locked() REQUIRES(mu_);
   // Held commands time out on the monotonic clock: a wall-clock step since the last reading
   // shifts every deadline by the step (a step forward must not time out, or auto-allow, what
   // is waiting for its approver). Returns whether anything moved.
-  bool absorb_wall_step_locked(int64_t now_mono_ms, int64_t now_wall_ms);
-  int64_t anchor_mono_ms_ = -1;
-  int64_t anchor_wall_ms_ = 0;
+  bool absorb_wall_step_locked(int64_t now_mono_ms, int64_t now_wall_ms) REQUIRES(mu_);
   void post_webhooks(const PendingItem& item, const json::Value& event);
   std::shared_ptr<Context> rebuild(const PendingItem& item, Error& err);
 
   NodeServices& svc_;
   AiOptions opts_;
   ThoughtLog thoughts_;
-  Pipeline* pipeline_ = nullptr;
-  mutable std::mutex mu_;
-  std::condition_variable cv_;
-  std::map<std::string, PendingItem> pending_;
-  bool quit_ = false;
+  Pipeline* pipeline_ = nullptr;  // set by start(), before the timer
+  mutable Mutex mu_;
+  CondVar cv_;
+  std::map<std::string, PendingItem> pending_ GUARDED_BY(mu_);
+  bool quit_ GUARDED_BY(mu_) = false;
+  int64_t anchor_mono_ms_ GUARDED_BY(mu_) = -1;
+  int64_t anchor_wall_ms_ GUARDED_BY(mu_) = 0;
   std::thread timer_;
   Worker net_{2};   // layer calls and webhooks (may wait for their timeouts)
   Worker disk_{1};  // the pending file and audit look-ups, in order

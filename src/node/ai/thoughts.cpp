@@ -70,7 +70,7 @@ Thought thought_from_command(const Message& m, const json::Value* thought, int64
 }
 
 void ThoughtLog::put(Thought t) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   std::string id = t.id;
   auto it = by_id_.find(id);
   if (it != by_id_.end()) {
@@ -86,20 +86,20 @@ void ThoughtLog::put(Thought t) {
 }
 
 std::optional<Thought> ThoughtLog::get(const std::string& id) const {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   auto it = by_id_.find(id);
   if (it == by_id_.end()) return std::nullopt;
   return it->second;
 }
 
 void ThoughtLog::clear() {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   by_id_.clear();
   order_.clear();
 }
 
 size_t ThoughtLog::size() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   return by_id_.size();
 }
 

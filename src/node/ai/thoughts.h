@@ -8,11 +8,11 @@
 
 #include <cstdint>
 #include <deque>
-#include <mutex>
 #include <optional>
 #include <string>
 #include <unordered_map>
 
+#include "base/thread_annotations.h"
 #include "rcan/json.h"
 #include "rcan/message.h"
 
@@ -42,16 +42,16 @@ class ThoughtLog {
  public:
   explicit ThoughtLog(size_t capacity = 1000) : capacity_(capacity ? capacity : 1) {}
   // Stores (or replaces) a thought by id.
-  void put(Thought t);
-  std::optional<Thought> get(const std::string& id) const;
-  void clear();
-  size_t size() const;
+  void put(Thought t) EXCLUDES(mu_);
+  std::optional<Thought> get(const std::string& id) const EXCLUDES(mu_);
+  void clear() EXCLUDES(mu_);
+  size_t size() const EXCLUDES(mu_);
 
  private:
-  mutable std::mutex mu_;
+  mutable Mutex mu_;
   size_t capacity_;
-  std::deque<std::string> order_;
-  std::unordered_map<std::string, Thought> by_id_;
+  std::deque<std::string> order_ GUARDED_BY(mu_);
+  std::unordered_map<std::string, Thought> by_id_ GUARDED_BY(mu_);
 };
 
 }  // namespace rcan::node

@@ -118,13 +118,13 @@ void Node::control_start() {
                                                      {"timestamp_ms", svc_.clock.wall_ms()}}));
         save_control_state();
       });
-  std::lock_guard<std::mutex> lock(control_mu_);
+  MutexLock lock(control_mu_);
   last_control_state_ = std::string(control_state_name(svc_.sessions.state(svc_.clock.mono_ms())));
 }
 
 void Node::save_control_state() {
   if (svc_.settings.state_dir.empty()) return;
-  std::lock_guard<std::mutex> lock(save_mu_);
+  MutexLock lock(save_mu_);
   uint64_t v[4] = {svc_.sessions.version(), svc_.ownership.version(), svc_.consent.version(),
                    svc_.partition.version()};
   const char* names[4] = {"leases.json", "ownership.json", "consent.json", "credentials.json"};
@@ -227,7 +227,7 @@ void Node::announce_control_changes() {
   std::string now_state(control_state_name(svc_.sessions.state(svc_.clock.mono_ms())));
   bool changed = false;
   {
-    std::lock_guard<std::mutex> lock(control_mu_);
+    MutexLock lock(control_mu_);
     if (now_state != last_control_state_) {
       last_control_state_ = now_state;
       changed = true;

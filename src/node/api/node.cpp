@@ -21,17 +21,19 @@ namespace rcan::node {
 // ACK/ERROR/events/telemetry out, one JSON message per text frame.
 
 struct StreamState {
+  // Set by Node::open() before the stream is shared.
   std::shared_ptr<transport::StreamSink> sink;
-  std::mutex mu;
-  bool connected = false;
-  std::optional<Principal> principal;
   std::string upgrade_token;  // from the upgrade request, if any
   std::string stream_id;
-  bool telemetry = false;
-  int64_t telemetry_period_ms = 200;
-  int64_t next_telemetry_mono = 0;
   int64_t opened_mono = 0;
-  bool closed = false;
+
+  Mutex mu;
+  bool connected GUARDED_BY(mu) = false;
+  std::optional<Principal> principal GUARDED_BY(mu);
+  bool telemetry GUARDED_BY(mu) = false;
+  int64_t telemetry_period_ms GUARDED_BY(mu) = 200;
+  int64_t next_telemetry_mono GUARDED_BY(mu) = 0;
+  bool closed GUARDED_BY(mu) = false;
 };
 
 struct NodeStream final : public transport::StreamReceiver {
@@ -40,7 +42,7 @@ struct NodeStream final : public transport::StreamReceiver {
   void on_binary() override { st->sink->close(1003, "binary frames are not supported"); }
   void on_closed() override {
     {
-      std::lock_guard<std::mutex> lock(st->mu);
+      MutexLock lock(st->mu);
       st->closed = true;
     }
     node.unregister_stream(st);
@@ -64,7 +66,7 @@ void NodeStream::on_text(std::string text) {
   auto v = json::parse(text, po);
   bool connected;
   {
-    std::lock_guard<std::mutex> lock(st->mu);
+    MutexLock lock(st->mu);
     connected = st->connected;
   }
   if (!v.ok() || !v->is_object()) {
@@ -100,7 +102,7 @@ void NodeStream::on_text(std::string text) {
       return;
     }
     {
-      std::lock_guard<std::mutex> lock(st->mu);
+      MutexLock lock(st->mu);
       st->connected = true;
       st->principal = *p;
     }
@@ -131,7 +133,7 @@ void NodeStream::on_text(std::string text) {
       return;
     }
     {
-      std::lock_guard<std::mutex> lock(st->mu);
+      MutexLock lock(st->mu);
       st->telemetry = on;
       st->telemetry_period_ms = static_cast<int64_t>(1000.0 / hz);
       st->next_telemetry_mono = 0;
@@ -143,7 +145,7 @@ void NodeStream::on_text(std::string text) {
   if (t == "AUTHORIZE") {  // §16.4, answered on this stream (ai_routes.cpp)
     std::optional<Principal> who;
     {
-      std::lock_guard<std::mutex> lock(st->mu);
+      MutexLock lock(st->mu);
       who = st->principal;
     }
     auto state = st;
@@ -159,7 +161,7 @@ void NodeStream::on_text(std::string text) {
   in.remote = st->sink->remote_addr();
   in.received_mono_us = received_us;
   {
-    std::lock_guard<std::mutex> lock(st->mu);
+    MutexLock lock(st->mu);
     in.preauthenticated = st->principal;
   }
   auto state = st;
@@ -179,13 +181,13 @@ Node::Node(NodeServices& services)
     std::string text;  // serialised once, for the first stream that may see it
     std::vector<std::shared_ptr<StreamState>> copy;
     {
-      std::lock_guard<std::mutex> lock(streams_mu_);
+      MutexLock lock(streams_mu_);
       copy = streams_;
     }
     for (auto& st : copy) {
       bool admitted;
       {
-        std::lock_guard<std::mutex> lock(st->mu);
+        MutexLock lock(st->mu);
         admitted = st->connected && !st->closed &&
                    ev.audience.admits(st->principal ? &*st->principal : nullptr);
       }
@@ -245,14 +247,14 @@ void Node::start() {
 
 void Node::shutdown() {
   if (!running_.exchange(false)) return;
-  { std::lock_guard<std::mutex> wake(pump_mu_); }
+  { MutexLock wake(pump_mu_); }
   pump_cv_.notify_all();
   if (pump_.joinable()) pump_.join();
   svc_.partition.stop();
   save_control_state();
   std::vector<std::shared_ptr<StreamState>> copy;
   {
-    std::lock_guard<std::mutex> lock(streams_mu_);
+    MutexLock lock(streams_mu_);
     copy = streams_;
   }
   for (auto& st : copy) st->sink->close(1001, "node shutting down");
@@ -262,21 +264,21 @@ void Node::shutdown() {
 }
 
 size_t Node::stream_count() const {
-  std::lock_guard<std::mutex> lock(streams_mu_);
+  MutexLock lock(streams_mu_);
   return streams_.size();
 }
 
 void Node::register_stream(const std::shared_ptr<StreamState>& st) {
   {
-    std::lock_guard<std::mutex> lock(streams_mu_);
+    MutexLock lock(streams_mu_);
     streams_.push_back(st);
   }
-  { std::lock_guard<std::mutex> wake(pump_mu_); }
+  { MutexLock wake(pump_mu_); }
   pump_cv_.notify_all();  // telemetry and the CONNECT deadline start now, not at the next idle tick
 }
 
 void Node::unregister_stream(const std::shared_ptr<StreamState>& st) {
-  std::lock_guard<std::mutex> lock(streams_mu_);
+  MutexLock lock(streams_mu_);
   for (auto it = streams_.begin(); it != streams_.end(); ++it) {
     if (*it == st) {
       streams_.erase(it);
@@ -294,11 +296,11 @@ void Node::pump() {
     {
       bool idle;
       {
-        std::lock_guard<std::mutex> lock(streams_mu_);
+        MutexLock lock(streams_mu_);
         idle = streams_.empty();
       }
-      std::unique_lock<std::mutex> lk(pump_mu_);
-      pump_cv_.wait_for(lk, std::chrono::milliseconds(idle ? 100 : 10));
+      MutexLock lk(pump_mu_);
+      pump_cv_.wait_for(pump_mu_, std::chrono::milliseconds(idle ? 100 : 10));
     }
     if (!running_.load()) break;
     int64_t now = svc_.clock.mono_ms();
@@ -308,14 +310,14 @@ void Node::pump() {
     }
     std::vector<std::shared_ptr<StreamState>> copy;
     {
-      std::lock_guard<std::mutex> lock(streams_mu_);
+      MutexLock lock(streams_mu_);
       copy = streams_;
     }
     std::string telemetry;
     for (auto& st : copy) {
       bool send = false, handshake_timeout = false;
       {
-        std::lock_guard<std::mutex> lock(st->mu);
+        MutexLock lock(st->mu);
         if (!st->connected && now - st->opened_mono > 10'000) handshake_timeout = true;
         if (st->connected && st->telemetry && now >= st->next_telemetry_mono) {
           send = true;
@@ -381,6 +383,7 @@ std::unique_ptr<transport::StreamReceiver> Node::open(const transport::HttpReque
       refusal.body = json::dump(svc_.error(p.error()));
       return nullptr;
     }
+    MutexLock lock(st->mu);
     st->connected = true;
     st->principal = *p;
     st->telemetry = true;

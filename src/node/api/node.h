@@ -4,13 +4,12 @@
 #pragma once
 
 #include <atomic>
-#include <condition_variable>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "base/thread_annotations.h"
 #include "base/worker.h"
 #include "node/api/route_table.h"
 #include "node/pipeline/pipeline.h"
@@ -32,7 +31,7 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   // Starts the telemetry pump and writes the SYSTEM_START audit record.
   void start();
   // Stops the pump, closes streams (1001) and writes SYSTEM_STOP (waits for it).
-  void shutdown();
+  void shutdown() EXCLUDES(streams_mu_, pump_mu_);
 
   void handle(transport::HttpRequest req, Respond respond) override;
   void answer_waited(int64_t us) override;
@@ -48,7 +47,7 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
 
   NodeServices& services() { return svc_; }
   Pipeline& pipeline() { return pipeline_; }
-  size_t stream_count() const;
+  size_t stream_count() const EXCLUDES(streams_mu_);
 
   // Called by the safety core's event callback (deadman, watchdog): audit + notify streams.
   void on_safety_event(const std::string& type, const std::string& session_id, int64_t elapsed_ms,
@@ -82,35 +81,35 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   Result<Principal> route_principal(const transport::HttpRequest& req, const json::Value& body,
                                     const std::string& route, const std::string& denied_event,
                                     Role min_role, std::string_view scope);
-  void control_start();
-  void control_tick();
+  void control_start() EXCLUDES(control_mu_);
+  void control_tick() EXCLUDES(control_mu_, save_mu_);
   void announce_control_changes();
-  void save_control_state();
+  void save_control_state() EXCLUDES(save_mu_);
   void publish_to(const std::string& principal_key, json::Object ev);
   void audit_listing(transport::HttpRequest& req, Respond& respond);
   void audit_export(transport::HttpRequest& req, Respond& respond);
   Result<Principal> bearer_principal(const transport::HttpRequest& req) const;
-  void pump();
+  void pump() EXCLUDES(streams_mu_, pump_mu_);
   void stream_text(const std::shared_ptr<StreamState>& st, std::string text);
-  void register_stream(const std::shared_ptr<StreamState>& st);
-  void unregister_stream(const std::shared_ptr<StreamState>& st);
+  void register_stream(const std::shared_ptr<StreamState>& st) EXCLUDES(streams_mu_, pump_mu_);
+  void unregister_stream(const std::shared_ptr<StreamState>& st) EXCLUDES(streams_mu_);
 
   NodeServices& svc_;
   Pipeline pipeline_;
   RouteTable routes_;
   Histogram* respond_timer_;  // stage "respond": answer handed over → its write begins
   Worker worker_{1};
-  mutable std::mutex streams_mu_;
-  std::vector<std::shared_ptr<StreamState>> streams_;
+  mutable Mutex streams_mu_;
+  std::vector<std::shared_ptr<StreamState>> streams_ GUARDED_BY(streams_mu_);
   std::atomic<bool> running_{false};
   std::thread pump_;
-  std::mutex pump_mu_;
-  std::condition_variable pump_cv_;  // wakes the pump on a new stream and on shutdown
+  Mutex pump_mu_;
+  CondVar pump_cv_;  // wakes the pump on a new stream and on shutdown
   uint64_t event_sub_ = 0;
-  std::mutex control_mu_;
-  std::string last_control_state_;
-  std::mutex save_mu_;
-  uint64_t saved_versions_[4] = {0, 0, 0, 0};
+  Mutex control_mu_;
+  std::string last_control_state_ GUARDED_BY(control_mu_);
+  Mutex save_mu_;
+  uint64_t saved_versions_[4] GUARDED_BY(save_mu_) = {0, 0, 0, 0};
 };
 
 }  // namespace rcan::node

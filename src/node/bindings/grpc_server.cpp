@@ -7,12 +7,12 @@
 #include <atomic>
 #include <deque>
 #include <fstream>
-#include <mutex>
 #include <optional>
 #include <set>
 #include <sstream>
 
 #include "base/log.h"
+#include "base/thread_annotations.h"
 #include "node/api/node.h"
 #include "rcan.grpc.pb.h"
 #include "rcan/errors.h"
@@ -96,10 +96,10 @@ Result<std::string> read_file(const std::string& path) {
 class StreamReactor;
 
 // What outlives a stream reactor: callbacks (pipeline answers, events) reach the reactor
-// only through this link, and only while `r` is set (cleared in OnDone, under `mu`).
+// only through this link, and only while `r` is set (cleared in OnDone).
 struct StreamLink {
-  std::mutex mu;
-  StreamReactor* r = nullptr;
+  Mutex mu;
+  StreamReactor* r GUARDED_BY(mu) = nullptr;
 };
 
 struct GrpcServer::Impl {
@@ -111,10 +111,10 @@ struct GrpcServer::Impl {
   std::unique_ptr<v1::Rcan::CallbackService> service;
   std::atomic<bool> stopping{false};
   std::atomic<uint64_t> calls_total{0}, streams_open{0}, streams_total{0}, streams_refused{0};
-  std::mutex links_mu;
-  std::set<std::shared_ptr<StreamLink>> links;
-  std::mutex stop_mu;
-  bool stopped = false;
+  Mutex links_mu;
+  std::set<std::shared_ptr<StreamLink>> links GUARDED_BY(links_mu);
+  Mutex stop_mu;
+  bool stopped GUARDED_BY(stop_mu) = false;
 };
 
 class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMessage> {
@@ -145,8 +145,9 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
         if (!ev.audience.admits(&who)) return;  // another principal's event
         auto l = weak.lock();
         if (!l) return;
-        std::lock_guard<std::mutex> lock(l->mu);
+        MutexLock lock(l->mu);
         if (!l->r) return;
+        l->r->link_->mu.assert_held();  // the same mutex: a reactor's link_ is `l` for its life
         RCANMessage m;
         transport::json_to_grpc(ev.body, m);
         l->r->enqueue(std::move(m));
@@ -159,7 +160,7 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
   void OnReadDone(bool ok) override {
     if (!ok) {
       {
-        std::lock_guard<std::mutex> lock(mu_);
+        MutexLock lock(mu_);
         reads_done_ = true;
       }
       try_finish();
@@ -167,14 +168,14 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
     }
     handle(in_);
     {
-      std::lock_guard<std::mutex> lock(mu_);
+      MutexLock lock(mu_);
       if (final_) {
         reads_done_ = true;
       }
     }
     bool more;
     {
-      std::lock_guard<std::mutex> lock(mu_);
+      MutexLock lock(mu_);
       more = !reads_done_;
     }
     if (more)
@@ -186,7 +187,7 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
   void OnWriteDone(bool ok) override {
     const RCANMessage* next = nullptr;
     {
-      std::lock_guard<std::mutex> lock(mu_);
+      MutexLock lock(mu_);
       if (!q_.empty()) q_.pop_front();
       if (!ok) {
         q_.clear();  // the client is gone; the pending read ends too
@@ -207,12 +208,12 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
 
   void OnDone() override {
     {
-      std::lock_guard<std::mutex> lock(link_->mu);
+      MutexLock lock(link_->mu);
       link_->r = nullptr;
     }
     if (event_sub_) impl_.svc.events.unsubscribe(event_sub_);
     {
-      std::lock_guard<std::mutex> lock(impl_.links_mu);
+      MutexLock lock(impl_.links_mu);
       impl_.links.erase(link_);
     }
     impl_.streams_open.fetch_sub(1);
@@ -226,11 +227,11 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
     delete this;
   }
 
-  // Thread-safe (callers hold link_->mu): queue one message for the client.
-  void enqueue(RCANMessage m) {
+  // Queues one message for the client.
+  void enqueue(RCANMessage m) REQUIRES(link_->mu) EXCLUDES(mu_) {
     const RCANMessage* start = nullptr;
     {
-      std::lock_guard<std::mutex> lock(mu_);
+      MutexLock lock(mu_);
       if (final_ || broken_) return;
       if (q_.size() >= impl_.opt.stream_send_queue) {
         q_.clear();
@@ -251,9 +252,9 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
   }
 
   // Ends the stream with `s` once the write in progress is done (shutdown).
-  void end(grpc::Status s) {
+  void end(grpc::Status s) EXCLUDES(mu_) {
     {
-      std::lock_guard<std::mutex> lock(mu_);
+      MutexLock lock(mu_);
       if (final_) return;
       final_ = std::move(s);
       q_.clear();
@@ -261,21 +262,21 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
     try_finish();
   }
 
-  void answer(const Outcome& out) {
+  void answer(const Outcome& out) REQUIRES(link_->mu) EXCLUDES(mu_) {
     impl_.svc.metrics.count_request(kStreamRoute, out.status);
     RCANMessage m;
     transport::json_to_grpc(out.body, m);
     enqueue(std::move(m));
     {
-      std::lock_guard<std::mutex> lock(mu_);
+      MutexLock lock(mu_);
       --pending_;
     }
     try_finish();
   }
 
  private:
-  void register_link() {
-    std::lock_guard<std::mutex> lock(impl_.links_mu);
+  void register_link() EXCLUDES(impl_.links_mu) {
+    MutexLock lock(impl_.links_mu);
     impl_.links.insert(link_);
   }
 
@@ -286,7 +287,7 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
       impl_.svc.metrics.count_request(kStreamRoute, http_status(body.error().code));
       RCANMessage m;
       transport::json_to_grpc(svc.error(body.error(), msg.message_id().substr(0, 64)), m);
-      std::lock_guard<std::mutex> lock(link_->mu);
+      MutexLock lock(link_->mu);
       enqueue(std::move(m));
       return;
     }
@@ -298,24 +299,26 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
     in.remote = ctx_->peer();
     in.preauthenticated = principal_;
     {
-      std::lock_guard<std::mutex> lock(mu_);
+      MutexLock lock(mu_);
       ++pending_;
     }
     std::shared_ptr<StreamLink> link = link_;
     std::string id = msg.message_id().substr(0, 64);
     impl_.node.submit(std::move(in), [link, id](Outcome out) {
       fill_reply_to(out, id);
-      std::lock_guard<std::mutex> lock(link->mu);
-      if (link->r) link->r->answer(out);
+      MutexLock lock(link->mu);
+      if (!link->r) return;
+      link->r->link_->mu.assert_held();  // the same mutex: a reactor's link_ is `link`
+      link->r->answer(out);
     });
   }
 
   // Finishes once: at the end of the client's messages with every answer written, or at
   // once (after the write in progress) when the stream was ended.
-  void try_finish() {
+  void try_finish() EXCLUDES(mu_) {
     grpc::Status s;
     {
-      std::lock_guard<std::mutex> lock(mu_);
+      MutexLock lock(mu_);
       if (finished_ || writing_) return;
       bool natural = reads_done_ && pending_ == 0 && q_.empty();
       if (!final_ && !natural && !broken_) return;
@@ -334,14 +337,14 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
   std::optional<Principal> principal_;
   uint64_t event_sub_ = 0;
   RCANMessage in_;
-  std::mutex mu_;
-  std::deque<RCANMessage> q_;
-  bool writing_ = false;
-  bool reads_done_ = false;
-  bool broken_ = false;
-  bool finished_ = false;
-  int pending_ = 0;
-  std::optional<grpc::Status> final_;
+  Mutex mu_;
+  std::deque<RCANMessage> q_ GUARDED_BY(mu_);
+  bool writing_ GUARDED_BY(mu_) = false;
+  bool reads_done_ GUARDED_BY(mu_) = false;
+  bool broken_ GUARDED_BY(mu_) = false;
+  bool finished_ GUARDED_BY(mu_) = false;
+  int pending_ GUARDED_BY(mu_) = 0;
+  std::optional<grpc::Status> final_ GUARDED_BY(mu_);
 };
 
 namespace {
@@ -471,7 +474,7 @@ Result<uint16_t> GrpcServer::start() {
 
 void GrpcServer::stop(int drain_ms) {
   Impl& im = *impl_;
-  std::lock_guard<std::mutex> lock(im.stop_mu);
+  MutexLock lock(im.stop_mu);
   if (im.stopped || !im.server) {
     im.stopped = true;
     return;
@@ -480,11 +483,11 @@ void GrpcServer::stop(int drain_ms) {
   im.stopping.store(true);
   std::vector<std::shared_ptr<StreamLink>> links;
   {
-    std::lock_guard<std::mutex> l(im.links_mu);
+    MutexLock l(im.links_mu);
     for (const auto& each : im.links) links.push_back(each);
   }
   for (auto& link : links) {
-    std::lock_guard<std::mutex> l(link->mu);
+    MutexLock l(link->mu);
     if (link->r) link->r->end(grpc::Status(grpc::StatusCode::UNAVAILABLE, "node shutting down"));
   }
   im.server->Shutdown(std::chrono::system_clock::now() +

@@ -164,7 +164,7 @@ Status MqttNode::start() {
 
 void MqttNode::stop() {
   if (!running_.exchange(false)) return;
-  { std::lock_guard<std::mutex> lk(loop_mu_); }
+  { MutexLock lk(loop_mu_); }
   loop_cv_.notify_all();
   if (loop_.joinable()) loop_.join();
   svc_.events.unsubscribe(event_sub_);
@@ -282,13 +282,11 @@ void MqttNode::submit(const json::Value& body, const std::string& route,
       std::string cmd = p != nullptr ? str_field(*p, "command") : std::string();
       if (!cmd.empty()) {
         {
-          std::lock_guard<std::mutex> lk(mu_);
+          MutexLock lk(mu_);
           pending_.push_back(
               Pending{reply_topic, str_field(b, "reply_to"), cmd, svc_.clock.mono_ms()});
         }
-        {
-          std::lock_guard<std::mutex> wake(loop_mu_);
-        }  // the loop is waiting, or sees pending_ next
+        { MutexLock wake(loop_mu_); }  // the loop is waiting, or sees pending_ next
         loop_cv_.notify_all();
       }
     }
@@ -300,20 +298,20 @@ void MqttNode::loop() {
   const int64_t telemetry_period =
       opts_.mqtt.telemetry_hz > 0 ? static_cast<int64_t>(1000 / opts_.mqtt.telemetry_hz) : 0;
   int64_t last_telemetry = 0;
-  std::unique_lock<std::mutex> lk(loop_mu_);
+  MutexLock lk(loop_mu_);
   while (running_.load()) {
     // Wake often only while there is something to watch: a motion to complete (20 ms), the
     // swarm's heartbeat, telemetry, new audit records; otherwise once a second.
     int64_t wait_ms = 1000;
     {
-      std::lock_guard<std::mutex> plk(mu_);
+      MutexLock plk(mu_);
       if (!pending_.empty()) wait_ms = 20;
     }
     if (swarm_)
       wait_ms = std::min<int64_t>(wait_ms, std::max<int64_t>(10, opts_.swarm.heartbeat_ms / 4));
     if (telemetry_period > 0) wait_ms = std::min<int64_t>(wait_ms, telemetry_period);
     if (opts_.mqtt.publish_audit) wait_ms = std::min<int64_t>(wait_ms, 100);
-    loop_cv_.wait_for(lk, std::chrono::milliseconds(wait_ms));
+    loop_cv_.wait_for(loop_mu_, std::chrono::milliseconds(wait_ms));
     if (!running_.load()) break;
     int64_t now = svc_.clock.mono_ms();
     tick_completions();
@@ -330,7 +328,7 @@ void MqttNode::loop() {
 void MqttNode::tick_completions() {
   std::vector<Pending> done;
   {
-    std::lock_guard<std::mutex> lk(mu_);
+    MutexLock lk(mu_);
     if (pending_.empty()) return;
     json::Value tel = svc_.act.telemetry();
     const json::Value* stopped = field(tel, "stopped");

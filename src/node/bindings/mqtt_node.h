@@ -11,15 +11,14 @@
 #pragma once
 
 #include <atomic>
-#include <condition_variable>
 #include <cstdint>
 #include <map>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "base/thread_annotations.h"
 #include "config/fleet_config.h"
 #include "rcan/mqtt_topics.h"
 #include "rcan/result.h"
@@ -59,7 +58,7 @@ class MqttNode {
   // publishing thread. Errors: bad topics, TLS setup.
   Status start();
   // Publishes "offline" (retained), disconnects, joins the threads. Idempotent.
-  void stop();
+  void stop() EXCLUDES(loop_mu_);
 
   bool connected() const;
   const mqtt::RobotTopics& robot() const { return robot_; }
@@ -74,8 +73,8 @@ class MqttNode {
               const std::string& fleet_id, const std::string& fleet_mode, bool standing_estop);
   void publish_json(const std::string& topic, const json::Value& v, int qos, bool retain);
   void publish_status(bool online, const std::string& reason);
-  void loop();
-  void tick_completions();
+  void loop() EXCLUDES(loop_mu_, mu_);
+  void tick_completions() EXCLUDES(mu_);
   void tick_audit();
 
   Node& node_;
@@ -93,14 +92,15 @@ class MqttNode {
     std::string command;
     int64_t since_mono_ms = 0;
   };
-  std::mutex mu_;
-  std::vector<Pending> pending_;  // motions acknowledged, completion not yet published
-  uint64_t next_audit_seq_ = 0;
+  Mutex mu_;
+  // Motions acknowledged, completion not yet published.
+  std::vector<Pending> pending_ GUARDED_BY(mu_);
+  uint64_t next_audit_seq_ = 0;  // the loop's (set by start() before it runs)
   uint64_t event_sub_ = 0;
 
   std::atomic<bool> running_{false};
-  std::mutex loop_mu_;
-  std::condition_variable loop_cv_;
+  Mutex loop_mu_;
+  CondVar loop_cv_;
   std::thread loop_;
 };
 

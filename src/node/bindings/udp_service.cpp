@@ -11,10 +11,10 @@
 #include <cerrno>
 #include <cstring>
 #include <map>
-#include <mutex>
 #include <unordered_map>
 
 #include "base/log.h"
+#include "base/thread_annotations.h"
 #include "node/services/node_services.h"
 #include "rcan/encoding.h"
 #include "rcan/errors.h"
@@ -76,19 +76,21 @@ struct UdpService::Impl {
   std::atomic<bool> running{false};
   std::shared_ptr<Counters> counters = std::make_shared<Counters>();
 
-  std::mutex mu;
-  std::map<udp::KeyId, KeyEntry> keys;
-  std::map<std::string, udp::KeyId> by_session;
-  std::unordered_map<std::string, Bucket> buckets;
-  Bucket global;
-  int64_t last_sweep_ms = 0;
+  Mutex mu;
+  std::map<udp::KeyId, KeyEntry> keys GUARDED_BY(mu);
+  std::map<std::string, udp::KeyId> by_session GUARDED_BY(mu);
+  std::unordered_map<std::string, Bucket> buckets GUARDED_BY(mu);
+  Bucket global GUARDED_BY(mu);
+  int64_t last_sweep_ms = 0;  // the receive thread's
 
-  void loop();
-  void on_datagram(const uint8_t* data, size_t n, const sockaddr_storage& from, socklen_t from_len);
-  void heartbeat(std::span<const uint8_t> bytes, const udp::Datagram& d);
-  void discover(const udp::Datagram& d, const sockaddr_storage& from, socklen_t from_len);
-  void sweep();
-  json::Object grant(const std::string& session_id);
+  void loop() EXCLUDES(mu);
+  void on_datagram(const uint8_t* data, size_t n, const sockaddr_storage& from, socklen_t from_len)
+      EXCLUDES(mu);
+  void heartbeat(std::span<const uint8_t> bytes, const udp::Datagram& d) EXCLUDES(mu);
+  void discover(const udp::Datagram& d, const sockaddr_storage& from, socklen_t from_len)
+      EXCLUDES(mu);
+  void sweep() EXCLUDES(mu);
+  json::Object grant(const std::string& session_id) EXCLUDES(mu);
 };
 
 void UdpService::Impl::loop() {
@@ -132,7 +134,7 @@ void UdpService::Impl::heartbeat(std::span<const uint8_t> bytes, const udp::Data
   bool first = false;
   uint64_t seq = d.seq;
   {
-    std::lock_guard<std::mutex> lock(mu);
+    MutexLock lock(mu);
     auto it = keys.find(d.key_id);
     if (it == keys.end() || !udp::verify_heartbeat(bytes, it->second.key)) {
       counters->hb_forged.fetch_add(1);
@@ -149,7 +151,7 @@ void UdpService::Impl::heartbeat(std::span<const uint8_t> bytes, const udp::Data
   auto session = svc.sessions.find(session_id, svc.clock.mono_ms());
   if (!session) {
     counters->hb_stale.fetch_add(1);
-    std::lock_guard<std::mutex> lock(mu);
+    MutexLock lock(mu);
     keys.erase(d.key_id);
     by_session.erase(session_id);
     return;
@@ -158,7 +160,7 @@ void UdpService::Impl::heartbeat(std::span<const uint8_t> bytes, const udp::Data
   counters->hb_ok.fetch_add(1);
   if (first) {
     {
-      std::lock_guard<std::mutex> lock(mu);
+      MutexLock lock(mu);
       if (auto it = keys.find(d.key_id); it != keys.end()) it->second.audited = true;
     }
     // The first heartbeat of a key is audited; later ones are counted (rcan_udp_heartbeats_*).
@@ -179,7 +181,7 @@ void UdpService::Impl::discover(const udp::Datagram& d, const sockaddr_storage& 
   std::string ip = addr_ip(from);
   bool allowed;
   {
-    std::lock_guard<std::mutex> lock(mu);
+    MutexLock lock(mu);
     if (buckets.size() >= 4096 && !buckets.count(ip)) {
       for (auto it = buckets.begin(); it != buckets.end();)
         it = now - it->second.last_ms > 60'000 ? buckets.erase(it) : std::next(it);
@@ -207,13 +209,13 @@ void UdpService::Impl::discover(const udp::Datagram& d, const sockaddr_storage& 
 void UdpService::Impl::sweep() {
   std::vector<std::pair<udp::KeyId, std::string>> all;
   {
-    std::lock_guard<std::mutex> lock(mu);
+    MutexLock lock(mu);
     for (const auto& [id, k] : keys) all.emplace_back(id, k.session_id);
   }
   int64_t now = svc.clock.mono_ms();
   for (const auto& [id, sid] : all) {
     if (svc.sessions.find(sid, now)) continue;
-    std::lock_guard<std::mutex> lock(mu);
+    MutexLock lock(mu);
     keys.erase(id);
     if (auto it = by_session.find(sid); it != by_session.end() && it->second == id)
       by_session.erase(it);
@@ -225,7 +227,7 @@ json::Object UdpService::Impl::grant(const std::string& session_id) {
   udp::Key key{};
   if (!random_bytes(id.data(), id.size()) || !random_bytes(key.data(), key.size())) return {};
   {
-    std::lock_guard<std::mutex> lock(mu);
+    MutexLock lock(mu);
     if (auto it = by_session.find(session_id); it != by_session.end()) keys.erase(it->second);
     KeyEntry e;
     e.session_id = session_id;
@@ -337,7 +339,7 @@ void UdpService::stop() {
   if (im.thread.joinable()) im.thread.join();
   if (im.fd >= 0) ::close(im.fd);
   im.fd = -1;
-  std::lock_guard<std::mutex> lock(im.mu);
+  MutexLock lock(im.mu);
   for (auto& [id, k] : im.keys) secure_wipe(k.key.data(), k.key.size());
   im.keys.clear();
   im.by_session.clear();

@@ -57,7 +57,7 @@ json::Value consent_notification(const ConsentRequest& r, const std::string& rob
 }
 
 Result<ConsentRequest> ConsentBook::add(ConsentRequest r, int64_t now_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   size_t pending = 0;
   for (const auto& x : items_)
     if (x.status == "PENDING") ++pending;
@@ -80,7 +80,7 @@ Result<ConsentRequest> ConsentBook::add(ConsentRequest r, int64_t now_ms) {
 }
 
 Result<ConsentRequest> ConsentBook::get(const std::string& id) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   for (const auto& x : items_)
     if (x.id == id) return x;
   return Error(ErrorCode::kNotFound, "no consent request " + id.substr(0, 64), "consent_id");
@@ -89,7 +89,7 @@ Result<ConsentRequest> ConsentBook::get(const std::string& id) {
 Result<ConsentRequest> ConsentBook::decide(const std::string& id, bool grant, const std::string& by,
                                            const std::string& kind, const std::string& lease_id,
                                            int64_t now_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   for (auto& x : items_) {
     if (x.id != id) continue;
     if (x.status == "PENDING" && now_ms >= x.expires_ms) {
@@ -113,7 +113,7 @@ Result<ConsentRequest> ConsentBook::decide(const std::string& id, bool grant, co
 }
 
 std::vector<ConsentRequest> ConsentBook::expire(int64_t now_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   std::vector<ConsentRequest> out;
   for (auto& x : items_)
     if (x.status == "PENDING" && now_ms >= x.expires_ms) {
@@ -125,18 +125,18 @@ std::vector<ConsentRequest> ConsentBook::expire(int64_t now_ms) {
 }
 
 std::vector<ConsentRequest> ConsentBook::list() {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   return items_;
 }
 
 void ConsentBook::clear() {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   items_.clear();
   ++version_;
 }
 
 json::Value ConsentBook::persist_json() {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   json::Array a;
   for (const auto& x : items_) a.push_back(x.to_json());
   return json::Object{{"requests", a}};
@@ -145,7 +145,7 @@ json::Value ConsentBook::persist_json() {
 void ConsentBook::load_json(const json::Value& v) {
   const json::Value* a = v.get("requests");
   if (!a || !a->is_array()) return;
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   items_.clear();
   for (const auto& e : a->as_array()) {
     if (!e.is_object()) continue;
@@ -175,7 +175,7 @@ void ConsentBook::load_json(const json::Value& v) {
 }
 
 uint64_t ConsentBook::version() {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   return version_;
 }
 

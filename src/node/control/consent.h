@@ -5,10 +5,10 @@
 #pragma once
 
 #include <cstdint>
-#include <mutex>
 #include <string>
 #include <vector>
 
+#include "base/thread_annotations.h"
 #include "rcan/json.h"
 #include "rcan/result.h"
 
@@ -40,26 +40,29 @@ json::Value consent_notification(const ConsentRequest& r, const std::string& rob
 
 class ConsentBook {
  public:
-  void set_pending_ttl_ms(int64_t ms) { ttl_ms_ = ms; }
+  void set_pending_ttl_ms(int64_t ms) EXCLUDES(mu_) {
+    MutexLock lock(mu_);
+    ttl_ms_ = ms;
+  }
   // Errors: CONTROL_CONFLICT when too many are pending.
-  Result<ConsentRequest> add(ConsentRequest r, int64_t now_ms);
-  Result<ConsentRequest> get(const std::string& id);
+  Result<ConsentRequest> add(ConsentRequest r, int64_t now_ms) EXCLUDES(mu_);
+  Result<ConsentRequest> get(const std::string& id) EXCLUDES(mu_);
   // Errors: NOT_FOUND, CONTROL_CONFLICT (already decided), SESSION_EXPIRED.
   Result<ConsentRequest> decide(const std::string& id, bool grant, const std::string& by,
                                 const std::string& kind, const std::string& lease_id,
-                                int64_t now_ms);
-  std::vector<ConsentRequest> expire(int64_t now_ms);
-  std::vector<ConsentRequest> list();
-  void clear();
-  json::Value persist_json();
-  void load_json(const json::Value& v);
-  uint64_t version();
+                                int64_t now_ms) EXCLUDES(mu_);
+  std::vector<ConsentRequest> expire(int64_t now_ms) EXCLUDES(mu_);
+  std::vector<ConsentRequest> list() EXCLUDES(mu_);
+  void clear() EXCLUDES(mu_);
+  json::Value persist_json() EXCLUDES(mu_);
+  void load_json(const json::Value& v) EXCLUDES(mu_);
+  uint64_t version() EXCLUDES(mu_);
 
  private:
-  std::mutex mu_;
-  std::vector<ConsentRequest> items_;
-  int64_t ttl_ms_ = 24 * 3600 * 1000LL;
-  uint64_t version_ = 0;
+  Mutex mu_;
+  std::vector<ConsentRequest> items_ GUARDED_BY(mu_);
+  int64_t ttl_ms_ GUARDED_BY(mu_) = 24 * 3600 * 1000LL;
+  uint64_t version_ GUARDED_BY(mu_) = 0;
 };
 
 }  // namespace rcan::node

@@ -21,7 +21,7 @@ Result<PendingTransfer> Ownership::request(const Principal& p, const std::string
   if (to_sub.empty() || to_sub.size() > 256)
     return Error(ErrorCode::kSchemaValidationFailed, "new_owner (a user id) is required",
                  "new_owner", "missing_field");
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (!is_owner_locked(p))
     return Error(ErrorCode::kInsufficientPrivileges, "only the robot's owner may transfer it",
                  "role");
@@ -39,7 +39,7 @@ Result<PendingTransfer> Ownership::request(const Principal& p, const std::string
 
 Result<PendingTransfer> Ownership::accept(const Principal& p, const std::string& transfer_id,
                                           const std::string& agreement, int64_t now_wall_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (!pending_ || (!transfer_id.empty() && transfer_id != pending_->id))
     return Error(ErrorCode::kNotFound, "no such pending transfer", "transfer_id");
   if (now_wall_ms >= pending_->expires_ms)
@@ -62,7 +62,7 @@ Result<PendingTransfer> Ownership::accept(const Principal& p, const std::string&
 }
 
 Result<PendingTransfer> Ownership::cancel(const Principal& p, int64_t now_wall_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (!pending_ || now_wall_ms >= pending_->expires_ms)
     return Error(ErrorCode::kNotFound, "no pending transfer", "transfer_id");
   if (!is_owner_locked(p) && p.sub != pending_->to_sub)
@@ -75,7 +75,7 @@ Result<PendingTransfer> Ownership::cancel(const Principal& p, int64_t now_wall_m
 }
 
 std::optional<PendingTransfer> Ownership::expire(int64_t now_wall_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (!pending_ || now_wall_ms < pending_->expires_ms) return std::nullopt;
   PendingTransfer t = *pending_;
   pending_.reset();
@@ -84,50 +84,50 @@ std::optional<PendingTransfer> Ownership::expire(int64_t now_wall_ms) {
 }
 
 void Ownership::cap(Principal& p) const {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (former_owners_.count(p.sub) && role_level(p.role) < role_level(Role::kCreator))
     p.role = Role::kGuest;
 }
 
 void Ownership::note_user(const std::string& sub) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (users_.size() < 10000 && users_.insert(sub).second) ++version_;
 }
 
 void Ownership::on_clear(std::function<void()> fn) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   clear_hooks_.push_back(std::move(fn));
 }
 
 void Ownership::run_clear_hooks() {
   std::vector<std::function<void()>> hooks;
   {
-    std::lock_guard<std::mutex> lock(mu_);
+    MutexLock lock(mu_);
     hooks = clear_hooks_;
   }
   for (auto& h : hooks) h();
 }
 
 OwnershipState Ownership::state(int64_t now_wall_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (pending_ && now_wall_ms >= pending_->expires_ms)
     return OwnershipState::kOwned;  // tick() records it
   return state_;
 }
 
 std::string Ownership::owner() {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   return owner_sub_;
 }
 
 std::optional<PendingTransfer> Ownership::pending() {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   return pending_;
 }
 
 json::Value Ownership::to_json(int64_t now_wall_ms, bool detailed) {
   OwnershipState st = state(now_wall_ms);
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   json::Object o{{"state", std::string(ownership_state_name(st))},
                  {"owner", owner_sub_.empty() ? json::Value() : json::Value(owner_sub_)},
                  {"users", static_cast<int64_t>(users_.size())}};
@@ -147,7 +147,7 @@ json::Value Ownership::to_json(int64_t now_wall_ms, bool detailed) {
 }
 
 json::Value Ownership::persist_json() {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   json::Array formers, users;
   for (const auto& f : former_owners_) formers.emplace_back(f);
   for (const auto& u : users_) users.emplace_back(u);
@@ -163,7 +163,7 @@ json::Value Ownership::persist_json() {
 }
 
 void Ownership::load_json(const json::Value& v) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   owner_sub_ = json::string_field(v, "owner");
   former_owners_.clear();
   users_.clear();
@@ -188,7 +188,7 @@ void Ownership::load_json(const json::Value& v) {
 }
 
 uint64_t Ownership::version() {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   return version_;
 }
 

@@ -12,12 +12,12 @@
 
 #include <cstdint>
 #include <functional>
-#include <mutex>
 #include <optional>
 #include <set>
 #include <string>
 #include <vector>
 
+#include "base/thread_annotations.h"
 #include "node/admission/authenticator.h"
 #include "node/control/control_machine.h"
 #include "rcan/json.h"
@@ -36,52 +36,61 @@ struct PendingTransfer {
 
 class Ownership {
  public:
-  void set_window_ms(int64_t ms) { window_ms_ = ms; }
-  int64_t window_ms() const { return window_ms_; }
+  void set_window_ms(int64_t ms) EXCLUDES(mu_) {
+    MutexLock lock(mu_);
+    window_ms_ = ms;
+  }
+  int64_t window_ms() const EXCLUDES(mu_) {
+    MutexLock lock(mu_);
+    return window_ms_;
+  }
 
   // Errors: INSUFFICIENT_PRIVILEGES (not the owner), CONTROL_CONFLICT (one is pending),
   // SCHEMA_VALIDATION_FAILED.
   Result<PendingTransfer> request(const Principal& p, const std::string& to_sub,
-                                  const std::string& note, int64_t now_wall_ms);
+                                  const std::string& note, int64_t now_wall_ms) EXCLUDES(mu_);
   // The named new owner accepts with an agreement reference. Errors: NOT_FOUND (nothing
   // pending or another id), SESSION_EXPIRED (the window passed), INSUFFICIENT_PRIVILEGES.
   Result<PendingTransfer> accept(const Principal& p, const std::string& transfer_id,
-                                 const std::string& agreement, int64_t now_wall_ms);
+                                 const std::string& agreement, int64_t now_wall_ms) EXCLUDES(mu_);
   // The owner withdraws, or the named new owner declines.
-  Result<PendingTransfer> cancel(const Principal& p, int64_t now_wall_ms);
+  Result<PendingTransfer> cancel(const Principal& p, int64_t now_wall_ms) EXCLUDES(mu_);
   // The pending transfer whose window passed (once).
-  std::optional<PendingTransfer> expire(int64_t now_wall_ms);
+  std::optional<PendingTransfer> expire(int64_t now_wall_ms) EXCLUDES(mu_);
 
   // Lowers the role of a former owner's token (GUEST).
   void cap(Principal& p) const;
   // A principal that used the robot (the user list, personal data).
-  void note_user(const std::string& sub);
+  void note_user(const std::string& sub) EXCLUDES(mu_) EXCLUDES(mu_);
   // Hooks run when personal data is cleared (after TRANSFER_ACCEPT).
-  void on_clear(std::function<void()> fn);
-  void run_clear_hooks();
+  void on_clear(std::function<void()> fn) EXCLUDES(mu_);
+  void run_clear_hooks() EXCLUDES(mu_);
 
-  OwnershipState state(int64_t now_wall_ms);
-  std::string owner();
-  std::optional<PendingTransfer> pending();
-  json::Value to_json(int64_t now_wall_ms, bool detailed);
-  json::Value persist_json();
-  void load_json(const json::Value& v);
-  uint64_t version();
-  uint64_t transition_violations() const { return violations_; }
+  OwnershipState state(int64_t now_wall_ms) EXCLUDES(mu_);
+  std::string owner() EXCLUDES(mu_);
+  std::optional<PendingTransfer> pending() EXCLUDES(mu_);
+  json::Value to_json(int64_t now_wall_ms, bool detailed) EXCLUDES(mu_);
+  json::Value persist_json() EXCLUDES(mu_);
+  void load_json(const json::Value& v) EXCLUDES(mu_);
+  uint64_t version() EXCLUDES(mu_);
+  uint64_t transition_violations() const EXCLUDES(mu_) {
+    MutexLock lock(mu_);
+    return violations_;
+  }
 
  private:
-  void transit(OwnershipEvent event, OwnershipState to);
-  bool is_owner_locked(const Principal& p) const;
-  mutable std::mutex mu_;
-  int64_t window_ms_ = 24 * 3600 * 1000LL;
-  OwnershipState state_ = OwnershipState::kOwned;
-  std::string owner_sub_;
-  std::set<std::string> former_owners_;
-  std::set<std::string> users_;
-  std::optional<PendingTransfer> pending_;
-  std::vector<std::function<void()>> clear_hooks_;
-  uint64_t version_ = 0;
-  uint64_t violations_ = 0;
+  void transit(OwnershipEvent event, OwnershipState to) REQUIRES(mu_);
+  bool is_owner_locked(const Principal& p) const REQUIRES(mu_);
+  mutable Mutex mu_;
+  int64_t window_ms_ GUARDED_BY(mu_) = 24 * 3600 * 1000LL;
+  OwnershipState state_ GUARDED_BY(mu_) = OwnershipState::kOwned;
+  std::string owner_sub_ GUARDED_BY(mu_);
+  std::set<std::string> former_owners_ GUARDED_BY(mu_);
+  std::set<std::string> users_ GUARDED_BY(mu_);
+  std::optional<PendingTransfer> pending_ GUARDED_BY(mu_);
+  std::vector<std::function<void()>> clear_hooks_ GUARDED_BY(mu_);
+  uint64_t version_ GUARDED_BY(mu_) = 0;
+  uint64_t violations_ GUARDED_BY(mu_) = 0;
 };
 
 }  // namespace rcan::node

@@ -3,6 +3,7 @@
 #include <pthread.h>
 
 #include <algorithm>
+#include <chrono>
 
 #include "base/http_client.h"
 
@@ -32,7 +33,7 @@ NetMode PartitionMonitor::compute_locked(int64_t now_wall_ms) const {
 }
 
 std::pair<NetMode, NetMode> PartitionMonitor::record(bool reachable, int64_t now_wall_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   NetMode old = mode();
   if (reachable) {
     reachable_ = true;
@@ -64,7 +65,7 @@ void PartitionMonitor::start(std::function<int64_t()> wall_now,
   on_change_ = std::move(on_change);
   if (!enabled()) return;
   {
-    std::lock_guard<std::mutex> lock(run_mu_);
+    MutexLock lock(run_mu_);
     if (running_) return;
     running_ = true;
   }
@@ -72,9 +73,12 @@ void PartitionMonitor::start(std::function<int64_t()> wall_now,
     pthread_setname_np(pthread_self(), "partition");
     for (;;) {
       probe_once();
-      std::unique_lock<std::mutex> lock(run_mu_);
-      run_cv_.wait_for(lock, std::chrono::milliseconds(opts_.poll_interval_ms),
-                       [this] { return !running_; });
+      MutexLock lock(run_mu_);
+      const auto until =
+          std::chrono::steady_clock::now() + std::chrono::milliseconds(opts_.poll_interval_ms);
+      while (running_) {
+        if (run_cv_.wait_until(run_mu_, until) == std::cv_status::timeout) break;
+      }
       if (!running_) return;
     }
   });
@@ -82,7 +86,7 @@ void PartitionMonitor::start(std::function<int64_t()> wall_now,
 
 void PartitionMonitor::stop() {
   {
-    std::lock_guard<std::mutex> lock(run_mu_);
+    MutexLock lock(run_mu_);
     running_ = false;
   }
   run_cv_.notify_all();
@@ -91,7 +95,7 @@ void PartitionMonitor::stop() {
 
 void PartitionMonitor::note_validated(const Principal& p, int64_t now_wall_ms) {
   if (!enabled()) return;
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (!reachable_) return;  // only what was validated while the issuer answered
   int64_t until = now_wall_ms + opts_.key_ttl_ms;
   if (p.token_exp) until = std::min(until, *p.token_exp * 1000);
@@ -104,14 +108,14 @@ void PartitionMonitor::note_validated(const Principal& p, int64_t now_wall_ms) {
 }
 
 bool PartitionMonitor::cached(const Principal& p, int64_t now_wall_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   auto it = cache_.find(p.key());
   return it != cache_.end() && now_wall_ms < it->second && last_ok_ms_ != 0 &&
          now_wall_ms < last_ok_ms_ + opts_.key_ttl_ms;
 }
 
 json::Value PartitionMonitor::status_json(int64_t now_wall_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   json::Object o{{"mode", std::string(net_mode_name(mode()))},
                  {"issuer_probe", enabled()},
                  {"issuer_reachable", reachable_}};
@@ -131,7 +135,7 @@ json::Value PartitionMonitor::status_json(int64_t now_wall_ms) {
 }
 
 json::Value PartitionMonitor::persist_json() {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   json::Array entries;
   for (const auto& [k, until] : cache_)
     entries.push_back(json::Object{{"principal", k}, {"until_ms", until}});
@@ -139,7 +143,7 @@ json::Value PartitionMonitor::persist_json() {
 }
 
 void PartitionMonitor::load_json(const json::Value& v, int64_t now_wall_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (const json::Value* l = v.get("last_reachable_ms"); l && l->is_int())
     last_ok_ms_ = l->as_int();
   cache_.clear();
@@ -155,7 +159,7 @@ void PartitionMonitor::load_json(const json::Value& v, int64_t now_wall_ms) {
 }
 
 uint64_t PartitionMonitor::version() {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   return version_;
 }
 

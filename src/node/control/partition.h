@@ -13,14 +13,13 @@
 #pragma once
 
 #include <atomic>
-#include <condition_variable>
 #include <cstdint>
 #include <functional>
 #include <map>
-#include <mutex>
 #include <string>
 #include <thread>
 
+#include "base/thread_annotations.h"
 #include "node/admission/authenticator.h"
 #include "rcan/json.h"
 
@@ -44,38 +43,39 @@ class PartitionMonitor {
   const PartitionOptions& options() const { return opts_; }
 
   // Starts the probe thread (no-op when disabled). `on_change(old, now)` runs on it.
-  void start(std::function<int64_t()> wall_now, std::function<void(NetMode, NetMode)> on_change);
-  void stop();
+  void start(std::function<int64_t()> wall_now, std::function<void(NetMode, NetMode)> on_change)
+      EXCLUDES(run_mu_);
+  void stop() EXCLUDES(run_mu_);
   // One probe now (the thread calls it; tests may too). Returns the resulting mode.
-  NetMode probe_once();
+  NetMode probe_once() EXCLUDES(mu_);
   // Records a probe result and recomputes the mode; returns {old, new}.
-  std::pair<NetMode, NetMode> record(bool reachable, int64_t now_wall_ms);
+  std::pair<NetMode, NetMode> record(bool reachable, int64_t now_wall_ms) EXCLUDES(mu_);
 
   NetMode mode() const { return static_cast<NetMode>(mode_.load()); }
   // The principal's token was validated while the issuer was reachable.
-  void note_validated(const Principal& p, int64_t now_wall_ms);
-  bool cached(const Principal& p, int64_t now_wall_ms);
-  json::Value status_json(int64_t now_wall_ms);
-  json::Value persist_json();
-  void load_json(const json::Value& v, int64_t now_wall_ms);
-  uint64_t version();
+  void note_validated(const Principal& p, int64_t now_wall_ms) EXCLUDES(mu_);
+  bool cached(const Principal& p, int64_t now_wall_ms) EXCLUDES(mu_);
+  json::Value status_json(int64_t now_wall_ms) EXCLUDES(mu_);
+  json::Value persist_json() EXCLUDES(mu_);
+  void load_json(const json::Value& v, int64_t now_wall_ms) EXCLUDES(mu_);
+  uint64_t version() EXCLUDES(mu_);
 
  private:
-  NetMode compute_locked(int64_t now_wall_ms) const;
-  PartitionOptions opts_;
-  std::mutex mu_;
+  NetMode compute_locked(int64_t now_wall_ms) const REQUIRES(mu_);
+  PartitionOptions opts_;  // set by configure(), before start()
+  Mutex mu_;
   std::atomic<int> mode_{0};
-  bool reachable_ = true;
-  int64_t last_ok_ms_ = 0;
-  int64_t offline_since_ms_ = 0;
-  std::map<std::string, int64_t> cache_;  // principal key → valid until (wall ms)
-  uint64_t version_ = 0;
-  std::function<int64_t()> wall_;
-  std::function<void(NetMode, NetMode)> on_change_;
+  bool reachable_ GUARDED_BY(mu_) = true;
+  int64_t last_ok_ms_ GUARDED_BY(mu_) = 0;
+  int64_t offline_since_ms_ GUARDED_BY(mu_) = 0;
+  std::map<std::string, int64_t> cache_ GUARDED_BY(mu_);  // principal key → valid until (wall ms)
+  uint64_t version_ GUARDED_BY(mu_) = 0;
+  std::function<int64_t()> wall_;                    // set by start(), before the thread
+  std::function<void(NetMode, NetMode)> on_change_;  // set by start(), before the thread
   std::thread thread_;
-  std::mutex run_mu_;
-  std::condition_variable run_cv_;
-  bool running_ = false;
+  Mutex run_mu_;
+  CondVar run_cv_;
+  bool running_ GUARDED_BY(run_mu_) = false;
 };
 
 }  // namespace rcan::node

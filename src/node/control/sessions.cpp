@@ -42,7 +42,7 @@ json::Value Lease::to_json(int64_t now_wall_ms) const {
 }
 
 void SessionTable::set_options(ControlOptions o) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   opts_ = o;
 }
 
@@ -59,7 +59,7 @@ void SessionTable::transit(ControlEvent event, ControlState to) {
 }
 
 uint64_t SessionTable::version() {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   return version_;
 }
 
@@ -178,7 +178,7 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
                                         bool fleet, int64_t now_mono_ms, int64_t now_wall_ms) {
   Role role = p.role;
   if (requested && role_level(*requested) < role_level(role)) role = *requested;  // only lower
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   last_wall_ms_ = now_wall_ms;
   expire_locked(now_mono_ms);
@@ -263,7 +263,7 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
 
 Result<Session> SessionTable::renew(const std::string& session_id, const Principal& p,
                                     int64_t now_mono_ms, int64_t now_wall_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   last_wall_ms_ = now_wall_ms;
   if (holder_ && holder_->id == session_id && holder_->expires_mono_ms != 0 &&
@@ -292,7 +292,7 @@ Result<Session> SessionTable::renew(const std::string& session_id, const Princip
 
 Result<Session> SessionTable::release(const std::string& session_id, const Principal& p,
                                       int64_t now_mono_ms, int64_t now_wall_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (now_wall_ms == 0) now_wall_ms = last_wall_ms_;
   expire_locked(now_mono_ms);
   if (!holder_ || holder_->id != session_id)
@@ -310,7 +310,7 @@ Result<Session> SessionTable::release(const std::string& session_id, const Princ
 Result<Session> SessionTable::handoff(const std::string& session_id, const Principal& p,
                                       std::string target_sub, std::optional<Role> target_role,
                                       int64_t window_ms, int64_t now_mono_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   expire_locked(now_mono_ms);
   if (!holder_ || holder_->id != session_id)
     return Error(ErrorCode::kNotFound, "no such control session", "session_id");
@@ -325,7 +325,7 @@ Result<Session> SessionTable::handoff(const std::string& session_id, const Princ
 }
 
 bool SessionTable::leave_queue(const Principal& p) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   for (auto it = queue_.begin(); it != queue_.end(); ++it) {
     if (it->principal_key == p.key()) {
       queue_.erase(it);
@@ -354,7 +354,7 @@ void SessionTable::absorb_wall_step_locked(int64_t now_mono_ms, int64_t now_wall
 }
 
 void SessionTable::tick(int64_t now_mono_ms, int64_t now_wall_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   last_wall_ms_ = now_wall_ms;
   // Lease ends revoke everything derived from the lease (before plain TTL expiry, so a
@@ -388,14 +388,14 @@ void SessionTable::tick(int64_t now_mono_ms, int64_t now_wall_ms) {
 }
 
 std::vector<ControlChange> SessionTable::take_changes() {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   std::vector<ControlChange> out;
   out.swap(changes_);
   return out;
 }
 
 void SessionTable::revoke_all(const std::string& reason, int64_t now_mono_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (holder_) drop_holder_locked(ControlEvent::kRevoke, reason, now_mono_ms);
   if (reserved_) {
     reserved_.reset();
@@ -422,7 +422,7 @@ void SessionTable::revoke_all(const std::string& reason, int64_t now_mono_ms) {
 }
 
 std::optional<Reservation> SessionTable::reservation(int64_t now_mono_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (reserved_ && now_mono_ms >= reserved_->until_mono_ms) return std::nullopt;
   return reserved_;
 }
@@ -430,7 +430,7 @@ std::optional<Reservation> SessionTable::reservation(int64_t now_mono_ms) {
 std::optional<Session> SessionTable::controller(int64_t now_mono_ms,
                                                 std::vector<Session>* expired) {
   (void)expired;
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (holder_ && holder_->expires_mono_ms != 0 && now_mono_ms >= holder_->expires_mono_ms)
     return std::nullopt;
   return holder_;
@@ -448,7 +448,7 @@ bool SessionTable::live(const std::string& session_id, int64_t now_mono_ms) {
 
 bool SessionTable::run_if_live(const std::string& session_id, int64_t now_mono_ms,
                                const std::function<void()>& fn) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (!holder_ || holder_->id != session_id) return false;
   if (holder_->expires_mono_ms != 0 && now_mono_ms >= holder_->expires_mono_ms) return false;
   fn();
@@ -456,14 +456,14 @@ bool SessionTable::run_if_live(const std::string& session_id, int64_t now_mono_m
 }
 
 std::optional<std::string> SessionTable::expired_session_of(const std::string& principal_key) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   auto it = expired_.find(principal_key);
   if (it == expired_.end()) return std::nullopt;
   return it->second;
 }
 
 ControlState SessionTable::state(int64_t now_mono_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (holder_ && holder_->expires_mono_ms != 0 && now_mono_ms >= holder_->expires_mono_ms)
     return reserved_ ? ControlState::kReserved : ControlState::kAvailable;
   if (!holder_ && reserved_ && now_mono_ms >= reserved_->until_mono_ms)
@@ -472,12 +472,12 @@ ControlState SessionTable::state(int64_t now_mono_ms) {
 }
 
 size_t SessionTable::queue_size() {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   return queue_.size();
 }
 
 json::Value SessionTable::to_json(int64_t now_mono_ms, bool detailed) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   json::Array arr;
   if (holder_ && !(holder_->expires_mono_ms != 0 && now_mono_ms >= holder_->expires_mono_ms)) {
     json::Object o;
@@ -495,7 +495,7 @@ json::Value SessionTable::to_json(int64_t now_mono_ms, bool detailed) {
 }
 
 json::Value SessionTable::queue_json(int64_t now_mono_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   json::Array arr;
   for (size_t i = 0; i < queue_.size(); ++i)
     arr.push_back(json::Object{{"position", static_cast<int64_t>(i + 1)},
@@ -516,7 +516,7 @@ Result<Lease> SessionTable::grant_lease(const Principal& owner, const std::strin
   if (duration_ms <= 0 || duration_ms > int64_t{366} * 86'400'000)
     return Error(ErrorCode::kSchemaValidationFailed, "duration_s must be 1 s .. 366 days",
                  "duration_s");
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (now_mono_ms >= 0) absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   if (const Lease* l = active_lease_locked(now_wall_ms))
     return Error(ErrorCode::kControlConflict, "lease " + l->id + " is running; revoke it first",
@@ -544,7 +544,7 @@ Result<Lease> SessionTable::grant_within_lease(const Principal& leasee, const st
                  "missing_field");
   if (duration_ms <= 0)
     return Error(ErrorCode::kSchemaValidationFailed, "duration_s must be positive", "duration_s");
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (now_mono_ms >= 0) absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   for (auto& l : leases_) {
     if (l.id != lease_id || now_wall_ms >= l.end_wall_ms) continue;
@@ -570,7 +570,7 @@ Result<Lease> SessionTable::grant_within_lease(const Principal& leasee, const st
 
 Result<Lease> SessionTable::revoke_lease(const Principal& p, const std::string& lease_id,
                                          int64_t now_mono_ms, int64_t now_wall_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   for (auto it = leases_.begin(); it != leases_.end(); ++it) {
     if (it->id != lease_id) continue;
     if (role_level(p.role) < role_level(Role::kOwner))
@@ -592,7 +592,7 @@ Result<Lease> SessionTable::revoke_lease(const Principal& p, const std::string& 
 }
 
 std::vector<Lease> SessionTable::leases(int64_t now_wall_ms) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   std::vector<Lease> out;
   for (const auto& l : leases_)
     if (now_wall_ms < l.end_wall_ms) out.push_back(l);
@@ -606,7 +606,7 @@ json::Value SessionTable::leases_json(int64_t now_wall_ms) {
 }
 
 json::Value SessionTable::persist_json() {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   json::Array a;
   for (const auto& l : leases_) a.push_back(l.to_json(0));
   return json::Object{{"leases", a}};
@@ -615,7 +615,7 @@ json::Value SessionTable::persist_json() {
 void SessionTable::load_json(const json::Value& v, int64_t now_wall_ms) {
   const json::Value* ls = v.get("leases");
   if (!ls || !ls->is_array()) return;
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   leases_.clear();
   for (const auto& e : ls->as_array()) {
     if (!e.is_object()) continue;

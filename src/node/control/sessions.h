@@ -27,11 +27,11 @@
 #include <deque>
 #include <functional>
 #include <map>
-#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "base/thread_annotations.h"
 #include "node/admission/authenticator.h"
 #include "node/control/control_machine.h"
 #include "rcan/json.h"
@@ -117,12 +117,15 @@ struct ControlChange {
 class SessionTable {
  public:
   SessionTable() = default;
-  void set_options(ControlOptions o);
-  const ControlOptions& options() const { return opts_; }
+  void set_options(ControlOptions o) EXCLUDES(mu_);
+  ControlOptions options() const EXCLUDES(mu_) {
+    MutexLock lock(mu_);
+    return opts_;
+  }
 
   // Errors: CONTROL_CONFLICT (higher role holds, reserved window, leased, queue full).
   Result<ClaimResult> claim(const Principal& p, std::optional<Role> requested, bool fleet,
-                            int64_t now_mono_ms, int64_t now_wall_ms);
+                            int64_t now_mono_ms, int64_t now_wall_ms) EXCLUDES(mu_);
   // Compatibility overload (an individual claim).
   Result<ClaimResult> claim(const Principal& p, std::optional<Role> requested, int64_t now_mono_ms,
                             int64_t now_wall_ms) {
@@ -130,90 +133,98 @@ class SessionTable {
   }
   // Explicit renewal by the holder. Errors: NOT_FOUND, INSUFFICIENT_PRIVILEGES, SESSION_EXPIRED.
   Result<Session> renew(const std::string& session_id, const Principal& p, int64_t now_mono_ms,
-                        int64_t now_wall_ms);
+                        int64_t now_wall_ms) EXCLUDES(mu_);
   // Errors: NOT_FOUND (no such session), INSUFFICIENT_PRIVILEGES (not the holder).
   Result<Session> release(const std::string& session_id, const Principal& p, int64_t now_mono_ms,
-                          int64_t now_wall_ms = 0);
+                          int64_t now_wall_ms = 0) EXCLUDES(mu_);
   // Ends the holder's session and reserves control for `target_sub` for the window.
   Result<Session> handoff(const std::string& session_id, const Principal& p, std::string target_sub,
-                          std::optional<Role> target_role, int64_t window_ms, int64_t now_mono_ms);
+                          std::optional<Role> target_role, int64_t window_ms, int64_t now_mono_ms)
+      EXCLUDES(mu_);
   // Leaves the queue (the claimant gave up). True when it was queued.
-  bool leave_queue(const Principal& p);
+  bool leave_queue(const Principal& p) EXCLUDES(mu_);
 
   // Expiries, window closes, lease ends. Call often (the node does every 100 ms).
-  void tick(int64_t now_mono_ms, int64_t now_wall_ms);
-  std::vector<ControlChange> take_changes();
+  void tick(int64_t now_mono_ms, int64_t now_wall_ms) EXCLUDES(mu_);
+  std::vector<ControlChange> take_changes() EXCLUDES(mu_);
 
   // Ends every session, the queue, the reservation and every lease (ownership transfer).
-  void revoke_all(const std::string& reason, int64_t now_mono_ms);
+  void revoke_all(const std::string& reason, int64_t now_mono_ms) EXCLUDES(mu_);
 
-  std::optional<Reservation> reservation(int64_t now_mono_ms);
+  std::optional<Reservation> reservation(int64_t now_mono_ms) EXCLUDES(mu_);
   // The live controller, if any (an expired holder counts as absent; tick() ends it).
-  std::optional<Session> controller(int64_t now_mono_ms, std::vector<Session>* expired = nullptr);
+  std::optional<Session> controller(int64_t now_mono_ms, std::vector<Session>* expired = nullptr)
+      EXCLUDES(mu_);
   std::optional<Session> find(const std::string& session_id, int64_t now_mono_ms);
   bool live(const std::string& session_id, int64_t now_mono_ms);
   // Runs `fn` only while the session is live, holding the table: a pre-emption, expiry or
   // revocation happens entirely before or entirely after it. False when not live.
   bool run_if_live(const std::string& session_id, int64_t now_mono_ms,
-                   const std::function<void()>& fn);
+                   const std::function<void()>& fn) EXCLUDES(mu_);
   // The session this principal held that expired or was revoked (until it claims again).
-  std::optional<std::string> expired_session_of(const std::string& principal_key);
-  ControlState state(int64_t now_mono_ms);
-  size_t queue_size();
-  json::Value to_json(int64_t now_mono_ms, bool detailed);
-  json::Value queue_json(int64_t now_mono_ms);
+  std::optional<std::string> expired_session_of(const std::string& principal_key) EXCLUDES(mu_);
+  ControlState state(int64_t now_mono_ms) EXCLUDES(mu_);
+  size_t queue_size() EXCLUDES(mu_);
+  json::Value to_json(int64_t now_mono_ms, bool detailed) EXCLUDES(mu_);
+  json::Value queue_json(int64_t now_mono_ms) EXCLUDES(mu_);
 
   // Leases. Errors: INSUFFICIENT_PRIVILEGES, CONTROL_CONFLICT (one already runs),
   // SCHEMA_VALIDATION_FAILED, NOT_FOUND.
   // `now_mono_ms` (optional, -1 = not given) lets a wall-clock step since the last reading be
   // absorbed first, so that a lease granted just after a step is not shifted by it later.
   Result<Lease> grant_lease(const Principal& owner, const std::string& leasee_sub,
-                            int64_t duration_ms, int64_t now_wall_ms, int64_t now_mono_ms = -1);
+                            int64_t duration_ms, int64_t now_wall_ms, int64_t now_mono_ms = -1)
+      EXCLUDES(mu_);
   Result<Lease> grant_within_lease(const Principal& leasee, const std::string& lease_id,
                                    const std::string& sub, Role role, int64_t duration_ms,
-                                   int64_t now_wall_ms, int64_t now_mono_ms = -1);
+                                   int64_t now_wall_ms, int64_t now_mono_ms = -1) EXCLUDES(mu_);
   Result<Lease> revoke_lease(const Principal& p, const std::string& lease_id, int64_t now_mono_ms,
-                             int64_t now_wall_ms);
-  std::vector<Lease> leases(int64_t now_wall_ms);
-  json::Value leases_json(int64_t now_wall_ms);
+                             int64_t now_wall_ms) EXCLUDES(mu_);
+  std::vector<Lease> leases(int64_t now_wall_ms) EXCLUDES(mu_);
+  json::Value leases_json(int64_t now_wall_ms) EXCLUDES(mu_);
   // Persistence of the leases (sessions are not persisted: they die with the process).
-  json::Value persist_json();
-  void load_json(const json::Value& v, int64_t now_wall_ms);
+  json::Value persist_json() EXCLUDES(mu_);
+  void load_json(const json::Value& v, int64_t now_wall_ms) EXCLUDES(mu_);
 
-  uint64_t transition_violations() const { return violations_; }
-  uint64_t version();  // bumps on every change (persistence, mDNS status)
+  uint64_t transition_violations() const EXCLUDES(mu_) {
+    MutexLock lock(mu_);
+    return violations_;
+  }
+  uint64_t version() EXCLUDES(mu_);  // bumps on every change (persistence, mDNS status)
 
  private:
-  void transit(ControlEvent event, ControlState to);
-  ControlState state_locked() const;
-  void expire_locked(int64_t now_mono_ms);
-  void drop_holder_locked(ControlEvent event, const std::string& reason, int64_t now_mono_ms);
-  void promote_locked(int64_t now_mono_ms, int64_t now_wall_ms);
+  void transit(ControlEvent event, ControlState to) REQUIRES(mu_);
+  ControlState state_locked() const REQUIRES(mu_);
+  void expire_locked(int64_t now_mono_ms) REQUIRES(mu_);
+  void drop_holder_locked(ControlEvent event, const std::string& reason, int64_t now_mono_ms)
+      REQUIRES(mu_);
+  void promote_locked(int64_t now_mono_ms, int64_t now_wall_ms) REQUIRES(mu_);
   Session make_session_locked(const std::string& key, const std::string& sub, Role role, bool fleet,
-                              int64_t now_mono_ms, int64_t now_wall_ms, const std::string& id = {});
-  const Lease* active_lease_locked(int64_t now_wall_ms) const;
+                              int64_t now_mono_ms, int64_t now_wall_ms, const std::string& id = {})
+      REQUIRES(mu_);
+  const Lease* active_lease_locked(int64_t now_wall_ms) const REQUIRES(mu_);
   // The lease link and role cap of a claimant; false when a lease runs and excludes it.
   bool lease_link_locked(const std::string& sub, Role& role, std::string& lease_id,
-                         int64_t& end_wall, int64_t now_wall_ms) const;
-
-  std::mutex mu_;
-  ControlOptions opts_;
-  std::optional<Session> holder_;
-  std::optional<Reservation> reserved_;
-  std::deque<QueuedClaim> queue_;
-  std::map<std::string, std::string> expired_;  // principal key → session id
-  std::vector<Lease> leases_;
-  std::vector<ControlChange> changes_;
-  ControlState state_ = ControlState::kAvailable;
-  int64_t last_wall_ms_ = 0;
+                         int64_t& end_wall, int64_t now_wall_ms) const REQUIRES(mu_);
   // Lease times are wall-clock (they are shown and persisted as such) but run on the
   // monotonic clock: a wall-clock step seen between two calls that carry both clocks shifts
-  // every lease and grant by the step (docs/NODE.md §Faults). -1 = no reading yet.
-  void absorb_wall_step_locked(int64_t now_mono_ms, int64_t now_wall_ms);
-  int64_t anchor_mono_ms_ = -1;
-  int64_t anchor_wall_ms_ = 0;
-  uint64_t violations_ = 0;
-  uint64_t version_ = 0;
+  // every lease and grant by the step (docs/NODE.md §Faults).
+  void absorb_wall_step_locked(int64_t now_mono_ms, int64_t now_wall_ms) REQUIRES(mu_);
+
+  mutable Mutex mu_;
+  ControlOptions opts_ GUARDED_BY(mu_);
+  std::optional<Session> holder_ GUARDED_BY(mu_);
+  std::optional<Reservation> reserved_ GUARDED_BY(mu_);
+  std::deque<QueuedClaim> queue_ GUARDED_BY(mu_);
+  std::map<std::string, std::string> expired_ GUARDED_BY(mu_);  // principal key → session id
+  std::vector<Lease> leases_ GUARDED_BY(mu_);
+  std::vector<ControlChange> changes_ GUARDED_BY(mu_);
+  ControlState state_ GUARDED_BY(mu_) = ControlState::kAvailable;
+  int64_t last_wall_ms_ GUARDED_BY(mu_) = 0;
+  int64_t anchor_mono_ms_ GUARDED_BY(mu_) = -1;  // -1: no reading yet
+  int64_t anchor_wall_ms_ GUARDED_BY(mu_) = 0;
+  uint64_t violations_ GUARDED_BY(mu_) = 0;
+  uint64_t version_ GUARDED_BY(mu_) = 0;
 };
 
 }  // namespace rcan::node

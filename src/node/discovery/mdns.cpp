@@ -8,6 +8,7 @@
 #include <cstdlib>
 
 #include "base/log.h"
+#include "base/thread_annotations.h"
 #include "node/discovery/avahi_dl.h"
 #include "node/services/node_services.h"
 
@@ -48,13 +49,13 @@ struct MdnsAdvertiser::Impl {
   std::function<void()> on_stop;
 
   std::thread watcher;
-  std::mutex mu;
-  std::condition_variable cv;
-  bool stopping = false;
-  bool poked = false;
+  Mutex mu;
+  CondVar cv;
+  bool stopping GUARDED_BY(mu) = false;
+  bool poked GUARDED_BY(mu) = false;
 
-  mutable std::mutex pub_mu;
-  std::string published;
+  mutable Mutex pub_mu;
+  std::string published GUARDED_BY(pub_mu);
 
   AvahiStringList* txt_list() const {
     AvahiStringList* l = nullptr;
@@ -64,8 +65,8 @@ struct MdnsAdvertiser::Impl {
     return l;
   }
 
-  void set_published(const std::string& s) {
-    std::lock_guard<std::mutex> lock(pub_mu);
+  void set_published(const std::string& s) EXCLUDES(pub_mu) {
+    MutexLock lock(pub_mu);
     published = s;
   }
 
@@ -247,10 +248,13 @@ void MdnsAdvertiser::start() {
   connect(true);
   im->watcher = std::thread([im, connect] {
     pthread_setname_np(pthread_self(), "mdns-watch");
-    std::unique_lock<std::mutex> lock(im->mu);
+    ReleasableMutexLock lock(im->mu);
     auto next_try = std::chrono::steady_clock::now() + std::chrono::seconds(5);
     while (!im->stopping) {
-      im->cv.wait_for(lock, std::chrono::seconds(1), [im] { return im->stopping || im->poked; });
+      const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(1);
+      while (!im->stopping && !im->poked) {
+        if (im->cv.wait_until(im->mu, until) == std::cv_status::timeout) break;
+      }
       if (im->stopping) break;
       im->poked = false;
       lock.unlock();
@@ -276,7 +280,7 @@ void MdnsAdvertiser::start() {
 
 void MdnsAdvertiser::poke() {
   {
-    std::lock_guard<std::mutex> lock(impl_->mu);
+    MutexLock lock(impl_->mu);
     impl_->poked = true;
   }
   impl_->cv.notify_one();
@@ -289,7 +293,7 @@ void MdnsAdvertiser::stop() {
     im->on_stop = nullptr;
   }
   {
-    std::lock_guard<std::mutex> lock(im->mu);
+    MutexLock lock(im->mu);
     im->stopping = true;
   }
   im->cv.notify_one();
@@ -307,7 +311,7 @@ void MdnsAdvertiser::stop() {
 void MdnsAdvertiser::set_on_stop(std::function<void()> fn) { impl_->on_stop = std::move(fn); }
 
 std::string MdnsAdvertiser::published_status() const {
-  std::lock_guard<std::mutex> lock(impl_->pub_mu);
+  MutexLock lock(impl_->pub_mu);
   return impl_->published;
 }
 
@@ -340,19 +344,19 @@ std::unique_ptr<MdnsAdvertiser> start_mdns(NodeServices& services, bool tls) {
   // The EventBus may still call a copy of the subscriber while the advertiser stops: the
   // subscriber reaches it only through this guarded pointer, cleared at stop().
   struct Target {
-    std::mutex mu;
-    MdnsAdvertiser* adv = nullptr;
+    explicit Target(MdnsAdvertiser* a) : adv(a) {}
+    Mutex mu;
+    MdnsAdvertiser* adv GUARDED_BY(mu);
   };
-  auto target = std::make_shared<Target>();
-  target->adv = adv.get();
+  auto target = std::make_shared<Target>(adv.get());
   uint64_t sub = services.events.subscribe([target](const Event&) {
-    std::lock_guard<std::mutex> lock(target->mu);
+    MutexLock lock(target->mu);
     if (target->adv) target->adv->poke();
   });
   NodeServices* svc = &services;
   adv->set_on_stop([svc, sub, target] {
     svc->events.unsubscribe(sub);
-    std::lock_guard<std::mutex> lock(target->mu);
+    MutexLock lock(target->mu);
     target->adv = nullptr;
   });
   adv->start();

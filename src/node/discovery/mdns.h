@@ -8,11 +8,9 @@
 // (re)published. Status is re-read on every node event (EventBus) and once a second.
 #pragma once
 
-#include <condition_variable>
 #include <cstdint>
 #include <functional>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <thread>
 #include <vector>

@@ -38,12 +38,12 @@ std::vector<std::string> SwarmAgent::subscriptions() const {
 }
 
 std::string SwarmAgent::leader() const {
-  std::lock_guard<std::mutex> lk(mu_);
+  MutexLock lk(mu_);
   return leader_;
 }
 
 json::Value SwarmAgent::state() const {
-  std::lock_guard<std::mutex> lk(mu_);
+  MutexLock lk(mu_);
   return announce_body("state", "");
 }
 
@@ -71,7 +71,7 @@ void SwarmAgent::announce_locked(const std::string& reason, const std::string& p
 }
 
 void SwarmAgent::on_connected(int64_t now) {
-  std::lock_guard<std::mutex> lk(mu_);
+  MutexLock lk(mu_);
   connected_since_ = now;
   for (const auto& m : members_) last_seen_[m] = now;  // everyone gets a full timeout of grace
   if (leader_ == cfg_.member_id) announce_locked("connected", "");
@@ -79,7 +79,7 @@ void SwarmAgent::on_connected(int64_t now) {
 
 void SwarmAgent::on_message(const mqtt::InboundTopic& t, const json::Value& body, int64_t now) {
   if (t.kind == mqtt::TopicKind::kSwarmHeartbeat) {
-    std::lock_guard<std::mutex> lk(mu_);
+    MutexLock lk(mu_);
     if (members_.count(t.member) == 0) return;
     last_seen_[t.member] = now;
     return;
@@ -102,7 +102,7 @@ void SwarmAgent::on_message(const mqtt::InboundTopic& t, const json::Value& body
   for (const auto& m : mem->as_array())
     if (m.is_string() && mqtt::valid_topic_segment(m.as_string())) members.insert(m.as_string());
   if (members.count(leader) == 0 || members.size() > 1024) return;
-  std::lock_guard<std::mutex> lk(mu_);
+  MutexLock lk(mu_);
   bool newer = epoch > epoch_ || (epoch == epoch_ && leader < leader_) ||
                (epoch == epoch_ && leader == leader_);
   if (!newer) {
@@ -127,7 +127,7 @@ void SwarmAgent::on_message(const mqtt::InboundTopic& t, const json::Value& body
 }
 
 void SwarmAgent::tick(int64_t now) {
-  std::lock_guard<std::mutex> lk(mu_);
+  MutexLock lk(mu_);
   if (now - last_beat_ >= cfg_.heartbeat_ms) {
     last_beat_ = now;
     last_seen_[cfg_.member_id] = now;
@@ -194,7 +194,7 @@ void SwarmAgent::handle_join(const json::Value& body) {
   std::string member = p != nullptr ? str_of(*p, "member") : std::string();
   std::string id = str_of(body, "message_id");
   {
-    std::lock_guard<std::mutex> lk(mu_);
+    MutexLock lk(mu_);
     if (leader_ != cfg_.member_id) return;  // only the leader answers
   }
   if ((type != "SWARM_JOIN" && type != "SWARM_APPROVE") || !mqtt::valid_topic_segment(member))
@@ -227,7 +227,7 @@ void SwarmAgent::handle_join(const json::Value& body) {
     answer(member, "DENIED", id, why);
     return;
   }
-  std::unique_lock<std::mutex> lk(mu_);
+  ReleasableMutexLock lk(mu_);
   if (type == "SWARM_APPROVE") {
     if (role_level(principal->role) < role_level(Role::kOwner) || cfg_.join_policy != "approval" ||
         pending_.count(member) == 0) {

@@ -21,11 +21,11 @@
 #include <cstdint>
 #include <functional>
 #include <map>
-#include <mutex>
 #include <set>
 #include <string>
 #include <vector>
 
+#include "base/thread_annotations.h"
 #include "config/fleet_config.h"
 #include "rcan/json.h"
 #include "rcan/mqtt_topics.h"
@@ -44,19 +44,21 @@ class SwarmAgent {
   // Topic filters to subscribe to.
   std::vector<std::string> subscriptions() const;
   // Called on every (re)connect: starts the silence clocks and announces when leader.
-  void on_connected(int64_t now_mono_ms);
-  void on_message(const mqtt::InboundTopic& topic, const json::Value& body, int64_t now_mono_ms);
+  void on_connected(int64_t now_mono_ms) EXCLUDES(mu_);
+  void on_message(const mqtt::InboundTopic& topic, const json::Value& body, int64_t now_mono_ms)
+      EXCLUDES(mu_);
   // Heartbeat and leader check; call every few tens of milliseconds.
-  void tick(int64_t now_mono_ms);
+  void tick(int64_t now_mono_ms) EXCLUDES(mu_);
 
   // {swarm_id, member, members, leader, epoch, formation, join_policy, pending}
-  json::Value state() const;
-  std::string leader() const;
+  json::Value state() const EXCLUDES(mu_);
+  std::string leader() const EXCLUDES(mu_);
 
  private:
-  json::Value announce_body(const std::string& reason, const std::string& previous) const;
-  void announce_locked(const std::string& reason, const std::string& previous);
-  void handle_join(const json::Value& body);
+  json::Value announce_body(const std::string& reason, const std::string& previous) const
+      REQUIRES(mu_);
+  void announce_locked(const std::string& reason, const std::string& previous) REQUIRES(mu_);
+  void handle_join(const json::Value& body) EXCLUDES(mu_);
   void answer(const std::string& member, const std::string& type, const std::string& reply_to,
               const std::string& reason);
 
@@ -65,14 +67,14 @@ class SwarmAgent {
   mqtt::SwarmTopics topics_;
   Publish publish_;
 
-  mutable std::mutex mu_;
-  std::set<std::string> members_;
-  std::set<std::string> pending_;
-  std::string leader_;
-  uint64_t epoch_ = 0;
-  std::map<std::string, int64_t> last_seen_;
-  int64_t last_beat_ = 0;
-  int64_t connected_since_ = 0;
+  mutable Mutex mu_;
+  std::set<std::string> members_ GUARDED_BY(mu_);
+  std::set<std::string> pending_ GUARDED_BY(mu_);
+  std::string leader_ GUARDED_BY(mu_);
+  uint64_t epoch_ GUARDED_BY(mu_) = 0;
+  std::map<std::string, int64_t> last_seen_ GUARDED_BY(mu_);
+  int64_t last_beat_ GUARDED_BY(mu_) = 0;
+  int64_t connected_since_ GUARDED_BY(mu_) = 0;
 };
 
 }  // namespace rcan::node

@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <cctype>
 #include <map>
-#include <mutex>
 
+#include "base/thread_annotations.h"
 #include "node/services/node_services.h"
 #include "rcan/errors.h"
 
@@ -30,7 +30,7 @@ class GuestLimitStage final : public Stage {
  public:
   explicit GuestLimitStage(NodeServices& s) : svc_(s) {}
   const char* name() const override { return "guest_limits"; }
-  Result run(const std::shared_ptr<Context>& ctx) override {
+  Result run(const std::shared_ptr<Context>& ctx) override EXCLUDES(mu_) {
     if (ctx->safety != SafetyAction::kNone || ctx->principal.role != Role::kGuest)
       return Result::kContinue;
     const GuestLimits& g = svc_.settings.guest_limits;
@@ -51,7 +51,7 @@ class GuestLimitStage final : public Stage {
     int64_t len = int64_t{g.session_seconds} * 1000;
     const std::string key = ctx->principal.key();
     {
-      std::lock_guard<std::mutex> lock(mu_);
+      MutexLock lock(mu_);
       for (auto it = sessions_.begin(); it != sessions_.end();)
         it = now - it->second >= 2 * len ? sessions_.erase(it) : std::next(it);
       auto it = sessions_.find(key);
@@ -94,8 +94,8 @@ class GuestLimitStage final : public Stage {
 
  private:
   NodeServices& svc_;
-  std::mutex mu_;
-  std::map<std::string, int64_t> sessions_;  // guest principal → session start (mono ms)
+  Mutex mu_;
+  std::map<std::string, int64_t> sessions_ GUARDED_BY(mu_);  // guest principal → start (mono ms)
 };
 
 }  // namespace

@@ -17,9 +17,9 @@
 #include <cstdint>
 #include <functional>
 #include <map>
-#include <mutex>
 #include <string>
 
+#include "base/thread_annotations.h"
 #include "node/admission/authenticator.h"
 #include "rcan/json.h"
 #include "rcan/roles.h"
@@ -70,33 +70,33 @@ struct Event {
 class EventBus {
  public:
   using Fn = std::function<void(const Event& event)>;
-  uint64_t subscribe(Fn fn) {
-    std::lock_guard<std::mutex> lock(mu_);
+  uint64_t subscribe(Fn fn) EXCLUDES(mu_) {
+    MutexLock lock(mu_);
     subs_[++next_] = std::move(fn);
     return next_;
   }
-  void unsubscribe(uint64_t id) {
-    std::lock_guard<std::mutex> lock(mu_);
+  void unsubscribe(uint64_t id) EXCLUDES(mu_) {
+    MutexLock lock(mu_);
     subs_.erase(id);
   }
-  void publish(json::Value body, Audience audience = Audience::everyone()) {
+  void publish(json::Value body, Audience audience = Audience::everyone()) EXCLUDES(mu_) {
     Event ev{std::move(body), std::move(audience)};
     std::map<uint64_t, Fn> copy;
     {
-      std::lock_guard<std::mutex> lock(mu_);
+      MutexLock lock(mu_);
       copy = subs_;
     }
     for (auto& [id, fn] : copy) fn(ev);
   }
-  size_t size() const {
-    std::lock_guard<std::mutex> lock(mu_);
+  size_t size() const EXCLUDES(mu_) {
+    MutexLock lock(mu_);
     return subs_.size();
   }
 
  private:
-  mutable std::mutex mu_;
-  std::map<uint64_t, Fn> subs_;
-  uint64_t next_ = 0;
+  mutable Mutex mu_;
+  std::map<uint64_t, Fn> subs_ GUARDED_BY(mu_);
+  uint64_t next_ GUARDED_BY(mu_) = 0;
 };
 
 }  // namespace rcan::node

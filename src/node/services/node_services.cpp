@@ -41,7 +41,7 @@ void NodeServices::write_audit(audit::AuditEntry e,
   metrics.count_audit(e.event);
   std::vector<audit::AuditEntry> late;
   if (audit.available()) {
-    std::lock_guard<std::mutex> l(deferred_mu);
+    MutexLock l(deferred_mu);
     late.swap(deferred_stops);
   }
   for (auto& d : late) {  // stops the log could not record while it was failed: recorded now
@@ -59,7 +59,7 @@ void NodeServices::write_audit(audit::AuditEntry e,
       if (r.error().code == ErrorCode::kAuditUnavailable) {
         audit_unavailable.store(true);
         if (stop_copy) {
-          std::lock_guard<std::mutex> l(deferred_mu);
+          MutexLock l(deferred_mu);
           if (deferred_stops.size() < 1000) deferred_stops.push_back(std::move(*stop_copy));
         }
       }

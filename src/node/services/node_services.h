@@ -8,12 +8,12 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <vector>
 
 #include "base/clock.h"
 #include "base/metrics.h"
+#include "base/thread_annotations.h"
 #include "config/safety_types.h"
 #include "node/admission/authenticator.h"
 #include "node/admission/injection.h"
@@ -113,13 +113,14 @@ class NodeServices {
   // A new audit record of `event` (audit_record.h): anonymous until `by…` says who.
   AuditRecord record(const std::string& event, const std::string& outcome = "ok");
   // Appends asynchronously; `cb` (optional) runs once the record is durable or failed.
-  void write_audit(audit::AuditEntry e, std::function<void(Result<audit::Receipt>)> cb = {});
+  void write_audit(audit::AuditEntry e, std::function<void(Result<audit::Receipt>)> cb = {})
+      EXCLUDES(deferred_mu);
 
   // ESTOP/STOP records that could not be written while the audit log was failed (the stop
   // itself happened): written, marked `recorded_after_audit_outage`, by the first write_audit
   // once the log is back. Bounded.
-  std::mutex deferred_mu;
-  std::vector<audit::AuditEntry> deferred_stops;
+  Mutex deferred_mu;
+  std::vector<audit::AuditEntry> deferred_stops GUARDED_BY(deferred_mu);
 
   uint32_t rate_limit(Role r) const {
     return settings.rate_per_minute[static_cast<size_t>(role_level(r))];
