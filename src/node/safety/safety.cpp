@@ -155,7 +155,7 @@ SafetyCore::SafetyCore(std::unique_ptr<Driver> driver, SafetyConfig cfg, Clock& 
 SafetyCore::~SafetyCore() {
   stop();
   {
-    std::lock_guard<std::mutex> lock(meta_mu_);
+    MutexLock lock(meta_mu_);
     persist_quit_ = true;
   }
   persist_cv_.notify_all();
@@ -165,7 +165,7 @@ SafetyCore::~SafetyCore() {
 Status SafetyCore::open(const std::string& state_dir, audit::Env* env) {
   namespace fs = std::filesystem;
   {
-    std::lock_guard<std::mutex> lock(meta_mu_);
+    MutexLock lock(meta_mu_);
     if (persist_enabled_) return Error(ErrorCode::kInternal, "SafetyCore::open called twice");
   }
   std::error_code ec;
@@ -223,7 +223,7 @@ Status SafetyCore::open(const std::string& state_dir, audit::Env* env) {
 
   bool need_write = false;
   {
-    std::lock_guard<std::mutex> lock(meta_mu_);
+    MutexLock lock(meta_mu_);
     state_dir_ = state_dir;
     persist_enabled_ = true;
     if (corrupt) {
@@ -251,14 +251,14 @@ Status SafetyCore::open(const std::string& state_dir, audit::Env* env) {
 }
 
 void SafetyCore::set_event_callback(EventFn fn) {
-  std::lock_guard<std::mutex> lock(event_mu_);
+  MutexLock lock(event_mu_);
   on_event_ = std::move(fn);
 }
 
 void SafetyCore::emit(const SafetyEvent& ev) {
   EventFn fn;
   {
-    std::lock_guard<std::mutex> lock(event_mu_);
+    MutexLock lock(event_mu_);
     fn = on_event_;
   }
   if (fn) fn(ev);
@@ -297,7 +297,7 @@ EstopResult SafetyCore::estop(std::string_view source, std::string_view reason) 
   record_latency(ns);
 
   {
-    std::lock_guard<std::mutex> lock(meta_mu_);
+    MutexLock lock(meta_mu_);
     latched_.store(true, std::memory_order_release);  // a racing resume() must not win silently
     if (!latch_.active) {
       latch_ = LatchState{true, std::string(source), std::string(reason), clock_.wall_ms()};
@@ -317,14 +317,14 @@ Status SafetyCore::resume(int principal_role_level, std::string_view source) {
                  "clearing ESTOP requires LEASEE (level 3) or above", "", "estop_clear_forbidden");
   }
   {
-    std::lock_guard<std::mutex> lock(meta_mu_);
+    MutexLock lock(meta_mu_);
     if (!latch_.active && !latched_.load()) return Status::Ok();  // nothing latched
     latch_ = LatchState{false, std::string(source), "resume", clock_.wall_ms()};
     ++latch_seq_;
     latched_.store(false, std::memory_order_release);
   }
   {
-    std::lock_guard<std::mutex> lock(deadman_mu_);
+    MutexLock lock(deadman_mu_);
     watchdog_last_feed_mono_ = 0;  // re-armed by the next feed
   }
   persist_cv_.notify_all();
@@ -332,19 +332,22 @@ Status SafetyCore::resume(int principal_role_level, std::string_view source) {
 }
 
 bool SafetyCore::wait_persisted(uint64_t seq, int64_t timeout_ms) {
-  std::unique_lock<std::mutex> lock(meta_mu_);
+  MutexLock lock(meta_mu_);
   if (!persist_enabled_) return false;
-  return durable_cv_.wait_for(lock, std::chrono::milliseconds(timeout_ms),
-                              [&] { return persisted_seq_ >= seq; });
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  while (persisted_seq_ < seq)
+    if (durable_cv_.wait_until(meta_mu_, deadline) == std::cv_status::timeout)
+      return persisted_seq_ >= seq;
+  return true;
 }
 
 uint64_t SafetyCore::state_seq() const {
-  std::lock_guard<std::mutex> lock(meta_mu_);
+  MutexLock lock(meta_mu_);
   return latch_seq_;
 }
 
 void SafetyCore::record_latency(int64_t ns) {
-  std::lock_guard<std::mutex> lock(stats_mu_);
+  MutexLock lock(stats_mu_);
   if (latency_ring_.size() < kLatencyRing) {
     latency_ring_.push_back(ns);
   } else {
@@ -360,7 +363,7 @@ LatencyStats SafetyCore::estop_latency() const {
   std::vector<int64_t> v;
   LatencyStats s;
   {
-    std::lock_guard<std::mutex> lock(stats_mu_);
+    MutexLock lock(stats_mu_);
     v = latency_ring_;
     s.count = latency_count_;
     s.last_ns = latency_last_ns_;
@@ -387,9 +390,9 @@ Status SafetyCore::write_state_file(const LatchState& st) {
 }
 
 void SafetyCore::persist_loop() {
-  std::unique_lock<std::mutex> lock(meta_mu_);
+  ReleasableMutexLock lock(meta_mu_);
   for (;;) {
-    persist_cv_.wait(lock, [&] { return persist_quit_ || persisted_seq_ < latch_seq_; });
+    while (!persist_quit_ && persisted_seq_ >= latch_seq_) persist_cv_.wait(meta_mu_);
     if (persisted_seq_ >= latch_seq_) return;  // shutting down, nothing pending
     const uint64_t seq = latch_seq_;
     const LatchState snapshot = latch_;
@@ -406,8 +409,9 @@ void SafetyCore::persist_loop() {
     durable_cv_.notify_all();
     if (persist_quit_) return;
     // Retry every 200 ms, sooner on a new change or shutdown (which makes one last attempt).
-    persist_cv_.wait_for(lock, std::chrono::milliseconds(200),
-                         [&] { return persist_quit_ || latch_seq_ != seq; });
+    const auto retry_at = std::chrono::steady_clock::now() + std::chrono::milliseconds(200);
+    while (!persist_quit_ && latch_seq_ == seq)
+      if (persist_cv_.wait_until(meta_mu_, retry_at) == std::cv_status::timeout) break;
   }
 }
 
@@ -415,7 +419,7 @@ void SafetyCore::persist_loop() {
 
 void SafetyCore::arm_deadman(const std::string& session_id, int64_t timeout_ms) {
   {
-    std::lock_guard<std::mutex> lock(deadman_mu_);
+    MutexLock lock(deadman_mu_);
     Deadman& s = deadmen_[session_id];
     s.timeout_ms = timeout_ms > 0 ? timeout_ms : cfg_.default_heartbeat_ms;
     s.last_heartbeat_mono = clock_.mono_ms();
@@ -427,7 +431,7 @@ void SafetyCore::arm_deadman(const std::string& session_id, int64_t timeout_ms) 
 Status SafetyCore::feed_deadman(const std::string& session_id) {
   bool revived = false;
   {
-    std::lock_guard<std::mutex> lock(deadman_mu_);
+    MutexLock lock(deadman_mu_);
     auto it = deadmen_.find(session_id);
     if (it == deadmen_.end())
       return Error(ErrorCode::kNotFound, "unknown session", "session_id", "unknown_session");
@@ -442,13 +446,13 @@ Status SafetyCore::feed_deadman(const std::string& session_id) {
 void SafetyCore::disarm_deadman(const std::string& session_id) {
   bool held = false;
   {
-    std::lock_guard<std::mutex> lock(deadman_mu_);
+    MutexLock lock(deadman_mu_);
     auto it = deadmen_.find(session_id);
     if (it == deadmen_.end()) return;
     held = it->second.holds_control;
     deadmen_.erase(it);
   }
-  std::lock_guard<std::mutex> lock(apply_mu_);
+  MutexLock lock(apply_mu_);
   if (held || (!session_id.empty() && motion_owner_ == session_id)) {
     if (!driver_->state().stopped || held) {
       driver_->stop();
@@ -459,7 +463,7 @@ void SafetyCore::disarm_deadman(const std::string& session_id) {
 }
 
 void SafetyCore::set_deadman_holds_control(const std::string& session_id, bool holds_control) {
-  std::lock_guard<std::mutex> lock(deadman_mu_);
+  MutexLock lock(deadman_mu_);
   auto it = deadmen_.find(session_id);
   if (it != deadmen_.end()) it->second.holds_control = holds_control;
 }
@@ -467,7 +471,7 @@ void SafetyCore::set_deadman_holds_control(const std::string& session_id, bool h
 void SafetyCore::feed_watchdog() {
   bool armed = false;
   {
-    std::lock_guard<std::mutex> lock(deadman_mu_);
+    MutexLock lock(deadman_mu_);
     armed = watchdog_last_feed_mono_ == 0;
     watchdog_last_feed_mono_ = clock_.mono_ms();
     if (watchdog_last_feed_mono_ == 0) watchdog_last_feed_mono_ = 1;
@@ -476,7 +480,7 @@ void SafetyCore::feed_watchdog() {
 }
 
 void SafetyCore::enter_safe_stop(std::string reason, std::string session) {
-  std::lock_guard<std::mutex> lock(meta_mu_);
+  MutexLock lock(meta_mu_);
   safe_stop_reason_ = std::move(reason);
   safe_stop_session_ = std::move(session);
   safe_stop_since_wall_ms_ = clock_.wall_ms();
@@ -503,7 +507,7 @@ void SafetyCore::tick() {
   std::string owner;
   bool moving = false;
   {
-    std::lock_guard<std::mutex> lock(apply_mu_);
+    MutexLock lock(apply_mu_);
     step_driver_to_locked(now);
     // Only now, with the driver stepped to `now` under apply_mu_, is a rest over: until here a
     // dispatch() still catches the driver up itself (see start()).
@@ -548,7 +552,7 @@ void SafetyCore::tick() {
   bool watchdog_fired = false;
   int64_t watchdog_elapsed = 0;
   {
-    std::lock_guard<std::mutex> lock(deadman_mu_);
+    MutexLock lock(deadman_mu_);
     for (auto& [id, s] : deadmen_) {
       const int64_t elapsed = now - s.last_heartbeat_mono;
       if (s.lost || elapsed <= s.timeout_ms) continue;
@@ -579,7 +583,7 @@ void SafetyCore::tick() {
     }
   }
   if (!events.empty()) {
-    std::lock_guard<std::mutex> lock(apply_mu_);
+    MutexLock lock(apply_mu_);
     drive_deadline_mono_ = 0;
   }
   if (watchdog_fired) {
@@ -604,11 +608,11 @@ int64_t SafetyCore::rest_for_ms() const {
   const int64_t now = clock_.mono_ms();
   int64_t until = now + cfg_.idle_tick_ms;
   {
-    std::lock_guard<std::mutex> lock(apply_mu_);
+    MutexLock lock(apply_mu_);
     if (drive_deadline_mono_ != 0 || !driver_->at_rest()) return 0;
   }
   {
-    std::lock_guard<std::mutex> lock(deadman_mu_);
+    MutexLock lock(deadman_mu_);
     // tick() acts once a deadline has passed (elapsed > timeout): wake 1 ms after it.
     for (const auto& [id, s] : deadmen_)
       if (!s.lost) until = std::min(until, s.last_heartbeat_mono + s.timeout_ms + 1);
@@ -622,18 +626,18 @@ int64_t SafetyCore::rest_for_ms() const {
 void SafetyCore::wake_ticker() {
   if (!resting_.load(std::memory_order_seq_cst)) return;
   {
-    std::lock_guard<std::mutex> wl(tick_wait_mu_);
+    MutexLock wl(tick_wait_mu_);
     wake_requested_ = true;
   }
   tick_wait_cv_.notify_all();
 }
 
 void SafetyCore::start() {
-  std::lock_guard<std::mutex> lock(thread_mu_);
+  MutexLock lock(thread_mu_);
   if (running_.load()) return;
   running_.store(true);
   {
-    std::lock_guard<std::mutex> l2(apply_mu_);
+    MutexLock l2(apply_mu_);
     last_tick_mono_ = clock_.mono_ms();
   }
   ticker_ = std::thread([this] {
@@ -643,18 +647,18 @@ void SafetyCore::start() {
     while (running_.load(std::memory_order_acquire)) {
       tick();
       {
-        std::lock_guard<std::mutex> wl(tick_wait_mu_);
+        MutexLock wl(tick_wait_mu_);
         wake_requested_ = false;
       }
       // Announce the rest before checking whether we may: a dispatch() or session change that
       // the check does not see then sees resting_ and wakes us (see wake_ticker()).
       resting_.store(true, std::memory_order_seq_cst);
       const int64_t rest_ms = rest_for_ms();
-      std::unique_lock<std::mutex> wl(tick_wait_mu_);
+      MutexLock wl(tick_wait_mu_);
       if (rest_ms > 0) {
-        tick_wait_cv_.wait_for(wl, std::chrono::milliseconds(rest_ms), [this] {
-          return wake_requested_ || !running_.load(std::memory_order_acquire);
-        });
+        const auto wake_at = std::chrono::steady_clock::now() + std::chrono::milliseconds(rest_ms);
+        while (!wake_requested_ && running_.load(std::memory_order_acquire))
+          if (tick_wait_cv_.wait_until(tick_wait_mu_, wake_at) == std::cv_status::timeout) break;
         // resting_ stays set until the next tick() has stepped the driver (it clears it under
         // apply_mu_): a command arriving between this wake-up and that step still brings the
         // driver up to its own moment, instead of being integrated over the whole rest.
@@ -662,8 +666,8 @@ void SafetyCore::start() {
         continue;
       }
       resting_.store(false, std::memory_order_seq_cst);
-      tick_wait_cv_.wait_until(wl, next,
-                               [this] { return !running_.load(std::memory_order_acquire); });
+      while (running_.load(std::memory_order_acquire))
+        if (tick_wait_cv_.wait_until(tick_wait_mu_, next) == std::cv_status::timeout) break;
       next += period;
       const auto now = std::chrono::steady_clock::now();
       if (next < now) next = now + period;  // overran: do not try to catch up
@@ -672,10 +676,10 @@ void SafetyCore::start() {
 }
 
 void SafetyCore::stop() {
-  std::lock_guard<std::mutex> lock(thread_mu_);
+  MutexLock lock(thread_mu_);
   if (ticker_.joinable()) {
     {
-      std::lock_guard<std::mutex> wl(tick_wait_mu_);
+      MutexLock wl(tick_wait_mu_);
       running_.store(false, std::memory_order_release);
     }
     tick_wait_cv_.notify_all();
@@ -683,7 +687,7 @@ void SafetyCore::stop() {
   }
   running_.store(false);
   driver_->stop();
-  std::lock_guard<std::mutex> al(apply_mu_);
+  MutexLock al(apply_mu_);
   driver_->stop();
   drive_deadline_mono_ = 0;
 }
@@ -703,7 +707,7 @@ RobotState SafetyCore::decorate(RobotState st) const {
 RobotState SafetyCore::robot_state() const {
   RobotState st;
   {
-    std::lock_guard<std::mutex> lock(apply_mu_);
+    MutexLock lock(apply_mu_);
     st = driver_->state();
   }
   return decorate(st);
@@ -717,7 +721,7 @@ SafetyStatus SafetyCore::status() const {
   s.policy = cfg_.policy;
   s.estop_latency = estop_latency();
   {
-    std::lock_guard<std::mutex> lock(meta_mu_);
+    MutexLock lock(meta_mu_);
     s.estop_active = latched_.load(std::memory_order_acquire);
     if (s.estop_active) {
       s.estop_source = latch_.source;
@@ -737,7 +741,7 @@ SafetyStatus SafetyCore::status() const {
     s.startup_note = startup_note_;
   }
   {
-    std::lock_guard<std::mutex> lock(deadman_mu_);
+    MutexLock lock(deadman_mu_);
     s.sessions = deadmen_.size();
   }
   s.running = running_.load();

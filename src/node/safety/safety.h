@@ -36,11 +36,9 @@
 
 #include <array>
 #include <atomic>
-#include <condition_variable>
 #include <cstdint>
 #include <functional>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -49,6 +47,7 @@
 #include <vector>
 
 #include "base/clock.h"
+#include "base/thread_annotations.h"
 #include "config/safety_types.h"
 #include "node/safety/driver.h"
 #include "rcan/audit/env.h"
@@ -253,7 +252,7 @@ class SafetyCore {
                                         const RobotState& now, DispatchOutcome& out) const;
   void enter_safe_stop(std::string reason, std::string session);
   void record_latency(int64_t ns);
-  void step_driver_to_locked(int64_t now);  // caller holds apply_mu_
+  void step_driver_to_locked(int64_t now) REQUIRES(apply_mu_);
   // Wakes a resting loop (new motion, session or watchdog deadline). Cheap when not resting.
   void wake_ticker();
   void persist_loop();
@@ -277,51 +276,51 @@ class SafetyCore {
   std::atomic<uint64_t> fence_timeouts_{0};
 
   // Serialises Driver::apply/step/state. Held only around those calls.
-  mutable std::mutex apply_mu_;
-  std::string motion_owner_;         // guarded by apply_mu_: session of the last motion command
-  int64_t drive_deadline_mono_ = 0;  // guarded by apply_mu_: 0 = no active drive
-  int64_t last_tick_mono_ = 0;       // guarded by apply_mu_
+  mutable Mutex apply_mu_;
+  std::string motion_owner_ GUARDED_BY(apply_mu_);         // the session of the last motion command
+  int64_t drive_deadline_mono_ GUARDED_BY(apply_mu_) = 0;  // 0 = no active drive
+  int64_t last_tick_mono_ GUARDED_BY(apply_mu_) = 0;
 
   // Latch metadata, safe-stop metadata, persistence bookkeeping.
-  mutable std::mutex meta_mu_;
-  LatchState latch_;               // guarded by meta_mu_
-  uint64_t latch_seq_ = 0;         // guarded by meta_mu_: bumps on every latch change
-  uint64_t persisted_seq_ = 0;     // guarded by meta_mu_
-  std::string persist_error_;      // guarded by meta_mu_
-  std::string startup_note_;       // guarded by meta_mu_
-  std::string safe_stop_reason_;   // guarded by meta_mu_
-  std::string safe_stop_session_;  // guarded by meta_mu_
-  int64_t safe_stop_since_wall_ms_ = 0;
-  std::string state_dir_;               // set once by open()
-  bool persist_enabled_ = false;        // set once by open()
-  bool persist_quit_ = false;           // guarded by meta_mu_
-  std::condition_variable persist_cv_;  // persister wakes (meta_mu_)
-  std::condition_variable durable_cv_;  // waiters in wait_persisted (meta_mu_)
+  mutable Mutex meta_mu_;
+  LatchState latch_ GUARDED_BY(meta_mu_);
+  uint64_t latch_seq_ GUARDED_BY(meta_mu_) = 0;  // bumps on every latch change
+  uint64_t persisted_seq_ GUARDED_BY(meta_mu_) = 0;
+  std::string persist_error_ GUARDED_BY(meta_mu_);
+  std::string startup_note_ GUARDED_BY(meta_mu_);
+  std::string safe_stop_reason_ GUARDED_BY(meta_mu_);
+  std::string safe_stop_session_ GUARDED_BY(meta_mu_);
+  int64_t safe_stop_since_wall_ms_ GUARDED_BY(meta_mu_) = 0;
+  std::string state_dir_;         // set once by open()
+  bool persist_enabled_ = false;  // set once by open()
+  bool persist_quit_ GUARDED_BY(meta_mu_) = false;
+  CondVar persist_cv_;  // the persister waits on meta_mu_
+  CondVar durable_cv_;  // wait_persisted() waits on meta_mu_
   std::thread persister_;
 
-  mutable std::mutex deadman_mu_;
-  std::unordered_map<std::string, Deadman> deadmen_;  // by control session id
-  int64_t watchdog_last_feed_mono_ = 0;               // guarded by deadman_mu_; 0 = not armed
+  mutable Mutex deadman_mu_;
+  std::unordered_map<std::string, Deadman> deadmen_ GUARDED_BY(deadman_mu_);  // by session id
+  int64_t watchdog_last_feed_mono_ GUARDED_BY(deadman_mu_) = 0;               // 0 = not armed
 
-  mutable std::mutex event_mu_;
-  EventFn on_event_;
+  mutable Mutex event_mu_;
+  EventFn on_event_ GUARDED_BY(event_mu_);
 
-  mutable std::mutex stats_mu_;
-  std::vector<int64_t> latency_ring_;  // guarded by stats_mu_
-  size_t latency_next_ = 0;
-  uint64_t latency_count_ = 0;
-  int64_t latency_last_ns_ = 0;
-  int64_t latency_max_ns_ = 0;
+  mutable Mutex stats_mu_;
+  std::vector<int64_t> latency_ring_ GUARDED_BY(stats_mu_);
+  size_t latency_next_ GUARDED_BY(stats_mu_) = 0;
+  uint64_t latency_count_ GUARDED_BY(stats_mu_) = 0;
+  int64_t latency_last_ns_ GUARDED_BY(stats_mu_) = 0;
+  int64_t latency_max_ns_ GUARDED_BY(stats_mu_) = 0;
 
   std::atomic<uint64_t> loop_count_{0};
   std::atomic<int64_t> loop_latency_us_{0};
 
-  std::mutex thread_mu_;  // start()/stop()
-  std::thread ticker_;
+  Mutex thread_mu_;  // start()/stop()
+  std::thread ticker_ GUARDED_BY(thread_mu_);
   std::atomic<bool> running_{false};
-  std::mutex tick_wait_mu_;
-  std::condition_variable tick_wait_cv_;
-  bool wake_requested_ = false;  // guarded by tick_wait_mu_
+  Mutex tick_wait_mu_;
+  CondVar tick_wait_cv_;
+  bool wake_requested_ GUARDED_BY(tick_wait_mu_) = false;
   // True while the loop thread may be sleeping at its idle rate: dispatch() then brings the
   // driver up to date before applying, and anything that adds work wakes the loop.
   std::atomic<bool> resting_{false};

@@ -194,7 +194,7 @@ Result<DispatchOutcome> SafetyCore::precheck(const ActuatorCommand& cmd,
         "command expired " + std::to_string(now - opts.deadline_mono_ms) + " ms before dispatch",
         "", "ttl_expired");
   if (!opts.session_id.empty()) {
-    std::lock_guard<std::mutex> lock(deadman_mu_);
+    MutexLock lock(deadman_mu_);
     auto it = deadmen_.find(opts.session_id);
     if (it != deadmen_.end() &&
         (it->second.lost || now - it->second.last_heartbeat_mono > it->second.timeout_ms)) {
@@ -205,7 +205,7 @@ Result<DispatchOutcome> SafetyCore::precheck(const ActuatorCommand& cmd,
   }
   RobotState snapshot;
   {
-    std::lock_guard<std::mutex> lock(apply_mu_);
+    MutexLock lock(apply_mu_);
     snapshot = driver_->state();
   }
   auto limited = limit_command(cmd, opts.policy.value_or(cfg_.policy), snapshot, out);
@@ -225,7 +225,7 @@ Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd,
     // A stop is always allowed, latched or not, stale or not.
     driver_->stop();
     {
-      std::lock_guard<std::mutex> lock(apply_mu_);
+      MutexLock lock(apply_mu_);
       driver_->stop();
       drive_deadline_mono_ = 0;
     }
@@ -239,7 +239,7 @@ Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd,
   DispatchOutcome out = std::move(pre).value();
 
   {
-    std::lock_guard<std::mutex> lock(apply_mu_);
+    MutexLock lock(apply_mu_);
     // apply_seq_ is odd while this thread may call Driver::apply(); estop() waits for it to
     // turn even (see estop()). The latch is re-checked after making it odd.
     struct SeqGuard {
@@ -269,7 +269,7 @@ Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd,
   }
   wake_ticker();
   if (safe_stop_.load(std::memory_order_acquire)) {
-    std::lock_guard<std::mutex> lock(meta_mu_);
+    MutexLock lock(meta_mu_);
     safe_stop_.store(false, std::memory_order_release);
     safe_stop_reason_.clear();
     safe_stop_session_.clear();

@@ -79,7 +79,7 @@ void SimRobot::absorb_stop_locked() const {
 }
 
 Status SimRobot::apply(const ActuatorCommand& cmd) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   absorb_stop_locked();
   if (cmd.stop) {
     st_.target_linear_mps = 0.0;
@@ -174,7 +174,7 @@ void SimRobot::integrate_locked(double dt) {
 
 void SimRobot::step(int64_t dt_ms) {
   if (dt_ms <= 0) return;
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   absorb_stop_locked();
   int64_t left = dt_ms;
   while (left > 0) {
@@ -195,13 +195,13 @@ void SimRobot::step(int64_t dt_ms) {
 }
 
 bool SimRobot::at_rest() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   absorb_stop_locked();
   return stopped_locked();
 }
 
 RobotState SimRobot::state() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   absorb_stop_locked();
   st_.stopped = stopped_locked();
   return st_;

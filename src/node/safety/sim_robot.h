@@ -20,10 +20,10 @@
 
 #include <atomic>
 #include <cstdint>
-#include <mutex>
 #include <string>
 #include <string_view>
 
+#include "base/thread_annotations.h"
 #include "node/safety/driver.h"
 
 namespace rcan::node {
@@ -60,17 +60,17 @@ class SimRobot final : public Driver {
   uint64_t stop_count() const { return stop_gen_.load(std::memory_order_acquire); }
 
  private:
-  // Applies a pending stop() (if any) to the state. Caller holds mu_.
-  void absorb_stop_locked() const;
-  void integrate_locked(double dt_s);
-  bool stopped_locked() const;
+  // Applies a pending stop() (if any) to the state.
+  void absorb_stop_locked() const REQUIRES(mu_);
+  void integrate_locked(double dt_s) REQUIRES(mu_);
+  bool stopped_locked() const REQUIRES(mu_);
 
   const SimRobotConfig cfg_;
-  mutable std::mutex mu_;
-  mutable RobotState st_;               // guarded by mu_
-  mutable bool braking_ = false;        // after stop(): decelerate at the brake rates
-  mutable uint64_t seen_stop_gen_ = 0;  // guarded by mu_
-  double drain_pct_ = 0.0;              // guarded by mu_
+  mutable Mutex mu_;
+  mutable RobotState st_ GUARDED_BY(mu_);
+  mutable bool braking_ GUARDED_BY(mu_) = false;  // after stop(): decelerate at the brake rates
+  mutable uint64_t seen_stop_gen_ GUARDED_BY(mu_) = 0;
+  double drain_pct_ GUARDED_BY(mu_) = 0.0;
   std::atomic<uint64_t> stop_gen_{0};
 };
 
