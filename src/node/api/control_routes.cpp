@@ -105,12 +105,12 @@ void Node::control_start() {
   svc_.partition.start(
       [this] { return svc_.clock.wall_ms(); },
       [this](NetMode old, NetMode now) {
-        AuditRecord e = svc_.record("PARTITION_MODE", "ok");
-        e.by_system();
-        e.reason(std::string(net_mode_name(now)));
-        e.detail("from", std::string(net_mode_name(old)));
-        e.detail("to", std::string(net_mode_name(now)));
-        e.write();
+        svc_.record("PARTITION_MODE", "ok")
+            .by_system()
+            .reason(std::string(net_mode_name(now)))
+            .detail("from", std::string(net_mode_name(old)))
+            .detail("to", std::string(net_mode_name(now)))
+            .write();
         svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
                                                      {"event", "PARTITION_MODE"},
                                                      {"mode", std::string(net_mode_name(now))},
@@ -147,23 +147,23 @@ void Node::control_tick() {
   int64_t now_wall = svc_.clock.wall_ms();
   svc_.sessions.tick(svc_.clock.mono_ms(), now_wall);
   if (auto t = svc_.ownership.expire(now_wall)) {
-    AuditRecord e = svc_.record("TRANSFER_EXPIRED", "ok");
-    e.by_system();
-    e.detail("transfer_id", t->id);
-    e.detail("from", t->from_sub);
-    e.detail("to", t->to_sub);
-    e.write();
+    svc_.record("TRANSFER_EXPIRED", "ok")
+        .by_system()
+        .detail("transfer_id", t->id)
+        .detail("from", t->from_sub)
+        .detail("to", t->to_sub)
+        .write();
     svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
                                                  {"event", "TRANSFER_EXPIRED"},
                                                  {"transfer_id", t->id},
                                                  {"timestamp_ms", now_wall}}));
   }
   for (const auto& c : svc_.consent.expire(now_wall)) {
-    AuditRecord e = svc_.record("CONSENT_EXPIRED", "ok");
-    e.by_system();
-    e.detail("consent_id", c.id);
-    e.detail("requester", c.requester_sub);
-    e.write();
+    svc_.record("CONSENT_EXPIRED", "ok")
+        .by_system()
+        .detail("consent_id", c.id)
+        .detail("requester", c.requester_sub)
+        .write();
   }
   announce_control_changes();
 }
@@ -255,9 +255,7 @@ void Node::queue_route(transport::HttpRequest& req, Respond& respond, const json
   if (m == "DELETE") {
     bool left = svc_.sessions.leave_queue(*pr);
     if (left) {
-      AuditRecord e = svc_.record("CLAIM_WITHDRAWN", "ok");
-      e.by(*pr);
-      e.write();
+      svc_.record("CLAIM_WITHDRAWN", "ok").by(*pr).write();
     }
     answer_json(respond, p, left ? 200 : 404,
                 left ? json::Value(json::Object{{"left", true}})
@@ -282,11 +280,11 @@ void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json
   bool fleet = !str_field(body, "fleet_id").empty();
   int64_t now_mono = svc_.clock.mono_ms(), now_wall = svc_.clock.wall_ms();
   auto deny = [&](const Error& err, const std::string& reason) {
-    AuditRecord e = svc_.record("CLAIM_DENIED", "blocked");
-    e.by(*pr);
-    e.reason(reason);
-    e.detail("error", err.message);
-    e.write();
+    svc_.record("CLAIM_DENIED", "blocked")
+        .by(*pr)
+        .reason(reason)
+        .detail("error", err.message)
+        .write();
     answer_error(respond, route, err);
   };
   // Network partition: no new sessions in LOCKDOWN; offline, only principals validated while
@@ -312,11 +310,11 @@ void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json
     return announce_control_changes();
   }
   if (c->outcome == ClaimOutcome::kQueued) {
-    AuditRecord e = svc_.record("CLAIM_QUEUED", "blocked");
-    e.by(*pr);
-    e.reason("CONTROL_CONFLICT");
-    e.detail("queue_position", static_cast<int64_t>(c->queue_position));
-    e.write();
+    svc_.record("CLAIM_QUEUED", "blocked")
+        .by(*pr)
+        .reason("CONTROL_CONFLICT")
+        .detail("queue_position", static_cast<int64_t>(c->queue_position))
+        .write();
     json::Value err =
         svc_.error(Error(ErrorCode::kControlConflict,
                          "the robot is controlled by another principal of the same role; you are "
@@ -386,10 +384,11 @@ void Node::renew_route(transport::HttpRequest& req, Respond& respond, const json
                               "session_id", "missing_field"));
   auto r = svc_.sessions.renew(session_id, *pr, svc_.clock.mono_ms(), svc_.clock.wall_ms());
   if (!r.ok()) {
-    AuditRecord e = svc_.record("RENEW_DENIED", "blocked");
-    e.by(*pr).message(session_id);
-    e.reason(std::string(error_name(r.error().code)));
-    e.write();
+    svc_.record("RENEW_DENIED", "blocked")
+        .by(*pr)
+        .message(session_id)
+        .reason(std::string(error_name(r.error().code)))
+        .write();
     announce_control_changes();
     return answer_error(respond, route, r.error());
   }
@@ -422,9 +421,7 @@ void Node::release_route(transport::HttpRequest& req, Respond& respond, const js
   auto r = svc_.sessions.release(session_id, *pr, svc_.clock.mono_ms(), svc_.clock.wall_ms());
   if (!r.ok()) return answer_error(respond, route, r.error());
   svc_.act.disarm_deadman(session_id);
-  AuditRecord e = svc_.record("RELEASE", "ok");
-  e.by(*pr).message(session_id);
-  e.write();
+  svc_.record("RELEASE", "ok").by(*pr).message(session_id).write();
   if (svc_.sessions.state(svc_.clock.mono_ms()) == ControlState::kAvailable)
     svc_.events.publish(json::Value(json::Object{{"type", "AVAILABLE"},
                                                  {"released_session", session_id},
@@ -468,8 +465,7 @@ void Node::handoff_route(transport::HttpRequest& req, Respond& respond, const js
                                                {"window_ms", window},
                                                {"timestamp_ms", svc_.clock.wall_ms()}}));
   AuditRecord e = svc_.record("HANDOFF", "ok");
-  e.by(*pr).message(session_id);
-  e.detail("target_user_id", target);
+  e.by(*pr).message(session_id).detail("target_user_id", target);
   if (target_role) e.detail("target_role", std::string(role_name(*target_role)));
   if (std::string reason = str_field(body, "reason", 512); !reason.empty()) e.reason(reason);
   announce_control_changes();
@@ -506,10 +502,11 @@ void Node::lease_route(transport::HttpRequest& req, Respond& respond, const json
                                        svc_.clock.mono_ms());
     if (!l.ok()) return answer_error(respond, route, l.error());
     AuditRecord e = svc_.record("LEASE_GRANTED", "ok");
-    e.by(*pr).message(l->id);
-    e.detail("lease_id", l->id);
-    e.detail("leasee", l->leasee_sub);
-    e.detail("end_ms", l->end_wall_ms);
+    e.by(*pr)
+        .message(l->id)
+        .detail("lease_id", l->id)
+        .detail("leasee", l->leasee_sub)
+        .detail("end_ms", l->end_wall_ms);
     svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
                                                  {"event", "LEASE_GRANTED"},
                                                  {"lease_id", l->id},
@@ -539,10 +536,11 @@ void Node::lease_route(transport::HttpRequest& req, Respond& respond, const json
                                               svc_.clock.mono_ms());
     if (!l.ok()) return answer_error(respond, route, l.error());
     AuditRecord e = svc_.record("LEASE_ACCESS_GRANTED", "ok");
-    e.by(*pr).message(lease_id);
-    e.detail("lease_id", lease_id);
-    e.detail("user_id", sub);
-    e.detail("role", std::string(role_name(*role)));
+    e.by(*pr)
+        .message(lease_id)
+        .detail("lease_id", lease_id)
+        .detail("user_id", sub)
+        .detail("role", std::string(role_name(*role)));
     announce_control_changes();
     json::Value answer = l->to_json(now_wall);
     return e.write([this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
@@ -554,8 +552,7 @@ void Node::lease_route(transport::HttpRequest& req, Respond& respond, const json
   auto l = svc_.sessions.revoke_lease(*pr, lease_id, svc_.clock.mono_ms(), now_wall);
   if (!l.ok()) return answer_error(respond, route, l.error());
   AuditRecord e = svc_.record("LEASE_REVOKED", "ok");
-  e.by(*pr).message(lease_id);
-  e.detail("lease_id", lease_id);
+  e.by(*pr).message(lease_id).detail("lease_id", lease_id);
   announce_control_changes();
   json::Value answer = json::Object{{"lease_id", lease_id}, {"revoked", true}};
   e.write([this, respond, route, answer](rcan::Result<audit::Receipt>) mutable {
@@ -598,20 +595,21 @@ void Node::transfer_route(transport::HttpRequest& req, Respond& respond, const j
     event = "TRANSFER_CANCEL";
   }
   if (!r.ok()) {
-    AuditRecord e = svc_.record("TRANSFER_DENIED", "blocked");
-    e.by(*pr);
-    e.reason(std::string(error_name(r.error().code)));
-    e.detail("action", action);
-    e.write();
+    svc_.record("TRANSFER_DENIED", "blocked")
+        .by(*pr)
+        .reason(std::string(error_name(r.error().code)))
+        .detail("action", action)
+        .write();
     if (r.error().code == ErrorCode::kSessionExpired) control_tick();  // record the expiry now
     return answer_error(respond, route, r.error());
   }
   AuditRecord e = svc_.record(event, "ok");
-  e.by(*pr).message(r->id);
-  e.detail("transfer_id", r->id);
-  e.detail("from", r->from_sub);
-  e.detail("to", r->to_sub);
-  e.detail("expires_ms", r->expires_ms);
+  e.by(*pr)
+      .message(r->id)
+      .detail("transfer_id", r->id)
+      .detail("from", r->from_sub)
+      .detail("to", r->to_sub)
+      .detail("expires_ms", r->expires_ms);
   if (action == "accept") {
     e.detail("agreement", str_field(body, "agreement", 512));
     // Personal data goes; the audit chain and skills stay.
@@ -659,8 +657,7 @@ void Node::consent_request_route(transport::HttpRequest& req, Respond& respond,
   if (!msg_body.get("payload")) msg_body.as_object().set("payload", json::Object{});
   auto refused = [&](const Error& err) {
     AuditRecord e = svc_.record("CONSENT_REFUSED", "blocked");
-    e.by(*pr);
-    e.reason(std::string(error_name(err.code)));
+    e.by(*pr).reason(std::string(error_name(err.code)));
     if (!err.field.empty()) e.detail("field", err.field.substr(0, 128));
     e.write();
     answer_error(respond, route, err);
@@ -734,8 +731,7 @@ void Node::consent_request_route(transport::HttpRequest& req, Respond& respond,
     worker_.post([this, url, text, cid] {
       auto r = http_request("POST", url, text, 2000);
       AuditRecord we = svc_.record("CONSENT_NOTIFIED", r.ok() && r->status < 300 ? "ok" : "error");
-      we.by_system().message(cid);
-      we.detail("consent_id", cid);
+      we.by_system().message(cid).detail("consent_id", cid);
       we.detail("webhook_status",
                 r.ok() ? json::Value(static_cast<int64_t>(r->status)) : json::Value());
       if (!r.ok()) we.reason(r.error().message);
