@@ -172,12 +172,13 @@ void run_actuation(int ms) {
   m.payload = rcan::json::Object{
       {"action", "move"},
       {"params", rcan::json::Object{{"linear", 0.2}, {"angular", 0.1}, {"duration_ms", 200}}}};
+  const rcan::ActionSpec& move = *rcan::find_action("move");
   int64_t prep_ns = 0, apply_ns = 0, n = 0;
   const int64_t end = now_ns() + int64_t{ms} * 1'000'000;
   while (now_ns() < end) {
     for (int i = 0; i < 256; ++i) {
       const int64_t t0 = now_ns();
-      auto pc = act.prepare(m, 0, "");
+      auto pc = act.prepare(m, move, 0, "");
       const int64_t t1 = now_ns();
       if (!pc.ok()) {
         std::fprintf(stderr, "prepare failed: %s\n", pc.error().message.c_str());

@@ -65,10 +65,7 @@ bool role_allows(Role r, Capability c, const RolePolicy& policy = {});
 std::optional<Role> scope_min_role(std::string_view scope);
 // The scope a capability needs.
 std::string_view capability_scope(Capability c);
-// The capability a command action addresses, by the reference server's prefix map:
-// status, chat, teleop, move/nav → navigation, arm, record, train, install, update → OTA,
-// safety, users, deploy, diagnostics; anything else → teleop (a motion command).
-Capability capability_for_action(std::string_view action);
+// The capability a command action addresses comes from the action table (rcan/actions.h).
 
 // Per-principal limits per minute (0 = unlimited): GUEST 10, USER 100, LEASEE 500,
 // OWNER 1000, CREATOR unlimited.

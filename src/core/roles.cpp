@@ -157,26 +157,6 @@ std::string_view capability_scope(Capability c) {
   return "control";
 }
 
-Capability capability_for_action(std::string_view action) {
-  std::string a = lower(action);
-  auto starts = [&](std::string_view p) { return a.rfind(p, 0) == 0; };
-  if (starts("status") || starts("get_status") || starts("query")) return Capability::kViewStatus;
-  if (starts("chat")) return Capability::kChat;
-  if (starts("teleop")) return Capability::kTeleop;
-  if (starts("move") || starts("nav") || starts("drive") || starts("goto"))
-    return Capability::kNavigation;
-  if (starts("arm") || starts("joint") || starts("gripper")) return Capability::kArm;
-  if (starts("record")) return Capability::kRecordEpisodes;
-  if (starts("train")) return Capability::kTrainingContribute;
-  if (starts("install")) return Capability::kInstallSkills;
-  if (starts("update") || starts("ota")) return Capability::kOtaUpdates;
-  if (starts("safety")) return Capability::kSafetyConfig;
-  if (starts("users") || starts("user_")) return Capability::kUserManagement;
-  if (starts("deploy")) return Capability::kModelDeployment;
-  if (starts("diagnostic")) return Capability::kHardwareDiagnostics;
-  return Capability::kTeleop;
-}
-
 uint32_t rate_limit_per_minute(Role r) {
   switch (r) {
     case Role::kGuest:

@@ -3,6 +3,7 @@
 // The discovery, audit, safety, gate and HiTL cases need the node and run in its tests.
 #include <gtest/gtest.h>
 
+#include "rcan/actions.h"
 #include "rcan/errors.h"
 #include "rcan/message.h"
 #include "rcan/roles.h"
@@ -34,8 +35,9 @@ TEST(ConformanceV13, FormatRbacAndSchemaCases) {
         auto role = role_from_name(in.get("principal_role")->as_string());
         ASSERT_TRUE(role.has_value());
         std::vector<std::string> scopes{in.get("scope")->as_string()};
-        Capability cap = capability_for_action(in.get("payload")->get("action")->as_string());
-        Status s = authorize(*role, scopes, cap);
+        const ActionSpec* action = find_action(in.get("payload")->get("action")->as_string());
+        ASSERT_NE(action, nullptr);
+        Status s = authorize(*role, scopes, action->capability);
         EXPECT_EQ(s.ok(), expect.get("allowed")->as_bool());
         ASSERT_FALSE(s.ok());
         EXPECT_EQ(http_status(s.error().code), expect.get("http_status")->as_int());

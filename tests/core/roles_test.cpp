@@ -107,18 +107,6 @@ TEST(Authorize, ScopeRoleAndMatrixAllApply) {
   EXPECT_FALSE(authorize(Role::kLeasee, {"config"}, Capability::kInstallSkills).ok());
 }
 
-TEST(Actions, PrefixMapOfTheReferenceServer) {
-  EXPECT_EQ(capability_for_action("move_forward"), Capability::kNavigation);
-  EXPECT_EQ(capability_for_action("nav_to"), Capability::kNavigation);
-  EXPECT_EQ(capability_for_action("arm_extend"), Capability::kArm);
-  EXPECT_EQ(capability_for_action("status"), Capability::kViewStatus);
-  EXPECT_EQ(capability_for_action("chat"), Capability::kChat);
-  EXPECT_EQ(capability_for_action("deploy_model"), Capability::kModelDeployment);
-  EXPECT_EQ(capability_for_action("update_firmware"), Capability::kOtaUpdates);
-  EXPECT_EQ(capability_for_action("teleop"), Capability::kTeleop);
-  EXPECT_EQ(capability_for_action("wave"), Capability::kTeleop);
-}
-
 TEST(Limits, RatesAndTtls) {
   EXPECT_EQ(rate_limit_per_minute(Role::kGuest), 10u);
   EXPECT_EQ(rate_limit_per_minute(Role::kUser), 100u);

@@ -16,6 +16,8 @@
 #include <set>
 
 #include "ai_test_support.h"
+#include "rcan/actions.h"
+#include "rcan/roles.h"
 
 namespace rcan {
 namespace {
@@ -35,6 +37,16 @@ const json::Value& conformance_case(const std::string& id) {
 
 const json::Value& in(const json::Value& c, const char* k) { return *c.get("input")->get(k); }
 const json::Value& expect(const json::Value& c, const char* k) { return *c.get("expect")->get(k); }
+
+// The capability name a conformance case's action addresses (the gate's scope).
+std::string capability_of(const std::string& action) {
+  const ActionSpec* a = find_action(action);
+  if (!a) {
+    ADD_FAILURE() << "no action " << action;
+    return "teleop";
+  }
+  return std::string(capability_name(a->capability));
+}
 
 std::string gate_yaml(const std::string& scope, double min, const std::string& on_fail) {
   return "agent:\n  confidence_gates:\n    - {scope: " + scope +
@@ -74,9 +86,10 @@ TEST(Conformance, L2_CONF_001_BlockGate) {
   const json::Value& c = conformance_case("L2-CONF-001");
   const json::Value& gate = in(c, "confidence_gate");
   const json::Value& ai_cmd = in(c, "ai_command");
-  std::string action = ai_cmd.get("action")->as_string();  // pick_object → the teleop capability
+  std::string action = ai_cmd.get("action")->as_string();
+  std::string scope = capability_of(action);  // pick_object: the arm capability (rcan/actions.h)
   test::TempDir dir;
-  AiNode n(dir.path(), gate_yaml("teleop", gate.get("min_confidence")->to_double(),
+  AiNode n(dir.path(), gate_yaml(scope, gate.get("min_confidence")->to_double(),
                                  gate.get("on_fail")->as_string()));
   std::string id = new_uuid_v4();
   HttpReply r = n.command(
@@ -96,11 +109,12 @@ TEST(Conformance, L2_CONF_002_EscalateGoesToTheNextLayerNotAQueue) {
   const json::Value& gate = in(c, "confidence_gate");
   const json::Value& ai_cmd = in(c, "ai_command");
   std::string action = ai_cmd.get("action")->as_string();
+  std::string scope = capability_of(action);
   double conf = ai_cmd.get("confidence")->to_double();
   {
     // No higher layer: not dispatched (the case's "dispatched": false), blocked per the seed.
     test::TempDir dir;
-    AiNode n(dir.path(), gate_yaml("teleop", gate.get("min_confidence")->to_double(),
+    AiNode n(dir.path(), gate_yaml(scope, gate.get("min_confidence")->to_double(),
                                    gate.get("on_fail")->as_string()));
     std::string id = new_uuid_v4();
     HttpReply r = n.command(n.leasee(), cmd(id, action, {}, ai_block("sim", "m", conf, "fast")));
@@ -112,17 +126,18 @@ TEST(Conformance, L2_CONF_002_EscalateGoesToTheNextLayerNotAQueue) {
   // With a planner layer: escalated (the case's "escalated": true) and, passing, dispatched.
   SimLayerProc planner("planner", 0.9);
   test::TempDir dir;
-  AiNode n(dir.path(), gate_yaml("teleop", gate.get("min_confidence")->to_double(),
-                                 gate.get("on_fail")->as_string()) +
-                           "  layers:\n    planner: {url: \"" + planner.url() +
-                           "\", timeout_ms: 3000}\n");
+  AiNode n(
+      dir.path(),
+      gate_yaml(scope, gate.get("min_confidence")->to_double(), gate.get("on_fail")->as_string()) +
+          "  layers:\n    planner: {url: \"" + planner.url() + "\", timeout_ms: 3000}\n");
   std::string id = new_uuid_v4();
   HttpReply r = n.command(n.leasee(), cmd(id, action, {}, ai_block("sim", "m", conf, "fast")));
   EXPECT_EQ(n.record(id, "CONFIDENCE_GATE_ESCALATED").get("reason")->as_string(),
             expect(c, "reason").as_string());
   // The planner's command (escalated: true) passed the gate and reached the robot, which has
-  // no pick_object skill: the dispatcher refuses it as unknown_action, naming the escalation.
-  EXPECT_EQ(parse(r.body).get("payload")->get("reason")->as_string(), "unknown_action") << r.body;
+  // no pick_object skill: the dispatcher refuses it as unsupported_action, naming the escalation.
+  EXPECT_EQ(parse(r.body).get("payload")->get("reason")->as_string(), "unsupported_action")
+      << r.body;
   json::Value rec = n.record(id, "COMMAND_REJECTED");
   ASSERT_TRUE(rec.get("ai")) << json::dump(rec);
   EXPECT_EQ(rec.get("ai")->get("escalated")->as_bool(), expect(c, "escalated").as_bool());

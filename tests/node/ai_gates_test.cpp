@@ -93,6 +93,38 @@ TEST_F(AiGates, AiBlockIsCopiedIntoTheAuditRecordAndConfidenceIsNeverDefaulted) 
   EXPECT_EQ(rec2.get("ai")->get("confidence"), nullptr) << json::dump(rec2);
 }
 
+// A gate names an action; every name of that action is held (docs/SECURITY.md R2). Before the
+// action table, `set_joints` and `joint_move` moved the arm past a gate on `arm_move`.
+TEST_F(AiGates, AHitlGateHoldsEveryNameOfItsAction) {
+  const json::Object joints{{"joints", json::Array{0.1, 0.1, 0.1, 0.1, 0.1, 0.1}}};
+  for (const char* name : {"set_joints", "joint_move", "ARM", "move_arm"}) {
+    SCOPED_TRACE(name);
+    std::string id = new_uuid_v4();
+    HttpReply r = n().command(n().leasee(), cmd(id, name, joints));
+    EXPECT_EQ(r.status, 202) << r.body;
+    EXPECT_EQ(n().records(id, "COMMAND").size(), 0u);  // not dispatched
+    json::Value held = n().record(id, "HITL_PENDING");
+    EXPECT_EQ(held.get("action")->as_string(), "arm_move") << json::dump(held);
+  }
+}
+
+// A confidence gate on the arm capability covers every name that moves the arm.
+TEST(AiGateNames, AConfidenceGateOnTheArmCoversEveryArmActionName) {
+  test::TempDir dir;
+  AiNode n(
+      dir.path(),
+      "agent:\n  confidence_gates:\n    - {scope: arm, min_confidence: 0.8, on_fail: block}\n");
+  const json::Object joints{{"joints", json::Array{0.1, 0.1, 0.1, 0.1, 0.1, 0.1}}};
+  for (const char* name : {"arm_move", "set_joints", "joint_move", "grip", "release_grip"}) {
+    SCOPED_TRACE(name);
+    std::string id = new_uuid_v4();
+    HttpReply r = n.command(n.leasee(), cmd(id, name, joints, ai_block("p", "m", 0.3, "fast")));
+    EXPECT_EQ(r.status, 403) << r.body;
+    EXPECT_EQ(error_code(r), "CONFIDENCE_GATE_FAIL") << r.body;
+    EXPECT_EQ(n.records(id, "COMMAND").size(), 0u);
+  }
+}
+
 TEST_F(AiGates, AiBlockWithoutAMustFieldOrWithABadConfidenceIsRefused) {
   json::Object no_model{{"provider", "anthropic"}, {"confidence", 0.88}};
   HttpReply r = n().command(n().leasee(), cmd(new_uuid_v4(), "status", {}, no_model));

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <fstream>
 #include <limits>
+#include <stdexcept>
 #include <string_view>
 #include <thread>
 #include <vector>
@@ -809,22 +810,36 @@ Message command_msg(json::Object payload) {
   return m;
 }
 
+// The action table's entry for a message (the authorize stage's lookup).
+const ActionSpec& spec_of(const Message& m) {
+  const ActionSpec* a = find_action(m.action());
+  if (!a) throw std::runtime_error("no action " + m.action());
+  return *a;
+}
+
+Result<ActuatorCommand> translate(const Message& m, const SafetyLimits& limits) {
+  return translate_command(spec_of(m), m, limits);
+}
+
+Result<PreparedCommand> prepare(SafetyActuation& act, const Message& m) {
+  return act.prepare(m, spec_of(m), 0, "");
+}
+
 TEST(TranslateCommand, FlatParametersWinOverParamsOverParameters) {
   SafetyLimits limits;
-  auto c =
-      translate_command(command_msg(json::Object{
-                            {"action", "move"},
-                            {"linear", 0.1},
-                            {"params", json::Object{{"linear", 0.5}, {"angular", 0.2}}},
-                            {"parameters", json::Object{{"angular", 0.9}, {"duration_ms", 300}}}}),
-                        limits);
+  auto c = translate(command_msg(json::Object{
+                         {"action", "move"},
+                         {"linear", 0.1},
+                         {"params", json::Object{{"linear", 0.5}, {"angular", 0.2}}},
+                         {"parameters", json::Object{{"angular", 0.9}, {"duration_ms", 300}}}}),
+                     limits);
   ASSERT_TRUE(c.ok()) << c.error().message;
   ASSERT_TRUE(c->drive.has_value());
   EXPECT_DOUBLE_EQ(c->drive->linear_mps, 0.1);
   EXPECT_DOUBLE_EQ(c->drive->angular_radps, 0.2);
   EXPECT_EQ(c->drive->duration_ms, 300);
   // Joints may come from "parameters" alone.
-  auto arm = translate_command(
+  auto arm = translate(
       command_msg(json::Object{
           {"action", "set_joints"},
           {"parameters", json::Object{{"joints", json::Array{0.1, 0.2, 0.3, 0.4, 0.5, 0.6}}}}}),
@@ -836,24 +851,45 @@ TEST(TranslateCommand, FlatParametersWinOverParamsOverParameters) {
 
 TEST(TranslateCommand, AFlatNullHidesTheNestedValue) {
   // The flat key is present (as null): it decides, and null means "not given".
-  auto c = translate_command(
+  auto c = translate(
       command_msg(json::Object{
           {"action", "move"}, {"linear", nullptr}, {"params", json::Object{{"linear", 0.4}}}}),
       SafetyLimits{});
   ASSERT_FALSE(c.ok());
   EXPECT_EQ(c.error().code, ErrorCode::kSchemaValidationFailed);
-  auto bad = translate_command(
+  auto bad = translate(
       command_msg(json::Object{{"action", "move"}, {"params", json::Object{{"linear", "fast"}}}}),
       SafetyLimits{});
   ASSERT_FALSE(bad.ok());
   EXPECT_EQ(bad.error().field, "payload.linear");
 }
 
+TEST(TranslateCommand, SynonymsMoveWhatTheirCanonicalActionMovesAndSkillsAreRefused) {
+  SafetyLimits limits;
+  json::Array joints{0.1, 0.2, 0.3, 0.4, 0.5, 0.6};
+  for (const char* name : {"set_joints", "joint_move", "arm", "ARM_MOVE"}) {
+    auto c = translate(command_msg(json::Object{{"action", name}, {"joints", joints}}), limits);
+    ASSERT_TRUE(c.ok()) << name << ": " << c.error().message;
+    EXPECT_TRUE(c->arm.has_value()) << name;
+  }
+  auto grip = translate(command_msg(json::Object{{"action", "grip"}}), limits);
+  ASSERT_TRUE(grip.ok());
+  EXPECT_EQ(grip->gripper, GripperAction::kClose);
+  auto release = translate(command_msg(json::Object{{"action", "release_grip"}}), limits);
+  ASSERT_TRUE(release.ok());
+  EXPECT_EQ(release->gripper, GripperAction::kOpen);
+  // A skill the simulator has no behaviour for: refused by name, not guessed at.
+  auto pick = translate(command_msg(json::Object{{"action", "pick_object"}}), limits);
+  ASSERT_FALSE(pick.ok());
+  EXPECT_EQ(pick.error().code, ErrorCode::kCommandRejected);
+  EXPECT_EQ(pick.error().reason, "unsupported_action");
+}
+
 TEST(SafetyActuationApply, AppliesWhatPrepareCheckedAndAnswersChat) {
   Rig r;
   SafetyActuation act(*r.core, "test-bot");
-  auto pc = act.prepare(
-      command_msg(json::Object{{"action", "MOVE"}, {"linear", 0.2}, {"duration_ms", 500}}), 0, "");
+  auto pc = prepare(
+      act, command_msg(json::Object{{"action", "MOVE"}, {"linear", 0.2}, {"duration_ms", 500}}));
   ASSERT_TRUE(pc.ok()) << pc.error().message;
   EXPECT_EQ(pc->action_name, "move");
   ASSERT_TRUE(pc->command.has_value());
@@ -863,7 +899,7 @@ TEST(SafetyActuationApply, AppliesWhatPrepareCheckedAndAnswersChat) {
   r.run(200);
   EXPECT_FALSE(r.core->robot_state().stopped);
   // An ESTOP between prepare() and apply() refuses the prepared command.
-  auto again = act.prepare(command_msg(json::Object{{"action", "move"}, {"linear", 0.1}}), 0, "");
+  auto again = prepare(act, command_msg(json::Object{{"action", "move"}, {"linear", 0.1}}));
   ASSERT_TRUE(again.ok());
   (void)act.estop("test", "between");
   auto refused = act.apply(*again);
@@ -871,8 +907,7 @@ TEST(SafetyActuationApply, AppliesWhatPrepareCheckedAndAnswersChat) {
   EXPECT_EQ(refused.error().reason, "estop_active");
 
   // Informational actions carry no actuator command; chat answers the text that was asked.
-  auto chat =
-      act.prepare(command_msg(json::Object{{"action", "chat"}, {"text", "Who are you?"}}), 0, "");
+  auto chat = prepare(act, command_msg(json::Object{{"action", "chat"}, {"text", "Who are you?"}}));
   ASSERT_TRUE(chat.ok());
   EXPECT_FALSE(chat->command.has_value());
   auto reply = act.apply(*chat);

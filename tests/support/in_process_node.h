@@ -31,7 +31,7 @@ namespace rcan::node::test_node {
 constexpr const char* kRuri = "rcan://local.rcan/acme/rover/0a1b2c3d";
 constexpr const char* kIssuer = "pipeline-test";
 
-// Records every call; prepare() accepts every action as a drive, apply() answers "applied".
+// Records every call; prepare() accepts every known action as a drive, apply() answers "applied".
 class FakeActuation final : public Actuation {
  public:
   bool estop_active() const override {
@@ -56,10 +56,10 @@ class FakeActuation final : public Actuation {
     std::lock_guard<std::mutex> lock(mu_);
     ++stops_;
   }
-  Result<PreparedCommand> prepare(const Message& msg, int64_t deadline_mono_ms,
+  Result<PreparedCommand> prepare(const Message&, const ActionSpec& spec, int64_t deadline_mono_ms,
                                   const std::string& session_id) override {
     PreparedCommand p;
-    p.action_name = msg.action();
+    p.action_name = spec.name;
     p.action = json::Object{{"action", p.action_name}};
     p.deadline_mono_ms = deadline_mono_ms;
     p.session_id = session_id;

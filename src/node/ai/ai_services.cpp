@@ -186,6 +186,7 @@ void AiServices::escalate(const std::shared_ptr<Context>& ctx, const config::Con
     ctx->audit_detail.set("escalation", esc);
     ctx->msg = std::move(next);
     ctx->capability.reset();
+    ctx->action = nullptr;
     // The new command is authorised, screened and gated again like any other.
     if (ctx->pipeline) ctx->pipeline->run_from(ctx, "authorize");
   });
@@ -198,13 +199,19 @@ void AiServices::escalate(const std::shared_ptr<Context>& ctx, const config::Con
 // ------------------------------------------------------------------------------------------
 // HiTL
 
-const config::HitlGate* AiServices::hitl_gate_for(const std::string& action_type) const {
-  if (action_type.empty()) return nullptr;
-  std::string a = lower(action_type);
+const config::HitlGate* AiServices::hitl_gate_for(const std::string& action) const {
+  if (action.empty()) return nullptr;
+  // Both sides canonical: a gate on `arm_move` holds `set_joints` too, and a gate naming a
+  // synonym holds the action it names. A gate naming no known action matches that name only.
+  auto canonical = [&](const std::string& name) {
+    const ActionSpec* s = svc_.actions.find(name);
+    return s ? s->name : lower(name);
+  };
+  std::string a = canonical(action);
   for (const auto& g : opts_.hitl_gates) {
     if (!g.require_auth) continue;
     for (const auto& t : g.action_types)
-      if (lower(t) == a) return &g;
+      if (canonical(t) == a) return &g;
   }
   return nullptr;
 }
@@ -352,7 +359,14 @@ std::shared_ptr<Context> AiServices::rebuild(const PendingItem& item, Error& err
     return ctx;
   }
   ctx->msg = std::move(m).value();
-  ctx->capability = capability_for_action(ctx->msg->action());
+  ctx->action = svc_.actions.find(ctx->msg->action());
+  if (!ctx->action) {  // held before the table changed under it: refuse, never default
+    err =
+        Error(ErrorCode::kCommandRejected, "the held command's action is not one this robot knows",
+              "payload.action", "unknown_action");
+    return ctx;
+  }
+  ctx->capability = ctx->action->capability;
   if (capability_scope(*ctx->capability) == "control") {
     auto holder = svc_.sessions.controller(svc_.clock.mono_ms());
     if (holder) {

@@ -61,7 +61,8 @@ class AiServices {
                 int to_rank, const config::AgentLayer& layer);
 
   // --- HiTL gates (§16.4)
-  const config::HitlGate* hitl_gate_for(const std::string& action_type) const;
+  // The HiTL gate that holds `action` (either side may name a synonym; rcan/actions.h).
+  const config::HitlGate* hitl_gate_for(const std::string& action) const;
   // Holds the command: persists it, audits HITL_PENDING, notifies, answers 202 (from the disk
   // worker, once the pending file holds it).
   void hold(const std::shared_ptr<Context>& ctx, const config::HitlGate& gate,

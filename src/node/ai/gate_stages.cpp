@@ -100,7 +100,8 @@ class HitlGateStage final : public Stage {
   const char* name() const override { return "hitl_gate"; }
   Result run(const std::shared_ptr<Context>& ctx) override {
     if (!gated_command(*ctx) || !svc_.ai) return Result::kContinue;
-    std::string action = ctx->msg->action();
+    if (!ctx->action) return Result::kContinue;     // only COMMANDs have one (authorize stage)
+    const std::string& action = ctx->action->name;  // canonical: a synonym cannot slip past
     const config::HitlGate* gate = svc_.ai->hitl_gate_for(action);
     if (!gate) return Result::kContinue;
     svc_.ai->hold(ctx, *gate, action);

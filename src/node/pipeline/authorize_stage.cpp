@@ -11,6 +11,13 @@
 namespace rcan::node {
 namespace {
 
+bool iequals(std::string_view a, std::string_view b) {
+  return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), [](char x, char y) {
+           return std::tolower(static_cast<unsigned char>(x)) ==
+                  std::tolower(static_cast<unsigned char>(y));
+         });
+}
+
 class AuthorizeStage final : public Stage {
  public:
   explicit AuthorizeStage(NodeServices& s) : svc_(s) {}
@@ -54,7 +61,20 @@ class AuthorizeStage final : public Stage {
                 "payload.action", "missing_field"),
           "MESSAGE_REJECTED");
     }
-    Capability cap = capability_for_action(action);
+    // One table says what every action name means (rcan/actions.h); a name it does not hold
+    // is refused for every role, never given some default capability.
+    const ActionSpec* spec = svc_.actions.find(action);
+    if (!spec) {
+      return refuse(svc_, ctx,
+                    Error(ErrorCode::kCommandRejected,
+                          "unknown action '" + action.substr(0, 64) +
+                              "': not an action this robot knows (docs/PROTOCOL.md §Actions)",
+                          "payload.action", "unknown_action"),
+                    "COMMAND_REJECTED");
+    }
+    ctx->action = spec;
+    if (!iequals(action, spec->name)) ctx->audit_detail.set("action_sent", action.substr(0, 128));
+    Capability cap = spec->capability;
     ctx->capability = cap;
     Status st = authorize(p.role, p.scopes, cap, svc_.settings.role_policy);
     if (!st.ok()) {

@@ -60,7 +60,7 @@ class DispatchStage final : public Stage {
   audit::AuditEntry accepted_entry(const Context& ctx, const std::string& event) {
     const Message& m = *ctx.msg;
     AuditRecord r = message_record(svc_, ctx, event, "ok");
-    r.action(m.action());
+    r.action(ctx.action ? ctx.action->name : m.action());
     audit::AuditEntry e = std::move(r.entry());
     if (m.ai) e.ai = *m.ai;
     e.gate_bypassed = ctx.gate_bypassed;
@@ -167,7 +167,11 @@ class DispatchStage final : public Stage {
       int64_t remaining = m.timestamp_ms + ttl - svc_.clock.wall_ms();
       deadline = svc_.clock.mono_ms() + std::max<int64_t>(remaining, 0);
     }
-    auto prepared = svc_.act.prepare(m, deadline, ctx->session_id);
+    if (!ctx->action) {  // the authorize stage looks every COMMAND's action up
+      return refuse(svc_, ctx, Error(ErrorCode::kInternal, "a command reached dispatch unchecked"),
+                    "INTERNAL_ERROR");
+    }
+    auto prepared = svc_.act.prepare(m, *ctx->action, deadline, ctx->session_id);
     if (!prepared.ok()) {
       return refuse(svc_, ctx, prepared.error(), "COMMAND_REJECTED");
     }

@@ -42,8 +42,7 @@ class SafetyStateStage final : public Stage {
     if (ctx->safety != SafetyAction::kNone) return Result::kContinue;
     const Message& m = *ctx->msg;
     if (m.type != MessageType::kCommand) return Result::kContinue;
-    bool moves = ctx->capability && capability_scope(*ctx->capability) != "status" &&
-                 *ctx->capability != Capability::kChat;
+    bool moves = ctx->action && ctx->action->kind != ActionKind::kInformational;
     if (moves && svc_.act.estop_active()) {
       return refuse(
           svc_, ctx,

@@ -10,18 +10,9 @@
 
 namespace rcan::node {
 
-std::string guest_capability(const Message& m, std::optional<Capability> cap) {
+std::string guest_capability(const Message& m, const ActionSpec* action) {
   if (m.type == MessageType::kStatus || m.type == MessageType::kHeartbeat) return "status_read";
-  std::string a = m.action();
-  for (auto& c : a) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  auto has = [&](const char* w) { return a.find(w) != std::string::npos; };
-  if (has("camera") || has("snapshot") || has("image") || has("video")) return "camera_access";
-  if (has("location") || has("history") || has("position") || has("map")) return "location_history";
-  if (cap == Capability::kChat) return "chat_text";
-  if (a.rfind("query", 0) == 0 || a.rfind("info", 0) == 0 || a.rfind("basic_info", 0) == 0)
-    return "basic_info";
-  if (cap == Capability::kViewStatus) return "status_read";
-  return "control";
+  return action ? action->guest_class : "control";
 }
 
 namespace {
@@ -34,7 +25,7 @@ class GuestLimitStage final : public Stage {
     if (ctx->safety != SafetyAction::kNone || ctx->principal.role != Role::kGuest)
       return Result::kContinue;
     const GuestLimits& g = svc_.settings.guest_limits;
-    std::string what = guest_capability(*ctx->msg, ctx->capability);
+    std::string what = guest_capability(*ctx->msg, ctx->action);
     ctx->audit_detail.set("guest_capability", what);
     bool allowed =
         std::find(g.capabilities.begin(), g.capabilities.end(), what) != g.capabilities.end();

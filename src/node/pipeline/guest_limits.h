@@ -14,7 +14,8 @@
 namespace rcan::node {
 
 std::unique_ptr<Stage> make_guest_limit_stage(NodeServices& services);
-// The guest capability a message asks for (see above).
-std::string guest_capability(const Message& m, std::optional<Capability> cap);
+// The guest capability a message asks for: status_read for STATUS and HEARTBEAT, else the
+// guest class of its action in the action table (rcan/actions.h), control without one.
+std::string guest_capability(const Message& m, const ActionSpec* action);
 
 }  // namespace rcan::node

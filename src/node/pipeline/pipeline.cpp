@@ -92,7 +92,9 @@ Stage::Result refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, con
   bool payload_free =
       err.code == ErrorCode::kReplayDetected || err.code == ErrorCode::kMessageStale ||
       err.code == ErrorCode::kMalformedJson || err.code == ErrorCode::kSchemaValidationFailed;
-  if (ctx->msg && !payload_free) {
+  if (ctx->action) {
+    e.action = ctx->action->name;
+  } else if (ctx->msg && !payload_free) {
     std::string action = ctx->msg->action();
     if (!action.empty()) e.action = action.substr(0, 128);
   }

@@ -26,6 +26,7 @@
 
 #include "node/admission/authenticator.h"
 #include "node/services/audit_record.h"
+#include "rcan/actions.h"
 #include "rcan/json.h"
 #include "rcan/message.h"
 #include "rcan/roles.h"
@@ -69,6 +70,9 @@ struct Context {
   SignatureCheck sig;
   SenderIdentity sender;
   SafetyAction safety = SafetyAction::kNone;
+  // The COMMAND's action from the action table (rcan/actions.h), set by the authorize stage:
+  // every later stage, the audit record and the driver use its canonical name.
+  const ActionSpec* action = nullptr;
   std::optional<Capability> capability;
   std::string event = "COMMAND";  // audit event for acceptance
   json::Object audit_detail;

@@ -2,7 +2,6 @@
 // and parameters into an ActuatorCommand (docs/NODE.md §Commands), asks the core to check it
 // (limits, ESTOP, deadline) without applying, and applies it once the audit record is durable.
 #include <algorithm>
-#include <cctype>
 #include <cmath>
 
 #include "node/safety/actuation_safety.h"
@@ -11,11 +10,6 @@
 
 namespace rcan::node {
 namespace {
-
-std::string lower(std::string s) {
-  for (auto& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return s;
-}
 
 Error bad_param(std::string field, std::string msg) {
   return Error(ErrorCode::kSchemaValidationFailed, std::move(msg), "payload." + field);
@@ -58,16 +52,13 @@ Result<std::optional<double>> number(const Params& p, std::initializer_list<cons
   return std::optional<double>();
 }
 
-bool starts(const std::string& s, std::string_view p) { return s.rfind(p, 0) == 0; }
-
 }  // namespace
 
-Result<ActuatorCommand> translate_command(const Message& msg, const SafetyLimits& limits) {
-  std::string action = lower(msg.action());
+Result<ActuatorCommand> translate_command(const ActionSpec& spec, const Message& msg,
+                                          const SafetyLimits& limits) {
+  const std::string& action = spec.name;  // canonical: synonyms are folded by the table
   const Params params(msg.payload);
-  if (action == "move" || action == "move_forward" || action == "move_backward" ||
-      action == "drive" || action == "teleop" || starts(action, "nav") || action == "turn" ||
-      action == "turn_left" || action == "turn_right" || action == "rotate" || action == "goto") {
+  if (spec.kind == ActionKind::kDrive) {
     auto lin =
         number(params, {"linear", "linear_x", "linear_mps", "speed", "speed_mps", "velocity"});
     if (!lin.ok()) return lin.error();
@@ -100,7 +91,7 @@ Result<ActuatorCommand> translate_command(const Message& msg, const SafetyLimits
       return bad_param("linear", "a drive command needs linear and/or angular");
     return ActuatorCommand::make_drive(linear, angular, duration);
   }
-  if (starts(action, "arm") || starts(action, "joint") || action == "set_joints") {
+  if (spec.kind == ActionKind::kArm) {
     JointArray targets{};
     if (action == "arm_home") return ActuatorCommand::make_arm(targets);
     const json::Value* j = nullptr;
@@ -120,15 +111,16 @@ Result<ActuatorCommand> translate_command(const Message& msg, const SafetyLimits
     if (!speed.ok()) return speed.error();
     return ActuatorCommand::make_arm(targets, speed->value_or(0.0));
   }
-  if (action == "gripper_open" || action == "gripper_close" || action == "grip" ||
-      action == "release_grip") {
+  if (spec.kind == ActionKind::kGripper) {
     ActuatorCommand c;
-    c.gripper = (action == "gripper_open" || action == "release_grip") ? GripperAction::kOpen
-                                                                       : GripperAction::kClose;
+    c.gripper = action == "gripper_open" ? GripperAction::kOpen : GripperAction::kClose;
     return c;
   }
-  return Error(ErrorCode::kCommandRejected, "unknown action '" + msg.action().substr(0, 64) + "'",
-               "payload.action", "unknown_action");
+  // A skill (or anything else) the simulated robot has no behaviour for.
+  return Error(ErrorCode::kCommandRejected,
+               "the robot cannot do '" + action + "' (" + std::string(action_kind_name(spec.kind)) +
+                   " it does not offer)",
+               "payload.action", "unsupported_action");
 }
 
 SafetyActuation::SafetyActuation(SafetyCore& core, std::string robot_name)
@@ -150,20 +142,16 @@ void SafetyActuation::stop(const std::string& source) {
   (void)core_.dispatch(ActuatorCommand::make_stop());
 }
 
-bool SafetyActuation::informational(const std::string& action) const {
-  return action == "chat" || action == "ask" || action == "status" || action == "get_status" ||
-         action == "query";
-}
-
-Result<PreparedCommand> SafetyActuation::prepare(const Message& msg, int64_t deadline_mono_ms,
+Result<PreparedCommand> SafetyActuation::prepare(const Message& msg, const ActionSpec& spec,
+                                                 int64_t deadline_mono_ms,
                                                  const std::string& session_id) {
   PreparedCommand pc;
   pc.deadline_mono_ms = deadline_mono_ms;
   pc.session_id = session_id;
-  pc.action_name = lower(msg.action());
+  pc.action_name = spec.name;
   const std::string& action = pc.action_name;
-  if (informational(action)) {
-    if (action == "chat" || action == "ask") {
+  if (spec.kind == ActionKind::kInformational) {
+    if (action == "chat") {
       for (const char* k : {"text", "message", "question", "instruction", "prompt"}) {
         const json::Value* v = msg.payload.find(k);
         if (v && v->is_string()) {
@@ -175,7 +163,7 @@ Result<PreparedCommand> SafetyActuation::prepare(const Message& msg, int64_t dea
     pc.action = json::Object{{"informational", action}};
     return pc;
   }
-  auto cmd = translate_command(msg, core_.limits());
+  auto cmd = translate_command(spec, msg, core_.limits());
   if (!cmd.ok()) return cmd.error();
   DispatchOptions opts;
   opts.deadline_mono_ms = deadline_mono_ms;
@@ -193,7 +181,7 @@ Result<json::Value> SafetyActuation::apply(const PreparedCommand& pc) {
   const std::string& action = pc.action_name;
   if (!pc.command) {
     RobotState st = core_.robot_state();
-    if (action == "chat" || action == "ask") {
+    if (action == "chat") {
       SafetyStatus s = core_.status();
       ChatContext ctx;
       ctx.estop_active = s.estop_active;

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "node/safety/driver.h"
+#include "rcan/actions.h"
 #include "rcan/json.h"
 #include "rcan/message.h"
 #include "rcan/result.h"
@@ -17,7 +18,7 @@
 namespace rcan::node {
 
 struct PreparedCommand {
-  std::string action_name;  // the COMMAND's action, lower-cased
+  std::string action_name;  // the COMMAND's canonical action (rcan/actions.h)
   std::optional<ActuatorCommand>
       command;           // as checked by prepare(); none for an informational action
   std::string question;  // chat/ask: the text asked
@@ -39,9 +40,11 @@ class Actuation {
   virtual Status resume(Role role, const std::string& source) = 0;
   // Stops motion without latching (STOP safety event).
   virtual void stop(const std::string& source) = 0;
-  // Validates a COMMAND against the state and the local limits, clamping where the
-  // policy says so. Errors: COMMAND_REJECTED (estop_active, limit_exceeded, unknown action).
-  virtual Result<PreparedCommand> prepare(const Message& msg, int64_t deadline_mono_ms,
+  // Validates a COMMAND of action `spec` (looked up by the authorize stage) against the state
+  // and the local limits, clamping where the policy says so. Errors: COMMAND_REJECTED
+  // (estop_active, limit_exceeded, unsupported_action), SCHEMA_VALIDATION_FAILED (parameters).
+  virtual Result<PreparedCommand> prepare(const Message& msg, const ActionSpec& spec,
+                                          int64_t deadline_mono_ms,
                                           const std::string& session_id) = 0;
   // Applies a prepared command. Errors: COMMAND_REJECTED estop_active when an ESTOP came in
   // between prepare() and apply(); MESSAGE_STALE past its deadline.

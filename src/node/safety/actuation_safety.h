@@ -8,9 +8,11 @@
 
 namespace rcan::node {
 
-// The actuator command a COMMAND asks for (docs/NODE.md §Commands). Errors:
-// SCHEMA_VALIDATION_FAILED for bad parameters, COMMAND_REJECTED/unknown_action.
-Result<ActuatorCommand> translate_command(const Message& msg, const SafetyLimits& limits);
+// The actuator command a COMMAND of action `spec` asks for (docs/NODE.md §Commands). Errors:
+// SCHEMA_VALIDATION_FAILED for bad parameters, COMMAND_REJECTED/unsupported_action for an
+// action the simulated robot cannot do (a skill).
+Result<ActuatorCommand> translate_command(const ActionSpec& spec, const Message& msg,
+                                          const SafetyLimits& limits);
 
 class SafetyActuation final : public Actuation {
  public:
@@ -21,8 +23,8 @@ class SafetyActuation final : public Actuation {
   double estop(const std::string& source, const std::string& reason) override;
   Status resume(Role role, const std::string& source) override;
   void stop(const std::string& source) override;
-  Result<PreparedCommand> prepare(const Message& msg, int64_t deadline_mono_ms,
-                                  const std::string& session_id) override;
+  Result<PreparedCommand> prepare(const Message& msg, const ActionSpec& spec,
+                                  int64_t deadline_mono_ms, const std::string& session_id) override;
   Result<json::Value> apply(const PreparedCommand& cmd) override;
   void arm_deadman(const std::string& session_id, int64_t timeout_ms) override;
   void feed_deadman(const std::string& session_id) override;
@@ -31,7 +33,6 @@ class SafetyActuation final : public Actuation {
   json::Value telemetry() const override;
 
  private:
-  bool informational(const std::string& action) const;
   SafetyCore& core_;
   std::string robot_name_;
 };

@@ -26,6 +26,7 @@
 #include "node/safety/actuation.h"
 #include "node/services/audit_record.h"
 #include "node/services/event_bus.h"
+#include "rcan/actions.h"
 #include "rcan/audit/audit_log.h"
 #include "rcan/message.h"
 #include "rcan/roles.h"
@@ -92,6 +93,9 @@ class NodeServices {
   RateLimiter rate;
   InjectionScreen injection;
   Actuation& act;
+  // What every COMMAND action name means (rcan/actions.h): the built-in table today; a driver
+  // that offers skills of its own will extend it.
+  const ActionTable& actions = ActionTable::builtin();
   audit::AuditLog& audit;
   SessionTable sessions;
   Ownership ownership;
