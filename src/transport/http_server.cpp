@@ -50,8 +50,13 @@ using Ms = std::chrono::milliseconds;
 
 constexpr auto kNoThrow = asio::as_tuple(asio::use_awaitable);
 constexpr std::string_view kServerName = "rcand";
-constexpr size_t kLingerBytes = 256 * 1024;  // discarded after an error answer, at most
-constexpr int kLingerMs = 1000;
+// Lingering close after an error answer (nginx's lingering_close): the server half-closes and
+// reads and discards what the client still sends — a client that writes its whole body before
+// reading (Python's http.client) then reads the 413 instead of a broken pipe. Bounded in bytes,
+// in total time and by a pause in the client's sending.
+constexpr size_t kLingerBytes = 64 * 1024 * 1024;
+constexpr int kLingerMs = 1000;        // the longest pause in the client's sending
+constexpr int kLingerTotalMs = 10000;  // the longest lingering close
 constexpr int kRejectTimeoutMs = 500;
 constexpr int kMaxConcurrentRejects = 64;
 constexpr std::string_view kQueueFullReason = "send queue limit exceeded";
@@ -631,10 +636,14 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
       beast::error_code ec;
       lowest().socket().shutdown(tcp::socket::shutdown_send, ec);
       if (!ec) {
-        lowest().expires_after(Ms(std::min(kLingerMs, opt_.read_timeout_ms)));
-        char scratch[4096];
+        const SteadyClock::time_point until = SteadyClock::now() + Ms(kLingerTotalMs);
+        const Ms pause(std::min(kLingerMs, opt_.read_timeout_ms));
+        std::vector<char> scratch(16 * 1024);
         size_t total = 0;
         while (total < kLingerBytes) {
+          const auto left = std::chrono::duration_cast<Ms>(until - SteadyClock::now());
+          if (left.count() <= 0) break;
+          lowest().expires_after(std::min(pause, left));
           auto [rec, n] = co_await lowest().async_read_some(asio::buffer(scratch), kNoThrow);
           if (rec) break;
           total += n;

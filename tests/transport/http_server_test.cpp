@@ -529,6 +529,27 @@ TEST_F(HttpServerTest, ContentLengthOverLimitIs413BeforeTheBodyIsSent) {
   EXPECT_EQ(server_->stats().rejected_limits, 1u);
 }
 
+// A client that writes its whole body before it reads (Python's http.client does) gets the
+// 413, not a broken pipe: the server discards what still arrives before it closes.
+TEST_F(HttpServerTest, AClientThatWritesItsWholeOversizeBodyFirstReadsThe413) {
+  ServerOptions o;
+  o.max_body_bytes = 1024;
+  start(o);
+  Client c(port_);
+  const size_t body = 20 * 1024 * 1024;
+  ASSERT_TRUE(c.send("POST /echo HTTP/1.1\r\nHost: x\r\nContent-Length: " + std::to_string(body) +
+                     "\r\n\r\n"));
+  const std::string chunk(1024 * 1024, 'x');
+  for (size_t sent = 0; sent < body; sent += chunk.size())
+    ASSERT_TRUE(c.send(chunk)) << "the server closed after " << sent << " bytes of body";
+  auto r = c.read_response(3000);
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 413);
+  EXPECT_EQ(r->error_code(), "BODY_TOO_LARGE");
+  EXPECT_TRUE(c.wait_closed(3000));
+  EXPECT_EQ(http_.calls.load(), 0);
+}
+
 TEST_F(HttpServerTest, BodyAtTheLimitIsAccepted) {
   ServerOptions o;
   o.max_body_bytes = 1024;
