@@ -1,5 +1,6 @@
 // libFuzzer: arbitrary bytes as an exported audit chain — native and rcan-py verifiers,
-// the rcan-py line parser and re-serialiser, and the native → rcan-py re-statement.
+// the rcan-py line parser and re-serialiser, the native → rcan-py re-statement, and each line
+// read as an unsealed entry (audit::entry_from_object, the node's stop backlog).
 // Must never crash, hang or read out of bounds; every verdict must be self-consistent.
 #include <cstddef>
 #include <cstdint>
@@ -79,6 +80,19 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       (void)check_record(v->as_object(), kSecret);
       auto out = exporter.add(v->as_object());
       if (out.ok()) check(rcanpy_parse_line(*out).ok());
+      // As a line of the node's stop backlog (an unsealed entry): a valid entry, and reading
+      // back what it writes gives the same object.
+      auto entry = entry_from_object(v->as_object());
+      if (entry.ok()) {
+        check(validate(*entry).ok());
+        const rcan::json::Object written = to_object(*entry);
+        auto again = entry_from_object(written);
+        check(again.ok());
+        check(rcan::json::canonical(rcan::json::Value(to_object(*again))) ==
+              rcan::json::canonical(rcan::json::Value(written)));
+      } else {
+        check(!entry.error().message.empty());
+      }
     }
     if (nl == std::string_view::npos) break;
     start = nl + 1;

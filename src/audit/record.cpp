@@ -83,6 +83,95 @@ json::Object to_object(const AuditEntry& e) {
   return o;
 }
 
+namespace {
+
+Error bad_member(const std::string& name, const char* what) {
+  return Error(ErrorCode::kSchemaValidationFailed, name + " must be " + what, name);
+}
+
+// Reads member `k` of `o` into `out` when present; an error when it has the wrong type.
+Status read_string(const json::Object& o, const char* k, std::string& out) {
+  const json::Value* v = o.find(k);
+  if (!v) return Status::Ok();
+  if (!v->is_string()) return bad_member(k, "a string");
+  out = v->as_string();
+  return Status::Ok();
+}
+
+Status read_string(const json::Object& o, const char* k, std::optional<std::string>& out) {
+  const json::Value* v = o.find(k);
+  if (!v || v->is_null()) return Status::Ok();
+  if (!v->is_string()) return bad_member(k, "a string");
+  out = v->as_string();
+  return Status::Ok();
+}
+
+Status read_number(const json::Object& o, const char* k, std::optional<double>& out) {
+  const json::Value* v = o.find(k);
+  if (!v || v->is_null()) return Status::Ok();
+  if (!v->is_number() || !std::isfinite(v->to_double())) return bad_member(k, "a number");
+  out = v->to_double();
+  return Status::Ok();
+}
+
+Status read_bool(const json::Object& o, const char* k, bool& out) {
+  const json::Value* v = o.find(k);
+  if (!v) return Status::Ok();
+  if (!v->is_bool()) return bad_member(k, "true or false");
+  out = v->as_bool();
+  return Status::Ok();
+}
+
+Result<AiBlock> ai_from_object(const json::Object& o) {
+  AiBlock a;
+  for (Status s :
+       {read_string(o, "provider", a.provider), read_string(o, "model", a.model),
+        read_string(o, "model_version", a.model_version), read_string(o, "layer", a.layer),
+        read_number(o, "confidence", a.confidence),
+        read_number(o, "inference_latency_ms", a.inference_latency_ms),
+        read_string(o, "thought_id", a.thought_id), read_bool(o, "escalated", a.escalated)})
+    if (!s.ok()) return Error(s.error().code, "ai." + s.error().message, "ai." + s.error().field);
+  return a;
+}
+
+}  // namespace
+
+Result<AuditEntry> entry_from_object(const json::Object& o) {
+  AuditEntry e;
+  for (Status s :
+       {read_string(o, "principal", e.principal), read_string(o, "ruri", e.ruri),
+        read_string(o, "message_id", e.message_id), read_string(o, "event", e.event),
+        read_string(o, "outcome", e.outcome), read_string(o, "sender_type", e.sender_type),
+        read_string(o, "sub", e.sub), read_string(o, "cloud_provider", e.cloud_provider),
+        read_string(o, "function_name", e.function_name),
+        read_bool(o, "gate_bypassed", e.gate_bypassed),
+        read_bool(o, "hitl_timeout_bypass", e.hitl_timeout_bypass),
+        read_string(o, "watermark_token", e.watermark_token), read_string(o, "action", e.action),
+        read_string(o, "reason", e.reason), read_string(o, "kind", e.kind)})
+    if (!s.ok()) return s.error();
+  if (const json::Value* t = o.find("timestamp_ms")) {
+    if (!t->is_int() || t->as_int() < 0)
+      return bad_member("timestamp_ms", "a non-negative integer");
+    e.timestamp_ms = t->as_int();
+  }
+  if (const json::Value* a = o.find("ai"); a && !a->is_null()) {
+    if (!a->is_object()) return bad_member("ai", "an object");
+    auto ai = ai_from_object(a->as_object());
+    if (!ai.ok()) return ai.error();
+    e.ai = std::move(*ai);
+  }
+  if (const json::Value* d = o.find("detail")) {
+    if (!d->is_object()) return bad_member("detail", "an object");
+    e.detail = d->as_object();
+  }
+  if (const json::Value* g = o.find("segment")) {
+    if (!g->is_int() || g->as_int() < 0) return bad_member("segment", "a non-negative integer");
+    e.segment = static_cast<uint64_t>(g->as_int());
+  }
+  if (Status s = validate(e); !s.ok()) return s.error();
+  return e;
+}
+
 SealedRecord seal(json::Object obj, uint64_t seq, std::string_view prev_hash,
                   std::string_view secret) {
   SealedRecord r;

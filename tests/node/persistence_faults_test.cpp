@@ -8,16 +8,21 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <fstream>
 #include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "base/clock.h"
 #include "base/state_file.h"
+#include "in_process_node.h"
 #include "node/ai/hitl.h"
 #include "node/safety/safety.h"
 #include "node/safety/sim_robot.h"
+#include "node/services/node_services.h"
+#include "node/services/stop_backlog.h"
 #include "rcan/audit/env.h"
 #include "rcan/errors.h"
 #include "test_support.h"
@@ -245,6 +250,136 @@ TEST(SafetyLatchFile, AClearThatCannotBeWrittenComesBackLatched) {
   EXPECT_TRUE(r.core->estop_active());
   EXPECT_EQ(r.core->status().estop_source, "cli");
   EXPECT_EQ(r.core->status().startup_note, "ESTOP was latched before restart; still latched");
+}
+
+// ---- Stops recorded during an audit outage (docs/SECURITY.md R14) -----------------------------
+
+audit::AuditEntry stop_entry(int i) {
+  audit::AuditEntry e;
+  e.principal = "owner-1";
+  e.ruri = "rcan://local.rcan/acme/bot/00000001";
+  e.message_id = "stop-" + std::to_string(i);
+  e.event = "ESTOP";
+  e.outcome = "ok";
+  e.sub = "owner-1";
+  e.reason = "button";
+  e.detail.set("transport", "http");
+  return e;
+}
+
+TEST(StopBacklog, ASpillFileKeepsStopsAcrossARestartPrivateAndInOrder) {
+  TempDir dir;
+  const std::string f = dir.file("stops-unrecorded.jsonl");
+  {
+    node::StopBacklog b(f);
+    for (int i = 0; i < 3; ++i) b.keep(stop_entry(i));
+    EXPECT_EQ(b.pending(), 3u);
+  }
+  EXPECT_EQ(mode_of(f), 0600u);
+  node::StopBacklog again(f);  // a restart: the file's records are still owed to the log
+  EXPECT_EQ(again.pending(), 3u);
+  auto got = again.take();
+  ASSERT_EQ(got.size(), 3u);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_EQ(got[static_cast<size_t>(i)].message_id, "stop-" + std::to_string(i));
+    EXPECT_EQ(json::canonical(json::Value(audit::to_object(got[static_cast<size_t>(i)]))),
+              json::canonical(json::Value(audit::to_object(stop_entry(i)))));
+  }
+  EXPECT_FALSE(present(f));
+  EXPECT_TRUE(again.empty());
+  EXPECT_EQ(again.lost(), 0u);
+}
+
+TEST(StopBacklog, WhenTheSpillFileFailsMemoryKeepsThemAndWhatCannotBeKeptIsCounted) {
+  TempDir dir;
+  FaultInjectionEnv env(Env::posix());
+  env.fail_after(1);  // every write to the spill file fails
+  node::StopBacklog b(dir.file("stops-unrecorded.jsonl"), &env,
+                      {.spill_records = 10, .memory_records = 5});
+  for (int i = 0; i < 8; ++i) b.keep(stop_entry(i));
+  EXPECT_EQ(b.pending(), 5u);
+  EXPECT_EQ(b.lost(), 3u);  // counted, logged and in the status — never silent
+  EXPECT_EQ(b.to_json().get("lost")->as_int(), 3);
+  auto got = b.take();
+  ASSERT_EQ(got.size(), 5u);
+  EXPECT_EQ(got[0].message_id, "stop-0");
+  // Both tiers full: spill 10, memory 5, the rest counted.
+  env.fail_after(0);
+  node::StopBacklog c(dir.file("other.jsonl"), &env, {.spill_records = 10, .memory_records = 5});
+  for (int i = 0; i < 20; ++i) c.keep(stop_entry(i));
+  EXPECT_EQ(c.pending(), 15u);
+  EXPECT_EQ(c.lost(), 5u);
+  EXPECT_EQ(c.take().size(), 15u);
+}
+
+TEST(StopBacklog, ATornLastLineIsCountedNotTakenAsARecord) {
+  TempDir dir;
+  const std::string f = dir.file("stops-unrecorded.jsonl");
+  {
+    node::StopBacklog b(f);
+    b.keep(stop_entry(0));
+    b.keep(stop_entry(1));
+  }
+  { std::ofstream(f, std::ios::app) << R"({"principal":"owner-1","event":"ES)"; }
+  { std::ofstream(f, std::ios::app) << "\n"; }  // and a line that is no record at all
+  node::StopBacklog b(f);
+  auto got = b.take();
+  EXPECT_EQ(got.size(), 2u);
+  EXPECT_EQ(b.lost(), 1u);
+}
+
+// More stops than the old in-memory list held (1,000) during one outage: every one of them is
+// recorded once the log writes again.
+TEST(StopBacklog, EveryStopDuringAnAuditOutageIsRecordedAfterIt) {
+  TempDir dir;
+  FaultInjectionEnv env(Env::posix());
+  audit::AuditOptions ao;
+  ao.secret = "stop-backlog-test-chain-secret-0123456789";
+  ao.robot_ruri = "rcan://local.rcan/acme/bot/00000001";
+  ao.preallocate = false;
+  ao.recovery_interval_ms = 20;
+  ao.env = &env;
+  auto log = audit::AuditLog::open(dir.file("audit"), ao);
+  ASSERT_TRUE(log.ok()) << log.error().message;
+  node::test_node::FakeActuation act;
+  node::NodeSettings ns;
+  ns.ruri = ao.robot_ruri;
+  ns.state_dir = dir.file("state");
+  ASSERT_EQ(::mkdir(ns.state_dir.c_str(), 0700), 0);
+  node::NodeServices svc(ns, Clock::system(), node::AuthOptions{}, act, **log);
+  env.fail_after(1);
+  const int n = 1200;
+  for (int i = 0; i < n; ++i) svc.write_audit(stop_entry(i));
+  auto settle = [&] {
+    for (int k = 0; k < 1000 && svc.audit_inflight.load() > 0; ++k)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  };
+  settle();
+  EXPECT_FALSE((*log)->available());
+  EXPECT_EQ(svc.stop_backlog.pending(), static_cast<uint64_t>(n));
+  env.fail_after(0);  // the disk is back
+  for (int k = 0; k < 500 && !(*log)->available(); ++k)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  ASSERT_TRUE((*log)->available());
+  audit::AuditEntry next = stop_entry(n);
+  next.event = "COMMAND";
+  svc.write_audit(next);  // the first record after the outage brings the backlog with it
+  settle();
+  int late = 0;
+  ASSERT_TRUE((*log)
+                  ->export_range(0, INT64_MAX,
+                                 [&](std::string_view line) {
+                                   auto v = json::parse(line);
+                                   const json::Value* d = v.ok() ? v->get("detail") : nullptr;
+                                   const json::Value* f =
+                                       d ? d->get("recorded_after_audit_outage") : nullptr;
+                                   if (f && f->is_bool() && f->as_bool()) ++late;
+                                   return true;
+                                 })
+                  .ok());
+  EXPECT_EQ(late, n);
+  EXPECT_EQ(svc.stop_backlog.lost(), 0u);
+  EXPECT_TRUE(svc.stop_backlog.empty());
 }
 
 }  // namespace

@@ -65,6 +65,10 @@ Status validate(const AuditEntry& e);
 json::Object to_object(const AuditEntry& e);
 // The §16.2 ai block as written in a record.
 json::Object to_object(const AiBlock& a);
+// The inverse of to_object(AuditEntry) for an unsealed entry (a record kept outside the log,
+// e.g. a stop the log could not write). Unknown members are ignored. Errors:
+// SCHEMA_VALIDATION_FAILED naming the member of the wrong type, or what validate() refuses.
+Result<AuditEntry> entry_from_object(const json::Object& o);
 
 // Result of sealing a record at a position in the chain.
 struct SealedRecord {

@@ -15,7 +15,9 @@ NodeServices::NodeServices(NodeSettings s, Clock& c, AuthOptions a, Actuation& a
       replay(settings.replay),
       injection(settings.injection_patterns),
       act(actuation),
-      audit(log) {}
+      audit(log),
+      stop_backlog(settings.state_dir.empty() ? std::string()
+                                              : settings.state_dir + "/stops-unrecorded.jsonl") {}
 
 AuditRecord NodeServices::record(const std::string& event, const std::string& outcome) {
   audit::AuditEntry e;
@@ -40,10 +42,7 @@ void NodeServices::write_audit(audit::AuditEntry e,
   }
   metrics.count_audit(e.event);
   std::vector<audit::AuditEntry> late;
-  if (audit.available()) {
-    MutexLock l(deferred_mu);
-    late.swap(deferred_stops);
-  }
+  if (!stop_backlog.empty() && audit.available()) late = stop_backlog.take();
   for (auto& d : late) {  // stops the log could not record while it was failed: recorded now
     d.detail.set("recorded_after_audit_outage", true);
     write_audit(std::move(d));
@@ -58,10 +57,7 @@ void NodeServices::write_audit(audit::AuditEntry e,
       audit_failures.fetch_add(1, std::memory_order_relaxed);
       if (r.error().code == ErrorCode::kAuditUnavailable) {
         audit_unavailable.store(true);
-        if (stop_copy) {
-          MutexLock l(deferred_mu);
-          if (deferred_stops.size() < 1000) deferred_stops.push_back(std::move(*stop_copy));
-        }
+        if (stop_copy) stop_backlog.keep(*stop_copy);
       }
     } else {
       audit_unavailable.store(
@@ -124,6 +120,7 @@ json::Value NodeServices::status(bool detailed) {
     o.set("control_queue", sessions.queue_json(now));
   }
   o.set("audit_available", audit.available());
+  if (detailed) o.set("audit_stop_backlog", stop_backlog.to_json());
   json::Value session_list = sessions.to_json(now, detailed);
   o.set("active_sessions", static_cast<int64_t>(session_list.as_array().size()));
   o.set("sessions", session_list);

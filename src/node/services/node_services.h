@@ -26,6 +26,7 @@
 #include "node/safety/actuation.h"
 #include "node/services/audit_record.h"
 #include "node/services/event_bus.h"
+#include "node/services/stop_backlog.h"
 #include "rcan/actions.h"
 #include "rcan/audit/audit_log.h"
 #include "rcan/message.h"
@@ -117,14 +118,13 @@ class NodeServices {
   // A new audit record of `event` (audit_record.h): anonymous until `by…` says who.
   AuditRecord record(const std::string& event, const std::string& outcome = "ok");
   // Appends asynchronously; `cb` (optional) runs once the record is durable or failed.
-  void write_audit(audit::AuditEntry e, std::function<void(Result<audit::Receipt>)> cb = {})
-      EXCLUDES(deferred_mu);
+  void write_audit(audit::AuditEntry e, std::function<void(Result<audit::Receipt>)> cb = {});
 
   // ESTOP/STOP records that could not be written while the audit log was failed (the stop
-  // itself happened): written, marked `recorded_after_audit_outage`, by the first write_audit
-  // once the log is back. Bounded.
-  Mutex deferred_mu;
-  std::vector<audit::AuditEntry> deferred_stops GUARDED_BY(deferred_mu);
+  // itself happened): spilled to `<state_dir>/stops-unrecorded.jsonl` (else memory) and
+  // written, marked `recorded_after_audit_outage`, by the first write_audit once the log is
+  // back — also after a restart. Never dropped silently (stop_backlog.h).
+  StopBacklog stop_backlog;
 
   uint32_t rate_limit(Role r) const {
     return settings.rate_per_minute[static_cast<size_t>(role_level(r))];
