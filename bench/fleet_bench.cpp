@@ -166,9 +166,9 @@ struct Robot {
 
 // The pipeline's stage timers (wall time per stage, node/metrics.h), summed over all robots:
 // stage → {sum_us, count}. A round's deltas show where its time went.
-constexpr const char* kStages[] = {"parse",        "shape",    "token", "decode",
-                                   "auth",         "replay",   "fleet", "authorize",
-                                   "safety_state", "dispatch", "audit", "total"};
+constexpr const char* kStages[] = {"parse",     "shape", "token",     "decode", "auth",
+                                   "freshness", "fleet", "authorize", "replay", "safety_state",
+                                   "dispatch",  "audit", "total"};
 std::map<std::string, std::pair<double, uint64_t>> stage_totals(
     const std::vector<std::unique_ptr<Robot>>& robots) {
   std::map<std::string, std::pair<double, uint64_t>> out;

@@ -888,9 +888,10 @@ void print_stages(Bench& bench) {
   std::printf(
       "\ncommand path, node's own stage timers over the 16-client HTTP run (mean / ~p99 by "
       "bucket)\n");
-  const char* order[] = {"parse",    "shape",     "token",      "decode",       "replay",
-                         "auth",     "authorize", "rate_limit", "safety_state", "injection",
-                         "dispatch", "audit",     "apply",      "respond",      "total"};
+  const char* order[] = {"parse",  "shape",        "token",     "decode",
+                         "auth",   "freshness",    "authorize", "rate_limit",
+                         "replay", "safety_state", "injection", "dispatch",
+                         "audit",  "apply",        "respond",   "total"};
   for (const char* s : order) {
     auto a = after16.find(s);
     if (a == after16.end()) continue;

@@ -499,33 +499,35 @@ TEST(DiskFull, WritebackErrorsUnderTheFileSystemFailClosedAndRecoverToo) {
 TEST(ClockSteps, ReplayMemoryEvictedBeforeAStepBackDoesNotRefuseTheNewTime) {
   node::ReplayOptions o;
   o.capacity = 3;
+  o.principal_share = 3;  // one principal, and it may hold the whole memory
   node::ReplayGuard g(o);
+  const std::string p = "issuer\x1fsub";
   const int64_t t = 1'750'000'000'000;
   for (int i = 0; i < 4; ++i)
-    ASSERT_TRUE(g.check("m" + std::to_string(i), t + i, false, t + 10).ok());
+    ASSERT_TRUE(g.check(p, "m" + std::to_string(i), t + i, false, t + 10).ok());
   EXPECT_EQ(g.evictions(), 1u);
   // The evicted id cannot come back while it could be fresh.
-  auto again = g.check("m0", t, false, t + 20);
+  auto again = g.check(p, "m0", t, false, t + 20);
   ASSERT_FALSE(again.ok());
   EXPECT_EQ(again.error().code, ErrorCode::kMessageStale);
   // The clock steps back an hour: messages stamped with the new time are fresh…
   const int64_t back = t - 3'600'000;
   for (int i = 0; i < 6; ++i)
-    EXPECT_TRUE(g.check("b" + std::to_string(i), back + 100 + i, false, back + 200).ok()) << i;
+    EXPECT_TRUE(g.check(p, "b" + std::to_string(i), back + 100 + i, false, back + 200).ok()) << i;
   // …ids from before the step are still remembered (they could become fresh once the clock
   // has caught up), and a replay of a new one is refused.
-  auto replay = g.check("b5", back + 105, false, back + 300);
+  auto replay = g.check(p, "b5", back + 105, false, back + 300);
   ASSERT_FALSE(replay.ok());
   EXPECT_EQ(replay.error().code, ErrorCode::kReplayDetected);
   // Evictions after the step took the oldest timestamps (the new ones): the pre-step ids that
   // remain still refuse their replays once the clock is back where it was.
-  auto late = g.check("m3", t + 3, false, t + 1000);
+  auto late = g.check(p, "m3", t + 3, false, t + 1000);
   ASSERT_FALSE(late.ok());
   EXPECT_EQ(late.error().code, ErrorCode::kReplayDetected);
   // Forward step: everything remembered is out of the window; the new time is fresh.
   const int64_t fwd = t + 7'200'000;
-  EXPECT_TRUE(g.check("f0", fwd, false, fwd + 5).ok());
-  auto old = g.check("m9", t + 5000, false, fwd + 10);
+  EXPECT_TRUE(g.check(p, "f0", fwd, false, fwd + 5).ok());
+  auto old = g.check(p, "m9", t + 5000, false, fwd + 10);
   ASSERT_FALSE(old.ok());
   EXPECT_EQ(old.error().code, ErrorCode::kMessageStale);
 }
@@ -592,7 +594,8 @@ TEST(ClockSteps, RealNodeUnderFaketimeKeepsReplayTtlAndAuditOrdering) {
     return node.post("/rcan/v1/command", command("status", {}, id, ts), tok);
   };
 
-  // Fill the replay memory (100 ids) past its capacity, so that evictions happen before the step.
+  // Send more ids than the OWNER's share of the replay memory (100 ids, 6 per principal), so that
+  // its own evictions happen before the step.
   std::vector<std::pair<std::string, int64_t>> before;
   for (int i = 0; i < 110; ++i) {
     std::string id = new_uuid_v4();
@@ -631,19 +634,21 @@ TEST(ClockSteps, RealNodeUnderFaketimeKeepsReplayTtlAndAuditOrdering) {
   ASSERT_TRUE(eventually([&] {
     return std::llabs(node_clock_ms(node) - clock.node_now_ms()) < 5000;
   })) << "the node's clock did not step back";
-  // A message stamped with the node's (new) time is fresh, although the replay memory evicted
-  // ids from before the step.
+  // A message stamped with the node's (new) time is fresh, also from the OWNER, whose replay
+  // memory evicted its own ids from before the step.
   std::string fresh = new_uuid_v4();
   int64_t fresh_ts = clock.node_now_ms();
   HttpReply r1 = send(fresh, fresh_ts, user);
   EXPECT_EQ(r1.status, 200) << r1.body;
+  HttpReply r1_owner = send(new_uuid_v4(), clock.node_now_ms(), owner);
+  EXPECT_EQ(r1_owner.status, 200) << r1_owner.body;
   // Replays are still refused: an id from before the step with its own timestamp (now an hour in
-  // the node's future: stale), the same id restamped with the new time (remembered: replay), and
-  // the new message sent again.
-  HttpReply r2 = send(before.back().first, before.back().second, user);
+  // the node's future: stale), the same id restamped with the new time by the principal that
+  // used it (remembered: replay), and the new message sent again.
+  HttpReply r2 = send(before.back().first, before.back().second, owner);
   EXPECT_EQ(r2.status, 408) << r2.body;
   EXPECT_EQ(error_code(r2), "MESSAGE_STALE");
-  HttpReply r3 = send(before.back().first, clock.node_now_ms(), user);
+  HttpReply r3 = send(before.back().first, clock.node_now_ms(), owner);
   EXPECT_EQ(r3.status, 409) << r3.body;
   EXPECT_EQ(error_code(r3), "REPLAY_DETECTED");
   HttpReply r4 = send(fresh, fresh_ts, user);

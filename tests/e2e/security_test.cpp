@@ -8,10 +8,13 @@
 #include <sys/stat.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <map>
 #include <mutex>
 #include <thread>
 
@@ -555,6 +558,186 @@ TEST(Security, AMessageWhoseTokenFailsUsesUpNoIdAndReplaysAreStillRefused) {
   // A replay under a bad token is refused for its token (it learns nothing about the id).
   HttpReply bad_replay = test::http(d.port(), "POST", "/rcan/v1/command", body, bearer("garbage"));
   EXPECT_EQ(bad_replay.status, 401) << bad_replay.body;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Review finding R3: the replay memory is each principal's own, and it is written only after
+// authorisation, the guest limits and the rate limit (docs/SECURITY.md).
+
+// A COMMAND with its own timestamp.
+std::string cmd_at(const std::string& id, const std::string& action, int64_t timestamp_ms) {
+  return R"({"version":"1.0.0","message_id":")" + id + R"(","type":"COMMAND","timestamp_ms":)" +
+         std::to_string(timestamp_ms) + R"(,"payload":{"action":")" + action + "\"}}";
+}
+
+// What a GUEST flooding a stream saw: answers by error code ("" for an ACK).
+struct Flood {
+  std::atomic<bool> stop{false};
+  std::atomic<int> answered{0};
+  std::atomic<bool> done{false};
+  std::mutex mu;
+  std::map<std::string, int> codes;
+};
+
+// Sends COMMANDs stamped `ahead_ms` in the future on one stream, 200 at a time (reading the 200
+// answers before the next batch) at `per_second`, until told to stop (or a minute has passed).
+void flood_stream(uint16_t port, const std::string& token, int64_t ahead_ms, int per_second,
+                  Flood& f) {
+  test::WsClient ws;
+  if (!ai_test::connect_stream(ws, port, token)) {
+    ADD_FAILURE() << "the flooding stream did not connect";
+    f.done = true;
+    return;
+  }
+  const int batch = 200;
+  const auto start = std::chrono::steady_clock::now();
+  const auto until = start + std::chrono::seconds(60);
+  for (int64_t n = 0; !f.stop && std::chrono::steady_clock::now() < until; ++n) {
+    std::this_thread::sleep_until(start +
+                                  std::chrono::microseconds(n * batch * 1'000'000 / per_second));
+    for (int i = 0; i < batch; ++i) {
+      ws.send_text(cmd_at(new_uuid_v4(), "status", now_ms() + ahead_ms));
+    }
+    for (int i = 0; i < batch; ++i) {
+      auto frame = ws.recv_text(10000);
+      if (!frame) {
+        ADD_FAILURE() << "the flooding stream stopped answering after " << f.answered;
+        f.done = true;
+        return;
+      }
+      auto v = json::parse(*frame);
+      const json::Value* p = v.ok() ? v->get("payload") : nullptr;
+      const json::Value* c = p && p->is_object() ? p->get("error_code") : nullptr;
+      std::lock_guard<std::mutex> l(f.mu);
+      ++f.codes[c && c->is_string() ? c->as_string() : ""];
+      ++f.answered;
+    }
+  }
+  f.done = true;
+}
+
+// The reproduction of the review: a GUEST floods the node with rate-limited messages stamped
+// 4.9 s ahead (within the 5 s of tolerated drift). With one memory for everyone, the flood filled
+// it and its evictions refused every timestamp up to 4.9 s ahead — the OWNER's next fresh
+// command was 408 MESSAGE_STALE. Now the flood is refused by the rate limit before it reaches
+// the replay memory, and the memory is each principal's own.
+TEST(Security, AGuestFloodOfFutureStampedMessagesCannotMakeTheOwnersCommandStale) {
+  test::TempDir dir;
+  test::RcandDaemon d(dir.path() + "/node");
+  ASSERT_NE(d.port(), 0);
+  const std::string owner = d.token("owner", {"status", "control"}, "owner-r3");
+  const std::string guest = d.token("guest", {"status"}, "guest-r3");
+  Flood f;
+  auto start = std::chrono::steady_clock::now();
+  // 4,000 a second (the review saw 4,500): more than 10,000 ids in 4.9 s, so that with one
+  // memory of 10,000 ids for everyone the evictions, from 4.9 s on, refused every timestamp up
+  // to the present.
+  std::thread flood([&] { flood_stream(d.port(), guest, 4900, 4000, f); });
+  // Past the node's memory (10,000 ids) and past the 4.9 s, while the flood goes on.
+  while (!f.done && (f.answered < 12000 ||
+                     std::chrono::steady_clock::now() - start < std::chrono::milliseconds(5500)))
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  HttpReply during = test::http(d.port(), "POST", "/rcan/v1/command",
+                                cmd_at(new_uuid_v4(), "status", now_ms()), bearer(owner));
+  f.stop = true;
+  flood.join();
+  double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::printf("guest flood: %d messages answered in %.1f s (%.0f/s)\n", f.answered.load(), secs,
+              f.answered / secs);
+  ASSERT_GE(f.answered, 10000) << "the flood was too small to show anything";
+  EXPECT_EQ(during.status, 200) << "the OWNER's command during the flood: " << during.body;
+  HttpReply after = test::http(d.port(), "POST", "/rcan/v1/command",
+                               cmd_at(new_uuid_v4(), "status", now_ms()), bearer(owner));
+  EXPECT_EQ(after.status, 200) << "the OWNER's command after the flood: " << after.body;
+  // The guest was answered (accepted within its budget, then rate-limited), never told stale.
+  {
+    std::lock_guard<std::mutex> l(f.mu);
+    for (const auto& [code, n] : f.codes)
+      EXPECT_TRUE(code.empty() || code == "RATE_LIMITED") << n << " answers " << code;
+  }
+  // A GUEST may still stop the robot (never rate-limited, never refused for memory).
+  HttpReply stop = test::http(d.port(), "POST", "/api/stop", "{}", bearer(guest));
+  EXPECT_EQ(stop.status, 200) << stop.body;
+}
+
+// A message_id is remembered for the principal that sent it (the token binds a message to its
+// sender; another principal's message with the same id is another message, acting with that
+// principal's rights only). A message refused before the replay stage — authorisation here —
+// uses up nothing: sent again when it may pass, it is accepted once.
+TEST(Security, MessageIdsBelongToTheirPrincipalAndARefusedMessageUsesUpNone) {
+  test::TempDir dir;
+  test::RcandDaemon d(dir.path() + "/node");
+  ASSERT_NE(d.port(), 0);
+  const std::string owner = d.token("owner", {"status", "control"}, "owner-r3");
+  const std::string user = d.token("user", {"status", "control"}, "user-r3");
+  const std::string guest = d.token("guest", {"status"}, "guest-r3");
+  auto send = [&](const std::string& body, const std::string& tok) {
+    return test::http(d.port(), "POST", "/rcan/v1/command", body, bearer(tok));
+  };
+  // The OWNER's id: a second copy from the OWNER is a replay…
+  const std::string x = cmd_json(new_uuid_v4(), "status");
+  EXPECT_EQ(send(x, owner).status, 200);
+  HttpReply owner_again = send(x, owner);
+  EXPECT_EQ(owner_again.status, 409) << owner_again.body;
+  EXPECT_EQ(code_of(owner_again), "REPLAY_DETECTED");
+  // …the same message under the USER's token is the USER's message (once).
+  HttpReply user_x = send(x, user);
+  EXPECT_EQ(user_x.status, 200) << "another principal's id refused: " << user_x.body;
+  HttpReply user_again = send(x, user);
+  EXPECT_EQ(user_again.status, 409) << user_again.body;
+  EXPECT_EQ(code_of(user_again), "REPLAY_DETECTED");
+
+  // Refused at authorisation (a GUEST may not drive): the id is not used up.
+  const std::string y = cmd_json(new_uuid_v4(), "move", R"(,"linear":0.1,"duration_ms":100)");
+  HttpReply guest_y = send(y, guest);
+  EXPECT_EQ(guest_y.status, 403) << guest_y.body;
+  HttpReply owner_y = send(y, owner);
+  EXPECT_EQ(owner_y.status, 200) << "the GUEST's refused message used up the id: " << owner_y.body;
+
+  // The same principal, refused at authorisation and then allowed: the OWNER holds control, the
+  // USER's command is a CONTROL_CONFLICT; once the OWNER releases, the same message is accepted.
+  HttpReply claim = test::http(d.port(), "POST", "/rcan/v1/auth/claim", "{}", bearer(owner));
+  ASSERT_EQ(claim.status, 200) << claim.body;
+  const std::string z = cmd_json(new_uuid_v4(), "move", R"(,"linear":0.1,"duration_ms":100)");
+  HttpReply conflict = send(z, user);
+  EXPECT_EQ(conflict.status, 409) << conflict.body;
+  EXPECT_EQ(code_of(conflict), "CONTROL_CONFLICT");
+  HttpReply release = test::http(d.port(), "DELETE", "/rcan/v1/auth/release", "{}", bearer(owner));
+  ASSERT_EQ(release.status, 200) << release.body;
+  HttpReply user_z = send(z, user);
+  EXPECT_EQ(user_z.status, 200) << "the refused message used up its id: " << user_z.body;
+  HttpReply user_z_again = send(z, user);
+  EXPECT_EQ(user_z_again.status, 409) << user_z_again.body;
+  EXPECT_EQ(code_of(user_z_again), "REPLAY_DETECTED");
+}
+
+// Ids are unique per principal only, so a command held for approval (§16.4) is named by an id
+// that another principal may also send: that principal's command must not take the held one's
+// place (an approval names the id).
+TEST(Security, AnotherPrincipalsCommandCannotTakeTheIdOfAHeldOne) {
+  test::TempDir dir;
+  ai_test::AiNode n(dir.path(),
+                    "agent:\n"
+                    "  hitl_gates:\n"
+                    "    - {action_types: [arm_move], require_auth: true, auth_timeout_ms: 60000,"
+                    " on_timeout: block}\n");
+  ASSERT_NE(n.port(), 0);
+  const std::string held = new_uuid_v4();
+  const std::string body = cmd_json(held, "arm_move", R"(,"joints":[0.1,0,0,0,0,0])");
+  HttpReply first = n.command(n.leasee(), body);
+  ASSERT_EQ(first.status, 202) << first.body;
+  HttpReply other = n.command(n.owner(), body);
+  EXPECT_EQ(other.status, 409) << other.body;
+  EXPECT_EQ(code_of(other), "REPLAY_DETECTED");
+  // The held command is still the LEASEE's: approving it runs the LEASEE's command.
+  HttpReply pending = n.get("/rcan/v1/pending", n.owner());
+  ASSERT_EQ(pending.status, 200);
+  EXPECT_NE(pending.body.find("leasee-1 asks for arm_move"), std::string::npos) << pending.body;
+  EXPECT_EQ(pending.body.find("owner-1 asks"), std::string::npos) << pending.body;
+  HttpReply approve = n.authorize(n.owner(), held, "approve");
+  EXPECT_EQ(approve.status, 200) << approve.body;
+  json::Value ran = n.record(held, "COMMAND");
+  EXPECT_EQ(json::string_field(ran, "sub"), "leasee-1") << json::dump(ran);
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -48,9 +48,9 @@ TEST_F(PipelineTest, StagesRunInTheDocumentedOrder) {
   std::vector<std::string> names;
   for (const auto& s : standard_stages(*services_)) names.emplace_back(s->name());
   const std::vector<std::string> documented{
-      "shape",     "token",           "decode",       "auth",       "replay",
-      "fleet",     "authorize",       "guest_limits", "rate_limit", "safety_state",
-      "injection", "confidence_gate", "hitl_gate",    "watermark",  "dispatch"};
+      "shape",           "token",        "decode",     "auth",    "freshness",    "fleet",
+      "authorize",       "guest_limits", "rate_limit", "replay",  "safety_state", "injection",
+      "confidence_gate", "hitl_gate",    "watermark",  "dispatch"};
   EXPECT_EQ(names, documented);
 }
 
@@ -137,6 +137,70 @@ TEST_F(PipelineTest, RateLimitAnswers429WithRetryAfterButNeverLimitsAStop) {
   EXPECT_EQ(stop.status, 200) << json::dump(stop.body);
   EXPECT_EQ(act_.estops(), 1u);
   EXPECT_EQ(audited("ESTOP", 1).size(), 1u);
+}
+
+// The replay memory is written after the rate limit: a message the rate limit refused used up
+// nothing, and is accepted once when the budget is back; a copy of an accepted message is
+// refused before it spends any budget.
+TEST_F(PipelineTest, ARateLimitedMessageUsesUpNoIdAndACopySpendsNoBudget) {
+  build([](NodeSettings& s) { s.rate_per_minute = {0, 10, 6, 500, 1000, 0}; });
+  const std::string user = token("user", "bob");
+  const std::string first = new_uuid_v4();
+  ASSERT_EQ(submit(command("move", {}, first), user).status, 200);
+  for (int i = 0; i < 5; ++i) {  // copies: refused before the rate limit
+    Outcome copy = submit(command("move", {}, first), user);
+    EXPECT_EQ(copy.status, 409);
+    EXPECT_EQ(error_code(copy), "REPLAY_DETECTED");
+  }
+  for (int i = 0; i < 5; ++i) EXPECT_EQ(submit(command("move"), user).status, 200) << i;
+  const json::Value seventh = command("move");  // the budget (6 a minute) is spent
+  Outcome limited = submit(seventh, user);
+  ASSERT_EQ(limited.status, 429);
+  clock_.advance(10'000);  // one more in the bucket; the message is 10 s old, still fresh
+  Outcome later = submit(seventh, user);
+  EXPECT_EQ(later.status, 200) << json::dump(later.body);
+  Outcome again = submit(seventh, user);
+  EXPECT_EQ(again.status, 409);
+  EXPECT_EQ(error_code(again), "REPLAY_DETECTED");
+  EXPECT_EQ(act_.applied().size(), 7u);
+}
+
+// With the whole replay memory full (every principal at its share), a principal below its
+// share is refused 429 with Retry-After — never told its message is stale —, an ESTOP still
+// passes, and a principal at its share goes on, making room from its own oldest id.
+TEST_F(PipelineTest, AFullReplayMemoryRefusesWith429ButNeverAStop) {
+  build([](NodeSettings& s) { s.replay.capacity = 32; });  // 2 ids per principal
+  std::vector<std::string> owners;
+  for (int i = 0; i < 16; ++i) {
+    owners.push_back(token("owner", ("owner-" + std::to_string(i)).c_str()));
+    for (int j = 0; j < 2; ++j) ASSERT_EQ(submit(command("status"), owners.back()).status, 200);
+  }
+  ASSERT_EQ(services_->replay.size(), 32u);
+  const std::string late = token("user", "late");
+  Outcome full = submit(command("status"), late);
+  EXPECT_EQ(full.status, 429) << json::dump(full.body);
+  EXPECT_EQ(error_code(full), "RATE_LIMITED");
+  EXPECT_EQ(reason(full), "replay_memory_full");
+  bool retry_after = false;
+  for (const auto& [k, v] : full.headers) retry_after |= k == "Retry-After" && !v.empty();
+  EXPECT_TRUE(retry_after);
+  EXPECT_EQ(submit(command("status"), owners[0]).status, 200);
+  EXPECT_EQ(services_->replay.size(), 32u);
+  Outcome stop =
+      submit(json::Object{{"version", "1.0.0"},
+                          {"message_id", new_uuid_v4()},
+                          {"type", "SAFETY"},
+                          {"priority", "SAFETY"},
+                          {"timestamp_ms", clock_.wall_ms()},
+                          {"payload", json::Object{{"safety_event", "ESTOP"}, {"reason", "test"}}}},
+             late);
+  EXPECT_EQ(stop.status, 200) << json::dump(stop.body);
+  EXPECT_EQ(act_.estops(), 1u);
+  auto rec = audited("ESTOP", 1);
+  ASSERT_EQ(rec.size(), 1u);
+  const json::Value* detail = rec[0].get("detail");
+  ASSERT_NE(detail, nullptr);
+  EXPECT_NE(detail->get("replay_memory_full"), nullptr) << json::dump(rec[0]);
 }
 
 TEST_F(PipelineTest, LatchedEstopRefusesMotionWith423) {

@@ -223,7 +223,7 @@ void AiServices::persist_locked() {
     log(LogLevel::kError, "hitl_pending_write_failed", json::Object{{"error", s.error().message}});
 }
 
-void AiServices::hold(const std::shared_ptr<Context>& ctx, const config::HitlGate& gate,
+bool AiServices::hold(const std::shared_ptr<Context>& ctx, const config::HitlGate& gate,
                       const std::string& action_type) {
   const Message& m = *ctx->msg;
   int64_t now = svc_.clock.wall_ms();
@@ -259,7 +259,9 @@ void AiServices::hold(const std::shared_ptr<Context>& ctx, const config::HitlGat
   {
     MutexLock lock(mu_);
     if (absorb_wall_step_locked(svc_.clock.mono_ms(), now)) persist_locked();
-    pending_[it.message_id] = it;
+    // Message ids are unique per principal only (replay.h): another principal's command with
+    // the id of a held one must not take its place (an approval names the id).
+    if (!pending_.emplace(it.message_id, it).second) return false;
   }
   cv_.notify_all();
   audit::AuditEntry e = std::move(message_record(svc_, *ctx, "HITL_PENDING", "blocked").entry());
@@ -291,6 +293,7 @@ void AiServices::hold(const std::shared_ptr<Context>& ctx, const config::HitlGat
   };
   auto shared = std::make_shared<decltype(job)>(std::move(job));
   if (!disk_.post([shared] { (*shared)(); })) (*shared)();
+  return true;
 }
 
 void AiServices::post_webhooks(const PendingItem& item, const json::Value& event) {

@@ -64,8 +64,9 @@ class AiServices {
   // The HiTL gate that holds `action` (either side may name a synonym; rcan/actions.h).
   const config::HitlGate* hitl_gate_for(const std::string& action) const;
   // Holds the command: persists it, audits HITL_PENDING, notifies, answers 202 (from the disk
-  // worker, once the pending file holds it).
-  void hold(const std::shared_ptr<Context>& ctx, const config::HitlGate& gate,
+  // worker, once the pending file holds it). False, doing nothing, when a command with the same
+  // message_id is already held (another principal's: ids are unique per principal).
+  bool hold(const std::shared_ptr<Context>& ctx, const config::HitlGate& gate,
             const std::string& action_type) EXCLUDES(mu_);
   // An AUTHORIZE from `p` (authenticated). `done` gets the answer for the authorizer.
   void authorize(const Principal& p, const json::Value& body, const std::string& transport,

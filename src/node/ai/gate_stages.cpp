@@ -104,7 +104,13 @@ class HitlGateStage final : public Stage {
     const std::string& action = ctx->action->name;  // canonical: a synonym cannot slip past
     const config::HitlGate* gate = svc_.ai->hitl_gate_for(action);
     if (!gate) return Result::kContinue;
-    svc_.ai->hold(ctx, *gate, action);
+    if (!svc_.ai->hold(ctx, *gate, action)) {
+      return refuse(
+          svc_, ctx,
+          Error(ErrorCode::kReplayDetected,
+                "a command with this message_id is already held for approval", "message_id"),
+          "REPLAY_DETECTED");
+    }
     return Result::kParked;
   }
 

@@ -13,14 +13,17 @@ std::vector<std::unique_ptr<Stage>> standard_stages(NodeServices& s) {
   v.push_back(make_shape_stage(s));
   v.push_back(make_token_stage(s));
   v.push_back(make_decode_stage(s));
-  // Authentication before the replay memory: a message whose token does not verify must not
-  // use up its message_id or a place in the bounded memory (docs/SECURITY.md).
   v.push_back(make_auth_stage(s));
-  v.push_back(make_replay_stage(s));
+  // A stale message or a copy of one its principal already sent is refused at once; nothing is
+  // remembered before authorisation, the guest limits and the rate limit have passed, so a
+  // message refused by any of them (or by a bad token) uses up neither its message_id nor a
+  // place in its principal's replay memory (docs/SECURITY.md).
+  v.push_back(make_freshness_stage(s));
   v.push_back(make_fleet_stage(s));
   v.push_back(make_authorize_stage(s));
   v.push_back(make_guest_limit_stage(s));
   v.push_back(make_rate_limit_stage(s));
+  v.push_back(make_replay_stage(s));
   v.push_back(make_safety_state_stage(s));
   v.push_back(make_injection_stage(s));
   for (auto& g : ai_stages(s)) v.push_back(std::move(g));  // §16: confidence, HiTL, watermark

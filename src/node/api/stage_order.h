@@ -8,8 +8,8 @@
 
 namespace rcan::node {
 
-// shape → token → decode → authentication → replay → fleet → authorisation → guest limits →
-// rate limit → safety state → injection screen → §16 gates → audit and dispatch.
+// shape → token → decode → authentication → freshness → fleet → authorisation → guest limits →
+// rate limit → replay → safety state → injection screen → §16 gates → audit and dispatch.
 std::vector<std::unique_ptr<Stage>> standard_stages(NodeServices& services);
 
 }  // namespace rcan::node

@@ -34,7 +34,7 @@ struct FleetMembership {
   std::function<std::optional<Error>(const Context& ctx, NodeServices& svc)> conflict;
 };
 
-// The stage (node/api/stage_order.cpp runs it after authentication and the replay window).
+// The stage (node/api/stage_order.cpp runs it after authentication and the freshness look).
 std::unique_ptr<Stage> make_fleet_stage(NodeServices& services);
 
 // True when a context arrived through a fleet topic or as a FLEET_COMMAND.

@@ -218,8 +218,9 @@ void SwarmAgent::handle_join(const json::Value& body) {
     return;
   }
   const json::Value* ts = body.get("timestamp_ms");
-  auto fresh = svc_.replay.check(id, ts != nullptr && ts->is_int() ? ts->as_int() : 0, false,
-                                 svc_.clock.wall_ms());
+  auto fresh =
+      svc_.replay.check(principal->key(), id, ts != nullptr && ts->is_int() ? ts->as_int() : 0,
+                        false, svc_.clock.wall_ms());
   if (id.empty() || !fresh.ok()) {
     std::string why =
         id.empty() ? "missing message_id" : std::string(error_name(fresh.error().code));

@@ -1,4 +1,5 @@
-// Authentication (token, signature, §8.5 sender identity) and the replay window (pipeline.h).
+// Authentication (token, signature, §8.5 sender identity) and the replay window: the freshness
+// look right after authentication, the replay memory after the rate limit (pipeline.h).
 #include <algorithm>
 #include <cctype>
 
@@ -11,33 +12,74 @@
 namespace rcan::node {
 namespace {
 
-class ReplayStage final : public Stage {
+bool is_stop(const Context& ctx) {
+  return ctx.safety == SafetyAction::kEstop || ctx.safety == SafetyAction::kStop;
+}
+
+// The timestamp the replay window judges: the message's, except for a retained fleet ESTOP,
+// which stands until it is cleared (a robot joining later obeys it), whatever its age.
+int64_t replay_timestamp(NodeServices& svc, const std::shared_ptr<Context>& ctx) {
+  if (ctx->in.standing_estop && ctx->safety == SafetyAction::kEstop) {
+    ctx->audit_detail.set("standing_fleet_estop_timestamp_ms", ctx->msg->timestamp_ms);
+    return svc.clock.wall_ms();
+  }
+  return ctx->msg->timestamp_ms;
+}
+
+Stage::Result refuse_replay(NodeServices& svc, const std::shared_ptr<Context>& ctx,
+                            const Error& e) {
+  // Replay and staleness refusals are audited without the payload.
+  return refuse(svc, ctx, e,
+                e.code == ErrorCode::kReplayDetected ? "REPLAY_DETECTED" : "MESSAGE_STALE");
+}
+
+// Right after authentication: a stale message, or one whose id its principal already used, is
+// refused before anything else looks at it (a copy neither feeds a deadman nor spends its
+// principal's rate budget). Nothing is remembered here.
+class FreshnessStage final : public Stage {
  public:
-  explicit ReplayStage(NodeServices& s) : svc_(s) {}
-  const char* name() const override { return "replay"; }
+  explicit FreshnessStage(NodeServices& s) : svc_(s) {}
+  const char* name() const override { return "freshness"; }
   Result run(const std::shared_ptr<Context>& ctx) override {
     const Message& m = *ctx->msg;
-    bool safety = ctx->safety == SafetyAction::kEstop || ctx->safety == SafetyAction::kStop;
-    int64_t ts = m.timestamp_ms;
-    if (ctx->in.standing_estop && ctx->safety == SafetyAction::kEstop) {
-      // A retained fleet ESTOP stands until it is cleared: a robot joining later obeys it.
-      ctx->audit_detail.set("standing_fleet_estop_timestamp_ms", m.timestamp_ms);
-      ts = svc_.clock.wall_ms();
-    }
-    auto v = svc_.replay.check(m.message_id, ts, safety, svc_.clock.wall_ms());
-    if (!v.ok()) {
-      // Replay and staleness refusals are audited without the payload.
-      return refuse(
-          svc_, ctx, v.error(),
-          v.error().code == ErrorCode::kReplayDetected ? "REPLAY_DETECTED" : "MESSAGE_STALE");
-    }
-    if (v->duplicate_safety) ctx->audit_detail.set("duplicate_safety_message", true);
+    bool safety = is_stop(*ctx);
+    auto v = svc_.replay.peek(ctx->principal.key(), m.message_id, replay_timestamp(svc_, ctx),
+                              safety, svc_.clock.wall_ms());
+    if (!v.ok()) return refuse_replay(svc_, ctx, v.error());
     // TTL: a message past timestamp + ttl is never dispatched.
     if (m.ttl_ms > 0 && svc_.clock.wall_ms() > m.timestamp_ms + m.ttl_ms && !safety) {
       return refuse(svc_, ctx,
                     Error(ErrorCode::kMessageStale, "the message's ttl_ms has expired", "ttl_ms"),
                     "MESSAGE_STALE");
     }
+    return Result::kContinue;
+  }
+
+ private:
+  NodeServices& svc_;
+};
+
+// After authorisation, the guest limits and the rate limit: the message_id is remembered in its
+// principal's memory (replay.h), so a message refused before here used up nothing. The check is
+// made again, atomically with remembering (a copy may have come in meanwhile).
+class ReplayStage final : public Stage {
+ public:
+  explicit ReplayStage(NodeServices& s) : svc_(s) {}
+  const char* name() const override { return "replay"; }
+  Result run(const std::shared_ptr<Context>& ctx) override {
+    if (ctx->replay_remembered) return Result::kContinue;  // an escalation's second pass
+    const Message& m = *ctx->msg;
+    const int64_t now = svc_.clock.wall_ms();
+    auto v = svc_.replay.check(ctx->principal.key(), m.message_id, replay_timestamp(svc_, ctx),
+                               is_stop(*ctx), now);
+    if (!v.ok()) {
+      if (v.error().code != ErrorCode::kRateLimited) return refuse_replay(svc_, ctx, v.error());
+      ctx->audit_detail.set("retry_after_ms", svc_.replay.retry_after_ms(now));
+      return refuse(svc_, ctx, v.error(), "RATE_LIMITED");
+    }
+    if (v->duplicate_safety) ctx->audit_detail.set("duplicate_safety_message", true);
+    if (v->unremembered) ctx->audit_detail.set("replay_memory_full", true);
+    ctx->replay_remembered = true;
     return Result::kContinue;
   }
 
@@ -91,6 +133,9 @@ class AuthStage final : public Stage {
 
 }  // namespace
 
+std::unique_ptr<Stage> make_freshness_stage(NodeServices& services) {
+  return std::make_unique<FreshnessStage>(services);
+}
 std::unique_ptr<Stage> make_replay_stage(NodeServices& services) {
   return std::make_unique<ReplayStage>(services);
 }

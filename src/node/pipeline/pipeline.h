@@ -78,6 +78,9 @@ struct Context {
   json::Object audit_detail;
   std::string session_id;      // control session the command runs under
   bool fleet_command = false;  // arrived as FLEET_COMMAND (decoded as a COMMAND)
+  // The replay stage remembered the message's id: when a §16 escalation runs the layer's
+  // command (the same message_id) through the stages again, it is not a replay.
+  bool replay_remembered = false;
   // §16 (src/node/ai/gate_stages.cpp): written into the acceptance record by the dispatch stage.
   bool gate_bypassed = false;        // a confidence gate missed with on_fail allow
   bool hitl_timeout_bypass = false;  // a HiTL gate timed out with on_timeout allow

@@ -15,13 +15,17 @@ std::unique_ptr<Stage> make_shape_stage(NodeServices& services);   // the JSON i
 std::unique_ptr<Stage> make_token_stage(NodeServices& services);   // a token is present
 std::unique_ptr<Stage> make_decode_stage(NodeServices& services);  // decoded; SAFETY recognised
 // auth_stages.cpp
-std::unique_ptr<Stage> make_auth_stage(NodeServices& services);    // token, signature, §8.5
-std::unique_ptr<Stage> make_replay_stage(NodeServices& services);  // message_id, age, ttl
+std::unique_ptr<Stage> make_auth_stage(NodeServices& services);  // token, signature, §8.5
+// Age, ttl and the principal's used ids, remembering nothing (replay.h: peek).
+std::unique_ptr<Stage> make_freshness_stage(NodeServices& services);
 // authorize_stage.cpp
 std::unique_ptr<Stage> make_authorize_stage(NodeServices& services);  // scope, role, session
 // guest_limits.cpp (guest_limits.h): seed §6.3
 // guard_stages.cpp
 std::unique_ptr<Stage> make_rate_limit_stage(NodeServices& services);
+// auth_stages.cpp: the message_id remembered in its principal's replay memory (replay.h: check).
+std::unique_ptr<Stage> make_replay_stage(NodeServices& services);
+// guard_stages.cpp
 std::unique_ptr<Stage> make_safety_state_stage(NodeServices& services);  // ESTOP, audit outage
 std::unique_ptr<Stage> make_injection_stage(NodeServices& services);
 // dispatch_stage.cpp
