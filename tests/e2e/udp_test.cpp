@@ -252,11 +252,15 @@ TEST(UdpHeartbeat, HeartbeatsKeepTheSessionAliveAndTheirLossSafeStopsTheRobot) {
   EXPECT_EQ(n.metric("rcan_audit_failures_total"), 0);
 }
 
-TEST(UdpHeartbeat, ASessionPromotedFromTheQueueGetsItsKeyOnItsStream) {
+// Secrets never travel in events: a claim promoted from the queue is told on its own stream
+// (PROMOTED, no key), and its holder fetches its heartbeat key by an authenticated request —
+// renewing its session with udp_heartbeat: true. Nobody else can.
+TEST(UdpHeartbeat, ASessionPromotedFromTheQueueFetchesItsKeyNotFromAnEvent) {
   ConfiguredNode n({}, /*heartbeat_timeout_ms=*/2000);
   ASSERT_NE(n.udp_port(), 0) << n.proc().err();
   std::string a = n.token("user", {"control", "status"}, "udp-user-a");
   std::string b = n.token("user", {"control", "status"}, "udp-user-b");
+  std::string c = n.token("user", {"control", "status"}, "udp-user-c");
   Grant ga = claim(n, a);
   ASSERT_FALSE(ga.session_id.empty());
   // B listens on its stream, then queues behind A.
@@ -269,21 +273,36 @@ TEST(UdpHeartbeat, ASessionPromotedFromTheQueueGetsItsKeyOnItsStream) {
   HttpReply q = n.post("/rcan/v1/auth/claim", "{}", b);
   ASSERT_EQ(q.status, 409) << q.body;
   ASSERT_NE(q.body.find("\"queued\":true"), std::string::npos) << q.body;
-  // A releases: B is promoted and its GRANTED event carries B's own heartbeat key.
+  // A releases: B is promoted; its GRANTED event carries no key.
   HttpReply rel = n.post("/rcan/v1/auth/release", "{}", a);
   ASSERT_EQ(rel.status, 200) << rel.body;
   std::optional<json::Value> promoted;
   for (int i = 0; i < 50 && !promoted; ++i) {
     auto f = ws.recv_text(200);
     if (!f) continue;
+    EXPECT_EQ(f->find("key_b64"), std::string::npos) << *f;
     json::Value v = parse_json(*f);
     if (v.get("event") && v.get("event")->as_string() == "PROMOTED") promoted = v;
   }
   ASSERT_TRUE(promoted) << "no PROMOTED event on B's stream";
-  const json::Value* u = promoted->get("udp_heartbeat");
-  ASSERT_NE(u, nullptr) << json::dump(*promoted);
+  EXPECT_EQ(promoted->get("udp_heartbeat"), nullptr) << json::dump(*promoted);
+  EXPECT_EQ(json::dump(*promoted).find("key_b64"), std::string::npos);
   std::string b_session = promoted->get("session_id")->as_string();
   EXPECT_NE(b_session, ga.session_id);
+  const std::string ask =
+      json::dump(json::Value(json::Object{{"session_id", b_session}, {"udp_heartbeat", true}}));
+  // Another principal — the former holder, or a stranger — cannot fetch B's key.
+  for (const std::string* other : {&a, &c}) {
+    HttpReply r = n.post("/rcan/v1/auth/renew", ask, *other);
+    EXPECT_EQ(r.status, 403) << r.body;
+    EXPECT_EQ(r.body.find("key_b64"), std::string::npos) << r.body;
+  }
+  // B fetches it by renewing its own session.
+  HttpReply mine = n.post("/rcan/v1/auth/renew", ask, b);
+  ASSERT_EQ(mine.status, 200) << mine.body;
+  json::Value mv = parse_json(mine.body);
+  const json::Value* u = mv.get("payload") ? mv.get("payload")->get("udp_heartbeat") : nullptr;
+  ASSERT_NE(u, nullptr) << mine.body;
   EXPECT_EQ(u->get("session_id")->as_string(), b_session);
   auto id = from_hex(u->get("key_id")->as_string());
   auto key = base64_decode(u->get("key_b64")->as_string());
@@ -293,6 +312,11 @@ TEST(UdpHeartbeat, ASessionPromotedFromTheQueueGetsItsKeyOnItsStream) {
   udp::Key k{};
   std::memcpy(kid.data(), id->data(), 16);
   std::memcpy(k.data(), key->data(), 32);
+  // A plain renewal keeps the key (and says nothing of it).
+  HttpReply plain = n.post("/rcan/v1/auth/renew",
+                           json::dump(json::Value(json::Object{{"session_id", b_session}})), b);
+  ASSERT_EQ(plain.status, 200) << plain.body;
+  EXPECT_EQ(plain.body.find("key_b64"), std::string::npos) << plain.body;
   // The key works: B's heartbeats are accepted; A's old key no longer is (A released).
   double before = n.metric("rcan_udp_heartbeats_accepted_total");
   UdpSocket s;

@@ -200,9 +200,10 @@ void Node::announce_control_changes() {
                                ? json::Value((s.expires_mono_ms - svc_.clock.mono_ms()) / 1000)
                                : json::Value());
       ev.set("heartbeat_timeout_ms", svc_.settings.heartbeat_timeout_ms);
-      // What a direct grant carries (e.g. the UDP heartbeat key) reaches a promoted holder on
-      // its own streams only.
-      if (svc_.on_grant) svc_.on_grant(s.id, ev);
+      // Secrets never travel in events: what a direct grant carries (the UDP heartbeat key) the
+      // promoted holder fetches itself, authenticated, by renewing its session with
+      // {"session_id", "udp_heartbeat": true} (renew_route).
+      if (svc_.on_grant) ev.set("udp_heartbeat_on_renew", true);
       publish_to(s.principal_key, std::move(ev));
     } else if (c.event == ControlEvent::kQueueDrop) {
       e.entry().event = "CLAIM_DROPPED";
@@ -401,6 +402,13 @@ void Node::renew_route(transport::HttpRequest& req, Respond& respond, const json
   payload.set("expires_in", r->expires_mono_ms
                                 ? json::Value((r->expires_mono_ms - svc_.clock.mono_ms()) / 1000)
                                 : json::Value());
+  // The holder asks for its session's UDP heartbeat key (a fresh one; the previous key stops
+  // working): how a holder promoted from the queue gets it, since events carry no secrets.
+  const json::Value* want = body.is_object() ? body.get("udp_heartbeat") : nullptr;
+  if (want && want->is_bool() && want->as_bool() && svc_.on_grant) {
+    svc_.on_grant(r->id, payload);
+    e.detail("udp_heartbeat", "issued");
+  }
   e.write([this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
     answer_json(respond, route, 200, svc_.envelope(MessageType::kGranted, payload));
   });
