@@ -27,8 +27,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       break;
     }
     case rcan::udp::Kind::kDiscover: {
-      auto again = rcan::udp::encode_discover(p.d.nonce);
-      if (size != again.size() || std::memcmp(again.data(), data, size) != 0) std::abort();
+      std::string again = rcan::udp::encode_discover_padded(p.d.nonce, size);
+      if (size != again.size() || p.d.size != size || std::memcmp(again.data(), data, size) != 0)
+        std::abort();
       break;
     }
     case rcan::udp::Kind::kAnnounce: {

@@ -5,11 +5,13 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <iostream>
 #include <thread>
+#include <vector>
 
 #include "cli.h"
 #include "rcan/encoding.h"
@@ -25,7 +27,10 @@ constexpr const char* kDiscoverHelp =
     "  Sends one DISCOVER datagram to ADDR:N (default 255.255.255.255:8082, broadcast on the\n"
     "  local segment; a unicast address asks one node) and prints each ANNOUNCE received within\n"
     "  the timeout (default 1000 ms) as one JSON line {\"from\":\"ip:port\",\"announce\":{…}}.\n"
-    "  Exits 0 when at least one node answered, 1 when none did.\n";
+    "  The DISCOVER is padded to 1200 bytes: a node never answers with more bytes than it was\n"
+    "  sent, and one whose ANNOUNCE is longer says how long a DISCOVER must be; it is then asked\n"
+    "  again, alone, with one that long. Exits 0 when at least one node answered, 1 when none\n"
+    "  did.\n";
 
 constexpr const char* kHeartbeatHelp =
     "usage: rcan udp-heartbeat --port N --key-id HEX --key-b64 KEY [--host ADDR] [--count N]\n"
@@ -48,6 +53,22 @@ bool to_addr(const std::string& host, uint16_t port, sockaddr_in& a) {
   a.sin_family = AF_INET;
   a.sin_port = htons(port);
   return inet_pton(AF_INET, host.c_str(), &a.sin_addr) == 1;
+}
+
+// An ANNOUNCE that only says how long a DISCOVER must be (`payload.discover_size`): asks that
+// node again, unicast, with a DISCOVER that long. True when `body` was such an answer.
+bool ask_again(int fd, const udp::Nonce& nonce, const sockaddr_in& from, const json::Value& body,
+               std::vector<std::string>& asked) {
+  const json::Value* p = body.get("payload");
+  const json::Value* need = p ? p->get("discover_size") : nullptr;
+  if (!need || !need->is_int() || p->get("ruri")) return false;
+  std::string who = std::to_string(from.sin_addr.s_addr) + ":" + std::to_string(from.sin_port);
+  if (std::find(asked.begin(), asked.end(), who) != asked.end() || asked.size() >= 256) return true;
+  asked.push_back(who);
+  std::string d = udp::encode_discover_padded(
+      nonce, static_cast<size_t>(std::clamp<int64_t>(need->as_int(), 0, udp::kMaxAnnounceSize)));
+  (void)::sendto(fd, d.data(), d.size(), 0, reinterpret_cast<const sockaddr*>(&from), sizeof from);
+  return true;
 }
 
 int discover_main(const Args& args) {
@@ -73,7 +94,7 @@ int discover_main(const Args& args) {
   ::setsockopt(fd, SOL_SOCKET, SO_BROADCAST, &on, sizeof on);
   udp::Nonce nonce{};
   random_bytes(nonce.data(), nonce.size());
-  auto d = udp::encode_discover(nonce);
+  std::string d = udp::encode_discover_padded(nonce);
   if (::sendto(fd, d.data(), d.size(), 0, reinterpret_cast<sockaddr*>(&to), sizeof to) < 0) {
     ::close(fd);
     std::fprintf(stderr, "rcan udp-discover: cannot send to %s:%u: %s\n", host.c_str(), port,
@@ -81,6 +102,7 @@ int discover_main(const Args& args) {
     return 1;
   }
   int found = 0;
+  std::vector<std::string> asked_again;  // each node is asked a second time at most once
   auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
   while (true) {
     auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
@@ -99,6 +121,7 @@ int discover_main(const Args& args) {
       continue;  // not our answer
     auto body = json::parse(pr.d.body, {.max_depth = 16, .max_bytes = udp::kMaxAnnounceSize});
     if (!body.ok()) continue;
+    if (ask_again(fd, nonce, from, *body, asked_again)) continue;
     char ip[INET_ADDRSTRLEN] = {0};
     inet_ntop(AF_INET, &from.sin_addr, ip, sizeof ip);
     json::Object line{{"from", std::string(ip) + ":" + std::to_string(ntohs(from.sin_port))},

@@ -71,7 +71,8 @@ node::NodeSettings node_settings(const config::NodeConfig& cfg, const keys::Robo
   ns.replay.window_ms = int64_t{cfg.security.replay_window_s} * 1000;
   ns.replay.capacity = cfg.security.msg_id_cache_size;
   ns.injection_patterns.clear();
-  for (const auto& p : cfg.security.injection_patterns) ns.injection_patterns.push_back(p.text);
+  for (const auto& p : cfg.security.injection_patterns)
+    ns.injection_patterns.push_back(node::InjectionRule{p.text, p.regex});
   ns.heartbeat_timeout_ms = cfg.safety.heartbeat_timeout_ms;
   ns.default_ttl_ms = cfg.safety.command_ttl_default_ms;
   ns.codec.max_body_bytes = cfg.server.limits.max_body_bytes;

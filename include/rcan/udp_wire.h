@@ -13,8 +13,12 @@
 //   8..23   key id (16 bytes, issued with the key)
 //   24..31  sequence number, unsigned 64-bit big-endian, strictly increasing per key
 //   32..63  HMAC-SHA256(session key, bytes 0..31)
-// DISCOVER, exactly 16 bytes:
+// DISCOVER, 16 to 8192 bytes:
 //   8..15   nonce chosen by the sender (echoed in the ANNOUNCE)
+//   16..    zero padding (anything else is malformed). The node's answer is never longer than
+//           the DISCOVER (no amplification): senders pad to kDiscoverPaddedSize, and a DISCOVER
+//           too short for the full ANNOUNCE gets, when that fits, a short one that says how long
+//           a DISCOVER must be ({"type":"ANNOUNCE","payload":{"discover_size":N}}).
 // ANNOUNCE, 16 bytes + body:
 //   8..15   the DISCOVER's nonce
 //   16..    UTF-8 JSON: the ANNOUNCE message (same as POST /rcan/v1/discover answers)
@@ -35,7 +39,9 @@ inline constexpr size_t kKeyIdSize = 16;
 inline constexpr size_t kKeySize = 32;
 inline constexpr size_t kMacSize = 32;
 inline constexpr size_t kHeartbeatSize = 64;
-inline constexpr size_t kDiscoverSize = 16;
+inline constexpr size_t kDiscoverSize = 16;  // the shortest DISCOVER (no padding)
+// What senders pad a DISCOVER to: room for a node's ANNOUNCE, within one IPv6 minimum-MTU packet.
+inline constexpr size_t kDiscoverPaddedSize = 1200;
 inline constexpr size_t kMaxAnnounceSize = 8192;
 inline constexpr uint8_t kVersion = 1;
 
@@ -52,8 +58,9 @@ enum class ParseError {
   kBadVersion,
   kBadKind,
   kBadFlags,
-  kBadLength,  // wrong size for its kind
-  kBadBody,    // ANNOUNCE body not a JSON object
+  kBadLength,   // wrong size for its kind
+  kBadBody,     // ANNOUNCE body not a JSON object
+  kBadPadding,  // DISCOVER padding not all zero
 };
 std::string_view parse_error_name(ParseError e);
 
@@ -66,6 +73,7 @@ struct Datagram {
   // DISCOVER / ANNOUNCE
   Nonce nonce{};
   std::string body;  // ANNOUNCE JSON text
+  size_t size = 0;   // the datagram's length (a DISCOVER's answer may be no longer)
 };
 
 struct Parsed {
@@ -83,7 +91,10 @@ bool verify_heartbeat(std::span<const uint8_t> bytes, const Key& key);
 
 std::array<uint8_t, kHeartbeatSize> encode_heartbeat(const KeyId& key_id, uint64_t seq,
                                                      const Key& key);
+// The shortest DISCOVER (16 bytes): a node answers it with nothing, having nothing that short.
 std::array<uint8_t, kDiscoverSize> encode_discover(const Nonce& nonce);
+// A DISCOVER zero-padded to `size` bytes (clamped to 16..8192).
+std::string encode_discover_padded(const Nonce& nonce, size_t size = kDiscoverPaddedSize);
 std::string encode_announce(const Nonce& nonce, std::string_view json_body);
 
 }  // namespace rcan::udp

@@ -1,6 +1,7 @@
 // UDP datagram encoding and parsing (udp_wire.h).
 #include "rcan/udp_wire.h"
 
+#include <algorithm>
 #include <cstring>
 
 #include "rcan/hash.h"
@@ -40,12 +41,15 @@ std::string_view parse_error_name(ParseError e) {
       return "bad_length";
     case ParseError::kBadBody:
       return "bad_body";
+    case ParseError::kBadPadding:
+      return "bad_padding";
   }
   return "unknown";
 }
 
 Parsed parse(std::span<const uint8_t> b) {
   Parsed p;
+  p.d.size = b.size();
   if (b.size() < kHeaderSize) {
     p.error = ParseError::kTooShort;
     return p;
@@ -77,10 +81,15 @@ Parsed parse(std::span<const uint8_t> b) {
       return p;
     }
     case static_cast<uint8_t>(Kind::kDiscover): {
-      if (b.size() != kDiscoverSize) {
+      if (b.size() < kDiscoverSize || b.size() > kMaxAnnounceSize) {
         p.error = ParseError::kBadLength;
         return p;
       }
+      for (size_t i = kDiscoverSize; i < b.size(); ++i)
+        if (b[i] != 0) {
+          p.error = ParseError::kBadPadding;
+          return p;
+        }
       p.d.kind = Kind::kDiscover;
       std::memcpy(p.d.nonce.data(), b.data() + 8, 8);
       return p;
@@ -127,6 +136,13 @@ std::array<uint8_t, kDiscoverSize> encode_discover(const Nonce& nonce) {
   std::array<uint8_t, kDiscoverSize> out{};
   put_header(out.data(), Kind::kDiscover);
   std::memcpy(out.data() + 8, nonce.data(), 8);
+  return out;
+}
+
+std::string encode_discover_padded(const Nonce& nonce, size_t size) {
+  auto head = encode_discover(nonce);
+  std::string out(std::clamp(size, kDiscoverSize, kMaxAnnounceSize), '\0');
+  std::memcpy(out.data(), head.data(), head.size());
   return out;
 }
 

@@ -72,8 +72,26 @@ bool FaultInjectionEnv::is_failing_now() {
   return just_tripped_;
 }
 
-Status FaultInjectionEnv::before_mutation(const std::string& what) {
+void FaultInjectionEnv::hold(bool on) {
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    hold_ = on;
+  }
+  if (!on) release_.notify_all();
+}
+
+size_t FaultInjectionEnv::held() const {
   std::lock_guard<std::mutex> l(mu_);
+  return held_;
+}
+
+Status FaultInjectionEnv::before_mutation(const std::string& what) {
+  std::unique_lock<std::mutex> l(mu_);
+  if (hold_) {
+    ++held_;
+    release_.wait(l, [this] { return !hold_; });
+    --held_;
+  }
   ++ops_;
   just_tripped_ = false;
   if (failed_) {

@@ -9,6 +9,8 @@
 //     be torn: half of its bytes reach the file before it fails (set_torn_appends).
 //     Env::write_file_atomic is three of them (the temporary file's synced write, the
 //     rename, the directory sync), so each of its steps can be the one that fails.
+//   * hold(true): every mutating operation waits until hold(false) — a disk that is slow or
+//     hung — before it goes on (or fails as above); held() counts the ones waiting.
 //   * drop_unsynced(): after the owner of the Env is gone, cuts every tracked file back
 //     to its durable length (keeping `keep_fraction` of the unsynced tail to model a
 //     torn page), and deletes files created since the last sync_dir of their directory.
@@ -16,6 +18,7 @@
 #pragma once
 
 #include <atomic>
+#include <condition_variable>
 #include <map>
 #include <mutex>
 #include <set>
@@ -31,6 +34,8 @@ class FaultInjectionEnv : public Env {
   // Operation `n` (1-based, counting from this call) and all later mutations fail.
   // n == 0 disables injection.
   void fail_after(uint64_t n);
+  void hold(bool on);
+  size_t held() const;
   void set_torn_appends(bool torn) { torn_appends_ = torn; }
   bool failed() const;
   // Shifts now_ms() by `ms` (tests of age-based retention).
@@ -78,6 +83,9 @@ class FaultInjectionEnv : public Env {
   mutable std::mutex mu_;
   uint64_t ops_ = 0;
   uint64_t fail_at_ = 0;  // absolute op number; 0 = never
+  bool hold_ = false;
+  size_t held_ = 0;
+  std::condition_variable release_;
   bool failed_ = false;
   bool just_tripped_ = false;
   bool torn_appends_ = false;

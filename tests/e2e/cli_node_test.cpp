@@ -243,6 +243,13 @@ TEST_F(CliNodeTest, AuditExportVerifyAndTail) {
   auto denied = cli({"audit", "export"}, "", user);
   EXPECT_EQ(denied.exit_code, 1);
   EXPECT_NE(denied.err.find("INSUFFICIENT_PRIVILEGES"), std::string::npos);
+  // The listing is the OWNER's too, and every read is recorded.
+  auto denied_tail = cli({"audit", "tail"}, "", user);
+  EXPECT_EQ(denied_tail.exit_code, 1);
+  EXPECT_NE(denied_tail.err.find("INSUFFICIENT_PRIVILEGES"), std::string::npos) << denied_tail.err;
+  auto reads = cli({"audit", "tail", "-n", "20"});
+  ASSERT_EQ(reads.exit_code, 0) << reads.err;
+  EXPECT_NE(reads.out.find("AUDIT_READ"), std::string::npos) << reads.out;
 }
 
 TEST(CliFakeNode, WatermarkVerifyAndThePendingExitCode) {

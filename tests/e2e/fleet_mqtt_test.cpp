@@ -770,8 +770,7 @@ TEST_F(FleetTest, RobotsNeverPublishTheCommandersToken) {
 }
 
 // The robot's events topic is read by whoever the broker lets subscribe: it carries the events
-// for everyone (ESTOP) and never one principal's (a queued claim's PROMOTED, with the UDP
-// heartbeat key that would let a reader keep the deadman fed).
+// for everyone (ESTOP) and never one principal's (a queued claim's PROMOTED).
 TEST_F(FleetTest, EventsTopicCarriesNoOnePrincipalsEvents) {
   Robot& r = add_robot("robot-a", "0000000a");
   Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/robot-a/events"});

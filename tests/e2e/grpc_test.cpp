@@ -321,7 +321,7 @@ TEST_F(GrpcTest, StreamCarriesCommandsAnswersAndSafetyEvents) {
   EXPECT_TRUE(fin.ok()) << fin.error_message();
 }
 
-// An event for one principal (a queued claim's PROMOTED, which carries its UDP heartbeat key)
+// An event for one principal (a queued claim's PROMOTED; it carries no key, but says who holds)
 // reaches that principal's gRPC stream and no one else's: a GUEST on another stream sees the
 // events for everyone (the ESTOP after it) but never the promotion.
 TEST_F(GrpcTest, EventsForOnePrincipalReachOnlyThatPrincipalsStream) {
@@ -362,7 +362,7 @@ TEST_F(GrpcTest, EventsForOnePrincipalReachOnlyThatPrincipalsStream) {
       5000);
   ASSERT_TRUE(estop.has_value()) << "the GUEST stream got no ESTOP event";
   EXPECT_FALSE(gs.wait_for(is_promoted, 0).has_value())
-      << "another principal's PROMOTED event (with its heartbeat key) reached a GUEST stream";
+      << "another principal's PROMOTED event reached a GUEST stream";
   auto resume = n().post(
       "/rcan/v1/command",
       json::dump(json::Value(json::Object{{"version", "1.0.0"},

@@ -180,6 +180,78 @@ TEST_F(OwnershipE2E, TransferAcceptedClearsPersonalDataKeepsTheChainAndCapsTheFo
   EXPECT_EQ(verify.exit_code, 0) << verify.out << verify.err;
 }
 
+// Two trusted issuers may both know a subject "bob": they are two principals. A transfer, a
+// handoff and a lease name issuer and subject (the requester's issuer unless the request says
+// another), and only that principal accepts, claims or acts as the owner.
+TEST_F(OwnershipE2E, TwoIssuersWithTheSameSubjectAreTwoPrincipals) {
+  start("      - issuer: partner.example\n        key_file: " + dir_.path() +
+        "/n/issuer.pub.pem\n");
+  auto partner = [&](const std::string& role, const std::string& sub,
+                     std::vector<std::string> scopes = {"control"}) {
+    return n().token(role, sub, std::move(scopes), 3600, json::Object{{"iss", "partner.example"}});
+  };
+  auto transfer = [&](const std::string& token, json::Object body) {
+    return n().post("/rcan/v1/transfer", json::dump(json::Value(std::move(body))), token);
+  };
+  // Ownership: alice (ops.example) transfers to bob — bob of ops.example.
+  HttpReply req = transfer(owner_, {{"action", "request"}, {"new_owner", "bob"}});
+  ASSERT_EQ(req.status, 200) << req.body;
+  json::Value rv = parse_json(req.body);
+  std::string tid = rv.get("transfer_id")->as_string();
+  ASSERT_NE(rv.get("pending"), nullptr) << req.body;
+  EXPECT_EQ(json::string_field(*rv.get("pending"), "to_iss"), "ops.example") << req.body;
+  const std::string partner_bob = partner("owner", "bob", {"control", "config", "status"});
+  HttpReply stolen =
+      transfer(partner_bob, {{"action", "accept"}, {"transfer_id", tid}, {"agreement", "x"}});
+  EXPECT_EQ(stolen.status, 403) << stolen.body;
+  EXPECT_EQ(test::error_code_of(stolen), "INSUFFICIENT_PRIVILEGES");
+  const std::string bob = n().token("owner", "bob", {"control", "config", "status"});
+  HttpReply acc = transfer(bob, {{"action", "accept"}, {"transfer_id", tid}, {"agreement", "y"}});
+  ASSERT_EQ(acc.status, 200) << acc.body;
+  json::Value av = parse_json(acc.body);
+  EXPECT_EQ(json::string_field(av, "owner"), "bob");
+  EXPECT_EQ(json::string_field(av, "owner_iss"), "ops.example") << acc.body;
+  // The other issuer's bob is not the owner: it may not give the robot away.
+  HttpReply not_owner = transfer(partner_bob, {{"action", "request"}, {"new_owner", "mallory"}});
+  EXPECT_EQ(not_owner.status, 403) << not_owner.body;
+  // A transfer may name a principal of another issuer explicitly.
+  HttpReply named = transfer(
+      bob, {{"action", "request"}, {"new_owner", "bob"}, {"new_owner_iss", "partner.example"}});
+  ASSERT_EQ(named.status, 200) << named.body;
+  json::Value nv = parse_json(named.body);
+  ASSERT_NE(nv.get("pending"), nullptr) << named.body;
+  EXPECT_EQ(json::string_field(*nv.get("pending"), "to_iss"), "partner.example") << named.body;
+  ASSERT_EQ(transfer(bob, {{"action", "cancel"}}).status, 200);
+
+  // Handoff to carol (ops.example): the other issuer's carol may not take the reserved control.
+  const std::string dan = n().token("user", "dan");
+  HttpReply claim = n().post("/rcan/v1/auth/claim", "{}", dan);
+  ASSERT_EQ(claim.status, 200) << claim.body;
+  std::string sid = parse_json(claim.body).get("payload")->get("session_id")->as_string();
+  HttpReply handoff = n().post(
+      "/rcan/v1/handoff",
+      json::dump(json::Value(json::Object{{"session_id", sid}, {"target_user_id", "carol"}})), dan);
+  ASSERT_EQ(handoff.status, 200) << handoff.body;
+  HttpReply wrong_carol = n().post("/rcan/v1/auth/claim", "{}", partner("user", "carol"));
+  EXPECT_EQ(wrong_carol.status, 409) << wrong_carol.body;
+  const std::string carol = n().token("user", "carol");
+  HttpReply carol_claim = n().post("/rcan/v1/auth/claim", "{}", carol);
+  ASSERT_EQ(carol_claim.status, 200) << carol_claim.body;
+  ASSERT_EQ(n().call("DELETE", "/rcan/v1/auth/release", "{}", carol).status, 200);
+
+  // A lease to lee (ops.example): the other issuer's lee is an outsider to it.
+  HttpReply lease =
+      n().post("/rcan/v1/leases",
+               json::dump(json::Value(json::Object{{"leasee", "lee"}, {"duration_s", 3600}})), bob);
+  ASSERT_EQ(lease.status, 201) << lease.body;
+  EXPECT_EQ(json::string_field(parse_json(lease.body), "leasee_iss"), "ops.example") << lease.body;
+  HttpReply wrong_lee = n().post("/rcan/v1/auth/claim", "{}", partner("leasee", "lee"));
+  EXPECT_EQ(wrong_lee.status, 409) << wrong_lee.body;
+  EXPECT_NE(wrong_lee.body.find("leased"), std::string::npos) << wrong_lee.body;
+  HttpReply lee = n().post("/rcan/v1/auth/claim", "{}", n().token("leasee", "lee"));
+  EXPECT_EQ(lee.status, 200) << lee.body;
+}
+
 TEST_F(OwnershipE2E, TransferCancelAndATransferAcceptedAfterExpiryChangesNothing) {
   start("control:\n  transfer_window_s: 1\n");
   std::string bob = n().token("user", "bob");

@@ -27,6 +27,7 @@ namespace {
 using node::ClaimOutcome;
 using node::ControlState;
 using node::Principal;
+using node::PrincipalId;
 using node::SessionTable;
 using test::ConfiguredNode;
 using test::HttpReply;
@@ -41,6 +42,9 @@ Principal who(const std::string& sub, Role role) {
   p.scopes = {"control", "config"};
   return p;
 }
+
+// A principal named in a request: issuer and subject.
+PrincipalId named(const std::string& sub) { return PrincipalId{"ops.example", sub}; }
 
 constexpr int64_t kWall = 1'750'000'000'000;
 
@@ -144,7 +148,8 @@ TEST(SessionMachine, ExpiryNeedsAnExplicitRenewal) {
 TEST(SessionMachine, HandoffReservesTheWindowUntilItCloses) {
   SessionTable t;
   auto s = t.claim(who("a", Role::kUser), std::nullopt, 0, kWall);
-  ASSERT_TRUE(t.handoff(s->session.id, who("a", Role::kUser), "b", Role::kUser, 30000, 10).ok());
+  ASSERT_TRUE(
+      t.handoff(s->session.id, who("a", Role::kUser), named("b"), Role::kUser, 30000, 10).ok());
   EXPECT_EQ(t.state(10), ControlState::kReserved);
   EXPECT_FALSE(t.claim(who("c", Role::kCreator), std::nullopt, 20, kWall).ok());
   t.tick(30010, kWall);
@@ -156,7 +161,8 @@ TEST(SessionMachine, HandoffReservesTheWindowUntilItCloses) {
   // The named target claims inside the window, capped at the handoff's role.
   SessionTable t2;
   auto s2 = t2.claim(who("a", Role::kUser), std::nullopt, 0, kWall);
-  ASSERT_TRUE(t2.handoff(s2->session.id, who("a", Role::kUser), "b", Role::kUser, 30000, 0).ok());
+  ASSERT_TRUE(
+      t2.handoff(s2->session.id, who("a", Role::kUser), named("b"), Role::kUser, 30000, 0).ok());
   auto b = t2.claim(who("b", Role::kOwner), std::nullopt, 100, kWall);
   ASSERT_TRUE(b.ok());
   EXPECT_EQ(b->session.role, Role::kUser);
@@ -189,13 +195,13 @@ TEST(SessionMachine, LeaseBoundsSessionsAndItsEndRevokesEverythingDerived) {
   SessionTable t;
   Principal owner = who("owner", Role::kOwner), leasee = who("lee", Role::kLeasee),
             user = who("u", Role::kUser), outsider = who("out", Role::kUser);
-  EXPECT_FALSE(t.grant_lease(user, "lee", 10000, kWall).ok());
-  auto l = t.grant_lease(owner, "lee", 10000, kWall);
+  EXPECT_FALSE(t.grant_lease(user, named("lee"), 10000, kWall).ok());
+  auto l = t.grant_lease(owner, named("lee"), 10000, kWall);
   ASSERT_TRUE(l.ok());
-  EXPECT_FALSE(t.grant_lease(owner, "other", 10000, kWall).ok());  // one at a time
-  EXPECT_FALSE(t.grant_within_lease(outsider, l->id, "u", Role::kUser, 5000, kWall).ok());
-  EXPECT_FALSE(t.grant_within_lease(leasee, l->id, "u", Role::kOwner, 5000, kWall).ok());
-  ASSERT_TRUE(t.grant_within_lease(leasee, l->id, "u", Role::kUser, 5000, kWall).ok());
+  EXPECT_FALSE(t.grant_lease(owner, named("other"), 10000, kWall).ok());  // one at a time
+  EXPECT_FALSE(t.grant_within_lease(outsider, l->id, named("u"), Role::kUser, 5000, kWall).ok());
+  EXPECT_FALSE(t.grant_within_lease(leasee, l->id, named("u"), Role::kOwner, 5000, kWall).ok());
+  ASSERT_TRUE(t.grant_within_lease(leasee, l->id, named("u"), Role::kUser, 5000, kWall).ok());
   auto denied = t.claim(outsider, std::nullopt, 0, kWall);
   ASSERT_FALSE(denied.ok());
   EXPECT_EQ(denied.error().field, "lease");
@@ -232,23 +238,23 @@ TEST(OwnershipMachine, RequestAcceptCancelExpireAndFormerOwnersAreCapped) {
   o.set_window_ms(1000);
   Principal owner = who("alice", Role::kOwner), bob = who("bob", Role::kUser),
             eve = who("eve", Role::kOwner);
-  EXPECT_FALSE(o.request(bob, "bob", "", kWall).ok());
-  auto r = o.request(owner, "bob", "sale", kWall);
+  EXPECT_FALSE(o.request(bob, named("bob"), "", kWall).ok());
+  auto r = o.request(owner, named("bob"), "sale", kWall);
   ASSERT_TRUE(r.ok());
   EXPECT_EQ(o.state(kWall), node::OwnershipState::kTransferPending);
-  EXPECT_EQ(o.request(owner, "carol", "", kWall).error().code, ErrorCode::kControlConflict);
+  EXPECT_EQ(o.request(owner, named("carol"), "", kWall).error().code, ErrorCode::kControlConflict);
   EXPECT_EQ(o.accept(eve, r->id, "x", kWall).error().code, ErrorCode::kInsufficientPrivileges);
   EXPECT_EQ(o.accept(bob, r->id, "", kWall).error().code, ErrorCode::kSchemaValidationFailed);
   ASSERT_TRUE(o.cancel(owner, kWall).ok());
   EXPECT_EQ(o.state(kWall), node::OwnershipState::kOwned);
   // Expiry path: accepting after the window fails; expire() records it once.
-  auto r2 = o.request(owner, "bob", "", kWall);
+  auto r2 = o.request(owner, named("bob"), "", kWall);
   ASSERT_TRUE(r2.ok());
   EXPECT_EQ(o.accept(bob, r2->id, "paid", kWall + 1000).error().code, ErrorCode::kSessionExpired);
   EXPECT_TRUE(o.expire(kWall + 1000).has_value());
   EXPECT_FALSE(o.expire(kWall + 1000).has_value());
   // Accept path.
-  auto r3 = o.request(owner, "bob", "", kWall + 2000);
+  auto r3 = o.request(owner, named("bob"), "", kWall + 2000);
   ASSERT_TRUE(r3.ok());
   o.note_user("someone");
   int cleared = 0;
@@ -256,15 +262,15 @@ TEST(OwnershipMachine, RequestAcceptCancelExpireAndFormerOwnersAreCapped) {
   ASSERT_TRUE(o.accept(bob, r3->id, "invoice-7", kWall + 2001).ok());
   o.run_clear_hooks();
   EXPECT_EQ(cleared, 1);
-  EXPECT_EQ(o.owner(), "bob");
+  EXPECT_EQ(o.owner(), named("bob"));
   Principal old = owner;
   o.cap(old);
   EXPECT_EQ(old.role, Role::kGuest);
-  EXPECT_FALSE(
-      o.request(eve, "eve", "", kWall + 3000).ok());  // another OWNER token is not the owner now
+  EXPECT_FALSE(o.request(eve, named("eve"), "", kWall + 3000)
+                   .ok());  // another OWNER token is not the owner now
   node::Ownership copy;
   copy.load_json(o.persist_json());
-  EXPECT_EQ(copy.owner(), "bob");
+  EXPECT_EQ(copy.owner(), named("bob"));
   Principal old2 = owner;
   copy.cap(old2);
   EXPECT_EQ(old2.role, Role::kGuest);

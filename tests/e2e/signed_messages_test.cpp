@@ -70,7 +70,9 @@ class SignedMessages : public ::testing::Test {
   json::Value record_of(const std::string& msg_id) {
     json::Value found;
     ConfiguredNode::eventually([&] {
-      HttpReply r = node_->get("/api/audit?limit=1000", token_);
+      // The audit log is the OWNER's to read.
+      HttpReply r =
+          node_->get("/api/audit?limit=1000", node_->token("owner", "auditor", {"status"}));
       json::Value v = parse_json(r.body);
       if (const json::Value* es = v.get("entries"); es && es->is_array())
         for (const auto& e : es->as_array())

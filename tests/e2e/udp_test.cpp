@@ -89,6 +89,22 @@ TEST(UdpWire, MalformedDatagramsAreNamed) {
   ASSERT_TRUE(pd.ok());
   EXPECT_EQ(pd.d.kind, udp::Kind::kDiscover);
   EXPECT_EQ(pd.d.nonce, n);
+  EXPECT_EQ(pd.d.size, 16u);
+  // A DISCOVER may be zero-padded up to 8192 bytes (its answer may be as long).
+  std::string padded = udp::encode_discover_padded(n);
+  ASSERT_EQ(padded.size(), udp::kDiscoverPaddedSize);
+  std::vector<uint8_t> pb(padded.begin(), padded.end());
+  udp::Parsed pp = udp::parse(pb);
+  ASSERT_TRUE(pp.ok()) << udp::parse_error_name(pp.error);
+  EXPECT_EQ(pp.d.nonce, n);
+  EXPECT_EQ(pp.d.size, udp::kDiscoverPaddedSize);
+  pb[600] = 1;
+  EXPECT_EQ(parse_err(pb), udp::ParseError::kBadPadding);
+  std::string huge = udp::encode_discover_padded(n, 8192);
+  std::vector<uint8_t> hb2(huge.begin(), huge.end());
+  EXPECT_TRUE(udp::parse(hb2).ok());
+  hb2.push_back(0);
+  EXPECT_EQ(parse_err(hb2), udp::ParseError::kBadLength);
   std::string a = udp::encode_announce(n, R"({"type":"ANNOUNCE"})");
   udp::Parsed pa = udp::parse({reinterpret_cast<const uint8_t*>(a.data()), a.size()});
   ASSERT_TRUE(pa.ok());
@@ -236,11 +252,15 @@ TEST(UdpHeartbeat, HeartbeatsKeepTheSessionAliveAndTheirLossSafeStopsTheRobot) {
   EXPECT_EQ(n.metric("rcan_audit_failures_total"), 0);
 }
 
-TEST(UdpHeartbeat, ASessionPromotedFromTheQueueGetsItsKeyOnItsStream) {
+// Secrets never travel in events: a claim promoted from the queue is told on its own stream
+// (PROMOTED, no key), and its holder fetches its heartbeat key by an authenticated request —
+// renewing its session with udp_heartbeat: true. Nobody else can.
+TEST(UdpHeartbeat, ASessionPromotedFromTheQueueFetchesItsKeyNotFromAnEvent) {
   ConfiguredNode n({}, /*heartbeat_timeout_ms=*/2000);
   ASSERT_NE(n.udp_port(), 0) << n.proc().err();
   std::string a = n.token("user", {"control", "status"}, "udp-user-a");
   std::string b = n.token("user", {"control", "status"}, "udp-user-b");
+  std::string c = n.token("user", {"control", "status"}, "udp-user-c");
   Grant ga = claim(n, a);
   ASSERT_FALSE(ga.session_id.empty());
   // B listens on its stream, then queues behind A.
@@ -253,21 +273,36 @@ TEST(UdpHeartbeat, ASessionPromotedFromTheQueueGetsItsKeyOnItsStream) {
   HttpReply q = n.post("/rcan/v1/auth/claim", "{}", b);
   ASSERT_EQ(q.status, 409) << q.body;
   ASSERT_NE(q.body.find("\"queued\":true"), std::string::npos) << q.body;
-  // A releases: B is promoted and its GRANTED event carries B's own heartbeat key.
+  // A releases: B is promoted; its GRANTED event carries no key.
   HttpReply rel = n.post("/rcan/v1/auth/release", "{}", a);
   ASSERT_EQ(rel.status, 200) << rel.body;
   std::optional<json::Value> promoted;
   for (int i = 0; i < 50 && !promoted; ++i) {
     auto f = ws.recv_text(200);
     if (!f) continue;
+    EXPECT_EQ(f->find("key_b64"), std::string::npos) << *f;
     json::Value v = parse_json(*f);
     if (v.get("event") && v.get("event")->as_string() == "PROMOTED") promoted = v;
   }
   ASSERT_TRUE(promoted) << "no PROMOTED event on B's stream";
-  const json::Value* u = promoted->get("udp_heartbeat");
-  ASSERT_NE(u, nullptr) << json::dump(*promoted);
+  EXPECT_EQ(promoted->get("udp_heartbeat"), nullptr) << json::dump(*promoted);
+  EXPECT_EQ(json::dump(*promoted).find("key_b64"), std::string::npos);
   std::string b_session = promoted->get("session_id")->as_string();
   EXPECT_NE(b_session, ga.session_id);
+  const std::string ask =
+      json::dump(json::Value(json::Object{{"session_id", b_session}, {"udp_heartbeat", true}}));
+  // Another principal — the former holder, or a stranger — cannot fetch B's key.
+  for (const std::string* other : {&a, &c}) {
+    HttpReply r = n.post("/rcan/v1/auth/renew", ask, *other);
+    EXPECT_EQ(r.status, 403) << r.body;
+    EXPECT_EQ(r.body.find("key_b64"), std::string::npos) << r.body;
+  }
+  // B fetches it by renewing its own session.
+  HttpReply mine = n.post("/rcan/v1/auth/renew", ask, b);
+  ASSERT_EQ(mine.status, 200) << mine.body;
+  json::Value mv = parse_json(mine.body);
+  const json::Value* u = mv.get("payload") ? mv.get("payload")->get("udp_heartbeat") : nullptr;
+  ASSERT_NE(u, nullptr) << mine.body;
   EXPECT_EQ(u->get("session_id")->as_string(), b_session);
   auto id = from_hex(u->get("key_id")->as_string());
   auto key = base64_decode(u->get("key_b64")->as_string());
@@ -277,6 +312,11 @@ TEST(UdpHeartbeat, ASessionPromotedFromTheQueueGetsItsKeyOnItsStream) {
   udp::Key k{};
   std::memcpy(kid.data(), id->data(), 16);
   std::memcpy(k.data(), key->data(), 32);
+  // A plain renewal keeps the key (and says nothing of it).
+  HttpReply plain = n.post("/rcan/v1/auth/renew",
+                           json::dump(json::Value(json::Object{{"session_id", b_session}})), b);
+  ASSERT_EQ(plain.status, 200) << plain.body;
+  EXPECT_EQ(plain.body.find("key_b64"), std::string::npos) << plain.body;
   // The key works: B's heartbeats are accepted; A's old key no longer is (A released).
   double before = n.metric("rcan_udp_heartbeats_accepted_total");
   UdpSocket s;
@@ -357,9 +397,11 @@ TEST(UdpDiscovery, DiscoverIsAnsweredWithAnnounceAndRateLimitedPerSource) {
   ASSERT_NE(n.udp_port(), 0) << n.proc().err();
   UdpSocket s;
   udp::Nonce nonce{9, 8, 7, 6, 5, 4, 3, 2};
-  ASSERT_TRUE(s.send(n.udp_port(), udp::encode_discover(nonce)));
+  const std::string discover = udp::encode_discover_padded(nonce);
+  ASSERT_TRUE(s.send(n.udp_port(), discover.data(), discover.size()));
   auto a = s.recv(5000);
   ASSERT_TRUE(a.has_value());
+  EXPECT_LE(a->size(), discover.size());
   udp::Parsed p = udp::parse({reinterpret_cast<const uint8_t*>(a->data()), a->size()});
   ASSERT_TRUE(p.ok()) << udp::parse_error_name(p.error);
   EXPECT_EQ(p.d.kind, udp::Kind::kAnnounce);
@@ -370,13 +412,74 @@ TEST(UdpDiscovery, DiscoverIsAnsweredWithAnnounceAndRateLimitedPerSource) {
   EXPECT_EQ(v.get("payload")->get("port")->as_int(), n.http_port());
   EXPECT_EQ(v.get("payload")->get("udp_port")->as_int(), n.udp_port());
   // A burst from one source: a few answers (burst 5), the rest dropped and counted.
-  for (int i = 0; i < 20; ++i) ASSERT_TRUE(s.send(n.udp_port(), udp::encode_discover(nonce)));
+  for (int i = 0; i < 20; ++i) ASSERT_TRUE(s.send(n.udp_port(), discover.data(), discover.size()));
   int answers = 0;
   while (s.recv(500)) ++answers;
   EXPECT_GE(answers, 1);
   EXPECT_LE(answers, 5);
   EXPECT_GE(n.metric("rcan_udp_discover_limited_total"), 15);
   EXPECT_EQ(n.metric("rcan_udp_discover_answered_total"), 1 + answers);
+}
+
+// No amplification: an unauthenticated DISCOVER never gets more bytes back than it sent. The
+// 16-byte one gets nothing; a short padded one learns how long a DISCOVER must be; one that long
+// gets the whole record.
+TEST(UdpDiscovery, NoAnswerIsLongerThanItsDiscover) {
+  ConfiguredNode n;
+  ASSERT_NE(n.udp_port(), 0) << n.proc().err();
+  UdpSocket s;
+  // The answer to the DISCOVER with this nonce (anything else arriving is skipped).
+  auto answer_to = [&](const udp::Nonce& nonce, int timeout_ms) -> std::optional<std::string> {
+    auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+    while (std::chrono::steady_clock::now() < until) {
+      auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+          until - std::chrono::steady_clock::now());
+      auto a = s.recv(static_cast<int>(std::max<int64_t>(1, left.count())));
+      if (!a) return std::nullopt;
+      udp::Parsed p = udp::parse({reinterpret_cast<const uint8_t*>(a->data()), a->size()});
+      if (p.ok() && p.d.kind == udp::Kind::kAnnounce && p.d.nonce == nonce) return a;
+    }
+    return std::nullopt;
+  };
+  auto metric_at_least = [&](const char* name, double v) {
+    double got = 0;
+    for (int i = 0; i < 100 && got < v; ++i) {
+      got = n.metric(name);
+      if (got < v) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    return got;
+  };
+  const udp::Nonce bare{1, 1, 2, 3, 5, 8, 13, 21}, shortish{2, 1, 2, 3, 5, 8, 13, 21},
+      padded{3, 1, 2, 3, 5, 8, 13, 21};
+  ASSERT_TRUE(s.send(n.udp_port(), udp::encode_discover(bare)));  // 16 bytes
+  auto tiny = answer_to(bare, 1000);
+  EXPECT_FALSE(tiny.has_value()) << "16 bytes asked, " << (tiny ? tiny->size() : 0) << " answered";
+  EXPECT_GE(metric_at_least("rcan_udp_discover_short_total", 1), 1);
+
+  const std::string small = udp::encode_discover_padded(shortish, 100);
+  ASSERT_TRUE(s.send(n.udp_port(), small.data(), small.size()));
+  auto hint = answer_to(shortish, 5000);
+  ASSERT_TRUE(hint.has_value());
+  EXPECT_LE(hint->size(), small.size());
+  udp::Parsed hp = udp::parse({reinterpret_cast<const uint8_t*>(hint->data()), hint->size()});
+  json::Value hv = parse_json(hp.d.body);
+  ASSERT_NE(hv.get("payload"), nullptr) << hp.d.body;
+  EXPECT_EQ(hv.get("payload")->get("ruri"), nullptr) << hp.d.body;
+  const json::Value* need = hv.get("payload")->get("discover_size");
+  ASSERT_NE(need, nullptr) << hp.d.body;
+  ASSERT_GT(need->as_int(), 100);
+  ASSERT_LE(need->as_int(), static_cast<int64_t>(udp::kDiscoverPaddedSize));
+
+  const std::string enough =
+      udp::encode_discover_padded(padded, static_cast<size_t>(need->as_int()));
+  ASSERT_TRUE(s.send(n.udp_port(), enough.data(), enough.size()));
+  auto full = answer_to(padded, 5000);
+  ASSERT_TRUE(full.has_value());
+  EXPECT_LE(full->size(), enough.size());
+  udp::Parsed fp = udp::parse({reinterpret_cast<const uint8_t*>(full->data()), full->size()});
+  json::Value fv = parse_json(fp.d.body);
+  EXPECT_EQ(fv.get("payload")->get("ruri")->as_string(), ConfiguredNode::kRuri);
+  EXPECT_EQ(metric_at_least("rcan_udp_discover_answered_total", 1), 1);
 }
 
 TEST(UdpCli, UdpDiscoverAndUdpHeartbeatVerbsTalkToTheNode) {

@@ -3,13 +3,15 @@
 // audit::Env::write_file_atomic. Here: what it does on the real file system (mode, no
 // temporary left behind, no symbolic link followed), and, through FaultInjectionEnv, that a
 // write failing at any step leaves the previous file whole, and what the safety core does when
-// its latch cannot be persisted.
+// its latch cannot be persisted — and that an ESTOP is acknowledged only once its latch file
+// is durable, or with the answer saying that it is not.
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <fstream>
+#include <future>
 #include <memory>
 #include <string>
 #include <thread>
@@ -19,6 +21,7 @@
 #include "base/state_file.h"
 #include "in_process_node.h"
 #include "node/ai/hitl.h"
+#include "node/safety/actuation_safety.h"
 #include "node/safety/safety.h"
 #include "node/safety/sim_robot.h"
 #include "node/services/node_services.h"
@@ -250,6 +253,197 @@ TEST(SafetyLatchFile, AClearThatCannotBeWrittenComesBackLatched) {
   EXPECT_TRUE(r.core->estop_active());
   EXPECT_EQ(r.core->status().estop_source, "cli");
   EXPECT_EQ(r.core->status().startup_note, "ESTOP was latched before restart; still latched");
+}
+
+// when_persisted() answers without blocking: not while the latch write is held up by the disk,
+// durable as soon as it is done.
+TEST(SafetyLatchFile, WhenPersistedAnswersOnlyOnceTheFileIsDurable) {
+  TempDir dir;
+  FaultInjectionEnv env(Env::posix());
+  SafetyRig r;
+  ASSERT_TRUE(r.core->open(dir.path(), &env).ok());
+  env.hold(true);  // a slow disk
+  auto e = r.core->estop("http", "button");
+  std::promise<std::pair<bool, std::string>> answered;
+  r.core->when_persisted(e.state_seq, [&](bool durable, const std::string& error) {
+    answered.set_value({durable, error});
+  });
+  auto got = answered.get_future();
+  EXPECT_EQ(got.wait_for(std::chrono::milliseconds(300)), std::future_status::timeout);
+  EXPECT_FALSE(present(dir.file("safety_state.json")));
+  env.hold(false);
+  ASSERT_EQ(got.wait_for(std::chrono::seconds(5)), std::future_status::ready);
+  auto [durable, error] = got.get();
+  EXPECT_TRUE(durable) << error;
+  EXPECT_TRUE(present(dir.file("safety_state.json")));
+  // Already durable: answered at once, on the caller's thread.
+  bool again = false;
+  r.core->when_persisted(e.state_seq, [&](bool d, const std::string&) { again = d; });
+  EXPECT_TRUE(again);
+}
+
+// A write that fails is answered at once with its error; one that hangs is answered by the
+// control loop once latch_ack_timeout_ms has passed. The write goes on in both cases.
+TEST(SafetyLatchFile, WhenPersistedSaysSoWhenTheWriteFailsOrHangs) {
+  {
+    TempDir dir;
+    FaultInjectionEnv env(Env::posix());
+    SafetyRig r;
+    ASSERT_TRUE(r.core->open(dir.path(), &env).ok());
+    env.fail_after(1);
+    auto e = r.core->estop("http", "button");
+    std::promise<std::pair<bool, std::string>> answered;
+    r.core->when_persisted(e.state_seq, [&](bool durable, const std::string& error) {
+      answered.set_value({durable, error});
+    });
+    auto got = answered.get_future();
+    ASSERT_EQ(got.wait_for(std::chrono::seconds(5)), std::future_status::ready);
+    auto [durable, error] = got.get();
+    EXPECT_FALSE(durable);
+    EXPECT_NE(error.find("injected fault"), std::string::npos) << error;
+    env.fail_after(0);
+    EXPECT_TRUE(r.core->wait_persisted(e.state_seq, 5000));  // still retried
+  }
+  {
+    TempDir dir;
+    FaultInjectionEnv env(Env::posix());
+    SafetyRig r;
+    ASSERT_TRUE(r.core->open(dir.path(), &env).ok());
+    env.hold(true);
+    auto e = r.core->estop("http", "button");
+    int calls = 0;
+    bool durable = true;
+    std::string error;
+    r.core->when_persisted(e.state_seq, [&](bool d, const std::string& why) {
+      ++calls;
+      durable = d;
+      error = why;
+    });
+    r.core->tick();
+    EXPECT_EQ(calls, 0);
+    r.clock.advance(node::SafetyConfig{}.latch_ack_timeout_ms);
+    r.core->tick();
+    EXPECT_EQ(calls, 1);
+    EXPECT_FALSE(durable);
+    EXPECT_NE(error.find("not written within 2000 ms"), std::string::npos) << error;
+    env.hold(false);
+    EXPECT_TRUE(r.core->wait_persisted(e.state_seq, 5000));
+    EXPECT_EQ(calls, 1);  // answered once
+  }
+  {  // stop() answers whoever still waits (what answers them is stopped before the core)
+    TempDir dir;
+    FaultInjectionEnv env(Env::posix());
+    SafetyRig r;
+    ASSERT_TRUE(r.core->open(dir.path(), &env).ok());
+    env.hold(true);
+    auto e = r.core->estop("http", "button");
+    int calls = 0;
+    std::string error;
+    r.core->when_persisted(e.state_seq, [&](bool d, const std::string& why) {
+      calls += d ? 100 : 1;
+      error = why;
+    });
+    r.core->stop();
+    EXPECT_EQ(calls, 1);
+    EXPECT_NE(error.find("stopped"), std::string::npos) << error;
+    env.hold(false);
+  }
+}
+
+// Without a state directory the latch lives in memory only, and when_persisted() says so.
+TEST(SafetyLatchFile, WhenPersistedWithoutAStateDirectorySaysMemoryOnly) {
+  SafetyRig r;
+  auto e = r.core->estop("http", "button");
+  bool durable = true;
+  std::string error;
+  r.core->when_persisted(e.state_seq, [&](bool d, const std::string& why) {
+    durable = d;
+    error = why;
+  });
+  EXPECT_FALSE(durable);
+  EXPECT_NE(error.find("memory only"), std::string::npos) << error;
+}
+
+// ---- the ESTOP answer waits for the latch file --------------------------------------------------
+
+// The node's pipeline over the real safety core, whose latch file is written through a
+// FaultInjectionEnv.
+class EstopAnswer : public node::test_node::InProcessNode {
+ protected:
+  EstopAnswer() : env_(Env::posix()) {
+    node::SimRobotConfig sim;
+    sim.battery = false;
+    core_ = std::make_unique<node::SafetyCore>(std::make_unique<node::SimRobot>(sim),
+                                               node::SafetyConfig{}, clock_);
+    EXPECT_TRUE(core_->open(state_.path(), &env_).ok());
+    actuation_ = std::make_unique<node::SafetyActuation>(*core_, "estop-answer");
+  }
+  void TearDown() override {
+    env_.hold(false);
+    InProcessNode::TearDown();
+  }
+  node::Actuation& actuation() override { return *actuation_; }
+
+  // Sends an ESTOP (HTTP, any role may) and returns the answer's future.
+  std::future<node::Outcome> estop() {
+    node::Ingress in;
+    in.body = json::Object{{"version", "1.0.0"},
+                           {"message_id", new_uuid_v4()},
+                           {"type", "SAFETY"},
+                           {"priority", "SAFETY"},
+                           {"timestamp_ms", clock_.wall_ms()},
+                           {"payload", json::Object{{"safety_event", "ESTOP"}, {"reason", "t"}}}};
+    in.bearer = token("guest", "gus", {"status"});
+    in.transport = "http";
+    in.route = "/api/stop";
+    auto answer = std::make_shared<std::promise<node::Outcome>>();
+    auto got = answer->get_future();
+    pipeline_->submit(std::move(in),
+                      [answer](node::Outcome o) { answer->set_value(std::move(o)); });
+    return got;
+  }
+
+  std::string latch_file() const { return state_.path() + "/safety_state.json"; }
+
+  TempDir state_;
+  FaultInjectionEnv env_;
+  std::unique_ptr<node::SafetyCore> core_;
+  std::unique_ptr<node::SafetyActuation> actuation_;
+};
+
+TEST_F(EstopAnswer, ComesOnlyOnceTheLatchFileIsDurable) {
+  env_.hold(true);  // the latch write is held up by a slow disk
+  auto got = estop();
+  EXPECT_TRUE(core_->estop_active());  // the robot stopped at once
+  EXPECT_EQ(got.wait_for(std::chrono::milliseconds(500)), std::future_status::timeout)
+      << "the ESTOP was acknowledged before its latch was written";
+  EXPECT_FALSE(present(latch_file()));
+  env_.hold(false);
+  ASSERT_EQ(got.wait_for(std::chrono::seconds(10)), std::future_status::ready);
+  node::Outcome o = got.get();
+  EXPECT_TRUE(present(latch_file()));
+  ASSERT_EQ(o.status, 200) << json::dump(o.body);
+  const json::Value& p = *o.body.get("payload");
+  EXPECT_EQ(json::string_field(p, "result"), "estop_latched");
+  EXPECT_EQ(json::string_field(p, "latch"), "durable") << json::dump(o.body);
+  EXPECT_EQ(p.get("latch_error"), nullptr);
+  auto file = json::parse(test::read_file(latch_file()));
+  ASSERT_TRUE(file.ok());
+  EXPECT_TRUE(file->get("estop_active")->as_bool());
+}
+
+TEST_F(EstopAnswer, SaysSoWhenTheLatchCannotBeWritten) {
+  env_.fail_after(1);
+  auto got = estop();
+  ASSERT_EQ(got.wait_for(std::chrono::seconds(10)), std::future_status::ready);
+  node::Outcome o = got.get();
+  ASSERT_EQ(o.status, 200) << json::dump(o.body);  // the stop happened and holds
+  EXPECT_TRUE(core_->estop_active());
+  const json::Value& p = *o.body.get("payload");
+  EXPECT_EQ(json::string_field(p, "latch"), "not_durable") << json::dump(o.body);
+  EXPECT_NE(json::string_field(p, "latch_error").find("injected fault"), std::string::npos)
+      << json::dump(o.body);
+  EXPECT_EQ(audited("ESTOP", 1).size(), 1u);
 }
 
 // ---- Stops recorded during an audit outage (docs/SECURITY.md R14) -----------------------------

@@ -66,8 +66,18 @@ class RoutesTest : public test_node::InProcessNode {
                     const std::string& body = "", const std::string& bearer = "") {
     HttpRequest req;
     req.method = method;
-    req.path = path;
     req.target = path;
+    req.path = path.substr(0, path.find('?'));
+    if (size_t q = path.find('?'); q != std::string::npos) {  // name=value&… (test paths only)
+      std::string rest = path.substr(q + 1);
+      for (size_t at = 0; at <= rest.size();) {
+        size_t amp = std::min(rest.find('&', at), rest.size());
+        std::string kv = rest.substr(at, amp - at);
+        size_t eq = kv.find('=');
+        req.query.emplace_back(kv.substr(0, eq), eq == std::string::npos ? "" : kv.substr(eq + 1));
+        at = amp + 1;
+      }
+    }
     req.body = body;
     if (!bearer.empty()) req.headers.emplace_back("authorization", "Bearer " + bearer);
     return answer(node_.get(), std::move(req));
@@ -190,6 +200,75 @@ TEST_F(RoutesTest, EveryRowAnswersAndNoneIsShadowed) {
     EXPECT_TRUE(r.status == 200 || r.status == 304)
         << method << " " << path << " " << r.status << " " << r.body.substr(0, 200);
   }
+}
+
+// The audit log names every principal and carries their §16 blocks: reading it (the listing and
+// the export) needs OWNER — the export also scope config — and every read, allowed or refused,
+// leaves a record of its own (AUDIT_READ, with the query).
+TEST_F(RoutesTest, TheAuditLogIsTheOwnersToReadAndEveryReadIsRecorded) {
+  ASSERT_EQ(call("POST", "/api/command", json::dump(command("move")), token("user", "bob")).status,
+            200);
+  const std::vector<std::pair<std::string, std::string>> others{
+      {"guest", "gus"}, {"user", "bob"}, {"leasee", "lee"}};
+  for (const auto& [role, sub] : others) {
+    SCOPED_TRACE(role);
+    const std::string t = token(role.c_str(), sub.c_str(), {"status", "chat", "control"});
+    for (const char* path : {"/api/audit", "/api/audit?limit=1000", "/api/v1/audit?format=jsonl"}) {
+      HttpResponse r = call("GET", path, "", t);
+      EXPECT_EQ(r.status, 403) << path << " " << r.body;
+      auto body = json::parse(r.body);
+      ASSERT_TRUE(body.ok()) << r.body;
+      EXPECT_EQ(json::string_field(*body, "type"), "ERROR") << r.body;  // the profile's body
+      EXPECT_EQ(http_error_code(r), "INSUFFICIENT_PRIVILEGES") << r.body;
+      EXPECT_EQ(r.body.find("\"entries\""), std::string::npos);
+    }
+  }
+  // OWNER reads the listing; the export needs scope config besides.
+  HttpResponse listing = call("GET", "/api/audit?limit=7", "", token("owner", "alice", {"status"}));
+  ASSERT_EQ(listing.status, 200) << listing.body;
+  EXPECT_EQ(
+      call("GET", "/api/v1/audit?format=jsonl", "", token("owner", "alice", {"status"})).status,
+      403);
+  HttpResponse exported =
+      call("GET", "/api/v1/audit?from=0&format=jsonl", "", token("owner", "alice", {"config"}));
+  ASSERT_EQ(exported.status, 200) << exported.body.substr(0, 300);
+
+  // The listing already shows its own read: the record is durable before the log is read.
+  auto v = json::parse(listing.body);
+  ASSERT_TRUE(v.ok());
+  const auto& entries = v->get("entries")->as_array();
+  ASSERT_FALSE(entries.empty());
+  EXPECT_EQ(json::string_field(entries.back(), "event"), "AUDIT_READ");
+  EXPECT_EQ(json::string_field(entries.back(), "sub"), "alice");
+
+  // 3 roles × 3 refusals, the OWNER's export without config, the listing and the export.
+  std::vector<json::Value> reads = audited("AUDIT_READ", 12);
+  ASSERT_EQ(reads.size(), 12u);
+  size_t blocked = 0;
+  std::set<std::string> refused;
+  for (const auto& r : reads) {
+    const json::Value* d = r.get("detail");
+    ASSERT_NE(d, nullptr) << json::dump(r);
+    if (json::string_field(r, "outcome") == "blocked") {
+      ++blocked;
+      refused.insert(json::string_field(r, "sub"));
+      EXPECT_EQ(json::string_field(r, "reason"), "INSUFFICIENT_PRIVILEGES");
+      continue;
+    }
+    EXPECT_EQ(json::string_field(r, "sub"), "alice");
+    const std::string route = json::string_field(*d, "route");
+    const json::Value* q = d->get("query");
+    ASSERT_NE(q, nullptr) << json::dump(r);
+    if (route == "/api/audit") {
+      EXPECT_EQ(q->get("limit")->as_int(), 7);
+    } else {
+      EXPECT_EQ(route, "/api/v1/audit");
+      EXPECT_EQ(json::string_field(*q, "format"), "jsonl");
+      EXPECT_EQ(q->get("from")->as_int(), 0);
+    }
+  }
+  EXPECT_EQ(blocked, 10u);
+  EXPECT_EQ(refused, (std::set<std::string>{"gus", "bob", "lee", "alice"}));
 }
 
 }  // namespace

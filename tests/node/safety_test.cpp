@@ -901,7 +901,7 @@ TEST(SafetyActuationApply, AppliesWhatPrepareCheckedAndAnswersChat) {
   // An ESTOP between prepare() and apply() refuses the prepared command.
   auto again = prepare(act, command_msg(json::Object{{"action", "move"}, {"linear", 0.1}}));
   ASSERT_TRUE(again.ok());
-  (void)act.estop("test", "between");
+  (void)act.estop("test", "between", {});
   auto refused = act.apply(*again);
   ASSERT_FALSE(refused.ok());
   EXPECT_EQ(refused.error().reason, "estop_active");

@@ -38,10 +38,14 @@ class FakeActuation final : public Actuation {
     std::lock_guard<std::mutex> lock(mu_);
     return latched_;
   }
-  double estop(const std::string& source, const std::string&) override {
-    std::lock_guard<std::mutex> lock(mu_);
-    latched_ = true;
-    estops_.push_back(source);
+  // The latch is "durable" at once.
+  double estop(const std::string& source, const std::string&, EstopLatchFn on_latch) override {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      latched_ = true;
+      estops_.push_back(source);
+    }
+    if (on_latch) on_latch(true, "");
     return 1.0;
   }
   Status resume(Role role, const std::string&) override {
@@ -136,9 +140,12 @@ class InProcessNode : public ::testing::Test {
     ns.ruri = kRuri;
     ns.name = "pipeline-test";
     if (tune) tune(ns);
-    services_ = std::make_unique<NodeServices>(ns, clock_, std::move(auth), act_, *audit_);
+    services_ = std::make_unique<NodeServices>(ns, clock_, std::move(auth), actuation(), *audit_);
     pipeline_ = std::make_unique<Pipeline>(*services_, standard_stages(*services_));
   }
+
+  // What the node's services act through: the fake unless a fixture brings its own.
+  virtual Actuation& actuation() { return act_; }
 
   std::string token(const char* role, const char* sub,
                     json::Array scopes = {"status", "chat", "control", "config"}) {

@@ -42,6 +42,11 @@ export async function loadAudit() {
       rawJsonl = await request('GET', `/api/v1/audit?${q}`, undefined, { text: true });
       all = rawJsonl.split('\n').filter((l) => l.trim()).map((l) => { try { return JSON.parse(l); } catch (_) { return { event: '(unreadable line)' }; } });
       setText($('#audit-source'), `${all.length} records from the chain export (GET /api/v1/audit?format=jsonl).`);
+    } else if (!roleAtLeast('OWNER')) {
+      // The node refuses (403): the log names every principal and is the owner's to read.
+      all = [];
+      rawJsonl = '';
+      setText($('#audit-source'), 'The audit log names every principal: reading it needs an OWNER token.');
     } else {
       const data = await request('GET', '/api/audit?limit=1000');
       all = (data && data.entries) || [];

@@ -5,6 +5,7 @@
 // public read-only routes are the only exceptions, decided by the router, not here).
 #pragma once
 
+#include <compare>
 #include <memory>
 #include <optional>
 #include <string>
@@ -36,6 +37,21 @@ struct Principal {
   // What audit records show as `principal`.
   std::string display() const { return authenticated ? sub : "anonymous"; }
   bool has_scope(std::string_view s) const;
+};
+
+// A principal named by issuer and subject — whom an ownership transfer, a lease, a grant
+// within it, a handoff or a consent request names. Two trusted issuers may both know a `sub`
+// "alice": they are two principals, and only (issuer, subject) together name one.
+struct PrincipalId {
+  std::string iss;  // empty only in state files written before the issuer was kept: any issuer
+  std::string sub;
+
+  static PrincipalId of(const Principal& p) { return PrincipalId{p.issuer, p.sub}; }
+  // Whether `p` is the principal named (a legacy entry without issuer: by subject alone).
+  bool is(const Principal& p) const { return is(of(p)); }
+  bool is(const PrincipalId& o) const { return sub == o.sub && (iss.empty() || iss == o.iss); }
+  bool empty() const { return sub.empty(); }
+  auto operator<=>(const PrincipalId&) const = default;
 };
 
 struct SignatureCheck {

@@ -42,6 +42,12 @@ std::vector<std::string> InjectionScreen::default_patterns() {
           "developer mode"};
 }
 
+std::vector<InjectionRule> InjectionScreen::default_rules() {
+  std::vector<InjectionRule> out;
+  for (auto& p : default_patterns()) out.push_back(InjectionRule{std::move(p), false});
+  return out;
+}
+
 InjectionScreen::InjectionScreen(std::vector<std::string> patterns) {
   for (auto& p : patterns) {
     std::string f = fold(p);
@@ -49,11 +55,45 @@ InjectionScreen::InjectionScreen(std::vector<std::string> patterns) {
   }
 }
 
+InjectionScreen::InjectionScreen(const std::vector<InjectionRule>& rules, std::string* error) {
+  for (const auto& r : rules) {
+    if (!r.regex) {
+      std::string f = fold(r.text);
+      if (!f.empty()) patterns_.push_back(std::move(f));
+      continue;
+    }
+    try {
+      regexes_.push_back(Regex{r.text, std::make_shared<const std::regex>(
+                                           r.text, std::regex::ECMAScript | std::regex::icase)});
+    } catch (const std::regex_error& e) {
+      if (error && error->empty())
+        *error = "injection pattern /" + r.text + "/ is not a regular expression: " + e.what();
+    }
+  }
+}
+
+bool InjectionScreen::regex_hit(const Regex& r, const std::string& folded) const {
+  const size_t step = kRegexWindow - kRegexOverlap;
+  for (size_t at = 0;; at += step) {
+    const size_t len = std::min(kRegexWindow, folded.size() - at);
+    try {
+      if (std::regex_search(folded.begin() + static_cast<std::ptrdiff_t>(at),
+                            folded.begin() + static_cast<std::ptrdiff_t>(at + len), *r.re))
+        return true;
+    } catch (const std::regex_error&) {
+      return true;  // the engine gave up (complexity, stack): fail closed
+    }
+    if (at + len >= folded.size()) return false;
+  }
+}
+
 std::optional<std::string> InjectionScreen::scan_text(const std::string& text) const {
-  if (patterns_.empty()) return std::nullopt;
+  if (patterns_.empty() && regexes_.empty()) return std::nullopt;
   std::string f = fold(text);
   for (const auto& p : patterns_)
     if (f.find(p) != std::string::npos) return p;
+  for (const auto& r : regexes_)
+    if (regex_hit(r, f)) return r.source;
   return std::nullopt;
 }
 

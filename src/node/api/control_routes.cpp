@@ -150,8 +150,9 @@ void Node::control_tick() {
     svc_.record("TRANSFER_EXPIRED", "ok")
         .by_system()
         .detail("transfer_id", t->id)
-        .detail("from", t->from_sub)
-        .detail("to", t->to_sub)
+        .detail("from", t->from.sub)
+        .detail("to", t->to.sub)
+        .detail("to_iss", t->to.iss)
         .write();
     svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
                                                  {"event", "TRANSFER_EXPIRED"},
@@ -199,9 +200,10 @@ void Node::announce_control_changes() {
                                ? json::Value((s.expires_mono_ms - svc_.clock.mono_ms()) / 1000)
                                : json::Value());
       ev.set("heartbeat_timeout_ms", svc_.settings.heartbeat_timeout_ms);
-      // What a direct grant carries (e.g. the UDP heartbeat key) reaches a promoted holder on
-      // its own streams only.
-      if (svc_.on_grant) svc_.on_grant(s.id, ev);
+      // Secrets never travel in events: what a direct grant carries (the UDP heartbeat key) the
+      // promoted holder fetches itself, authenticated, by renewing its session with
+      // {"session_id", "udp_heartbeat": true} (renew_route).
+      if (svc_.on_grant) ev.set("udp_heartbeat_on_renew", true);
       publish_to(s.principal_key, std::move(ev));
     } else if (c.event == ControlEvent::kQueueDrop) {
       e.entry().event = "CLAIM_DROPPED";
@@ -400,6 +402,13 @@ void Node::renew_route(transport::HttpRequest& req, Respond& respond, const json
   payload.set("expires_in", r->expires_mono_ms
                                 ? json::Value((r->expires_mono_ms - svc_.clock.mono_ms()) / 1000)
                                 : json::Value());
+  // The holder asks for its session's UDP heartbeat key (a fresh one; the previous key stops
+  // working): how a holder promoted from the queue gets it, since events carry no secrets.
+  const json::Value* want = body.is_object() ? body.get("udp_heartbeat") : nullptr;
+  if (want && want->is_bool() && want->as_bool() && svc_.on_grant) {
+    svc_.on_grant(r->id, payload);
+    e.detail("udp_heartbeat", "issued");
+  }
   e.write([this, respond, route, payload](rcan::Result<audit::Receipt>) mutable {
     answer_json(respond, route, 200, svc_.envelope(MessageType::kGranted, payload));
   });
@@ -438,6 +447,9 @@ void Node::handoff_route(transport::HttpRequest& req, Respond& respond, const js
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   std::string session_id = str_field(body, "session_id");
   std::string target = str_field(body, "target_user_id");
+  // The target is a principal: issuer and subject (the holder's issuer unless `target_iss`).
+  PrincipalId target_id{str_field(body, "target_iss"), target};
+  if (target_id.iss.empty()) target_id.iss = pr->issuer;
   if (session_id.empty() || target.empty())
     return answer_error(
         respond, route,
@@ -456,7 +468,7 @@ void Node::handoff_route(transport::HttpRequest& req, Respond& respond, const js
   }
   int64_t window = svc_.settings.handoff_window_ms;
   auto r =
-      svc_.sessions.handoff(session_id, *pr, target, target_role, window, svc_.clock.mono_ms());
+      svc_.sessions.handoff(session_id, *pr, target_id, target_role, window, svc_.clock.mono_ms());
   if (!r.ok()) return answer_error(respond, route, r.error());
   svc_.act.disarm_deadman(session_id);
   svc_.events.publish(json::Value(json::Object{{"type", "AVAILABLE"},
@@ -465,7 +477,10 @@ void Node::handoff_route(transport::HttpRequest& req, Respond& respond, const js
                                                {"window_ms", window},
                                                {"timestamp_ms", svc_.clock.wall_ms()}}));
   AuditRecord e = svc_.record("HANDOFF", "ok");
-  e.by(*pr).message(session_id).detail("target_user_id", target);
+  e.by(*pr)
+      .message(session_id)
+      .detail("target_user_id", target)
+      .detail("target_iss", target_id.iss);
   if (target_role) e.detail("target_role", std::string(role_name(*target_role)));
   if (std::string reason = str_field(body, "reason", 512); !reason.empty()) e.reason(reason);
   announce_control_changes();
@@ -498,19 +513,21 @@ void Node::lease_route(transport::HttpRequest& req, Respond& respond, const json
       return answer_error(respond, route,
                           Error(ErrorCode::kSchemaValidationFailed,
                                 "duration_s must be 1 s .. 366 days", "duration_s"));
-    auto l = svc_.sessions.grant_lease(*pr, str_field(body, "leasee"), dur * 1000, now_wall,
-                                       svc_.clock.mono_ms());
+    auto l = svc_.sessions.grant_lease(
+        *pr, PrincipalId{str_field(body, "leasee_iss"), str_field(body, "leasee")}, dur * 1000,
+        now_wall, svc_.clock.mono_ms());
     if (!l.ok()) return answer_error(respond, route, l.error());
     AuditRecord e = svc_.record("LEASE_GRANTED", "ok");
     e.by(*pr)
         .message(l->id)
         .detail("lease_id", l->id)
-        .detail("leasee", l->leasee_sub)
+        .detail("leasee", l->leasee.sub)
+        .detail("leasee_iss", l->leasee.iss)
         .detail("end_ms", l->end_wall_ms);
     svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
                                                  {"event", "LEASE_GRANTED"},
                                                  {"lease_id", l->id},
-                                                 {"leasee", l->leasee_sub},
+                                                 {"leasee", l->leasee.sub},
                                                  {"end_ms", l->end_wall_ms},
                                                  {"timestamp_ms", now_wall}}));
     announce_control_changes();
@@ -532,8 +549,9 @@ void Node::lease_route(transport::HttpRequest& req, Respond& respond, const json
           respond, route,
           Error(ErrorCode::kSchemaValidationFailed, "duration_s must be positive", "duration_s"));
     std::string sub = str_field(body, "user_id");
-    auto l = svc_.sessions.grant_within_lease(*pr, lease_id, sub, *role, dur * 1000, now_wall,
-                                              svc_.clock.mono_ms());
+    auto l = svc_.sessions.grant_within_lease(*pr, lease_id,
+                                              PrincipalId{str_field(body, "user_iss"), sub}, *role,
+                                              dur * 1000, now_wall, svc_.clock.mono_ms());
     if (!l.ok()) return answer_error(respond, route, l.error());
     AuditRecord e = svc_.record("LEASE_ACCESS_GRANTED", "ok");
     e.by(*pr)
@@ -583,8 +601,9 @@ void Node::transfer_route(transport::HttpRequest& req, Respond& respond, const j
   Result<PendingTransfer> r = Error(ErrorCode::kInternal, "unreachable");
   std::string event;
   if (action == "request") {
-    r = svc_.ownership.request(*pr, str_field(body, "new_owner"), str_field(body, "note", 512),
-                               now_wall);
+    r = svc_.ownership.request(
+        *pr, PrincipalId{str_field(body, "new_owner_iss"), str_field(body, "new_owner")},
+        str_field(body, "note", 512), now_wall);
     event = "TRANSFER_REQUEST";
   } else if (action == "accept") {
     r = svc_.ownership.accept(*pr, str_field(body, "transfer_id"),
@@ -607,13 +626,15 @@ void Node::transfer_route(transport::HttpRequest& req, Respond& respond, const j
   e.by(*pr)
       .message(r->id)
       .detail("transfer_id", r->id)
-      .detail("from", r->from_sub)
-      .detail("to", r->to_sub)
+      .detail("from", r->from.sub)
+      .detail("from_iss", r->from.iss)
+      .detail("to", r->to.sub)
+      .detail("to_iss", r->to.iss)
       .detail("expires_ms", r->expires_ms);
   if (action == "accept") {
     e.detail("agreement", str_field(body, "agreement", 512));
     // Personal data goes; the audit chain and skills stay.
-    svc_.sessions.revoke_all("ownership transferred to " + r->to_sub, svc_.clock.mono_ms());
+    svc_.sessions.revoke_all("ownership transferred to " + r->to.sub, svc_.clock.mono_ms());
     svc_.consent.clear();
     svc_.ownership.run_clear_hooks();
     e.detail("cleared", json::Array{"sessions", "leases", "users", "consent", "thought_log"});
@@ -673,6 +694,7 @@ void Node::consent_request_route(transport::HttpRequest& req, Respond& respond,
   if (!sender.ok()) return refused(sender.error());
   ConsentRequest c;
   c.requester_sub = pr->sub;
+  c.requester_iss = pr->issuer;
   c.sender_type = std::string(sender_type_name(sender->sender_type));
   c.cloud_provider = sender->cloud_provider;
   c.function_name = sender->function_name;
@@ -765,7 +787,7 @@ void Node::consent_decision_route(transport::HttpRequest& req, Respond& respond,
                           d.ok() ? Error(ErrorCode::kInternal, "unexpected") : d.error());
     }
     if (kind == "lease") {
-      auto l = svc_.sessions.grant_lease(*pr, pending->requester_sub, dur * 1000, now_wall,
+      auto l = svc_.sessions.grant_lease(*pr, pending->requester(), dur * 1000, now_wall,
                                          svc_.clock.mono_ms());
       if (!l.ok()) return answer_error(respond, route, l.error());
       lease_id = l->id;
@@ -777,7 +799,7 @@ void Node::consent_decision_route(transport::HttpRequest& req, Respond& respond,
         return answer_error(respond, route,
                             Error(ErrorCode::kControlConflict,
                                   "kind grant needs a running lease; use kind lease", "kind"));
-      auto l = svc_.sessions.grant_within_lease(*pr, running.front().id, pending->requester_sub,
+      auto l = svc_.sessions.grant_within_lease(*pr, running.front().id, pending->requester(),
                                                 control ? Role::kUser : Role::kGuest, dur * 1000,
                                                 now_wall, svc_.clock.mono_ms());
       if (!l.ok()) return answer_error(respond, route, l.error());

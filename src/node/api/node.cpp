@@ -441,10 +441,43 @@ void Node::run_pipeline(transport::HttpRequest& req, Respond& respond, const std
 
 void Node::answer_waited(int64_t us) { respond_timer_->observe_us(static_cast<double>(us)); }
 
+bool Node::audit_reader(const Principal& p, const std::string& route, std::string_view scope,
+                        Respond& respond) {
+  if (role_level(p.role) >= role_level(Role::kOwner) && (scope.empty() || p.has_scope(scope)))
+    return true;
+  Error err(ErrorCode::kInsufficientPrivileges,
+            "the audit log names every principal: reading it needs OWNER" +
+                (scope.empty() ? std::string() : " and scope " + std::string(scope)),
+            "role");
+  svc_.record("AUDIT_READ", "blocked")
+      .by(p)
+      .reason(std::string(error_name(err.code)))
+      .detail("route", route)
+      .write();
+  answer_error(respond, route, err);
+  return false;
+}
+
+void Node::record_audit_read(const Principal& p, const std::string& route, json::Object query,
+                             Respond& respond, std::function<void()> read) {
+  svc_.record("AUDIT_READ")
+      .by(p)
+      .detail("route", route)
+      .detail("query", std::move(query))
+      .write(
+          [this, respond, route, read = std::move(read)](rcan::Result<audit::Receipt> r) mutable {
+            if (r.ok()) return read();
+            answer_error(respond, route,
+                         Error(ErrorCode::kAuditUnavailable,
+                               "reading the audit log is recorded, and it cannot record now"));
+          });
+}
+
 void Node::audit_listing(transport::HttpRequest& req, Respond& respond) {
   const std::string route = "/api/audit";
   auto pr = bearer_principal(req);
   if (!pr.ok()) return answer_error(respond, route, pr.error());
+  if (!audit_reader(*pr, route, "", respond)) return;
   size_t limit = svc_.settings.audit_listing;
   if (req.has_query("limit")) {
     char* end = nullptr;
@@ -456,50 +489,54 @@ void Node::audit_listing(transport::HttpRequest& req, Respond& respond) {
           Error(ErrorCode::kSchemaValidationFailed, "limit must be 1..1000", "limit"));
     limit = static_cast<size_t>(v);
   }
-  bool posted = worker_.post([this, respond, route, limit]() mutable {
-    audit::AuditStats st = svc_.audit.stats();
-    json::Array entries;
-    // Records in the range that cannot be shown (changed on disk, unreadable): named, never
-    // left out silently.
-    json::Array unreadable;
-    std::string first_error;
-    uint64_t first = st.last_seq >= limit ? st.last_seq - limit + 1 : 1;
-    if (first < st.first_seq) first = st.first_seq;
-    for (uint64_t seq = first; seq <= st.last_seq && seq != 0; ++seq) {
-      auto line = svc_.audit.get(seq);
-      // Removed by retention since stats() was read: gone by design, not a failed check.
-      if (!line.ok() && line.error().code == ErrorCode::kNotFound) continue;
-      auto v = line.ok() ? json::parse(*line, {.max_depth = 64, .max_bytes = 1u << 20})
-                         : rcan::Result<json::Value>(line.error());
-      if (v.ok()) {
-        entries.push_back(std::move(v).value());
-        continue;
-      }
-      if (first_error.empty()) first_error = v.error().message;
-      unreadable.emplace_back(static_cast<int64_t>(seq));
+  auto read = [this, respond, route, limit]() mutable {
+    bool posted = worker_.post(
+        [this, respond, route, limit]() mutable { list_audit(respond, route, limit); });
+    if (!posted) answer_error(respond, route, Error(ErrorCode::kSafeStop, "busy; try again"));
+  };
+  record_audit_read(*pr, route, json::Object{{"limit", static_cast<int64_t>(limit)}}, respond,
+                    std::move(read));
+}
+
+void Node::list_audit(Respond& respond, const std::string& route, size_t limit) {
+  audit::AuditStats st = svc_.audit.stats();
+  json::Array entries;
+  // Records in the range that cannot be shown (changed on disk, unreadable): named, never
+  // left out silently.
+  json::Array unreadable;
+  std::string first_error;
+  uint64_t first = st.last_seq >= limit ? st.last_seq - limit + 1 : 1;
+  if (first < st.first_seq) first = st.first_seq;
+  for (uint64_t seq = first; seq <= st.last_seq && seq != 0; ++seq) {
+    auto line = svc_.audit.get(seq);
+    // Removed by retention since stats() was read: gone by design, not a failed check.
+    if (!line.ok() && line.error().code == ErrorCode::kNotFound) continue;
+    auto v = line.ok() ? json::parse(*line, {.max_depth = 64, .max_bytes = 1u << 20})
+                       : rcan::Result<json::Value>(line.error());
+    if (v.ok()) {
+      entries.push_back(std::move(v).value());
+      continue;
     }
-    if (!unreadable.empty())
-      log(LogLevel::kWarn, "audit.listing_unreadable",
-          {{"count", static_cast<int64_t>(unreadable.size())},
-           {"first_seq", unreadable.front()},
-           {"error", first_error}});
-    answer_json(respond, route, 200,
-                json::Object{{"entries", entries},
-                             {"count", static_cast<int64_t>(entries.size())},
-                             {"last_seq", static_cast<int64_t>(st.last_seq)},
-                             {"unreadable", unreadable}});
-  });
-  if (!posted) answer_error(respond, route, Error(ErrorCode::kSafeStop, "busy; try again"));
+    if (first_error.empty()) first_error = v.error().message;
+    unreadable.emplace_back(static_cast<int64_t>(seq));
+  }
+  if (!unreadable.empty())
+    log(LogLevel::kWarn, "audit.listing_unreadable",
+        {{"count", static_cast<int64_t>(unreadable.size())},
+         {"first_seq", unreadable.front()},
+         {"error", first_error}});
+  answer_json(respond, route, 200,
+              json::Object{{"entries", entries},
+                           {"count", static_cast<int64_t>(entries.size())},
+                           {"last_seq", static_cast<int64_t>(st.last_seq)},
+                           {"unreadable", unreadable}});
 }
 
 void Node::audit_export(transport::HttpRequest& req, Respond& respond) {
   const std::string route = "/api/v1/audit";
   auto pr = bearer_principal(req);
   if (!pr.ok()) return answer_error(respond, route, pr.error());
-  if (role_level(pr->role) < role_level(Role::kOwner) || !pr->has_scope("config"))
-    return answer_error(respond, route,
-                        Error(ErrorCode::kInsufficientPrivileges,
-                              "audit export needs OWNER and scope config", "scope"));
+  if (!audit_reader(*pr, route, "config", respond)) return;
   auto parse_time = [&](std::string_view name, int64_t def, int64_t& out) -> bool {
     if (!req.has_query(name)) {
       out = def;
@@ -522,16 +559,21 @@ void Node::audit_export(transport::HttpRequest& req, Respond& respond) {
     return answer_error(
         respond, route,
         Error(ErrorCode::kSchemaValidationFailed, "format must be jsonl", "format"));
-  bool posted = worker_.post([this, respond, route, from, to]() mutable {
-    auto text = svc_.audit.export_jsonl(from, to);
-    if (!text.ok()) return answer_error(respond, route, text.error());
-    svc_.metrics.count_request(route, 200);
-    transport::HttpResponse r;
-    r.content_type = "application/x-ndjson";
-    r.body = std::move(text).value();
-    respond(std::move(r));
-  });
-  if (!posted) answer_error(respond, route, Error(ErrorCode::kSafeStop, "busy; try again"));
+  auto read = [this, respond, route, from, to]() mutable {
+    bool posted = worker_.post([this, respond, route, from, to]() mutable {
+      auto text = svc_.audit.export_jsonl(from, to);
+      if (!text.ok()) return answer_error(respond, route, text.error());
+      svc_.metrics.count_request(route, 200);
+      transport::HttpResponse r;
+      r.content_type = "application/x-ndjson";
+      r.body = std::move(text).value();
+      respond(std::move(r));
+    });
+    if (!posted) answer_error(respond, route, Error(ErrorCode::kSafeStop, "busy; try again"));
+  };
+  record_audit_read(*pr, route,
+                    json::Object{{"from", from}, {"to", to}, {"format", std::move(format)}},
+                    respond, std::move(read));
 }
 
 }  // namespace rcan::node

@@ -4,8 +4,10 @@
 #pragma once
 
 #include <atomic>
+#include <functional>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <vector>
 
@@ -88,6 +90,15 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   void publish_to(const std::string& principal_key, json::Object ev);
   void audit_listing(transport::HttpRequest& req, Respond& respond);
   void audit_export(transport::HttpRequest& req, Respond& respond);
+  // Reading the audit log: OWNER (and `scope`, when not empty), else 403 recorded as
+  // AUDIT_READ blocked. Answers the refusal itself and returns false.
+  bool audit_reader(const Principal& p, const std::string& route, std::string_view scope,
+                    Respond& respond);
+  // Records the read (AUDIT_READ: who, the route, the query) and runs `read` once the record is
+  // durable; if it cannot be recorded, answers 503 AUDIT_UNAVAILABLE and reads nothing.
+  void record_audit_read(const Principal& p, const std::string& route, json::Object query,
+                         Respond& respond, std::function<void()> read);
+  void list_audit(Respond& respond, const std::string& route, size_t limit);
   Result<Principal> bearer_principal(const transport::HttpRequest& req) const;
   void pump() EXCLUDES(streams_mu_, pump_mu_);
   void stream_text(const std::shared_ptr<StreamState>& st, std::string text);

@@ -27,7 +27,7 @@ namespace {
 
 struct Counters {
   std::atomic<uint64_t> hb_ok{0}, hb_forged{0}, hb_replayed{0}, hb_stale{0}, malformed{0},
-      disc_ok{0}, disc_limited{0};
+      disc_ok{0}, disc_limited{0}, disc_short{0};
 };
 
 struct KeyEntry {
@@ -201,8 +201,19 @@ void UdpService::Impl::discover(const udp::Datagram& d, const sockaddr_storage& 
   std::string body = json::dump(svc.envelope(MessageType::kAnnounce, std::move(info)));
   std::string out = udp::encode_announce(d.nonce, body);
   if (out.size() > udp::kMaxAnnounceSize) return;
+  const bool full = out.size() <= d.size;
+  if (!full) {
+    // No amplification: the answer is never longer than the question. A DISCOVER too short for
+    // the record learns how long one must be, if even that fits; else it gets nothing.
+    counters->disc_short.fetch_add(1);
+    json::Object need{{"discover_size", static_cast<int64_t>(out.size())}};
+    out = udp::encode_announce(
+        d.nonce, json::dump(json::Value(json::Object{{"type", "ANNOUNCE"}, {"payload", need}})));
+    if (out.size() > d.size) return;
+  }
   if (::sendto(fd, out.data(), out.size(), 0, reinterpret_cast<const sockaddr*>(&from), from_len) >=
-      0)
+          0 &&
+      full)
     counters->disc_ok.fetch_add(1);
 }
 
@@ -313,6 +324,10 @@ Result<uint16_t> UdpService::start() {
   m.add_counter_fn("rcan_udp_discover_limited_total",
                    "DISCOVER datagrams dropped by the rate limits.",
                    [c] { return static_cast<double>(c->disc_limited.load()); });
+  m.add_counter_fn("rcan_udp_discover_short_total",
+                   "DISCOVER datagrams too short for the ANNOUNCE (answered with the size needed, "
+                   "or not at all).",
+                   [c] { return static_cast<double>(c->disc_short.load()); });
   if (im.opt.heartbeat) {
     std::weak_ptr<Impl> weak = impl_;
     im.svc.on_grant = [weak](const std::string& session_id, json::Object& payload) {

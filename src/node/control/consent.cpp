@@ -11,6 +11,7 @@ json::Value ConsentRequest::to_json() const {
   for (const auto& s : scopes) sc.emplace_back(s);
   json::Object o{{"consent_id", id},
                  {"requester", requester_sub},
+                 {"requester_iss", requester_iss},
                  {"sender_type", sender_type},
                  {"scopes", sc},
                  {"duration_s", duration_s},
@@ -152,6 +153,7 @@ void ConsentBook::load_json(const json::Value& v) {
     ConsentRequest r;
     r.id = json::string_field(e, "consent_id");
     r.requester_sub = json::string_field(e, "requester");
+    r.requester_iss = json::string_field(e, "requester_iss");
     r.sender_type = json::string_field(e, "sender_type");
     r.cloud_provider = json::string_field(e, "cloud_provider");
     r.function_name = json::string_field(e, "function_name");

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "base/thread_annotations.h"
+#include "node/admission/authenticator.h"
 #include "rcan/json.h"
 #include "rcan/result.h"
 
@@ -17,6 +18,8 @@ namespace rcan::node {
 struct ConsentRequest {
   std::string id;
   std::string requester_sub;
+  std::string requester_iss;  // with the subject, the principal a grant goes to
+  PrincipalId requester() const { return PrincipalId{requester_iss, requester_sub}; }
   std::string sender_type = "human";
   std::string cloud_provider;
   std::string function_name;

@@ -13,12 +13,27 @@ void Ownership::transit(OwnershipEvent event, OwnershipState to) {
 bool Ownership::is_owner_locked(const Principal& p) const {
   if (role_level(p.role) >= role_level(Role::kCreator)) return true;
   if (role_level(p.role) < role_level(Role::kOwner)) return false;
-  return owner_sub_.empty() || p.sub == owner_sub_;
+  return owner_.empty() || owner_.is(p);
 }
 
-Result<PendingTransfer> Ownership::request(const Principal& p, const std::string& to_sub,
+namespace {
+
+json::Value id_json(const PrincipalId& id) {
+  return json::Object{{"iss", id.iss}, {"sub", id.sub}};
+}
+
+// A stored principal: {"iss","sub"}, or a bare subject (state written before issuers were kept).
+PrincipalId id_from(const json::Value& v) {
+  if (v.is_string()) return PrincipalId{"", v.as_string()};
+  return PrincipalId{json::string_field(v, "iss"), json::string_field(v, "sub")};
+}
+
+}  // namespace
+
+Result<PendingTransfer> Ownership::request(const Principal& p, PrincipalId to,
                                            const std::string& note, int64_t now_wall_ms) {
-  if (to_sub.empty() || to_sub.size() > 256)
+  if (to.iss.empty()) to.iss = p.issuer;
+  if (to.sub.empty() || to.sub.size() > 256 || to.iss.size() > 256)
     return Error(ErrorCode::kSchemaValidationFailed, "new_owner (a user id) is required",
                  "new_owner", "missing_field");
   MutexLock lock(mu_);
@@ -28,10 +43,10 @@ Result<PendingTransfer> Ownership::request(const Principal& p, const std::string
   if (pending_ && now_wall_ms < pending_->expires_ms)
     return Error(ErrorCode::kControlConflict, "transfer " + pending_->id + " is already pending",
                  "transfer_id");
-  if (to_sub == p.sub)
+  if (to == PrincipalId::of(p))
     return Error(ErrorCode::kSchemaValidationFailed, "the new owner is the owner", "new_owner");
-  PendingTransfer t{new_uuid_v4(),      p.sub, to_sub, now_wall_ms, now_wall_ms + window_ms_,
-                    note.substr(0, 512)};
+  PendingTransfer t{new_uuid_v4(), PrincipalId::of(p),       std::move(to),
+                    now_wall_ms,   now_wall_ms + window_ms_, note.substr(0, 512)};
   pending_ = t;
   transit(OwnershipEvent::kTransferRequest, OwnershipState::kTransferPending);
   return t;
@@ -44,18 +59,19 @@ Result<PendingTransfer> Ownership::accept(const Principal& p, const std::string&
     return Error(ErrorCode::kNotFound, "no such pending transfer", "transfer_id");
   if (now_wall_ms >= pending_->expires_ms)
     return Error(ErrorCode::kSessionExpired, "the transfer window has passed", "transfer_id");
-  if (p.sub != pending_->to_sub)
-    return Error(ErrorCode::kInsufficientPrivileges, "only the named new owner may accept", "sub");
+  if (!pending_->to.is(p))
+    return Error(ErrorCode::kInsufficientPrivileges,
+                 "only the named new owner (issuer and subject) may accept", "sub");
   if (agreement.empty())
     return Error(ErrorCode::kSchemaValidationFailed,
                  "agreement (payment or agreement reference) is required", "agreement",
                  "missing_field");
   PendingTransfer t = *pending_;
   pending_.reset();
-  if (!owner_sub_.empty()) former_owners_.insert(owner_sub_);
-  former_owners_.insert(t.from_sub);
-  former_owners_.erase(t.to_sub);
-  owner_sub_ = t.to_sub;
+  if (!owner_.empty()) former_owners_.insert(owner_);
+  former_owners_.insert(t.from);
+  former_owners_.erase(t.to);
+  owner_ = t.to;
   users_.clear();
   transit(OwnershipEvent::kTransferAccept, OwnershipState::kOwned);
   return t;
@@ -65,7 +81,7 @@ Result<PendingTransfer> Ownership::cancel(const Principal& p, int64_t now_wall_m
   MutexLock lock(mu_);
   if (!pending_ || now_wall_ms >= pending_->expires_ms)
     return Error(ErrorCode::kNotFound, "no pending transfer", "transfer_id");
-  if (!is_owner_locked(p) && p.sub != pending_->to_sub)
+  if (!is_owner_locked(p) && !pending_->to.is(p))
     return Error(ErrorCode::kInsufficientPrivileges,
                  "only the owner or the named new owner may cancel", "role");
   PendingTransfer t = *pending_;
@@ -85,8 +101,14 @@ std::optional<PendingTransfer> Ownership::expire(int64_t now_wall_ms) {
 
 void Ownership::cap(Principal& p) const {
   MutexLock lock(mu_);
-  if (former_owners_.count(p.sub) && role_level(p.role) < role_level(Role::kCreator))
-    p.role = Role::kGuest;
+  if (role_level(p.role) >= role_level(Role::kCreator)) return;
+  // The new owner is never capped, whoever held the robot before under that name.
+  if (!owner_.empty() && owner_.is(p)) return;
+  for (const PrincipalId& f : former_owners_)
+    if (f.is(p)) {
+      p.role = Role::kGuest;
+      return;
+    }
 }
 
 void Ownership::note_user(const std::string& sub) {
@@ -115,9 +137,9 @@ OwnershipState Ownership::state(int64_t now_wall_ms) {
   return state_;
 }
 
-std::string Ownership::owner() {
+PrincipalId Ownership::owner() {
   MutexLock lock(mu_);
-  return owner_sub_;
+  return owner_;
 }
 
 std::optional<PendingTransfer> Ownership::pending() {
@@ -129,12 +151,15 @@ json::Value Ownership::to_json(int64_t now_wall_ms, bool detailed) {
   OwnershipState st = state(now_wall_ms);
   MutexLock lock(mu_);
   json::Object o{{"state", std::string(ownership_state_name(st))},
-                 {"owner", owner_sub_.empty() ? json::Value() : json::Value(owner_sub_)},
+                 {"owner", owner_.empty() ? json::Value() : json::Value(owner_.sub)},
+                 {"owner_iss", owner_.iss.empty() ? json::Value() : json::Value(owner_.iss)},
                  {"users", static_cast<int64_t>(users_.size())}};
   if (pending_ && now_wall_ms < pending_->expires_ms) {
     json::Object t{{"transfer_id", pending_->id},
-                   {"from", pending_->from_sub},
-                   {"to", pending_->to_sub},
+                   {"from", pending_->from.sub},
+                   {"from_iss", pending_->from.iss},
+                   {"to", pending_->to.sub},
+                   {"to_iss", pending_->to.iss},
                    {"requested_ms", pending_->requested_ms},
                    {"expires_ms", pending_->expires_ms},
                    {"remaining_s", (pending_->expires_ms - now_wall_ms) / 1000}};
@@ -149,13 +174,16 @@ json::Value Ownership::to_json(int64_t now_wall_ms, bool detailed) {
 json::Value Ownership::persist_json() {
   MutexLock lock(mu_);
   json::Array formers, users;
-  for (const auto& f : former_owners_) formers.emplace_back(f);
+  for (const auto& f : former_owners_) formers.push_back(id_json(f));
   for (const auto& u : users_) users.emplace_back(u);
-  json::Object o{{"owner", owner_sub_}, {"former_owners", formers}, {"users", users}};
+  json::Object o{{"owner", owner_.sub},
+                 {"owner_iss", owner_.iss},
+                 {"former_owners", formers},
+                 {"users", users}};
   if (pending_)
     o.set("pending", json::Object{{"transfer_id", pending_->id},
-                                  {"from", pending_->from_sub},
-                                  {"to", pending_->to_sub},
+                                  {"from", id_json(pending_->from)},
+                                  {"to", id_json(pending_->to)},
                                   {"requested_ms", pending_->requested_ms},
                                   {"expires_ms", pending_->expires_ms},
                                   {"note", pending_->note}});
@@ -164,22 +192,28 @@ json::Value Ownership::persist_json() {
 
 void Ownership::load_json(const json::Value& v) {
   MutexLock lock(mu_);
-  owner_sub_ = json::string_field(v, "owner");
+  owner_ = PrincipalId{json::string_field(v, "owner_iss"), json::string_field(v, "owner")};
   former_owners_.clear();
   users_.clear();
   if (const json::Value* a = v.get("former_owners"); a && a->is_array())
     for (const auto& e : a->as_array())
-      if (e.is_string()) former_owners_.insert(e.as_string());
+      if (PrincipalId f = id_from(e); !f.empty()) former_owners_.insert(std::move(f));
   if (const json::Value* a = v.get("users"); a && a->is_array())
     for (const auto& e : a->as_array())
       if (e.is_string()) users_.insert(e.as_string());
   pending_.reset();
   state_ = OwnershipState::kOwned;
   if (const json::Value* p = v.get("pending"); p && p->is_object()) {
-    PendingTransfer t{json::string_field(*p, "transfer_id"), json::string_field(*p, "from"),
-                      json::string_field(*p, "to"),          json::int_field(*p, "requested_ms"),
-                      json::int_field(*p, "expires_ms"),     json::string_field(*p, "note")};
-    if (!t.id.empty() && !t.to_sub.empty()) {
+    const json::Value none;
+    const json::Value* from = p->get("from");
+    const json::Value* to = p->get("to");
+    PendingTransfer t{json::string_field(*p, "transfer_id"),
+                      id_from(from ? *from : none),
+                      id_from(to ? *to : none),
+                      json::int_field(*p, "requested_ms"),
+                      json::int_field(*p, "expires_ms"),
+                      json::string_field(*p, "note")};
+    if (!t.id.empty() && !t.to.empty()) {
       pending_ = t;
       state_ = OwnershipState::kTransferPending;  // an expired one is recorded by the next tick
     }

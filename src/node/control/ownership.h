@@ -2,9 +2,11 @@
 //   OWNED --TRANSFER_REQUEST--> TRANSFER_PENDING (window, 24 h by default)
 //   TRANSFER_PENDING --TRANSFER_ACCEPT--> OWNED (new owner recorded, personal data cleared)
 //   TRANSFER_PENDING --TRANSFER_CANCEL | TRANSFER_EXPIRE--> OWNED (nothing changes)
-// The owner is the recorded `sub`; before any transfer none is recorded and any OWNER token
-// acts as the owner. After a transfer, tokens of former owners are capped to GUEST: the
-// role still comes from the verified token, ownership can only lower it.
+// The owner is the recorded principal (issuer and subject, PrincipalId); before any transfer
+// none is recorded and any OWNER token acts as the owner. After a transfer, tokens of former
+// owners are capped to GUEST: the role still comes from the verified token, ownership can only
+// lower it. A subject of another issuer is another principal: it neither accepts a transfer
+// named for this one nor acts as its owner.
 // Personal data cleared on acceptance: control sessions, queue and leases (SessionTable::
 // revoke_all), the user list kept here, pending consent, and whatever registered a clear
 // hook (e.g. a thought log). The audit chain and skills are kept.
@@ -27,8 +29,8 @@ namespace rcan::node {
 
 struct PendingTransfer {
   std::string id;
-  std::string from_sub;
-  std::string to_sub;
+  PrincipalId from;
+  PrincipalId to;
   int64_t requested_ms = 0;
   int64_t expires_ms = 0;
   std::string note;
@@ -45,10 +47,11 @@ class Ownership {
     return window_ms_;
   }
 
+  // `to` without an issuer names a subject of the requester's own issuer.
   // Errors: INSUFFICIENT_PRIVILEGES (not the owner), CONTROL_CONFLICT (one is pending),
   // SCHEMA_VALIDATION_FAILED.
-  Result<PendingTransfer> request(const Principal& p, const std::string& to_sub,
-                                  const std::string& note, int64_t now_wall_ms) EXCLUDES(mu_);
+  Result<PendingTransfer> request(const Principal& p, PrincipalId to, const std::string& note,
+                                  int64_t now_wall_ms) EXCLUDES(mu_);
   // The named new owner accepts with an agreement reference. Errors: NOT_FOUND (nothing
   // pending or another id), SESSION_EXPIRED (the window passed), INSUFFICIENT_PRIVILEGES.
   Result<PendingTransfer> accept(const Principal& p, const std::string& transfer_id,
@@ -67,7 +70,7 @@ class Ownership {
   void run_clear_hooks() EXCLUDES(mu_);
 
   OwnershipState state(int64_t now_wall_ms) EXCLUDES(mu_);
-  std::string owner() EXCLUDES(mu_);
+  PrincipalId owner() EXCLUDES(mu_);
   std::optional<PendingTransfer> pending() EXCLUDES(mu_);
   json::Value to_json(int64_t now_wall_ms, bool detailed) EXCLUDES(mu_);
   json::Value persist_json() EXCLUDES(mu_);
@@ -84,8 +87,8 @@ class Ownership {
   mutable Mutex mu_;
   int64_t window_ms_ GUARDED_BY(mu_) = 24 * 3600 * 1000LL;
   OwnershipState state_ GUARDED_BY(mu_) = OwnershipState::kOwned;
-  std::string owner_sub_ GUARDED_BY(mu_);
-  std::set<std::string> former_owners_ GUARDED_BY(mu_);
+  PrincipalId owner_ GUARDED_BY(mu_);
+  std::set<PrincipalId> former_owners_ GUARDED_BY(mu_);
   std::set<std::string> users_ GUARDED_BY(mu_);
   std::optional<PendingTransfer> pending_ GUARDED_BY(mu_);
   std::vector<std::function<void()>> clear_hooks_ GUARDED_BY(mu_);

@@ -28,12 +28,14 @@ std::optional<FleetPolicy> fleet_policy_from_name(std::string_view s) {
 json::Value Lease::to_json(int64_t now_wall_ms) const {
   json::Array g;
   for (const auto& x : grants)
-    g.push_back(json::Object{{"sub", x.sub},
+    g.push_back(json::Object{{"sub", x.who.sub},
+                             {"iss", x.who.iss},
                              {"role", std::string(role_name(x.role))},
                              {"end_ms", x.end_wall_ms},
                              {"active", x.end_wall_ms > now_wall_ms}});
   return json::Object{{"lease_id", id},
-                      {"leasee", leasee_sub},
+                      {"leasee", leasee.sub},
+                      {"leasee_iss", leasee.iss},
                       {"granted_by", granted_by},
                       {"start_ms", start_wall_ms},
                       {"end_ms", end_wall_ms},
@@ -69,17 +71,17 @@ const Lease* SessionTable::active_lease_locked(int64_t now_wall_ms) const {
   return nullptr;
 }
 
-bool SessionTable::lease_link_locked(const std::string& sub, Role& role, std::string& lease_id,
+bool SessionTable::lease_link_locked(const PrincipalId& who, Role& role, std::string& lease_id,
                                      int64_t& end_wall, int64_t now_wall_ms) const {
   const Lease* l = active_lease_locked(now_wall_ms);
   if (!l) return true;
-  if (sub == l->leasee_sub) {
+  if (l->leasee.is(who)) {
     lease_id = l->id;
     end_wall = l->end_wall_ms;
     return true;
   }
   for (const auto& g : l->grants) {
-    if (g.sub == sub && g.end_wall_ms > now_wall_ms) {
+    if (g.who.is(who) && g.end_wall_ms > now_wall_ms) {
       if (role_level(g.role) < role_level(role)) role = g.role;  // only lowers
       lease_id = l->id;
       end_wall = std::min(g.end_wall_ms, l->end_wall_ms);
@@ -89,13 +91,14 @@ bool SessionTable::lease_link_locked(const std::string& sub, Role& role, std::st
   return role_level(role) >= role_level(Role::kOwner);  // the owner stays above any lease
 }
 
-Session SessionTable::make_session_locked(const std::string& key, const std::string& sub, Role role,
+Session SessionTable::make_session_locked(const std::string& key, const PrincipalId& who, Role role,
                                           bool fleet, int64_t now_mono_ms, int64_t now_wall_ms,
                                           const std::string& id) {
   Session s;
   s.id = id.empty() ? new_uuid_v4() : id;
   s.principal_key = key;
-  s.sub = sub;
+  s.iss = who.iss;
+  s.sub = who.sub;
   s.role = role;
   s.fleet = fleet;
   s.granted_mono_ms = now_mono_ms;
@@ -107,7 +110,7 @@ Session SessionTable::make_session_locked(const std::string& key, const std::str
     s.expires_mono_ms = now_mono_ms + opts_.max_session_ms;
   Role r = role;
   int64_t end_wall = 0;
-  if (lease_link_locked(sub, r, s.lease_id, end_wall, now_wall_ms)) s.role = r;
+  if (lease_link_locked(who, r, s.lease_id, end_wall, now_wall_ms)) s.role = r;
   if (end_wall) {
     int64_t end_mono = now_mono_ms + (end_wall - now_wall_ms);
     if (s.expires_mono_ms == 0 || end_mono < s.expires_mono_ms) s.expires_mono_ms = end_mono;
@@ -142,7 +145,7 @@ void SessionTable::promote_locked(int64_t now_mono_ms, int64_t now_wall_ms) {
     std::string lease_id;
     int64_t end_wall = 0;
     if (now_mono_ms - q.enqueued_mono_ms > opts_.queue_wait_ms ||
-        !lease_link_locked(q.sub, role, lease_id, end_wall, now_wall_ms)) {
+        !lease_link_locked(q.who(), role, lease_id, end_wall, now_wall_ms)) {
       ControlChange c;
       c.event = ControlEvent::kQueueDrop;
       c.queued = q;
@@ -152,7 +155,8 @@ void SessionTable::promote_locked(int64_t now_mono_ms, int64_t now_wall_ms) {
       continue;
     }
     // AVAILABLE for an instant: the head of the queue claims it.
-    holder_ = make_session_locked(q.principal_key, q.sub, role, q.fleet, now_mono_ms, now_wall_ms);
+    holder_ =
+        make_session_locked(q.principal_key, q.who(), role, q.fleet, now_mono_ms, now_wall_ms);
     transit(ControlEvent::kClaim, ControlState::kHeld);
     ControlChange c;
     c.event = ControlEvent::kPromote;
@@ -188,8 +192,8 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
     // Explicit renewal by re-claiming: a fresh TTL, same session id; the role may be lowered,
     // never raised above the session's (a handoff's cap stays).
     if (role_level(holder_->role) < role_level(role)) role = holder_->role;
-    Session s =
-        make_session_locked(p.key(), p.sub, role, fleet, now_mono_ms, now_wall_ms, holder_->id);
+    Session s = make_session_locked(p.key(), PrincipalId::of(p), role, fleet, now_mono_ms,
+                                    now_wall_ms, holder_->id);
     holder_ = s;
     transit(ControlEvent::kRenew, ControlState::kHeld);
     r.outcome = ClaimOutcome::kRenewed;
@@ -198,7 +202,7 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
   }
   std::string lease_id;
   int64_t end_wall = 0;
-  if (!lease_link_locked(p.sub, role, lease_id, end_wall, now_wall_ms)) {
+  if (!lease_link_locked(PrincipalId::of(p), role, lease_id, end_wall, now_wall_ms)) {
     const Lease* l = active_lease_locked(now_wall_ms);
     return Error(ErrorCode::kControlConflict,
                  "the robot is leased to another principal for " +
@@ -206,7 +210,7 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
                  "lease");
   }
   if (reserved_) {
-    if (p.sub != reserved_->target_sub)
+    if (!reserved_->target.is(p))
       return Error(ErrorCode::kControlConflict,
                    "control is reserved for a named handoff for " +
                        std::to_string((reserved_->until_mono_ms - now_mono_ms + 999) / 1000) + " s",
@@ -214,7 +218,8 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
     if (reserved_->max_role && role_level(*reserved_->max_role) < role_level(role))
       role = *reserved_->max_role;
     reserved_.reset();
-    holder_ = make_session_locked(p.key(), p.sub, role, fleet, now_mono_ms, now_wall_ms);
+    holder_ =
+        make_session_locked(p.key(), PrincipalId::of(p), role, fleet, now_mono_ms, now_wall_ms);
     transit(ControlEvent::kClaim, ControlState::kHeld);
     r.session = *holder_;
     return r;
@@ -228,7 +233,8 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
     }
     if (preempt) {
       r.preempted = holder_;
-      holder_ = make_session_locked(p.key(), p.sub, role, fleet, now_mono_ms, now_wall_ms);
+      holder_ =
+          make_session_locked(p.key(), PrincipalId::of(p), role, fleet, now_mono_ms, now_wall_ms);
       transit(ControlEvent::kPreempt, ControlState::kHeld);
       r.session = *holder_;
       return r;
@@ -249,13 +255,13 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
     }
     if (queue_.size() >= opts_.queue_max)
       return Error(ErrorCode::kControlConflict, "the control queue is full", "session");
-    queue_.push_back(QueuedClaim{p.key(), p.sub, role, fleet, now_mono_ms});
+    queue_.push_back(QueuedClaim{p.key(), p.issuer, p.sub, role, fleet, now_mono_ms});
     transit(ControlEvent::kQueue, ControlState::kHeld);
     r.outcome = ClaimOutcome::kQueued;
     r.queue_position = queue_.size();
     return r;
   }
-  holder_ = make_session_locked(p.key(), p.sub, role, fleet, now_mono_ms, now_wall_ms);
+  holder_ = make_session_locked(p.key(), PrincipalId::of(p), role, fleet, now_mono_ms, now_wall_ms);
   transit(ControlEvent::kClaim, ControlState::kHeld);
   r.session = *holder_;
   return r;
@@ -284,8 +290,8 @@ Result<Session> SessionTable::renew(const std::string& session_id, const Princip
     return Error(ErrorCode::kInsufficientPrivileges, "only the holder may renew this session",
                  "session_id");
   Role role = std::min(holder_->role, p.role);
-  holder_ = make_session_locked(p.key(), p.sub, role, holder_->fleet, now_mono_ms, now_wall_ms,
-                                holder_->id);
+  holder_ = make_session_locked(p.key(), PrincipalId::of(p), role, holder_->fleet, now_mono_ms,
+                                now_wall_ms, holder_->id);
   transit(ControlEvent::kRenew, ControlState::kHeld);
   return *holder_;
 }
@@ -308,7 +314,7 @@ Result<Session> SessionTable::release(const std::string& session_id, const Princ
 }
 
 Result<Session> SessionTable::handoff(const std::string& session_id, const Principal& p,
-                                      std::string target_sub, std::optional<Role> target_role,
+                                      PrincipalId target, std::optional<Role> target_role,
                                       int64_t window_ms, int64_t now_mono_ms) {
   MutexLock lock(mu_);
   expire_locked(now_mono_ms);
@@ -319,7 +325,8 @@ Result<Session> SessionTable::handoff(const std::string& session_id, const Princ
                  "session_id");
   Session s = *holder_;
   holder_.reset();
-  reserved_ = Reservation{std::move(target_sub), target_role, s.id, now_mono_ms + window_ms};
+  if (target.iss.empty()) target.iss = p.issuer;
+  reserved_ = Reservation{std::move(target), target_role, s.id, now_mono_ms + window_ms};
   transit(ControlEvent::kHandoff, ControlState::kReserved);
   return s;
 }
@@ -372,10 +379,10 @@ void SessionTable::tick(int64_t now_mono_ms, int64_t now_wall_ms) {
       ++version_;
     } else {
       // A grant inside a running lease can end earlier than the lease.
-      if (holder_ && holder_->lease_id == it->id && holder_->sub != it->leasee_sub) {
+      if (holder_ && holder_->lease_id == it->id && !it->leasee.is(holder_->who())) {
         bool granted = false;
         for (const auto& g : it->grants)
-          if (g.sub == holder_->sub && g.end_wall_ms > now_wall_ms) granted = true;
+          if (g.who.is(holder_->who()) && g.end_wall_ms > now_wall_ms) granted = true;
         if (!granted)
           drop_holder_locked(ControlEvent::kRevoke, "the grant within lease " + it->id + " ended",
                              now_mono_ms);
@@ -505,12 +512,13 @@ json::Value SessionTable::queue_json(int64_t now_mono_ms) {
   return arr;
 }
 
-Result<Lease> SessionTable::grant_lease(const Principal& owner, const std::string& leasee_sub,
+Result<Lease> SessionTable::grant_lease(const Principal& owner, PrincipalId leasee,
                                         int64_t duration_ms, int64_t now_wall_ms,
                                         int64_t now_mono_ms) {
   if (role_level(owner.role) < role_level(Role::kOwner))
     return Error(ErrorCode::kInsufficientPrivileges, "only an OWNER may grant a lease", "role");
-  if (leasee_sub.empty() || leasee_sub.size() > 256)
+  if (leasee.iss.empty()) leasee.iss = owner.issuer;
+  if (leasee.sub.empty() || leasee.sub.size() > 256 || leasee.iss.size() > 256)
     return Error(ErrorCode::kSchemaValidationFailed, "leasee (a user id) is required", "leasee",
                  "missing_field");
   if (duration_ms <= 0 || duration_ms > int64_t{366} * 86'400'000)
@@ -523,7 +531,7 @@ Result<Lease> SessionTable::grant_lease(const Principal& owner, const std::strin
                  "lease");
   Lease l;
   l.id = new_uuid_v4();
-  l.leasee_sub = leasee_sub;
+  l.leasee = std::move(leasee);
   l.granted_by = owner.sub;
   l.start_wall_ms = now_wall_ms;
   l.end_wall_ms = now_wall_ms + duration_ms;
@@ -533,13 +541,13 @@ Result<Lease> SessionTable::grant_lease(const Principal& owner, const std::strin
 }
 
 Result<Lease> SessionTable::grant_within_lease(const Principal& leasee, const std::string& lease_id,
-                                               const std::string& sub, Role role,
-                                               int64_t duration_ms, int64_t now_wall_ms,
-                                               int64_t now_mono_ms) {
+                                               PrincipalId who, Role role, int64_t duration_ms,
+                                               int64_t now_wall_ms, int64_t now_mono_ms) {
   if (role != Role::kUser && role != Role::kGuest)
     return Error(ErrorCode::kSchemaValidationFailed, "a lease grants USER or GUEST access only",
                  "role");
-  if (sub.empty() || sub.size() > 256)
+  if (who.iss.empty()) who.iss = leasee.issuer;
+  if (who.sub.empty() || who.sub.size() > 256 || who.iss.size() > 256)
     return Error(ErrorCode::kSchemaValidationFailed, "user_id is required", "user_id",
                  "missing_field");
   if (duration_ms <= 0)
@@ -548,16 +556,15 @@ Result<Lease> SessionTable::grant_within_lease(const Principal& leasee, const st
   if (now_mono_ms >= 0) absorb_wall_step_locked(now_mono_ms, now_wall_ms);
   for (auto& l : leases_) {
     if (l.id != lease_id || now_wall_ms >= l.end_wall_ms) continue;
-    bool may =
-        (leasee.sub == l.leasee_sub && role_level(leasee.role) >= role_level(Role::kLeasee)) ||
-        role_level(leasee.role) >= role_level(Role::kOwner);
+    bool may = (l.leasee.is(leasee) && role_level(leasee.role) >= role_level(Role::kLeasee)) ||
+               role_level(leasee.role) >= role_level(Role::kOwner);
     if (!may)
       return Error(ErrorCode::kInsufficientPrivileges,
                    "only the lease's LEASEE may grant within it", "lease_id");
-    LeaseGrant g{sub, role, std::min(l.end_wall_ms, now_wall_ms + duration_ms)};
+    LeaseGrant g{who, role, std::min(l.end_wall_ms, now_wall_ms + duration_ms)};
     bool replaced = false;
     for (auto& x : l.grants)
-      if (x.sub == sub) {
+      if (x.who == who) {
         x = g;
         replaced = true;
       }
@@ -621,18 +628,19 @@ void SessionTable::load_json(const json::Value& v, int64_t now_wall_ms) {
     if (!e.is_object()) continue;
     Lease l;
     l.id = json::string_field(e, "lease_id");
-    l.leasee_sub = json::string_field(e, "leasee");
+    l.leasee = PrincipalId{json::string_field(e, "leasee_iss"), json::string_field(e, "leasee")};
     l.granted_by = json::string_field(e, "granted_by");
     l.start_wall_ms = json::int_field(e, "start_ms");
     l.end_wall_ms = json::int_field(e, "end_ms");
-    if (l.id.empty() || l.leasee_sub.empty() || l.end_wall_ms <= now_wall_ms) continue;
+    if (l.id.empty() || l.leasee.empty() || l.end_wall_ms <= now_wall_ms) continue;
     if (const json::Value* gs = e.get("grants"); gs && gs->is_array()) {
       for (const auto& g : gs->as_array()) {
         if (!g.is_object()) continue;
         auto r = role_from_name(json::string_field(g, "role"));
         if (!r || (*r != Role::kUser && *r != Role::kGuest)) continue;
         l.grants.push_back(
-            LeaseGrant{json::string_field(g, "sub"), *r, json::int_field(g, "end_ms")});
+            LeaseGrant{PrincipalId{json::string_field(g, "iss"), json::string_field(g, "sub")}, *r,
+                       json::int_field(g, "end_ms")});
       }
     }
     leases_.push_back(std::move(l));

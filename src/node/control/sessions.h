@@ -55,6 +55,7 @@ struct ControlOptions {
 struct Session {
   std::string id;
   std::string principal_key;
+  std::string iss;
   std::string sub;
   Role role = Role::kGuest;
   int64_t granted_mono_ms = 0;
@@ -62,10 +63,11 @@ struct Session {
   int64_t granted_wall_ms = 0;
   std::string lease_id;  // granted under this lease (as its leasee or a grantee)
   bool fleet = false;
+  PrincipalId who() const { return PrincipalId{iss, sub}; }
 };
 
 struct Reservation {
-  std::string target_sub;
+  PrincipalId target;            // issuer and subject
   std::optional<Role> max_role;  // the handoff's target_role (can only lower)
   std::string from_session;
   int64_t until_mono_ms = 0;
@@ -73,21 +75,23 @@ struct Reservation {
 
 struct QueuedClaim {
   std::string principal_key;
+  std::string iss;
   std::string sub;
   Role role = Role::kGuest;
   bool fleet = false;
   int64_t enqueued_mono_ms = 0;
+  PrincipalId who() const { return PrincipalId{iss, sub}; }
 };
 
 struct LeaseGrant {
-  std::string sub;
+  PrincipalId who;          // issuer and subject
   Role role = Role::kUser;  // USER or GUEST
   int64_t end_wall_ms = 0;
 };
 
 struct Lease {
   std::string id;
-  std::string leasee_sub;
+  PrincipalId leasee;  // issuer and subject
   std::string granted_by;
   int64_t start_wall_ms = 0;
   int64_t end_wall_ms = 0;
@@ -137,8 +141,9 @@ class SessionTable {
   // Errors: NOT_FOUND (no such session), INSUFFICIENT_PRIVILEGES (not the holder).
   Result<Session> release(const std::string& session_id, const Principal& p, int64_t now_mono_ms,
                           int64_t now_wall_ms = 0) EXCLUDES(mu_);
-  // Ends the holder's session and reserves control for `target_sub` for the window.
-  Result<Session> handoff(const std::string& session_id, const Principal& p, std::string target_sub,
+  // Ends the holder's session and reserves control for `target` for the window (without an
+  // issuer: a subject of the holder's issuer).
+  Result<Session> handoff(const std::string& session_id, const Principal& p, PrincipalId target,
                           std::optional<Role> target_role, int64_t window_ms, int64_t now_mono_ms)
       EXCLUDES(mu_);
   // Leaves the queue (the claimant gave up). True when it was queued.
@@ -172,11 +177,11 @@ class SessionTable {
   // SCHEMA_VALIDATION_FAILED, NOT_FOUND.
   // `now_mono_ms` (optional, -1 = not given) lets a wall-clock step since the last reading be
   // absorbed first, so that a lease granted just after a step is not shifted by it later.
-  Result<Lease> grant_lease(const Principal& owner, const std::string& leasee_sub,
-                            int64_t duration_ms, int64_t now_wall_ms, int64_t now_mono_ms = -1)
-      EXCLUDES(mu_);
+  // A principal named without an issuer is one of the granting principal's issuer.
+  Result<Lease> grant_lease(const Principal& owner, PrincipalId leasee, int64_t duration_ms,
+                            int64_t now_wall_ms, int64_t now_mono_ms = -1) EXCLUDES(mu_);
   Result<Lease> grant_within_lease(const Principal& leasee, const std::string& lease_id,
-                                   const std::string& sub, Role role, int64_t duration_ms,
+                                   PrincipalId who, Role role, int64_t duration_ms,
                                    int64_t now_wall_ms, int64_t now_mono_ms = -1) EXCLUDES(mu_);
   Result<Lease> revoke_lease(const Principal& p, const std::string& lease_id, int64_t now_mono_ms,
                              int64_t now_wall_ms) EXCLUDES(mu_);
@@ -199,12 +204,12 @@ class SessionTable {
   void drop_holder_locked(ControlEvent event, const std::string& reason, int64_t now_mono_ms)
       REQUIRES(mu_);
   void promote_locked(int64_t now_mono_ms, int64_t now_wall_ms) REQUIRES(mu_);
-  Session make_session_locked(const std::string& key, const std::string& sub, Role role, bool fleet,
+  Session make_session_locked(const std::string& key, const PrincipalId& who, Role role, bool fleet,
                               int64_t now_mono_ms, int64_t now_wall_ms, const std::string& id = {})
       REQUIRES(mu_);
   const Lease* active_lease_locked(int64_t now_wall_ms) const REQUIRES(mu_);
   // The lease link and role cap of a claimant; false when a lease runs and excludes it.
-  bool lease_link_locked(const std::string& sub, Role& role, std::string& lease_id,
+  bool lease_link_locked(const PrincipalId& who, Role& role, std::string& lease_id,
                          int64_t& end_wall, int64_t now_wall_ms) const REQUIRES(mu_);
   // Lease times are wall-clock (they are shown and persisted as such) but run on the
   // monotonic clock: a wall-clock step seen between two calls that carry both clocks shifts

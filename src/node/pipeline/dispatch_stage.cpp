@@ -4,12 +4,67 @@
 
 #include "base/clock.h"
 #include "base/log.h"
+#include "base/thread_annotations.h"
 #include "node/pipeline/stages.h"
 #include "node/services/node_services.h"
 #include "rcan/errors.h"
 
 namespace rcan::node {
 namespace {
+
+// An ESTOP or STOP answer waits for its audit record and, for an ESTOP, for its latch file;
+// whichever of them comes last (the stage, the audit writer or the safety core's persister)
+// sends it. Nothing here blocks a thread.
+class StopAnswer {
+ public:
+  StopAnswer(NodeServices& svc, std::shared_ptr<Context> ctx, bool latch)
+      : svc_(svc), ctx_(std::move(ctx)), pending_(latch ? 3 : 2) {}
+
+  // The stage's own part: the answer's payload.
+  void ready(json::Object payload) EXCLUDES(mu_) {
+    {
+      MutexLock lock(mu_);
+      payload_ = std::move(payload);
+    }
+    arrive();
+  }
+  void audited(bool ok) EXCLUDES(mu_) {
+    if (!ok) {
+      MutexLock lock(mu_);
+      extra_.set("audit", "unavailable");
+    }
+    arrive();
+  }
+  // The latch survives a restart ("durable"), or the answer says it may not and why.
+  void latched(bool durable, const std::string& error) EXCLUDES(mu_) {
+    {
+      MutexLock lock(mu_);
+      extra_.set("latch", durable ? "durable" : "not_durable");
+      if (!durable) extra_.set("latch_error", error);
+    }
+    arrive();
+  }
+
+ private:
+  void arrive() EXCLUDES(mu_) {
+    json::Object payload;
+    {
+      MutexLock lock(mu_);
+      if (--pending_ > 0) return;
+      payload = std::move(payload_);
+      for (const auto& [k, v] : extra_) payload.set(k, v);
+    }
+    ctx_->finish(Outcome{
+        200, svc_.envelope(MessageType::kAck, std::move(payload), ctx_->msg->message_id), {}});
+  }
+
+  NodeServices& svc_;
+  const std::shared_ptr<Context> ctx_;
+  Mutex mu_;
+  int pending_ GUARDED_BY(mu_);
+  json::Object payload_ GUARDED_BY(mu_);
+  json::Object extra_ GUARDED_BY(mu_);
+};
 
 // Audit, then dispatch. SAFETY stops act first and record after; everything else is recorded
 // durably before it reaches the safety core.
@@ -80,9 +135,14 @@ class DispatchStage final : public Stage {
     if (const json::Value* r = ctx->msg->payload.find("reason"); r && r->is_string())
       reason = r->as_string().substr(0, 512);
     double us = 0;
+    auto answer = std::make_shared<StopAnswer>(svc_, ctx, estop);
     const int64_t t_call = steady_us();
     if (estop) {
-      us = svc_.act.estop(source, reason);
+      // The ACK waits for the latch file too: an acknowledged ESTOP survives a restart, or
+      // its answer says that it may not (latch: not_durable, with why).
+      us = svc_.act.estop(source, reason, [answer](bool durable, const std::string& error) {
+        answer->latched(durable, error);
+      });
     } else {
       svc_.act.stop(source);
       us = static_cast<double>(steady_us() - t_call);
@@ -118,16 +178,12 @@ class DispatchStage final : public Stage {
     }
     auto e = accepted_entry(*ctx, estop ? "ESTOP" : "STOP");
     if (!reason.empty()) e.reason = reason;
-    std::string id = ctx->msg->message_id;
-    json::Object payload{{"command", safety_action_name(ctx->safety)},
-                         {"result", estop ? "estop_latched" : "stopped"},
-                         {"estop_active", svc_.act.estop_active()}};
     // The stop already happened; the answer waits for the record (or its failure).
     svc_.write_audit(std::move(e),
-                     [this, ctx, id, payload](rcan::Result<audit::Receipt> r) mutable {
-                       if (!r.ok()) payload.set("audit", "unavailable");
-                       ctx->finish(Outcome{200, svc_.envelope(MessageType::kAck, payload, id), {}});
-                     });
+                     [answer](rcan::Result<audit::Receipt> r) { answer->audited(r.ok()); });
+    answer->ready(json::Object{{"command", safety_action_name(ctx->safety)},
+                               {"result", estop ? "estop_latched" : "stopped"},
+                               {"estop_active", svc_.act.estop_active()}});
     return Result::kParked;
   }
 

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 
@@ -29,13 +30,20 @@ struct PreparedCommand {
   std::string session_id;
 };
 
+// How estop() says whether the latch survives a restart (see Actuation::estop).
+using EstopLatchFn = std::function<void(bool durable, const std::string& error)>;
+
 class Actuation {
  public:
   virtual ~Actuation() = default;
   virtual bool estop_active() const = 0;
   // Latches ESTOP and stops the actuators now. Returns the microseconds from the call to
-  // the driver's stop.
-  virtual double estop(const std::string& source, const std::string& reason) = 0;
+  // the driver's stop. Then `on_latch` is called exactly once, without blocking anyone (on
+  // another thread, or before estop() returns): durable, once the latch is in its state file;
+  // or not, with why — the write failed or did not finish in time (the latch holds in memory
+  // and the write is retried), or there is no state file.
+  virtual double estop(const std::string& source, const std::string& reason,
+                       EstopLatchFn on_latch) = 0;
   // Clears a latched ESTOP. Errors: INSUFFICIENT_PRIVILEGES below LEASEE.
   virtual Status resume(Role role, const std::string& source) = 0;
   // Stops motion without latching (STOP safety event).

@@ -13,6 +13,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 
 #include "base/clock.h"
@@ -160,6 +161,14 @@ SafetyCore::~SafetyCore() {
   }
   persist_cv_.notify_all();
   if (persister_.joinable()) persister_.join();
+  std::vector<PersistWaiter> left;
+  std::string why;
+  {
+    MutexLock lock(meta_mu_);
+    left = take_waiters_locked([](const PersistWaiter&) { return true; });
+    why = persist_error_.empty() ? "shutting down before the latch was written" : persist_error_;
+  }
+  for (auto& w : left) w.fn(false, why);
 }
 
 Status SafetyCore::open(const std::string& state_dir, audit::Env* env) {
@@ -341,6 +350,48 @@ bool SafetyCore::wait_persisted(uint64_t seq, int64_t timeout_ms) {
   return true;
 }
 
+void SafetyCore::when_persisted(uint64_t seq, LatchFn fn) {
+  bool memory_only = false;
+  {
+    MutexLock lock(meta_mu_);
+    memory_only = !persist_enabled_;
+    if (!memory_only && persisted_seq_ < seq) {
+      persist_waiters_.push_back(PersistWaiter{
+          seq, clock_.mono_ms() + std::max<int64_t>(0, cfg_.latch_ack_timeout_ms), std::move(fn)});
+      fn = nullptr;
+    }
+  }
+  if (!fn) {
+    wake_ticker();  // a new deadline for a resting control loop
+  } else if (memory_only) {
+    fn(false, "no safety state directory: the latch is kept in memory only");
+  } else {
+    fn(true, "");
+  }
+}
+
+template <typename Pred>
+std::vector<SafetyCore::PersistWaiter> SafetyCore::take_waiters_locked(Pred pred) {
+  std::vector<PersistWaiter> out;
+  auto keep = std::partition(persist_waiters_.begin(), persist_waiters_.end(),
+                             [&](const PersistWaiter& w) { return !pred(w); });
+  std::move(keep, persist_waiters_.end(), std::back_inserter(out));
+  persist_waiters_.erase(keep, persist_waiters_.end());
+  return out;
+}
+
+void SafetyCore::expire_persist_waiters(int64_t now) {
+  std::vector<PersistWaiter> late;
+  {
+    MutexLock lock(meta_mu_);
+    if (persist_waiters_.empty()) return;
+    late = take_waiters_locked([&](const PersistWaiter& w) { return now >= w.deadline_mono; });
+  }
+  for (auto& w : late)
+    w.fn(false, "the latch file was not written within " +
+                    std::to_string(cfg_.latch_ack_timeout_ms) + " ms (still trying)");
+}
+
 uint64_t SafetyCore::state_seq() const {
   MutexLock lock(meta_mu_);
   return latch_seq_;
@@ -399,14 +450,26 @@ void SafetyCore::persist_loop() {
     lock.unlock();
     Status st = write_state_file(snapshot);
     lock.lock();
+    std::vector<PersistWaiter> answered;
     if (st.ok()) {
       persisted_seq_ = std::max(persisted_seq_, seq);
       persist_error_.clear();
       durable_cv_.notify_all();
-      continue;
+      const uint64_t durable = persisted_seq_;
+      answered =
+          take_waiters_locked([durable](const PersistWaiter& w) { return w.seq <= durable; });
+    } else {
+      persist_error_ = st.error().message;
+      durable_cv_.notify_all();
+      answered = take_waiters_locked([seq](const PersistWaiter& w) { return w.seq <= seq; });
     }
-    persist_error_ = st.error().message;
-    durable_cv_.notify_all();
+    if (!answered.empty()) {  // answered unlocked: a callback may ask for the status
+      const std::string error = persist_error_;
+      lock.unlock();
+      for (auto& w : answered) w.fn(st.ok(), error);
+      lock.lock();
+    }
+    if (st.ok()) continue;
     if (persist_quit_) return;
     // Retry every 200 ms, sooner on a new change or shutdown (which makes one last attempt).
     const auto retry_at = std::chrono::steady_clock::now() + std::chrono::milliseconds(200);
@@ -592,6 +655,7 @@ void SafetyCore::tick() {
                                 "no watchdog feed; ESTOP latched"));
   }
 
+  expire_persist_waiters(now);
   loop_count_.fetch_add(1, std::memory_order_relaxed);
   loop_latency_us_.store((steady_ns() - t0) / 1000, std::memory_order_relaxed);
   for (const auto& ev : events) emit(ev);
@@ -618,6 +682,10 @@ int64_t SafetyCore::rest_for_ms() const {
       if (!s.lost) until = std::min(until, s.last_heartbeat_mono + s.timeout_ms + 1);
     if (cfg_.watchdog_timeout_ms > 0 && watchdog_last_feed_mono_ != 0)
       until = std::min(until, watchdog_last_feed_mono_ + cfg_.watchdog_timeout_ms + 1);
+  }
+  {
+    MutexLock lock(meta_mu_);
+    for (const auto& w : persist_waiters_) until = std::min(until, w.deadline_mono);
   }
   const int64_t rest = until - now;
   return rest > cfg_.tick_period_ms ? rest : 0;
@@ -676,20 +744,30 @@ void SafetyCore::start() {
 }
 
 void SafetyCore::stop() {
-  MutexLock lock(thread_mu_);
-  if (ticker_.joinable()) {
-    {
-      MutexLock wl(tick_wait_mu_);
-      running_.store(false, std::memory_order_release);
+  {
+    MutexLock lock(thread_mu_);
+    if (ticker_.joinable()) {
+      {
+        MutexLock wl(tick_wait_mu_);
+        running_.store(false, std::memory_order_release);
+      }
+      tick_wait_cv_.notify_all();
+      ticker_.join();
     }
-    tick_wait_cv_.notify_all();
-    ticker_.join();
+    running_.store(false);
+    driver_->stop();
+    MutexLock al(apply_mu_);
+    driver_->stop();
+    drive_deadline_mono_ = 0;
   }
-  running_.store(false);
-  driver_->stop();
-  MutexLock al(apply_mu_);
-  driver_->stop();
-  drive_deadline_mono_ = 0;
+  // Whoever waits for the latch file is answered now, while what it answers through (the
+  // node's services and transports, stopped before the core) still exists.
+  std::vector<PersistWaiter> left;
+  {
+    MutexLock ml(meta_mu_);
+    left = take_waiters_locked([](const PersistWaiter&) { return true; });
+  }
+  for (auto& w : left) w.fn(false, "the safety core stopped before the latch file was written");
 }
 
 // ---- status ---------------------------------------------------------------------------------

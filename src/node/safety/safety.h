@@ -90,6 +90,9 @@ struct SafetyConfig {
   // estop() waits at most this long for a dispatch already inside Driver::apply() (see
   // estop()). The stop itself never waits.
   int64_t estop_fence_timeout_ms = 100;
+  // when_persisted() answers "not durable" if the latch write has not finished this long after
+  // it was asked (a hung disk); the write itself goes on and is retried.
+  int64_t latch_ack_timeout_ms = 2000;
 };
 
 struct DispatchOptions {
@@ -157,8 +160,12 @@ struct EstopResult {
   bool fenced = true;
   int64_t stop_latency_ns = 0;    // call → Driver::stop() returned
   int64_t return_latency_ns = 0;  // call → estop() returning (fence included, not persistence)
-  uint64_t state_seq = 0;         // pass to wait_persisted()
+  uint64_t state_seq = 0;         // pass to wait_persisted() or when_persisted()
 };
+
+// when_persisted()'s answer: durable, or why not (the write's error, the time limit, no state
+// directory). Called exactly once.
+using LatchFn = std::function<void(bool durable, const std::string& error)>;
 
 class SafetyCore {
  public:
@@ -202,6 +209,14 @@ class SafetyCore {
   // Waits until the latch state `seq` (or later) is durable; false on timeout (a failing
   // write is retried every 200 ms; status().persist_error says why) or without open().
   bool wait_persisted(uint64_t seq, int64_t timeout_ms);
+  // The same without blocking: `fn` is called once — durable, as soon as the latch state `seq`
+  // (or later) is; not durable with the reason as soon as a write of it fails (it is still
+  // retried), when it is not done within SafetyConfig::latch_ack_timeout_ms (checked by the
+  // control loop: start(), or tick() by hand), at stop() or destruction, or at once without
+  // open(). It
+  // runs on the persister or control-loop thread, or on the caller's when already decided;
+  // it must not block.
+  void when_persisted(uint64_t seq, LatchFn fn);
   // The sequence number of the current latch state (bumps on every latch/clear).
   uint64_t state_seq() const;
 
@@ -256,6 +271,15 @@ class SafetyCore {
   // Wakes a resting loop (new motion, session or watchdog deadline). Cheap when not resting.
   void wake_ticker();
   void persist_loop();
+  struct PersistWaiter {  // a when_persisted() call not answered yet
+    uint64_t seq = 0;
+    int64_t deadline_mono = 0;
+    LatchFn fn;
+  };
+  // Takes the waiters that `pred` selects out of persist_waiters_ (to be called unlocked).
+  template <typename Pred>
+  std::vector<PersistWaiter> take_waiters_locked(Pred pred) REQUIRES(meta_mu_);
+  void expire_persist_waiters(int64_t now);
   Status write_state_file(const LatchState& st);
   void request_persist(uint64_t seq);
   void emit(const SafetyEvent& ev);
@@ -296,6 +320,7 @@ class SafetyCore {
   bool persist_quit_ GUARDED_BY(meta_mu_) = false;
   CondVar persist_cv_;  // the persister waits on meta_mu_
   CondVar durable_cv_;  // wait_persisted() waits on meta_mu_
+  std::vector<PersistWaiter> persist_waiters_ GUARDED_BY(meta_mu_);
   std::thread persister_;
 
   mutable Mutex deadman_mu_;

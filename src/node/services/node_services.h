@@ -70,7 +70,7 @@ struct NodeSettings {
   // Per-role rate limits per minute, indexed by role level (0 unused); 0 = unlimited.
   std::array<uint32_t, 6> rate_per_minute{0, 10, 100, 500, 1000, 0};
   ReplayOptions replay;
-  std::vector<std::string> injection_patterns = InjectionScreen::default_patterns();
+  std::vector<InjectionRule> injection_patterns = InjectionScreen::default_rules();
   int64_t heartbeat_timeout_ms = config::kDefaultHeartbeatTimeoutMs;
   int64_t default_ttl_ms = 0;  // applied to commands that carry none (0 = none)
   CodecLimits codec;
