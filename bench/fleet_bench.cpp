@@ -128,9 +128,9 @@ class TimedActuation final : public node::Actuation {
  public:
   explicit TimedActuation(node::SafetyActuation& inner) : inner_(inner) {}
   bool estop_active() const override { return inner_.estop_active(); }
-  double estop(const std::string& source, const std::string& reason,
+  double estop(const std::string& source, const std::string& reason, Role by,
                node::EstopLatchFn on_latch) override {
-    double r = inner_.estop(source, reason, std::move(on_latch));
+    double r = inner_.estop(source, reason, by, std::move(on_latch));
     latched_at.store(mono_ms());
     return r;
   }

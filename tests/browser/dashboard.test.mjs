@@ -388,7 +388,8 @@ async function approvals(context, consoleErrors, pageErrors, isApiRefusal) {
   await page.click('#tabs button[data-view=audit]');
   await page.waitForFunction(() => document.querySelectorAll('#audit-table tbody tr').length > 3);
   await page.evaluate(() => {
-    const tr = Array.from(document.querySelectorAll('#audit-table tbody tr')).find((r) => r.cells[6] && r.cells[6].textContent === 'drive');
+    // The record names the canonical action: `drive` is a synonym of `move` (docs/PROTOCOL.md §Actions).
+    const tr = Array.from(document.querySelectorAll('#audit-table tbody tr')).find((r) => r.cells[6] && r.cells[6].textContent === 'move');
     if (tr) tr.click();
   });
   const thoughtBtn = await page.waitForSelector('#thought button', { timeout: 5000 }).catch(() => null);

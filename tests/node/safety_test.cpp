@@ -246,6 +246,37 @@ TEST(SafetyResume, RequiresLeaseeOrAbove) {
   EXPECT_TRUE(r.core->resume(5, "creator").ok());
 }
 
+// Whoever latched an ESTOP decides who may clear it: that role or above, and OWNER always
+// (docs/SECURITY.md R12). The rule survives a restart in the latch file.
+TEST(SafetyResume, NeedsTheRoleThatLatchedItOrOwner) {
+  test::TempDir dir;
+  {
+    Rig r;
+    ASSERT_TRUE(r.core->open(dir.path()).ok());
+    (void)r.core->estop("owner via http", "stop", 4);
+    ASSERT_TRUE(r.core->wait_persisted(r.core->state_seq(), 2000));
+    Status s = r.core->resume(3, "leasee");
+    ASSERT_FALSE(s.ok());
+    EXPECT_EQ(s.error().reason, "estop_clear_forbidden");
+    EXPECT_TRUE(r.core->estop_active());
+  }
+  Rig r;  // a restart: the latch and its level come back from the file
+  ASSERT_TRUE(r.core->open(dir.path()).ok());
+  ASSERT_TRUE(r.core->estop_active());
+  EXPECT_FALSE(r.core->resume(3, "leasee").ok());
+  EXPECT_TRUE(r.core->resume(4, "owner").ok());
+  // Latched by a USER, then again by a LEASEE: the higher role counts.
+  (void)r.core->estop("user via http", "stop", 2);
+  (void)r.core->estop("leasee via http", "stop", 3);
+  EXPECT_TRUE(r.core->resume(3, "leasee").ok());
+  // Latched by a CREATOR: OWNER still clears it.
+  (void)r.core->estop("creator", "stop", 5);
+  EXPECT_TRUE(r.core->resume(4, "owner").ok());
+  // Latched by the node itself (watchdog): LEASEE, as before.
+  (void)r.core->estop("watchdog", "timeout");
+  EXPECT_TRUE(r.core->resume(3, "leasee").ok());
+}
+
 TEST(SafetyDispatch, CheckIsADryRun) {
   Rig r;
   auto c = r.core->check(ActuatorCommand::make_drive(5.0, 0, 100));
@@ -901,7 +932,7 @@ TEST(SafetyActuationApply, AppliesWhatPrepareCheckedAndAnswersChat) {
   // An ESTOP between prepare() and apply() refuses the prepared command.
   auto again = prepare(act, command_msg(json::Object{{"action", "move"}, {"linear", 0.1}}));
   ASSERT_TRUE(again.ok());
-  (void)act.estop("test", "between", {});
+  (void)act.estop("test", "between", Role::kOwner, {});
   auto refused = act.apply(*again);
   ASSERT_FALSE(refused.ok());
   EXPECT_EQ(refused.error().reason, "estop_active");

@@ -39,7 +39,8 @@ class FakeActuation final : public Actuation {
     return latched_;
   }
   // The latch is "durable" at once.
-  double estop(const std::string& source, const std::string&, EstopLatchFn on_latch) override {
+  double estop(const std::string& source, const std::string&, Role,
+               EstopLatchFn on_latch) override {
     {
       std::lock_guard<std::mutex> lock(mu_);
       latched_ = true;

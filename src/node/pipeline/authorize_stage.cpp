@@ -35,9 +35,15 @@ class AuthorizeStage final : public Stage {
       case SafetyAction::kStop:
         return Result::kContinue;  // any authenticated principal may stop the robot
       case SafetyAction::kResume:
+        // Clearing an ESTOP re-enables motion: the control scope, LEASEE or above, and (checked
+        // by the safety core against the latch) a role at least that of whoever latched it.
         if (role_level(p.role) < role_level(Role::kLeasee))
           return deny(std::string(role_name(p.role)) + " may not clear an ESTOP (LEASEE or above)",
                       "role");
+        if (!p.has_scope("control"))
+          return deny(std::string(role_name(p.role)) +
+                          " token lacks scope control, needed to clear an ESTOP",
+                      "scope");
         return Result::kContinue;
       case SafetyAction::kNone:
         break;

@@ -140,9 +140,9 @@ class DispatchStage final : public Stage {
     if (estop) {
       // The ACK waits for the latch file too: an acknowledged ESTOP survives a restart, or
       // its answer says that it may not (latch: not_durable, with why).
-      us = svc_.act.estop(source, reason, [answer](bool durable, const std::string& error) {
-        answer->latched(durable, error);
-      });
+      us = svc_.act.estop(
+          source, reason, ctx->principal.role,
+          [answer](bool durable, const std::string& error) { answer->latched(durable, error); });
     } else {
       svc_.act.stop(source);
       us = static_cast<double>(steady_us() - t_call);

@@ -128,9 +128,9 @@ SafetyActuation::SafetyActuation(SafetyCore& core, std::string robot_name)
 
 bool SafetyActuation::estop_active() const { return core_.estop_active(); }
 
-double SafetyActuation::estop(const std::string& source, const std::string& reason,
+double SafetyActuation::estop(const std::string& source, const std::string& reason, Role by,
                               EstopLatchFn on_latch) {
-  EstopResult r = core_.estop(source, reason);
+  EstopResult r = core_.estop(source, reason, role_level(by));
   if (on_latch) core_.when_persisted(r.state_seq, std::move(on_latch));
   return static_cast<double>(r.stop_latency_ns) / 1000.0;
 }

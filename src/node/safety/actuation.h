@@ -42,9 +42,11 @@ class Actuation {
   // another thread, or before estop() returns): durable, once the latch is in its state file;
   // or not, with why — the write failed or did not finish in time (the latch holds in memory
   // and the write is retried), or there is no state file.
-  virtual double estop(const std::string& source, const std::string& reason,
+  // `by` is the role of the principal who asked: only that role or OWNER may clear it.
+  virtual double estop(const std::string& source, const std::string& reason, Role by,
                        EstopLatchFn on_latch) = 0;
-  // Clears a latched ESTOP. Errors: INSUFFICIENT_PRIVILEGES below LEASEE.
+  // Clears a latched ESTOP. Errors: INSUFFICIENT_PRIVILEGES below LEASEE, or below the role
+  // that latched it (OWNER clears any).
   virtual Status resume(Role role, const std::string& source) = 0;
   // Stops motion without latching (STOP safety event).
   virtual void stop(const std::string& source) = 0;

@@ -20,7 +20,7 @@ class SafetyActuation final : public Actuation {
   SafetyActuation(SafetyCore& core, std::string robot_name);
 
   bool estop_active() const override;
-  double estop(const std::string& source, const std::string& reason,
+  double estop(const std::string& source, const std::string& reason, Role by,
                EstopLatchFn on_latch) override;
   Status resume(Role role, const std::string& source) override;
   void stop(const std::string& source) override;

@@ -37,6 +37,7 @@ constexpr const char* kStateFormat = "rcan-safety-state-v1";
 constexpr size_t kLatencyRing = 4096;
 constexpr int64_t kMaxStepMs = 60'000;
 constexpr int kLevelLeasee = 3;
+constexpr int kLevelOwner = 4;
 
 json::Value joints_json(const JointArray& a) {
   json::Array out;
@@ -222,6 +223,9 @@ Status SafetyCore::open(const std::string& state_dir, audit::Env* env) {
             loaded.reason = r->as_string();
           if (const auto* t = parsed->get("since_ms"); t && t->is_int())
             loaded.since_wall_ms = t->as_int();
+          // Absent in files written before latches kept it: LEASEE's rule, as then.
+          if (const auto* b = parsed->get("by_level"); b && b->is_int())
+            loaded.by_level = static_cast<int>(std::clamp<int64_t>(b->as_int(), 0, 5));
         }
       }
     }
@@ -275,7 +279,7 @@ void SafetyCore::emit(const SafetyEvent& ev) {
 
 // ---- ESTOP / RESUME -------------------------------------------------------------------------
 
-EstopResult SafetyCore::estop(std::string_view source, std::string_view reason) {
+EstopResult SafetyCore::estop(std::string_view source, std::string_view reason, int by_level) {
   const int64_t t0 = steady_ns();
   latched_.store(true, std::memory_order_seq_cst);
   driver_->stop();  // first, before any lock or I/O
@@ -309,9 +313,15 @@ EstopResult SafetyCore::estop(std::string_view source, std::string_view reason) 
     MutexLock lock(meta_mu_);
     latched_.store(true, std::memory_order_release);  // a racing resume() must not win silently
     if (!latch_.active) {
-      latch_ = LatchState{true, std::string(source), std::string(reason), clock_.wall_ms()};
+      latch_ =
+          LatchState{true, std::string(source), std::string(reason), clock_.wall_ms(), by_level};
       ++latch_seq_;
       r.newly_latched = true;
+    } else if (by_level > latch_.by_level) {
+      // Latched again by a higher role: clearing it now needs that role.
+      latch_.by_level = by_level;
+      ++latch_seq_;
+      r.newly_latched = true;  // persisted like a new latch
     }
     r.state_seq = latch_seq_;
   }
@@ -328,6 +338,13 @@ Status SafetyCore::resume(int principal_role_level, std::string_view source) {
   {
     MutexLock lock(meta_mu_);
     if (!latch_.active && !latched_.load()) return Status::Ok();  // nothing latched
+    // Whoever latched it decides who may clear it: a role at least theirs, or OWNER.
+    if (principal_role_level < std::min(latch_.by_level, kLevelOwner)) {
+      return Error(ErrorCode::kInsufficientPrivileges,
+                   "this ESTOP was latched by role level " + std::to_string(latch_.by_level) +
+                       "; clearing it needs that level or OWNER",
+                   "", "estop_clear_forbidden");
+    }
     latch_ = LatchState{false, std::string(source), "resume", clock_.wall_ms()};
     ++latch_seq_;
     latched_.store(false, std::memory_order_release);
@@ -431,9 +448,10 @@ LatencyStats SafetyCore::estop_latency() const {
 // ---- persistence ----------------------------------------------------------------------------
 
 Status SafetyCore::write_state_file(const LatchState& st) {
-  json::Object o{{"format", kStateFormat},       {"estop_active", st.active},
-                 {"source", st.source},          {"reason", st.reason},
-                 {"since_ms", st.since_wall_ms}, {"written_ms", clock_.wall_ms()}};
+  json::Object o{{"format", kStateFormat},        {"estop_active", st.active},
+                 {"source", st.source},           {"reason", st.reason},
+                 {"since_ms", st.since_wall_ms},  {"by_level", st.by_level},
+                 {"written_ms", clock_.wall_ms()}};
   const std::string body = json::dump(json::Value(std::move(o))) + "\n";
   Status s = env_->write_file_atomic(state_dir_ + "/" + kStateFile, body);
   if (!s.ok()) return Error(ErrorCode::kInternal, s.error().message);

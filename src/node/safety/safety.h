@@ -202,7 +202,11 @@ class SafetyCore {
   // Driver::apply(), bounded by estop_fence_timeout_ms), a second stop(), and the latch
   // metadata; persistence happens on the persister thread (wait_persisted() to wait for it).
   // After it returns (fenced), no dispatch reaches the driver until resume().
-  EstopResult estop(std::string_view source, std::string_view reason);
+  // `by_level`: the role level of the principal asking (0: the node itself — watchdog,
+  // start-up). A latch remembers the highest level that latched it (in its state file too).
+  EstopResult estop(std::string_view source, std::string_view reason, int by_level = 0);
+  // Clears the latch for a principal of LEASEE or above whose level is at least the latch's
+  // (OWNER and above clear any latch). Errors: INSUFFICIENT_PRIVILEGES, estop_clear_forbidden.
   Status resume(int principal_role_level, std::string_view source);
   bool estop_active() const { return latched_.load(std::memory_order_acquire); }
   bool safe_stop_active() const { return safe_stop_.load(std::memory_order_acquire); }
@@ -259,6 +263,7 @@ class SafetyCore {
     std::string source;
     std::string reason;
     int64_t since_wall_ms = 0;
+    int by_level = 0;  // the highest role level that latched it; 0: the node itself
   };
 
   Result<DispatchOutcome> precheck(const ActuatorCommand& cmd, const DispatchOptions& opts,
