@@ -125,6 +125,31 @@ TEST(AiGateNames, AConfidenceGateOnTheArmCoversEveryArmActionName) {
   }
 }
 
+// §16.5 evidence outlives the process, and one sender cannot rewrite another's.
+TEST(AiThoughts, AThoughtSurvivesARestartAndAnotherSenderCannotOverwriteIt) {
+  test::TempDir dir;
+  const json::Object why{{"reasoning", "the aisle is clear for 2 m"}, {"instruction", "hi"}};
+  const json::Object forged{{"reasoning", "nothing happened here"}};
+  {
+    AiNode n(dir.path(), "");
+    HttpReply sent = n.command(n.leasee(), cmd(new_uuid_v4(), "chat", {{"text", "hi"}},
+                                               ai_block("sim", "m", 0.9, "fast", "th_keep"),
+                                               ",\"thought\":" + json::dump(json::Value(why))));
+    ASSERT_EQ(sent.status, 200) << sent.body;
+    HttpReply other = n.command(
+        n.token("user", {"status", "chat"}),
+        cmd(new_uuid_v4(), "chat", {{"text", "hi"}}, ai_block("sim", "m", 0.9, "fast", "th_keep"),
+            ",\"thought\":" + json::dump(json::Value(forged))));
+    EXPECT_EQ(other.status, 400) << other.body;
+    EXPECT_NE(other.body.find("thought_id_taken"), std::string::npos) << other.body;
+    ASSERT_EQ(n.terminate(), 0);
+  }
+  AiNode again(dir.path(), "", /*fresh=*/false);
+  HttpReply got = again.get("/api/thoughts/th_keep", again.owner());
+  ASSERT_EQ(got.status, 200) << got.body;
+  EXPECT_EQ(parse(got.body).get("reasoning")->as_string(), "the aisle is clear for 2 m");
+}
+
 TEST_F(AiGates, AiBlockWithoutAMustFieldOrWithABadConfidenceIsRefused) {
   json::Object no_model{{"provider", "anthropic"}, {"confidence", 0.88}};
   HttpReply r = n().command(n().leasee(), cmd(new_uuid_v4(), "status", {}, no_model));

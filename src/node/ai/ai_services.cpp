@@ -36,16 +36,22 @@ AiOptions ai_options(const config::NodeConfig& cfg) {
   o.hitl_gates = cfg.agent.hitl_gates;
   o.layers = {cfg.agent.reactive_layer, cfg.agent.fast_layer, cfg.agent.planner_layer};
   o.pending_file = cfg.data_dir + "/hitl-pending.json";
+  o.thought_file = cfg.data_dir + "/thoughts.jsonl";
   return o;
 }
 
 AiServices::AiServices(NodeServices& svc, AiOptions opts)
-    : svc_(svc), opts_(std::move(opts)), thoughts_(opts_.thought_capacity) {}
+    : svc_(svc), opts_(std::move(opts)), thoughts_(opts_.thought_capacity, opts_.thought_file) {}
 
 AiServices::~AiServices() { shutdown(); }
 
 Status AiServices::start(Pipeline& pipeline) {
   pipeline_ = &pipeline;
+  auto thoughts = thoughts_.open();
+  if (!thoughts.ok()) return thoughts.error();
+  if (*thoughts > 0)
+    log(LogLevel::kWarn, "thought_log_lines_skipped",
+        json::Object{{"file", opts_.thought_file}, {"lines", static_cast<int64_t>(*thoughts)}});
   size_t skipped = 0;
   auto items = load_pending(opts_.pending_file, &skipped);
   if (!items.ok()) {
@@ -179,8 +185,12 @@ void AiServices::escalate(const std::shared_ptr<Context>& ctx, const config::Con
     if (t.id.empty()) t.id = "th_" + new_uuid_v4();
     t.layer = to;
     t.escalated_from = from_thought;
+    t.principal = ctx->principal.key();
+    if (!thoughts_.put(t)) {  // the layer named an id someone else's thought holds: a new one
+      t.id = "th_" + new_uuid_v4();
+      (void)thoughts_.put(t);
+    }
     next->ai->thought_id = t.id;
-    thoughts_.put(t);
     esc.set("thought_id", t.id);
     ctx->audit_detail.erase("confidence_gate");
     ctx->audit_detail.set("escalation", esc);

@@ -33,6 +33,7 @@ struct AiOptions {
   std::string pending_file;         // held commands survive restarts here (0600)
   keys::SecretBytes watermark_key;  // the robot's ML-DSA-65 secret key (4032 bytes)
   size_t thought_capacity = 1000;
+  std::string thought_file;  // the §16.5 thought log survives restarts here (0600; "" = memory)
   int webhook_timeout_ms = 2000;
 };
 

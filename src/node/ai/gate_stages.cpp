@@ -34,8 +34,16 @@ class ConfidenceGateStage final : public Stage {
     if (ai && m.ai && !ctx->audit_detail.find("escalation") && (thought || m.ai->thought_id)) {
       Thought t = thought_from_command(m, thought, svc_.clock.wall_ms());
       if (t.id.empty()) t.id = "th_" + new_uuid_v4();
-      if (!m.ai->thought_id) m.ai->thought_id = t.id;
-      ai->thoughts().put(std::move(t));
+      t.principal = ctx->principal.key();
+      const std::string id = t.id;
+      if (!ai->thoughts().put(std::move(t))) {
+        return refuse(svc_, ctx,
+                      Error(ErrorCode::kSchemaValidationFailed,
+                            "thought id '" + id.substr(0, 64) + "' holds another sender's thought",
+                            "ai.thought_id", "thought_id_taken"),
+                      "MESSAGE_REJECTED");
+      }
+      if (!m.ai->thought_id) m.ai->thought_id = id;
     }
     m.payload.erase("thought");
     if (!ai) return Result::kContinue;

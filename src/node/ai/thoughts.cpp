@@ -1,6 +1,10 @@
 #include "node/ai/thoughts.h"
 
 #include <algorithm>
+#include <tuple>
+
+#include "base/log.h"
+#include "rcan/errors.h"
 
 namespace rcan::node {
 namespace {
@@ -69,20 +73,165 @@ Thought thought_from_command(const Message& m, const json::Value* thought, int64
   return t;
 }
 
-void ThoughtLog::put(Thought t) {
+json::Object thought_record(const Thought& t) {
+  json::Object o = t.to_json(true).as_object();
+  o.set("principal", t.principal);
+  return o;
+}
+
+Result<Thought> parse_thought_line(std::string_view line) {
+  auto v = json::parse(line);
+  if (!v.ok()) return v.error();
+  if (!v->is_object())
+    return Error(ErrorCode::kSchemaValidationFailed, "a thought line is an object", "");
+  const json::Value& o = *v;
+  auto bad = [](const char* k, const char* what) {
+    return Error(ErrorCode::kSchemaValidationFailed, std::string(k) + " must be " + what, k);
+  };
+  Thought t;
+  const json::Value* id = o.get("id");
+  if (!id || !id->is_string() || id->as_string().empty() || id->as_string().size() > 128)
+    return bad("id", "a string of 1 to 128 characters");
+  t.id = id->as_string();
+  const json::Value* ts = o.get("timestamp_ms");
+  if (!ts || !ts->is_int()) return bad("timestamp_ms", "an integer");
+  t.timestamp_ms = ts->as_int();
+  for (auto [k, out, cap] :
+       {std::tuple<const char*, std::string*, size_t>{"provider", &t.provider, 512},
+        {"model", &t.model, 512},
+        {"instruction", &t.instruction, kMaxText},
+        {"reasoning", &t.reasoning, kMaxText},
+        {"message_id", &t.message_id, 512},
+        {"principal", &t.principal, 1024}}) {
+    const json::Value* f = o.get(k);
+    if (!f || f->is_null()) continue;
+    if (!f->is_string()) return bad(k, "a string");
+    *out = f->as_string().substr(0, cap);
+  }
+  if (const json::Value* l = o.get("layer"); l && !l->is_null()) {
+    if (!l->is_string()) return bad("layer", "a string or null");
+    t.layer = l->as_string().substr(0, 512);
+  }
+  if (const json::Value* c = o.get("confidence"); c && !c->is_null()) {
+    if (!c->is_number() || !(c->to_double() >= 0.0 && c->to_double() <= 1.0))
+      return bad("confidence", "a number in [0, 1] or null");
+    t.confidence = c->to_double();
+  }
+  if (const json::Value* e = o.get("escalated_from"); e && !e->is_null()) {
+    if (!e->is_string()) return bad("escalated_from", "a string or null");
+    t.escalated_from = e->as_string().substr(0, 128);
+  }
+  if (const json::Value* c = o.get("context_snapshot"); c && c->is_object())
+    t.context_snapshot = *c;
+  if (const json::Value* a = o.get("action")) t.action = *a;
+  return t;
+}
+
+Result<size_t> ThoughtLog::open() {
+  if (file_.empty()) return size_t{0};
+  MutexLock lock(mu_);
+  size_t skipped = 0;
+  if (env_->exists(file_)) {
+    auto text = env_->read_file(file_);
+    if (!text.ok())
+      return Error(ErrorCode::kInternal, "thought log " + file_ + ": " + text.error().message);
+    std::string_view rest = *text;
+    while (!rest.empty()) {
+      size_t nl = rest.find('\n');
+      std::string_view line = rest.substr(0, nl);
+      rest = nl == std::string_view::npos ? std::string_view() : rest.substr(nl + 1);
+      ++lines_;
+      auto t = nl == std::string_view::npos
+                   ? Result<Thought>(Error(ErrorCode::kMalformedJson, "torn"))
+                   : parse_thought_line(line);
+      if (!t.ok()) {
+        ++skipped;
+        continue;
+      }
+      std::string id = t->id;
+      if (by_id_.count(id) == 0) order_.push_back(id);
+      by_id_[id] = std::move(*t);
+      while (order_.size() > capacity_) {
+        by_id_.erase(order_.front());
+        order_.pop_front();
+      }
+    }
+  }
+  // Start from a file that holds exactly what is kept (no torn tail to append after).
+  if (skipped > 0 || lines_ > order_.size()) {
+    if (Status st = rewrite_locked(); !st.ok()) return st.error();
+  }
+  return skipped;
+}
+
+Status ThoughtLog::rewrite_locked() {
+  if (out_) {
+    (void)out_->close();
+    out_.reset();
+  }
+  std::string body;
+  for (const auto& id : order_) {
+    body += json::canonical(json::Value(thought_record(by_id_.at(id))));
+    body += '\n';
+  }
+  Status st = env_->write_file_atomic(file_, body);
+  if (!st.ok())
+    return Error(ErrorCode::kInternal, "thought log " + file_ + ": " + st.error().message);
+  lines_ = order_.size();
+  return Status::Ok();
+}
+
+void ThoughtLog::append_locked(const Thought& t) {
+  if (file_.empty()) return;
+  if (lines_ >= 2 * capacity_ && rewrite_locked().ok()) {
+    // compacted: the thought below is appended to the rewritten file
+  }
+  Status st = Status::Ok();
+  if (!out_) {
+    auto f = env_->open_appendable(file_);
+    if (f.ok()) {
+      out_ = std::move(*f);
+    } else {
+      st = f.error();
+    }
+  }
+  if (st.ok()) {
+    std::string line = json::canonical(json::Value(thought_record(t)));
+    line += '\n';
+    st = out_->append(line);
+    if (st.ok()) st = out_->sync();
+    if (!st.ok()) {
+      (void)out_->close();
+      out_.reset();
+    }
+  }
+  if (st.ok()) {
+    ++lines_;
+    return;
+  }
+  if (unpersisted_++ == 0)
+    log(LogLevel::kError, "thought_log_write_failed",
+        json::Object{{"file", file_}, {"error", st.error().message}});
+}
+
+bool ThoughtLog::put(Thought t) {
   MutexLock lock(mu_);
   std::string id = t.id;
   auto it = by_id_.find(id);
   if (it != by_id_.end()) {
+    if (it->second.principal != t.principal) return false;
+    append_locked(t);
     it->second = std::move(t);
-    return;
+    return true;
   }
+  append_locked(t);
   by_id_.emplace(id, std::move(t));
   order_.push_back(id);
   while (order_.size() > capacity_) {
     by_id_.erase(order_.front());
     order_.pop_front();
   }
+  return true;
 }
 
 std::optional<Thought> ThoughtLog::get(const std::string& id) const {
@@ -96,6 +245,16 @@ void ThoughtLog::clear() {
   MutexLock lock(mu_);
   by_id_.clear();
   order_.clear();
+  if (!file_.empty()) {
+    if (Status st = rewrite_locked(); !st.ok())
+      log(LogLevel::kError, "thought_log_write_failed",
+          json::Object{{"file", file_}, {"error", st.error().message}});
+  }
+}
+
+uint64_t ThoughtLog::unpersisted() const {
+  MutexLock lock(mu_);
+  return unpersisted_;
 }
 
 size_t ThoughtLog::size() const {
