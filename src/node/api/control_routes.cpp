@@ -50,6 +50,9 @@ Result<Principal> Node::route_principal(const transport::HttpRequest& req, const
     if (!token.empty()) pr = svc_.authenticate(token);
   }
   auto refuse_audit = [&](const Error& err, const Principal* p) {
+    if (!p && !svc_.record_refusal(RefusalLedger::source_of(req.remote_addr), denied_event,
+                                   err.code, route))
+      return;  // counted into a REFUSALS_SUMMARY record (refusal_ledger.h)
     AuditRecord e = svc_.record(denied_event, "blocked");
     if (p) e.by(*p);
     e.reason(std::string(error_name(err.code)));
@@ -145,6 +148,7 @@ void Node::save_control_state() {
 
 void Node::control_tick() {
   int64_t now_wall = svc_.clock.wall_ms();
+  svc_.flush_refusals();
   svc_.sessions.tick(svc_.clock.mono_ms(), now_wall);
   if (auto t = svc_.ownership.expire(now_wall)) {
     svc_.record("TRANSFER_EXPIRED", "ok")

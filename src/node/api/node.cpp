@@ -94,10 +94,12 @@ void NodeStream::on_text(std::string text) {
     }
     auto p = svc.authenticate(token);
     if (!p.ok()) {
-      svc.record("STREAM_REFUSED", "blocked")
-          .reason(std::string(error_name(p.error().code)))
-          .detail("transport", "ws")
-          .write();
+      if (svc.record_refusal(RefusalLedger::source_of(st->sink->remote_addr()), "STREAM_REFUSED",
+                             p.error().code, "/ws"))
+        svc.record("STREAM_REFUSED", "blocked")
+            .reason(std::string(error_name(p.error().code)))
+            .detail("transport", "ws")
+            .write();
       refuse_connect(p.error().message);
       return;
     }
@@ -259,6 +261,7 @@ void Node::shutdown() {
   }
   for (auto& st : copy) st->sink->close(1001, "node shutting down");
   worker_.shutdown();
+  svc_.flush_refusals(true);  // the counts of refusals not recorded one by one
   // Appended synchronously (blocks until durable): the last word of the run.
   (void)svc_.audit.append(std::move(svc_.record("SYSTEM_STOP").by_system().entry()));
 }

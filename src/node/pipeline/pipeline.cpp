@@ -83,8 +83,20 @@ Stage::Result refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, con
     int64_t secs = ra && ra->is_int() ? (ra->as_int() + 999) / 1000 : 1;
     out.headers.emplace_back("Retry-After", std::to_string(std::max<int64_t>(secs, 1)));
   }
+  const std::string event = audit_event.empty() ? "COMMAND_REJECTED" : audit_event;
+  // Without a verified principal, or refused for its rate: one record per source and kind per
+  // window, the rest counted into a summary (refusal_ledger.h) — a flood cannot fill the disk.
+  if (!ctx->principal.authenticated || err.code == ErrorCode::kRateLimited) {
+    const std::string source = ctx->principal.authenticated
+                                   ? ctx->principal.key()
+                                   : RefusalLedger::source_of(ctx->in.remote);
+    if (!svc.record_refusal(source, event, err.code, ctx->in.route)) {
+      ctx->finish(std::move(out));
+      return Stage::Result::kAnswered;
+    }
+  }
   AuditRecord r = message_record(
-      svc, *ctx, audit_event.empty() ? "COMMAND_REJECTED" : audit_event,
+      svc, *ctx, event,
       err.code == ErrorCode::kAuditUnavailable || err.code == ErrorCode::kInternal ? "error"
                                                                                    : "blocked");
   audit::AuditEntry& e = r.entry();

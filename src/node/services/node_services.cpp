@@ -67,6 +67,28 @@ void NodeServices::write_audit(audit::AuditEntry e,
   });
 }
 
+bool NodeServices::record_refusal(const std::string& source, const std::string& event,
+                                  ErrorCode code, const std::string& route) {
+  return refusals.admit(RefusalKey{source, event, std::string(error_name(code)), route},
+                        clock.wall_ms());
+}
+
+void NodeServices::flush_refusals(bool all) {
+  for (const RefusalSummary& s : refusals.due(clock.wall_ms(), all)) {
+    record("REFUSALS_SUMMARY", "blocked")
+        .by_system()
+        .reason(s.key.code)
+        .detail("source", s.key.source)
+        .detail("event", s.key.event)
+        .detail("error_code", s.key.code)
+        .detail("route", s.key.route)
+        .detail("count", static_cast<int64_t>(s.suppressed))
+        .detail("first_ms", s.first_ms)
+        .detail("last_ms", s.last_ms)
+        .write();
+  }
+}
+
 Result<Principal> NodeServices::authenticate(std::string_view token) const {
   auto p = auth.authenticate_token(token, clock.wall_ms() / 1000);
   if (p.ok()) ownership.cap(*p);
@@ -120,7 +142,10 @@ json::Value NodeServices::status(bool detailed) {
     o.set("control_queue", sessions.queue_json(now));
   }
   o.set("audit_available", audit.available());
-  if (detailed) o.set("audit_stop_backlog", stop_backlog.to_json());
+  if (detailed) {
+    o.set("audit_stop_backlog", stop_backlog.to_json());
+    o.set("refusals_coalesced", static_cast<int64_t>(refusals.suppressed_total()));
+  }
   json::Value session_list = sessions.to_json(now, detailed);
   o.set("active_sessions", static_cast<int64_t>(session_list.as_array().size()));
   o.set("sessions", session_list);

@@ -26,6 +26,7 @@
 #include "node/safety/actuation.h"
 #include "node/services/audit_record.h"
 #include "node/services/event_bus.h"
+#include "node/services/refusal_ledger.h"
 #include "node/services/stop_backlog.h"
 #include "rcan/actions.h"
 #include "rcan/audit/audit_log.h"
@@ -115,6 +116,13 @@ class NodeServices {
   // Set once, before serving.
   std::function<void(const std::string& session_id, json::Object& payload)> on_grant;
 
+  // Whether a refusal from `source` (an address, or a principal's key) of this kind gets a
+  // record of its own now; false: it is counted into a REFUSALS_SUMMARY record instead.
+  bool record_refusal(const std::string& source, const std::string& event, ErrorCode code,
+                      const std::string& route);
+  // Writes the summaries of closed windows (all of them with `all`, at shutdown).
+  void flush_refusals(bool all = false);
+
   // A new audit record of `event` (audit_record.h): anonymous until `by…` says who.
   AuditRecord record(const std::string& event, const std::string& outcome = "ok");
   // Appends asynchronously; `cb` (optional) runs once the record is durable or failed.
@@ -125,6 +133,9 @@ class NodeServices {
   // written, marked `recorded_after_audit_outage`, by the first write_audit once the log is
   // back — also after a restart. Never dropped silently (stop_backlog.h).
   StopBacklog stop_backlog;
+  // Refusals without a verified principal (and rate-limit refusals), coalesced per source and
+  // kind into summary records (refusal_ledger.h).
+  RefusalLedger refusals;
 
   uint32_t rate_limit(Role r) const {
     return settings.rate_per_minute[static_cast<size_t>(role_level(r))];
