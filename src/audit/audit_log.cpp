@@ -630,6 +630,14 @@ void AuditLog::Impl::submit(AuditEntry entry, Callback done) {
       p.done(e);
       return;
     }
+    if (opts_.max_queued_records > 0 && queue_.size() >= opts_.max_queued_records) {
+      l.unlock();
+      p.done(Error(ErrorCode::kAuditUnavailable,
+                   "audit log: " + std::to_string(opts_.max_queued_records) +
+                       " records already wait for the disk",
+                   "", "audit_queue_full"));
+      return;
+    }
     queue_.push_back(std::move(p));
   }
   cv_.notify_one();

@@ -144,6 +144,49 @@ void crash_everywhere(bool retention, bool grouped, double keep_fraction, bool t
   EXPECT_GT(runs, 20);
 }
 
+// A disk slower than the records coming in: the queue is bounded, the records beyond it are
+// refused at once (audit_queue_full), and every record it took is written once the disk moves.
+TEST(AuditFault, TheWriterQueueIsBoundedAndRefusesWhatItCannotHold) {
+  TempDir tmp;
+  FaultInjectionEnv env(Env::posix());
+  AuditOptions o = options();
+  o.env = &env;
+  o.preallocate = false;
+  o.max_queued_records = 4;
+  auto log = AuditLog::open(tmp.path() + "/log", o);
+  ASSERT_TRUE(log.ok()) << log.error().message;
+  env.hold(true);  // the disk stops taking writes
+  std::mutex mu;
+  std::condition_variable cv;
+  int ok = 0, full = 0, other = 0;
+  const int n = 20;
+  for (int i = 0; i < n; ++i) {
+    (*log)->append_async(entry(i), [&](Result<Receipt> r) {
+      std::lock_guard<std::mutex> l(mu);
+      if (r.ok()) {
+        ++ok;
+      } else if (r.error().reason == "audit_queue_full") {
+        ++full;
+      } else {
+        ++other;
+      }
+      cv.notify_all();
+    });
+  }
+  {
+    std::unique_lock<std::mutex> l(mu);
+    EXPECT_GE(full, n - 4 - int(o.max_group_records));  // refused at once, not after the disk
+    EXPECT_GT(full, 0);
+  }
+  env.hold(false);
+  std::unique_lock<std::mutex> l(mu);
+  ASSERT_TRUE(cv.wait_for(l, std::chrono::seconds(10), [&] { return ok + full + other == n; }));
+  EXPECT_EQ(other, 0);
+  EXPECT_EQ(ok + full, n);
+  EXPECT_LE(full, n - 4);
+  EXPECT_EQ(static_cast<int>(export_lines(**log).size()), 1 + ok);  // the genesis checkpoint too
+}
+
 TEST(AuditFault, CrashAtEveryOperationLosesNoAcknowledgedRecord) {
   crash_everywhere(/*retention=*/false, /*grouped=*/false, 0.0, false);
 }

@@ -75,6 +75,10 @@ struct AuditOptions {
   // After a failed write or sync, how often the writer probes whether the disk takes
   // writes again (and, if so, recovers: docs/AUDIT.md §3). 0 = stay failed until reopened.
   int recovery_interval_ms = 1000;
+  // Records waiting for the writer, at most (0 = no bound). Beyond it append_async() and
+  // append() refuse at once with AUDIT_UNAVAILABLE, reason `audit_queue_full`: back-pressure
+  // on whoever produces records faster than the disk takes them, never unbounded memory.
+  size_t max_queued_records = 65'536;
   // Identity written into the log's own (system) records.
   std::string robot_ruri = "rcan://local.rcan/unknown/unknown/unknown";
   std::string system_principal = "system:audit";
