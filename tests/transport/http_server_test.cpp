@@ -1055,6 +1055,32 @@ TEST_F(HttpServerTest, WebSocketTextFramesBothWaysAndServerClose) {
   EXPECT_EQ(http_.calls.load(), 0);
 }
 
+// Finding R6: a WebSocket from the reserve opens (the handler admits its path) and is closed
+// with 1013 after read_timeout_ms, so it cannot hold a reserve slot.
+TEST_F(HttpServerTest, AReserveWebSocketIsClosedAfterTheReadTimeout) {
+  ServerOptions o;
+  o.max_connections = 1;
+  o.read_timeout_ms = 400;
+  start(o);
+  Client held(port_, 0, "127.0.0.2");
+  ASSERT_TRUE(held.send(get("/auth")));
+  ASSERT_TRUE(held.read_response());
+  Client refused(port_);
+  EXPECT_FALSE(refused.ws_handshake("/other"));  // not admitted on the reserve
+  Client c(port_);
+  ASSERT_TRUE(c.ws_handshake("/ws"));
+  ASSERT_TRUE(c.ws_send(0x1, "hello"));
+  auto f = c.ws_read();
+  ASSERT_TRUE(f);
+  EXPECT_EQ(f->payload, "echo:hello");
+  const auto t0 = std::chrono::steady_clock::now();
+  auto cl = c.ws_read(3000);
+  ASSERT_TRUE(cl);
+  EXPECT_EQ(cl->opcode, 0x8);
+  EXPECT_EQ(cl->close_code(), 1013);
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 2s);
+}
+
 TEST_F(HttpServerTest, WebSocketFramesQueuedDuringOpenAreDelivered) {
   start();
   Client c(port_);
