@@ -194,6 +194,42 @@ Status Daemon::start_node() {
 // is in place before HTTP serves, docs/TRANSPORT.md), HTTP/WebSocket, gRPC, MQTT (docs/FLEET.md),
 // then the mDNS advertisement. They stop in the reverse order: gRPC drains its calls before
 // HTTP and UDP stop.
+// The HTTP server's connection counters on /metrics: what the connection limits refused and
+// how often the reserve (over max_connections, for a stop) was used (docs/TRANSPORT.md).
+void Daemon::add_http_metrics() {
+  using Stats = transport::ServerStats;
+  struct Row {
+    const char* name;
+    const char* help;
+    uint64_t Stats::*field;
+    bool gauge;
+  };
+  static constexpr Row kRows[] = {
+      {"rcan_http_connections_open", "HTTP and WebSocket connections open.",
+       &Stats::connections_open, true},
+      {"rcan_http_connections_refused_total",
+       "Connections refused 503: max_connections and the reserve were full.",
+       &Stats::rejected_connections, false},
+      {"rcan_http_connections_refused_per_address_total",
+       "Connections refused 503 for server.limits.max_connections_per_address.",
+       &Stats::rejected_per_address, false},
+      {"rcan_http_reserve_connections_total",
+       "Connections accepted from the reserve over max_connections (for a stop).",
+       &Stats::reserve_connections, false},
+      {"rcan_http_reserve_refused_total",
+       "Requests other than a stop on a reserve connection, answered 503.", &Stats::reserve_refused,
+       false},
+  };
+  for (const Row& r : kRows) {
+    auto fn = [this, field = r.field] { return static_cast<double>(http_->stats().*field); };
+    if (r.gauge) {
+      services_->metrics.add_gauge(r.name, r.help, fn);
+    } else {
+      services_->metrics.add_counter_fn(r.name, r.help, fn);
+    }
+  }
+}
+
 Status Daemon::start_transports() {
   auto udp = start_udp(cfg_, *node_);
   if (!udp.ok()) return udp.error();
@@ -207,6 +243,7 @@ Status Daemon::start_transports() {
     return failed("cannot listen on " + so.bind_address + ":" + std::to_string(so.port) + ": ",
                   port.error());
   on_stop([this](int drain_ms) { http_->stop(drain_ms); });
+  add_http_metrics();
   services_->settings.port =
       *port;  // the bound port (differs from the configured one for --port 0)
 

@@ -83,6 +83,7 @@ class Daemon {
   Status start_safety_core();
   Status start_node();
   Status start_transports();
+  void add_http_metrics();
   // Records how to undo the step that just succeeded.
   void on_stop(std::function<void(int drain_ms)> fn) { stops_.push_back(std::move(fn)); }
 

@@ -157,6 +157,10 @@ transport::ServerOptions server_options(const config::NodeConfig& cfg) {
   so.read_timeout_ms = static_cast<int>(cfg.server.limits.read_timeout_ms);
   so.idle_timeout_ms = static_cast<int>(cfg.server.limits.idle_timeout_ms);
   so.max_connections = cfg.server.limits.max_connections;
+  so.max_connections_per_address = cfg.server.limits.max_connections_per_address;
+  so.reserved_connections = cfg.server.limits.reserved_connections;
+  so.unauthenticated_idle_timeout_ms =
+      static_cast<int>(cfg.server.limits.unauthenticated_idle_timeout_ms);
   so.ws_max_message_bytes = cfg.server.limits.max_body_bytes;
   so.tls = cfg.server.tls.enabled;
   so.cert_file = cfg.server.tls.cert_file;

@@ -160,6 +160,9 @@ server:
     read_timeout_ms: 10000
     idle_timeout_ms: 60000
     max_connections: 1024
+    max_connections_per_address: 64
+    reserved_connections: 16
+    unauthenticated_idle_timeout_ms: 5000
 security:
   replay_window_s: 30
   msg_id_cache_size: 10000

@@ -59,6 +59,9 @@ struct ServerLimits {
   uint32_t read_timeout_ms = 10000;
   uint32_t idle_timeout_ms = 60000;
   uint32_t max_connections = 1024;
+  uint32_t max_connections_per_address = 64;  // 0 = no per-address limit
+  uint32_t reserved_connections = 16;         // over max_connections, for a stop only
+  uint32_t unauthenticated_idle_timeout_ms = 5000;
 };
 
 struct ServerConfig {

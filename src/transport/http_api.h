@@ -34,6 +34,10 @@ struct HttpRequest {
   std::string body;
   std::string remote_addr;  // "ip:port"
   bool tls = false;
+  // The connection was accepted from the reserve, over max_connections (ServerOptions): only a
+  // request HttpHandler::serve_on_reserve() admits reaches the node on it, and it is closed
+  // after its one request (a WebSocket: after read_timeout_ms).
+  bool reserve = false;
   int64_t received_mono_us =
       0;  // steady clock when the transport had read the request (0: unknown)
 
@@ -65,6 +69,11 @@ struct HttpResponse {
   // When the node handed the answer over (steady clock, µs; 0 = not timed). The transport then
   // reports how long the answer waited before its write began (HttpHandler::answer_waited).
   int64_t answered_mono_us = 0;
+  // The request presented a valid credential. A connection keeps the long keep-alive
+  // (idle_timeout_ms) only once one of its answers says so; until then it waits
+  // unauthenticated_idle_timeout_ms for the next request. The transport knows no credentials:
+  // the handler decides.
+  bool authenticated = false;
 };
 
 // Called on a transport thread. `respond` must be called exactly once, from any thread,
@@ -78,6 +87,14 @@ class HttpHandler {
   // A timed answer (answered_mono_us set) waited `us` between respond() and the start of its
   // write. Called on a transport thread; must be cheap.
   virtual void answer_waited(int64_t us) { (void)us; }
+  // Whether `req`, which arrived on a connection accepted from the reserve (req.reserve: the
+  // server is at max_connections), is served — a stop must always get through. Any other request
+  // is answered 503 `too_many_connections` by the transport and the connection closed. Also
+  // asked for a WebSocket upgrade on such a connection. Called on a transport thread; cheap.
+  virtual bool serve_on_reserve(const HttpRequest& req) {
+    (void)req;
+    return false;
+  }
 };
 
 // The transport's side of one WebSocket. Thread-safe; calls after close are ignored.

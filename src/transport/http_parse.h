@@ -14,7 +14,10 @@
 //   426 SCHEMA_VALIDATION_FAILED  WebSocket upgrade with Sec-WebSocket-Version other than 13
 //   431 SCHEMA_VALIDATION_FAILED  request line + headers over max_header_bytes
 //                                 (message "request headers too large")
-//   503 RATE_LIMITED              over max_connections (reason "too_many_connections")
+//   503 RATE_LIMITED              over max_connections (reason "too_many_connections"), over
+//                                 max_connections_per_address
+//                                 ("too_many_connections_from_address"), a request other than a
+//                                 stop on a reserve connection ("reserve_for_stop_only")
 // The error catalogue has no dedicated code for 408/431/503-at-the-socket; the codes above
 // are the closest generic ones and `reason` says exactly what happened.
 #pragma once
@@ -62,6 +65,14 @@ inline TransportError headers_too_large_error() {
 }
 inline TransportError too_many_connections_error() {
   return {503, ErrorCode::kRateLimited, "too_many_connections", "too many connections"};
+}
+inline TransportError too_many_from_address_error() {
+  return {503, ErrorCode::kRateLimited, "too_many_connections_from_address",
+          "too many connections from this address"};
+}
+inline TransportError reserve_only_error() {
+  return {503, ErrorCode::kRateLimited, "reserve_for_stop_only",
+          "the server is at its connection limit: only a stop request is served now"};
 }
 inline TransportError shutting_down_error() {
   return {503, ErrorCode::kRateLimited, "shutting_down", "server is shutting down"};

@@ -1,7 +1,9 @@
 // HttpServer: Boost.Beast HTTP/1.1 + WebSocket over one io_context.
 //
 // Shape (Beast's advanced server, with C++20 coroutines):
-//   Impl::accept_loop      accepts; over max_connections → reject() writes 503 and closes
+//   Impl::accept_loop      accepts; admit() counts it per address and against
+//                          max_connections, then the reserve (for a stop); refused →
+//                          reject() writes 503 and closes
 //   Conn<Stream>::serve    per connection, on its own strand:
 //                            [TLS handshake] → loop { idle wait → serve_one() } → close
 //   Conn<Stream>::serve_one  read one request under the read deadline → limits/errors →
@@ -59,6 +61,10 @@ constexpr int kLingerMs = 1000;        // the longest pause in the client's send
 constexpr int kLingerTotalMs = 10000;  // the longest lingering close
 constexpr int kRejectTimeoutMs = 500;
 constexpr int kMaxConcurrentRejects = 64;
+// Reserve connections (over max_connections, for a stop) one address may hold at once: an
+// attacker holding its per-address share of ordinary slots gets none, and many addresses
+// together take at most two each.
+constexpr size_t kReservePerAddress = 2;
 constexpr std::string_view kQueueFullReason = "send queue limit exceeded";
 
 using PlainStream = beast::tcp_stream;
@@ -86,6 +92,15 @@ inline std::string endpoint_string(const tcp::endpoint& ep) {
     addr = asio::ip::make_address_v4(asio::ip::v4_mapped, addr.to_v6());
   if (addr.is_v6()) return "[" + addr.to_string() + "]:" + std::to_string(ep.port());
   return addr.to_string() + ":" + std::to_string(ep.port());
+}
+
+// The address a connection is counted under for max_connections_per_address: the IP without
+// the port (IPv4-mapped IPv6 as IPv4).
+inline std::string address_key(const tcp::endpoint& ep) {
+  auto addr = ep.address();
+  if (addr.is_v6() && addr.to_v6().is_v4_mapped())
+    addr = asio::ip::make_address_v4(asio::ip::v4_mapped, addr.to_v6());
+  return addr.to_string();
 }
 
 inline bool is_token_char(char c) {
@@ -322,14 +337,51 @@ class HttpServer::Impl : public std::enable_shared_from_this<HttpServer::Impl> {
   ServerStats stats() const;
 
   detail::asio::awaitable<void> accept_loop();
-  detail::asio::awaitable<void> reject(detail::tcp::socket sock);
+  detail::asio::awaitable<void> reject(detail::tcp::socket sock, detail::TransportError err);
   template <class Stream>
-  void spawn_conn(detail::tcp::socket sock, std::string remote) EXCLUDES(mu);
-  void conn_gone(uint64_t id) EXCLUDES(mu) {
+  void spawn_conn(detail::tcp::socket sock, std::string remote, std::string addr, bool reserve)
+      EXCLUDES(mu);
+
+  // Where a new connection from `addr` goes: an ordinary slot, the reserve (over
+  // max_connections), or nowhere (per-address limit, or everything full). Counts it when taken.
+  enum class Admit { kOrdinary, kReserve, kPerAddress, kFull };
+  Admit admit(const std::string& addr) EXCLUDES(mu) {
+    MutexLock lock(mu);
+    auto it = per_address.find(addr);
+    const PerAddress have = it == per_address.end() ? PerAddress{} : it->second;
+    if (opt.max_connections_per_address != 0 && have.total >= opt.max_connections_per_address)
+      return Admit::kPerAddress;
+    Admit a;
+    if (ordinary_open < opt.max_connections) {
+      ++ordinary_open;
+      a = Admit::kOrdinary;
+    } else if (reserve_open < opt.reserved_connections &&
+               have.reserve < detail::kReservePerAddress) {
+      ++reserve_open;
+      a = Admit::kReserve;
+    } else {
+      return Admit::kFull;
+    }
+    PerAddress& slot = per_address[addr];
+    ++slot.total;
+    if (a == Admit::kReserve) ++slot.reserve;
+    return a;
+  }
+  void conn_gone(uint64_t id, const std::string& addr, bool reserve) EXCLUDES(mu) {
     {
       MutexLock lock(mu);
       conns.erase(id);
       --connections_open;
+      if (reserve) {
+        --reserve_open;
+      } else {
+        --ordinary_open;
+      }
+      auto it = per_address.find(addr);
+      if (it != per_address.end()) {
+        if (reserve && it->second.reserve > 0) --it->second.reserve;
+        if (--it->second.total == 0) per_address.erase(it);
+      }
     }
     cv.notify_all();
   }
@@ -352,6 +404,9 @@ class HttpServer::Impl : public std::enable_shared_from_this<HttpServer::Impl> {
   std::atomic<uint64_t> ws_streams_total{0};
   std::atomic<uint64_t> requests_total{0};
   std::atomic<uint64_t> rejected_connections{0};
+  std::atomic<uint64_t> rejected_per_address{0};
+  std::atomic<uint64_t> reserve_connections{0};
+  std::atomic<uint64_t> reserve_refused{0};
   std::atomic<uint64_t> rejected_limits{0};
   std::atomic<uint64_t> bad_requests{0};
   std::atomic<int> rejecting{0};
@@ -360,6 +415,13 @@ class HttpServer::Impl : public std::enable_shared_from_this<HttpServer::Impl> {
   CondVar cv;  // signalled when a connection or an I/O thread ends
   std::unordered_map<uint64_t, std::weak_ptr<detail::ConnBase>> conns GUARDED_BY(mu);
   uint64_t next_id GUARDED_BY(mu) = 0;
+  struct PerAddress {
+    size_t total = 0;    // open connections from the address, ordinary and reserve
+    size_t reserve = 0;  // of which from the reserve
+  };
+  std::unordered_map<std::string, PerAddress> per_address GUARDED_BY(mu);
+  size_t ordinary_open GUARDED_BY(mu) = 0;
+  size_t reserve_open GUARDED_BY(mu) = 0;
   int running_threads GUARDED_BY(mu) = 0;
 
   Mutex lifecycle_mu;
@@ -378,6 +440,11 @@ class HttpServer::Impl : public std::enable_shared_from_this<HttpServer::Impl> {
 
 namespace detail {
 
+// The keep-alive wait of a connection not (yet) answered as authenticated.
+inline int short_idle_ms(const ServerOptions& o) {
+  return std::min(o.unauthenticated_idle_timeout_ms, o.idle_timeout_ms);
+}
+
 template <class Stream>
 Stream make_stream(HttpServer::Impl& srv, tcp::socket&& sock);
 template <>
@@ -394,19 +461,24 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
  public:
   static constexpr bool kTls = std::is_same_v<Stream, TlsStream>;
 
-  Conn(HttpServer::Impl& srv, uint64_t id, tcp::socket sock, std::string remote)
+  Conn(HttpServer::Impl& srv, uint64_t id, tcp::socket sock, std::string remote, std::string addr,
+       bool reserve)
       : srv_(srv),
         opt_(srv.opt),
         id_(id),
         ex_(sock.get_executor()),
         stream_(make_stream<Stream>(srv, std::move(sock))),
         remote_(std::move(remote)),
+        addr_(std::move(addr)),
+        reserve_(reserve),
+        read_timeout_ms_(reserve ? std::min(opt_.read_timeout_ms, short_idle_ms(opt_))
+                                 : opt_.read_timeout_ms),
         buf_(srv.opt.max_header_bytes + 64 * 1024),
         deadline_(ex_),
         response_timer_(ex_),
         close_timer_(ex_),
         started_(SteadyClock::now()) {}
-  ~Conn() override { srv_.conn_gone(id_); }
+  ~Conn() override { srv_.conn_gone(id_, addr_, reserve_); }
   Conn(const Conn&) = delete;
   Conn& operator=(const Conn&) = delete;
 
@@ -441,7 +513,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
 
   asio::awaitable<void> serve() {
     if constexpr (kTls) {
-      lowest().expires_after(Ms(opt_.read_timeout_ms));
+      lowest().expires_after(Ms(read_timeout_ms_));
       auto [ec] = co_await stream_.async_handshake(ssl::stream_base::server, kNoThrow);
       if (ec) {
         rcan::log(LogLevel::kDebug, "tls.handshake_failed",
@@ -458,9 +530,10 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
         // The first request must arrive whole within read_timeout of the accept; later ones
         // may take idle_timeout to start.
         if (first) {
-          lowest().expires_at(started_ + Ms(opt_.read_timeout_ms));
+          lowest().expires_at(started_ + Ms(read_timeout_ms_));
         } else {
-          lowest().expires_after(Ms(opt_.idle_timeout_ms));
+          // The long keep-alive only once an answer said the client presented a credential.
+          lowest().expires_after(Ms(authenticated_ ? opt_.idle_timeout_ms : short_idle_ms(opt_)));
         }
         auto [ec, n] = co_await stream_.async_read_some(buf_.prepare(4096), kNoThrow);
         if (ec) break;  // idle timeout, peer closed, shutdown: close quietly
@@ -483,7 +556,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
   asio::awaitable<bool> serve_one(SteadyClock::time_point request_start) {
     http::request_parser<http::string_body> parser;
     apply_limits(parser, opt_.max_header_bytes, opt_.max_body_bytes);
-    arm_read_deadline(request_start + Ms(opt_.read_timeout_ms));
+    arm_read_deadline(request_start + Ms(read_timeout_ms_));
     beast::error_code ec;
     {
       auto [hec, hn] = co_await http::async_read_header(stream_, buf_, parser, kNoThrow);
@@ -520,6 +593,14 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
       co_return false;
     }
     req.received_mono_us = received_us;
+    req.reserve = reserve_;
+    if (reserve_ && !serve_on_reserve(req)) {
+      ++srv_.reserve_refused;
+      rcan::log(LogLevel::kWarn, "http.reserve_refused",
+                {{"remote", remote_}, {"method", req.method}, {"path", req.path}});
+      co_await answer_error(reserve_only_error(), version);
+      co_return false;
+    }
     if (wants_websocket(req)) {
       if (auto err = check_websocket_upgrade(req, version)) {
         co_await answer_error(*err, version);
@@ -560,9 +641,11 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     if (!response_) co_await response_timer_.async_wait(kNoThrow);
     if (!response_) co_return false;  // force-closed while waiting
 
-    keep_alive = keep_alive && !srv_.stopping.load() && !shutdown_requested_;
+    // A reserve connection serves one request.
+    keep_alive = keep_alive && !reserve_ && !srv_.stopping.load() && !shutdown_requested_;
     phase_ = Phase::kWriting;
     const int status = response_->status;
+    if (response_->authenticated) authenticated_ = true;
     if (response_->answered_mono_us > 0)
       srv_.http.answer_waited(
           std::max<int64_t>(0, rcan::steady_us() - response_->answered_mono_us));
@@ -581,6 +664,15 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
                  {"ms", static_cast<int64_t>(ms)}});
     }
     co_return !wec && keep_alive;
+  }
+
+  bool serve_on_reserve(const HttpRequest& req) {
+    try {
+      return srv_.http.serve_on_reserve(req);
+    } catch (const std::exception& e) {
+      rcan::log(LogLevel::kError, "http.handler_exception", {{"error", e.what()}});
+      return false;
+    }
   }
 
   void deliver(uint64_t seq, HttpResponse r) {
@@ -610,7 +702,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
   asio::awaitable<void> answer_error(const TransportError& err, unsigned version) {
     if (err.status == 400 || err.status == 426) {
       ++srv_.bad_requests;
-    } else {
+    } else if (err.status != 503) {  // a reserve refusal is counted as reserve_refused
       ++srv_.rejected_limits;
     }
     rcan::log(LogLevel::kInfo, "http.rejected",
@@ -715,7 +807,13 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     if (!aec) {
       ws_open_ = true;
       rcan::log(LogLevel::kInfo, "ws.open", {{"remote", remote_}, {"path", req.path}});
-      pump();  // frames queued during open(), or a close requested meanwhile
+      pump();          // frames queued during open(), or a close requested meanwhile
+      if (reserve_) {  // a reserve WebSocket lives read_timeout_ms: long enough for a stop
+        deadline_.expires_after(Ms(opt_.read_timeout_ms));
+        deadline_.async_wait([self = this->shared_from_this()](beast::error_code ec) {
+          if (!ec) self->request_ws_close(1013, "reserved connection: try again later", false);
+        });
+      }
       beast::flat_buffer in;
       for (;;) {
         in.clear();
@@ -743,6 +841,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     ws_done_ = true;
     sink_->mark_closed(true);
     close_timer_.cancel();
+    deadline_.cancel();
     const int code = aec ? 0 : static_cast<int>(ws_->reason().code);
     try {
       receiver_->on_closed();
@@ -808,6 +907,10 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
   Stream stream_;  // moved into ws_ on upgrade
   std::optional<websocket::stream<Stream>> ws_;
   const std::string remote_;
+  const std::string addr_;  // the IP it is counted under (max_connections_per_address)
+  const bool reserve_;      // accepted from the reserve, over max_connections
+  const int read_timeout_ms_;
+  bool authenticated_ = false;  // an answer said the client presented a valid credential
   beast::flat_buffer buf_;
   asio::steady_timer deadline_;
   asio::steady_timer response_timer_;
@@ -847,7 +950,8 @@ inline void log_coroutine_exception(std::exception_ptr e) {
 // ---- HttpServer::Impl ------------------------------------------------------------------------
 
 template <class Stream>
-void HttpServer::Impl::spawn_conn(detail::tcp::socket sock, std::string remote) {
+void HttpServer::Impl::spawn_conn(detail::tcp::socket sock, std::string remote, std::string addr,
+                                  bool reserve) {
   uint64_t id;
   {
     MutexLock lock(mu);
@@ -855,7 +959,8 @@ void HttpServer::Impl::spawn_conn(detail::tcp::socket sock, std::string remote) 
     ++connections_open;
   }
   ++connections_total;
-  auto conn = std::make_shared<detail::Conn<Stream>>(*this, id, std::move(sock), std::move(remote));
+  auto conn = std::make_shared<detail::Conn<Stream>>(*this, id, std::move(sock), std::move(remote),
+                                                     std::move(addr), reserve);
   {
     MutexLock lock(mu);
     conns[id] = conn;
@@ -882,26 +987,41 @@ detail::asio::awaitable<void> HttpServer::Impl::accept_loop() {
     beast::error_code rec;
     const auto ep = sock.remote_endpoint(rec);
     std::string remote = rec ? std::string("unknown") : detail::endpoint_string(ep);
+    std::string addr = rec ? std::string("unknown") : detail::address_key(ep);
     sock.set_option(detail::tcp::no_delay(true), rec);
-    if (connections_open.load() >= opt.max_connections) {
-      ++rejected_connections;
-      rcan::log(rcan::LogLevel::kWarn, "http.connection_limit",
+    const Admit admitted = admit(addr);
+    if (admitted == Admit::kPerAddress || admitted == Admit::kFull) {
+      const bool by_address = admitted == Admit::kPerAddress;
+      ++(by_address ? rejected_per_address : rejected_connections);
+      rcan::log(rcan::LogLevel::kWarn,
+                by_address ? "http.address_connection_limit" : "http.connection_limit",
                 {{"remote", remote}, {"open", connections_open.load()}});
       auto ex = sock.get_executor();
-      asio::co_spawn(ex, reject(std::move(sock)), detail::log_coroutine_exception);
+      asio::co_spawn(ex,
+                     reject(std::move(sock), by_address ? detail::too_many_from_address_error()
+                                                        : detail::too_many_connections_error()),
+                     detail::log_coroutine_exception);
       continue;
     }
+    const bool reserve = admitted == Admit::kReserve;
+    if (reserve) {
+      ++reserve_connections;
+      rcan::log(rcan::LogLevel::kWarn, "http.reserve_connection",
+                {{"remote", remote}, {"open", connections_open.load()}});
+    }
     if (opt.tls) {
-      spawn_conn<detail::TlsStream>(std::move(sock), std::move(remote));
+      spawn_conn<detail::TlsStream>(std::move(sock), std::move(remote), std::move(addr), reserve);
     } else {
-      spawn_conn<detail::PlainStream>(std::move(sock), std::move(remote));
+      spawn_conn<detail::PlainStream>(std::move(sock), std::move(remote), std::move(addr), reserve);
     }
   }
 }
 
-// Over max_connections: answer 503 with the error body and close. TLS connections are closed
-// without an answer (a TLS handshake per refused connection would defeat the limit's purpose).
-detail::asio::awaitable<void> HttpServer::Impl::reject(detail::tcp::socket sock) {
+// Over max_connections (and the reserve) or max_connections_per_address: answer 503 with the
+// error body and close. TLS connections are closed without an answer (a TLS handshake per
+// refused connection would defeat the limit's purpose).
+detail::asio::awaitable<void> HttpServer::Impl::reject(detail::tcp::socket sock,
+                                                       detail::TransportError err) {
   namespace asio = detail::asio;
   namespace http = detail::http;
   if (opt.tls || rejecting.load() >= detail::kMaxConcurrentRejects) {
@@ -913,8 +1033,7 @@ detail::asio::awaitable<void> HttpServer::Impl::reject(detail::tcp::socket sock)
   {
     beast::tcp_stream s(std::move(sock));
     s.expires_after(detail::Ms(detail::kRejectTimeoutMs));
-    const std::string wire = detail::response_bytes(
-        detail::error_response(detail::too_many_connections_error()), 11, false, false);
+    const std::string wire = detail::response_bytes(detail::error_response(err), 11, false, false);
     auto [wec, wn] = co_await asio::async_write(s, asio::buffer(wire), detail::kNoThrow);
     if (!wec) {
       beast::error_code ec;
@@ -935,8 +1054,9 @@ Result<uint16_t> HttpServer::Impl::start() {
   MutexLock life(lifecycle_mu);
   if (started) return Error(ErrorCode::kInternal, "server already started");
   if (opt.io_threads < 1 || opt.read_timeout_ms <= 0 || opt.idle_timeout_ms <= 0 ||
-      opt.ws_handshake_timeout_ms <= 0 || opt.max_connections == 0 || opt.max_header_bytes == 0 ||
-      opt.ws_max_message_bytes == 0 || opt.ws_send_queue_limit == 0)
+      opt.ws_handshake_timeout_ms <= 0 || opt.unauthenticated_idle_timeout_ms <= 0 ||
+      opt.max_connections == 0 || opt.max_header_bytes == 0 || opt.ws_max_message_bytes == 0 ||
+      opt.ws_send_queue_limit == 0)
     return Error(ErrorCode::kSchemaValidationFailed, "invalid server options");
   uint16_t port = 0;
   try {
@@ -1059,6 +1179,9 @@ ServerStats HttpServer::Impl::stats() const {
   s.ws_streams_total = ws_streams_total.load();
   s.requests_total = requests_total.load();
   s.rejected_connections = rejected_connections.load();
+  s.rejected_per_address = rejected_per_address.load();
+  s.reserve_connections = reserve_connections.load();
+  s.reserve_refused = reserve_refused.load();
   s.rejected_limits = rejected_limits.load();
   s.bad_requests = bad_requests.load();
   return s;

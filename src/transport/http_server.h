@@ -32,7 +32,16 @@ struct ServerOptions {
   size_t max_header_bytes = 8 * 1024;  // request line + header fields → 431 when exceeded
   int read_timeout_ms = 10000;         // whole request, first byte to last (defeats slow-loris)
   int idle_timeout_ms = 60000;         // keep-alive idle wait for the next request's first byte
-  size_t max_connections = 1024;       // beyond it: accepted, answered 503, closed
+  size_t max_connections = 1024;       // beyond it: the reserve, then accepted, 503, closed
+  // Connections open at once from one IP address (ordinary and reserve together); the next one
+  // is answered 503 `too_many_connections_from_address` and closed. 0 = no limit.
+  size_t max_connections_per_address = 64;
+  // Connections accepted over max_connections, each for one request that
+  // HttpHandler::serve_on_reserve() admits (a stop); at most 2 of them per address. 0 = none.
+  size_t reserved_connections = 16;
+  // Keep-alive wait of a connection none of whose answers said `authenticated` (HttpResponse);
+  // also the deadline for the one request of a reserve connection. Capped by idle_timeout_ms.
+  int unauthenticated_idle_timeout_ms = 5000;
   size_t ws_max_message_bytes = 64 * 1024;  // larger message → close 1009
   size_t ws_send_queue_limit = 256;         // queued frames per WebSocket; beyond it → close 1008
   int ws_handshake_timeout_ms = 10000;      // WebSocket opening/closing handshake limit
@@ -49,6 +58,9 @@ struct ServerStats {
   uint64_t ws_streams_total = 0;
   uint64_t requests_total = 0;        // HTTP requests handed to the HttpHandler
   uint64_t rejected_connections = 0;  // refused with 503 for max_connections (or while stopping)
+  uint64_t rejected_per_address = 0;  // refused with 503 for max_connections_per_address
+  uint64_t reserve_connections = 0;   // accepted from the reserve over max_connections
+  uint64_t reserve_refused = 0;       // requests on a reserve connection answered 503 (not a stop)
   uint64_t rejected_limits = 0;       // 413, 431, 408 answers and WS queue/size closes
   uint64_t bad_requests = 0;          // 400 answers for unparsable HTTP or bad percent-encoding
 };

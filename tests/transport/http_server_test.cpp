@@ -72,9 +72,16 @@ struct Resp {
 
 class Client {
  public:
-  explicit Client(uint16_t port, int rcvbuf = 0) {
+  // `source`: a loopback address to connect from (127.0.0.2, …), to be another client address.
+  explicit Client(uint16_t port, int rcvbuf = 0, const char* source = nullptr) {
     fd_ = ::socket(AF_INET, SOCK_STREAM, 0);
     if (rcvbuf > 0) ::setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof rcvbuf);
+    if (source) {
+      sockaddr_in src{};
+      src.sin_family = AF_INET;
+      ::inet_pton(AF_INET, source, &src.sin_addr);
+      if (::bind(fd_, reinterpret_cast<sockaddr*>(&src), sizeof src) != 0) return;
+    }
     sockaddr_in addr{};
     addr.sin_family = AF_INET;
     addr.sin_port = htons(port);
@@ -291,6 +298,13 @@ class FakeHttp : public transport::HttpHandler {
       return;
     }
     if (req.path == "/drop") return;  // never answers: the transport must answer 500
+    if (req.path == "/auth") {        // as the node answers a request with a valid credential
+      HttpResponse r;
+      r.body = "{}";
+      r.authenticated = true;
+      respond(r);
+      return;
+    }
     if (req.path == "/throw") throw std::runtime_error("handler failed");
     if (req.path == "/headers") {
       HttpResponse r;
@@ -319,6 +333,10 @@ class FakeHttp : public transport::HttpHandler {
     HttpResponse r;
     r.body = json::dump(json::Value(std::move(o)));
     respond(std::move(r));
+  }
+  // Over the connection limit only "/stop" (and the "/ws" upgrade) is served.
+  bool serve_on_reserve(const HttpRequest& req) override {
+    return req.path == "/stop" || req.path == "/ws";
   }
   HttpRequest last() {
     std::lock_guard<std::mutex> lock(mu_);
@@ -779,6 +797,7 @@ TEST_F(HttpServerTest, IdleKeepAliveConnectionIsClosed) {
 TEST_F(HttpServerTest, ConnectionsOverTheLimitGet503AndAreClosed) {
   ServerOptions o;
   o.max_connections = 2;
+  o.reserved_connections = 0;  // no reserve: the third connection is refused at once
   start(o);
   auto a = std::make_unique<Client>(port_);
   Client b(port_);
@@ -805,6 +824,100 @@ TEST_F(HttpServerTest, ConnectionsOverTheLimitGet503AndAreClosed) {
     if (!served) std::this_thread::sleep_for(20ms);
   }
   EXPECT_TRUE(served);
+}
+
+// Finding R6: one address holds at most max_connections_per_address; others are still served.
+TEST_F(HttpServerTest, OneAddressGetsMaxConnectionsPerAddressAndNoMore) {
+  ServerOptions o;
+  o.max_connections_per_address = 3;
+  start(o);
+  std::vector<std::unique_ptr<Client>> held;
+  for (int i = 0; i < 3; ++i) {
+    held.push_back(std::make_unique<Client>(port_, 0, "127.0.0.2"));
+    ASSERT_TRUE(held.back()->send(get("/echo")));
+    ASSERT_TRUE(held.back()->read_response());
+  }
+  Client fourth(port_, 0, "127.0.0.2");
+  auto r = fourth.read_response(3000);
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 503);
+  EXPECT_EQ(r->error_code(), "RATE_LIMITED");
+  EXPECT_EQ(r->error_reason(), "too_many_connections_from_address");
+  EXPECT_TRUE(fourth.wait_closed(3000));
+  EXPECT_EQ(server_->stats().rejected_per_address, 1u);
+  Client other(port_, 0, "127.0.0.3");  // another address is served
+  ASSERT_TRUE(other.send(get("/echo")));
+  auto ok = other.read_response();
+  ASSERT_TRUE(ok);
+  EXPECT_EQ(ok->status, 200);
+  held.pop_back();  // a closed connection frees the address's slot
+  bool served = false;
+  for (int i = 0; i < 50 && !served; ++i) {
+    Client again(port_, 0, "127.0.0.2");
+    again.send(get("/echo"));
+    auto r2 = again.read_response(2000);
+    served = r2 && r2->status == 200;
+    if (!served) std::this_thread::sleep_for(20ms);
+  }
+  EXPECT_TRUE(served);
+}
+
+// Finding R6: over max_connections the reserve serves a stop, and nothing else.
+TEST_F(HttpServerTest, TheReserveServesOnlyAStopOverTheConnectionLimit) {
+  ServerOptions o;
+  o.max_connections = 2;
+  o.reserved_connections = 8;
+  start(o);
+  Client a(port_, 0, "127.0.0.2"), b(port_, 0, "127.0.0.3");
+  for (Client* c : {&a, &b}) {
+    ASSERT_TRUE(c->send(get("/auth")));
+    ASSERT_TRUE(c->read_response());
+  }
+  Client other(port_);  // from the reserve: anything but a stop is 503 and closed
+  ASSERT_TRUE(other.send(get("/echo")));
+  auto r = other.read_response(3000);
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 503);
+  EXPECT_EQ(r->error_reason(), "reserve_for_stop_only");
+  EXPECT_TRUE(other.wait_closed(3000));
+  Client stop(port_);
+  ASSERT_TRUE(stop.send(post("/stop", "{}")));
+  auto s = stop.read_response(3000);
+  ASSERT_TRUE(s);
+  EXPECT_EQ(s->status, 200);
+  EXPECT_EQ(s->header("connection"), "close");  // one request per reserve connection
+  EXPECT_TRUE(http_.last().reserve);
+  EXPECT_TRUE(stop.wait_closed(3000));
+  EXPECT_EQ(server_->stats().reserve_refused, 1u);
+  EXPECT_GE(server_->stats().reserve_connections, 2u);
+  // One address holds at most two reserve connections at once.
+  Client r1(port_, 0, "127.0.0.4"), r2(port_, 0, "127.0.0.4");
+  std::this_thread::sleep_for(100ms);  // both accepted (from the reserve) before the third
+  Client r3(port_, 0, "127.0.0.4");
+  auto full = r3.read_response(3000);
+  ASSERT_TRUE(full);
+  EXPECT_EQ(full->error_reason(), "too_many_connections");
+}
+
+// Finding R6: the long keep-alive only after an answer that said "authenticated".
+TEST_F(HttpServerTest, UnauthenticatedKeepAliveIsShortAuthenticatedKeepsTheLongOne) {
+  ServerOptions o;
+  o.idle_timeout_ms = 60000;
+  o.unauthenticated_idle_timeout_ms = 300;
+  start(o);
+  Client anon(port_), authed(port_);
+  ASSERT_TRUE(anon.send(get("/echo")));
+  ASSERT_TRUE(anon.read_response());
+  ASSERT_TRUE(authed.send(get("/auth")));
+  ASSERT_TRUE(authed.read_response());
+  ASSERT_TRUE(authed.send(get("/echo")));  // later unauthenticated requests keep it long
+  ASSERT_TRUE(authed.read_response());
+  EXPECT_TRUE(anon.wait_closed(3000));
+  std::this_thread::sleep_for(1000ms);
+  ASSERT_TRUE(authed.send(get("/echo")));
+  auto r = authed.read_response(2000);
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 200);
 }
 
 TEST_F(HttpServerTest, HandlerThatDropsRespondOrThrowsGets500) {
@@ -940,6 +1053,32 @@ TEST_F(HttpServerTest, WebSocketTextFramesBothWaysAndServerClose) {
   std::this_thread::sleep_for(50ms);
   EXPECT_EQ(streams_.ev.closed, 1);
   EXPECT_EQ(http_.calls.load(), 0);
+}
+
+// Finding R6: a WebSocket from the reserve opens (the handler admits its path) and is closed
+// with 1013 after read_timeout_ms, so it cannot hold a reserve slot.
+TEST_F(HttpServerTest, AReserveWebSocketIsClosedAfterTheReadTimeout) {
+  ServerOptions o;
+  o.max_connections = 1;
+  o.read_timeout_ms = 400;
+  start(o);
+  Client held(port_, 0, "127.0.0.2");
+  ASSERT_TRUE(held.send(get("/auth")));
+  ASSERT_TRUE(held.read_response());
+  Client refused(port_);
+  EXPECT_FALSE(refused.ws_handshake("/other"));  // not admitted on the reserve
+  Client c(port_);
+  ASSERT_TRUE(c.ws_handshake("/ws"));
+  ASSERT_TRUE(c.ws_send(0x1, "hello"));
+  auto f = c.ws_read();
+  ASSERT_TRUE(f);
+  EXPECT_EQ(f->payload, "echo:hello");
+  const auto t0 = std::chrono::steady_clock::now();
+  auto cl = c.ws_read(3000);
+  ASSERT_TRUE(cl);
+  EXPECT_EQ(cl->opcode, 0x8);
+  EXPECT_EQ(cl->close_code(), 1013);
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 2s);
 }
 
 TEST_F(HttpServerTest, WebSocketFramesQueuedDuringOpenAreDelivered) {

@@ -59,6 +59,11 @@ Table<ServerLimits> limits_rows() {
       L::field("read_timeout_ms", Int(100, 600'000), &ServerLimits::read_timeout_ms),
       L::field("idle_timeout_ms", Int(100, 86'400'000), &ServerLimits::idle_timeout_ms),
       L::field("max_connections", Int(1, 1'000'000), &ServerLimits::max_connections),
+      L::field("max_connections_per_address", Int(0, 1'000'000),
+               &ServerLimits::max_connections_per_address),
+      L::field("reserved_connections", Int(0, 1024), &ServerLimits::reserved_connections),
+      L::field("unauthenticated_idle_timeout_ms", Int(100, 86'400'000),
+               &ServerLimits::unauthenticated_idle_timeout_ms),
   };
 }
 

@@ -26,6 +26,7 @@ struct StreamState {
   std::string upgrade_token;  // from the upgrade request, if any
   std::string stream_id;
   int64_t opened_mono = 0;
+  bool reserve = false;  // opened over the connection limit: SAFETY messages only
 
   Mutex mu;
   bool connected GUARDED_BY(mu) = false;
@@ -153,6 +154,14 @@ void NodeStream::on_text(std::string text) {
     auto state = st;
     ai_stream_message(svc, t, *v, who,
                       [state](std::string s) { state->sink->send_text(std::move(s)); });
+    return;
+  }
+  if (st->reserve && t != "SAFETY") {  // a reserve connection is there for a stop only
+    st->sink->send_text(json::dump(svc.error(
+        Error(ErrorCode::kRateLimited,
+              "the node is at its connection limit: this stream carries only SAFETY messages",
+              "type", "reserve_for_stop_only"))));
+    st->sink->close(1008, "reserved connection: SAFETY messages only");
     return;
   }
   // Everything else is an RCAN message through the pipeline, as this stream's principal.
@@ -374,6 +383,7 @@ std::unique_ptr<transport::StreamReceiver> Node::open(const transport::HttpReque
   st->sink = std::move(sink);
   st->stream_id = new_uuid_v4();
   st->opened_mono = svc_.clock.mono_ms();
+  st->reserve = upgrade.reserve;
   if (std::string_view bearer = upgrade.bearer(); !bearer.empty())
     st->upgrade_token = std::string(bearer);
   else if (upgrade.has_query("token"))
@@ -412,7 +422,23 @@ Result<Principal> Node::bearer_principal(const transport::HttpRequest& req) cons
   return svc_.authenticate_header(req.header("authorization"));
 }
 
-void Node::handle(transport::HttpRequest req, Respond respond) { routes_.dispatch(req, respond); }
+void Node::handle(transport::HttpRequest req, Respond respond) {
+  // The transport keeps a connection's long keep-alive only after an answer to a request that
+  // presented a valid credential (docs/TRANSPORT.md): a bearer token that verifies (the verified
+  // token cache makes the second check cheap), or a pipeline message whose token did.
+  if (!req.header("authorization").empty() && bearer_principal(req).ok()) {
+    respond = [inner = std::move(respond)](transport::HttpResponse r) {
+      r.authenticated = true;
+      inner(std::move(r));
+    };
+  }
+  routes_.dispatch(req, respond);
+}
+
+bool Node::serve_on_reserve(const transport::HttpRequest& req) {
+  if (req.method == "POST" && req.path == "/api/stop") return true;
+  return req.method == "GET" && req.path == "/rcan/v1/stream";
+}
 
 void Node::run_pipeline(transport::HttpRequest& req, Respond& respond, const std::string& route,
                         json::Value body) {
@@ -438,6 +464,7 @@ void Node::run_pipeline(transport::HttpRequest& req, Respond& respond, const std
     resp.body = json::dump(out.body);
     resp.headers = std::move(out.headers);
     resp.answered_mono_us = steady_us();
+    resp.authenticated = out.authenticated;
     respond(std::move(resp));
   });
 }

@@ -37,6 +37,9 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
 
   void handle(transport::HttpRequest req, Respond respond) override;
   void answer_waited(int64_t us) override;
+  // Over the connection limit only a stop gets through: POST /api/stop and the stream upgrade
+  // (a reserve stream then carries only SAFETY messages).
+  bool serve_on_reserve(const transport::HttpRequest& req) override;
   std::unique_ptr<transport::StreamReceiver> open(const transport::HttpRequest& upgrade,
                                                   std::shared_ptr<transport::StreamSink> sink,
                                                   transport::HttpResponse& refusal) override;

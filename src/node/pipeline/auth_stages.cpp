@@ -109,6 +109,7 @@ class AuthStage final : public Stage {
       }
       ctx->principal = std::move(p).value();
     }
+    ctx->authenticated = true;
     svc_.ownership.cap(ctx->principal);  // a former owner's token no longer carries ownership
     auto sig = svc_.auth.check_signature(*ctx->msg);
     if (!sig.ok()) {

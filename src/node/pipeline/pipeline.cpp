@@ -68,6 +68,7 @@ std::string token_of(const Context& ctx) {
 void Context::finish(Outcome out) {
   if (finished_) return;
   finished_ = true;
+  out.authenticated = authenticated;
   if (done) done(std::move(out));
 }
 

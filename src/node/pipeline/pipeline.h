@@ -59,6 +59,7 @@ struct Outcome {
   int status = 200;
   json::Value body;
   std::vector<std::pair<std::string, std::string>> headers;
+  bool authenticated = false;  // the message's token verified (the auth stage passed)
 };
 
 enum class SafetyAction { kNone, kEstop, kStop, kResume };
@@ -81,6 +82,7 @@ struct Context {
   // The replay stage remembered the message's id: when a §16 escalation runs the layer's
   // command (the same message_id) through the stages again, it is not a replay.
   bool replay_remembered = false;
+  bool authenticated = false;  // the auth stage verified the token (Outcome::authenticated)
   // §16 (src/node/ai/gate_stages.cpp): written into the acceptance record by the dispatch stage.
   bool gate_bypassed = false;        // a confidence gate missed with on_fail allow
   bool hitl_timeout_bypass = false;  // a HiTL gate timed out with on_timeout allow
