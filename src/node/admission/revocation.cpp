@@ -208,26 +208,28 @@ Result<bool> RevocationList::add(Revocation r, int64_t now_s) {
   return true;
 }
 
+const int64_t* RevocationList::find_locked(Revocation::Kind k, std::string_view iss,
+                                           std::string_view value) const {
+  if (value.empty()) return nullptr;
+  // The entry for this issuer first, then the one for any issuer.
+  for (std::string_view i : {iss, std::string_view()}) {
+    auto it = index_.find(index_key(k, i, value));
+    if (it != index_.end()) return &it->second;
+    if (iss.empty()) break;
+  }
+  return nullptr;
+}
+
 std::optional<std::string> RevocationList::revoked(const Principal& p) const {
   if (!p.authenticated) return std::nullopt;
   MutexLock lock(mu_);
   if (index_.empty()) return std::nullopt;
-  auto has = [&](Revocation::Kind k, std::string_view value) -> const int64_t* {
-    if (value.empty()) return nullptr;
-    for (std::string_view iss : {std::string_view(p.issuer), std::string_view()}) {
-      auto it = index_.find(index_key(k, iss, value));
-      if (it != index_.end()) return &it->second;
-    }
-    return nullptr;
-  };
-  if (has(Revocation::Kind::kJti, p.jti)) return "jti";
-  if (has(Revocation::Kind::kKid, p.kid)) return "kid";
-  if (const int64_t* at_s = has(Revocation::Kind::kSubject, p.sub)) {
-    if (!p.token_iat || *p.token_iat <= *at_s) return "sub";
-    // Issued after the revocation: the owner minted it anew. (A same-subject entry with the
-    // other issuer key is looked up above only when this one is absent.)
-    auto any = index_.find(index_key(Revocation::Kind::kSubject, "", p.sub));
-    if (any != index_.end() && *p.token_iat <= any->second) return "sub";
+  if (find_locked(Revocation::Kind::kJti, p.issuer, p.jti)) return "jti";
+  if (find_locked(Revocation::Kind::kKid, p.issuer, p.kid)) return "kid";
+  // By subject: the tokens issued at or before the revocation's second (or without iat).
+  for (std::string_view iss : {std::string_view(p.issuer), std::string_view()}) {
+    const int64_t* at_s = find_locked(Revocation::Kind::kSubject, iss, p.sub);
+    if (at_s && (!p.token_iat || *p.token_iat <= *at_s)) return "sub";
   }
   return std::nullopt;
 }

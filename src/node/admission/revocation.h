@@ -89,6 +89,9 @@ class RevocationList {
  private:
   void install(std::vector<Revocation> entries) EXCLUDES(mu_);
   std::vector<Revocation> pruned(int64_t now_s) const EXCLUDES(mu_);
+  // The entry's second for (k, iss, value), else for (k, any issuer, value); null when neither.
+  const int64_t* find_locked(Revocation::Kind k, std::string_view iss, std::string_view value) const
+      REQUIRES(mu_);
 
   const std::string path_;
   const size_t capacity_;
