@@ -49,10 +49,11 @@ const std::map<std::string, std::pair<std::string, std::string>>& table() {
        {"compute check verify", std::string("--key-file --rrn --thought-id --timestamp ") + kNet}},
       {"keys", {"generate derive show", "--dir --mldsa-seed --ed25519-seed --json --help"}},
       {"token",
-       {"issue inspect",
+       {"issue inspect revoke revocations",
         "--key --sub --role --aud --scope --ttl --iss --alg --kid --fleet --sender-type "
         "--cloud-provider "
-        "--function-name --secret --device --leeway --now --help"}},
+        "--function-name --secret --device --leeway --now --jti --exp --reason --url "
+        "--token-file --help"}},
       {"ruri", {"parse", "--help"}},
       {"json", {"canonical", "--help"}},
       {"message", {"check send", std::string("--max-bytes ") + kNet}},

@@ -1,9 +1,11 @@
 // rcan token — issue and inspect JWTs (see include/rcan/crypto/jwt.h).
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <iostream>
 
 #include "cli.h"
+#include "node_http.h"
 #include "rcan/crypto/jwt.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
@@ -26,8 +28,20 @@ constexpr const char* kHelp =
     "      (PEM public key, JWK or JWKS; or an HS256 secret file) it verifies the token the way\n"
     "      the robot does: issuer --iss (default: the token's own iss, trusted because you named\n"
     "      the key), audience --aud (skipped when absent), fleet --device (skipped when absent).\n"
-    "  Exit: 0 issued / valid (or decoded, without a key), 1 invalid, 2 usage or malformed "
-    "token.\n";
+    "  rcan token revoke TOKEN | --jti J [--exp UNIX] | --sub S | --kid K  [--iss I]\n"
+    "                    [--reason TEXT] [--url URL] [--token-file F]\n"
+    "      Asks the robot (OWNER) to refuse a token from now on, also across restarts: TOKEN\n"
+    "      (\"-\" reads it from stdin) by its jti; --sub every token of that subject issued so\n"
+    "      far (of issuer --iss, else of any issuer); --kid every token signed under that key\n"
+    "      id. Open streams of a revoked token are closed. URL and token as the other node verbs\n"
+    "      ($RCAN_URL, $RCAN_TOKEN_FILE).\n"
+    "  rcan token revocations [--url URL] [--token-file F]\n"
+    "      Lists the robot's revocations (OWNER).\n"
+    "  Issued tokens carry a fresh jti (a UUID). The robot's own issuer key is\n"
+    "  <data dir>/issuer/ed25519.seed (issuer \"rcand-local\"): with --iss rcand-local it mints\n"
+    "  tokens that robot accepts, e.g. a new OWNER token once owner.token (24 h) has expired.\n"
+    "  Exit: 0 issued / valid / revoked (or decoded, without a key), 1 invalid or refused by the\n"
+    "  robot, 2 usage, malformed token or no answer.\n";
 
 std::vector<std::string> split_csv(const std::string& s) {
   std::vector<std::string> out;
@@ -87,8 +101,6 @@ int issue_main(const Args& args) {
                        "--sender-type cloud_function needs --cloud-provider (RCAN 8.5)");
 
   int64_t now = unix_now();
-  uint8_t jti[16];
-  if (!random_bytes(jti, sizeof jti)) return usage_error("token issue", "random generator failed");
   json::Object c;
   c.set("iss", o.get("iss", "rcan-cli"));
   c.set("sub", o.get("sub"));
@@ -107,7 +119,7 @@ int issue_main(const Args& args) {
   if (!o.get("function-name").empty()) c.set("function_name", o.get("function-name"));
   c.set("iat", now);
   c.set("exp", now + *ttl);
-  c.set("jti", to_hex(jti, sizeof jti));
+  c.set("jti", new_uuid_v4());  // what `rcan token revoke` names it by
   auto tok = jwt::issue(c, *key, o.get("kid"));
   if (!tok.ok()) {
     std::fprintf(stderr, "rcan token issue: %s\n", tok.error().message.c_str());
@@ -192,6 +204,67 @@ int inspect_main(const Args& args) {
   return 0;
 }
 
+// Runs one call against the node and prints its answer: 0 on 2xx, 1 refused, 2 no answer.
+int node_call(const char* verb, const Options& o, const std::string& method,
+              const std::string& body) {
+  std::string err;
+  std::string token = node_token(o, true, err);
+  if (!err.empty()) return usage_error(verb, err);
+  auto r = node_request(node_url(o), method, "/rcan/v1/revocations", body, token);
+  if (!r.ok()) {
+    std::fprintf(stderr, "rcan %s: %s\n", verb, r.error().message.c_str());
+    return 2;
+  }
+  std::cout << r->second << (r->second.empty() || r->second.back() != '\n' ? "\n" : "");
+  return r->first >= 200 && r->first < 300 ? 0 : 1;
+}
+
+int revoke_main(const Args& args) {
+  Options o(args, {}, {"jti", "sub", "kid", "iss", "exp", "reason", "url", "token-file"});
+  if (!o.ok()) return usage_error("token revoke", o.error());
+  if (o.positional().size() > 1) return usage_error("token revoke", "give at most one TOKEN");
+  json::Object body;
+  int given = o.positional().empty() ? 0 : 1;
+  if (!o.positional().empty()) {
+    std::string t = o.positional()[0];
+    if (t == "-") {
+      std::string line;
+      std::getline(std::cin, line);
+      t = line;
+    }
+    t = trim(t);
+    if (t.empty()) return usage_error("token revoke", "TOKEN is empty");
+    body.set("token", t);
+  }
+  for (const char* k : {"jti", "sub", "kid"}) {
+    if (!o.has(k)) continue;
+    if (o.get(k).empty()) return usage_error("token revoke", std::string("--") + k + " is empty");
+    body.set(k, o.get(k));
+    ++given;
+  }
+  if (given != 1)
+    return usage_error("token revoke", "give exactly one of TOKEN, --jti, --sub or --kid");
+  if (o.has("iss")) body.set("iss", o.get("iss"));
+  if (o.has("exp")) {
+    if (!o.has("jti")) return usage_error("token revoke", "--exp goes with --jti");
+    char* end = nullptr;
+    long long e = std::strtoll(o.get("exp").c_str(), &end, 10);
+    if (o.get("exp").empty() || *end)
+      return usage_error("token revoke", "--exp takes unix seconds");
+    body.set("exp", static_cast<int64_t>(e));
+  }
+  if (o.has("reason")) body.set("reason", o.get("reason"));
+  return node_call("token revoke", o, "POST", json::dump(json::Value(std::move(body))));
+}
+
+int revocations_main(const Args& args) {
+  Options o(args, {}, {"url", "token-file"});
+  if (!o.ok()) return usage_error("token revocations", o.error());
+  if (!o.positional().empty())
+    return usage_error("token revocations", "unexpected argument " + o.positional()[0]);
+  return node_call("token revocations", o, "GET", "");
+}
+
 int token_main(const Args& args) {
   if (args.empty() || args[0] == "--help" || args[0] == "-h") {
     std::fputs(kHelp, args.empty() ? stderr : stdout);
@@ -200,10 +273,17 @@ int token_main(const Args& args) {
   Args rest(args.begin() + 1, args.end());
   if (args[0] == "issue") return issue_main(rest);
   if (args[0] == "inspect") return inspect_main(rest);
-  return usage_error("token", "unknown subcommand " + args[0] + " (issue | inspect)");
+  if (!rest.empty() && (rest[0] == "--help" || rest[0] == "-h")) {
+    std::fputs(kHelp, stdout);
+    return 0;
+  }
+  if (args[0] == "revoke") return revoke_main(rest);
+  if (args[0] == "revocations") return revocations_main(rest);
+  return usage_error("token",
+                     "unknown subcommand " + args[0] + " (issue | inspect | revoke | revocations)");
 }
 
-const Registration kReg{"token", "issue and inspect JWTs", &token_main};
+const Registration kReg{"token", "issue, inspect and revoke JWTs", &token_main};
 
 }  // namespace
 }  // namespace rcan::cli

@@ -167,6 +167,9 @@ Status Daemon::start_node() {
   if (!auth.ok()) return auth.error();
   services_ = std::make_unique<node::NodeServices>(ns, Clock::system(), std::move(auth).value(),
                                                    *actuation_, *audit_);
+  // Revoked tokens stay revoked across restarts; a list that cannot be read stops start-up
+  // rather than accept what it revoked.
+  if (Status s = services_->revocations.load(services_->clock.wall_ms() / 1000); !s.ok()) return s;
   if (!cfg_.fleet.fleet_id.empty())
     services_->fleet =
         std::make_shared<node::FleetMembership>(node::FleetMembership{cfg_.fleet, {}});

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 
+#include "rcan/audit/env.h"
 #include "rcan/audit/secret.h"
 #include "rcan/crypto/ed25519.h"
 #include "rcan/encoding.h"
@@ -27,6 +28,19 @@ Result<std::string> read_text(const std::string& path) {
   while ((n = std::fread(buf, 1, sizeof buf, f)) > 0 && s.size() < (1u << 20)) s.append(buf, n);
   std::fclose(f);
   return s;
+}
+
+// Whether the owner token in `path` has expired at `now` (or within the next minute), or is
+// unreadable as a JWT: then a fresh one replaces it.
+bool owner_token_expired(const std::string& path, int64_t now) {
+  auto text = read_text(path);
+  if (!text.ok()) return true;
+  std::string t = *text;
+  while (!t.empty() && (t.back() == '\n' || t.back() == '\r' || t.back() == ' ')) t.pop_back();
+  auto d = jwt::decode(t);
+  if (!d.ok()) return true;
+  const json::Value* exp = d->claims.find("exp");
+  return !exp || !exp->is_int() || exp->as_int() <= now + 60;
 }
 
 }  // namespace
@@ -78,27 +92,29 @@ Status ensure_issuer_and_token(const LocalIdentity& id, const std::string& data_
   if (!verify.ok()) return verify.error();
   trust.add(id.issuer, *verify);
   token_created = false;
-  if (!fs::exists(id.owner_token_file)) {
-    int64_t now = std::chrono::duration_cast<std::chrono::seconds>(
-                      std::chrono::system_clock::now().time_since_epoch())
-                      .count();
-    json::Object claims{{"iss", id.issuer},
-                        {"sub", "local-owner"},
-                        {"aud", ruri},
-                        {"role", "owner"},
-                        {"scope", json::Array{"status", "chat", "control", "config", "training"}},
-                        {"iat", now},
-                        {"exp", static_cast<int64_t>(now + 365 * 24 * 3600)}};
-    auto token = jwt::issue(claims, *signing);
-    if (!token.ok()) return token.error();
-    std::string text = *token + "\n";
-    if (Status s = keys::write_new_file(
-            id.owner_token_file, {reinterpret_cast<const uint8_t*>(text.data()), text.size()},
-            0600);
-        !s.ok())
-      return s;
-    token_created = true;
-  }
+  const int64_t now = std::chrono::duration_cast<std::chrono::seconds>(
+                          std::chrono::system_clock::now().time_since_epoch())
+                          .count();
+  if (fs::exists(id.owner_token_file) && !owner_token_expired(id.owner_token_file, now))
+    return Status::Ok();
+  // First run, or the last owner token has expired (or is no JWT): a fresh one, with its own
+  // jti. It lives kOwnerTokenTtlS; `rcan token issue --key <data>/issuer/ed25519.seed …` mints
+  // more (docs/NODE.md).
+  json::Object claims{{"iss", id.issuer},
+                      {"sub", "local-owner"},
+                      {"aud", ruri},
+                      {"role", "owner"},
+                      {"scope", json::Array{"status", "chat", "control", "config", "training"}},
+                      {"jti", new_uuid_v4()},
+                      {"iat", now},
+                      {"exp", now + kOwnerTokenTtlS}};
+  auto token = jwt::issue(claims, *signing);
+  if (!token.ok()) return token.error();
+  std::string text = *token + "\n";
+  if (Status s = audit::Env::posix()->write_file_atomic(id.owner_token_file, text); !s.ok())
+    return Error(ErrorCode::kInternal,
+                 "cannot write " + id.owner_token_file + ": " + s.error().message);
+  token_created = true;
   return Status::Ok();
 }
 

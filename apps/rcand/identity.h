@@ -27,8 +27,13 @@ struct LocalIdentity {
 // Reads (or, on the first run, creates) the device id in `data_dir`.
 Result<LocalIdentity> ensure_local_identity(const std::string& data_dir);
 
+// How long the OWNER token rcand writes is valid (24 h): short, so that a copied token does not
+// outlive the day; `rcan token issue` with the local issuer key mints more (docs/NODE.md).
+inline constexpr int64_t kOwnerTokenTtlS = 24 * 3600;
+
 // The local issuer's key (created once), trusted as `id.issuer` in `trust`, and an OWNER token
-// for `ruri` (created once; `token_created` says whether this run wrote it).
+// for `ruri` (each with a fresh jti; written on the first run and again whenever the last one
+// has expired; `token_created` says whether this run wrote it).
 Status ensure_issuer_and_token(const LocalIdentity& id, const std::string& data_dir,
                                const std::string& ruri, jwt::TrustStore& trust,
                                bool& token_created);

@@ -129,7 +129,9 @@ int main(int argc, char** argv) {
     std::fprintf(
         stderr,
         "\nrcand is serving the simulated robot %s at %s\n"
-        "%s token: %s (mode 0600)\n"
+        "%s token: %s (mode 0600, valid 24 h; a fresh one is written at the next start once\n"
+        "  it has expired, and `rcan token issue --key <data dir>/issuer/ed25519.seed --iss\n"
+        "  rcand-local --sub local-owner --role owner --aud RURI` mints more)\n"
         "Use it from another terminal:\n"
         "  export RCAN_URL=%s RCAN_TOKEN_FILE=%s\n"
         "  rcan status        # then: rcan claim, rcan command move --linear 0.3, rcan estop\n"

@@ -124,19 +124,6 @@ struct CommitmentConfig {  // security.commitment (profile schema; kept, unused)
   std::optional<double> qber_threshold;
 };
 
-struct KeyRotationConfig {  // security.key_rotation (v1.5)
-  uint32_t overlap_s = 3600;
-  uint32_t max_validity_days = 365;
-  bool auto_rotate = false;
-};
-
-struct RevocationConfig {  // security.revocation (v1.5)
-  bool check_on_startup = false;
-  uint32_t cache_ttl_s = 3600;
-  uint32_t max_staleness_s = 3600;
-  bool quarantine_on_staleness = false;
-};
-
 struct SecurityConfig {
   std::string key_dir;  // default <data_dir>/keys
   AuditConfig audit;
@@ -149,8 +136,6 @@ struct SecurityConfig {
   std::vector<TrustedRobotKey> trusted_signer_keys;
   std::vector<InjectionPattern> injection_patterns;  // defaults (unless disabled) + configured
   CommitmentConfig commitment;
-  KeyRotationConfig key_rotation;
-  RevocationConfig revocation;
 };
 
 // "10/minute" → {10, 60}.

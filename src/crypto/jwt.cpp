@@ -846,7 +846,9 @@ Result<Claims> JwtVerifier::verify(std::string_view token, int64_t now) const {
         "alg " + alg_s + " does not match the issuer's key type (algorithm confusion refused)",
         "alg", "alg_mismatch");
   if (!verified) return auth_invalid("signature does not verify", "signature", "bad_signature");
-  return check_claims(std::move(d->claims), opts_, now);
+  auto claims = check_claims(std::move(d->claims), opts_, now);
+  if (claims.ok()) claims->kid = d->header.kid;
+  return claims;
 }
 
 Result<Claims> JwtVerifier::verify(std::string_view token) const {

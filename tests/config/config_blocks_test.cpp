@@ -79,13 +79,6 @@ void expect_security_defaults(const NodeConfig& c) {
   EXPECT_FALSE(s.commitment.enabled);
   EXPECT_EQ(s.commitment.key_mode, "classical");
   EXPECT_FALSE(s.commitment.qber_threshold.has_value());
-  EXPECT_EQ(s.key_rotation.overlap_s, 3600u);
-  EXPECT_EQ(s.key_rotation.max_validity_days, 365u);
-  EXPECT_FALSE(s.key_rotation.auto_rotate);
-  EXPECT_FALSE(s.revocation.check_on_startup);
-  EXPECT_EQ(s.revocation.cache_ttl_s, 3600u);
-  EXPECT_EQ(s.revocation.max_staleness_s, 3600u);
-  EXPECT_FALSE(s.revocation.quarantine_on_staleness);
 }
 
 void expect_rbac_defaults(const NodeConfig& c) {
@@ -278,8 +271,7 @@ TEST(ConfigBlockDefaults, EveryBlockGivenEmpty) {
   auto r = parse(
       "robot: {}\nregistry: {}\nrcan_protocol: {}\nnode: {}\n"
       "server: {tls: {}, limits: {}}\ngrpc: {tls: {}}\nudp: {}\n"
-      "security: {audit: {retention: {}}, jwt: {}, injection: {}, commitment: {},"
-      " key_rotation: {}, revocation: {}}\n"
+      "security: {audit: {retention: {}}, jwt: {}, injection: {}, commitment: {}}\n"
       "rbac: {grants: {}, rate_limits: {}, guest_limits: {}}\n"
       "safety: {}\nwatchdog: {}\nagent: {layers: {}}\nbrain: {}\ndriver: {sim: {}}\n"
       "offline: {}\ncontrol: {}\nqos: {}\nmqtt: {tls: {}, reconnect: {}}\n");
@@ -488,6 +480,14 @@ TEST(ConfigBlockRules, IdentityServerAndSecurity) {
        "security.trusted_robot_keys[1].name", "invalid_value", "duplicate trusted key name \"a\""},
       {"security: {injection: {patterns: ['']}}\n", "security.injection.patterns[0]",
        "invalid_value", "empty pattern"},
+      // v1.5 blocks rcand does not implement are refused, never parsed and ignored (R7).
+      {"security: {key_rotation: {auto_rotate: true}}\n", "security.key_rotation", "not_supported",
+       "security.key_rotation is not implemented by rcand"},
+      {"security: {key_rotation: {}}\n", "security.key_rotation", "not_supported",
+       "security.key_rotation is not implemented by rcand; add the new key beside the old one"},
+      {"security: {revocation: {check_on_startup: true}}\n", "security.revocation", "not_supported",
+       "security.revocation is not implemented by rcand; the node's own revocation list is "
+       "always on"},
   };
   for (const Rule& rule : rules) expect_rule(rule);
 }

@@ -341,8 +341,6 @@ TEST(ConfigFixtures, FullConfig) {
   EXPECT_TRUE(c.security.injection_patterns[1].regex);
   EXPECT_TRUE(c.security.commitment.enabled);
   EXPECT_EQ(c.security.commitment.key_mode, "hybrid");
-  EXPECT_TRUE(c.security.key_rotation.auto_rotate);
-  EXPECT_EQ(c.security.revocation.max_staleness_s, 120u);
   EXPECT_TRUE(c.rbac.policy.user_arm);
   EXPECT_FALSE(c.rbac.policy.user_record);
   EXPECT_TRUE(c.rbac.policy.owner_safety_config);

@@ -4,6 +4,7 @@
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <condition_variable>
 #include <deque>
 #include <mutex>
@@ -387,6 +388,27 @@ TEST_F(GrpcTest, StreamWithABadTokenIsRefused) {
   EXPECT_FALSE(rw->Read(&m));
   grpc::Status st = rw->Finish();
   EXPECT_EQ(st.error_code(), grpc::StatusCode::UNAUTHENTICATED);
+}
+
+// docs/SECURITY.md R7: a stream keeps its CONNECT principal only until that token is revoked.
+TEST_F(GrpcTest, StreamOfARevokedPrincipalEndsAtOnceUnauthenticated) {
+  auto stub = stub_for(n().grpc_port());
+  std::string user = n().token("user", {"control", "status"}, "grpc-revoked");
+  std::string owner = n().token("owner", {"control", "status"}, "grpc-owner");
+  StreamClient s(*stub, user);
+  RCANMessage st = typed_msg(RCANMessage::STATUS, {});
+  ASSERT_TRUE(s.send(st));
+  ASSERT_TRUE(s.reply_to(st.message_id()).has_value());
+  auto revoked =
+      n().post("/rcan/v1/revocations",
+               R"({"sub":"grpc-revoked","iss":"test.local","reason":"grpc test"})", owner);
+  ASSERT_EQ(revoked.status, 201) << revoked.body;
+  const auto t0 = std::chrono::steady_clock::now();
+  grpc::Status ended = s.finish();
+  EXPECT_EQ(ended.error_code(), grpc::StatusCode::UNAUTHENTICATED) << ended.error_message();
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(3));
+  StreamClient again(*stub, user);
+  EXPECT_EQ(again.finish().error_code(), grpc::StatusCode::UNAUTHENTICATED);
 }
 
 TEST_F(GrpcTest, StreamWithoutMetadataTakesTheTokenFromEachMessage) {

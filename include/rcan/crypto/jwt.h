@@ -161,6 +161,7 @@ struct Claims {
   std::vector<std::string> aud;
   std::optional<int64_t> exp, nbf, iat;
   std::string jti;
+  std::string kid;     // the header's key id (set by JwtVerifier::verify; "" when none)
   std::string role;    // "creator" | "owner" | "leasee" | "user" | "guest"
   int role_level = 0;  // 5..1
   std::vector<std::string> scopes;

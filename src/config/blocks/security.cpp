@@ -1,6 +1,7 @@
 // `security`: keys, the audit log, JWT issuers, trusted robot and signer keys, the injection
-// screen, and the profile/v1.5 commitment, key rotation and revocation blocks (docs/CONFIG.md
-// §security). The key, audit and secret paths default to files under the data dir.
+// screen, the profile commitment block, and the refusal of the v1.5 key rotation and
+// revocation blocks (docs/CONFIG.md §security). The key, audit and secret paths default to files
+// under the data dir.
 #include <algorithm>
 #include <filesystem>
 #include <regex>
@@ -153,23 +154,18 @@ Table<CommitmentConfig> commitment_rows() {
   };
 }
 
-Table<KeyRotationConfig> key_rotation_rows() {
-  using K = Rows<KeyRotationConfig>;
-  return {
-      K::field("overlap_s", Int(0, 31'536'000), &KeyRotationConfig::overlap_s),
-      K::field("max_validity_days", Int(1, 36'500), &KeyRotationConfig::max_validity_days),
-      K::field("auto_rotate", Bool(), &KeyRotationConfig::auto_rotate),
-  };
-}
-
-Table<RevocationConfig> revocation_rows() {
-  using V = Rows<RevocationConfig>;
-  return {
-      V::field("check_on_startup", Bool(), &RevocationConfig::check_on_startup),
-      V::field("cache_ttl_s", Int(0, 31'536'000), &RevocationConfig::cache_ttl_s),
-      V::field("max_staleness_s", Int(0, 31'536'000), &RevocationConfig::max_staleness_s),
-      V::field("quarantine_on_staleness", Bool(), &RevocationConfig::quarantine_on_staleness),
-  };
+// v1.5 blocks rcand does not implement: refused when present (even empty), never parsed and
+// ignored. Key rotation: add the new key beside the old one (security.jwt issuers, trusted
+// keys), then revoke the old key id (`rcan token revoke --kid`). A registry's revocation feed:
+// the node's own list (`revocations.json`, POST /rcan/v1/revocations) is always on.
+Row<SecurityConfig> not_implemented(const char* key, const char* instead) {
+  return S::read(key, Free(), [key, instead](const At& a, SecurityConfig&, Ctx&) {
+    if (a)
+      fail(a.path,
+           std::string("security.") + key + " is not implemented by rcand; " + instead +
+               " (docs/CONFIG.md)",
+           "not_supported");
+  });
 }
 
 Table<SecurityConfig> security_rows() {
@@ -183,8 +179,12 @@ Table<SecurityConfig> security_rows() {
       trusted_keys("trusted_signer_keys", &SecurityConfig::trusted_signer_keys),
       S::block("injection", injection_rows()),
       S::block("commitment", commitment_rows(), &SecurityConfig::commitment),
-      S::block("key_rotation", key_rotation_rows(), &SecurityConfig::key_rotation),
-      S::block("revocation", revocation_rows(), &SecurityConfig::revocation),
+      not_implemented("key_rotation",
+                      "add the new key beside the old one and revoke the old key id with "
+                      "`rcan token revoke --kid`"),
+      not_implemented("revocation",
+                      "the node's own revocation list is always on (`rcan token revoke`); "
+                      "remove the block"),
   };
 }
 

@@ -37,6 +37,9 @@ Result<Principal> Authenticator::authenticate_token(std::string_view token, int6
   p.role = *role;
   p.scopes = claims->scopes;
   p.token_exp = claims->exp;
+  p.token_iat = claims->iat;
+  p.jti = claims->jti;
+  p.kid = claims->kid;
   if (claims->fleet)
     p.fleet = std::make_shared<const std::vector<std::string>>(std::move(*claims->fleet));
   p.token_identity.sub = claims->sub;

@@ -27,6 +27,9 @@ struct Principal {
   Role role = Role::kGuest;
   std::vector<std::string> scopes;
   std::optional<int64_t> token_exp;  // unix seconds
+  std::optional<int64_t> token_iat;  // unix seconds
+  std::string jti;                   // the token's `jti` ("" when it has none)
+  std::string kid;                   // the key id in the token's header ("" when none)
   TokenIdentity token_identity;
   // The token's `fleet` claim (a fleet JWT; already checked to list this robot). Shared: a
   // fleet token lists every member, and a Principal is copied once per message.

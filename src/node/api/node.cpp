@@ -118,6 +118,16 @@ void NodeStream::on_text(std::string text) {
     st->sink->send_text(json::dump(json::Value(ack)));
     return;
   }
+  std::optional<Principal> who;
+  {
+    MutexLock lock(st->mu);
+    if (st->closed) return;  // closed on revocation: the close is on its way
+    who = st->principal;
+  }
+  if (who && !svc.check_revoked(*who).ok()) {
+    node.close_revoked_streams();
+    return;
+  }
   if (t == "PING") {
     json::Object pong{{"type", "PONG"}};
     const json::Value* id = v->get("msg_id");
@@ -146,11 +156,6 @@ void NodeStream::on_text(std::string text) {
     return;
   }
   if (t == "AUTHORIZE") {  // §16.4, answered on this stream (ai_routes.cpp)
-    std::optional<Principal> who;
-    {
-      MutexLock lock(st->mu);
-      who = st->principal;
-    }
     auto state = st;
     ai_stream_message(svc, t, *v, who,
                       [state](std::string s) { state->sink->send_text(std::move(s)); });
@@ -207,6 +212,10 @@ Node::Node(NodeServices& services)
       st->sink->send_text(text);
     }
   });
+  revocation_sub_ = svc_.revocations.subscribe([this](const Revocation& r) {
+    close_revoked_streams();
+    end_revoked_control(r);
+  });
   svc_.metrics.add_gauge("rcan_estop_active", "1 while ESTOP is latched.",
                          [this] { return svc_.act.estop_active() ? 1.0 : 0.0; });
   svc_.metrics.add_gauge("rcan_audit_queue_depth", "Audit records waiting to be durable.",
@@ -239,7 +248,36 @@ Node::Node(NodeServices& services)
 
 Node::~Node() {
   shutdown();
+  svc_.revocations.unsubscribe(revocation_sub_);
   svc_.events.unsubscribe(event_sub_);
+}
+
+void Node::close_revoked_streams() {
+  std::vector<std::shared_ptr<StreamState>> copy;
+  {
+    MutexLock lock(streams_mu_);
+    copy = streams_;
+  }
+  for (auto& st : copy) {
+    Status revoked = Status::Ok();
+    Principal who;
+    {
+      MutexLock lock(st->mu);
+      if (!st->connected || st->closed || !st->principal) continue;
+      revoked = svc_.check_revoked(*st->principal);
+      if (revoked.ok()) continue;
+      st->closed = true;  // nothing more goes through this stream
+      who = *st->principal;
+    }
+    svc_.record("STREAM_CLOSED", "blocked")
+        .by(who)
+        .reason("token_revoked")
+        .message(st->stream_id)
+        .detail("transport", "ws")
+        .write();
+    st->sink->send_text(json::dump(svc_.error(revoked.error())));
+    st->sink->close(1008, "token revoked");
+  }
 }
 
 void Node::start() {

@@ -107,6 +107,14 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   void stream_text(const std::shared_ptr<StreamState>& st, std::string text);
   void register_stream(const std::shared_ptr<StreamState>& st) EXCLUDES(streams_mu_, pump_mu_);
   void unregister_stream(const std::shared_ptr<StreamState>& st) EXCLUDES(streams_mu_);
+  // Closes (1008, after an AUTH_INVALID `token_revoked` frame) every stream whose CONNECT
+  // principal the revocation list now names.
+  void close_revoked_streams() EXCLUDES(streams_mu_);
+  // Ends the control session of a principal revoked by subject (revocation_routes.cpp).
+  void end_revoked_control(const Revocation& r);
+  // Revocation routes (revocation_routes.cpp): GET and POST /rcan/v1/revocations, OWNER.
+  void add_revocation_routes();
+  void revocations_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
 
   NodeServices& svc_;
   Pipeline pipeline_;
@@ -120,6 +128,7 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   Mutex pump_mu_;
   CondVar pump_cv_;  // wakes the pump on a new stream and on shutdown
   uint64_t event_sub_ = 0;
+  uint64_t revocation_sub_ = 0;
   Mutex control_mu_;
   std::string last_control_state_ GUARDED_BY(control_mu_);
   Mutex save_mu_;

@@ -79,6 +79,7 @@ void Node::add_routes() {
     run_pipeline(c.req, c.respond, c.route, std::move(body));
   });
   add_control_routes();
+  add_revocation_routes();
   add_ai_routes(t, svc_);
   t.add("GET", "/api/audit", Body::kNone,
         [this](RouteCall& c) { audit_listing(c.req, c.respond); });

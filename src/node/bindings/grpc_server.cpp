@@ -152,6 +152,15 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
         transport::json_to_grpc(ev.body, m);
         l->r->enqueue(std::move(m));
       });
+      // Revoked since the stream opened: ended at once, UNAUTHENTICATED.
+      revocation_sub_ = svc.revocations.subscribe([weak, who = *p, &svc](const Revocation&) {
+        if (svc.check_revoked(who).ok()) return;
+        auto l = weak.lock();
+        if (!l) return;
+        MutexLock lock(l->mu);
+        if (!l->r) return;
+        l->r->end(grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "token revoked"));
+      });
     }
     register_link();
     StartRead(&in_);
@@ -212,6 +221,7 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
       link_->r = nullptr;
     }
     if (event_sub_) impl_.svc.events.unsubscribe(event_sub_);
+    if (revocation_sub_) impl_.svc.revocations.unsubscribe(revocation_sub_);
     {
       MutexLock lock(impl_.links_mu);
       impl_.links.erase(link_);
@@ -336,6 +346,7 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
   std::string bearer_;
   std::optional<Principal> principal_;
   uint64_t event_sub_ = 0;
+  uint64_t revocation_sub_ = 0;
   RCANMessage in_;
   Mutex mu_;
   std::deque<RCANMessage> q_ GUARDED_BY(mu_);

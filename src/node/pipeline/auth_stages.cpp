@@ -102,6 +102,9 @@ class AuthStage final : public Stage {
             Error(ErrorCode::kSessionExpired, "the stream's token has expired", "auth_token"),
             "AUTH_FAILED");
       }
+      // Revoked since CONNECT: the stream is being closed too (Node, GrpcServer).
+      if (Status s = svc_.check_revoked(ctx->principal); !s.ok())
+        return refuse(svc_, ctx, s.error(), "AUTH_FAILED");
     } else {
       auto p = svc_.authenticate(token_of(*ctx));
       if (!p.ok()) {

@@ -12,6 +12,9 @@ NodeServices::NodeServices(NodeSettings s, Clock& c, AuthOptions a, Actuation& a
     : settings(std::move(s)),
       clock(c),
       auth(std::move(a)),
+      revocations(
+          settings.state_dir.empty() ? std::string() : settings.state_dir + "/revocations.json",
+          RevocationList::kDefaultCapacity, auth.verify_options().leeway_s),
       replay(settings.replay),
       injection(settings.injection_patterns),
       act(actuation),
@@ -91,8 +94,17 @@ void NodeServices::flush_refusals(bool all) {
 
 Result<Principal> NodeServices::authenticate(std::string_view token) const {
   auto p = auth.authenticate_token(token, clock.wall_ms() / 1000);
-  if (p.ok()) ownership.cap(*p);
+  if (!p.ok()) return p;
+  if (Status s = check_revoked(*p); !s.ok()) return s.error();
+  ownership.cap(*p);
   return p;
+}
+
+Status NodeServices::check_revoked(const Principal& p) const {
+  auto why = revocations.revoked(p);
+  if (!why) return Status::Ok();
+  return Error(ErrorCode::kAuthInvalid, "token revoked (by " + *why + ")", "authorization",
+               "token_revoked");
 }
 
 Result<Principal> NodeServices::authenticate_header(std::string_view authorization) const {

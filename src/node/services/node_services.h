@@ -19,6 +19,7 @@
 #include "node/admission/injection.h"
 #include "node/admission/rate_limit.h"
 #include "node/admission/replay.h"
+#include "node/admission/revocation.h"
 #include "node/control/consent.h"
 #include "node/control/ownership.h"
 #include "node/control/partition.h"
@@ -91,6 +92,9 @@ class NodeServices {
   NodeSettings settings;
   Clock& clock;
   Authenticator auth;
+  // Revoked tokens (`<state_dir>/revocations.json`; revocation.h): checked by authenticate()
+  // and, for a stream's CONNECT principal, by the pipeline's authentication stage.
+  RevocationList revocations;
   ReplayGuard replay;
   RateLimiter rate;
   InjectionScreen injection;
@@ -147,6 +151,8 @@ class NodeServices {
   Result<Principal> authenticate(std::string_view token) const;
   // The same from an Authorization header value ("Bearer <token>"; empty → AUTH_REQUIRED).
   Result<Principal> authenticate_header(std::string_view authorization) const;
+  // AUTH_INVALID `token_revoked` when the revocation list names `p`'s token.
+  Status check_revoked(const Principal& p) const;
 
   json::Value discovery_info() const;
   json::Value status(bool detailed);
