@@ -161,6 +161,8 @@ Result<size_t> ThoughtLog::open() {
   if (skipped > 0 || lines_ > order_.size()) {
     if (Status st = rewrite_locked(); !st.ok()) return st.error();
   }
+  // Opened now, not at the first thought: the node's open files do not change under load.
+  if (auto f = env_->open_appendable(file_); f.ok()) out_ = std::move(*f);
   return skipped;
 }
 
