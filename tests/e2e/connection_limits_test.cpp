@@ -148,7 +148,8 @@ std::vector<std::unique_ptr<Conn>> hold(uint16_t port, const char* source, int n
 bool estop_active(const ConfiguredNode& node) {
   HttpReply r = node.get("/healthz");
   EXPECT_EQ(r.status, 200) << r.body;
-  const json::Value* e = parse_json(r.body).get("estop_active");
+  const json::Value v = parse_json(r.body);  // kept: get() points into it
+  const json::Value* e = v.get("estop_active");
   return e && e->is_bool() && e->as_bool();
 }
 
