@@ -146,12 +146,13 @@ void Pipeline::submit(Ingress in, std::function<void(Outcome)> done) {
   ctx->in = std::move(in);
   ctx->started_mono_us = steady_us();
   if (ctx->in.received_mono_us == 0) ctx->in.received_mono_us = ctx->started_mono_us;
-  // parse: arrival → here (routing and the JSON parse); total: arrival → answer handed over.
+  // parse: arrival → here (routing and the JSON parse); total: arrival → answer ready. Timed
+  // before the answer is handed over: whoever waits for it may tear the node down at once.
   parse_timer_->observe_us(static_cast<double>(ctx->started_mono_us - ctx->in.received_mono_us));
   ctx->done = [total = total_timer_, arrival = ctx->in.received_mono_us,
                done = std::move(done)](Outcome out) {
-    done(std::move(out));
     total->observe_us(static_cast<double>(steady_us() - arrival));
+    done(std::move(out));
   };
   ctx->pipeline = this;
   run(ctx, 0);
