@@ -33,6 +33,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -58,7 +59,10 @@
 #include "node/safety/sim_robot.h"
 #include "node/services/node_services.h"
 #include "rcan/audit/audit_log.h"
+#include "rcan/crypto/cnf.h"
+#include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/jwt.h"
+#include "rcan/crypto/message_sig.h"
 #include "rcan/errors.h"
 #include "rcan/json.h"
 #include "transport/mqtt_client.h"
@@ -305,19 +309,19 @@ struct Fleet {
   pid_t broker = -1;
   std::string url;
   std::vector<std::string> members;
-  std::string token;
+  std::string token;  // bound (cnf) to the coordinator's Ed25519 key, as MQTT requires
+  std::array<uint8_t, 32> coordinator_seed{};
   std::optional<jwt::VerificationKey> verify;
   std::vector<std::unique_ptr<Robot>> robots;
 
   size_t size() const { return static_cast<size_t>(opt.robots_n); }
-  // A message of `type` from the coordinator, carrying the fleet token.
+  // A message of `type` from the coordinator, carrying the fleet token, signed by its key.
   json::Value message(const std::string& type, json::Object payload, const std::string& id) const {
-    return json::Value(json::Object{{"version", "1.0.0"},
-                                    {"message_id", id},
-                                    {"type", type},
-                                    {"timestamp_ms", wall_ms()},
-                                    {"auth_token", token},
-                                    {"payload", std::move(payload)}});
+    json::Object m{{"version", "1.0.0"},  {"message_id", id},
+                   {"type", type},        {"timestamp_ms", wall_ms()},
+                   {"auth_token", token}, {"payload", std::move(payload)}};
+    if (!msgsig::sign_ed25519(m, coordinator_seed).ok()) std::fprintf(stderr, "cannot sign\n");
+    return json::Value(std::move(m));
   }
 };
 
@@ -352,6 +356,8 @@ void issue_fleet_token(Fleet& f) {
     f.members.emplace_back(b);
     fleet_claim.emplace_back(b);
   }
+  f.coordinator_seed.fill(0x5a);
+  auto pub = ed25519::public_key_from_seed(f.coordinator_seed);
   int64_t now_s = wall_ms() / 1000;
   f.token = *jwt::issue(json::Object{{"iss", "fleet-issuer"},
                                      {"sub", "bench"},
@@ -359,6 +365,7 @@ void issue_fleet_token(Fleet& f) {
                                      {"role", "owner"},
                                      {"scope", json::Array{"status", "control"}},
                                      {"fleet", fleet_claim},
+                                     {"cnf", *cnf::make(msgsig::Alg::kEd25519, *pub)},
                                      {"iat", now_s - 5},
                                      {"exp", now_s + 3600}},
                         *signing);

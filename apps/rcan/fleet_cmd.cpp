@@ -14,6 +14,7 @@
 
 #include "cli.h"
 #include "fleet_audit_db.h"
+#include "message_signer.h"
 #include "rcan/audit/secret.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
@@ -52,6 +53,9 @@ constexpr const char* kHelp =
     "      Re-verifies every stored chain from the database: record hashes, links, gaps, HMACs.\n"
     "  Common options: --broker URL (default $RCAN_MQTT_URL, else mqtt://127.0.0.1:1883),\n"
     "    --token FILE (a fleet JWT; default $RCAN_TOKEN_FILE), --prefix P (default rcan),\n"
+    "    --key-dir D (default $RCAN_KEY_DIR: the key pair the token is bound to; robots accept\n"
+    "    MQTT messages only with a key-bound token, signed by its key: rcan token issue\n"
+    "    --bind-key D),\n"
     "    --ca-file F (mqtts), --username U --password-file F, --timeout-ms N (default 10000).\n"
     "  Exit: 0 success, 1 a robot refused, failed or timed out, 2 usage or connection error.\n";
 
@@ -167,13 +171,14 @@ class Session {
 struct Common {
   std::string prefix = "rcan";
   std::string token;
+  MessageSigner signer;  // signs with the key the token is bound to (cnf), if it is
   int64_t timeout_ms = 10000;
 };
 
 const std::vector<std::string> kValued{"broker",   "token",         "prefix",     "ca-file",
                                        "username", "password-file", "timeout-ms", "members",
                                        "reason",   "params",        "out",        "duration-ms",
-                                       "db",       "secrets-dir",   "fleet"};
+                                       "db",       "secrets-dir",   "fleet",      "key-dir"};
 const std::vector<std::string> kFlags{"wait-complete"};
 
 Result<Common> common(const Options& o, bool need_token) {
@@ -192,6 +197,11 @@ Result<Common> common(const Options& o, bool need_token) {
     while (!c.token.empty() &&
            (c.token.back() == '\n' || c.token.back() == '\r' || c.token.back() == ' '))
       c.token.pop_back();
+    std::string kd =
+        o.get("key-dir", std::getenv("RCAN_KEY_DIR") ? std::getenv("RCAN_KEY_DIR") : "");
+    auto signer = MessageSigner::for_token(c.token, kd);
+    if (!signer.ok()) return signer.error();
+    c.signer = std::move(signer).value();
   }
   if (o.has("timeout-ms")) {
     const std::string text = o.get("timeout-ms");  // `end` points into it
@@ -204,14 +214,18 @@ Result<Common> common(const Options& o, bool need_token) {
   return c;
 }
 
-json::Value message(const std::string& type, json::Object payload, const std::string& token,
+// A message with the fleet token, signed by the key the token is bound to (when it is).
+json::Value message(const std::string& type, json::Object payload, const Common& c,
                     const std::string& id = new_uuid_v4()) {
-  return json::Value(json::Object{{"version", "1.0.0"},
-                                  {"message_id", id},
-                                  {"type", type},
-                                  {"timestamp_ms", wall_ms()},
-                                  {"auth_token", token},
-                                  {"payload", std::move(payload)}});
+  json::Value m(json::Object{{"version", "1.0.0"},
+                             {"message_id", id},
+                             {"type", type},
+                             {"timestamp_ms", wall_ms()},
+                             {"auth_token", c.token},
+                             {"payload", std::move(payload)}});
+  if (Status s = c.signer.sign(m); !s.ok())  // the robot refuses it unsigned, and says why
+    std::fprintf(stderr, "rcan fleet: cannot sign the message: %s\n", s.error().message.c_str());
+  return m;
 }
 
 bool valid_ids(const std::vector<std::string>& ids) {
@@ -286,7 +300,7 @@ int estop_or_resume(const Options& o, bool estop) {
   json::Object payload{{"safety_event", estop ? "ESTOP" : "RESUME"}, {"fleet_id", fleet}};
   payload.set("reason", o.get("reason", estop ? "fleet estop" : "fleet resume"));
   std::string id = new_uuid_v4();
-  json::Value msg = message("SAFETY", std::move(payload), c->token, id);
+  json::Value msg = message("SAFETY", std::move(payload), *c, id);
   // Retained: the fleet's standing state, for members that connect later.
   if (Status st = s.publish(topics.estop(), msg, 2, true); !st.ok())
     return usage_error(verb, st.error().message);
@@ -349,8 +363,8 @@ int command_main(const Options& o) {
   if (Status st = s.open(o, subs); !st.ok())
     return usage_error("fleet command", st.error().message);
   std::string id = new_uuid_v4();
-  if (Status st = s.publish(topics.cmd(),
-                            message("FLEET_COMMAND", std::move(payload), c->token, id), 1, false);
+  if (Status st =
+          s.publish(topics.cmd(), message("FLEET_COMMAND", std::move(payload), *c, id), 1, false);
       !st.ok())
     return usage_error("fleet command", st.error().message);
   bool complete = o.has("wait-complete");
@@ -527,9 +541,9 @@ int run_main(const Options& o) {
                            {"choreography_id", choreography_id},
                            {"step", static_cast<int64_t>(s.index)}};
       s.message_id = new_uuid_v4();
-      Status ps = sess.publish(topics.member(s.robot).cmd(),
-                               message("FLEET_COMMAND", std::move(payload), c->token, s.message_id),
-                               1, false);
+      Status ps =
+          sess.publish(topics.member(s.robot).cmd(),
+                       message("FLEET_COMMAND", std::move(payload), *c, s.message_id), 1, false);
       if (!ps.ok()) {
         failed = s.index;
         fail_reason = "publish failed: " + ps.error().message;
@@ -610,7 +624,7 @@ int run_main(const Options& o) {
                                             {"fleet_id", fleet},
                                             {"reason", "choreography step " +
                                                            std::to_string(*failed) + " failed"}},
-                               c->token, id),
+                               *c, id),
                        1, false);
   }
   bool stops_ok = true;

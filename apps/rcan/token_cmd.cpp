@@ -3,10 +3,13 @@
 #include <cstdio>
 #include <cstdlib>
 #include <iostream>
+#include <optional>
 
 #include "cli.h"
 #include "node_http.h"
+#include "rcan/crypto/cnf.h"
 #include "rcan/crypto/jwt.h"
+#include "rcan/crypto/keys.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
 
@@ -18,10 +21,14 @@ constexpr const char* kHelp =
     "  rcan token issue --key FILE --sub S --role R --aud RURI [--scope a,b] [--ttl 1h]\n"
     "                   [--iss I] [--alg EdDSA|ES256|RS256|HS256] [--kid K] [--fleet id1,id2]\n"
     "                   [--sender-type T] [--cloud-provider P] [--function-name F]\n"
+    "                   [--bind-key DIR [--bind-alg ed25519|ml-dsa-65]]\n"
     "      Prints a signed JWT. FILE is a PEM private key (Ed25519, P-256, RSA >= 2048) or a raw\n"
     "      32-byte ed25519.seed; with --alg HS256 it is a shared-secret file (>= 32 bytes, one\n"
     "      trailing newline ignored). The key file must not be group/world accessible. There is\n"
     "      no default key. R is creator|owner|leasee|user|guest. --iss defaults to \"rcan-cli\".\n"
+    "      --bind-key binds the token to a key pair of DIR (`rcan keys generate --dir DIR`; its\n"
+    "      public half, by default ed25519): the token carries a cnf claim (RFC 7800) and a robot\n"
+    "      accepts it only on messages signed by that key. Tokens sent over MQTT must be bound.\n"
     "  rcan token inspect [TOKEN] [--key PUBFILE | --secret FILE] [--iss I] [--aud RURI]\n"
     "                     [--device ID] [--leeway S] [--now UNIX]\n"
     "      Reads the token from the argument or stdin and prints {header, claims}. Given a key\n"
@@ -63,10 +70,20 @@ int64_t unix_now() {
       .count();
 }
 
+// The `cnf` claim for the public key of `alg` in the key directory `dir`.
+Result<json::Value> bound_key_claim(const std::string& dir, const std::string& alg) {
+  if (alg != "ed25519" && alg != "ml-dsa-65")
+    return Error(ErrorCode::kSchemaValidationFailed, "--bind-alg must be ed25519 or ml-dsa-65");
+  auto pub = keys::load_public_dir(dir);
+  if (!pub.ok()) return Error(pub.error().code, "--bind-key " + dir + ": " + pub.error().message);
+  if (alg == "ed25519") return cnf::make(msgsig::Alg::kEd25519, pub->ed25519_pk);
+  return cnf::make(msgsig::Alg::kMlDsa65, pub->mldsa65_pk);
+}
+
 int issue_main(const Args& args) {
   Options o(args, {},
             {"key", "sub", "role", "scope", "aud", "ttl", "iss", "alg", "kid", "fleet",
-             "sender-type", "cloud-provider", "function-name"});
+             "sender-type", "cloud-provider", "function-name", "bind-key", "bind-alg"});
   if (!o.ok()) return usage_error("token issue", o.error());
   if (!o.positional().empty())
     return usage_error("token issue", "unexpected argument " + o.positional()[0]);
@@ -100,6 +117,15 @@ int issue_main(const Args& args) {
     return usage_error("token issue",
                        "--sender-type cloud_function needs --cloud-provider (RCAN 8.5)");
 
+  std::optional<json::Value> cnf;
+  if (o.has("bind-key")) {
+    auto bound = bound_key_claim(o.get("bind-key"), o.get("bind-alg", "ed25519"));
+    if (!bound.ok()) return usage_error("token issue", bound.error().message);
+    cnf = std::move(bound).value();
+  } else if (o.has("bind-alg")) {
+    return usage_error("token issue", "--bind-alg goes with --bind-key");
+  }
+
   int64_t now = unix_now();
   json::Object c;
   c.set("iss", o.get("iss", "rcan-cli"));
@@ -120,6 +146,7 @@ int issue_main(const Args& args) {
   c.set("iat", now);
   c.set("exp", now + *ttl);
   c.set("jti", new_uuid_v4());  // what `rcan token revoke` names it by
+  if (cnf) c.set("cnf", std::move(*cnf));
   auto tok = jwt::issue(c, *key, o.get("kid"));
   if (!tok.ok()) {
     std::fprintf(stderr, "rcan token issue: %s\n", tok.error().message.c_str());

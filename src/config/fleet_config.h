@@ -16,6 +16,9 @@ struct MqttConfig {
   std::string client_id;                              // default "rcand-<device_id>"
   std::string topic_prefix = "rcan";
   uint32_t keepalive_s = transport::kDefaultKeepaliveS;
+  // Messages over MQTT need a token bound to a key (cnf) and a signature by that key: anyone
+  // who can read a topic sees its tokens. false is a lab's explicit opt-out (warned at start).
+  bool require_bound_tokens = true;
   std::string username;
   std::string password_file;  // 0600; required with username
   std::string ca_file;        // required with mqtts://

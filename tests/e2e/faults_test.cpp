@@ -12,6 +12,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <array>
 #include <cerrno>
 #include <chrono>
 #include <cstdlib>
@@ -26,8 +27,11 @@
 #include <thread>
 
 #include "node/admission/replay.h"
+#include "rcan/crypto/cnf.h"
 #include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/jwt.h"
+#include "rcan/crypto/keys.h"
+#include "rcan/crypto/message_sig.h"
 #include "rcan/encoding.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
@@ -147,8 +151,10 @@ class Node {
 
   // A token from the test issuer; iat/exp are relative to `now_s` (the node's clock by default
   // the real one), valid from `before_s` before it to `after_s` after it.
+  // `cnf`: the claim binding the token to a key (rcan/crypto/cnf.h), as MQTT requires.
   std::string token(const std::string& role, std::vector<std::string> scopes,
-                    const std::string& sub, int64_t before_s = 5, int64_t after_s = 3600) const {
+                    const std::string& sub, int64_t before_s = 5, int64_t after_s = 3600,
+                    std::optional<json::Value> cnf = std::nullopt) const {
     auto key = jwt::SigningKey::from_file(seed_file_);
     EXPECT_TRUE(key.ok());
     int64_t now = real_wall_ms() / 1000;
@@ -157,6 +163,7 @@ class Node {
     json::Object claims{{"iss", "test.local"}, {"sub", sub},  {"aud", kRuri},
                         {"role", role},        {"scope", sc}, {"iat", now - before_s},
                         {"exp", now + after_s}};
+    if (cnf) claims.set("cnf", std::move(*cnf));
     auto t = jwt::issue(claims, *key);
     EXPECT_TRUE(t.ok());
     return t.ok() ? *t : "";
@@ -841,16 +848,26 @@ TEST(BrokerOutage, RobotKeepsServingHttpAndMqttCommandsResumeWithoutRunningTwice
   ASSERT_TRUE(node.start());
   ASSERT_TRUE(node.proc().wait_for_line("mqtt_connected", 10000)) << node.proc().err();
   const std::string owner = node.token("owner", {"status", "control", "config"}, "owner-1");
+  // Over MQTT the token is bound to the sender's key and each message signed with it.
+  std::array<uint8_t, 32> seed{};
+  seed.fill(9);
+  auto sender = keys::derive(seed, seed);
+  ASSERT_TRUE(sender.ok());
+  const std::string mqtt_owner =
+      node.token("owner", {"status", "control", "config"}, "owner-1", 5, 3600,
+                 *cnf::make(msgsig::Alg::kEd25519, sender->pub.ed25519_pk));
   const std::string topic = "rcan/robot/local.rcan/acme/rover/0a1b2c3d/cmd";
   const std::string reply = "rcan/robot/local.rcan/acme/rover/0a1b2c3d/reply";
   auto mqtt_cmd = [&](const std::string& id) {
-    return json::Value(json::Object{
+    json::Object m{
         {"version", "1.0.0"},
         {"message_id", id},
         {"type", "COMMAND"},
         {"timestamp_ms", real_wall_ms()},
-        {"auth_token", owner},
-        {"payload", json::Object{{"action", "move"}, {"linear", 0.1}, {"duration_ms", 100}}}});
+        {"auth_token", mqtt_owner},
+        {"payload", json::Object{{"action", "move"}, {"linear", 0.1}, {"duration_ms", 100}}}};
+    EXPECT_TRUE(msgsig::sign_ed25519(m, sender->ed25519_seed.span()).ok());
+    return json::Value(std::move(m));
   };
   const std::string a = new_uuid_v4();
   json::Value msg_a = mqtt_cmd(a);

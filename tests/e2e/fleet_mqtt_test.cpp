@@ -21,7 +21,10 @@
 #include <thread>
 
 #include "config/config.h"
+#include "rcan/crypto/cnf.h"
 #include "rcan/crypto/jwt.h"
+#include "rcan/crypto/keys.h"
+#include "rcan/crypto/message_sig.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
 #include "rcan/json.h"
@@ -273,6 +276,12 @@ class FleetTest : public ::testing::Test {
     broker_ = std::make_unique<Broker>(tmp_.path());
     secret_ = tmp_.file("fleet.secret");
     write_file(secret_, "0123456789abcdef0123456789abcdef-fleet-test-secret");
+    // The commander's key pair: fleet tokens are bound to it (cnf), and its messages signed.
+    key_dir_ = tmp_.file("fleet-keys");
+    ASSERT_EQ(test::run_cli({"keys", "generate", "--dir", key_dir_}).exit_code, 0);
+    auto k = keys::load_dir(key_dir_);
+    ASSERT_TRUE(k.ok()) << k.error().message;
+    keys_ = std::make_shared<keys::RobotKeys>(std::move(k).value());
     fleet_token_ = token("owner", {"robot-a", "robot-b", "robot-c"});
     write_file(tmp_.file("fleet.token"), fleet_token_);
   }
@@ -281,10 +290,12 @@ class FleetTest : public ::testing::Test {
     broker_.reset();
   }
   // An HS256 token from the fleet issuer, for every sim-rover of the registry; `fleet`
-  // lists the members it may command (empty: no fleet claim).
+  // lists the members it may command (empty: no fleet claim). `bound`: bound (cnf) to the
+  // commander's Ed25519 key, as robots require on MQTT.
   std::string token(const std::string& role, std::vector<std::string> fleet,
                     const std::string& sub = "coordinator",
-                    const std::string& aud = "rcan://local.rcan/rcan/sim-rover/*") {
+                    const std::string& aud = "rcan://local.rcan/rcan/sim-rover/*",
+                    bool bound = true) {
     auto key = jwt::SigningKey::from_file(secret_, true);
     EXPECT_TRUE(key.ok());
     int64_t now = wall_ms() / 1000;
@@ -300,6 +311,7 @@ class FleetTest : public ::testing::Test {
       for (auto& m : fleet) f.emplace_back(m);
       claims.set("fleet", f);
     }
+    if (bound) claims.set("cnf", *cnf::make(msgsig::Alg::kEd25519, keys_->pub.ed25519_pk));
     auto t = jwt::issue(claims, *key);
     EXPECT_TRUE(t.ok());
     return t.ok() ? *t : "";
@@ -317,17 +329,25 @@ class FleetTest : public ::testing::Test {
   }
   test::RunResult fleet(std::vector<std::string> args) {
     args.insert(args.begin(), "fleet");
-    args.insert(args.end(), {"--broker", broker_->url(), "--token", tmp_.file("fleet.token")});
+    args.insert(args.end(), {"--broker", broker_->url(), "--token", tmp_.file("fleet.token"),
+                             "--key-dir", key_dir_});
     return test::run_cli(args);
   }
+  // A message as `rcan fleet` sends it: signed by the commander's key unless `sign` is false.
   json::Value command_msg(const std::string& type, json::Object payload, const std::string& tok,
-                          const std::string& id = new_uuid_v4()) {
-    return json::Value(json::Object{{"version", "1.0.0"},
-                                    {"message_id", id},
-                                    {"type", type},
-                                    {"timestamp_ms", wall_ms()},
-                                    {"auth_token", tok},
-                                    {"payload", std::move(payload)}});
+                          const std::string& id = new_uuid_v4(), bool sign = true) {
+    json::Object m{{"version", "1.0.0"}, {"message_id", id},
+                   {"type", type},       {"timestamp_ms", wall_ms()},
+                   {"auth_token", tok},  {"payload", std::move(payload)}};
+    if (sign) {
+      EXPECT_TRUE(msgsig::sign_ed25519(m, keys_->ed25519_seed.span()).ok());
+    }
+    return json::Value(std::move(m));
+  }
+  // `m` signed by the commander's key (the key fleet tokens are bound to).
+  json::Value signed_msg(json::Object m) {
+    EXPECT_TRUE(msgsig::sign_ed25519(m, keys_->ed25519_seed.span()).ok());
+    return json::Value(std::move(m));
   }
   static bool moving(const json::Value& status) {
     // /api/status with a token: the safety core's state under "safety".
@@ -348,6 +368,8 @@ class FleetTest : public ::testing::Test {
   std::unique_ptr<Broker> broker_;
   std::string secret_;
   std::string fleet_token_;
+  std::string key_dir_;
+  std::shared_ptr<keys::RobotKeys> keys_;
   std::map<std::string, std::unique_ptr<Robot>> robots_;
 };
 
@@ -721,6 +743,75 @@ TEST_F(FleetTest, FleetJwtIsCheckedPerRobot) {
   EXPECT_TRUE(robots_["robot-b"]->proc().running());
 }
 
+// docs/SECURITY.md R8: whoever reads a topic sees the tokens on it. A robot accepts a message
+// over MQTT only with a token bound to a key (cnf) and a signature by that key, so a copied
+// token cannot carry a message of the reader's own — not even an ESTOP.
+TEST_F(FleetTest, MqttMessagesNeedATokenBoundToTheSendersKey) {
+  add_robot("robot-a", "0000000a");
+  add_robot("robot-b", "0000000b", "", ", require_bound_tokens: false");  // a lab's opt-out
+  Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/+/reply"});
+  auto reply_of = [&](const std::string& robot, const std::string& mid) {
+    return w.wait([&](const Watcher::Msg& m) {
+      return m.topic == "rcan/fleet/alpha/robot/" + robot + "/reply" &&
+             str_of(m.body, "reply_to") == mid && str_of(m.body, "type") != "EVENT";
+    });
+  };
+  auto outcome = [&](const std::string& robot, const json::Value& msg) {
+    w.publish("rcan/fleet/alpha/robot/" + robot + "/cmd", msg);
+    auto r = reply_of(robot, str_of(msg, "message_id"));
+    if (!r) return std::string("no reply");
+    return str_of(r->body, "type") == "ACK" ? std::string("ACK")
+                                            : payload_str(r->body, "error_code");
+  };
+  const json::Object estop{{"safety_event", "ESTOP"}, {"fleet_id", "alpha"}};
+  const json::Object status{{"command", "status"}, {"fleet_id", "alpha"}};
+  // A plain bearer token, as anyone reading a topic of an older deployment would have it.
+  std::string bearer = token("owner", {"robot-a", "robot-b"}, "coordinator",
+                             "rcan://local.rcan/rcan/sim-rover/*", false);
+  EXPECT_EQ(outcome("robot-a", command_msg("SAFETY", estop, bearer, new_uuid_v4(), false)),
+            "AUTH_INVALID");
+  EXPECT_EQ(outcome("robot-a", command_msg("SAFETY", estop, bearer)), "AUTH_INVALID");
+  // A bound token without a signature.
+  EXPECT_EQ(outcome("robot-a", command_msg("SAFETY", estop, fleet_token_, new_uuid_v4(), false)),
+            "AUTH_REQUIRED");
+  // The commander's signed message, seen on the topic…
+  json::Value seen = command_msg("FLEET_COMMAND", status, fleet_token_);
+  EXPECT_EQ(outcome("robot-a", seen), "ACK");
+  // …and the reader's own message with the commander's token and signature copied onto it.
+  json::Value copied = seen;
+  copied.as_object().set("message_id", new_uuid_v4());
+  copied.as_object().set("type", "SAFETY");
+  copied.as_object().set("payload", estop);
+  EXPECT_EQ(outcome("robot-a", copied), "SIGNATURE_INVALID");
+  // …or signed with the reader's own key.
+  const std::string other_dir = tmp_.file("reader-keys");
+  ASSERT_EQ(test::run_cli({"keys", "generate", "--dir", other_dir}).exit_code, 0);
+  auto other = keys::load_dir(other_dir);
+  ASSERT_TRUE(other.ok());
+  json::Object theirs{{"version", "1.0.0"},         {"message_id", new_uuid_v4()},
+                      {"type", "SAFETY"},           {"timestamp_ms", wall_ms()},
+                      {"auth_token", fleet_token_}, {"payload", estop}};
+  ASSERT_TRUE(msgsig::sign_ed25519(theirs, other->ed25519_seed.span()).ok());
+  EXPECT_EQ(outcome("robot-a", json::Value(theirs)), "SIGNATURE_INVALID");
+  // None of it latched robot-a.
+  EXPECT_NE(json::dump(robots_["robot-a"]->status(fleet_token_)).find("\"estop_active\":false"),
+            std::string::npos);
+  // The opted-out robot takes a bearer token, and said at start what that means.
+  EXPECT_EQ(outcome("robot-b", command_msg("FLEET_COMMAND", status, bearer, new_uuid_v4(), false)),
+            "ACK");
+  EXPECT_NE(robots_["robot-b"]->proc().err().find("mqtt_unbound_tokens_accepted"),
+            std::string::npos);
+  EXPECT_EQ(robots_["robot-a"]->proc().err().find("mqtt_unbound_tokens_accepted"),
+            std::string::npos);
+  // The CLI will not send with a bound token whose key it was not given.
+  auto cli = test::run_cli(
+      {"fleet", "estop", "alpha", "--broker", broker_->url(), "--token", tmp_.file("fleet.token")});
+  EXPECT_EQ(cli.exit_code, 2) << cli.out << cli.err;
+  EXPECT_NE(cli.err.find("--key-dir"), std::string::npos) << cli.err;
+  EXPECT_NE(json::dump(robots_["robot-a"]->status(fleet_token_)).find("\"estop_active\":false"),
+            std::string::npos);
+}
+
 // docs/SECURITY.md: a commander's token reaches the robots in the command envelope, and no
 // robot passes it on — nothing a robot publishes (replies, status, telemetry, events, audit
 // records) carries it, for accepted and for refused commands alike.
@@ -777,8 +868,10 @@ TEST_F(FleetTest, EventsTopicCarriesNoOnePrincipalsEvents) {
   auto post = [&](const std::string& path, const std::string& body, const std::string& tok) {
     return test::http(r.port(), "POST", path, body, {{"Authorization", "Bearer " + tok}});
   };
-  std::string a = token("user", {}, "mqtt-user-a");
-  std::string b = token("user", {}, "mqtt-user-b");
+  // HTTP calls carry no message signature: plain bearer tokens (a bound one needs its key's).
+  const std::string aud = "rcan://local.rcan/rcan/sim-rover/*";
+  std::string a = token("user", {}, "mqtt-user-a", aud, false);
+  std::string b = token("user", {}, "mqtt-user-b", aud, false);
   auto claimed = post("/rcan/v1/auth/claim", "{}", a);
   ASSERT_EQ(claimed.status, 200) << claimed.body;
   auto queued = post("/rcan/v1/auth/claim", "{}", b);
@@ -790,7 +883,8 @@ TEST_F(FleetTest, EventsTopicCarriesNoOnePrincipalsEvents) {
   auto again = post("/rcan/v1/auth/claim", "{}", a);
   ASSERT_EQ(again.status, 409) << again.body;
   // An event for everyone after it: when it is on the topic, the promotion would be too.
-  auto stop = post("/api/stop", R"({"reason":"events topic test"})", fleet_token_);
+  auto stop =
+      post("/api/stop", R"({"reason":"events topic test"})", token("owner", {}, "op", aud, false));
   ASSERT_EQ(stop.status, 200) << stop.body;
   ASSERT_TRUE(w.wait([](const Watcher::Msg& m) {
     return json::dump(m.body).find("ESTOP") != std::string::npos;
@@ -818,35 +912,49 @@ TEST_F(FleetTest, SwarmLeaderFailoverAndJoinPolicy) {
   // Join under the approval policy: pending, then granted by an OWNER's approval.
   std::string jid = new_uuid_v4();
   w.publish("rcan/swarm/s42/join",
-            json::Value(json::Object{{"type", "SWARM_JOIN"},
-                                     {"message_id", jid},
-                                     {"timestamp_ms", wall_ms()},
-                                     {"auth_token", token("user", {}, "robot-d")},
-                                     {"payload", json::Object{{"member", "robot-d"}}}}));
+            signed_msg(json::Object{{"type", "SWARM_JOIN"},
+                                    {"message_id", jid},
+                                    {"timestamp_ms", wall_ms()},
+                                    {"auth_token", token("user", {}, "robot-d")},
+                                    {"payload", json::Object{{"member", "robot-d"}}}}));
   auto pending = w.wait([&](const Watcher::Msg& m) { return str_of(m.body, "reply_to") == jid; });
   ASSERT_TRUE(pending);
   EXPECT_EQ(str_of(pending->body, "type"), "PENDING_AUTH");
   std::string aid = new_uuid_v4();
   w.publish("rcan/swarm/s42/join",
-            json::Value(json::Object{{"type", "SWARM_APPROVE"},
-                                     {"message_id", aid},
-                                     {"timestamp_ms", wall_ms()},
-                                     {"auth_token", token("owner", {})},
-                                     {"payload", json::Object{{"member", "robot-d"}}}}));
+            signed_msg(json::Object{{"type", "SWARM_APPROVE"},
+                                    {"message_id", aid},
+                                    {"timestamp_ms", wall_ms()},
+                                    {"auth_token", token("owner", {})},
+                                    {"payload", json::Object{{"member", "robot-d"}}}}));
   auto granted = w.wait([&](const Watcher::Msg& m) { return str_of(m.body, "reply_to") == aid; });
   ASSERT_TRUE(granted);
   EXPECT_EQ(str_of(granted->body, "type"), "GRANTED");
   // A join with a bad token is denied.
   std::string bid = new_uuid_v4();
   w.publish("rcan/swarm/s42/join",
-            json::Value(json::Object{{"type", "SWARM_JOIN"},
-                                     {"message_id", bid},
-                                     {"timestamp_ms", wall_ms()},
-                                     {"auth_token", "not-a-token"},
-                                     {"payload", json::Object{{"member", "robot-e"}}}}));
+            signed_msg(json::Object{{"type", "SWARM_JOIN"},
+                                    {"message_id", bid},
+                                    {"timestamp_ms", wall_ms()},
+                                    {"auth_token", "not-a-token"},
+                                    {"payload", json::Object{{"member", "robot-e"}}}}));
   auto denied = w.wait([&](const Watcher::Msg& m) { return str_of(m.body, "reply_to") == bid; });
   ASSERT_TRUE(denied);
   EXPECT_EQ(str_of(denied->body, "type"), "DENIED");
+  // So is an OWNER's approval with a plain bearer token (a copy read off the topic would do).
+  std::string cid = new_uuid_v4();
+  w.publish(
+      "rcan/swarm/s42/join",
+      json::Value(json::Object{{"type", "SWARM_APPROVE"},
+                               {"message_id", cid},
+                               {"timestamp_ms", wall_ms()},
+                               {"auth_token", token("owner", {}, "coordinator",
+                                                    "rcan://local.rcan/rcan/sim-rover/*", false)},
+                               {"payload", json::Object{{"member", "robot-e"}}}}));
+  auto copied = w.wait([&](const Watcher::Msg& m) { return str_of(m.body, "reply_to") == cid; });
+  ASSERT_TRUE(copied);
+  EXPECT_EQ(str_of(copied->body, "type"), "DENIED");
+  EXPECT_EQ(payload_str(copied->body, "reason"), "AUTH_INVALID");
   // The leader goes silent: robot-b (first live member in order) takes over and announces.
   robots_["robot-a"]->kill9();
   auto next =

@@ -45,6 +45,7 @@ Table<MqttConfig> mqtt_rows() {
                        "invalid_value");
               }),
       M::field("keepalive_s", Int(5, 3600), &MqttConfig::keepalive_s),
+      M::field("require_bound_tokens", Bool(), &MqttConfig::require_bound_tokens),
       M::field("username", Str(256), &MqttConfig::username),
       M::read("password_file", Str(),
               [](const At& a, MqttConfig& m, Ctx& x) {

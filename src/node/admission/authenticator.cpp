@@ -40,6 +40,11 @@ Result<Principal> Authenticator::authenticate_token(std::string_view token, int6
   p.token_iat = claims->iat;
   p.jti = claims->jti;
   p.kid = claims->kid;
+  if (const json::Value* c = claims->raw.find("cnf")) {
+    auto bound = cnf::parse(*c);
+    if (!bound.ok()) return bound.error();
+    p.bound_key = std::make_shared<const cnf::BoundKey>(std::move(bound).value());
+  }
   if (claims->fleet)
     p.fleet = std::make_shared<const std::vector<std::string>>(std::move(*claims->fleet));
   p.token_identity.sub = claims->sub;
@@ -56,9 +61,18 @@ Result<Principal> Authenticator::authenticate_token(std::string_view token, int6
   return p;
 }
 
-Result<SignatureCheck> Authenticator::check_signature(const Message& msg) const {
+Result<SignatureCheck> Authenticator::check_signature(const Message& msg, const Principal& p,
+                                                      bool need_bound_key) const {
   SignatureCheck c;
   const json::Value* sig = msg.wire.find("sig");
+  if (p.bound_key || need_bound_key) {
+    auto bound = check_bound_key(msg.wire, p, need_bound_key);
+    if (!bound.ok()) return bound.error();
+    c.present = c.verified = c.bound_key = true;  // a bound key exists: check_bound_key says so
+    c.alg = p.bound_key->alg == msgsig::Alg::kMlDsa65 ? "ml-dsa-65" : "ed25519";
+    c.kid = p.bound_key->kid;
+    return c;
+  }
   if (!sig || sig->is_null()) {
     if (opts_.require_signature)
       return Error(ErrorCode::kAuthRequired, "this node requires signed messages", "sig");
@@ -88,6 +102,29 @@ Result<SignatureCheck> Authenticator::check_signature(const Message& msg) const 
   c.alg = r->alg == msgsig::Alg::kMlDsa65 ? "ml-dsa-65" : "ed25519";
   c.kid = r->kid;
   return c;
+}
+
+Result<bool> Authenticator::check_bound_key(const json::Object& wire, const Principal& p,
+                                            bool need_bound_key) const {
+  if (!p.bound_key) {
+    if (!need_bound_key) return false;
+    return Error(ErrorCode::kAuthInvalid,
+                 "over this transport a token must be bound to a key (cnf) and the message "
+                 "signed with it",
+                 "cnf");
+  }
+  const json::Value* sig = wire.find("sig");
+  if (!sig || sig->is_null())
+    return Error(ErrorCode::kAuthRequired,
+                 "the token is bound to a key (cnf): sign the message with that key", "sig");
+  auto r = cnf::verify(wire, *p.bound_key);
+  if (!r.ok()) {
+    Error e = r.error();
+    if (e.code != ErrorCode::kSchemaValidationFailed && e.code != ErrorCode::kInvalidRuri)
+      e.code = ErrorCode::kSignatureInvalid;
+    return e;
+  }
+  return true;
 }
 
 Result<SenderIdentity> Authenticator::sender(const Message& msg, const Principal& p,

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "rcan/crypto/cnf.h"
 #include "rcan/crypto/jwt.h"
 #include "rcan/crypto/message_sig.h"
 #include "rcan/message.h"
@@ -34,6 +35,9 @@ struct Principal {
   // The token's `fleet` claim (a fleet JWT; already checked to list this robot). Shared: a
   // fleet token lists every member, and a Principal is copied once per message.
   std::shared_ptr<const std::vector<std::string>> fleet;
+  // The key the token is bound to (its `cnf` claim, rcan/crypto/cnf.h): every message sent
+  // with it must be signed by that key. Null for a plain bearer token.
+  std::shared_ptr<const cnf::BoundKey> bound_key;
 
   // Stable key for rate limits and session ownership.
   std::string key() const { return issuer + "\x1f" + sub; }
@@ -61,6 +65,7 @@ struct SignatureCheck {
   bool present = false;
   bool verified = false;
   bool robot_key = false;  // signed by a key configured as a peer robot's
+  bool bound_key = false;  // signed by the key the token is bound to (cnf)
   std::string alg;
   std::string kid;
 };
@@ -85,9 +90,18 @@ class Authenticator {
 
   // Verifies a bearer token at unix time `now_s`. Errors: AUTH_REQUIRED (empty), AUTH_INVALID.
   Result<Principal> authenticate_token(std::string_view token, int64_t now_s) const;
-  // Verifies msg.sig (when present) over the received wire object. Errors:
-  // SIGNATURE_INVALID; AUTH_REQUIRED when signatures are required and absent.
-  Result<SignatureCheck> check_signature(const Message& msg) const;
+  // Verifies msg.sig over the received wire object. A token bound to a key (p.bound_key) needs
+  // a signature by exactly that key; `need_bound_key` (a message from a shared channel such as
+  // MQTT) refuses a token that is bound to no key. Otherwise the signature is checked when
+  // present. Errors: SIGNATURE_INVALID; AUTH_REQUIRED when a signature is required and absent;
+  // AUTH_INVALID when a bound token is required and this one is not.
+  Result<SignatureCheck> check_signature(const Message& msg, const Principal& p,
+                                         bool need_bound_key = false) const;
+  // The key-binding part of check_signature over a raw wire object (a request that is not an
+  // RCAN message, such as a swarm join): Ok(true) when signed by the token's bound key,
+  // Ok(false) when the token is bound to nothing and none is needed; otherwise the error.
+  Result<bool> check_bound_key(const json::Object& wire, const Principal& p,
+                               bool need_bound_key) const;
   // §8.5: the sender identity the audit record carries.
   Result<SenderIdentity> sender(const Message& msg, const Principal& p,
                                 const SignatureCheck& sig) const;

@@ -692,7 +692,7 @@ void Node::consent_request_route(transport::HttpRequest& req, Respond& respond,
   if (msg->type != MessageType::kConsentRequest)
     return refused(
         Error(ErrorCode::kSchemaValidationFailed, "type must be CONSENT_REQUEST", "type"));
-  auto sig = svc_.auth.check_signature(*msg);
+  auto sig = svc_.auth.check_signature(*msg, *pr);
   if (!sig.ok()) return refused(sig.error());
   auto sender = svc_.auth.sender(*msg, *pr, *sig);
   if (!sender.ok()) return refused(sender.error());

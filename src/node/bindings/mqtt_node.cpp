@@ -49,6 +49,10 @@ bool is_estop_message(const json::Value& body) {
   return true;
 }
 
+bool is_loopback_host(const std::string& host) {
+  return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
+}
+
 }  // namespace
 
 Result<MqttNodeOptions> mqtt_node_options(const config::NodeConfig& cfg) {
@@ -131,7 +135,8 @@ Status MqttNode::start() {
         svc_, opts_.swarm, mq.topic_prefix,
         [this](const std::string& topic, const json::Value& body, int qos, bool retain) {
           publish_json(topic, body, qos, retain);
-        });
+        },
+        mq.require_bound_tokens);
     for (const auto& f : swarm_->subscriptions()) client_->subscribe(f, 1);
   }
   client_->on_message([this](const transport::MqttMessage& m) { on_message(m); });
@@ -146,6 +151,7 @@ Status MqttNode::start() {
   event_sub_ = svc_.events.subscribe([this](const Event& ev) {
     if (ev.audience.is_everyone()) publish_json(out_.events(), ev.body, 1, false);
   });
+  warn_about_exposure();
   running_.store(true);
   if (Status s = client_->start(); !s.ok()) {
     running_.store(false);
@@ -160,6 +166,23 @@ Status MqttNode::start() {
       json::Object{
           {"broker", mq.broker}, {"cmd_topic", robot_.cmd()}, {"status_topic", out_.status()}});
   return Status::Ok();
+}
+
+// What a reader of the broker's traffic could do with this configuration, said once at start.
+void MqttNode::warn_about_exposure() const {
+  const auto& mq = opts_.mqtt;
+  if (!mq.require_bound_tokens)
+    log(LogLevel::kWarn, "mqtt_unbound_tokens_accepted",
+        json::Object{{"note",
+                      "mqtt.require_bound_tokens is false: whoever reads a topic can reuse the "
+                      "tokens on it to send commands of their own (lab use only)"}});
+  auto u = transport::parse_broker_url(mq.broker);
+  if (u.ok() && !u->tls && !is_loopback_host(u->host))
+    log(LogLevel::kWarn, "mqtt_plaintext_broker",
+        json::Object{{"broker", mq.broker},
+                     {"note",
+                      "mqtt:// off loopback: tokens, commands and telemetry cross the network "
+                      "unencrypted; use mqtts:// with tls.ca_file"}});
 }
 
 void MqttNode::stop() {
@@ -270,6 +293,7 @@ void MqttNode::submit(const json::Value& body, const std::string& route,
   in.fleet_id = fleet_id;
   in.fleet_mode = fleet_mode;
   in.standing_estop = standing_estop;
+  in.require_bound_key = opts_.mqtt.require_bound_tokens;
   in.received_mono_us = steady_us();
   bool is_command = upper(str_field(body, "type")) == "COMMAND" ||
                     upper(str_field(body, "type")) == "FLEET_COMMAND" ||

@@ -73,6 +73,7 @@ class MqttNode {
               const std::string& fleet_id, const std::string& fleet_mode, bool standing_estop);
   void publish_json(const std::string& topic, const json::Value& v, int qos, bool retain);
   void publish_status(bool online, const std::string& reason);
+  void warn_about_exposure() const;
   void loop() EXCLUDES(loop_mu_, mu_);
   void tick_completions() EXCLUDES(mu_);
   void tick_audit();

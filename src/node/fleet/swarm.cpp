@@ -24,11 +24,12 @@ json::Array to_array(const std::set<std::string>& s) {
 }  // namespace
 
 SwarmAgent::SwarmAgent(NodeServices& svc, config::SwarmConfig cfg, std::string prefix,
-                       Publish publish)
+                       Publish publish, bool require_bound_tokens)
     : svc_(svc),
       cfg_(std::move(cfg)),
       topics_(mqtt::swarm_topics(prefix, cfg_.swarm_id)),
-      publish_(std::move(publish)) {
+      publish_(std::move(publish)),
+      require_bound_tokens_(require_bound_tokens) {
   members_.insert(cfg_.members.begin(), cfg_.members.end());
   leader_ = cfg_.leader;
 }
@@ -189,6 +190,7 @@ void SwarmAgent::answer(const std::string& member, const std::string& type,
 }
 
 void SwarmAgent::handle_join(const json::Value& body) {
+  if (!body.is_object()) return;
   std::string type = str_of(body, "type");
   const json::Value* p = body.get("payload");
   std::string member = p != nullptr ? str_of(*p, "member") : std::string();
@@ -210,11 +212,18 @@ void SwarmAgent::handle_join(const json::Value& body) {
         .detail("join_policy", cfg_.join_policy)
         .write();
   };
-  // The same checks as every other inbound message: a verified token and a fresh, unseen id.
+  // The same checks as every other inbound message: a verified token, signed by the key it is
+  // bound to, and a fresh, unseen id.
   auto principal = svc_.authenticate(str_of(body, "auth_token"));
   if (!principal.ok()) {
     record(type, "blocked", nullptr, std::string(error_name(principal.error().code)));
     answer(member, "DENIED", id, std::string(error_name(principal.error().code)));
+    return;
+  }
+  if (auto pop = svc_.auth.check_bound_key(body.as_object(), *principal, require_bound_tokens_);
+      !pop.ok()) {
+    record(type, "blocked", &*principal, std::string(error_name(pop.error().code)));
+    answer(member, "DENIED", id, std::string(error_name(pop.error().code)));
     return;
   }
   const json::Value* ts = body.get("timestamp_ms");

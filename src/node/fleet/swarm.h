@@ -39,7 +39,10 @@ class SwarmAgent {
   using Publish =
       std::function<void(const std::string& topic, const json::Value& body, int qos, bool retain)>;
 
-  SwarmAgent(NodeServices& svc, config::SwarmConfig cfg, std::string prefix, Publish publish);
+  // `require_bound_tokens`: join and approval requests need a key-bound token and a signature
+  // by its key (mqtt.require_bound_tokens), like every other message over MQTT.
+  SwarmAgent(NodeServices& svc, config::SwarmConfig cfg, std::string prefix, Publish publish,
+             bool require_bound_tokens = true);
 
   // Topic filters to subscribe to.
   std::vector<std::string> subscriptions() const;
@@ -66,6 +69,7 @@ class SwarmAgent {
   config::SwarmConfig cfg_;
   mqtt::SwarmTopics topics_;
   Publish publish_;
+  const bool require_bound_tokens_;
 
   mutable Mutex mu_;
   std::set<std::string> members_ GUARDED_BY(mu_);

@@ -114,7 +114,7 @@ class AuthStage final : public Stage {
     }
     ctx->authenticated = true;
     svc_.ownership.cap(ctx->principal);  // a former owner's token no longer carries ownership
-    auto sig = svc_.auth.check_signature(*ctx->msg);
+    auto sig = svc_.auth.check_signature(*ctx->msg, ctx->principal, ctx->in.require_bound_key);
     if (!sig.ok()) {
       return refuse(svc_, ctx, sig.error(), "AUTH_FAILED");
     }
@@ -122,6 +122,7 @@ class AuthStage final : public Stage {
     if (ctx->sig.verified) {
       ctx->audit_detail.set("sig_alg", ctx->sig.alg);
       ctx->audit_detail.set("sig_kid", ctx->sig.kid);
+      if (ctx->sig.bound_key) ctx->audit_detail.set("sig_bound_to_token", true);
     }
     auto sender = svc_.auth.sender(*ctx->msg, ctx->principal, ctx->sig);
     if (!sender.ok()) {

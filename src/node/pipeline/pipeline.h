@@ -48,9 +48,12 @@ struct Ingress {
   std::string route;      // e.g. "/rcan/v1/command"
   std::string remote;     // peer address, for logs
   std::optional<Principal> preauthenticated;  // a stream authenticated at CONNECT
-  std::string fleet_id;          // MQTT: the fleet topic it came in on (empty: not a fleet topic)
-  std::string fleet_mode;        // MQTT: "broadcast", "individual" or "estop" (docs/FLEET.md)
-  bool standing_estop = false;   // MQTT: the retained fleet ESTOP, obeyed whatever its age
+  std::string fleet_id;         // MQTT: the fleet topic it came in on (empty: not a fleet topic)
+  std::string fleet_mode;       // MQTT: "broadcast", "individual" or "estop" (docs/FLEET.md)
+  bool standing_estop = false;  // MQTT: the retained fleet ESTOP, obeyed whatever its age
+  // A shared channel (MQTT): the token must be bound to a key (cnf) and the message signed by
+  // it, or a reader of the channel could send messages of their own with a copied token.
+  bool require_bound_key = false;
   int64_t received_mono_us = 0;  // steady clock at arrival (transport read done); 0: at submit
 };
 
