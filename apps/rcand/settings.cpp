@@ -70,6 +70,7 @@ node::NodeSettings node_settings(const config::NodeConfig& cfg, const keys::Robo
                         cfg.rbac.rate_limits.creator};
   ns.replay.window_ms = int64_t{cfg.security.replay_window_s} * 1000;
   ns.replay.capacity = cfg.security.msg_id_cache_size;
+  ns.failed_auth_per_address_per_minute = cfg.security.failed_auth_per_address_per_minute;
   ns.injection_patterns.clear();
   for (const auto& p : cfg.security.injection_patterns)
     ns.injection_patterns.push_back(node::InjectionRule{p.text, p.regex});

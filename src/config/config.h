@@ -130,6 +130,8 @@ struct SecurityConfig {
   JwtConfig jwt;
   uint32_t replay_window_s = 30;  // 5..300
   uint32_t msg_id_cache_size = 10000;
+  // Tokens failing verification one peer address may send per minute (0: no limit).
+  uint32_t failed_auth_per_address_per_minute = kDefaultFailedAuthPerAddressPerMinute;
   std::vector<TrustedRobotKey> trusted_robot_keys;
   // Operators' and integrators' message-signing keys (rcan-py clients sign with their own
   // key): a verified signature from one of these is a human/software signer, not a robot.

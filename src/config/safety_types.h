@@ -15,6 +15,9 @@ namespace rcan::config {
 // safety.heartbeat_timeout_ms when neither it nor agent.latency_budget_ms is set; also the
 // safety core's deadman timeout for a session registered without one.
 inline constexpr uint32_t kDefaultHeartbeatTimeoutMs = 2000;
+// security.failed_auth_per_address_per_minute: what failed token verifications one peer address
+// may cost the node (NodeServices::authenticate).
+inline constexpr uint32_t kDefaultFailedAuthPerAddressPerMinute = 1200;
 
 enum class LimitPolicy : uint8_t { kClamp, kReject };
 std::string_view limit_policy_name(LimitPolicy p);  // "clamp" / "reject"

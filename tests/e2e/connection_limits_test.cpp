@@ -3,7 +3,8 @@
 // connections; the OWNER's stop still latches ESTOP, over HTTP and over a new WebSocket. One
 // address gets server.limits.max_connections_per_address connections and no more; a connection
 // that never presented a valid credential is closed after the short idle timeout, one that did
-// keeps the long one.
+// keeps the long one. And R4's part here: one address's failed token verifications are
+// limited.
 //
 // The attacker's connections come from other loopback addresses (127.0.0.2, …: all of
 // 127.0.0.0/8 reaches the node on Linux), the owner's from 127.0.0.1.
@@ -295,6 +296,55 @@ TEST(ConnectionLimits, UnauthenticatedConnectionsIdleOutSoonAuthenticatedOnesKee
   std::this_thread::sleep_until(t0 + 7s);
   ASSERT_TRUE(authed.send("GET", "/healthz"));
   EXPECT_EQ(authed.read().status, 200);
+}
+
+// R4: tokens failing verification cost the node a signature check each. One address gets
+// security.failed_auth_per_address_per_minute of them (lowered to 30 here); past it, a token
+// not verified before is refused 429 without being verified. Tokens verified before, stops, and
+// other addresses are not held up.
+TEST(FailedAuthLimit, AnAddressThatSpentItsBadTokensGetsNoMoreVerifiedButItsStopsAndOthersDo) {
+  ConfiguredNode node("", 2000, false, "  failed_auth_per_address_per_minute: 30\n");
+  const uint16_t port = node.http_port();
+  const std::string known = node.token("user", {"control", "status"}, "known-user");
+  const std::string forged = known.substr(0, known.size() - 6) + "AAAAAA";
+  Conn c(port, "127.0.0.2");
+  ASSERT_TRUE(c.connected());
+  // Verified once: the node remembers it.
+  ASSERT_TRUE(c.send("POST", "/rcan/v1/command", known, command_json("status")));
+  ASSERT_EQ(c.read().status, 200);
+  int unauthorized = 0, limited = 0;
+  for (int i = 0; i < 45; ++i) {
+    ASSERT_TRUE(c.send("POST", "/rcan/v1/command", forged, command_json("status")));
+    HttpReply r = c.read();
+    if (r.status == 401) {
+      ++unauthorized;
+    } else {
+      ASSERT_EQ(r.status, 429) << r.body;
+      EXPECT_EQ(reason_of(r), "failed_auth_rate") << r.body;
+      ++limited;
+    }
+  }
+  EXPECT_GE(unauthorized, 30);
+  EXPECT_LE(unauthorized, 32);  // the bucket refills at one every 2 s
+  EXPECT_GE(limited, 13);
+  // A valid token the node has not seen yet is not verified for this address now…
+  const std::string fresh = node.token("owner", {"control", "status"}, "fresh-owner");
+  ASSERT_TRUE(c.send("POST", "/rcan/v1/command", fresh, command_json("status")));
+  HttpReply held = c.read();
+  EXPECT_EQ(held.status, 429) << held.body;
+  ASSERT_TRUE(c.send("GET", "/api/status", fresh));
+  EXPECT_EQ(c.read().status, 429);
+  // …but the token verified before still works, and a stop with the fresh one latches.
+  ASSERT_TRUE(c.send("POST", "/rcan/v1/command", known, command_json("status")));
+  EXPECT_EQ(c.read().status, 200);
+  ASSERT_TRUE(c.send("POST", "/api/stop", fresh, R"({"reason":"flooded address"})"));
+  HttpReply stop = c.read();
+  EXPECT_EQ(stop.status, 200) << stop.body;
+  EXPECT_TRUE(estop_active(node));
+  // Another address is not held up by this one's failures.
+  Conn other(port, "127.0.0.3");
+  ASSERT_TRUE(other.send("GET", "/api/status", node.token("guest", {"status"}, "elsewhere")));
+  EXPECT_EQ(other.read().status, 200);
 }
 
 }  // namespace

@@ -38,10 +38,11 @@ class ConfiguredNode {
  public:
   static constexpr const char* kRuri = "rcan://local.rcan/acme/rover/0a1b2c3d";
 
-  // `extra_yaml` is appended to the config (top-level blocks). heartbeat_timeout_ms and the
-  // control-loop rate are set here; gRPC and UDP are on (port 0) unless `transports` is false.
+  // `extra_yaml` is appended to the config (top-level blocks); `security_yaml` to its security
+  // block (keys indented by two spaces). heartbeat_timeout_ms and the control-loop rate are set
+  // here; gRPC and UDP are on (port 0) unless `transports` is false.
   explicit ConfiguredNode(std::string extra_yaml = {}, int heartbeat_timeout_ms = 2000,
-                          bool transports = true) {
+                          bool transports = true, const std::string& security_yaml = {}) {
     data_ = dir_.file("data");
     std::filesystem::create_directories(data_);
     EXPECT_EQ(run_cli({"keys", "generate", "--dir", data_ + "/keys"}).exit_code, 0);
@@ -76,7 +77,8 @@ class ConfiguredNode {
           << "\n"
           << "driver:\n  type: sim\n  sim:\n    tick_hz: 200\n"
           << "security:\n  jwt:\n    issuers:\n      - issuer: test.local\n        key_file: "
-          << pub_file << "\n";
+          << pub_file << "\n"
+          << security_yaml;
       if (transports)
         out << "grpc:\n  enabled: true\n  port: 0\nudp:\n  enabled: true\n  port: 0\n";
       out << extra_yaml;

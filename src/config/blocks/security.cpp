@@ -175,6 +175,8 @@ Table<SecurityConfig> security_rows() {
       S::block("jwt", jwt_rows(), &SecurityConfig::jwt),
       S::field("replay_window_s", Int(5, 300), &SecurityConfig::replay_window_s),
       S::field("msg_id_cache_size", Int(100, 10'000'000), &SecurityConfig::msg_id_cache_size),
+      S::field("failed_auth_per_address_per_minute", Int(0, 1'000'000),
+               &SecurityConfig::failed_auth_per_address_per_minute),
       trusted_keys("trusted_robot_keys", &SecurityConfig::trusted_robot_keys),
       trusted_keys("trusted_signer_keys", &SecurityConfig::trusted_signer_keys),
       S::block("injection", injection_rows()),

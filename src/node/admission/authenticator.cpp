@@ -61,6 +61,10 @@ Result<Principal> Authenticator::authenticate_token(std::string_view token, int6
   return p;
 }
 
+bool Authenticator::is_cached(std::string_view token, int64_t now_s) const {
+  return !token.empty() && cache_->find(token, now_s).has_value();
+}
+
 Result<SignatureCheck> Authenticator::check_signature(const Message& msg, const Principal& p,
                                                       bool need_bound_key) const {
   SignatureCheck c;

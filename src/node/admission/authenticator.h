@@ -90,6 +90,9 @@ class Authenticator {
 
   // Verifies a bearer token at unix time `now_s`. Errors: AUTH_REQUIRED (empty), AUTH_INVALID.
   Result<Principal> authenticate_token(std::string_view token, int64_t now_s) const;
+  // Whether `token` is in the verified-token cache at `now_s` (a cheap look: no signature is
+  // checked, and a miss says nothing about the token).
+  bool is_cached(std::string_view token, int64_t now_s) const;
   // Verifies msg.sig over the received wire object. A token bound to a key (p.bound_key) needs
   // a signature by exactly that key; `need_bound_key` (a message from a shared channel such as
   // MQTT) refuses a token that is bound to no key. Otherwise the signature is checked when

@@ -53,6 +53,23 @@ RateLimiter::Decision RateLimiter::take(const std::string& principal, uint32_t p
   return d;
 }
 
+RateLimiter::Decision RateLimiter::peek(const std::string& principal, uint32_t per_minute,
+                                        int64_t now_mono_ms) const {
+  Decision d;
+  if (per_minute == 0) return d;
+  MutexLock lock(mu_);
+  auto it = buckets_.find(principal);
+  if (it == buckets_.end()) return d;
+  const Bucket& b = it->second;
+  double rate_per_ms = per_minute / 60'000.0;
+  double tokens = std::min(static_cast<double>(per_minute),
+                           b.tokens + static_cast<double>(now_mono_ms - b.last_ms) * rate_per_ms);
+  if (tokens >= 1.0) return d;
+  d.allowed = false;
+  d.retry_after_ms = static_cast<int64_t>(std::ceil((1.0 - tokens) / rate_per_ms));
+  return d;
+}
+
 size_t RateLimiter::tracked() const {
   MutexLock lock(mu_);
   return buckets_.size();

@@ -1,6 +1,8 @@
 // RateLimiter — per-principal command budgets (docs/PROTOCOL.md §Roles): a token bucket per
 // principal holding `per_minute` tokens, refilled continuously on the monotonic clock.
-// SAFETY messages never reach it. Idle buckets are dropped so memory stays bounded.
+// SAFETY messages never reach it. Idle buckets are dropped so memory stays bounded. The node
+// also keeps one keyed by source address, charged by failed token verifications
+// (NodeServices::authenticate).
 #pragma once
 
 #include <cstdint>
@@ -21,6 +23,9 @@ class RateLimiter {
   };
   // `per_minute` 0 = unlimited.
   Decision take(const std::string& principal, uint32_t per_minute, int64_t now_mono_ms)
+      EXCLUDES(mu_);
+  // What take() would decide now, without taking anything (a key never seen is allowed).
+  Decision peek(const std::string& principal, uint32_t per_minute, int64_t now_mono_ms) const
       EXCLUDES(mu_);
   size_t tracked() const EXCLUDES(mu_);
 

@@ -11,7 +11,8 @@ namespace rcan::node {
 namespace {
 
 Result<Principal> bearer(NodeServices& svc, const transport::HttpRequest& req) {
-  return svc.authenticate_header(req.header("authorization"));
+  return svc.authenticate_header(req.header("authorization"),
+                                 RefusalLedger::source_of(req.remote_addr));
 }
 
 void authorize_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req,

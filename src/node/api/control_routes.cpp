@@ -47,7 +47,7 @@ Result<Principal> Node::route_principal(const transport::HttpRequest& req, const
                "authorization");
   } else {
     if (token.empty()) token = str_field(body, "auth_token", 16384);
-    if (!token.empty()) pr = svc_.authenticate(token);
+    if (!token.empty()) pr = svc_.authenticate(token, RefusalLedger::source_of(req.remote_addr));
   }
   auto refuse_audit = [&](const Error& err, const Principal* p) {
     if (!p && !svc_.record_refusal(RefusalLedger::source_of(req.remote_addr), denied_event,

@@ -93,10 +93,10 @@ void NodeStream::on_text(std::string text) {
       const json::Value* tk = v->get(k);
       if (tk && tk->is_string() && !tk->as_string().empty()) token = tk->as_string();
     }
-    auto p = svc.authenticate(token);
+    const std::string source = RefusalLedger::source_of(st->sink->remote_addr());
+    auto p = svc.authenticate(token, source);
     if (!p.ok()) {
-      if (svc.record_refusal(RefusalLedger::source_of(st->sink->remote_addr()), "STREAM_REFUSED",
-                             p.error().code, "/ws"))
+      if (svc.record_refusal(source, "STREAM_REFUSED", p.error().code, "/ws"))
         svc.record("STREAM_REFUSED", "blocked")
             .reason(std::string(error_name(p.error().code)))
             .detail("transport", "ws")
@@ -428,7 +428,7 @@ std::unique_ptr<transport::StreamReceiver> Node::open(const transport::HttpReque
     st->upgrade_token = std::string(upgrade.query_value("token"));
   if (upgrade.path == "/ws/telemetry") {
     // v1.1 telemetry socket: the token is in the query; telemetry starts at once.
-    auto p = svc_.authenticate(st->upgrade_token);
+    auto p = svc_.authenticate(st->upgrade_token, RefusalLedger::source_of(upgrade.remote_addr));
     if (!p.ok()) {
       refusal.status = http_status(p.error().code);
       refusal.body = json::dump(svc_.error(p.error()));
@@ -457,16 +457,21 @@ void Node::answer_error(Respond& respond, const std::string& route, const Error&
 }
 
 Result<Principal> Node::bearer_principal(const transport::HttpRequest& req) const {
-  return svc_.authenticate_header(req.header("authorization"));
+  return svc_.authenticate_header(req.header("authorization"),
+                                  RefusalLedger::source_of(req.remote_addr));
 }
 
 void Node::handle(transport::HttpRequest req, Respond respond) {
   // The transport keeps a connection's long keep-alive only after an answer to a request that
-  // presented a valid credential (docs/TRANSPORT.md): a bearer token that verifies (the verified
-  // token cache makes the second check cheap), or a pipeline message whose token did.
-  if (!req.header("authorization").empty() && bearer_principal(req).ok()) {
-    respond = [inner = std::move(respond)](transport::HttpResponse r) {
-      r.authenticated = true;
+  // presented a valid credential (docs/TRANSPORT.md): a pipeline message whose token verified,
+  // or a bearer token the route verified — found in the verified-token cache when the answer
+  // goes out. Nothing is verified here: a bad token costs one verification, not two, and is
+  // charged to its address once (NodeServices::authenticate).
+  if (std::string_view bearer = req.bearer(); !bearer.empty()) {
+    respond = [this, token = std::string(bearer),
+               inner = std::move(respond)](transport::HttpResponse r) {
+      if (!r.authenticated && svc_.auth.is_cached(token, svc_.clock.wall_ms() / 1000))
+        r.authenticated = svc_.authenticate(token).ok();  // cached: no signature check
       inner(std::move(r));
     };
   }

@@ -126,7 +126,7 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
     bearer_ = bearer_of(ctx);
     NodeServices& svc = impl_.svc;
     if (!bearer_.empty()) {
-      auto p = svc.authenticate(bearer_);
+      auto p = svc.authenticate(bearer_, RefusalLedger::source_of(ctx->peer()));
       if (!p.ok()) {
         svc.record("STREAM_REFUSED", "blocked")
             .reason(std::string(error_name(p.error().code)))

@@ -7,6 +7,7 @@
 #include "base/log.h"
 #include "node/pipeline/stages.h"
 #include "node/services/node_services.h"
+#include "node/services/refusal_ledger.h"
 #include "rcan/errors.h"
 
 namespace rcan::node {
@@ -106,7 +107,12 @@ class AuthStage final : public Stage {
       if (Status s = svc_.check_revoked(ctx->principal); !s.ok())
         return refuse(svc_, ctx, s.error(), "AUTH_FAILED");
     } else {
-      auto p = svc_.authenticate(token_of(*ctx));
+      // The peer's address pays for tokens that fail verification (NodeServices::authenticate);
+      // a stop never waits on that budget, and MQTT has no peer address (the broker's clients
+      // authenticated to the broker).
+      const bool unlimited = is_stop(*ctx) || ctx->in.transport == "mqtt";
+      auto p = svc_.authenticate(
+          token_of(*ctx), unlimited ? std::string() : RefusalLedger::source_of(ctx->in.remote));
       if (!p.ok()) {
         return refuse(svc_, ctx, p.error(), "AUTH_FAILED");
       }

@@ -92,9 +92,23 @@ void NodeServices::flush_refusals(bool all) {
   }
 }
 
-Result<Principal> NodeServices::authenticate(std::string_view token) const {
-  auto p = auth.authenticate_token(token, clock.wall_ms() / 1000);
-  if (!p.ok()) return p;
+Result<Principal> NodeServices::authenticate(std::string_view token,
+                                             const std::string& source) const {
+  const int64_t now_s = clock.wall_ms() / 1000;
+  const uint32_t budget = settings.failed_auth_per_address_per_minute;
+  const bool limited = !source.empty() && budget > 0 && !token.empty();
+  if (limited && !auth.is_cached(token, now_s)) {
+    if (auto d = failed_auth.peek(source, budget, clock.mono_ms()); !d.allowed)
+      return Error(ErrorCode::kRateLimited,
+                   "too many failed authentications from this address; retry in " +
+                       std::to_string((d.retry_after_ms + 999) / 1000) + " s",
+                   "authorization", "failed_auth_rate");
+  }
+  auto p = auth.authenticate_token(token, now_s);
+  if (!p.ok()) {
+    if (limited) (void)failed_auth.take(source, budget, clock.mono_ms());
+    return p;
+  }
   if (Status s = check_revoked(*p); !s.ok()) return s.error();
   ownership.cap(*p);
   return p;
@@ -107,12 +121,13 @@ Status NodeServices::check_revoked(const Principal& p) const {
                "token_revoked");
 }
 
-Result<Principal> NodeServices::authenticate_header(std::string_view authorization) const {
+Result<Principal> NodeServices::authenticate_header(std::string_view authorization,
+                                                    const std::string& source) const {
   std::string_view token = transport::bearer_token(authorization);
   if (token.empty() && !authorization.empty())
     return Error(ErrorCode::kAuthInvalid, "the Authorization header must be 'Bearer <token>'",
                  "authorization");
-  return authenticate(token);
+  return authenticate(token, source);
 }
 
 json::Value NodeServices::discovery_info() const {

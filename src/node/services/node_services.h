@@ -71,6 +71,10 @@ struct NodeSettings {
   RolePolicy role_policy;
   // Per-role rate limits per minute, indexed by role level (0 unused); 0 = unlimited.
   std::array<uint32_t, 6> rate_per_minute{0, 10, 100, 500, 1000, 0};
+  // Failed token verifications one source address may cost per minute (a bucket of as many,
+  // refilled continuously); past it, tokens not already verified are refused 429 unverified.
+  // 0 = no limit. security.failed_auth_per_address_per_minute.
+  uint32_t failed_auth_per_address_per_minute = config::kDefaultFailedAuthPerAddressPerMinute;
   ReplayOptions replay;
   std::vector<InjectionRule> injection_patterns = InjectionScreen::default_rules();
   int64_t heartbeat_timeout_ms = config::kDefaultHeartbeatTimeoutMs;
@@ -97,6 +101,8 @@ class NodeServices {
   RevocationList revocations;
   ReplayGuard replay;
   RateLimiter rate;
+  // Failed token verifications per source address (authenticate()).
+  mutable RateLimiter failed_auth{10'000};
   InjectionScreen injection;
   Actuation& act;
   // What every COMMAND action name means (rcan/actions.h): the built-in table today; a driver
@@ -145,12 +151,16 @@ class NodeServices {
     return settings.rate_per_minute[static_cast<size_t>(role_level(r))];
   }
 
-  // The one way a token becomes a principal outside the pipeline's own stage: verified (JWT,
-  // audience, expiry) and then limited by the node's state (a former owner's token no longer
-  // carries ownership). Errors: AUTH_REQUIRED (empty), AUTH_INVALID.
-  Result<Principal> authenticate(std::string_view token) const;
+  // The one way a token becomes a principal: verified (JWT, audience, expiry, revocation) and
+  // then limited by the node's state (a former owner's token no longer carries ownership).
+  // `source` (a peer address; empty for none, and for stops) is charged for each token that
+  // fails verification; a source past its budget gets RATE_LIMITED `failed_auth_rate` for
+  // any token not already verified, without the cost of verifying it.
+  // Errors: AUTH_REQUIRED (empty), AUTH_INVALID, RATE_LIMITED.
+  Result<Principal> authenticate(std::string_view token, const std::string& source = {}) const;
   // The same from an Authorization header value ("Bearer <token>"; empty → AUTH_REQUIRED).
-  Result<Principal> authenticate_header(std::string_view authorization) const;
+  Result<Principal> authenticate_header(std::string_view authorization,
+                                        const std::string& source = {}) const;
   // AUTH_INVALID `token_revoked` when the revocation list names `p`'s token.
   Status check_revoked(const Principal& p) const;
 
