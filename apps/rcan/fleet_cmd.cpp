@@ -138,9 +138,18 @@ class Session {
       cv_.notify_all();
     });
     if (Status s = client_->start(); !s.ok()) return s;
+    const int64_t deadline = mono_ms() + timeout_ms_;
     if (!client_->wait_subscribed(static_cast<int>(timeout_ms_)))
       return Error(ErrorCode::kInternal, "cannot connect to the broker at " + mo.url);
+    // A clustered broker refuses subscriptions for a moment while it elects new stream
+    // leaders (a node died): ask again until the timeout.
     auto refused = client_->refused_subscriptions();
+    while (!refused.empty() && mono_ms() + 500 < deadline) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(500));
+      client_->retry_refused();
+      client_->wait_subscribed(static_cast<int>(std::max<int64_t>(1, deadline - mono_ms())));
+      refused = client_->refused_subscriptions();
+    }
     if (!refused.empty())
       return Error(ErrorCode::kInsufficientPrivileges,
                    "the broker refused the subscription to " + refused.front());

@@ -214,6 +214,23 @@ std::vector<std::string> MqttClient::refused_subscriptions() const {
   return sub_refused_;
 }
 
+void MqttClient::retry_refused() {
+  std::vector<std::pair<std::string, int>> again;
+  {
+    MutexLock lk(mu_);
+    for (const auto& f : sub_refused_)
+      for (const auto& s : subs_)
+        if (s.first == f) again.push_back(s);
+    sub_refused_.clear();
+  }
+  for (const auto& [filter, qos] : again) {
+    int mid = 0;
+    if (impl_->m != nullptr && connected_.load() &&
+        mosquitto_subscribe(impl_->m, &mid, filter.c_str(), qos) == MOSQ_ERR_SUCCESS)
+      sent_subscribe(mid, filter, qos);
+  }
+}
+
 bool MqttClient::wait_subscribed(int timeout_ms) {
   auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
   MutexLock lk(mu_);

@@ -114,6 +114,9 @@ class MqttClient {
   int qos_cap() const { return qos_cap_.load(); }
   // Subscriptions the broker refused (SUBACK 0x80) at QoS 1 or 0.
   std::vector<std::string> refused_subscriptions() const EXCLUDES(mu_);
+  // Sends the refused subscriptions again (a clustered broker refuses while it elects a new
+  // leader for its session and retained-message streams); wait_subscribed() then waits for them.
+  void retry_refused() EXCLUDES(mu_);
   // Waits up to `timeout_ms` until every QoS 1/2 message published so far is acknowledged by
   // the broker. False on timeout.
   bool flush(int timeout_ms);
