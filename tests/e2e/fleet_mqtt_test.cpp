@@ -101,10 +101,11 @@ void write_file(const std::string& path, const std::string& text,
 // A Mosquitto broker on a free loopback port.
 class Broker {
  public:
-  explicit Broker(const std::string& dir) : dir_(dir), port_(free_port()) {
+  explicit Broker(const std::string& dir, const std::string& extra_conf = "")
+      : dir_(dir), port_(free_port()) {
     write_file(dir_ + "/mosquitto.conf",
                "listener " + std::to_string(port_) +
-                   " 127.0.0.1\nallow_anonymous true\npersistence false\n");
+                   " 127.0.0.1\nallow_anonymous true\npersistence false\n" + extra_conf);
     start();
   }
   ~Broker() { stop(); }
@@ -579,6 +580,47 @@ TEST_F(FleetTest, FleetEstopWaitsForTheRosterAndNamesWhoDidNotConfirm) {
   auto lone = fleet({"resume", "beta"});
   EXPECT_EQ(lone.exit_code, 1);
   EXPECT_NE(lone.err.find("nothing was sent"), std::string::npos) << lone.err;
+}
+
+// A broker that accepts a publish and drops it: Mosquitto denying the operator write access by
+// ACL. Over MQTT 3.1.1 (what the CLI speaks) Mosquitto still answers PUBACK, so the broker's
+// acknowledgement proves nothing here; waiting for the members does: every verb exits 1 and
+// names the robot that never heard it.
+TEST_F(FleetTest, AnAclDenialIsCaughtByWaitingForTheMembers) {
+  write_file(tmp_.file("acl"), "topic readwrite rcan/#\nuser operator\ntopic read rcan/#\n");
+  auto dir = tmp_.path() + "/acl-broker";
+  fs::create_directories(dir);
+  // Started as root, Mosquitto drops to its own user before reading the ACL file, which lives
+  // in this test's private directory: keep it root (ignored when the test is not root).
+  Broker acl(dir, "user root\nacl_file " + tmp_.file("acl") + "\n");
+  robots_["robot-a"] =
+      std::make_unique<Robot>(tmp_.path(), "robot-a", "0000000a", acl.url(), secret_);
+  write_file(tmp_.file("run.json"), R"({"command":"COORDINATED_MOVE","fleet_id":"alpha",
+    "choreography":{"type":"sequential","steps":[
+      {"robot":"robot-a","action":"move","params":{"linear":0.1,"duration_ms":100}}]}})");
+  const std::vector<std::vector<std::string>> verbs{
+      {"estop", "alpha", "--members", "robot-a"},
+      {"resume", "alpha", "--members", "robot-a"},
+      {"command", "alpha", "move", "--params", R"({"linear":0.1,"duration_ms":100})", "--members",
+       "robot-a"},
+      {"run", tmp_.file("run.json")},
+  };
+  for (auto args : verbs) {
+    args.insert(args.begin(), "fleet");
+    args.insert(args.end(), {"--broker", acl.url(), "--token", tmp_.file("fleet.token"),
+                             "--username", "operator", "--timeout-ms", "1500"});
+    auto r = test::run_cli(args);
+    EXPECT_EQ(r.exit_code, 1) << args[1] << "\n" << r.out << r.err;
+    EXPECT_NE(r.err.find("robot-a"), std::string::npos) << args[1] << ": " << r.err;
+  }
+  EXPECT_EQ(json::dump(robots_["robot-a"]->status(fleet_token_)).find("\"estop_active\":true"),
+            std::string::npos);
+  // The control: an anonymous client may write, and the same ESTOP latches the robot.
+  auto allowed = test::run_cli({"fleet", "estop", "alpha", "--members", "robot-a", "--broker",
+                                acl.url(), "--token", tmp_.file("fleet.token")});
+  EXPECT_EQ(allowed.exit_code, 0) << allowed.out << allowed.err;
+  EXPECT_NE(json::dump(robots_["robot-a"]->status(fleet_token_)).find("\"estop_active\":true"),
+            std::string::npos);
 }
 
 TEST_F(FleetTest, LastWillShowsTheRobotOffline) {
