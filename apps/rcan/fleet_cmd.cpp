@@ -308,15 +308,16 @@ json::Object await_replies(Session& s, const std::map<std::string, std::string>&
   return out;
 }
 
-// The members of the fleet the broker knows: the retained statuses on <base>/robot/+/status
-// (online or not), read for `window_ms` after the subscriptions were answered.
+// The members of the fleet the broker knows: the statuses on <base>/robot/+/status (retained,
+// online or not, or published during the window), read for `window_ms` after the subscriptions
+// were answered.
 std::map<std::string, json::Value> roster(Session& s, const mqtt::FleetTopics& topics,
                                           int64_t window_ms) {
   std::map<std::string, json::Value> out;
   const std::string head = topics.base + "/robot/";
   int64_t deadline = mono_ms() + window_ms;
   while (auto m = s.next(deadline)) {
-    if (!m->retained || m->topic.rfind(head, 0) != 0) continue;
+    if (m->topic.rfind(head, 0) != 0) continue;  // retained, or a member connecting just now
     std::string rest = m->topic.substr(head.size());
     size_t slash = rest.find('/');
     if (slash == std::string::npos || rest.substr(slash) != "/status") continue;

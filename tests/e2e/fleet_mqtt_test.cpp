@@ -599,10 +599,9 @@ TEST_F(FleetTest, AnAclDenialIsCaughtByWaitingForTheMembers) {
     "choreography":{"type":"sequential","steps":[
       {"robot":"robot-a","action":"move","params":{"linear":0.1,"duration_ms":100}}]}})");
   const std::vector<std::vector<std::string>> verbs{
-      {"estop", "alpha", "--members", "robot-a"},
-      {"resume", "alpha", "--members", "robot-a"},
-      {"command", "alpha", "move", "--params", R"({"linear":0.1,"duration_ms":100})", "--members",
-       "robot-a"},
+      {"estop", "alpha"},  // the roster: robot-a's retained status
+      {"resume", "alpha"},
+      {"command", "alpha", "move", "--params", R"({"linear":0.1,"duration_ms":100})"},
       {"run", tmp_.file("run.json")},
   };
   for (auto args : verbs) {
