@@ -10,7 +10,7 @@ PKGS=(
   libssl-dev openssl
   libboost1.81-dev libboost-json1.81-dev libboost-url1.81-dev
   libyaml-cpp-dev libsqlite3-dev
-  mosquitto libmosquitto-dev
+  mosquitto libmosquitto-dev nats-server
   postgresql libpq-dev
   libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
   libgtest-dev libgmock-dev googletest libbenchmark-dev

@@ -1,4 +1,5 @@
 // rcan fleet — drive a fleet of robots over an MQTT broker (docs/FLEET.md).
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
@@ -8,8 +9,11 @@
 #include <fstream>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <string>
+#include <string_view>
+#include <thread>
 #include <vector>
 
 #include "cli.h"
@@ -27,19 +31,23 @@ namespace {
 
 constexpr const char* kHelp =
     "usage:\n"
-    "  rcan fleet estop FLEET [--members a,b,…] [--reason TEXT]\n"
-    "      Publishes a retained ESTOP (QoS 2) on the fleet's estop topic: every member latches\n"
-    "      it, and so does a member that connects later. With --members, waits for each\n"
-    "      member's acknowledgement.\n"
-    "  rcan fleet resume FLEET [--members a,b,…]\n"
+    "  rcan fleet estop FLEET [--members a,b,…] [--no-wait] [--reason TEXT]\n"
+    "      Publishes a retained ESTOP on the fleet's estop topic (QoS 2, or QoS 1 on a broker\n"
+    "      without QoS 2): every member latches it, and so does a member that connects later.\n"
+    "      Waits for the broker's acknowledgement, then for each member's: --members, else every\n"
+    "      member with a retained status on the broker (online or not). Names each robot that\n"
+    "      did not confirm. --no-wait: fire and forget (the broker must still acknowledge).\n"
+    "  rcan fleet resume FLEET [--members a,b,…] [--no-wait]\n"
     "      Replaces the retained ESTOP with a RESUME (LEASEE or above); live members resume.\n"
-    "  rcan fleet command FLEET ACTION [--params JSON] [--members a,b,…] [--wait-complete]\n"
-    "      Broadcasts a FLEET_COMMAND to every member; with --members, waits for each ACK\n"
-    "      (and, with --wait-complete, each completion).\n"
+    "  rcan fleet command FLEET ACTION [--params JSON] [--members a,b,…] [--no-wait]\n"
+    "      [--wait-complete]\n"
+    "      Broadcasts a FLEET_COMMAND to every member and waits for each ACK (and, with\n"
+    "      --wait-complete, each completion); members as for estop.\n"
     "  rcan fleet run CHOREOGRAPHY.json\n"
     "      Runs a COORDINATED_MOVE: publishes each step to its robot, waits for its completion\n"
-    "      (sequential, or parallel with wait_for), and on a refusal, an abort or a timeout\n"
-    "      stops every robot it moved and reports the failed step.\n"
+    "      (sequential, or parallel with wait_for), and on a refusal, an abort, a timeout or a\n"
+    "      publish the broker did not acknowledge stops every robot it moved and reports the\n"
+    "      failed step.\n"
     "  rcan fleet status FLEET\n"
     "      Prints each member's retained status (online or offline).\n"
     "  rcan fleet audit collect FLEET (--out DIR | --db CONNINFO) [--secrets-dir D] [--duration-ms "
@@ -56,8 +64,12 @@ constexpr const char* kHelp =
     "    --key-dir D (default $RCAN_KEY_DIR: the key pair the token is bound to; robots accept\n"
     "    MQTT messages only with a key-bound token, signed by its key: rcan token issue\n"
     "    --bind-key D),\n"
-    "    --ca-file F (mqtts), --username U --password-file F, --timeout-ms N (default 10000).\n"
-    "  Exit: 0 success, 1 a robot refused, failed or timed out, 2 usage or connection error.\n";
+    "    --ca-file F (mqtts), --username U --password-file F, --timeout-ms N (default 10000),\n"
+    "    --qos 1|2 (force the QoS of every publish and subscription; default: 2 for the estop\n"
+    "    topic and 1 for commands, and 1 throughout when the broker's SUBACK grants less than 2).\n"
+    "  Exit: 0 success; 1 the broker did not acknowledge a publish (it refused it, or the\n"
+    "    connection dropped), or a robot refused, failed or did not confirm in time, or no\n"
+    "    member is known to confirm; 2 usage error or no connection to the broker.\n";
 
 int64_t wall_ms() {
   return std::chrono::duration_cast<std::chrono::milliseconds>(
@@ -100,12 +112,19 @@ class Session {
     bool retained = false;
   };
 
-  Status open(const Options& o, const std::vector<std::string>& subscriptions) {
+  // Connects and subscribes, each filter at QoS 2 (the broker's SUBACK shows whether it does
+  // QoS 2: if it grants less, publishes stay at QoS 1) or at `forced_qos` (1 or 2; 0: auto).
+  // Returns once every SUBACK is in, so the retained messages follow at once.
+  Status open(const Options& o, const std::vector<std::string>& subscriptions, int forced_qos) {
     transport::MqttOptions mo;
     mo.url = o.get("broker", std::getenv("RCAN_MQTT_URL") ? std::getenv("RCAN_MQTT_URL")
                                                           : "mqtt://127.0.0.1:1883");
     mo.ca_file = o.get("ca-file");
     mo.username = o.get("username");
+    if (forced_qos != 0) {
+      mo.max_qos = forced_qos;
+      mo.downgrade_on_suback = false;
+    }
     if (o.has("password-file")) {
       auto pw = read_file(o.get("password-file"));
       if (!pw.ok()) return pw.error();
@@ -114,7 +133,7 @@ class Session {
         mo.password.pop_back();
     }
     client_ = std::make_unique<transport::MqttClient>(mo);
-    for (const auto& s : subscriptions) client_->subscribe(s, 1);
+    for (const auto& s : subscriptions) client_->subscribe(s, 2);
     client_->on_message([this](const transport::MqttMessage& m) {
       auto body = mqtt::parse_payload(m.payload);
       if (!body.ok()) return;
@@ -122,24 +141,32 @@ class Session {
       inbox_.push_back(Inbound{m.topic, std::move(body).value(), m.retained});
       cv_.notify_all();
     });
-    client_->on_connection([this](bool up, int) {
-      std::lock_guard<std::mutex> lk(mu_);
-      if (up) ++connects_;
-      cv_.notify_all();
-    });
     if (Status s = client_->start(); !s.ok()) return s;
-    std::unique_lock<std::mutex> lk(mu_);
-    if (!cv_.wait_for(lk, std::chrono::milliseconds(timeout_ms_), [this] { return connects_ > 0; }))
+    const int64_t deadline = mono_ms() + timeout_ms_;
+    if (!client_->wait_subscribed(static_cast<int>(timeout_ms_)))
       return Error(ErrorCode::kInternal, "cannot connect to the broker at " + mo.url);
-    lk.unlock();
-    // Subscriptions are sent on connect; a short settle lets the broker register them.
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    // A clustered broker refuses subscriptions for a moment while it elects new stream
+    // leaders (a node died): ask again until the timeout.
+    auto refused = client_->refused_subscriptions();
+    while (!refused.empty() && mono_ms() + 500 < deadline) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(500));
+      client_->retry_refused();
+      client_->wait_subscribed(static_cast<int>(std::max<int64_t>(1, deadline - mono_ms())));
+      refused = client_->refused_subscriptions();
+    }
+    if (!refused.empty())
+      return Error(ErrorCode::kInsufficientPrivileges,
+                   "the broker refused the subscription to " + refused.front());
     return Status::Ok();
   }
 
+  // Publishes and waits for the broker's acknowledgement (PUBACK, or PUBCOMP at QoS 2).
   Status publish(const std::string& topic, const json::Value& v, int qos, bool retain) {
-    return client_->publish(topic, json::dump(v), qos, retain);
+    return client_->publish_confirmed(topic, json::dump(v), qos, retain,
+                                      static_cast<int>(timeout_ms_));
   }
+  // The QoS a publish at `qos` goes out with.
+  int qos_for(int qos) const { return std::clamp(qos, 1, client_->qos_cap()); }
 
   // Next message, or nullopt at the deadline (monotonic ms).
   std::optional<Inbound> next(int64_t deadline) {
@@ -164,7 +191,6 @@ class Session {
   std::mutex mu_;
   std::condition_variable cv_;
   std::deque<Inbound> inbox_;
-  int connects_ = 0;
   int64_t timeout_ms_ = 10000;
 };
 
@@ -173,13 +199,15 @@ struct Common {
   std::string token;
   MessageSigner signer;  // signs with the key the token is bound to (cnf), if it is
   int64_t timeout_ms = 10000;
+  int qos = 0;  // --qos: 1 or 2 forced; 0: QoS 2 for the estop topic unless the broker lacks it
+  bool wait = true;  // --no-wait: fire and forget (the broker's acknowledgement is still needed)
 };
 
-const std::vector<std::string> kValued{"broker",   "token",         "prefix",     "ca-file",
-                                       "username", "password-file", "timeout-ms", "members",
-                                       "reason",   "params",        "out",        "duration-ms",
-                                       "db",       "secrets-dir",   "fleet",      "key-dir"};
-const std::vector<std::string> kFlags{"wait-complete"};
+const std::vector<std::string> kValued{
+    "broker",     "token",       "prefix", "ca-file", "username", "password-file",
+    "timeout-ms", "members",     "reason", "params",  "out",      "duration-ms",
+    "db",         "secrets-dir", "fleet",  "qos",     "key-dir"};
+const std::vector<std::string> kFlags{"wait-complete", "no-wait"};
 
 Result<Common> common(const Options& o, bool need_token) {
   Common c;
@@ -211,7 +239,19 @@ Result<Common> common(const Options& o, bool need_token) {
       return Error(ErrorCode::kSchemaValidationFailed, "--timeout-ms must be 1..3600000");
     c.timeout_ms = v;
   }
+  if (o.has("qos")) {
+    if (o.get("qos") != "1" && o.get("qos") != "2")
+      return Error(ErrorCode::kSchemaValidationFailed, "--qos must be 1 or 2");
+    c.qos = o.get("qos") == "1" ? 1 : 2;
+  }
+  c.wait = !o.has("no-wait");
   return c;
+}
+
+// Exit 1 with the reason on stderr: the fleet did not get what was asked of it.
+int failure(std::string_view verb, const std::string& msg) {
+  std::fprintf(stderr, "rcan %.*s: %s\n", static_cast<int>(verb.size()), verb.data(), msg.c_str());
+  return 1;
 }
 
 // A message with the fleet token, signed by the key the token is bound to (when it is).
@@ -282,61 +322,178 @@ json::Object await_replies(Session& s, const std::map<std::string, std::string>&
   return out;
 }
 
+// The members of the fleet the broker knows: the statuses on <base>/robot/+/status (retained,
+// online or not, or published during the window), read for `window_ms` after the subscriptions
+// were answered.
+std::map<std::string, json::Value> roster(Session& s, const mqtt::FleetTopics& topics,
+                                          int64_t window_ms) {
+  std::map<std::string, json::Value> out;
+  const std::string head = topics.base + "/robot/";
+  int64_t deadline = mono_ms() + window_ms;
+  while (auto m = s.next(deadline)) {
+    if (m->topic.rfind(head, 0) != 0) continue;  // retained, or a member connecting just now
+    std::string rest = m->topic.substr(head.size());
+    size_t slash = rest.find('/');
+    if (slash == std::string::npos || rest.substr(slash) != "/status") continue;
+    std::string member = rest.substr(0, slash);
+    if (mqtt::valid_topic_segment(member)) out[member] = m->body;
+  }
+  return out;
+}
+
+// Who must confirm: --members, else the roster; with --no-wait, nobody.
+struct Targets {
+  std::vector<std::string> members;
+  std::map<std::string, json::Value> last_status;  // from the roster
+  bool from_roster = false;
+};
+
+// Opens the session (member statuses and replies subscribed) and names the members that must
+// confirm. Errors are usage/connection errors (exit 2).
+Result<Targets> open_fleet(Session& s, const Options& o, const Common& c,
+                           const mqtt::FleetTopics& topics) {
+  Targets t;
+  t.members = split_list(o.get("members"));
+  if (!valid_ids(t.members))
+    return Error(ErrorCode::kSchemaValidationFailed, "bad member id in --members");
+  s.set_timeout(c.timeout_ms);
+  std::vector<std::string> subs{topics.base + "/robot/+/reply"};
+  const bool need_roster = c.wait && t.members.empty();
+  if (need_roster) subs.push_back(topics.base + "/robot/+/status");
+  if (Status st = s.open(o, subs, c.qos); !st.ok()) return st.error();
+  if (!c.wait) {
+    t.members.clear();
+  } else if (need_roster) {
+    // Retained messages follow the SUBACK at once; a clustered broker may take a moment more.
+    t.last_status = roster(s, topics, std::min<int64_t>(c.timeout_ms, 700));
+    for (const auto& [member, status] : t.last_status) t.members.push_back(member);
+    t.from_roster = true;
+  }
+  return t;
+}
+
+// Waits for each member's answer to `id` on its reply topic: ACK, ERROR and, with `complete`,
+// the COMPLETED / ABORTED event. Returns {member: {result, reply}}; `unconfirmed` gets every
+// member that did not confirm (refused, aborted, incomplete or silent).
+json::Object await_members(Session& s, const mqtt::FleetTopics& topics, const std::string& id,
+                           const Targets& t, bool complete, int64_t timeout_ms,
+                           std::vector<std::string>* unconfirmed) {
+  json::Object results;
+  std::set<std::string> open(t.members.begin(), t.members.end());
+  std::set<std::string> acked;
+  int64_t deadline = mono_ms() + timeout_ms;
+  while (!open.empty()) {
+    auto m = s.next(deadline);
+    if (!m) break;
+    if (str_of(m->body, "reply_to") != id) continue;
+    for (const auto& mem : t.members) {
+      if (m->topic != topics.member(mem).reply() || open.count(mem) == 0) continue;
+      std::string type = str_of(m->body, "type");
+      if (type == "ACK" && complete) {
+        acked.insert(mem);
+        continue;
+      }
+      std::string res = type == "ACK" ? "acknowledged" : type == "ERROR" ? "refused" : "";
+      if (type == "EVENT") {
+        const json::Value* p = m->body.get("payload");
+        res = p != nullptr && str_of(*p, "event") == "COMPLETED" ? "completed" : "aborted";
+      }
+      if (res.empty()) continue;
+      results.set(mem, json::Object{{"result", res}, {"reply", m->body}});
+      if (res != "acknowledged" && res != "completed") unconfirmed->push_back(mem);
+      open.erase(mem);
+    }
+  }
+  for (const auto& mem : open) {
+    json::Object r{{"result", acked.count(mem) ? "incomplete" : "timeout"}};
+    auto st = t.last_status.find(mem);
+    if (st != t.last_status.end()) r.set("last_status", st->second);
+    results.set(mem, std::move(r));
+    unconfirmed->push_back(mem);
+  }
+  return results;
+}
+
+// "robot-a (timeout), robot-b (refused)".
+std::string name_unconfirmed(const std::vector<std::string>& unconfirmed,
+                             const json::Object& results) {
+  std::string out;
+  for (const auto& m : unconfirmed) {
+    const json::Value* r = results.find(m);
+    out += (out.empty() ? "" : ", ") + m + " (" + (r ? str_of(*r, "result") : "?") + ")";
+  }
+  return out;
+}
+
+// Publishes one fleet message and, unless --no-wait, waits for the members' confirmations.
+// Exit 0 only when the broker acknowledged the publish and every member it waited for
+// confirmed; 1 otherwise, naming what failed on stderr.
+int publish_and_confirm(Session& s, const char* verb, const Common& c,
+                        const mqtt::FleetTopics& topics, const Targets& t, const std::string& topic,
+                        const json::Value& msg, int qos, bool retain, bool complete,
+                        json::Object out) {
+  const std::string id = str_of(msg, "message_id");
+  const int used_qos = s.qos_for(c.qos != 0 ? c.qos : qos);
+  out.set("message_id", id);
+  out.set("qos", static_cast<int64_t>(used_qos));
+  out.set("waited", c.wait);
+  if (Status st = s.publish(topic, msg, used_qos, retain); !st.ok()) {
+    s.close();
+    out.set("ok", false);
+    out.set("error", "not delivered: " + st.error().message);
+    print(json::Value(std::move(out)));
+    return failure(verb, "NOT DELIVERED: " + st.error().message);
+  }
+  std::vector<std::string> unconfirmed;
+  json::Object results = await_members(s, topics, id, t, complete, c.timeout_ms, &unconfirmed);
+  s.close();
+  bool none_known = c.wait && t.members.empty();
+  bool ok = unconfirmed.empty() && !none_known;
+  out.set("ok", ok);
+  out.set("members", results);
+  json::Array un;
+  for (const auto& m : unconfirmed) un.emplace_back(m);
+  out.set("unconfirmed", std::move(un));
+  print(json::Value(std::move(out)));
+  if (none_known)
+    return failure(verb,
+                   "the broker acknowledged the message, but no member is known to confirm it "
+                   "(no retained member status on the broker): name them with --members a,b,… "
+                   "or use --no-wait");
+  if (!ok)
+    return failure(verb, std::to_string(unconfirmed.size()) + " of " +
+                             std::to_string(t.members.size()) + " robots did not confirm within " +
+                             std::to_string(c.timeout_ms) +
+                             " ms: " + name_unconfirmed(unconfirmed, results));
+  return 0;
+}
+
 int estop_or_resume(const Options& o, bool estop) {
   const char* verb = estop ? "fleet estop" : "fleet resume";
   if (o.positional().size() != 2) return usage_error(verb, "give the fleet id");
   const std::string fleet = o.positional()[1];
   auto c = common(o, true);
   if (!c.ok()) return usage_error(verb, c.error().message);
-  auto members = split_list(o.get("members"));
-  if (!mqtt::valid_topic_segment(fleet) || !valid_ids(members))
-    return usage_error(verb, "bad fleet or member id");
+  if (!mqtt::valid_topic_segment(fleet)) return usage_error(verb, "bad fleet id");
   auto topics = mqtt::fleet_topics(c->prefix, fleet);
   Session s;
-  s.set_timeout(c->timeout_ms);
-  std::vector<std::string> subs;
-  for (const auto& m : members) subs.push_back(topics.member(m).reply());
-  if (Status st = s.open(o, subs); !st.ok()) return usage_error(verb, st.error().message);
+  auto t = open_fleet(s, o, *c, topics);
+  if (!t.ok()) return usage_error(verb, t.error().message);
+  // An ESTOP goes out even when nobody is known to confirm it; a RESUME does not.
+  if (!estop && c->wait && t->members.empty()) {
+    s.close();
+    return failure(verb,
+                   "no member is known to confirm a RESUME (no retained member status on the "
+                   "broker): name them with --members a,b,… or use --no-wait; nothing was sent");
+  }
   json::Object payload{{"safety_event", estop ? "ESTOP" : "RESUME"}, {"fleet_id", fleet}};
   payload.set("reason", o.get("reason", estop ? "fleet estop" : "fleet resume"));
-  std::string id = new_uuid_v4();
-  json::Value msg = message("SAFETY", std::move(payload), *c, id);
-  // Retained: the fleet's standing state, for members that connect later.
-  if (Status st = s.publish(topics.estop(), msg, 2, true); !st.ok())
-    return usage_error(verb, st.error().message);
-  std::map<std::string, std::string> ids;
-  for (const auto& m : members) ids[id + "\x1f" + m] = m;
-  // Every member answers the same message id on its own reply topic.
-  json::Object results;
-  bool ok = true;
-  if (!members.empty()) {
-    std::set<std::string> open(members.begin(), members.end());
-    int64_t deadline = mono_ms() + c->timeout_ms;
-    while (!open.empty()) {
-      auto m = s.next(deadline);
-      if (!m) break;
-      if (str_of(m->body, "reply_to") != id) continue;
-      for (const auto& mem : members) {
-        if (m->topic != topics.member(mem).reply() || open.count(mem) == 0) continue;
-        std::string type = str_of(m->body, "type");
-        results.set(mem, json::Object{{"result", type == "ACK" ? "acknowledged" : "refused"},
-                                      {"reply", m->body}});
-        if (type != "ACK") ok = false;
-        open.erase(mem);
-      }
-    }
-    for (const auto& mem : open) {
-      results.set(mem, json::Object{{"result", "timeout"}});
-      ok = false;
-    }
-  }
-  s.close();
-  print(json::Value(json::Object{{"fleet_id", fleet},
-                                 {"event", estop ? "ESTOP" : "RESUME"},
-                                 {"message_id", id},
-                                 {"ok", ok},
-                                 {"members", std::move(results)}}));
-  return ok ? 0 : 1;
+  json::Value msg = message("SAFETY", std::move(payload), *c);
+  // Retained: the fleet's standing state, for members that connect later. Every member answers
+  // the same message id on its own reply topic.
+  return publish_and_confirm(
+      s, verb, *c, topics, *t, topics.estop(), msg, 2, true, false,
+      json::Object{{"fleet_id", fleet}, {"event", estop ? "ESTOP" : "RESUME"}});
 }
 
 int command_main(const Options& o) {
@@ -345,9 +502,7 @@ int command_main(const Options& o) {
   const std::string fleet = o.positional()[1], action = o.positional()[2];
   auto c = common(o, true);
   if (!c.ok()) return usage_error("fleet command", c.error().message);
-  auto members = split_list(o.get("members"));
-  if (!mqtt::valid_topic_segment(fleet) || !valid_ids(members))
-    return usage_error("fleet command", "bad fleet or member id");
+  if (!mqtt::valid_topic_segment(fleet)) return usage_error("fleet command", "bad fleet id");
   json::Object payload{{"command", action}, {"fleet_id", fleet}};
   if (o.has("params")) {
     auto p = json::parse(o.get("params"));
@@ -357,51 +512,17 @@ int command_main(const Options& o) {
   }
   auto topics = mqtt::fleet_topics(c->prefix, fleet);
   Session s;
-  s.set_timeout(c->timeout_ms);
-  std::vector<std::string> subs;
-  for (const auto& m : members) subs.push_back(topics.member(m).reply());
-  if (Status st = s.open(o, subs); !st.ok())
-    return usage_error("fleet command", st.error().message);
-  std::string id = new_uuid_v4();
-  if (Status st =
-          s.publish(topics.cmd(), message("FLEET_COMMAND", std::move(payload), *c, id), 1, false);
-      !st.ok())
-    return usage_error("fleet command", st.error().message);
-  bool complete = o.has("wait-complete");
-  json::Object results;
-  bool ok = true;
-  std::set<std::string> open(members.begin(), members.end());
-  std::map<std::string, std::string> acked;
-  int64_t deadline = mono_ms() + c->timeout_ms;
-  while (!open.empty()) {
-    auto m = s.next(deadline);
-    if (!m) break;
-    if (str_of(m->body, "reply_to") != id) continue;
-    for (const auto& mem : members) {
-      if (m->topic != topics.member(mem).reply() || open.count(mem) == 0) continue;
-      std::string type = str_of(m->body, "type");
-      if (type == "ACK" && complete) {
-        acked[mem] = "acknowledged";
-        continue;
-      }
-      std::string res = type == "ACK" ? "acknowledged" : type == "ERROR" ? "refused" : "";
-      if (type == "EVENT") {
-        const json::Value* p = m->body.get("payload");
-        res = p != nullptr && str_of(*p, "event") == "COMPLETED" ? "completed" : "aborted";
-      }
-      results.set(mem, json::Object{{"result", res}, {"reply", m->body}});
-      if (res != "acknowledged" && res != "completed") ok = false;
-      open.erase(mem);
-    }
+  auto t = open_fleet(s, o, *c, topics);
+  if (!t.ok()) return usage_error("fleet command", t.error().message);
+  if (c->wait && t->members.empty()) {
+    s.close();
+    return failure("fleet command",
+                   "no member is known to confirm the command (no retained member status on the "
+                   "broker): name them with --members a,b,… or use --no-wait; nothing was sent");
   }
-  for (const auto& mem : open) {
-    results.set(mem, json::Object{{"result", acked.count(mem) ? "incomplete" : "timeout"}});
-    ok = false;
-  }
-  s.close();
-  print(json::Value(json::Object{
-      {"fleet_id", fleet}, {"message_id", id}, {"ok", ok}, {"members", std::move(results)}}));
-  return ok ? 0 : 1;
+  json::Value msg = message("FLEET_COMMAND", std::move(payload), *c);
+  return publish_and_confirm(s, "fleet command", *c, topics, *t, topics.cmd(), msg, 1, false,
+                             o.has("wait-complete"), json::Object{{"fleet_id", fleet}});
 }
 
 // ---- choreography
@@ -491,10 +612,41 @@ Result<std::vector<Step>> parse_choreography(const json::Value& doc, std::string
   return out;
 }
 
+// Sends a SAFETY STOP to every robot a failed run moved and waits for their ACKs; records
+// `stopped`, `stops_not_delivered` and `all_stops_acknowledged` in `out`.
+void stop_moved(Session& sess, const mqtt::FleetTopics& topics, const std::set<std::string>& moved,
+                const std::string& fleet, size_t failed, const Common& c, int qos,
+                json::Object* out) {
+  std::map<std::string, std::string> stop_ids;
+  json::Array undelivered;
+  for (const auto& r : moved) {
+    std::string id = new_uuid_v4();
+    stop_ids[id] = r;
+    Status sent = sess.publish(
+        topics.member(r).cmd(),
+        message("SAFETY",
+                json::Object{{"safety_event", "STOP"},
+                             {"fleet_id", fleet},
+                             {"reason", "choreography step " + std::to_string(failed) + " failed"}},
+                c, id),
+        qos, false);
+    if (!sent.ok()) undelivered.emplace_back(r);
+  }
+  bool stops_ok = true;
+  json::Object stopped = await_replies(sess, stop_ids, false, c.timeout_ms, &stops_ok);
+  if (!undelivered.empty()) {
+    stops_ok = false;
+    out->set("stops_not_delivered", std::move(undelivered));
+  }
+  out->set("stopped", std::move(stopped));
+  out->set("all_stops_acknowledged", stops_ok);
+}
+
 int run_main(const Options& o) {
   if (o.positional().size() != 2) return usage_error("fleet run", "give the choreography file");
   auto c = common(o, true);
   if (!c.ok()) return usage_error("fleet run", c.error().message);
+  if (!c->wait) return usage_error("fleet run", "a choreography always waits for its steps");
   auto text = read_file(o.positional()[1]);
   if (!text.ok()) return usage_error("fleet run", text.error().message);
   auto doc = json::parse(*text);
@@ -510,7 +662,9 @@ int run_main(const Options& o) {
   sess.set_timeout(c->timeout_ms);
   std::vector<std::string> subs;
   for (const auto& r : robots) subs.push_back(topics.member(r).reply());
-  if (Status st = sess.open(o, subs); !st.ok()) return usage_error("fleet run", st.error().message);
+  if (Status st = sess.open(o, subs, c->qos); !st.ok())
+    return usage_error("fleet run", st.error().message);
+  const int qos = c->qos != 0 ? c->qos : 1;
 
   std::string choreography_id = new_uuid_v4();
   std::set<std::string> moved;
@@ -543,7 +697,7 @@ int run_main(const Options& o) {
       s.message_id = new_uuid_v4();
       Status ps =
           sess.publish(topics.member(s.robot).cmd(),
-                       message("FLEET_COMMAND", std::move(payload), *c, s.message_id), 1, false);
+                       message("FLEET_COMMAND", std::move(payload), *c, s.message_id), qos, false);
       if (!ps.ok()) {
         failed = s.index;
         fail_reason = "publish failed: " + ps.error().message;
@@ -614,31 +768,16 @@ int run_main(const Options& o) {
     return 0;
   }
   // Stop every robot this run moved, then report.
-  std::map<std::string, std::string> stop_ids;
-  for (const auto& r : moved) {
-    std::string id = new_uuid_v4();
-    stop_ids[id] = r;
-    (void)sess.publish(topics.member(r).cmd(),
-                       message("SAFETY",
-                               json::Object{{"safety_event", "STOP"},
-                                            {"fleet_id", fleet},
-                                            {"reason", "choreography step " +
-                                                           std::to_string(*failed) + " failed"}},
-                               *c, id),
-                       1, false);
-  }
-  bool stops_ok = true;
-  json::Object stopped = await_replies(sess, stop_ids, false, c->timeout_ms, &stops_ok);
+  stop_moved(sess, topics, moved, fleet, *failed, *c, qos, &out);
   sess.close();
   out.set("ok", false);
   out.set("failed_step", static_cast<int64_t>(*failed));
   out.set("failed_robot", st[*failed].robot);
   out.set("reason", fail_reason);
-  out.set("stopped", std::move(stopped));
-  out.set("all_stops_acknowledged", stops_ok);
   out.set("steps", std::move(report));
   print(json::Value(std::move(out)));
-  return 1;
+  return failure("fleet run", "step " + std::to_string(*failed) + " (" + st[*failed].robot +
+                                  ") failed: " + fail_reason);
 }
 
 int status_main(const Options& o) {
@@ -650,7 +789,7 @@ int status_main(const Options& o) {
   auto topics = mqtt::fleet_topics(c->prefix, fleet);
   Session s;
   s.set_timeout(c->timeout_ms);
-  if (Status st = s.open(o, {topics.base + "/robot/+/status"}); !st.ok())
+  if (Status st = s.open(o, {topics.base + "/robot/+/status"}, c->qos); !st.ok())
     return usage_error("fleet status", st.error().message);
   json::Object members;
   int64_t deadline =
@@ -726,7 +865,7 @@ int audit_collect_main(const Options& o) {
   auto topics = mqtt::fleet_topics(c->prefix, fleet);
   Session s;
   s.set_timeout(c->timeout_ms);
-  if (Status st = s.open(o, {topics.base + "/robot/+/audit"}); !st.ok())
+  if (Status st = s.open(o, {topics.base + "/robot/+/audit"}, c->qos); !st.ok())
     return usage_error("fleet audit collect", st.error().message);
   struct Chain {
     uint64_t last_seq = 0;

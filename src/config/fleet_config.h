@@ -31,6 +31,9 @@ struct MqttConfig {
   // QoS of the robot's subscription to its fleet's estop topic (docs/FLEET.md): 1 acts on the
   // first PUBLISH that arrives; 2 only after the PUBREL round trip through the broker.
   int estop_qos = 1;
+  // The highest QoS of every publish and subscription (docs/FLEET.md §Brokers capped at QoS 1):
+  // 1 for brokers without QoS 2. With 2, a broker's SUBACK granting less lowers it to 1.
+  int max_qos = 2;
 };
 
 struct FleetConfig {

@@ -3,6 +3,7 @@
 #include <mosquitto.h>
 #include <pthread.h>
 
+#include <algorithm>
 #include <cctype>
 #include <chrono>
 #include <cstdlib>
@@ -87,18 +88,42 @@ struct MqttCallbacks {
         MutexLock lk(self->mu_);
         subs = self->subs_;
       }
-      for (const auto& [filter, qos] : subs) mosquitto_subscribe(m, nullptr, filter.c_str(), qos);
+      for (const auto& [filter, qos] : subs) {
+        int mid = 0;
+        if (mosquitto_subscribe(m, &mid, filter.c_str(), qos) == MOSQ_ERR_SUCCESS)
+          self->sent_subscribe(mid, filter, qos);
+      }
+      MutexLock lk(self->mu_);
+      ++self->ready_connects_;
+      self->cv_.notify_all();
     }
     if (self->on_connection_) self->on_connection_(rc == 0, rc);
   }
   static void on_disconnect(mosquitto*, void* obj, int rc) {
     auto* self = static_cast<MqttClient*>(obj);
     self->connected_.store(false);
+    {
+      MutexLock lk(self->mu_);
+      ++self->drops_;
+      self->sub_pending_.clear();  // renewed on the next connect
+      self->sub_early_.clear();
+      self->cv_.notify_all();
+    }
     if (self->on_connection_) self->on_connection_(false, rc);
   }
-  static void on_publish(mosquitto*, void* obj, int) {
+  static void on_publish(mosquitto*, void* obj, int mid) {
     auto* self = static_cast<MqttClient*>(obj);
     self->inflight_.fetch_sub(1);
+    MutexLock lk(self->mu_);
+    if (self->confirm_waiters_ > 0) {
+      self->acked_.insert(mid);
+      self->cv_.notify_all();
+    }
+  }
+  static void on_subscribe(mosquitto*, void* obj, int mid, int count, const int* granted) {
+    auto* self = static_cast<MqttClient*>(obj);
+    // One filter per SUBSCRIBE: one granted QoS (0x80: refused).
+    self->got_suback(mid, count > 0 && granted != nullptr ? granted[0] : 0x80);
   }
   static void on_message(mosquitto*, void* obj, const mosquitto_message* msg) {
     auto* self = static_cast<MqttClient*>(obj);
@@ -116,6 +141,9 @@ struct MqttCallbacks {
 
 MqttClient::MqttClient(MqttOptions opts) : opts_(std::move(opts)), impl_(std::make_unique<Impl>()) {
   std::call_once(g_lib_once, [] { mosquitto_lib_init(); });
+  opts_.max_qos = std::clamp(opts_.max_qos, 1, 2);
+  opts_.will.qos = std::min(opts_.will.qos, opts_.max_qos);
+  qos_cap_.store(opts_.max_qos);
 }
 
 MqttClient::~MqttClient() {
@@ -124,12 +152,93 @@ MqttClient::~MqttClient() {
 }
 
 void MqttClient::subscribe(const std::string& filter, int qos) {
+  qos = std::min(qos, opts_.max_qos);
   {
     MutexLock lk(mu_);
     subs_.emplace_back(filter, qos);
   }
-  if (impl_->m != nullptr && connected_.load())
-    mosquitto_subscribe(impl_->m, nullptr, filter.c_str(), qos);
+  int mid = 0;
+  if (impl_->m != nullptr && connected_.load() &&
+      mosquitto_subscribe(impl_->m, &mid, filter.c_str(), qos) == MOSQ_ERR_SUCCESS)
+    sent_subscribe(mid, filter, qos);
+}
+
+void MqttClient::sent_subscribe(int mid, const std::string& filter, int qos) {
+  int granted = -1;
+  {
+    MutexLock lk(mu_);
+    auto early = sub_early_.find(mid);
+    if (early == sub_early_.end()) {
+      sub_pending_[mid] = {filter, qos};
+      return;
+    }
+    granted = early->second;
+    sub_early_.erase(early);
+    sub_pending_[mid] = {filter, qos};
+  }
+  got_suback(mid, granted);
+}
+
+// A broker without QoS 2 grants QoS 1 to a QoS 2 subscription (NATS, Azure IoT Hub) or refuses
+// it: from then on nothing is published above QoS 1, and a refused subscription is renewed at 1.
+void MqttClient::got_suback(int mid, int granted) {
+  std::string renew;
+  {
+    MutexLock lk(mu_);
+    auto it = sub_pending_.find(mid);
+    if (it == sub_pending_.end()) {
+      sub_early_[mid] = granted;
+      return;
+    }
+    auto [filter, requested] = it->second;
+    sub_pending_.erase(it);
+    cv_.notify_all();
+    if (requested == 2 && (granted == 0x80 || granted < 2) && opts_.downgrade_on_suback)
+      qos_cap_.store(1);
+    if (granted == 0x80 && requested == 2) {
+      for (auto& s : subs_)
+        if (s.first == filter) s.second = 1;
+      renew = filter;
+    } else if (granted == 0x80) {
+      sub_refused_.push_back(filter);
+    }
+  }
+  int again = 0;
+  if (!renew.empty() && impl_->m != nullptr &&
+      mosquitto_subscribe(impl_->m, &again, renew.c_str(), 1) == MOSQ_ERR_SUCCESS)
+    sent_subscribe(again, renew, 1);
+}
+
+std::vector<std::string> MqttClient::refused_subscriptions() const {
+  MutexLock lk(mu_);
+  return sub_refused_;
+}
+
+void MqttClient::retry_refused() {
+  std::vector<std::pair<std::string, int>> again;
+  {
+    MutexLock lk(mu_);
+    for (const auto& f : sub_refused_)
+      for (const auto& s : subs_)
+        if (s.first == f) again.push_back(s);
+    sub_refused_.clear();
+  }
+  for (const auto& [filter, qos] : again) {
+    int mid = 0;
+    if (impl_->m != nullptr && connected_.load() &&
+        mosquitto_subscribe(impl_->m, &mid, filter.c_str(), qos) == MOSQ_ERR_SUCCESS)
+      sent_subscribe(mid, filter, qos);
+  }
+}
+
+bool MqttClient::wait_subscribed(int timeout_ms) {
+  auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  MutexLock lk(mu_);
+  while (!(ready_connects_ > 0 && connected_.load() && sub_pending_.empty())) {
+    if (cv_.wait_until(mu_, deadline) == std::cv_status::timeout)
+      return ready_connects_ > 0 && connected_.load() && sub_pending_.empty();
+  }
+  return true;
 }
 
 Status MqttClient::start() {
@@ -155,6 +264,7 @@ Status MqttClient::start() {
   mosquitto_disconnect_callback_set(m, &MqttCallbacks::on_disconnect);
   mosquitto_message_callback_set(m, &MqttCallbacks::on_message);
   mosquitto_publish_callback_set(m, &MqttCallbacks::on_publish);
+  mosquitto_subscribe_callback_set(m, &MqttCallbacks::on_subscribe);
   mosquitto_reconnect_delay_set(m, static_cast<unsigned>(opts_.reconnect_min_s),
                                 static_cast<unsigned>(opts_.reconnect_max_s), true);
   if (!opts_.username.empty()) {
@@ -200,6 +310,7 @@ Status MqttClient::publish(const std::string& topic, const std::string& payload,
                            bool retain) {
   if (impl_->m == nullptr || stopped_.load())
     return Error(ErrorCode::kInternal, "the MQTT client is not running");
+  qos = std::min(qos, qos_cap_.load());
   if (qos > 0) inflight_.fetch_add(1);
   int rc = mosquitto_publish(impl_->m, nullptr, topic.c_str(), static_cast<int>(payload.size()),
                              payload.data(), qos, retain);
@@ -210,6 +321,47 @@ Status MqttClient::publish(const std::string& topic, const std::string& payload,
   if (rc == MOSQ_ERR_NO_CONN && qos == 0)
     return Error(ErrorCode::kInternal, "MQTT publish: not connected");
   return Status::Ok();
+}
+
+Status MqttClient::publish_confirmed(const std::string& topic, const std::string& payload, int qos,
+                                     bool retain, int timeout_ms) {
+  if (impl_->m == nullptr || stopped_.load())
+    return Error(ErrorCode::kInternal, "the MQTT client is not running");
+  if (!connected_.load()) return Error(ErrorCode::kInternal, "not connected to the broker");
+  qos = std::clamp(qos, 1, qos_cap_.load());
+  uint64_t drops = 0;
+  {
+    MutexLock lk(mu_);
+    ++confirm_waiters_;
+    drops = drops_;
+  }
+  inflight_.fetch_add(1);
+  int mid = 0;
+  int rc = mosquitto_publish(impl_->m, &mid, topic.c_str(), static_cast<int>(payload.size()),
+                             payload.data(), qos, retain);
+  auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  MutexLock lk(mu_);
+  if (rc == MOSQ_ERR_SUCCESS) {
+    while (acked_.count(mid) == 0 && drops_ == drops &&
+           cv_.wait_until(mu_, deadline) != std::cv_status::timeout) {
+    }
+  }
+  bool acked = rc == MOSQ_ERR_SUCCESS && acked_.erase(mid) > 0;
+  bool dropped = drops_ != drops;
+  if (--confirm_waiters_ == 0) acked_.clear();
+  if (acked) return Status::Ok();
+  const std::string what = "the publish on " + topic + " at QoS " + std::to_string(qos);
+  if (rc != MOSQ_ERR_SUCCESS) {
+    if (rc != MOSQ_ERR_NO_CONN) inflight_.fetch_sub(1);
+    return Error(ErrorCode::kInternal, what + " failed: " + mosquitto_strerror(rc));
+  }
+  if (dropped)
+    return Error(ErrorCode::kInternal,
+                 "the broker closed the connection before acknowledging " + what +
+                     " (a broker refuses a publish by disconnecting; brokers capped at QoS 1 "
+                     "refuse QoS 2)");
+  return Error(ErrorCode::kInternal, "the broker did not acknowledge " + what + " within " +
+                                         std::to_string(timeout_ms) + " ms");
 }
 
 bool MqttClient::flush(int timeout_ms) {

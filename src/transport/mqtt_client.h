@@ -6,13 +6,22 @@
 // reconnect_max_s) after a broker loss. Subscriptions are renewed on every (re)connect. The
 // callbacks run on that thread; publish() may be called from any thread.
 //
+// QoS: every publish and subscription is capped at MqttOptions::max_qos. A broker without QoS 2
+// grants QoS 1 to a QoS 2 subscription, or refuses it, and may drop the connection on a QoS 2
+// PUBLISH (NATS 2.9 does both): a SUBACK that grants less than QoS 2 to a QoS 2
+// request lowers the cap to 1 for the rest of the client's life (qos_cap()), and a refused QoS 2
+// subscription is renewed at QoS 1. publish_confirmed() reports whether the broker
+// acknowledged one publish (PUBACK / PUBCOMP) before the connection dropped.
+//
 // This header includes no libmosquitto: keep it that way.
 #pragma once
 
 #include <atomic>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -56,6 +65,10 @@ struct MqttOptions {
   int reconnect_min_s = kDefaultReconnectMinS;
   int reconnect_max_s = kDefaultReconnectMaxS;
   MqttWill will;
+  int max_qos = 2;  // 1 for brokers capped at QoS 1 (config mqtt.max_qos, `rcan fleet --qos`)
+  // A SUBACK granting less than a requested QoS 2 lowers qos_cap() to 1. False: QoS 2 stays,
+  // whatever the broker grants (`rcan fleet --qos 2` forces it).
+  bool downgrade_on_suback = true;
 };
 
 struct MqttMessage {
@@ -87,6 +100,23 @@ class MqttClient {
   // Publishes (queued by libmosquitto while disconnected for QoS > 0). Errors when the
   // payload is too large or the client is stopped.
   Status publish(const std::string& topic, const std::string& payload, int qos, bool retain);
+  // Publishes at QoS min(qos, qos_cap()) (at least 1) and waits up to `timeout_ms` for the
+  // broker's acknowledgement of this message: PUBACK at QoS 1, PUBCOMP at QoS 2. Errors
+  // (kInternal) when not connected, when the connection drops first (a broker refusing the
+  // publish closes it: MQTT 3.1.1 has no negative acknowledgement) or at the timeout.
+  Status publish_confirmed(const std::string& topic, const std::string& payload, int qos,
+                           bool retain, int timeout_ms);
+  // Waits up to `timeout_ms` until connected and every subscription sent so far is answered by
+  // a SUBACK. False on timeout.
+  bool wait_subscribed(int timeout_ms);
+  // The highest QoS publishes use: max_qos, lowered to 1 by a SUBACK that granted less than a
+  // requested QoS 2.
+  int qos_cap() const { return qos_cap_.load(); }
+  // Subscriptions the broker refused (SUBACK 0x80) at QoS 1 or 0.
+  std::vector<std::string> refused_subscriptions() const EXCLUDES(mu_);
+  // Sends the refused subscriptions again (a clustered broker refuses while it elects a new
+  // leader for its session and retained-message streams); wait_subscribed() then waits for them.
+  void retry_refused() EXCLUDES(mu_);
   // Waits up to `timeout_ms` until every QoS 1/2 message published so far is acknowledged by
   // the broker. False on timeout.
   bool flush(int timeout_ms);
@@ -102,8 +132,19 @@ class MqttClient {
   MqttOptions opts_;
   OnMessage on_message_;
   OnConnection on_connection_;
-  Mutex mu_;
+  mutable Mutex mu_;
   std::vector<std::pair<std::string, int>> subs_ GUARDED_BY(mu_);
+  void sent_subscribe(int mid, const std::string& filter, int qos) EXCLUDES(mu_);
+  void got_suback(int mid, int granted) EXCLUDES(mu_);
+  std::atomic<int> qos_cap_{2};
+  CondVar cv_;
+  std::map<int, std::pair<std::string, int>> sub_pending_ GUARDED_BY(mu_);  // mid → filter, QoS
+  std::map<int, int> sub_early_ GUARDED_BY(mu_);  // SUBACKs that arrived before their mid was noted
+  std::vector<std::string> sub_refused_ GUARDED_BY(mu_);
+  uint64_t ready_connects_ GUARDED_BY(mu_) = 0;  // connects whose subscriptions were all sent
+  std::set<int> acked_ GUARDED_BY(mu_);          // acknowledged mids, kept while someone waits
+  int confirm_waiters_ GUARDED_BY(mu_) = 0;
+  uint64_t drops_ GUARDED_BY(mu_) = 0;  // connection losses
   std::atomic<bool> connected_{false};
   std::atomic<uint64_t> connects_{0};
   std::atomic<bool> stopped_{false};

@@ -571,6 +571,19 @@ TEST(ConfigMqtt, EstopSubscriptionQos) {
   EXPECT_EQ(two->mqtt.estop_qos, 2);
 }
 
+TEST(ConfigMqtt, MaxQos) {
+  auto dflt = parse("mqtt:\n  enabled: true\n");
+  ASSERT_TRUE(dflt.ok()) << dflt.error().message;
+  EXPECT_EQ(dflt->mqtt.max_qos, 2);
+  auto one = parse("mqtt:\n  enabled: true\n  max_qos: 1\n");
+  ASSERT_TRUE(one.ok()) << one.error().message;
+  EXPECT_EQ(one->mqtt.max_qos, 1);
+  expect_error(parse("mqtt:\n  max_qos: 0\n"), "mqtt.max_qos", "out_of_range");
+  expect_error(parse("mqtt:\n  max_qos: 3\n"), "mqtt.max_qos", "out_of_range");
+  // An estop subscription above the cap is a contradiction, not something to clamp silently.
+  expect_error(parse("mqtt:\n  max_qos: 1\n  estop_qos: 2\n"), "mqtt.estop_qos", "out_of_range");
+}
+
 TEST(ConfigErrors, Semantics) {
   expect_error(parse("safety:\n  local_safety_wins: false\n"), "safety.local_safety_wins",
                "invalid_value");

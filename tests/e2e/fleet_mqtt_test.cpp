@@ -10,11 +10,13 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <condition_variable>
 #include <deque>
 #include <filesystem>
 #include <fstream>
+#include <initializer_list>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -58,6 +60,28 @@ std::string payload_str(const json::Value& v, const char* key) {
   return p != nullptr ? str_of(*p, key) : std::string();
 }
 
+// Fields of the CLI's output that may be missing (an old CLI): never dereference null.
+const json::Value* path_of(const json::Value& v, std::initializer_list<const char*> keys) {
+  const json::Value* at = &v;
+  for (const char* k : keys) {
+    at = at->is_object() ? at->get(k) : nullptr;
+    if (at == nullptr) return nullptr;
+  }
+  return at;
+}
+int64_t int_at(const json::Value& v, std::initializer_list<const char*> keys) {
+  const json::Value* f = path_of(v, keys);
+  return f != nullptr && f->is_int() ? f->as_int() : -1;
+}
+std::string bool_at(const json::Value& v, std::initializer_list<const char*> keys) {
+  const json::Value* f = path_of(v, keys);
+  return f != nullptr && f->is_bool() ? (f->as_bool() ? "true" : "false") : "missing";
+}
+std::string str_at(const json::Value& v, std::initializer_list<const char*> keys) {
+  const json::Value* f = path_of(v, keys);
+  return f != nullptr && f->is_string() ? f->as_string() : std::string();
+}
+
 uint16_t free_port() {
   int fd = ::socket(AF_INET, SOCK_STREAM, 0);
   sockaddr_in a{};
@@ -80,10 +104,11 @@ void write_file(const std::string& path, const std::string& text,
 // A Mosquitto broker on a free loopback port.
 class Broker {
  public:
-  explicit Broker(const std::string& dir) : dir_(dir), port_(free_port()) {
+  explicit Broker(const std::string& dir, const std::string& extra_conf = "")
+      : dir_(dir), port_(free_port()) {
     write_file(dir_ + "/mosquitto.conf",
                "listener " + std::to_string(port_) +
-                   " 127.0.0.1\nallow_anonymous true\npersistence false\n");
+                   " 127.0.0.1\nallow_anonymous true\npersistence false\n" + extra_conf);
     start();
   }
   ~Broker() { stop(); }
@@ -540,6 +565,83 @@ TEST_F(FleetTest, FleetEstopDeliveredTwiceIsHarmlessAtEitherQos) {
     EXPECT_EQ(first, 1) << m;
     EXPECT_EQ(duplicates, 1) << m;
   }
+}
+
+// Without --members, `rcan fleet estop` waits for every member with a retained status on the
+// broker, online or not, and names each one that did not confirm (exit 1); --no-wait only needs
+// the broker's acknowledgement. Mosquitto does QoS 2: the ESTOP goes out at QoS 2.
+TEST_F(FleetTest, FleetEstopWaitsForTheRosterAndNamesWhoDidNotConfirm) {
+  three_robots();
+  Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/robot-c/status"});
+  robots_["robot-c"]->kill9();  // its will says it is offline: it stays on the roster
+  ASSERT_TRUE(w.wait([](const Watcher::Msg& m) {
+    return m.body.get("online") && !m.body.get("online")->as_bool();
+  }));
+  auto r = fleet({"estop", "alpha", "--timeout-ms", "3000"});
+  EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
+  EXPECT_NE(r.err.find("1 of 3 robots did not confirm"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("robot-c (timeout)"), std::string::npos) << r.err;
+  json::Value out = parse(r.out);
+  EXPECT_EQ(bool_at(out, {"ok"}), "false");
+  EXPECT_EQ(int_at(out, {"qos"}), 2);
+  for (const char* m : {"robot-a", "robot-b"}) {
+    EXPECT_EQ(str_at(out, {"members", m, "result"}), "acknowledged") << m;
+    EXPECT_NE(json::dump(robots_[m]->status(fleet_token_)).find("\"estop_active\":true"),
+              std::string::npos)
+        << m;
+  }
+  EXPECT_EQ(str_at(out, {"members", "robot-c", "result"}), "timeout");
+  EXPECT_EQ(str_at(out, {"members", "robot-c", "last_status", "reason"}), "connection_lost");
+  // Naming the members that are up, or not waiting at all, succeeds.
+  auto named = fleet({"estop", "alpha", "--members", "robot-a,robot-b"});
+  EXPECT_EQ(named.exit_code, 0) << named.out << named.err;
+  auto fire = fleet({"estop", "alpha", "--no-wait"});
+  EXPECT_EQ(fire.exit_code, 0) << fire.out << fire.err;
+  EXPECT_EQ(bool_at(parse(fire.out), {"waited"}), "false");
+  // A RESUME or a command nobody is known to confirm is not sent.
+  auto lone = fleet({"resume", "beta"});
+  EXPECT_EQ(lone.exit_code, 1);
+  EXPECT_NE(lone.err.find("nothing was sent"), std::string::npos) << lone.err;
+}
+
+// A broker that accepts a publish and drops it: Mosquitto denying the operator write access by
+// ACL. Over MQTT 3.1.1 (what the CLI speaks) Mosquitto still answers PUBACK, so the broker's
+// acknowledgement proves nothing here; waiting for the members does: every verb exits 1 and
+// names the robot that never heard it.
+TEST_F(FleetTest, AnAclDenialIsCaughtByWaitingForTheMembers) {
+  write_file(tmp_.file("acl"), "topic readwrite rcan/#\nuser operator\ntopic read rcan/#\n");
+  auto dir = tmp_.path() + "/acl-broker";
+  fs::create_directories(dir);
+  // Started as root, Mosquitto drops to its own user before reading the ACL file, which lives
+  // in this test's private directory: keep it root (ignored when the test is not root).
+  Broker acl(dir, "user root\nacl_file " + tmp_.file("acl") + "\n");
+  robots_["robot-a"] =
+      std::make_unique<Robot>(tmp_.path(), "robot-a", "0000000a", acl.url(), secret_);
+  write_file(tmp_.file("run.json"), R"({"command":"COORDINATED_MOVE","fleet_id":"alpha",
+    "choreography":{"type":"sequential","steps":[
+      {"robot":"robot-a","action":"move","params":{"linear":0.1,"duration_ms":100}}]}})");
+  const std::vector<std::vector<std::string>> verbs{
+      {"estop", "alpha"},  // the roster: robot-a's retained status
+      {"resume", "alpha"},
+      {"command", "alpha", "move", "--params", R"({"linear":0.1,"duration_ms":100})"},
+      {"run", tmp_.file("run.json")},
+  };
+  for (auto args : verbs) {
+    args.insert(args.begin(), "fleet");
+    args.insert(args.end(), {"--broker", acl.url(), "--token", tmp_.file("fleet.token"),
+                             "--username", "operator", "--timeout-ms", "1500"});
+    auto r = test::run_cli(args);
+    EXPECT_EQ(r.exit_code, 1) << args[1] << "\n" << r.out << r.err;
+    EXPECT_NE(r.err.find("robot-a"), std::string::npos) << args[1] << ": " << r.err;
+  }
+  EXPECT_EQ(json::dump(robots_["robot-a"]->status(fleet_token_)).find("\"estop_active\":true"),
+            std::string::npos);
+  // The control: an anonymous client may write, and the same ESTOP latches the robot.
+  auto allowed = test::run_cli({"fleet", "estop", "alpha", "--members", "robot-a", "--broker",
+                                acl.url(), "--token", tmp_.file("fleet.token")});
+  EXPECT_EQ(allowed.exit_code, 0) << allowed.out << allowed.err;
+  EXPECT_NE(json::dump(robots_["robot-a"]->status(fleet_token_)).find("\"estop_active\":true"),
+            std::string::npos);
 }
 
 TEST_F(FleetTest, LastWillShowsTheRobotOffline) {
@@ -1049,6 +1151,179 @@ TEST_F(FleetTest, FleetAuditIntoPostgresCatchesTamperingAndGaps) {
   EXPECT_EQ(v2.exit_code, 1);
   EXPECT_NE(v2.out.find("record_hash_mismatch"), std::string::npos) << v2.out;
   EXPECT_NE(v2.out.find("robot-a"), std::string::npos) << v2.out;
+}
+
+// ---- fleets on NATS (docs/FLEET.md §Running on NATS)
+
+// nats-server (scripts/install-deps.sh), or empty when it is not installed.
+std::string nats_server_path() {
+  for (const char* p :
+       {"/usr/sbin/nats-server", "/usr/bin/nats-server", "/usr/local/bin/nats-server"})
+    if (::access(p, X_OK) == 0) return p;
+  return {};
+}
+
+// NATS with its MQTT listener (which needs JetStream and a server name) on loopback: one node,
+// or a cluster of `nodes` with routes between them; the MQTT streams are replicated on up to
+// three nodes. NATS does no QoS 2: it grants QoS 1 to a QoS 2 subscription and drops the
+// connection of a client that publishes at QoS 2.
+class Nats {
+ public:
+  Nats(const std::string& dir, int nodes) {
+    std::string routes;
+    for (int i = 0; i < nodes; ++i) {
+      ports_.push_back({free_port(), free_port(), free_port()});  // client, cluster, MQTT
+      routes +=
+          std::string(i ? ", " : "") + "nats-route://127.0.0.1:" + std::to_string(ports_.back()[1]);
+    }
+    for (int i = 0; i < nodes; ++i) {
+      std::string name = "n" + std::to_string(i + 1);
+      std::string conf = "server_name: " + name +
+                         "\nlisten: 127.0.0.1:" + std::to_string(ports_[i][0]) +
+                         "\njetstream { store_dir: \"" + dir + "/js-" + name +
+                         "\" }\nmqtt { listen: 127.0.0.1:" + std::to_string(ports_[i][2]) + " }\n";
+      if (nodes > 1)
+        conf += "cluster { name: rcan, listen: 127.0.0.1:" + std::to_string(ports_[i][1]) +
+                ", routes: [" + routes + "] }\n";
+      write_file(dir + "/" + name + ".conf", conf);
+      procs_.push_back(std::make_unique<test::Process>());
+      EXPECT_TRUE(procs_.back()->start({nats_server_path(), "-c", dir + "/" + name + ".conf"}));
+    }
+    for (auto& p : procs_) {
+      EXPECT_TRUE(p->wait_for_line("Listening for MQTT clients", 15000)) << p->err();
+      // MQTT sessions live in JetStream: wait until the cluster elected its metadata leader.
+      if (nodes > 1 && p->err().find("metadata leader") == std::string::npos) {
+        EXPECT_TRUE(p->wait_for_line("metadata leader", 20000)) << p->err();
+      }
+    }
+  }
+  ~Nats() {
+    for (auto& p : procs_)
+      if (p->running()) p->stop(SIGTERM, 10000);
+  }
+  std::string url(int node) const {
+    return "mqtt://127.0.0.1:" + std::to_string(ports_[static_cast<size_t>(node)][2]);
+  }
+  void kill(int node) { procs_[static_cast<size_t>(node)]->stop(SIGKILL, 5000); }
+  test::Process& proc(int node) { return *procs_[static_cast<size_t>(node)]; }
+
+ private:
+  std::vector<std::array<uint16_t, 3>> ports_;
+  std::vector<std::unique_ptr<test::Process>> procs_;
+};
+
+class NatsFleetTest : public FleetTest {
+ protected:
+  void SetUp() override {
+    if (nats_server_path().empty())
+      GTEST_SKIP() << "nats-server is not installed (scripts/install-deps.sh installs it)";
+    FleetTest::SetUp();
+  }
+  Robot& robot_on(const std::string& url, const std::string& name, const std::string& device,
+                  const std::string& mqtt_extra = "") {
+    robots_[name] =
+        std::make_unique<Robot>(tmp_.path(), name, device, url, secret_, "", mqtt_extra);
+    return *robots_[name];
+  }
+  test::RunResult fleet_via(const std::string& url, std::vector<std::string> args) {
+    args.insert(args.begin(), "fleet");
+    args.insert(args.end(), {"--broker", url, "--token", tmp_.file("fleet.token")});
+    return test::run_cli(args);
+  }
+  bool latched(const std::string& name) {
+    return json::dump(robots_[name]->status(fleet_token_)).find("\"estop_active\":true") !=
+           std::string::npos;
+  }
+};
+
+// The reproduction of issue 32 on a 3-node NATS cluster: the robot is on node 1, the operator on
+// node 3. `rcan fleet estop` (no --members: the roster comes from the retained statuses) goes
+// out at QoS 1 — the cluster's SUBACK granted no more — and exits 0 only once the robot has
+// confirmed the latch. With node 1 gone (and no failover URL) the robot cannot hear it: the CLI
+// exits 1 and names it.
+TEST_F(NatsFleetTest, ClusterFleetEstopLatchesTheRobotAndNamesItWhenItsBrokerIsGone) {
+  Nats nats(tmp_.path(), 3);
+  {
+    // The robot's status, published on node 1, has crossed the cluster to node 3 (a robot's
+    // first connection to a fresh cluster waits for its JetStream session).
+    Watcher w(nats.url(2), {"rcan/fleet/alpha/robot/+/status"});
+    robot_on(nats.url(0), "robot-a", "0000000a");
+    ASSERT_TRUE(
+        w.wait([](const Watcher::Msg& m) { return m.body.get("online") != nullptr; }, 15000));
+  }
+  auto r = fleet_via(nats.url(2), {"estop", "alpha", "--reason", "nats cluster"});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  json::Value out = parse(r.out);
+  EXPECT_EQ(bool_at(out, {"ok"}), "true");
+  EXPECT_EQ(int_at(out, {"qos"}), 1);
+  EXPECT_EQ(str_at(out, {"members", "robot-a", "result"}), "acknowledged") << r.out;
+  EXPECT_TRUE(latched("robot-a"));
+  auto res = fleet_via(nats.url(1), {"resume", "alpha"});
+  ASSERT_EQ(res.exit_code, 0) << res.out << res.err;
+  EXPECT_FALSE(latched("robot-a"));
+
+  nats.kill(0);
+  ASSERT_TRUE(robots_["robot-a"]->proc().wait_for_line("mqtt_disconnected", 10000));
+  // The two remaining nodes elect new leaders for the MQTT streams of node 1 (NATS refuses
+  // subscriptions meanwhile): wait until node 3 serves the fleet's statuses again.
+  int settled_after = -1;
+  for (int i = 0; i < 60 && settled_after < 0; ++i) {
+    if (fleet_via(nats.url(2), {"status", "alpha", "--timeout-ms", "2000"}).exit_code == 0)
+      settled_after = i;
+    else
+      std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  }
+  ASSERT_GE(settled_after, 0) << nats.proc(2).err();
+  auto gone = fleet_via(nats.url(2), {"estop", "alpha", "--timeout-ms", "15000"});
+  EXPECT_EQ(gone.exit_code, 1) << gone.out << gone.err;
+  EXPECT_NE(gone.err.find("robot-a (timeout)"), std::string::npos) << gone.err;
+  json::Value g = parse(gone.out);
+  EXPECT_EQ(bool_at(g, {"ok"}), "false");
+  const json::Value* unconfirmed = path_of(g, {"unconfirmed"});
+  EXPECT_EQ(unconfirmed ? json::dump(*unconfirmed) : "missing", "[\"robot-a\"]") << gone.out;
+  EXPECT_FALSE(latched("robot-a"));  // the exit code told the truth: it did not stop
+}
+
+// A broker that refuses a publish — NATS, with QoS 2 forced by --qos 2 — makes every fleet verb
+// exit 1 with the reason, --no-wait included; nothing reaches the robot. Left to choose, the
+// same verbs work at QoS 1 on the same broker, also for a robot whose estop subscription asks
+// for QoS 2 (mqtt.estop_qos: 2, granted 1) and one capped by mqtt.max_qos: 1.
+TEST_F(NatsFleetTest, ARefusedPublishFailsEveryVerb) {
+  Nats nats(tmp_.path(), 1);
+  robot_on(nats.url(0), "robot-a", "0000000a", ", estop_qos: 2");
+  robot_on(nats.url(0), "robot-b", "0000000b", ", max_qos: 1");
+  write_file(tmp_.file("run.json"), R"({"command":"COORDINATED_MOVE","fleet_id":"alpha",
+    "choreography":{"type":"sequential","steps":[
+      {"robot":"robot-a","action":"move","params":{"linear":0.1,"duration_ms":100}}]}})");
+  const std::vector<std::vector<std::string>> verbs{
+      {"estop", "alpha"},
+      {"estop", "alpha", "--no-wait"},
+      {"resume", "alpha", "--members", "robot-a,robot-b"},
+      {"command", "alpha", "move", "--params", R"({"linear":0.1,"duration_ms":100})"},
+      {"run", tmp_.file("run.json")},
+  };
+  for (auto args : verbs) {
+    args.insert(args.end(), {"--qos", "2", "--timeout-ms", "3000"});
+    auto r = fleet_via(nats.url(0), args);
+    EXPECT_EQ(r.exit_code, 1) << args[0] << " " << args.back() << "\n" << r.out << r.err;
+    EXPECT_NE(r.err.find("closed the connection before acknowledging"), std::string::npos)
+        << args[0] << ": " << r.err;
+  }
+  EXPECT_FALSE(latched("robot-a"));
+  EXPECT_FALSE(latched("robot-b"));
+  // Chosen automatically: QoS 1, acknowledged by the broker and by both robots.
+  auto e = fleet_via(nats.url(0), {"estop", "alpha"});
+  ASSERT_EQ(e.exit_code, 0) << e.out << e.err;
+  EXPECT_EQ(int_at(parse(e.out), {"qos"}), 1);
+  EXPECT_TRUE(latched("robot-a"));
+  EXPECT_TRUE(latched("robot-b"));
+  auto r = fleet_via(nats.url(0), {"resume", "alpha", "--qos", "1"});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  auto c = fleet_via(nats.url(0), {"command", "alpha", "move", "--params",
+                                   R"({"linear":0.1,"duration_ms":100})", "--wait-complete"});
+  EXPECT_EQ(c.exit_code, 0) << c.out << c.err;
+  auto run = fleet_via(nats.url(0), {"run", tmp_.file("run.json")});
+  EXPECT_EQ(run.exit_code, 0) << run.out << run.err;
 }
 
 TEST(FleetJwt, FleetAudienceNeedsAFleetClaim) {

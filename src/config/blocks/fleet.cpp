@@ -75,6 +75,11 @@ Table<MqttConfig> mqtt_rows() {
       M::field("telemetry_hz", Int(0, 50), &MqttConfig::telemetry_hz),
       M::field("publish_audit", Bool(), &MqttConfig::publish_audit),
       M::field("estop_qos", Int(1, 2), &MqttConfig::estop_qos),
+      M::field("max_qos", Int(1, 2), &MqttConfig::max_qos),
+      M::check([](const At& mq, MqttConfig& m, Ctx&) {
+        if (m.estop_qos > m.max_qos)
+          fail(mq["estop_qos"].path, "must not exceed mqtt.max_qos", "out_of_range");
+      }),
   };
 }
 

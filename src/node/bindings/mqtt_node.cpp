@@ -116,6 +116,7 @@ Status MqttNode::start() {
   co.key_file = mq.key_file;
   co.reconnect_min_s = static_cast<int>(mq.reconnect_min_s);
   co.reconnect_max_s = static_cast<int>(mq.reconnect_max_s);
+  co.max_qos = mq.max_qos;  // every publish and subscription at most this (brokers without QoS 2)
   co.will.topic = out_.status();
   co.will.payload = json::dump(json::Value(json::Object{{"online", false},
                                                         {"ruri", svc_.settings.ruri},
