@@ -628,8 +628,9 @@ TEST_F(FleetTest, AnAclDenialIsCaughtByWaitingForTheMembers) {
   };
   for (auto args : verbs) {
     args.insert(args.begin(), "fleet");
-    args.insert(args.end(), {"--broker", acl.url(), "--token", tmp_.file("fleet.token"),
-                             "--username", "operator", "--timeout-ms", "1500"});
+    args.insert(args.end(),
+                {"--broker", acl.url(), "--token", tmp_.file("fleet.token"), "--key-dir", key_dir_,
+                 "--username", "operator", "--timeout-ms", "1500"});
     auto r = test::run_cli(args);
     EXPECT_EQ(r.exit_code, 1) << args[1] << "\n" << r.out << r.err;
     EXPECT_NE(r.err.find("robot-a"), std::string::npos) << args[1] << ": " << r.err;
@@ -637,8 +638,9 @@ TEST_F(FleetTest, AnAclDenialIsCaughtByWaitingForTheMembers) {
   EXPECT_EQ(json::dump(robots_["robot-a"]->status(fleet_token_)).find("\"estop_active\":true"),
             std::string::npos);
   // The control: an anonymous client may write, and the same ESTOP latches the robot.
-  auto allowed = test::run_cli({"fleet", "estop", "alpha", "--members", "robot-a", "--broker",
-                                acl.url(), "--token", tmp_.file("fleet.token")});
+  auto allowed =
+      test::run_cli({"fleet", "estop", "alpha", "--members", "robot-a", "--broker", acl.url(),
+                     "--token", tmp_.file("fleet.token"), "--key-dir", key_dir_});
   EXPECT_EQ(allowed.exit_code, 0) << allowed.out << allowed.err;
   EXPECT_NE(json::dump(robots_["robot-a"]->status(fleet_token_)).find("\"estop_active\":true"),
             std::string::npos);
@@ -1227,7 +1229,8 @@ class NatsFleetTest : public FleetTest {
   }
   test::RunResult fleet_via(const std::string& url, std::vector<std::string> args) {
     args.insert(args.begin(), "fleet");
-    args.insert(args.end(), {"--broker", url, "--token", tmp_.file("fleet.token")});
+    args.insert(args.end(),
+                {"--broker", url, "--token", tmp_.file("fleet.token"), "--key-dir", key_dir_});
     return test::run_cli(args);
   }
   bool latched(const std::string& name) {
