@@ -137,6 +137,7 @@ function wireStream(s) {
     const m = e.detail;
     const name = m.event || m.type;
     if (m.type === 'ERROR') return;
+    emit('stream-event', m);
     if (['ESTOP', 'RESUME', 'STOP', 'PREEMPTED', 'AVAILABLE', 'NETWORK_LOSS_SAFE_STOP'].includes(name)) {
       toast(`Event: ${name}`, name === 'ESTOP' || name === 'PREEMPTED' ? 'bad' : 'info');
       refreshStatus();
@@ -160,6 +161,7 @@ async function onEstop() {
     toast('Sign in first — or run `rcan estop` on the robot.', 'bad');
     return;
   }
+  emit('estop-pressed');
   try {
     await api.estop();
     setSafety(true);
