@@ -312,6 +312,25 @@ async function main() {
     check(targets.every((v, i) => Math.abs(v - want[i]) < 1e-6), `Move arm changes only joint 1: targets ${JSON.stringify(targets)}`);
   }
   await page.screenshot({ path: join(artifacts, 'dashboard-teleop-deadman.png') });
+
+  // 9. A frozen connection (nothing closed): within three telemetry periods (5 Hz: 600 ms) the
+  // page says "connection lost" and disables motion; when the network returns, it recovers.
+  {
+    const frozenAt = Date.now();
+    proxy.freeze();
+    await page.waitForFunction(() => document.body.dataset.stream === 'lost' &&
+      /connection lost/.test(document.querySelector('#conn-pill').textContent) &&
+      document.querySelector('#pad button[data-drive=fwd]').disabled &&
+      document.querySelector('#arm-send').disabled, null, { timeout: 5000, polling: 20 });
+    const shownMs = Date.now() - frozenAt;
+    // The last frame came at most one period before the freeze; the watchdog looks every 0.1 s.
+    check(shownMs <= 600 + 100 + 100, `frozen connection: "connection lost" and motion disabled ${shownMs} ms after the freeze`);
+    await page.screenshot({ path: join(artifacts, 'dashboard-connection-lost.png') });
+    proxy.thaw();
+    await page.waitForFunction(() => document.body.dataset.stream === 'open' &&
+      !document.querySelector('#pad button[data-drive=fwd]').disabled, null, { timeout: 10000 });
+    check(true, 'when the network returns the stream is live again and motion is enabled');
+  }
   check(pageErrors.length === 0, `no page errors (${pageErrors.join('; ')})`);
   await page.close();
 }

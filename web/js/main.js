@@ -106,10 +106,12 @@ function setConn(state, detail) {
   let text = `stream: ${state}`;
   if (state === 'waiting' && s) text = `stream: reconnecting in ${Math.max(0, Math.round((s.retryAt - Date.now()) / 1000))} s`;
   if (state === 'refused') text = 'stream: refused';
+  if (state === 'lost') text = 'connection lost';
   setText(pill, text);
   pill.title = detail ? String(detail) : 'WebSocket stream';
   pill.className = 'pill ' + (state === 'open' ? 'good' : state === 'idle' ? '' : 'warn');
   document.body.dataset.stream = state;
+  emit('link', state);
   renderSafetyPill();
   renderStreamStats();
 }

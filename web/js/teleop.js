@@ -276,6 +276,12 @@ export function initTeleop() {
     if (name === 'PREEMPTED' || name === 'SESSION_EXPIRED' || name === 'SESSION_REVOKED' || name === 'NETWORK_LOSS_SAFE_STOP') endHold(name);
   });
   on('estop-pressed', () => { needRearm = true; endHold('ESTOP'); });
+  // Motion controls work only while the stream is live (stream.js: liveness watchdog).
+  on('link', (state) => {
+    const live = state === 'open';
+    if (!live) endHold(`stream ${state}`);
+    for (const b of document.querySelectorAll('#pad button, #arm-send, #arm-home, #grip-open, #grip-close')) b.disabled = !live;
+  });
   $('#arm-send').addEventListener('click', sendArm);
   $('#arm-home').addEventListener('click', () => {
     touched.clear();
