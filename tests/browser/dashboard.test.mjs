@@ -250,13 +250,15 @@ async function main() {
   const s2 = await http(base, 'GET', '/rcan/v1/status', owner);
   check(s2.json.estop_active === true, 'one ESTOP click latches ESTOP (status confirms)');
   await page.click('#tabs button[data-view=teleop]');
-  // After an ESTOP the first press re-arms the session (docs/NODE.md, "Re-arm after ESTOP"); a
-  // press that ends before the re-arm is answered sends no drive. The next press drives.
-  await page.click('#pad button[data-drive=fwd]');
-  await page.waitForFunction(() => /re-arm after ESTOP: GRANTED/.test(document.querySelector('#teleop-log').textContent));
-  await page.click('#pad button[data-drive=fwd]');
-  await page.waitForFunction(() => /drive fwd: COMMAND_REJECTED/.test(document.querySelector('#teleop-log').textContent));
-  check(true, 'a drive under ESTOP shows its refusal code (COMMAND_REJECTED)');
+  // Under ESTOP: a full-width banner with RESUME beside it, and the motion controls disabled; a
+  // drive sent anyway (another client) is refused with its code.
+  await page.waitForSelector('#safety-banner:not([hidden])');
+  check(/ESTOP LATCHED/.test(await page.textContent('#safety-banner')) && await page.isVisible('#banner-resume'),
+    'ESTOP shows a full-width banner with RESUME beside it');
+  check(await page.$eval('#pad button[data-drive=fwd]', (b) => b.disabled) && await page.$eval('#arm-send', (b) => b.disabled),
+    'the drive and arm controls are disabled under ESTOP');
+  const under = await http(base, 'POST', '/rcan/v1/command', owner, command('drive', { linear: 0.2, duration_ms: 200 }));
+  check(under.status === 423 && under.json.payload.error_code === 'COMMAND_REJECTED', `a drive under ESTOP is refused (${under.status})`);
   await page.click('#tabs button[data-view=overview]');
   await page.waitForFunction(() => /LATCHED/.test(document.querySelector('#safety-facts').textContent));
   await shot('estop');

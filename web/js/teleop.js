@@ -277,10 +277,20 @@ export function initTeleop() {
   });
   on('estop-pressed', () => { needRearm = true; endHold('ESTOP'); });
   // Motion controls work only while the stream is live (stream.js: liveness watchdog).
+  // and no ESTOP is latched.
+  let linkState = 'idle';
+  const motionControls = () => {
+    const ok = linkState === 'open' && app.estop !== true;
+    for (const b of document.querySelectorAll('#pad button, #arm-send, #arm-home, #grip-open, #grip-close')) b.disabled = !ok;
+  };
   on('link', (state) => {
-    const live = state === 'open';
-    if (!live) endHold(`stream ${state}`);
-    for (const b of document.querySelectorAll('#pad button, #arm-send, #arm-home, #grip-open, #grip-close')) b.disabled = !live;
+    linkState = state;
+    if (state !== 'open') endHold(`stream ${state}`);
+    motionControls();
+  });
+  on('safety', (estop) => {
+    if (estop) endHold('ESTOP');
+    motionControls();
   });
   $('#arm-send').addEventListener('click', sendArm);
   $('#arm-home').addEventListener('click', () => {
