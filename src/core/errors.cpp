@@ -66,7 +66,9 @@ std::optional<ErrorCode> error_from_name(std::string_view name) {
 }
 
 int http_status(ErrorCode code, std::string_view reason) {
-  if (code == ErrorCode::kCommandRejected && reason == "estop_active") return 423;
+  if (code == ErrorCode::kCommandRejected &&
+      (reason == "estop_active" || reason == "rearm_required"))
+    return 423;
   const Entry* e = lookup(code);
   return e ? e->status : 500;
 }

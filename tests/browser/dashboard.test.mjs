@@ -229,8 +229,9 @@ async function main() {
   await page.mouse.up();
   const x1 = Number(await page.getAttribute('#live-facts', 'data-x'));
   check(x1 > 0.3, `driving forward with the pad moves the robot (x = ${x1.toFixed(2)} m)`);
-  for (let i = 0; i < 8; i++) { await page.keyboard.press('ArrowLeft'); await page.waitForTimeout(220); }
-  for (let i = 0; i < 8; i++) { await page.keyboard.press('ArrowUp'); await page.waitForTimeout(220); }
+  // The pad has focus (the press above gave it): holding an arrow key drives, letting go stops.
+  await page.keyboard.down('ArrowLeft'); await page.waitForTimeout(1200); await page.keyboard.up('ArrowLeft');
+  await page.keyboard.down('ArrowUp'); await page.waitForTimeout(1500); await page.keyboard.up('ArrowUp');
   await page.waitForFunction(() => Math.abs(Number(document.querySelector('#live-facts').dataset.y)) > 0.05, null, { timeout: 10000 });
   check(true, 'arrow keys turn and drive the robot (y changed)');
   await page.fill('#j0', '0.8');
@@ -249,9 +250,15 @@ async function main() {
   const s2 = await http(base, 'GET', '/rcan/v1/status', owner);
   check(s2.json.estop_active === true, 'one ESTOP click latches ESTOP (status confirms)');
   await page.click('#tabs button[data-view=teleop]');
-  await page.click('#pad button[data-drive=fwd]');
-  await page.waitForFunction(() => /drive fwd: COMMAND_REJECTED/.test(document.querySelector('#teleop-log').textContent));
-  check(true, 'a drive under ESTOP shows its refusal code (COMMAND_REJECTED)');
+  // Under ESTOP: a full-width banner with RESUME beside it, and the motion controls disabled; a
+  // drive sent anyway (another client) is refused with its code.
+  await page.waitForSelector('#safety-banner:not([hidden])');
+  check(/ESTOP LATCHED/.test(await page.textContent('#safety-banner')) && await page.isVisible('#banner-resume'),
+    'ESTOP shows a full-width banner with RESUME beside it');
+  check(await page.$eval('#pad button[data-drive=fwd]', (b) => b.disabled) && await page.$eval('#arm-send', (b) => b.disabled),
+    'the drive and arm controls are disabled under ESTOP');
+  const under = await http(base, 'POST', '/rcan/v1/command', owner, command('drive', { linear: 0.2, duration_ms: 200 }));
+  check(under.status === 423 && under.json.payload.error_code === 'COMMAND_REJECTED', `a drive under ESTOP is refused (${under.status})`);
   await page.click('#tabs button[data-view=overview]');
   await page.waitForFunction(() => /LATCHED/.test(document.querySelector('#safety-facts').textContent));
   await shot('estop');

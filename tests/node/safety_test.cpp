@@ -526,6 +526,53 @@ TEST(SafetyWorkspace, GuardStopsBaseThatDriftsOut) {
 
 // ---- deadman ----------------------------------------------------------------------------
 
+// ---- re-arm after ESTOP (docs/NODE.md, "Re-arm after ESTOP") ------------------------------
+
+TEST(SafetyRearm, ASessionArmedBeforeAnEstopNeedsRearmAfterResume) {
+  Rig r;
+  r.core->arm_deadman("held", 60000);
+  DispatchOptions held;
+  held.session_id = "held";
+  ASSERT_TRUE(r.core->dispatch(ActuatorCommand::make_drive(0.5, 0, 300), held).ok());
+  const uint64_t epoch0 = r.core->estop_epoch();
+  r.core->estop("http", "operator");
+  EXPECT_EQ(r.core->estop_epoch(), epoch0 + 1);
+  // Claimed while latched: armed at the new epoch.
+  r.core->arm_deadman("fresh", 60000);
+  ASSERT_TRUE(r.core->resume(4, "owner").ok());
+  r.run(500);
+  const double x0 = r.core->robot_state().x;
+
+  // The old hold: refused, coded, the robot does not move; re-registering does not re-arm.
+  auto d = r.core->dispatch(ActuatorCommand::make_drive(0.5, 0, 300), held);
+  ASSERT_FALSE(d.ok());
+  EXPECT_EQ(d.error().code, ErrorCode::kCommandRejected);
+  EXPECT_EQ(d.error().reason, "rearm_required");
+  EXPECT_EQ(http_status(d.error().code, d.error().reason), 423);
+  EXPECT_FALSE(r.core->check(ActuatorCommand::make_drive(0.5, 0, 300), held).ok());
+  r.core->arm_deadman("held", 60000);
+  ASSERT_TRUE(r.core->feed_deadman("held").ok());
+  EXPECT_EQ(r.core->dispatch(ActuatorCommand::make_drive(0.5, 0, 300), held).error().reason,
+            "rearm_required");
+  // Stops are never refused.
+  EXPECT_TRUE(r.core->dispatch(ActuatorCommand::make_stop(), held).ok());
+  r.run(500);
+  EXPECT_DOUBLE_EQ(r.core->robot_state().x, x0);
+
+  // A session armed after the ESTOP, and one without a session, drive.
+  DispatchOptions fresh;
+  fresh.session_id = "fresh";
+  EXPECT_TRUE(r.core->dispatch(ActuatorCommand::make_drive(0.1, 0, 100), fresh).ok());
+  // rearm(): the old session drives again; unknown sessions are NOT_FOUND.
+  ASSERT_TRUE(r.core->rearm("held").ok());
+  EXPECT_TRUE(r.core->dispatch(ActuatorCommand::make_drive(0.5, 0, 300), held).ok());
+  EXPECT_EQ(r.core->rearm("nobody").error().code, ErrorCode::kNotFound);
+  r.run(300);
+  EXPECT_GT(r.core->robot_state().x, x0);
+  EXPECT_EQ(r.core->status().to_json().find("estop_epoch")->as_int(),
+            static_cast<int64_t>(epoch0 + 1));
+}
+
 TEST(SafetyDeadman, FiresAfterTimeoutWithEventNotBefore) {
   Rig r;
   std::vector<SafetyEvent> events;

@@ -79,6 +79,7 @@ class FakeActuation final : public Actuation {
   void arm_deadman(const std::string&, int64_t) override {}
   void feed_deadman(const std::string&) override {}
   void disarm_deadman(const std::string&) override {}
+  Status rearm(const std::string&) override { return Status::Ok(); }
   json::Value status() const override { return json::Object{{"fake", true}}; }
   json::Value telemetry() const override { return json::Object{}; }
 

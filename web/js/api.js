@@ -60,22 +60,33 @@ export class ApiError extends Error {
   }
 }
 
-// fetch + JSON; an error body (PROFILE §4) becomes an ApiError carrying its error_code.
-export async function request(method, path, body, { auth = true, text = false } = {}) {
+// Every request gives up after this long unless told otherwise (the network may freeze
+// without closing: an answer that never comes must not leave the page waiting).
+export const DEFAULT_TIMEOUT_MS = 10000;
+
+// fetch + JSON; an error body (PROFILE §4) becomes an ApiError carrying its error_code. A
+// request not answered within `timeoutMs` is aborted (ApiError TIMEOUT).
+export async function request(method, path, body, { auth = true, text = false, timeoutMs = DEFAULT_TIMEOUT_MS } = {}) {
   const headers = {};
   if (auth && token) headers.Authorization = 'Bearer ' + token;
-  const init = { method, headers, cache: 'no-store', credentials: 'omit', redirect: 'error' };
+  const ctl = new AbortController();
+  const init = { method, headers, cache: 'no-store', credentials: 'omit', redirect: 'error', signal: ctl.signal };
   if (body !== undefined) {
     headers['Content-Type'] = 'application/json';
     init.body = JSON.stringify(body);
   }
+  const timer = setTimeout(() => ctl.abort(), timeoutMs);
   let res;
+  let raw;
   try {
     res = await fetch(path, init);
+    raw = await res.text();
   } catch (e) {
+    if (ctl.signal.aborted) throw new ApiError(0, 'TIMEOUT', `no answer within ${(timeoutMs / 1000).toFixed(1)} s`);
     throw new ApiError(0, 'NETWORK', 'the robot cannot be reached');
+  } finally {
+    clearTimeout(timer);
   }
-  const raw = await res.text();
   if (text && res.ok) return raw;
   let data = null;
   try { data = raw ? JSON.parse(raw) : null; } catch (_) { data = null; }
@@ -83,7 +94,9 @@ export async function request(method, path, body, { auth = true, text = false } 
     const p = data && data.payload;
     const code = (p && p.error_code) || (data && (data.code || data.error_code)) || `HTTP_${res.status}`;
     const msg = (p && p.error) || (data && typeof data.error === 'string' && data.error) || res.statusText;
-    throw new ApiError(res.status, code, msg, data);
+    const err = new ApiError(res.status, code, msg, data);
+    err.reason = (p && typeof p.reason === 'string' && p.reason) || '';
+    throw err;
   }
   return data;
 }
@@ -103,12 +116,26 @@ export function commandMessage(action, params = {}, extra = {}) {
   };
 }
 
-export function sendCommand(action, params) {
-  return request('POST', '/rcan/v1/command', commandMessage(action, params));
+// `ttlMs`: the node refuses the command (MESSAGE_STALE) if it arrives later than this after it
+// was sent; `timeoutMs`: the page stops waiting for the answer.
+export function sendCommand(action, params, { ttlMs = 5000, timeoutMs = DEFAULT_TIMEOUT_MS } = {}) {
+  return request('POST', '/rcan/v1/command', commandMessage(action, params, { ttl_ms: ttlMs }), { timeoutMs });
+}
+
+// A SAFETY STOP: stops motion without latching; the node never refuses it.
+export function safetyStop(reason, timeoutMs = 3000) {
+  return request('POST', '/rcan/v1/command', {
+    version: '1.0.0',
+    message_id: uuid(),
+    type: 'SAFETY',
+    priority: 'SAFETY',
+    timestamp_ms: Math.round(serverNow()),
+    payload: { safety_event: 'STOP', reason },
+  }, { timeoutMs });
 }
 
 export function estop() {
-  return request('POST', '/api/stop', { reason: 'dashboard ESTOP' });
+  return request('POST', '/api/stop', { reason: 'dashboard ESTOP' }, { timeoutMs: 5000 });
 }
 
 export function resume() {

@@ -37,6 +37,24 @@ function renderSafetyPill() {
   pill.className = 'pill ' + (estop === null ? '' : estop ? 'bad' : live ? 'good' : 'warn');
   pill.title = live ? 'Safety state from the robot' : 'The stream is down: this is the last state the page saw';
   document.body.dataset.estop = estop ? 'latched' : 'clear';
+  renderBanner();
+  emit('safety', estop);
+}
+
+// ESTOP and safe-stop as a full-width banner, RESUME beside it (for a latched ESTOP).
+function renderBanner() {
+  const banner = $('#safety-banner');
+  const robot = (app.status && app.status.robot) || {};
+  const safeStop = !app.estop && robot.state === 'safe_stop';
+  banner.hidden = !app.estop && !safeStop;
+  banner.className = 'banner' + (safeStop ? ' warn' : '');
+  const why = safeStop && robot.safe_stop_detail ? robot.safe_stop_detail.reason : '';
+  setText($('#safety-banner-text'), app.estop
+    ? 'ESTOP LATCHED — nothing moves until RESUME. Motion controls are disabled.'
+    : `SAFE STOP${why ? ` (${why})` : ''} — the robot stopped itself; the next accepted command clears it.`);
+  const resumeBtn = $('#banner-resume');
+  resumeBtn.hidden = !app.estop;
+  resumeBtn.disabled = $('#resume').disabled;
 }
 
 async function refreshStatus() {
@@ -47,6 +65,7 @@ async function refreshStatus() {
     app.statusAskedAt = asked;
     app.status = st;
     setSafety(!!app.status.estop_active);
+    renderBanner();
     setText($('#robot-name'), app.status.name || 'RCAN robot');
     setText($('#robot-ruri'), app.status.ruri || '');
     const lim = app.status.robot && app.status.robot.limits;
@@ -106,10 +125,12 @@ function setConn(state, detail) {
   let text = `stream: ${state}`;
   if (state === 'waiting' && s) text = `stream: reconnecting in ${Math.max(0, Math.round((s.retryAt - Date.now()) / 1000))} s`;
   if (state === 'refused') text = 'stream: refused';
+  if (state === 'lost') text = 'connection lost';
   setText(pill, text);
   pill.title = detail ? String(detail) : 'WebSocket stream';
   pill.className = 'pill ' + (state === 'open' ? 'good' : state === 'idle' ? '' : 'warn');
   document.body.dataset.stream = state;
+  emit('link', state);
   renderSafetyPill();
   renderStreamStats();
 }
@@ -137,6 +158,7 @@ function wireStream(s) {
     const m = e.detail;
     const name = m.event || m.type;
     if (m.type === 'ERROR') return;
+    emit('stream-event', m);
     if (['ESTOP', 'RESUME', 'STOP', 'PREEMPTED', 'AVAILABLE', 'NETWORK_LOSS_SAFE_STOP'].includes(name)) {
       toast(`Event: ${name}`, name === 'ESTOP' || name === 'PREEMPTED' ? 'bad' : 'info');
       refreshStatus();
@@ -160,6 +182,7 @@ async function onEstop() {
     toast('Sign in first — or run `rcan estop` on the robot.', 'bad');
     return;
   }
+  emit('estop-pressed');
   try {
     await api.estop();
     setSafety(true);
@@ -178,6 +201,7 @@ function init() {
   initAudit();
   on('refresh', refreshStatus);
   $('#estop').addEventListener('click', onEstop);
+  $('#banner-resume').addEventListener('click', () => $('#resume').click());
   $('#signout').addEventListener('click', () => signOut(''));
   for (const b of $all('#tabs button')) b.addEventListener('click', () => showView(b.dataset.view));
   $('#signin-form').addEventListener('submit', (e) => {

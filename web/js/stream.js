@@ -5,12 +5,18 @@
 import { getToken, uuid } from './api.js';
 
 const BACKOFF_S = [1, 2, 4, 8, 16, 30];
+// Liveness: telemetry arrives every TELEMETRY_PERIOD_MS; an open stream that brings nothing for
+// three periods is "lost" (a frozen network closes nothing) until a message arrives again.
+export const TELEMETRY_HZ = 5;
+export const TELEMETRY_PERIOD_MS = 1000 / TELEMETRY_HZ;
+export const LIVENESS_MS = 3 * TELEMETRY_PERIOD_MS;
 
 export class Stream extends EventTarget {
   constructor() {
     super();
     this.ws = null;
-    this.state = 'idle';       // idle | connecting | open | waiting | refused
+    this.state = 'idle';       // idle | connecting | open | lost | waiting | refused
+    this.watchdog = 0;
     this.attempt = 0;
     this.reconnects = 0;
     this.retryAt = 0;
@@ -25,11 +31,18 @@ export class Stream extends EventTarget {
 
   start() {
     this.stopped = false;
+    clearInterval(this.watchdog);
+    this.watchdog = setInterval(() => {
+      if (this.state === 'open' && Date.now() - this.lastFrameAt > LIVENESS_MS) {
+        this.setState('lost', `no message for ${Math.round((Date.now() - this.lastFrameAt) / 100) / 10} s`);
+      }
+    }, 100);
     this.connect();
   }
 
   stop() {
     this.stopped = true;
+    clearInterval(this.watchdog);
     clearTimeout(this.timer);
     if (this.ws) this.ws.close(1000, 'signed out');
     this.ws = null;
@@ -62,6 +75,7 @@ export class Stream extends EventTarget {
       try { msg = JSON.parse(ev.data); } catch (_) { return; }
       if (!msg || typeof msg !== 'object') return;
       this.lastFrameAt = Date.now();
+      if (this.state === 'lost') this.setState('open');
       this.handle(msg);
     };
     ws.onclose = (ev) => {
@@ -96,7 +110,7 @@ export class Stream extends EventTarget {
       this.role = msg.role || '';
       this.sessionId = msg.session_id || '';
       this.setState('open');
-      this.ws.send(JSON.stringify({ type: 'SUBSCRIBE', topics: ['telemetry'], hz: 5 }));
+      this.ws.send(JSON.stringify({ type: 'SUBSCRIBE', topics: ['telemetry'], hz: TELEMETRY_HZ }));
       this.dispatchEvent(new CustomEvent('connected', { detail: msg }));
       return;
     }

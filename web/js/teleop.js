@@ -1,14 +1,31 @@
 // Teleop: claim/release control, drive (pad and arrow keys), arm joints, gripper. Every action is
 // an ordinary RCAN message through the node's pipeline, so refusals come back with their code.
 import { $, el, setText, toast, fmtNum } from './dom.js';
-import { request, sendCommand, uuid, serverNow } from './api.js';
+import { request, sendCommand, safetyStop, uuid, serverNow } from './api.js';
 import { app, emit, on } from './state.js';
 
 const DEFAULT_MIN = [-3.1, -2.0, -2.5, -3.1, -2.0, -3.1];
 const DEFAULT_MAX = [3.1, 2.0, 2.5, 3.1, 2.0, 3.1];
 let heartbeatTimer = 0;
-let lastDrive = 0;
-let held = null;
+
+// Hold-to-drive is a deadman. A hold repeats a short drive (DRIVE_MS on the robot) every
+// REPEAT_MS while the operator holds a pad button or an arrow key; every way a hold can end
+// (release, pointer cancel or lost capture, leaving the button, the button losing focus, the
+// window losing focus, the tab hidden, the stream going silent, a drive unanswered or refused,
+// an ESTOP) ends it at once and sends a SAFETY STOP if a drive of it may have gone through.
+// A drive is never sent while the previous one is unanswered or the stream is not live, and it
+// carries a short ttl_ms, so the node refuses (MESSAGE_STALE) one that a frozen network
+// delivers late.
+const DRIVE_MS = 500;
+const REPEAT_MS = 300;
+const DRIVE_TIMEOUT_MS = 800;
+const DRIVE_TTL_MS = 1000;
+const STREAM_SILENCE_MS = 1000;   // telemetry runs at 5 Hz: five frames missed
+let hold = null;                  // {dir, key, timer, moved}
+let driveInFlight = false;
+// After an ESTOP the node refuses our session's drives until it is re-armed (docs/NODE.md,
+// "Re-arm after ESTOP"); the page re-arms on the operator's next press, never from a hold.
+let needRearm = false;
 
 function log(text, ok) {
   const list = $('#teleop-log');
@@ -26,20 +43,79 @@ async function act(label, fn) {
     log(`${label}: ${res && (res.type || res.message_type) || 'OK'}${p.clamped ? ' (clamped)' : ''}`, true);
     return res;
   } catch (e) {
-    log(`${label}: ${e.code} — ${e.message}`, false);
+    log(`${label}: ${e.code}${e.reason ? ' / ' + e.reason : ''} — ${e.message}`, false);
     if (e.status === 401) toast(`${label}: ${e.code}`, 'bad');
+    if (e.reason === 'rearm_required') needRearm = true;
     return null;
   }
 }
 
-function drive(dir) {
+export function streamLive() {
+  const s = app.stream;
+  return !!s && s.state === 'open' && Date.now() - (s.lastFrameAt || 0) < STREAM_SILENCE_MS;
+}
+
+function sendStop(why) {
+  lastSent = Date.now();
+  return act(`stop (${why})`, () => safetyStop(`dashboard: ${why}`));
+}
+
+async function rearm() {
+  if (!app.session) { needRearm = false; return true; }
+  const res = await act('re-arm after ESTOP', () => request('POST', '/rcan/v1/auth/renew',
+    { session_id: app.session.session_id, rearm: true }, { timeoutMs: 3000 }));
+  if (res && res.payload && res.payload.rearmed) { needRearm = false; return true; }
+  return false;
+}
+
+async function driveOnce(h) {
+  if (hold !== h) return;
+  if (!streamLive()) { endHold('the stream is silent'); return; }
+  if (driveInFlight) return;   // never queue a drive behind an unanswered one
   const lin = parseFloat($('#lin-speed').value);
   const ang = parseFloat($('#ang-speed').value);
-  const m = { fwd: [lin, 0], back: [-lin, 0], left: [0, ang], right: [0, -ang], stop: [0, 0] }[dir];
-  if (!m) return;
-  lastDrive = Date.now();
-  if (dir === 'stop') return act('stop', () => sendCommand('drive', { linear: 0, angular: 0, duration_ms: 1 }));
-  return act(`drive ${dir}`, () => sendCommand('drive', { linear: m[0], angular: m[1], duration_ms: 500 }));
+  const m = { fwd: [lin, 0], back: [-lin, 0], left: [0, ang], right: [0, -ang] }[h.dir];
+  driveInFlight = true;
+  h.moved = true;              // until the node says otherwise, this drive may move the robot
+  lastSent = Date.now();
+  try {
+    const res = await sendCommand('drive', { linear: m[0], angular: m[1], duration_ms: DRIVE_MS },
+      { ttlMs: DRIVE_TTL_MS, timeoutMs: DRIVE_TIMEOUT_MS });
+    const p = (res && res.payload) || {};
+    if (!h.logged) log(`drive ${h.dir}: ${res && (res.type || res.message_type) || 'OK'}${p.clamped ? ' (clamped)' : ''}`, true);
+    h.logged = true;
+  } catch (e) {
+    log(`drive ${h.dir}: ${e.code}${e.reason ? ' / ' + e.reason : ''} — ${e.message}`, false);
+    if (e.status === 401) toast(`drive: ${e.code}`, 'bad');
+    if (e.reason === 'rearm_required') {
+      needRearm = true;
+      log('ESTOP since this session was armed: let go and press again to re-arm', false);
+    }
+    endHold(e.status ? 'refused' : 'no answer');
+  } finally {
+    driveInFlight = false;
+  }
+}
+
+async function startHold(dir, key) {
+  if (dir === 'stop') { endHold('■'); sendStop('■'); return; }
+  if (hold && hold.dir === dir && hold.key === key) return;
+  endHold('another direction');
+  if (!streamLive()) { log(`drive ${dir}: not sent — the stream is not live`, false); return; }
+  const h = { dir, key, timer: 0, moved: false, logged: false };
+  hold = h;
+  if (needRearm && !(await rearm())) { if (hold === h) hold = null; return; }
+  if (hold !== h) return;      // let go while re-arming
+  driveOnce(h);
+  h.timer = setInterval(() => driveOnce(h), REPEAT_MS);
+}
+
+function endHold(why) {
+  const h = hold;
+  if (!h) return;
+  hold = null;
+  clearInterval(h.timer);
+  if (h.moved || driveInFlight) sendStop(why);
 }
 
 function startHeartbeat(timeoutMs) {
@@ -87,33 +163,63 @@ export function applyLimits() {
   }
 }
 
+// The arm sliders start at the arm's pose and follow it until the operator moves one; "Move
+// arm" then changes only the joints the operator touched and holds the others where the arm
+// is commanded to be.
+const touched = new Set();
+
 function buildJoints() {
   const box = $('#joints');
   const lim = (app.status && app.status.robot && app.status.robot.limits) || {};
   const mins = Array.isArray(lim.joint_min_rad) ? lim.joint_min_rad : DEFAULT_MIN;
   const maxs = Array.isArray(lim.joint_max_rad) ? lim.joint_max_rad : DEFAULT_MAX;
   for (let i = 0; i < 6; i++) {
-    const out = el('output', { id: `j${i}-out` }, '0.00');
-    const input = el('input', { type: 'range', id: `j${i}`, min: mins[i], max: maxs[i], step: 0.01, value: 0 });
-    input.addEventListener('input', () => setText(out, Number(input.value).toFixed(2)));
+    const out = el('output', { id: `j${i}-out` }, '…');
+    const input = el('input', { type: 'range', id: `j${i}`, min: mins[i], max: maxs[i], step: 0.01, value: 0, disabled: '' });
+    input.addEventListener('input', () => { touched.add(i); setText(out, Number(input.value).toFixed(2)); });
     box.appendChild(el('label', { class: 'slider' }, `Joint ${i + 1}`, input, out, el('span', { class: 'muted small', id: `j${i}-now` })));
   }
 }
 
-export function onTelemetryJoints(t) {
-  const j = t && t.arm && Array.isArray(t.arm.joints_rad) ? t.arm.joints_rad : null;
-  if (!j) return;
-  j.forEach((v, i) => setText($(`#j${i}-now`), `now ${fmtNum(v)}`));
+function armOf(t) {
+  const a = t && t.arm;
+  if (!a || !Array.isArray(a.joints_rad) || a.joints_rad.length !== 6) return null;
+  return { joints: a.joints_rad, targets: Array.isArray(a.targets_rad) && a.targets_rad.length === 6 ? a.targets_rad : a.joints_rad };
 }
+
+export function onTelemetryJoints(t) {
+  const arm = armOf(t);
+  if (!arm) return;
+  arm.joints.forEach((v, i) => {
+    setText($(`#j${i}-now`), `now ${fmtNum(v)}`);
+    const input = $(`#j${i}`);
+    input.disabled = false;
+    if (!touched.has(i)) { input.value = String(v); setText($(`#j${i}-out`), Number(v).toFixed(2)); }
+  });
+}
+
+function sendArm() {
+  const arm = armOf(app.telemetry) || armOf(app.status && app.status.robot && app.status.robot.robot);
+  if (!arm) { log('arm_move: not sent — the arm\'s pose is not known yet', false); return; }
+  if (!touched.size) { log('arm_move: no joint changed', false); return; }
+  const joints = arm.targets.map((v, i) => (touched.has(i) ? Number($(`#j${i}`).value) : v));
+  const what = [...touched].sort().map((i) => `J${i + 1} → ${joints[i].toFixed(2)}`).join(', ');
+  log(`arm_move sends ${what}; the other joints stay where they are`, true);
+  act('arm_move', () => sendCommand('arm_move', { joints })).then((res) => { if (res) touched.clear(); });
+}
+
+const PAD_KEYS = { ArrowUp: 'fwd', ArrowDown: 'back', ArrowLeft: 'left', ArrowRight: 'right' };
 
 export function initTeleop() {
   buildJoints();
   $('#lin-speed').addEventListener('input', (e) => setText($('#lin-out'), `${Number(e.target.value).toFixed(1)} m/s`));
   $('#ang-speed').addEventListener('input', (e) => setText($('#ang-out'), `${Number(e.target.value).toFixed(1)} rad/s`));
   $('#claim').addEventListener('click', async () => {
-    const res = await act('claim', () => request('POST', '/rcan/v1/auth/claim', { source_ruri: 'rcan://local/dashboard' }));
+    // A claim is the operator's own action: it also re-arms a session armed before an ESTOP.
+    const res = await act('claim', () => request('POST', '/rcan/v1/auth/claim', { source_ruri: 'rcan://local/dashboard', rearm: true }));
     if (res && res.payload && res.payload.session_id) {
       app.session = { session_id: res.payload.session_id, heartbeat_timeout_ms: res.payload.heartbeat_timeout_ms, since: Date.now() };
+      needRearm = false;
       startHeartbeat(res.payload.heartbeat_timeout_ms);
     }
     renderControl();
@@ -121,46 +227,74 @@ export function initTeleop() {
   });
   $('#release').addEventListener('click', async () => {
     if (!app.session) return;
+    endHold('release');
     const sid = app.session.session_id;
     const res = await act('release', () => request('DELETE', '/rcan/v1/auth/release', { session_id: sid }));
     if (res) { app.session = null; stopHeartbeat(); }
     renderControl();
     emit('refresh');
   });
-  // The pad: a press drives, holding repeats every 300 ms, letting go stops.
-  for (const b of document.querySelectorAll('#pad button')) {
+  // The pad: pressing a button (pointer, Enter or Space) or an arrow key while the pad has
+  // focus starts a hold; every way it can end stops the robot.
+  const pad = $('#pad');
+  for (const b of pad.querySelectorAll('button')) {
     const dir = b.dataset.drive;
-    const startHold = (e) => {
+    b.addEventListener('pointerdown', (e) => {
       e.preventDefault();
-      drive(dir);
-      clearInterval(held);
-      if (dir !== 'stop') held = setInterval(() => drive(dir), 300);
-    };
-    const endHold = () => {
-      if (held) { clearInterval(held); held = null; }
-    };
-    b.addEventListener('pointerdown', startHold);
-    b.addEventListener('pointerup', endHold);
-    b.addEventListener('pointerleave', endHold);
-    b.addEventListener('keydown', (e) => { if (e.key === 'Enter' || e.key === ' ') startHold(e); });
-    b.addEventListener('keyup', endHold);
+      b.focus();
+      startHold(dir, `pointer${e.pointerId}`);
+    });
+    for (const ev of ['pointerup', 'pointercancel', 'pointerleave', 'lostpointercapture']) {
+      b.addEventListener(ev, () => { if (hold && hold.key.startsWith('pointer')) endHold(ev); });
+    }
+    b.addEventListener('keydown', (e) => {
+      if (e.key !== 'Enter' && e.key !== ' ') return;
+      e.preventDefault();
+      if (!e.repeat) startHold(dir, e.key);
+    });
+    b.addEventListener('keyup', (e) => { if (hold && hold.key === e.key) endHold('key released'); });
+    b.addEventListener('blur', () => endHold('the pad lost focus'));
   }
-  document.addEventListener('keydown', (e) => {
-    if ($('#view-teleop').hidden) return;
-    const tag = (e.target && e.target.tagName) || '';
-    if (tag === 'INPUT' || tag === 'TEXTAREA' || tag === 'SELECT') return;
-    const dir = { ArrowUp: 'fwd', ArrowDown: 'back', ArrowLeft: 'left', ArrowRight: 'right' }[e.key];
+  // Arrow keys drive only while a pad button has focus; on a speed slider they change the speed.
+  pad.addEventListener('keydown', (e) => {
+    const dir = PAD_KEYS[e.key];
     if (!dir) return;
     e.preventDefault();
-    if (Date.now() - lastDrive < 200) return;   // key auto-repeat is faster than we need
-    drive(dir);
+    if (e.repeat) return;      // the hold repeats by itself
+    const target = pad.querySelector(`button[data-drive=${dir}]`);
+    if (target && document.activeElement !== target) target.focus();
+    startHold(dir, e.key);
   });
-  $('#arm-send').addEventListener('click', () => {
-    const joints = [0, 1, 2, 3, 4, 5].map((i) => Number($(`#j${i}`).value));
-    act('arm_move', () => sendCommand('arm_move', { joints }));
+  pad.addEventListener('keyup', (e) => { if (hold && hold.key === e.key) endHold('key released'); });
+  window.addEventListener('blur', () => endHold('the window lost focus'));
+  document.addEventListener('visibilitychange', () => { if (document.visibilityState !== 'visible') endHold('the tab was hidden'); });
+  // The stream falling silent ends a hold even between repeats.
+  setInterval(() => { if (hold && !streamLive()) endHold('the stream is silent'); }, 200);
+  on('stream-event', (m) => {
+    const name = m && (m.event || m.type);
+    if (name === 'ESTOP') { needRearm = true; endHold('ESTOP'); }
+    if (name === 'PREEMPTED' || name === 'SESSION_EXPIRED' || name === 'SESSION_REVOKED' || name === 'NETWORK_LOSS_SAFE_STOP') endHold(name);
   });
+  on('estop-pressed', () => { needRearm = true; endHold('ESTOP'); });
+  // Motion controls work only while the stream is live (stream.js: liveness watchdog).
+  // and no ESTOP is latched.
+  let linkState = 'idle';
+  const motionControls = () => {
+    const ok = linkState === 'open' && app.estop !== true;
+    for (const b of document.querySelectorAll('#pad button, #arm-send, #arm-home, #grip-open, #grip-close')) b.disabled = !ok;
+  };
+  on('link', (state) => {
+    linkState = state;
+    if (state !== 'open') endHold(`stream ${state}`);
+    motionControls();
+  });
+  on('safety', (estop) => {
+    if (estop) endHold('ESTOP');
+    motionControls();
+  });
+  $('#arm-send').addEventListener('click', sendArm);
   $('#arm-home').addEventListener('click', () => {
-    for (let i = 0; i < 6; i++) { $(`#j${i}`).value = 0; setText($(`#j${i}-out`), '0.00'); }
+    touched.clear();
     act('arm_home', () => sendCommand('arm_home', {}));
   });
   $('#grip-open').addEventListener('click', () => act('gripper_open', () => sendCommand('gripper_open', {})));
@@ -173,14 +307,17 @@ export function initTeleop() {
         (!holder || !app.session.session_id.startsWith(holder.session_id))) {
       app.session = null;
       stopHeartbeat();
+      endHold('control session ended');
       log('control session ended (released, pre-empted or expired)', false);
     }
+    if (!app.telemetry) onTelemetryJoints(s.robot && s.robot.robot);
     applyLimits();
     renderControl();
   });
 }
 
 export function teleopSignedOut() {
+  endHold('signed out');
   stopHeartbeat();
   app.session = null;
 }

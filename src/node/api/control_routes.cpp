@@ -17,6 +17,11 @@ std::string str_field(const json::Value& body, const char* k, size_t max = 256) 
   return json::string_field(body, k).substr(0, max);
 }
 
+bool bool_field(const json::Value& body, const char* k) {
+  const json::Value* f = body.is_object() ? body.get(k) : nullptr;
+  return f && f->is_bool() && f->as_bool();
+}
+
 // Seconds from the body: a positive integer, or `def` when absent. -1 when malformed.
 int64_t seconds_field(const json::Value& body, const char* k, int64_t def) {
   const json::Value* f = body.is_object() ? body.get(k) : nullptr;
@@ -356,6 +361,10 @@ void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json
   bool renewed = c->outcome == ClaimOutcome::kRenewed;
   AuditRecord e = svc_.record(renewed ? "CLAIM_RENEWED" : "CLAIM", "ok");
   e.by(*pr).message(c->session.id);
+  // A new session is armed; a renewing claim keeps its arming unless it asks (docs/NODE.md,
+  // "Re-arm after ESTOP").
+  const bool rearmed = bool_field(body, "rearm") && svc_.act.rearm(c->session.id).ok();
+  if (rearmed) e.detail("rearmed", true);
   if (c->preempted) e.detail("preempted_session", c->preempted->id);
   if (!c->session.lease_id.empty()) e.detail("lease_id", c->session.lease_id);
   if (fleet) e.detail("fleet_id", str_field(body, "fleet_id"));
@@ -365,6 +374,7 @@ void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json
       {"capabilities", capabilities_of(c->session.role, svc_.settings.role_policy)},
       {"heartbeat_timeout_ms", svc_.settings.heartbeat_timeout_ms},
       {"renewed", renewed}};
+  if (rearmed) payload.set("rearmed", true);
   if (c->session.expires_mono_ms)
     payload.set("expires_in", (c->session.expires_mono_ms - now_mono) / 1000);
   else
@@ -403,6 +413,10 @@ void Node::renew_route(transport::HttpRequest& req, Respond& respond, const json
   e.by(*pr).message(r->id);
   json::Object payload{
       {"session_id", r->id}, {"role", std::string(role_name(r->role))}, {"renewed", true}};
+  if (bool_field(body, "rearm") && svc_.act.rearm(r->id).ok()) {  // docs/NODE.md, "Re-arm"
+    e.detail("rearmed", true);
+    payload.set("rearmed", true);
+  }
   payload.set("expires_in", r->expires_mono_ms
                                 ? json::Value((r->expires_mono_ms - svc_.clock.mono_ms()) / 1000)
                                 : json::Value());

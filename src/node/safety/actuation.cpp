@@ -217,6 +217,8 @@ void SafetyActuation::disarm_deadman(const std::string& session_id) {
   core_.disarm_deadman(session_id);
 }
 
+Status SafetyActuation::rearm(const std::string& session_id) { return core_.rearm(session_id); }
+
 json::Value SafetyActuation::status() const { return json::Value(core_.status().to_json()); }
 
 json::Value SafetyActuation::telemetry() const {

@@ -63,6 +63,9 @@ class Actuation {
   virtual void arm_deadman(const std::string& session_id, int64_t timeout_ms) = 0;
   virtual void feed_deadman(const std::string& session_id) = 0;
   virtual void disarm_deadman(const std::string& session_id) = 0;
+  // Re-arms a control session after an ESTOP (docs/NODE.md, "Re-arm after ESTOP"): until then
+  // its motion commands are refused (COMMAND_REJECTED / rearm_required). Errors: NOT_FOUND.
+  virtual Status rearm(const std::string& session_id) = 0;
   // Snapshots for status and telemetry.
   virtual json::Value status() const = 0;
   virtual json::Value telemetry() const = 0;

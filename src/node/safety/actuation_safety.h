@@ -30,6 +30,7 @@ class SafetyActuation final : public Actuation {
   void arm_deadman(const std::string& session_id, int64_t timeout_ms) override;
   void feed_deadman(const std::string& session_id) override;
   void disarm_deadman(const std::string& session_id) override;
+  Status rearm(const std::string& session_id) override;
   json::Value status() const override;
   json::Value telemetry() const override;
 

@@ -111,6 +111,7 @@ json::Object SafetyStatus::to_json() const {
                                 {"reason", estop_reason},
                                 {"since_ms", estop_since_wall_ms}});
   }
+  o.set("estop_epoch", static_cast<int64_t>(estop_epoch));
   o.set("safe_stop", safe_stop_active);
   if (safe_stop_active) {
     json::Object s{{"reason", safe_stop_reason}, {"since_ms", safe_stop_since_wall_ms}};
@@ -252,7 +253,10 @@ Status SafetyCore::open(const std::string& state_dir, audit::Env* env) {
     } else if (latch_.active) {
       need_write = true;  // estop_on_startup over a cleared file
     }
-    if (latch_.active) latched_.store(true, std::memory_order_release);
+    if (latch_.active) {
+      estop_epoch_.fetch_add(1, std::memory_order_acq_rel);
+      latched_.store(true, std::memory_order_release);
+    }
     if (need_write) ++latch_seq_;
   }
   if (latched_.load()) driver_->stop();
@@ -281,6 +285,9 @@ void SafetyCore::emit(const SafetyEvent& ev) {
 
 EstopResult SafetyCore::estop(std::string_view source, std::string_view reason, int by_level) {
   const int64_t t0 = steady_ns();
+  // The epoch first: a session armed from here on is armed at the new epoch, one armed before
+  // (a hold that started before this ESTOP) needs rearm() after the RESUME.
+  estop_epoch_.fetch_add(1, std::memory_order_seq_cst);
   latched_.store(true, std::memory_order_seq_cst);
   driver_->stop();  // first, before any lock or I/O
   const int64_t ns = steady_ns() - t0;
@@ -501,7 +508,11 @@ void SafetyCore::persist_loop() {
 void SafetyCore::arm_deadman(const std::string& session_id, int64_t timeout_ms) {
   {
     MutexLock lock(deadman_mu_);
-    Deadman& s = deadmen_[session_id];
+    auto [it, fresh] = deadmen_.try_emplace(session_id);
+    Deadman& s = it->second;
+    // A new session is armed at the current epoch; re-registering one (a renewing claim) keeps
+    // its epoch: only rearm() re-arms after an ESTOP.
+    if (fresh) s.armed_epoch = estop_epoch_.load(std::memory_order_acquire);
     s.timeout_ms = timeout_ms > 0 ? timeout_ms : cfg_.default_heartbeat_ms;
     s.last_heartbeat_mono = clock_.mono_ms();
     s.lost = false;
@@ -521,6 +532,15 @@ Status SafetyCore::feed_deadman(const std::string& session_id) {
     it->second.lost = false;
   }
   if (revived) wake_ticker();  // a heartbeat only moves a live deadline later
+  return Status::Ok();
+}
+
+Status SafetyCore::rearm(const std::string& session_id) {
+  MutexLock lock(deadman_mu_);
+  auto it = deadmen_.find(session_id);
+  if (it == deadmen_.end())
+    return Error(ErrorCode::kNotFound, "unknown session", "session_id", "unknown_session");
+  it->second.armed_epoch = estop_epoch_.load(std::memory_order_acquire);
   return Status::Ok();
 }
 
@@ -819,6 +839,7 @@ SafetyStatus SafetyCore::status() const {
   {
     MutexLock lock(meta_mu_);
     s.estop_active = latched_.load(std::memory_order_acquire);
+    s.estop_epoch = estop_epoch_.load(std::memory_order_acquire);
     if (s.estop_active) {
       s.estop_source = latch_.source;
       s.estop_reason = latch_.reason;

@@ -27,6 +27,11 @@
 //     next accepted motion command clears it. A command of a control session whose heartbeat
 //     was lost is refused (SAFE_STOP / heartbeat_lost) until that session feeds its deadman
 //     again; a command of no (or an unarmed) session is bounded by its own duration.
+//   * Re-arm after ESTOP: every new latch bumps the ESTOP epoch. A control session records the
+//     epoch it was armed at (arm_deadman() of a new session, or rearm()); while its epoch is
+//     older than the current one its motion commands are refused (COMMAND_REJECTED /
+//     rearm_required, HTTP 423) even after RESUME, until rearm(): a hold or a stream that
+//     started before the ESTOP does not drive again by itself. Stops are never refused.
 //
 // Time: deadlines, TTLs and heartbeats use Clock::mono_ms(); `since`/`ts` fields wall_ms.
 // Threads: every public method is thread-safe. start() runs the control loop on the core's own
@@ -134,6 +139,7 @@ struct SafetyStatus {
   std::string estop_source;
   std::string estop_reason;
   int64_t estop_since_wall_ms = 0;
+  uint64_t estop_epoch = 0;  // SafetyCore::estop_epoch()
   bool safe_stop_active = false;
   std::string safe_stop_reason;  // "NETWORK_LOSS_SAFE_STOP", "workspace", "drive_ttl"
   std::string safe_stop_session;
@@ -240,6 +246,12 @@ class SafetyCore {
   void disarm_deadman(const std::string& session_id);
   // The node marks the session that holds control (claim/release).
   void set_deadman_holds_control(const std::string& session_id, bool holds_control);
+  // Re-arms a control session after an ESTOP: its motion commands are accepted again (once the
+  // latch is cleared). Unknown session → NOT_FOUND. Re-arming while latched arms it at the
+  // current epoch: a later RESUME then lets it drive.
+  Status rearm(const std::string& session_id);
+  // Bumps on every new ESTOP latch (and once at open() when the node comes up latched).
+  uint64_t estop_epoch() const { return estop_epoch_.load(std::memory_order_acquire); }
 
   // Brain watchdog (optional; SafetyConfig::watchdog_timeout_ms > 0). Armed by the first feed;
   // expiry latches ESTOP (source "watchdog") and emits WATCHDOG_TIMEOUT.
@@ -257,6 +269,7 @@ class SafetyCore {
     int64_t last_heartbeat_mono = 0;
     bool holds_control = false;
     bool lost = false;
+    uint64_t armed_epoch = 0;  // the ESTOP epoch it was armed at (a new session, or rearm())
   };
   struct LatchState {
     bool active = false;
@@ -300,6 +313,7 @@ class SafetyCore {
   // The SAFETY lane flag: read by dispatch() (before and under apply_mu_) and tick().
   std::atomic<bool> latched_{false};
   std::atomic<bool> safe_stop_{false};
+  std::atomic<uint64_t> estop_epoch_{0};  // bumped before every latch store
   // Odd while a dispatch() may be inside Driver::apply() (bumped under apply_mu_).
   std::atomic<uint64_t> apply_seq_{0};
   std::atomic<uint64_t> fence_timeouts_{0};

@@ -202,6 +202,13 @@ Result<DispatchOutcome> SafetyCore::precheck(const ActuatorCommand& cmd,
                    "session heartbeat lost; send a heartbeat before commanding", "",
                    "heartbeat_lost");
     }
+    if (it != deadmen_.end() &&
+        it->second.armed_epoch < estop_epoch_.load(std::memory_order_acquire)) {
+      return Error(ErrorCode::kCommandRejected,
+                   "an ESTOP latched since this control session was armed; re-arm it (claim or "
+                   "renew with rearm: true) before commanding motion",
+                   "session", "rearm_required");
+    }
   }
   RobotState snapshot;
   {

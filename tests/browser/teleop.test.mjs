@@ -1,0 +1,356 @@
+// Teleop that cannot run away, in a real browser (Debian's Chromium, headless, driven by
+// playwright-core) against a real rcand started here. The page reaches the node through a small
+// TCP proxy that this test can freeze (it stops forwarding without closing anything), as a
+// stalled Wi-Fi link would; the robot's pose is read from the node directly, never through the
+// page. Each scenario starts a hold, ends it in one of the ways an operator's hold really ends —
+// pointer cancelled, window blurred, Tab away while Space is held, tab hidden, network frozen,
+// ESTOP then RESUME by someone else — and checks that the robot's pose does not change after
+// the hold ended. Exit 0 pass, 1 fail, 77 skip (no browser or playwright-core).
+//
+// Environment: RCAND_PATH, RCAN_CLI_PATH (set by CTest), CHROMIUM_PATH (default
+// /usr/bin/chromium), DASHBOARD_ARTIFACTS (screenshots; default a temp dir).
+
+import { spawn } from 'node:child_process';
+import { existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { join } from 'node:path';
+import { randomUUID } from 'node:crypto';
+import { createServer, connect } from 'node:net';
+
+const SKIP = 77;
+const chromiumPath = process.env.CHROMIUM_PATH || '/usr/bin/chromium';
+const rcandPath = process.env.RCAND_PATH;
+const artifacts = process.env.DASHBOARD_ARTIFACTS || mkdtempSync(join(tmpdir(), 'teleop-artifacts-'));
+
+function skip(why) {
+  console.log(`SKIP: ${why}`);
+  process.exit(SKIP);
+}
+
+if (!rcandPath || !existsSync(rcandPath)) skip('RCAND_PATH does not name an rcand binary');
+if (!existsSync(chromiumPath)) skip(`no browser at ${chromiumPath} (scripts/install-deps.sh installs Debian's chromium)`);
+let chromium;
+try {
+  ({ chromium } = await import('playwright-core'));
+} catch (e) {
+  skip(`playwright-core is not installed (scripts/install-deps.sh runs npm ci in tests/browser): ${e.message}`);
+}
+
+mkdirSync(artifacts, { recursive: true });
+const work = mkdtempSync(join(tmpdir(), 'teleop-test-'));
+const dataDir = join(work, 'data');
+const failures = [];
+let rcand = null;
+let browser = null;
+let proxy = null;
+
+function check(cond, what) {
+  if (cond) console.log(`ok - ${what}`);
+  else { console.log(`FAIL - ${what}`); failures.push(what); }
+}
+
+const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+
+async function startRcand() {
+  rcand = spawn(rcandPath, ['--data-dir', dataDir, '--port', '0'], { stdio: ['ignore', 'ignore', 'pipe'] });
+  let log = '';
+  const url = await new Promise((resolve, reject) => {
+    const timer = setTimeout(() => reject(new Error(`rcand did not start:\n${log}`)), 20000);
+    rcand.stderr.on('data', (d) => {
+      log += d.toString();
+      const m = log.match(/"event":"listening"[^\n]*"url":"(http:\/\/[^"]+)"/);
+      if (m) { clearTimeout(timer); resolve(m[1]); }
+    });
+    rcand.on('exit', (code) => { clearTimeout(timer); reject(new Error(`rcand exited ${code}:\n${log}`)); });
+  });
+  rcand.removeAllListeners('exit');
+  return url;
+}
+
+// A TCP proxy to the node. freeze(): nothing more is forwarded either way and nothing is
+// closed (bytes are held, as a stalled link holds them); thaw(): everything held is delivered.
+async function startProxy(targetPort) {
+  let frozen = false;
+  const held = [];   // [socket, chunk | null (end)]
+  const deliver = (sock, chunk) => {
+    if (frozen) { held.push([sock, chunk]); return; }
+    if (sock.destroyed) return;
+    if (chunk === null) sock.end(); else sock.write(chunk);
+  };
+  const server = createServer((client) => {
+    const upstream = connect(targetPort, '127.0.0.1');
+    client.on('data', (c) => deliver(upstream, c));
+    upstream.on('data', (c) => deliver(client, c));
+    client.on('end', () => deliver(upstream, null));
+    upstream.on('end', () => deliver(client, null));
+    client.on('error', () => upstream.destroy());
+    upstream.on('error', () => client.destroy());
+  });
+  await new Promise((r) => server.listen(0, '127.0.0.1', r));
+  return {
+    port: server.address().port,
+    freeze() { frozen = true; },
+    thaw() {
+      frozen = false;
+      for (const [sock, chunk] of held.splice(0)) deliver(sock, chunk);
+    },
+    close() { server.close(); },
+  };
+}
+
+async function http(base, method, path, token, body) {
+  const headers = {};
+  if (token) headers.Authorization = `Bearer ${token}`;
+  if (body !== undefined) headers['Content-Type'] = 'application/json';
+  const res = await fetch(base + path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
+  const text = await res.text();
+  let json = null;
+  try { json = JSON.parse(text); } catch (_) { /* not JSON */ }
+  return { status: res.status, json, text };
+}
+
+function message(type, payload) {
+  return { version: '1.0.0', message_id: randomUUID(), type, timestamp_ms: Date.now(), payload };
+}
+
+async function main() {
+  const node = await startRcand();
+  const owner = readFileSync(join(dataDir, 'owner.token'), 'utf8').trim();
+  proxy = await startProxy(Number(new URL(node).port));
+  const viaProxy = `http://127.0.0.1:${proxy.port}`;
+  console.log(`rcand at ${node}, the page reaches it through ${viaProxy}`);
+
+  const robot = async () => (await http(node, 'GET', '/rcan/v1/status', owner)).json.robot.robot;
+  const pose = async () => { const r = await robot(); return { x: r.base.x, y: r.base.y, th: r.base.theta }; };
+  const dist = (a, b) => Math.hypot(a.x - b.x, a.y - b.y) + Math.abs(a.th - b.th);
+  const fmt = (p) => `(${p.x.toFixed(3)}, ${p.y.toFixed(3)}, ${p.th.toFixed(3)})`;
+  // At rest: the pose has not changed over 300 ms.
+  async function waitStopped() {
+    for (let i = 0; i < 40; i++) {
+      const a = await pose();
+      await sleep(300);
+      if (dist(a, await pose()) < 1e-4) return;
+    }
+    throw new Error('the robot did not come to rest');
+  }
+  async function waitMoving(from) {
+    for (let i = 0; i < 100; i++) {
+      if (dist(await pose(), from) > 0.05) return true;
+      await sleep(50);
+    }
+    return false;
+  }
+
+  browser = await chromium.launch({
+    executablePath: chromiumPath,
+    args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-background-networking',
+      '--disable-component-update', '--disable-sync', '--disable-dev-shm-usage'],
+  });
+  const context = await browser.newContext({ viewport: { width: 1280, height: 860 } });
+  const page = await context.newPage();
+  const pageErrors = [];
+  page.on('pageerror', (e) => pageErrors.push(String(e)));
+  await page.goto(viaProxy + '/', { waitUntil: 'load' });
+  await page.waitForSelector('#signin:not([hidden])');
+  await page.fill('#token-input', owner);
+  await page.click('#signin-form button[type=submit]');
+  await page.waitForSelector('body[data-stream=open]', { timeout: 10000 });
+  await page.click('#tabs button[data-view=teleop]');
+  await page.click('#claim');
+  await page.waitForFunction(() => /claim: GRANTED/.test(document.querySelector('#teleop-log').textContent));
+  await page.waitForFunction(() => !document.querySelector('#j0').disabled, null, { timeout: 10000 });
+
+  const center = async (dir) => {
+    const b = await (await page.$(`#pad button[data-drive=${dir}]`)).boundingBox();
+    return [b.x + b.width / 2, b.y + b.height / 2];
+  };
+  async function pointerHold(dir) {
+    const [x, y] = await center(dir);
+    await page.mouse.move(x, y);
+    await page.mouse.down();
+  }
+
+  // One runaway scenario: start a hold, end it the given way, then the robot must not move.
+  async function scenario(name, begin, end, cleanup) {
+    await waitStopped();
+    const p0 = await pose();
+    await begin();
+    const moving = await waitMoving(p0);
+    check(moving, `${name}: the hold drives the robot`);
+    await end();
+    await sleep(800);                       // a drive already applied ends within its 0.5 s
+    const p1 = await pose();
+    await sleep(2500);                      // an unstopped hold repeats every 0.3 s
+    const p2 = await pose();
+    check(dist(p1, p2) < 0.005, `${name}: the robot does not move after the hold ended ${fmt(p1)} → ${fmt(p2)}`);
+    await cleanup();
+    await sleep(300);
+  }
+
+  // 1. A touch the browser cancels (pointercancel), the button still pressed.
+  await scenario('pointercancel',
+    () => pointerHold('fwd'),
+    () => page.$eval('#pad button[data-drive=fwd]', (b) => b.dispatchEvent(new PointerEvent('pointercancel', { pointerId: 1, pointerType: 'mouse', bubbles: true }))),
+    () => page.mouse.up());
+
+  // 2. The window loses focus while the button is held.
+  await scenario('window blur',
+    () => pointerHold('back'),
+    () => page.evaluate(() => window.dispatchEvent(new Event('blur'))),
+    () => page.mouse.up());
+
+  // 3. Space held on ▼, Tab moves the focus away, Space released elsewhere.
+  await scenario('Tab away while Space is held',
+    async () => { await page.focus('#pad button[data-drive=back]'); await page.keyboard.down(' '); },
+    () => page.keyboard.press('Tab'),
+    () => page.keyboard.up(' '));
+  check(await page.evaluate(() => document.activeElement && document.activeElement.id) === 'lin-speed',
+    'after Tab the focus is on the speed slider');
+
+  // 4. The tab is hidden (switching apps on a phone) while the button is held.
+  await scenario('hidden tab',
+    () => pointerHold('fwd'),
+    () => page.evaluate(() => {
+      Object.defineProperty(document, 'visibilityState', { value: 'hidden', configurable: true });
+      Object.defineProperty(document, 'hidden', { value: true, configurable: true });
+      document.dispatchEvent(new Event('visibilitychange'));
+    }),
+    async () => {
+      await page.evaluate(() => { delete document.visibilityState; delete document.hidden; });
+      await page.mouse.up();
+    });
+
+  // 5. The network freezes while the button is held; the operator lets go during the freeze;
+  // the network comes back. Nothing the page sent may move the robot after it let go.
+  {
+    await waitStopped();
+    const p0 = await pose();
+    await pointerHold('fwd');
+    check(await waitMoving(p0), 'frozen network: the hold drives the robot');
+    proxy.freeze();
+    await sleep(1500);                      // still holding, nothing gets through
+    await page.mouse.up();
+    const letGo = Date.now();
+    await sleep(800);
+    const p1 = await pose();
+    await sleep(2000);
+    proxy.thaw();                           // ~3 s after letting go, everything held arrives
+    await sleep(2500);
+    const p2 = await pose();
+    check(dist(p1, p2) < 0.005,
+      `frozen network: nothing sent before letting go moves the robot when the network returns ${((Date.now() - letGo) / 1000).toFixed(1)} s later ${fmt(p1)} → ${fmt(p2)}`);
+    await page.waitForSelector('body[data-stream=open]', { timeout: 15000 });
+    await page.waitForFunction(() => {
+      const s = document.querySelector('#conn-pill');
+      return s && /open/.test(s.textContent);
+    }, null, { timeout: 15000 });
+    await sleep(500);
+  }
+
+  // 6. A hold stuck down, ESTOP and RESUME by another client; nobody touches anything.
+  {
+    await waitStopped();
+    const p0 = await pose();
+    await pointerHold('fwd');
+    check(await waitMoving(p0), 'ESTOP→RESUME: the hold drives the robot');
+    const e = await http(node, 'POST', '/api/stop', owner, { reason: 'test ESTOP' });
+    check(e.status === 200, `ESTOP by another client (${e.status})`);
+    await sleep(500);
+    const r = await http(node, 'POST', '/rcan/v1/command', owner, message('SAFETY', { safety_event: 'RESUME' }));
+    check(r.status === 200, `RESUME by another client (${r.status})`);
+    await sleep(300);
+    const p1 = await pose();
+    await sleep(2500);
+    const p2 = await pose();
+    check(dist(p1, p2) < 0.005, `ESTOP→RESUME: the stuck hold does not drive again ${fmt(p1)} → ${fmt(p2)}`);
+    await page.mouse.up();
+    // A fresh press re-arms the session and drives.
+    await waitStopped();
+    const p3 = await pose();
+    await pointerHold('fwd');
+    check(await waitMoving(p3), 'ESTOP→RESUME: a fresh press re-arms and drives');
+    await page.mouse.up();
+    check(/re-arm after ESTOP: GRANTED/.test(await page.textContent('#teleop-log')), 'the page re-armed on the fresh press');
+  }
+
+  // 7. Arrow keys on a focused speed slider change the speed, they do not drive; on the pad
+  // they drive while held and stop when released.
+  {
+    await waitStopped();
+    const p0 = await pose();
+    await page.focus('#lin-speed');
+    const before = await page.inputValue('#lin-speed');
+    await page.keyboard.press('ArrowDown');   // the slider may already be at its maximum
+    await sleep(800);
+    const after = await page.inputValue('#lin-speed');
+    check(after !== before, `ArrowDown on the speed slider changes the speed (${before} → ${after})`);
+    const pa = await pose();
+    check(dist(pa, p0) < 0.005, `ArrowDown on the speed slider does not drive (backwards) ${fmt(p0)} → ${fmt(pa)}`);
+    await page.focus('#pad button[data-drive=fwd]');
+    await page.keyboard.down('ArrowUp');
+    check(await waitMoving(p0), 'ArrowUp held on the pad drives');
+    await page.keyboard.up('ArrowUp');
+    await sleep(800);
+    const p1 = await pose();
+    await sleep(1500);
+    check(dist(p1, await pose()) < 0.005, 'releasing ArrowUp stops the robot');
+  }
+
+  // 8. Move arm: the sliders start at the arm's pose; only the joint the operator changed moves.
+  {
+    const pose6 = [0, 1.2, -0.8, 0, 0.5, 0];
+    const a = await http(node, 'POST', '/rcan/v1/command', owner, message('COMMAND', { action: 'arm_move', joints: pose6 }));
+    check(a.status === 200, `the arm is moved to ${JSON.stringify(pose6)} by another client (${a.status})`);
+    await page.waitForFunction(() => Math.abs(Number(document.querySelector('#j1').value) - 1.2) < 0.02 &&
+      Math.abs(Number(document.querySelector('#j2').value) + 0.8) < 0.02, null, { timeout: 10000 });
+    check(true, 'the arm sliders follow the arm\'s pose');
+    await page.fill('#j0', '0.8');
+    await page.click('#arm-send');
+    await page.waitForFunction(() => /arm_move: ACK/.test(document.querySelector('#teleop-log').textContent));
+    const targets = (await robot()).arm.targets_rad;
+    const want = [0.8, 1.2, -0.8, 0, 0.5, 0];
+    check(targets.every((v, i) => Math.abs(v - want[i]) < 1e-6), `Move arm changes only joint 1: targets ${JSON.stringify(targets)}`);
+  }
+  await page.screenshot({ path: join(artifacts, 'dashboard-teleop-deadman.png') });
+
+  // 9. A frozen connection (nothing closed): within three telemetry periods (5 Hz: 600 ms) the
+  // page says "connection lost" and disables motion; when the network returns, it recovers.
+  {
+    const frozenAt = Date.now();
+    proxy.freeze();
+    await page.waitForFunction(() => document.body.dataset.stream === 'lost' &&
+      /connection lost/.test(document.querySelector('#conn-pill').textContent) &&
+      document.querySelector('#pad button[data-drive=fwd]').disabled &&
+      document.querySelector('#arm-send').disabled, null, { timeout: 5000, polling: 20 });
+    const shownMs = Date.now() - frozenAt;
+    // The last frame came at most one period before the freeze; the watchdog looks every 0.1 s.
+    check(shownMs <= 600 + 100 + 100, `frozen connection: "connection lost" and motion disabled ${shownMs} ms after the freeze`);
+    await page.screenshot({ path: join(artifacts, 'dashboard-connection-lost.png') });
+    proxy.thaw();
+    await page.waitForFunction(() => document.body.dataset.stream === 'open' &&
+      !document.querySelector('#pad button[data-drive=fwd]').disabled, null, { timeout: 10000 });
+    check(true, 'when the network returns the stream is live again and motion is enabled');
+  }
+  check(pageErrors.length === 0, `no page errors (${pageErrors.join('; ')})`);
+  await page.close();
+}
+
+try {
+  await main();
+} catch (e) {
+  failures.push(`exception: ${e.stack || e}`);
+  console.log(`FAIL - ${e.stack || e}`);
+} finally {
+  if (browser) await browser.close().catch(() => {});
+  if (proxy) proxy.close();
+  if (rcand) rcand.kill('SIGTERM');
+  await sleep(300);
+  rmSync(work, { recursive: true, force: true });
+}
+console.log(`artifacts: ${artifacts}`);
+if (failures.length) {
+  console.log(`${failures.length} failure(s)`);
+  process.exit(1);
+}
+console.log('all teleop checks passed');
+process.exit(0);
