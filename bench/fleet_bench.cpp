@@ -150,6 +150,7 @@ class TimedActuation final : public node::Actuation {
   void arm_deadman(const std::string& s, int64_t t) override { inner_.arm_deadman(s, t); }
   void feed_deadman(const std::string& s) override { inner_.feed_deadman(s); }
   void disarm_deadman(const std::string& s) override { inner_.disarm_deadman(s); }
+  Status rearm(const std::string& s) override { return inner_.rearm(s); }
   json::Value status() const override { return inner_.status(); }
   json::Value telemetry() const override { return inner_.telemetry(); }
   std::atomic<double> latched_at{0};
