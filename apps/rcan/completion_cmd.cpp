@@ -52,8 +52,13 @@ const std::map<std::string, std::pair<std::string, std::string>>& table() {
        {"issue inspect revoke revocations",
         "--key --sub --role --aud --scope --ttl --iss --alg --kid --fleet --sender-type "
         "--cloud-provider "
-        "--function-name --secret --device --leeway --now --jti --exp --reason --url "
-        "--token-file --help"}},
+        "--function-name --bind-key --bind-alg --secret --device --leeway --now --jti --exp "
+        "--reason --url --token-file --help"}},
+      {"fleet",
+       {"estop resume command run status audit",
+        "--broker --token --key-dir --prefix --ca-file --username --password-file --timeout-ms "
+        "--members --reason --params --wait-complete --no-wait --qos --out --db --secrets-dir "
+        "--duration-ms --fleet --help"}},
       {"ruri", {"parse", "--help"}},
       {"json", {"canonical", "--help"}},
       {"message", {"check send", std::string("--max-bytes ") + kNet}},
