@@ -183,6 +183,36 @@ TEST_F(OwnershipE2E, TransferAcceptedClearsPersonalDataKeepsTheChainAndCapsTheFo
 // Two trusted issuers may both know a subject "bob": they are two principals. A transfer, a
 // handoff and a lease name issuer and subject (the requester's issuer unless the request says
 // another), and only that principal accepts, claims or acts as the owner.
+// R13: below OWNER, the HiTL pending list shows one's own held commands — one's own by issuer
+// and subject, not by subject alone.
+TEST_F(OwnershipE2E, THePendingListBelowOwnerIsOnesOwnByIssuerAndSubject) {
+  start("      - issuer: partner.example\n        key_file: " + dir_.path() +
+        "/n/issuer.pub.pem\n"
+        "agent:\n  hitl_gates:\n    - {action_types: [arm_move], require_auth: true,"
+        " auth_timeout_ms: 60000, on_timeout: block}\n");
+  const std::string dan = n().token("leasee", "dan", {"control", "status"});
+  const std::string partner_dan = n().token("leasee", "dan", {"control", "status"}, 3600,
+                                            json::Object{{"iss", "partner.example"}});
+  const std::string id = new_uuid_v4();
+  json::Object cmd{{"version", "1.0.0"},
+                   {"message_id", id},
+                   {"type", "COMMAND"},
+                   {"timestamp_ms", test::now_wall_ms()},
+                   {"payload", json::Object{{"action", "arm_move"},
+                                            {"joints", json::Array{0.1, 0, 0, 0, 0, 0}}}}};
+  HttpReply held = n().post("/rcan/v1/command", json::dump(json::Value(cmd)), dan);
+  ASSERT_EQ(held.status, 202) << held.body;
+  auto listed = [&](const std::string& token) {
+    HttpReply r = n().get("/rcan/v1/pending", token);
+    EXPECT_EQ(r.status, 200) << r.body;
+    return r.body;
+  };
+  EXPECT_NE(listed(dan).find(id), std::string::npos);
+  EXPECT_EQ(listed(partner_dan).find(id), std::string::npos) << "another issuer's dan sees it";
+  EXPECT_NE(listed(owner_).find(id), std::string::npos);
+  EXPECT_NE(listed(owner_).find("\"requested_by_iss\":\"ops.example\""), std::string::npos);
+}
+
 TEST_F(OwnershipE2E, TwoIssuersWithTheSameSubjectAreTwoPrincipals) {
   start("      - issuer: partner.example\n        key_file: " + dir_.path() +
         "/n/issuer.pub.pem\n");

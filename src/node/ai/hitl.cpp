@@ -128,6 +128,7 @@ json::Object PendingItem::public_view(int64_t now_ms) const {
                  {"created_ms", created_ms},
                  {"on_timeout", allow_on_timeout ? "allow" : "block"},
                  {"requested_by", sub},
+                 {"requested_by_iss", issuer},
                  {"requested_role", std::string(role_name(role))},
                  {"requires_auth_from_role", 4},
                  {"thought_id", thought_id.empty() ? message_id : thought_id},

@@ -40,12 +40,14 @@ void pending_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& re
   if (!p.ok()) return answer_error(svc, respond, route, p.error());
   json::Value list = ai.pending_list();
   if (role_level(p->role) < role_level(Role::kOwner)) {
-    // Below OWNER: only one's own held commands.
+    // Below OWNER: only one's own held commands — by issuer and subject (docs/SECURITY.md R13;
+    // an entry kept from before issuers were recorded matches by subject).
     json::Array mine;
-    for (const auto& i : list.get("pending")->as_array())
-      if (const json::Value* by = i.get("requested_by");
-          by && by->is_string() && by->as_string() == p->sub)
-        mine.push_back(i);
+    for (const auto& i : list.get("pending")->as_array()) {
+      PrincipalId by{json::string_field(i, "requested_by_iss"),
+                     json::string_field(i, "requested_by")};
+      if (by.is(*p)) mine.push_back(i);
+    }
     list = json::Object{{"pending", mine}, {"count", static_cast<int64_t>(mine.size())}};
   }
   answer_json(svc, respond, route, 200, list);
