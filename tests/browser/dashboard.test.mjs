@@ -11,27 +11,13 @@ import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { randomUUID } from 'node:crypto';
 import { createServer } from 'node:net';
+import { checker, http, launchBrowser, loadBrowser, runChecks, spawnRcand } from './harness.mjs';
 
-const SKIP = 77;
-const chromiumPath = process.env.CHROMIUM_PATH || '/usr/bin/chromium';
 const rcandPath = process.env.RCAND_PATH;
 const cliPath = process.env.RCAN_CLI_PATH;
 const artifacts = process.env.DASHBOARD_ARTIFACTS || mkdtempSync(join(tmpdir(), 'dashboard-artifacts-'));
 
-function skip(why) {
-  console.log(`SKIP: ${why}`);
-  process.exit(SKIP);
-}
-
-if (!rcandPath || !existsSync(rcandPath)) skip('RCAND_PATH does not name an rcand binary');
-if (!cliPath || !existsSync(cliPath)) skip('RCAN_CLI_PATH does not name the rcan CLI');
-if (!existsSync(chromiumPath)) skip(`no browser at ${chromiumPath} (scripts/install-deps.sh installs Debian's chromium)`);
-let chromium;
-try {
-  ({ chromium } = await import('playwright-core'));
-} catch (e) {
-  skip(`playwright-core is not installed (scripts/install-deps.sh runs npm ci in tests/browser): ${e.message}`);
-}
+const { chromium, chromiumPath } = await loadBrowser({ rcandPath, cliPath, needCli: true });
 
 mkdirSync(artifacts, { recursive: true });
 const work = mkdtempSync(join(tmpdir(), 'dashboard-test-'));
@@ -44,10 +30,7 @@ let gated = null;
 let nodeDown = false;
 let pendingShownMs = null;   // set while the test has stopped the node
 
-function check(cond, what) {
-  if (cond) console.log(`ok - ${what}`);
-  else { console.log(`FAIL - ${what}`); failures.push(what); }
-}
+const check = checker(failures);
 
 async function freePort() {
   const srv = createServer();
@@ -58,30 +41,9 @@ async function freePort() {
 }
 
 async function startRcand(port) {
-  rcand = spawn(rcandPath, ['--data-dir', dataDir, '--port', String(port)], { stdio: ['ignore', 'ignore', 'pipe'] });
-  let log = '';
-  const url = await new Promise((resolve, reject) => {
-    const timer = setTimeout(() => reject(new Error(`rcand did not start:\n${log}`)), 20000);
-    rcand.stderr.on('data', (d) => {
-      log += d.toString();
-      const m = log.match(/"event":"listening"[^\n]*"url":"(http:\/\/[^"]+)"/) || log.match(/"url":"(http:\/\/[^"]+)"[^\n]*listening/);
-      if (m) { clearTimeout(timer); resolve(m[1]); }
-    });
-    rcand.on('exit', (code) => { clearTimeout(timer); reject(new Error(`rcand exited ${code}:\n${log}`)); });
-  });
-  rcand.removeAllListeners('exit');
+  let url;
+  ({ proc: rcand, url } = await spawnRcand(rcandPath, dataDir, port));
   return url;
-}
-
-async function http(base, method, path, token, body) {
-  const headers = {};
-  if (token) headers.Authorization = `Bearer ${token}`;
-  if (body !== undefined) headers['Content-Type'] = 'application/json';
-  const res = await fetch(base + path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
-  const text = await res.text();
-  let json = null;
-  try { json = JSON.parse(text); } catch (_) { /* not JSON */ }
-  return { status: res.status, json, text, headers: res.headers };
 }
 
 function command(action, params = {}) {
@@ -148,11 +110,7 @@ async function main() {
   const planted = await http(base, 'POST', '/rcan/v1/command', hostileUser, command(HOSTILE, { note: HOSTILE }));
   check(planted.status >= 400 && planted.json && planted.json.payload, `the hostile command is refused and audited (${planted.status})`);
 
-  browser = await chromium.launch({
-    executablePath: chromiumPath,
-    args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-background-networking',
-      '--disable-component-update', '--disable-sync', '--disable-dev-shm-usage'],
-  });
+  browser = await launchBrowser(chromium, chromiumPath);
   const context = await browser.newContext({ viewport: { width: 1280, height: 860 } });
   const page = await context.newPage();
   const consoleErrors = [];
@@ -428,23 +386,15 @@ async function approvals(context, consoleErrors, pageErrors, isApiRefusal) {
   await page.close();
 }
 
-try {
-  await main();
-} catch (e) {
-  failures.push(`exception: ${e.stack || e}`);
-  console.log(`FAIL - ${e.stack || e}`);
-} finally {
-  if (browser) await browser.close().catch(() => {});
-  if (rcand) rcand.kill('SIGTERM');
-  if (gated) gated.kill('SIGTERM');
-  await new Promise((r) => setTimeout(r, 300));
-  rmSync(work, { recursive: true, force: true });
-}
-for (const n of notes) console.log(`note: ${n}`);
-console.log(`artifacts: ${artifacts}`);
-if (failures.length) {
-  console.log(`${failures.length} failure(s)`);
-  process.exit(1);
-}
-console.log('all dashboard checks passed');
-process.exit(0);
+await runChecks('dashboard', main, {
+  failures,
+  artifacts,
+  notes,
+  async cleanup() {
+    if (browser) await browser.close().catch(() => {});
+    if (rcand) rcand.kill('SIGTERM');
+    if (gated) gated.kill('SIGTERM');
+    await new Promise((r) => setTimeout(r, 300));
+    rmSync(work, { recursive: true, force: true });
+  },
+});

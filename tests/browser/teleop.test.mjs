@@ -10,31 +10,17 @@
 // Environment: RCAND_PATH, RCAN_CLI_PATH (set by CTest), CHROMIUM_PATH (default
 // /usr/bin/chromium), DASHBOARD_ARTIFACTS (screenshots; default a temp dir).
 
-import { spawn } from 'node:child_process';
 import { existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { randomUUID } from 'node:crypto';
 import { createServer, connect } from 'node:net';
+import { checker, http, launchBrowser, loadBrowser, runChecks, spawnRcand } from './harness.mjs';
 
-const SKIP = 77;
-const chromiumPath = process.env.CHROMIUM_PATH || '/usr/bin/chromium';
 const rcandPath = process.env.RCAND_PATH;
 const artifacts = process.env.DASHBOARD_ARTIFACTS || mkdtempSync(join(tmpdir(), 'teleop-artifacts-'));
 
-function skip(why) {
-  console.log(`SKIP: ${why}`);
-  process.exit(SKIP);
-}
-
-if (!rcandPath || !existsSync(rcandPath)) skip('RCAND_PATH does not name an rcand binary');
-if (!existsSync(chromiumPath)) skip(`no browser at ${chromiumPath} (scripts/install-deps.sh installs Debian's chromium)`);
-let chromium;
-try {
-  ({ chromium } = await import('playwright-core'));
-} catch (e) {
-  skip(`playwright-core is not installed (scripts/install-deps.sh runs npm ci in tests/browser): ${e.message}`);
-}
+const { chromium, chromiumPath } = await loadBrowser({ rcandPath });
 
 mkdirSync(artifacts, { recursive: true });
 const work = mkdtempSync(join(tmpdir(), 'teleop-test-'));
@@ -44,26 +30,13 @@ let rcand = null;
 let browser = null;
 let proxy = null;
 
-function check(cond, what) {
-  if (cond) console.log(`ok - ${what}`);
-  else { console.log(`FAIL - ${what}`); failures.push(what); }
-}
+const check = checker(failures);
 
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 
 async function startRcand() {
-  rcand = spawn(rcandPath, ['--data-dir', dataDir, '--port', '0'], { stdio: ['ignore', 'ignore', 'pipe'] });
-  let log = '';
-  const url = await new Promise((resolve, reject) => {
-    const timer = setTimeout(() => reject(new Error(`rcand did not start:\n${log}`)), 20000);
-    rcand.stderr.on('data', (d) => {
-      log += d.toString();
-      const m = log.match(/"event":"listening"[^\n]*"url":"(http:\/\/[^"]+)"/);
-      if (m) { clearTimeout(timer); resolve(m[1]); }
-    });
-    rcand.on('exit', (code) => { clearTimeout(timer); reject(new Error(`rcand exited ${code}:\n${log}`)); });
-  });
-  rcand.removeAllListeners('exit');
+  let url;
+  ({ proc: rcand, url } = await spawnRcand(rcandPath, dataDir));
   return url;
 }
 
@@ -98,17 +71,6 @@ async function startProxy(targetPort) {
   };
 }
 
-async function http(base, method, path, token, body) {
-  const headers = {};
-  if (token) headers.Authorization = `Bearer ${token}`;
-  if (body !== undefined) headers['Content-Type'] = 'application/json';
-  const res = await fetch(base + path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
-  const text = await res.text();
-  let json = null;
-  try { json = JSON.parse(text); } catch (_) { /* not JSON */ }
-  return { status: res.status, json, text };
-}
-
 function message(type, payload) {
   return { version: '1.0.0', message_id: randomUUID(), type, timestamp_ms: Date.now(), payload };
 }
@@ -141,11 +103,7 @@ async function main() {
     return false;
   }
 
-  browser = await chromium.launch({
-    executablePath: chromiumPath,
-    args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-background-networking',
-      '--disable-component-update', '--disable-sync', '--disable-dev-shm-usage'],
-  });
+  browser = await launchBrowser(chromium, chromiumPath);
   const context = await browser.newContext({ viewport: { width: 1280, height: 860 } });
   const page = await context.newPage();
   const pageErrors = [];
@@ -335,22 +293,14 @@ async function main() {
   await page.close();
 }
 
-try {
-  await main();
-} catch (e) {
-  failures.push(`exception: ${e.stack || e}`);
-  console.log(`FAIL - ${e.stack || e}`);
-} finally {
-  if (browser) await browser.close().catch(() => {});
-  if (proxy) proxy.close();
-  if (rcand) rcand.kill('SIGTERM');
-  await sleep(300);
-  rmSync(work, { recursive: true, force: true });
-}
-console.log(`artifacts: ${artifacts}`);
-if (failures.length) {
-  console.log(`${failures.length} failure(s)`);
-  process.exit(1);
-}
-console.log('all teleop checks passed');
-process.exit(0);
+await runChecks('teleop', main, {
+  failures,
+  artifacts,
+  async cleanup() {
+    if (browser) await browser.close().catch(() => {});
+    if (proxy) proxy.close();
+    if (rcand) rcand.kill('SIGTERM');
+    await sleep(300);
+    rmSync(work, { recursive: true, force: true });
+  },
+});

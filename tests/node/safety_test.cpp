@@ -524,8 +524,6 @@ TEST(SafetyWorkspace, GuardStopsBaseThatDriftsOut) {
   EXPECT_LT(r2.core->robot_state().x, 1.2);
 }
 
-// ---- deadman ----------------------------------------------------------------------------
-
 // ---- re-arm after ESTOP (docs/NODE.md, "Re-arm after ESTOP") ------------------------------
 
 TEST(SafetyRearm, ASessionArmedBeforeAnEstopNeedsRearmAfterResume) {
@@ -572,6 +570,8 @@ TEST(SafetyRearm, ASessionArmedBeforeAnEstopNeedsRearmAfterResume) {
   EXPECT_EQ(r.core->status().to_json().find("estop_epoch")->as_int(),
             static_cast<int64_t>(epoch0 + 1));
 }
+
+// ---- deadman ----------------------------------------------------------------------------
 
 TEST(SafetyDeadman, FiresAfterTimeoutWithEventNotBefore) {
   Rig r;

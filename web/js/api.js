@@ -122,16 +122,21 @@ export function sendCommand(action, params, { ttlMs = 5000, timeoutMs = DEFAULT_
   return request('POST', '/rcan/v1/command', commandMessage(action, params, { ttl_ms: ttlMs }), { timeoutMs });
 }
 
-// A SAFETY STOP: stops motion without latching; the node never refuses it.
-export function safetyStop(reason, timeoutMs = 3000) {
+// A SAFETY message (STOP, RESUME) with its reason.
+function safetyMessage(event, reason, options) {
   return request('POST', '/rcan/v1/command', {
     version: '1.0.0',
     message_id: uuid(),
     type: 'SAFETY',
     priority: 'SAFETY',
     timestamp_ms: Math.round(serverNow()),
-    payload: { safety_event: 'STOP', reason },
-  }, { timeoutMs });
+    payload: { safety_event: event, reason },
+  }, options);
+}
+
+// A SAFETY STOP: stops motion without latching; the node never refuses it.
+export function safetyStop(reason, timeoutMs = 3000) {
+  return safetyMessage('STOP', reason, { timeoutMs });
 }
 
 export function estop() {
@@ -139,14 +144,7 @@ export function estop() {
 }
 
 export function resume() {
-  return request('POST', '/rcan/v1/command', {
-    version: '1.0.0',
-    message_id: uuid(),
-    type: 'SAFETY',
-    priority: 'SAFETY',
-    timestamp_ms: Math.round(serverNow()),
-    payload: { safety_event: 'RESUME', reason: 'dashboard RESUME' },
-  });
+  return safetyMessage('RESUME', 'dashboard RESUME');
 }
 
 export function status() {

@@ -1,0 +1,93 @@
+// What the browser tests share: the skip rule (exit 77, CTest's SKIP_RETURN_CODE, when the
+// browser or playwright-core is missing), pass/fail lines, starting an rcand and reading its
+// URL from the "listening" log line, and a small JSON-over-HTTP helper.
+
+import { spawn } from 'node:child_process';
+import { existsSync } from 'node:fs';
+
+export const SKIP = 77;
+
+export function skip(why) {
+  console.log(`SKIP: ${why}`);
+  process.exit(SKIP);
+}
+
+// The browser and the binaries the test needs, or a skip. Returns { chromium, chromiumPath }.
+export async function loadBrowser({ rcandPath, cliPath, needCli = false }) {
+  const chromiumPath = process.env.CHROMIUM_PATH || '/usr/bin/chromium';
+  if (!rcandPath || !existsSync(rcandPath)) skip('RCAND_PATH does not name an rcand binary');
+  if (needCli && (!cliPath || !existsSync(cliPath))) skip('RCAN_CLI_PATH does not name the rcan CLI');
+  if (!existsSync(chromiumPath)) skip(`no browser at ${chromiumPath} (scripts/install-deps.sh installs Debian's chromium)`);
+  try {
+    const { chromium } = await import('playwright-core');
+    return { chromium, chromiumPath };
+  } catch (e) {
+    return skip(`playwright-core is not installed (scripts/install-deps.sh runs npm ci in tests/browser): ${e.message}`);
+  }
+}
+
+// check(cond, what): prints ok/FAIL and keeps the failures in `failures`.
+export function checker(failures) {
+  return (cond, what) => {
+    if (cond) console.log(`ok - ${what}`);
+    else { console.log(`FAIL - ${what}`); failures.push(what); }
+  };
+}
+
+// Starts rcand on its embedded default over `dataDir`; resolves { proc, url } once it listens.
+export async function spawnRcand(rcandPath, dataDir, port = 0) {
+  const proc = spawn(rcandPath, ['--data-dir', dataDir, '--port', String(port)], { stdio: ['ignore', 'ignore', 'pipe'] });
+  let log = '';
+  const url = await new Promise((resolve, reject) => {
+    const timer = setTimeout(() => reject(new Error(`rcand did not start:\n${log}`)), 20000);
+    proc.stderr.on('data', (d) => {
+      log += d.toString();
+      const m = log.match(/"event":"listening"[^\n]*"url":"(http:\/\/[^"]+)"/) || log.match(/"url":"(http:\/\/[^"]+)"[^\n]*listening/);
+      if (m) { clearTimeout(timer); resolve(m[1]); }
+    });
+    proc.on('exit', (code) => { clearTimeout(timer); reject(new Error(`rcand exited ${code}:\n${log}`)); });
+  });
+  proc.removeAllListeners('exit');
+  return { proc, url };
+}
+
+export async function http(base, method, path, token, body) {
+  const headers = {};
+  if (token) headers.Authorization = `Bearer ${token}`;
+  if (body !== undefined) headers['Content-Type'] = 'application/json';
+  const res = await fetch(base + path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
+  const text = await res.text();
+  let json = null;
+  try { json = JSON.parse(text); } catch (_) { /* not JSON */ }
+  return { status: res.status, json, text, headers: res.headers };
+}
+
+// Runs `main`, then `cleanup` whatever happened; prints the notes and the verdict and exits
+// 0 (every check passed) or 1.
+export async function runChecks(name, main, { failures, cleanup, artifacts, notes = [] }) {
+  try {
+    await main();
+  } catch (e) {
+    failures.push(`exception: ${e.stack || e}`);
+    console.log(`FAIL - ${e.stack || e}`);
+  } finally {
+    await cleanup();
+  }
+  for (const n of notes) console.log(`note: ${n}`);
+  console.log(`artifacts: ${artifacts}`);
+  if (failures.length) {
+    console.log(`${failures.length} failure(s)`);
+    process.exit(1);
+  }
+  console.log(`all ${name} checks passed`);
+  process.exit(0);
+}
+
+// Headless Chromium as every browser test runs it.
+export function launchBrowser(chromium, chromiumPath) {
+  return chromium.launch({
+    executablePath: chromiumPath,
+    args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-background-networking',
+      '--disable-component-update', '--disable-sync', '--disable-dev-shm-usage'],
+  });
+}
