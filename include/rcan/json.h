@@ -164,6 +164,7 @@ std::string dump(const Value& v);
 //   int64_t end = json::int_field(lease, "end_ms");   // 0 when absent or not an integer
 std::string string_field(const Value& v, std::string_view key, std::string_view def = {});
 int64_t int_field(const Value& v, std::string_view key, int64_t def = 0);
+bool bool_field(const Value& v, std::string_view key, bool def = false);
 // Appends `s` as a JSON string literal, as dump() and canonical() write a string. `s` must not
 // point into `out` (appending may move `out`'s bytes).
 void append_string(std::string& out, std::string_view s);

@@ -166,6 +166,11 @@ int64_t int_field(const Value& v, std::string_view key, int64_t def) {
   return f != nullptr && f->is_int() ? f->as_int() : def;
 }
 
+bool bool_field(const Value& v, std::string_view key, bool def) {
+  const Value* f = v.get(key);
+  return f != nullptr && f->is_bool() ? f->as_bool() : def;
+}
+
 bool Value::operator==(const Value& other) const {
   if (kind_ != other.kind_) return false;
   switch (kind_) {

@@ -278,5 +278,20 @@ TEST(ValueModel, ObjectSetReplacesAndKeepsOrder) {
   EXPECT_EQ(moved, Value(o));
 }
 
+TEST(JsonFieldReaders, TakeAMemberOfItsKindOrTheDefault) {
+  auto v = parse(R"({"s":"x","i":7,"b":true,"f":false,"n":null})");
+  ASSERT_TRUE(v.ok());
+  EXPECT_EQ(string_field(*v, "s"), "x");
+  EXPECT_EQ(string_field(*v, "i", "d"), "d");
+  EXPECT_EQ(int_field(*v, "i"), 7);
+  EXPECT_EQ(int_field(*v, "s", -1), -1);
+  EXPECT_TRUE(bool_field(*v, "b"));
+  EXPECT_FALSE(bool_field(*v, "f", true));
+  EXPECT_FALSE(bool_field(*v, "i"));  // 7 is not a bool
+  EXPECT_TRUE(bool_field(*v, "n", true));
+  EXPECT_FALSE(bool_field(*v, "missing"));
+  EXPECT_FALSE(bool_field(Value("not an object"), "b"));
+}
+
 }  // namespace
 }  // namespace rcan::json

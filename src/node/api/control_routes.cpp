@@ -17,11 +17,6 @@ std::string str_field(const json::Value& body, const char* k, size_t max = 256) 
   return json::string_field(body, k).substr(0, max);
 }
 
-bool bool_field(const json::Value& body, const char* k) {
-  const json::Value* f = body.is_object() ? body.get(k) : nullptr;
-  return f && f->is_bool() && f->as_bool();
-}
-
 // Seconds from the body: a positive integer, or `def` when absent. -1 when malformed.
 int64_t seconds_field(const json::Value& body, const char* k, int64_t def) {
   const json::Value* f = body.is_object() ? body.get(k) : nullptr;
@@ -363,7 +358,7 @@ void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json
   e.by(*pr).message(c->session.id);
   // A new session is armed; a renewing claim keeps its arming unless it asks (docs/NODE.md,
   // "Re-arm after ESTOP").
-  const bool rearmed = bool_field(body, "rearm") && svc_.act.rearm(c->session.id).ok();
+  const bool rearmed = json::bool_field(body, "rearm") && svc_.act.rearm(c->session.id).ok();
   if (rearmed) e.detail("rearmed", true);
   if (c->preempted) e.detail("preempted_session", c->preempted->id);
   if (!c->session.lease_id.empty()) e.detail("lease_id", c->session.lease_id);
@@ -413,7 +408,7 @@ void Node::renew_route(transport::HttpRequest& req, Respond& respond, const json
   e.by(*pr).message(r->id);
   json::Object payload{
       {"session_id", r->id}, {"role", std::string(role_name(r->role))}, {"renewed", true}};
-  if (bool_field(body, "rearm") && svc_.act.rearm(r->id).ok()) {  // docs/NODE.md, "Re-arm"
+  if (json::bool_field(body, "rearm") && svc_.act.rearm(r->id).ok()) {  // docs/NODE.md, "Re-arm"
     e.detail("rearmed", true);
     payload.set("rearmed", true);
   }
@@ -422,8 +417,7 @@ void Node::renew_route(transport::HttpRequest& req, Respond& respond, const json
                                 : json::Value());
   // The holder asks for its session's UDP heartbeat key (a fresh one; the previous key stops
   // working): how a holder promoted from the queue gets it, since events carry no secrets.
-  const json::Value* want = body.is_object() ? body.get("udp_heartbeat") : nullptr;
-  if (want && want->is_bool() && want->as_bool() && svc_.on_grant) {
+  if (json::bool_field(body, "udp_heartbeat") && svc_.on_grant) {
     svc_.on_grant(r->id, payload);
     e.detail("udp_heartbeat", "issued");
   }

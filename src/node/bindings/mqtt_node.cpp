@@ -356,9 +356,7 @@ void MqttNode::tick_completions() {
     MutexLock lk(mu_);
     if (pending_.empty()) return;
     json::Value tel = svc_.act.telemetry();
-    const json::Value* stopped = field(tel, "stopped");
-    bool is_stopped = stopped != nullptr && stopped->is_bool() && stopped->as_bool();
-    if (!is_stopped && !svc_.act.estop_active()) return;
+    if (!json::bool_field(tel, "stopped") && !svc_.act.estop_active()) return;
     done.swap(pending_);
   }
   bool estop = svc_.act.estop_active();
