@@ -133,6 +133,7 @@ void configure_control(node::NodeServices& services, const config::NodeConfig& c
   co.handoff_window_ms = services.settings.handoff_window_ms;
   co.queue_max = cfg.control.queue_max;
   co.queue_wait_ms = int64_t{cfg.control.queue_wait_s} * 1000;
+  co.queue_stream_grace_ms = int64_t{cfg.control.queue_stream_grace_s} * 1000;
   co.fleet_policy =
       node::fleet_policy_from_name(cfg.control.fleet_policy).value_or(node::FleetPolicy::kRole);
   co.guest_session_s = services.settings.guest_limits.session_seconds;

@@ -303,6 +303,7 @@ struct ControlConfig {                // this node's `control` block (docs/SESSI
   uint32_t handoff_window_s = 30;
   uint32_t queue_max = 16;
   uint32_t queue_wait_s = 300;
+  uint32_t queue_stream_grace_s = 5;  // a queued claimant without a stream leaves the queue
   uint32_t max_session_s = 0;          // caps every role's session TTL; 0 = the role TTLs
   uint32_t transfer_window_s = 86400;  // seed §6.2: 24 h
   uint32_t consent_ttl_s = 86400;

@@ -14,13 +14,15 @@ import { existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync } from 'node:f
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { randomUUID } from 'node:crypto';
+import { execFileSync } from 'node:child_process';
 import { createServer, connect } from 'node:net';
 import { checker, http, launchBrowser, loadBrowser, runChecks, spawnRcand } from './harness.mjs';
 
 const rcandPath = process.env.RCAND_PATH;
+const cliPath = process.env.RCAN_CLI_PATH;
 const artifacts = process.env.DASHBOARD_ARTIFACTS || mkdtempSync(join(tmpdir(), 'teleop-artifacts-'));
 
-const { chromium, chromiumPath } = await loadBrowser({ rcandPath });
+const { chromium, chromiumPath } = await loadBrowser({ rcandPath, cliPath, needCli: true });
 
 mkdirSync(artifacts, { recursive: true });
 const work = mkdtempSync(join(tmpdir(), 'teleop-test-'));
@@ -69,6 +71,11 @@ async function startProxy(targetPort) {
     },
     close() { server.close(); },
   };
+}
+
+function issueToken(ruri, sub, role, scopes) {
+  return execFileSync(cliPath, ['token', 'issue', '--key', join(dataDir, 'issuer', 'ed25519.seed'), '--iss', 'rcand-local',
+    '--sub', sub, '--role', role, '--aud', ruri, '--scope', scopes, '--ttl', '1h'], { encoding: 'utf8' }).trim();
 }
 
 function message(type, payload) {
@@ -288,6 +295,70 @@ async function main() {
     await page.waitForFunction(() => document.body.dataset.stream === 'open' &&
       !document.querySelector('#pad button[data-drive=fwd]').disabled, null, { timeout: 10000 });
     check(true, 'when the network returns the stream is live again and motion is enabled');
+  }
+  // 10. Control follows the operator: sign-out releases control, the queued operator's page is
+  // told it was promoted and keeps the deadman fed, a closed tab leaves the queue, and a drive
+  // the safety core limits shows as a warning with its reason.
+  {
+    await page.click('#release');
+    await page.waitForFunction(() => /release: RELEASED/.test(document.querySelector('#teleop-log').textContent));
+    const ruri = (await http(node, 'GET', '/rcan/v1/status', owner)).json.ruri;
+    const operator = async (sub) => {
+      const ctx = await browser.newContext({ viewport: { width: 1280, height: 860 } });
+      const p = await ctx.newPage();
+      p.on('pageerror', (e) => pageErrors.push(`${sub}: ${e}`));
+      await p.goto(node + '/', { waitUntil: 'load' });
+      await p.fill('#token-input', issueToken(ruri, sub, 'user', 'status,control'));
+      await p.click('#signin-form button[type=submit]');
+      await p.waitForSelector('body[data-stream=open]', { timeout: 10000 });
+      await p.click('#tabs button[data-view=teleop]');
+      await p.click('#claim');
+      return p;
+    };
+    const queue = async () => ((await http(node, 'GET', '/rcan/v1/auth/queue', owner)).json.queue || []).map((q) => q.user_id);
+    const safeStops = async () => ((await http(node, 'GET', '/api/audit?limit=1000', owner)).json.entries || [])
+      .filter((r) => r.event === 'NETWORK_LOSS_SAFE_STOP').length;
+
+    const a = await operator('op-a');
+    await a.waitForFunction(() => /claim: GRANTED/.test(document.querySelector('#teleop-log').textContent));
+    const b = await operator('op-b');
+    await b.waitForFunction(() => /number 1 in the queue/.test(document.querySelector('#control-state').textContent));
+    check(await b.textContent('#release') === 'Leave queue', 'a queued operator sees its place and a "Leave queue" button');
+    const stopsBefore = await safeStops();
+    await a.click('#signout');
+    await b.waitForFunction(() => /You hold control/.test(document.querySelector('#control-state').textContent), null, { timeout: 5000 });
+    check(/promoted from the queue/.test(await b.textContent('#teleop-log')), 'sign-out released control and the queued operator\'s page was told it was promoted');
+    await sleep(3500);                     // heartbeat_timeout_ms is 2 s: an unfed deadman would fire
+    const st = (await http(node, 'GET', '/rcan/v1/status', owner)).json;
+    check(st.control === 'HELD' && st.sessions && st.sessions[0] && st.sessions[0].user_id === 'op-b',
+      `the promoted operator holds control (${st.control}, ${st.sessions && st.sessions[0] && st.sessions[0].user_id})`);
+    check(await safeStops() === stopsBefore, 'the promoted page feeds the deadman: no NETWORK_LOSS_SAFE_STOP after the promotion');
+
+    const c = await operator('op-c');
+    await c.waitForFunction(() => /number 1 in the queue/.test(document.querySelector('#control-state').textContent));
+    check((await queue()).includes('op-c'), 'a third operator is queued');
+    await c.context().close();
+    const closedAt = Date.now();
+    while (Date.now() - closedAt < 10000 && (await queue()).includes('op-c')) await sleep(200);
+    check(!(await queue()).includes('op-c'), `a closed tab leaves the queue (${Date.now() - closedAt} ms)`);
+
+    // Drive into the workspace fence (±5 m): the node shortens, then refuses to move, and says so.
+    const [x, y] = await (async () => {
+      const bb = await (await b.$('#pad button[data-drive=fwd]')).boundingBox();
+      return [bb.x + bb.width / 2, bb.y + bb.height / 2];
+    })();
+    await b.mouse.move(x, y);
+    await b.mouse.down();
+    await b.waitForFunction(() => /limited — .*workspace/.test(document.querySelector('#teleop-log').textContent), null, { timeout: 20000 })
+      .catch(() => {});
+    await b.mouse.up();
+    const lines = await b.$$eval('#teleop-log li', (ls) => ls.map((l) => [l.className, l.textContent]));
+    const limited = lines.find(([, t]) => /limited — .*workspace/.test(t));
+    check(!!limited && limited[0] === 'warn', `a drive limited at the workspace fence is a warning with its reason (${limited ? limited[1] : 'none'})`);
+    check(!lines.some(([cls, t]) => cls === 'good' && /clamped/.test(t)), 'no green "clamped" ACK');
+    await b.screenshot({ path: join(artifacts, 'dashboard-teleop-promoted-limited.png') });
+    await b.context().close();
+    await a.context().close();
   }
   check(pageErrors.length === 0, `no page errors (${pageErrors.join('; ')})`);
   await page.close();

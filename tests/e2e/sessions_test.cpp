@@ -431,6 +431,45 @@ TEST_F(SessionsE2E, TwoClaimsAtOnceGrantOneAndQueueTheOtherWhichIsPromotedOnRele
   EXPECT_FALSE(n().audit_eventually("CLAIM_PROMOTED", owner_).empty());
 }
 
+// A closed tab leaves the queue: the claimant's last stream closes and no other opens within
+// control.queue_stream_grace_s. A claimant that never had a stream (the CLI) keeps its place.
+TEST_F(SessionsE2E, AQueuedClaimantWhoseLastStreamClosesLeavesTheQueue) {
+  start("control:\n  queue_stream_grace_s: 1\n");
+  std::string holder = n().token("user", "holder"), tab = n().token("user", "tab-user"),
+              cli = n().token("user", "cli-user");
+  ASSERT_EQ(n().post("/rcan/v1/auth/claim", "{}", holder).status, 200);
+  auto first = std::make_unique<test::Stream>(n().port(), tab);
+  auto second = std::make_unique<test::Stream>(n().port(), tab);
+  HttpReply qt = n().post("/rcan/v1/auth/claim", "{}", tab);
+  HttpReply qc = n().post("/rcan/v1/auth/claim", "{}", cli);
+  ASSERT_EQ(qt.status, 409) << qt.body;
+  ASSERT_EQ(qc.status, 409) << qc.body;
+  auto queued = [&] {
+    std::vector<std::string> subs;
+    json::Value q = parse_json(n().get("/rcan/v1/auth/queue", owner_).body);
+    for (const auto& e : q.get("queue")->as_array())
+      if (const json::Value* u = e.get("user_id"); u && u->is_string())
+        subs.push_back(u->as_string());
+    return subs;
+  };
+  ASSERT_EQ(queued(), (std::vector<std::string>{"tab-user", "cli-user"}));
+  // One of two tabs closes: the other still streams, so the claim stays past the grace.
+  first.reset();
+  std::this_thread::sleep_for(std::chrono::milliseconds(1800));
+  EXPECT_EQ(queued(), (std::vector<std::string>{"tab-user", "cli-user"}));
+  // The last one closes: the claim is dropped, audited and the CLI claimant moves up.
+  second.reset();
+  ASSERT_TRUE(ConfiguredNode::eventually([&] { return queued().size() == 1; }, 5000));
+  EXPECT_EQ(queued(), (std::vector<std::string>{"cli-user"}));
+  auto dropped = n().audit_eventually("CLAIM_DROPPED", owner_);
+  ASSERT_EQ(dropped.size(), 1u);
+  EXPECT_EQ(dropped[0].get("reason")->as_string(), "stream_closed");
+  EXPECT_EQ(dropped[0].get("sub")->as_string(), "tab-user");
+  // The CLI claimant, which never had a stream, keeps its place.
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  EXPECT_EQ(queued(), (std::vector<std::string>{"cli-user"}));
+}
+
 TEST_F(SessionsE2E, ClaimDuringTheHandoffWindowIsDeniedUntilItCloses) {
   start("control:\n  handoff_window_s: 1\n");
   std::string alice = n().token("user", "alice"),

@@ -66,11 +66,12 @@ export const DEFAULT_TIMEOUT_MS = 10000;
 
 // fetch + JSON; an error body (PROFILE §4) becomes an ApiError carrying its error_code. A
 // request not answered within `timeoutMs` is aborted (ApiError TIMEOUT).
-export async function request(method, path, body, { auth = true, text = false, timeoutMs = DEFAULT_TIMEOUT_MS } = {}) {
+// `keepalive`: the request outlives the page (sent from pagehide).
+export async function request(method, path, body, { auth = true, text = false, timeoutMs = DEFAULT_TIMEOUT_MS, keepalive = false } = {}) {
   const headers = {};
   if (auth && token) headers.Authorization = 'Bearer ' + token;
   const ctl = new AbortController();
-  const init = { method, headers, cache: 'no-store', credentials: 'omit', redirect: 'error', signal: ctl.signal };
+  const init = { method, headers, cache: 'no-store', credentials: 'omit', redirect: 'error', signal: ctl.signal, keepalive };
   if (body !== undefined) {
     headers['Content-Type'] = 'application/json';
     init.body = JSON.stringify(body);

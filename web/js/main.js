@@ -6,7 +6,7 @@ import { Stream } from './stream.js';
 import { app, emit, on } from './state.js';
 import { initOverview, renderOverview } from './overview.js';
 import { initLive, onTelemetry, setWorkspace, renderStreamStats } from './live.js';
-import { initTeleop, onTelemetryJoints, teleopSignedOut, renderControl } from './teleop.js';
+import { initTeleop, onTelemetryJoints, teleopSignOut, renderControl } from './teleop.js';
 import { initApprovals, onPending, onEvent as approvalsEvent, refresh as refreshPending } from './approvals.js';
 import { initAudit, loadAudit, setDefaultRrn } from './audit.js';
 
@@ -104,11 +104,11 @@ async function signIn(token, remember) {
   pollTimer = setInterval(() => { refreshStatus(); refreshPending(); renderStreamStats(); }, 2000);
 }
 
-function signOut(why) {
+async function signOut(why) {
   clearInterval(pollTimer);
+  await teleopSignOut();      // releases control and leaves the queue while the token works
   if (app.stream) app.stream.stop();
   app.stream = null;
-  teleopSignedOut();
   api.setToken('', false);
   app.role = '';
   app.claims = null;

@@ -10,6 +10,7 @@ export const app = {
   telemetry: null,     // last telemetry payload
   estop: null,         // last known ESTOP state
   session: null,       // our control session {session_id, heartbeat_timeout_ms, since} while we hold it
+  queued: 0,           // our place in the control queue (1-based) while our claim waits
   bus: new EventTarget(),
 };
 

@@ -1,7 +1,7 @@
 // Teleop: claim/release control, drive (pad and arrow keys), arm joints, gripper. Every action is
 // an ordinary RCAN message through the node's pipeline, so refusals come back with their code.
 import { $, el, setText, toast, fmtNum } from './dom.js';
-import { request, sendCommand, safetyStop, uuid, serverNow } from './api.js';
+import { request, sendCommand, safetyStop, uuid, serverNow, getToken } from './api.js';
 import { app, emit, on } from './state.js';
 
 const DEFAULT_MIN = [-3.1, -2.0, -2.5, -3.1, -2.0, -3.1];
@@ -27,10 +27,23 @@ let driveInFlight = false;
 // "Re-arm after ESTOP"); the page re-arms on the operator's next press, never from a hold.
 let needRearm = false;
 
-function log(text, ok) {
+// `kind`: true (done), false (refused or failed) or 'warn' (done, but not as asked).
+function log(text, kind) {
   const list = $('#teleop-log');
-  list.insertBefore(el('li', { class: ok ? 'good' : 'bad' }, `${new Date().toLocaleTimeString()}  ${text}`), list.firstChild);
+  const cls = kind === 'warn' ? 'warn' : kind ? 'good' : 'bad';
+  list.insertBefore(el('li', { class: cls }, `${new Date().toLocaleTimeString()}  ${text}`), list.firstChild);
   while (list.children.length > 30) list.removeChild(list.lastChild);
+}
+
+// A command the safety core limited (clamped to a limit, shortened or stopped at the workspace
+// fence) is accepted but not done as asked: a warning with the node's reason, never a green ACK.
+function limitedNote(label, res) {
+  const p = (res && res.payload) || {};
+  if (!p.clamped) return false;
+  const why = typeof p.clamped === 'string' ? p.clamped : 'a safety limit';
+  log(`${label}: limited — ${why}`, 'warn');
+  toast(`${label} limited: ${why}`, 'warn');
+  return true;
 }
 
 let lastSent = 0;
@@ -39,8 +52,7 @@ async function act(label, fn) {
   lastSent = Date.now();
   try {
     const res = await fn();
-    const p = (res && res.payload) || {};
-    log(`${label}: ${res && (res.type || res.message_type) || 'OK'}${p.clamped ? ' (clamped)' : ''}`, true);
+    if (!limitedNote(label, res)) log(`${label}: ${res && (res.type || res.message_type) || 'OK'}`, true);
     return res;
   } catch (e) {
     log(`${label}: ${e.code}${e.reason ? ' / ' + e.reason : ''} — ${e.message}`, false);
@@ -81,8 +93,9 @@ async function driveOnce(h) {
   try {
     const res = await sendCommand('drive', { linear: m[0], angular: m[1], duration_ms: DRIVE_MS },
       { ttlMs: DRIVE_TTL_MS, timeoutMs: DRIVE_TIMEOUT_MS });
-    const p = (res && res.payload) || {};
-    if (!h.logged) log(`drive ${h.dir}: ${res && (res.type || res.message_type) || 'OK'}${p.clamped ? ' (clamped)' : ''}`, true);
+    // One line per hold, and one warning the first time the hold is limited.
+    if (!h.warned && limitedNote(`drive ${h.dir}`, res)) h.warned = true;
+    else if (!h.logged) log(`drive ${h.dir}: ${res && (res.type || res.message_type) || 'OK'}`, true);
     h.logged = true;
   } catch (e) {
     log(`drive ${h.dir}: ${e.code}${e.reason ? ' / ' + e.reason : ''} — ${e.message}`, false);
@@ -102,7 +115,7 @@ async function startHold(dir, key) {
   if (hold && hold.dir === dir && hold.key === key) return;
   endHold('another direction');
   if (!streamLive()) { log(`drive ${dir}: not sent — the stream is not live`, false); return; }
-  const h = { dir, key, timer: 0, moved: false, logged: false };
+  const h = { dir, key, timer: 0, moved: false, logged: false, warned: false };
   hold = h;
   if (needRearm && !(await rearm())) { if (hold === h) hold = null; return; }
   if (hold !== h) return;      // let go while re-arming
@@ -145,10 +158,72 @@ export function renderControl() {
   const holder = Array.isArray(s.sessions) ? s.sessions[0] : null;
   let text;
   if (app.session) text = `You hold control (session ${app.session.session_id.slice(0, 8)}…). The deadman needs a heartbeat: this page sends one while it is open.`;
+  else if (app.queued) text = `You are number ${app.queued} in the queue for control${holder ? ` (held by ${holder.role || '?'} ${holder.user_id || ''})` : ''}. This page takes over and starts heart-beating when the node promotes you; closing it leaves the queue.`;
   else if (holder) text = `Held by ${holder.role || '?'} ${holder.user_id || ''}. Your motion commands are refused (CONTROL_CONFLICT) unless your role pre-empts theirs when you claim.`;
   else text = 'Nobody holds control: any authorised principal may drive. Claim it to keep others off.';
   setText($('#control-state'), text);
-  $('#release').disabled = !app.session;
+  const rel = $('#release');
+  rel.disabled = !app.session && !app.queued;
+  setText(rel, !app.session && app.queued ? 'Leave queue' : 'Release');
+}
+
+// This page holds the session from now on: heartbeats keep the deadman fed.
+function takeSession(p) {
+  app.session = { session_id: p.session_id, heartbeat_timeout_ms: p.heartbeat_timeout_ms, since: Date.now() };
+  app.queued = 0;
+  needRearm = false;
+  startHeartbeat(p.heartbeat_timeout_ms);
+}
+
+async function claim() {
+  // A claim is the operator's own action: it also re-arms a session armed before an ESTOP.
+  lastSent = Date.now();
+  try {
+    const res = await request('POST', '/rcan/v1/auth/claim', { source_ruri: 'rcan://local/dashboard', rearm: true });
+    const p = (res && res.payload) || {};
+    log(`claim: ${res && (res.type || res.message_type) || 'OK'}`, true);
+    if (p.session_id) takeSession(p);
+  } catch (e) {
+    const p = (e.body && e.body.payload) || {};
+    if (p.queued) {
+      app.queued = p.queue_position || 1;
+      log(`claim: queued at position ${app.queued} — this page is told when control passes to you`, 'warn');
+    } else {
+      log(`claim: ${e.code}${e.reason ? ' / ' + e.reason : ''} — ${e.message}`, false);
+      if (e.status === 401) toast(`claim: ${e.code}`, 'bad');
+    }
+  }
+  renderControl();
+  emit('refresh');
+}
+
+async function releaseOrLeave() {
+  if (app.session) {
+    endHold('release');
+    const sid = app.session.session_id;
+    const res = await act('release', () => request('DELETE', '/rcan/v1/auth/release', { session_id: sid }));
+    if (res) { app.session = null; stopHeartbeat(); }
+  } else if (app.queued) {
+    const res = await act('leave queue', () => request('DELETE', '/rcan/v1/auth/queue'));
+    if (res) app.queued = 0;
+  }
+  renderControl();
+  emit('refresh');
+}
+
+// The node's word on our place: promoted (we hold control now) or dropped from the queue.
+function onControlEvent(m) {
+  if (m.event === 'PROMOTED' && m.session_id) {
+    takeSession(m);
+    log(`promoted from the queue: you hold control (session ${String(m.session_id).slice(0, 8)}…)`, true);
+    toast('You now hold control of the robot.', 'good');
+    renderControl();
+    emit('refresh');
+  } else if (m.event === 'CLAIM_DROPPED' && app.queued) {
+    app.queued = 0;
+    log(`left the queue: ${m.reason || 'dropped by the node'}`, 'warn');
+    renderControl();
+  }
 }
 
 // The speed sliders follow the safety core's limits (faster requests would only be clamped).
@@ -214,25 +289,18 @@ export function initTeleop() {
   buildJoints();
   $('#lin-speed').addEventListener('input', (e) => setText($('#lin-out'), `${Number(e.target.value).toFixed(1)} m/s`));
   $('#ang-speed').addEventListener('input', (e) => setText($('#ang-out'), `${Number(e.target.value).toFixed(1)} rad/s`));
-  $('#claim').addEventListener('click', async () => {
-    // A claim is the operator's own action: it also re-arms a session armed before an ESTOP.
-    const res = await act('claim', () => request('POST', '/rcan/v1/auth/claim', { source_ruri: 'rcan://local/dashboard', rearm: true }));
-    if (res && res.payload && res.payload.session_id) {
-      app.session = { session_id: res.payload.session_id, heartbeat_timeout_ms: res.payload.heartbeat_timeout_ms, since: Date.now() };
-      needRearm = false;
-      startHeartbeat(res.payload.heartbeat_timeout_ms);
+  $('#claim').addEventListener('click', claim);
+  $('#release').addEventListener('click', releaseOrLeave);
+  // Closing or leaving the page gives control back and leaves the queue (the request outlives
+  // the page); the node also drops a queued claim whose last stream closed.
+  window.addEventListener('pagehide', () => {
+    const token = getToken();
+    if (!token) return;
+    if (app.session) {
+      request('DELETE', '/rcan/v1/auth/release', { session_id: app.session.session_id }, { keepalive: true }).catch(() => {});
+    } else if (app.queued) {
+      request('DELETE', '/rcan/v1/auth/queue', undefined, { keepalive: true }).catch(() => {});
     }
-    renderControl();
-    emit('refresh');
-  });
-  $('#release').addEventListener('click', async () => {
-    if (!app.session) return;
-    endHold('release');
-    const sid = app.session.session_id;
-    const res = await act('release', () => request('DELETE', '/rcan/v1/auth/release', { session_id: sid }));
-    if (res) { app.session = null; stopHeartbeat(); }
-    renderControl();
-    emit('refresh');
   });
   // The pad: pressing a button (pointer, Enter or Space) or an arrow key while the pad has
   // focus starts a hold; every way it can end stops the robot.
@@ -273,6 +341,7 @@ export function initTeleop() {
   on('stream-event', (m) => {
     const name = m && (m.event || m.type);
     if (name === 'ESTOP') { needRearm = true; endHold('ESTOP'); }
+    onControlEvent(m);
     if (name === 'PREEMPTED' || name === 'SESSION_EXPIRED' || name === 'SESSION_REVOKED' || name === 'NETWORK_LOSS_SAFE_STOP') endHold(name);
   });
   on('estop-pressed', () => { needRearm = true; endHold('ESTOP'); });
@@ -316,8 +385,16 @@ export function initTeleop() {
   });
 }
 
-export function teleopSignedOut() {
+// Signing out gives control back and leaves the queue first, while the token still works.
+export async function teleopSignOut() {
   endHold('signed out');
   stopHeartbeat();
+  const sid = app.session && app.session.session_id;
+  const queued = app.queued;
   app.session = null;
+  app.queued = 0;
+  try {
+    if (sid) await request('DELETE', '/rcan/v1/auth/release', { session_id: sid }, { timeoutMs: 3000 });
+    else if (queued) await request('DELETE', '/rcan/v1/auth/queue', undefined, { timeoutMs: 3000 });
+  } catch (_) { /* the token may already be refused; the node's timers end what is left */ }
 }

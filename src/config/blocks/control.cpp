@@ -37,6 +37,7 @@ Table<ControlConfig> control_rows() {
       C::field("handoff_window_s", Int(1, 3600), &ControlConfig::handoff_window_s),
       C::field("queue_max", Int(0, 1024), &ControlConfig::queue_max),
       C::field("queue_wait_s", Int(1, 86400), &ControlConfig::queue_wait_s),
+      C::field("queue_stream_grace_s", Int(0, 86400), &ControlConfig::queue_stream_grace_s),
       C::field("max_session_s", Int(0, 31'536'000), &ControlConfig::max_session_s),
       C::field("transfer_window_s", Int(1, 31'536'000), &ControlConfig::transfer_window_s),
       C::field("consent_ttl_s", Int(1, 31'536'000), &ControlConfig::consent_ttl_s),

@@ -170,6 +170,7 @@ void Node::control_tick() {
         .detail("requester", c.requester_sub)
         .write();
   }
+  drop_streamless_claims();
   announce_control_changes();
 }
 

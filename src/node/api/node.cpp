@@ -328,6 +328,11 @@ void Node::register_stream(const std::shared_ptr<StreamState>& st) {
 }
 
 void Node::unregister_stream(const std::shared_ptr<StreamState>& st) {
+  std::string key;
+  {
+    MutexLock lock(st->mu);
+    if (st->principal) key = st->principal->key();
+  }
   MutexLock lock(streams_mu_);
   for (auto it = streams_.begin(); it != streams_.end(); ++it) {
     if (*it == st) {
@@ -335,6 +340,31 @@ void Node::unregister_stream(const std::shared_ptr<StreamState>& st) {
       break;
     }
   }
+  if (!key.empty()) closed_streams_of_[key] = svc_.clock.mono_ms();
+}
+
+void Node::drop_streamless_claims() {
+  const int64_t now = svc_.clock.mono_ms();
+  const int64_t grace = svc_.sessions.options().queue_stream_grace_ms;
+  std::vector<std::string> due;
+  {
+    MutexLock lock(streams_mu_);
+    for (auto it = closed_streams_of_.begin(); it != closed_streams_of_.end();) {
+      if (now - it->second < grace) {
+        ++it;
+        continue;
+      }
+      due.push_back(it->first);
+      it = closed_streams_of_.erase(it);
+    }
+    if (due.empty()) return;
+    for (auto& st : streams_) {  // a stream of its own again (another tab, a reconnect)
+      MutexLock sl(st->mu);
+      if (st->closed || !st->principal) continue;
+      std::erase(due, st->principal->key());
+    }
+  }
+  for (const auto& key : due) (void)svc_.sessions.drop_queued(key, "stream_closed");
 }
 
 void Node::pump() {

@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <functional>
+#include <map>
 #include <memory>
 #include <string>
 #include <string_view>
@@ -107,6 +108,10 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   void stream_text(const std::shared_ptr<StreamState>& st, std::string text);
   void register_stream(const std::shared_ptr<StreamState>& st) EXCLUDES(streams_mu_, pump_mu_);
   void unregister_stream(const std::shared_ptr<StreamState>& st) EXCLUDES(streams_mu_);
+  // A closed tab leaves the control queue: a principal whose last stream closed and who opened
+  // none again within control.queue_stream_grace_s loses its queued claim (CLAIM_DROPPED,
+  // docs/SESSIONS.md). Called by the control tick.
+  void drop_streamless_claims() EXCLUDES(streams_mu_);
   // Closes (1008, after an AUTH_INVALID `token_revoked` frame) every stream whose CONNECT
   // principal the revocation list now names.
   void close_revoked_streams() EXCLUDES(streams_mu_);
@@ -123,6 +128,8 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   Worker worker_{1};
   mutable Mutex streams_mu_;
   std::vector<std::shared_ptr<StreamState>> streams_ GUARDED_BY(streams_mu_);
+  // Principals (key) whose stream closed, and when: drop_streamless_claims looks at them.
+  std::map<std::string, int64_t> closed_streams_of_ GUARDED_BY(streams_mu_);
   std::atomic<bool> running_{false};
   std::thread pump_;
   Mutex pump_mu_;

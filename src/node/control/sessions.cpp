@@ -343,6 +343,22 @@ bool SessionTable::leave_queue(const Principal& p) {
   return false;
 }
 
+bool SessionTable::drop_queued(const std::string& principal_key, const std::string& reason) {
+  MutexLock lock(mu_);
+  for (auto it = queue_.begin(); it != queue_.end(); ++it) {
+    if (it->principal_key != principal_key) continue;
+    ControlChange c;
+    c.event = ControlEvent::kQueueDrop;
+    c.queued = *it;
+    c.reason = reason;
+    changes_.push_back(std::move(c));
+    queue_.erase(it);
+    ++version_;
+    return true;
+  }
+  return false;
+}
+
 void SessionTable::absorb_wall_step_locked(int64_t now_mono_ms, int64_t now_wall_ms) {
   if (now_wall_ms == 0) return;
   if (anchor_mono_ms_ >= 0) {

@@ -47,6 +47,9 @@ struct ControlOptions {
   int64_t handoff_window_ms = 30'000;
   size_t queue_max = 16;
   int64_t queue_wait_ms = 300'000;  // a queued claim is dropped after this long
+  // A queued claimant whose last stream closed (a closed tab) leaves the queue after this long
+  // without a stream of its own (the node's control tick calls drop_queued).
+  int64_t queue_stream_grace_ms = 5'000;
   FleetPolicy fleet_policy = FleetPolicy::kRole;
   uint32_t guest_session_s = 15 * 60;
   int64_t max_session_ms = 0;  // caps every role's TTL (control.max_session_s); 0 = role TTLs
@@ -148,6 +151,9 @@ class SessionTable {
       EXCLUDES(mu_);
   // Leaves the queue (the claimant gave up). True when it was queued.
   bool leave_queue(const Principal& p) EXCLUDES(mu_);
+  // Drops this principal's queued claim, announced and audited as CLAIM_DROPPED with `reason`
+  // (take_changes). True when it was queued.
+  bool drop_queued(const std::string& principal_key, const std::string& reason) EXCLUDES(mu_);
 
   // Expiries, window closes, lease ends. Call often (the node does every 100 ms).
   void tick(int64_t now_mono_ms, int64_t now_wall_ms) EXCLUDES(mu_);
