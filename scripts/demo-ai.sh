@@ -8,7 +8,7 @@
 #      one denied, one left to time out;
 #   3. the dispatched command's watermark verified over the public endpoint, and the audit
 #      chain verified offline with only its secret.
-# Usage: scripts/demo-ai.sh [BIN_DIR]   (default build/release/bin; needs curl, openssl, python3)
+# Usage: scripts/demo-ai.sh [BIN_DIR]   (default build/release/bin; needs curl, python3)
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
@@ -46,9 +46,7 @@ say "identity: robot keys, audit chain secret, a token issuer"
 mkdir -p "$WORK/data"
 "$RCAN" keys generate --dir "$WORK/data/keys" >/dev/null
 "$RCAN" audit new-secret --out "$WORK/data/audit.secret" >/dev/null
-openssl genpkey -algorithm ed25519 -out "$WORK/issuer.pem" 2>/dev/null
-chmod 600 "$WORK/issuer.pem"
-openssl pkey -in "$WORK/issuer.pem" -pubout -out "$WORK/issuer.pub.pem" 2>/dev/null
+"$RCAN" keys issuer --dir "$WORK/issuer" --name demo-issuer >/dev/null
 
 say "the planner brain layer (built-in simulated layer)"
 "$RCAND" --sim-layer --port 0 --layer planner --confidence 0.93 2>"$WORK/planner.log" &
@@ -66,7 +64,7 @@ capabilities: [status, chat, teleop, nav, arm]
 safety: {local_safety_wins: true, max_linear_speed_mps: 0.5}
 security:
   jwt:
-    issuers: [{issuer: demo-issuer, key_file: $WORK/issuer.pub.pem}]
+    issuers: [{issuer: demo-issuer, key_file: $WORK/issuer/ed25519.pub.pem}]
 agent:
   confidence_gates:
     - {scope: nav, min_confidence: 0.8, on_fail: escalate}
@@ -90,7 +88,7 @@ URL=http://127.0.0.1:$PORT
 echo "rcand at $URL"
 
 token() {  # sub role scopes
-  "$RCAN" token issue --key "$WORK/issuer.pem" --iss demo-issuer --sub "$1" --role "$2" --aud "$RURI" --scope "$3" --ttl 1h
+  "$RCAN" token issue --key "$WORK/issuer/ed25519.seed" --iss demo-issuer --sub "$1" --role "$2" --aud "$RURI" --scope "$3" --ttl 1h
 }
 token alice owner status,control,config >"$WORK/owner.token"
 token agent-bob leasee status,control >"$WORK/agent.token"

@@ -21,6 +21,10 @@ constexpr const char* kHelp =
     "  rcan keys show --dir D [--json]\n"
     "      Prints the public keys: kid (first 8 hex of SHA-256 of the ML-DSA-65 pk), the\n"
     "      rcan-py JWK of the ML-DSA-65 key, and the Ed25519 key (hex, PEM, rcan-py kid).\n"
+    "  rcan keys issuer --dir D [--name ISSUER]\n"
+    "      A JWT issuer's Ed25519 key pair: D/ed25519.seed (0600; `rcan token issue --key`\n"
+    "      signs with it) and D/ed25519.pub.pem (what security.jwt.issuers[].key_file names).\n"
+    "      Existing files are kept. Prints the config line.\n"
     "  Exit: 0 ok, 1 failure (file exists, bad permissions…), 2 usage.\n";
 
 void print_summary(const keys::PublicKeys& pub, const std::string& dir, bool as_json) {
@@ -108,10 +112,30 @@ int keys_main(const Args& args) {
     print_summary(*pub, o.get("dir"), o.has("json"));
     return 0;
   }
-  return usage_error("keys", "unknown subcommand " + sub + " (generate | derive | show)");
+  if (sub == "issuer") {
+    Options o(rest, {}, {"dir", "name"});
+    if (!o.ok()) return usage_error("keys issuer", o.error());
+    if (o.get("dir").empty() || !o.positional().empty())
+      return usage_error("keys issuer", "--dir D is required");
+    const std::string dir = o.get("dir");
+    auto made = keys::ensure_issuer_dir(dir);
+    if (!made.ok()) {
+      std::fprintf(stderr, "rcan keys issuer: %s\n", made.error().message.c_str());
+      return 1;
+    }
+    const std::string name = o.get("name").empty() ? "my-issuer" : o.get("name");
+    std::cout << (*made ? "created " : "kept ") << dir << "/" << keys::kIssuerSeedFile
+              << " (0600) and " << dir << "/" << keys::kIssuerPubFile << "\n"
+              << "config (security.jwt.issuers):\n  - {issuer: " << name << ", key_file: " << dir
+              << "/" << keys::kIssuerPubFile << "}\n"
+              << "tokens: rcan token issue --key " << dir << "/" << keys::kIssuerSeedFile
+              << " --iss " << name << " --aud RURI --sub NAME --role user\n";
+    return 0;
+  }
+  return usage_error("keys", "unknown subcommand " + sub + " (generate | derive | show | issuer)");
 }
 
-const Registration kReg{"keys", "generate, derive and show robot identity keys", &keys_main};
+const Registration kReg{"keys", "robot identity keys and token issuer keys", &keys_main};
 
 }  // namespace
 }  // namespace rcan::cli

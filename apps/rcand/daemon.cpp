@@ -122,8 +122,7 @@ Status Daemon::open_identity() {
   auto trust = jwt::TrustStore::from_config(cfg_.security.jwt.issuers);
   if (!trust.ok()) return failed("security.jwt.issuers: ", trust.error());
   if (local_) {
-    if (Status s =
-            ensure_issuer_and_token(*local_, cfg_.data_dir, cfg_.ruri, *trust, info_.token_created);
+    if (Status s = ensure_issuer_and_token(*local_, cfg_.ruri, *trust, info_.token_created);
         !s.ok())
       return s;
   }

@@ -77,15 +77,10 @@ Result<LocalIdentity> ensure_local_identity(const std::string& data_dir) {
   return id;
 }
 
-Status ensure_issuer_and_token(const LocalIdentity& id, const std::string& data_dir,
-                               const std::string& ruri, jwt::TrustStore& trust,
-                               bool& token_created) {
-  if (Status s = make_private_dir(data_dir + "/issuer"); !s.ok()) return s;
-  if (!fs::exists(id.issuer_seed_file)) {
-    Bytes seed = ed25519::random_seed();
-    if (Status s = keys::write_new_file(id.issuer_seed_file, seed, 0600); !s.ok()) return s;
-    secure_wipe(seed.data(), seed.size());
-  }
+Status ensure_issuer_and_token(const LocalIdentity& id, const std::string& ruri,
+                               jwt::TrustStore& trust, bool& token_created) {
+  if (auto made = keys::ensure_issuer_dir(fs::path(id.issuer_seed_file).parent_path()); !made.ok())
+    return made.error();
   auto signing = jwt::SigningKey::from_file(id.issuer_seed_file);
   if (!signing.ok()) return signing.error();
   auto verify = signing->verification_key();
@@ -118,8 +113,13 @@ Status ensure_issuer_and_token(const LocalIdentity& id, const std::string& data_
   return Status::Ok();
 }
 
-Result<keys::RobotKeys> robot_keys(const config::NodeConfig& cfg, bool embedded) {
-  if (embedded && !fs::exists(cfg.security.key_dir + "/" + std::string(keys::kMldsaSeedFile))) {
+// What a configured robot without its identity should run.
+std::string init_hint(const config::NodeConfig& cfg) {
+  return "; `rcand init --dir " + cfg.data_dir + "` creates what a configured robot needs";
+}
+
+Result<keys::RobotKeys> robot_keys(const config::NodeConfig& cfg, bool create) {
+  if (create && !fs::exists(cfg.security.key_dir + "/" + std::string(keys::kMldsaSeedFile))) {
     auto k = keys::generate();
     if (!k.ok()) return k.error();
     if (Status s = keys::write_dir(cfg.security.key_dir, *k); !s.ok()) return s.error();
@@ -128,13 +128,14 @@ Result<keys::RobotKeys> robot_keys(const config::NodeConfig& cfg, bool embedded)
   if (!loaded.ok())
     return Error(ErrorCode::kInternal,
                  "robot keys in " + cfg.security.key_dir + ": " + loaded.error().message +
-                     " (create them with: rcan keys generate --dir " + cfg.security.key_dir + ")");
+                     " (create them with: rcan keys generate --dir " + cfg.security.key_dir + ")" +
+                     (create ? "" : init_hint(cfg)));
   return loaded;
 }
 
-Result<std::string> chain_secret(const config::NodeConfig& cfg, bool embedded) {
+Result<std::string> chain_secret(const config::NodeConfig& cfg, bool create) {
   const std::string& file = cfg.security.audit.chain_secret_file;
-  if (embedded && !fs::exists(file)) {
+  if (create && !fs::exists(file)) {
     if (Status s = audit::create_secret_file(file); !s.ok()) return s.error();
   }
   auto secret = audit::load_chain_secret(file);
@@ -142,6 +143,7 @@ Result<std::string> chain_secret(const config::NodeConfig& cfg, bool embedded) {
     std::string msg = secret.error().message;
     if (msg.find("new-secret") == std::string::npos)
       msg += " (create one with: rcan audit new-secret --out " + file + ")";
+    if (!create) msg += init_hint(cfg);
     return Error(ErrorCode::kInternal, msg);
   }
   return secret;

@@ -34,16 +34,16 @@ inline constexpr int64_t kOwnerTokenTtlS = 24 * 3600;
 // The local issuer's key (created once), trusted as `id.issuer` in `trust`, and an OWNER token
 // for `ruri` (each with a fresh jti; written on the first run and again whenever the last one
 // has expired; `token_created` says whether this run wrote it).
-Status ensure_issuer_and_token(const LocalIdentity& id, const std::string& data_dir,
-                               const std::string& ruri, jwt::TrustStore& trust,
-                               bool& token_created);
+Status ensure_issuer_and_token(const LocalIdentity& id, const std::string& ruri,
+                               jwt::TrustStore& trust, bool& token_created);
 
-// The robot's keys from security.key_dir. The embedded default creates them on its first run;
-// a configured robot must have them (the error says how to make them).
-Result<keys::RobotKeys> robot_keys(const config::NodeConfig& cfg, bool embedded);
+// The robot's keys from security.key_dir, created when missing and `create` is set (the
+// embedded default's first run, `rcand init`); otherwise missing keys are an error that says
+// how to make them (`rcand init`).
+Result<keys::RobotKeys> robot_keys(const config::NodeConfig& cfg, bool create);
 
-// The audit chain secret from security.audit.chain_secret_file; created on the embedded
-// default's first run, required otherwise (the error says how to make one).
-Result<std::string> chain_secret(const config::NodeConfig& cfg, bool embedded);
+// The audit chain secret from security.audit.chain_secret_file; created when missing and
+// `create` is set, else required (the error says how to make one).
+Result<std::string> chain_secret(const config::NodeConfig& cfg, bool create);
 
 }  // namespace rcan::rcand

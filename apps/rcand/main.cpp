@@ -29,19 +29,23 @@ const char* malloc_conf = "background_thread:true";
 using namespace rcan;
 
 int sim_layer_main(int argc, char** argv);  // sim_layer.cpp: `rcand --sim-layer …`
+int init_main(int argc, char** argv);       // init.cpp: `rcand init …`
 
 namespace {
 
 constexpr const char* kUsage =
     "usage: rcand [--config FILE] [--port N] [--bind ADDR] [--data-dir DIR] [--log-level "
     "debug|info|warn|error]\n"
+    "       rcand init [--dir D] [--name NAME] … (a configured robot; rcand init --help)\n"
     "       rcand --sim-layer [--port N] [--layer reactive|fast|planner] [--confidence C] "
     "[--delay-ms D]\n"
     "\n"
     "Without --config, rcand runs the embedded simulated robot. On its first run it creates, in\n"
     "the data directory (default $RCAND_DATA_DIR, else ~/.local/share/rcand): robot keys, the\n"
     "audit chain secret, a local token issuer and an OWNER token (owner.token, mode 0600).\n"
-    "SIGTERM or Ctrl-C stops it gracefully (drains requests, flushes the audit log).\n";
+    "With --config, the robot's identity files must exist: `rcand init --dir D` creates them\n"
+    "and a commented robot.rcan.yaml. SIGTERM or Ctrl-C stops it gracefully (drains requests,\n"
+    "flushes the audit log).\n";
 
 int fail(const std::string& what) {
   log(LogLevel::kError, "startup_failed", json::Object{{"error", what}});
@@ -111,6 +115,7 @@ sigset_t block_signals() {
 
 int main(int argc, char** argv) {
   if (argc > 1 && std::strcmp(argv[1], "--sim-layer") == 0) return sim_layer_main(argc, argv);
+  if (argc > 1 && std::strcmp(argv[1], "init") == 0) return init_main(argc, argv);
   int exit_code = 2;
   std::optional<std::string> log_level;
   auto options = parse_args(argc, argv, log_level, exit_code);

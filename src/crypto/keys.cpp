@@ -182,12 +182,10 @@ Result<RobotKeys> generate() {
   return k;
 }
 
-Status write_dir(const std::string& dir, const RobotKeys& keys) {
-  if (keys.mldsa65_seed.size() != mldsa65::kSeedBytes ||
-      keys.ed25519_seed.size() != ed25519::kSeedBytes ||
-      keys.pub.mldsa65_pk.size() != mldsa65::kPublicKeyBytes ||
-      keys.pub.ed25519_pk.size() != ed25519::kPublicKeyBytes)
-    return Error(ErrorCode::kInternal, "incomplete key set");
+namespace {
+
+// `dir` as a key directory: created with mode 0700 when absent, else it must be a directory.
+Status key_directory(const std::string& dir) {
   struct stat st {};
   if (::stat(dir.c_str(), &st) != 0) {
     if (errno != ENOENT) return io_error("cannot stat", dir, errno);
@@ -195,6 +193,19 @@ Status write_dir(const std::string& dir, const RobotKeys& keys) {
   } else if (!S_ISDIR(st.st_mode)) {
     return Error(ErrorCode::kSchemaValidationFailed, dir + " exists and is not a directory", dir);
   }
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status write_dir(const std::string& dir, const RobotKeys& keys) {
+  if (keys.mldsa65_seed.size() != mldsa65::kSeedBytes ||
+      keys.ed25519_seed.size() != ed25519::kSeedBytes ||
+      keys.pub.mldsa65_pk.size() != mldsa65::kPublicKeyBytes ||
+      keys.pub.ed25519_pk.size() != ed25519::kPublicKeyBytes)
+    return Error(ErrorCode::kInternal, "incomplete key set");
+  if (Status s = key_directory(dir); !s.ok()) return s;
+  struct stat st {};
   const std::string files[] = {join(dir, kMldsaSeedFile), join(dir, kMldsaPubFile),
                                join(dir, kEd25519SeedFile), join(dir, kEd25519PubFile)};
   for (const auto& f : files) {
@@ -308,6 +319,39 @@ Result<std::string> ed25519_kid(std::span<const uint8_t> pk) {
   auto pem = ed25519::public_key_to_pem(pk);
   if (!pem.ok()) return pem.error();
   return sha256_hex(*pem).substr(0, 8);
+}
+
+Result<bool> ensure_issuer_dir(const std::string& dir) {
+  if (Status s = key_directory(dir); !s.ok()) return s.error();
+  const std::string seed_file = join(dir, kIssuerSeedFile), pem_file = join(dir, kIssuerPubFile);
+  struct stat st {};
+  bool created = false;
+  if (::lstat(seed_file.c_str(), &st) != 0) {
+    Bytes seed = ed25519::random_seed();
+    Status s = write_new_file(seed_file, seed, 0600);
+    secure_wipe(seed.data(), seed.size());
+    if (!s.ok()) return s.error();
+    created = true;
+  }
+  auto seed = read_secret_file(seed_file, ed25519::kSeedBytes);
+  if (!seed.ok()) return seed.error();
+  auto pk = ed25519::public_key_from_seed(seed->span());
+  if (!pk.ok()) return pk.error();
+  auto pem = ed25519::public_key_to_pem(*pk);
+  if (!pem.ok()) return pem.error();
+  if (::lstat(pem_file.c_str(), &st) == 0) {
+    auto have = read_public_file(pem_file, 4096);
+    if (!have.ok()) return have.error();
+    if (std::string(have->begin(), have->end()) != *pem)
+      return Error(ErrorCode::kSchemaValidationFailed,
+                   pem_file + " is not the public key of " + seed_file, pem_file);
+    return created;
+  }
+  if (Status s = write_new_file(pem_file,
+                                {reinterpret_cast<const uint8_t*>(pem->data()), pem->size()}, 0644);
+      !s.ok())
+    return s.error();
+  return created;
 }
 
 }  // namespace rcan::keys

@@ -80,6 +80,14 @@ Result<RobotKeys> generate();
 // Writes the four files into `dir` (created with mode 0700 when absent). Fails, writing
 // nothing new, when any of the files already exists.
 Status write_dir(const std::string& dir, const RobotKeys& keys);
+// A JWT issuer's Ed25519 key pair in `dir` (created 0700 when absent): ed25519.seed (0600, the
+// key `rcan token issue --key` signs with) and ed25519.pub.pem (its SubjectPublicKeyInfo PEM,
+// what security.jwt.issuers[].key_file names). Existing files are kept, never replaced; a seed
+// without its PEM gets one, and a PEM that is not the seed's public key is an error. True when
+// this call created the seed.
+inline constexpr std::string_view kIssuerSeedFile = "ed25519.seed";
+inline constexpr std::string_view kIssuerPubFile = "ed25519.pub.pem";
+Result<bool> ensure_issuer_dir(const std::string& dir);
 // Loads and cross-checks a key directory (secrets included).
 Result<RobotKeys> load_dir(const std::string& dir);
 // Loads only the public files of a key directory (no permission requirements).
