@@ -135,8 +135,12 @@ int main(int argc, char** argv) {
   }
   std::string verb = argv[1];
   Args args(argv + 2, argv + argc);
+  // `--help` (or -h) anywhere after the verb — `rcan token issue --help` — prints the verb's
+  // usage, which covers its sub-verbs.
+  const bool help = std::any_of(args.begin(), args.end(),
+                                [](const std::string& a) { return a == "--help" || a == "-h"; });
   for (const auto& v : verbs()) {
-    if (v.name == verb) return v.fn(args);
+    if (v.name == verb) return help ? v.fn(Args{"--help"}) : v.fn(args);
   }
   std::fprintf(stderr, "rcan: unknown verb '%s' (try 'rcan --help')\n", verb.c_str());
   return 2;

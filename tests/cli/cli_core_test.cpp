@@ -1,6 +1,8 @@
 // The rcan CLI's first verbs, run as a real process: ruri parse, json canonical, message check.
 #include <gtest/gtest.h>
 
+#include <sstream>
+
 #include "rcan/json.h"
 #include "test_support.h"
 
@@ -50,6 +52,38 @@ TEST(CliRuri, UsageErrorsExitTwo) {
   EXPECT_EQ(test::run_cli({"ruri", "frobnicate", "x"}).exit_code, 2);
   EXPECT_EQ(test::run_cli({"no-such-verb"}).exit_code, 2);
   EXPECT_EQ(test::run_cli({"ruri", "--help"}).exit_code, 0);
+}
+
+// Every verb, and every sub-verb after it, answers --help (and -h) with its usage on stdout and
+// exit 0 — never "unknown option --help" — and does nothing else (no request, no file).
+TEST(CliHelp, EveryVerbAndSubVerbAnswersHelp) {
+  auto top = test::run_cli({"--help"});
+  ASSERT_EQ(top.exit_code, 0);
+  std::vector<std::string> verbs;
+  std::istringstream lines(top.out);
+  for (std::string line; std::getline(lines, line);)
+    if (line.size() > 2 && line.rfind("  ", 0) == 0 && line[2] >= 'a' && line[2] <= 'z')
+      verbs.push_back(line.substr(2, line.find(' ', 2) - 2));
+  ASSERT_GE(verbs.size(), 25u) << top.out;
+  const std::vector<std::vector<std::string>> subs = {
+      {"token", "issue"},      {"token", "inspect"}, {"token", "revoke"},    {"keys", "generate"},
+      {"keys", "issuer"},      {"audit", "verify"},  {"audit", "export"},    {"fleet", "estop"},
+      {"fleet", "run"},        {"lease", "grant"},   {"transfer", "accept"}, {"consent", "grant"},
+      {"message", "check"},    {"ruri", "parse"},    {"json", "canonical"},  {"thoughts", "get"},
+      {"watermark", "verify"}, {"command", "move"}};
+  std::vector<std::vector<std::string>> all;
+  for (const auto& v : verbs) all.push_back({v});
+  all.insert(all.end(), subs.begin(), subs.end());
+  for (auto argv : all) {
+    for (const char* flag : {"--help", "-h"}) {
+      auto a = argv;
+      a.push_back(flag);
+      auto r = test::run_cli(a, {}, {"RCAN_URL=http://127.0.0.1:1"});
+      EXPECT_EQ(r.exit_code, 0) << a[0] << " " << (a.size() > 2 ? a[1] : "") << " " << flag << ": "
+                                << r.err;
+      EXPECT_NE(r.out.find("usage"), std::string::npos) << a[0] << " " << flag << ": " << r.out;
+    }
+  }
 }
 
 TEST(CliJson, CanonicalBytesOnStdout) {
