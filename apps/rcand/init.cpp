@@ -185,7 +185,7 @@ std::string template_yaml(const InitOptions& o, const std::string& ruri) {
   y += "    sync: per_group\n";
   y += "    # Segments of max_segment_bytes, the next one preallocated; retention bounds the\n";
   y += "    # total. Small disks: lower both.\n";
-  y += "    # max_segment_bytes: 67108864\n";
+  y += "    # max_segment_bytes: 16777216\n";
   y += "    # retention: {max_bytes: 0, max_age_days: 0}   # 0 = unlimited\n\n";
   y += "safety:\n";
   y += "  local_safety_wins: true         # must be true\n";
@@ -308,8 +308,8 @@ int init(InitOptions o) {
         yaml_path.c_str(), o.issuer.c_str(), pub.c_str());
   const uint64_t seg = cfg->security.audit.max_segment_bytes;
   std::printf(
-      "\nThe audit log (%s) grows in segments of %llu MiB with the next one preallocated: "
-      "up to %llu MiB\non disk before the first segment fills "
+      "\nThe audit log (%s) starts as one zero-filled segment of %llu MiB; the next is prepared\n"
+      "once it is half full, so it holds at most %llu MiB before the first rotation\n"
       "(security.audit.max_segment_bytes; retention bounds the total).\n",
       cfg->security.audit.dir.c_str(), static_cast<unsigned long long>(seg >> 20),
       static_cast<unsigned long long>((2 * seg) >> 20));

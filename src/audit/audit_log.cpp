@@ -216,6 +216,9 @@ class AuditLog::Impl {
   std::thread preallocer_;
   std::atomic<bool> spare_ready_{false};
   std::atomic<bool> prealloc_busy_{false};
+  // Writer: the active segment has no spare prepared yet; it is made once the segment is half
+  // full (not at open or rotation), so a fresh log holds one segment, not two.
+  bool spare_wanted_ = false;
   std::atomic<uint64_t> recoveries_{0};
   mutable std::atomic<uint64_t> index_fallbacks_{0};
   uint64_t failed_next_seq_ = 0;  // writer: next_seq_ when the failure was first seen
@@ -295,7 +298,7 @@ Status AuditLog::Impl::open() {
     if (!s.ok()) return s;
   }
   opened_ = true;
-  prepare_spare();
+  spare_wanted_ = true;
   if (pipelined_)
     syncer_ = std::thread([this] {
       pthread_setname_np(pthread_self(), "audit-sync");
@@ -915,6 +918,10 @@ void AuditLog::Impl::writer_loop() {
       one.push_back(std::move(t));
       sync_and_ack(one);
     }
+    if (spare_wanted_ && active_bytes_ >= opts_.max_segment_bytes / 2) {
+      spare_wanted_ = false;
+      prepare_spare();
+    }
     if (active_bytes_ >= opts_.max_segment_bytes) {
       if (pipelined) wait_synced();
       if (!failed_.load()) {
@@ -1042,12 +1049,13 @@ Status AuditLog::Impl::rotate() {
   if (!s.ok()) return s;
   s = apply_retention();
   if (!s.ok()) return s;
-  prepare_spare();
+  spare_wanted_ = true;
   return Status::Ok();
 }
 
-// Zero-fills the next segment ahead of time. If it is not ready at the next rotation,
-// that segment is simply not preallocated (slower syncs, same correctness).
+// Zero-fills the next segment ahead of time, once the active one is half full. If it is not
+// ready at the next rotation, that segment is simply not preallocated (slower syncs, same
+// correctness).
 void AuditLog::Impl::prepare_spare() {
   if (!opts_.preallocate || spare_ready_.load()) return;
   if (preallocer_.joinable()) {

@@ -97,9 +97,9 @@ struct AuditConfig {
   std::string chain_secret_file;  // default <data_dir>/audit.secret
   audit::SyncPolicy sync_policy = audit::SyncPolicy::kPerGroup;
   uint32_t sync_interval_ms = 2;
-  uint64_t max_segment_bytes = 64ull << 20;
-  uint64_t retention_max_bytes = 0;     // 0 = unlimited
-  uint32_t retention_max_age_days = 0;  // 0 = unlimited
+  uint64_t max_segment_bytes = 16ull << 20;  // small disks first (docs/CONFIG.md)
+  uint64_t retention_max_bytes = 0;          // 0 = unlimited
+  uint32_t retention_max_age_days = 0;       // 0 = unlimited
 };
 
 struct JwtConfig {
@@ -303,7 +303,7 @@ struct ControlConfig {                // this node's `control` block (docs/SESSI
   uint32_t handoff_window_s = 30;
   uint32_t queue_max = 16;
   uint32_t queue_wait_s = 300;
-  uint32_t queue_stream_grace_s = 5;  // a queued claimant without a stream leaves the queue
+  uint32_t queue_stream_grace_s = 5;   // a queued claimant without a stream leaves the queue
   uint32_t max_session_s = 0;          // caps every role's session TTL; 0 = the role TTLs
   uint32_t transfer_window_s = 86400;  // seed §6.2: 24 h
   uint32_t consent_ttl_s = 86400;

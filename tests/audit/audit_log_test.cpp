@@ -4,9 +4,12 @@
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <thread>
 
 #include "audit/fast_seal.h"
 #include "audit_util.h"
@@ -63,6 +66,43 @@ TEST(Audit, AppendAssignsSeqAndChainsRecords) {
   auto rep = verify_jsonl(join(lines), kSecret);
   EXPECT_TRUE(rep.ok) << rep.why;
   EXPECT_EQ(rep.count, 11u);
+}
+
+// Disk footprint: a fresh log holds one preallocated segment; the next one (prealloc.tmp) is
+// prepared only once the active segment is half full, and a rotation uses it.
+TEST(Audit, AFreshLogHoldsOneSegmentAndPreparesTheNextOnlyWhenHalfFull) {
+  TempDir tmp;
+  const std::string dir = tmp.path() + "/log";
+  const uint64_t seg = 64 << 10;
+  auto log = open_log(dir, options(seg));
+  ASSERT_TRUE(log->append(entry(1)).ok());
+  auto files = [&] {
+    std::vector<std::string> out;
+    for (const auto& e : std::filesystem::directory_iterator(dir))
+      if (e.path().extension() == ".log" || e.path().extension() == ".tmp")
+        out.push_back(e.path().filename().string());
+    std::sort(out.begin(), out.end());
+    return out;
+  };
+  EXPECT_EQ(files(), (std::vector<std::string>{"seg-00000001.log"}));
+  EXPECT_EQ(std::filesystem::file_size(dir + "/seg-00000001.log"), seg);
+  // Below half of the segment there is still no spare.
+  int i = 2;
+  while (log->stats().total_bytes < seg / 2 - 2048) ASSERT_TRUE(log->append(entry(i++)).ok());
+  EXPECT_FALSE(std::filesystem::exists(dir + "/prealloc.tmp"));
+  // Past half, the spare appears (prepared in the background) before the segment fills.
+  bool spare = false;
+  while (!spare && log->stats().segments == 1) {
+    ASSERT_TRUE(log->append(entry(i++)).ok());
+    spare = std::filesystem::exists(dir + "/prealloc.tmp");
+    if (!spare && log->stats().total_bytes > seg / 2)
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  EXPECT_TRUE(spare) << "the next segment is prepared once the active one is half full";
+  // The rotation takes the spare: two segments, the second preallocated, no spare left yet.
+  while (log->stats().segments == 1) ASSERT_TRUE(log->append(entry(i++)).ok());
+  EXPECT_EQ(files(), (std::vector<std::string>{"seg-00000001.log", "seg-00000002.log"}));
+  EXPECT_EQ(std::filesystem::file_size(dir + "/seg-00000002.log"), seg);
 }
 
 TEST(Audit, FastSealIsByteIdenticalToCanonicalSeal) {

@@ -64,7 +64,7 @@ void expect_security_defaults(const NodeConfig& c) {
                c.explicit_paths.chain_secret_file);
   EXPECT_EQ(s.audit.sync_policy, audit::SyncPolicy::kPerGroup);
   EXPECT_EQ(s.audit.sync_interval_ms, 2u);
-  EXPECT_EQ(s.audit.max_segment_bytes, 64ull << 20);
+  EXPECT_EQ(s.audit.max_segment_bytes, 16ull << 20);
   EXPECT_EQ(s.audit.retention_max_bytes, 0u);
   EXPECT_EQ(s.audit.retention_max_age_days, 0u);
   EXPECT_TRUE(s.jwt.issuers.empty());

@@ -52,9 +52,10 @@ struct AuditOptions {
   SyncPolicy sync_policy = SyncPolicy::kPerGroup;
   int sync_interval_ms = 2;
   uint64_t max_segment_bytes = 64ull << 20;  // rotate when the active segment reaches this
-  // Zero-fill each segment file to max_segment_bytes before use (a spare is prepared in
-  // the background), so that fdatasync after an append flushes data only and needs no
-  // file-system journal commit for a size change. See docs/AUDIT.md §Durability.
+  // Zero-fill each segment file to max_segment_bytes before use (the next one is prepared in
+  // the background once the active segment is half full), so that fdatasync after an append flushes
+  // data only and needs no file-system journal commit for a size change. See docs/AUDIT.md
+  // §Durability.
   bool preallocate = true;
   size_t max_group_records = 4096;    // records per group commit at most
   size_t max_record_bytes = 1 << 20;  // larger entries are rejected
