@@ -47,6 +47,12 @@ void Daemon::stop(int drain_ms) {
 
 uint64_t Daemon::audit_last_seq() const { return audit_ ? audit_->stats().last_seq : 0; }
 
+uint64_t Daemon::safety_loop_count() const { return core_ ? core_->loop_count() : 0; }
+
+void Daemon::safety_estop(const std::string& reason) {
+  if (core_) (void)core_->estop("node", reason);
+}
+
 Status Daemon::start(const DaemonOptions& options) {
   const auto started = std::chrono::steady_clock::now();
   Status s = load_configuration(options);

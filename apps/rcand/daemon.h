@@ -74,6 +74,10 @@ class Daemon {
 
   const ServingInfo& info() const { return info_; }
   uint64_t audit_last_seq() const;
+  // The safety core's loop turns (the systemd watchdog's liveness signal), and an ESTOP by the
+  // node itself (a hung loop).
+  uint64_t safety_loop_count() const;
+  void safety_estop(const std::string& reason);
 
  private:
   // The steps of start(), in order; each records its undo with on_stop().

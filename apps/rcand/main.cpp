@@ -16,6 +16,7 @@
 #include "base/log.h"
 #include "daemon.h"
 #include "rcan/json.h"
+#include "sd_notify.h"
 
 // Read by jemalloc, which rcand links (CMakeLists.txt), when it starts: a background thread
 // hands freed pages back to the system once they have been unused for the decay time, also
@@ -146,9 +147,20 @@ int main(int argc, char** argv) {
         info.identity.owner_token_file.c_str(), info.url.c_str());
   }
 
+  // Under systemd (Type=notify): ready now; the watchdog is fed while the safety loop turns.
+  rcand::SystemdNotifier systemd;
+  if (systemd.enabled()) {
+    systemd.notify("READY=1\nSTATUS=serving " + info.ruri + " at " + info.url);
+    systemd.start_watchdog(
+        [&daemon] { return daemon.safety_loop_count(); },
+        [&daemon] { daemon.safety_estop("safety loop stalled (systemd watchdog)"); });
+  }
+
   // Run until SIGTERM / SIGINT.
   int sig = 0;
   sigwait(&signals, &sig);
+  systemd.stop_watchdog();
+  systemd.notify("STOPPING=1");
   log(LogLevel::kInfo, "shutting_down",
       json::Object{{"signal", sig == SIGTERM ? "SIGTERM" : "SIGINT"}});
   daemon.stop(2000);

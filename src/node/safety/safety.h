@@ -215,6 +215,9 @@ class SafetyCore {
   // (OWNER and above clear any latch). Errors: INSUFFICIENT_PRIVILEGES, estop_clear_forbidden.
   Status resume(int principal_role_level, std::string_view source);
   bool estop_active() const { return latched_.load(std::memory_order_acquire); }
+  // Control-loop turns so far (at least one a second while the loop runs; the systemd
+  // watchdog feeds only while it advances).
+  uint64_t loop_count() const { return loop_count_.load(std::memory_order_relaxed); }
   bool safe_stop_active() const { return safe_stop_.load(std::memory_order_acquire); }
   // Waits until the latch state `seq` (or later) is durable; false on timeout (a failing
   // write is retried every 200 ms; status().persist_error says why) or without open().
