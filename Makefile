@@ -3,7 +3,7 @@
 #   make test   install what is missing, build, run every test (CTest summary) in the release
 #               tree, then again under ASan+UBSan, then the threaded tests under TSan
 # Other targets: build, test-release, debug, asan, test-asan, tsan, test-tsan, bench,
-# load-bench, fuzz, format, clean.
+# load-bench, fuzz, format, package (the .deb, docs/PACKAGING.md), clean.
 
 BUILD_DIR   ?= build/release
 DEBUG_DIR   ?= build/debug
@@ -16,7 +16,7 @@ CMAKE_FLAGS ?=
 # `make test` checks the packages once, then runs its phases with DEPS empty.
 DEPS        ?= deps
 
-.PHONY: all deps build run test test-sanitizers sanitizer-phases test-release debug asan test-asan tsan test-tsan bench load-bench fuzz format clean
+.PHONY: package all deps build run test test-sanitizers sanitizer-phases test-release debug asan test-asan tsan test-tsan bench load-bench fuzz format clean
 
 all: build
 
@@ -28,6 +28,10 @@ $(BUILD_DIR)/build.ninja:
 
 build: $(DEPS) $(BUILD_DIR)/build.ninja
 	cmake --build $(BUILD_DIR) -j $(JOBS)
+
+# The Debian package: build/release/package/rcan_<version>_<arch>.deb (docs/PACKAGING.md).
+package: build
+	cd $(BUILD_DIR) && cpack -G DEB
 
 run: build
 	$(BUILD_DIR)/bin/rcan selfcheck

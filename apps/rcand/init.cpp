@@ -28,7 +28,7 @@ namespace {
 constexpr const char* kInitUsage =
     "usage: rcand init [--dir D] [--name NAME] [--manufacturer M] [--model M] [--type TYPE]\n"
     "                  [--registry R] [--driver sim] [--port N] [--bind ADDR] [--issuer NAME]\n"
-    "                  [--yes]\n"
+    "                  [--config FILE] [--yes]\n"
     "\n"
     "Creates a configured robot in D (default: the data directory rcand uses, $RCAND_DATA_DIR,\n"
     "else ~/.local/share/rcand): D/robot.rcan.yaml (commented; its data directory is D), robot\n"
@@ -36,6 +36,9 @@ constexpr const char* kInitUsage =
     "an OWNER token D/owner.token (secrets 0600 in 0700 directories). Run it again at any time:\n"
     "it keeps every file that exists (a new OWNER token only replaces an expired one), and on a\n"
     "robot.rcan.yaml of your own it creates the identity files that file names.\n"
+    "--config FILE writes (or reads) the configuration there instead of D/robot.rcan.yaml, its\n"
+    "data directory naming D (a packaged install: --dir /var/lib/rcand --config\n"
+    "/etc/rcan/robot.rcan.yaml).\n"
     "On a terminal it asks for the robot's name, manufacturer and model; --yes takes the\n"
     "defaults and the flags. Then: rcand --config D/robot.rcan.yaml\n";
 
@@ -49,6 +52,7 @@ struct InitOptions {
   std::string driver = "sim";
   std::string bind = "127.0.0.1";
   std::string issuer = "rcand-local";
+  std::string config;  // the robot.rcan.yaml to write or read; default <dir>/robot.rcan.yaml
   int port = 8080;
   bool yes = false;
   std::vector<std::string> given;  // the flags named on the command line
@@ -99,6 +103,7 @@ std::optional<InitOptions> parse(int argc, char** argv, int& code) {
                           : a == "--driver"       ? &o.driver
                           : a == "--bind"         ? &o.bind
                           : a == "--issuer"       ? &o.issuer
+                          : a == "--config"       ? &o.config
                                                   : nullptr;
     if (!target && a != "--port") {
       std::fprintf(stderr, "rcand init: unknown argument '%s'\n%s", a.c_str(), kInitUsage);
@@ -147,13 +152,14 @@ std::string yaml_quote(const std::string& s) {
   return out + "\"";
 }
 
-std::string template_yaml(const InitOptions& o, const std::string& ruri) {
+std::string template_yaml(const InitOptions& o, const std::string& ruri,
+                          const std::string& yaml_path) {
   std::time_t t = std::time(nullptr);
   char date[32];
   std::strftime(date, sizeof date, "%Y-%m-%d", std::gmtime(&t));
   std::string y;
   y += "# robot.rcan.yaml — written by `rcand init` on " + std::string(date) + ".\n";
-  y += "#\n#   rcand --config " + o.dir + "/robot.rcan.yaml\n#\n";
+  y += "#\n#   rcand --config " + yaml_path + "\n#\n";
   y += "# Every key, its type and default: docs/CONFIG.md; a fuller commented example:\n";
   y += "# examples/sim-robot.rcan.yaml. Loading is strict (an unknown or misspelt key stops\n";
   y += "# start-up, naming it). Relative paths resolve against this file's directory.\n\n";
@@ -166,7 +172,11 @@ std::string template_yaml(const InitOptions& o, const std::string& ruri) {
   y += "  model: " + o.model + "\n";
   y += "  type: " + o.type + "   # the protocol capabilities follow from it\n\n";
   y += "node:\n";
-  y += "  data_dir: .        # keys/, audit/, audit.secret, issuer/ and owner.token live here\n";
+  // Paths relative to this file when it lives in the data directory, else absolute.
+  const bool beside = fs::path(yaml_path).parent_path() == fs::path(o.dir);
+  const std::string in_dir = beside ? std::string() : o.dir + "/";
+  y += "  data_dir: " + (beside ? std::string(".") : yaml_quote(o.dir)) +
+       "        # keys/, audit/, audit.secret, issuer/ and owner.token live here\n";
   y += "  log_level: info\n\n";
   y += "server:\n";
   y += "  port: " + std::to_string(o.port) + "\n";
@@ -176,11 +186,12 @@ std::string template_yaml(const InitOptions& o, const std::string& ruri) {
   y += "security:\n";
   y += "  jwt:\n";
   y += "    # JWTs are always required. The local issuer `rcand init` made; mint tokens with\n";
-  y += "    #   rcan token issue --key issuer/ed25519.seed --iss " + o.issuer +
+  y += "    #   rcan token issue --key " + in_dir + "issuer/ed25519.seed --iss " + o.issuer +
        " --aud <ruri> --sub …\n";
   y += "    # Add your organisation's issuer beside it ({issuer, key_file: PEM, JWK or JWKS}).\n";
   y += "    issuers:\n";
-  y += "      - {issuer: " + yaml_quote(o.issuer) + ", key_file: issuer/ed25519.pub.pem}\n";
+  y += "      - {issuer: " + yaml_quote(o.issuer) +
+       ", key_file: " + yaml_quote(in_dir + "issuer/ed25519.pub.pem") + "}\n";
   y += "  audit:\n";
   y += "    sync: per_group\n";
   y += "    # Segments of max_segment_bytes, the next one preallocated; retention bounds the\n";
@@ -219,7 +230,9 @@ int init(InitOptions o) {
   }
   o.dir = fs::absolute(o.dir).lexically_normal().string();
   if (!o.dir.empty() && o.dir.size() > 1 && o.dir.back() == '/') o.dir.pop_back();
-  const std::string yaml_path = o.dir + "/robot.rcan.yaml";
+  const std::string yaml_path = o.config.empty()
+                                    ? o.dir + "/robot.rcan.yaml"
+                                    : fs::absolute(o.config).lexically_normal().string();
   const bool have_yaml = fs::exists(yaml_path);
   if (!have_yaml) {
     ask(o);
@@ -248,7 +261,9 @@ int init(InitOptions o) {
     }
     std::string ruri =
         "rcan://" + o.registry + "/" + o.manufacturer + "/" + o.model + "/" + to_hex(b, sizeof b);
-    std::string text = template_yaml(o, ruri);
+    std::string text = template_yaml(o, ruri, yaml_path);
+    std::error_code ec;
+    fs::create_directories(fs::path(yaml_path).parent_path(), ec);
     if (Status s = keys::write_new_file(
             yaml_path, {reinterpret_cast<const uint8_t*>(text.data()), text.size()}, 0644);
         !s.ok()) {

@@ -84,9 +84,9 @@ TEST(SystemdNotify, AWatchdogMeantForAnotherProcessIsNotFed) {
   test::TempDir tmp;
   NotifySocket sock(tmp.file("notify.sock"));
   test::Process node;
-  ASSERT_TRUE(node.start({RCAND_PATH, "--data-dir", tmp.file("data"), "--port", "0"},
-                         {"NOTIFY_SOCKET=" + tmp.file("notify.sock"), "WATCHDOG_USEC=200000",
-                          "WATCHDOG_PID=1"}));
+  ASSERT_TRUE(node.start(
+      {RCAND_PATH, "--data-dir", tmp.file("data"), "--port", "0"},
+      {"NOTIFY_SOCKET=" + tmp.file("notify.sock"), "WATCHDOG_USEC=200000", "WATCHDOG_PID=1"}));
   ASSERT_TRUE(sock.wait_for("READY=1", 20000).has_value()) << node.err();
   EXPECT_FALSE(sock.wait_for("WATCHDOG=1", 1000).has_value());
   EXPECT_EQ(node.stop(SIGTERM, 10000), 0) << node.err();

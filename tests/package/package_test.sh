@@ -1,0 +1,96 @@
+#!/usr/bin/env bash
+# The Debian package, built and inspected without installing it on this machine: cpack builds
+# the .deb from the release tree; dpkg-deb unpacks it into a temporary root; the files, modes,
+# dependencies and maintainer scripts are checked; systemd-analyze verifies the unit and scores
+# its hardening; the postinst's `rcand init` and the unit's ExecStart run with their paths
+# redirected into the root, and the node answers /healthz. Exit 0 pass, 1 fail, 77 skip.
+#
+# Usage: package_test.sh BUILD_DIR
+set -uo pipefail
+BUILD=${1:?build dir}
+for t in cpack dpkg-deb systemd-analyze curl; do
+  command -v "$t" >/dev/null || { echo "SKIP: $t is not installed (scripts/install-deps.sh)"; exit 77; }
+done
+WORK=$(mktemp -d "${TMPDIR:-/tmp}/rcan-package.XXXXXX")
+PID=
+cleanup() { [ -n "$PID" ] && kill "$PID" 2>/dev/null; wait 2>/dev/null; rm -rf "$WORK"; }
+trap cleanup EXIT
+fails=0
+ok() { echo "ok - $*"; }
+bad() { echo "FAIL - $*"; fails=$((fails + 1)); }
+check() { local what=$1; shift; if "$@"; then ok "$what"; else bad "$what"; fi; }
+
+# 1. Build the package (into this test's own directory).
+( cd "$BUILD" && cpack -G DEB -B "$WORK/out" ) >"$WORK/cpack.log" 2>&1 || { cat "$WORK/cpack.log"; bad "cpack builds the .deb"; exit 1; }
+DEB=$(ls "$WORK"/out/rcan_*.deb 2>/dev/null | head -1)
+check "cpack builds the .deb ($(basename "${DEB:-none}"))" test -f "$DEB"
+ROOT=$WORK/root CTRL=$WORK/control
+dpkg-deb -x "$DEB" "$ROOT" && dpkg-deb -e "$DEB" "$CTRL"
+
+# 2. Files, modes, metadata.
+for f in usr/bin/rcand usr/bin/rcan; do check "$f is an executable" test -x "$ROOT/$f"; done
+for f in usr/lib/rcan/librcand_grpc.so usr/lib/systemd/system/rcand.service \
+         usr/share/man/man1/rcand.1.gz usr/share/man/man1/rcan.1.gz \
+         usr/share/bash-completion/completions/rcan usr/share/doc/rcan/examples/sim-robot.rcan.yaml; do
+  check "$f is packaged" test -s "$ROOT/$f"
+done
+check "the man pages hold the --help text" bash -c "zcat '$ROOT/usr/share/man/man1/rcand.1.gz' | grep -q 'rcand init'"
+check "the completion completes rcan's verbs" grep -q "fleet" "$ROOT/usr/share/bash-completion/completions/rcan"
+check "no file is group- or world-writable" test -z "$(find "$ROOT" -perm /022 ! -type l)"
+check "no file is setuid or setgid" test -z "$(find "$ROOT" -perm /6000)"
+check "the package depends on adduser and the shared libraries" grep -Eq '^Depends: .*adduser.*libssl3' "$CTRL/control"
+for s in postinst prerm postrm; do
+  check "$s is an executable sh script" bash -c "test -x '$CTRL/$s' && head -1 '$CTRL/$s' | grep -q '^#!/bin/sh' && sh -n '$CTRL/$s'"
+done
+check "postinst creates the rcand system user" grep -q 'adduser --system' "$CTRL/postinst"
+check "postinst makes the robot with rcand init, never over an existing config" \
+  grep -q 'if \[ ! -e /etc/rcan/robot.rcan.yaml \]' "$CTRL/postinst"
+check "postrm removes the audit log on purge only" bash -c "grep -B2 'rm -rf /var/lib/rcand' '$CTRL/postrm' | grep -q purge"
+
+# 3. The unit: systemd's own verifier and hardening score.
+UNIT=$ROOT/usr/lib/systemd/system/rcand.service
+# The verifier resolves the unit's dependencies (sysinit.target…) in the root: give it this
+# machine's system units beside the package's. Its Documentation= check runs man(1), which a
+# build machine may lack: only those lines are set aside.
+VROOT=$WORK/verify-root
+cp -a "$ROOT" "$VROOT" && cp -rn /usr/lib/systemd/system/. "$VROOT/usr/lib/systemd/system/"
+verify=$(systemd-analyze verify --root="$VROOT" "$VROOT/usr/lib/systemd/system/rcand.service" 2>&1 |
+         grep -v "Command 'man " || true)
+check "systemd-analyze verify accepts rcand.service${verify:+ ($verify)}" test -z "$verify"
+for k in 'Type=notify' 'WatchdogSec=' 'User=rcand' 'ProtectSystem=strict' 'ProtectHome=true' \
+         'NoNewPrivileges=true' 'PrivateTmp=true' 'ReadWritePaths=/var/lib/rcand' \
+         'CapabilityBoundingSet=$' 'RestrictAddressFamilies=' 'SystemCallFilter=@system-service'; do
+  check "the unit sets $k" grep -Eq "^$k" "$UNIT"
+done
+score=$(systemd-analyze security --offline=true "$UNIT" 2>/dev/null | sed -n 's/.*Overall exposure level for rcand.service: \([0-9.]*\).*/\1/p')
+echo "note: systemd-analyze security: exposure ${score:-?} (0 safest, 10 unsafe)"
+check "the exposure score is at most 2.0 (${score:-none})" awk -v s="${score:-99}" 'BEGIN { exit !(s <= 2.0) }'
+
+# 4. What postinst does, into the root: a configured robot in /var/lib/rcand, /etc/rcan.
+PORT=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
+"$ROOT/usr/bin/rcand" init --dir "$ROOT/var/lib/rcand" --config "$ROOT/etc/rcan/robot.rcan.yaml" \
+  --yes --port "$PORT" >"$WORK/init.log" 2>&1
+check "rcand init (postinst's step) makes the configured robot" test -s "$ROOT/var/lib/rcand/owner.token"
+
+# 5. The unit's ExecStart, its paths redirected into the root: the node serves.
+exec_start=$(sed -n 's/^ExecStart=//p' "$UNIT")
+cmd=${exec_start//\/usr\/bin\//$ROOT/usr/bin/}
+cmd=${cmd//\/etc\/rcan/$ROOT/etc/rcan}
+cmd=${cmd//\/var\/lib\/rcand/$ROOT/var/lib/rcand}
+echo "note: starting: ${cmd#$ROOT}"
+$cmd 2>"$WORK/rcand.log" &
+PID=$!
+healthy=
+for _ in $(seq 1 100); do
+  if curl -fsS "http://127.0.0.1:$PORT/healthz" >"$WORK/health" 2>/dev/null; then healthy=1; break; fi
+  sleep 0.1
+done
+check "rcand started by the unit's command line answers /healthz" test -n "$healthy"
+check "the packaged CLI drives it with the OWNER token" bash -c \
+  "RCAN_URL=http://127.0.0.1:$PORT RCAN_TOKEN_FILE='$ROOT/var/lib/rcand/owner.token' '$ROOT/usr/bin/rcan' status >/dev/null"
+check "the packaged gRPC module is the one it would load" test -f "$ROOT/usr/lib/rcan/librcand_grpc.so"
+kill -TERM "$PID"; wait "$PID"; rc=$?; PID=
+check "SIGTERM stops it cleanly (exit $rc)" test "$rc" -eq 0
+
+if [ "$fails" -gt 0 ]; then echo "$fails failure(s)"; tail -20 "$WORK/rcand.log"; exit 1; fi
+echo "all package checks passed"
