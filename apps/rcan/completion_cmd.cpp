@@ -47,7 +47,9 @@ const std::map<std::string, std::pair<std::string, std::string>>& table() {
             kNet}},
       {"watermark",
        {"compute check verify", std::string("--key-file --rrn --thought-id --timestamp ") + kNet}},
-      {"keys", {"generate derive show issuer", "--dir --mldsa-seed --ed25519-seed --name --json --help"}},
+      {"doctor", {"", std::string("--config ") + kNet}},
+      {"keys",
+       {"generate derive show issuer", "--dir --mldsa-seed --ed25519-seed --name --json --help"}},
       {"token",
        {"issue inspect revoke revocations",
         "--key --sub --role --aud --scope --ttl --iss --alg --kid --fleet --sender-type "

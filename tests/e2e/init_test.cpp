@@ -14,6 +14,7 @@
 #include <string>
 
 #include "rcan/hash.h"
+#include "rcan/json.h"
 #include "test_support.h"
 
 namespace rcan {
@@ -198,6 +199,56 @@ TEST_F(InitTest, KeysIssuerMakesAKeyPairWhoseTokensVerify) {
   auto bad = run_cli({"keys", "issuer", "--dir", d});
   EXPECT_EQ(bad.exit_code, 1);
   EXPECT_NE(bad.err.find("is not the public key"), std::string::npos) << bad.err;
+}
+
+// `rcan doctor` on a robot rcand init made: what it finds, and what it says to do.
+TEST_F(InitTest, DoctorChecksTheInstallationAndSaysWhatToFix) {
+  const int port = free_port();
+  ASSERT_EQ(init({"--port", std::to_string(port)}).exit_code, 0);
+  const std::string yaml = dir_ + "/robot.rcan.yaml";
+  const std::vector<std::string> env = {"RCAN_TOKEN_FILE=" + dir_ + "/owner.token"};
+  auto level_of = [](const json::Value& report, const std::string& check) -> std::string {
+    for (const auto& c : report.get("checks")->as_array())
+      if (c.get("check")->as_string() == check) return c.get("level")->as_string();
+    return "absent";
+  };
+  // The node is not running: that is the one failure.
+  auto down = run_cli({"doctor", "--config", yaml, "--json"}, {}, env);
+  EXPECT_EQ(down.exit_code, 1) << down.out << down.err;
+  auto dv = json::parse(down.out);
+  ASSERT_TRUE(dv.ok()) << down.out;
+  EXPECT_EQ(level_of(*dv, "node"), "FAIL");
+  EXPECT_EQ(level_of(*dv, "configuration"), "ok");
+  EXPECT_EQ(level_of(*dv, "chain secret"), "ok");
+  EXPECT_EQ(level_of(*dv, "robot key (ML-DSA-65)"), "ok");
+  EXPECT_EQ(level_of(*dv, "disk"), "ok");
+  // Running: no failure (the clock may only warn on a machine without NTP).
+  test::Process node;
+  ASSERT_TRUE(node.start({RCAND_PATH, "--config", yaml}));
+  ASSERT_TRUE(node.wait_for_line("\"listening\"", 20000).has_value()) << node.err();
+  auto up = run_cli({"doctor", "--config", yaml, "--json"}, {}, env);
+  EXPECT_EQ(up.exit_code, 0) << up.out << up.err;
+  auto uv = json::parse(up.out);
+  ASSERT_TRUE(uv.ok()) << up.out;
+  EXPECT_EQ(level_of(*uv, "node"), "ok");
+  EXPECT_EQ(level_of(*uv, "audit log"), "ok");
+  EXPECT_EQ(level_of(*uv, "ESTOP"), "ok");
+  // A secret others can read is a failure, with the command that fixes it.
+  fs::permissions(dir_ + "/audit.secret", fs::perms::others_read | fs::perms::group_read,
+                  fs::perm_options::add);
+  auto leak = run_cli({"doctor", "--config", yaml}, {}, env);
+  EXPECT_EQ(leak.exit_code, 1);
+  EXPECT_NE(leak.out.find("FAIL  chain secret"), std::string::npos) << leak.out;
+  EXPECT_NE(leak.out.find("chmod 600 " + dir_ + "/audit.secret"), std::string::npos) << leak.out;
+  // A broken configuration names the key.
+  {
+    std::ofstream out(yaml, std::ios::app);
+    out << "safety_typo: 1\n";
+  }
+  auto broken = run_cli({"doctor", "--config", yaml}, {}, env);
+  EXPECT_EQ(broken.exit_code, 1);
+  EXPECT_NE(broken.out.find("safety_typo"), std::string::npos) << broken.out;
+  EXPECT_EQ(node.stop(SIGTERM, 10000), 0);
 }
 
 }  // namespace
