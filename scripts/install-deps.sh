@@ -41,13 +41,18 @@ if [ ${#missing[@]} -gt 0 ]; then
   $SUDO apt-get install -o DPkg::Lock::Timeout=600 -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 fi
 
-# The dashboard's browser test drives Debian's chromium with playwright-core, pinned in
-# tests/browser/package-lock.json (no browser download: it uses /usr/bin/chromium).
+# The dashboard's browser test drives Debian's chromium with playwright-core and checks
+# accessibility with axe-core, both pinned in tests/browser/package-lock.json (no browser
+# download: it uses /usr/bin/chromium).
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 B="$ROOT/tests/browser"
-want="$(node -p "require('$B/package.json').dependencies['playwright-core']")"
-have="$(node -p "require('$B/node_modules/playwright-core/package.json').version" 2>/dev/null || true)"
-if [ "$want" != "$have" ]; then
-  echo "install-deps: npm ci in tests/browser (playwright-core $want)" >&2
+stale=""
+for dep in playwright-core axe-core; do
+  want="$(node -p "require('$B/package.json').dependencies['$dep']")"
+  have="$(node -p "require('$B/node_modules/$dep/package.json').version" 2>/dev/null || true)"
+  if [ "$want" != "$have" ]; then stale="$stale $dep@$want"; fi
+done
+if [ -n "$stale" ]; then
+  echo "install-deps: npm ci in tests/browser ($stale )" >&2
   (cd "$B" && PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 npm ci --no-audit --no-fund --loglevel=error >/dev/null)
 fi

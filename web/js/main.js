@@ -169,7 +169,12 @@ function wireStream(s) {
 }
 
 function showView(name) {
-  for (const b of $all('#tabs button')) b.classList.toggle('active', b.dataset.view === name);
+  for (const b of $all('#tabs button')) {
+    const on = b.dataset.view === name;
+    b.classList.toggle('active', on);
+    b.setAttribute('aria-selected', on ? 'true' : 'false');
+    b.tabIndex = on ? 0 : -1;
+  }
   for (const v of $all('#views .view')) v.hidden = v.id !== `view-${name}`;
   document.body.dataset.view = name;
   if (name === 'audit' && !auditLoaded) { auditLoaded = true; loadAudit(); }
@@ -204,6 +209,18 @@ function init() {
   $('#banner-resume').addEventListener('click', () => $('#resume').click());
   $('#signout').addEventListener('click', () => signOut(''));
   for (const b of $all('#tabs button')) b.addEventListener('click', () => showView(b.dataset.view));
+  // The tab list's keyboard: Left/Right (Home/End) move between tabs and show the view.
+  $('#tabs').addEventListener('keydown', (e) => {
+    const tabs = $all('#tabs button');
+    const i = tabs.indexOf(document.activeElement);
+    if (i < 0) return;
+    const to = { ArrowRight: i + 1, ArrowLeft: i - 1, Home: 0, End: tabs.length - 1 }[e.key];
+    if (to === undefined) return;
+    e.preventDefault();
+    const t = tabs[(to + tabs.length) % tabs.length];
+    t.focus();
+    showView(t.dataset.view);
+  });
   $('#signin-form').addEventListener('submit', (e) => {
     e.preventDefault();
     signIn($('#token-input').value, $('#remember').checked);

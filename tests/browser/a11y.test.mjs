@@ -1,0 +1,115 @@
+// Accessibility of the operator dashboard (WCAG 2.1 AA), checked by axe-core (pinned in
+// package-lock.json) in Debian's headless Chromium against a real rcand: every view — sign-in,
+// overview, live, teleop, approvals, audit, and the ESTOP banner — at a desktop (1280×800) and
+// a phone (390×844) width. Any violation axe rates serious or critical fails the test; the
+// others are printed. Exit 0 pass, 1 fail, 77 skip (no browser, playwright-core or axe-core).
+//
+// Environment: RCAND_PATH (set by CTest), CHROMIUM_PATH (default /usr/bin/chromium),
+// DASHBOARD_ARTIFACTS (screenshots; default a temp dir).
+
+import { existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { join, dirname } from 'node:path';
+import { fileURLToPath } from 'node:url';
+import { checker, http, launchBrowser, loadBrowser, runChecks, skip, spawnRcand } from './harness.mjs';
+
+const here = dirname(fileURLToPath(import.meta.url));
+const rcandPath = process.env.RCAND_PATH;
+const artifacts = process.env.DASHBOARD_ARTIFACTS || mkdtempSync(join(tmpdir(), 'a11y-artifacts-'));
+const axePath = join(here, 'node_modules', 'axe-core', 'axe.min.js');
+
+const { chromium, chromiumPath } = await loadBrowser({ rcandPath });
+if (!existsSync(axePath)) skip('axe-core is not installed (scripts/install-deps.sh runs npm ci in tests/browser)');
+
+mkdirSync(artifacts, { recursive: true });
+const work = mkdtempSync(join(tmpdir(), 'a11y-test-'));
+const dataDir = join(work, 'data');
+const failures = [];
+const notes = [];
+const check = checker(failures);
+let rcand = null;
+let browser = null;
+
+// WCAG 2.0/2.1 A and AA rules (axe's tags), run on the whole document as it is shown.
+async function audit(page, what) {
+  await page.addScriptTag({ path: axePath });
+  const res = await page.evaluate(() => window.axe.run(document, {
+    runOnly: { type: 'tag', values: ['wcag2a', 'wcag2aa', 'wcag21a', 'wcag21aa'] },
+    resultTypes: ['violations'],
+  }));
+  const bad = res.violations.filter((v) => v.impact === 'serious' || v.impact === 'critical');
+  for (const v of res.violations) {
+    const where = v.nodes.slice(0, 3).map((n) => n.target.join(' ')).join(', ');
+    const line = `${what}: ${v.impact} ${v.id} (${v.nodes.length}×: ${where}) — ${v.help}`;
+    if (bad.includes(v)) console.log(`  ${line}`);
+    else notes.push(line);
+  }
+  check(bad.length === 0, `${what}: no serious or critical axe violation (${bad.map((v) => v.id).join(', ') || 'none'})`);
+}
+
+async function main() {
+  let url;
+  ({ proc: rcand, url } = await spawnRcand(rcandPath, dataDir));
+  const owner = readFileSync(join(dataDir, 'owner.token'), 'utf8').trim();
+  browser = await launchBrowser(chromium, chromiumPath);
+  for (const [label, viewport] of [['desktop', { width: 1280, height: 800 }], ['phone', { width: 390, height: 844 }]]) {
+    // The page's CSP allows only its own scripts; the test context lets axe in.
+    const context = await browser.newContext({ viewport, bypassCSP: true });
+    const page = await context.newPage();
+    await page.goto(url + '/', { waitUntil: 'load' });
+    await page.waitForSelector('#signin:not([hidden])');
+    await audit(page, `${label} sign-in`);
+    await page.fill('#token-input', owner);
+    await page.click('#signin-form button[type=submit]');
+    await page.waitForSelector('body[data-stream=open]', { timeout: 10000 });
+    for (const view of ['overview', 'live', 'teleop', 'approvals', 'audit']) {
+      await page.click(`#tabs button[data-view=${view}]`);
+      await page.waitForTimeout(view === 'audit' ? 1500 : 600);
+      await audit(page, `${label} ${view}`);
+      await page.screenshot({ path: join(artifacts, `a11y-${label}-${view}.png`), fullPage: true });
+    }
+    // Semantics axe cannot judge by itself: the tabs as a tab list (roles, the selected tab,
+    // arrow keys), the safety state as a live region, the charts named.
+    const sem = await page.evaluate(() => ({
+      tablist: document.querySelector('#tabs').getAttribute('role'),
+      tabs: [...document.querySelectorAll('#tabs button')].map((b) => [b.getAttribute('role'), b.getAttribute('aria-selected')]),
+      panel: document.querySelector('#view-audit').getAttribute('role'),
+      pill: document.querySelector('#safety-pill').getAttribute('aria-live'),
+      charts: [...document.querySelectorAll('canvas')].map((c) => [c.getAttribute('role'), c.getAttribute('aria-label') || '']),
+    }));
+    check(sem.tablist === 'tablist' && sem.tabs.every(([r]) => r === 'tab') && sem.panel === 'tabpanel',
+      `${label}: the tabs are a tablist of tabs controlling tabpanels`);
+    check(sem.tabs.filter(([, sel]) => sel === 'true').length === 1 && sem.tabs[4][1] === 'true',
+      `${label}: exactly the shown view's tab is aria-selected (${JSON.stringify(sem.tabs.map(([, x]) => x))})`);
+    check(sem.pill === 'polite', `${label}: the safety state is a live region`);
+    check(sem.charts.length >= 3 && sem.charts.every(([r, l]) => r === 'img' && l.length > 10),
+      `${label}: every chart is an image with a name`);
+    await page.focus('#tabs button[data-view=audit]');
+    await page.keyboard.press('ArrowRight');
+    check(await page.evaluate(() => document.body.dataset.view === 'overview' && document.activeElement.dataset.view === 'overview'),
+      `${label}: ArrowRight on the last tab wraps to the first and shows its view`);
+    await page.keyboard.press('ArrowRight');
+    check(await page.evaluate(() => document.body.dataset.view === 'live'), `${label}: ArrowRight shows the next view`);
+
+    // The ESTOP banner and its RESUME, as an operator meets them.
+    const e = await http(url, 'POST', '/api/stop', owner, { reason: 'a11y test' });
+    check(e.status === 200, `${label}: ESTOP latched (${e.status})`);
+    await page.waitForSelector('#safety-banner:not([hidden])', { timeout: 5000 });
+    await audit(page, `${label} ESTOP banner`);
+    await page.click('#banner-resume');
+    await page.waitForSelector('#safety-banner', { state: 'hidden', timeout: 5000 });
+    await context.close();
+  }
+}
+
+await runChecks('accessibility', main, {
+  failures,
+  artifacts,
+  notes,
+  async cleanup() {
+    if (browser) await browser.close().catch(() => {});
+    if (rcand) rcand.kill('SIGTERM');
+    await new Promise((r) => setTimeout(r, 300));
+    rmSync(work, { recursive: true, force: true });
+  },
+});
