@@ -152,7 +152,15 @@ class Watcher {
     for (int i = 0; i < 500 && !client_->connected(); ++i)
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
     EXPECT_TRUE(client_->connected());
-    std::this_thread::sleep_for(std::chrono::milliseconds(150));  // subscriptions registered
+    // Every SUBACK in; a subscription a clustered broker refused while it settles is asked for
+    // again (up to 10 s).
+    EXPECT_TRUE(client_->wait_subscribed(5000));
+    for (int i = 0; i < 20 && !client_->refused_subscriptions().empty(); ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(500));
+      client_->retry_refused();
+      client_->wait_subscribed(5000);
+    }
+    EXPECT_TRUE(client_->refused_subscriptions().empty());
   }
   // The client's network thread calls on_message: stop it before msgs_ and mu_ go away.
   ~Watcher() { client_.reset(); }
