@@ -261,13 +261,16 @@ int doctor_main(const Args& args) {
               "apt install avahi-daemon; systemctl enable --now avahi-daemon");
     }
     if (cfg->mqtt.enabled) {
-      std::string host, port, why;
-      split_url(cfg->mqtt.broker, host, port);
-      if (reachable(host, port, 3000, why))
-        r.add(Level::kOk, "MQTT broker", cfg->mqtt.broker + " accepts connections");
-      else
-        r.add(Level::kFail, "MQTT broker", cfg->mqtt.broker + ": " + why,
-              "start the broker or fix mqtt.broker; the fleet channel is down");
+      // Every node of the list: a failover target that is down is found now, not in an outage.
+      for (const std::string& broker : cfg->mqtt.broker_urls()) {
+        std::string host, port, why;
+        split_url(broker, host, port);
+        if (reachable(host, port, 3000, why))
+          r.add(Level::kOk, "MQTT broker", broker + " accepts connections");
+        else
+          r.add(Level::kFail, "MQTT broker", broker + ": " + why,
+                "start the broker or fix mqtt.broker; the fleet channel is down");
+      }
     }
     if (!cfg->offline.issuer_url.empty()) {
       std::string host, port, why;

@@ -59,7 +59,8 @@ constexpr const char* kHelp =
     "      them in PostgreSQL (libpq connection string; schema in docs/FLEET.md).\n"
     "  rcan fleet audit verify --db CONNINFO [--fleet F] [--secrets-dir D]\n"
     "      Re-verifies every stored chain from the database: record hashes, links, gaps, HMACs.\n"
-    "  Common options: --broker URL (default $RCAN_MQTT_URL, else mqtt://127.0.0.1:1883),\n"
+    "  Common options: --broker URL[,URL…] (a cluster's nodes, tried in turn; default\n"
+    "    $RCAN_MQTT_URL, else mqtt://127.0.0.1:1883),\n"
     "    --token FILE (a fleet JWT; default $RCAN_TOKEN_FILE), --prefix P (default rcan),\n"
     "    --key-dir D (default $RCAN_KEY_DIR: the key pair the token is bound to; robots accept\n"
     "    MQTT messages only with a key-bound token, signed by its key: rcan token issue\n"
@@ -119,6 +120,7 @@ class Session {
     transport::MqttOptions mo;
     mo.url = o.get("broker", std::getenv("RCAN_MQTT_URL") ? std::getenv("RCAN_MQTT_URL")
                                                           : "mqtt://127.0.0.1:1883");
+    mo.urls = split_list(mo.url);  // a cluster's nodes, tried in turn
     mo.ca_file = o.get("ca-file");
     mo.username = o.get("username");
     if (forced_qos != 0) {
@@ -185,6 +187,12 @@ class Session {
     if (client_) client_->stop();
   }
   void set_timeout(int64_t ms) { timeout_ms_ = ms; }
+  // The connection dropped since connects() said `connects`: what came meanwhile is lost.
+  bool lost(uint64_t connects) const {
+    return !client_->connected() || client_->connects() != connects;
+  }
+  uint64_t connects() const { return client_->connects(); }
+  std::string url() const { return client_->current_url(); }
 
  private:
   std::unique_ptr<transport::MqttClient> client_;
@@ -382,10 +390,11 @@ json::Object await_members(Session& s, const mqtt::FleetTopics& topics, const st
   std::set<std::string> open(t.members.begin(), t.members.end());
   std::set<std::string> acked;
   int64_t deadline = mono_ms() + timeout_ms;
-  while (!open.empty()) {
-    auto m = s.next(deadline);
-    if (!m) break;
-    if (str_of(m->body, "reply_to") != id) continue;
+  const uint64_t connects = s.connects();
+  while (!open.empty() && !s.lost(connects)) {  // a dropped connection loses the replies
+    auto m = s.next(std::min(deadline, mono_ms() + 200));
+    if (!m && mono_ms() >= deadline) break;
+    if (!m || str_of(m->body, "reply_to") != id) continue;
     for (const auto& mem : t.members) {
       if (m->topic != topics.member(mem).reply() || open.count(mem) == 0) continue;
       std::string type = str_of(m->body, "type");
@@ -400,12 +409,22 @@ json::Object await_members(Session& s, const mqtt::FleetTopics& topics, const st
       }
       if (res.empty()) continue;
       results.set(mem, json::Object{{"result", res}, {"reply", m->body}});
+      const json::Value* p = m->body.get("payload");
+      const std::string code = p != nullptr ? str_of(*p, "error_code") : "";
+      // A late copy (a session's queued one after an outage): the retained ESTOP may still latch.
+      if (code == "MESSAGE_STALE" || code == "REPLAY_DETECTED") continue;
       if (res != "acknowledged" && res != "completed") unconfirmed->push_back(mem);
       open.erase(mem);
     }
   }
   for (const auto& mem : open) {
-    json::Object r{{"result", acked.count(mem) ? "incomplete" : "timeout"}};
+    if (results.find(mem) != nullptr) {  // only a late copy's refusal came
+      unconfirmed->push_back(mem);
+      continue;
+    }
+    json::Object r{{"result", acked.count(mem)   ? "incomplete"
+                              : s.lost(connects) ? "broker_lost"
+                                                 : "timeout"}};
     auto st = t.last_status.find(mem);
     if (st != t.last_status.end()) r.set("last_status", st->second);
     results.set(mem, std::move(r));
@@ -445,7 +464,10 @@ int publish_and_confirm(Session& s, const char* verb, const Common& c,
     return failure(verb, "NOT DELIVERED: " + st.error().message);
   }
   std::vector<std::string> unconfirmed;
+  const uint64_t connects = s.connects();
   json::Object results = await_members(s, topics, id, t, complete, c.timeout_ms, &unconfirmed);
+  const std::string lost =
+      s.lost(connects) ? " (the connection to the broker at " + s.url() + " dropped)" : "";
   s.close();
   bool none_known = c.wait && t.members.empty();
   bool ok = unconfirmed.empty() && !none_known;
@@ -463,8 +485,8 @@ int publish_and_confirm(Session& s, const char* verb, const Common& c,
   if (!ok)
     return failure(verb, std::to_string(unconfirmed.size()) + " of " +
                              std::to_string(t.members.size()) + " robots did not confirm within " +
-                             std::to_string(c.timeout_ms) +
-                             " ms: " + name_unconfirmed(unconfirmed, results));
+                             std::to_string(c.timeout_ms) + " ms" + lost + ": " +
+                             name_unconfirmed(unconfirmed, results));
   return 0;
 }
 

@@ -13,7 +13,13 @@ namespace rcan::config {
 struct MqttConfig {
   bool enabled = false;
   std::string broker = transport::kDefaultBrokerUrl;  // mqtt://host[:port] | mqtts://host[:port]
-  std::string client_id;                              // default "rcand-<device_id>"
+  // `mqtt.broker` given as a list: every URL in order (`broker` is the first), a cluster's nodes
+  // tried round robin after a broker loss (docs/FLEET.md §Broker failover). Empty: `broker` alone.
+  std::vector<std::string> brokers;
+  std::vector<std::string> broker_urls() const {
+    return brokers.empty() ? std::vector{broker} : brokers;
+  }
+  std::string client_id;  // default "rcand-<device_id>"
   std::string topic_prefix = "rcan";
   uint32_t keepalive_s = transport::kDefaultKeepaliveS;
   // Messages over MQTT need a token bound to a key (cnf) and a signature by that key: anyone
@@ -34,6 +40,9 @@ struct MqttConfig {
   // The highest QoS of every publish and subscription (docs/FLEET.md §Brokers capped at QoS 1):
   // 1 for brokers without QoS 2. With 2, a broker's SUBACK granting less lowers it to 1.
   int max_qos = 2;
+  // The longest a fleet member stays without its broker while it moves: past it (no URL took
+  // it back) its motion is stopped, not latched, and audited, and again while the outage lasts.
+  uint32_t failover_ms = 5000;
 };
 
 struct FleetConfig {

@@ -73,13 +73,15 @@ Result<BrokerUrl> parse_broker_url(std::string_view url) {
 
 struct MqttClient::Impl {
   mosquitto* m = nullptr;
+  std::vector<std::string> url_text;  // MqttOptions::urls, or {url}
+  std::vector<BrokerUrl> urls;        // parsed by start()
+  std::thread net;                    // run()
 };
 
 // C callbacks → the client.
 struct MqttCallbacks {
   static void on_connect(mosquitto* m, void* obj, int rc) {
     auto* self = static_cast<MqttClient*>(obj);
-    pthread_setname_np(pthread_self(), "mqtt-io");  // libmosquitto's network thread
     if (rc == 0) {
       self->connected_.store(true);
       self->connects_.fetch_add(1);
@@ -142,6 +144,8 @@ struct MqttCallbacks {
 MqttClient::MqttClient(MqttOptions opts) : opts_(std::move(opts)), impl_(std::make_unique<Impl>()) {
   std::call_once(g_lib_once, [] { mosquitto_lib_init(); });
   opts_.max_qos = std::clamp(opts_.max_qos, 1, 2);
+  opts_.reconnect_min_s = std::max(opts_.reconnect_min_s, 1);
+  opts_.reconnect_max_s = std::max(opts_.reconnect_max_s, opts_.reconnect_min_s);
   opts_.will.qos = std::min(opts_.will.qos, opts_.max_qos);
   qos_cap_.store(opts_.max_qos);
 }
@@ -209,6 +213,11 @@ void MqttClient::got_suback(int mid, int granted) {
     sent_subscribe(again, renew, 1);
 }
 
+bool MqttClient::all_subscribed() const {
+  MutexLock lk(mu_);
+  return connected_.load() && ready_connects_ > 0 && sub_pending_.empty() && sub_refused_.empty();
+}
+
 std::vector<std::string> MqttClient::refused_subscriptions() const {
   MutexLock lk(mu_);
   return sub_refused_;
@@ -243,8 +252,16 @@ bool MqttClient::wait_subscribed(int timeout_ms) {
 
 Status MqttClient::start() {
   if (started_) return Error(ErrorCode::kInternal, "the MQTT client was already started");
-  auto url = parse_broker_url(opts_.url);
-  if (!url.ok()) return url.error();
+  impl_->url_text = opts_.urls.empty() ? std::vector<std::string>{opts_.url} : opts_.urls;
+  for (const auto& text : impl_->url_text) {
+    auto u = parse_broker_url(text);
+    if (!u.ok()) return u.error();
+    // One TLS setting per client: a failover URL never drops to plaintext.
+    if (!impl_->urls.empty() && u->tls != impl_->urls.front().tls)
+      return bad("the broker URLs must all be mqtt:// or all mqtts://");
+    impl_->urls.push_back(*u);
+  }
+  const BrokerUrl* url = &impl_->urls.front();
   std::string id = opts_.client_id;
   bool clean = opts_.clean_session;
   if (id.empty()) {
@@ -265,8 +282,6 @@ Status MqttClient::start() {
   mosquitto_message_callback_set(m, &MqttCallbacks::on_message);
   mosquitto_publish_callback_set(m, &MqttCallbacks::on_publish);
   mosquitto_subscribe_callback_set(m, &MqttCallbacks::on_subscribe);
-  mosquitto_reconnect_delay_set(m, static_cast<unsigned>(opts_.reconnect_min_s),
-                                static_cast<unsigned>(opts_.reconnect_max_s), true);
   if (!opts_.username.empty()) {
     if (mosquitto_username_pw_set(m, opts_.username.c_str(),
                                   opts_.password.empty() ? nullptr : opts_.password.c_str()) !=
@@ -291,19 +306,58 @@ Status MqttClient::start() {
     if (rc != MOSQ_ERR_SUCCESS)
       return Error(ErrorCode::kInternal, std::string("MQTT will: ") + mosquitto_strerror(rc));
   }
-  int rc = mosquitto_loop_start(m);
-  if (rc != MOSQ_ERR_SUCCESS)
-    return Error(ErrorCode::kInternal,
-                 std::string("MQTT network thread: ") + mosquitto_strerror(rc));
+  // Our own network thread drives mosquitto_loop (libmosquitto's loop_forever reconnects only to
+  // the one host it was given): publishes from other threads are queued for it and wake it.
+  mosquitto_threaded_set(m, true);
   started_ = true;
-  // A broker that is down now is retried by the network thread with the backoff above.
-  rc = mosquitto_connect_async(m, url->host.c_str(), url->port, opts_.keepalive_s);
-  if (rc != MOSQ_ERR_SUCCESS && rc != MOSQ_ERR_ERRNO && rc != MOSQ_ERR_CONN_REFUSED) {
-    stop();
-    return Error(ErrorCode::kInternal, std::string("MQTT connect: ") + mosquitto_strerror(rc));
-  }
-  if (rc != MOSQ_ERR_SUCCESS) mosquitto_reconnect_async(m);
+  // A broker that is down now is retried by the network thread (failover, backoff).
+  impl_->net = std::thread([this] {
+    pthread_setname_np(pthread_self(), "mqtt-io");
+    run();
+  });
   return Status::Ok();
+}
+
+// Connects to the URL in turn and serves the connection until it drops; then the next URL
+// (round robin): the first round without delay, then each round after the backoff delay. One
+// URL: the backoff before every attempt, as libmosquitto's own reconnect does.
+void MqttClient::run() {
+  mosquitto* m = impl_->m;
+  const size_t n = impl_->urls.size();
+  size_t at = 0;
+  size_t fails = 0;  // attempts since the last connection that the broker accepted
+  while (!stopped_.load()) {
+    at_.store(at);
+    const BrokerUrl& u = impl_->urls[at];
+    const uint64_t before = connects_.load();
+    if (mosquitto_connect(m, u.host.c_str(), u.port, opts_.keepalive_s) == MOSQ_ERR_SUCCESS) {
+      while (!stopped_.load() && mosquitto_loop(m, 1000, 1) == MOSQ_ERR_SUCCESS) {
+      }
+    }
+    if (stopped_.load()) break;
+    if (connects_.load() != before) fails = 0;  // this one served: a new outage begins
+    ++fails;
+    if (n > 1) at = (at + 1) % n;
+    int64_t delay_ms = 0;
+    if (fails >= n) {
+      size_t round = std::min<size_t>((fails - n) / n, 20);
+      delay_ms =
+          std::min<int64_t>(int64_t{opts_.reconnect_min_s} << round, opts_.reconnect_max_s) * 1000;
+    }
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(delay_ms);
+    MutexLock lk(mu_);
+    while (!stopped_.load() && cv_.wait_until(mu_, deadline) != std::cv_status::timeout) {
+    }
+  }
+  // stop() asked: a clean DISCONNECT (no will), sent by this thread.
+  mosquitto_disconnect(m);
+  for (int i = 0; i < 10 && mosquitto_loop(m, 50, 1) == MOSQ_ERR_SUCCESS; ++i) {
+  }
+}
+
+std::string MqttClient::current_url() const {
+  if (impl_->url_text.empty()) return opts_.url;
+  return impl_->url_text[std::min(at_.load(), impl_->url_text.size() - 1)];
 }
 
 Status MqttClient::publish(const std::string& topic, const std::string& payload, int qos,
@@ -375,8 +429,12 @@ bool MqttClient::flush(int timeout_ms) {
 
 void MqttClient::stop() {
   if (!started_ || stopped_.exchange(true)) return;
-  mosquitto_disconnect(impl_->m);
-  mosquitto_loop_stop(impl_->m, false);
+  {
+    MutexLock lk(mu_);
+    cv_.notify_all();  // a backoff wait ends
+  }
+  mosquitto_disconnect(impl_->m);  // wakes mosquitto_loop; run() sends it again if it raced
+  if (impl_->net.joinable()) impl_->net.join();
   connected_.store(false);
 }
 

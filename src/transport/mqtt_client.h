@@ -1,10 +1,14 @@
 // MqttClient — a small MQTT 3.1.1 client over libmosquitto, used by rcand's MQTT transport
 // (src/node/bindings/mqtt_node.h) and by `rcan fleet` (docs/FLEET.md).
 //
-// libmosquitto runs its own network thread (mosquitto_loop_start): it keeps the connection,
-// answers keep-alives and reconnects with exponential backoff (reconnect_min_s doubling up to
-// reconnect_max_s) after a broker loss. Subscriptions are renewed on every (re)connect. The
-// callbacks run on that thread; publish() may be called from any thread.
+// The client runs one network thread (libmosquitto's mosquitto_loop, driven by us): it keeps the
+// connection, answers keep-alives and reconnects after a broker loss. With one broker URL it
+// retries that broker with exponential backoff (reconnect_min_s doubling up to reconnect_max_s).
+// With several (MqttOptions::urls, a cluster's nodes) it fails over: after a loss it tries the
+// next URL at once, round robin, each URL of the first round without delay, then every round
+// after a backoff delay (reconnect_min_s doubling up to reconnect_max_s). Subscriptions are
+// renewed on every (re)connect, so a broker delivers its retained messages again. The callbacks
+// run on that thread; publish() may be called from any thread.
 //
 // QoS: every publish and subscription is capped at MqttOptions::max_qos. A broker without QoS 2
 // grants QoS 1 to a QoS 2 subscription, or refuses it, and may drop the connection on a QoS 2
@@ -54,6 +58,8 @@ inline constexpr int kDefaultReconnectMaxS = 30;
 
 struct MqttOptions {
   std::string url = kDefaultBrokerUrl;
+  // Failover: the broker URLs tried in turn (all mqtt:// or all mqtts://); empty → {url}.
+  std::vector<std::string> urls;
   std::string client_id;  // empty → random (a clean session is then forced)
   bool clean_session = true;
   int keepalive_s = kDefaultKeepaliveS;
@@ -112,6 +118,8 @@ class MqttClient {
   // The highest QoS publishes use: max_qos, lowered to 1 by a SUBACK that granted less than a
   // requested QoS 2.
   int qos_cap() const { return qos_cap_.load(); }
+  // Connected, and every subscription answered by a SUBACK that did not refuse it.
+  bool all_subscribed() const EXCLUDES(mu_);
   // Subscriptions the broker refused (SUBACK 0x80) at QoS 1 or 0.
   std::vector<std::string> refused_subscriptions() const EXCLUDES(mu_);
   // Sends the refused subscriptions again (a clustered broker refuses while it elects a new
@@ -125,6 +133,8 @@ class MqttClient {
 
   bool connected() const { return connected_.load(); }
   uint64_t connects() const { return connects_.load(); }
+  // The URL the client is connected to, or trying now.
+  std::string current_url() const;
 
   struct Impl;
 
@@ -149,8 +159,10 @@ class MqttClient {
   std::atomic<uint64_t> connects_{0};
   std::atomic<bool> stopped_{false};
   std::atomic<int64_t> inflight_{0};  // QoS > 0 publishes not yet acknowledged
+  std::atomic<size_t> at_{0};         // index of the URL in use (Impl::urls)
   bool started_ = false;
   std::unique_ptr<Impl> impl_;
+  void run();  // the network thread
   friend struct MqttCallbacks;
 };
 

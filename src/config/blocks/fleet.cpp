@@ -24,12 +24,30 @@ Table<MqttConfig> mqtt_rows() {
   using M = Rows<MqttConfig>;
   return {
       M::field("enabled", Bool(), &MqttConfig::enabled),
-      M::field("broker", Str(512), &MqttConfig::broker),
+      // One URL, or a list: a cluster's nodes, tried in turn after a broker loss (failover).
+      M::read("broker", Either({Str(512), Arr(Str(512), 16)}),
+              [](const At& a, MqttConfig& m, Ctx&) {
+                if (a.is_string()) m.broker = a.str();
+                if (!a.is_array()) return;
+                m.brokers = a.strs();
+                if (m.brokers.empty())
+                  fail(a.path, "needs at least one broker URL", "invalid_value");
+                m.broker = m.brokers.front();
+              }),
       M::check([](const At& mq, MqttConfig& m, Ctx&) {
-        if (auto u = transport::parse_broker_url(m.broker); !u.ok())
-          fail(mq["broker"].path, u.error().message, "invalid_value");
-        else if (u->tls && mq["tls"]["ca_file"].str().empty())
-          fail(mq["tls"]["ca_file"].path, "required with an mqtts:// broker", "missing_key");
+        const At b = mq["broker"];
+        const std::vector<std::string> urls = m.broker_urls();
+        for (size_t i = 0; i < urls.size(); ++i) {
+          const std::string path = b.is_array() ? b[i].path : b.path;
+          auto u = transport::parse_broker_url(urls[i]);
+          if (!u.ok()) fail(path, u.error().message, "invalid_value");
+          // A failover URL never drops to plaintext (one TLS setting per connection).
+          const bool first_tls = urls.front().rfind("mqtts://", 0) == 0;
+          if (u->tls != first_tls)
+            fail(path, "the broker URLs must all be mqtt:// or all mqtts://", "invalid_value");
+          if (u->tls && mq["tls"]["ca_file"].str().empty())
+            fail(mq["tls"]["ca_file"].path, "required with an mqtts:// broker", "missing_key");
+        }
       }),
       M::read("client_id", Str(128),
               [](const At& a, MqttConfig& m, Ctx&) {
@@ -76,6 +94,7 @@ Table<MqttConfig> mqtt_rows() {
       M::field("publish_audit", Bool(), &MqttConfig::publish_audit),
       M::field("estop_qos", Int(1, 2), &MqttConfig::estop_qos),
       M::field("max_qos", Int(1, 2), &MqttConfig::max_qos),
+      M::field("failover_ms", Int(100, 600000), &MqttConfig::failover_ms),
       M::check([](const At& mq, MqttConfig& m, Ctx&) {
         if (m.estop_qos > m.max_qos)
           fail(mq["estop_qos"].path, "must not exceed mqtt.max_qos", "out_of_range");

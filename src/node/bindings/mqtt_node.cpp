@@ -99,6 +99,7 @@ Status MqttNode::start() {
   robot_ = *rt;
   out_ = robot_;
   const bool in_fleet = !opts_.fleet.fleet_id.empty();
+  in_fleet_ = in_fleet;
   if (in_fleet) {
     fleet_ = mqtt::fleet_topics(mq.topic_prefix, opts_.fleet.fleet_id);
     out_ = fleet_.member(opts_.fleet.member_id);
@@ -106,6 +107,7 @@ Status MqttNode::start() {
 
   transport::MqttOptions co;
   co.url = mq.broker;
+  co.urls = mq.broker_urls();  // a cluster's nodes: failover, round robin
   co.client_id = mq.client_id.empty() ? "rcand-" + opts_.ruri.device_id : mq.client_id;
   co.clean_session = false;  // QoS 1 commands sent during a short absence still arrive
   co.keepalive_s = static_cast<int>(mq.keepalive_s);
@@ -141,7 +143,7 @@ Status MqttNode::start() {
     for (const auto& f : swarm_->subscriptions()) client_->subscribe(f, 1);
   }
   client_->on_message([this](const transport::MqttMessage& m) { on_message(m); });
-  client_->on_connection([this](bool up, int) { on_connection(up); });
+  client_->on_connection([this](bool up, int code) { on_connection(up, code); });
 
   if (mq.publish_audit) {
     auto st = svc_.audit.stats();
@@ -164,8 +166,10 @@ Status MqttNode::start() {
     loop();
   });
   log(LogLevel::kInfo, "mqtt_started",
-      json::Object{
-          {"broker", mq.broker}, {"cmd_topic", robot_.cmd()}, {"status_topic", out_.status()}});
+      json::Object{{"broker", mq.broker},
+                   {"brokers", static_cast<int64_t>(co.urls.size())},
+                   {"cmd_topic", robot_.cmd()},
+                   {"status_topic", out_.status()}});
   return Status::Ok();
 }
 
@@ -177,13 +181,15 @@ void MqttNode::warn_about_exposure() const {
         json::Object{{"note",
                       "mqtt.require_bound_tokens is false: whoever reads a topic can reuse the "
                       "tokens on it to send commands of their own (lab use only)"}});
-  auto u = transport::parse_broker_url(mq.broker);
-  if (u.ok() && !u->tls && !is_loopback_host(u->host))
-    log(LogLevel::kWarn, "mqtt_plaintext_broker",
-        json::Object{{"broker", mq.broker},
-                     {"note",
-                      "mqtt:// off loopback: tokens, commands and telemetry cross the network "
-                      "unencrypted; use mqtts:// with tls.ca_file"}});
+  for (const auto& url : mq.broker_urls()) {
+    auto u = transport::parse_broker_url(url);
+    if (u.ok() && !u->tls && !is_loopback_host(u->host))
+      log(LogLevel::kWarn, "mqtt_plaintext_broker",
+          json::Object{{"broker", url},
+                       {"note",
+                        "mqtt:// off loopback: tokens, commands and telemetry cross the network "
+                        "unencrypted; use mqtts:// with tls.ca_file"}});
+  }
 }
 
 void MqttNode::stop() {
@@ -199,15 +205,83 @@ void MqttNode::stop() {
   client_->stop();
 }
 
-void MqttNode::on_connection(bool up) {
+// Runs on the client's network thread. The loss and the return of the broker are audited once
+// per outage (a broker refusing every attempt writes one record, not one per attempt), with the
+// URL: after a failover the return names the node the robot is on now.
+void MqttNode::on_connection(bool up, int code) {
+  const std::string url = client_->current_url();
+  const int64_t now = svc_.clock.mono_ms();
   if (up) {
     publish_status(true, "connected");
-    if (swarm_) swarm_->on_connected(svc_.clock.mono_ms());
+    if (swarm_) swarm_->on_connected(now);
+    const int64_t since = lost_since_ms_.exchange(0);
+    const bool again = !last_url_.empty();
+    const bool failover = again && url != last_url_;
+    channel_up_ = true;
     log(LogLevel::kInfo, "mqtt_connected",
-        json::Object{{"connects", static_cast<int64_t>(client_->connects())}});
+        json::Object{{"connects", static_cast<int64_t>(client_->connects())},
+                     {"broker", url},
+                     {"failover", failover}});
+    AuditRecord r = svc_.record(again ? "MQTT_RECONNECTED" : "MQTT_CONNECTED").by_system();
+    r.detail("broker", url).detail("connects", static_cast<int64_t>(client_->connects()));
+    if (again)
+      r.detail("previous_broker", last_url_)
+          .detail("failover", failover)
+          .detail("down_ms", now - since);
+    r.write();
+    last_url_ = url;
   } else if (running_.load()) {
-    log(LogLevel::kWarn, "mqtt_disconnected", json::Object{{"note", "reconnecting with backoff"}});
+    log(LogLevel::kWarn, "mqtt_disconnected",
+        json::Object{{"broker", url},
+                     {"code", static_cast<int64_t>(code)},
+                     {"note", "reconnecting (failover to the next broker URL, then backoff)"}});
+    if (!channel_up_) return;  // the same outage
+    channel_up_ = false;
+    lost_since_ms_.store(now);
+    svc_.record("MQTT_DISCONNECTED", "degraded")
+        .by_system()
+        .reason(in_fleet_ ? "fleet_channel_lost" : "broker_lost")
+        .detail("broker", url)
+        .detail("code", static_cast<int64_t>(code))
+        .detail("failover_ms", static_cast<int64_t>(opts_.mqtt.failover_ms))
+        .write();
   }
+}
+
+// A fleet member without its broker cannot hear a fleet ESTOP, nor can one whose subscriptions a
+// clustered broker refused (NATS refuses them for a few seconds after losing a node, while it
+// elects new stream leaders): those are asked for again every 500 ms. Past mqtt.failover_ms
+// without every subscription in place, a moving robot is stopped (not latched: the fleet's
+// order, if any, comes back with the channel as the retained ESTOP), and again whenever it moves
+// while that lasts.
+void MqttNode::tick_channel(int64_t now) {
+  if (client_->connected() && !client_->refused_subscriptions().empty() &&
+      now - last_retry_ms_ >= 500) {
+    last_retry_ms_ = now;
+    log(LogLevel::kWarn, "mqtt_subscription_refused",
+        json::Object{{"broker", client_->current_url()},
+                     {"topic", client_->refused_subscriptions().front()},
+                     {"note", "asking again every 500 ms"}});
+    client_->retry_refused();
+  }
+  if (client_->all_subscribed()) {
+    deaf_since_ms_ = 0;
+    return;
+  }
+  if (deaf_since_ms_ == 0) deaf_since_ms_ = now;
+  if (!in_fleet_ || now - deaf_since_ms_ < static_cast<int64_t>(opts_.mqtt.failover_ms)) return;
+  if (json::bool_field(svc_.act.telemetry(), "stopped")) return;
+  svc_.act.stop("fleet_channel_lost");
+  log(LogLevel::kWarn, "fleet_channel_stop",
+      json::Object{{"down_ms", now - deaf_since_ms_}, {"broker", client_->current_url()}});
+  svc_.record("STOP", "ok")
+      .by_system()
+      .reason("fleet_channel_lost")
+      .detail("down_ms", now - deaf_since_ms_)
+      .detail("failover_ms", static_cast<int64_t>(opts_.mqtt.failover_ms))
+      .detail("broker", client_->current_url())
+      .detail("connected", client_->connected())
+      .write();
 }
 
 void MqttNode::publish_json(const std::string& topic, const json::Value& v, int qos, bool retain) {
@@ -336,9 +410,11 @@ void MqttNode::loop() {
       wait_ms = std::min<int64_t>(wait_ms, std::max<int64_t>(10, opts_.swarm.heartbeat_ms / 4));
     if (telemetry_period > 0) wait_ms = std::min<int64_t>(wait_ms, telemetry_period);
     if (opts_.mqtt.publish_audit) wait_ms = std::min<int64_t>(wait_ms, 100);
+    if (deaf_since_ms_ != 0) wait_ms = std::min<int64_t>(wait_ms, 50);
     loop_cv_.wait_for(loop_mu_, std::chrono::milliseconds(wait_ms));
     if (!running_.load()) break;
     int64_t now = svc_.clock.mono_ms();
+    tick_channel(now);
     tick_completions();
     if (opts_.mqtt.publish_audit) tick_audit();
     if (swarm_ && client_->connected()) swarm_->tick(now);

@@ -5,6 +5,11 @@
 // will says "offline"), telemetry, events, motion completions and the audit records, and runs
 // the swarm agent (swarm.h) when a swarm is configured.
 //
+// Broker loss: the client fails over to the next `mqtt.broker` URL (a cluster's nodes), renews
+// the subscriptions (the broker delivers a retained fleet ESTOP again) and the loss and the
+// return are audited (MQTT_DISCONNECTED, MQTT_RECONNECTED with the URL). A fleet member still
+// without a broker after `mqtt.failover_ms` has its motion stopped (STOP, audited).
+//
 // Delivery: commands and replies use QoS 1 on a persistent session (clean_session false), so a
 // command published while the robot is briefly away still arrives; a redelivered or
 // re-published command is refused by the replay window (REPLAY_DETECTED), never run twice.
@@ -68,7 +73,8 @@ class MqttNode {
 
  private:
   void on_message(const transport::MqttMessage& msg);
-  void on_connection(bool up);
+  void on_connection(bool up, int code);
+  void tick_channel(int64_t now_mono_ms);
   void submit(const json::Value& body, const std::string& route, const std::string& reply_topic,
               const std::string& fleet_id, const std::string& fleet_mode, bool standing_estop);
   void publish_json(const std::string& topic, const json::Value& v, int qos, bool retain);
@@ -99,6 +105,12 @@ class MqttNode {
   uint64_t next_audit_seq_ = 0;  // the loop's (set by start() before it runs)
   uint64_t event_sub_ = 0;
 
+  bool in_fleet_ = false;                  // set by start()
+  std::atomic<int64_t> lost_since_ms_{0};  // mono ms the broker was lost at; 0: connected
+  std::string last_url_;       // the network thread's: the URL last connected to (empty: never)
+  bool channel_up_ = false;    // the network thread's
+  int64_t deaf_since_ms_ = 0;  // the loop's: since when not every subscription is in place
+  int64_t last_retry_ms_ = 0;  // the loop's: refused subscriptions last asked for again
   std::atomic<bool> running_{false};
   Mutex loop_mu_;
   CondVar loop_cv_;
