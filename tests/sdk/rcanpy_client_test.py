@@ -153,7 +153,7 @@ def post(base, token, body):
 
 
 def get(base, path, token):
-    req = urllib.request.Request(base + path, headers={"Authorization": f"Bearer {token}"})
+    req = urllib.request.Request(base + path, headers={"Authorization": f"Bearer {token}"} if token else {})
     with urllib.request.urlopen(req, timeout=10) as r:
         return r.status, json.loads(r.read())
 
@@ -248,8 +248,16 @@ def main():
         proc, base, token = start_rcand(work, operator, operator_ed)
         print(f"rcand at {base}, rcan-py {rcan.__version__}")
 
-        target = RobotURI.build(manufacturer="acme", model="rover", version="v1", device_id="0a1b2c3d",
-                                registry="local.rcan")
+        # The robot's identity as the SDK writes it, copied from status and discovery.
+        st, status = get(base, "/rcan/v1/status", None)
+        sdk_ruri = status.get("ruri_sdk", "")
+        check(status.get("ruri") == RURI and sdk_ruri == "rcan://local.rcan/acme/rover/v1/0a1b2c3d",
+              f"status advertises both RURI forms ({status.get('ruri')}, {sdk_ruri})")
+        target = RobotURI.parse(sdk_ruri)
+        check(str(target) == sdk_ruri and target.device_id == "0a1b2c3d",
+              "rcan-py RobotURI.parse reads status's ruri_sdk as the robot's identity")
+        st, disc = get(base, "/api/discovery", None)
+        check(disc.get("txt_record", {}).get("ruri_sdk") == sdk_ruri, "discovery's TXT record carries ruri_sdk")
 
         def move(linear=0.1):
             return RCANMessage(cmd="move", target=target, params={"linear": linear, "duration_ms": 100})

@@ -187,7 +187,15 @@ async function main() {
     ({ proc, url: base, token } = await startRcand(work, operator, operatorEd));
     console.log(`rcand at ${base}`);
 
-    const target = RobotURI.build({ manufacturer: 'acme', model: 'rover', version: 'v1', deviceId: '0a1b2c3d', registry: 'local.rcan' });
+    // The robot's identity as the SDK writes it, copied from status and the ANNOUNCE answer.
+    const status = await (await fetch(`${base}/rcan/v1/status`)).json();
+    check(status.ruri === RURI && status.ruri_sdk === 'rcan://local.rcan/acme/rover/v1/0a1b2c3d',
+      `status advertises both RURI forms (${status.ruri}, ${status.ruri_sdk})`);
+    const target = RobotURI.parse(status.ruri_sdk);
+    check(target.toString() === status.ruri_sdk && target.deviceId === '0a1b2c3d',
+      'rcan-ts RobotURI.parse reads status\'s ruri_sdk as the robot\'s identity');
+    const announce = await (await fetch(`${base}/rcan/v1/discover`, { method: 'POST' })).json();
+    check(announce?.payload?.ruri_sdk === status.ruri_sdk, 'the DISCOVER answer (ANNOUNCE) carries ruri_sdk');
     let n = 0; // distinct params per message: rcan-ts timestamps have millisecond resolution
     const move = (extra = {}) => new RCANMessage({ cmd: 'move', target, params: { linear: 0.1, duration_ms: 100 + (n++) }, ...extra });
     const hybridBody = async (msg, kp = operatorKp, ed = operatorEd) =>
