@@ -55,6 +55,8 @@ enum class MessageType : uint8_t {
   kConsentDeny,
   kTransferCancel,
   kSwarmAnnounce,
+  // The SDKs' skill invocation (their MessageType.INVOKE = 11): a COMMAND naming a skill.
+  kInvoke,
 };
 enum class Priority : uint8_t { kLow = 0, kNormal = 1, kHigh = 2, kSafety = 3 };
 enum class SenderType : uint8_t { kHuman, kRobot, kCloudFunction, kSystem };

@@ -14,7 +14,7 @@ struct TypeName {
   MessageType type;
   std::string_view name;
 };
-constexpr std::array<TypeName, 27> kTypeNames{{
+constexpr std::array<TypeName, 28> kTypeNames{{
     {MessageType::kDiscover, "DISCOVER"},
     {MessageType::kStatus, "STATUS"},
     {MessageType::kCommand, "COMMAND"},
@@ -42,6 +42,7 @@ constexpr std::array<TypeName, 27> kTypeNames{{
     {MessageType::kConsentDeny, "CONSENT_DENY"},
     {MessageType::kTransferCancel, "TRANSFER_CANCEL"},
     {MessageType::kSwarmAnnounce, "SWARM_ANNOUNCE"},
+    {MessageType::kInvoke, "INVOKE"},
 }};
 
 Error schema(std::string field, std::string msg) {
@@ -470,6 +471,11 @@ Result<Message> decode_rcanpy(const json::Object& o, const CodecLimits& lim) {
   Message m;
   m.shape = WireShape::kRcanPy;
   m.type = MessageType::kCommand;
+  // The SDKs' RCANMessage never writes its type; a sender may add rcan-py's MessageType.INVOKE
+  // (11, or "INVOKE") to ask for a skill. Any other `type` is ignored like an unknown field.
+  if (const json::Value* t = o.find("type");
+      t && ((t->is_int() && t->as_int() == 11) || (t->is_string() && t->as_string() == "INVOKE")))
+    m.type = MessageType::kInvoke;
   Reader r(o);
   auto rc = r.str("rcan", 32);
   if (!rc.ok()) return rc.error();

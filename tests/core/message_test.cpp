@@ -148,6 +148,28 @@ TEST(MessageCodec, RcanTsShapeIsReadWithADerivedReplayIdentity) {
   EXPECT_TRUE(parse_message(ts_with(R"(,"params":{"linear":0.1,"duration_ms":100})", "")).ok());
 }
 
+TEST(MessageCodec, InvokeInEveryShape) {
+  // Seed shape: the type name round-trips.
+  auto seed = parse_message(seed_msg("", R"({"skill":"scan_environment"})")
+                                .replace(seed_msg().find("COMMAND"), 7, "INVOKE"));
+  ASSERT_TRUE(seed.ok()) << seed.error().message;
+  EXPECT_EQ(seed->type, MessageType::kInvoke);
+  EXPECT_EQ(message_type_name(seed->type), "INVOKE");
+  // SDK shapes: `type` 11 or "INVOKE" asks for a skill; anything else is ignored.
+  auto ts = parse_message(ts_with(R"("cmd":"move")", R"("type":11,"cmd":"scan_environment")"));
+  ASSERT_TRUE(ts.ok()) << ts.error().message;
+  EXPECT_EQ(ts->type, MessageType::kInvoke);
+  EXPECT_EQ(ts->action(), "scan_environment");
+  auto named = parse_message(ts_with(R"("cmd":"move")", R"("type":"INVOKE","cmd":"dock")"));
+  ASSERT_TRUE(named.ok());
+  EXPECT_EQ(named->type, MessageType::kInvoke);
+  for (const char* other : {R"("type":1,)", R"("type":"COMMAND",)", R"("type":[11],)"}) {
+    auto m = parse_message(ts_with(R"("cmd")", std::string(other) + R"("cmd")"));
+    ASSERT_TRUE(m.ok()) << other;
+    EXPECT_EQ(m->type, MessageType::kCommand) << other;
+  }
+}
+
 TEST(MessageCodec, RcanTsBadTimestampsAreSchemaErrors) {
   for (const char* bad : {"2025-02-28 05:44:42Z", "2025-02-28T05:44:42", "2025-13-28T05:44:42Z",
                           "2025-02-28T05:44:42.Z", "2025-02-28T25:44:42Z", "yesterday",

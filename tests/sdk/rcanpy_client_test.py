@@ -58,7 +58,7 @@ import rcan  # noqa: E402  (the SDK under test)
 from rcan import RCANMessage, RobotURI  # noqa: E402
 from rcan.crypto import MlDsaKeyPair  # noqa: E402
 from rcan.hybrid import sign_body, verify_body  # noqa: E402
-from rcan.message import RCANResponse  # noqa: E402
+from rcan.message import MessageType, RCANResponse  # noqa: E402
 from rcan.signing import KeyPair, MLDSAKeyPair, _canonical_message_bytes, sign_message  # noqa: E402
 
 failures = []
@@ -323,6 +323,30 @@ def main():
         st, body = post(base, token, hybrid(move(), kp=stranger_pq))
         check(st == 401 and code_of(body) == "SIGNATURE_INVALID", f"HTTP: hybrid with an untrusted ML-DSA-65 key is 401 SIGNATURE_INVALID ({st} {code_of(body)})")
 
+        # --- INVOKE (skills) ----------------------------------------------------------------------
+        def invoke(skill, **params):
+            return RCANMessage(type=MessageType.INVOKE, cmd=skill, target=target, params=params)
+
+        inv = invoke("scan_environment", duration_ms=200)
+        if "type" not in inv.to_dict():
+            notes.append("rcan-py RCANMessage.to_dict() drops type=INVOKE: an SDK INVOKE is a COMMAND on the "
+                         "wire unless the sender adds \"type\": 11")
+        st, body = post(base, token, inv.to_dict())
+        check(st == 200 and body.get("type") == "ACK", f"HTTP: the simulator's skill scan_environment is ACKed ({st} {code_of(body)})")
+        typed = sign_message(invoke("scan_environment", duration_ms=150), operator).to_dict()
+        typed["type"] = int(MessageType.INVOKE)
+        st, body = post(base, token, typed)
+        check(st == 200 and body.get("type") == "ACK", f"HTTP: a signed INVOKE (type 11) of scan_environment is ACKed ({st} {code_of(body)})")
+        for skill in ("juggle", "dock"):  # not a skill at all / a skill the simulator does not offer
+            d = {**invoke(skill, speed=1).to_dict(), "type": int(MessageType.INVOKE)}
+            st, body = post(base, token, d)
+            p = (body or {}).get("payload") or {}
+            check(st == 404 and body.get("type") == "ERROR" and p.get("error_code") == "NOT_FOUND"
+                  and p.get("reason") == "unknown_skill" and (p.get("detail") or {}).get("field") == "payload.skill",
+                  f"HTTP: INVOKE of {skill} is 404 NOT_FOUND/unknown_skill with the error body ({st} {code_of(body)})")
+        st, body = post(base, token, invoke("juggle").to_dict())
+        check(st == 422 and code_of(body) == "COMMAND_REJECTED", f"HTTP: the same name as a plain COMMAND is 422 COMMAND_REJECTED ({st} {code_of(body)})")
+
         # --- WebSocket --------------------------------------------------------------------------
         ws = WebSocket(base, "/rcan/v1/stream")
         try:
@@ -353,6 +377,9 @@ def main():
             ws.send(sign_message(move(), stranger).to_dict())
             a = ws.answer_to()
             check(code_of(a) == "SIGNATURE_INVALID", f"WS: an untrusted key is SIGNATURE_INVALID ({code_of(a)})")
+            ws.send({**invoke("juggle").to_dict(), "type": int(MessageType.INVOKE)})
+            a = ws.answer_to()
+            check(code_of(a) == "NOT_FOUND", f"WS: INVOKE of an unknown skill is NOT_FOUND ({code_of(a)})")
         finally:
             ws.close()
     except Exception as e:  # an exception is a failure, never a pass

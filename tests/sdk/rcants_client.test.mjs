@@ -31,7 +31,7 @@ if (!rcandPath || !existsSync(rcandPath)) skip('RCAND_PATH does not name an rcan
 if (!cliPath || !existsSync(cliPath)) skip('RCAN_CLI_PATH does not name the rcan CLI');
 if (!existsSync(sdkDist)) skip('rcan-ts is not built (scripts/install-deps.sh runs npm ci + tsup in tests/peers/rcan-ts-3.4.2)');
 const sdk = await import(sdkDist);
-const { RCANMessage, RobotURI, MLDSAKeyPair, signMessage, verifyMessage, signBody, verifyBody, signHybrid, canonicalJson } = sdk;
+const { RCANMessage, MessageType, RobotURI, MLDSAKeyPair, signMessage, verifyMessage, signBody, verifyBody, signHybrid, canonicalJson } = sdk;
 
 const failures = [];
 const notes = [];
@@ -258,6 +258,14 @@ async function main() {
     shBad.sig.ed25519 = Buffer.from(signHybrid(strangerEd.seed, operator.secretKey, canonicalJson(sh)).ed25519Sig).toString('base64');
     r = await post(base, token, { ...shBad, params: { ...shBad.params, duration_ms: 1 } });
     check(r.status === 401 && codeOf(r.json) === 'SIGNATURE_INVALID', `HTTP: signHybrid with a wrong Ed25519 half is 401 SIGNATURE_INVALID (${r.status} ${codeOf(r.json)})`);
+
+    // --- INVOKE (skills): rcan-ts has MessageType.INVOKE but no type member on RCANMessage ---
+    r = await post(base, token, new RCANMessage({ cmd: 'scan_environment', target, params: { duration_ms: 100 + (n++) } }).toJSONString());
+    check(r.status === 200 && r.json?.type === 'ACK', `HTTP: the simulator's skill scan_environment is ACKed (${r.status} ${codeOf(r.json)})`);
+    const inv = { ...new RCANMessage({ cmd: 'juggle', target, params: { n: n++ } }).toJSON(), type: MessageType.INVOKE };
+    r = await post(base, token, inv);
+    check(r.status === 404 && r.json?.type === 'ERROR' && codeOf(r.json) === 'NOT_FOUND' && r.json?.payload?.reason === 'unknown_skill',
+      `HTTP: INVOKE (type ${MessageType.INVOKE}) of an unknown skill is 404 NOT_FOUND/unknown_skill (${r.status} ${codeOf(r.json)})`);
 
     // --- WebSocket ------------------------------------------------------------------------
     const ws = await Ws.open(base, '/rcan/v1/stream');
