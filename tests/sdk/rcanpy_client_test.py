@@ -273,10 +273,11 @@ def main():
         # --- HTTP -------------------------------------------------------------------------------
         st, body = post(base, token, move().to_dict())
         check(st == 200 and body.get("type") == "ACK", f"HTTP: unsigned rcan-py message + token is ACKed ({st})")
+        sent = move()
+        st, body = post(base, token, sent.to_dict())
         resp = RCANResponse.from_dict(body or {})
-        if not resp.ok:
-            notes.append(f"rcan-py RCANResponse.from_dict reads rcand's ACK as status={resp.status!r} "
-                         "(rcand's ACK has no `status`/`msg_id` members)")
+        check(st == 200 and resp.ok and resp.msg_id == sent.msg_id,
+              f"rcan-py RCANResponse.from_dict reads rcand's ACK as ok for its msg_id ({resp.status}, {resp.msg_id})")
 
         signed = sign_message(move(), operator)
         check(signed.to_dict()["sig"]["alg"] == "ml-dsa-65", "rcan-py sign_message wrote an ml-dsa-65 sig block")
@@ -285,6 +286,9 @@ def main():
         check(st == 200 and body.get("type") == "ACK", f"HTTP: ML-DSA-65-signed (sign_message) is ACKed ({st} {code_of(body)})")
         st, body = post(base, token, wire)
         check(st == 409 and code_of(body) == "REPLAY_DETECTED", f"HTTP: the same signed message again is 409 REPLAY_DETECTED ({st} {code_of(body)})")
+        resp = RCANResponse.from_dict(body or {})
+        check(not resp.ok and resp.status == "error" and resp.msg_id == signed.msg_id and "already used" in resp.message,
+              f"rcan-py RCANResponse.from_dict reads the refusal as an error for its msg_id ({resp.status}: {resp.message})")
 
         tampered = signed.to_dict()
         tampered["params"] = {"linear": 0.5, "duration_ms": 100}
