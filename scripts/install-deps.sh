@@ -57,5 +57,7 @@ fi
 T="$ROOT/tests/peers/rcan-ts-3.4.2"
 if [ ! -f "$T/dist/index.mjs" ] || [ -n "$(find "$T/package-lock.json" "$T/package.json" "$T/src" "$T/tsup.config.ts" -newer "$T/dist/index.mjs" 2>/dev/null | head -1)" ]; then
   echo "install-deps: npm ci + tsup in tests/peers/rcan-ts-3.4.2" >&2
-  (cd "$T" && npm ci --ignore-scripts --no-audit --no-fund --loglevel=error >/dev/null && npx --no-install tsup >/dev/null)
+  # tsup's output (warnings about rcan-ts's own config) is shown only when the build fails.
+  (cd "$T" && npm ci --ignore-scripts --no-audit --no-fund --loglevel=error >/dev/null &&
+    { out="$(npx --no-install tsup 2>&1)" || { echo "$out" >&2; exit 1; }; })
 fi
