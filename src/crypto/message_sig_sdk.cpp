@@ -154,6 +154,8 @@ Result<SigBlock> verify_hybrid(const json::Object& msg, const TrustedKeys& trust
 
 // rcan-ts `signature` {alg: "ml-dsa-65", kid, sig (base64url)} over rcants_preimage().
 Result<SigBlock> verify_rcants(const json::Object& msg, const TrustedKeys& trusted) {
+  auto pre = rcants_preimage(msg);  // first: a malformed message is a schema error
+  if (!pre.ok()) return pre.error();
   const json::Value* s = msg.find("signature");
   if (!s->is_object()) return sig_error("signature must be an object {alg, kid, sig}", "signature");
   std::string alg = json::string_field(*s, "alg");
@@ -166,8 +168,6 @@ Result<SigBlock> verify_rcants(const json::Object& msg, const TrustedKeys& trust
   auto raw = base64url_decode(value);
   if (!raw || raw->size() != mldsa65::kSignatureBytes)
     return sig_error("signature.sig is not a 3309-byte base64url signature", "signature.sig");
-  auto pre = rcants_preimage(msg);
-  if (!pre.ok()) return pre.error();
   bool known = false;
   for (const auto& pk : trusted.mldsa65) {
     if (pk.size() != mldsa65::kPublicKeyBytes || mldsa65::kid(pk) != kid) continue;

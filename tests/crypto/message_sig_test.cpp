@@ -309,6 +309,31 @@ TEST(MessageSig, RcanTsPreimageAndSignature) {
   EXPECT_EQ(verify(unsigned_msg, trusted0()).error().code, ErrorCode::kAuthRequired);
 }
 
+// Messages signed by rcan-ts 3.4.2 itself (tests/vectors/rcants-signed-messages.json): its
+// signMessage pre-image (raw UTF-8, JavaScript number formatting such as 1e-7) is rebuilt
+// byte for byte, and its signBody on a message verifies with both keys trusted.
+TEST(MessageSig, MessagesSignedByRcanTsVerify) {
+  auto v = test::load_vector("rcants-signed-messages.json");
+  auto ed_pub = ed25519::public_key_from_seed(Bytes(32, 7));
+  ASSERT_TRUE(ed_pub.ok());
+  TrustedKeys both = trusted0();
+  both.ed25519.push_back(*ed_pub);
+  json::Object ts = parse_obj(v.get("rcants_signed_message")->as_string());
+  auto ok = verify(ts, both);
+  ASSERT_TRUE(ok.ok()) << ok.error().message;
+  EXPECT_EQ(ok->kid, "d666806e");
+  json::Object ts_bad = ts;
+  ts_bad.find("params")->as_object().set("tiny", 1e-6);
+  EXPECT_EQ(verify(ts_bad, both).error().code, ErrorCode::kSignatureInvalid);
+  json::Object body = parse_obj(v.get("signbody_message")->as_string());
+  auto hy = verify(body, both);
+  ASSERT_TRUE(hy.ok()) << hy.error().message;
+  EXPECT_EQ(hy->alg, Alg::kHybrid);
+  json::Object body_bad = body;
+  body_bad.set("msg_id", "fuzz-2");
+  EXPECT_EQ(verify(body_bad, both).error().code, ErrorCode::kSignatureInvalid);
+}
+
 TEST(MessageSig, HybridSignedMessageNeedsBothKeysTrusted) {
   Bytes ed_seed(32, 7);
   auto ed_pub = ed25519::public_key_from_seed(ed_seed);
