@@ -1,10 +1,12 @@
-// libFuzzer target: message `sig` blocks and hybrid signed bodies. The input is parsed as
-// JSON; objects go through parse_sig_block (on their "sig" and on themselves), the rcan-py /
-// canonical pre-image builders, msgsig::verify against fixed trusted keys, and
-// hybrid::verify_body in strict and SDK mode. Must never crash. Invariants: a message that
-// verifies has a well-formed sig block and pre-image; a body accepted in strict mode is also
-// accepted in SDK mode (strict only adds checks). (The seed corpus holds validly signed
-// messages, so verification itself may succeed.)
+// libFuzzer target: message signatures in every form and hybrid signed bodies. The input is
+// parsed as JSON; objects go through parse_sig_block (on their "sig" and on themselves), the
+// rcan-py / canonical / rcan-ts pre-image builders (and js_stringify), msgsig::verify against
+// fixed trusted keys (sig {alg,kid,value}, hybrid sig {ml_dsa,ed25519,ed25519_pub}, rcan-ts
+// signature {alg,kid,sig}), and hybrid::verify_body in strict and SDK mode. Must never crash.
+// Invariants: a message that verifies carries a well-formed block of the form that verified
+// (and a hybrid one passes strict verify_body); a body accepted in strict mode is also accepted
+// in SDK mode (strict only adds checks). (The seed corpus holds validly signed messages, so
+// verification itself may succeed.)
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
@@ -52,10 +54,21 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const json::Value* sig = obj.find("sig");
   if (sig) (void)msgsig::parse_sig_block(*sig);
   auto pre = msgsig::preimage(obj);
-  if (msgsig::verify(obj, trusted().keys).ok()) {
-    if (!sig || !msgsig::parse_sig_block(*sig).ok() || !pre.ok()) std::abort();
-  }
+  auto ts_pre = msgsig::rcants_preimage(obj);
+  if (ts_pre.ok() && ts_pre->empty()) std::abort();
+  (void)msgsig::js_stringify(*v);
   hybrid::VerifyOptions strict;
+  if (msgsig::verify(obj, trusted().keys).ok()) {
+    // Whichever form verified must be well-formed on its own terms.
+    if (!msgsig::signature_member(obj)) std::abort();
+    if (sig && sig->is_object() && sig->get("ml_dsa")) {
+      if (!hybrid::verify_body(obj, trusted().mldsa_pk, strict).ok()) std::abort();
+    } else if (sig && !sig->is_null()) {
+      if (!msgsig::parse_sig_block(*sig).ok() || !pre.ok()) std::abort();
+    } else if (!ts_pre.ok()) {
+      std::abort();
+    }
+  }
   hybrid::VerifyOptions sdk;
   sdk.strict = false;
   bool strict_ok = hybrid::verify_body(obj, trusted().mldsa_pk, strict).ok();

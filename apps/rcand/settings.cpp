@@ -46,6 +46,7 @@ node::SafetyConfig safety_config(const config::NodeConfig& cfg, const node::SimR
 node::NodeSettings node_settings(const config::NodeConfig& cfg, const keys::RobotKeys& robot) {
   node::NodeSettings ns;
   ns.ruri = cfg.ruri;
+  ns.ruri_sdk = sdk_form(cfg.ruri_parts);
   ns.rrn = cfg.rrn;
   if (ns.rrn.empty()) {
     // A stable local registration number from the robot's key id (digits only).

@@ -55,10 +55,12 @@ enum class MessageType : uint8_t {
   kConsentDeny,
   kTransferCancel,
   kSwarmAnnounce,
+  // The SDKs' skill invocation (their MessageType.INVOKE = 11): a COMMAND naming a skill.
+  kInvoke,
 };
 enum class Priority : uint8_t { kLow = 0, kNormal = 1, kHigh = 2, kSafety = 3 };
 enum class SenderType : uint8_t { kHuman, kRobot, kCloudFunction, kSystem };
-enum class WireShape : uint8_t { kSeed, kRcanPy };
+enum class WireShape : uint8_t { kSeed, kRcanPy, kRcanTs };
 
 std::string_view message_type_name(MessageType t);
 std::optional<MessageType> message_type_from_name(std::string_view name);

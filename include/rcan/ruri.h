@@ -48,6 +48,11 @@ Result<Ruri> parse_ruri(std::string_view text);
 
 std::string_view ruri_form_name(Ruri::Form f);
 
+// The robot's identity in the SDKs' 5-segment form (rcan-py / rcan-ts RobotURI):
+// rcan://<registry>/<manufacturer>/<model>/<version>/<device-id>, with `version` as the version
+// segment (a kSdk5 RURI keeps its own). Empty for a discovered RURI, which names no robot.
+std::string sdk_form(const Ruri& ruri, std::string_view version = "v1");
+
 // JWT audience matching: `pattern` is a RURI in which any segment may be '*'. Matches when
 // every segment of the robot's base RURI equals the pattern's segment or the pattern has
 // '*' there. A pattern with a capability matches only that capability of `robot`; a

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "rcan/errors.h"
+#include "rcan/hash.h"
 #include "rcan/ruri.h"
 
 namespace rcan {
@@ -13,7 +14,7 @@ struct TypeName {
   MessageType type;
   std::string_view name;
 };
-constexpr std::array<TypeName, 27> kTypeNames{{
+constexpr std::array<TypeName, 28> kTypeNames{{
     {MessageType::kDiscover, "DISCOVER"},
     {MessageType::kStatus, "STATUS"},
     {MessageType::kCommand, "COMMAND"},
@@ -41,6 +42,7 @@ constexpr std::array<TypeName, 27> kTypeNames{{
     {MessageType::kConsentDeny, "CONSENT_DENY"},
     {MessageType::kTransferCancel, "TRANSFER_CANCEL"},
     {MessageType::kSwarmAnnounce, "SWARM_ANNOUNCE"},
+    {MessageType::kInvoke, "INVOKE"},
 }};
 
 Error schema(std::string field, std::string msg) {
@@ -184,19 +186,32 @@ Result<AiBlock> read_ai(const json::Value& v) {
   return ai;
 }
 
-Result<SignatureBlock> read_sig(const json::Value& v) {
-  if (!v.is_object()) return schema("sig", "sig must be an object {alg, kid, value}");
+// `sig` {alg, kid, value} (rcan-py), `sig` {ml_dsa, ed25519, ed25519_pub} (hybrid signed body:
+// kid from the top-level pq_kid), or rcan-ts's `signature` {alg, kid, sig} (`member` names it).
+Result<SignatureBlock> read_sig(const json::Object& msg, std::string_view member) {
+  const json::Value& v = *msg.find(member);
+  const std::string m(member);
+  if (!v.is_object()) return schema(m, m + " must be an object");
   Reader r(v.as_object());
   SignatureBlock s;
+  const bool hybrid = member == "sig" && v.as_object().contains("ml_dsa");
+  if (hybrid) {
+    s.alg = "hybrid-ed25519-ml-dsa-65";
+    if (const json::Value* k = msg.find("pq_kid");
+        k && k->is_string() && k->as_string().size() <= 64)
+      s.kid = k->as_string();
+  }
+  const char* value_key = member == "signature" ? "sig" : (hybrid ? "ml_dsa" : "value");
   for (auto [key, dest, max] :
        {std::tuple{"alg", &s.alg, size_t{32}}, std::tuple{"kid", &s.kid, size_t{64}},
-        std::tuple{"value", &s.value, size_t{16384}}}) {
+        std::tuple{value_key, &s.value, size_t{16384}}}) {
+    if (hybrid && dest != &s.value) continue;
     auto f = r.str(key, max);
     if (!f.ok() || !*f || (*f)->empty())
-      return schema(std::string("sig.") + key,
-                    std::string("sig.") + key + " must be a non-empty string");
+      return schema(m + "." + key, m + "." + key + " must be a non-empty string");
     *dest = **f;
   }
+  if (hybrid && s.kid.empty()) return missing("pq_kid", "a hybrid signature needs pq_kid");
   return s;
 }
 
@@ -239,10 +254,13 @@ Status read_common(const json::Object& o, Message& m, const CodecLimits& lim) {
     return Error(ErrorCode::kMissingDelegationChain,
                  "sender_type robot requires a delegation_chain", "delegation_chain");
   }
-  if (const json::Value* s = o.find("sig"); s && !s->is_null()) {
-    auto sig = read_sig(*s);
-    if (!sig.ok()) return sig.error();
-    m.sig = *sig;
+  for (const char* member : {"sig", "signature"}) {
+    if (const json::Value* s = o.find(member); s && !s->is_null()) {
+      auto sig = read_sig(o, member);
+      if (!sig.ok()) return sig.error();
+      m.sig = *sig;
+      break;
+    }
   }
   return Status::Ok();
 }
@@ -364,34 +382,9 @@ Result<Message> decode_seed(const json::Object& o, const CodecLimits& lim) {
   return m;
 }
 
-Result<Message> decode_rcanpy(const json::Object& o, const CodecLimits& lim) {
-  Message m;
-  m.shape = WireShape::kRcanPy;
-  m.type = MessageType::kCommand;
+// rcan-py's msg_id (any short printable id) and timestamp (float Unix seconds).
+Status read_rcanpy_id_and_time(const json::Object& o, Message& m) {
   Reader r(o);
-  auto rc = r.str("rcan", 32);
-  if (!rc.ok()) return rc.error();
-  if (!*rc || (*rc)->empty())
-    return missing("rcan", "rcan (protocol version) is required in the rcan-py shape");
-  m.version = **rc;
-  auto rv = r.str("rcan_version", 32, true);
-  if (!rv.ok()) return rv.error();
-  auto cmd = r.str("cmd", 128);
-  if (!cmd.ok()) return cmd.error();
-  if (!*cmd || (*cmd)->empty()) return missing("cmd", "cmd is required in the rcan-py shape");
-  auto target = r.str("target", 512);
-  if (!target.ok()) return target.error();
-  if (!*target || (*target)->empty())
-    return missing("target", "target is required in the rcan-py shape");
-  {
-    // rcan-py strips surrounding whitespace and one trailing '/'.
-    std::string t = **target;
-    size_t b = t.find_first_not_of(" \t\r\n"), e = t.find_last_not_of(" \t\r\n");
-    t = b == std::string::npos ? "" : t.substr(b, e - b + 1);
-    auto n = normalise_ruri_field(t, "target");
-    if (!n.ok()) return n.error();
-    m.target_ruri = *n;
-  }
   auto id = r.str("msg_id", 128);
   if (!id.ok()) return id.error();
   if (!*id) return missing("msg_id", "msg_id is required");
@@ -409,6 +402,121 @@ Result<Message> decode_rcanpy(const json::Object& o, const CodecLimits& lim) {
   double secs = ts->to_double();
   if (!(secs > 0 && secs < 9999999999.0)) return schema("timestamp", "timestamp is out of range");
   m.timestamp_ms = static_cast<int64_t>(std::llround(secs * 1000.0));
+  return Status::Ok();
+}
+
+// "2026-11-26T23:10:00.123Z" (rcan-ts's Date.toISOString) or with a ±HH:MM offset; fraction
+// of 0–9 digits (milliseconds kept). Nothing else.
+std::optional<int64_t> parse_iso8601_ms(std::string_view s) {
+  auto num = [&](size_t pos, size_t len) -> std::optional<int64_t> {
+    if (pos + len > s.size()) return std::nullopt;
+    int64_t v = 0;
+    for (size_t i = pos; i < pos + len; ++i) {
+      if (s[i] < '0' || s[i] > '9') return std::nullopt;
+      v = v * 10 + (s[i] - '0');
+    }
+    return v;
+  };
+  if (s.size() < 20 || s.size() > 40 || s[4] != '-' || s[7] != '-' || s[10] != 'T' ||
+      s[13] != ':' || s[16] != ':')
+    return std::nullopt;
+  auto y = num(0, 4), mo = num(5, 2), d = num(8, 2), h = num(11, 2), mi = num(14, 2),
+       se = num(17, 2);
+  if (!y || !mo || !d || !h || !mi || !se || *y < 1970 || *mo < 1 || *mo > 12 || *d < 1 ||
+      *d > 31 || *h > 23 || *mi > 59 || *se > 60)
+    return std::nullopt;
+  size_t pos = 19;
+  int64_t frac_ms = 0;
+  if (pos < s.size() && s[pos] == '.') {
+    size_t start = ++pos;
+    while (pos < s.size() && s[pos] >= '0' && s[pos] <= '9') ++pos;
+    if (pos == start || pos - start > 9) return std::nullopt;
+    for (size_t i = start; i < start + 3; ++i) frac_ms = frac_ms * 10 + (i < pos ? s[i] - '0' : 0);
+  }
+  int64_t offset_min = 0;
+  if (pos < s.size() && s[pos] == 'Z' && pos + 1 == s.size()) {
+  } else if (pos + 6 == s.size() && (s[pos] == '+' || s[pos] == '-') && s[pos + 3] == ':') {
+    auto oh = num(pos + 1, 2), om = num(pos + 4, 2);
+    if (!oh || !om || *oh > 23 || *om > 59) return std::nullopt;
+    offset_min = (s[pos] == '-' ? -1 : 1) * (*oh * 60 + *om);
+  } else {
+    return std::nullopt;
+  }
+  // Days from the civil date (H. Hinnant's algorithm).
+  int64_t yy = *y - (*mo <= 2 ? 1 : 0);
+  int64_t era = yy / 400, yoe = yy - era * 400;
+  int64_t doy = (153 * (*mo + (*mo > 2 ? -3 : 9)) + 2) / 5 + *d - 1;
+  int64_t days = era * 146097 + yoe * 365 + yoe / 4 - yoe / 100 + doy - 719468;
+  int64_t secs = days * 86400 + *h * 3600 + *mi * 60 + *se - offset_min * 60;
+  return secs * 1000 + frac_ms;
+}
+
+// The replay identity of an rcan-ts message (it carries no msg_id): "ts-" + the first 32 hex
+// of SHA-256 over the canonical JSON of exactly what rcan-ts's signature covers — {cmd, params
+// (absent: {}), rcan, target, timestamp} as received. Fields outside the signature are left out
+// so that changing one cannot make a captured message look new.
+Result<std::string> rcants_id(const json::Object& o) {
+  json::Object id;
+  for (const char* key : {"cmd", "rcan", "target", "timestamp"}) {
+    const json::Value* v = o.find(key);
+    if (!v || !v->is_string()) return schema(key, std::string(key) + " must be a string");
+    id.set(key, *v);
+  }
+  const json::Value* params = o.find("params");
+  id.set("params", params && !params->is_null() ? *params : json::Value(json::Object{}));
+  return "ts-" + sha256_hex(json::canonical(id)).substr(0, 32);
+}
+
+Result<Message> decode_rcanpy(const json::Object& o, const CodecLimits& lim) {
+  Message m;
+  m.shape = WireShape::kRcanPy;
+  m.type = MessageType::kCommand;
+  // The SDKs' RCANMessage never writes its type; a sender may add rcan-py's MessageType.INVOKE
+  // (11, or "INVOKE") to ask for a skill. Any other `type` is ignored like an unknown field.
+  if (const json::Value* t = o.find("type");
+      t && ((t->is_int() && t->as_int() == 11) || (t->is_string() && t->as_string() == "INVOKE")))
+    m.type = MessageType::kInvoke;
+  Reader r(o);
+  auto rc = r.str("rcan", 32);
+  if (!rc.ok()) return rc.error();
+  if (!*rc || (*rc)->empty())
+    return missing("rcan", "rcan (protocol version) is required in the rcan-py shape");
+  m.version = **rc;
+  for (const char* key : {"rcan_version", "rcanVersion"}) {  // rcan-py / rcan-ts spelling
+    auto rv = r.str(key, 32, true);
+    if (!rv.ok()) return rv.error();
+  }
+  auto cmd = r.str("cmd", 128);
+  if (!cmd.ok()) return cmd.error();
+  if (!*cmd || (*cmd)->empty()) return missing("cmd", "cmd is required in the rcan-py shape");
+  auto target = r.str("target", 512);
+  if (!target.ok()) return target.error();
+  if (!*target || (*target)->empty())
+    return missing("target", "target is required in the rcan-py shape");
+  {
+    // rcan-py strips surrounding whitespace and one trailing '/'.
+    std::string t = **target;
+    size_t b = t.find_first_not_of(" \t\r\n"), e = t.find_last_not_of(" \t\r\n");
+    t = b == std::string::npos ? "" : t.substr(b, e - b + 1);
+    auto n = normalise_ruri_field(t, "target");
+    if (!n.ok()) return n.error();
+    m.target_ruri = *n;
+  }
+  if (const json::Value* ts = o.find("timestamp"); ts && ts->is_string()) {
+    // rcan-ts: ISO-8601 timestamp and no msg_id; the replay identity is derived (rcants_id).
+    m.shape = WireShape::kRcanTs;
+    auto ms = parse_iso8601_ms(ts->as_string());
+    if (!ms)
+      return schema("timestamp",
+                    "timestamp must be an ISO-8601 UTC time (rcan-ts) or Unix seconds (rcan-py)");
+    m.timestamp_ms = *ms;
+    auto id = rcants_id(o);
+    if (!id.ok()) return id.error();
+    m.message_id = *id;
+  } else {
+    auto idt = read_rcanpy_id_and_time(o, m);
+    if (!idt.ok()) return idt.error();
+  }
   json::Object payload;
   if (const json::Value* params = o.find("params"); params && !params->is_null()) {
     if (!params->is_object()) return schema("params", "params must be an object");

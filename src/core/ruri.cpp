@@ -245,6 +245,13 @@ std::string Ruri::base() const {
   return s;
 }
 
+std::string sdk_form(const Ruri& ruri, std::string_view version) {
+  if (ruri.form == Ruri::Form::kDiscovered) return {};
+  if (ruri.form == Ruri::Form::kSdk5) return ruri.base();
+  return "rcan://" + ruri.registry + "/" + ruri.manufacturer + "/" + ruri.model + "/" +
+         std::string(version) + "/" + ruri.device_id;
+}
+
 std::string Ruri::str() const {
   if (form == Form::kDiscovered) {
     return "rcan://local.rcan/discovered/" + device_id + ":" + std::to_string(port.value_or(8080));

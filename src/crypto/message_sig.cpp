@@ -193,7 +193,7 @@ Result<std::string> preimage(const json::Object& msg) {
   return json::canonical_without(msg, "sig");
 }
 
-Result<SigBlock> verify(const json::Object& msg, const TrustedKeys& trusted) {
+Result<SigBlock> verify_block(const json::Object& msg, const TrustedKeys& trusted) {
   const json::Value* sig = msg.find("sig");
   if (!sig) return Error(ErrorCode::kAuthRequired, "message is unsigned (no sig)", "sig");
   auto block = parse_sig_block(*sig);

@@ -105,6 +105,84 @@ TEST(MessageCodec, RcanPyTimestampSecondsBecomeMilliseconds) {
   EXPECT_EQ(m->target_ruri, "rcan://local.rcan/acme/rover/abcdef12");
 }
 
+// rcan-ts 3.4.2 RCANMessage.toJSONString(): camelCase rcanVersion, ISO timestamp, no msg_id.
+constexpr const char* kTsMsg =
+    R"({"rcan":"3.2","rcanVersion":"3.2","cmd":"move","target":"rcan://local.rcan/acme/rover/v1/0a1b2c3d",)"
+    R"("timestamp":"2025-02-28T05:44:42.934Z","params":{"linear":0.1,"duration_ms":100}})";
+
+std::string ts_with(const std::string& from, const std::string& to) {
+  std::string s = kTsMsg;
+  size_t at = s.find(from);
+  EXPECT_NE(at, std::string::npos) << from;
+  return at == std::string::npos ? s : s.replace(at, from.size(), to);
+}
+
+TEST(MessageCodec, RcanTsShapeIsReadWithADerivedReplayIdentity) {
+  auto m = parse_message(kTsMsg);
+  ASSERT_TRUE(m.ok()) << m.error().message;
+  EXPECT_EQ(m->shape, WireShape::kRcanTs);
+  EXPECT_EQ(m->type, MessageType::kCommand);
+  EXPECT_EQ(m->action(), "move");
+  EXPECT_EQ(m->timestamp_ms, 1740721482934);
+  EXPECT_EQ(m->target_ruri, "rcan://local.rcan/acme/rover/v1/0a1b2c3d");
+  ASSERT_EQ(m->message_id.size(), 35u) << m->message_id;  // "ts-" + 32 hex
+  EXPECT_EQ(m->message_id.substr(0, 3), "ts-");
+  // The same signed content is the same message: unsigned fields, a signature block or a
+  // msg_id do not change the identity; a signed field or the timestamp does.
+  auto same = [&](const std::string& body) {
+    auto o = parse_message(body);
+    EXPECT_TRUE(o.ok()) << body << (o.ok() ? "" : o.error().message);
+    return o.ok() && o->message_id == m->message_id;
+  };
+  EXPECT_TRUE(same(ts_with(R"("params")", R"("confidence":0.5,"params")")));
+  EXPECT_TRUE(same(ts_with(R"("params")", R"("msg_id":"other","params")")));
+  EXPECT_TRUE(same(ts_with(
+      R"("params")", R"("signature":{"alg":"ml-dsa-65","kid":"0011aabb","sig":"AA"},"params")")));
+  EXPECT_FALSE(same(ts_with("42.934Z", "42.935Z")));
+  EXPECT_FALSE(same(ts_with(R"("linear":0.1)", R"("linear":0.2)")));
+  EXPECT_FALSE(same(ts_with(R"("cmd":"move")", R"("cmd":"rotate")")));
+  // An offset is read; an absent params is {} (rcan-ts omits an empty one).
+  auto off = parse_message(ts_with("05:44:42.934Z", "07:44:42.934+02:00"));
+  ASSERT_TRUE(off.ok()) << off.error().message;
+  EXPECT_EQ(off->timestamp_ms, 1740721482934);
+  EXPECT_TRUE(parse_message(ts_with(R"(,"params":{"linear":0.1,"duration_ms":100})", "")).ok());
+}
+
+TEST(MessageCodec, InvokeInEveryShape) {
+  // Seed shape: the type name round-trips.
+  auto seed = parse_message(seed_msg("", R"({"skill":"scan_environment"})")
+                                .replace(seed_msg().find("COMMAND"), 7, "INVOKE"));
+  ASSERT_TRUE(seed.ok()) << seed.error().message;
+  EXPECT_EQ(seed->type, MessageType::kInvoke);
+  EXPECT_EQ(message_type_name(seed->type), "INVOKE");
+  // SDK shapes: `type` 11 or "INVOKE" asks for a skill; anything else is ignored.
+  auto ts = parse_message(ts_with(R"("cmd":"move")", R"("type":11,"cmd":"scan_environment")"));
+  ASSERT_TRUE(ts.ok()) << ts.error().message;
+  EXPECT_EQ(ts->type, MessageType::kInvoke);
+  EXPECT_EQ(ts->action(), "scan_environment");
+  auto named = parse_message(ts_with(R"("cmd":"move")", R"("type":"INVOKE","cmd":"dock")"));
+  ASSERT_TRUE(named.ok());
+  EXPECT_EQ(named->type, MessageType::kInvoke);
+  for (const char* other : {R"("type":1,)", R"("type":"COMMAND",)", R"("type":[11],)"}) {
+    auto m = parse_message(ts_with(R"("cmd")", std::string(other) + R"("cmd")"));
+    ASSERT_TRUE(m.ok()) << other;
+    EXPECT_EQ(m->type, MessageType::kCommand) << other;
+  }
+}
+
+TEST(MessageCodec, RcanTsBadTimestampsAreSchemaErrors) {
+  for (const char* bad : {"2025-02-28 05:44:42Z", "2025-02-28T05:44:42", "2025-13-28T05:44:42Z",
+                          "2025-02-28T05:44:42.Z", "2025-02-28T25:44:42Z", "yesterday",
+                          "2025-02-28T05:44:42.1234567890Z", "1969-12-31T23:59:59Z"}) {
+    Error e = decode_error(ts_with("2025-02-28T05:44:42.934Z", bad));
+    EXPECT_EQ(e.code, ErrorCode::kSchemaValidationFailed) << bad;
+    EXPECT_EQ(e.field, "timestamp") << bad;
+  }
+  // rcan-py's shape still needs its msg_id.
+  Error e = decode_error(ts_with(R"("2025-02-28T05:44:42.934Z")", "1740721482.934"));
+  EXPECT_EQ(e.field, "msg_id");
+}
+
 TEST(MessageCodec, AiBlockAtTopLevelOrInPayloadConfidenceNeverDefaulted) {
   auto m = parse_message(seed_msg(
       R"(,"ai":{"provider":"anthropic","model":"claude-sonnet-4-6","layer":"planner","thought_id":"th_1"})"));

@@ -129,6 +129,29 @@ TEST(Ruri, Sdk5FormKeepsVersionAndDevice) {
   EXPECT_EQ(r->device_id, "unit-001");
 }
 
+TEST(Ruri, SdkFormOfEachRobotIdentity) {
+  auto sdk = [](const char* text) {
+    auto r = parse_ruri(text);
+    EXPECT_TRUE(r.ok()) << text;
+    return r.ok() ? sdk_form(*r) : std::string("?");
+  };
+  // The seed form gains the version segment; port and capability are not identity.
+  EXPECT_EQ(sdk("rcan://local.rcan/acme/rover/0a1b2c3d"),
+            "rcan://local.rcan/acme/rover/v1/0a1b2c3d");
+  EXPECT_EQ(sdk("rcan://registry.rcan.dev/acme/arm/0a1b2c3d:9000/arm"),
+            "rcan://registry.rcan.dev/acme/arm/v1/0a1b2c3d");
+  EXPECT_EQ(sdk("rcan://acme.arm.unit42"), "rcan://local.rcan/acme/arm/v1/unit42");
+  // A 5-segment RURI keeps its own version; a discovered one names no robot.
+  EXPECT_EQ(sdk("rcan://registry.rcan.dev/acme/arm/v2/unit-001"),
+            "rcan://registry.rcan.dev/acme/arm/v2/unit-001");
+  EXPECT_EQ(sdk("rcan://local.rcan/discovered/192.168.1.42:8080"), "");
+  // What sdk_form writes reads back as the 5-segment form.
+  auto back = parse_ruri(sdk("rcan://local.rcan/acme/rover/0a1b2c3d"));
+  ASSERT_TRUE(back.ok());
+  EXPECT_EQ(back->form, Ruri::Form::kSdk5);
+  EXPECT_EQ(back->version, "v1");
+}
+
 TEST(Ruri, ErrorsNameSegmentAndRule) {
   auto r = parse_ruri("rcan://local.rcan/opencastor/rover");
   ASSERT_FALSE(r.ok());

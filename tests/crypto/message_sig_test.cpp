@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include "rcan/crypto/ed25519.h"
+#include "rcan/crypto/hybrid.h"
 #include "rcan/crypto/keys.h"
 #include "rcan/crypto/mldsa65.h"
 #include "rcan/hash.h"
@@ -255,6 +256,107 @@ TEST(MessageSig, Ed25519OverRcanPyShapeUsesThePythonPreimage) {
   TrustedKeys t;
   t.ed25519.push_back(*pk);
   EXPECT_TRUE(verify(msg, t).ok());
+}
+
+TEST(MessageSig, JsStringifyMatchesJavaScript) {
+  auto js = [](const std::string& text) {
+    auto v = json::parse(text);
+    EXPECT_TRUE(v.ok()) << text;
+    return v.ok() ? js_stringify(*v) : std::string();
+  };
+  // Numbers as JavaScript's Number#toString writes them (node: JSON.stringify).
+  EXPECT_EQ(js("[0.00001,1e-7,1e21,1e20,123.456,-0.0,50.0,1.5e300,0.1,100,-2.5e-7,1."
+               "2345678901234568e23]"),
+            "[0.00001,1e-7,1e+21,100000000000000000000,123.456,0,50,1.5e+300,0.1,100,-2.5e-7,"
+            "1.2345678901234569e+23]");  // node prints …69e+23 for this input
+  // Members in wire order, raw UTF-8, JavaScript's escapes.
+  EXPECT_EQ(js(R"({"b":1,"a":"caf\u00e9 \"q\" \\ \n\u0001\u007f"})"),
+            "{\"b\":1,\"a\":\"caf\xc3\xa9 \\\"q\\\" \\\\ \\n\\u0001\x7f\"}");
+}
+
+TEST(MessageSig, RcanTsPreimageAndSignature) {
+  json::Object msg = parse_obj(
+      R"({"rcan":"3.2","rcanVersion":"3.2","cmd":"move","target":"rcan://local.rcan/acme/rover/v1/0a1b2c3d",)"
+      R"("timestamp":"2025-02-28T05:44:42.934Z","params":{"linear":0.1,"duration_ms":100}})");
+  auto pre = rcants_preimage(msg);
+  ASSERT_TRUE(pre.ok()) << pre.error().message;
+  // rcan-ts 3.4.2 canonicalMessageBytes: sorted top level, empty msg_id, params as sent.
+  EXPECT_EQ(
+      *pre,
+      R"({"cmd":"move","msg_id":"","params":{"linear":0.1,"duration_ms":100},"rcan":"3.2",)"
+      R"("target":"rcan://local.rcan/acme/rover/v1/0a1b2c3d","timestamp":"2025-02-28T05:44:42.934Z"})");
+  auto s = mldsa65::sign(
+      key0().sk,
+      std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(pre->data()), pre->size()));
+  ASSERT_TRUE(s.ok());
+  msg.set("signature", json::Object{{"alg", "ml-dsa-65"},
+                                    {"kid", mldsa65::kid(key0().pk)},
+                                    {"sig", base64url_encode(s->data(), s->size(), false)}});
+  auto ok = verify(msg, trusted0());
+  ASSERT_TRUE(ok.ok()) << ok.error().message;
+  EXPECT_EQ(ok->alg, Alg::kMlDsa65);
+  EXPECT_EQ(alg_name(ok->alg), "ml-dsa-65");
+  ASSERT_NE(signature_member(msg), nullptr);
+  json::Object tampered = msg;
+  tampered.set("timestamp", "2025-02-28T05:44:43.934Z");
+  EXPECT_EQ(verify(tampered, trusted0()).error().code, ErrorCode::kSignatureInvalid);
+  EXPECT_EQ(verify(msg, TrustedKeys{}).error().code, ErrorCode::kSignatureInvalid);
+  json::Object bad_alg = msg;
+  bad_alg.find("signature")->as_object().set("alg", "ed25519");
+  EXPECT_EQ(verify(bad_alg, trusted0()).error().code, ErrorCode::kSignatureInvalid);
+  json::Object unsigned_msg = parse_obj(R"({"cmd":"move"})");
+  EXPECT_EQ(signature_member(unsigned_msg), nullptr);
+  EXPECT_EQ(verify(unsigned_msg, trusted0()).error().code, ErrorCode::kAuthRequired);
+}
+
+// Messages signed by rcan-ts 3.4.2 itself (tests/vectors/rcants-signed-messages.json): its
+// signMessage pre-image (raw UTF-8, JavaScript number formatting such as 1e-7) is rebuilt
+// byte for byte, and its signBody on a message verifies with both keys trusted.
+TEST(MessageSig, MessagesSignedByRcanTsVerify) {
+  auto v = test::load_vector("rcants-signed-messages.json");
+  auto ed_pub = ed25519::public_key_from_seed(Bytes(32, 7));
+  ASSERT_TRUE(ed_pub.ok());
+  TrustedKeys both = trusted0();
+  both.ed25519.push_back(*ed_pub);
+  json::Object ts = parse_obj(v.get("rcants_signed_message")->as_string());
+  auto ok = verify(ts, both);
+  ASSERT_TRUE(ok.ok()) << ok.error().message;
+  EXPECT_EQ(ok->kid, "d666806e");
+  json::Object ts_bad = ts;
+  ts_bad.find("params")->as_object().set("tiny", 1e-6);
+  EXPECT_EQ(verify(ts_bad, both).error().code, ErrorCode::kSignatureInvalid);
+  json::Object body = parse_obj(v.get("signbody_message")->as_string());
+  auto hy = verify(body, both);
+  ASSERT_TRUE(hy.ok()) << hy.error().message;
+  EXPECT_EQ(hy->alg, Alg::kHybrid);
+  json::Object body_bad = body;
+  body_bad.set("msg_id", "fuzz-2");
+  EXPECT_EQ(verify(body_bad, both).error().code, ErrorCode::kSignatureInvalid);
+}
+
+TEST(MessageSig, HybridSignedMessageNeedsBothKeysTrusted) {
+  Bytes ed_seed(32, 7);
+  auto ed_pub = ed25519::public_key_from_seed(ed_seed);
+  ASSERT_TRUE(ed_pub.ok());
+  json::Object body =
+      parse_obj(R"({"rcan":"3.2","msg_id":"m-1","timestamp":1740721482.934,"cmd":"move",)"
+                R"("target":"rcan://local.rcan/acme/rover/v1/0a1b2c3d","params":{"linear":0.1}})");
+  auto signed_body = hybrid::sign_body(body, key0().sk, key0().pk, ed_seed);
+  ASSERT_TRUE(signed_body.ok());
+  TrustedKeys both = trusted0();
+  both.ed25519.push_back(*ed_pub);
+  auto ok = verify(*signed_body, both);
+  ASSERT_TRUE(ok.ok()) << ok.error().message;
+  EXPECT_EQ(ok->alg, Alg::kHybrid);
+  EXPECT_EQ(ok->kid, mldsa65::kid(key0().pk));
+  // The Ed25519 key must be trusted too, and the ML-DSA-65 key named by pq_kid.
+  EXPECT_EQ(verify(*signed_body, trusted0()).error().code, ErrorCode::kSignatureInvalid);
+  TrustedKeys ed_only;
+  ed_only.ed25519.push_back(*ed_pub);
+  EXPECT_EQ(verify(*signed_body, ed_only).error().code, ErrorCode::kSignatureInvalid);
+  json::Object tampered = *signed_body;
+  tampered.set("cmd", "rotate");
+  EXPECT_EQ(verify(tampered, both).error().code, ErrorCode::kSignatureInvalid);
 }
 
 }  // namespace

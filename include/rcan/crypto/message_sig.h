@@ -32,9 +32,11 @@ namespace rcan::msgsig {
 
 inline constexpr std::string_view kAlgMlDsa65 = "ml-dsa-65";
 inline constexpr std::string_view kAlgEd25519 = "ed25519";
+inline constexpr std::string_view kAlgHybrid = "hybrid-ed25519-ml-dsa-65";
 inline constexpr size_t kMaxSigValueChars = 8192;
 
-enum class Alg { kMlDsa65, kEd25519 };
+enum class Alg { kMlDsa65, kEd25519, kHybrid };
+std::string_view alg_name(Alg alg);
 enum class Preimage { kRcanPy, kCanonical };
 
 struct SigBlock {
@@ -65,9 +67,31 @@ struct TrustedKeys {
   std::vector<Bytes> ed25519;  // raw 32-byte public keys
 };
 
-// Verifies msg["sig"]. Errors: kAuthRequired (no sig), kSignatureInvalid (malformed block,
-// unknown kid, bad signature), or the pre-image errors above.
+// The message's signature member: `sig` (rcan-py block, or the hybrid `sign_body` block), or
+// rcan-ts's `signature` {alg, kid, sig}; null when unsigned.
+const json::Value* signature_member(const json::Object& msg);
+
+// Verifies the message's signature, whichever form it takes:
+//   * `sig` {alg, kid, value}: the rcan-py pre-image (or the seed's canonical one);
+//   * `sig` {ml_dsa, ed25519, ed25519_pub} with top-level pq_signing_pub and pq_kid: a hybrid
+//     signed body (rcan-py `hybrid.sign_body`, rcan-ts `signBody`; include/rcan/crypto/hybrid.h),
+//     verified in strict mode: the ML-DSA-65 key is the trusted key whose kid is pq_kid, and
+//     sig.ed25519_pub must be a trusted Ed25519 key; both signatures must verify (kid = pq_kid);
+//   * rcan-ts `signature` {alg: "ml-dsa-65", kid, sig}: rcan-ts's signMessage pre-image
+//     (rcants_preimage).
+// Errors: kAuthRequired (unsigned), kSignatureInvalid (malformed block, unknown kid, bad
+// signature), or the pre-image errors above.
 Result<SigBlock> verify(const json::Object& msg, const TrustedKeys& trusted);
+// The first form alone: `sig` {alg, kid, value}.
+Result<SigBlock> verify_block(const json::Object& msg, const TrustedKeys& trusted);
+
+// rcan-ts 3.4.2 signMessage's pre-image for a received rcan-ts message: JavaScript
+// JSON.stringify of {cmd, msg_id: "", params, rcan, target, timestamp} (top-level keys sorted,
+// nested members in wire order, raw UTF-8, JavaScript number formatting). rcan-ts always signs
+// an empty msg_id (its messages carry none). Errors: kSchemaValidationFailed naming the field.
+Result<std::string> rcants_preimage(const json::Object& msg);
+// JavaScript's JSON.stringify of a value (members in stored order).
+std::string js_stringify(const json::Value& v);
 
 struct SignOptions {
   bool deterministic = false;  // ML-DSA rnd = 0^32 (reproducible; tests and vectors)

@@ -68,12 +68,12 @@ bool Authenticator::is_cached(std::string_view token, int64_t now_s) const {
 Result<SignatureCheck> Authenticator::check_signature(const Message& msg, const Principal& p,
                                                       bool need_bound_key) const {
   SignatureCheck c;
-  const json::Value* sig = msg.wire.find("sig");
+  const json::Value* sig = msgsig::signature_member(msg.wire);
   if (p.bound_key || need_bound_key) {
     auto bound = check_bound_key(msg.wire, p, need_bound_key);
     if (!bound.ok()) return bound.error();
     c.present = c.verified = c.bound_key = true;  // a bound key exists: check_bound_key says so
-    c.alg = p.bound_key->alg == msgsig::Alg::kMlDsa65 ? "ml-dsa-65" : "ed25519";
+    c.alg = std::string(msgsig::alg_name(p.bound_key->alg));
     c.kid = p.bound_key->kid;
     return c;
   }
@@ -89,7 +89,7 @@ Result<SignatureCheck> Authenticator::check_signature(const Message& msg, const 
     if (r.ok()) {
       c.verified = true;
       c.robot_key = true;
-      c.alg = r->alg == msgsig::Alg::kMlDsa65 ? "ml-dsa-65" : "ed25519";
+      c.alg = std::string(msgsig::alg_name(r->alg));
       c.kid = r->kid;
       return c;
     }
@@ -103,7 +103,7 @@ Result<SignatureCheck> Authenticator::check_signature(const Message& msg, const 
     return e;
   }
   c.verified = true;
-  c.alg = r->alg == msgsig::Alg::kMlDsa65 ? "ml-dsa-65" : "ed25519";
+  c.alg = std::string(msgsig::alg_name(r->alg));
   c.kid = r->kid;
   return c;
 }

@@ -45,6 +45,7 @@ void Node::add_routes() {
                      {"version", svc_.settings.rcan_version},
                      {"name", svc_.settings.name},
                      {"status", status_word(svc_)}};  // as in the mDNS TXT record
+    if (!svc_.settings.ruri_sdk.empty()) txt.set("ruri_sdk", svc_.settings.ruri_sdk);
     answer_json(c.respond, c.route, 200,
                 json::Object{{"service_type", "_rcan._tcp"}, {"txt_record", txt}});
   });

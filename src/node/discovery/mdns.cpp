@@ -326,6 +326,7 @@ MdnsInfo mdns_info_for(NodeServices& services, bool tls) {
               "caps=" + caps,   "roles=creator,owner,leasee,user,guest",
               "role=GUEST",     "version=" + s.rcan_version,
               "name=" + s.name};
+  if (!s.ruri_sdk.empty()) info.txt.push_back("ruri_sdk=" + s.ruri_sdk);
   if (!s.rrn.empty()) info.txt.push_back("rrn=" + s.rrn);
   if (tls) info.txt.push_back("tls=1");
   NodeServices* svc = &services;

@@ -70,6 +70,13 @@ class AuthorizeStage final : public Stage {
     // One table says what every action name means (rcan/actions.h); a name it does not hold
     // is refused for every role, never given some default capability.
     const ActionSpec* spec = svc_.actions.find(action);
+    if (!spec && ctx->invoke) {  // an INVOKE names a skill: one the robot lacks is not found
+      return refuse(
+          svc_, ctx,
+          Error(ErrorCode::kNotFound, "no skill '" + action.substr(0, 64) + "' on this robot",
+                "payload.skill", "unknown_skill"),
+          "COMMAND_REJECTED");
+    }
     if (!spec) {
       return refuse(svc_, ctx,
                     Error(ErrorCode::kCommandRejected,

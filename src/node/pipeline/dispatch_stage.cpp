@@ -229,7 +229,12 @@ class DispatchStage final : public Stage {
     }
     auto prepared = svc_.act.prepare(m, *ctx->action, deadline, ctx->session_id);
     if (!prepared.ok()) {
-      return refuse(svc_, ctx, prepared.error(), "COMMAND_REJECTED");
+      Error err = prepared.error();
+      if (ctx->invoke && err.reason == "unsupported_action")  // a skill this robot does not have
+        err = Error(ErrorCode::kNotFound,
+                    "this robot does not offer the skill '" + std::string(ctx->action->name) + "'",
+                    "payload.skill", "unknown_skill");
+      return refuse(svc_, ctx, err, "COMMAND_REJECTED");
     }
     auto e = accepted_entry(*ctx, "COMMAND");
     if (prepared->clamped) {

@@ -61,6 +61,18 @@ class DecodeStage final : public Stage {
       msg.type = MessageType::kCommand;
       ctx->fleet_command = true;
     }
+    if (msg.type == MessageType::kInvoke) {  // a skill invocation runs as a COMMAND
+      const json::Value* skill = msg.payload.find("skill");
+      if (skill && !skill->is_string()) {
+        return refuse(svc_, ctx,
+                      Error(ErrorCode::kSchemaValidationFailed, "payload.skill must be a string",
+                            "payload.skill"),
+                      "MESSAGE_REJECTED");
+      }
+      if (skill && msg.action().empty()) msg.payload.set("action", *skill);
+      msg.type = MessageType::kCommand;
+      ctx->invoke = true;
+    }
     ctx->safety = safety_action_of(msg);
     if (msg.priority == Priority::kSafety && ctx->safety == SafetyAction::kNone) {
       return refuse(svc_, ctx,

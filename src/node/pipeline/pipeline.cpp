@@ -65,10 +65,36 @@ std::string token_of(const Context& ctx) {
   return {};
 }
 
+namespace {
+
+// The answer to an SDK-shaped message (rcan-py / rcan-ts: it has `cmd`) also carries the members
+// rcan-py's RCANResponse.from_dict reads: `msg_id` (the message's id — rcan-ts's derived one —
+// or the id it sent, when refused before decoding) and `status` ("ok", "pending", "error"),
+// plus `message` for an error. The seed's members are unchanged.
+void add_sdk_response_fields(const Context& ctx, json::Value& body) {
+  if (!ctx.in.body.is_object() || !ctx.in.body.as_object().contains("cmd")) return;
+  if (!body.is_object()) return;
+  json::Object& o = body.as_object();
+  const std::string type = json::string_field(body, "type");
+  std::string id = ctx.msg ? ctx.msg->message_id : json::string_field(ctx.in.body, "msg_id");
+  o.set("msg_id", id.substr(0, 128));
+  if (type == "ACK") {
+    o.set("status", "ok");
+  } else if (type == "ERROR") {
+    o.set("status", "error");
+    if (const json::Value* p = o.find("payload")) o.set("message", json::string_field(*p, "error"));
+  } else if (type == "PENDING_AUTH") {
+    o.set("status", "pending");
+  }
+}
+
+}  // namespace
+
 void Context::finish(Outcome out) {
   if (finished_) return;
   finished_ = true;
   out.authenticated = authenticated;
+  add_sdk_response_fields(*this, out.body);
   if (done) done(std::move(out));
 }
 

@@ -116,6 +116,16 @@ Result<ActuatorCommand> translate_command(const ActionSpec& spec, const Message&
     c.gripper = action == "gripper_open" ? GripperAction::kOpen : GripperAction::kClose;
     return c;
   }
+  // The one skill the simulated robot offers: scan_environment turns it slowly on the spot
+  // (duration_ms, default 2 s) so that its sensors sweep the room.
+  if (action == "scan_environment") {
+    auto dur_ms = number(params, {"duration_ms"});
+    if (!dur_ms.ok()) return dur_ms.error();
+    double ms = dur_ms->value_or(2000.0);
+    if (ms < 0) return bad_param("duration_ms", "duration must not be negative");
+    return ActuatorCommand::make_drive(0.0, std::min(0.5, limits.max_angular_radps),
+                                       static_cast<int64_t>(ms));
+  }
   // A skill (or anything else) the simulated robot has no behaviour for.
   return Error(ErrorCode::kCommandRejected,
                "the robot cannot do '" + action + "' (" + std::string(action_kind_name(spec.kind)) +

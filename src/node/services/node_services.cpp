@@ -133,6 +133,7 @@ Result<Principal> NodeServices::authenticate_header(std::string_view authorizati
 json::Value NodeServices::discovery_info() const {
   json::Object o;
   o.set("ruri", settings.ruri);
+  if (!settings.ruri_sdk.empty()) o.set("ruri_sdk", settings.ruri_sdk);
   if (!settings.rrn.empty()) o.set("rrn", settings.rrn);
   o.set("name", settings.name);
   o.set("model", settings.model);
@@ -154,6 +155,7 @@ json::Value NodeServices::status(bool detailed) {
   int64_t now = clock.mono_ms();
   json::Object o;
   o.set("ruri", settings.ruri);
+  if (!settings.ruri_sdk.empty()) o.set("ruri_sdk", settings.ruri_sdk);
   o.set("rrn", settings.rrn);
   o.set("name", settings.name);
   o.set("rcan_version", settings.rcan_version);

@@ -58,7 +58,8 @@ class BoundPort {
 };
 
 struct NodeSettings {
-  std::string ruri;  // canonical robot RURI (identity, no capability)
+  std::string ruri;      // canonical robot RURI (identity, no capability)
+  std::string ruri_sdk;  // the same in the SDKs' 5-segment form (sdk_form), "" if none
   std::string rrn;
   std::string name = "rcan-robot";
   std::string manufacturer;
