@@ -50,9 +50,9 @@ function command(action, params = {}) {
   return { version: '1.0.0', message_id: randomUUID(), type: 'COMMAND', timestamp_ms: Date.now(), payload: { action, ...params } };
 }
 
-function issueToken(ruri, sub, role, scopes) {
+function issueToken(ruri, sub, role, scopes, ttl = '1h') {
   return execFileSync(cliPath, ['token', 'issue', '--key', join(dataDir, 'issuer', 'ed25519.seed'), '--iss', 'rcand-local',
-    '--sub', sub, '--role', role, '--aud', ruri, '--scope', scopes, '--ttl', '1h'], { encoding: 'utf8' }).trim();
+    '--sub', sub, '--role', role, '--aud', ruri, '--scope', scopes, '--ttl', ttl], { encoding: 'utf8' }).trim();
 }
 
 // A configured robot whose arm_move waits for a human (agent.hitl_gates), with its own issuer.
@@ -156,7 +156,8 @@ async function main() {
   await page.fill('#token-input', 'not-a-token');
   await page.click('#signin-form button[type=submit]');
   await page.waitForFunction(() => document.querySelector('#signin-error').textContent.length > 0);
-  check(/AUTH_/.test(await page.textContent('#signin-error')), 'a bad token is refused with its error code');
+  const refusal = await page.textContent('#signin-error');
+  check(/AUTH_/.test(refusal) && /refused this token/.test(refusal), `a bad token is refused with its error code, in plain words (${refusal})`);
   await page.fill('#token-input', owner);
   await page.click('#signin-form button[type=submit]');
   await page.waitForSelector('body[data-signed-in=yes]');
@@ -276,6 +277,38 @@ async function main() {
   check(/Read-only|does not offer/.test(await page2.textContent('#approvals-note')), 'approvals are read-only for a USER');
   await page2.close();
 
+  // 8b. A GUEST watches: Claim and the motion controls are disabled and say why; the empty
+  // queue reads as words; Escape, anywhere on the page, is ESTOP (any role may stop the robot).
+  const guest = issueToken(ruri, 'guest-1', 'guest', 'status', '4m');
+  const page3 = await context.newPage();
+  page3.on('pageerror', (e) => pageErrors.push(String(e)));
+  page3.on('console', (m) => { if (m.type() === 'error' && !isApiRefusal(m)) consoleErrors.push(m.text()); });
+  await page3.goto(base + '/');
+  await page3.fill('#token-input', guest);
+  await page3.click('#signin-form button[type=submit]');
+  await page3.waitForSelector('body[data-stream=open]', { timeout: 10000 });
+  // Its token lives 4 minutes: the page warns that it expires (5 minutes ahead).
+  const warned = await page3.waitForFunction(() => /Your token expires in [34] min/.test(document.querySelector('#toast').textContent),
+    null, { timeout: 6000 }).then(() => true, () => false);
+  check(warned, `the page warns before the token expires (${await page3.textContent('#toast')})`);
+  await page3.click('#tabs button[data-view=teleop]');
+  await page3.waitForFunction(() => document.querySelector('#claim').disabled, null, { timeout: 5000 }).catch(() => {});
+  check(await page3.isDisabled('#claim') && /USER or above/.test(await page3.getAttribute('#claim', 'title') || '') &&
+    await page3.isDisabled('#pad button[data-drive=fwd]') && await page3.isDisabled('#arm-send'),
+  'a GUEST sees Claim, the pad and the arm disabled, saying why');
+  await page3.click('#tabs button[data-view=overview]');
+  check(/Nobody is waiting for control/.test(await page3.textContent('#control-queue')), 'an empty queue reads "Nobody is waiting for control", not "1. Empty."');
+  await page3.keyboard.press('Escape');
+  await page3.waitForSelector('body[data-estop=latched]', { timeout: 5000 }).catch(() => {});
+  const s4 = await http(base, 'GET', '/rcan/v1/status', owner);
+  check(s4.json.estop_active === true, 'Escape is ESTOP (the status endpoint confirms)');
+  const cleared = await http(base, 'POST', '/rcan/v1/command', owner, {
+    version: '1.0.0', message_id: randomUUID(), type: 'SAFETY', priority: 'SAFETY', timestamp_ms: Date.now(),
+    payload: { safety_event: 'RESUME', reason: 'test: after the Escape ESTOP' },
+  });
+  check(cleared.status === 200, `RESUME after the Escape ESTOP (${cleared.status})`);
+  await page3.close();
+
   // 9. Reconnect: the page shows the stream dropping when the node stops and comes back by
   // itself (backoff) when it restarts on the same port.
   await page.click('#tabs button[data-view=live]');
@@ -332,9 +365,19 @@ async function approvals(context, consoleErrors, pageErrors, isApiRefusal) {
   const before = await http(g.url, 'GET', '/rcan/v1/status', g.owner);
   const targets0 = before.json.robot.robot.arm.targets_rad;
   check(targets0[0] === 0, 'the parked command has not moved the arm');
+  // It announces itself in the window title, and the operator's reason goes with the decision
+  // (typed text survives the page's refreshes of the list).
+  check(/^\(1\) waiting for approval/.test(await page.title()), `the window title counts the waiting request ("${await page.title()}")`);
+  const why = 'checked the workcell is clear';
+  await page.fill('#approvals-list .reason-input', why);
+  await page.waitForTimeout(2500);                       // at least one refresh of the list
+  check(await page.inputValue('#approvals-list .reason-input') === why, 'a reason being typed survives the list\'s refresh');
   await page.screenshot({ path: join(artifacts, 'dashboard-approvals.png') });
   await page.click('#approvals-list button.approve');
   await page.waitForFunction(() => !document.querySelector('#approvals-list article.approval'), null, { timeout: 5000 });
+  check(!/waiting for approval/.test(await page.title()), 'the title stops counting once it is decided');
+  const auditAfter = await http(g.url, 'GET', '/api/audit?limit=1000', g.owner);
+  check(JSON.stringify(auditAfter.json).includes(why), 'the typed reason is in the audit log');
   let moved = false;
   for (let i = 0; i < 40 && !moved; i++) {
     const st = await http(g.url, 'GET', '/rcan/v1/status', g.owner);

@@ -102,6 +102,18 @@ export async function request(method, path, body, { auth = true, text = false, t
   return data;
 }
 
+// A refused token in plain words (the parser's own text stays in the error's detail).
+export function tokenRefusal(e) {
+  const why = {
+    expired: 'it has expired',
+    not_yet_valid: 'it is not valid yet (check the clocks)',
+    token_revoked: 'it has been revoked',
+    bad_signature: 'its signature does not verify: not issued by an issuer this robot trusts, or damaged when copied',
+  }[e.reason] || (e.code === 'AUTH_REQUIRED' ? 'no token was sent'
+    : 'it is not a token this robot accepts: expired, for another robot, from an issuer it does not trust, or damaged when copied');
+  return `The node refused this token (${e.code}): ${why}.`;
+}
+
 // A COMMAND in the seed shape, through the normal pipeline.
 export function commandMessage(action, params = {}, extra = {}) {
   return {

@@ -53,10 +53,25 @@ function paramsOf(cmd) {
   return Object.keys(rest).length ? JSON.stringify(rest) : '';
 }
 
+// A new request announces itself beyond the tab badge: the window title counts what waits,
+// and with the operator's consent ("Notify me") a browser notification names the action.
+const BASE_TITLE = document.title;
+const reasons = new Map();   // item key → the reason typed so far (kept across refreshes)
+let renderedKeys = '';
+
+function announce(it) {
+  if (typeof Notification === 'undefined' || Notification.permission !== 'granted') return;
+  if (!$('#notify-approvals') || !$('#notify-approvals').checked) return;
+  try {
+    new Notification('Approval needed', { body: `${it.action || 'a command'} from ${it.requester || 'someone'}`, tag: it.key });
+  } catch (_) { /* some browsers allow notifications only from a service worker */ }
+}
+
 export function onPending(msg) {
   const it = normalise(msg);
   if (!it.key) return;
   it.pushedAt = Date.now();
+  if (!items.has(it.key)) announce(it);
   items.set(it.key, it);
   render();
 }
@@ -99,12 +114,16 @@ async function decide(it, decision) {
     message_id: uuid(),
     type: 'AUTHORIZE',
     timestamp_ms: Math.round(serverNow()),
-    payload: { message_id: it.ref, ref_message_id: it.ref, pending_id: it.pending_id, thought_id: it.thought_id, decision, reason: `${decision} from the dashboard` },
+    payload: {
+      message_id: it.ref, ref_message_id: it.ref, pending_id: it.pending_id, thought_id: it.thought_id, decision,
+      reason: (reasons.get(it.key) || '').trim() || `${decision} from the dashboard`,
+    },
   };
   try {
     await request('POST', '/rcan/v1/authorize', body);
     toast(`${decision === 'approve' ? 'Approved' : 'Denied'}: ${it.action}`, 'good');
     items.delete(it.key);
+    reasons.delete(it.key);
   } catch (e) {
     toast(`AUTHORIZE refused: ${e.code} — ${e.message}`, 'bad');
   }
@@ -122,6 +141,11 @@ function render() {
   const badge = $('#pending-count');
   badge.hidden = items.size === 0;
   setText(badge, items.size);
+  document.title = items.size ? `(${items.size}) waiting for approval — ${BASE_TITLE}` : BASE_TITLE;
+  // The list is rebuilt only when its items change, so a reason being typed keeps its focus.
+  const keys = `${canDecide}|${Array.from(items.keys()).join('|')}`;
+  if (keys === renderedKeys && items.size) return;
+  renderedKeys = keys;
   if (!items.size) {
     replace(list, el('p', { class: 'muted' }, 'Nothing is waiting.'));
     return;
@@ -140,6 +164,9 @@ function render() {
         el('dt', {}, 'Confidence'), el('dd', {}, it.confidence === null ? 'unknown' : it.confidence.toFixed(2)),
         el('dt', {}, 'Message'), el('dd', { class: 'mono' }, it.ref || '–'),
         el('dt', {}, 'Expires'), el('dd', {}, it.expires ? fmtTime(it.expires) : '–')),
+      el('label', { class: 'reason' }, 'Reason (recorded in the audit log)',
+        el('input', { type: 'text', class: 'reason-input', maxlength: 200, disabled: !canDecide, value: reasons.get(it.key) || '',
+          placeholder: 'why you approve or deny', oninput: (e) => reasons.set(it.key, e.target.value) })),
       el('div', { class: 'row' },
         count,
         el('button', { type: 'button', class: 'primary approve', disabled: !canDecide, onclick: () => decide(it, 'approve') }, 'Approve'),
@@ -157,6 +184,16 @@ function countdown() {
 }
 
 export function initApprovals() {
+  const box = $('#notify-approvals');
+  if (box) {
+    if (typeof Notification === 'undefined') box.disabled = true;
+    box.addEventListener('change', async () => {
+      if (box.checked && Notification.permission !== 'granted') {
+        const got = await Notification.requestPermission().catch(() => 'denied');
+        if (got !== 'granted') { box.checked = false; toast('The browser did not allow notifications.', 'warn'); }
+      }
+    });
+  }
   clearInterval(tick);
   tick = setInterval(countdown, 250);
   render();

@@ -67,6 +67,17 @@ export function fmtTime(ms) {
     `${pad(d.getHours())}:${pad(d.getMinutes())}:${pad(d.getSeconds())}.${pad(d.getMilliseconds(), 3)}`;
 }
 
+// Seconds in words: "7 h 58 min", "12 min 5 s", "45 s".
+export function fmtDuration(seconds) {
+  if (typeof seconds !== 'number' || !isFinite(seconds)) return '';
+  const s = Math.max(0, Math.round(seconds));
+  const h = Math.floor(s / 3600);
+  const m = Math.floor((s % 3600) / 60);
+  if (h) return `${h} h ${m} min`;
+  if (m) return `${m} min ${s % 60} s`;
+  return `${s} s`;
+}
+
 export function fmtNum(v, digits = 2) {
   return typeof v === 'number' && isFinite(v) ? v.toFixed(digits) : '–';
 }

@@ -1,6 +1,6 @@
 // The dashboard's entry point: sign-in, tabs, the always-visible ESTOP, status polling and the
 // stream that feeds the views.
-import { $, $all, setText, toast } from './dom.js';
+import { $, $all, setText, toast, fmtDuration } from './dom.js';
 import * as api from './api.js';
 import { Stream } from './stream.js';
 import { app, emit, on } from './state.js';
@@ -73,7 +73,7 @@ async function refreshStatus() {
     setDefaultRrn(app.status.rrn);
     emit('status');
   } catch (e) {
-    if (e.status === 401) signOut(`The node refused the token: ${e.code} — ${e.message}`);
+    if (e.status === 401) signOut(api.tokenRefusal(e));
   }
 }
 
@@ -86,12 +86,14 @@ async function signIn(token, remember) {
   } catch (e) {
     api.setToken('', false);
     showSignedIn(false);
-    setText($('#signin-error'), e.status === 401 ? `The node refused this token: ${e.code} — ${e.message}` : `Cannot reach the node: ${e.message}`);
+    setText($('#signin-error'), e.status === 401 ? api.tokenRefusal(e) : `Cannot reach the node: ${e.message}`);
+    $('#signin-error').title = e.message || '';
     return;
   }
   setText($('#signin-error'), '');
   $('#token-input').value = '';
   app.claims = api.tokenClaims(t) || {};
+  expiryWarned = 0;
   app.role = String(app.claims.role || '').toUpperCase();
   setText($('#who'), `${app.claims.sub || 'signed in'} (${app.role || '?'})`);
   showSignedIn(true);
@@ -101,7 +103,21 @@ async function signIn(token, remember) {
   await refreshStatus();
   refreshPending();
   clearInterval(pollTimer);
-  pollTimer = setInterval(() => { refreshStatus(); refreshPending(); renderStreamStats(); }, 2000);
+  pollTimer = setInterval(() => { refreshStatus(); refreshPending(); renderStreamStats(); warnTokenExpiry(); }, 2000);
+}
+
+// The token's expiry, announced 5 minutes and 1 minute ahead (the node signs the page out when
+// it refuses the token; a warning lets the operator fetch a new one first).
+let expiryWarned = 0;
+function warnTokenExpiry() {
+  const exp = app.claims && typeof app.claims.exp === 'number' ? app.claims.exp * 1000 : 0;
+  if (!exp) return;
+  const left = exp - api.serverNow();
+  const step = left <= 60000 ? 2 : left <= 300000 ? 1 : 0;
+  if (step > expiryWarned) {
+    expiryWarned = step;
+    toast(`Your token expires in ${fmtDuration(left / 1000)}: get a new one and sign in again before it does.`, 'warn');
+  }
 }
 
 async function signOut(why) {
@@ -206,6 +222,13 @@ function init() {
   initAudit();
   on('refresh', refreshStatus);
   $('#estop').addEventListener('click', onEstop);
+  // Escape anywhere on the page is ESTOP (an ESTOP is never harmful: it latches until RESUME).
+  document.addEventListener('keydown', (e) => {
+    if (e.key === 'Escape' && !e.repeat && !e.ctrlKey && !e.altKey && !e.metaKey) {
+      e.preventDefault();
+      onEstop();
+    }
+  });
   $('#banner-resume').addEventListener('click', () => $('#resume').click());
   $('#signout').addEventListener('click', () => signOut(''));
   for (const b of $all('#tabs button')) b.addEventListener('click', () => showView(b.dataset.view));

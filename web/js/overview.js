@@ -1,5 +1,5 @@
 // Overview: identity, mode, safety, who holds control and the queue, RESUME.
-import { $, el, replace, setText, toast, fmtTime } from './dom.js';
+import { $, el, replace, setText, toast, fmtTime, fmtDuration } from './dom.js';
 import { resume } from './api.js';
 import { app, on, roleAtLeast } from './state.js';
 
@@ -42,16 +42,16 @@ export function renderOverview() {
   facts($('#control-facts'), [
     ['Holder', holder ? `${holder.role || ''} ${holder.user_id || ''}`.trim() : 'nobody — any authorised principal may drive'],
     holder && ['Session', holder.session_id, 'mono'],
-    holder && ['Expires in', holder.expires_in === null || holder.expires_in === undefined ? 'no expiry' : `${holder.expires_in} s`],
+    holder && ['Expires in', holder.expires_in === null || holder.expires_in === undefined ? 'no expiry' : fmtDuration(holder.expires_in)],
     ['Active sessions', s.active_sessions],
   ]);
   const queue = Array.isArray(s.queue) ? s.queue : (Array.isArray(s.control_queue) ? s.control_queue : null);
   const q = $('#control-queue');
-  if (!queue) replace(q, el('li', { class: 'muted' }, 'This node does not report a queue.'));
-  else if (!queue.length) replace(q, el('li', { class: 'muted' }, 'Empty.'));
+  if (!queue) replace(q, el('li', { class: 'muted note' }, 'This node does not report a queue.'));
+  else if (!queue.length) replace(q, el('li', { class: 'muted note' }, 'Nobody is waiting for control.'));
   else {
     replace(q, queue.map((e) => el('li', {}, e && typeof e === 'object'
-      ? [e.role, e.user_id || e.principal, typeof e.waiting_s === 'number' ? `(waiting ${e.waiting_s} s)` : ''].filter(Boolean).join(' ')
+      ? [e.role, e.user_id || e.principal, typeof e.waiting_s === 'number' ? `(waiting ${fmtDuration(e.waiting_s)})` : ''].filter(Boolean).join(' ')
       : String(e))));
   }
   const c = app.claims || {};

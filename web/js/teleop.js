@@ -2,7 +2,7 @@
 // an ordinary RCAN message through the node's pipeline, so refusals come back with their code.
 import { $, el, setText, toast, fmtNum } from './dom.js';
 import { request, sendCommand, safetyStop, uuid, serverNow, getToken } from './api.js';
-import { app, emit, on } from './state.js';
+import { app, emit, on, roleAtLeast } from './state.js';
 
 const DEFAULT_MIN = [-3.1, -2.0, -2.5, -3.1, -2.0, -3.1];
 const DEFAULT_MAX = [3.1, 2.0, 2.5, 3.1, 2.0, 3.1];
@@ -348,10 +348,20 @@ export function initTeleop() {
   // Motion controls work only while the stream is live (stream.js: liveness watchdog).
   // and no ESTOP is latched.
   let linkState = 'idle';
+  // A GUEST may watch but neither claim nor drive (seed §6.3): its controls are disabled and
+  // say why, instead of answering every press with a refusal.
   const motionControls = () => {
-    const ok = linkState === 'open' && app.estop !== true;
-    for (const b of document.querySelectorAll('#pad button, #arm-send, #arm-home, #grip-open, #grip-close')) b.disabled = !ok;
+    const mayDrive = roleAtLeast('USER');
+    const ok = linkState === 'open' && app.estop !== true && mayDrive;
+    for (const b of document.querySelectorAll('#pad button, #arm-send, #arm-home, #grip-open, #grip-close')) {
+      b.disabled = !ok;
+      b.title = mayDrive ? '' : `Driving needs USER or above (you are ${app.role || 'unknown'})`;
+    }
+    const claim = $('#claim');
+    claim.disabled = !mayDrive;
+    claim.title = mayDrive ? '' : `Claiming control needs USER or above (you are ${app.role || 'unknown'})`;
   };
+  on('status', motionControls);
   on('link', (state) => {
     linkState = state;
     if (state !== 'open') endHold(`stream ${state}`);
