@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
-#include <cstdio>
 
 #include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/hybrid.h"
@@ -53,45 +52,6 @@ std::string js_number(double d) {
   return out;
 }
 
-void js_string(std::string& out, std::string_view s) {
-  out += '"';
-  for (char ch : s) {
-    auto c = static_cast<unsigned char>(ch);
-    switch (c) {
-      case '"':
-        out += "\\\"";
-        break;
-      case '\\':
-        out += "\\\\";
-        break;
-      case '\b':
-        out += "\\b";
-        break;
-      case '\f':
-        out += "\\f";
-        break;
-      case '\n':
-        out += "\\n";
-        break;
-      case '\r':
-        out += "\\r";
-        break;
-      case '\t':
-        out += "\\t";
-        break;
-      default:
-        if (c < 0x20) {
-          char u[8];
-          std::snprintf(u, sizeof u, "\\u%04x", c);
-          out += u;
-        } else {
-          out += ch;
-        }
-    }
-  }
-  out += '"';
-}
-
 void js_append(std::string& out, const json::Value& v) {
   if (v.is_null()) {
     out += "null";
@@ -100,7 +60,7 @@ void js_append(std::string& out, const json::Value& v) {
   } else if (v.is_number()) {
     out += js_number(v.to_double());
   } else if (v.is_string()) {
-    js_string(out, v.as_string());
+    json::append_string(out, v.as_string());  // as JSON.stringify: parsed strings are valid UTF-8
   } else if (v.is_array()) {
     out += '[';
     bool first = true;
@@ -116,7 +76,7 @@ void js_append(std::string& out, const json::Value& v) {
     for (const auto& [k, x] : v.as_object()) {
       if (!first) out += ',';
       first = false;
-      js_string(out, k);
+      json::append_string(out, k);
       out += ':';
       js_append(out, x);
     }
