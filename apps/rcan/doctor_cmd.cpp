@@ -17,7 +17,9 @@
 
 #include "cli.h"
 #include "config/config.h"
+#include "node_http.h"
 #include "rcan/client.h"
+#include "transport/mqtt_client.h"
 
 namespace rcan::cli {
 namespace {
@@ -145,23 +147,16 @@ bool reachable(const std::string& host, const std::string& port, int timeout_ms,
   return ok;
 }
 
-// scheme://host[:port][/…] → host, port (default by scheme).
-void split_url(const std::string& url, std::string& host, std::string& port) {
-  const size_t s = url.find("://");
-  const std::string scheme = s == std::string::npos ? "" : url.substr(0, s);
-  std::string rest = s == std::string::npos ? url : url.substr(s + 3);
-  rest = rest.substr(0, rest.find('/'));
-  port = scheme == "mqtts" ? "8883" : scheme == "mqtt" ? "1883" : scheme == "https" ? "443" : "80";
-  if (!rest.empty() && rest[0] == '[') {  // [v6]:port
-    const size_t e = rest.find(']');
-    host = rest.substr(1, e == std::string::npos ? std::string::npos : e - 1);
-    if (e != std::string::npos && e + 1 < rest.size() && rest[e + 1] == ':')
-      port = rest.substr(e + 2);
-    return;
+// Whether the host and port of a URL accept a TCP connection: `parse` is the project's own
+// parser for that kind of URL (the MQTT client's broker URLs, the client library's endpoints).
+template <typename Parse>
+bool url_reachable(const std::string& url, Parse parse, std::string& why) {
+  auto u = parse(url);
+  if (!u.ok()) {
+    why = u.error().message;
+    return false;
   }
-  const size_t c = rest.rfind(':');
-  host = c == std::string::npos ? rest : rest.substr(0, c);
-  if (c != std::string::npos) port = rest.substr(c + 1);
+  return reachable(u->host, std::to_string(u->port), 3000, why);
 }
 
 void check_clock(Report& r) {
@@ -235,8 +230,10 @@ int doctor_main(const Args& args) {
           "rcand init --dir D creates one; the embedded simulator needs none");
   } else if (auto c = config::load_config(cfg_path); !c.ok()) {
     r.add(Level::kFail, "configuration",
-          cfg_path + ": " + (c.error().field.empty() ? "" : c.error().field + ": ") +
-              c.error().message,
+          // The loader's message names the file, the key, the line and the column.
+          c.error().message.find(cfg_path) == std::string::npos
+              ? cfg_path + ": " + c.error().message
+              : c.error().message,
           "fix the key it names (docs/CONFIG.md)");
   } else {
     cfg = std::move(c).value();
@@ -263,9 +260,8 @@ int doctor_main(const Args& args) {
     if (cfg->mqtt.enabled) {
       // Every node of the list: a failover target that is down is found now, not in an outage.
       for (const std::string& broker : cfg->mqtt.broker_urls()) {
-        std::string host, port, why;
-        split_url(broker, host, port);
-        if (reachable(host, port, 3000, why))
+        std::string why;
+        if (url_reachable(broker, transport::parse_broker_url, why))
           r.add(Level::kOk, "MQTT broker", broker + " accepts connections");
         else
           r.add(Level::kFail, "MQTT broker", broker + ": " + why,
@@ -273,9 +269,8 @@ int doctor_main(const Args& args) {
       }
     }
     if (!cfg->offline.issuer_url.empty()) {
-      std::string host, port, why;
-      split_url(cfg->offline.issuer_url, host, port);
-      if (reachable(host, port, 3000, why))
+      std::string why;
+      if (url_reachable(cfg->offline.issuer_url, client::parse_endpoint, why))
         r.add(Level::kOk, "token issuer URL", cfg->offline.issuer_url + " reachable");
       else
         r.add(Level::kWarn, "token issuer URL", cfg->offline.issuer_url + ": " + why,
@@ -292,18 +287,9 @@ int doctor_main(const Args& args) {
     url = std::string(cfg->server.tls.enabled ? "https://" : "http://") + host + ":" +
           std::to_string(cfg->server.port);
   }
-  if (url.empty())
-    url = std::getenv("RCAN_URL") ? std::getenv("RCAN_URL") : "http://127.0.0.1:8080";
-  std::string token;
-  std::string token_file = o.get("token-file");
-  if (token_file.empty() && std::getenv("RCAN_TOKEN_FILE"))
-    token_file = std::getenv("RCAN_TOKEN_FILE");
-  if (!token_file.empty()) {
-    if (auto t = read_file(token_file); t.ok()) {
-      token = *t;
-      while (!token.empty() && (token.back() == '\n' || token.back() == '\r')) token.pop_back();
-    }
-  }
+  if (url.empty()) url = node_url(o);
+  std::string err;
+  const std::string token = token_from(o, false, err);
   check_node(r, url, token);
   return r.print(o.has("json"));
 }

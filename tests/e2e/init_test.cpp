@@ -240,6 +240,18 @@ TEST_F(InitTest, DoctorChecksTheInstallationAndSaysWhatToFix) {
   EXPECT_EQ(leak.exit_code, 1);
   EXPECT_NE(leak.out.find("FAIL  chain secret"), std::string::npos) << leak.out;
   EXPECT_NE(leak.out.find("chmod 600 " + dir_ + "/audit.secret"), std::string::npos) << leak.out;
+  // A broker of the fleet list that does not answer is a failure, named.
+  const int dead = free_port();
+  {
+    std::ofstream out(yaml, std::ios::app);
+    out << "mqtt:\n  enabled: true\n  broker: [mqtt://127.0.0.1:" << dead << "]\n";
+  }
+  auto nobroker = run_cli({"doctor", "--config", yaml}, {}, env);
+  EXPECT_EQ(nobroker.exit_code, 1);
+  EXPECT_NE(
+      nobroker.out.find("FAIL  MQTT broker            mqtt://127.0.0.1:" + std::to_string(dead)),
+      std::string::npos)
+      << nobroker.out;
   // A broken configuration names the key.
   {
     std::ofstream out(yaml, std::ios::app);
