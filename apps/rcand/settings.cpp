@@ -38,6 +38,7 @@ node::SafetyConfig safety_config(const config::NodeConfig& cfg, const node::SimR
   sc.limits.workspace = cfg.safety.workspace;
   sc.policy = cfg.safety.speed_policy;
   sc.estop_on_startup = cfg.safety.estop_on_startup;
+  sc.estop_on_driver_fault = cfg.safety.estop_on_driver_fault;
   sc.default_heartbeat_ms = cfg.safety.heartbeat_timeout_ms;
   sc.tick_period_ms = cfg.driver.sim.tick_hz ? 1000 / cfg.driver.sim.tick_hz : 20;
   return sc;

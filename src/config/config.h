@@ -195,6 +195,7 @@ struct SafetyConfig {
   LimitPolicy joint_policy = LimitPolicy::kReject;
   LimitPolicy workspace_policy = LimitPolicy::kReject;
   bool estop_on_startup = false;
+  bool estop_on_driver_fault = false;  // a driver fault also latches ESTOP
   bool estop_clear_requires_presence = false;
   // Default: agent.latency_budget_ms × 2 when that is set, else kDefaultHeartbeatTimeoutMs.
   uint32_t heartbeat_timeout_ms = kDefaultHeartbeatTimeoutMs;

@@ -1,6 +1,6 @@
 // SafetyCore: latched and persisted ESTOP, RESUME privileges, dispatch refusals (latch, TTL,
 // lost heartbeat), each limit clamped vs rejected, the workspace, the deadman event, drive TTL,
-// the watchdog, and ESTOP racing many real dispatching threads.
+// the watchdog, driver faults, and ESTOP racing many real dispatching threads.
 #include "node/safety/safety.h"
 
 #include <gtest/gtest.h>
@@ -679,6 +679,102 @@ TEST(SafetyWatchdog, ExpiryLatchesEstop) {
   ASSERT_TRUE(r.core->resume(3, "leasee").ok());
   r.run(20000);  // disarmed until fed again
   EXPECT_FALSE(r.core->estop_active());
+}
+
+// ---- driver health ------------------------------------------------------------------------
+
+// A simulated robot whose hardware link can be cut (what a ROS 2 base without odometry or a
+// dead driver process reports).
+class FaultySim final : public Driver {
+ public:
+  DriverInfo describe() const override { return sim.describe(); }
+  Status apply(const ActuatorCommand& c) override { return sim.apply(c); }
+  void stop() noexcept override { sim.stop(); }
+  void step(int64_t dt) override { sim.step(dt); }
+  RobotState state() const override { return sim.state(); }
+  DriverHealth health() const override {
+    if (!link_lost.load()) return {};
+    return {false, "no odometry for 500 ms"};
+  }
+  SimRobot sim{quiet_sim()};
+  std::atomic<bool> link_lost{false};
+};
+
+struct FaultRig {
+  explicit FaultRig(SafetyConfig cfg = {}) {
+    auto d = std::make_unique<FaultySim>();
+    drv = d.get();
+    core = std::make_unique<SafetyCore>(std::move(d), cfg, clock);
+    core->set_event_callback([this](const SafetyEvent& e) { events.push_back(e); });
+  }
+  void run(int64_t ms) {
+    for (int64_t t = 0; t < ms; t += 20) {
+      clock.advance(20);
+      core->tick();
+    }
+  }
+  ManualClock clock;
+  FaultySim* drv = nullptr;
+  std::unique_ptr<SafetyCore> core;
+  std::vector<SafetyEvent> events;
+};
+
+TEST(SafetyDriverHealth, AFaultStopsTheRobotRefusesMotionAndRecovers) {
+  FaultRig r;
+  ASSERT_TRUE(r.core->dispatch(ActuatorCommand::make_drive(0.5, 0, 5000)).ok());
+  r.run(400);
+  ASSERT_GT(r.core->robot_state().target_linear_mps, 0.0);
+  r.drv->link_lost = true;
+  r.run(20);
+  // Stopped at once, safe stop with the driver's reason, one audited event.
+  EXPECT_DOUBLE_EQ(r.core->robot_state().target_linear_mps, 0.0);
+  auto st = r.core->status();
+  EXPECT_TRUE(st.safe_stop_active);
+  EXPECT_EQ(st.safe_stop_reason, "driver_fault");
+  EXPECT_EQ(st.driver_fault, "no odometry for 500 ms");
+  EXPECT_EQ(st.to_json().find("driver_fault")->as_string(), "no odometry for 500 ms");
+  ASSERT_EQ(r.events.size(), 1u);
+  EXPECT_EQ(r.events[0].type, "DRIVER_FAULT");
+  EXPECT_EQ(r.events[0].detail, "no odometry for 500 ms");
+  EXPECT_FALSE(r.core->estop_active());  // estop_on_driver_fault is off by default
+  // Motion is refused while the fault lasts (the dry run says so too); a stop is accepted.
+  for (auto cmd : {ActuatorCommand::make_drive(0.1, 0, 100),
+                   ActuatorCommand::make_arm({0.1, 0, 0, 0, 0, 0})}) {
+    auto d = r.core->dispatch(cmd);
+    ASSERT_FALSE(d.ok());
+    EXPECT_EQ(d.error().reason, "driver_fault");
+    EXPECT_NE(d.error().message.find("no odometry"), std::string::npos) << d.error().message;
+    EXPECT_FALSE(r.core->check(cmd).ok());
+  }
+  EXPECT_TRUE(r.core->dispatch(ActuatorCommand::make_stop()).ok());
+  r.run(1000);
+  EXPECT_EQ(r.events.size(), 1u);  // one event per fault, not one per tick
+  // The link comes back: DRIVER_RECOVERED, and motion is accepted again.
+  r.drv->link_lost = false;
+  r.run(20);
+  ASSERT_EQ(r.events.size(), 2u);
+  EXPECT_EQ(r.events[1].type, "DRIVER_RECOVERED");
+  EXPECT_TRUE(r.core->status().driver_fault.empty());
+  EXPECT_TRUE(r.core->dispatch(ActuatorCommand::make_drive(0.1, 0, 100)).ok());
+  EXPECT_FALSE(r.core->status().safe_stop_active);
+}
+
+TEST(SafetyDriverHealth, EstopOnDriverFaultLatchesUntilResume) {
+  SafetyConfig cfg;
+  cfg.estop_on_driver_fault = true;
+  FaultRig r(cfg);
+  r.drv->link_lost = true;
+  r.run(20);
+  EXPECT_TRUE(r.core->estop_active());
+  EXPECT_EQ(r.core->status().estop_source, "driver");
+  r.drv->link_lost = false;
+  r.run(20);
+  // Healthy again, but the latch holds until someone resumes.
+  auto d = r.core->dispatch(ActuatorCommand::make_drive(0.1, 0, 100));
+  ASSERT_FALSE(d.ok());
+  EXPECT_EQ(d.error().reason, "estop_active");
+  ASSERT_TRUE(r.core->resume(3, "leasee").ok());
+  EXPECT_TRUE(r.core->dispatch(ActuatorCommand::make_drive(0.1, 0, 100)).ok());
 }
 
 // ---- the control loop thread ------------------------------------------------------------

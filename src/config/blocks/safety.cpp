@@ -131,6 +131,7 @@ Table<SafetyConfig> safety_rows() {
       workspace(),
       limit_policy(),
       S::field("estop_on_startup", Bool(), &SafetyConfig::estop_on_startup),
+      S::field("estop_on_driver_fault", Bool(), &SafetyConfig::estop_on_driver_fault),
       S::field("estop_clear_requires_presence", Bool(),
                &SafetyConfig::estop_clear_requires_presence),
       S::read("heartbeat_timeout_ms", Int(100, 600'000),

@@ -142,6 +142,16 @@ struct DriverInfo {
   json::Object to_json() const;
 };
 
+// Driver health, polled by the SafetyCore on every control-loop tick. A driver that loses its
+// hardware (no odometry from a ROS 2 base, a driver process that died, missed its heartbeat or
+// answered garbage) reports a fault: the core stops it, enters safe stop ("driver_fault"),
+// emits DRIVER_FAULT once (audited), latches ESTOP when SafetyConfig::estop_on_driver_fault,
+// and refuses motion until the driver is healthy again (DRIVER_RECOVERED).
+struct DriverHealth {
+  bool ok = true;
+  std::string fault;  // why, in plain words, when !ok
+};
+
 class Driver {
  public:
   virtual ~Driver() = default;
@@ -163,6 +173,8 @@ class Driver {
   // (and wakes for the next command). The default keeps a driver that services hardware on
   // the full-rate loop.
   virtual bool at_rest() const { return false; }
+  // Called under the same lock as step(); must be short (a flag or a timestamp check).
+  virtual DriverHealth health() const { return {}; }
 };
 
 // ---- JSON (inline so that the header stands alone) ----

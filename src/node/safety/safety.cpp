@@ -118,6 +118,7 @@ json::Object SafetyStatus::to_json() const {
     if (!safe_stop_session.empty()) s.set("session_id", safe_stop_session);
     o.set("safe_stop_detail", std::move(s));
   }
+  if (!driver_fault.empty()) o.set("driver_fault", driver_fault);
   o.set("state", estop_active       ? "estop"
                  : safe_stop_active ? "safe_stop"
                  : robot.stopped    ? "idle"
@@ -607,6 +608,8 @@ void SafetyCore::tick() {
 
   std::string owner;
   bool moving = false;
+  bool fault_started = false, fault_cleared = false;
+  std::string fault_detail;
   {
     MutexLock lock(apply_mu_);
     step_driver_to_locked(now);
@@ -645,8 +648,38 @@ void SafetyCore::tick() {
             make_event("WORKSPACE_SAFE_STOP", 0, 0, "the base was about to leave the workspace"));
       }
     }
+    // Driver health: a fault stops the driver at once and holds motion off until it clears.
+    const DriverHealth health = driver_->health();
+    if (!health.ok && !driver_faulted_.load(std::memory_order_acquire)) {
+      driver_->stop();
+      drive_deadline_mono_ = 0;
+      driver_faulted_.store(true, std::memory_order_release);
+      fault_started = true;
+      fault_detail =
+          health.fault.empty() ? std::string("the driver reports a fault") : health.fault;
+    } else if (health.ok && driver_faulted_.load(std::memory_order_acquire)) {
+      driver_faulted_.store(false, std::memory_order_release);
+      fault_cleared = true;
+    }
     owner = motion_owner_;
     moving = !st.stopped;
+  }
+  if (fault_started) {
+    {
+      MutexLock lock(meta_mu_);
+      driver_fault_ = fault_detail;
+    }
+    enter_safe_stop("driver_fault", "");
+    events.push_back(make_event("DRIVER_FAULT", 0, 0, fault_detail));
+    if (cfg_.estop_on_driver_fault) (void)estop("driver", fault_detail);
+  } else if (fault_cleared) {
+    std::string was;
+    {
+      MutexLock lock(meta_mu_);
+      was.swap(driver_fault_);
+    }
+    events.push_back(
+        make_event("DRIVER_RECOVERED", 0, 0, "the driver is healthy again (was: " + was + ")"));
   }
 
   // Deadman.
@@ -674,6 +707,7 @@ void SafetyCore::tick() {
   }
 
   for (const auto& ev : events) {
+    if (ev.type == "DRIVER_FAULT" || ev.type == "DRIVER_RECOVERED") continue;  // handled above
     driver_->stop();
     if (ev.type == "NETWORK_LOSS_SAFE_STOP") {
       enter_safe_stop("NETWORK_LOSS_SAFE_STOP", ev.session_id);
@@ -851,6 +885,7 @@ SafetyStatus SafetyCore::status() const {
       s.safe_stop_session = safe_stop_session_;
       s.safe_stop_since_wall_ms = safe_stop_since_wall_ms_;
     }
+    s.driver_fault = driver_fault_;
     s.estop_fence_timeouts = fence_timeouts_.load(std::memory_order_relaxed);
     s.persistence_enabled = persist_enabled_;
     s.persisted = !persist_enabled_ || persisted_seq_ >= latch_seq_;

@@ -81,7 +81,10 @@ struct SafetyConfig {
   SafetyLimits limits;
   LimitPolicy policy = LimitPolicy::kClamp;
   bool estop_on_startup = false;  // safety.estop_on_startup: always come up latched
-  int64_t tick_period_ms = 20;    // 50 Hz control loop
+  // safety.estop_on_driver_fault: a driver fault latches ESTOP (source "driver") besides the
+  // safe stop, so that motion needs an explicit RESUME once the driver is back.
+  bool estop_on_driver_fault = false;
+  int64_t tick_period_ms = 20;  // 50 Hz control loop
   // While the driver is at rest (Driver::at_rest()) and no drive TTL is running, the loop
   // sleeps up to this long instead — woken early by a command, a session or watchdog feed,
   // and always on time for the next heartbeat or watchdog deadline. An idle robot then costs
@@ -115,7 +118,7 @@ struct DispatchOutcome {
 
 struct SafetyEvent {
   std::string type;        // "NETWORK_LOSS_SAFE_STOP", "WATCHDOG_TIMEOUT", "WORKSPACE_SAFE_STOP",
-                           // "DRIVE_TTL_SAFE_STOP"
+                           // "DRIVE_TTL_SAFE_STOP", "DRIVER_FAULT", "DRIVER_RECOVERED"
   std::string session_id;  // NETWORK_LOSS_SAFE_STOP
   int64_t elapsed_ms = 0;  // since the last heartbeat / watchdog feed
   int64_t timeout_ms = 0;
@@ -141,7 +144,9 @@ struct SafetyStatus {
   int64_t estop_since_wall_ms = 0;
   uint64_t estop_epoch = 0;  // SafetyCore::estop_epoch()
   bool safe_stop_active = false;
-  std::string safe_stop_reason;  // "NETWORK_LOSS_SAFE_STOP", "workspace", "drive_ttl"
+  std::string safe_stop_reason;  // "NETWORK_LOSS_SAFE_STOP", "workspace", "drive_ttl",
+                                 // "driver_fault"
+  std::string driver_fault;      // non-empty while the driver reports a fault
   std::string safe_stop_session;
   int64_t safe_stop_since_wall_ms = 0;
   SafetyLimits limits;
@@ -316,7 +321,8 @@ class SafetyCore {
   // The SAFETY lane flag: read by dispatch() (before and under apply_mu_) and tick().
   std::atomic<bool> latched_{false};
   std::atomic<bool> safe_stop_{false};
-  std::atomic<uint64_t> estop_epoch_{0};  // bumped before every latch store
+  std::atomic<bool> driver_faulted_{false};  // set/cleared by tick() from Driver::health()
+  std::atomic<uint64_t> estop_epoch_{0};     // bumped before every latch store
   // Odd while a dispatch() may be inside Driver::apply() (bumped under apply_mu_).
   std::atomic<uint64_t> apply_seq_{0};
   std::atomic<uint64_t> fence_timeouts_{0};
@@ -337,6 +343,7 @@ class SafetyCore {
   std::string safe_stop_reason_ GUARDED_BY(meta_mu_);
   std::string safe_stop_session_ GUARDED_BY(meta_mu_);
   int64_t safe_stop_since_wall_ms_ GUARDED_BY(meta_mu_) = 0;
+  std::string driver_fault_ GUARDED_BY(meta_mu_);
   std::string state_dir_;         // set once by open()
   bool persist_enabled_ = false;  // set once by open()
   bool persist_quit_ GUARDED_BY(meta_mu_) = false;

@@ -188,6 +188,16 @@ Result<DispatchOutcome> SafetyCore::precheck(const ActuatorCommand& cmd,
   if (latched_.load(std::memory_order_acquire))
     return Error(ErrorCode::kCommandRejected, "ESTOP is latched; an explicit RESUME is required",
                  "", "estop_active");
+  if (driver_faulted_.load(std::memory_order_acquire)) {
+    std::string why;
+    {
+      MutexLock lock(meta_mu_);
+      why = driver_fault_;
+    }
+    return Error(ErrorCode::kSafeStop,
+                 "the driver reports a fault (" + why + "); motion is refused until it recovers",
+                 "", "driver_fault");
+  }
   if (opts.deadline_mono_ms > 0 && now > opts.deadline_mono_ms)
     return Error(
         ErrorCode::kMessageStale,
@@ -259,6 +269,11 @@ Result<DispatchOutcome> SafetyCore::dispatch(const ActuatorCommand& cmd,
     if (latched_.load(std::memory_order_seq_cst))
       return Error(ErrorCode::kCommandRejected, "ESTOP is latched; an explicit RESUME is required",
                    "", "estop_active");
+    // tick() sets the fault under apply_mu_: checked here, no apply follows a reported fault.
+    if (driver_faulted_.load(std::memory_order_acquire))
+      return Error(ErrorCode::kSafeStop,
+                   "the driver reports a fault; motion is refused until it recovers", "",
+                   "driver_fault");
     if (resting_.load(std::memory_order_seq_cst)) {
       // The loop may have slept up to idle_tick_ms: bring the driver to now first, so the
       // new motion is integrated from this moment and not from the last tick.
