@@ -24,6 +24,7 @@ LAYERS = [
     ("transport", ["src/transport/"]),
     ("config", ["src/config/"]),
     ("node/safety", ["src/node/safety/"]),
+    ("drivers", ["src/drivers/"]),  # hardware drivers under the safety core (driver.h)
     ("node/admission", ["src/node/admission/"]),
     ("node/control", ["src/node/control/"]),
     ("node/services", ["src/node/services/"]),
