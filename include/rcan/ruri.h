@@ -59,6 +59,13 @@ std::string sdk_form(const Ruri& ruri, std::string_view version = "v1");
 // pattern without one matches the robot whatever capability it is addressed with.
 bool aud_matches(std::string_view pattern, const Ruri& robot);
 
+// Whether a message's `target` addresses the robot `self` (its own identity). The manufacturer,
+// model and device id must be the robot's; the registry must be the robot's or `local.rcan`
+// (the local-network registry, which the dot shorthand expands to); the SDKs' version segment,
+// a port and a capability do not matter. A discovered RURI names an address, not a robot, and
+// never matches. On a mismatch `why` (if given) says which segment differs.
+bool addresses_robot(const Ruri& target, const Ruri& self, std::string* why = nullptr);
+
 // RRN — "RRN-" + 12 digits canonical; accepted: RRN(-PFX)?-<8..16 digits>, PFX [A-Z0-9]{2,8}.
 struct Rrn {
   std::string prefix;  // e.g. "BD" in RRN-BD-000000000042, empty when none

@@ -341,6 +341,25 @@ Result<Ruri> parse_ruri(std::string_view text) {
   return r;
 }
 
+bool addresses_robot(const Ruri& target, const Ruri& self, std::string* why) {
+  auto differs = [&](const char* segment, const std::string& got, const std::string& own) {
+    if (why) *why = std::string(segment) + " '" + got + "' is not this robot's ('" + own + "')";
+    return false;
+  };
+  if (target.form == Ruri::Form::kDiscovered) {
+    if (why) *why = "a discovered RURI names an address, not a robot";
+    return false;
+  }
+  if (target.registry != self.registry && target.registry != "local.rcan")
+    return differs("registry", target.registry, self.registry);
+  if (target.manufacturer != self.manufacturer)
+    return differs("manufacturer", target.manufacturer, self.manufacturer);
+  if (target.model != self.model) return differs("model", target.model, self.model);
+  if (target.device_id != self.device_id)
+    return differs("device-id", target.device_id, self.device_id);
+  return true;
+}
+
 bool aud_matches(std::string_view pattern, const Ruri& robot) {
   if (pattern.substr(0, kScheme.size()) != kScheme) return false;
   std::string_view rest = pattern.substr(kScheme.size());

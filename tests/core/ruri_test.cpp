@@ -1,5 +1,6 @@
 // RURI parsing against every URI of the shared acceptance matrix (tests/vectors/ruri.json),
-// with this project's verdict per docs/PROTOCOL.md §Addressing, plus RRN and aud matching.
+// with this project's verdict per docs/PROTOCOL.md §Addressing, plus RRN, aud matching and
+// whether a target addresses this robot.
 #include "rcan/ruri.h"
 
 #include <gtest/gtest.h>
@@ -217,6 +218,38 @@ TEST(AudMatch, WildcardSegmentsAndCapabilities) {
   EXPECT_TRUE(aud_matches("rcan://continuon.cloud/continuon/companion-v1/d3a4b5c6/arm", *arm));
   EXPECT_TRUE(aud_matches("rcan://continuon.cloud/continuon/companion-v1/*", *arm));
   EXPECT_FALSE(aud_matches("rcan://continuon.cloud/continuon/companion-v1/*/vision", *arm));
+}
+
+TEST(AddressesRobot, EveryFormOfThisRobotAndNoOther) {
+  auto self = parse_ruri("rcan://registry.rcan.dev/acme/rover/0a1b2c3d");
+  ASSERT_TRUE(self.ok());
+  auto verdict = [&](const char* text, std::string* why = nullptr) {
+    auto t = parse_ruri(text);
+    EXPECT_TRUE(t.ok()) << text;
+    return t.ok() && addresses_robot(*t, *self, why);
+  };
+  // This robot: canonical, with a port or a capability, the SDKs' 5-segment form with any
+  // version, the local registry and the dot shorthand (which expands into it).
+  for (const char* mine : {"rcan://registry.rcan.dev/acme/rover/0a1b2c3d",
+                           "rcan://registry.rcan.dev/acme/rover/0a1b2c3d:8000",
+                           "rcan://registry.rcan.dev/acme/rover/0a1b2c3d/arm",
+                           "rcan://registry.rcan.dev/acme/rover/v1/0a1b2c3d",
+                           "rcan://registry.rcan.dev/acme/rover/v7/0a1b2c3d",
+                           "rcan://local.rcan/acme/rover/0a1b2c3d", "rcan://acme.rover.0a1b2c3d"})
+    EXPECT_TRUE(verdict(mine)) << mine;
+  // Another robot, however close: each differing segment is named.
+  std::string why;
+  EXPECT_FALSE(verdict("rcan://registry.rcan.dev/acme/rover/0a1b2c3e", &why));
+  EXPECT_NE(why.find("device-id '0a1b2c3e'"), std::string::npos) << why;
+  EXPECT_FALSE(verdict("rcan://registry.rcan.dev/acme/rover2/0a1b2c3d", &why));
+  EXPECT_NE(why.find("model"), std::string::npos) << why;
+  EXPECT_FALSE(verdict("rcan://registry.rcan.dev/acme2/rover/0a1b2c3d", &why));
+  EXPECT_NE(why.find("manufacturer"), std::string::npos) << why;
+  EXPECT_FALSE(verdict("rcan://other.example/acme/rover/0a1b2c3d", &why));
+  EXPECT_NE(why.find("registry"), std::string::npos) << why;
+  EXPECT_FALSE(verdict("rcan://registry.rcan.dev/acme/rover/v1/0a1b2c3e"));
+  EXPECT_FALSE(verdict("rcan://local.rcan/discovered/192.168.1.42:8080", &why));
+  EXPECT_NE(why.find("address"), std::string::npos) << why;
 }
 
 TEST(Rrn, CanonicalAndAcceptedForms) {

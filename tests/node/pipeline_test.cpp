@@ -203,6 +203,57 @@ TEST_F(PipelineTest, AFullReplayMemoryRefusesWith429ButNeverAStop) {
   EXPECT_NE(detail->get("replay_memory_full"), nullptr) << json::dump(rec[0]);
 }
 
+// A signed command captured on one robot must not run on another robot that trusts the same
+// signer (docs/SECURITY.md R17): the target must name this robot (kRuri). Stops are honoured
+// whatever they name.
+TEST_F(PipelineTest, AMessageAddressedToAnotherRobotIsRefusedButAStopIsNot) {
+  const std::string owner = token("owner", "alice");
+  auto aimed = [&](const std::string& target, const char* key = "target_ruri") {
+    json::Value m = command("move");
+    m.as_object().set(key, target);
+    return m;
+  };
+  for (const char* other :
+       {"rcan://local.rcan/acme/rover/0a1b2c3e", "rcan://local.rcan/acme/rover/v1/0a1b2c3e",
+        "rcan://local.rcan/acme/crane/0a1b2c3d", "rcan://registry.rcan.dev/acme/rover2/0a1b2c3d",
+        "rcan://local.rcan/discovered/10.0.0.7:8000"}) {
+    Outcome o = submit(aimed(other), owner);
+    EXPECT_EQ(o.status, 422) << other << ": " << json::dump(o.body);
+    EXPECT_EQ(error_code(o), "COMMAND_REJECTED");
+    EXPECT_EQ(reason(o), "wrong_target");
+    const json::Value* p = o.body.get("payload");
+    ASSERT_TRUE(p);
+    EXPECT_NE(json::string_field(*p, "error").find(other), std::string::npos) << json::dump(o.body);
+  }
+  EXPECT_TRUE(act_.applied().empty());
+  // Recorded (repeats of the same refusal within the ledger's window are counted, not repeated).
+  auto rec = audited("MESSAGE_REJECTED", 1);
+  ASSERT_FALSE(rec.empty());
+  EXPECT_NE(json::dump(rec[0]).find("wrong_target"), std::string::npos) << json::dump(rec[0]);
+  // This robot in every form: canonical, the SDKs' 5-segment form, a capability, the dot
+  // shorthand, broadcast, and no target at all.
+  for (const char* mine :
+       {"rcan://local.rcan/acme/rover/0a1b2c3d", "rcan://local.rcan/acme/rover/v1/0a1b2c3d",
+        "rcan://local.rcan/acme/rover/0a1b2c3d/base", "rcan://acme.rover.0a1b2c3d", "broadcast"}) {
+    Outcome o = submit(aimed(mine), owner);
+    EXPECT_EQ(o.status, 200) << mine << ": " << json::dump(o.body);
+  }
+  EXPECT_EQ(submit(command("move"), owner).status, 200);
+  EXPECT_EQ(act_.applied().size(), 6u);
+  // An ESTOP names another robot: it still stops this one.
+  Outcome stop =
+      submit(json::Object{{"version", "1.0.0"},
+                          {"message_id", new_uuid_v4()},
+                          {"type", "SAFETY"},
+                          {"priority", "SAFETY"},
+                          {"target_ruri", "rcan://local.rcan/acme/rover/0a1b2c3e"},
+                          {"timestamp_ms", clock_.wall_ms()},
+                          {"payload", json::Object{{"safety_event", "ESTOP"}, {"reason", "test"}}}},
+             owner);
+  EXPECT_EQ(stop.status, 200) << json::dump(stop.body);
+  EXPECT_EQ(act_.estops(), 1u);
+}
+
 TEST_F(PipelineTest, LatchedEstopRefusesMotionWith423) {
   act_.latch();
   Outcome o = submit(command("move"), token("owner", "alice"));

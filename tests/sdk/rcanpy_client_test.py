@@ -295,6 +295,13 @@ def main():
         st, body = post(base, token, tampered)
         check(st == 401 and code_of(body) == "SIGNATURE_INVALID", f"HTTP: params changed after signing is 401 SIGNATURE_INVALID ({st} {code_of(body)})")
 
+        # Signed by a trusted operator for another robot (same fleet, next device id): the
+        # signature is good, the target is not this robot.
+        other = RobotURI.parse("rcan://local.rcan/acme/rover/v1/0a1b2c3e")
+        st, body = post(base, token, sign_message(RCANMessage(cmd="move", target=other, params={"linear": 0.1, "duration_ms": 100}), operator).to_dict())
+        check(st == 422 and code_of(body) == "COMMAND_REJECTED" and "0a1b2c3e" in json.dumps(body),
+              f"HTTP: a signed message addressed to another robot is 422 COMMAND_REJECTED ({st} {code_of(body)})")
+
         st, body = post(base, token, sign_message(move(), stranger).to_dict())
         check(st == 401 and code_of(body) == "SIGNATURE_INVALID", f"HTTP: signed by an untrusted ML-DSA-65 key is 401 SIGNATURE_INVALID ({st} {code_of(body)})")
 

@@ -7,6 +7,7 @@
 #include "node/pipeline/stages.h"
 #include "node/services/node_services.h"
 #include "rcan/errors.h"
+#include "rcan/ruri.h"
 
 namespace rcan::node {
 namespace {
@@ -48,7 +49,9 @@ class TokenPresenceStage final : public Stage {
 
 class DecodeStage final : public Stage {
  public:
-  explicit DecodeStage(NodeServices& s) : svc_(s) {}
+  explicit DecodeStage(NodeServices& s) : svc_(s) {
+    if (auto self = parse_ruri(s.settings.ruri); self.ok()) self_ = std::move(self).value();
+  }
   const char* name() const override { return "decode"; }
   Result run(const std::shared_ptr<Context>& ctx) override {
     auto m = decode_message(ctx->in.body, svc_.settings.codec);
@@ -82,6 +85,24 @@ class DecodeStage final : public Stage {
                     "MESSAGE_REJECTED");
     }
     if (ctx->safety != SafetyAction::kNone) msg.priority = Priority::kSafety;
+    // A message addressed to another robot is refused, whatever its token and signature say:
+    // a signed command captured on one robot must not run on another that trusts the same
+    // signer (docs/PROTOCOL.md §Addressing). ESTOP and STOP are honoured whatever they name —
+    // stopping is always safe, and a mistyped target must not keep a robot moving.
+    if (!msg.target_ruri.empty() && msg.target_ruri != "broadcast" &&
+        ctx->safety != SafetyAction::kEstop && ctx->safety != SafetyAction::kStop) {
+      std::string why = "this robot's identity is not a valid RURI";
+      auto target = parse_ruri(msg.target_ruri);
+      if (!self_ || !target.ok() || !addresses_robot(*target, *self_, &why)) {
+        const char* field = msg.shape == WireShape::kSeed ? "target_ruri" : "target";
+        return refuse(svc_, ctx,
+                      Error(ErrorCode::kCommandRejected,
+                            "the message is addressed to " + msg.target_ruri +
+                                ", not this robot (" + svc_.settings.ruri + "): " + why,
+                            field, "wrong_target"),
+                      "MESSAGE_REJECTED");
+      }
+    }
     switch (msg.type) {
       case MessageType::kCommand:
       case MessageType::kSafety:
@@ -101,6 +122,7 @@ class DecodeStage final : public Stage {
 
  private:
   NodeServices& svc_;
+  std::optional<Ruri> self_;  // the robot's own identity (settings.ruri)
 };
 
 }  // namespace
