@@ -1,10 +1,11 @@
-// A fleet through one Mosquitto broker: N simulated robots (default 200), each a complete node
-// stack in this process — safety core and simulated robot, HMAC audit log on disk, the one
-// pipeline, and its own MQTT connection (MqttNode) — exactly what rcand wires up, minus the
-// HTTP port. The bench starts a broker on a free loopback port, then:
+// A fleet through one Mosquitto broker or a NATS cluster: N simulated robots (default 200), each
+// a complete node stack in this process — safety core and simulated robot, HMAC audit log on
+// disk, the one pipeline, and its own MQTT connection (MqttNode) — exactly what rcand wires up,
+// minus the HTTP port. The bench starts the broker(s) on free loopback ports, then:
 //
-//   1. fleet ESTOP: publishes a retained QoS 2 SAFETY ESTOP on the fleet's estop topic (the
-//      robots subscribe at mqtt.estop_qos, 1 unless --estop-qos 2) and
+//   1. fleet ESTOP: publishes a retained SAFETY ESTOP on the fleet's estop topic (QoS 2 on
+//      Mosquitto, QoS 1 on NATS, which does no QoS 2; the robots subscribe at mqtt.estop_qos,
+//      1 unless --estop-qos 2) and
 //      times, per robot, publish → the safety core latching (measured inside the robot's
 //      Actuation) and publish → the robot's ACK arriving back at the coordinator;
 //   2. RESUME, then a broadcast FLEET_COMMAND (`status`, then a short `move`): times publish →
@@ -13,8 +14,17 @@
 // Repeats each round --rounds times and prints percentiles over all robot×round samples.
 //
 //   fleet_bench [--robots 200] [--rounds 5] [--estop-qos 1|2] [--segment-kib 1024]
-//               [--mosquitto /usr/sbin/mosquitto] [--perf-ctl FIFO --profile-round N] [--warm-up
-//               0|1]
+//               [--broker mosquitto|nats] [--nats-nodes 3] [--light 0|1]
+//               [--mosquitto /usr/sbin/mosquitto] [--nats-server /usr/sbin/nats-server]
+//               [--perf-ctl FIFO --profile-round N] [--warm-up 0|1]
+//
+// --broker nats: a cluster of --nats-nodes nats-server processes (MQTT listener, JetStream,
+// routes between them, docs/FLEET.md §Running on NATS); robot i connects to node i mod N, the
+// coordinator to node 1, so most ESTOPs cross the cluster.
+//
+// --light 1: light members, so that 1,000 fit on a small machine: each robot's audit log keeps
+// its records, chain and fsyncs but preallocates nothing (a preallocated segment per robot is
+// 1,000 zero-filled files written while measuring) and writes its index inline.
 //
 // --warm-up 1: one broadcast `status` before round 1, so that the first ESTOP is no longer each
 // robot's first message (the fleet token is verified then); separates first-message costs from
@@ -225,8 +235,10 @@ class Coordinator {
       if (acked_.emplace(member, t).second) cv_.notify_all();
     });
     (void)client_->start();
-    for (int i = 0; i < 1000 && !client_->connected(); ++i)
+    for (int i = 0; i < 3000 && !client_->connected(); ++i)
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    if (!client_->connected())
+      std::fprintf(stderr, "fleet_bench: the coordinator could not connect to %s\n", url.c_str());
     std::this_thread::sleep_for(std::chrono::milliseconds(200));
   }
   // Publishes and waits for `n` answers (up to `timeout_ms`); returns member → arrival time.
@@ -240,7 +252,12 @@ class Coordinator {
       errors_ = 0;
     }
     *t0 = mono_ms();
-    (void)client_->publish(topic, json::dump(msg), qos, retain);
+    if (Status s = client_->publish(topic, json::dump(msg), qos, retain); !s.ok()) {
+      std::fprintf(stderr, "fleet_bench: the coordinator's publish on %s failed: %s\n",
+                   topic.c_str(), s.error().message.c_str());
+      *errors = static_cast<int>(n);
+      return {};
+    }
     std::unique_lock<std::mutex> lk(mu_);
     cv_.wait_for(lk, std::chrono::milliseconds(timeout_ms), [&] { return acked_.size() >= n; });
     *errors = errors_;
@@ -269,6 +286,11 @@ struct Options {
   std::string perf_ctl;
   int profile_round = 0;
   int warm_up = 0;
+  std::string broker = "mosquitto";
+  int nats_nodes = 3;
+  std::string nats_server = "/usr/sbin/nats-server";
+  int light = 0;
+  int publish_qos() const { return broker == "nats" ? 1 : 2; }
 };
 
 // False (after printing the usage) when an option is out of range.
@@ -291,13 +313,23 @@ bool parse_options(int argc, char** argv, Options& o) {
       o.warm_up = std::atoi(argv[i + 1]);
     else if (a == "--segment-kib")
       o.segment_bytes = std::strtoull(argv[i + 1], nullptr, 10) << 10;
+    else if (a == "--broker")
+      o.broker = argv[i + 1];
+    else if (a == "--nats-nodes")
+      o.nats_nodes = std::atoi(argv[i + 1]);
+    else if (a == "--nats-server")
+      o.nats_server = argv[i + 1];
+    else if (a == "--light")
+      o.light = std::atoi(argv[i + 1]);
   }
   if (o.robots_n < 1 || o.robots_n > 2000 || o.rounds < 1 || o.rounds > 1000 ||
-      o.segment_bytes < (64u << 10) || (o.estop_qos != 1 && o.estop_qos != 2)) {
+      o.segment_bytes < (64u << 10) || (o.estop_qos != 1 && o.estop_qos != 2) ||
+      (o.broker != "mosquitto" && o.broker != "nats") || o.nats_nodes < 1 || o.nats_nodes > 5) {
     std::fprintf(stderr,
                  "usage: fleet_bench [--robots 1..2000] [--rounds 1..1000] [--estop-qos 1|2] "
-                 "[--segment-kib N] "
-                 "[--mosquitto PATH] [--perf-ctl FIFO --profile-round N] [--warm-up 0|1]\n");
+                 "[--segment-kib N] [--broker mosquitto|nats] [--nats-nodes 1..5] [--light 0|1] "
+                 "[--mosquitto PATH] [--nats-server PATH] [--perf-ctl FIFO --profile-round N] "
+                 "[--warm-up 0|1]\n");
     return false;
   }
   return true;
@@ -307,7 +339,8 @@ bool parse_options(int argc, char** argv, Options& o) {
 struct Fleet {
   Options opt;
   fs::path dir;
-  pid_t broker = -1;
+  std::vector<pid_t> brokers;
+  std::vector<std::string> urls;  // one per broker node; the coordinator uses the first
   std::string url;
   std::vector<std::string> members;
   std::string token;  // bound (cnf) to the coordinator's Ed25519 key, as MQTT requires
@@ -326,22 +359,82 @@ struct Fleet {
   }
 };
 
-// The broker, on a free loopback port.
-void start_broker(Fleet& f) {
-  uint16_t port = free_port();
-  std::ofstream(f.dir / "mosquitto.conf") << "listener " << port
-                                          << " 127.0.0.1\nset_tcp_nodelay true\nallow_anonymous "
-                                             "true\npersistence false\nmax_queued_messages 10000\n";
-  f.broker = fork();
-  if (f.broker == 0) {
-    int devnull = ::open("/dev/null", O_WRONLY);
-    dup2(devnull, 2);
-    execl(f.opt.mosquitto.c_str(), f.opt.mosquitto.c_str(), "-c",
-          (f.dir / "mosquitto.conf").c_str(), nullptr);
+// Starts `argv` with stderr to `log`.
+pid_t spawn(const std::vector<std::string>& argv, const fs::path& log) {
+  pid_t pid = fork();
+  if (pid == 0) {
+    int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0600);
+    dup2(fd, 1);
+    dup2(fd, 2);
+    std::vector<char*> args;
+    for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+    args.push_back(nullptr);
+    execv(args[0], args.data());
     _exit(127);
   }
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));
-  f.url = "mqtt://127.0.0.1:" + std::to_string(port);
+  return pid;
+}
+
+// Waits until `log` holds `line` (up to `timeout_ms`).
+bool wait_for_log(const fs::path& log, const std::string& line, int timeout_ms) {
+  for (int waited = 0; waited < timeout_ms; waited += 50) {
+    std::ifstream in(log);
+    for (std::string l; std::getline(in, l);)
+      if (l.find(line) != std::string::npos) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return false;
+}
+
+// The broker(s), on free loopback ports: one Mosquitto, or a NATS cluster with its MQTT
+// listeners. False when one did not come up.
+bool start_broker(Fleet& f) {
+  if (f.opt.broker == "mosquitto") {
+    uint16_t port = free_port();
+    std::ofstream(f.dir / "mosquitto.conf")
+        << "listener " << port
+        << " 127.0.0.1\nset_tcp_nodelay true\nallow_anonymous true\npersistence false\n"
+           "max_queued_messages 10000\n";
+    f.brokers.push_back(spawn({f.opt.mosquitto, "-c", (f.dir / "mosquitto.conf").string()},
+                              f.dir / "mosquitto.log"));
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    f.urls.push_back("mqtt://127.0.0.1:" + std::to_string(port));
+  } else {
+    const int n = f.opt.nats_nodes;
+    std::vector<std::array<uint16_t, 3>> ports;  // client, cluster, MQTT
+    std::string routes;
+    for (int i = 0; i < n; ++i) {
+      ports.push_back({free_port(), free_port(), free_port()});
+      routes +=
+          std::string(i ? ", " : "") + "nats-route://127.0.0.1:" + std::to_string(ports[i][1]);
+    }
+    for (int i = 0; i < n; ++i) {
+      std::string name = "n" + std::to_string(i + 1);
+      std::ofstream conf(f.dir / (name + ".conf"));
+      conf << "server_name: " << name << "\nlisten: 127.0.0.1:" << ports[i][0]
+           << "\nmax_connections: 10000\njetstream { store_dir: \""
+           << (f.dir / ("js-" + name)).string() << "\" }\nmqtt { listen: 127.0.0.1:" << ports[i][2]
+           << " }\n";
+      if (n > 1)
+        conf << "cluster { name: rcan, listen: 127.0.0.1:" << ports[i][1] << ", routes: [" << routes
+             << "] }\n";
+      conf.close();
+      f.brokers.push_back(spawn({f.opt.nats_server, "-c", (f.dir / (name + ".conf")).string()},
+                                f.dir / (name + ".log")));
+      f.urls.push_back("mqtt://127.0.0.1:" + std::to_string(ports[i][2]));
+    }
+    for (int i = 0; i < n; ++i) {
+      fs::path log = f.dir / ("n" + std::to_string(i + 1) + ".log");
+      if (!wait_for_log(log, "Listening for MQTT clients", 20000) ||
+          (n > 1 && !wait_for_log(log, "metadata leader", 30000))) {
+        std::fprintf(stderr, "fleet_bench: NATS node %d did not come up (see %s)\n", i + 1,
+                     log.c_str());
+        return false;
+      }
+    }
+  }
+  f.url = f.urls.front();
+  return true;
 }
 
 // One fleet token for all (HS256 issuer shared by the fleet).
@@ -391,6 +484,10 @@ std::unique_ptr<Robot> start_robot(const Fleet& f, const config::FleetConfig& fc
   ao.secret = "bench-chain-secret-0123456789";
   ao.robot_ruri = ruri;
   ao.max_segment_bytes = f.opt.segment_bytes;
+  if (f.opt.light != 0) {
+    ao.preallocate = false;
+    ao.background_index = false;
+  }
   auto log = audit::AuditLog::open((rd / "audit").string(), std::move(ao));
   if (!log.ok()) {
     std::fprintf(stderr, "audit log: %s\n", log.error().message.c_str());
@@ -414,7 +511,7 @@ std::unique_ptr<Robot> start_robot(const Fleet& f, const config::FleetConfig& fc
   r->node->start();
   node::MqttNodeOptions mo;
   mo.mqtt.enabled = true;
-  mo.mqtt.broker = f.url;
+  mo.mqtt.broker = f.urls[static_cast<size_t>(i) % f.urls.size()];
   mo.mqtt.telemetry_hz = 0;
   mo.mqtt.publish_audit = false;
   mo.mqtt.estop_qos = f.opt.estop_qos;
@@ -454,18 +551,29 @@ bool start_robots(Fleet& f) {
     for (auto& t : builders) t.join();
   }
   if (failed.load()) return false;
-  for (int i = 0; i < 3000; ++i) {
-    bool all = std::all_of(f.robots.begin(), f.robots.end(),
-                           [](const auto& r) { return r->mqtt->connected(); });
-    if (all) break;
+  size_t up = 0;
+  for (int i = 0; i < 12000; ++i) {  // up to 2 minutes
+    up = static_cast<size_t>(std::count_if(f.robots.begin(), f.robots.end(),
+                                           [](const auto& r) { return r->mqtt->connected(); }));
+    if (up == f.size()) break;
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
+  if (up != f.size()) {
+    std::fprintf(stderr, "fleet_bench: only %zu of %zu robots connected to the broker\n", up,
+                 f.size());
+    return false;
+  }
   std::this_thread::sleep_for(std::chrono::milliseconds(500));  // subscriptions settle
+  const std::string where = f.opt.broker == "mosquitto"
+                                ? std::string("one Mosquitto")
+                                : "a " + std::to_string(f.opt.nats_nodes) +
+                                      "-node NATS cluster (robot i on node i mod " +
+                                      std::to_string(f.opt.nats_nodes) + ", coordinator on node 1)";
   std::printf(
-      "fleet_bench: %d robots (full node stacks, one MQTT connection each, estop subscription QoS "
-      "%d) on one "
-      "Mosquitto, up in %.0f ms\n",
-      f.opt.robots_n, f.opt.estop_qos, mono_ms() - t_start);
+      "fleet_bench: %d %s robots (one MQTT connection each, estop subscription QoS %d, ESTOP "
+      "published at QoS %d) on %s, up in %.0f ms\n",
+      f.opt.robots_n, f.opt.light ? "light" : "full", f.opt.estop_qos, f.opt.publish_qos(),
+      where.c_str(), mono_ms() - t_start);
   return true;
 }
 
@@ -521,7 +629,7 @@ void estop_round(const Fleet& f, Coordinator& coord, int round, Results& res) {
   auto acks = coord.round(
       "rcan/fleet/bench/estop",
       f.message("SAFETY", json::Object{{"safety_event", "ESTOP"}, {"fleet_id", "bench"}}, id), id,
-      2, true, n, &t0, 10000, &errors);
+      f.opt.publish_qos(), true, n, &t0, 10000, &errors);
   for (auto& [m, t] : acks) res.estop_ack.push_back(t - t0);
   perf("disable");
   const double round_cpu_ms = (cpu_now() - cpu0) * 1000;
@@ -564,7 +672,7 @@ void resume_and_command(const Fleet& f, Coordinator& coord, Results& res) {
   auto acks = coord.round(
       "rcan/fleet/bench/estop",
       f.message("SAFETY", json::Object{{"safety_event", "RESUME"}, {"fleet_id", "bench"}}, rid),
-      rid, 2, true, n, &t0, 10000, &errors);
+      rid, f.opt.publish_qos(), true, n, &t0, 10000, &errors);
   res.failures += errors + static_cast<int>(n - acks.size());
   std::string sid = new_uuid_v4();
   acks = coord.round(
@@ -606,14 +714,15 @@ void print_report(const Fleet& f, const Results& res) {
 
 // Stops the robots and the broker and removes the temporary directory.
 void stop_fleet(Fleet& f) {
+  std::erase(f.robots, nullptr);  // a start that failed half-way
   for (auto& r : f.robots) r->mqtt->stop();
   for (auto& r : f.robots) {
     r->node->shutdown();
     r->core->stop();
   }
   f.robots.clear();
-  kill(f.broker, SIGTERM);
-  waitpid(f.broker, nullptr, 0);
+  for (pid_t b : f.brokers) kill(b, SIGTERM);
+  for (pid_t b : f.brokers) waitpid(b, nullptr, 0);
   std::error_code ec;
   fs::remove_all(f.dir, ec);
 }
@@ -627,9 +736,11 @@ int main(int argc, char** argv) {
   signal(SIGPIPE, SIG_IGN);
   f.dir = fs::temp_directory_path() / ("fleet_bench_" + std::to_string(getpid()));
   fs::create_directories(f.dir);
-  start_broker(f);
   issue_fleet_token(f);
-  if (!start_robots(f)) return 1;
+  if (!start_broker(f) || !start_robots(f)) {
+    stop_fleet(f);
+    return 1;
+  }
   report_idle_cost(f.opt.robots_n);
 
   Coordinator coord(f.url);
