@@ -1,10 +1,14 @@
 #include "transport/mqtt_client.h"
 
 #include <mosquitto.h>
+#include <poll.h>
 #include <pthread.h>
+#include <sys/eventfd.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
 #include <chrono>
 #include <cstdlib>
 #include <string_view>
@@ -76,7 +80,54 @@ struct MqttClient::Impl {
   std::vector<std::string> url_text;  // MqttOptions::urls, or {url}
   std::vector<BrokerUrl> urls;        // parsed by start()
   std::thread net;                    // run()
+  // Wakes the network thread's poll() when another thread queued a packet (a publish, a
+  // subscription, the DISCONNECT of stop()). libmosquitto's own wake-up belongs to its select()
+  // loop, which this client does not use (see serve()).
+  int wake_fd = -1;
+
+  ~Impl() {
+    if (wake_fd >= 0) ::close(wake_fd);
+  }
+  void wake() const {
+    if (wake_fd < 0) return;
+    const uint64_t one = 1;
+    ssize_t n = ::write(wake_fd, &one, sizeof one);
+    (void)n;  // a full counter (never in practice) means a wake-up is pending anyway
+  }
 };
+
+namespace {
+
+// Serves the connection of `m` until it drops or `stopped` is set: reads what arrives, writes
+// what is queued, keeps the connection alive. poll() rather than mosquitto_loop(), whose
+// select() refuses a socket numbered 1024 or more (a robot with many clients, files or driver
+// sockets open would lose its fleet channel for good). False when the connection is gone.
+bool serve(mosquitto* m, int wake_fd, bool tls, const std::atomic<bool>& stopped) {
+  while (!stopped.load()) {
+    const int fd = mosquitto_socket(m);
+    if (fd < 0) return false;
+    pollfd p[2] = {{fd, static_cast<short>(POLLIN | (mosquitto_want_write(m) ? POLLOUT : 0)), 0},
+                   {wake_fd, POLLIN, 0}};
+    const int ready = ::poll(p, 2, 1000);
+    if (ready < 0 && errno != EINTR) return false;
+    if (p[1].revents & POLLIN) {
+      uint64_t count = 0;
+      ssize_t n = ::read(wake_fd, &count, sizeof count);
+      (void)n;
+    }
+    // TLS may hold decrypted bytes that poll() cannot see: read on every turn (a read with
+    // nothing there is answered EAGAIN, which is not an error).
+    if (tls || (p[0].revents & (POLLIN | POLLERR | POLLHUP))) {
+      if (mosquitto_loop_read(m, 1) != MOSQ_ERR_SUCCESS) return false;
+    }
+    if (mosquitto_socket(m) < 0) return false;
+    if (mosquitto_want_write(m) && mosquitto_loop_write(m, 1) != MOSQ_ERR_SUCCESS) return false;
+    if (mosquitto_loop_misc(m) != MOSQ_ERR_SUCCESS) return false;  // keepalive, timeouts
+  }
+  return true;
+}
+
+}  // namespace
 
 // C callbacks → the client.
 struct MqttCallbacks {
@@ -163,8 +214,10 @@ void MqttClient::subscribe(const std::string& filter, int qos) {
   }
   int mid = 0;
   if (impl_->m != nullptr && connected_.load() &&
-      mosquitto_subscribe(impl_->m, &mid, filter.c_str(), qos) == MOSQ_ERR_SUCCESS)
+      mosquitto_subscribe(impl_->m, &mid, filter.c_str(), qos) == MOSQ_ERR_SUCCESS) {
     sent_subscribe(mid, filter, qos);
+    impl_->wake();
+  }
 }
 
 void MqttClient::sent_subscribe(int mid, const std::string& filter, int qos) {
@@ -209,8 +262,10 @@ void MqttClient::got_suback(int mid, int granted) {
   }
   int again = 0;
   if (!renew.empty() && impl_->m != nullptr &&
-      mosquitto_subscribe(impl_->m, &again, renew.c_str(), 1) == MOSQ_ERR_SUCCESS)
+      mosquitto_subscribe(impl_->m, &again, renew.c_str(), 1) == MOSQ_ERR_SUCCESS) {
     sent_subscribe(again, renew, 1);
+    impl_->wake();
+  }
 }
 
 bool MqttClient::all_subscribed() const {
@@ -235,8 +290,10 @@ void MqttClient::retry_refused() {
   for (const auto& [filter, qos] : again) {
     int mid = 0;
     if (impl_->m != nullptr && connected_.load() &&
-        mosquitto_subscribe(impl_->m, &mid, filter.c_str(), qos) == MOSQ_ERR_SUCCESS)
+        mosquitto_subscribe(impl_->m, &mid, filter.c_str(), qos) == MOSQ_ERR_SUCCESS) {
       sent_subscribe(mid, filter, qos);
+      impl_->wake();
+    }
   }
 }
 
@@ -309,6 +366,8 @@ Status MqttClient::start() {
   // Our own network thread drives mosquitto_loop (libmosquitto's loop_forever reconnects only to
   // the one host it was given): publishes from other threads are queued for it and wake it.
   mosquitto_threaded_set(m, true);
+  impl_->wake_fd = ::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK);
+  if (impl_->wake_fd < 0) return Error(ErrorCode::kInternal, "cannot create the MQTT wake-up fd");
   started_ = true;
   // A broker that is down now is retried by the network thread (failover, backoff).
   impl_->net = std::thread([this] {
@@ -330,10 +389,8 @@ void MqttClient::run() {
     at_.store(at);
     const BrokerUrl& u = impl_->urls[at];
     const uint64_t before = connects_.load();
-    if (mosquitto_connect(m, u.host.c_str(), u.port, opts_.keepalive_s) == MOSQ_ERR_SUCCESS) {
-      while (!stopped_.load() && mosquitto_loop(m, 1000, 1) == MOSQ_ERR_SUCCESS) {
-      }
-    }
+    if (mosquitto_connect(m, u.host.c_str(), u.port, opts_.keepalive_s) == MOSQ_ERR_SUCCESS)
+      serve(m, impl_->wake_fd, u.tls, stopped_);
     if (stopped_.load()) break;
     if (connects_.load() != before) fails = 0;  // this one served: a new outage begins
     ++fails;
@@ -349,9 +406,12 @@ void MqttClient::run() {
     while (!stopped_.load() && cv_.wait_until(mu_, deadline) != std::cv_status::timeout) {
     }
   }
-  // stop() asked: a clean DISCONNECT (no will), sent by this thread.
+  // stop() asked: a clean DISCONNECT (no will), sent by this thread (up to 500 ms).
   mosquitto_disconnect(m);
-  for (int i = 0; i < 10 && mosquitto_loop(m, 50, 1) == MOSQ_ERR_SUCCESS; ++i) {
+  for (int i = 0; i < 10 && mosquitto_socket(m) >= 0 && mosquitto_want_write(m); ++i) {
+    pollfd p{mosquitto_socket(m), POLLOUT, 0};
+    (void)::poll(&p, 1, 50);
+    if (mosquitto_loop_write(m, 1) != MOSQ_ERR_SUCCESS) break;
   }
 }
 
@@ -368,6 +428,7 @@ Status MqttClient::publish(const std::string& topic, const std::string& payload,
   if (qos > 0) inflight_.fetch_add(1);
   int rc = mosquitto_publish(impl_->m, nullptr, topic.c_str(), static_cast<int>(payload.size()),
                              payload.data(), qos, retain);
+  if (rc == MOSQ_ERR_SUCCESS) impl_->wake();
   if (rc != MOSQ_ERR_SUCCESS && rc != MOSQ_ERR_NO_CONN) {
     if (qos > 0) inflight_.fetch_sub(1);
     return Error(ErrorCode::kInternal, std::string("MQTT publish: ") + mosquitto_strerror(rc));
@@ -393,6 +454,7 @@ Status MqttClient::publish_confirmed(const std::string& topic, const std::string
   int mid = 0;
   int rc = mosquitto_publish(impl_->m, &mid, topic.c_str(), static_cast<int>(payload.size()),
                              payload.data(), qos, retain);
+  if (rc == MOSQ_ERR_SUCCESS) impl_->wake();
   auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
   MutexLock lk(mu_);
   if (rc == MOSQ_ERR_SUCCESS) {
@@ -433,7 +495,8 @@ void MqttClient::stop() {
     MutexLock lk(mu_);
     cv_.notify_all();  // a backoff wait ends
   }
-  mosquitto_disconnect(impl_->m);  // wakes mosquitto_loop; run() sends it again if it raced
+  mosquitto_disconnect(impl_->m);  // queued; run() sends it again if it raced
+  impl_->wake();
   if (impl_->net.joinable()) impl_->net.join();
   connected_.store(false);
 }
