@@ -117,6 +117,9 @@ Result<node::AuthOptions> auth_options(const config::NodeConfig& cfg, jwt::Trust
   auth.verify.fleet_ids = {cfg.ruri_parts.device_id, cfg.ruri, rrn};
   if (!cfg.fleet.fleet_id.empty()) {
     auth.verify.fleet_ids.push_back(cfg.fleet.member_id);
+    // "fleet:<fleet_id>" in the claim names every member of the fleet: a token for a fleet of
+    // 1,000 robots need not list them all (and would not fit the 8 KiB token limit if it did).
+    auth.verify.fleet_ids.push_back("fleet:" + cfg.fleet.fleet_id);
     auth.verify.fleet_audiences.push_back("rcan://fleet/" + cfg.fleet.fleet_id);  // v1.5 fleet JWT
   }
   auth.verify.leeway_s = cfg.security.jwt.leeway_s;

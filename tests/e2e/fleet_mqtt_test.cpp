@@ -479,7 +479,12 @@ TEST_F(FleetTest, FleetJwtIsCheckedPerRobot) {
     const char* expect;
   } auds[] = {{"rcan://fleet/alpha", {"robot-a"}, "ACK"},
               {"rcan://fleet/alpha", {}, "AUTH_INVALID"},
-              {"rcan://fleet/beta", {"robot-a"}, "AUTH_INVALID"}};
+              {"rcan://fleet/beta", {"robot-a"}, "AUTH_INVALID"},
+              // "fleet:<fleet_id>" names every member of that fleet, and no other fleet's.
+              {"rcan://fleet/alpha", {"fleet:alpha"}, "ACK"},
+              {"rcan://local.rcan/rcan/sim-rover/*", {"fleet:alpha"}, "ACK"},
+              {"rcan://fleet/alpha", {"fleet:beta"}, "AUTH_INVALID"},
+              {"rcan://fleet/alpha", {"alpha"}, "AUTH_INVALID"}};
   for (const auto& ac : auds) {
     std::string aid = new_uuid_v4();
     w.publish(
