@@ -581,58 +581,42 @@ void Node::audit_listing(transport::HttpRequest& req, Respond& respond) {
   auto pr = bearer_principal(req);
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   if (!audit_reader(*pr, route, "", respond)) return;
-  size_t limit = svc_.settings.audit_listing;
-  if (req.has_query("limit")) {
-    char* end = nullptr;
-    std::string s(req.query_value("limit"));
-    long v = std::strtol(s.c_str(), &end, 10);
-    if (!end || *end || v < 1 || v > 1000)
-      return answer_error(
-          respond, route,
-          Error(ErrorCode::kSchemaValidationFailed, "limit must be 1..1000", "limit"));
-    limit = static_cast<size_t>(v);
-  }
-  auto read = [this, respond, route, limit]() mutable {
-    bool posted = worker_.post(
-        [this, respond, route, limit]() mutable { list_audit(respond, route, limit); });
+  auto q = parse_audit_query(
+      [&req](std::string_view name) -> std::optional<std::string_view> {
+        if (!req.has_query(name)) return std::nullopt;
+        return req.query_value(name);
+      },
+      svc_.settings.audit_listing);
+  if (!q.ok()) return answer_error(respond, route, q.error());
+  json::Object recorded = q->to_json();
+  auto read = [this, respond, route, q = std::move(q).value()]() mutable {
+    bool posted =
+        worker_.post([this, respond, route, q]() mutable { list_audit(respond, route, q); });
     if (!posted) answer_error(respond, route, Error(ErrorCode::kSafeStop, "busy; try again"));
   };
-  record_audit_read(*pr, route, json::Object{{"limit", static_cast<int64_t>(limit)}}, respond,
-                    std::move(read));
+  record_audit_read(*pr, route, std::move(recorded), respond, std::move(read));
 }
 
-void Node::list_audit(Respond& respond, const std::string& route, size_t limit) {
-  audit::AuditStats st = svc_.audit.stats();
-  json::Array entries;
+void Node::list_audit(Respond& respond, const std::string& route, const AuditQuery& q) {
+  const audit::AuditStats st = svc_.audit.stats();
+  AuditPage page = run_audit_query(svc_.audit, q);
   // Records in the range that cannot be shown (changed on disk, unreadable): named, never
   // left out silently.
-  json::Array unreadable;
-  std::string first_error;
-  uint64_t first = st.last_seq >= limit ? st.last_seq - limit + 1 : 1;
-  if (first < st.first_seq) first = st.first_seq;
-  for (uint64_t seq = first; seq <= st.last_seq && seq != 0; ++seq) {
-    auto line = svc_.audit.get(seq);
-    // Removed by retention since stats() was read: gone by design, not a failed check.
-    if (!line.ok() && line.error().code == ErrorCode::kNotFound) continue;
-    auto v = line.ok() ? json::parse(*line, {.max_depth = 64, .max_bytes = 1u << 20})
-                       : rcan::Result<json::Value>(line.error());
-    if (v.ok()) {
-      entries.push_back(std::move(v).value());
-      continue;
-    }
-    if (first_error.empty()) first_error = v.error().message;
-    unreadable.emplace_back(static_cast<int64_t>(seq));
-  }
-  if (!unreadable.empty())
+  if (!page.unreadable.empty())
     log(LogLevel::kWarn, "audit.listing_unreadable",
-        {{"count", static_cast<int64_t>(unreadable.size())},
-         {"first_seq", unreadable.front()},
-         {"error", first_error}});
-  answer_json(respond, route, 200,
-              json::Object{{"entries", entries},
-                           {"count", static_cast<int64_t>(entries.size())},
-                           {"last_seq", static_cast<int64_t>(st.last_seq)},
-                           {"unreadable", unreadable}});
+        {{"count", static_cast<int64_t>(page.unreadable.size())},
+         {"first_seq", page.unreadable.front()},
+         {"error", page.first_error}});
+  json::Object body{{"count", static_cast<int64_t>(page.entries.size())},
+                    {"first_seq", static_cast<int64_t>(st.first_seq)},
+                    {"last_seq", static_cast<int64_t>(st.last_seq)},
+                    {"scanned", static_cast<int64_t>(page.scanned)},
+                    {"complete", page.complete},
+                    {"unreadable", std::move(page.unreadable)}};
+  body.set("next_before", page.next_before > 0 ? json::Value(static_cast<int64_t>(page.next_before))
+                                               : json::Value(nullptr));
+  body.set("entries", std::move(page.entries));
+  answer_json(respond, route, 200, std::move(body));
 }
 
 void Node::audit_export(transport::HttpRequest& req, Respond& respond) {

@@ -14,6 +14,7 @@
 
 #include "base/thread_annotations.h"
 #include "base/worker.h"
+#include "node/api/audit_query.h"
 #include "node/api/route_table.h"
 #include "node/pipeline/pipeline.h"
 #include "node/services/node_services.h"
@@ -102,7 +103,7 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   // durable; if it cannot be recorded, answers 503 AUDIT_UNAVAILABLE and reads nothing.
   void record_audit_read(const Principal& p, const std::string& route, json::Object query,
                          Respond& respond, std::function<void()> read);
-  void list_audit(Respond& respond, const std::string& route, size_t limit);
+  void list_audit(Respond& respond, const std::string& route, const AuditQuery& q);
   Result<Principal> bearer_principal(const transport::HttpRequest& req) const;
   void pump() EXCLUDES(streams_mu_, pump_mu_);
   void stream_text(const std::shared_ptr<StreamState>& st, std::string text);
