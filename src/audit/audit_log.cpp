@@ -1319,18 +1319,34 @@ Result<std::vector<std::string>> AuditLog::Impl::find(bool watermark, std::strin
 
 Result<std::string> AuditLog::Impl::get(uint64_t seq) const {
   ReaderGuard guard(readers_);
-  Snapshot snap = snapshot();
-  for (const auto& seg : snap.sealed) {
-    if (seq < seg.first_seq || seq > seg.last_seq) continue;
-    if (seg.mem) return exact_line(read_line(seg.id, (*seg.mem)[seq - seg.first_seq]), seq);
-    if (seg.header)
-      return sealed_line(
-          seg.id,
-          internal::read_index_entry(env_, idx_path(seg.id), *seg.header, seq - seg.first_seq), seq,
-          true);
+  // Only what locates this one record is copied under the lock (not the active segment's
+  // whole index, which made a page of reads quadratic in the segment's size).
+  std::optional<Segment> sealed;
+  std::optional<IndexEntry> active;
+  uint64_t active_id = 0;
+  {
+    std::lock_guard<std::mutex> l(state_mu_);
+    for (const auto& seg : sealed_) {
+      if (seq < seg.first_seq || seq > seg.last_seq) continue;
+      if (seg.mem || seg.header) {
+        sealed = seg;
+        break;
+      }
+    }
+    if (!sealed && !active_index_.empty() && seq >= active_index_.front().seq &&
+        seq <= active_index_.back().seq) {
+      active = active_index_[seq - active_index_.front().seq];
+      active_id = active_id_;
+    }
   }
-  if (!snap.active.empty() && seq >= snap.active.front().seq && seq <= snap.active.back().seq)
-    return exact_line(read_line(snap.active_id, snap.active[seq - snap.active.front().seq]), seq);
+  if (sealed && sealed->mem)
+    return exact_line(read_line(sealed->id, (*sealed->mem)[seq - sealed->first_seq]), seq);
+  if (sealed)
+    return sealed_line(sealed->id,
+                       internal::read_index_entry(env_, idx_path(sealed->id), *sealed->header,
+                                                  seq - sealed->first_seq),
+                       seq, true);
+  if (active) return exact_line(read_line(active_id, *active), seq);
   return Error(ErrorCode::kNotFound, "no audit record with seq " + std::to_string(seq));
 }
 

@@ -234,10 +234,21 @@ async function main() {
   check(cells.some((c) => c.includes(HOSTILE_SUB)), 'the hostile principal is rendered as its literal text');
   check(await page.$$eval('#audit-table img, #audit-table script', (n) => n.length) === 0, 'no element was created from audit text');
   check(await page.evaluate(() => window.__pwned === undefined), 'no audit text executed');
+  // Searched on the node (GET /api/audit?event=…), once typing pauses.
+  const searches = [];
+  const onRequest = (r) => { if (r.url().includes('/api/audit?')) searches.push(r.url()); };
+  page.on('request', onRequest);
   await page.fill('#f-event', 'COMMAND_REJECTED');
-  await page.waitForTimeout(100);
+  await page.waitForFunction(() => {
+    const ev = Array.from(document.querySelectorAll('#audit-table tbody tr td:nth-child(3)')).map((t) => t.textContent);
+    return ev.length > 0 && ev.every((e) => e === 'COMMAND_REJECTED');
+  }, null, { timeout: 5000 }).catch(() => {});
   const filtered = await page.$$eval('#audit-table tbody tr td:nth-child(3)', (tds) => tds.map((t) => t.textContent));
   check(filtered.length > 0 && filtered.every((e) => e === 'COMMAND_REJECTED'), `the event filter keeps only matching rows (${filtered.length})`);
+  check(searches.some((u) => u.includes('event=COMMAND_REJECTED') && u.includes('limit=')), `the event filter is a search on the node (${searches.slice(-1)[0] || 'no request'})`);
+  page.off('request', onRequest);
+  // The whole log is never downloaded for the view: every request asks for one page.
+  check(searches.every((u) => /limit=\d+/.test(u)), 'each audit request asks for one page');
   await page.evaluate((h) => {
     const tr = Array.from(document.querySelectorAll('#audit-table tbody tr')).find((r) => Array.from(r.cells).some((c) => c.textContent === h));
     if (tr) tr.click();
@@ -245,6 +256,23 @@ async function main() {
   check((await page.textContent('#record-detail')).includes(JSON.stringify(HOSTILE).slice(1, -1)), 'the record detail shows the hostile string as (JSON) text');
   await shot('audit-hostile');
   await page.fill('#f-event', '');
+  // Text search: the hostile action, found anywhere in the record.
+  await page.fill('#f-text', HOSTILE.slice(0, 12));
+  await page.waitForFunction((h) => {
+    const rows = Array.from(document.querySelectorAll('#audit-table tbody tr'));
+    return rows.length > 0 && rows.length < 20 && rows.some((r) => Array.from(r.cells).some((c) => c.textContent.includes(h)));
+  }, HOSTILE.slice(0, 12), { timeout: 5000 }).then(() => check(true, 'the text search finds the hostile record'),
+    () => check(false, 'the text search finds the hostile record'));
+  await page.fill('#f-text', '');
+  await page.waitForTimeout(600);
+  // The JSONL export (OWNER with scope config) downloads the chain as a file.
+  const [download] = await Promise.all([page.waitForEvent('download', { timeout: 5000 }).catch(() => null), page.click('#audit-export')]);
+  if (download) {
+    const lines = readFileSync(await download.path(), 'utf8').split('\n').filter((l) => l.trim());
+    check(lines.length > 3 && lines.every((l) => typeof JSON.parse(l).seq === 'number'), `Export JSONL downloads the records (${lines.length} lines)`);
+  } else {
+    check(false, 'Export JSONL downloads a file');
+  }
   await page.click('#verify-chain');
   await page.waitForFunction(() => document.querySelector('#chain-result').textContent.length > 0);
   const chainText = await page.textContent('#chain-result');

@@ -1,4 +1,5 @@
-// Audit: a paged, filterable table over the node's audit endpoints, each record's detail, the
+// Audit: a table over the node's audit search (paged and filtered on the node, GET /api/audit),
+// auto-refresh, the JSONL export, each record's detail, the
 // chain's links checked in the browser, the watermark verify form, and the thought behind an AI
 // command. Every record field is attacker-influenced text: it is only ever set as text.
 import { $, el, replace, setText, toast, fmtTime } from './dom.js';
@@ -6,13 +7,16 @@ import { request, ApiError } from './api.js';
 import { app, roleAtLeast } from './state.js';
 import { verifyLinks } from './chain.js';
 
-const PAGE = 50;
-let records = [];        // newest first, after filtering
-let all = [];            // as loaded, oldest first
-let rawJsonl = '';       // the export text, when we have it (needed to check links)
-let page = 0;
+const PAGE = 100;
+let records = [];        // the page shown, newest first (after the sender filter)
+let pageEntries = [];    // the page as the node answered it, oldest first
+let cursors = [];        // `before` cursors of the newer pages (for ◀ Newer)
+let before = null;       // this page's cursor (null: the newest records)
+let nextBefore = null;   // the node's cursor to the next, older page
 let chain = null;        // verifyLinks() result
 let selectedSeq = null;
+let refreshTimer = null;
+let typingTimer = null;
 
 function str(v) { return v === undefined || v === null ? '' : (typeof v === 'object' ? JSON.stringify(v) : String(v)); }
 
@@ -29,34 +33,47 @@ function canExport() {
   return roleAtLeast('OWNER') && scopes.includes('config');
 }
 
-export async function loadAudit() {
+// The node pages and searches the log (GET /api/audit, docs/NODE.md): one page per request,
+// never the whole chain.
+function searchParams() {
+  const q = new URLSearchParams({ limit: String(PAGE) });
+  const text = (id) => $(id).value.trim();
+  if (text('#f-event')) q.set('event', text('#f-event').toUpperCase());
+  if ($('#f-outcome').value) q.set('outcome', $('#f-outcome').value);
+  if (text('#f-principal')) q.set('principal', text('#f-principal'));
+  if (text('#f-message')) q.set('message_id', text('#f-message'));
+  if (text('#f-text')) q.set('q', text('#f-text'));
   const from = localMs($('#f-from'));
   const to = localMs($('#f-to'));
-  chain = null;
-  setText($('#chain-result'), '');
+  if (from !== null) q.set('from', String(from));
+  if (to !== null) q.set('to', String(to));
+  return q;
+}
+
+export async function loadAudit(opts = {}) {
+  if (!opts.keepCursor) { cursors = []; before = null; }
+  if (!roleAtLeast('OWNER')) {
+    // The node refuses (403): the log names every principal and is the owner's to read.
+    pageEntries = [];
+    nextBefore = null;
+    setText($('#audit-source'), 'The audit log names every principal: reading it needs an OWNER token.');
+    applyFilter();
+    return;
+  }
+  const q = searchParams();
+  if (before !== null) q.set('before', String(before));
   try {
-    if (canExport()) {
-      const q = new URLSearchParams({ format: 'jsonl' });
-      if (from !== null) q.set('from', String(from));
-      if (to !== null) q.set('to', String(to));
-      rawJsonl = await request('GET', `/api/v1/audit?${q}`, undefined, { text: true });
-      all = rawJsonl.split('\n').filter((l) => l.trim()).map((l) => { try { return JSON.parse(l); } catch (_) { return { event: '(unreadable line)' }; } });
-      setText($('#audit-source'), `${all.length} records from the chain export (GET /api/v1/audit?format=jsonl).`);
-    } else if (!roleAtLeast('OWNER')) {
-      // The node refuses (403): the log names every principal and is the owner's to read.
-      all = [];
-      rawJsonl = '';
-      setText($('#audit-source'), 'The audit log names every principal: reading it needs an OWNER token.');
-    } else {
-      const data = await request('GET', '/api/audit?limit=1000');
-      all = (data && data.entries) || [];
-      rawJsonl = '';
-      const bad = (data && Array.isArray(data.unreadable)) ? data.unreadable : [];
-      const warn = bad.length ? ` ${bad.length} record(s) failed their check on the node and are not shown (seq ${bad.slice(0, 10).join(', ')}${bad.length > 10 ? ', …' : ''}).` : '';
-      setText($('#audit-source'), `The latest ${all.length} records (GET /api/audit). The full export and the chain check need OWNER with scope config.${warn}`);
-    }
+    const data = await request('GET', `/api/audit?${q}`);
+    pageEntries = (data && data.entries) || [];
+    nextBefore = data && typeof data.next_before === 'number' ? data.next_before : null;
+    const bad = (data && Array.isArray(data.unreadable)) ? data.unreadable : [];
+    const warn = bad.length ? ` ${bad.length} record(s) failed their check on the node and are not shown (seq ${bad.slice(0, 10).join(', ')}${bad.length > 10 ? ', …' : ''}).` : '';
+    const more = data && data.complete === false
+      ? ` The node stopped after examining ${data.scanned} records: Older ▶ searches on.` : '';
+    setText($('#audit-source'), `${pageEntries.length} record(s) on this page; the log holds seq ${str(data.first_seq)}–${str(data.last_seq)}.${more}${warn}`);
   } catch (e) {
-    all = [];
+    pageEntries = [];
+    nextBefore = null;
     setText($('#audit-source'), `Cannot load the audit log: ${e.code} — ${e.message}`);
   }
   fillFilterChoices();
@@ -64,8 +81,9 @@ export async function loadAudit() {
 }
 
 function fillFilterChoices() {
-  const events = new Set(), outcomes = new Set();
-  for (const r of all) { if (r.event) events.add(String(r.event)); if (r.outcome) outcomes.add(String(r.outcome)); }
+  const events = new Set(['COMMAND', 'COMMAND_REJECTED', 'ESTOP', 'RESUME', 'STOP', 'AUTH_FAILED', 'AUDIT_READ']);
+  const outcomes = new Set(['ok', 'blocked', 'error', 'degraded']);
+  for (const r of pageEntries) { if (r.event) events.add(String(r.event)); if (r.outcome) outcomes.add(String(r.outcome)); }
   replace($('#events-seen'), Array.from(events).sort().map((e) => el('option', { value: e })));
   const sel = $('#f-outcome');
   const keep = sel.value;
@@ -73,22 +91,43 @@ function fillFilterChoices() {
   sel.value = keep;
 }
 
+// The sender filter applies to the page shown (the node filters everything else).
 function applyFilter() {
-  const ev = $('#f-event').value.trim().toLowerCase();
-  const oc = $('#f-outcome').value;
-  const pr = $('#f-principal').value.trim().toLowerCase();
   const st = $('#f-sender').value;
+  records = pageEntries.filter((r) => !st || str(r.sender_type || 'human') === st).slice().reverse();
+  renderTable();
+}
+
+function setAutoRefresh(on) {
+  if (refreshTimer) { clearInterval(refreshTimer); refreshTimer = null; }
+  if (!on) return;
+  refreshTimer = setInterval(() => {
+    // Only the newest page follows the log; an older page stays where the operator put it.
+    if (before === null && !document.hidden && document.querySelector('#view-audit:not([hidden])')) loadAudit().catch(() => {});
+  }, 5000);
+}
+
+async function exportJsonl() {
+  if (!canExport()) {
+    toast('The JSONL export needs OWNER with scope config.', 'bad');
+    return;
+  }
+  const q = new URLSearchParams({ format: 'jsonl' });
   const from = localMs($('#f-from'));
   const to = localMs($('#f-to'));
-  records = all.filter((r) =>
-    (!ev || str(r.event).toLowerCase().includes(ev)) &&
-    (!oc || str(r.outcome) === oc) &&
-    (!pr || str(r.principal).toLowerCase().includes(pr) || str(r.sub).toLowerCase().includes(pr)) &&
-    (!st || str(r.sender_type || 'human') === st) &&
-    (from === null || (r.timestamp_ms || 0) >= from) &&
-    (to === null || (r.timestamp_ms || 0) <= to)).reverse();
-  page = 0;
-  renderTable();
+  if (from !== null) q.set('from', String(from));
+  if (to !== null) q.set('to', String(to));
+  try {
+    const text = await request('GET', `/api/v1/audit?${q}`, undefined, { text: true });
+    const a = el('a', { href: URL.createObjectURL(new Blob([text], { type: 'application/x-ndjson' })),
+      download: `audit-${from ?? 'start'}-${to ?? 'now'}.jsonl` });
+    document.body.appendChild(a);
+    a.click();
+    a.remove();
+    setTimeout(() => URL.revokeObjectURL(a.href), 10000);
+  } catch (e) {
+    toast(`Export failed: ${e.code} — ${e.message}`, 'bad');
+  }
 }
 
 function chainMark(seq) {
@@ -100,8 +139,7 @@ function chainMark(seq) {
 
 function renderTable() {
   const body = $('#audit-table tbody');
-  const start = page * PAGE;
-  const rows = records.slice(start, start + PAGE);
+  const rows = records;
   replace(body, rows.map((r) => {
     const [mark, cls] = chainMark(r.seq);
     const tr = el('tr', { class: r.seq === selectedSeq ? 'selected' : '', tabindex: 0, dataset: { seq: str(r.seq) } },
@@ -119,10 +157,10 @@ function renderTable() {
     return tr;
   }));
   if (!rows.length) replace(body, el('tr', {}, el('td', { colspan: 9, class: 'muted' }, 'No records match.')));
-  const pages = Math.max(1, Math.ceil(records.length / PAGE));
-  setText($('#page-info'), `page ${page + 1} of ${pages} · ${records.length} records`);
-  $('#page-prev').disabled = page === 0;
-  $('#page-next').disabled = page + 1 >= pages;
+  const seqs = records.map((r) => r.seq).filter((x) => typeof x === 'number');
+  setText($('#page-info'), seqs.length ? `seq ${Math.min(...seqs)}–${Math.max(...seqs)} · page ${cursors.length + 1}` : `page ${cursors.length + 1}`);
+  $('#page-prev').disabled = before === null;
+  $('#page-next').disabled = nextBefore === null;
 }
 
 function showRecord(r) {
@@ -162,8 +200,13 @@ async function verifyChain() {
     setText($('#chain-result'), 'Checking the chain needs the export: sign in as OWNER with scope config, or run `rcan audit verify` on the robot.');
     return;
   }
-  if (!rawJsonl) await loadAudit();
-  chain = verifyLinks(rawJsonl);
+  const q = new URLSearchParams({ format: 'jsonl' });
+  const from = localMs($('#f-from'));
+  const to = localMs($('#f-to'));
+  if (from !== null) q.set('from', String(from));
+  if (to !== null) q.set('to', String(to));
+  setText($('#chain-result'), 'Reading the chain…');
+  chain = verifyLinks(await request('GET', `/api/v1/audit?${q}`, undefined, { text: true }));
   const res = $('#chain-result');
   if (!chain.checked && chain.breakAt === null) {
     setText(res, 'Nothing to check.');
@@ -201,10 +244,25 @@ async function verifyWatermark(e) {
 
 export function initAudit() {
   $('#audit-filter').addEventListener('submit', (e) => { e.preventDefault(); loadAudit(); });
-  for (const id of ['#f-event', '#f-principal']) $(id).addEventListener('input', applyFilter);
-  for (const id of ['#f-outcome', '#f-sender']) $(id).addEventListener('change', applyFilter);
-  $('#page-prev').addEventListener('click', () => { if (page > 0) { page--; renderTable(); } });
-  $('#page-next').addEventListener('click', () => { if ((page + 1) * PAGE < records.length) { page++; renderTable(); } });
+  // Typing searches on the node once the operator pauses.
+  for (const id of ['#f-event', '#f-principal', '#f-message', '#f-text']) {
+    $(id).addEventListener('input', () => { clearTimeout(typingTimer); typingTimer = setTimeout(() => loadAudit(), 350); });
+  }
+  for (const id of ['#f-outcome', '#f-from', '#f-to']) $(id).addEventListener('change', () => loadAudit());
+  $('#f-sender').addEventListener('change', applyFilter);
+  $('#page-prev').addEventListener('click', () => {
+    if (before === null) return;
+    before = cursors.length ? cursors.pop() : null;
+    loadAudit({ keepCursor: true });
+  });
+  $('#page-next').addEventListener('click', () => {
+    if (nextBefore === null) return;
+    cursors.push(before);
+    before = nextBefore;
+    loadAudit({ keepCursor: true });
+  });
+  $('#audit-refresh').addEventListener('change', (e) => setAutoRefresh(e.target.checked));
+  $('#audit-export').addEventListener('click', () => exportJsonl());
   $('#verify-chain').addEventListener('click', () => verifyChain().catch((e) => toast(String(e.message), 'bad')));
   $('#wm-form').addEventListener('submit', verifyWatermark);
 }

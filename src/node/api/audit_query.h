@@ -27,7 +27,7 @@ struct AuditQuery {
   std::string text;        // case-insensitive substring of the stored line
   // Records examined per request at most; a page that runs out of it is answered incomplete
   // with the cursor to go on from, so that no search holds the node's worker for long.
-  size_t scan_budget = 50'000;
+  size_t scan_budget = 10'000;
 
   json::Object to_json() const;  // what AUDIT_READ records of the query
 };
