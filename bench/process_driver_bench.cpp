@@ -1,0 +1,260 @@
+// Driver-process benchmark (plain main, prints numbers; not a test). docs/DRIVERS.md quotes it.
+//
+// The benchmark plays the driver process itself: it listens on a Unix socket, and a
+// SafetyCore over a ProcessDriver (driver.process.socket) connects to it. The peer answers
+// describe and heartbeats like any driver and timestamps every frame as it reads it.
+//
+// 1. COMMAND → apply frame: 1 and 16 client threads call SafetyCore::dispatch() (what the
+//    node's pipeline calls once a COMMAND is admitted and audited) with drive commands of
+//    unique speeds; the time from the call to the peer reading the matching apply frame,
+//    p50 / p99 / max.
+// 2. ESTOP → stop frame: SafetyCore::estop() called while a drive is active, idle and with 16
+//    threads hammering dispatch(); the time from the call to the peer reading the stop frame.
+//
+// Usage: process_driver_bench [commands_per_client=500] [estop_trials=300]
+#include <poll.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "drivers/process/frame.h"
+#include "drivers/process/process_driver.h"
+#include "node/safety/safety.h"
+#include "rcan/json.h"
+
+using namespace rcan;
+using namespace rcan::node;
+
+namespace {
+
+int64_t now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+int64_t key_of(double v) { return std::llround(v * 1e7); }
+
+// The driver process, played in-process: answers the handshake and heartbeats, timestamps
+// apply frames (by speed) and stop frames as it reads them.
+class Peer {
+ public:
+  explicit Peer(const std::string& path) {
+    srv_ = ::socket(AF_UNIX, SOCK_STREAM, 0);
+    sockaddr_un a{};
+    a.sun_family = AF_UNIX;
+    std::strncpy(a.sun_path, path.c_str(), sizeof a.sun_path - 1);
+    ::unlink(path.c_str());
+    if (::bind(srv_, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 || ::listen(srv_, 1) != 0) {
+      std::perror("peer socket");
+      std::exit(1);
+    }
+    th_ = std::thread([this] { run(); });
+  }
+  ~Peer() {
+    quit_ = true;
+    th_.join();
+    ::close(srv_);
+  }
+  // The time the apply frame with this speed was read (0: not yet).
+  int64_t apply_ns(double v) {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = applies_.find(key_of(v));
+    return it == applies_.end() ? 0 : it->second;
+  }
+  int64_t last_stop_ns() const { return last_stop_.load(std::memory_order_acquire); }
+
+ private:
+  void send(int fd, const std::string& json) {
+    const std::string f = drivers::encode_frame(json);
+    (void)!::send(fd, f.data(), f.size(), MSG_NOSIGNAL);
+  }
+  void run() {
+    const int c = ::accept(srv_, nullptr, nullptr);
+    drivers::FrameDecoder dec;
+    char buf[65536];
+    while (!quit_) {
+      pollfd p{c, POLLIN, 0};
+      if (::poll(&p, 1, 20) <= 0) continue;
+      const ssize_t n = ::recv(c, buf, sizeof buf, 0);
+      const int64_t t = now_ns();
+      if (n <= 0) break;
+      dec.feed(buf, static_cast<size_t>(n));
+      while (true) {
+        auto f = dec.next();
+        if (!f.ok() || !*f) break;
+        auto v = json::parse(**f);
+        if (!v.ok()) continue;
+        const std::string type = v->get("type")->as_string();
+        if (type == "describe") {
+          send(c, R"({"type":"describe","protocol":1,"name":"bench-peer"})");
+        } else if (type == "heartbeat") {
+          send(c, R"({"type":"heartbeat"})");
+        } else if (type == "stop") {
+          last_stop_.store(t, std::memory_order_release);
+        } else if (type == "apply") {
+          const json::Value* d = v->get("command")->get("drive");
+          if (!d) continue;
+          std::lock_guard<std::mutex> lock(mu_);
+          applies_.emplace(key_of(d->get("linear_mps")->to_double()), t);
+        }
+      }
+    }
+    ::close(c);
+  }
+  int srv_ = -1;
+  std::atomic<bool> quit_{false};
+  std::thread th_;
+  std::mutex mu_;
+  std::map<int64_t, int64_t> applies_;
+  std::atomic<int64_t> last_stop_{0};
+};
+
+struct Stats {
+  double p50 = 0, p99 = 0, max = 0;
+  size_t n = 0;
+};
+
+Stats stats(std::vector<double> us) {
+  Stats s;
+  if (us.empty()) return s;
+  std::sort(us.begin(), us.end());
+  s.n = us.size();
+  s.p50 = us[us.size() / 2];
+  s.p99 = us[std::min(us.size() - 1, static_cast<size_t>(us.size() * 0.99))];
+  s.max = us.back();
+  return s;
+}
+
+// `refused`: commands the driver refused (its queue of 32 frames was full: the peer did not
+// read fast enough), not counted in the latencies.
+void print(const char* what, const Stats& s, size_t refused = 0) {
+  std::printf("%-44s n=%-6zu p50 %8.1f us   p99 %8.1f us   max %8.1f us", what, s.n, s.p50, s.p99,
+              s.max);
+  if (refused) std::printf("   (%zu refused)", refused);
+  std::printf("\n");
+}
+
+bool wait_for(const std::function<bool()>& pred, int64_t timeout_ms = 2000) {
+  const int64_t end = now_ns() + timeout_ms * 1'000'000;
+  while (now_ns() < end) {
+    if (pred()) return true;
+    std::this_thread::yield();
+  }
+  return pred();
+}
+
+// `clients` threads dispatch `per_client` drive commands each (back to back); the latency of
+// each, from the call to the peer reading it.
+std::vector<double> command_latency(SafetyCore& core, Peer& peer, int clients, int per_client,
+                                    int base, size_t& refused) {
+  std::vector<std::vector<std::pair<double, int64_t>>> sent(clients);
+  std::vector<std::thread> th;
+  std::atomic<size_t> bad{0};
+  for (int c = 0; c < clients; ++c)
+    th.emplace_back([&, c] {
+      for (int i = 0; i < per_client; ++i) {
+        const double v = 0.1 + 1e-7 * (base + c * per_client + i);
+        const int64_t t0 = now_ns();
+        if (core.dispatch(ActuatorCommand::make_drive(v, 0, 1000)).ok()) {
+          sent[c].emplace_back(v, t0);
+        } else {
+          bad.fetch_add(1);
+        }
+        if (clients == 1) wait_for([&] { return peer.apply_ns(v) != 0; });
+      }
+    });
+  for (auto& t : th) t.join();
+  refused = bad.load();
+  std::vector<double> us;
+  for (auto& per : sent)
+    for (auto& [v, t0] : per) {
+      if (!wait_for([&] { return peer.apply_ns(v) != 0; })) continue;
+      us.push_back((peer.apply_ns(v) - t0) / 1000.0);
+    }
+  return us;
+}
+
+std::vector<double> estop_latency(SafetyCore& core, Peer& peer, int trials, int hammer) {
+  std::atomic<bool> quit{false};
+  std::vector<std::thread> th;
+  for (int h = 0; h < hammer; ++h)
+    th.emplace_back([&, h] {
+      int i = 0;
+      while (!quit) {
+        (void)core.dispatch(ActuatorCommand::make_drive(0.3 + 1e-7 * (h * 1000000 + ++i), 0, 500));
+        std::this_thread::sleep_for(std::chrono::microseconds(200));
+      }
+    });
+  std::vector<double> us;
+  for (int k = 0; k < trials; ++k) {
+    (void)core.resume(3, "bench");
+    const double v = 0.05 + 1e-7 * k;
+    if (!core.dispatch(ActuatorCommand::make_drive(v, 0, 1000)).ok()) continue;
+    if (!wait_for([&] { return peer.apply_ns(v) != 0; })) continue;
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    const int64_t t0 = now_ns();
+    core.estop("bench", "bench");
+    if (!wait_for([&] { return peer.last_stop_ns() > t0; })) continue;
+    us.push_back((peer.last_stop_ns() - t0) / 1000.0);
+  }
+  quit = true;
+  for (auto& t : th) t.join();
+  (void)core.resume(3, "bench");
+  return us;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const int per_client = argc > 1 ? std::atoi(argv[1]) : 500;
+  const int trials = argc > 2 ? std::atoi(argv[2]) : 300;
+  char tmpl[] = "/tmp/rcan-procbench-XXXXXX";
+  if (!mkdtemp(tmpl)) return 1;
+  const std::string path = std::string(tmpl) + "/drv.sock";
+  Peer peer(path);
+  drivers::ProcessDriverOptions o;
+  o.socket = path;
+  o.info.name = "process";
+  o.info.has_base = true;
+  o.info.max_linear_mps = 1.0;
+  o.info.max_angular_radps = 2.0;
+  auto driver = std::make_unique<drivers::ProcessDriver>(o);
+  if (!driver->start().ok() || !driver->healthy()) {
+    std::fprintf(stderr, "the driver did not connect\n");
+    return 1;
+  }
+  SafetyConfig cfg;
+  cfg.limits.max_linear_mps = 1.0;
+  SafetyCore core(std::move(driver), cfg);
+  core.start();
+  std::printf("driver.type process: SafetyCore -> ProcessDriver -> Unix socket -> peer\n");
+  size_t refused = 0;
+  (void)command_latency(core, peer, 1, 50, 0, refused);  // warm-up
+  Stats one = stats(command_latency(core, peer, 1, per_client, 1000000, refused));
+  print("COMMAND -> apply frame, 1 client", one, refused);
+  Stats sixteen = stats(command_latency(core, peer, 16, per_client, 2000000, refused));
+  print("COMMAND -> apply frame, 16 clients", sixteen, refused);
+  print("ESTOP -> stop frame, idle", stats(estop_latency(core, peer, trials, 0)));
+  print("ESTOP -> stop frame, 16 clients dispatching",
+        stats(estop_latency(core, peer, trials, 16)));
+  core.stop();
+  ::unlink(path.c_str());
+  ::rmdir(tmpl);
+  return 0;
+}
