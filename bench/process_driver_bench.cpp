@@ -7,11 +7,18 @@
 // 1. COMMAND → apply frame: 1 and 16 client threads call SafetyCore::dispatch() (what the
 //    node's pipeline calls once a COMMAND is admitted and audited) with drive commands of
 //    unique speeds; the time from the call to the peer reading the matching apply frame,
-//    p50 / p99 / max.
+//    p50 / p99 / max. Each client waits for its command to arrive before it sends the next
+//    (as an HTTP client waits for its ACK); the open-loop line sends back to back, which
+//    outruns the reading peer and shows the driver refusing what its full queue cannot take.
 // 2. ESTOP → stop frame: SafetyCore::estop() called while a drive is active, idle and with 16
 //    threads hammering dispatch(); the time from the call to the peer reading the stop frame.
 //
-// Usage: process_driver_bench [commands_per_client=500] [estop_trials=300]
+// 3. With --rcand PATH, the same through a real rcand (driver.type process, driver.process.socket
+//    = the peer): a move COMMAND POSTed to /rcan/v1/command (HTTP, token, replay guard, audit
+//    record, safety core) → the apply frame, 1 and 16 clients (each waits for its ACK); a SAFETY
+//    ESTOP POSTed → the stop frame.
+//
+// Usage: process_driver_bench [commands_per_client=500] [estop_trials=300] [--rcand PATH]
 #include <poll.h>
 #include <sys/socket.h>
 #include <sys/un.h>
@@ -24,6 +31,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <functional>
 #include <map>
 #include <memory>
@@ -32,9 +41,11 @@
 #include <thread>
 #include <vector>
 
+#include "bench_support.h"
 #include "drivers/process/frame.h"
 #include "drivers/process/process_driver.h"
 #include "node/safety/safety.h"
+#include "rcan/crypto/ed25519.h"
 #include "rcan/json.h"
 
 using namespace rcan;
@@ -162,25 +173,30 @@ bool wait_for(const std::function<bool()>& pred, int64_t timeout_ms = 2000) {
 // `clients` threads dispatch `per_client` drive commands each (back to back); the latency of
 // each, from the call to the peer reading it.
 std::vector<double> command_latency(SafetyCore& core, Peer& peer, int clients, int per_client,
-                                    int base, size_t& refused) {
+                                    int base, size_t& refused, bool closed = true) {
   std::vector<std::vector<std::pair<double, int64_t>>> sent(clients);
   std::vector<std::thread> th;
   std::atomic<size_t> bad{0};
+  std::mutex why_mu;
+  std::string why;
   for (int c = 0; c < clients; ++c)
     th.emplace_back([&, c] {
       for (int i = 0; i < per_client; ++i) {
         const double v = 0.1 + 1e-7 * (base + c * per_client + i);
         const int64_t t0 = now_ns();
-        if (core.dispatch(ActuatorCommand::make_drive(v, 0, 1000)).ok()) {
+        auto r = core.dispatch(ActuatorCommand::make_drive(v, 0, 1000));
+        if (r.ok()) {
           sent[c].emplace_back(v, t0);
-        } else {
-          bad.fetch_add(1);
+        } else if (bad.fetch_add(1) == 0) {
+          std::lock_guard<std::mutex> lock(why_mu);
+          why = r.error().message;
         }
-        if (clients == 1) wait_for([&] { return peer.apply_ns(v) != 0; });
+        if (closed) wait_for([&] { return peer.apply_ns(v) != 0; });
       }
     });
   for (auto& t : th) t.join();
   refused = bad.load();
+  if (refused) std::printf("  (first refusal: %s)\n", why.c_str());
   std::vector<double> us;
   for (auto& per : sent)
     for (auto& [v, t0] : per) {
@@ -219,11 +235,130 @@ std::vector<double> estop_latency(SafetyCore& core, Peer& peer, int trials, int 
   return us;
 }
 
+// ---- through rcand ---------------------------------------------------------------------------
+
+std::string message(const std::string& type, json::Object payload) {
+  return json::dump(json::Value(json::Object{{"version", "1.0.0"},
+                                             {"message_id", bench::fast_uuid()},
+                                             {"type", type},
+                                             {"timestamp_ms", bench::wall_ms()},
+                                             {"payload", std::move(payload)}}));
+}
+
+int post(uint16_t port, const std::string& body, const std::string& token) {
+  return bench::sync_http(port, boost::beast::http::verb::post, "/rcan/v1/command", body, token);
+}
+
+// rcand on `root`/node with driver.process.socket = `sock` and the node's local issuer trusted
+// by name (rcand-local) in its --config.
+bool start_rcand(bench::Node& n, const std::string& rcand, const std::string& root,
+                 const std::string& sock) {
+  n.dir = root + "/node";
+  if (!bench::start_node(n, rcand, {})) return false;  // the embedded run makes keys and issuer
+  n.child->stop();
+  std::ifstream seed_in(n.dir + "/issuer/ed25519.seed", std::ios::binary);
+  std::string seed(32, '\0');
+  seed_in.read(seed.data(), static_cast<std::streamsize>(seed.size()));
+  seed.resize(static_cast<size_t>(seed_in.gcount()));
+  auto pk = ed25519::public_key_from_seed(
+      std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(seed.data()), seed.size()));
+  if (!pk.ok()) return false;
+  auto pem = ed25519::public_key_to_pem(*pk);
+  if (!pem.ok()) return false;
+  std::ofstream(root + "/issuer.pem") << *pem;
+  std::string yaml = bench::default_yaml_for(n.dir);
+  auto replace = [&](const std::string& from, const std::string& to) {
+    const size_t p = yaml.find(from);
+    if (p != std::string::npos) yaml.replace(p, from.size(), to);
+  };
+  replace("  jwt:\n    leeway_s: 60\n",
+          "  jwt:\n    leeway_s: 60\n    issuers:\n      - {issuer: "
+          "rcand-local, key_file: " +
+              root + "/issuer.pem}\n");
+  replace("driver:\n  type: sim\n", "driver:\n  type: process\n  process: {socket: " + sock +
+                                        ", max_linear_mps: 1.0, max_angular_radps: 2.0}\n");
+  std::ofstream(root + "/process.rcan.yaml") << yaml;
+  bench::Node m;
+  m.dir = n.dir;
+  if (!bench::start_node(m, rcand, {"--config", root + "/process.rcan.yaml"})) return false;
+  n = std::move(m);
+  return true;
+}
+
+void through_rcand(const std::string& rcand, const std::string& root, int per_client, int trials) {
+  const std::string sock = root + "/rcand-drv.sock";
+  Peer peer(sock);
+  bench::Node n;
+  if (!start_rcand(n, rcand, root, sock)) {
+    std::fprintf(stderr, "rcand did not start with driver.type process\n");
+    return;
+  }
+  bench::settle(n.child->pid());
+  const std::string token =
+      bench::token_for(n.dir + "/issuer/ed25519.seed", "rcand-local", n.ruri, "bench");
+  std::printf("through rcand: POST /rcan/v1/command -> ... -> Unix socket -> peer\n");
+  for (int clients : {1, 16}) {
+    std::vector<std::vector<double>> lat(clients);
+    std::atomic<size_t> failed{0};
+    std::vector<std::thread> th;
+    const int count = clients == 1 ? per_client : std::max(1, per_client / 4);
+    for (int c = 0; c < clients; ++c)
+      th.emplace_back([&, c] {
+        for (int i = 0; i < count; ++i) {
+          const double v = 0.1 + 1e-7 * (clients * 10000 + c * count + i);
+          const std::string body = message(
+              "COMMAND", json::Object{{"action", "move"}, {"linear", v}, {"duration_ms", 1000}});
+          const int64_t t0 = now_ns();
+          if (post(n.port, body, token) != 200 ||
+              !wait_for([&] { return peer.apply_ns(v) != 0; })) {
+            failed.fetch_add(1);
+            continue;
+          }
+          lat[c].push_back((peer.apply_ns(v) - t0) / 1000.0);
+        }
+      });
+    for (auto& t : th) t.join();
+    std::vector<double> all;
+    for (auto& l : lat) all.insert(all.end(), l.begin(), l.end());
+    print(clients == 1 ? "COMMAND (HTTP) -> apply frame, 1 client"
+                       : "COMMAND (HTTP) -> apply frame, 16 clients",
+          stats(all), failed.load());
+  }
+  std::vector<double> us;
+  for (int k = 0; k < trials; ++k) {
+    const double v = 0.2 + 1e-7 * k;
+    (void)post(n.port, message("SAFETY", json::Object{{"safety_event", "RESUME"}}), token);
+    if (post(n.port,
+             message("COMMAND",
+                     json::Object{{"action", "move"}, {"linear", v}, {"duration_ms", 1000}}),
+             token) != 200 ||
+        !wait_for([&] { return peer.apply_ns(v) != 0; }))
+      continue;
+    const std::string estop =
+        message("SAFETY", json::Object{{"safety_event", "ESTOP"}, {"reason", "bench"}});
+    const int64_t t0 = now_ns();
+    if (post(n.port, estop, token) != 200) continue;
+    if (!wait_for([&] { return peer.last_stop_ns() > t0; })) continue;
+    us.push_back((peer.last_stop_ns() - t0) / 1000.0);
+  }
+  print("ESTOP (HTTP) -> stop frame", stats(us), static_cast<size_t>(trials) - us.size());
+  n.child->stop();
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  const int per_client = argc > 1 ? std::atoi(argv[1]) : 500;
-  const int trials = argc > 2 ? std::atoi(argv[2]) : 300;
+  std::string rcand;
+  std::vector<std::string> pos;
+  for (int i = 1; i < argc; ++i) {
+    if (std::string(argv[i]) == "--rcand" && i + 1 < argc) {
+      rcand = argv[++i];
+    } else {
+      pos.emplace_back(argv[i]);
+    }
+  }
+  const int per_client = pos.size() > 0 ? std::atoi(pos[0].c_str()) : 500;
+  const int trials = pos.size() > 1 ? std::atoi(pos[1].c_str()) : 300;
   char tmpl[] = "/tmp/rcan-procbench-XXXXXX";
   if (!mkdtemp(tmpl)) return 1;
   const std::string path = std::string(tmpl) + "/drv.sock";
@@ -250,11 +385,15 @@ int main(int argc, char** argv) {
   print("COMMAND -> apply frame, 1 client", one, refused);
   Stats sixteen = stats(command_latency(core, peer, 16, per_client, 2000000, refused));
   print("COMMAND -> apply frame, 16 clients", sixteen, refused);
+  Stats burst = stats(command_latency(core, peer, 16, per_client, 3000000, refused, false));
+  print("COMMAND -> apply frame, 16 clients, open loop", burst, refused);
   print("ESTOP -> stop frame, idle", stats(estop_latency(core, peer, trials, 0)));
   print("ESTOP -> stop frame, 16 clients dispatching",
         stats(estop_latency(core, peer, trials, 16)));
   core.stop();
   ::unlink(path.c_str());
-  ::rmdir(tmpl);
+  if (!rcand.empty()) through_rcand(rcand, tmpl, per_client, std::min(trials, 100));
+  std::error_code ec;
+  std::filesystem::remove_all(tmpl, ec);
   return 0;
 }

@@ -139,9 +139,14 @@ Status ProcessDriver::apply(const node::ActuatorCommand& cmd) {
     if (queue_.size() >= kMaxQueuedFrames)
       return Error(ErrorCode::kSafeStop, "the driver process is not reading its commands", "",
                    "driver_fault");
-    queue_.push_back(
-        Out{encode_apply(++seq_, cmd), stop_gen_.load(std::memory_order_acquire), false});
+    const uint64_t gen = stop_gen_.load(std::memory_order_acquire);
+    queue_.push_back(Out{encode_apply(++seq_, cmd), gen, false});
     moved_since_stop_ = true;
+    if (cmd.moves() && cmd.drive) {
+      MutexLock rlock(rmu_);
+      commanded_ = Commanded{cmd.drive->linear_mps, cmd.drive->angular_radps,
+                             now_ms() + std::max<int64_t>(0, cmd.drive->duration_ms), gen};
+    }
     // A stop() that could not take the lock is served first: it goes out ahead of this frame.
     if (stop_gen_.load(std::memory_order_acquire) != stop_served_gen_) serve_stop_locked();
     if (!flush_locked())
@@ -230,6 +235,18 @@ node::RobotState ProcessDriver::state() const {
   MutexLock lock(rmu_);
   node::RobotState s = state_;
   s.t_ms = t_ms_;
+  // Conservative: while a drive rcand sent is within its duration and no stop came since, the
+  // robot counts as moving whatever the process reported (a process that reports nothing, or
+  // late, must not look stopped to the safety core's deadman and TTL checks).
+  const int64_t now = now_ms();
+  if (commanded_.end_ms > now && commanded_.stop_gen == stop_gen_.load(std::memory_order_acquire)) {
+    s.stopped = false;
+    if (s.target_linear_mps == 0.0 && s.target_angular_radps == 0.0) {
+      s.target_linear_mps = commanded_.linear_mps;
+      s.target_angular_radps = commanded_.angular_radps;
+      s.drive_remaining_ms = commanded_.end_ms - now;
+    }
+  }
   return s;
 }
 
@@ -416,7 +433,7 @@ void ProcessDriver::on_frame(const std::string& payload, int64_t now) {
     }
   }
   // Readiness: describe answered, a heartbeat seen, no fault reported by the process.
-  bool ready_now = false;
+  bool ready_now = false, became_ready = false;
   {
     MutexLock lock(rmu_);
     ready_now = described_ && heartbeat_seen_ && process_fault_.empty();
@@ -426,13 +443,14 @@ void ProcessDriver::on_frame(const std::string& payload, int64_t now) {
       healthy_since_ms_ = now;
       ready_.store(true, std::memory_order_release);
       ready_cv_.notify_all();
+      became_ready = true;
     } else if (!ready_now && was) {
       fault_ = "the driver process reports: " + process_fault_;
       unreported_fault_ = fault_;
       ready_.store(false, std::memory_order_release);
     }
   }
-  if (ready_now && healthy_since_ms_ == now)
+  if (became_ready)
     log(LogLevel::kInfo, "driver_process_ready",
         json::Object{{"restarts", static_cast<int64_t>(restarts_.load())}});
 }
@@ -552,9 +570,8 @@ void ProcessDriver::io_loop() {
     close_locked();
   }
   ready_.store(false, std::memory_order_release);
-  pid_t pid = child_pid_.exchange(-1);
-  if (pid <= 0) pid = reaping_pid_;
-  if (pid > 0) {
+  for (pid_t pid : {child_pid_.exchange(-1), reaping_pid_}) {
+    if (pid <= 0) continue;
     ::kill(-pid, SIGTERM);
     ::kill(pid, SIGTERM);
     const int64_t deadline = now_ms() + opts_.kill_grace_ms;

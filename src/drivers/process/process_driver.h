@@ -122,6 +122,14 @@ class ProcessDriver final : public node::Driver {
   std::string fault_ GUARDED_BY(rmu_) = "the driver process has not started yet";
   mutable std::string unreported_fault_ GUARDED_BY(rmu_);  // shown once by health()
   std::string process_fault_ GUARDED_BY(rmu_);             // the process's own heartbeat fault
+  // The last drive sent: the robot counts as moving until its end unless a stop came since.
+  struct Commanded {
+    double linear_mps = 0.0;
+    double angular_radps = 0.0;
+    int64_t end_ms = 0;
+    uint64_t stop_gen = 0;
+  };
+  Commanded commanded_ GUARDED_BY(rmu_);
   CondVar ready_cv_;
   uint64_t faults_ GUARDED_BY(rmu_) = 0;
   int64_t t_ms_ GUARDED_BY(rmu_) = 0;
