@@ -103,9 +103,11 @@ class Base:
             attrs[4] = attrs[5] = BAUDS.get(self.baud, termios.B115200)
             termios.tcsetattr(self.fd, termios.TCSANOW, attrs)
             self.port_fault = ""
-        except OSError as e:
+        except (OSError, termios.error) as e:
+            if self.fd >= 0:
+                os.close(self.fd)
             self.fd = -1
-            self.port_fault = "serial port %s: %s" % (self.path, e.strerror)
+            self.port_fault = "serial port %s: %s" % (self.path, e.args[-1])
         return self.fd >= 0
 
     def write_line(self, line):
@@ -250,10 +252,18 @@ class Driver:
     def run(self):
         sel = selectors.DefaultSelector()
         sel.register(self.link.sock, selectors.EVENT_READ, "link")
-        if self.base.fd >= 0:
-            sel.register(self.base.fd, selectors.EVENT_READ, "base")
+        watched = -1  # the serial fd being read (the port may be reopened)
         self.stop()
         while True:
+            if self.base.fd != watched:
+                if watched >= 0:
+                    try:
+                        sel.unregister(watched)
+                    except (KeyError, ValueError):
+                        pass
+                watched = self.base.fd
+                if watched >= 0:
+                    sel.register(watched, selectors.EVENT_READ, "base")
             for key, _ in sel.select(self.timeout()):
                 if key.data == "link":
                     frames = self.link.receive()

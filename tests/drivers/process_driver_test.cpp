@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <sys/un.h>
 #include <unistd.h>
 
@@ -198,6 +199,30 @@ TEST(ProcessDriver, AProgramThatCannotStartIsAFault) {
   ASSERT_TRUE(d.start().ok());
   EXPECT_FALSE(d.healthy());
   EXPECT_TRUE(faults_with(d, "cannot start the driver process", 3000));
+}
+
+TEST(ProcessDriver, ReferenceDriverServesASocketForAnAlreadyRunningProcess) {
+  PtyBase pty;
+  ASSERT_TRUE(pty.ok());
+  test::TempDir dir;
+  const std::string path = dir.file("drv.sock");
+  test::Process py;
+  ASSERT_TRUE(py.start(
+      {"/usr/bin/env", "python3", kReference, "--port", pty.slave_path(), "--listen", path}));
+  struct stat st {};
+  ASSERT_TRUE(eventually([&] { return ::stat(path.c_str(), &st) == 0; }, 10000));
+  EXPECT_EQ(st.st_mode & 0777, 0600u);  // only rcand's user may pose as the hardware
+  ProcessDriverOptions o = options({});
+  o.socket = path;
+  ProcessDriver d(o);
+  ASSERT_TRUE(d.start().ok());
+  ASSERT_TRUE(d.healthy()) << d.health().fault;
+  pty.drain();
+  ASSERT_TRUE(d.apply(ActuatorCommand::make_drive(0.4, 0, 500)).ok());
+  EXPECT_EQ(pty.line_starting("V ", 3000).value_or("none"), "V 0.400 0.400");
+  py.stop(SIGTERM, 5000);
+  EXPECT_TRUE(faults_with(d, "driver process", 3000));
+  EXPECT_TRUE(faults_with(d, "cannot connect", 3000));  // nothing listens any more
 }
 
 // The test plays the driver process on driver.process.socket: it answers the handshake, keeps
