@@ -146,6 +146,10 @@ TEST(ProcessFrame, RefusesWhatIsNotExactlyTheProtocol) {
       EXPECT_FALSE(r.error().message.empty()) << b;
     }
   }
+  // What the process sent is shown as printable ASCII only.
+  auto odd = parse_incoming("{\"type\":\"x\u00e9\\n\"}");
+  ASSERT_FALSE(odd.ok());
+  EXPECT_NE(odd.error().message.find("\"x???\""), std::string::npos) << odd.error().message;
   // Deeply nested input is refused by depth, not by recursion.
   std::string deep = R"({"type":"state","state":{"base":)" + std::string(5000, '[') + "}}";
   EXPECT_FALSE(parse_incoming(deep).ok());

@@ -233,7 +233,9 @@ Result<Incoming> parse_incoming(std::string_view payload) {
       if (auto e = read_state(*s, in.state)) return *e;
     }
   } else {
-    return bad("unknown frame type \"" + t.substr(0, 64) + "\"", "type");
+    std::string shown;  // printable ASCII only: the text goes to the log and the audit record
+    for (char c : t.substr(0, 64)) shown.push_back(c >= 0x20 && c < 0x7f ? c : '?');
+    return bad("unknown frame type \"" + shown + "\"", "type");
   }
   if (r.error()) return *r.error();
   return in;
