@@ -149,6 +149,7 @@ TEST(ProcessDriver, AKilledProcessIsAFaultThenRestartsAndRecovers) {
   std::string seen;
   EXPECT_TRUE(faults_with(d, "driver process", 3000, &seen)) << seen;
   EXPECT_FALSE(d.apply(ActuatorCommand::make_drive(0.1, 0, 100)).ok());
+  EXPECT_TRUE(d.apply(ActuatorCommand::make_stop()).ok());  // a stop is always accepted
   ASSERT_TRUE(eventually([&] { return d.healthy() && d.health().ok; }, 10000));
   EXPECT_EQ(d.restarts(), 1u);
   EXPECT_NE(d.child_pid(), first);

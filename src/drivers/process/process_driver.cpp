@@ -126,6 +126,12 @@ void ProcessDriver::wake() noexcept {
 // ---- the caller's side ------------------------------------------------------------------------
 
 Status ProcessDriver::apply(const node::ActuatorCommand& cmd) {
+  // A stop command takes the stop path: ahead of the queue, and accepted with the link down
+  // (a process that is gone or not yet ready starts at rest).
+  if (cmd.stop) {
+    stop();
+    return Status::Ok();
+  }
   if (!ready_.load(std::memory_order_acquire)) {
     MutexLock lock(rmu_);
     return Error(ErrorCode::kSafeStop, "the driver process is not ready: " + fault_, "",

@@ -11,7 +11,8 @@
 //
 // Threads: one I/O thread per driver polls the socket (reads, heartbeats, liveness, restarts).
 // apply() queues its frame and writes it at once with a non-blocking send (never waits on the
-// socket; a full queue refuses the command). stop() is lock-free for the caller: it bumps a
+// socket; a full queue refuses the command; a stop command takes stop()'s path). stop() is
+// lock-free for the caller: it bumps a
 // stop generation, then either writes the stop frame itself (when it gets the writer lock
 // without waiting) or wakes the I/O thread through an eventfd. Either way every frame queued
 // before the stop is dropped unsent and the stop frame goes out before anything queued after
