@@ -7,6 +7,7 @@
 #include <signal.h>
 
 #include <chrono>
+#include <cmath>
 #include <functional>
 #include <string>
 #include <thread>
@@ -124,8 +125,20 @@ TEST(ProcessDriverE2E, AKilledDriverSafeStopsIsAuditedAndRecovers) {
                           command_json("move", {{"linear", 0.3}, {"duration_ms", 5000}}), owner);
   ASSERT_EQ(r.status, 200) << r.body;
   EXPECT_EQ(pty.line_starting("V 0.3", 3000).value_or("none"), "V 0.300 0.300");
+  // The base's odometry becomes the robot's pose in the status.
+  pty.say("O 0 0");
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  pty.say("O 0.25 0.25");
+  auto core_status = [&] { return *status(node, owner).get("robot"); };
+  EXPECT_TRUE(eventually(
+      [&] {
+        const json::Value* x = core_status().get("robot")->get("base")->get("x");
+        return x && std::abs(x->to_double() - 0.25) < 1e-6;
+      },
+      3000))
+      << json::dump(core_status());
   ASSERT_EQ(::kill(pid, SIGKILL), 0);
-  // Fault: safe stop, audited.
+  // Fault: safe stop, audited, and the status says why.
   ASSERT_TRUE(eventually([&] { return count_events(node, owner, "DRIVER_FAULT") == 1; }, 5000));
   // A new process, healthy again: DRIVER_RECOVERED, and it starts by stopping the base.
   const pid_t second = driver_pid(node, "driver_process_restarted");
