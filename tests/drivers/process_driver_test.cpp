@@ -336,10 +336,14 @@ TEST(ProcessDriver, StopIsSafeFromManyThreadsDuringAppliesAndRestarts) {
   threads.emplace_back([&] {  // the base reads what it is sent
     while (!quit) (void)pty.line(50);
   });
-  for (int k = 0; k < 2; ++k) {
+  for (uint64_t k = 0; k < 2; ++k) {
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
-    if (d.child_pid() > 0) ::kill(d.child_pid(), SIGKILL);
-    const bool back = eventually([&] { return d.healthy(); }, 10000);
+    const pid_t pid = d.child_pid();
+    EXPECT_GT(pid, 0);
+    if (pid <= 0) break;
+    ::kill(pid, SIGKILL);
+    const bool back = eventually(
+        [&] { return d.restarts() == k + 1 && d.healthy() && d.child_pid() > 0; }, 10000);
     EXPECT_TRUE(back) << d.health().fault;
     if (!back) break;
   }
