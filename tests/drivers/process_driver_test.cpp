@@ -226,6 +226,38 @@ TEST(ProcessDriver, ReferenceDriverServesASocketForAnAlreadyRunningProcess) {
   EXPECT_TRUE(faults_with(d, "cannot connect", 3000));  // nothing listens any more
 }
 
+// The other side of the contract: the reference driver stops the base by itself when rcand
+// falls silent for the heartbeat timeout it announced (the test plays a hung rcand).
+TEST(ProcessDriver, ReferenceDriverStopsTheBaseWhenRcandFallsSilent) {
+  PtyBase pty;
+  ASSERT_TRUE(pty.ok());
+  test::TempDir dir;
+  const std::string path = dir.file("drv.sock");
+  test::Process py;
+  ASSERT_TRUE(py.start(
+      {"/usr/bin/env", "python3", kReference, "--port", pty.slave_path(), "--listen", path}));
+  struct stat st {};
+  ASSERT_TRUE(eventually([&] { return ::stat(path.c_str(), &st) == 0; }, 10000));
+  const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  std::strncpy(addr.sun_path, path.c_str(), sizeof addr.sun_path - 1);
+  ASSERT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+  auto send_frame = [&](const std::string& f) {
+    return ::send(fd, f.data(), f.size(), MSG_NOSIGNAL) == static_cast<ssize_t>(f.size());
+  };
+  ASSERT_TRUE(send_frame(encode_describe(1, 50, 300)));
+  pty.drain();
+  ASSERT_TRUE(send_frame(encode_apply(2, ActuatorCommand::make_drive(0.2, 0, 10000))));
+  EXPECT_EQ(pty.line_starting("V ", 3000).value_or("none"), "V 0.200 0.200");
+  const auto t0 = std::chrono::steady_clock::now();  // silence from here on
+  EXPECT_EQ(pty.line_starting("V ", 3000).value_or("none"), "V 0.000 0.000");
+  const auto waited = std::chrono::steady_clock::now() - t0;
+  EXPECT_GE(waited, std::chrono::milliseconds(200));
+  EXPECT_LT(waited, std::chrono::milliseconds(2000));
+  ::close(fd);
+}
+
 // The test plays the driver process on driver.process.socket: it answers the handshake, keeps
 // heartbeating, but stops reading, so that rcand's frames pile up in the socket and its queue.
 TEST(ProcessDriver, AStopJumpsTheQueueAndDropsTheAppliesBeforeIt) {
