@@ -6,6 +6,7 @@
 
 #include "base/clock.h"
 #include "base/log.h"
+#include "driver_factory.h"
 #include "node/ai/ai_services.h"
 #include "node/api/node.h"
 #include "node/bindings/mqtt_node.h"
@@ -153,8 +154,9 @@ Status Daemon::open_audit_log() {
 // 4. The safety core over the simulated robot, with its persisted ESTOP latch.
 Status Daemon::start_safety_core() {
   node::SimRobotConfig sim;
-  core_ = std::make_unique<node::SafetyCore>(std::make_unique<node::SimRobot>(sim),
-                                             safety_config(cfg_, sim));
+  auto driver = make_driver(cfg_, sim);
+  if (!driver.ok()) return failed("driver: ", driver.error());
+  core_ = std::make_unique<node::SafetyCore>(std::move(driver).value(), safety_config(cfg_, sim));
   if (Status s = core_->open(cfg_.data_dir + "/safety"); !s.ok())
     return failed("safety state: ", s.error());
   actuation_ = std::make_unique<node::SafetyActuation>(

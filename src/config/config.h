@@ -267,9 +267,26 @@ struct SimDriverConfig {
   uint32_t arm_joints = 6;
 };
 
+// driver.type process: a driver process on a Unix socket (docs/DRIVERS.md).
+struct ProcessDriverConfig {
+  std::vector<std::string> command;  // argv to start; empty: connect to `socket`
+  std::string socket;                // an already-running driver process's socket
+  uint32_t heartbeat_ms = 100;
+  uint32_t heartbeat_timeout_ms = 500;
+  uint32_t startup_timeout_ms = 5000;
+  uint32_t restart_backoff_ms = 200;
+  uint32_t restart_backoff_max_ms = 5000;
+  // The hardware envelope (the safety core uses min(safety.*, these)).
+  double max_linear_mps = 1.0;
+  double max_angular_radps = 2.0;
+  double linear_accel_mps2 = 0.0;  // 0: unknown (the core predicts an instant change)
+  double brake_decel_mps2 = 0.0;
+};
+
 struct DriverConfig {
-  std::string type = "sim";  // only "sim" today
+  std::string type = "sim";  // "sim" | "process"
   SimDriverConfig sim;
+  ProcessDriverConfig process;
 };
 
 struct RobotInfo {

@@ -590,5 +590,39 @@ TEST(ConfigBlockRules, FirstFaultInReadingOrder) {
   for (const Rule& rule : rules) expect_rule(rule);
 }
 
+TEST(ConfigBlockKeys, DriverProcess) {
+  auto r = parse(
+      "driver:\n  type: process\n  process:\n    command: [python3, /opt/drv/base.py, --port, "
+      "/dev/ttyUSB0]\n    heartbeat_ms: 50\n    heartbeat_timeout_ms: 300\n"
+      "    restart_backoff_ms: 100\n    restart_backoff_max_ms: 2000\n    max_linear_mps: 0.8\n"
+      "    max_angular_radps: 1.5\n    brake_decel_mps2: 2\n");
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  const ProcessDriverConfig& p = r->driver.process;
+  EXPECT_EQ(r->driver.type, "process");
+  ASSERT_EQ(p.command.size(), 4u);
+  EXPECT_EQ(p.command[1], "/opt/drv/base.py");
+  EXPECT_EQ(p.heartbeat_ms, 50u);
+  EXPECT_EQ(p.heartbeat_timeout_ms, 300u);
+  EXPECT_EQ(p.startup_timeout_ms, 5000u);
+  EXPECT_EQ(p.restart_backoff_ms, 100u);
+  EXPECT_EQ(p.restart_backoff_max_ms, 2000u);
+  EXPECT_DOUBLE_EQ(p.max_linear_mps, 0.8);
+  EXPECT_DOUBLE_EQ(p.brake_decel_mps2, 2.0);
+  auto s = parse("driver: {type: process, process: {socket: run/drv.sock}}\n");
+  ASSERT_TRUE(s.ok()) << s.error().message;
+  EXPECT_EQ(s->driver.process.socket, "/etc/rcand/run/drv.sock");  // relative to the file
+  const Rule rules[] = {
+      {"driver: {type: process}\n", "driver.process", "required",
+       "driver.type process needs command or socket"},
+      {"driver: {type: can}\n", "driver.type", "invalid_value", ""},
+      {"driver: {process: {heartbeat_ms: 100, heartbeat_timeout_ms: 100}}\n",
+       "driver.process.heartbeat_timeout_ms", "out_of_range", "must exceed heartbeat_ms"},
+      {"driver: {process: {restart_backoff_ms: 500, restart_backoff_max_ms: 100}}\n",
+       "driver.process.restart_backoff_max_ms", "out_of_range",
+       "must not be below restart_backoff_ms"},
+  };
+  for (const Rule& rule : rules) expect_rule(rule);
+}
+
 }  // namespace
 }  // namespace rcan::config

@@ -40,9 +40,12 @@ class ConfiguredNode {
 
   // `extra_yaml` is appended to the config (top-level blocks); `security_yaml` to its security
   // block (keys indented by two spaces). heartbeat_timeout_ms and the control-loop rate are set
-  // here; gRPC and UDP are on (port 0) unless `transports` is false.
+  // here; gRPC and UDP are on (port 0) unless `transports` is false. `driver_yaml`, when given,
+  // is the whole `driver:` block instead of the simulator's; it follows the safety block, so
+  // lines before `driver:` indented by two spaces are more safety keys.
   explicit ConfiguredNode(std::string extra_yaml = {}, int heartbeat_timeout_ms = 2000,
-                          bool transports = true, const std::string& security_yaml = {}) {
+                          bool transports = true, const std::string& security_yaml = {},
+                          const std::string& driver_yaml = {}) {
     data_ = dir_.file("data");
     std::filesystem::create_directories(data_);
     EXPECT_EQ(run_cli({"keys", "generate", "--dir", data_ + "/keys"}).exit_code, 0);
@@ -75,7 +78,8 @@ class ConfiguredNode {
           << "robot:\n  name: test-rover\n  manufacturer: acme\n  model: rover\n  type: mobile\n"
           << "safety:\n  local_safety_wins: true\n  heartbeat_timeout_ms: " << heartbeat_timeout_ms
           << "\n"
-          << "driver:\n  type: sim\n  sim:\n    tick_hz: 200\n"
+          << (driver_yaml.empty() ? "driver:\n  type: sim\n  sim:\n    tick_hz: 200\n"
+                                  : driver_yaml)
           << "security:\n  jwt:\n    issuers:\n      - issuer: test.local\n        key_file: "
           << pub_file << "\n"
           << security_yaml;

@@ -1,0 +1,40 @@
+#include "driver_factory.h"
+
+#include "drivers/process/process_driver.h"
+
+namespace rcan::rcand {
+namespace {
+
+drivers::ProcessDriverOptions process_options(const config::ProcessDriverConfig& p) {
+  drivers::ProcessDriverOptions o;
+  o.command = p.command;
+  o.socket = p.socket;
+  o.heartbeat_ms = p.heartbeat_ms;
+  o.heartbeat_timeout_ms = p.heartbeat_timeout_ms;
+  o.startup_timeout_ms = p.startup_timeout_ms;
+  o.restart_backoff_ms = p.restart_backoff_ms;
+  o.restart_backoff_max_ms = p.restart_backoff_max_ms;
+  node::DriverInfo& i = o.info;
+  i.name = "process";
+  i.has_base = true;
+  i.max_linear_mps = p.max_linear_mps;
+  i.max_angular_radps = p.max_angular_radps;
+  i.linear_accel_mps2 = p.linear_accel_mps2;
+  i.brake_decel_mps2 = p.brake_decel_mps2;
+  i.capabilities = {"status", "teleop", "navigation"};
+  return o;
+}
+
+}  // namespace
+
+Result<std::unique_ptr<node::Driver>> make_driver(const config::NodeConfig& cfg,
+                                                  const node::SimRobotConfig& sim) {
+  if (cfg.driver.type == "process") {
+    auto d = std::make_unique<drivers::ProcessDriver>(process_options(cfg.driver.process));
+    if (Status s = d->start(); !s.ok()) return s.error();
+    return std::unique_ptr<node::Driver>(std::move(d));
+  }
+  return std::unique_ptr<node::Driver>(std::make_unique<node::SimRobot>(sim));
+}
+
+}  // namespace rcan::rcand
