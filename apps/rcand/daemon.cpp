@@ -6,6 +6,7 @@
 
 #include "base/clock.h"
 #include "base/log.h"
+#include "drivers/ros2/ros2_driver.h"
 #include "node/ai/ai_services.h"
 #include "node/api/node.h"
 #include "node/bindings/mqtt_node.h"
@@ -150,11 +151,32 @@ Status Daemon::open_audit_log() {
   return Status::Ok();
 }
 
-// 4. The safety core over the simulated robot, with its persisted ESTOP latch.
+namespace {
+
+// The driver `driver.type` names: the simulated robot, or a ROS 2 robot over DDS.
+Result<std::unique_ptr<node::Driver>> make_driver(const config::NodeConfig& cfg,
+                                                  const node::SimRobotConfig& sim) {
+  if (cfg.driver.type == "ros2") {
+    auto d = drivers::ros2::Ros2Driver::create(cfg.driver.ros2);
+    if (!d.ok()) return d.error();
+    log(LogLevel::kInfo, "driver",
+        json::Object{{"type", "ros2"},
+                     {"domain_id", static_cast<int64_t>(cfg.driver.ros2.domain_id)},
+                     {"cmd_vel", (*d)->cmd_vel_topic()},
+                     {"odom", (*d)->odom_topic()}});
+    return std::unique_ptr<node::Driver>(std::move(d).value());
+  }
+  return std::unique_ptr<node::Driver>(std::make_unique<node::SimRobot>(sim));
+}
+
+}  // namespace
+
+// 4. The safety core over the configured driver, with its persisted ESTOP latch.
 Status Daemon::start_safety_core() {
   node::SimRobotConfig sim;
-  core_ = std::make_unique<node::SafetyCore>(std::make_unique<node::SimRobot>(sim),
-                                             safety_config(cfg_, sim));
+  auto driver = make_driver(cfg_, sim);
+  if (!driver.ok()) return failed("driver: ", driver.error());
+  core_ = std::make_unique<node::SafetyCore>(std::move(driver).value(), safety_config(cfg_, sim));
   if (Status s = core_->open(cfg_.data_dir + "/safety"); !s.ok())
     return failed("safety state: ", s.error());
   actuation_ = std::make_unique<node::SafetyActuation>(
