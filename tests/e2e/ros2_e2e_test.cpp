@@ -74,7 +74,7 @@ class Ros2E2eTest : public ::testing::Test {
   }
 
   // `rcand init` a robot, make it a ROS 2 robot on our domain, start it, match with it.
-  void start(uint32_t odom_timeout_ms) {
+  void start(uint32_t odom_timeout_ms, bool pump = true) {
     auto r = test::run({RCAND_PATH, "init", "--dir", dir_, "--yes", "--port", std::to_string(port_),
                         "--name", "ros2-rover"});
     ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
@@ -92,7 +92,7 @@ class Ros2E2eTest : public ::testing::Test {
     }
     peer_ = std::make_unique<test::Ros2Peer>(domain_);
     ASSERT_TRUE(peer_->ok());
-    start_pump();
+    if (pump) start_pump();
     ASSERT_TRUE(node_.start({RCAND_PATH, "--config", yaml_path}, {dds_env_}));
     ASSERT_TRUE(node_.wait_for_line("\"listening\"", 30000).has_value()) << node_.err();
     ASSERT_TRUE(peer_->wait_matched(15000)) << "rcand's DDS writer never matched\n" << node_.err();
@@ -324,6 +324,27 @@ TEST_F(Ros2E2eTest, OdometryThatStopsIsADriverFaultThatSafeStopsAndIsAudited) {
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
   EXPECT_NE(audit.find("DRIVER_RECOVERED"), std::string::npos);
+}
+
+// The whole chain with the example robot (examples/ros2_sim_base, the simulator on DDS): a
+// move through rcand drives it, and its odometry comes back into rcand's status.
+TEST_F(Ros2E2eTest, TheSimulatedRos2BaseDrivenThroughRcandReportsItsMotionBack) {
+  test::Process base;
+  ASSERT_TRUE(base.start({ROS2_SIM_BASE_PATH, "--domain", std::to_string(domain_)}, {dds_env_}));
+  start(3000, /*pump=*/false);
+  ASSERT_EQ(cli({"claim"}).exit_code, 0);
+  auto move =
+      cli({"command", "move", "--linear", "0.4", "--angular", "0", "--duration-ms", "1000"});
+  ASSERT_EQ(move.exit_code, 0) << move.out << move.err;
+  double x = 0;
+  for (int i = 0; i < 60 && x < 0.2; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    const json::Value st = status();
+    if (const json::Value* b = base_of(st); b && b->get("x")) x = b->get("x")->to_double();
+  }
+  EXPECT_GT(x, 0.2) << "the simulated base did not report moving forward";
+  EXPECT_FALSE(safe_stopped(status()));
+  base.stop(SIGTERM, 5000);
 }
 
 }  // namespace
