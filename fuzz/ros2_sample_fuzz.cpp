@@ -66,7 +66,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     static const std::vector<std::string> kNames{"j1", "j2", "j3", "j4", "j5", "j6"};
     for (const auto* names : {&kNames, static_cast<const std::vector<std::string>*>(nullptr)}) {
       rcan::node::JointArray j{};
-      const int n = rcan::drivers::ros2::read_joint_state(m, names ? *names : std::vector<std::string>{}, j);
+      const int n =
+          rcan::drivers::ros2::read_joint_state(m, names ? *names : std::vector<std::string>{}, j);
       if (n < 0 || n > static_cast<int>(m.position._length)) std::abort();
       for (double d : j)
         if (!std::isfinite(d)) std::abort();

@@ -242,6 +242,15 @@ class Ros2Peer {
     std::lock_guard<std::mutex> lock(mu_);
     twists_.clear();
   }
+  // Takes what has arrived (waiting up to timeout_ms for something): O(1) under the lock, so
+  // that a busy consumer never holds up the listener and its timestamps.
+  std::vector<WireTwist> drain(int timeout_ms) {
+    std::vector<WireTwist> out;
+    std::unique_lock<std::mutex> lock(mu_);
+    cv_.wait_for(lock, std::chrono::milliseconds(timeout_ms), [&] { return !twists_.empty(); });
+    out.swap(twists_);
+    return out;
+  }
   // Waits until `pred(twists)` holds; false on timeout.
   template <typename Pred>
   bool wait(Pred pred, int timeout_ms) {

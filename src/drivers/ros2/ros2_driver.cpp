@@ -159,25 +159,30 @@ node::DriverInfo Ros2Driver::describe() const {
 
 // ---- the publish path ------------------------------------------------------------------------
 
-bool Ros2Driver::write_twist(double v, double w, uint64_t gen, int64_t now) {
+int Ros2Driver::write_twist(double v, double w, uint64_t gen, int64_t now) {
   const geometry_msgs_msg_dds__Twist_ t = make_twist(v, w);
   MutexLock lock(pub_mu_);
-  if (stop_gen_.load(std::memory_order_acquire) != gen) return false;  // a stop() came first
-  if (dds_write(cmd_vel_writer_, &t) < 0) return false;
+  if (stop_gen_.load(std::memory_order_acquire) != gen) return 0;  // a stop() came first
+  if (const dds_return_t rc = dds_write(cmd_vel_writer_, &t); rc < 0) {
+    write_failures_.fetch_add(1, std::memory_order_relaxed);
+    return rc;
+  }
   const bool zero = v == 0.0 && w == 0.0;
   last_was_zero_ = zero;
   last_pub_ns_ = now;
   twists_.fetch_add(1, std::memory_order_relaxed);
   if (zero) zero_twists_.fetch_add(1, std::memory_order_relaxed);
-  return true;
+  return 1;
 }
 
 void Ros2Driver::write_zero_if_due(int64_t now) noexcept {
   const geometry_msgs_msg_dds__Twist_ t = make_twist(0.0, 0.0);
   MutexLock lock(pub_mu_);
   if (last_was_zero_ && now - last_pub_ns_ < period_ns_) return;
-  // Counted as written even if the write fails: the next period retries.
-  (void)dds_write(cmd_vel_writer_, &t);
+  if (dds_write(cmd_vel_writer_, &t) < 0) {
+    write_failures_.fetch_add(1, std::memory_order_relaxed);
+    return;  // not marked as written: the next stop() or loop step tries again
+  }
   last_was_zero_ = true;
   last_pub_ns_ = now;
   twists_.fetch_add(1, std::memory_order_relaxed);
@@ -259,9 +264,14 @@ Status Ros2Driver::apply(const node::ActuatorCommand& cmd) {
     drive_end_ns_ = now + d.duration_ms * 1'000'000;
     next_repub_ns_ = now + period_ns_;
     drive_active_ = d.duration_ms > 0;
-    if (!write_twist(v, w, gen, now)) {
+    const int wrote = write_twist(v, w, gen, now);
+    if (wrote == 0) {
       absorb_stop_locked();  // a stop() won the race: nothing was written
       return Status::Ok();
+    }
+    if (wrote < 0) {
+      drive_active_ = false;
+      return dds_error("cmd_vel write", wrote);
     }
     if (!drive_active_) last_stop_ns_.store(now, std::memory_order_release);
   }
@@ -382,7 +392,7 @@ void Ros2Driver::step(int64_t dt_ms) {
       last_stop_ns_.store(now, std::memory_order_release);
       write_zero_if_due(now);
     } else if (now >= next_repub_ns_) {
-      if (!write_twist(drive_v_, drive_w_, drive_gen_, now)) absorb_stop_locked();
+      if (write_twist(drive_v_, drive_w_, drive_gen_, now) == 0) absorb_stop_locked();
       next_repub_ns_ = std::max(next_repub_ns_ + period_ns_, now + period_ns_ / 2);
     }
   }

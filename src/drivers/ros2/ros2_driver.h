@@ -62,18 +62,21 @@ class Ros2Driver final : public node::Driver {
   // The DDS topic names in use (for logs and tests).
   const std::string& cmd_vel_topic() const { return cmd_vel_name_; }
   const std::string& odom_topic() const { return odom_name_; }
-  // Twists written so far (zero ones included), and zero ones alone.
+  // Twists written so far (zero ones included), zero ones alone, and failed writes.
   uint64_t twists_written() const { return twists_.load(std::memory_order_relaxed); }
   uint64_t zero_twists_written() const { return zero_twists_.load(std::memory_order_relaxed); }
+  uint64_t write_failures() const { return write_failures_.load(std::memory_order_relaxed); }
 
  private:
   explicit Ros2Driver(const config::Ros2DriverConfig& cfg);
   Status open();
   void close() noexcept;
 
-  // Writes a Twist unless a stop() came after `gen` (then it returns false and writes nothing).
-  bool write_twist(double v, double w, uint64_t gen, int64_t now) EXCLUDES(pub_mu_);
-  // Writes a zero Twist unless one went out less than one period ago.
+  // Writes a Twist unless a stop() came after `gen`: 1 written, 0 a stop() came first (nothing
+  // written), a negative DDS return code when the write failed.
+  int write_twist(double v, double w, uint64_t gen, int64_t now) EXCLUDES(pub_mu_);
+  // Writes a zero Twist unless one went out less than one period ago (a failed write is
+  // retried on the next call).
   void write_zero_if_due(int64_t now) noexcept EXCLUDES(pub_mu_);
   void write_arm_hold() noexcept;
   void take_samples_locked(int64_t now) REQUIRES(mu_);
@@ -100,7 +103,7 @@ class Ros2Driver final : public node::Driver {
   mutable Mutex pub_mu_;
   bool last_was_zero_ GUARDED_BY(pub_mu_) = false;
   int64_t last_pub_ns_ GUARDED_BY(pub_mu_) = 0;
-  std::atomic<uint64_t> twists_{0}, zero_twists_{0};
+  std::atomic<uint64_t> twists_{0}, zero_twists_{0}, write_failures_{0};
 
   // Everything else, under mu_ (the safety core serialises these calls anyway).
   mutable Mutex mu_;
