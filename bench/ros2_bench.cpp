@@ -164,77 +164,62 @@ void print(const char* what, std::vector<double> v) {
               bench::pct(v, 0.50), bench::pct(v, 0.99), v.empty() ? 0.0 : v.back());
 }
 
-}  // namespace
+// A configured robot (`rcand init` in `dir`), made a ROS 2 robot on `domain`.
+bool init_robot(const std::string& rcand, const std::string& dir, uint32_t domain) {
+  const std::string cmd = rcand + " init --dir " + dir + " --yes --name ros2-bench >/dev/null";
+  if (std::system(cmd.c_str()) != 0) {
+    std::fprintf(stderr, "rcand init failed\n");
+    return false;
+  }
+  std::ifstream in(dir + "/robot.rcan.yaml");
+  std::string yaml, line;
+  while (std::getline(in, line)) yaml += line + "\n";
+  yaml = yaml.substr(0, yaml.rfind("driver:\n")) + "driver:\n  type: ros2\n  ros2:\n" +
+         "    domain_id: " + std::to_string(domain) +
+         "\n    cmd_rate_hz: 20\n    odom_timeout_ms: 0\n";
+  std::ofstream(dir + "/robot.rcan.yaml", std::ios::trunc) << yaml;
+  return true;
+}
 
-int main(int argc, char** argv) {
-  std::string rcand = (fs::path(argv[0]).parent_path() / ".." / "bin" / "rcand").string();
-  int commands = 2000, stops = 50;
-  for (int i = 1; i + 1 < argc; i += 2) {
-    const std::string a = argv[i];
-    if (a == "--rcand") rcand = argv[i + 1];
-    if (a == "--commands") commands = std::atoi(argv[i + 1]);
-    if (a == "--stops") stops = std::atoi(argv[i + 1]);
-  }
-  test::use_loopback_dds();  // rcand inherits it
-  const uint32_t domain = test::random_domain_id();
-  char tmpl[] = "/tmp/rcan-ros2-bench-XXXXXX";
-  const std::string root = mkdtemp(tmpl);
-  const std::string dir = root + "/robot";
-  // A configured robot (`rcand init`), made a ROS 2 robot on our domain.
-  {
-    const std::string cmd = rcand + " init --dir " + dir + " --yes --name ros2-bench >/dev/null";
-    if (std::system(cmd.c_str()) != 0) {
-      std::fprintf(stderr, "rcand init failed\n");
-      return 1;
-    }
-    std::ifstream in(dir + "/robot.rcan.yaml");
-    std::string yaml, line;
-    while (std::getline(in, line)) yaml += line + "\n";
-    yaml = yaml.substr(0, yaml.rfind("driver:\n")) + "driver:\n  type: ros2\n  ros2:\n" +
-           "    domain_id: " + std::to_string(domain) +
-           "\n    cmd_rate_hz: 20\n    odom_timeout_ms: 0\n";
-    std::ofstream(dir + "/robot.rcan.yaml", std::ios::trunc) << yaml;
-  }
-  test::Ros2Peer robot(domain);
+// rcand, the robot (a DDS reader on rt/cmd_vel) and what the robot has seen.
+struct Bench {
+  explicit Bench(uint32_t domain) : robot(domain) {}
+
+  test::Ros2Peer robot;
+  bench::Node node;
+  std::string issuer_seed;
   Matcher m;
   std::atomic<int64_t> estop_sent{0}, estop_zero{0};
   std::atomic<bool> measuring_estop{false};
   std::atomic<int64_t> last_moving{0};  // arrival of the last moving Twist
-  bench::Node node;
-  node.dir = dir;
-  if (!robot.ok() || !bench::start_node(node, rcand, {"--config", dir + "/robot.rcan.yaml"})) {
-    fs::remove_all(root);
-    return 1;
-  }
-  if (!robot.wait_matched(15000)) {
-    std::fprintf(stderr, "no DDS match with rcand\n");
-    return 1;
-  }
-  // The peer collects Twists in order; a thread takes them to the matcher as they come.
   std::atomic<bool> done{false};
-  std::thread feeder([&] {
-    while (!done) {
-      for (const auto& t : robot.drain(50)) {
-        m.got(t);
-        if (!t.zero()) last_moving = t.t_ns;
-        if (measuring_estop && t.zero() && t.t_ns >= estop_sent.load() && estop_zero.load() == 0)
-          estop_zero = t.t_ns;
-      }
-    }
-  });
-  const std::string issuer_seed = dir + "/issuer/ed25519.seed";
-  auto token = [&](const std::string& sub) {
-    return bench::token_for(issuer_seed, "rcand-local", node.ruri, sub);
-  };
-  bench::settle(node.child->pid());
-  std::printf(
-      "ros2_bench: rcand (driver.type ros2, DDS domain %u, loopback) — COMMAND and ESTOP "
-      "to the DDS wire\n",
-      domain);
-
-  // Phase 1 and 2: COMMAND → Twist, 1 and 16 clients.
+  std::thread feeder;
   int seq_counter[16] = {};
-  auto command_phase = [&](int clients, int per_client, const char* label) {
+
+  std::string token(const std::string& sub) const {
+    return bench::token_for(issuer_seed, "rcand-local", node.ruri, sub);
+  }
+
+  // The peer collects Twists in order; this thread takes them to the matcher as they come.
+  void start_feeder() {
+    feeder = std::thread([this] {
+      while (!done) {
+        for (const auto& t : robot.drain(50)) {
+          m.got(t);
+          if (!t.zero()) last_moving = t.t_ns;
+          if (measuring_estop && t.zero() && t.t_ns >= estop_sent.load() && estop_zero.load() == 0)
+            estop_zero = t.t_ns;
+        }
+      }
+    });
+  }
+  void stop_feeder() {
+    done = true;
+    if (feeder.joinable()) feeder.join();
+  }
+
+  // COMMAND → Twist: `clients` keep-alive connections, `per_client` commands each.
+  void command_phase(int clients, int per_client, const char* label) {
     {
       std::lock_guard<std::mutex> l(m.mu);
       m.lat_us.clear();
@@ -266,55 +251,56 @@ int main(int argc, char** argv) {
     }
     print(label, lat);
     if (failures) std::printf("  (%d commands not answered 200)\n", failures.load());
-  };
-  command_phase(1, commands, "COMMAND -> Twist on rt/cmd_vel, 1 client");
-  command_phase(16, std::max(1, commands / 8), "COMMAND -> Twist on rt/cmd_vel, 16 clients");
+  }
 
-  // Phase 3 and 4: ESTOP → zero Twist, idle and under 16 clients.
-  auto estop_phase = [&](bool load, const char* label) {
+  // One ESTOP while the robot moves: its latency to the first zero Twist, or -1.
+  double one_estop(const std::string& admin, const std::string& driver) {
+    Conn c(node.port);
+    c.post("/rcan/v1/command", resume(), admin);
+    // A drive, so that the last Twist on the wire is a moving one.
+    c.post("/rcan/v1/command", move(0.3, 0.0, 5000), driver);
+    Conn s(node.port);  // connected before the clock starts
+    std::this_thread::sleep_for(std::chrono::milliseconds(60));
+    // Only while the robot is moving (a moving Twist in the last 30 ms).
+    for (int k = 0; k < 500 && test::steady_ns() - last_moving.load() > 30'000'000; ++k)
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    estop_zero = 0;
+    int64_t t = 0;
+    s.post("/api/stop", "{\"reason\":\"bench\"}", admin, [&](int64_t at) {
+      t = at;
+      estop_sent = at;
+      measuring_estop = true;
+    });
+    for (int k = 0; k < 200 && estop_zero.load() == 0; ++k)
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    measuring_estop = false;
+    const int64_t z = estop_zero.load();
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    return z != 0 ? static_cast<double>(z - t) / 1000.0 : -1.0;
+  }
+
+  // ESTOP → zero Twist, `stops` times; with `load`, 16 clients keep commanding meanwhile.
+  void estop_phase(bool load, int stops, const char* label) {
     std::atomic<bool> stop_load{false};
     std::vector<std::thread> th;
-    if (load) {
-      for (int c = 0; c < 16; ++c) {
-        th.emplace_back([&, c] {
-          Conn conn(node.port);
-          const std::string tok = token("load-" + std::to_string(c));
-          // 50 commands a second each (800/s in all): a load the node answers, not one that
-          // fills its replay memory and has the robot's own commands refused.
-          while (!stop_load) {
-            if (conn.post("/rcan/v1/command", move(0.2, 0.0, 100), tok) == 0) break;
-            std::this_thread::sleep_for(std::chrono::milliseconds(20));
-          }
-        });
-      }
+    for (int c = 0; load && c < 16; ++c) {
+      th.emplace_back([&, c] {
+        Conn conn(node.port);
+        const std::string tok = token("load-" + std::to_string(c));
+        // 50 commands a second each (800/s in all): a load the node answers, not one that
+        // fills its replay memory and has the robot's own commands refused.
+        while (!stop_load) {
+          if (conn.post("/rcan/v1/command", move(0.2, 0.0, 100), tok) == 0) break;
+          std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        }
+      });
     }
     const std::string admin = token("bench-operator");
     const std::string driver = token("bench-driver");
     (void)node.child->take_kept();  // estop.latency lines: only this phase's
     std::vector<double> lat;
-    for (int i = 0; i < stops; ++i) {
-      Conn c(node.port);
-      c.post("/rcan/v1/command", resume(), admin);
-      // A drive, so that the last Twist on the wire is a moving one.
-      c.post("/rcan/v1/command", move(0.3, 0.0, 5000), driver);
-      Conn s(node.port);  // connected before the clock starts
-      std::this_thread::sleep_for(std::chrono::milliseconds(60));
-      // Only while the robot is moving (a moving Twist in the last 30 ms).
-      for (int k = 0; k < 500 && test::steady_ns() - last_moving.load() > 30'000'000; ++k)
-        std::this_thread::sleep_for(std::chrono::milliseconds(1));
-      estop_zero = 0;
-      int64_t t = 0;
-      s.post("/api/stop", "{\"reason\":\"bench\"}", admin, [&](int64_t at) {
-        t = at;
-        estop_sent = at;
-        measuring_estop = true;
-      });
-      for (int k = 0; k < 200 && estop_zero.load() == 0; ++k)
-        std::this_thread::sleep_for(std::chrono::milliseconds(1));
-      measuring_estop = false;
-      if (estop_zero.load() != 0) lat.push_back(static_cast<double>(estop_zero - t) / 1000.0);
-      std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    }
+    for (int i = 0; i < stops; ++i)
+      if (const double us = one_estop(admin, driver); us >= 0) lat.push_back(us);
     stop_load = true;
     for (auto& t : th) t.join();
     Conn c(node.port);
@@ -333,47 +319,90 @@ int main(int argc, char** argv) {
     if (lat.size() < static_cast<size_t>(stops))
       std::printf("  (%zu of %d ESTOPs without a zero Twist within 200 ms)\n", stops - lat.size(),
                   stops);
-  };
-  estop_phase(false, "ESTOP -> zero Twist on rt/cmd_vel, idle");
-  estop_phase(true, "ESTOP -> zero Twist on rt/cmd_vel, 16 clients");
-
-  done = true;
-  feeder.join();
-  node.child->stop();
-  fs::remove_all(root);
-
-  // Phase 5: the driver alone, in this process (no HTTP, no safety core, no network: Cyclone
-  // delivers to a reader in the same process directly): Driver::apply() and Driver::stop() to
-  // the Twist at the DDS listener — the driver's own share of the figures above.
-  {
-    config::Ros2DriverConfig cfg;
-    cfg.domain_id = test::random_domain_id();
-    cfg.odom_timeout_ms = 0;
-    auto d = drivers::ros2::Ros2Driver::create(cfg);
-    test::Ros2Peer peer(cfg.domain_id);
-    if (!d.ok() || !peer.ok() || !peer.wait_matched(10000)) {
-      std::fprintf(stderr, "in-process driver: no DDS match\n");
-      return 1;
-    }
-    std::vector<double> apply_us, stop_us;
-    for (int i = 0; i < 200; ++i) {
-      peer.clear();
-      const int64_t t0 = test::steady_ns();
-      (void)(*d)->apply(node::ActuatorCommand::make_drive(0.2, 0.0, 5000));
-      peer.wait([](const std::vector<test::WireTwist>& v) { return !v.empty(); }, 1000);
-      auto v = peer.twists();
-      if (!v.empty()) apply_us.push_back(static_cast<double>(v[0].t_ns - t0) / 1000.0);
-      std::this_thread::sleep_for(std::chrono::milliseconds(2));
-      peer.clear();
-      const int64_t t1 = test::steady_ns();
-      (*d)->stop();
-      peer.wait([](const std::vector<test::WireTwist>& w) { return !w.empty(); }, 1000);
-      v = peer.twists();
-      if (!v.empty() && v[0].zero())
-        stop_us.push_back(static_cast<double>(v[0].t_ns - t1) / 1000.0);
-    }
-    print("Driver::apply() -> Twist (in-process reader)", apply_us);
-    print("Driver::stop() -> zero Twist (in-process reader)", stop_us);
   }
-  return 0;
+};
+
+// The driver alone, in this process (no HTTP, no safety core, no network: Cyclone delivers to
+// a reader in the same process directly): Driver::apply() and Driver::stop() to the Twist at
+// the DDS listener — the driver's own share of the figures above.
+bool driver_alone() {
+  config::Ros2DriverConfig cfg;
+  cfg.domain_id = test::random_domain_id();
+  cfg.odom_timeout_ms = 0;
+  auto d = drivers::ros2::Ros2Driver::create(cfg);
+  test::Ros2Peer peer(cfg.domain_id);
+  if (!d.ok() || !peer.ok() || !peer.wait_matched(10000)) {
+    std::fprintf(stderr, "in-process driver: no DDS match\n");
+    return false;
+  }
+  std::vector<double> apply_us, stop_us;
+  auto first = [&](int64_t t0, bool zero, std::vector<double>& out) {
+    peer.wait([](const std::vector<test::WireTwist>& v) { return !v.empty(); }, 1000);
+    const auto v = peer.twists();
+    if (!v.empty() && v[0].zero() == zero)
+      out.push_back(static_cast<double>(v[0].t_ns - t0) / 1000.0);
+    peer.clear();
+  };
+  for (int i = 0; i < 200; ++i) {
+    peer.clear();
+    const int64_t t0 = test::steady_ns();
+    (void)(*d)->apply(node::ActuatorCommand::make_drive(0.2, 0.0, 5000));
+    first(t0, false, apply_us);
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    peer.clear();
+    const int64_t t1 = test::steady_ns();
+    (*d)->stop();
+    first(t1, true, stop_us);
+  }
+  print("Driver::apply() -> Twist (in-process reader)", apply_us);
+  print("Driver::stop() -> zero Twist (in-process reader)", stop_us);
+  return true;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string rcand = (fs::path(argv[0]).parent_path() / ".." / "bin" / "rcand").string();
+  int commands = 2000, stops = 50;
+  for (int i = 1; i + 1 < argc; i += 2) {
+    const std::string a = argv[i];
+    if (a == "--rcand") rcand = argv[i + 1];
+    if (a == "--commands") commands = std::atoi(argv[i + 1]);
+    if (a == "--stops") stops = std::atoi(argv[i + 1]);
+  }
+  test::use_loopback_dds();  // rcand inherits it
+  const uint32_t domain = test::random_domain_id();
+  char tmpl[] = "/tmp/rcan-ros2-bench-XXXXXX";
+  const std::string root = mkdtemp(tmpl);
+  const std::string dir = root + "/robot";
+  if (!init_robot(rcand, dir, domain)) return 1;
+  int rc = 0;
+  {
+    Bench b(domain);
+    b.node.dir = dir;
+    b.issuer_seed = dir + "/issuer/ed25519.seed";
+    if (!b.robot.ok() ||
+        !bench::start_node(b.node, rcand, {"--config", dir + "/robot.rcan.yaml"})) {
+      rc = 1;
+    } else if (!b.robot.wait_matched(15000)) {
+      std::fprintf(stderr, "no DDS match with rcand\n");
+      rc = 1;
+    } else {
+      b.start_feeder();
+      bench::settle(b.node.child->pid());
+      std::printf(
+          "ros2_bench: rcand (driver.type ros2, DDS domain %u, loopback) — COMMAND and ESTOP "
+          "to the DDS wire\n",
+          domain);
+      b.command_phase(1, commands, "COMMAND -> Twist on rt/cmd_vel, 1 client");
+      b.command_phase(16, std::max(1, commands / 8), "COMMAND -> Twist on rt/cmd_vel, 16 clients");
+      b.estop_phase(false, stops, "ESTOP -> zero Twist on rt/cmd_vel, idle");
+      b.estop_phase(true, stops, "ESTOP -> zero Twist on rt/cmd_vel, 16 clients");
+      b.stop_feeder();
+    }
+    if (b.node.child) b.node.child->stop();
+  }
+  fs::remove_all(root);
+  if (rc == 0 && !driver_alone()) rc = 1;
+  return rc;
 }
