@@ -6,8 +6,7 @@ Every .cpp under src/node/, src/base/, src/transport/ and src/drivers/ is compil
 (14 or later) -fsyntax-only -Wthread-safety -Werror=thread-safety, with the include paths and
 definitions the build uses (the release tree's compile_commands.json). A member GUARDED_BY a
 mutex touched without it, a REQUIRES function called without the lock, an EXCLUDES function
-called with it or
-a lock left held on some path fails the check, with clang's diagnostic.
+called with it or a lock left held on some path fails the check, with clang's diagnostic.
 
   scripts/check_thread_safety.py --build DIR [ROOT]   exit 0: no finding; 1: findings (printed)
   scripts/check_thread_safety.py --self-test          shows that a guarded member written
