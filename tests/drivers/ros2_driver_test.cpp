@@ -192,12 +192,13 @@ TEST_F(Ros2DriverTest, ADrivePublishesAtOnceRepublishesAtTheRateAndEndsWithAZero
       EXPECT_DOUBLE_EQ(v[i].lx, 0.3);
     }
   }
-  // 500 ms at 20 Hz: about 10 (the loop's 20 ms steps blur the edges).
-  EXPECT_GE(moving, 8u);
+  // 500 ms at 20 Hz: about 10 (the loop's 20 ms steps blur the edges; a loaded machine that
+  // steps late republishes less often, never more).
+  EXPECT_GE(moving, 5u);
   EXPECT_LE(moving, 12u);
   ASSERT_LT(first_zero, v.size()) << "no zero Twist when the drive ended";
   EXPECT_GE(v[first_zero].t_ns - t0, 480'000'000);
-  EXPECT_LE(v[first_zero].t_ns - t0, 600'000'000);
+  EXPECT_LE(v[first_zero].t_ns - t0, 900'000'000);
   EXPECT_EQ(peer_->bad_twists(), 0u);
   // The state shows the drive's targets while it runs (checked after: it ended).
   EXPECT_EQ(driver_->state().target_linear_mps, 0.0);
@@ -243,8 +244,10 @@ TEST_F(Ros2DriverTest, StopPublishesAZeroTwistAtOnceAndAtTheRateWhileItKeepsBein
   }
   const auto v = peer_->twists();
   const size_t zeros = count_zero(v, t1);
-  EXPECT_GE(zeros, 15u) << "zero Twists did not keep coming while latched";
-  EXPECT_LE(zeros, 24u) << "zero Twists flooded at the tick rate";
+  // One per 50 ms of what the loop took (50 ticks of at least 20 ms; longer on a busy machine).
+  const double periods = static_cast<double>(test::steady_ns() - t1) / 50e6;
+  EXPECT_GE(static_cast<double>(zeros), 0.6 * periods) << "zero Twists stopped while latched";
+  EXPECT_LE(static_cast<double>(zeros), periods + 2) << "zero Twists flooded at the tick rate";
   for (const auto& t : v) {
     if (t.t_ns >= t_stop) {
       EXPECT_TRUE(t.zero()) << "a moving Twist after stop()";

@@ -282,8 +282,10 @@ TEST_F(Ros2E2eTest, EstopPutsAZeroTwistOnTheWireAtOnceAndKeepsThemComingWhileLat
     EXPECT_TRUE(t.zero()) << "a moving Twist while ESTOP is latched";
     if (t.t_ns >= t_zero + 100'000'000 && t.t_ns < t_zero + 1'100'000'000) ++zeros;
   }
-  EXPECT_GE(zeros, 15u) << "zero Twists stopped while latched";
-  EXPECT_LE(zeros, 25u) << "zero Twists flood faster than cmd_rate_hz";
+  // 20 in that second at 20 Hz; at least 10 on a busy machine whose control loop ticks late,
+  // and never the loop's 50 (stop() on every tick while latched).
+  EXPECT_GE(zeros, 10u) << "zero Twists stopped while latched";
+  EXPECT_LE(zeros, 22u) << "zero Twists flood faster than cmd_rate_hz";
   EXPECT_TRUE(status().get("estop_active")->as_bool());
 }
 
