@@ -234,7 +234,8 @@ TEST_F(Ros2DriverTest, StopPublishesAZeroTwistAtOnceAndAtTheRateWhileItKeepsBein
       t_zero = t.t_ns;
       break;
     }
-  EXPECT_LT(t_zero - t_stop, 50'000'000) << "the zero Twist came late";
+  // No step() ran: this zero Twist can only be stop()'s own (the bound allows a busy machine).
+  EXPECT_LT(t_zero - t_stop, 200'000'000) << "the zero Twist came late";
   // Latched: the core calls stop() on every 20 ms tick. Zero Twists flow at 20 Hz, not 50.
   const int64_t t1 = test::steady_ns();
   for (int i = 0; i < 50; ++i) {

@@ -270,8 +270,9 @@ TEST_F(Ros2E2eTest, EstopPutsAZeroTwistOnTheWireAtOnceAndKeepsThemComingWhileLat
       t_zero = t.t_ns;
       break;
     }
-  // "At once": well inside one command period (the benchmark measures it precisely).
-  EXPECT_LT(t_zero - t_sent, 50'000'000) << (t_zero - t_sent) / 1000 << " us";
+  // "At once" (the driver test shows the zero Twist is stop()'s own; the benchmark measures
+  // how fast): within two command periods even on a busy machine.
+  EXPECT_LT(t_zero - t_sent, 100'000'000) << (t_zero - t_sent) / 1000 << " us";
   EXPECT_TRUE(status().get("estop_active")->as_bool());
   // Latched for the next 1.5 s (longer than the drive would have lasted): zero Twists at
   // about 20 Hz, and nothing else after the first zero one.
