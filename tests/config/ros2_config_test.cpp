@@ -94,6 +94,7 @@ TEST(Ros2Config, RefusedWithTheirPath) {
       {"arm_joints: [a, b, c, d, e, f, g]", "driver.ros2.arm_joints"},
       {"joint_min_rad: [1, 2, 3, 4, 5, 6, 7]", "driver.ros2.joint_min_rad"},
       {"topic: x", "driver.ros2"},
+      {"joint_min_rad: [0, 1]\n    joint_max_rad: [1, 1]", "driver.ros2.joint_max_rad[1]"},
   };
   for (const auto& c : cases) {
     auto r = parse(std::string("driver:\n  type: ros2\n  ros2:\n    ") + c.ros2 + "\n");

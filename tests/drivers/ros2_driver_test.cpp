@@ -373,6 +373,23 @@ TEST_F(Ros2DriverTest, AnArmCommandIsOneTrajectoryPointAndStopHoldsTheArm) {
   EXPECT_EQ(h.get<uint32_t>(), 0u) << "the hold trajectory has points";
 }
 
+TEST_F(Ros2DriverTest, AHugeDurationOrATinyJointSpeedStaysWithinTheMessage) {
+  start();
+  node::JointArray target{0.5, 0, 0, 0, 0, 0};
+  ASSERT_TRUE(driver_->apply(node::ActuatorCommand::make_arm(target, 1e-300)).ok());
+  auto b = peer_->take_trajectory_bytes(3000);
+  ASSERT_TRUE(b);
+  // time_from_start is the last 8 bytes: at most an hour.
+  test::CdrReader r{b->data(), b->size()};
+  r.off = b->size() - 8;
+  EXPECT_EQ(r.get<int32_t>(), 3600);
+  EXPECT_EQ(r.get<uint32_t>(), 0u);
+  ASSERT_TRUE(driver_->apply(node::ActuatorCommand::make_drive(0.1, 0, INT64_MAX / 2)).ok());
+  driver_->step(20);
+  EXPECT_GT(driver_->state().drive_remaining_ms, 0);
+  driver_->stop();
+}
+
 // The generated serializer writes Odometry exactly as encoded by hand from ROS 2's layout
 // (header, child_frame_id, pose with covariance[36], twist with covariance[36]).
 TEST(Ros2Cdr, OdometryBytesAreRos2sLayout) {

@@ -72,6 +72,9 @@ Table<Ros2DriverConfig> ros2_rows() {
         if (!r.arm_topic.empty() && r.arm_joints.empty())
           fail(ros2["arm_joints"].path, "an arm topic needs the arm's joint names",
                "invalid_value");
+        for (size_t i = 0; i < r.joint_min_rad.size() && i < r.joint_max_rad.size(); ++i)
+          if (!(r.joint_min_rad[i] < r.joint_max_rad[i]))
+            fail(ros2["joint_max_rad"][i].path, "must be above joint_min_rad", "invalid_value");
         // ROS 2 names: letters, digits, '_' and '/' separators; no empty or digit-led token.
         const std::pair<const char*, const std::string*> names[] = {
             {"namespace", &r.ns},          {"cmd_vel_topic", &r.cmd_vel_topic},

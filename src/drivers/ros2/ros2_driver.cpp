@@ -19,6 +19,8 @@ int64_t now_ns() {
 constexpr double kRestEps = 1e-3;  // m/s, rad/s: below this the base counts as stopped
 constexpr int kTakeBatch = 8;      // samples per dds_take
 constexpr int kMaxTakePerStep = 64;
+constexpr int64_t kMaxDriveMs = 86'400'000;  // a drive's end stays representable in ns
+constexpr double kMaxArmMoveS = 3600.0;
 
 Error dds_error(const std::string& what, dds_return_t rc) {
   return Error(ErrorCode::kInternal, "ROS 2 driver: " + what + ": " + dds_strretcode(rc));
@@ -261,7 +263,7 @@ Status Ros2Driver::apply(const node::ActuatorCommand& cmd) {
     drive_v_ = v;
     drive_w_ = w;
     drive_gen_ = gen;
-    drive_end_ns_ = now + d.duration_ms * 1'000'000;
+    drive_end_ns_ = now + std::min<int64_t>(d.duration_ms, kMaxDriveMs) * 1'000'000;
     next_repub_ns_ = now + period_ns_;
     drive_active_ = d.duration_ms > 0;
     const int wrote = write_twist(v, w, gen, now);
@@ -284,11 +286,14 @@ Status Ros2Driver::apply(const node::ActuatorCommand& cmd) {
     std::vector<double> positions(arm_slots_);
     double longest = 0.0;
     for (size_t i = 0; i < arm_slots_; ++i) {
+      if (!(info.joint_min_rad[i] <= info.joint_max_rad[i]))
+        return Error(ErrorCode::kInternal, "joint limits: min above max", "arm");
       positions[i] = std::clamp(a.targets_rad[i], info.joint_min_rad[i], info.joint_max_rad[i]);
       st_.joint_targets_rad[i] = positions[i];
       longest = std::max(longest, std::abs(positions[i] - st_.joints_rad[i]));
     }
-    const double secs = std::max(0.1, longest / speed);
+    // At least 0.1 s; at most kMaxArmMoveS (a tiny speed must not overflow the Duration).
+    const double secs = std::clamp(longest / speed, 0.1, kMaxArmMoveS);
     trajectory_msgs_msg_dds__JointTrajectoryPoint_ pt{};
     pt.positions._maximum = pt.positions._length = static_cast<uint32_t>(positions.size());
     pt.positions._buffer = positions.data();
