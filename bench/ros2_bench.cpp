@@ -253,17 +253,21 @@ struct Bench {
     if (failures) std::printf("  (%d commands not answered 200)\n", failures.load());
   }
 
-  // One ESTOP while the robot moves: its latency to the first zero Twist, or -1.
-  double one_estop(const std::string& admin, const std::string& driver) {
+  // One ESTOP while the robot moves: its latency to the first zero Twist, -1 when none came,
+  // -2 when the robot was not moving (not measured: a zero Twist was already on the wire).
+  double one_estop(const std::string& admin, const std::string& driver,
+                   std::map<int, int>& drive_answers) {
     Conn c(node.port);
     c.post("/rcan/v1/command", resume(), admin);
     // A drive, so that the last Twist on the wire is a moving one.
-    c.post("/rcan/v1/command", move(0.3, 0.0, 5000), driver);
+    ++drive_answers[c.post("/rcan/v1/command", move(0.3, 0.0, 5000), driver)];
     Conn s(node.port);  // connected before the clock starts
     std::this_thread::sleep_for(std::chrono::milliseconds(60));
     // Only while the robot is moving (a moving Twist in the last 30 ms).
-    for (int k = 0; k < 500 && test::steady_ns() - last_moving.load() > 30'000'000; ++k)
+    int k = 0;
+    for (; k < 500 && test::steady_ns() - last_moving.load() > 30'000'000; ++k)
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    if (k == 500) return -2;
     estop_zero = 0;
     int64_t t = 0;
     s.post("/api/stop", "{\"reason\":\"bench\"}", admin, [&](int64_t at) {
@@ -271,7 +275,7 @@ struct Bench {
       estop_sent = at;
       measuring_estop = true;
     });
-    for (int k = 0; k < 200 && estop_zero.load() == 0; ++k)
+    for (int w = 0; w < 200 && estop_zero.load() == 0; ++w)
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
     measuring_estop = false;
     const int64_t z = estop_zero.load();
@@ -299,8 +303,13 @@ struct Bench {
     const std::string driver = token("bench-driver");
     (void)node.child->take_kept();  // estop.latency lines: only this phase's
     std::vector<double> lat;
-    for (int i = 0; i < stops; ++i)
-      if (const double us = one_estop(admin, driver); us >= 0) lat.push_back(us);
+    std::map<int, int> drive_answers;
+    int not_moving = 0;
+    for (int i = 0; i < stops; ++i) {
+      const double us = one_estop(admin, driver, drive_answers);
+      if (us >= 0) lat.push_back(us);
+      if (us == -2) ++not_moving;
+    }
     stop_load = true;
     for (auto& t : th) t.join();
     Conn c(node.port);
@@ -316,9 +325,17 @@ struct Bench {
       if (us && us->is_number()) node_us.push_back(us->to_double());
     }
     print("  in rcand: ESTOP read -> zero Twist written", node_us);
-    if (lat.size() < static_cast<size_t>(stops))
-      std::printf("  (%zu of %d ESTOPs without a zero Twist within 200 ms)\n", stops - lat.size(),
-                  stops);
+    if (not_moving > 0) {
+      std::printf(
+          "  (%d of %d ESTOPs not measured: the robot was not moving; the drive before "
+          "each ESTOP was answered",
+          not_moving, stops);
+      for (const auto& [status, n] : drive_answers) std::printf(" %d x%d", status, n);
+      std::printf(")\n");
+    }
+    if (lat.size() + not_moving < static_cast<size_t>(stops))
+      std::printf("  (%zu of %d ESTOPs without a zero Twist within 200 ms)\n",
+                  stops - not_moving - lat.size(), stops);
   }
 };
 
