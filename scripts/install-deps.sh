@@ -20,6 +20,7 @@ PKGS=(
   avahi-daemon dbus libavahi-client-dev iproute2
   faketime e2fsprogs
   libjemalloc-dev
+  cyclonedds-dev cyclonedds-tools
   help2man dpkg-dev systemd
 )
 

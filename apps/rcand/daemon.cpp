@@ -151,7 +151,7 @@ Status Daemon::open_audit_log() {
   return Status::Ok();
 }
 
-// 4. The safety core over the simulated robot, with its persisted ESTOP latch.
+// 4. The safety core over the configured driver, with its persisted ESTOP latch.
 Status Daemon::start_safety_core() {
   node::SimRobotConfig sim;
   auto driver = make_driver(cfg_, sim);

@@ -1,6 +1,8 @@
 #include "driver_factory.h"
 
+#include "base/log.h"
 #include "drivers/process/process_driver.h"
+#include "drivers/ros2/ros2_driver.h"
 
 namespace rcan::rcand {
 namespace {
@@ -29,6 +31,16 @@ drivers::ProcessDriverOptions process_options(const config::ProcessDriverConfig&
 
 Result<std::unique_ptr<node::Driver>> make_driver(const config::NodeConfig& cfg,
                                                   const node::SimRobotConfig& sim) {
+  if (cfg.driver.type == "ros2") {
+    auto d = drivers::ros2::Ros2Driver::create(cfg.driver.ros2);
+    if (!d.ok()) return d.error();
+    log(LogLevel::kInfo, "driver",
+        json::Object{{"type", "ros2"},
+                     {"domain_id", static_cast<int64_t>(cfg.driver.ros2.domain_id)},
+                     {"cmd_vel", (*d)->cmd_vel_topic()},
+                     {"odom", (*d)->odom_topic()}});
+    return std::unique_ptr<node::Driver>(std::move(d).value());
+  }
   if (cfg.driver.type == "process") {
     auto d = std::make_unique<drivers::ProcessDriver>(process_options(cfg.driver.process));
     if (Status s = d->start(); !s.ok()) return s.error();

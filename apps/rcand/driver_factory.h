@@ -1,4 +1,5 @@
-// The driver the configuration names (driver.type): the simulator, or a driver process.
+// The driver the configuration names (driver.type): the simulator, a ROS 2 robot over DDS, or a
+// driver process.
 #pragma once
 
 #include <memory>

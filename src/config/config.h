@@ -283,9 +283,33 @@ struct ProcessDriverConfig {
   double brake_decel_mps2 = 0.0;
 };
 
+// driver.ros2: a ROS 2 robot over DDS (docs/DRIVERS.md §ROS 2).
+struct Ros2DriverConfig {
+  uint32_t domain_id = 0;                           // ROS_DOMAIN_ID
+  std::string ns;                                   // ROS namespace, e.g. "/robot1" ("" = none)
+  std::string cmd_vel_topic = "cmd_vel";            // geometry_msgs/msg/Twist, out
+  std::string odom_topic = "odom";                  // nav_msgs/msg/Odometry, in
+  std::string joint_states_topic = "joint_states";  // sensor_msgs/msg/JointState, in
+  std::string arm_topic;                // trajectory_msgs/msg/JointTrajectory, out ("" = no arm)
+  std::vector<std::string> arm_joints;  // joint names, in the arm's slot order (≤ 6)
+  std::string gripper_topic;            // "" = no gripper
+  std::string gripper_type = "std_msgs/msg/Float64";  // or std_msgs/msg/Bool (true = closed)
+  double gripper_open = 0.0;                          // Float64 value that opens
+  double gripper_close = 1.0;                         // Float64 value that closes
+  uint32_t cmd_rate_hz = 20;        // Twist republish rate (active drive, stop/ESTOP)
+  uint32_t odom_timeout_ms = 1000;  // no odometry this long → driver fault (0 = never)
+  uint32_t stop_repeat_ms = 1000;   // zero Twists keep coming this long after a stop
+  double max_linear_mps = 1.0;      // the hardware's envelope (describe())
+  double max_angular_radps = 2.0;
+  double max_joint_speed_radps = 1.0;
+  std::vector<double> joint_min_rad;  // per arm joint; missing entries -pi
+  std::vector<double> joint_max_rad;  // missing entries +pi
+};
+
 struct DriverConfig {
-  std::string type = "sim";  // "sim" | "process"
+  std::string type = "sim";  // "sim" | "ros2" | "process"
   SimDriverConfig sim;
+  Ros2DriverConfig ros2;
   ProcessDriverConfig process;
 };
 

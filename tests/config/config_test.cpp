@@ -587,7 +587,7 @@ TEST(ConfigMqtt, MaxQos) {
 TEST(ConfigErrors, Semantics) {
   expect_error(parse("safety:\n  local_safety_wins: false\n"), "safety.local_safety_wins",
                "invalid_value");
-  expect_error(parse("driver:\n  type: ros2\n"), "driver.type", "invalid_value");
+  expect_error(parse("driver:\n  type: gazebo\n"), "driver.type", "invalid_value");
   expect_error(parse("agent:\n  confidence_gates:\n"
                      "    - {scope: control, min_confidence: 0.5, on_fail: block}\n"
                      "    - {scope: control, min_confidence: 0.7, on_fail: block}\n"),

@@ -1,5 +1,10 @@
-// `driver`: which driver runs the robot (the simulator, or a driver process) and its settings
+// `driver`: which driver runs the robot (the simulator, a ROS 2 robot over DDS, or a driver
+// process) and its settings
 // (docs/CONFIG.md §driver).
+#include <string>
+#include <string_view>
+#include <utility>
+
 #include "config/blocks/blocks.h"
 
 namespace rcan::config::internal {
@@ -46,6 +51,76 @@ Table<ProcessDriverConfig> process_rows() {
   };
 }
 
+bool ros2_name_ok(const std::string& n) {
+  if (n.empty() || n == "/") return false;
+  size_t i = n[0] == '/' ? 1 : 0;
+  bool token_start = true;
+  for (; i < n.size(); ++i) {
+    const char c = n[i];
+    if (c == '/') {
+      if (token_start) return false;  // "//" or a leading "//"
+      token_start = true;
+      continue;
+    }
+    const bool alpha = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || c == '_';
+    const bool digit = c >= '0' && c <= '9';
+    if (!alpha && !digit) return false;
+    if (token_start && digit) return false;
+    token_start = false;
+  }
+  return !token_start;  // no trailing '/'
+}
+
+Table<Ros2DriverConfig> ros2_rows() {
+  using R = Rows<Ros2DriverConfig>;
+  return {
+      R::field("domain_id", Int(0, 232), &Ros2DriverConfig::domain_id),
+      R::field("namespace", Str(256), &Ros2DriverConfig::ns),
+      R::field("cmd_vel_topic", Str(256), &Ros2DriverConfig::cmd_vel_topic),
+      R::field("odom_topic", Str(256), &Ros2DriverConfig::odom_topic),
+      R::field("joint_states_topic", Str(256), &Ros2DriverConfig::joint_states_topic),
+      R::field("arm_topic", Str(256), &Ros2DriverConfig::arm_topic),
+      R::field("arm_joints", Arr(Str(256), 6), &Ros2DriverConfig::arm_joints),
+      R::field("gripper_topic", Str(256), &Ros2DriverConfig::gripper_topic),
+      R::field("gripper_type", Enum({"std_msgs/msg/Float64", "std_msgs/msg/Bool"}),
+               &Ros2DriverConfig::gripper_type),
+      R::field("gripper_open", Num(), &Ros2DriverConfig::gripper_open),
+      R::field("gripper_close", Num(), &Ros2DriverConfig::gripper_close),
+      R::field("cmd_rate_hz", Int(1, 1000), &Ros2DriverConfig::cmd_rate_hz),
+      R::field("odom_timeout_ms", Int(0, 600000), &Ros2DriverConfig::odom_timeout_ms),
+      R::field("stop_repeat_ms", Int(0, 600000), &Ros2DriverConfig::stop_repeat_ms),
+      R::field("max_linear_mps", Pos(), &Ros2DriverConfig::max_linear_mps),
+      R::field("max_angular_radps", Pos(), &Ros2DriverConfig::max_angular_radps),
+      R::field("max_joint_speed_radps", Pos(), &Ros2DriverConfig::max_joint_speed_radps),
+      R::field("joint_min_rad", Arr(Num(), 6), &Ros2DriverConfig::joint_min_rad),
+      R::field("joint_max_rad", Arr(Num(), 6), &Ros2DriverConfig::joint_max_rad),
+      R::check([](const At& ros2, Ros2DriverConfig& r, Ctx&) {
+        if (!r.arm_topic.empty() && r.arm_joints.empty())
+          fail(ros2["arm_joints"].path, "an arm topic needs the arm's joint names",
+               "invalid_value");
+        for (size_t i = 0; i < r.joint_min_rad.size() && i < r.joint_max_rad.size(); ++i)
+          if (!(r.joint_min_rad[i] < r.joint_max_rad[i]))
+            fail(ros2["joint_max_rad"][i].path, "must be above joint_min_rad", "invalid_value");
+        // ROS 2 names: letters, digits, '_' and '/' separators; no empty or digit-led token.
+        const std::pair<const char*, const std::string*> names[] = {
+            {"namespace", &r.ns},          {"cmd_vel_topic", &r.cmd_vel_topic},
+            {"odom_topic", &r.odom_topic}, {"joint_states_topic", &r.joint_states_topic},
+            {"arm_topic", &r.arm_topic},   {"gripper_topic", &r.gripper_topic}};
+        for (const auto& [key, value] : names) {
+          const bool optional = std::string_view(key) == "namespace" ||
+                                std::string_view(key) == "arm_topic" ||
+                                std::string_view(key) == "gripper_topic";
+          if ((value->empty() && optional) || (*value == "/" && key == names[0].first)) continue;
+          if (!ros2_name_ok(*value))
+            fail(ros2[key].path,
+                 "not a ROS 2 name (letters, digits, '_', '/' between tokens, no token starting "
+                 "with a digit)",
+                 "invalid_value");
+        }
+      }),
+  };
+}
+
 }  // namespace
 
 Table<NodeConfig> driver_blocks() {
@@ -53,8 +128,9 @@ Table<NodeConfig> driver_blocks() {
   return {Rows<NodeConfig>::block(
       "driver",
       Table<DriverConfig>{
-          D::field("type", Enum({"sim", "process"}), &DriverConfig::type),
+          D::field("type", Enum({"sim", "ros2", "process"}), &DriverConfig::type),
           D::block("sim", sim_rows(), &DriverConfig::sim),
+          D::block("ros2", ros2_rows(), &DriverConfig::ros2),
           D::block("process", process_rows(), &DriverConfig::process),
           D::check([](const At& at, DriverConfig& d, Ctx&) {
             if (d.type == "process" && d.process.command.empty() && d.process.socket.empty())
