@@ -554,13 +554,17 @@ bool start_robots(Fleet& f) {
   size_t up = 0;
   for (int i = 0; i < 12000; ++i) {  // up to 2 minutes
     up = static_cast<size_t>(std::count_if(f.robots.begin(), f.robots.end(),
-                                           [](const auto& r) { return r->mqtt->connected(); }));
+                                           [](const auto& r) { return r->mqtt->subscribed(); }));
     if (up == f.size()) break;
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   if (up != f.size()) {
-    std::fprintf(stderr, "fleet_bench: only %zu of %zu robots connected to the broker\n", up,
-                 f.size());
+    const size_t connected = static_cast<size_t>(std::count_if(
+        f.robots.begin(), f.robots.end(), [](const auto& r) { return r->mqtt->connected(); }));
+    std::fprintf(stderr,
+                 "fleet_bench: after 2 minutes %zu of %zu robots are connected to the broker and "
+                 "%zu have every subscription granted\n",
+                 connected, f.size(), up);
     return false;
   }
   std::this_thread::sleep_for(std::chrono::milliseconds(500));  // subscriptions settle

@@ -44,6 +44,9 @@ if(NOT RCAN_SANITIZE AND NOT RCAN_TSAN AND NOT RCAN_FUZZ)
           DESTINATION lib/systemd/system)
   install(FILES ${PROJECT_SOURCE_DIR}/examples/sim-robot.rcan.yaml
           DESTINATION ${CMAKE_INSTALL_DOCDIR}/examples)
+  # The reference driver process (docs/DRIVERS.md), where `rcand init --driver process` points.
+  install(PROGRAMS ${PROJECT_SOURCE_DIR}/examples/drivers/serial_diffbase.py
+          DESTINATION ${CMAKE_INSTALL_DATADIR}/rcan/examples/drivers)
   install(FILES ${PROJECT_SOURCE_DIR}/README.md ${PROJECT_SOURCE_DIR}/docs/NODE.md
                 ${PROJECT_SOURCE_DIR}/docs/CONFIG.md ${PROJECT_SOURCE_DIR}/docs/PACKAGING.md
                 ${PROJECT_SOURCE_DIR}/docs/SECURITY.md

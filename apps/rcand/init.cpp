@@ -27,7 +27,8 @@ namespace {
 
 constexpr const char* kInitUsage =
     "usage: rcand init [--dir D] [--name NAME] [--manufacturer M] [--model M] [--type TYPE]\n"
-    "                  [--registry R] [--driver sim] [--port N] [--bind ADDR] [--issuer NAME]\n"
+    "                  [--registry R] [--driver sim|ros2|process] [--port N] [--bind ADDR] "
+    "[--issuer NAME]\n"
     "                  [--config FILE] [--yes]\n"
     "\n"
     "Creates a configured robot in D (default: the data directory rcand uses, $RCAND_DATA_DIR,\n"
@@ -207,7 +208,36 @@ std::string template_yaml(const InitOptions& o, const std::string& ruri,
   y += "  heartbeat_timeout_ms: 2000      # the deadman of a control session\n\n";
   y += "watchdog:\n  enabled: true\n  timeout_s: 10\n\n";
   y += "driver:\n";
-  y += "  type: " + o.driver + "   # the simulated robot (docs/CONFIG.md, `driver`)\n";
+  if (o.driver == "ros2") {
+    y += "  type: ros2   # a ROS 2 robot over DDS, no ROS installation needed (docs/DRIVERS.md)\n";
+    y += "  ros2:\n";
+    y += "    domain_id: 0          # the robot's ROS_DOMAIN_ID\n";
+    y += "    namespace: \"\"         # e.g. /robot1\n";
+    y += "    cmd_vel_topic: cmd_vel            # geometry_msgs/msg/Twist, out\n";
+    y += "    odom_topic: odom                  # nav_msgs/msg/Odometry, in\n";
+    y += "    joint_states_topic: joint_states  # sensor_msgs/msg/JointState, in\n";
+    y += "    cmd_rate_hz: 20       # Twists (and zero Twists while stopped) per second\n";
+    y += "    odom_timeout_ms: 1000 # no odometry this long: a driver fault, the robot stops\n";
+    y += "    max_linear_mps: 0.5   # the base's own limits (safety.* may only lower them)\n";
+    y += "    max_angular_radps: 1.0\n";
+    y += "    # arm_topic: arm_controller/joint_trajectory   # "
+         "trajectory_msgs/msg/JointTrajectory\n";
+    y += "    # arm_joints: [joint1, joint2, joint3, joint4, joint5, joint6]\n";
+    y += "    # Keep DDS off other networks: CYCLONEDDS_URI in the service's environment.\n";
+  } else if (o.driver == "process") {
+    y += "  type: process   # a driver process on a Unix socket, in any language "
+         "(docs/DRIVERS.md)\n";
+    y += "  process:\n";
+    y += "    # The reference driver: a serial differential base (examples/drivers/).\n";
+    y += "    command: [/usr/bin/python3, /usr/share/rcan/examples/drivers/serial_diffbase.py,\n";
+    y += "              --port, /dev/ttyUSB0]\n";
+    y += "    heartbeat_ms: 100\n";
+    y += "    heartbeat_timeout_ms: 500   # silence this long: a driver fault, the robot stops\n";
+    y += "    max_linear_mps: 0.5         # the base's own limits (safety.* may only lower them)\n";
+    y += "    max_angular_radps: 1.0\n";
+  } else {
+    y += "  type: " + o.driver + "   # the simulated robot (docs/CONFIG.md, `driver`)\n";
+  }
   return y;
 }
 
@@ -236,8 +266,8 @@ int init(InitOptions o) {
   const bool have_yaml = fs::exists(yaml_path);
   if (!have_yaml) {
     ask(o);
-    if (o.driver != "sim") {
-      std::fprintf(stderr, "rcand init: --driver %s: this build drives only `sim`\n",
+    if (o.driver != "sim" && o.driver != "ros2" && o.driver != "process") {
+      std::fprintf(stderr, "rcand init: --driver is sim, ros2 or process (not %s)\n",
                    o.driver.c_str());
       return 2;
     }

@@ -13,6 +13,7 @@
 #include <map>
 #include <string>
 
+#include "config/config.h"
 #include "rcan/hash.h"
 #include "rcan/json.h"
 #include "test_support.h"
@@ -152,6 +153,26 @@ TEST_F(InitTest, AConfiguredRobotWithoutItsIdentitySaysToRunInit) {
   ASSERT_EQ(again.exit_code, 0) << again.out << again.err;
   EXPECT_TRUE(fs::exists(dir_ + "/keys/mldsa65.seed"));
   for (const auto& [path, h] : before) EXPECT_EQ(hashes(dir_)[path], h) << path;
+}
+
+// --driver ros2 / process: the template is a valid configuration of that driver, commented.
+TEST_F(InitTest, RosAndProcessDriverTemplatesAreValidConfigurations) {
+  for (const char* driver : {"ros2", "process"}) {
+    test::TempDir tmp;
+    const std::string dir = tmp.file("robot");
+    auto r = run({RCAND_PATH, "init", "--dir", dir, "--yes", "--driver", driver});
+    ASSERT_EQ(r.exit_code, 0) << driver << ": " << r.out << r.err;
+    auto cfg = config::load_config(dir + "/robot.rcan.yaml");
+    ASSERT_TRUE(cfg.ok()) << driver << ": " << cfg.error().field << ": " << cfg.error().message;
+    EXPECT_EQ(cfg->driver.type, driver);
+    if (std::string(driver) == "ros2") {
+      EXPECT_EQ(cfg->driver.ros2.cmd_vel_topic, "cmd_vel");
+      EXPECT_EQ(cfg->driver.ros2.odom_timeout_ms, 1000u);
+    } else {
+      ASSERT_FALSE(cfg->driver.process.command.empty());
+      EXPECT_NE(cfg->driver.process.command.back(), "");
+    }
+  }
 }
 
 TEST_F(InitTest, BadArgumentsAreRefusedWithUsageAndNothingIsWritten) {

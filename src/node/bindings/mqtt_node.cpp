@@ -173,6 +173,8 @@ Status MqttNode::start() {
   return Status::Ok();
 }
 
+bool MqttNode::subscribed() const { return client_ && client_->all_subscribed(); }
+
 // What a reader of the broker's traffic could do with this configuration, said once at start.
 void MqttNode::warn_about_exposure() const {
   const auto& mq = opts_.mqtt;

@@ -66,6 +66,8 @@ class MqttNode {
   void stop() EXCLUDES(loop_mu_);
 
   bool connected() const;
+  // Connected and every subscription granted (the fleet channel is up).
+  bool subscribed() const;
   const mqtt::RobotTopics& robot() const { return robot_; }
   // The topics the robot publishes its status, telemetry, events and audit on: its fleet
   // member topics when it is in a fleet, else its RURI topics.
