@@ -132,7 +132,10 @@ TEST(ProcessDriverE2E, AKilledDriverSafeStopsIsAuditedAndRecovers) {
   auto core_status = [&] { return *status(node, owner).get("robot"); };
   EXPECT_TRUE(eventually(
       [&] {
-        const json::Value* x = core_status().get("robot")->get("base")->get("x");
+        const json::Value st = core_status();  // x points into it: keep it alive
+        const json::Value* robot = st.get("robot");
+        const json::Value* base = robot ? robot->get("base") : nullptr;
+        const json::Value* x = base ? base->get("x") : nullptr;
         return x && std::abs(x->to_double() - 0.25) < 1e-6;
       },
       3000))
