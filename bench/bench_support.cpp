@@ -115,6 +115,21 @@ int count_fds(pid_t pid) {
   return n;
 }
 
+std::string thread_names(pid_t pid) {
+  std::vector<std::string> names;
+  std::error_code ec;
+  for (fs::directory_iterator it("/proc/" + std::to_string(pid) + "/task", ec), end;
+       !ec && it != end; it.increment(ec)) {
+    std::ifstream f(it->path() / "comm");
+    std::string name;
+    if (std::getline(f, name)) names.push_back(name);
+  }
+  std::sort(names.begin(), names.end());
+  std::string out;
+  for (const auto& n : names) out += (out.empty() ? "" : " ") + n;
+  return out;
+}
+
 uint64_t dir_bytes(const std::string& dir) {
   std::error_code ec;
   uint64_t total = 0;

@@ -41,6 +41,9 @@ ProcStat proc_stat(pid_t pid);
 // Open file descriptors of a process (entries of /proc/<pid>/fd), -1 when unreadable.
 int count_fds(pid_t pid);
 
+// The names of a process's threads (/proc/<pid>/task/*/comm), sorted, joined by spaces.
+std::string thread_names(pid_t pid);
+
 // Bytes in the regular files under `dir` (recursively), 0 when it does not exist.
 uint64_t dir_bytes(const std::string& dir);
 

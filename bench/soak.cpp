@@ -642,6 +642,7 @@ struct Soak {
   Ctx ctx;
   ProcStat idle0;
   int idle_fds0 = 0;
+  std::string idle_threads0;  // thread names before the load
   uint64_t audit0 = 0;
 };
 
@@ -775,6 +776,7 @@ bool restart_configured(Soak& s) {
   settle(s.pid);
   s.idle0 = proc_stat(s.pid);
   s.idle_fds0 = count_fds(s.pid);
+  s.idle_threads0 = thread_names(s.pid);
   s.audit0 = dir_data_bytes(node.dir + "/audit");
   return true;
 }
@@ -998,7 +1000,11 @@ void judge_idle_and_audit(const Soak& s, Verdicts& v) {
                 idle_fds1, idle_fds0, idle1.threads, idle0.threads,
                 static_cast<double>(idle1.rss_kb) / 1024.0,
                 static_cast<double>(idle0.rss_kb) / 1024.0);
-  v.judge(idle_fds1 == idle_fds0 && idle1.threads == idle0.threads, line);
+  std::string what = line;
+  if (idle1.threads != idle0.threads)  // say which thread came or went
+    what += "\n      threads before: " + s.idle_threads0 + "\n      threads after:  " +
+            thread_names(pid);
+  v.judge(idle_fds1 == idle_fds0 && idle1.threads == idle0.threads, what);
   const uint64_t audit1 = dir_data_bytes(s.node.dir + "/audit");
   std::snprintf(line, sizeof line, "audit grows: %.1f MB → %.1f MB",
                 static_cast<double>(s.audit0) / 1048576.0, static_cast<double>(audit1) / 1048576.0);

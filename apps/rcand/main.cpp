@@ -22,9 +22,11 @@
 // hands freed pages back to the system once they have been unused for the decay time, also
 // while the node is idle. Without it, memory a burst freed stays resident until the next
 // allocations (the start-up scan of the audit segment alone reads 4 MiB at a time).
+// One such thread serves every arena: by default jemalloc starts one more each time
+// another arena is first used, so the node's thread count grew under load and stayed.
 // Ignored where rcand runs on the C library's malloc.
 extern "C" {
-const char* malloc_conf = "background_thread:true";
+const char* malloc_conf = "background_thread:true,max_background_threads:1";
 }
 
 using namespace rcan;
