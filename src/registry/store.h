@@ -43,7 +43,7 @@ struct Robot {
 // registered_at/updated_at (= now) and deleted.
 struct NewRobot {
   std::string manufacturer, model, version, device_id;  // already slugged by the caller
-  std::string rcan_uri_base;  // "rcan://<registry-host>"
+  std::string rcan_uri_base;                            // "rcan://<registry-host>"
   std::string description, contact_email, source;
   std::string metadata_json = "{}";
   std::string ed25519_pub, mldsa65_pub;
@@ -137,8 +137,7 @@ class Store {
   virtual Result<std::optional<Robot>> find_robot_by_uri(std::string_view rcan_uri) = 0;
   virtual Result<RobotPage> list_robots(const RobotQuery& q) = 0;
   // The updated robot, or nullopt when no live robot has that RRN.
-  virtual Result<std::optional<Robot>> update_robot(std::string_view rrn,
-                                                    const RobotUpdate& u) = 0;
+  virtual Result<std::optional<Robot>> update_robot(std::string_view rrn, const RobotUpdate& u) = 0;
   // Soft delete; false when no live robot has that RRN.
   virtual Result<bool> delete_robot(std::string_view rrn, std::string_view now) = 0;
   // For federation sync: robots (deleted ones too) with updated_at > since, oldest first.

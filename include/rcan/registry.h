@@ -1,0 +1,31 @@
+// The registry's vocabulary, shared by rcan-registry, rcand and the CLI (docs/REGISTRY.md):
+// RRNs, the slugs that name a robot, and the bytes a robot signs to prove it holds its keys.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <string_view>
+
+namespace rcan::registry {
+
+// The slug of a name, as the rcan.dev registry makes it: lower case; every character outside
+// [a-z0-9-] becomes '-'; runs of '-' collapse to one; at most 64 characters. May be empty.
+std::string slugify(std::string_view s);
+
+// An RRN: "RRN-" + 8..16 digits (root), or "RRN-<PREFIX>-" + 8..16 digits with PREFIX
+// [A-Z0-9]{2,8} (a delegated namespace). Letters compare case-insensitively.
+bool is_rrn(std::string_view s);
+// The upper-case RRN, or nullopt when `s` is not one.
+std::optional<std::string> normalize_rrn(std::string_view s);
+// The delegated prefix of an RRN ("BD" of RRN-BD-000000000001), empty for a root RRN.
+std::string rrn_prefix(std::string_view rrn);
+
+// What a robot signs, with both its Ed25519 and its ML-DSA-65 key, to register them:
+//   "rcan-registry-pop:<challenge_id>:<nonce>:<manufacturer>/<model>/<version>/<device_id>"
+// with the four slugs. The challenge comes from the registry (GET /api/v1/challenge) and is
+// used once, so a proof cannot be replayed or moved to another robot.
+std::string proof_message(std::string_view challenge_id, std::string_view nonce,
+                          std::string_view manufacturer, std::string_view model,
+                          std::string_view version, std::string_view device_id);
+
+}  // namespace rcan::registry

@@ -1,0 +1,85 @@
+// The registry's shared vocabulary (include/rcan/registry.h) and its proof of possession
+// (include/rcan/crypto/registry_proof.h).
+#include <gtest/gtest.h>
+
+#include "rcan/crypto/registry_proof.h"
+#include "rcan/encoding.h"
+#include "rcan/registry.h"
+
+namespace rcan::registry {
+namespace {
+
+TEST(RegistrySlug, FollowsTheReferenceRegistry) {
+  EXPECT_EQ(slugify("Acme Robotics"), "acme-robotics");
+  EXPECT_EQ(slugify("RobotArm_v2"), "robotarm-v2");
+  EXPECT_EQ(slugify("a--b"), "a-b");
+  EXPECT_EQ(slugify("'; DROP TABLE robots;--"), "-drop-table-robots-");
+  EXPECT_EQ(slugify("\xc3\xa9t\xc3\xa9"), "-t-");  // each UTF-8 character becomes one '-'
+  EXPECT_EQ(slugify(std::string(100, 'x')).size(), 64u);
+  EXPECT_EQ(slugify(""), "");
+}
+
+TEST(RegistryRrn, RootAndDelegatedFormsAreRecognised) {
+  EXPECT_TRUE(is_rrn("RRN-000000000042"));
+  EXPECT_TRUE(is_rrn("rrn-00000042"));
+  EXPECT_TRUE(is_rrn("RRN-BD-000000000001"));
+  EXPECT_TRUE(is_rrn("RRN-ACME1234-0000000000000001"));
+  EXPECT_FALSE(is_rrn("RRN-0000042"));                 // 7 digits
+  EXPECT_FALSE(is_rrn("RRN-00000000000000001"));       // 17 digits
+  EXPECT_FALSE(is_rrn("RRN-B-000000000001"));          // 1-character prefix
+  EXPECT_FALSE(is_rrn("RRN-ABCDEFGHI-000000000001"));  // 9-character prefix
+  EXPECT_FALSE(is_rrn("RRN-B_-000000000001"));
+  EXPECT_FALSE(is_rrn("RRN-BD-0000000x0001"));
+  EXPECT_FALSE(is_rrn("XRN-000000000042"));
+  EXPECT_FALSE(is_rrn(""));
+  EXPECT_EQ(normalize_rrn("rrn-bd-000000000001").value_or(""), "RRN-BD-000000000001");
+  EXPECT_FALSE(normalize_rrn("RRN-1").has_value());
+  EXPECT_EQ(rrn_prefix("rrn-bd-000000000001"), "BD");
+  EXPECT_EQ(rrn_prefix("RRN-000000000001"), "");
+}
+
+TEST(RegistryProof, BothSignaturesVerifyAndAnyChangeIsRefused) {
+  auto k = keys::generate();
+  ASSERT_TRUE(k.ok()) << k.error().message;
+  const std::string ed = base64url_encode(k->pub.ed25519_pk);
+  const std::string ml = base64url_encode(k->pub.mldsa65_pk);
+  const std::string msg = proof_message("c1", "n1", "acme", "arm", "v2", "unit-1");
+  EXPECT_EQ(msg, "rcan-registry-pop:c1:n1:acme/arm/v2/unit-1");
+  auto p = sign_proof(*k, "c1", msg);
+  ASSERT_TRUE(p.ok()) << p.error().message;
+  EXPECT_TRUE(verify_proof(ed, ml, msg, *p).ok());
+
+  // Through JSON and back.
+  auto back = Proof::from_json(p->to_json());
+  ASSERT_TRUE(back.ok());
+  EXPECT_TRUE(verify_proof(ed, ml, msg, *back).ok());
+
+  // Another robot's message, another key, a tampered signature, garbage.
+  const std::string other = proof_message("c1", "n1", "acme", "arm", "v2", "unit-2");
+  auto s = verify_proof(ed, ml, other, *p);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.error().field, "proof.ed25519_sig");
+  auto k2 = keys::generate();
+  ASSERT_TRUE(k2.ok());
+  s = verify_proof(ed, base64url_encode(k2->pub.mldsa65_pk), msg, *p);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.error().field, "proof.mldsa65_sig");
+  Proof t = *p;
+  t.mldsa65_sig[10] = t.mldsa65_sig[10] == 'A' ? 'B' : 'A';
+  EXPECT_FALSE(verify_proof(ed, ml, msg, t).ok());
+  t = *p;
+  t.ed25519_sig = "not base64url!";
+  EXPECT_FALSE(verify_proof(ed, ml, msg, t).ok());
+  EXPECT_EQ(verify_proof("AAAA", ml, msg, *p).error().field, "ed25519_public_key");
+  EXPECT_EQ(verify_proof(ed, "", msg, *p).error().field, "mldsa65_public_key");
+
+  EXPECT_FALSE(Proof::from_json(json::Value("x")).ok());
+  json::Object partial;
+  partial.set("challenge_id", "c1");
+  auto e = Proof::from_json(json::Value(std::move(partial)));
+  ASSERT_FALSE(e.ok());
+  EXPECT_EQ(e.error().field, "proof.ed25519_sig");
+}
+
+}  // namespace
+}  // namespace rcan::registry
