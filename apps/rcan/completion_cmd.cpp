@@ -61,6 +61,12 @@ const std::map<std::string, std::pair<std::string, std::string>>& table() {
         "--broker --token --key-dir --prefix --ca-file --username --password-file --timeout-ms "
         "--members --reason --params --wait-complete --no-wait --qos --out --db --secrets-dir "
         "--duration-ms --fleet --help"}},
+      {"registry",
+       {"register get list search update delete resolve nodes manifest keys",
+        "--registry --key-file --manufacturer --model --version --device-id --description "
+        "--contact-email --endpoint --keys-dir --save-key --q --tier --limit --offset --prefix "
+        "--role --label --save --help"}},
+      {"resolve", {"", "--registry --json --help"}},
       {"ruri", {"parse", "--help"}},
       {"json", {"canonical", "--help"}},
       {"message", {"check send", std::string("--max-bytes ") + kNet}},

@@ -1,0 +1,365 @@
+// rcan registry … and rcan resolve — a client of rcan-registry (docs/REGISTRY.md) and of any
+// registry that speaks the rcan.dev API. The registry's URL comes from --registry or
+// $RCAN_REGISTRY; write operations present the API key in --key-file or $RCAN_REGISTRY_KEY_FILE.
+#include <sys/stat.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <iostream>
+
+#include "cli.h"
+#include "node_http.h"
+#include "rcan/crypto/keys.h"
+#include "rcan/crypto/registry_proof.h"
+#include "rcan/encoding.h"
+#include "rcan/json.h"
+#include "rcan/registry.h"
+#include "rcan/ruri.h"
+
+namespace rcan::cli {
+namespace {
+
+constexpr const char* kUsage =
+    "usage: rcan registry <command> [--registry URL] [--key-file F] …\n"
+    "  register --manufacturer M --model X --version V --device-id D [--description T]\n"
+    "           [--contact-email E] [--endpoint URL] [--keys-dir D] [--save-key F]\n"
+    "      Registers a robot and prints its RRN. --keys-dir proves that the robot holds the\n"
+    "      identity keys in D (rcan keys generate; rcand's <data-dir>/keys): both keys sign\n"
+    "      the registry's challenge and the registry records them. --save-key writes the\n"
+    "      robot's own API key (shown once) to F with mode 0600.\n"
+    "  get RRN | resolve RRN | delete RRN\n"
+    "  list [--q TEXT] [--manufacturer M] [--model X] [--tier T] [--limit N] [--offset N]\n"
+    "  search [--manufacturer M] [--model X] [--tier T]\n"
+    "  update RRN [--description T] [--contact-email E] [--endpoint URL]\n"
+    "  nodes [--prefix P] | manifest\n"
+    "  keys create [--role registrant|admin] [--label L] [--save F] | keys list | keys revoke ID\n"
+    "The registry: --registry URL, else $RCAN_REGISTRY, else http://127.0.0.1:8090. The API\n"
+    "key: --key-file F, else $RCAN_REGISTRY_KEY_FILE (rcan-registry writes its admin key to\n"
+    "<data-dir>/admin.key). Exit: 0 success, 1 refused by the registry, 2 usage, 3 unreachable.\n";
+
+constexpr const char* kResolveUsage =
+    "usage: rcan resolve RRN|RURI [--registry URL] [--json]\n"
+    "  Asks the registry where a robot answers and which keys it proved it holds. A RURI\n"
+    "  (rcan://<registry-host>/<manufacturer>/<model>/<version>/<device-id>) is asked of\n"
+    "  --registry, else $RCAN_REGISTRY, else https://<registry-host>.\n"
+    "  Exit: 0 found, 1 not found or refused, 2 usage, 3 unreachable.\n";
+
+const std::vector<std::string> kValued = {
+    "registry",      "key-file", "manufacturer", "model",    "version", "device-id", "description",
+    "contact-email", "endpoint", "keys-dir",     "save-key", "q",       "tier",      "limit",
+    "offset",        "prefix",   "role",         "label",    "save"};
+
+std::string registry_url(const Options& o, const std::string& fallback = {}) {
+  std::string u = o.get("registry");
+  if (u.empty())
+    if (const char* env = std::getenv("RCAN_REGISTRY")) u = env;
+  if (u.empty()) u = fallback.empty() ? "http://127.0.0.1:8090" : fallback;
+  while (!u.empty() && u.back() == '/') u.pop_back();
+  return u;
+}
+
+// The API key, or empty (then `err` says why when required).
+std::string api_key(const Options& o, bool required, std::string& err) {
+  std::string file = o.get("key-file");
+  if (file.empty())
+    if (const char* env = std::getenv("RCAN_REGISTRY_KEY_FILE")) file = env;
+  if (file.empty()) {
+    if (required) err = "an API key is required: --key-file F or RCAN_REGISTRY_KEY_FILE";
+    return {};
+  }
+  auto t = read_file(file);
+  if (!t.ok()) {
+    err = t.error().message;
+    return {};
+  }
+  std::string s = *t;
+  while (!s.empty() && (s.back() == '\n' || s.back() == '\r' || s.back() == ' ')) s.pop_back();
+  return s;
+}
+
+// Percent-encodes a query value.
+std::string q_escape(const std::string& s) {
+  static const char* hex = "0123456789ABCDEF";
+  std::string out;
+  for (unsigned char c : s) {
+    if (std::isalnum(c) || c == '-' || c == '_' || c == '.' || c == '~') {
+      out.push_back(static_cast<char>(c));
+    } else {
+      out.push_back('%');
+      out.push_back(hex[c >> 4]);
+      out.push_back(hex[c & 15]);
+    }
+  }
+  return out;
+}
+
+std::string query(const Options& o, const std::vector<std::string>& names) {
+  std::string q;
+  for (const auto& n : names) {
+    if (!o.has(n)) continue;
+    q += (q.empty() ? "?" : "&") + n + "=" + q_escape(o.get(n));
+  }
+  return q;
+}
+
+struct Answer {
+  int exit = 0;  // 0 2xx, 1 refused, 3 unreachable
+  int status = 0;
+  json::Value body;
+  std::string text;
+};
+
+Answer call(const std::string& base, const std::string& method, const std::string& path,
+            const std::string& body, const std::string& key) {
+  Answer a;
+  auto r = node_request(base, method, path, body, key);
+  if (!r.ok()) {
+    a.exit = 3;
+    a.text = r.error().message;
+    const std::string hint = " (is rcand running?)";  // the client library's, about nodes
+    if (a.text.size() > hint.size() && a.text.ends_with(hint))
+      a.text.resize(a.text.size() - hint.size());
+    return a;
+  }
+  a.status = r->first;
+  a.text = r->second;
+  auto parsed = json::parse(r->second);
+  if (parsed.ok()) a.body = std::move(*parsed);
+  a.exit = a.status >= 200 && a.status < 300 ? 0 : 1;
+  return a;
+}
+
+int report(const std::string& verb, const Answer& a) {
+  if (a.exit == 3) {
+    std::fprintf(stderr, "rcan %s: registry unreachable: %s\n", verb.c_str(), a.text.c_str());
+    return 3;
+  }
+  std::cout << a.text << (a.text.empty() || a.text.back() != '\n' ? "\n" : "");
+  if (a.exit != 0)
+    std::fprintf(stderr, "rcan %s: the registry answered %d\n", verb.c_str(), a.status);
+  return a.exit;
+}
+
+// Writes a secret the registry showed once to a new file with mode 0600.
+bool save_secret(const std::string& path, const std::string& secret) {
+  std::string line = secret + "\n";
+  Status s = keys::write_new_file(
+      path, std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(line.data()), line.size()),
+      0600);
+  if (!s.ok()) {
+    std::fprintf(stderr, "rcan registry: cannot save the key to %s: %s\n", path.c_str(),
+                 s.error().message.c_str());
+    return false;
+  }
+  return true;
+}
+
+int do_register(const Options& o, const std::string& base, const std::string& key) {
+  json::Object body;
+  std::string slugs[4];
+  const char* names[4] = {"manufacturer", "model", "version", "device-id"};
+  for (int i = 0; i < 4; ++i) {
+    slugs[i] = registry::slugify(o.get(names[i]));
+    if (slugs[i].empty() || slugs[i] == "-")
+      return usage_error("registry", std::string("register needs --") + names[i]);
+  }
+  body.set("manufacturer", slugs[0]);
+  body.set("model", slugs[1]);
+  body.set("version", slugs[2]);
+  body.set("device_id", slugs[3]);
+  for (const char* f : {"description", "contact-email"}) {
+    if (!o.has(f)) continue;
+    std::string name = f;
+    for (char& c : name)
+      if (c == '-') c = '_';
+    body.set(name, o.get(f));
+  }
+  if (o.has("endpoint")) body.set("endpoints", json::Array{json::Value(o.get("endpoint"))});
+  if (o.has("keys-dir")) {
+    auto k = keys::load_dir(o.get("keys-dir"));
+    if (!k.ok()) {
+      std::fprintf(stderr, "rcan registry: %s\n", k.error().message.c_str());
+      return 1;
+    }
+    Answer ch = call(base, "GET", "/api/v1/challenge", "", key);
+    if (ch.exit != 0) return report("registry", ch);
+    const json::Value* id = ch.body.get("challenge_id");
+    const json::Value* nonce = ch.body.get("nonce");
+    if (id == nullptr || nonce == nullptr || !id->is_string() || !nonce->is_string()) {
+      std::fprintf(stderr, "rcan registry: the registry's challenge is malformed: %s\n",
+                   ch.text.c_str());
+      return 1;
+    }
+    auto proof =
+        registry::sign_proof(*k, id->as_string(),
+                             registry::proof_message(id->as_string(), nonce->as_string(), slugs[0],
+                                                     slugs[1], slugs[2], slugs[3]));
+    if (!proof.ok()) {
+      std::fprintf(stderr, "rcan registry: %s\n", proof.error().message.c_str());
+      return 1;
+    }
+    body.set("ed25519_public_key", base64url_encode(k->pub.ed25519_pk));
+    body.set("mldsa65_public_key", base64url_encode(k->pub.mldsa65_pk));
+    body.set("proof", proof->to_json());
+  }
+  Answer a = call(base, "POST", "/api/v1/robots", json::dump(json::Value(std::move(body))), key);
+  int rc = report("registry", a);
+  if (rc == 0 && o.has("save-key")) {
+    const json::Value* robot_key = a.body.get("api_key");
+    if (robot_key == nullptr || !robot_key->is_string()) {
+      std::fprintf(stderr, "rcan registry: no robot key in the answer (already registered?)\n");
+      return 1;
+    }
+    if (!save_secret(o.get("save-key"), robot_key->as_string())) return 1;
+  }
+  return rc;
+}
+
+int do_update(const Options& o, const std::string& base, const std::string& key,
+              const std::string& rrn) {
+  json::Object body;
+  if (o.has("description")) body.set("description", o.get("description"));
+  if (o.has("contact-email")) body.set("contact_email", o.get("contact-email"));
+  if (o.has("endpoint")) body.set("endpoints", json::Array{json::Value(o.get("endpoint"))});
+  if (body.empty())
+    return usage_error("registry", "update needs --description, --contact-email or --endpoint");
+  return report("registry", call(base, "PATCH", "/api/v1/robots/" + rrn,
+                                 json::dump(json::Value(std::move(body))), key));
+}
+
+int do_keys(const Options& o, const std::string& base, const std::string& key) {
+  const auto& pos = o.positional();
+  const std::string sub = pos.size() > 1 ? pos[1] : "";
+  if (sub == "list") return report("registry", call(base, "GET", "/api/v1/keys", "", key));
+  if (sub == "revoke") {
+    if (pos.size() < 3) return usage_error("registry", "keys revoke needs the key id");
+    return report("registry", call(base, "DELETE", "/api/v1/keys/" + q_escape(pos[2]), "", key));
+  }
+  if (sub != "create") return usage_error("registry", "keys create|list|revoke ID");
+  json::Object body;
+  body.set("role", o.get("role", "registrant"));
+  if (o.has("label")) body.set("label", o.get("label"));
+  Answer a = call(base, "POST", "/api/v1/keys", json::dump(json::Value(std::move(body))), key);
+  int rc = report("registry", a);
+  if (rc == 0 && o.has("save")) {
+    const json::Value* k = a.body.get("api_key");
+    if (k == nullptr || !k->is_string()) {
+      std::fprintf(stderr, "rcan registry: no key in the answer\n");
+      return 1;
+    }
+    if (!save_secret(o.get("save"), k->as_string())) return 1;
+  }
+  return rc;
+}
+
+int registry_main(const Args& args) {
+  if (args.empty() || args[0] == "--help" || args[0] == "-h") {
+    std::fputs(kUsage, args.empty() ? stderr : stdout);
+    return args.empty() ? 2 : 0;
+  }
+  Options o(args, {}, kValued);
+  if (!o.ok()) return usage_error("registry", o.error());
+  const auto& pos = o.positional();
+  if (pos.empty()) return usage_error("registry", "which command? (rcan registry --help)");
+  const std::string& sub = pos[0];
+  const std::string base = registry_url(o);
+  const bool writes = sub == "register" || sub == "update" || sub == "delete" || sub == "keys";
+  std::string err;
+  const std::string key = api_key(o, writes, err);
+  if (!err.empty()) return usage_error("registry", err);
+
+  auto rrn_arg = [&](std::string& out) {
+    if (pos.size() < 2) return false;
+    auto n = registry::normalize_rrn(pos[1]);
+    if (!n) return false;
+    out = *n;
+    return true;
+  };
+  std::string rrn;
+  if (sub == "register") return do_register(o, base, key);
+  if (sub == "keys") return do_keys(o, base, key);
+  if (sub == "list")
+    return report(
+        "registry",
+        call(base, "GET",
+             "/api/v1/robots" + query(o, {"q", "manufacturer", "model", "tier", "limit", "offset"}),
+             "", key));
+  if (sub == "search")
+    return report(
+        "registry",
+        call(base, "GET", "/api/v1/robots/search" + query(o, {"manufacturer", "model", "tier"}), "",
+             key));
+  if (sub == "nodes")
+    return report("registry", call(base, "GET", "/api/v1/nodes" + query(o, {"prefix"}), "", key));
+  if (sub == "manifest")
+    return report("registry", call(base, "GET", "/.well-known/rcan-node.json", "", key));
+  if (sub == "get" || sub == "resolve" || sub == "delete" || sub == "update") {
+    if (!rrn_arg(rrn))
+      return usage_error("registry", sub + " needs an RRN (RRN-000000000001, RRN-BD-…)");
+    if (sub == "get")
+      return report("registry", call(base, "GET", "/api/v1/robots/" + rrn, "", key));
+    if (sub == "resolve")
+      return report("registry", call(base, "GET", "/api/v1/resolve/" + rrn, "", key));
+    if (sub == "delete")
+      return report("registry", call(base, "DELETE", "/api/v1/robots/" + rrn, "", key));
+    return do_update(o, base, key, rrn);
+  }
+  return usage_error("registry", "unknown command '" + sub + "' (rcan registry --help)");
+}
+
+// Prints where a resolved robot answers and its keys, one per line.
+void print_resolved(const json::Value& v) {
+  auto str = [&](const char* k) {
+    const json::Value* m = v.get(k);
+    return m != nullptr && m->is_string() ? m->as_string() : std::string();
+  };
+  std::cout << "rrn: " << str("rrn") << "\n";
+  std::string uri = str("rcan_uri");
+  if (uri.empty()) uri = str("uri");
+  std::cout << "ruri: " << uri << "\n";
+  if (const json::Value* eps = v.get("endpoints"); eps != nullptr && eps->is_array()) {
+    for (const auto& e : eps->as_array()) {
+      if (e.is_string()) std::cout << "endpoint: " << e.as_string() << "\n";
+      if (const json::Value* u = e.get("url"); u != nullptr && u->is_string())
+        std::cout << "endpoint: " << u->as_string() << "\n";
+    }
+  }
+  const json::Value* keys = v.get("keys");
+  auto key = [&](const char* name) {
+    const json::Value* k = keys != nullptr ? keys->get(name) : v.get(name);
+    return k != nullptr && k->is_string() ? k->as_string() : std::string();
+  };
+  for (const char* k : {"ed25519_public_key", "mldsa65_public_key"})
+    if (!key(k).empty()) std::cout << k << ": " << key(k) << "\n";
+}
+
+int resolve_main(const Args& args) {
+  if (args.empty() || args[0] == "--help" || args[0] == "-h") {
+    std::fputs(kResolveUsage, args.empty() ? stderr : stdout);
+    return args.empty() ? 2 : 0;
+  }
+  Options o(args, {"json"}, {"registry"});
+  if (!o.ok()) return usage_error("resolve", o.error());
+  if (o.positional().size() != 1) return usage_error("resolve", "one RRN or RURI");
+  const std::string& what = o.positional()[0];
+  Answer a;
+  if (auto rrn = registry::normalize_rrn(what)) {
+    a = call(registry_url(o), "GET", "/api/v1/resolve/" + *rrn, "", "");
+  } else {
+    auto r = parse_ruri(what);
+    if (!r.ok()) return usage_error("resolve", "not an RRN or a RURI: " + r.error().message);
+    a = call(registry_url(o, "https://" + r->registry), "GET",
+             "/api/v1/resolve?uri=" + q_escape(what), "", "");
+  }
+  if (a.exit != 0 || o.has("json")) return report("resolve", a);
+  print_resolved(a.body);
+  return 0;
+}
+
+const Registration kReg{"registry", "register, find and manage robots in an RCAN registry",
+                        &registry_main};
+const Registration kResolveReg{"resolve", "where a robot (RRN or RURI) answers, and its keys",
+                               &resolve_main};
+
+}  // namespace
+}  // namespace rcan::cli
