@@ -12,13 +12,9 @@ namespace rcan::registry {
 // [a-z0-9-] becomes '-'; runs of '-' collapse to one; at most 64 characters. May be empty.
 std::string slugify(std::string_view s);
 
-// An RRN: "RRN-" + 8..16 digits (root), or "RRN-<PREFIX>-" + 8..16 digits with PREFIX
-// [A-Z0-9]{2,8} (a delegated namespace). Letters compare case-insensitively.
-bool is_rrn(std::string_view s);
-// The upper-case RRN, or nullopt when `s` is not one.
+// The canonical RRN (upper case, the number zero-padded to 12 digits: parse_rrn in
+// rcan/ruri.h) of `s`, which may be in any letter case; nullopt when `s` is not an RRN.
 std::optional<std::string> normalize_rrn(std::string_view s);
-// The delegated prefix of an RRN ("BD" of RRN-BD-000000000001), empty for a root RRN.
-std::string rrn_prefix(std::string_view rrn);
 
 // What a robot signs, with both its Ed25519 and its ML-DSA-65 key, to register them:
 //   "rcan-registry-pop:<challenge_id>:<nonce>:<manufacturer>/<model>/<version>/<device_id>"
