@@ -32,8 +32,9 @@ Error describe(const client::net::ExchangeFailure& f, const HttpUrl& url, int ti
       return fail("answer too large");
     case FailedAt::kChunked:
       return fail("chunked answers are not supported");
+    case FailedAt::kTls:
+      return fail("TLS with " + where + " failed" + (f.timed_out ? " (timed out)" : ""));
     case FailedAt::kNone:
-    case FailedAt::kTls:  // http:// only: no TLS here
     case FailedAt::kMalformed:
       break;
   }
@@ -76,6 +77,18 @@ Result<HttpUrl> parse_http_url(std::string_view url) {
   return u;
 }
 
+Result<HttpUrl> parse_web_url(std::string_view url) {
+  constexpr std::string_view kTls = "https://";
+  if (url.substr(0, kTls.size()) != kTls) return parse_http_url(url);
+  std::string plain = "http://" + std::string(url.substr(kTls.size()));
+  auto u = parse_http_url(plain);
+  if (!u.ok()) return u.error();
+  std::string_view rest = url.substr(kTls.size());
+  if (rest.substr(0, rest.find('/')).find(':') == std::string_view::npos) u->port = 443;
+  u->tls = true;
+  return u;
+}
+
 int parse_status_line(std::string_view line) {
   if (line.size() < 12 || line.substr(0, 7) != "HTTP/1." || line[8] != ' ') return 0;
   int code = 0;
@@ -96,11 +109,27 @@ Result<HttpAnswer> http_request(std::string_view method, std::string_view url,
 
 Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std::string_view body,
                                 int timeout_ms, size_t max_body) {
+  HttpRequestOptions o;
+  o.max_body = max_body;
+  return http_request(method, url, body, timeout_ms, o);
+}
+
+Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std::string_view body,
+                                int timeout_ms, const HttpRequestOptions& o) {
+  auto clean = [](const std::string& v) {
+    return v.find_first_of(std::string_view("\r\n\0", 3)) == std::string::npos;
+  };
   std::string port = std::to_string(url.port);
   std::string req = std::string(method) + " " + url.path + " HTTP/1.1\r\nHost: " + url.host + ":" +
                     port +
                     "\r\nAccept: application/json\r\nConnection: close\r\nUser-Agent: rcand\r\n";
-  if (!body.empty() || method == "POST")
+  for (const auto& [name, value] : o.headers) {
+    if (name.empty() || !clean(name) || !clean(value) || name.find(':') != std::string::npos)
+      return Error(ErrorCode::kSchemaValidationFailed, "a request header holds CR, LF or NUL",
+                   "headers");
+    req += name + ": " + value + "\r\n";
+  }
+  if (!body.empty() || method == "POST" || method == "PATCH")
     req +=
         "Content-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) + "\r\n";
   req += "\r\n";
@@ -108,10 +137,12 @@ Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std
   client::Endpoint ep;
   ep.host = url.host;
   ep.port = url.port;
+  ep.tls = url.tls;
   client::net::ExchangeOptions opts;
   opts.timeout_ms = timeout_ms;
-  opts.max_body = max_body;
+  opts.max_body = o.max_body;
   opts.refuse_chunked = true;
+  opts.ca_file = o.ca_file;
   client::net::ExchangeFailure failure;
   auto r = client::net::exchange(ep, req, opts, &failure);
   if (!r.ok()) return describe(failure, url, timeout_ms);

@@ -10,6 +10,8 @@
 #include <cstdint>
 #include <string>
 #include <string_view>
+#include <utility>
+#include <vector>
 
 #include "rcan/result.h"
 
@@ -19,10 +21,15 @@ struct HttpUrl {
   std::string host;
   uint16_t port = 80;
   std::string path = "/";
+  bool tls = false;  // https:// (parse_web_url only)
 };
 
 // "http://host[:port][/path]". Errors: SCHEMA_VALIDATION_FAILED (field "url").
 Result<HttpUrl> parse_http_url(std::string_view url);
+// The same, or "https://host[:port][/path]" (port 443 by default; the server's certificate is
+// checked against the system's trust anchors or HttpRequestOptions::ca_file). For the node's
+// links to services on the internet (its registry); the other callers stay on plain http.
+Result<HttpUrl> parse_web_url(std::string_view url);
 // The status code of "HTTP/1.x NNN ..." (0 when it is not a status line). A fuzz subject.
 int parse_status_line(std::string_view line);
 
@@ -41,6 +48,15 @@ Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std
 Result<HttpAnswer> http_request(std::string_view method, std::string_view url,
                                 std::string_view body, int timeout_ms,
                                 size_t max_body = 256 * 1024);
+// With request headers (names and values without CR, LF or NUL; others are refused) and,
+// for https, a CA file.
+struct HttpRequestOptions {
+  std::vector<std::pair<std::string, std::string>> headers;
+  std::string ca_file;
+  size_t max_body = 256 * 1024;
+};
+Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std::string_view body,
+                                int timeout_ms, const HttpRequestOptions& opts);
 inline Result<HttpAnswer> http_post_json(const HttpUrl& url, const std::string& json_body,
                                          int timeout_ms, size_t max_body = 256 * 1024) {
   return http_request("POST", url, json_body, timeout_ms, max_body);

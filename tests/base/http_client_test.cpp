@@ -17,6 +17,7 @@
 #include <thread>
 
 #include "rcan/errors.h"
+#include "test_support.h"
 
 namespace rcan {
 namespace {
@@ -231,6 +232,97 @@ TEST(NodeHttpClient, OnlyPlainHttpUrls) {
   EXPECT_EQ(r.error().code, ErrorCode::kSchemaValidationFailed);
   EXPECT_EQ(r.error().message, "only http:// URLs are supported");
   EXPECT_EQ(r.error().field, "url");
+}
+
+TEST(NodeHttpClient, WebUrlsTakeHttpsWithItsDefaultPort) {
+  auto u = parse_web_url("https://registry.example.com/api/v1");
+  ASSERT_TRUE(u.ok()) << u.error().message;
+  EXPECT_TRUE(u->tls);
+  EXPECT_EQ(u->port, 443);
+  EXPECT_EQ(u->host, "registry.example.com");
+  EXPECT_EQ(u->path, "/api/v1");
+  u = parse_web_url("https://127.0.0.1:8443");
+  ASSERT_TRUE(u.ok());
+  EXPECT_EQ(u->port, 8443);
+  EXPECT_EQ(u->path, "/");
+  u = parse_web_url("http://h:81/x");
+  ASSERT_TRUE(u.ok());
+  EXPECT_FALSE(u->tls);
+  EXPECT_EQ(u->port, 81);
+  EXPECT_FALSE(parse_web_url("ftp://h/").ok());
+  EXPECT_FALSE(parse_web_url("https://").ok());
+  EXPECT_FALSE(parse_web_url("https://h:0/").ok());
+}
+
+TEST(NodeHttpClient, SendsHeadersAndRefusesOnesThatWouldSplitTheRequest) {
+  {
+    OneShotServer s("HTTP/1.1 200 OK\r\nContent-Length: 2\r\n\r\nok");
+    auto u = parse_http_url(s.url("/api/v1/robots/RRN-000000000001"));
+    ASSERT_TRUE(u.ok());
+    HttpRequestOptions o;
+    o.headers = {{"Authorization", "Bearer rcan_k_s"}};
+    auto r = http_request("PATCH", *u, "{}", 2000, o);
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    EXPECT_EQ(s.request(),
+              head_for(s.port(), "PATCH /api/v1/robots/RRN-000000000001 HTTP/1.1") +
+                  "Authorization: Bearer rcan_k_s\r\nContent-Type: application/json\r\n"
+                  "Content-Length: 2\r\n\r\n{}");
+  }
+  HttpUrl nowhere{"127.0.0.1", 1, "/", false};
+  for (auto h : std::vector<std::pair<std::string, std::string>>{{"X", "a\r\nEvil: 1"},
+                                                                 {"X\nY", "v"},
+                                                                 {"", "v"},
+                                                                 {"X:Y", "v"},
+                                                                 {"X", std::string(1, '\0')}}) {
+    HttpRequestOptions o;
+    o.headers = {h};
+    auto r = http_request("GET", nowhere, "", 100, o);
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.error().code, ErrorCode::kSchemaValidationFailed);
+  }
+}
+
+// https against `openssl s_server` with a certificate for 127.0.0.1: answered when the
+// certificate is trusted (ca_file), refused when it is not (the system's anchors).
+TEST(NodeHttpClient, HttpsChecksTheServersCertificate) {
+  test::TempDir dir;
+  const std::string cert = dir.file("cert.pem"), key = dir.file("key.pem");
+  auto gen =
+      test::run({"/usr/bin/openssl", "req", "-x509", "-newkey", "ec", "-pkeyopt",
+                 "ec_paramgen_curve:prime256v1", "-nodes", "-days", "1", "-subj", "/CN=127.0.0.1",
+                 "-addext", "subjectAltName=IP:127.0.0.1", "-keyout", key, "-out", cert});
+  ASSERT_EQ(gen.exit_code, 0) << gen.err;
+  auto serve_once = [&](test::Process& p, uint16_t port) {
+    // -www answers a GET with a status page (HTTP/1.0, until close); stdout to stderr so
+    // that the test sees ACCEPT.
+    return p.start({"/bin/sh", "-c",
+                    "exec /usr/bin/openssl s_server -www -naccept 1 -accept 127.0.0.1:" +
+                        std::to_string(port) + " -cert " + cert + " -key " + key + " 1>&2"}) &&
+           p.wait_for_line("ACCEPT", 10'000).has_value();
+  };
+  {
+    const uint16_t port = test::free_port();
+    test::Process server;
+    ASSERT_TRUE(serve_once(server, port)) << server.err();
+    auto u = parse_web_url("https://127.0.0.1:" + std::to_string(port) + "/");
+    ASSERT_TRUE(u.ok());
+    HttpRequestOptions o;
+    o.ca_file = cert;
+    auto r = http_request("GET", *u, "", 5000, o);
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    EXPECT_EQ(r->status, 200);
+    EXPECT_NE(r->body.find("s_server"), std::string::npos) << r->body;
+  }
+  {
+    const uint16_t port = test::free_port();
+    test::Process server;
+    ASSERT_TRUE(serve_once(server, port)) << server.err();
+    auto u = parse_web_url("https://127.0.0.1:" + std::to_string(port) + "/");
+    ASSERT_TRUE(u.ok());
+    auto r = http_request("GET", *u, "", 5000, HttpRequestOptions{});
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.error().message.rfind("TLS with 127.0.0.1:", 0), 0u) << r.error().message;
+  }
 }
 
 }  // namespace

@@ -3,6 +3,7 @@
 
 #include <sys/types.h>
 
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -58,6 +59,10 @@ RunResult run(const std::vector<std::string>& argv, const std::string& stdin_dat
 // Runs the rcan CLI built alongside the tests.
 RunResult run_cli(const std::vector<std::string>& args, const std::string& stdin_data = {},
                   const std::vector<std::string>& extra_env = {});
+
+// A loopback TCP port that was free a moment ago (bound to port 0, then closed): for servers
+// the test starts that take a port on their command line.
+uint16_t free_port();
 
 }  // namespace rcan::test
 
