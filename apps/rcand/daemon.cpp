@@ -18,6 +18,7 @@
 #include "node/services/node_services.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
+#include "registry_join.h"
 #include "settings.h"
 #include "transport/http_server.h"
 #include "transports.h"
@@ -57,8 +58,8 @@ void Daemon::safety_estop(const std::string& reason) {
 Status Daemon::start(const DaemonOptions& options) {
   const auto started = std::chrono::steady_clock::now();
   Status s = load_configuration(options);
-  for (auto step : {&Daemon::open_identity, &Daemon::open_audit_log, &Daemon::start_safety_core,
-                    &Daemon::start_node, &Daemon::start_transports}) {
+  for (auto step : {&Daemon::open_identity, &Daemon::open_audit_log, &Daemon::join_registry,
+                    &Daemon::start_safety_core, &Daemon::start_node, &Daemon::start_transports}) {
     if (!s.ok()) break;
     s = (this->*step)();
   }
@@ -148,6 +149,29 @@ Status Daemon::open_audit_log() {
   chain_secret_.clear();
   if (!opened.ok()) return failed("audit log in " + cfg_.security.audit.dir + ": ", opened.error());
   audit_ = std::move(opened).value();
+  return Status::Ok();
+}
+
+// 3b. The registry (config `registry`): a robot that has no RRN from it yet registers now, so
+// that it serves under the registry's RRN from the start; an unreachable registry does not
+// stop it (it serves under its local RRN and the link keeps trying, registry_join.h).
+Status Daemon::join_registry() {
+  if (cfg_.registry.key_file.empty()) return Status::Ok();
+  if (stored_registry_rrn(cfg_.data_dir).empty() && cfg_.registry.register_at_start) {
+    auto r = register_with_registry(cfg_, *robot_keys_, 3000);
+    audit::AuditEntry e;
+    e.principal = "node";
+    e.ruri = cfg_.ruri;
+    e.event = r.ok() ? "REGISTRY_REGISTERED" : "REGISTRY_UNREACHABLE";
+    e.outcome = r.ok() ? "ok" : "error";
+    e.sender_type = "system";
+    e.detail.set("registry", cfg_.registry_url);
+    e.detail.set("result", r.ok() ? *r : r.error().message);
+    if (auto a = audit_->append(std::move(e)); !a.ok()) return failed("audit log: ", a.error());
+    if (!r.ok())
+      log(LogLevel::kWarn, "registry_registration_failed",
+          json::Object{{"error", r.error().message}, {"next", "retrying in the background"}});
+  }
   return Status::Ok();
 }
 
@@ -272,6 +296,12 @@ Status Daemon::start_transports() {
   if (cfg_.server.enable_mdns) {  // _rcan._tcp via Avahi (docs/NODE.md §Discovery)
     mdns_ = node::start_mdns(*services_, so.tls);
     on_stop([this](int) { mdns_.reset(); });
+  }
+
+  if (!cfg_.registry.key_file.empty()) {  // registry_join.h
+    registry_ = std::make_unique<RegistryLink>(cfg_, *robot_keys_, *audit_, cfg_.ruri);
+    registry_->start();
+    on_stop([this](int) { registry_->stop(); });
   }
 
   const std::string host =

@@ -41,6 +41,8 @@ class HttpServer;
 
 namespace rcan::rcand {
 
+class RegistryLink;  // registry_join.h
+
 struct DaemonOptions {
   std::optional<std::string> config;    // --config: a configured robot; none: the embedded default
   std::optional<int> port;              // --port
@@ -84,6 +86,7 @@ class Daemon {
   Status load_configuration(const DaemonOptions& options);
   Status open_identity();
   Status open_audit_log();
+  Status join_registry();
   Status start_safety_core();
   Status start_node();
   Status start_transports();
@@ -108,6 +111,7 @@ class Daemon {
   std::unique_ptr<node::GrpcTransport> grpc_;
   std::unique_ptr<node::MqttNode> mqtt_;
   std::unique_ptr<node::MdnsAdvertiser> mdns_;
+  std::unique_ptr<RegistryLink> registry_;
 
   std::vector<std::function<void(int drain_ms)>> stops_;  // run newest first
   ServingInfo info_;

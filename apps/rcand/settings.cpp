@@ -6,6 +6,7 @@
 
 #include "node/control/sessions.h"
 #include "rcan/errors.h"
+#include "registry_join.h"
 
 namespace rcan::rcand {
 
@@ -49,6 +50,7 @@ node::NodeSettings node_settings(const config::NodeConfig& cfg, const keys::Robo
   ns.ruri = cfg.ruri;
   ns.ruri_sdk = sdk_form(cfg.ruri_parts);
   ns.rrn = cfg.rrn;
+  if (ns.rrn.empty()) ns.rrn = stored_registry_rrn(cfg.data_dir);  // registry_join.h
   if (ns.rrn.empty()) {
     // A stable local registration number from the robot's key id (digits only).
     std::string kid = robot.pub.kid();

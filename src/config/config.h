@@ -360,12 +360,23 @@ struct QosConfig {  // v1.5 `qos`
 
 // ---------------------------------------------------------------------------------------
 
+// `registry`: the registry this robot joins (docs/REGISTRY.md §A robot joins its registry).
+// Joining needs registry.registry_url and key_file; without them the node stays on its own.
+struct RegistryLinkConfig {
+  std::string key_file;           // a registrant API key (mode 0600), resolved; empty: not joining
+  bool register_at_start = true;  // register (with proof of possession) when no RRN is stored
+  std::string endpoint;           // the URL the registry hands out for this robot; empty: none
+  uint32_t refresh_s = 300;       // how often the robot tells the registry it is there
+  std::string ca_file;            // https: trust anchors (empty: the system's)
+};
+
 struct NodeConfig {
   std::string rcan_version = "1.2";  // "1.2" and "1.3.0" styles
   std::string ruri;                  // canonical (ruri | metadata.ruri, normalised)
   Ruri ruri_parts;                   // parse_ruri(ruri)
   std::string rrn;                   // canonical RRN, empty unless configured (rrn | registry.rrn)
   std::string registry_url;          // registry.registry_url | rcan_protocol.registry
+  RegistryLinkConfig registry;       // registry.key_file, register, endpoint, refresh_s, ca_file
   RobotInfo robot;
   // Protocol capabilities the node offers (status, chat, teleop, nav, arm, vision, …):
   // top-level `capabilities` as a list | rcan_protocol.capabilities; when neither is given,

@@ -5,6 +5,7 @@
 #include <cctype>
 #include <regex>
 
+#include "base/http_client.h"
 #include "config/blocks/blocks.h"
 
 namespace rcan::config::internal {
@@ -264,6 +265,39 @@ Table<NodeConfig> identity_blocks() {
                              At proto_reg = x.root["rcan_protocol"]["registry"];
                              same_or_fail(reg_url, reg_url.str(), proto_reg, proto_reg.str());
                              c.registry_url = reg_url ? reg_url.str() : proto_reg.str();
+                           }),
+                   R::read("key_file", Str(),
+                           [](const At& a, NodeConfig& c, Ctx& x) {
+                             if (!a) return;
+                             if (a.str().empty()) fail(a.path, "must not be empty", "invalid_value");
+                             At url = x.root["registry"]["registry_url"];
+                             if (!url) url = x.root["rcan_protocol"]["registry"];
+                             if (!url || !parse_web_url(url.str()).ok())
+                               fail(a.path,
+                                    "joining a registry needs registry.registry_url, an http:// "
+                                    "or https:// URL",
+                                    "invalid_value");
+                             c.registry.key_file = resolve_path(a.str(), x.opts.base_dir);
+                           }),
+                   R::read("register", Bool(),
+                           [](const At& a, NodeConfig& c, Ctx&) {
+                             c.registry.register_at_start = a.flag(true);
+                           }),
+                   R::read("endpoint", Str(2048),
+                           [](const At& a, NodeConfig& c, Ctx&) {
+                             if (!a) return;
+                             const std::string& u = a.str();
+                             if (u.rfind("http://", 0) != 0 && u.rfind("https://", 0) != 0)
+                               fail(a.path, "must be an http:// or https:// URL", "invalid_value");
+                             c.registry.endpoint = u;
+                           }),
+                   R::read("refresh_s", Int(10, 86'400),
+                           [](const At& a, NodeConfig& c, Ctx&) {
+                             c.registry.refresh_s = a.u32(300);
+                           }),
+                   R::read("ca_file", Str(),
+                           [](const At& a, NodeConfig& c, Ctx& x) {
+                             if (a) c.registry.ca_file = resolve_path(a.str(), x.opts.base_dir);
                            }),
                }),
       R::block("robot", robot_rows(), &NodeConfig::robot),
