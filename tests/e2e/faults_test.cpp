@@ -763,22 +763,10 @@ TEST(ClockSteps, AStepForwardDoesNotTimeOutOrAutoAllowAHeldCommand) {
 // ------------------------------------------------------------------------------------------
 // Broker and issuer outages (seed §6.1; docs/FLEET.md, docs/SESSIONS.md §Network partition).
 
-uint16_t free_port() {
-  int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
-  socklen_t len = sizeof a;
-  ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
-  ::close(fd);
-  return ntohs(a.sin_port);
-}
-
 // A Mosquitto broker on a free loopback port that the test stops and starts again.
 class Broker {
  public:
-  explicit Broker(const std::string& dir) : dir_(dir), port_(free_port()) {
+  explicit Broker(const std::string& dir) : dir_(dir), port_(test::free_port()) {
     write_text(dir_ + "/mosquitto.conf",
                "listener " + std::to_string(port_) +
                    " 127.0.0.1\nallow_anonymous true\npersistence false\n");

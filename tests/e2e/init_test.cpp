@@ -31,19 +31,6 @@ unsigned mode_of(const std::string& path) {
 }
 
 // A loopback port nobody listens on now.
-int free_port() {
-  int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t len = sizeof a;
-  int port = 0;
-  if (::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
-      ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0)
-    port = ntohs(a.sin_port);
-  ::close(fd);
-  return port;
-}
 
 // Every regular file under `dir` → SHA-256 of its bytes.
 std::map<std::string, std::string> hashes(const std::string& dir) {
@@ -73,7 +60,7 @@ class InitTest : public ::testing::Test {
 };
 
 TEST_F(InitTest, AConfiguredRobotFromAnEmptyDirectoryServesAndItsOwnerTokenDrivesIt) {
-  const int port = free_port();
+  const int port = test::free_port();
   ASSERT_GT(port, 0);
   auto r = init({"--name", "Yard rover", "--manufacturer", "acme", "--model", "yard-rover",
                  "--port", std::to_string(port)});
@@ -142,7 +129,7 @@ TEST_F(InitTest, RunningItAgainChangesNoSecretAndRenewsOnlyAnExpiredOwnerToken) 
 }
 
 TEST_F(InitTest, AConfiguredRobotWithoutItsIdentitySaysToRunInit) {
-  ASSERT_EQ(init({"--port", std::to_string(free_port())}).exit_code, 0);
+  ASSERT_EQ(init({"--port", std::to_string(test::free_port())}).exit_code, 0);
   fs::remove_all(dir_ + "/keys");
   auto r = run({RCAND_PATH, "--config", dir_ + "/robot.rcan.yaml"});
   EXPECT_EQ(r.exit_code, 1);
@@ -224,7 +211,7 @@ TEST_F(InitTest, KeysIssuerMakesAKeyPairWhoseTokensVerify) {
 
 // `rcan doctor` on a robot rcand init made: what it finds, and what it says to do.
 TEST_F(InitTest, DoctorChecksTheInstallationAndSaysWhatToFix) {
-  const int port = free_port();
+  const int port = test::free_port();
   ASSERT_EQ(init({"--port", std::to_string(port)}).exit_code, 0);
   const std::string yaml = dir_ + "/robot.rcan.yaml";
   const std::vector<std::string> env = {"RCAN_TOKEN_FILE=" + dir_ + "/owner.token"};
@@ -262,7 +249,7 @@ TEST_F(InitTest, DoctorChecksTheInstallationAndSaysWhatToFix) {
   EXPECT_NE(leak.out.find("FAIL  chain secret"), std::string::npos) << leak.out;
   EXPECT_NE(leak.out.find("chmod 600 " + dir_ + "/audit.secret"), std::string::npos) << leak.out;
   // A broker of the fleet list that does not answer is a failure, named.
-  const int dead = free_port();
+  const int dead = test::free_port();
   {
     std::ofstream out(yaml, std::ios::app);
     out << "mqtt:\n  enabled: true\n  broker: [mqtt://127.0.0.1:" << dead << "]\n";

@@ -33,20 +33,6 @@ using test::HttpReply;
 using test::WireTwist;
 using Headers = std::vector<std::pair<std::string, std::string>>;
 
-int free_port() {
-  int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t len = sizeof a;
-  int port = 0;
-  if (::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
-      ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0)
-    port = ntohs(a.sin_port);
-  ::close(fd);
-  return port;
-}
-
 json::Value parse(const std::string& s) {
   auto v = json::parse(s, {.max_depth = 64, .max_bytes = 64u << 20});
   return v.ok() ? std::move(v).value() : json::Value();
@@ -62,7 +48,7 @@ class Ros2E2eTest : public ::testing::Test {
   void SetUp() override {
     dds_env_ = test::use_loopback_dds();
     domain_ = test::random_domain_id();
-    port_ = free_port();
+    port_ = test::free_port();
     ASSERT_GT(port_, 0);
   }
   void TearDown() override {

@@ -24,18 +24,6 @@
 namespace rcan::transport {
 namespace {
 
-uint16_t free_port() {
-  int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
-  socklen_t len = sizeof a;
-  ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
-  ::close(fd);
-  return ntohs(a.sin_port);
-}
-
 template <typename F>
 bool eventually(F f, int timeout_ms = 10000) {
   for (int waited = 0; waited < timeout_ms; waited += 10) {
@@ -47,7 +35,7 @@ bool eventually(F f, int timeout_ms = 10000) {
 
 class Mosquitto {
  public:
-  explicit Mosquitto(const std::string& dir) : port_(free_port()) {
+  explicit Mosquitto(const std::string& dir) : port_(test::free_port()) {
     std::ofstream(dir + "/mosquitto.conf")
         << "listener " << port_ << " 127.0.0.1\nallow_anonymous true\npersistence false\n";
     EXPECT_TRUE(proc_.start({"/usr/sbin/mosquitto", "-c", dir + "/mosquitto.conf"}));
