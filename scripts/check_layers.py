@@ -23,6 +23,7 @@ LAYERS = [
     ("base", ["src/base/"]),
     ("transport", ["src/transport/"]),
     ("config", ["src/config/"]),
+    ("registry", ["src/registry/"]),
     ("node/safety", ["src/node/safety/"]),
     ("drivers", ["src/drivers/"]),  # hardware drivers under the safety core (driver.h)
     ("node/admission", ["src/node/admission/"]),
