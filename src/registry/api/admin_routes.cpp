@@ -124,13 +124,21 @@ HttpResponse RegistryApi::Impl::list_nodes(const HttpRequest& req) {
   std::string filter;
   for (char c : req.query_value("prefix"))
     if (c != ' ') filter.push_back(static_cast<char>(std::toupper(static_cast<unsigned char>(c))));
-  json::Array nodes{self_node()};
+  // With ?prefix= the matching node comes first (rcan-ts's discover takes nodes[0]; rcan-py's
+  // matches namespace_prefix); no match: the root (self) alone, as the reference answers.
+  json::Array nodes;
+  std::string own = o.prefix.empty() ? "RRN" : o.prefix;
   if (!filter.empty()) {
-    auto d = valid_prefix(filter) ? store.get_delegation(filter)
-                                  : Result<std::optional<Delegation>>(std::optional<Delegation>());
-    if (!d.ok()) return store_error(d.error());
-    if (*d) nodes.emplace_back(delegation_json(**d));
+    if (filter == own) {
+      nodes.emplace_back(self_node());
+    } else if (valid_prefix(filter)) {
+      auto d = store.get_delegation(filter);
+      if (!d.ok()) return store_error(d.error());
+      if (*d) nodes.emplace_back(delegation_json(**d));
+    }
+    if (nodes.empty()) nodes.emplace_back(self_node());
   } else {
+    nodes.emplace_back(self_node());
     auto all = store.list_delegations();
     if (!all.ok()) return store_error(all.error());
     for (const auto& d : *all) nodes.emplace_back(delegation_json(d));
