@@ -593,7 +593,7 @@ Result<Registered> SqliteStore::register_robot(const NewRobot& r) {
 Result<RobotPage> SqliteStore::list_robots(const RobotQuery& q) {
   std::vector<std::string> values;
   std::string where = detail::robot_filter(
-      q, [](size_t i) { return "?" + std::to_string(i); }, values);
+      q, "deleted = 0", [](size_t i) { return "?" + std::to_string(i); }, values);
   std::lock_guard lock(mu_);
   RobotPage page;
   {

@@ -22,11 +22,12 @@ std::string robot_uri(const NewRobot& r);
 // An Error with code kInternal and `what` + ": " + `detail`.
 Error db_error(std::string_view what, std::string_view detail);
 
-// The WHERE clause (without "WHERE") for list_robots, with the backend's placeholders produced
-// by `ph(i)` for the i-th (1-based) bound value; `values` receives the values in order.
+// The WHERE clause (without "WHERE") for list_robots: `live` (the backend's "not deleted"),
+// then the query's filters with the backend's placeholders produced by `ph(i)` for the i-th
+// (1-based) bound value; `values` receives the values in order.
 template <typename Placeholder, typename Values>
-std::string robot_filter(const RobotQuery& q, Placeholder ph, Values& values) {
-  std::string where = "deleted = 0";
+std::string robot_filter(const RobotQuery& q, const char* live, Placeholder ph, Values& values) {
+  std::string where = live;
   if (!q.q.empty()) {
     values.push_back(like_contains(q.q));
     std::string p = ph(values.size());

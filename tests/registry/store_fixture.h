@@ -51,6 +51,8 @@ class StoreTest : public ::testing::TestWithParam<std::string> {
   Result<std::unique_ptr<Store>> open(const StoreOptions& o = {});
   // What open_store takes for this test's database.
   std::string spec();
+  // What open_store takes for another, empty database (`name`: a new one each call).
+  std::string fresh_spec(const std::string& name);
 
   test::TempDir tmp_;
   std::unique_ptr<Store> store_;

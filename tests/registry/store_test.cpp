@@ -4,19 +4,48 @@
 #include <sys/stat.h>
 
 #include <atomic>
+#include <map>
 #include <regex>
 #include <set>
 #include <thread>
 
+#include "postgres.h"
 #include "store_fixture.h"
 
 namespace rcan::registry::testing {
 
-std::string StoreTest::spec() { return tmp_.file("registry.db"); }
+namespace {
+// One PostgreSQL server for the suite, started by the first PostgreSQL test.
+std::unique_ptr<test::Postgres>& pg_server() {
+  static std::unique_ptr<test::Postgres> server;
+  return server;
+}
+int pg_databases = 0;
+}  // namespace
+
+std::string StoreTest::spec() {
+  if (!postgres()) return tmp_.file("registry.db");
+  auto& pg = pg_server();
+  if (!pg) pg = std::make_unique<test::Postgres>();
+  if (pg_database_.empty()) {
+    pg_database_ = "registry_" + std::to_string(++pg_databases);
+    auto r = pg->sql("CREATE DATABASE " + pg_database_);
+    EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  }
+  return pg->url(pg_database_);
+}
+std::string StoreTest::fresh_spec(const std::string& name) {
+  if (!postgres()) return tmp_.file(name + ".db");
+  spec();  // the server
+  std::string db = "registry_" + std::to_string(++pg_databases) + "_" + name;
+  auto r = pg_server()->sql("CREATE DATABASE " + db);
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  return pg_server()->url(db);
+}
 Result<std::unique_ptr<Store>> StoreTest::open(const StoreOptions& o) {
   return open_store(spec(), o);
 }
-void StoreTest::TearDownTestSuite() {}
+void StoreTest::TearDownTestSuite() { pg_server().reset(); }
 
 namespace {
 
@@ -555,7 +584,80 @@ TEST_P(StoreTest, ConcurrentRegistrationsOfOneRobotMintOneRrn) {
   EXPECT_EQ(must(store_->list_robots(RobotQuery{})).total, 1);
 }
 
-INSTANTIATE_TEST_SUITE_P(Backends, StoreTest, ::testing::Values("sqlite"),
+TEST_P(StoreTest, TwoInstancesRegisteringAtOnceNeverShareAnRrn) {
+  // Two Store objects on one database stand for two registry processes.
+  auto other = open();
+  ASSERT_TRUE(other.ok()) << other.error().message;
+  std::vector<Store*> stores{store_.get(), other->get()};
+  constexpr int kEach = 100;
+  std::vector<std::vector<Registered>> got(4);
+  std::atomic<bool> go{false};
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 4; ++t)
+    threads.emplace_back([&, t] {
+      while (!go.load()) std::this_thread::yield();
+      for (int i = 0; i < kEach; ++i) {
+        // Distinct robots, and one robot every thread of both instances registers.
+        auto r = stores[t % 2]->register_robot(
+            new_robot(i % 10 == 0 ? "shared-" + std::to_string(i)
+                                  : "t" + std::to_string(t) + "-" + std::to_string(i),
+                      at(i)));
+        EXPECT_TRUE(r.ok()) << (r.ok() ? "" : r.error().message);
+        if (r.ok()) got[t].push_back(*r);
+      }
+    });
+  go = true;
+  for (auto& th : threads) th.join();
+  std::map<std::string, std::string> device_of;  // rrn -> device
+  std::map<std::string, int> created;            // device -> creations
+  for (const auto& v : got)
+    for (const auto& r : v) {
+      auto [it, fresh] = device_of.emplace(r.robot.rrn, r.robot.device_id);
+      EXPECT_EQ(it->second, r.robot.device_id) << r.robot.rrn << " minted twice";
+      created[r.robot.device_id] += r.created ? 1 : 0;
+    }
+  EXPECT_EQ(device_of.size(), 4u * 90 + 10);
+  for (const auto& [device, n] : created) EXPECT_EQ(n, 1) << device;
+  EXPECT_EQ(must(store_->list_robots(RobotQuery{})).total, 4 * 90 + 10);
+}
+
+TEST_P(StoreTest, TwoInstancesOpeningAFreshDatabaseAtOnceBothSucceed) {
+  for (int round = 0; round < 3; ++round) {
+    std::string where = fresh_spec("fresh" + std::to_string(round));
+    std::vector<Result<std::unique_ptr<Store>>> opened;
+    for (int i = 0; i < 2; ++i) opened.emplace_back(Error());
+    std::atomic<bool> go{false};
+    std::vector<std::thread> threads;
+    for (int i = 0; i < 2; ++i)
+      threads.emplace_back([&, i] {
+        while (!go.load()) std::this_thread::yield();
+        opened[i] = open_store(where);
+      });
+    go = true;
+    for (auto& th : threads) th.join();
+    for (auto& o : opened) {
+      ASSERT_TRUE(o.ok()) << o.error().message;
+      Registered r = must((*o)->register_robot(new_robot("unit-1")));
+      EXPECT_EQ(r.robot.rrn.size(), 16u);
+    }
+  }
+}
+
+TEST_P(StoreTest, OpenStoreChoosesTheBackend) {
+  auto s = open_store(fresh_spec("chosen"));
+  ASSERT_TRUE(s.ok()) << s.error().message;
+  EXPECT_EQ((*s)->backend(), GetParam());
+  if (postgres()) {
+    // libpq's key=value form works through open_postgres directly.
+    auto kv = open_postgres(pg_server()->conninfo(pg_database_));
+    ASSERT_TRUE(kv.ok()) << kv.error().message;
+    EXPECT_FALSE(open_store("postgresql://rcan@127.0.0.1:1/nothing").ok());
+  } else {
+    EXPECT_FALSE(open_store(tmp_.file("no/such/dir/registry.db")).ok());
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Backends, StoreTest, ::testing::Values("sqlite", "postgresql"),
                          [](const ::testing::TestParamInfo<std::string>& p) { return p.param; });
 
 }  // namespace
