@@ -5,7 +5,9 @@
 #include <sys/stat.h>
 
 #include <filesystem>
+#include <thread>
 
+#include "postgres.h"
 #include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/mldsa65.h"
 #include "rcan/encoding.h"
@@ -465,6 +467,40 @@ TEST(RegistryApi, RestartKeepsDataAndAuditsChanges) {
   for (const char* ev : {"REGISTRY_KEY_CREATED", "REGISTRY_ROBOT_REGISTERED",
                          "REGISTRY_ROBOT_UPDATED", "REGISTRY_PREFIX_DELEGATED"})
     EXPECT_NE(audit.find(ev), std::string::npos) << ev;
+}
+
+// Two stateless instances on one PostgreSQL database (--database postgresql://…): what one
+// registers, the other serves; keys made on one work on the other; concurrent registrations of
+// one robot through both mint one RRN.
+TEST(RegistryApi, TwoInstancesOnOnePostgresDatabase) {
+  Postgres pg;
+  TempDir a_dir, b_dir;
+  RegistryDaemon a(a_dir.path(), {"--database", pg.url()});
+  RegistryDaemon b(b_dir.path(), {"--database", pg.url()});
+  EXPECT_EQ(str(body_of(a.get("/healthz")), "backend"), "postgresql");
+  auto r = a.send("POST", "/api/v1/robots", robot("pg-1"), a.admin_key());
+  ASSERT_EQ(r.status, 201) << r.body;
+  std::string rrn = str(body_of(r), "rrn");
+  EXPECT_EQ(b.get("/api/v1/robots/" + rrn).status, 200);
+  EXPECT_EQ(b.send("PATCH", "/api/v1/robots/" + rrn, R"({"description":"via b"})",
+                   str(body_of(r), "api_key"))
+                .status,
+            200);
+  EXPECT_EQ(str(body_of(a.get("/api/v1/robots/" + rrn)), "description"), "via b");
+  // a's admin key is valid on b (one key table).
+  EXPECT_EQ(b.get("/api/v1/keys", a.admin_key()).status, 200);
+
+  std::vector<std::thread> threads;
+  std::vector<std::string> rrns(8);
+  for (int i = 0; i < 8; ++i)
+    threads.emplace_back([&, i] {
+      const RegistryDaemon& d = i % 2 == 0 ? a : b;
+      auto x = d.send("POST", "/api/v1/robots", robot("same"), d.admin_key());
+      rrns[static_cast<size_t>(i)] = str(body_of(x), "rrn");
+    });
+  for (auto& t : threads) t.join();
+  for (const auto& x : rrns) EXPECT_EQ(x, rrns[0]);
+  EXPECT_EQ(num(body_of(b.get("/api/v1/robots")), "total"), 2);
 }
 
 }  // namespace
