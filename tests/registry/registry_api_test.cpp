@@ -503,5 +503,25 @@ TEST(RegistryApi, TwoInstancesOnOnePostgresDatabase) {
   EXPECT_EQ(num(body_of(b.get("/api/v1/robots")), "total"), 2);
 }
 
+TEST(RegistryApi, FlagsHelpAndTheDefaultDataDirectory) {
+  auto help = run({RCAN_REGISTRY_PATH, "--help"});
+  EXPECT_EQ(help.exit_code, 0);
+  EXPECT_NE(help.out.find("--public-url"), std::string::npos);
+  EXPECT_EQ(run({RCAN_REGISTRY_PATH, "--bogus"}).exit_code, 2);
+  EXPECT_EQ(run({RCAN_REGISTRY_PATH, "--port", "70000"}).exit_code, 2);
+  // No --data-dir: $HOME/.local/share/rcan-registry (as rcand's ~/.local/share/rcand).
+  TempDir home;
+  Process p;
+  ASSERT_TRUE(p.start({RCAN_REGISTRY_PATH, "--port", "0"},
+                      {"HOME=" + home.path(), "XDG_DATA_HOME=", "RCAN_REGISTRY_DATA_DIR="}));
+  auto line = p.wait_for_line("\"event\":\"listening\"", 30000);
+  ASSERT_TRUE(line) << p.err();
+  std::string dir = home.path() + "/.local/share/rcan-registry";
+  EXPECT_NE(line->find(dir), std::string::npos) << *line;
+  EXPECT_EQ(mode_of(dir), 0700u);
+  EXPECT_EQ(mode_of(dir + "/admin.key"), 0600u);
+  EXPECT_EQ(p.stop(SIGTERM, 10000), 0);
+}
+
 }  // namespace
 }  // namespace rcan::test
