@@ -236,6 +236,7 @@ HttpResponse RegistryApi::Impl::get_robot(const std::string& rrn) {
 HttpResponse RegistryApi::Impl::patch_robot(const HttpRequest& req, const std::string& rrn) {
   HttpResponse err;
   auto caller = authenticate(req, err);
+  if (!caller && err.status >= 500) return err;
   if (!caller)
     return ref_error(err.status, err.status == 401 && req.bearer().empty()
                                      ? "Authorization required"
@@ -274,6 +275,7 @@ HttpResponse RegistryApi::Impl::patch_robot(const HttpRequest& req, const std::s
 HttpResponse RegistryApi::Impl::delete_robot(const HttpRequest& req, const std::string& rrn) {
   HttpResponse err;
   auto caller = authenticate(req, err);
+  if (!caller && err.status >= 500) return err;
   if (!caller)
     return ref_error(err.status, err.status == 401 && req.bearer().empty()
                                      ? "Authorization required"
