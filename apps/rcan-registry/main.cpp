@@ -129,6 +129,7 @@ int main(int argc, char** argv) {
   opts.node_seed = *seed;
   if (!flags->operator_name.empty()) opts.operator_name = flags->operator_name;
   opts.contact = flags->contact;
+  opts.allow_http_node_urls = flags->allow_http_node_urls;
   opts.write_per_key = {flags->write_rate, flags->write_burst};
   opts.write_per_address = {flags->addr_write_rate, flags->addr_write_rate * 2};
   opts.read_per_address = {flags->read_rate, flags->read_rate * 2};

@@ -41,6 +41,7 @@ constexpr const char* kUsage =
     "  --write-rate R      writes per second per API key (default 10, burst --write-burst 20)\n"
     "  --address-write-rate R  writes per second per client address (default 50)\n"
     "  --read-rate R       reads per second per client address (default 2000; 0 = unlimited)\n"
+    "  --allow-http-node-urls  accept http:// node URLs in delegations (local tests only)\n"
     "\n"
     "The first start creates, in the data directory, an admin API key (admin.key, mode 0600),\n"
     "the node's Ed25519 key (node-ed25519.seed) and the audit chain secret (audit.secret).\n"
@@ -92,6 +93,8 @@ std::optional<Flags> parse_flags(int argc, char** argv, int& exit_code) {
       if (!value(f.public_url)) return std::nullopt;
     } else if (s == "--host") {
       if (!value(f.host)) return std::nullopt;
+    } else if (s == "--allow-http-node-urls") {
+      f.allow_http_node_urls = true;
     } else if (s == "--prefix") {
       if (!value(f.prefix)) return std::nullopt;
     } else if (s == "--operator") {

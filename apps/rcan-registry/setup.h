@@ -18,6 +18,7 @@ struct Flags {
   std::string public_url, host, prefix, operator_name, contact;
   double write_rate = 10, write_burst = 20, addr_write_rate = 50, read_rate = 2000;
   int io_threads = 2;
+  bool allow_http_node_urls = false;
 };
 
 // nullopt: exit with `exit_code` (0 after --help, 2 on a bad flag; the message is printed).

@@ -116,6 +116,32 @@ async function nodeClient(reg, rrn) {
   check(eu.node_url === 'https://eu.example' && eu.api_base === 'https://eu.example/api/v1', 'NodeClient.discover (delegated)');
 }
 
+// A root delegating BD to a second rcan-registry (--prefix BD): resolve at the root follows
+// the root's 307 to the authoritative node.
+async function federation() {
+  const bd = await start(['--prefix', 'BD']);
+  const root = await start(['--allow-http-node-urls']);
+  try {
+    const made = await post(bd, '/api/v1/robots', { manufacturer: 'bd', model: 'spot', version: 'v1', device_id: 'f-1' }, bd.admin);
+    check(made.status === 201 && made.body.rrn.startsWith('RRN-BD-'), 'the BD node mints RRN-BD-…');
+    const d = await post(root, '/api/v1/nodes', { prefix: 'BD', operator: 'BD robots', node_url: bd.url }, root.admin);
+    check(d.status === 201, 'the root delegates BD to the second node');
+    const nc = new sdk.NodeClient(root.url, 5000);
+    const res = await nc.resolve(made.body.rrn);
+    check(res.resolved_by === bd.url && res.record.rrn === made.body.rrn, 'NodeClient.resolve at the root follows federation to the BD node');
+    const node = await nc.discover(made.body.rrn);
+    check(node.node_url === bd.url, 'NodeClient.discover → the BD node');
+  } finally {
+    bd.proc.kill('SIGTERM');
+    root.proc.kill('SIGTERM');
+  }
+}
+
+try {
+  await federation();
+} catch (e) {
+  check(false, `federation: ${e.stack ?? e}`);
+}
 const insecure = await start();
 const secure = await start(['--public-url', 'https://registry.example']);
 try {

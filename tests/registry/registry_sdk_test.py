@@ -155,7 +155,35 @@ def registry_client_checks(reg):
     asyncio.run(run())
 
 
+def federation_checks():
+    """A root node delegating BD to a second rcan-registry (--prefix BD): NodeClient.resolve at
+    the root follows the root's 307 to the authoritative node."""
+    bd = Registry("--prefix", "BD")
+    root = Registry("--allow-http-node-urls")
+    try:
+        status, made = bd.call("POST", "/api/v1/robots", {
+            "manufacturer": "bd", "model": "spot", "version": "v1", "device_id": "f-1"}, bd.admin)
+        check(status == 201 and made["rrn"].startswith("RRN-BD-"), "the BD node mints RRN-BD-…")
+        status, _ = root.call("POST", "/api/v1/nodes", {
+            "prefix": "BD", "operator": "BD robots", "node_url": bd.url}, root.admin)
+        check(status == 201, "the root delegates BD to the second node")
+        nc = NodeClient(root_url=root.url, timeout=5)
+        res = nc.resolve(made["rrn"])
+        check(res.get("resolved_by") == bd.url and res["record"]["rrn"] == made["rrn"],
+              "NodeClient.resolve at the root follows federation to the BD node")
+        check(nc.discover(made["rrn"])["node_url"] == bd.url, "NodeClient.discover → the BD node")
+        try:
+            nc.resolve("RRN-BD-000000000999")
+            check(False, "an unknown RRN-BD-… raises")
+        except RCANNodeError:
+            check(True, "an unknown RRN-BD-… raises RCANNodeError (root, then the BD node)")
+    finally:
+        root.stop()
+        bd.stop()
+
+
 def main():
+    federation_checks()
     reg = Registry()
     try:
         node_client_checks(reg)

@@ -184,7 +184,7 @@ HttpResponse RegistryApi::Impl::add_node(const HttpRequest& req) {
   if (!caller->is("admin"))
     return json_response(403, json::Object{{"error", "AUTH_INVALID"},
                                            {"message", "delegating a prefix needs an admin key"}});
-  auto n = parse_node_request(req.body);
+  auto n = parse_node_request(req.body, o.allow_http_node_urls);
   if (!n.ok()) {
     std::string code =
         n.error().code == ErrorCode::kMalformedJson ? "INVALID_REQUEST"

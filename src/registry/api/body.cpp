@@ -241,7 +241,7 @@ Result<KeyRequest> parse_key_request(std::string_view body) {
   return k;
 }
 
-Result<NodeRequest> parse_node_request(std::string_view body) {
+Result<NodeRequest> parse_node_request(std::string_view body, bool allow_http) {
   auto o = parse_object(body);
   if (!o.ok()) return o.error();
   NodeRequest n;
@@ -262,7 +262,9 @@ Result<NodeRequest> parse_node_request(std::string_view body) {
     return invalid("prefix must be 2–8 uppercase alphanumeric characters (e.g. BD, ACME)", "prefix",
                    "INVALID_PREFIX");
   if (n.operator_name.empty()) return invalid("operator is required", "operator", "missing");
-  if (n.node_url.rfind("https://", 0) != 0 || n.node_url.size() < 9)
+  bool https = n.node_url.rfind("https://", 0) == 0 && n.node_url.size() > 8;
+  bool http = allow_http && n.node_url.rfind("http://", 0) == 0 && n.node_url.size() > 7;
+  if (!https && !http)
     return invalid("node_url must start with https://", "node_url", "INVALID_NODE_URL");
   while (!n.node_url.empty() && n.node_url.back() == '/') n.node_url.pop_back();
   return n;

@@ -71,7 +71,8 @@ Result<KeyRequest> parse_key_request(std::string_view body);
 struct NodeRequest {
   std::string prefix, operator_name, node_url, node_pubkey, contact, expires_at;
 };
-Result<NodeRequest> parse_node_request(std::string_view body);
+// node_url must be https://; `allow_http` also takes http:// (local federation tests only).
+Result<NodeRequest> parse_node_request(std::string_view body, bool allow_http = false);
 
 // `endpoints`: an array of URL strings or of {"url": …} objects → the stored form
 // [{"url": …, "last_seen": now}].

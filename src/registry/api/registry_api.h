@@ -32,6 +32,8 @@ struct ApiOptions {
   BucketConfig write_per_address{50, 100};
   BucketConfig read_per_address{2000, 4000};
   int challenge_ttl_s = 300;
+  // Accept http:// node URLs in delegations (local federation tests; never in production).
+  bool allow_http_node_urls = false;
   std::function<int64_t()> wall_ms;  // unset: the system clock
 };
 
