@@ -243,6 +243,22 @@ TEST(RegistryApi, SqlMetacharactersInEveryField) {
               200);
   }
   EXPECT_GE(created, 4);
+  // contact_email, endpoints and the key label carry metacharacters too.
+  auto r =
+      d.send("POST", "/api/v1/robots",
+             robot("meta-2",
+                   R"(,"contact_email":"o';DROP--@x.y","endpoints":["https://x.example/'--%_"])"),
+             d.admin_key());
+  ASSERT_EQ(r.status, 201) << r.body;
+  ++created;
+  auto e = body_of(d.get("/api/v1/robots/" + str(body_of(r), "rrn")));
+  EXPECT_EQ(str(e.get("endpoints")->as_array()[0], "url"), "https://x.example/'--%_");
+  EXPECT_EQ(
+      d.send("POST", "/api/v1/keys",
+             R"({"role":"registrant","label":"x'); DELETE FROM api_keys; --"})", d.admin_key())
+          .status,
+      201);
+  EXPECT_EQ(d.get("/api/v1/keys", d.admin_key()).status, 200);
   EXPECT_EQ(num(body_of(d.get("/api/v1/robots")), "total"), created);
   // LIKE metacharacters in q are literal; a quote in q is only text.
   EXPECT_EQ(num(body_of(d.get("/api/v1/robots?q=%25%25")), "total"), 0);
