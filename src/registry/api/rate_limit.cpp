@@ -20,6 +20,7 @@ int64_t RateLimiter::take(std::string_view key, int64_t now_us) {
         refill(i->second);
         i = i->second.tokens >= c_.burst ? buckets_.erase(i) : std::next(i);
       }
+      if (buckets_.size() >= max_keys_) buckets_.clear();
     }
     it = buckets_.emplace(std::string(key), Bucket{c_.burst, now_us}).first;
   }
@@ -31,6 +32,11 @@ int64_t RateLimiter::take(std::string_view key, int64_t now_us) {
   }
   double wait = (1.0 - b.tokens) / c_.rate_per_s;
   return std::max<int64_t>(1, static_cast<int64_t>(std::ceil(wait)));
+}
+
+size_t RateLimiter::size() {
+  std::lock_guard lock(mu_);
+  return buckets_.size();
 }
 
 }  // namespace rcan::registry::api

@@ -1,6 +1,7 @@
 // Token buckets keyed by a string (an API key id, a client address), for the registry's rate
-// limits (docs/REGISTRY.md §Rate limits). Thread-safe; memory is bounded: when the table grows
-// past max_keys, buckets that have refilled completely (idle clients) are dropped.
+// limits (docs/REGISTRY.md §Rate limits). Thread-safe; memory is bounded: when the table reaches
+// max_keys, buckets that have refilled completely (idle clients) are dropped, and if that is not
+// enough (a flood from that many distinct keys) the whole table is: every key starts full again.
 #pragma once
 
 #include <cstdint>
@@ -22,6 +23,7 @@ class RateLimiter {
   // Takes one token for `key` at `now_us` (a steady clock). 0: allowed; otherwise the seconds
   // to wait before a token is there (for Retry-After, at least 1).
   int64_t take(std::string_view key, int64_t now_us);
+  size_t size();
 
  private:
   struct Bucket {
