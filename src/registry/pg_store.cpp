@@ -183,7 +183,8 @@ struct Conn {
     if (st != PGRES_COMMAND_OK && st != PGRES_TUPLES_OK) {
       const char* state = PQresultErrorField(r, PG_DIAG_SQLSTATE);
       Error e = db_error("PostgreSQL", r != nullptr ? PQresultErrorMessage(r) : PQerrorMessage(pg));
-      e.reason = state != nullptr ? state : "";  // SQLSTATE, e.g. 23505 unique_violation
+      if (state != nullptr && std::string_view(state) == "23505")
+        e.reason = detail::kUniqueViolation;
       return e;
     }
     return rows;
@@ -458,14 +459,15 @@ class PgStore final : public Store {
   }
 
  private:
-  // Runs one statement on a pooled connection; once more on a fresh connection when the
-  // borrowed one turned out broken (the server restarted, the network dropped it).
+  // Runs one statement on a pooled connection. A connection that turns out broken (the server
+  // restarted, the network dropped it) is dropped and the statement runs on the next one: the
+  // idle ones may all be broken, so up to one more than the pool holds, the last a fresh one.
   Result<Rows> run(const std::string& sql, const Params& p) {
-    for (int attempt = 0;; ++attempt) {
+    for (size_t attempt = 0;; ++attempt) {
       auto lease = pool_.acquire();
       if (!lease) return lease.error();
       auto rows = (*lease)->exec(sql, p);
-      if (rows.ok() || !(*lease)->broken() || attempt > 0) return rows;
+      if (rows.ok() || !(*lease)->broken() || attempt >= kPoolSize) return rows;
     }
   }
   Result<bool> changed(const std::string& sql, const Params& p) {

@@ -399,7 +399,11 @@ class SqliteStore final : public Store {
 
  private:
   Error error(std::string_view what) const {
-    return db_error(std::string("SQLite ") + std::string(what), sqlite3_errmsg(db_));
+    Error e = db_error(std::string("SQLite ") + std::string(what), sqlite3_errmsg(db_));
+    int code = sqlite3_extended_errcode(db_);
+    if (code == SQLITE_CONSTRAINT_UNIQUE || code == SQLITE_CONSTRAINT_PRIMARYKEY)
+      e.reason = detail::kUniqueViolation;
+    return e;
   }
 
   // The cached statement for `sql` (prepared on first use). Call with mu_ held.

@@ -21,6 +21,9 @@ std::string like_contains(std::string_view q);
 std::string robot_uri(const NewRobot& r);
 // An Error with code kInternal and `what` + ": " + `detail`.
 Error db_error(std::string_view what, std::string_view detail);
+// Error::reason of a write that met a unique constraint (an API key or challenge id that
+// exists), the same on both backends.
+inline constexpr const char* kUniqueViolation = "unique_violation";
 
 // The WHERE clause (without "WHERE") for list_robots: `live` (the backend's "not deleted"),
 // then the query's filters with the backend's placeholders produced by `ph(i)` for the i-th

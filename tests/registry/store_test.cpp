@@ -338,7 +338,9 @@ TEST_P(StoreTest, ApiKeys) {
            ""};
   ASSERT_TRUE(store_->put_api_key(k).ok());
   ASSERT_TRUE(store_->put_api_key(r).ok());
-  EXPECT_FALSE(store_->put_api_key(k).ok());  // the id must be new
+  Status dup = store_->put_api_key(k);  // the id must be new
+  EXPECT_FALSE(dup.ok());
+  EXPECT_EQ(dup.error().reason, "unique_violation") << dup.error().message;
   auto got = must(store_->get_api_key(r.id));
   ASSERT_TRUE(got.has_value());
   EXPECT_EQ(got->salt, r.salt);
@@ -428,7 +430,9 @@ TEST_P(StoreTest, ChallengesAreTakenOnceAndExpire) {
   Challenge old{std::string(32, 'b'), "b2xk", "update", at(10)};
   ASSERT_TRUE(store_->put_challenge(c).ok());
   ASSERT_TRUE(store_->put_challenge(old).ok());
-  EXPECT_FALSE(store_->put_challenge(c).ok());  // ids are unique
+  Status dup = store_->put_challenge(c);  // ids are unique
+  EXPECT_FALSE(dup.ok());
+  EXPECT_EQ(dup.error().reason, "unique_violation") << dup.error().message;
   auto taken = must(store_->take_challenge(c.id));
   ASSERT_TRUE(taken.has_value());
   EXPECT_EQ(taken->nonce, "bm9uY2U");
@@ -655,6 +659,27 @@ TEST_P(StoreTest, OpenStoreChoosesTheBackend) {
   } else {
     EXPECT_FALSE(open_store(tmp_.file("no/such/dir/registry.db")).ok());
   }
+}
+
+TEST_P(StoreTest, ReconnectsWhenTheServerDropsTheConnections) {
+  if (!postgres()) GTEST_SKIP() << "SQLite has no connection to lose";
+  Robot r = must(store_->register_robot(new_robot("unit-1"))).robot;
+  // Several pooled connections, all idle, then all killed by the server.
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 4; ++t)
+    threads.emplace_back([&] {
+      for (int i = 0; i < 20; ++i) EXPECT_TRUE(must(store_->get_robot(r.rrn)).has_value());
+    });
+  for (auto& th : threads) th.join();
+  auto killed = pg_server()->sql(
+      "SELECT count(pg_terminate_backend(pid)) FROM pg_stat_activity WHERE datname = '" +
+      pg_database_ + "'");
+  ASSERT_EQ(killed.exit_code, 0) << killed.err;
+  EXPECT_NE(killed.out, "0\n");
+  auto got = must(store_->get_robot(r.rrn));
+  ASSERT_TRUE(got.has_value());
+  EXPECT_EQ(got->rrn, r.rrn);
+  EXPECT_TRUE(must(store_->register_robot(new_robot("unit-2"))).created);
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, StoreTest, ::testing::Values("sqlite", "postgresql"),
