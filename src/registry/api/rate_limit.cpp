@@ -7,7 +7,7 @@ namespace rcan::registry::api {
 
 int64_t RateLimiter::take(std::string_view key, int64_t now_us) {
   if (c_.rate_per_s <= 0) return 0;
-  std::lock_guard lock(mu_);
+  MutexLock lock(mu_);
   auto refill = [&](Bucket& b) {
     double dt = static_cast<double>(std::max<int64_t>(0, now_us - b.at_us)) / 1e6;
     b.tokens = std::min(c_.burst, b.tokens + dt * c_.rate_per_s);
@@ -35,7 +35,7 @@ int64_t RateLimiter::take(std::string_view key, int64_t now_us) {
 }
 
 size_t RateLimiter::size() {
-  std::lock_guard lock(mu_);
+  MutexLock lock(mu_);
   return buckets_.size();
 }
 

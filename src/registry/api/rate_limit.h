@@ -5,10 +5,11 @@
 #pragma once
 
 #include <cstdint>
-#include <mutex>
 #include <string>
 #include <string_view>
 #include <unordered_map>
+
+#include "base/thread_annotations.h"
 
 namespace rcan::registry::api {
 
@@ -22,8 +23,8 @@ class RateLimiter {
   explicit RateLimiter(BucketConfig c, size_t max_keys = 100000) : c_(c), max_keys_(max_keys) {}
   // Takes one token for `key` at `now_us` (a steady clock). 0: allowed; otherwise the seconds
   // to wait before a token is there (for Retry-After, at least 1).
-  int64_t take(std::string_view key, int64_t now_us);
-  size_t size();
+  int64_t take(std::string_view key, int64_t now_us) EXCLUDES(mu_);
+  size_t size() EXCLUDES(mu_);
 
  private:
   struct Bucket {
@@ -32,8 +33,8 @@ class RateLimiter {
   };
   BucketConfig c_;
   size_t max_keys_;
-  std::mutex mu_;
-  std::unordered_map<std::string, Bucket> buckets_;
+  Mutex mu_;
+  std::unordered_map<std::string, Bucket> buckets_ GUARDED_BY(mu_);
 };
 
 }  // namespace rcan::registry::api
