@@ -33,7 +33,7 @@ json::Object delegation_json(const Delegation& d) {
 
 }  // namespace
 
-HttpResponse RegistryApi::Impl::challenge() {
+HttpResponse RegistryApi::Impl::challenge(bool post) {
   Challenge c;
   Bytes id(16), nonce(32);
   if (!random_bytes(id.data(), id.size()) || !random_bytes(nonce.data(), nonce.size()))
@@ -45,12 +45,13 @@ HttpResponse RegistryApi::Impl::challenge() {
   c.expires_at = iso_utc(t + int64_t{o.challenge_ttl_s} * 1000);
   (void)store.expire_challenges(iso_utc(t));
   if (Status s = store.put_challenge(c); !s.ok()) return store_error(s.error());
-  return json_response(201, json::Object{{"challenge_id", c.id},
-                                         {"nonce", c.nonce},
-                                         {"expires_at", c.expires_at},
-                                         {"format",
-                                          "rcan-registry-pop:<challenge_id>:<nonce>:<manufacturer>/"
-                                          "<model>/<version>/<device_id>"}});
+  return json_response(post ? 201 : 200,
+                       json::Object{{"challenge_id", c.id},
+                                    {"nonce", c.nonce},
+                                    {"expires_at", c.expires_at},
+                                    {"format",
+                                     "rcan-registry-pop:<challenge_id>:<nonce>:<manufacturer>/"
+                                     "<model>/<version>/<device_id>"}});
 }
 
 HttpResponse RegistryApi::Impl::create_key_route(const HttpRequest& req) {

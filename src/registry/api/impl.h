@@ -55,7 +55,7 @@ class RegistryApi::Impl {
   json::Object robot_json(const Robot& r) const;
 
   // ---- keys, nodes, challenges, manifest (admin_routes.cpp)
-  HttpResponse challenge();
+  HttpResponse challenge(bool post);  // 200 on GET, 201 on POST
   HttpResponse create_key_route(const HttpRequest& req);
   HttpResponse list_keys(const HttpRequest& req);
   HttpResponse revoke_key(const HttpRequest& req, const std::string& id);

@@ -263,7 +263,8 @@ HttpResponse RegistryApi::Impl::serve(const HttpRequest& req) {
   }
   if (rest.rfind("nodes/", 0) == 0)
     return m == "GET" ? get_node(std::string(rest.substr(6))) : not_allowed();
-  if (rest == "challenge") return m == "GET" || m == "POST" ? challenge() : not_allowed();
+  if (rest == "challenge")
+    return m == "GET" || m == "POST" ? challenge(m == "POST") : not_allowed();
   if (rest == "keys") {
     if (m == "GET") return list_keys(req);
     if (m == "POST") return create_key_route(req);
