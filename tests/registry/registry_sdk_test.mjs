@@ -7,7 +7,7 @@
 // Exit 0 pass, 1 fail, 77 skip (CTest SKIP_RETURN_CODE): RCAN_REGISTRY_PATH missing, or the SDK
 // not built (dist/index.mjs).
 import { spawn } from 'node:child_process';
-import { existsSync, mkdtempSync, readFileSync } from 'node:fs';
+import { existsSync, mkdtempSync, readFileSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { dirname, join } from 'node:path';
 import { fileURLToPath } from 'node:url';
@@ -47,7 +47,14 @@ async function start(extra = []) {
     proc.on('exit', () => reject(new Error(`rcan-registry exited:\n${buf}`)));
   });
   const admin = readFileSync(join(dir, 'admin.key'), 'utf8');
-  return { proc, url, admin };
+  const exited = new Promise((resolve) => proc.on('exit', resolve));
+  // SIGTERM, wait for the exit, remove the data directory.
+  const stop = async () => {
+    proc.kill('SIGTERM');
+    await exited;
+    rmSync(dir, { recursive: true, force: true });
+  };
+  return { proc, url, admin, stop };
 }
 
 async function post(reg, path, body, key) {
@@ -132,8 +139,8 @@ async function federation() {
     const node = await nc.discover(made.body.rrn);
     check(node.node_url === bd.url, 'NodeClient.discover → the BD node');
   } finally {
-    bd.proc.kill('SIGTERM');
-    root.proc.kill('SIGTERM');
+    await bd.stop();
+    await root.stop();
   }
 }
 
@@ -158,8 +165,8 @@ try {
 } catch (e) {
   check(false, `unexpected: ${e.stack ?? e}`);
 } finally {
-  insecure.proc.kill('SIGTERM');
-  secure.proc.kill('SIGTERM');
+  await insecure.stop();
+  await secure.stop();
 }
 console.log(`${failures.length} failure(s)`);
 process.exit(failures.length ? 1 : 0);
