@@ -23,6 +23,7 @@ LAYERS = [
     ("base", ["src/base/"]),
     ("transport", ["src/transport/"]),
     ("config", ["src/config/"]),
+    ("registry", ["src/registry/"]),
     ("node/safety", ["src/node/safety/"]),
     ("drivers", ["src/drivers/"]),  # hardware drivers under the safety core (driver.h)
     ("node/admission", ["src/node/admission/"]),
@@ -37,6 +38,7 @@ LAYERS = [
     ("testing", ["src/testing/"]),
     ("apps/rcan", ["apps/rcan/"]),
     ("apps/rcand", ["apps/rcand/"]),
+    ("apps/rcan-registry", ["apps/rcan-registry/"]),
 ]
 # Layers that must not reach some lower layers even though they sit above them: the CLI is a
 # client of robots, not a robot (it links neither the node nor Boost.Beast).

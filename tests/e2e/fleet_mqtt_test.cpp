@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "fleet_fixture.h"
+#include "postgres.h"
 
 namespace rcan {
 namespace {
@@ -11,55 +12,7 @@ namespace {
 using namespace fleet_test;  // NOLINT(google-build-using-namespace)
 namespace fs = std::filesystem;
 
-// A PostgreSQL server on a free loopback port, in a fresh cluster (initdb). PostgreSQL refuses
-// to run as root: under root the server runs as the `postgres` system user.
-class Postgres {
- public:
-  Postgres() : port_(free_port()) {
-    std::vector<char> tmpl{'/', 't', 'm', 'p', '/', 'r', 'c', 'a', 'n', '-',
-                           'p', 'g', '-', 'X', 'X', 'X', 'X', 'X', 'X', '\0'};
-    dir_ = ::mkdtemp(tmpl.data());
-    for (const auto& e : fs::directory_iterator("/usr/lib/postgresql"))
-      if (fs::exists(e.path() / "bin/postgres")) bin_ = (e.path() / "bin").string();
-    EXPECT_FALSE(bin_.empty()) << "PostgreSQL is not installed (scripts/install-deps.sh)";
-    if (::getuid() == 0) {
-      struct passwd* pw = ::getpwnam("postgres");
-      EXPECT_NE(pw, nullptr);
-      if (pw != nullptr) {
-        EXPECT_EQ(::chown(dir_.c_str(), pw->pw_uid, pw->pw_gid), 0);
-        as_ = {"/usr/bin/setpriv", "--reuid=postgres", "--regid=postgres", "--init-groups"};
-      }
-    }
-    auto init = test::run(with_user({bin_ + "/initdb", "-D", dir_ + "/data", "-A", "trust", "-U",
-                                     "rcan", "--no-sync", "-E", "UTF8"}));
-    EXPECT_EQ(init.exit_code, 0) << init.out << init.err;
-    EXPECT_TRUE(proc_.start(
-        with_user({bin_ + "/postgres", "-D", dir_ + "/data", "-p", std::to_string(port_), "-k",
-                   dir_, "-c", "listen_addresses=127.0.0.1", "-c", "fsync=off"})));
-    EXPECT_TRUE(proc_.wait_for_line("ready to accept connections", 30000)) << proc_.err();
-  }
-  ~Postgres() {
-    if (proc_.running()) proc_.stop(SIGTERM, 15000);
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  std::string conninfo() const {
-    return "host=127.0.0.1 port=" + std::to_string(port_) + " user=rcan dbname=postgres";
-  }
-  test::RunResult sql(const std::string& statement) const {
-    return test::run({bin_ + "/psql", conninfo(), "-v", "ON_ERROR_STOP=1", "-At", "-c", statement});
-  }
-
- private:
-  std::vector<std::string> with_user(std::vector<std::string> argv) const {
-    argv.insert(argv.begin(), as_.begin(), as_.end());
-    return argv;
-  }
-  uint16_t port_;
-  std::string dir_, bin_;
-  std::vector<std::string> as_;
-  test::Process proc_;
-};
+using test::Postgres;  // tests/support/postgres.h
 
 TEST_F(FleetTest, FleetCommandReachesEveryMemberAndCompletes) {
   three_robots();

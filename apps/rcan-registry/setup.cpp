@@ -1,0 +1,190 @@
+#include "setup.h"
+
+#include <fcntl.h>
+#include <pwd.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <charconv>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <vector>
+
+#include "rcan/audit/secret.h"
+#include "rcan/crypto/ed25519.h"
+#include "rcan/crypto/keys.h"
+
+namespace rcan::registry_app {
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr const char* kUsage =
+    "usage: rcan-registry [--port N] [--bind ADDR] [--data-dir DIR] [--database SPEC]\n"
+    "                     [--public-url URL] [--host NAME] [--prefix P] [--operator NAME]\n"
+    "                     [--contact EMAIL] [--write-rate R] [--write-burst B]\n"
+    "                     [--address-write-rate R] [--read-rate R] [--io-threads N]\n"
+    "\n"
+    "An RCAN robot registry (docs/REGISTRY.md): robots and their RRNs, resolve, federation\n"
+    "nodes and the signed node manifest, compatible with rcan.dev and the official SDKs.\n"
+    "\n"
+    "  --port N            TCP port (default 8090; 0 = any free port)\n"
+    "  --bind ADDR         listen address (default 127.0.0.1)\n"
+    "  --data-dir DIR      keys, audit log and the SQLite database (default\n"
+    "                      $RCAN_REGISTRY_DATA_DIR, else ~/.local/share/rcan-registry)\n"
+    "  --database SPEC     postgresql://… or a SQLite path (default <data-dir>/registry.db)\n"
+    "  --public-url URL    the URL clients use (manifest api_base; default http://ADDR:PORT)\n"
+    "  --host NAME         registry host in rcan:// URIs (default: the public URL's host)\n"
+    "  --prefix P          authoritative for the delegated prefix P: RRNs are RRN-P-…\n"
+    "  --write-rate R      writes per second per API key (default 10, burst --write-burst 20)\n"
+    "  --address-write-rate R  writes per second per client address (default 50)\n"
+    "  --read-rate R       reads per second per client address (default 2000; 0 = unlimited)\n"
+    "  --allow-http-node-urls  accept http:// node URLs in delegations (local tests only)\n"
+    "\n"
+    "The first start creates, in the data directory, an admin API key (admin.key, mode 0600),\n"
+    "the node's Ed25519 key (node-ed25519.seed) and the audit chain secret (audit.secret).\n"
+    "SIGTERM or Ctrl-C stops it gracefully.\n";
+
+bool parse_number(const std::string& s, double& out) {
+  char* end = nullptr;
+  out = std::strtod(s.c_str(), &end);
+  return !s.empty() && end == s.c_str() + s.size() && out >= 0;
+}
+
+}  // namespace
+
+std::optional<Flags> parse_flags(int argc, char** argv, int& exit_code) {
+  Flags f;
+  exit_code = 2;
+  for (int i = 1; i < argc; ++i) {
+    std::string s = argv[i];
+    auto value = [&](std::string& out) {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "rcan-registry: %s needs a value\n", s.c_str());
+        return false;
+      }
+      out = argv[++i];
+      return true;
+    };
+    std::string v;
+    double d = 0;
+    if (s == "--help" || s == "-h") {
+      std::fputs(kUsage, stdout);
+      exit_code = 0;
+      return std::nullopt;
+    } else if (s == "--port") {
+      if (!value(v)) return std::nullopt;
+      unsigned p = 0;
+      auto [ptr, ec] = std::from_chars(v.data(), v.data() + v.size(), p);
+      if (ec != std::errc() || ptr != v.data() + v.size() || p > 65535) {
+        std::fprintf(stderr, "rcan-registry: --port must be 0..65535\n");
+        return std::nullopt;
+      }
+      f.port = static_cast<uint16_t>(p);
+    } else if (s == "--bind") {
+      if (!value(f.bind)) return std::nullopt;
+    } else if (s == "--data-dir") {
+      if (!value(f.data_dir)) return std::nullopt;
+    } else if (s == "--database") {
+      if (!value(f.database)) return std::nullopt;
+    } else if (s == "--public-url") {
+      if (!value(f.public_url)) return std::nullopt;
+    } else if (s == "--host") {
+      if (!value(f.host)) return std::nullopt;
+    } else if (s == "--allow-http-node-urls") {
+      f.allow_http_node_urls = true;
+    } else if (s == "--prefix") {
+      if (!value(f.prefix)) return std::nullopt;
+    } else if (s == "--operator") {
+      if (!value(f.operator_name)) return std::nullopt;
+    } else if (s == "--contact") {
+      if (!value(f.contact)) return std::nullopt;
+    } else if (s == "--write-rate" || s == "--write-burst" || s == "--address-write-rate" ||
+               s == "--read-rate" || s == "--io-threads") {
+      if (!value(v)) return std::nullopt;
+      if (!parse_number(v, d)) {
+        std::fprintf(stderr, "rcan-registry: %s must be a number ≥ 0\n", s.c_str());
+        return std::nullopt;
+      }
+      if (s == "--write-rate") f.write_rate = d;
+      if (s == "--write-burst") f.write_burst = d;
+      if (s == "--address-write-rate") f.addr_write_rate = d;
+      if (s == "--read-rate") f.read_rate = d;
+      if (s == "--io-threads") f.io_threads = std::max(1, static_cast<int>(d));
+    } else {
+      std::fprintf(stderr, "rcan-registry: unknown argument '%s'\n%s", s.c_str(), kUsage);
+      return std::nullopt;
+    }
+  }
+  return f;
+}
+
+Result<std::string> default_data_dir() {
+  auto env = [](const char* name) {
+    const char* v = std::getenv(name);
+    return v != nullptr ? std::string(v) : std::string();
+  };
+  if (std::string d = env("RCAN_REGISTRY_DATA_DIR"); !d.empty())
+    return fs::absolute(d).lexically_normal().string();
+  if (std::string x = env("XDG_DATA_HOME"); !x.empty() && x[0] == '/')
+    return (fs::path(x) / "rcan-registry").lexically_normal().string();
+  std::string home = env("HOME");
+  if (home.empty() || home[0] != '/') {
+    struct passwd pw {};
+    struct passwd* result = nullptr;
+    std::vector<char> buf(16384);
+    if (getpwuid_r(getuid(), &pw, buf.data(), buf.size(), &result) == 0 && result != nullptr &&
+        result->pw_dir != nullptr && result->pw_dir[0] == '/')
+      home = result->pw_dir;
+  }
+  if (home.empty() || home[0] != '/')
+    return Error(ErrorCode::kInternal,
+                 "no data directory: set RCAN_REGISTRY_DATA_DIR or HOME, or pass --data-dir");
+  return (fs::path(home) / ".local" / "share" / "rcan-registry").lexically_normal().string();
+}
+
+Status make_private_dir(const std::string& dir) {
+  std::error_code ec;
+  if (!fs::exists(dir, ec)) {
+    fs::create_directories(dir, ec);
+    if (ec) return Error(ErrorCode::kInternal, "cannot create " + dir + ": " + ec.message());
+    ::chmod(dir.c_str(), 0700);
+  }
+  return Status::Ok();
+}
+
+Result<Bytes> node_seed(const std::string& dir, bool& created) {
+  std::string path = dir + "/node-ed25519.seed";
+  created = false;
+  if (!fs::exists(path)) {
+    Bytes seed = ed25519::random_seed();
+    if (Status s = keys::write_new_file(path, seed, 0600); !s.ok()) return s.error();
+    created = true;
+  }
+  auto seed = keys::read_secret_file(path, ed25519::kSeedBytes);
+  if (!seed.ok()) return seed.error();
+  return Bytes(seed->data(), seed->data() + seed->size());
+}
+
+Result<std::string> audit_secret(const std::string& dir) {
+  std::string path = dir + "/audit.secret";
+  if (!fs::exists(path)) {
+    if (Status s = audit::create_secret_file(path); !s.ok()) return s.error();
+  }
+  return audit::read_secret_file(path);
+}
+
+Status write_private_file(const std::string& path, const std::string& text) {
+  int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
+  if (fd < 0)
+    return Error(ErrorCode::kInternal, "cannot create " + path + ": " + std::strerror(errno));
+  bool ok = ::write(fd, text.data(), text.size()) == static_cast<ssize_t>(text.size());
+  ok = ::fsync(fd) == 0 && ok;
+  ::close(fd);
+  if (!ok) return Error(ErrorCode::kInternal, "cannot write " + path);
+  return Status::Ok();
+}
+
+}  // namespace rcan::registry_app

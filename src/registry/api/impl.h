@@ -1,0 +1,90 @@
+// The registry API's internals, shared by its route files (not an interface).
+#pragma once
+
+#include <optional>
+#include <string>
+#include <string_view>
+
+#include "rcan/json.h"
+#include "registry/api/body.h"
+#include "registry/api/registry_api.h"
+
+namespace rcan::registry::api {
+
+using transport::HttpRequest;
+using transport::HttpResponse;
+
+// Who presented which API key.
+struct Caller {
+  ApiKey key;
+  bool is(std::string_view role) const { return key.role == role; }
+};
+
+class RegistryApi::Impl {
+ public:
+  Impl(Store& store, audit::AuditLog* audit, ApiOptions o);
+
+  HttpResponse serve(const HttpRequest& req);
+
+  // ---- helpers (registry_api.cpp)
+  std::string now() const { return iso_utc(now_ms()); }
+  int64_t now_ms() const;
+  // Who the bearer is: nullopt with `err` set (401) when the key is missing, malformed,
+  // unknown, revoked or wrong.
+  std::optional<Caller> authenticate(const HttpRequest& req, HttpResponse& err);
+  // 429 when `key_id`'s write bucket is empty.
+  std::optional<HttpResponse> limit_key(const std::string& key_id);
+  // Appends a change to the audit log (logs and counts a failure: the change is stored).
+  void audit(const std::string& event, const std::string& principal, const std::string& ruri,
+             json::Object detail);
+  // 503 when the audit log does not take records (no change is made then).
+  std::optional<HttpResponse> audit_unavailable();
+  Result<std::string> create_key(const std::string& role, const std::string& rrn,
+                                 const std::string& label, const std::string& by);
+  std::string registry_ruri() const { return "rcan://" + o.host + "/registry/rcan-registry/node"; }
+  std::string uri_base() const { return "rcan://" + o.host; }
+
+  // ---- robots (robots_routes.cpp)
+  HttpResponse register_robot(const HttpRequest& req);
+  HttpResponse list_robots(const HttpRequest& req);
+  HttpResponse search_robots(const HttpRequest& req);
+  HttpResponse get_robot(const std::string& rrn);
+  HttpResponse patch_robot(const HttpRequest& req, const std::string& rrn);
+  HttpResponse delete_robot(const HttpRequest& req, const std::string& rrn);
+  HttpResponse resolve(const HttpRequest& req, const std::string& raw);
+  json::Object robot_json(const Robot& r) const;
+
+  // ---- keys, nodes, challenges, manifest (admin_routes.cpp)
+  HttpResponse challenge(bool post);  // 200 on GET, 201 on POST
+  HttpResponse create_key_route(const HttpRequest& req);
+  HttpResponse list_keys(const HttpRequest& req);
+  HttpResponse revoke_key(const HttpRequest& req, const std::string& id);
+  HttpResponse list_nodes(const HttpRequest& req);
+  HttpResponse get_node(const std::string& prefix);
+  HttpResponse add_node(const HttpRequest& req);
+  json::Object self_node() const;
+  void build_manifest();
+  // The registration's proof of possession: nullopt when it holds (or there are no keys).
+  std::optional<HttpResponse> check_proof(const Registration& r);
+
+  Store& store;
+  audit::AuditLog* audit_log;
+  ApiOptions o;
+  Bytes node_pub;
+  std::string manifest;
+  Metrics metrics;
+  RateLimiter write_key, write_addr, read_addr;
+  std::atomic<uint64_t> audit_failures{0};
+};
+
+// Answers.
+HttpResponse json_response(int status, const json::Value& body);
+// The reference's error form {"error": msg} (plus "error_code" naming the project's code).
+HttpResponse ref_error(int status, std::string msg);
+// The project's error body (include/rcan/errors.h) for what the reference does not define.
+HttpResponse project_error(ErrorCode code, std::string msg, std::string field = {},
+                           std::string reason = {});
+HttpResponse from_error(const Error& e);   // project_error of a Result's error
+HttpResponse store_error(const Error& e);  // 500, logged
+
+}  // namespace rcan::registry::api

@@ -1,0 +1,326 @@
+#include "registry/api/registry_api.h"
+
+#include <chrono>
+#include <ctime>
+
+#include "base/clock.h"
+#include "base/log.h"
+#include "rcan/crypto/ed25519.h"
+#include "rcan/errors.h"
+#include "rcan/hash.h"
+#include "registry/api/impl.h"
+
+namespace rcan::registry::api {
+namespace {
+
+constexpr const char* kAllowMethods = "GET, POST, PATCH, DELETE, OPTIONS";
+
+void add_cors(HttpResponse& r) {
+  r.headers.emplace_back("Access-Control-Allow-Origin", "*");
+  r.headers.emplace_back("Access-Control-Allow-Methods", kAllowMethods);
+  r.headers.emplace_back("Access-Control-Allow-Headers", "Content-Type, Authorization");
+}
+
+std::string address_of(const std::string& remote) {
+  size_t colon = remote.rfind(':');
+  if (colon == std::string::npos) return remote;
+  std::string a = remote.substr(0, colon);
+  if (a.size() >= 2 && a.front() == '[' && a.back() == ']') a = a.substr(1, a.size() - 2);
+  return a;
+}
+
+HttpResponse too_many(int64_t retry_after_s, const std::string& what) {
+  HttpResponse r = project_error(ErrorCode::kRateLimited, "Rate limited — slow down requests", what,
+                                 "rate_limited");
+  r.headers.emplace_back("Retry-After", std::to_string(retry_after_s));
+  return r;
+}
+
+bool is_hex(std::string_view s) {
+  for (char c : s)
+    if (!((c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'))) return false;
+  return true;
+}
+
+std::string random_hex(size_t bytes) {
+  Bytes b(bytes);
+  if (!random_bytes(b.data(), b.size())) return {};
+  return to_hex(b);
+}
+
+}  // namespace
+
+std::string iso_utc(int64_t ms) {
+  std::time_t secs = static_cast<std::time_t>(ms / 1000);
+  std::tm tm{};
+  gmtime_r(&secs, &tm);
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "%04d-%02d-%02dT%02d:%02d:%02d.%03dZ", tm.tm_year + 1900,
+                tm.tm_mon + 1, tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec,
+                static_cast<int>(ms % 1000));
+  return buf;
+}
+
+HttpResponse json_response(int status, const json::Value& body) {
+  HttpResponse r;
+  r.status = status;
+  r.body = json::dump(body);
+  return r;
+}
+
+HttpResponse ref_error(int status, std::string msg) {
+  return json_response(status, json::Object{{"error", std::move(msg)}});
+}
+
+HttpResponse project_error(ErrorCode code, std::string msg, std::string field, std::string reason) {
+  Error e(code, std::move(msg), std::move(field), std::move(reason));
+  int64_t ms = std::chrono::duration_cast<std::chrono::milliseconds>(
+                   std::chrono::system_clock::now().time_since_epoch())
+                   .count();
+  json::Value body = error_body(e, "", ms);
+  // The SDK clients show body.error: keep the message there too.
+  body.as_object().set("error", e.message);
+  return json_response(http_status(code), body);
+}
+
+HttpResponse from_error(const Error& e) {
+  return project_error(e.code, e.message, e.field, e.reason);
+}
+
+HttpResponse store_error(const Error& e) {
+  log(LogLevel::kError, "registry_store_error", json::Object{{"error", e.message}});
+  return ref_error(500, "Internal server error");
+}
+
+RegistryApi::Impl::Impl(Store& s, audit::AuditLog* a, ApiOptions opts)
+    : store(s),
+      audit_log(a),
+      o(std::move(opts)),
+      write_key(o.write_per_key),
+      write_addr(o.write_per_address),
+      read_addr(o.read_per_address) {
+  while (!o.public_url.empty() && o.public_url.back() == '/') o.public_url.pop_back();
+  if (o.node_seed.size() != ed25519::kSeedBytes) o.node_seed = ed25519::random_seed();
+  auto pub = ed25519::public_key_from_seed(o.node_seed);
+  if (pub.ok()) node_pub = *pub;
+  metrics.add_gauge("rcan_registry_robots", "Live robots in the registry", [this] {
+    RobotQuery q;
+    q.limit = 1;
+    auto page = store.list_robots(q);
+    return page.ok() ? static_cast<double>(page->total) : -1.0;
+  });
+  metrics.add_counter_fn("rcan_registry_audit_failures_total",
+                         "Changes whose audit record could not be written",
+                         [this] { return static_cast<double>(audit_failures.load()); });
+  build_manifest();
+}
+
+int64_t RegistryApi::Impl::now_ms() const {
+  if (o.wall_ms) return o.wall_ms();
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+std::optional<Caller> RegistryApi::Impl::authenticate(const HttpRequest& req, HttpResponse& err) {
+  std::string_view token = req.bearer();
+  while (!token.empty() && token.back() == ' ') token.remove_suffix(1);
+  if (token.empty()) {
+    err = project_error(ErrorCode::kAuthRequired, "Authorization required", "authorization",
+                        "missing");
+    return std::nullopt;
+  }
+  err = project_error(ErrorCode::kAuthInvalid, "Invalid API key", "authorization", "invalid");
+  // rcan_<16 hex id>_<64 hex secret>
+  if (token.size() != 5 + 16 + 1 + 64 || token.substr(0, 5) != "rcan_" || token[21] != '_')
+    return std::nullopt;
+  std::string_view id = token.substr(5, 16), secret = token.substr(22);
+  if (!is_hex(id) || !is_hex(secret)) return std::nullopt;
+  auto key = store.get_api_key(id);
+  if (!key.ok()) {
+    err = store_error(key.error());
+    return std::nullopt;
+  }
+  if (!*key || !(*key)->revoked_at.empty()) return std::nullopt;
+  std::string presented = sha256_hex((*key)->salt + std::string(secret));
+  if (!constant_time_equal(presented, (*key)->hash)) return std::nullopt;
+  return Caller{std::move(**key)};
+}
+
+std::optional<HttpResponse> RegistryApi::Impl::limit_key(const std::string& key_id) {
+  if (int64_t wait = write_key.take(key_id, steady_us()); wait > 0)
+    return too_many(wait, "api_key");
+  return std::nullopt;
+}
+
+std::optional<HttpResponse> RegistryApi::Impl::audit_unavailable() {
+  if (audit_log == nullptr || audit_log->available()) return std::nullopt;
+  return project_error(ErrorCode::kAuditUnavailable,
+                       "The audit log does not take records: no change is made", "audit",
+                       "audit_unavailable");
+}
+
+void RegistryApi::Impl::audit(const std::string& event, const std::string& principal,
+                              const std::string& ruri, json::Object detail) {
+  if (audit_log == nullptr) return;
+  audit::AuditEntry e;
+  e.principal = principal;
+  e.ruri = ruri;
+  e.message_id = new_uuid_v4();
+  e.event = event;
+  e.outcome = "ok";
+  e.sender_type = "human";
+  e.detail = std::move(detail);
+  auto r = audit_log->append(std::move(e));
+  if (!r.ok()) {
+    audit_failures.fetch_add(1);
+    log(LogLevel::kError, "registry_audit_failed",
+        json::Object{{"event", event}, {"error", r.error().message}});
+  }
+}
+
+Result<std::string> RegistryApi::Impl::create_key(const std::string& role, const std::string& rrn,
+                                                  const std::string& label, const std::string& by) {
+  ApiKey k;
+  k.id = random_hex(8);
+  k.salt = random_hex(16);
+  std::string secret = random_hex(32);
+  if (k.id.empty() || k.salt.empty() || secret.empty())
+    return Error(ErrorCode::kInternal, "no randomness for a new API key");
+  k.hash = sha256_hex(k.salt + secret);
+  k.role = role;
+  k.rrn = rrn;
+  k.label = label;
+  k.created_at = now();
+  if (Status s = store.put_api_key(k); !s.ok()) return s.error();
+  audit("REGISTRY_KEY_CREATED", by, registry_ruri(),
+        json::Object{{"key_id", k.id}, {"role", role}, {"rrn", rrn}, {"label", label}});
+  return "rcan_" + k.id + "_" + secret;
+}
+
+HttpResponse RegistryApi::Impl::serve(const HttpRequest& req) {
+  const std::string& m = req.method;
+  const std::string& p = req.path;
+  // A challenge is a row in the store whatever the method: it counts as a write.
+  bool write =
+      m == "POST" || m == "PATCH" || m == "DELETE" || m == "PUT" || p == "/api/v1/challenge";
+  std::string addr = address_of(req.remote_addr);
+  if (m == "OPTIONS") {
+    HttpResponse r;
+    r.status = 204;
+    r.content_type.clear();
+    return r;
+  }
+  if (int64_t wait = (write ? write_addr : read_addr).take(addr, steady_us()); wait > 0)
+    return too_many(wait, "address");
+  auto not_allowed = [&] { return ref_error(405, "Method not allowed"); };
+  if (p == "/healthz") {
+    return m == "GET" ? json_response(200, json::Object{{"status", "ok"},
+                                                        {"backend", std::string(store.backend())}})
+                      : not_allowed();
+  }
+  if (p == "/metrics") {
+    if (m != "GET") return not_allowed();
+    HttpResponse r;
+    r.content_type = "text/plain; version=0.0.4";
+    r.body = metrics.render();
+    return r;
+  }
+  if (p == "/.well-known/rcan-node.json") {
+    if (m != "GET") return not_allowed();
+    HttpResponse r;
+    r.body = manifest;
+    r.headers.emplace_back("Cache-Control", "public, max-age=3600");
+    return r;
+  }
+  constexpr std::string_view kApi = "/api/v1/";
+  if (p.rfind(kApi, 0) != 0) return ref_error(404, "Not found");
+  std::string_view rest = std::string_view(p).substr(kApi.size());
+  while (!rest.empty() && rest.back() == '/') rest.remove_suffix(1);
+  // rcan-py's NodeClient appends /api/v1/robots/<rrn> to a manifest's api_base, which already
+  // ends in /api/v1 (rcan-ts appends /robots/<rrn>): serve both.
+  if (rest.rfind("api/v1/robots/", 0) == 0) rest.remove_prefix(7);
+  if (rest == "robots") {
+    if (m == "GET") return list_robots(req);
+    if (m == "POST") return register_robot(req);
+    return not_allowed();
+  }
+  if (rest == "robots/search") return m == "GET" ? search_robots(req) : not_allowed();
+  if (rest.rfind("robots/", 0) == 0) {
+    auto rrn = parse_rrn(rest.substr(7));
+    if (!rrn) return ref_error(404, "Not found");
+    if (m == "GET") return get_robot(rrn->rrn);
+    if (m == "PATCH") return patch_robot(req, rrn->rrn);
+    if (m == "DELETE") return delete_robot(req, rrn->rrn);
+    return not_allowed();
+  }
+  if (rest.rfind("resolve/", 0) == 0)
+    return m == "GET" ? resolve(req, std::string(rest.substr(8))) : not_allowed();
+  if (rest == "nodes") {
+    if (m == "GET") return list_nodes(req);
+    if (m == "POST") return add_node(req);
+    return not_allowed();
+  }
+  if (rest.rfind("nodes/", 0) == 0)
+    return m == "GET" ? get_node(std::string(rest.substr(6))) : not_allowed();
+  if (rest == "challenge")
+    return m == "GET" || m == "POST" ? challenge(m == "POST") : not_allowed();
+  if (rest == "keys") {
+    if (m == "GET") return list_keys(req);
+    if (m == "POST") return create_key_route(req);
+    return not_allowed();
+  }
+  if (rest.rfind("keys/", 0) == 0)
+    return m == "DELETE" ? revoke_key(req, std::string(rest.substr(5))) : not_allowed();
+  return ref_error(404, "Not found");
+}
+
+namespace {
+
+// The metrics label of a path: its route pattern, never the raw path (bounded label set).
+std::string route_label(std::string_view p) {
+  static constexpr std::string_view kFixed[] = {"/healthz",
+                                                "/metrics",
+                                                "/.well-known/rcan-node.json",
+                                                "/api/v1/robots",
+                                                "/api/v1/robots/search",
+                                                "/api/v1/nodes",
+                                                "/api/v1/challenge",
+                                                "/api/v1/keys"};
+  for (auto f : kFixed)
+    if (p == f) return std::string(f);
+  static constexpr std::pair<std::string_view, std::string_view> kPrefixes[] = {
+      {"/api/v1/api/v1/robots/", "/api/v1/robots/{rrn}"},
+      {"/api/v1/robots/", "/api/v1/robots/{rrn}"},
+      {"/api/v1/resolve/", "/api/v1/resolve/{rrn}"},
+      {"/api/v1/nodes/", "/api/v1/nodes/{prefix}"},
+      {"/api/v1/keys/", "/api/v1/keys/{id}"}};
+  for (auto [pre, label] : kPrefixes)
+    if (p.rfind(pre, 0) == 0) return std::string(label);
+  return "other";
+}
+
+}  // namespace
+
+RegistryApi::RegistryApi(Store& store, audit::AuditLog* audit, ApiOptions options)
+    : impl_(std::make_unique<Impl>(store, audit, std::move(options))) {}
+
+RegistryApi::~RegistryApi() = default;
+
+HttpResponse RegistryApi::serve(const HttpRequest& req) {
+  HttpResponse r = impl_->serve(req);
+  add_cors(r);
+  impl_->metrics.count_request(route_label(req.path), r.status);
+  return r;
+}
+
+void RegistryApi::handle(HttpRequest req, Respond respond) { respond(serve(req)); }
+
+Result<std::string> RegistryApi::create_key(const std::string& role, const std::string& rrn,
+                                            const std::string& label, const std::string& by) {
+  return impl_->create_key(role, rrn, label, by);
+}
+
+const std::string& RegistryApi::manifest() const { return impl_->manifest; }
+
+}  // namespace rcan::registry::api

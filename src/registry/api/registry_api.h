@@ -1,0 +1,67 @@
+// The registry's HTTP API (docs/REGISTRY.md): robots, resolve, federation nodes, the node
+// manifest, API keys and proof-of-possession challenges, compatible with the rcan.dev
+// reference and the official SDK clients. One HttpHandler over a Store (src/registry/store.h);
+// every change is appended to the audit log.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "base/metrics.h"
+#include "rcan/audit/audit_log.h"
+#include "rcan/encoding.h"
+#include "rcan/result.h"
+#include "registry/api/rate_limit.h"
+#include "registry/store.h"
+#include "transport/http_api.h"
+
+namespace rcan::registry::api {
+
+struct ApiOptions {
+  std::string public_url = "http://127.0.0.1:8090";  // what clients use; no trailing '/'
+  std::string host = "127.0.0.1";                    // registry host of rcan:// URIs
+  std::string prefix;                                // authoritative for RRN-<prefix>-…; "" root
+  Bytes node_seed;                                   // the node's Ed25519 seed (32 bytes)
+  std::string operator_name = "rcan-registry";
+  std::string contact;
+  // Rate limits (rate 0 = unlimited): writes per API key, writes and reads per client address.
+  BucketConfig write_per_key{10, 20};
+  BucketConfig write_per_address{50, 100};
+  BucketConfig read_per_address{2000, 4000};
+  int challenge_ttl_s = 300;
+  // Accept http:// node URLs in delegations (local federation tests; never in production).
+  bool allow_http_node_urls = false;
+  std::function<int64_t()> wall_ms;  // unset: the system clock
+};
+
+// "2026-11-27T05:20:00.000Z"
+std::string iso_utc(int64_t ms);
+
+class RegistryApi : public transport::HttpHandler {
+ public:
+  // `store` and `audit` must outlive the API. `audit` may be null (tests of the routes only).
+  RegistryApi(Store& store, audit::AuditLog* audit, ApiOptions options);
+  ~RegistryApi() override;
+
+  void handle(transport::HttpRequest req, Respond respond) override;
+  // The same, synchronously.
+  transport::HttpResponse serve(const transport::HttpRequest& req);
+
+  // Creates and stores an API key; returns the presented form "rcan_<id>_<secret>", which is
+  // never stored. `by` names who asked, for the audit record.
+  Result<std::string> create_key(const std::string& role, const std::string& rrn,
+                                 const std::string& label, const std::string& by);
+
+  // The signed node manifest (GET /.well-known/rcan-node.json).
+  const std::string& manifest() const;
+
+  class Impl;
+
+ private:
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace rcan::registry::api

@@ -1,0 +1,364 @@
+// Robots: register, list, search, get, update, delete, and resolve.
+#include <charconv>
+
+#include "rcan/crypto/ed25519.h"
+#include "rcan/crypto/mldsa65.h"
+#include "registry/api/impl.h"
+
+namespace rcan::registry::api {
+namespace {
+
+// parseInt of the reference: the leading digits (with a sign), else `def`.
+int64_t int_param(const HttpRequest& req, std::string_view name, int64_t def) {
+  std::string_view v = req.query_value(name);
+  while (!v.empty() && v.front() == ' ') v.remove_prefix(1);
+  int64_t out = 0;
+  auto [ptr, ec] = std::from_chars(v.data(), v.data() + v.size(), out);
+  if (ec != std::errc() || ptr == v.data()) return def;
+  return out;
+}
+
+std::string trimmed(std::string_view v) {
+  while (!v.empty() && v.front() == ' ') v.remove_prefix(1);
+  while (!v.empty() && v.back() == ' ') v.remove_suffix(1);
+  return std::string(v);
+}
+
+json::Value parsed_or(const std::string& text, json::Value def) {
+  auto v = json::parse(text);
+  return v.ok() ? std::move(v).value() : std::move(def);
+}
+
+bool owns(const Caller& c, const Robot& r) {
+  return c.is("admin") || (c.is("robot") && c.key.rrn == r.rrn) ||
+         (!r.owner_key_id.empty() && c.key.id == r.owner_key_id);
+}
+
+}  // namespace
+
+json::Object RegistryApi::Impl::robot_json(const Robot& r) const {
+  json::Object j{{"rrn", r.rrn},
+                 {"manufacturer", r.manufacturer},
+                 {"model", r.model},
+                 {"version", r.version},
+                 {"device_id", r.device_id},
+                 {"rcan_uri", r.rcan_uri},
+                 {"uri", r.rcan_uri},
+                 {"verification_tier", r.verification_tier},
+                 {"description", r.description},
+                 {"source", r.source},
+                 {"metadata", parsed_or(r.metadata_json, json::Object{})},
+                 {"endpoints", parsed_or(r.endpoints_json, json::Array{})},
+                 {"status", r.deleted ? "deleted" : "active"},
+                 {"registered_at", r.registered_at},
+                 {"updated_at", r.updated_at}};
+  j.set("ed25519_public_key", r.ed25519_pub.empty() ? json::Value() : json::Value(r.ed25519_pub));
+  j.set("mldsa65_public_key", r.mldsa65_pub.empty() ? json::Value() : json::Value(r.mldsa65_pub));
+  return j;
+}
+
+std::optional<HttpResponse> RegistryApi::Impl::check_proof(const Registration& r) {
+  bool keys = !r.ed25519_pub.empty() || !r.mldsa65_pub.empty();
+  if (!keys && !r.proof) return std::nullopt;
+  auto bad = [](int status, std::string msg, std::string reason) {
+    return project_error(
+        status == 400 ? ErrorCode::kSchemaValidationFailed : ErrorCode::kSignatureInvalid,
+        std::move(msg), "proof", std::move(reason));
+  };
+  if (!keys)
+    return bad(400, "a proof needs ed25519_public_key and/or mldsa65_public_key", "no_keys");
+  if (!r.proof)
+    return bad(400,
+               "public keys need a proof of possession: get a challenge (GET /api/v1/challenge) "
+               "and sign it with each key",
+               "proof_required");
+  std::optional<Bytes> ed, ml;
+  if (!r.ed25519_pub.empty()) {
+    ed = base64url_decode(r.ed25519_pub);
+    if (!ed || ed->size() != ed25519::kPublicKeyBytes)
+      return bad(400, "ed25519_public_key is not 32 bytes of base64url", "bad_key");
+  }
+  if (!r.mldsa65_pub.empty()) {
+    ml = base64url_decode(r.mldsa65_pub);
+    if (!ml || ml->size() != mldsa65::kPublicKeyBytes)
+      return bad(400, "mldsa65_public_key is not 1952 bytes of base64url", "bad_key");
+  }
+  if ((ed && r.proof->ed25519_sig.empty()) || (ml && r.proof->mldsa65_sig.empty()))
+    return bad(400, "the proof needs a signature by every key sent", "missing_signature");
+  // The challenge is used up whatever follows: a failed proof cannot be retried with it.
+  auto c = store.take_challenge(r.proof->challenge_id);
+  if (!c.ok()) return store_error(c.error());
+  if (!*c || (*c)->purpose != "register")
+    return bad(401, "unknown or already used challenge", "challenge_unknown");
+  if ((*c)->expires_at < now()) return bad(401, "the challenge has expired", "challenge_expired");
+  Bytes msg = to_bytes(pop_message((*c)->id, (*c)->nonce, r));
+  if (ed) {
+    auto sig = base64url_decode(r.proof->ed25519_sig);
+    if (!sig || !ed25519::verify(*ed, msg, *sig))
+      return bad(401, "the Ed25519 proof of possession does not verify", "bad_signature");
+  }
+  if (ml) {
+    auto sig = base64url_decode(r.proof->mldsa65_sig);
+    if (!sig || !mldsa65::verify(*ml, msg, *sig))
+      return bad(401, "the ML-DSA-65 proof of possession does not verify", "bad_signature");
+  }
+  return std::nullopt;
+}
+
+HttpResponse RegistryApi::Impl::register_robot(const HttpRequest& req) {
+  HttpResponse err;
+  auto caller = authenticate(req, err);
+  if (!caller) return err;
+  if (auto l = limit_key(caller->key.id)) return *l;
+  if (!caller->is("admin") && !caller->is("registrant"))
+    return project_error(ErrorCode::kInsufficientPrivileges,
+                         "registering needs a registrant or admin key", "authorization", "role");
+  std::string t = now();
+  auto reg = parse_registration(req.body, t);
+  if (!reg.ok()) return ref_error(400, reg.error().message);
+  if (auto bad = check_proof(*reg)) return *bad;
+  if (auto a = audit_unavailable()) return *a;
+  NewRobot n;
+  n.manufacturer = reg->manufacturer;
+  n.model = reg->model;
+  n.version = reg->version;
+  n.device_id = reg->device_id;
+  n.rcan_uri_base = uri_base();
+  n.description = reg->description;
+  n.contact_email = reg->contact_email;
+  n.source = reg->source;
+  n.metadata_json = reg->metadata_json;
+  n.ed25519_pub = reg->ed25519_pub;
+  n.mldsa65_pub = reg->mldsa65_pub;
+  n.endpoints_json = reg->endpoints_json;
+  n.owner_key_id = caller->key.id;
+  n.now = t;
+  auto done = store.register_robot(n);
+  if (!done.ok()) return store_error(done.error());
+  const Robot& r = done->robot;
+  if (!done->created)
+    return json_response(200, json::Object{{"rrn", r.rrn},
+                                           {"rcan_uri", r.rcan_uri},
+                                           {"message", "Robot already registered"},
+                                           {"already_existed", true}});
+  std::string principal = "apikey:" + caller->key.id;
+  auto key = create_key("robot", r.rrn, "robot " + r.rrn, principal);
+  audit("REGISTRY_ROBOT_REGISTERED", principal, r.rcan_uri,
+        json::Object{{"rrn", r.rrn}, {"proof_of_possession", reg->proof.has_value()}});
+  json::Object out{{"rrn", r.rrn},
+                   {"rcan_uri", r.rcan_uri},
+                   {"uri", r.rcan_uri},
+                   {"manufacturer", r.manufacturer},
+                   {"model", r.model},
+                   {"version", r.version},
+                   {"device_id", r.device_id},
+                   {"verification_tier", r.verification_tier},
+                   {"registered_at", r.registered_at},
+                   {"api_key", key.ok() ? json::Value(*key) : json::Value()},
+                   {"message", "Robot registered successfully"}};
+  if (!r.ed25519_pub.empty() || !r.mldsa65_pub.empty()) out.set("identity_proven", true);
+  return json_response(201, out);
+}
+
+HttpResponse RegistryApi::Impl::list_robots(const HttpRequest& req) {
+  int64_t raw_limit =
+      req.has_query("limit") ? int_param(req, "limit", 20) : int_param(req, "per_page", 20);
+  int64_t limit = std::min<int64_t>(100, std::max<int64_t>(1, raw_limit));
+  int64_t offset = 0;
+  if (req.has_query("offset")) {
+    offset = std::max<int64_t>(0, int_param(req, "offset", 0));
+  } else {
+    int64_t page = std::max<int64_t>(1, int_param(req, "page", 1));
+    offset = (std::min<int64_t>(page, int64_t{1} << 40) - 1) * limit;
+  }
+  RobotQuery q;
+  q.q = trimmed(req.query_value("q"));
+  q.tier = trimmed(req.query_value("tier"));
+  if (std::string m = trimmed(req.query_value("manufacturer")); !m.empty())
+    q.manufacturer = slugify(m);
+  if (std::string m = trimmed(req.query_value("model")); !m.empty()) q.model = slugify(m);
+  q.limit = static_cast<int>(limit);
+  q.offset = offset;
+  auto page = store.list_robots(q);
+  if (!page.ok()) return store_error(page.error());
+  json::Array robots;
+  for (const auto& r : page->robots) robots.emplace_back(robot_json(r));
+  int64_t total = page->total;
+  bool has_next = offset + limit < total;
+  int64_t page_no = offset / limit + 1;
+  int64_t pages = (total + limit - 1) / limit;
+  json::Object out{{"robots", std::move(robots)},
+                   {"total", total},
+                   {"limit", limit},
+                   {"offset", offset},
+                   {"next_offset", has_next ? json::Value(offset + limit) : json::Value()}};
+  out.set("pagination", json::Object{{"page", page_no},
+                                     {"limit", limit},
+                                     {"total", total},
+                                     {"total_pages", pages},
+                                     {"has_next", has_next},
+                                     {"has_prev", offset > 0}});
+  out.set("meta", json::Object{{"total", total}, {"page", page_no}, {"per_page", limit}});
+  return json_response(200, out);
+}
+
+HttpResponse RegistryApi::Impl::search_robots(const HttpRequest& req) {
+  RobotQuery q;
+  q.q = trimmed(req.query_value("q"));
+  q.tier = trimmed(req.query_value("tier"));
+  if (std::string m = trimmed(req.query_value("manufacturer")); !m.empty())
+    q.manufacturer = slugify(m);
+  if (std::string m = trimmed(req.query_value("model")); !m.empty()) q.model = slugify(m);
+  bool filtered = !q.tier.empty() || !q.manufacturer.empty() || !q.model.empty();
+  if ((q.q.size() < 2 && !filtered) || (!q.q.empty() && q.q.size() < 2))
+    return json_response(400, json::Object{{"error", "Query must be at least 2 characters"},
+                                           {"results", json::Array{}}});
+  q.limit =
+      static_cast<int>(std::min<int64_t>(50, std::max<int64_t>(1, int_param(req, "limit", 10))));
+  auto page = store.list_robots(q);
+  if (!page.ok()) return store_error(page.error());
+  json::Array results;
+  for (const auto& r : page->robots) results.emplace_back(robot_json(r));
+  int64_t count = static_cast<int64_t>(results.size());
+  return json_response(200,
+                       json::Object{{"q", q.q}, {"results", std::move(results)}, {"count", count}});
+}
+
+HttpResponse RegistryApi::Impl::get_robot(const std::string& rrn) {
+  auto r = store.get_robot(rrn);
+  if (!r.ok()) return store_error(r.error());
+  if (!*r) return ref_error(404, "Robot not found: " + rrn);
+  HttpResponse out = json_response(200, robot_json(**r));
+  out.headers.emplace_back("Cache-Control", "public, max-age=60, stale-while-revalidate=300");
+  return out;
+}
+
+HttpResponse RegistryApi::Impl::patch_robot(const HttpRequest& req, const std::string& rrn) {
+  HttpResponse err;
+  auto caller = authenticate(req, err);
+  if (!caller && err.status >= 500) return err;
+  if (!caller)
+    return ref_error(err.status, err.status == 401 && req.bearer().empty()
+                                     ? "Authorization required"
+                                     : "Invalid API key");
+  if (auto l = limit_key(caller->key.id)) return *l;
+  auto r = store.get_robot(rrn);
+  if (!r.ok()) return store_error(r.error());
+  if (!*r) return ref_error(404, "Robot not found: " + rrn);
+  if (!caller->is("admin") && !(caller->is("robot") && caller->key.rrn == (*r)->rrn))
+    return ref_error(403, "Invalid API key");
+  std::string t = now();
+  auto u = parse_update(req.body, t);
+  if (!u.ok()) return ref_error(400, u.error().message);
+  if (u->empty()) return ref_error(400, "No updatable fields provided");
+  if (auto a = audit_unavailable()) return *a;
+  RobotUpdate ru;
+  ru.description = u->description;
+  ru.contact_email = u->contact_email;
+  ru.metadata_json = u->metadata_json;
+  ru.endpoints_json = u->endpoints_json;
+  ru.now = t;
+  auto done = store.update_robot((*r)->rrn, ru);
+  if (!done.ok()) return store_error(done.error());
+  if (!*done) return ref_error(404, "Robot not found: " + rrn);
+  json::Array fields;
+  for (auto [name, set] : {std::pair{"description", u->description.has_value()},
+                           {"contact_email", u->contact_email.has_value()},
+                           {"metadata", u->metadata_json.has_value()},
+                           {"endpoints", u->endpoints_json.has_value()}})
+    if (set) fields.emplace_back(name);
+  audit("REGISTRY_ROBOT_UPDATED", "apikey:" + caller->key.id, (*done)->rcan_uri,
+        json::Object{{"rrn", (*done)->rrn}, {"fields", std::move(fields)}});
+  return json_response(200, robot_json(**done));
+}
+
+HttpResponse RegistryApi::Impl::delete_robot(const HttpRequest& req, const std::string& rrn) {
+  HttpResponse err;
+  auto caller = authenticate(req, err);
+  if (!caller && err.status >= 500) return err;
+  if (!caller)
+    return ref_error(err.status, err.status == 401 && req.bearer().empty()
+                                     ? "Authorization required"
+                                     : "Invalid API key");
+  if (auto l = limit_key(caller->key.id)) return *l;
+  auto r = store.get_robot(rrn);
+  if (!r.ok()) return store_error(r.error());
+  if (!*r) return ref_error(404, "Robot not found: " + rrn);
+  if (!owns(*caller, **r)) return ref_error(403, "Invalid API key");
+  if (auto a = audit_unavailable()) return *a;
+  auto done = store.delete_robot((*r)->rrn, now());
+  if (!done.ok()) return store_error(done.error());
+  if (!*done) return ref_error(404, "Robot not found: " + rrn);
+  audit("REGISTRY_ROBOT_DELETED", "apikey:" + caller->key.id, (*r)->rcan_uri,
+        json::Object{{"rrn", (*r)->rrn}});
+  return json_response(200,
+                       json::Object{{"message", "Robot registration removed"}, {"rrn", (*r)->rrn}});
+}
+
+HttpResponse RegistryApi::Impl::resolve(const HttpRequest& req, const std::string& raw) {
+  (void)req;
+  auto parsed = parse_rrn(raw);
+  auto with = [this](HttpResponse r, const std::string& by, const std::string& ns) {
+    r.headers.emplace_back("X-Resolved-By", by);
+    r.headers.emplace_back("X-Cache", "MISS");
+    r.headers.emplace_back("X-RRN-Namespace", ns);
+    return r;
+  };
+  if (!parsed) {
+    std::string up;
+    for (char c : raw) up.push_back(static_cast<char>(std::toupper(static_cast<unsigned char>(c))));
+    return with(json_response(400, json::Object{{"error", "INVALID_RRN_FORMAT"}, {"rrn", up}}),
+                o.public_url, "");
+  }
+  const std::string& rrn = parsed->rrn;
+  std::string ns = parsed->prefix.empty() ? "root" : parsed->prefix;
+  bool local = parsed->prefix.empty() ? o.prefix.empty() : parsed->prefix == o.prefix;
+  if (!local && !parsed->prefix.empty()) {
+    auto d = store.get_delegation(parsed->prefix);
+    if (!d.ok()) return store_error(d.error());
+    if (!*d)
+      return with(json_response(404, json::Object{{"error", "NODE_DELEGATION_NOT_FOUND"},
+                                                  {"prefix", parsed->prefix},
+                                                  {"rrn", rrn}}),
+                  o.public_url, ns);
+    if (!(*d)->expires_at.empty() && (*d)->expires_at < now())
+      return with(json_response(404, json::Object{{"error", "NODE_DELEGATION_EXPIRED"},
+                                                  {"prefix", parsed->prefix},
+                                                  {"rrn", rrn},
+                                                  {"expired_at", (*d)->expires_at}}),
+                  o.public_url, ns);
+    // No fan-out from here: the client is sent to the authoritative node.
+    std::string loc = (*d)->node_url + "/api/v1/resolve/" + rrn;
+    HttpResponse r = json_response(307, json::Object{{"rrn", rrn},
+                                                     {"namespace", ns},
+                                                     {"authoritative_node", (*d)->node_url},
+                                                     {"api_base", (*d)->node_url + "/api/v1"},
+                                                     {"location", loc}});
+    r.headers.emplace_back("Location", loc);
+    return with(std::move(r), (*d)->node_url, ns);
+  }
+  // A root RRN on a prefix node, or another prefix's RRN on the root without delegation,
+  // falls through to the local lookup (a synced copy may be here).
+  auto r = store.get_robot(rrn);
+  if (!r.ok()) return store_error(r.error());
+  if (!*r)
+    return with(json_response(404, json::Object{{"error", "NOT_FOUND"}, {"rrn", rrn}}),
+                o.public_url, ns);
+  json::Object rec = robot_json(**r);
+  json::Object keys{
+      {"ed25519", rec.find("ed25519_public_key") ? *rec.find("ed25519_public_key") : json::Value()},
+      {"mldsa65",
+       rec.find("mldsa65_public_key") ? *rec.find("mldsa65_public_key") : json::Value()}};
+  json::Value endpoints = *rec.find("endpoints");
+  json::Object out{{"rrn", rrn},
+                   {"resolved_by", o.public_url},
+                   {"namespace", ns},
+                   {"record", std::move(rec)},
+                   {"keys", std::move(keys)},
+                   {"endpoints", std::move(endpoints)},
+                   {"cache_status", "MISS"},
+                   {"resolved_at", now()}};
+  return with(json_response(200, out), o.public_url, ns);
+}
+
+}  // namespace rcan::registry::api

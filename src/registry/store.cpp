@@ -1,0 +1,62 @@
+// open_store and the helpers both backends share (store_internal.h).
+#include "registry/store.h"
+
+#include <cstdio>
+
+#include "registry/store_internal.h"
+
+namespace rcan::registry {
+namespace detail {
+
+std::string format_rrn(std::string_view prefix, int64_t n) {
+  char digits[32];
+  std::snprintf(digits, sizeof digits, "%012lld", static_cast<long long>(n));
+  std::string out = "RRN-";
+  if (!prefix.empty()) out += upper(prefix) + "-";
+  return out + digits;
+}
+
+std::string upper(std::string_view s) {
+  std::string out(s);
+  for (char& c : out)
+    if (c >= 'a' && c <= 'z') c = static_cast<char>(c - 'a' + 'A');
+  return out;
+}
+
+std::string lower(std::string_view s) {
+  std::string out(s);
+  for (char& c : out)
+    if (c >= 'A' && c <= 'Z') c = static_cast<char>(c - 'A' + 'a');
+  return out;
+}
+
+std::string like_contains(std::string_view q) {
+  std::string out = "%";
+  for (char c : lower(q)) {
+    if (c == '%' || c == '_' || c == '\\') out += '\\';
+    out += c;
+  }
+  return out + "%";
+}
+
+std::string robot_uri(const NewRobot& r) {
+  std::string base = r.rcan_uri_base;
+  while (!base.empty() && base.back() == '/') base.pop_back();
+  return base + "/" + r.manufacturer + "/" + r.model + "/" + r.version + "/" + r.device_id;
+}
+
+Error db_error(std::string_view what, std::string_view detail) {
+  std::string d(detail);
+  while (!d.empty() && (d.back() == '\n' || d.back() == ' ')) d.pop_back();
+  return Error(ErrorCode::kInternal, std::string(what) + ": " + d);
+}
+
+}  // namespace detail
+
+Result<std::unique_ptr<Store>> open_store(const std::string& spec, const StoreOptions& o) {
+  if (spec.starts_with("postgresql://") || spec.starts_with("postgres://"))
+    return open_postgres(spec, o);
+  return open_sqlite(spec, o);
+}
+
+}  // namespace rcan::registry

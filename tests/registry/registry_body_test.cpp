@@ -1,0 +1,114 @@
+// The registry's request bodies (src/registry/api/body.h) in-process: the reference's slugging
+// and RRN pattern, field validation, the proof-of-possession string, endpoint normalisation.
+#include <gtest/gtest.h>
+
+#include "rcan/json.h"
+#include "registry/api/body.h"
+#include "registry/api/rate_limit.h"
+
+namespace rcan::registry::api {
+namespace {
+
+const std::string kNow = "2026-11-27T05:20:00.000Z";
+
+TEST(RegistryBody, SlugifyLikeTheReference) {
+  EXPECT_EQ(slugify("Acme Robotics"), "acme-robotics");
+  EXPECT_EQ(slugify("v2.1_beta"), "v2-1-beta");
+  EXPECT_EQ(slugify("a  --  b"), "a-b");
+  EXPECT_EQ(slugify("ünï"), "-n-");  // each byte outside [a-z0-9-] is one '-', runs collapse
+  EXPECT_EQ(slugify(std::string(100, 'x')).size(), 64u);
+  EXPECT_FALSE(usable_slug("---"));
+  EXPECT_TRUE(usable_slug("-a-"));
+}
+
+TEST(RegistryBody, RrnPatternOfTheReference) {
+  EXPECT_EQ(parse_rrn("RRN-000000000001")->prefix, "");
+  EXPECT_EQ(parse_rrn("rrn-bd-00000001")->rrn, "RRN-BD-00000001");
+  EXPECT_EQ(parse_rrn("RRN-ACME1234-0000000000000001")->prefix, "ACME1234");
+  EXPECT_FALSE(parse_rrn("RRN-1234567"));             // 7 digits
+  EXPECT_FALSE(parse_rrn("RRN-12345678901234567"));   // 17 digits
+  EXPECT_FALSE(parse_rrn("RRN-A-00000001"));          // 1-character prefix
+  EXPECT_FALSE(parse_rrn("RRN-ABCDEFGHI-00000001"));  // 9-character prefix
+  EXPECT_FALSE(parse_rrn("RRN-B_D-00000001"));
+  EXPECT_FALSE(parse_rrn("XRN-00000001"));
+}
+
+TEST(RegistryBody, Registration) {
+  auto r = parse_registration(
+      R"({"manufacturer":"Acme","model":"Arm X","version":"2","device_id":"U1","rcan_version":"3.4",
+          "metadata":{"dof":6},"endpoints":["https://a.example",{"url":"wss://b.example"}]})",
+      kNow);
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_EQ(r->model, "arm-x");
+  EXPECT_EQ(r->metadata_json, R"({"dof":6})");
+  auto eps = json::parse(r->endpoints_json);
+  ASSERT_TRUE(eps.ok());
+  EXPECT_EQ(eps->as_array()[1].get("url")->as_string(), "wss://b.example");
+  EXPECT_EQ(eps->as_array()[1].get("last_seen")->as_string(), kNow);
+  EXPECT_EQ(pop_message("c1", "n1", *r), "rcan-registry-pop:c1:n1:acme/arm-x/2/u1");
+
+  EXPECT_EQ(parse_registration("[]", kNow).error().code, ErrorCode::kSchemaValidationFailed);
+  EXPECT_EQ(parse_registration("{", kNow).error().code, ErrorCode::kMalformedJson);
+  EXPECT_FALSE(parse_registration(R"({"manufacturer":"a","model":"b","version":"c"})", kNow).ok());
+  EXPECT_FALSE(
+      parse_registration(R"({"manufacturer":1,"model":"b","version":"c","device_id":"d"})", kNow)
+          .ok());
+  EXPECT_FALSE(
+      parse_registration(
+          R"({"manufacturer":"a","model":"b","version":"c","device_id":"d","metadata":[]})", kNow)
+          .ok());
+  EXPECT_FALSE(
+      parse_registration(
+          R"({"manufacturer":"a","model":"b","version":"c","device_id":"d","endpoints":["ftp://x"]})",
+          kNow)
+          .ok());
+  EXPECT_FALSE(
+      parse_registration(
+          R"({"manufacturer":"a","model":"b","version":"c","device_id":"d","contact_email":"nobody"})",
+          kNow)
+          .ok());
+  EXPECT_FALSE(
+      parse_registration(
+          R"({"manufacturer":"a","model":"b","version":"c","device_id":"d","ed25519_public_key":"a+b/"})",
+          kNow)
+          .ok());
+  EXPECT_FALSE(
+      parse_registration(
+          R"({"manufacturer":"a","model":"b","version":"c","device_id":"d","proof":{}})", kNow)
+          .ok());
+}
+
+TEST(RegistryBody, UpdateKeyAndNodeRequests) {
+  auto u = parse_update(R"({"description":"x","unknown":1})", kNow);
+  ASSERT_TRUE(u.ok());
+  EXPECT_EQ(*u->description, "x");
+  EXPECT_FALSE(u->metadata_json);
+  EXPECT_TRUE(parse_update("{}", kNow)->empty());
+  EXPECT_EQ(parse_key_request("{}")->role, "registrant");
+  EXPECT_FALSE(parse_key_request(R"({"role":"robot"})").ok());
+  auto n =
+      parse_node_request(R"({"prefix":"bd","operator":"o","node_url":"https://bd.example//"})");
+  ASSERT_TRUE(n.ok());
+  EXPECT_EQ(n->prefix, "BD");
+  EXPECT_EQ(n->node_url, "https://bd.example");
+  EXPECT_FALSE(parse_node_request(R"({"prefix":"BD","operator":"o","node_url":"http://x"})").ok());
+  EXPECT_TRUE(
+      parse_node_request(R"({"prefix":"BD","operator":"o","node_url":"http://x"})", true).ok());
+  EXPECT_FALSE(parse_node_request(R"({"prefix":"B","operator":"o","node_url":"https://x"})").ok());
+  EXPECT_FALSE(parse_node_request(R"({"prefix":"BD","node_url":"https://x"})").ok());
+}
+
+TEST(RegistryBody, TokenBucket) {
+  RateLimiter l(BucketConfig{2, 3}, 4);
+  int64_t t = 1'000'000;
+  for (int i = 0; i < 3; ++i) EXPECT_EQ(l.take("k", t), 0);
+  EXPECT_EQ(l.take("k", t), 1);            // empty: wait a second (rounded up)
+  EXPECT_EQ(l.take("k", t + 500'000), 0);  // 2/s: one token after 0.5 s
+  EXPECT_EQ(l.take("other", t), 0);        // buckets are per key
+  for (int i = 0; i < 10; ++i) l.take("k" + std::to_string(i), t);  // bounded table
+  EXPECT_LE(l.size(), 4u);
+  EXPECT_EQ(RateLimiter(BucketConfig{0, 0}).take("x", t), 0);  // 0 = unlimited
+}
+
+}  // namespace
+}  // namespace rcan::registry::api
