@@ -19,7 +19,7 @@ void require(bool cond) {
 void check_slug(const std::string& s) {
   require(!s.empty() && s.size() <= 64 && rcan::registry::api::usable_slug(s));
   for (char c : s) require((c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '-');
-  require(rcan::registry::api::slugify(s) == s);  // slugging is idempotent
+  require(rcan::registry::slugify(s) == s);  // slugging is idempotent
 }
 
 void check_json(const std::string& text, bool object) {
@@ -41,7 +41,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     check_json(r->endpoints_json, false);
     require(r->description.size() <= api::kMaxTextField);
     if (r->proof) require(!r->proof->challenge_id.empty());
-    std::string m = api::pop_message("c", "n", *r);
+    std::string m = rcan::registry::proof_message("c", "n", r->manufacturer, r->model, r->version,
+                                                  r->device_id);
     require(m.rfind("rcan-registry-pop:c:n:", 0) == 0);
   }
   if (auto u = api::parse_update(text, now); u.ok()) {
@@ -59,7 +60,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     require(rrn->prefix.empty() || api::valid_prefix(rrn->prefix));
     require(api::parse_rrn(rrn->rrn).has_value());
   }
-  std::string slug = api::slugify(text);
-  require(slug.size() <= 64 && api::slugify(slug) == slug);
+  std::string slug = rcan::registry::slugify(text);
+  require(slug.size() <= 64 && rcan::registry::slugify(slug) == slug);
   return 0;
 }

@@ -11,10 +11,6 @@ std::span<const uint8_t> bytes_of(const std::string& s) {
   return {reinterpret_cast<const uint8_t*>(s.data()), s.size()};
 }
 
-Error bad(const std::string& field, const std::string& msg) {
-  return Error(ErrorCode::kSchemaValidationFailed, msg, field, "proof_invalid");
-}
-
 }  // namespace
 
 json::Value Proof::to_json() const {
@@ -23,20 +19,6 @@ json::Value Proof::to_json() const {
   o.set("ed25519_sig", ed25519_sig);
   o.set("mldsa65_sig", mldsa65_sig);
   return json::Value(std::move(o));
-}
-
-Result<Proof> Proof::from_json(const json::Value& v) {
-  if (!v.is_object()) return bad("proof", "proof must be an object");
-  Proof p;
-  for (auto [name, out] :
-       {std::pair{"challenge_id", &p.challenge_id}, std::pair{"ed25519_sig", &p.ed25519_sig},
-        std::pair{"mldsa65_sig", &p.mldsa65_sig}}) {
-    const json::Value* m = v.get(name);
-    if (m == nullptr || !m->is_string())
-      return bad(std::string("proof.") + name, std::string("proof.") + name + " must be a string");
-    *out = m->as_string();
-  }
-  return p;
 }
 
 Result<Proof> sign_proof(const keys::RobotKeys& keys, const std::string& challenge_id,
@@ -52,22 +34,53 @@ Result<Proof> sign_proof(const keys::RobotKeys& keys, const std::string& challen
   return p;
 }
 
+Status check_proof_shape(const std::string& ed25519_pub_b64url,
+                         const std::string& mldsa65_pub_b64url, const Proof& proof) {
+  auto shape = [](const char* field, std::string msg, const char* reason) {
+    return Error(ErrorCode::kSchemaValidationFailed, std::move(msg), field, reason);
+  };
+  if (ed25519_pub_b64url.empty() && mldsa65_pub_b64url.empty())
+    return shape("proof", "a proof needs ed25519_public_key and/or mldsa65_public_key", "no_keys");
+  if (!ed25519_pub_b64url.empty()) {
+    auto pk = base64url_decode(ed25519_pub_b64url);
+    if (!pk || pk->size() != ed25519::kPublicKeyBytes)
+      return shape("ed25519_public_key", "ed25519_public_key is not 32 bytes of base64url",
+                   "bad_key");
+    if (proof.ed25519_sig.empty())
+      return shape("proof.ed25519_sig", "the proof needs a signature by every key sent",
+                   "missing_signature");
+  }
+  if (!mldsa65_pub_b64url.empty()) {
+    auto pk = base64url_decode(mldsa65_pub_b64url);
+    if (!pk || pk->size() != mldsa65::kPublicKeyBytes)
+      return shape("mldsa65_public_key", "mldsa65_public_key is not 1952 bytes of base64url",
+                   "bad_key");
+    if (proof.mldsa65_sig.empty())
+      return shape("proof.mldsa65_sig", "the proof needs a signature by every key sent",
+                   "missing_signature");
+  }
+  return Status::Ok();
+}
+
 Status verify_proof(const std::string& ed25519_pub_b64url, const std::string& mldsa65_pub_b64url,
                     const std::string& message, const Proof& proof) {
-  auto ed_pk = base64url_decode(ed25519_pub_b64url);
-  if (!ed_pk || ed_pk->size() != 32)
-    return bad("ed25519_public_key", "ed25519_public_key must be 32 bytes of base64url");
-  auto ml_pk = base64url_decode(mldsa65_pub_b64url);
-  if (!ml_pk || ml_pk->size() != 1952)
-    return bad("mldsa65_public_key", "mldsa65_public_key must be 1952 bytes of base64url");
-  auto ed_sig = base64url_decode(proof.ed25519_sig);
-  if (!ed_sig || !ed25519::verify(*ed_pk, bytes_of(message), *ed_sig))
-    return Error(ErrorCode::kSignatureInvalid, "the Ed25519 proof signature does not verify",
-                 "proof.ed25519_sig", "proof_invalid");
-  auto ml_sig = base64url_decode(proof.mldsa65_sig);
-  if (!ml_sig || !mldsa65::verify(*ml_pk, bytes_of(message), *ml_sig))
-    return Error(ErrorCode::kSignatureInvalid, "the ML-DSA-65 proof signature does not verify",
-                 "proof.mldsa65_sig", "proof_invalid");
+  if (Status s = check_proof_shape(ed25519_pub_b64url, mldsa65_pub_b64url, proof); !s.ok())
+    return s;
+  auto refused = [](const char* field, const char* msg) {
+    return Error(ErrorCode::kSignatureInvalid, msg, field, "bad_signature");
+  };
+  if (!ed25519_pub_b64url.empty()) {
+    auto pk = base64url_decode(ed25519_pub_b64url);
+    auto sig = base64url_decode(proof.ed25519_sig);
+    if (!sig || !ed25519::verify(*pk, bytes_of(message), *sig))
+      return refused("proof.ed25519_sig", "the Ed25519 proof of possession does not verify");
+  }
+  if (!mldsa65_pub_b64url.empty()) {
+    auto pk = base64url_decode(mldsa65_pub_b64url);
+    auto sig = base64url_decode(proof.mldsa65_sig);
+    if (!sig || !mldsa65::verify(*pk, bytes_of(message), *sig))
+      return refused("proof.mldsa65_sig", "the ML-DSA-65 proof of possession does not verify");
+  }
   return Status::Ok();
 }
 

@@ -414,7 +414,8 @@ TEST(RegistryApi, NodesDelegationAndResolve) {
 
   auto redirect = d.get("/api/v1/resolve/RRN-BD-00000001");
   EXPECT_EQ(redirect.status, 307);
-  EXPECT_EQ(redirect.header("location"), "https://bd.example/api/v1/resolve/RRN-BD-00000001");
+  // Sent on in the canonical form (12 digits, as both registries mint them).
+  EXPECT_EQ(redirect.header("location"), "https://bd.example/api/v1/resolve/RRN-BD-000000000001");
   EXPECT_EQ(str(body_of(redirect), "authoritative_node"), "https://bd.example");
   auto missing = d.get("/api/v1/resolve/RRN-ZZ-00000001");
   EXPECT_EQ(missing.status, 404);

@@ -23,7 +23,7 @@ TEST(RegistryBody, SlugifyLikeTheReference) {
 
 TEST(RegistryBody, RrnPatternOfTheReference) {
   EXPECT_EQ(parse_rrn("RRN-000000000001")->prefix, "");
-  EXPECT_EQ(parse_rrn("rrn-bd-00000001")->rrn, "RRN-BD-00000001");
+  EXPECT_EQ(parse_rrn("rrn-bd-00000001")->rrn, "RRN-BD-000000000001");  // canonical: 12 digits
   EXPECT_EQ(parse_rrn("RRN-ACME1234-0000000000000001")->prefix, "ACME1234");
   EXPECT_FALSE(parse_rrn("RRN-1234567"));             // 7 digits
   EXPECT_FALSE(parse_rrn("RRN-12345678901234567"));   // 17 digits
@@ -45,7 +45,8 @@ TEST(RegistryBody, Registration) {
   ASSERT_TRUE(eps.ok());
   EXPECT_EQ(eps->as_array()[1].get("url")->as_string(), "wss://b.example");
   EXPECT_EQ(eps->as_array()[1].get("last_seen")->as_string(), kNow);
-  EXPECT_EQ(pop_message("c1", "n1", *r), "rcan-registry-pop:c1:n1:acme/arm-x/2/u1");
+  EXPECT_EQ(proof_message("c1", "n1", r->manufacturer, r->model, r->version, r->device_id),
+            "rcan-registry-pop:c1:n1:acme/arm-x/2/u1");
 
   EXPECT_EQ(parse_registration("[]", kNow).error().code, ErrorCode::kSchemaValidationFailed);
   EXPECT_EQ(parse_registration("{", kNow).error().code, ErrorCode::kMalformedJson);

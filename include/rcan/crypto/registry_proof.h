@@ -16,17 +16,23 @@ struct Proof {
   std::string ed25519_sig;  // 64 bytes
   std::string mldsa65_sig;  // 3309 bytes (pure ML-DSA-65, empty context)
 
-  json::Value to_json() const;  // {"challenge_id", "ed25519_sig", "mldsa65_sig"}
-  // Refuses a non-object, a missing or non-string member (error field names it).
-  static Result<Proof> from_json(const json::Value& v);
+  // {"challenge_id", "ed25519_sig", "mldsa65_sig"}; the registry reads it back with its
+  // request parser (src/registry/api/body.h).
+  json::Value to_json() const;
 };
 
 // Signs `message` with both keys of `keys`.
 Result<Proof> sign_proof(const keys::RobotKeys& keys, const std::string& challenge_id,
                          const std::string& message);
 
-// Both signatures verify over `message` with the given public keys (base64url): Ok, or an
-// error saying which key or signature is malformed or does not verify.
+// The keys (base64url; an empty string: that key is not registered) and the proof fit
+// together: at least one key, each key well formed, a signature for each key. Errors are
+// SCHEMA_VALIDATION_FAILED with reason no_keys, bad_key or missing_signature; `field` names
+// the key or signature.
+Status check_proof_shape(const std::string& ed25519_pub_b64url,
+                         const std::string& mldsa65_pub_b64url, const Proof& proof);
+// check_proof_shape, then the signature of every given key verifies over `message`: Ok, or
+// SIGNATURE_INVALID with reason bad_signature and `field` the signature that failed.
 Status verify_proof(const std::string& ed25519_pub_b64url, const std::string& mldsa65_pub_b64url,
                     const std::string& message, const Proof& proof);
 

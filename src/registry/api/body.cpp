@@ -2,6 +2,8 @@
 
 #include <cctype>
 
+#include "rcan/ruri.h"
+
 namespace rcan::registry::api {
 namespace {
 
@@ -58,20 +60,6 @@ bool base64url_chars(std::string_view s) {
 
 }  // namespace
 
-std::string slugify(std::string_view s) {
-  std::string out;
-  out.reserve(s.size());
-  for (char ch : s) {
-    char c = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-    bool ok = (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '-';
-    if (!ok) c = '-';
-    if (c == '-' && !out.empty() && out.back() == '-') continue;
-    out.push_back(c);
-  }
-  if (out.size() > 64) out.resize(64);
-  return out;
-}
-
 bool usable_slug(std::string_view slug) {
   for (char c : slug)
     if (c != '-') return true;
@@ -86,24 +74,9 @@ bool valid_prefix(std::string_view p) {
 }
 
 std::optional<ParsedRrn> parse_rrn(std::string_view s) {
-  std::string up;
-  for (char c : s) up.push_back(static_cast<char>(std::toupper(static_cast<unsigned char>(c))));
-  if (up.size() < 12 || up.compare(0, 4, "RRN-") != 0) return std::nullopt;
-  auto digits = [](std::string_view d) {
-    if (d.size() < 8 || d.size() > 16) return false;
-    for (char c : d)
-      if (c < '0' || c > '9') return false;
-    return true;
-  };
-  std::string_view rest = std::string_view(up).substr(4);
-  size_t dash = rest.find('-');
-  if (dash == std::string_view::npos) {
-    if (!digits(rest)) return std::nullopt;
-    return ParsedRrn{up, ""};
-  }
-  std::string_view prefix = rest.substr(0, dash);
-  if (!valid_prefix(prefix) || !digits(rest.substr(dash + 1))) return std::nullopt;
-  return ParsedRrn{up, std::string(prefix)};
+  auto canonical = normalize_rrn(s);  // rcan/registry.h: the core's parse_rrn, any case
+  if (!canonical) return std::nullopt;
+  return ParsedRrn{*canonical, rcan::parse_rrn(*canonical)->prefix};
 }
 
 Result<std::string> normalize_endpoints(const json::Value& endpoints, std::string_view now) {
@@ -190,15 +163,6 @@ Result<Registration> parse_registration(std::string_view body, std::string_view 
     r.proof = std::move(proof);
   }
   return r;
-}
-
-std::string pop_message(std::string_view challenge_id, std::string_view nonce,
-                        const Registration& r) {
-  std::string m = "rcan-registry-pop:";
-  m.append(challenge_id).append(":").append(nonce).append(":");
-  m.append(r.manufacturer).append("/").append(r.model).append("/");
-  m.append(r.version).append("/").append(r.device_id);
-  return m;
 }
 
 Result<Update> parse_update(std::string_view body, std::string_view now) {

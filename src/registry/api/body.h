@@ -8,7 +8,9 @@
 #include <string_view>
 #include <vector>
 
+#include "rcan/crypto/registry_proof.h"
 #include "rcan/json.h"
+#include "rcan/registry.h"
 #include "rcan/result.h"
 
 namespace rcan::registry::api {
@@ -19,25 +21,21 @@ inline constexpr size_t kMaxMetadataBytes = 16384;  // metadata object, as JSON
 inline constexpr size_t kMaxEndpoints = 16;
 inline constexpr size_t kMaxUrl = 2048;
 
-// The reference's slugging: lower case, every character outside [a-z0-9-] becomes '-', runs
-// of '-' collapse to one, at most 64 characters. May return "" or "-".
-std::string slugify(std::string_view s);
-// True when a slug carries at least one [a-z0-9] (the reference refuses empty slugs; a slug
-// of dashes only cannot name anything either).
+// Slugs are rcan/registry.h's slugify (the reference's slugging). True when a slug carries at least
+// one [a-z0-9] (the reference refuses empty slugs; a slug of dashes only cannot name anything
+// either).
 bool usable_slug(std::string_view slug);
 
 // The RRN forms of the reference: RRN-<8..16 digits> or RRN-<[A-Z0-9]{2,8}>-<8..16 digits>,
-// case-insensitive. Returns the upper-cased RRN and its prefix ("" for the root namespace).
+// case-insensitive. Returns the canonical RRN (upper case, the number padded to 12 digits:
+// rcan/ruri.h parse_rrn) and its prefix ("" for the root namespace).
 struct ParsedRrn {
   std::string rrn, prefix;
 };
 std::optional<ParsedRrn> parse_rrn(std::string_view s);
 bool valid_prefix(std::string_view p);  // [A-Z0-9]{2,8}
 
-// Proof of possession sent with a registration.
-struct Proof {
-  std::string challenge_id, ed25519_sig, mldsa65_sig;  // base64url signatures
-};
+// A registration's proof of possession is rcan/crypto/registry_proof.h's Proof.
 
 struct Registration {
   std::string manufacturer, model, version, device_id;  // slugged
@@ -52,10 +50,7 @@ struct Registration {
 // message fit for the client.
 Result<Registration> parse_registration(std::string_view body, std::string_view now);
 
-// The signed string of a proof of possession:
-//   rcan-registry-pop:<challenge_id>:<nonce>:<manufacturer>/<model>/<version>/<device_id>
-std::string pop_message(std::string_view challenge_id, std::string_view nonce,
-                        const Registration& r);
+// The signed string of a proof of possession is rcan/registry.h's proof_message.
 
 struct Update {
   std::optional<std::string> description, contact_email, metadata_json, endpoints_json;

@@ -52,6 +52,9 @@ class RegistryApi::Impl {
   HttpResponse patch_robot(const HttpRequest& req, const std::string& rrn);
   HttpResponse delete_robot(const HttpRequest& req, const std::string& rrn);
   HttpResponse resolve(const HttpRequest& req, const std::string& raw);
+  // GET /api/v1/resolve?uri=<RURI>: the robot registered here under that RURI (the 4-segment
+  // canonical form names version v1, as rcand registers itself).
+  HttpResponse resolve_uri(const HttpRequest& req);
   json::Object robot_json(const Robot& r) const;
 
   // ---- keys, nodes, challenges, manifest (admin_routes.cpp)

@@ -254,6 +254,7 @@ HttpResponse RegistryApi::Impl::serve(const HttpRequest& req) {
     if (m == "DELETE") return delete_robot(req, rrn->rrn);
     return not_allowed();
   }
+  if (rest == "resolve") return m == "GET" ? resolve_uri(req) : not_allowed();
   if (rest.rfind("resolve/", 0) == 0)
     return m == "GET" ? resolve(req, std::string(rest.substr(8))) : not_allowed();
   if (rest == "nodes") {
@@ -285,6 +286,7 @@ std::string route_label(std::string_view p) {
                                                 "/api/v1/robots",
                                                 "/api/v1/robots/search",
                                                 "/api/v1/nodes",
+                                                "/api/v1/resolve",
                                                 "/api/v1/challenge",
                                                 "/api/v1/keys"};
   for (auto f : kFixed)

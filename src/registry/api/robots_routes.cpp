@@ -3,6 +3,7 @@
 
 #include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/mldsa65.h"
+#include "rcan/ruri.h"
 #include "registry/api/impl.h"
 
 namespace rcan::registry::api {
@@ -60,48 +61,28 @@ json::Object RegistryApi::Impl::robot_json(const Robot& r) const {
 std::optional<HttpResponse> RegistryApi::Impl::check_proof(const Registration& r) {
   bool keys = !r.ed25519_pub.empty() || !r.mldsa65_pub.empty();
   if (!keys && !r.proof) return std::nullopt;
-  auto bad = [](int status, std::string msg, std::string reason) {
-    return project_error(
-        status == 400 ? ErrorCode::kSchemaValidationFailed : ErrorCode::kSignatureInvalid,
-        std::move(msg), "proof", std::move(reason));
-  };
-  if (!keys)
-    return bad(400, "a proof needs ed25519_public_key and/or mldsa65_public_key", "no_keys");
-  if (!r.proof)
-    return bad(400,
-               "public keys need a proof of possession: get a challenge (GET /api/v1/challenge) "
-               "and sign it with each key",
-               "proof_required");
-  std::optional<Bytes> ed, ml;
-  if (!r.ed25519_pub.empty()) {
-    ed = base64url_decode(r.ed25519_pub);
-    if (!ed || ed->size() != ed25519::kPublicKeyBytes)
-      return bad(400, "ed25519_public_key is not 32 bytes of base64url", "bad_key");
-  }
-  if (!r.mldsa65_pub.empty()) {
-    ml = base64url_decode(r.mldsa65_pub);
-    if (!ml || ml->size() != mldsa65::kPublicKeyBytes)
-      return bad(400, "mldsa65_public_key is not 1952 bytes of base64url", "bad_key");
-  }
-  if ((ed && r.proof->ed25519_sig.empty()) || (ml && r.proof->mldsa65_sig.empty()))
-    return bad(400, "the proof needs a signature by every key sent", "missing_signature");
+  auto refused = [](const Error& e) { return project_error(e.code, e.message, "proof", e.reason); };
+  if (keys && !r.proof)
+    return project_error(ErrorCode::kSchemaValidationFailed,
+                         "public keys need a proof of possession: get a challenge (GET "
+                         "/api/v1/challenge) and sign it with each key",
+                         "proof", "proof_required");
+  // Malformed keys or missing signatures are refused before the challenge is spent.
+  if (Status s = check_proof_shape(r.ed25519_pub, r.mldsa65_pub, *r.proof); !s.ok())
+    return refused(s.error());
   // The challenge is used up whatever follows: a failed proof cannot be retried with it.
   auto c = store.take_challenge(r.proof->challenge_id);
   if (!c.ok()) return store_error(c.error());
   if (!*c || (*c)->purpose != "register")
-    return bad(401, "unknown or already used challenge", "challenge_unknown");
-  if ((*c)->expires_at < now()) return bad(401, "the challenge has expired", "challenge_expired");
-  Bytes msg = to_bytes(pop_message((*c)->id, (*c)->nonce, r));
-  if (ed) {
-    auto sig = base64url_decode(r.proof->ed25519_sig);
-    if (!sig || !ed25519::verify(*ed, msg, *sig))
-      return bad(401, "the Ed25519 proof of possession does not verify", "bad_signature");
-  }
-  if (ml) {
-    auto sig = base64url_decode(r.proof->mldsa65_sig);
-    if (!sig || !mldsa65::verify(*ml, msg, *sig))
-      return bad(401, "the ML-DSA-65 proof of possession does not verify", "bad_signature");
-  }
+    return project_error(ErrorCode::kSignatureInvalid, "unknown or already used challenge", "proof",
+                         "challenge_unknown");
+  if ((*c)->expires_at < now())
+    return project_error(ErrorCode::kSignatureInvalid, "the challenge has expired", "proof",
+                         "challenge_expired");
+  const std::string msg =
+      proof_message((*c)->id, (*c)->nonce, r.manufacturer, r.model, r.version, r.device_id);
+  if (Status s = verify_proof(r.ed25519_pub, r.mldsa65_pub, msg, *r.proof); !s.ok())
+    return refused(s.error());
   return std::nullopt;
 }
 
@@ -359,6 +340,26 @@ HttpResponse RegistryApi::Impl::resolve(const HttpRequest& req, const std::strin
                    {"cache_status", "MISS"},
                    {"resolved_at", now()}};
   return with(json_response(200, out), o.public_url, ns);
+}
+
+HttpResponse RegistryApi::Impl::resolve_uri(const HttpRequest& req) {
+  const std::string text(req.query_value("uri"));
+  auto ruri = parse_ruri(text);
+  if (text.empty() || !ruri.ok() || ruri->form == Ruri::Form::kDiscovered)
+    return json_response(400,
+                         json::Object{{"error", "INVALID_RURI"},
+                                      {"message", text.empty() ? std::string("uri is required")
+                                                  : ruri.ok()  ? std::string("a discovered RURI "
+                                                                              "names no robot")
+                                                               : ruri.error().message}});
+  const std::string version = ruri->version.empty() ? "v1" : ruri->version;
+  const std::string uri = uri_base() + "/" + slugify(ruri->manufacturer) + "/" +
+                          slugify(ruri->model) + "/" + slugify(version) + "/" +
+                          slugify(ruri->device_id);
+  auto r = store.find_robot_by_uri(uri);
+  if (!r.ok()) return store_error(r.error());
+  if (!*r) return json_response(404, json::Object{{"error", "NOT_FOUND"}, {"rcan_uri", uri}});
+  return resolve(req, (*r)->rrn);
 }
 
 }  // namespace rcan::registry::api
