@@ -7,8 +7,10 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <chrono>
 #include <cstring>
 #include <mutex>
+#include <thread>
 #include <unordered_map>
 
 #include "registry/store.h"
@@ -179,10 +181,23 @@ class SqliteStore final : public Store {
     sqlite3_close_v2(db_);
   }
 
-  // Applies the pragmas and creates the schema when missing.
+  // Applies the pragmas and creates the schema when missing. synchronous = FULL: in WAL mode
+  // NORMAL may lose the last commits on a power cut, and a lost counter row would mint an RRN
+  // that a robot already holds; reads do not pay for it.
+  // Two processes opening a fresh file at once can see SQLITE_BUSY without the busy handler
+  // (the switch to WAL, the first WAL recovery): every step is idempotent, so it is retried.
   Status init() {
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    for (;;) {
+      busy_ = false;
+      Status s = init_once();
+      if (s.ok() || !busy_ || std::chrono::steady_clock::now() > deadline) return s;
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+  }
+  Status init_once() {
     if (auto s = exec_script("PRAGMA busy_timeout = 10000; PRAGMA journal_mode = WAL; "
-                             "PRAGMA synchronous = NORMAL; PRAGMA foreign_keys = OFF;");
+                             "PRAGMA synchronous = FULL; PRAGMA foreign_keys = OFF;");
         !s)
       return s;
     if (auto s = exec_script("BEGIN IMMEDIATE"); !s) return s;
@@ -421,7 +436,8 @@ class SqliteStore final : public Store {
   Status exec_script(const char* sql) {
     std::lock_guard lock(mu_);
     char* msg = nullptr;
-    if (sqlite3_exec(db_, sql, nullptr, nullptr, &msg) != SQLITE_OK) {
+    if (int rc = sqlite3_exec(db_, sql, nullptr, nullptr, &msg); rc != SQLITE_OK) {
+      busy_ = busy_ || (rc & 0xff) == SQLITE_BUSY || (rc & 0xff) == SQLITE_LOCKED;
       Error e = db_error("SQLite", msg != nullptr ? msg : sqlite3_errmsg(db_));
       sqlite3_free(msg);
       return e;
@@ -520,6 +536,7 @@ class SqliteStore final : public Store {
   StoreOptions opts_;
   std::mutex mu_;
   std::unordered_map<std::string, sqlite3_stmt*> cache_;
+  bool busy_ = false;  // init: a step failed with SQLITE_BUSY or SQLITE_LOCKED
 };
 
 Result<std::optional<Robot>> SqliteStore::live_by_slugs(const NewRobot& r) {
