@@ -242,7 +242,7 @@ int do_keys(const Options& o, const std::string& base, const std::string& key) {
   Answer a = call(base, "POST", "/api/v1/keys", json::dump(json::Value(std::move(body))), key);
   int rc = report("registry", a);
   if (rc == 0 && o.has("save")) {
-    const json::Value* k = a.body.get("api_key");
+    const json::Value* k = a.body.get("key");
     if (k == nullptr || !k->is_string()) {
       std::fprintf(stderr, "rcan registry: no key in the answer\n");
       return 1;
@@ -307,30 +307,26 @@ int registry_main(const Args& args) {
   return usage_error("registry", "unknown command '" + sub + "' (rcan registry --help)");
 }
 
-// Prints where a resolved robot answers and its keys, one per line.
+// Prints where a resolved robot answers and its keys, one per line (the registry's resolve
+// answer: rrn, record, keys {ed25519, mldsa65}, endpoints [{url, last_seen}]).
 void print_resolved(const json::Value& v) {
-  auto str = [&](const char* k) {
-    const json::Value* m = v.get(k);
+  auto str = [](const json::Value* o, const char* k) {
+    const json::Value* m = o != nullptr ? o->get(k) : nullptr;
     return m != nullptr && m->is_string() ? m->as_string() : std::string();
   };
-  std::cout << "rrn: " << str("rrn") << "\n";
-  std::string uri = str("rcan_uri");
-  if (uri.empty()) uri = str("uri");
-  std::cout << "ruri: " << uri << "\n";
+  const json::Value* record = v.get("record");
+  std::cout << "rrn: " << str(&v, "rrn") << "\n";
+  std::cout << "rcan_uri: " << str(record, "rcan_uri") << "\n";
   if (const json::Value* eps = v.get("endpoints"); eps != nullptr && eps->is_array()) {
     for (const auto& e : eps->as_array()) {
-      if (e.is_string()) std::cout << "endpoint: " << e.as_string() << "\n";
-      if (const json::Value* u = e.get("url"); u != nullptr && u->is_string())
-        std::cout << "endpoint: " << u->as_string() << "\n";
+      std::string seen = str(&e, "last_seen");
+      std::cout << "endpoint: " << str(&e, "url")
+                << (seen.empty() ? "" : " (last seen " + seen + ")") << "\n";
     }
   }
   const json::Value* keys = v.get("keys");
-  auto key = [&](const char* name) {
-    const json::Value* k = keys != nullptr ? keys->get(name) : v.get(name);
-    return k != nullptr && k->is_string() ? k->as_string() : std::string();
-  };
-  for (const char* k : {"ed25519_public_key", "mldsa65_public_key"})
-    if (!key(k).empty()) std::cout << k << ": " << key(k) << "\n";
+  for (const char* k : {"ed25519", "mldsa65"})
+    if (!str(keys, k).empty()) std::cout << k << "_public_key: " << str(keys, k) << "\n";
 }
 
 int resolve_main(const Args& args) {

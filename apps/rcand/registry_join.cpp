@@ -8,6 +8,7 @@
 #include "identity.h"
 #include "rcan/crypto/registry_proof.h"
 #include "rcan/encoding.h"
+#include "rcan/errors.h"
 #include "rcan/registry.h"
 
 namespace rcan::rcand {
@@ -110,6 +111,8 @@ Result<std::string> register_with_registry(const config::NodeConfig& cfg,
                     {"device_id", device},
                     {"description", cfg.robot.name},
                     {"source", "rcand"},
+                    // The robot's own RURI: the audience of the tokens the registry issues for it.
+                    {"metadata", json::Object{{"ruri", cfg.ruri}}},
                     {"ed25519_public_key", base64url_encode(keys.pub.ed25519_pk)},
                     {"mldsa65_public_key", base64url_encode(keys.pub.mldsa65_pk)},
                     {"proof", proof->to_json()}};
@@ -164,6 +167,7 @@ void RegistryLink::record(const std::string& event, const std::string& outcome,
   }
   audit::AuditEntry e;
   e.principal = "node";
+  e.message_id = new_uuid_v4();
   e.ruri = ruri_;
   e.event = event;
   e.outcome = outcome;

@@ -1,0 +1,218 @@
+// A robot joins its registry (docs/REGISTRY.md §A robot joins its registry), and the CLI's
+// registry verbs: a real rcan-registry and a real rcand, both started here.
+#include <gtest/gtest.h>
+#include <sys/stat.h>
+
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include "rcan/encoding.h"
+#include "rcan/json.h"
+#include "registry_daemon.h"
+#include "test_support.h"
+
+namespace rcan::test {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr const char* kRuri = "rcan://local.rcan/acme/rover/0a1b2c3d";
+
+json::Value json_of(const std::string& s) {
+  auto v = json::parse(s);
+  EXPECT_TRUE(v.ok()) << s.substr(0, 300);
+  return v.ok() ? *v : json::Value();
+}
+
+std::string str(const json::Value& v, const char* k) {
+  const json::Value* m = v.get(k);
+  return m != nullptr && m->is_string() ? m->as_string() : std::string();
+}
+
+void write_private(const std::string& path, const std::string& text) {
+  std::ofstream(path) << text;
+  fs::permissions(path, fs::perms::owner_read | fs::perms::owner_write);
+}
+
+// A registrant key made with the admin key, in a 0600 file.
+std::string registrant_key_file(const RegistryDaemon& reg, const std::string& reg_dir,
+                                const std::string& path) {
+  auto r = run_cli({"registry", "keys", "create", "--registry", reg.url(), "--label", "fleet-ops",
+                    "--save", path},
+                   {}, {"RCAN_REGISTRY_KEY_FILE=" + reg_dir + "/admin.key"});
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  return path;
+}
+
+// A configured robot: keys, chain secret, a token issuer, and the `registry` block.
+class JoiningRobot {
+ public:
+  JoiningRobot(const std::string& dir, const std::string& registry_url, const std::string& key_file)
+      : dir_(dir), data_(dir + "/data") {
+    fs::create_directories(data_);
+    EXPECT_EQ(run_cli({"keys", "generate", "--dir", data_ + "/keys"}).exit_code, 0);
+    EXPECT_EQ(run_cli({"audit", "new-secret", "--out", data_ + "/audit.secret"}).exit_code, 0);
+    EXPECT_EQ(run_cli({"keys", "issuer", "--dir", dir_ + "/issuer"}).exit_code, 0);
+    std::ofstream(dir_ + "/robot.rcan.yaml")
+        << "rcan_version: \"1.2\"\nruri: " << kRuri << "\n"
+        << "robot:\n  name: join-rover\n  manufacturer: acme\n  model: rover\n  type: mobile\n"
+        << "driver:\n  type: sim\n"
+        << "security:\n  jwt:\n    issuers:\n      - issuer: test.local\n        key_file: " << dir_
+        << "/issuer/ed25519.pub.pem\n"
+        << "registry:\n  registry_url: " << registry_url << "\n  key_file: " << key_file
+        << "\n  endpoint: http://rover.example:8080\n  refresh_s: 10\n";
+  }
+  // Starts rcand; returns the RRN of its "listening" line (empty when it did not start).
+  std::string start() {
+    proc_ = std::make_unique<Process>();
+    EXPECT_TRUE(proc_->start(
+        {RCAND_PATH, "--config", dir_ + "/robot.rcan.yaml", "--port", "0", "--data-dir", data_}));
+    auto line = proc_->wait_for_line("\"event\":\"listening\"", 60000);
+    if (!line) {
+      ADD_FAILURE() << "rcand did not start:\n" << proc_->err();
+      return {};
+    }
+    return str(json_of(*line), "rrn");
+  }
+  int stop() { return proc_->stop(SIGTERM, 15000); }
+  Process& proc() { return *proc_; }
+  const std::string& data() const { return data_; }
+
+ private:
+  std::string dir_, data_;
+  std::unique_ptr<Process> proc_;
+};
+
+TEST(RegistryJoin, ARobotRegistersWithProofOfPossessionAndKeepsItsRrn) {
+  TempDir dir;
+  RegistryDaemon reg(dir.file("registry"));
+  ASSERT_FALSE(reg.url().empty());
+  const std::string key =
+      registrant_key_file(reg, dir.file("registry"), dir.file("registrant.key"));
+  JoiningRobot robot(dir.file("robot"), reg.url(), key);
+  const std::string rrn = robot.start();
+  ASSERT_EQ(rrn.rfind("RRN-", 0), 0u) << rrn;
+
+  // The registry holds the robot under that RRN, with the keys it proved it holds.
+  auto got = reg.get("/api/v1/robots/" + rrn);
+  ASSERT_EQ(got.status, 200) << got.body;
+  json::Value rec = json_of(got.body);
+  EXPECT_EQ(str(rec, "manufacturer"), "acme");
+  EXPECT_EQ(str(rec, "model"), "rover");
+  EXPECT_EQ(str(rec, "device_id"), "0a1b2c3d");
+  const Bytes ed = to_bytes(read_file(robot.data() + "/keys/ed25519.pub"));
+  const Bytes ml = to_bytes(read_file(robot.data() + "/keys/mldsa65.pub"));
+  EXPECT_EQ(str(rec, "ed25519_public_key"), base64url_encode(ed));
+  EXPECT_EQ(str(rec, "mldsa65_public_key"), base64url_encode(ml));
+  ASSERT_NE(rec.get("metadata"), nullptr);
+  EXPECT_EQ(str(*rec.get("metadata"), "ruri"), kRuri);
+
+  // Its own registry key is kept with the RRN, readable by the robot alone.
+  struct stat st {};
+  ASSERT_EQ(::stat((robot.data() + "/registry/state.json").c_str(), &st), 0);
+  EXPECT_EQ(st.st_mode & 0777, 0600u);
+  json::Value state = json_of(read_file(robot.data() + "/registry/state.json"));
+  EXPECT_EQ(str(state, "rrn"), rrn);
+  EXPECT_EQ(str(state, "robot_key").rfind("rcan_", 0), 0u);
+
+  // Anyone resolves the robot's RURI to where it answers and to its keys.
+  auto res = run_cli({"resolve", kRuri, "--registry", reg.url()});
+  EXPECT_EQ(res.exit_code, 0) << res.out << res.err;
+  EXPECT_NE(res.out.find("rrn: " + rrn), std::string::npos) << res.out;
+  EXPECT_NE(res.out.find("endpoint: http://rover.example:8080"), std::string::npos) << res.out;
+  EXPECT_NE(res.out.find("ed25519_public_key: " + base64url_encode(ed)), std::string::npos);
+
+  // A restart keeps the RRN and registers nothing new.
+  EXPECT_EQ(robot.stop(), 0);
+  EXPECT_EQ(robot.start(), rrn);
+  auto list = json_of(reg.get("/api/v1/robots").body);
+  EXPECT_EQ(list.get("total")->as_int(), 1);
+}
+
+TEST(RegistryJoin, AnUnusableRegistryDoesNotStopTheRobotAndTheLinkRegistersLater) {
+  TempDir dir;
+  RegistryDaemon reg(dir.file("registry"));
+  ASSERT_FALSE(reg.url().empty());
+  // A key the registry does not know: registration is refused at start.
+  const std::string key = dir.file("registrant.key");
+  write_private(key, "rcan_0123456789abcdef_" + std::string(64, '0') + "\n");
+  JoiningRobot robot(dir.file("robot"), reg.url(), key);
+  const std::string local = robot.start();
+  ASSERT_FALSE(local.empty());
+  EXPECT_NE(robot.proc().err().find("registry_registration_failed"), std::string::npos);
+  EXPECT_FALSE(fs::exists(robot.data() + "/registry/state.json"));
+
+  // With a good key in place, the background link registers (first retry after 5 s).
+  registrant_key_file(reg, dir.file("registry"), dir.file("good.key"));
+  fs::rename(dir.file("good.key"), key);
+  bool registered = false;
+  for (int i = 0; i < 150 && !registered; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    registered = fs::exists(robot.data() + "/registry/state.json");
+  }
+  ASSERT_TRUE(registered) << robot.proc().err();
+  const std::string rrn = str(json_of(read_file(robot.data() + "/registry/state.json")), "rrn");
+  EXPECT_EQ(reg.get("/api/v1/robots/" + rrn).status, 200);
+  // Adopted at the next start.
+  EXPECT_EQ(robot.stop(), 0);
+  EXPECT_EQ(robot.start(), rrn);
+}
+
+TEST(RegistryCli, RegisterWithProofGetListUpdateResolveDelete) {
+  TempDir dir;
+  RegistryDaemon reg(dir.file("registry"));
+  ASSERT_FALSE(reg.url().empty());
+  const std::string key =
+      registrant_key_file(reg, dir.file("registry"), dir.file("registrant.key"));
+  ASSERT_EQ(run_cli({"keys", "generate", "--dir", dir.file("keys")}).exit_code, 0);
+  const std::vector<std::string> env{"RCAN_REGISTRY=" + reg.url(), "RCAN_REGISTRY_KEY_FILE=" + key};
+  auto r = run_cli({"registry", "register", "--manufacturer", "Acme Robotics", "--model", "Arm X",
+                    "--version", "v2", "--device-id", "unit-7", "--keys-dir", dir.file("keys"),
+                    "--save-key", dir.file("robot.key")},
+                   {}, env);
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  json::Value reg_answer = json_of(r.out);
+  const std::string rrn = str(reg_answer, "rrn");
+  ASSERT_EQ(rrn.rfind("RRN-", 0), 0u) << r.out;
+  struct stat st {};
+  ASSERT_EQ(::stat(dir.file("robot.key").c_str(), &st), 0);
+  EXPECT_EQ(st.st_mode & 0777, 0600u);
+
+  r = run_cli({"registry", "get", rrn}, {}, env);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(str(json_of(r.out), "manufacturer"), "acme-robotics");
+  r = run_cli({"registry", "list", "--q", "arm"}, {}, env);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(json_of(r.out).get("total")->as_int(), 1);
+
+  // Updates are the robot's own (its key) — the registrant key is refused.
+  r = run_cli({"registry", "update", rrn, "--endpoint", "https://arm7.example"}, {}, env);
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  r = run_cli({"registry", "update", rrn, "--endpoint", "https://arm7.example", "--key-file",
+               dir.file("robot.key")},
+              {}, env);
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  r = run_cli({"resolve", rrn}, {}, env);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("endpoint: https://arm7.example"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("mldsa65_public_key: "), std::string::npos) << r.out;
+
+  // Bad input is a usage error before anything is sent; a missing robot is a refusal.
+  EXPECT_EQ(run_cli({"registry", "get", "not-an-rrn"}, {}, env).exit_code, 2);
+  EXPECT_EQ(run_cli({"registry", "register", "--model", "x"}, {}, env).exit_code, 2);
+  EXPECT_EQ(run_cli({"resolve", "RRN-000000009999"}, {}, env).exit_code, 1);
+  EXPECT_EQ(run_cli({"registry", "delete", rrn}, {"RCAN_REGISTRY=" + reg.url()}).exit_code, 2);
+
+  r = run_cli({"registry", "delete", rrn, "--key-file", dir.file("robot.key")}, {}, env);
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_EQ(run_cli({"registry", "get", rrn}, {}, env).exit_code, 1);
+  // Nobody there: exit 3.
+  EXPECT_EQ(
+      run_cli({"registry", "list", "--registry", "http://127.0.0.1:" + std::to_string(free_port())})
+          .exit_code,
+      3);
+}
+
+}  // namespace
+}  // namespace rcan::test
