@@ -9,12 +9,14 @@ if(NOT RCAN_SANITIZE AND NOT RCAN_TSAN AND NOT RCAN_FUZZ)
   set(RCAN_GEN ${PROJECT_BINARY_DIR}/generated/package)
   set(RCAN_PACKAGE_FILES "")
   if(RCAN_HELP2MAN)
-    foreach(tool rcand rcan)
+    foreach(tool rcand rcan rcan-registry)
       set(target ${tool})
       set(what "the RCAN robot node")
       if(tool STREQUAL "rcan")
         set(target rcan_cli)
         set(what "the RCAN command-line tool")
+      elseif(tool STREQUAL "rcan-registry")
+        set(what "an RCAN robot registry")
       endif()
       add_custom_command(OUTPUT ${RCAN_GEN}/${tool}.1.gz
         COMMAND ${CMAKE_COMMAND} -E make_directory ${RCAN_GEN}
@@ -37,10 +39,11 @@ if(NOT RCAN_SANITIZE AND NOT RCAN_TSAN AND NOT RCAN_FUZZ)
   list(APPEND RCAN_PACKAGE_FILES ${RCAN_GEN}/rcan.bash-completion)
   add_custom_target(rcan_package_files ALL DEPENDS ${RCAN_PACKAGE_FILES})
 
-  install(TARGETS rcan_cli RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
+  install(TARGETS rcan_cli rcan-registry RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
   install(FILES ${RCAN_GEN}/rcan.bash-completion
           DESTINATION ${CMAKE_INSTALL_DATADIR}/bash-completion/completions RENAME rcan)
   install(FILES ${PROJECT_SOURCE_DIR}/packaging/systemd/rcand.service
+                ${PROJECT_SOURCE_DIR}/packaging/systemd/rcan-registry.service
           DESTINATION lib/systemd/system)
   install(FILES ${PROJECT_SOURCE_DIR}/examples/sim-robot.rcan.yaml
           DESTINATION ${CMAKE_INSTALL_DOCDIR}/examples)
@@ -49,7 +52,7 @@ if(NOT RCAN_SANITIZE AND NOT RCAN_TSAN AND NOT RCAN_FUZZ)
           DESTINATION ${CMAKE_INSTALL_DATADIR}/rcan/examples/drivers)
   install(FILES ${PROJECT_SOURCE_DIR}/README.md ${PROJECT_SOURCE_DIR}/docs/NODE.md
                 ${PROJECT_SOURCE_DIR}/docs/CONFIG.md ${PROJECT_SOURCE_DIR}/docs/PACKAGING.md
-                ${PROJECT_SOURCE_DIR}/docs/SECURITY.md
+                ${PROJECT_SOURCE_DIR}/docs/SECURITY.md ${PROJECT_SOURCE_DIR}/docs/REGISTRY.md
           DESTINATION ${CMAKE_INSTALL_DOCDIR})
 endif()
 
@@ -57,9 +60,9 @@ set(CPACK_GENERATOR DEB)
 set(CPACK_PACKAGE_NAME rcan)
 set(CPACK_PACKAGE_VENDOR "rcan")
 set(CPACK_PACKAGE_VERSION ${PROJECT_VERSION})
-set(CPACK_PACKAGE_DESCRIPTION_SUMMARY "RCAN robot node (rcand) and command-line tool (rcan)")
+set(CPACK_PACKAGE_DESCRIPTION_SUMMARY "RCAN robot node (rcand), command-line tool (rcan) and registry (rcan-registry)")
 set(CPACK_PACKAGE_DESCRIPTION
-  "The Robot Communication & Addressing Network protocol in C++: rcand serves a robot over\nHTTP, WebSocket, gRPC, UDP and MQTT behind a safety core, with an HMAC-chained audit log;\nrcan drives robots and fleets from the command line.")
+  "The Robot Communication & Addressing Network protocol in C++: rcand serves a robot over\nHTTP, WebSocket, gRPC, UDP and MQTT behind a safety core, with an HMAC-chained audit log;\nrcan drives robots and fleets from the command line; rcan-registry registers and resolves\nrobots (not enabled by default).")
 set(CPACK_PACKAGING_INSTALL_PREFIX /usr)
 set(CPACK_DEBIAN_FILE_NAME DEB-DEFAULT)
 set(CPACK_DEBIAN_PACKAGE_MAINTAINER "rcan maintainers <maintainers@rcan.invalid>")

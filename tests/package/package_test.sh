@@ -28,8 +28,9 @@ ROOT=$WORK/root CTRL=$WORK/control
 dpkg-deb -x "$DEB" "$ROOT" && dpkg-deb -e "$DEB" "$CTRL"
 
 # 2. Files, modes, metadata.
-for f in usr/bin/rcand usr/bin/rcan; do check "$f is an executable" test -x "$ROOT/$f"; done
+for f in usr/bin/rcand usr/bin/rcan usr/bin/rcan-registry; do check "$f is an executable" test -x "$ROOT/$f"; done
 for f in usr/lib/rcan/librcand_grpc.so usr/lib/systemd/system/rcand.service \
+         usr/lib/systemd/system/rcan-registry.service usr/share/man/man1/rcan-registry.1.gz \
          usr/share/man/man1/rcand.1.gz usr/share/man/man1/rcan.1.gz \
          usr/share/bash-completion/completions/rcan usr/share/doc/rcan/examples/sim-robot.rcan.yaml; do
   check "$f is packaged" test -s "$ROOT/$f"
@@ -42,7 +43,10 @@ check "the package depends on adduser and the shared libraries" grep -Eq '^Depen
 for s in postinst prerm postrm; do
   check "$s is an executable sh script" bash -c "test -x '$CTRL/$s' && head -1 '$CTRL/$s' | grep -q '^#!/bin/sh' && sh -n '$CTRL/$s'"
 done
-check "postinst creates the rcand system user" grep -q 'adduser --system' "$CTRL/postinst"
+check "postinst creates the rcand system user" grep -q 'gecos "RCAN robot node" rcand$' "$CTRL/postinst"
+check "postinst creates the rcan-registry system user" \
+  grep -q 'gecos "RCAN robot registry" rcan-registry$' "$CTRL/postinst"
+check "postinst enables and starts no service" bash -c "! grep -Eq '^[[:space:]]*systemctl (enable|start)' '$CTRL/postinst'"
 check "postinst makes the robot with rcand init, never over an existing config" \
   grep -q 'if \[ ! -e /etc/rcan/robot.rcan.yaml \]' "$CTRL/postinst"
 check "postrm removes the audit log on purge only" bash -c "grep -B2 'rm -rf /var/lib/rcand' '$CTRL/postrm' | grep -q purge"
@@ -54,17 +58,20 @@ UNIT=$ROOT/usr/lib/systemd/system/rcand.service
 # build machine may lack: only those lines are set aside.
 VROOT=$WORK/verify-root
 cp -a "$ROOT" "$VROOT" && cp -rn /usr/lib/systemd/system/. "$VROOT/usr/lib/systemd/system/"
-verify=$(systemd-analyze verify --root="$VROOT" "$VROOT/usr/lib/systemd/system/rcand.service" 2>&1 |
-         grep -v "Command 'man " || true)
-check "systemd-analyze verify accepts rcand.service${verify:+ ($verify)}" test -z "$verify"
+for u in rcand rcan-registry; do
+  verify=$(systemd-analyze verify --root="$VROOT" "$VROOT/usr/lib/systemd/system/$u.service" 2>&1 |
+           grep -v "Command 'man " || true)
+  check "systemd-analyze verify accepts $u.service${verify:+ ($verify)}" test -z "$verify"
+  score=$(systemd-analyze security --offline=true "$ROOT/usr/lib/systemd/system/$u.service" 2>/dev/null |
+          sed -n "s/.*Overall exposure level for $u.service: \([0-9.]*\).*/\1/p")
+  echo "note: systemd-analyze security $u: exposure ${score:-?} (0 safest, 10 unsafe)"
+  check "the $u exposure score is at most 2.0 (${score:-none})" awk -v s="${score:-99}" 'BEGIN { exit !(s <= 2.0) }'
+done
 for k in 'Type=notify' 'WatchdogSec=' 'User=rcand' 'ProtectSystem=strict' 'ProtectHome=true' \
          'NoNewPrivileges=true' 'PrivateTmp=true' 'ReadWritePaths=/var/lib/rcand' \
          'CapabilityBoundingSet=$' 'RestrictAddressFamilies=' 'SystemCallFilter=@system-service'; do
   check "the unit sets $k" grep -Eq "^$k" "$UNIT"
 done
-score=$(systemd-analyze security --offline=true "$UNIT" 2>/dev/null | sed -n 's/.*Overall exposure level for rcand.service: \([0-9.]*\).*/\1/p')
-echo "note: systemd-analyze security: exposure ${score:-?} (0 safest, 10 unsafe)"
-check "the exposure score is at most 2.0 (${score:-none})" awk -v s="${score:-99}" 'BEGIN { exit !(s <= 2.0) }'
 
 # 4. What postinst does, into the root: a configured robot in /var/lib/rcand, /etc/rcan.
 PORT=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
@@ -92,5 +99,30 @@ check "the packaged gRPC module is the one it would load" test -f "$ROOT/usr/lib
 kill -TERM "$PID"; wait "$PID"; rc=$?; PID=
 check "SIGTERM stops it cleanly (exit $rc)" test "$rc" -eq 0
 
-if [ "$fails" -gt 0 ]; then echo "$fails failure(s)"; tail -20 "$WORK/rcand.log"; exit 1; fi
+# 6. The registry's unit: its ExecStart, paths redirected into the root and on a free port.
+RUNIT=$ROOT/usr/lib/systemd/system/rcan-registry.service
+RPORT=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
+rcmd=$(sed -n 's/^ExecStart=//p' "$RUNIT")
+rcmd=${rcmd//\/usr\/bin\//$ROOT/usr/bin/}
+rcmd=${rcmd//\/var\/lib\/rcan-registry/$ROOT/var/lib/rcan-registry}
+rcmd=${rcmd//--port 8090/--port $RPORT}
+echo "note: starting: ${rcmd#$ROOT}"
+$rcmd 2>"$WORK/registry.log" &
+PID=$!
+healthy=
+for _ in $(seq 1 100); do
+  if curl -fsS "http://127.0.0.1:$RPORT/healthz" >/dev/null 2>&1; then healthy=1; break; fi
+  sleep 0.1
+done
+check "rcan-registry started by its unit's command line answers /healthz" test -n "$healthy"
+check "its first start wrote the admin key 0600" \
+  test "$(stat -c %a "$ROOT/var/lib/rcan-registry/admin.key" 2>/dev/null)" = 600
+check "the packaged CLI lists robots with it" bash -c \
+  "RCAN_REGISTRY=http://127.0.0.1:$RPORT '$ROOT/usr/bin/rcan' registry list >/dev/null"
+kill -TERM "$PID"; wait "$PID"; rc=$?; PID=
+check "SIGTERM stops rcan-registry cleanly (exit $rc)" test "$rc" -eq 0
+
+if [ "$fails" -gt 0 ]; then
+  echo "$fails failure(s)"; tail -20 "$WORK/rcand.log"; tail -20 "$WORK/registry.log" 2>/dev/null; exit 1
+fi
 echo "all package checks passed"
