@@ -9,6 +9,8 @@
 #include <ctime>
 #include <iostream>
 
+#include "rcan/registry.h"
+
 namespace rcan::cli {
 
 const std::vector<std::string>& net_flags() {
@@ -16,12 +18,13 @@ const std::vector<std::string>& net_flags() {
   return f;
 }
 const std::vector<std::string>& net_valued() {
-  static const std::vector<std::string> v{"url", "token-file", "timeout", "ca-file"};
+  static const std::vector<std::string> v{"url", "token-file", "timeout", "ca-file", "registry"};
   return v;
 }
 
 const char* const kNetHelp =
-    "  Connection: --url URL (default $RCAN_URL, else http://127.0.0.1:8080; https:// for TLS)\n"
+    "  Connection: --url URL (default $RCAN_URL, else http://127.0.0.1:8080; https:// for TLS;\n"
+    "              an RRN or RURI is resolved through --registry URL, default $RCAN_REGISTRY)\n"
     "              --token-file F (default $RCAN_TOKEN_FILE)  --timeout MS (default 10000)\n"
     "              --ca-file PEM  --insecure (skip TLS verification)  --json (machine output)\n"
     "  Exit: 0 done, 1 refused by the node (its error code is printed), 2 usage,\n"
@@ -32,6 +35,14 @@ client::ClientOptions client_options(const Options& o, bool need_token, std::str
   std::string url = o.get("url");
   if (url.empty())
     if (const char* env = std::getenv("RCAN_URL"); env && *env) url = env;
+  if (url.rfind("rcan://", 0) == 0 || registry::normalize_rrn(url)) {
+    auto found = robot_url_from_registry(url, o.get("registry"));
+    if (!found.ok()) {
+      err = found.error().message;
+      return co;
+    }
+    url = *found;
+  }
   if (!url.empty()) co.url = url;
   if (auto ep = client::parse_endpoint(co.url); !ep.ok()) {
     err = ep.error().message;

@@ -2,7 +2,10 @@
 // options, output (tables, colour on a terminal, --json), errors and exit codes.
 //
 // Connection options (every networked verb):
-//   --url URL          node URL (default $RCAN_URL, else http://127.0.0.1:8080)
+//   --url URL          node URL (default $RCAN_URL, else http://127.0.0.1:8080); an RRN or a
+//                      RURI instead is resolved through the registry (--registry URL, else
+//                      $RCAN_REGISTRY; a RURI's own registry host over https otherwise) to
+//                      the first endpoint the robot published
 //   --token-file F     bearer token file (default $RCAN_TOKEN_FILE)
 //   --timeout MS       per request (default 10000)
 //   --ca-file F        PEM trust anchors for https/wss;  --insecure skips verification
@@ -32,6 +35,12 @@ const std::vector<std::string>& net_flags();
 const std::vector<std::string>& net_valued();
 // The help text block describing them.
 extern const char* const kNetHelp;
+
+// Where the registry says the robot named by `rrn_or_ruri` answers (its first endpoint).
+// `registry` empty: $RCAN_REGISTRY, else https://<the RURI's registry> (an RRN then needs
+// $RCAN_REGISTRY or --registry). Defined in registry_cmd.cpp.
+Result<std::string> robot_url_from_registry(const std::string& rrn_or_ruri,
+                                            const std::string& registry);
 
 // Builds client options from parsed options and the environment. `need_token`: a missing
 // token is a usage error (returned in `err`).

@@ -260,8 +260,9 @@ int command_main(const Args& args) {
   }
   if (help_requested(args, (std::string(kCommandHelp) + kNetHelp).c_str())) return 0;
   // Split: our options vs payload parameters.
-  const std::vector<std::string> own_valued{"url",    "token-file", "timeout",    "ca-file",
-                                            "ttl-ms", "priority",   "confidence", "scope"};
+  const std::vector<std::string> own_valued{"url",        "token-file", "timeout",
+                                            "ca-file",    "ttl-ms",     "priority",
+                                            "confidence", "scope",      "registry"};
   const std::vector<std::string> own_flags{"json", "insecure"};
   Args own;
   std::vector<std::pair<std::string, std::string>> params;

@@ -8,6 +8,7 @@
 #include <iostream>
 
 #include "cli.h"
+#include "net_common.h"
 #include "node_http.h"
 #include "rcan/crypto/keys.h"
 #include "rcan/crypto/registry_proof.h"
@@ -351,6 +352,44 @@ int resolve_main(const Args& args) {
   print_resolved(a.body);
   return 0;
 }
+
+}  // namespace
+
+Result<std::string> robot_url_from_registry(const std::string& rrn_or_ruri,
+                                            const std::string& registry) {
+  std::string base = registry;
+  if (base.empty())
+    if (const char* env = std::getenv("RCAN_REGISTRY"); env && *env) base = env;
+  std::string path;
+  if (auto rrn = registry::normalize_rrn(rrn_or_ruri)) {
+    if (base.empty())
+      return Error(ErrorCode::kSchemaValidationFailed,
+                   "an RRN is resolved through a registry: --registry URL or RCAN_REGISTRY");
+    path = "/api/v1/resolve/" + *rrn;
+  } else {
+    auto r = parse_ruri(rrn_or_ruri);
+    if (!r.ok())
+      return Error(ErrorCode::kInvalidRuri, "not a node URL, RRN or RURI: " + r.error().message);
+    if (base.empty()) base = "https://" + r->registry;
+    path = "/api/v1/resolve?uri=" + q_escape(rrn_or_ruri);
+  }
+  while (!base.empty() && base.back() == '/') base.pop_back();
+  Answer a = call(base, "GET", path, "", "");
+  if (a.exit == 3)
+    return Error(ErrorCode::kNotFound, "registry " + base + " unreachable: " + a.text);
+  if (a.exit != 0)
+    return Error(ErrorCode::kNotFound, "registry " + base + " does not know " + rrn_or_ruri + " (" +
+                                           std::to_string(a.status) + ")");
+  if (const json::Value* eps = a.body.get("endpoints"); eps != nullptr && eps->is_array())
+    for (const auto& e : eps->as_array())
+      if (const json::Value* u = e.get("url");
+          u != nullptr && u->is_string() && !u->as_string().empty())
+        return u->as_string();
+  return Error(ErrorCode::kNotFound,
+               rrn_or_ruri + " has published no endpoint in registry " + base);
+}
+
+namespace {
 
 const Registration kReg{"registry", "register, find and manage robots in an RCAN registry",
                         &registry_main};

@@ -49,7 +49,7 @@ std::string registrant_key_file(const RegistryDaemon& reg, const std::string& re
 class JoiningRobot {
  public:
   JoiningRobot(const std::string& dir, const std::string& registry_url, const std::string& key_file)
-      : dir_(dir), data_(dir + "/data") {
+      : dir_(dir), data_(dir + "/data"), port_(free_port()) {
     fs::create_directories(data_);
     EXPECT_EQ(run_cli({"keys", "generate", "--dir", data_ + "/keys"}).exit_code, 0);
     EXPECT_EQ(run_cli({"audit", "new-secret", "--out", data_ + "/audit.secret"}).exit_code, 0);
@@ -61,13 +61,24 @@ class JoiningRobot {
         << "security:\n  jwt:\n    issuers:\n      - issuer: test.local\n        key_file: " << dir_
         << "/issuer/ed25519.pub.pem\n"
         << "registry:\n  registry_url: " << registry_url << "\n  key_file: " << key_file
-        << "\n  endpoint: http://rover.example:8080\n  refresh_s: 10\n";
+        << "\n  endpoint: " << url() << "\n  refresh_s: 10\n";
+  }
+  // Where it serves (and what it publishes as its endpoint).
+  std::string url() const { return "http://127.0.0.1:" + std::to_string(port_); }
+  // An OWNER token of its test issuer, in a file.
+  std::string owner_token_file() const {
+    auto t = run_cli({"token", "issue", "--key", dir_ + "/issuer/ed25519.seed", "--iss",
+                      "test.local", "--sub", "alice", "--role", "owner", "--aud", kRuri});
+    EXPECT_EQ(t.exit_code, 0) << t.err;
+    std::string path = dir_ + "/owner.token";
+    write_private(path, t.out);
+    return path;
   }
   // Starts rcand; returns the RRN of its "listening" line (empty when it did not start).
   std::string start() {
     proc_ = std::make_unique<Process>();
-    EXPECT_TRUE(proc_->start(
-        {RCAND_PATH, "--config", dir_ + "/robot.rcan.yaml", "--port", "0", "--data-dir", data_}));
+    EXPECT_TRUE(proc_->start({RCAND_PATH, "--config", dir_ + "/robot.rcan.yaml", "--port",
+                              std::to_string(port_), "--data-dir", data_}));
     auto line = proc_->wait_for_line("\"event\":\"listening\"", 60000);
     if (!line) {
       ADD_FAILURE() << "rcand did not start:\n" << proc_->err();
@@ -81,6 +92,7 @@ class JoiningRobot {
 
  private:
   std::string dir_, data_;
+  uint16_t port_ = 0;
   std::unique_ptr<Process> proc_;
 };
 
@@ -120,8 +132,21 @@ TEST(RegistryJoin, ARobotRegistersWithProofOfPossessionAndKeepsItsRrn) {
   auto res = run_cli({"resolve", kRuri, "--registry", reg.url()});
   EXPECT_EQ(res.exit_code, 0) << res.out << res.err;
   EXPECT_NE(res.out.find("rrn: " + rrn), std::string::npos) << res.out;
-  EXPECT_NE(res.out.find("endpoint: http://rover.example:8080"), std::string::npos) << res.out;
+  EXPECT_NE(res.out.find("endpoint: " + robot.url()), std::string::npos) << res.out;
   EXPECT_NE(res.out.find("ed25519_public_key: " + base64url_encode(ed)), std::string::npos);
+
+  // The CLI reaches the robot by its RRN or its RURI, through the registry.
+  const std::string token = robot.owner_token_file();
+  for (const std::string& name : {rrn, std::string(kRuri)}) {
+    auto status = run_cli(
+        {"status", "--url", name, "--registry", reg.url(), "--token-file", token, "--json"});
+    EXPECT_EQ(status.exit_code, 0) << name << ": " << status.out << status.err;
+    EXPECT_NE(status.out.find(rrn), std::string::npos) << status.out;
+  }
+  auto unknown = run_cli(
+      {"status", "--url", "RRN-000000009999", "--registry", reg.url(), "--token-file", token});
+  EXPECT_NE(unknown.exit_code, 0);
+  EXPECT_NE(unknown.err.find("does not know RRN-000000009999"), std::string::npos) << unknown.err;
 
   // A restart keeps the RRN and registers nothing new.
   EXPECT_EQ(robot.stop(), 0);
