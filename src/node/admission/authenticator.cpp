@@ -12,19 +12,52 @@ bool Principal::has_scope(std::string_view s) const {
 }
 
 Authenticator::Authenticator(AuthOptions opts) : opts_(std::move(opts)) {
-  verifier_ = std::make_unique<jwt::JwtVerifier>(opts_.trust, opts_.verify);
+  verifier_ = std::make_shared<const jwt::JwtVerifier>(opts_.trust, opts_.verify);
   cache_ = std::make_unique<TokenCache>(opts_.token_cache_entries);
 }
 
 Authenticator::~Authenticator() = default;
 
+std::shared_ptr<const jwt::JwtVerifier> Authenticator::verifier() const {
+  MutexLock lock(verifier_mu_);
+  return verifier_;
+}
+
+void Authenticator::set_followed_issuer_keys(const std::string& issuer,
+                                             std::vector<jwt::VerificationKey> keys) {
+  jwt::TrustStore trust = opts_.trust;  // the configured issuers, never changed
+  for (auto& k : keys) {
+    std::string kid = k.kid();
+    trust.add(issuer, std::move(k), std::move(kid));
+  }
+  auto next = std::make_shared<const jwt::JwtVerifier>(std::move(trust), opts_.verify);
+  {
+    MutexLock lock(verifier_mu_);
+    verifier_.swap(next);
+  }
+  // A token verified with a key that is no longer published must be verified afresh.
+  cache_->clear();
+}
+
+void Authenticator::on_unknown_followed_key(std::string issuer,
+                                            std::function<void(const std::string& kid)> fn) {
+  followed_issuer_ = std::move(issuer);
+  on_unknown_key_ = std::move(fn);
+}
+
 Result<Principal> Authenticator::authenticate_token(std::string_view token, int64_t now_s) const {
   if (token.empty())
     return Error(ErrorCode::kAuthRequired, "a bearer token is required", "auth_token");
   if (auto hit = cache_->find(token, now_s)) return std::move(*hit);
-  auto claims = verifier_->verify(token, now_s);
+  auto claims = verifier()->verify(token, now_s);
   if (!claims.ok()) {
     Error e = claims.error();
+    if (on_unknown_key_ && (e.reason == "unknown_kid" || e.reason == "untrusted_issuer")) {
+      auto d = jwt::decode(token, opts_.verify.max_token_bytes);
+      const json::Value* iss = d.ok() ? d->claims.find("iss") : nullptr;
+      if (iss && iss->is_string() && iss->as_string() == followed_issuer_)
+        on_unknown_key_(d->header.kid);
+    }
     if (e.code != ErrorCode::kAuthRequired) e.code = ErrorCode::kAuthInvalid;
     return e;
   }
