@@ -16,6 +16,10 @@ namespace {
 constexpr int kCallTimeoutMs = 2000;
 constexpr int64_t kEarlyRefreshEveryMs = 60'000;
 constexpr int kMaxPagesPerPoll = 20;
+constexpr size_t kMaxQueuedIntrospections = 64;
+constexpr size_t kMaxIntrospectionAnswers = 10'000;
+constexpr int64_t kActiveAnswerMs = 60'000;
+constexpr int64_t kInactiveAnswerMs = 30'000;
 
 }  // namespace
 
@@ -36,13 +40,12 @@ std::string RegistryTrust::url(const std::string& path) const {
 void RegistryTrust::failed(const std::string& what, const std::string& error) {
   {
     std::lock_guard<std::mutex> l(mu_);
-    last_error_ = what + ": " + error;
+    (what.rfind("registry keys", 0) == 0 ? keys_error_ : revs_error_) = what + ": " + error;
   }
   log(LogLevel::kWarn, "registry_trust_failed", json::Object{{"what", what}, {"error", error}});
 }
 
-bool RegistryTrust::install(const json::Value& jwks, int64_t fetched_ms, const char* source) {
-  const std::string text = json::dump(jwks);
+bool RegistryTrust::install(const std::string& text, int64_t fetched_ms, const char* source) {
   auto set = node::parse_registry_jwks(text);
   if (!set.ok()) {
     failed("registry keys", set.error().message);
@@ -55,7 +58,8 @@ bool RegistryTrust::install(const json::Value& jwks, int64_t fetched_ms, const c
         .write();
     return false;
   }
-  const std::string canon = json::canonical(jwks);
+  auto doc = json::parse(text, {.max_depth = 8, .max_bytes = node::kMaxRegistryJwksBytes});
+  const std::string canon = doc.ok() ? json::canonical(*doc) : text;
   std::vector<std::string> kids;
   for (const auto& k : set->keys) kids.push_back(k.kid());
   bool changed;
@@ -95,22 +99,24 @@ bool RegistryTrust::fetch_jwks(int timeout_ms) {
                     : a->status != 200 ? "the registry answered " + std::to_string(a->status)
                                        : std::string();
   if (!err.empty()) return failed("registry keys", err), ++jwks_failures_, false;
-  auto doc = json::parse(a->body, {.max_depth = 8, .max_bytes = node::kMaxRegistryJwksBytes});
   const int64_t now = svc_.clock.wall_ms();
-  if (!install(doc.ok() ? *doc : json::Value(a->body), now, "fetched")) {
+  if (!install(a->body, now, "fetched")) {
     ++jwks_failures_;
     return false;
   }
+  auto doc = json::parse(a->body, {.max_depth = 8, .max_bytes = node::kMaxRegistryJwksBytes});
+  if (!doc.ok()) return true;  // install() parsed it: not reached
   json::Object cache{{"registry_url", cfg_.registry_url},
                      {"issuer", issuer_},
                      {"fetched_at_ms", now},
                      {"jwks", *doc}};
-  if (Status s = make_private_dir(dir_); !s.ok())
-    return failed("registry keys", s.error().message), true;
-  if (Status s = write_state_file(dir_ + "/jwks.json", json::Value(std::move(cache))); !s.ok())
-    failed("registry keys cache", s.error().message);
-  std::lock_guard<std::mutex> l(mu_);
-  last_error_.clear();
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    keys_error_.clear();
+  }
+  Status s = make_private_dir(dir_);
+  if (s.ok()) s = write_state_file(dir_ + "/jwks.json", json::Value(std::move(cache)));
+  if (!s.ok()) failed("registry keys cache", s.error().message);
   return true;
 }
 
@@ -177,6 +183,8 @@ bool RegistryTrust::poll_revocations(int timeout_ms) {
     }
     if (p->entries.size() < node::kRevocationPageSize) break;
   }
+  std::lock_guard<std::mutex> l(mu_);
+  if (revs_error_.rfind("registry revocations:", 0) == 0) revs_error_.clear();
   return true;
 }
 
@@ -189,8 +197,13 @@ void RegistryTrust::prime(int timeout_ms) {
       since_ = s->as_int();
     }
   }
-  svc_.auth.on_unknown_followed_key(issuer_,
-                                    [this](const std::string&) { request_early_refresh(); });
+  svc_.auth.on_unknown_followed_key(
+      issuer_,
+      [this](const std::string&, std::string_view token) {
+        request_early_refresh();
+        request_introspection(token);
+      },
+      [this](std::string_view token) { return introspected(token); });
   if (!fetch_jwks(timeout_ms)) {
     auto c = read_state_file(dir_ + "/jwks.json");
     const json::Value* u = c.ok() ? c->get("registry_url") : nullptr;
@@ -199,7 +212,7 @@ void RegistryTrust::prime(int timeout_ms) {
     const json::Value* jwks = c.ok() ? c->get("jwks") : nullptr;
     if (u && u->is_string() && u->as_string() == cfg_.registry_url && i && i->is_string() &&
         i->as_string() == issuer_ && at && at->is_int() && jwks)
-      install(*jwks, at->as_int(), "cache");
+      install(json::dump(*jwks), at->as_int(), "cache");
   }
   svc_.registry_status = [this] { return status_json(); };
   auto& m = svc_.metrics;
@@ -215,6 +228,11 @@ void RegistryTrust::prime(int timeout_ms) {
           "Polls of the registry's revocation feed that failed.", rev_failures_);
   counter("rcan_registry_revocations_applied_total",
           "Revocations from the registry added to the node's list.", revocations_applied_);
+  counter("rcan_registry_introspections_total", "Tokens the registry was asked about (RFC 7662).",
+          introspections_);
+  counter("rcan_registry_introspection_failures_total",
+          "Introspection calls that failed (the token is refused for 30 s).",
+          introspection_failures_);
   m.add_gauge("rcan_registry_keys", "Registry keys the node verifies tokens with.", [this] {
     std::lock_guard<std::mutex> l(mu_);
     return static_cast<double>(key_count_);
@@ -246,6 +264,89 @@ void RegistryTrust::request_early_refresh() {
   cv_.notify_all();
 }
 
+void RegistryTrust::request_introspection(std::string_view token) {
+  {
+    std::lock_guard<std::mutex> a(answers_mu_);
+    auto it = answers_.find(std::string(token));
+    if (it != answers_.end() && it->second.until_ms > svc_.clock.wall_ms()) return;
+  }
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    if (to_introspect_.size() >= kMaxQueuedIntrospections) return;
+    for (const auto& t : to_introspect_)
+      if (t == token) return;
+    to_introspect_.emplace_back(token);
+  }
+  cv_.notify_all();
+}
+
+std::optional<json::Object> RegistryTrust::introspected(std::string_view token) const {
+  std::lock_guard<std::mutex> a(answers_mu_);
+  auto it = answers_.find(std::string(token));
+  if (it == answers_.end()) return std::nullopt;
+  if (it->second.until_ms <= svc_.clock.wall_ms()) {
+    answers_.erase(it);
+    return std::nullopt;
+  }
+  return it->second.claims;
+}
+
+// RFC 7662: POST token=<jwt>, with the robot's own registry key. Any failure is cached as
+// "inactive" for kInactiveAnswerMs, so an unverifiable token costs the registry one call.
+void RegistryTrust::introspect(const std::string& token, int timeout_ms) {
+  ++introspections_;
+  const int64_t now = svc_.clock.wall_ms();
+  Answer answer{std::nullopt, now + kInactiveAnswerMs};
+  std::string err;
+  auto state = read_state_file(dir_ + "/state.json");  // registry_join.h
+  const json::Value* key = state.ok() ? state->get("robot_key") : nullptr;
+  auto u = parse_web_url(url("/oauth/introspect"));
+  if (!key || !key->is_string() || key->as_string().empty()) {
+    err = "no robot key from the registry (registry.key_file, registration)";
+  } else if (!u.ok()) {
+    err = u.error().message;
+  } else {
+    HttpRequestOptions o;
+    o.ca_file = cfg_.registry.ca_file;
+    o.content_type = "application/x-www-form-urlencoded";
+    o.headers.emplace_back("Authorization", "Bearer " + key->as_string());
+    // A compact JWS is base64url and dots: nothing in it needs form encoding.
+    auto a = http_request("POST", *u, "token=" + token, timeout_ms, o);
+    auto doc = a.ok() && a->status == 200 ? json::parse(a->body) : Result<json::Value>(Error());
+    const json::Value* active = doc.ok() ? doc->get("active") : nullptr;
+    if (!a.ok()) {
+      err = a.error().message;
+    } else if (a->status != 200) {
+      err = "the registry answered " + std::to_string(a->status);
+    } else if (!active || !active->is_bool()) {
+      err = "the introspection answer is not RFC 7662 JSON";
+    } else if (active->as_bool()) {
+      json::Object claims = doc->as_object();
+      claims.erase("active");
+      const json::Value* exp = claims.find("exp");
+      if (exp && exp->is_int())
+        answer = Answer{std::move(claims), std::min(exp->as_int() * 1000, now + kActiveAnswerMs)};
+    }
+  }
+  if (!err.empty()) {
+    ++introspection_failures_;
+    failed("registry introspection", err);
+  }
+  svc_.record("TOKEN_INTROSPECTED", err.empty() ? "ok" : "error")
+      .by_system()
+      .detail("registry", cfg_.registry_url)
+      .detail("active", answer.claims.has_value())
+      .detail("error", err.empty() ? json::Value() : json::Value(err))
+      .write();
+  std::lock_guard<std::mutex> a(answers_mu_);
+  if (answers_.size() >= kMaxIntrospectionAnswers) {
+    for (auto it = answers_.begin(); it != answers_.end();)
+      it = it->second.until_ms <= now ? answers_.erase(it) : std::next(it);
+    if (answers_.size() >= kMaxIntrospectionAnswers) answers_.erase(answers_.begin());
+  }
+  answers_[token] = std::move(answer);
+}
+
 void RegistryTrust::run() {
   using Clock = std::chrono::steady_clock;
   const auto keys_every = std::chrono::seconds(cfg_.registry.jwks_refresh_s);
@@ -265,6 +366,14 @@ void RegistryTrust::run() {
           (ok ? keys_every : std::min<Clock::duration>(keys_every, std::chrono::seconds(30)));
       continue;
     }
+    if (!to_introspect_.empty()) {  // after an early fetch of the keys, which may settle it
+      std::string token = std::move(to_introspect_.front());
+      to_introspect_.pop_front();
+      l.unlock();
+      introspect(token, kCallTimeoutMs);
+      l.lock();
+      continue;
+    }
     if (Clock::now() >= next_revs) {
       l.unlock();
       (void)poll_revocations(kCallTimeoutMs);
@@ -272,7 +381,8 @@ void RegistryTrust::run() {
       next_revs = Clock::now() + revs_every;
       continue;
     }
-    cv_.wait_until(l, std::min(next_keys, next_revs), [this] { return stopping_ || early_; });
+    cv_.wait_until(l, std::min(next_keys, next_revs),
+                   [this] { return stopping_ || early_ || !to_introspect_.empty(); });
   }
 }
 
@@ -297,7 +407,9 @@ json::Value RegistryTrust::status_json() const {
        json::Object{{"since", since_},
                     {"last_poll_ms", last_poll_ms_ ? json::Value(last_poll_ms_) : json::Value()},
                     {"applied", static_cast<int64_t>(revocations_applied_.load())}}},
-      {"last_error", last_error_.empty() ? json::Value() : json::Value(last_error_)}};
+      {"last_error", !keys_error_.empty()   ? json::Value(keys_error_)
+                     : !revs_error_.empty() ? json::Value(revs_error_)
+                                            : json::Value()}};
 }
 
 }  // namespace rcan::rcand

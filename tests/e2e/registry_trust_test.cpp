@@ -25,7 +25,7 @@ namespace {
 
 // The registry's token authority as the contract describes it (GET only: what rcand reads).
 constexpr const char* kFakeRegistry = R"PY(
-import json, os, sys, http.server, urllib.parse
+import base64, json, os, sys, http.server, urllib.parse
 port, root = int(sys.argv[1]), sys.argv[2]
 def read(name, default):
     try:
@@ -57,6 +57,23 @@ class H(http.server.BaseHTTPRequestHandler):
             nxt = revs[-1]['seq'] if revs else since
             return self.send(200, json.dumps({'revocations': revs, 'next_since': nxt}))
         self.send(404, '{}')
+    def do_POST(self):
+        u = urllib.parse.urlparse(self.path)
+        body = self.rfile.read(int(self.headers.get('Content-Length', '0'))).decode()
+        with open(os.path.join(root, 'requests.log'), 'a') as f:
+            f.write(u.path + '\n')
+        if u.path != '/oauth/introspect':
+            return self.send(404, '{}')
+        if self.headers.get('Authorization') != 'Bearer rk-test' or \
+                self.headers.get('Content-Type') != 'application/x-www-form-urlencoded':
+            return self.send(401, '{"error":"unauthorized"}')
+        tok = urllib.parse.parse_qs(body)['token'][0]
+        p = tok.split('.')[1]
+        claims = json.loads(base64.urlsafe_b64decode(p + '=' * (-len(p) % 4)))
+        if claims.get('jti') not in json.loads(read('active.json', '[]')):
+            return self.send(200, '{"active":false}')
+        claims['active'] = True
+        self.send(200, json.dumps(claims))
 http.server.ThreadingHTTPServer.allow_reuse_address = True
 s = http.server.ThreadingHTTPServer(('127.0.0.1', port), H)
 print('fake registry serving', file=sys.stderr, flush=True)
@@ -168,13 +185,14 @@ class RegistryTrustTest : public ::testing::Test {
   }
   void stop_rcand() { EXPECT_EQ(rcand_->stop(SIGTERM, 15000), 0) << rcand_->err(); }
 
-  std::string token(const RegistryKey& k, const std::string& jti, const std::string& sub = "ops") {
+  std::string token(const RegistryKey& k, const std::string& jti, const std::string& sub = "ops",
+                    const std::string& aud = {}) {
     auto key = jwt::SigningKey::ed25519_seed(k.seed);
     EXPECT_TRUE(key.ok());
     const int64_t now = now_s();
     json::Object claims{{"iss", registry_url_},
                         {"sub", sub},
-                        {"aud", ruri_},
+                        {"aud", aud.empty() ? ruri_ : aud},
                         {"role", "owner"},
                         {"scope", json::Array{"status", "control", "config"}},
                         {"jti", jti},
@@ -338,6 +356,48 @@ TEST_F(RegistryTrustTest, RegistryDownGoesOfflineThenLockdownAndBackToNormal) {
   EXPECT_TRUE(has(events, "PARTITION_MODE:OFFLINE_AUTONOMOUS"));
   EXPECT_TRUE(has(events, "PARTITION_MODE:LOCKDOWN"));
   EXPECT_TRUE(has(events, "PARTITION_MODE:NORMAL"));
+}
+
+}  // namespace
+}  // namespace rcan
+
+namespace rcan {
+namespace {
+
+// RFC 7662: a token naming the registry whose key the robot cannot get is put to the registry,
+// off the transport thread, once; the answer decides its next uses and is still checked here.
+TEST_F(RegistryTrustTest, IntrospectionDecidesATokenItsKeysCannotVerifyOnceAndIsCached) {
+  std::filesystem::create_directories(data_ + "/registry");
+  write(data_ + "/registry/state.json",
+        "{\"registry_url\":\"" + registry_url_ +
+            "\",\"rrn\":\"RRN-000000000042\",\"robot_key\":\"rk-test\"}");
+  write(reg_dir_ + "/active.json", "[\"i1\", \"i3\"]");
+  start_registry();
+  start_rcand("  jwks_refresh_s: 3600\n");
+  RegistryKey kx{"kx", test::hex(std::string(64, '5'))};  // never in the JWKS
+  const std::string vouched = token(kx, "i1"), inactive = token(kx, "i2");
+  EXPECT_EQ(status_code(vouched), 401);  // refused now; the registry is asked meanwhile
+  EXPECT_TRUE(eventually([&] { return status_code(vouched) == 200; }, 5000)) << rcand_->err();
+  for (int i = 0; i < 5; ++i) EXPECT_EQ(status_code(vouched), 200);
+  EXPECT_EQ(count_requests("/oauth/introspect"), 1);
+  json::Value st = parse(get("/api/status", vouched).body);
+  EXPECT_EQ(st.get("rrn")->as_string(), "RRN-000000000042");
+  EXPECT_EQ(st.get("registry")->get("rrn")->as_string(), "RRN-000000000042");
+
+  // Inactive: refused, and asked about once for the next 30 s.
+  EXPECT_EQ(status_code(inactive), 401);
+  EXPECT_TRUE(eventually([&] { return count_requests("/oauth/introspect") == 2; }, 5000));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  for (int i = 0; i < 3; ++i) EXPECT_EQ(status_code(inactive), 401);
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_EQ(count_requests("/oauth/introspect"), 2);
+
+  // Active for the registry, but for another robot: the answer's aud is checked here.
+  const std::string elsewhere = token(kx, "i3", "ops", "rcan://local.rcan/acme/rover/ffffffff");
+  EXPECT_EQ(status_code(elsewhere), 401);
+  EXPECT_TRUE(eventually([&] { return count_requests("/oauth/introspect") == 3; }, 5000));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_EQ(status_code(elsewhere), 401);
 }
 
 }  // namespace

@@ -108,7 +108,8 @@ TEST(RegistryFeed, RevocationPage) {
 TEST(FollowedIssuer, KeysAreSwappedInAndOutAndUnknownKidsReported) {
   Authenticator auth = make_auth();
   std::vector<std::string> asked;
-  auth.on_unknown_followed_key(kIss, [&](const std::string& kid) { asked.push_back(kid); });
+  auth.on_unknown_followed_key(
+      kIss, [&](const std::string& kid, std::string_view) { asked.push_back(kid); });
   const std::string t1 = token(1, "k1");
   EXPECT_FALSE(auth.authenticate_token(t1, kNow).ok());  // no keys yet: untrusted issuer
   ASSERT_EQ(asked.size(), 1u);

@@ -120,19 +120,30 @@ class Authenticator {
   void set_followed_issuer_keys(const std::string& issuer, std::vector<jwt::VerificationKey> keys)
       EXCLUDES(verifier_mu_);
   // Called on the authenticating thread when a token names `issuer` (the followed issuer) and
-  // none of its keys has the token's kid. It must not block (it may only ask for a refresh).
-  // Set before the node serves.
-  void on_unknown_followed_key(std::string issuer, std::function<void(const std::string& kid)> fn);
+  // none of its keys has the token's kid. It must not block (it may only ask for a refresh or
+  // an introspection, done elsewhere). Set before the node serves.
+  using UnknownKey = std::function<void(const std::string& kid, std::string_view token)>;
+  // The issuer's own word on such a token (RFC 7662 introspection, answered and cached off the
+  // authenticating thread): the claims of an active answer, or nullopt (not asked yet, asked
+  // and inactive, or failed). The claims are checked here as a verified token's are (exp, aud,
+  // role, scopes, fleet); `iss` must be the followed issuer. Must not block.
+  using Introspected = std::function<std::optional<json::Object>(std::string_view token)>;
+  void on_unknown_followed_key(std::string issuer, UnknownKey fn, Introspected introspected = {});
 
  private:
   std::shared_ptr<const jwt::JwtVerifier> verifier() const EXCLUDES(verifier_mu_);
+  // The principal of claims that passed verification (or the issuer's introspection).
+  Result<Principal> principal_of(jwt::Claims&& claims) const;
+  // A followed issuer's token its keys cannot verify: its introspected principal, or `e`.
+  Result<Principal> unverifiable(std::string_view token, int64_t now_s, Error e) const;
 
   AuthOptions opts_;
   mutable Mutex verifier_mu_;
   std::shared_ptr<const jwt::JwtVerifier> verifier_ GUARDED_BY(verifier_mu_);
   std::unique_ptr<TokenCache> cache_;
   std::string followed_issuer_;
-  std::function<void(const std::string& kid)> on_unknown_key_;
+  UnknownKey on_unknown_key_;
+  Introspected introspected_;
 };
 
 }  // namespace rcan::node
