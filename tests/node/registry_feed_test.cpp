@@ -6,6 +6,7 @@
 
 #include <array>
 #include <atomic>
+#include <map>
 #include <thread>
 
 #include "node/admission/authenticator.h"
@@ -156,4 +157,50 @@ TEST(FollowedIssuer, SwapWhileVerifying) {
   stop = true;
   for (auto& t : threads) t.join();
   EXPECT_EQ(refused.load(), 0);
+}
+
+// The registry's introspection answer stands in for a signature the node cannot check, never
+// for the checks of the claims: exp, aud, role and issuer are this node's to check.
+TEST(FollowedIssuer, IntrospectedClaimsAreCheckedLikeAVerifiedTokens) {
+  Authenticator auth = make_auth();
+  std::map<std::string, json::Object> answers;
+  int asked = 0;
+  auth.on_unknown_followed_key(
+      kIss, [&](const std::string&, std::string_view) { ++asked; },
+      [&](std::string_view t) -> std::optional<json::Object> {
+        auto it = answers.find(std::string(t));
+        if (it == answers.end()) return std::nullopt;
+        return it->second;
+      });
+  const std::string t = token(7, "kx");  // signed "owner" by a key the node never had
+  EXPECT_FALSE(auth.authenticate_token(t, kNow).ok());
+  EXPECT_EQ(asked, 1);
+  const json::Object answer{{"iss", kIss},
+                            {"sub", "carol"},
+                            {"aud", kAud},
+                            {"role", "user"},
+                            {"scope", "status control"},
+                            {"iat", kNow},
+                            {"exp", kNow + 100}};
+  answers[t] = answer;
+  auto p = auth.authenticate_token(t, kNow);
+  ASSERT_TRUE(p.ok()) << p.error().message;
+  EXPECT_EQ(p->sub, "carol");
+  EXPECT_EQ(p->role, Role::kUser);  // the answer's role, not the token's
+  EXPECT_TRUE(p->has_scope("control"));
+  EXPECT_EQ(p->issuer, kIss);
+  EXPECT_EQ(asked, 1);  // answered: nothing more to ask
+  // Another robot's audience, an expired answer, another issuer: refused.
+  answers[t] = answer;
+  answers[t].set("aud", "rcan://local.rcan/acme/rover/ffffffff");
+  EXPECT_FALSE(auth.authenticate_token(t, kNow).ok());
+  answers[t] = answer;
+  answers[t].set("exp", kNow - 3600);
+  EXPECT_FALSE(auth.authenticate_token(t, kNow).ok());
+  answers[t] = answer;
+  answers[t].set("iss", "elsewhere");
+  EXPECT_FALSE(auth.authenticate_token(t, kNow).ok());
+  answers[t] = answer;
+  answers[t].set("role", "emperor");
+  EXPECT_FALSE(auth.authenticate_token(t, kNow).ok());
 }
