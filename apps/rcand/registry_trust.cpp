@@ -20,6 +20,8 @@ constexpr size_t kMaxQueuedIntrospections = 64;
 constexpr size_t kMaxIntrospectionAnswers = 10'000;
 constexpr int64_t kActiveAnswerMs = 60'000;
 constexpr int64_t kInactiveAnswerMs = 30'000;
+// Introspection calls a minute at most: a flood of unverifiable tokens costs the registry this.
+constexpr int kMaxIntrospectionsPerMinute = 120;
 
 }  // namespace
 
@@ -353,6 +355,8 @@ void RegistryTrust::run() {
   const auto revs_every = std::chrono::seconds(cfg_.registry.revocations_refresh_s);
   auto next_keys = Clock::now() + keys_every;
   auto next_revs = Clock::now();
+  auto window_start = Clock::now();
+  int window_calls = 0;
   std::unique_lock<std::mutex> l(mu_);
   while (!stopping_) {
     if (early_ || Clock::now() >= next_keys) {
@@ -366,19 +370,26 @@ void RegistryTrust::run() {
           (ok ? keys_every : std::min<Clock::duration>(keys_every, std::chrono::seconds(30)));
       continue;
     }
-    if (!to_introspect_.empty()) {  // after an early fetch of the keys, which may settle it
-      std::string token = std::move(to_introspect_.front());
-      to_introspect_.pop_front();
-      l.unlock();
-      introspect(token, kCallTimeoutMs);
-      l.lock();
-      continue;
-    }
+    // Revocations before introspections: a flood of unverifiable tokens must not delay them.
     if (Clock::now() >= next_revs) {
       l.unlock();
       (void)poll_revocations(kCallTimeoutMs);
       l.lock();
       next_revs = Clock::now() + revs_every;
+      continue;
+    }
+    if (!to_introspect_.empty()) {  // after an early fetch of the keys, which may settle it
+      std::string token = std::move(to_introspect_.front());
+      to_introspect_.pop_front();
+      if (Clock::now() - window_start >= std::chrono::minutes(1)) {
+        window_start = Clock::now();
+        window_calls = 0;
+      }
+      if (window_calls >= kMaxIntrospectionsPerMinute) continue;  // dropped: stays refused
+      ++window_calls;
+      l.unlock();
+      introspect(token, kCallTimeoutMs);
+      l.lock();
       continue;
     }
     cv_.wait_until(l, std::min(next_keys, next_revs),
