@@ -122,6 +122,24 @@ bool RegistryTrust::fetch_jwks(int timeout_ms) {
   return true;
 }
 
+// <data-dir>/registry/revocations_cursor.json, when the cursor moved since it was last saved.
+void RegistryTrust::save_cursor() {
+  int64_t since;
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    if (since_ == saved_since_) return;
+    since = since_;
+  }
+  Status s = make_private_dir(dir_);
+  if (s.ok())
+    s = write_state_file(
+        dir_ + "/revocations_cursor.json",
+        json::Value(json::Object{{"registry_url", cfg_.registry_url}, {"since", since}}));
+  if (!s.ok()) return failed("registry revocations cursor", s.error().message);
+  std::lock_guard<std::mutex> l(mu_);
+  saved_since_ = since;
+}
+
 bool RegistryTrust::poll_revocations(int timeout_ms) {
   ++rev_polls_;
   HttpRequestOptions o;
@@ -163,6 +181,7 @@ bool RegistryTrust::poll_revocations(int timeout_ms) {
       rec.write();
       if (!added.ok()) {
         ++rev_failures_;
+        save_cursor();  // what was applied before it stays applied
         return failed("registry revocations", added.error().message), false;
       }
       ++revocations_applied_;
@@ -172,17 +191,9 @@ bool RegistryTrust::poll_revocations(int timeout_ms) {
     {
       std::lock_guard<std::mutex> l(mu_);
       since_ = std::max(since_, p->next_since);
-      since = since_;
       last_poll_ms_ = now_ms;
     }
-    if (since != 0 || !p->entries.empty()) {
-      (void)make_private_dir(dir_);
-      if (Status s = write_state_file(
-              dir_ + "/revocations_cursor.json",
-              json::Value(json::Object{{"registry_url", cfg_.registry_url}, {"since", since}}));
-          !s.ok())
-        failed("registry revocations cursor", s.error().message);
-    }
+    save_cursor();
     if (p->entries.size() < node::kRevocationPageSize) break;
   }
   std::lock_guard<std::mutex> l(mu_);
@@ -196,7 +207,7 @@ void RegistryTrust::prime(int timeout_ms) {
     const json::Value* s = c->get("since");
     if (u && u->is_string() && u->as_string() == cfg_.registry_url && s && s->is_int()) {
       std::lock_guard<std::mutex> l(mu_);
-      since_ = s->as_int();
+      since_ = saved_since_ = s->as_int();
     }
   }
   svc_.auth.on_unknown_followed_key(

@@ -73,6 +73,7 @@ class RegistryTrust {
   void run();
   bool fetch_jwks(int timeout_ms);
   bool poll_revocations(int timeout_ms);
+  void save_cursor();
   void introspect(const std::string& token, int timeout_ms);
   // Installs the keys of the JWKS `text` fetched at `fetched_ms`; false (the keys in use kept,
   // the refusal recorded) when it is not a usable JWKS.
@@ -98,6 +99,7 @@ class RegistryTrust {
   std::vector<std::string> kids_;
   std::string keys_source_;  // "fetched" | "cache" | ""
   int64_t since_ = 0;
+  int64_t saved_since_ = 0;  // the cursor the file holds
   int64_t last_poll_ms_ = 0;
   std::string keys_error_;  // the last failure of the keys ("" once a fetch succeeds)
   std::string revs_error_;  // the last failure of the revocation feed
