@@ -19,6 +19,7 @@
 #include "rcan/errors.h"
 #include "rcan/hash.h"
 #include "registry_join.h"
+#include "registry_trust.h"
 #include "settings.h"
 #include "transport/http_server.h"
 #include "transports.h"
@@ -134,7 +135,7 @@ Status Daemon::open_identity() {
         !s.ok())
       return s;
   }
-  if (trust->empty())
+  if (trust->empty() && !cfg_.registry.trust_tokens)  // the registry's keys come in start_node
     return Error(
         ErrorCode::kInternal,
         "no token issuer is configured (security.jwt.issuers); every request would be refused");
@@ -205,7 +206,14 @@ Status Daemon::start_node() {
   if (!cfg_.fleet.fleet_id.empty())
     services_->fleet =
         std::make_shared<node::FleetMembership>(node::FleetMembership{cfg_.fleet, {}});
-  configure_control(*services_, cfg_);
+  // Tokens from the registry (registry_trust.h): its keys before the node serves.
+  std::function<int64_t()> keys_fetched;
+  if (cfg_.registry.trust_tokens) {
+    registry_trust_ = std::make_unique<RegistryTrust>(cfg_, *services_);
+    registry_trust_->prime(3000);
+    keys_fetched = [t = registry_trust_.get()] { return t->keys_fetched_ms(); };
+  }
+  configure_control(*services_, cfg_, std::move(keys_fetched));
   node::AiOptions ai_opts = node::ai_options(cfg_);  // §16 gates, layers, HiTL, watermark
   ai_opts.watermark_key = robot_keys_->mldsa65_sk.clone();
   services_->ai = std::make_shared<node::AiServices>(*services_, std::move(ai_opts));
@@ -222,6 +230,10 @@ Status Daemon::start_node() {
   on_stop([this](int) { services_->ai->shutdown(); });
   if (Status s = services_->ai->start(node_->pipeline()); !s.ok())
     return failed("HiTL pending file: ", s.error());
+  if (registry_trust_) {
+    registry_trust_->start();
+    on_stop([this](int) { registry_trust_->stop(); });
+  }
   return Status::Ok();
 }
 

@@ -41,7 +41,8 @@ class HttpServer;
 
 namespace rcan::rcand {
 
-class RegistryLink;  // registry_join.h
+class RegistryLink;   // registry_join.h
+class RegistryTrust;  // registry_trust.h
 
 struct DaemonOptions {
   std::optional<std::string> config;    // --config: a configured robot; none: the embedded default
@@ -106,6 +107,7 @@ class Daemon {
   std::unique_ptr<node::SafetyActuation> actuation_;
   std::unique_ptr<node::NodeServices> services_;
   std::unique_ptr<node::Node> node_;
+  std::unique_ptr<RegistryTrust> registry_trust_;  // the registry's keys and revocations
   std::unique_ptr<node::UdpService> udp_;
   std::unique_ptr<transport::HttpServer> http_;
   std::unique_ptr<node::GrpcTransport> grpc_;

@@ -135,7 +135,8 @@ Result<node::AuthOptions> auth_options(const config::NodeConfig& cfg, jwt::Trust
   return auth;
 }
 
-void configure_control(node::NodeServices& services, const config::NodeConfig& cfg) {
+void configure_control(node::NodeServices& services, const config::NodeConfig& cfg,
+                       std::function<int64_t()> registry_keys_fetched_ms) {
   node::ControlOptions co;  // docs/SESSIONS.md
   co.handoff_window_ms = services.settings.handoff_window_ms;
   co.queue_max = cfg.control.queue_max;
@@ -153,6 +154,14 @@ void configure_control(node::NodeServices& services, const config::NodeConfig& c
   po.poll_interval_ms = cfg.offline.issuer_poll_ms;
   po.timeout_ms = static_cast<int>(cfg.offline.issuer_timeout_ms);
   po.key_ttl_ms = int64_t{cfg.offline.max_key_ttl_s} * 1000;
+  if (po.issuer_url.empty() && registry_keys_fetched_ms) {  // the registry is the issuer
+    std::string base = cfg.registry_url;
+    while (!base.empty() && base.back() == '/') base.pop_back();
+    po.issuer_url = base + "/healthz";
+    po.ca_file = cfg.registry.ca_file;
+    po.key_ttl_ms = int64_t{cfg.registry.max_key_age_s} * 1000;
+    po.keys_fetched_ms = std::move(registry_keys_fetched_ms);
+  }
   services.partition.configure(po);
 }
 

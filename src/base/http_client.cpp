@@ -129,9 +129,13 @@ Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std
                    "headers");
     req += name + ": " + value + "\r\n";
   }
-  if (!body.empty() || method == "POST" || method == "PATCH")
-    req +=
-        "Content-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) + "\r\n";
+  if (!body.empty() || method == "POST" || method == "PATCH") {
+    if (!clean(o.content_type))
+      return Error(ErrorCode::kSchemaValidationFailed, "the content type holds CR, LF or NUL",
+                   "content_type");
+    req += "Content-Type: " + o.content_type +
+           "\r\nContent-Length: " + std::to_string(body.size()) + "\r\n";
+  }
   req += "\r\n";
   req.append(body);
   client::Endpoint ep;

@@ -54,6 +54,7 @@ struct HttpRequestOptions {
   std::vector<std::pair<std::string, std::string>> headers;
   std::string ca_file;
   size_t max_body = 256 * 1024;
+  std::string content_type = "application/json";  // of a body (an RFC 7662 form, say)
 };
 Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std::string_view body,
                                 int timeout_ms, const HttpRequestOptions& opts);

@@ -426,6 +426,35 @@ TEST(ConfigBlockKeys, ComputedDefaultsAndAliases) {
   EXPECT_TRUE(r->safety.estop_clear_requires_presence);
 }
 
+// The registry whose tokens the robot trusts: defaults, the issuer, the intervals.
+TEST(ConfigBlocks, RegistryTrustTokens) {
+  auto r = parse("registry: {registry_url: 'https://reg.example'}\n");
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_FALSE(r->registry.trust_tokens);
+  EXPECT_EQ(r->registry.jwks_refresh_s, 300u);
+  EXPECT_EQ(r->registry.revocations_refresh_s, 30u);
+  EXPECT_EQ(r->registry.max_key_age_s, 86400u);
+  r = parse("registry: {registry_url: 'https://reg.example', trust_tokens: true}\n");
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_TRUE(r->registry.trust_tokens);
+  EXPECT_EQ(r->registry.issuer, "https://reg.example");  // the registry's URL by default
+  r = parse(
+      "registry: {registry_url: 'https://reg.example', trust_tokens: true, issuer: "
+      "'https://id.example', jwks_refresh_s: 60, revocations_refresh_s: 5, max_key_age_s: 3600}\n");
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_EQ(r->registry.issuer, "https://id.example");
+  EXPECT_EQ(r->registry.jwks_refresh_s, 60u);
+  EXPECT_EQ(r->registry.revocations_refresh_s, 5u);
+  EXPECT_EQ(r->registry.max_key_age_s, 3600u);
+  // Trusting the registry's tokens needs its URL.
+  r = parse("registry: {trust_tokens: true}\n");
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().field, "registry.trust_tokens");
+  r = parse("registry: {registry_url: 'https://reg.example', jwks_refresh_s: 0}\n");
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().field, "registry.jwks_refresh_s");
+}
+
 // ------------------------------------------------------------------------------------------
 // Rules between keys: each with its path, reason and message
 

@@ -12,22 +12,89 @@ bool Principal::has_scope(std::string_view s) const {
 }
 
 Authenticator::Authenticator(AuthOptions opts) : opts_(std::move(opts)) {
-  verifier_ = std::make_unique<jwt::JwtVerifier>(opts_.trust, opts_.verify);
+  verifier_ = std::make_shared<const jwt::JwtVerifier>(opts_.trust, opts_.verify);
   cache_ = std::make_unique<TokenCache>(opts_.token_cache_entries);
 }
 
 Authenticator::~Authenticator() = default;
 
+std::shared_ptr<const jwt::JwtVerifier> Authenticator::verifier() const {
+  MutexLock lock(verifier_mu_);
+  return verifier_;
+}
+
+void Authenticator::set_followed_issuer_keys(const std::string& issuer,
+                                             std::vector<jwt::VerificationKey> keys) {
+  jwt::TrustStore trust = opts_.trust;  // the configured issuers, never changed
+  for (auto& k : keys) {
+    std::string kid = k.kid();
+    trust.add(issuer, std::move(k), std::move(kid));
+  }
+  auto next = std::make_shared<const jwt::JwtVerifier>(std::move(trust), opts_.verify);
+  {
+    MutexLock lock(verifier_mu_);
+    verifier_.swap(next);
+  }
+  // A token verified with a key that is no longer published must be verified afresh.
+  cache_->clear();
+}
+
+void Authenticator::on_unknown_followed_key(std::string issuer, UnknownKey fn,
+                                            Introspected introspected) {
+  followed_issuer_ = std::move(issuer);
+  on_unknown_key_ = std::move(fn);
+  introspected_ = std::move(introspected);
+}
+
+Result<Principal> Authenticator::unverifiable(std::string_view token, int64_t now_s,
+                                              Error e) const {
+  auto d = jwt::decode(token, opts_.verify.max_token_bytes);
+  const json::Value* iss = d.ok() ? d->claims.find("iss") : nullptr;
+  if (!iss || !iss->is_string() || iss->as_string() != followed_issuer_) return e;
+  if (introspected_) {
+    if (auto answer = introspected_(token)) {
+      auto claims = jwt::check_claims(std::move(*answer), opts_.verify, now_s);
+      if (!claims.ok()) {
+        Error ce = claims.error();
+        if (ce.code != ErrorCode::kAuthRequired) ce.code = ErrorCode::kAuthInvalid;
+        return ce;
+      }
+      if (claims->iss != followed_issuer_)
+        return Error(ErrorCode::kAuthInvalid, "the introspected token names another issuer", "iss",
+                     "untrusted_issuer");
+      claims->kid = d->header.kid;
+      return principal_of(std::move(claims).value());
+    }
+  }
+  if (on_unknown_key_) on_unknown_key_(d->header.kid, token);
+  return e;
+}
+
 Result<Principal> Authenticator::authenticate_token(std::string_view token, int64_t now_s) const {
   if (token.empty())
     return Error(ErrorCode::kAuthRequired, "a bearer token is required", "auth_token");
   if (auto hit = cache_->find(token, now_s)) return std::move(*hit);
-  auto claims = verifier_->verify(token, now_s);
+  auto claims = verifier()->verify(token, now_s);
   if (!claims.ok()) {
     Error e = claims.error();
     if (e.code != ErrorCode::kAuthRequired) e.code = ErrorCode::kAuthInvalid;
+    if (!followed_issuer_.empty() && (e.reason == "unknown_kid" || e.reason == "untrusted_issuer"))
+      return unverifiable(token, now_s, std::move(e));
     return e;
   }
+  // The window in which jwt::check_claims' time checks pass (exp required; nbf, iat optional).
+  const int64_t leeway = std::max<int64_t>(0, opts_.verify.leeway_s);
+  int64_t from = std::numeric_limits<int64_t>::min();
+  if (claims->nbf) from = std::max(from, *claims->nbf - leeway);
+  if (claims->iat) from = std::max(from, *claims->iat - leeway);
+  const std::optional<int64_t> exp = claims->exp;
+  auto p = principal_of(std::move(claims).value());
+  if (p.ok() && exp) cache_->insert(token, *p, from, *exp + leeway);
+  return p;
+}
+
+Result<Principal> Authenticator::principal_of(jwt::Claims&& claims_in) const {
+  jwt::Claims* claims = &claims_in;
   Principal p;
   p.authenticated = true;
   p.issuer = claims->iss;
@@ -52,12 +119,6 @@ Result<Principal> Authenticator::authenticate_token(std::string_view token, int6
   if (!claims->cloud_provider.empty()) p.token_identity.cloud_provider = claims->cloud_provider;
   if (!claims->function_name.empty()) p.token_identity.function_name = claims->function_name;
   if (Status s = check_token_sender_claims(p.token_identity); !s.ok()) return s.error();
-  // The window in which jwt::check_claims' time checks pass (exp required; nbf, iat optional).
-  const int64_t leeway = std::max<int64_t>(0, opts_.verify.leeway_s);
-  int64_t from = std::numeric_limits<int64_t>::min();
-  if (claims->nbf) from = std::max(from, *claims->nbf - leeway);
-  if (claims->iat) from = std::max(from, *claims->iat - leeway);
-  if (claims->exp) cache_->insert(token, p, from, *claims->exp + leeway);
   return p;
 }
 

@@ -6,11 +6,13 @@
 #pragma once
 
 #include <compare>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "base/thread_annotations.h"
 #include "rcan/crypto/cnf.h"
 #include "rcan/crypto/jwt.h"
 #include "rcan/crypto/message_sig.h"
@@ -111,10 +113,37 @@ class Authenticator {
 
   const jwt::VerifyOptions& verify_options() const { return opts_.verify; }
 
+  // The keys an issuer publishes and the node follows (rcand's registry link): tokens whose
+  // `iss` is `issuer` verify with `keys`, next to the configured issuers; each call replaces
+  // the previous set and empties the verified-token cache. Safe while other threads
+  // authenticate: a verification in flight finishes with the keys it started with.
+  void set_followed_issuer_keys(const std::string& issuer, std::vector<jwt::VerificationKey> keys)
+      EXCLUDES(verifier_mu_);
+  // Called on the authenticating thread when a token names `issuer` (the followed issuer) and
+  // none of its keys has the token's kid. It must not block (it may only ask for a refresh or
+  // an introspection, done elsewhere). Set before the node serves.
+  using UnknownKey = std::function<void(const std::string& kid, std::string_view token)>;
+  // The issuer's own word on such a token (RFC 7662 introspection, answered and cached off the
+  // authenticating thread): the claims of an active answer, or nullopt (not asked yet, asked
+  // and inactive, or failed). The claims are checked here as a verified token's are (exp, aud,
+  // role, scopes, fleet); `iss` must be the followed issuer. Must not block.
+  using Introspected = std::function<std::optional<json::Object>(std::string_view token)>;
+  void on_unknown_followed_key(std::string issuer, UnknownKey fn, Introspected introspected = {});
+
  private:
+  std::shared_ptr<const jwt::JwtVerifier> verifier() const EXCLUDES(verifier_mu_);
+  // The principal of claims that passed verification (or the issuer's introspection).
+  Result<Principal> principal_of(jwt::Claims&& claims) const;
+  // A followed issuer's token its keys cannot verify: its introspected principal, or `e`.
+  Result<Principal> unverifiable(std::string_view token, int64_t now_s, Error e) const;
+
   AuthOptions opts_;
-  std::unique_ptr<jwt::JwtVerifier> verifier_;
+  mutable Mutex verifier_mu_;
+  std::shared_ptr<const jwt::JwtVerifier> verifier_ GUARDED_BY(verifier_mu_);
   std::unique_ptr<TokenCache> cache_;
+  std::string followed_issuer_;
+  UnknownKey on_unknown_key_;
+  Introspected introspected_;
 };
 
 }  // namespace rcan::node

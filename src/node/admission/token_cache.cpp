@@ -29,4 +29,9 @@ size_t TokenCache::size() const {
   return map_.size();
 }
 
+void TokenCache::clear() {
+  MutexLock lock(mu_);
+  map_.clear();
+}
+
 }  // namespace rcan::node

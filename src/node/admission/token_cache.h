@@ -6,7 +6,8 @@
 // time-dependent checks of the verification (exp, nbf, iat with the same leeway) — a hit
 // outside that window is dropped and the caller verifies afresh (and refuses with the
 // verifier's own error). Everything else the verification depends on (trusted issuers and
-// keys, audience, fleet ids) is fixed for the life of the Authenticator that owns the cache.
+// keys, audience, fleet ids) is fixed for the life of the Authenticator that owns the cache,
+// which clears it when a followed issuer's keys change.
 // Bounded: at most `capacity` entries; when full, an arbitrary entry is evicted. Thread-safe.
 #pragma once
 
@@ -34,6 +35,8 @@ class TokenCache {
               int64_t valid_until_s) EXCLUDES(mu_);
 
   size_t size() const EXCLUDES(mu_);
+  // Forgets every entry (the keys the verification depends on changed).
+  void clear() EXCLUDES(mu_);
   uint64_t hits() const EXCLUDES(mu_) {
     MutexLock lock(mu_);
     return hits_;

@@ -25,10 +25,14 @@ PartitionMonitor::~PartitionMonitor() { stop(); }
 
 void PartitionMonitor::configure(PartitionOptions o) { opts_ = std::move(o); }
 
+int64_t PartitionMonitor::keys_base_locked() const {
+  return opts_.keys_fetched_ms ? opts_.keys_fetched_ms() : last_ok_ms_;
+}
+
 NetMode PartitionMonitor::compute_locked(int64_t now_wall_ms) const {
   if (!enabled() || reachable_) return NetMode::kNormal;
-  if (last_ok_ms_ != 0 && now_wall_ms < last_ok_ms_ + opts_.key_ttl_ms)
-    return NetMode::kOfflineAutonomous;
+  const int64_t base = keys_base_locked();
+  if (base != 0 && now_wall_ms < base + opts_.key_ttl_ms) return NetMode::kOfflineAutonomous;
   return NetMode::kLockdown;
 }
 
@@ -51,7 +55,11 @@ std::pair<NetMode, NetMode> PartitionMonitor::record(bool reachable, int64_t now
 
 NetMode PartitionMonitor::probe_once() {
   if (!enabled()) return NetMode::kNormal;
-  auto r = http_request("GET", opts_.issuer_url, "", opts_.timeout_ms);
+  auto url = parse_web_url(opts_.issuer_url);
+  HttpRequestOptions ho;
+  ho.ca_file = opts_.ca_file;
+  auto r = url.ok() ? http_request("GET", *url, "", opts_.timeout_ms, ho)
+                    : Result<HttpAnswer>(url.error());
   bool ok = r.ok() && r->status >= 200 && r->status < 300;
   int64_t now = wall_ ? wall_() : 0;
   auto [old, cur] = record(ok, now);
@@ -110,8 +118,9 @@ void PartitionMonitor::note_validated(const Principal& p, int64_t now_wall_ms) {
 bool PartitionMonitor::cached(const Principal& p, int64_t now_wall_ms) {
   MutexLock lock(mu_);
   auto it = cache_.find(p.key());
-  return it != cache_.end() && now_wall_ms < it->second && last_ok_ms_ != 0 &&
-         now_wall_ms < last_ok_ms_ + opts_.key_ttl_ms;
+  const int64_t base = keys_base_locked();
+  return it != cache_.end() && now_wall_ms < it->second && base != 0 &&
+         now_wall_ms < base + opts_.key_ttl_ms;
 }
 
 json::Value PartitionMonitor::status_json(int64_t now_wall_ms) {
@@ -121,8 +130,8 @@ json::Value PartitionMonitor::status_json(int64_t now_wall_ms) {
                  {"issuer_reachable", reachable_}};
   if (enabled()) {
     o.set("last_reachable_ms", last_ok_ms_ ? json::Value(last_ok_ms_) : json::Value());
-    o.set("keys_fresh_until_ms",
-          last_ok_ms_ ? json::Value(last_ok_ms_ + opts_.key_ttl_ms) : json::Value());
+    const int64_t base = keys_base_locked();
+    o.set("keys_fresh_until_ms", base ? json::Value(base + opts_.key_ttl_ms) : json::Value());
     o.set("offline_since_s", offline_since_ms_
                                  ? json::Value((now_wall_ms - offline_since_ms_) / 1000)
                                  : json::Value());

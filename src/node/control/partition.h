@@ -10,6 +10,9 @@
 //                                      tagged (partition_mode, sync_pending) for later sync
 //   unreachable, cache expired/empty → LOCKDOWN: no new sessions, existing ones are kept
 // With no issuer_url configured the node has nothing to reach and stays NORMAL.
+// An issuer whose keys the node fetches (rcand's registry link, docs/SECURITY.md) sets
+// `keys_fetched_ms`: the keys are then fresh for key_ttl_ms after their last successful fetch,
+// not after the last good probe.
 #pragma once
 
 #include <atomic>
@@ -33,6 +36,9 @@ struct PartitionOptions {
   int64_t poll_interval_ms = 5000;
   int timeout_ms = 1000;
   int64_t key_ttl_ms = 86'400'000;  // offline.max_key_ttl_s
+  std::string ca_file;              // https: trust anchors (empty: the system's)
+  // When set: when the issuer's keys were last fetched (unix ms; 0: never). Must not block.
+  std::function<int64_t()> keys_fetched_ms;
 };
 
 class PartitionMonitor {
@@ -62,6 +68,8 @@ class PartitionMonitor {
 
  private:
   NetMode compute_locked(int64_t now_wall_ms) const REQUIRES(mu_);
+  // The time the issuer's keys are fresh from (0: never).
+  int64_t keys_base_locked() const REQUIRES(mu_);
   PartitionOptions opts_;  // set by configure(), before start()
   Mutex mu_;
   std::atomic<int> mode_{0};

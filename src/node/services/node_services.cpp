@@ -167,6 +167,7 @@ json::Value NodeServices::status(bool detailed) {
   o.set("control", std::string(control_state_name(sessions.state(now))));
   if (detailed) {
     o.set("partition", partition.status_json(clock.wall_ms()));
+    if (registry_status) o.set("registry", registry_status());
     o.set("ownership", ownership.to_json(clock.wall_ms(), false));
     o.set("control_queue", sessions.queue_json(now));
   }

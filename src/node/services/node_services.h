@@ -114,6 +114,9 @@ class NodeServices {
   Ownership ownership;
   ConsentBook consent;
   PartitionMonitor partition;
+  // The link to the registry whose tokens the node trusts, for the detailed status (set by
+  // rcand before the node serves; empty: no such link).
+  std::function<json::Value()> registry_status;
   EventBus events;
   Metrics metrics;
   // The robot's fleet membership (fleet.h); null when it is in no fleet.

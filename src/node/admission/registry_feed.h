@@ -1,0 +1,54 @@
+// What a robot reads from its registry's token authority (docs/SECURITY.md §Tokens from the
+// registry): the signing keys it publishes (GET /.well-known/jwks.json) and the pages of its
+// revocation feed (GET /api/v1/revocations?since=<seq>). Parsers only: the fetching, caching
+// and applying is rcand's (apps/rcand/registry_trust.h). Both refuse rather than guess: a
+// document that is not what the contract says is an error, and the caller keeps what it had.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "rcan/crypto/jwt.h"
+#include "rcan/result.h"
+
+namespace rcan::node {
+
+inline constexpr size_t kMaxRegistryJwksBytes = 256 * 1024;
+inline constexpr size_t kMaxRegistryKeys = 64;
+inline constexpr size_t kRevocationPageSize = 500;  // the registry's page: a full page means more
+
+struct RegistryKeySet {
+  std::vector<jwt::VerificationKey> keys;  // each with its kid
+  size_t skipped = 0;                      // entries that were not usable signing keys
+};
+
+// A JWKS {"keys":[…]}: the public signature keys (jwt::VerificationKey::from_jwk) that carry a
+// `kid`; others are skipped. Errors (SCHEMA_VALIDATION_FAILED): not a JSON object with a
+// `keys` array, too large, or no usable key at all.
+Result<RegistryKeySet> parse_registry_jwks(std::string_view text);
+
+struct RegistryRevocation {
+  int64_t seq = 0;
+  std::string jti;             // empty: none
+  std::string sub;             // empty: none
+  std::optional<int64_t> exp;  // unix s
+  std::optional<int64_t> revoked_at_ms;
+};
+
+struct RevocationPage {
+  std::vector<RegistryRevocation> entries;  // oldest first
+  int64_t next_since = 0;
+};
+
+// One page answered for `since`. Every entry must have an integer `seq` above `since`, and a
+// jti or a sub (strings of at most 512 bytes, or null); `next_since` must not go back. Errors:
+// SCHEMA_VALIDATION_FAILED naming what is wrong.
+Result<RevocationPage> parse_revocation_page(std::string_view text, int64_t since);
+
+// "2026-11-27T05:35:00Z", with optional fraction and a Z or ±hh:mm offset → unix ms.
+std::optional<int64_t> parse_iso8601_ms(std::string_view s);
+
+}  // namespace rcan::node

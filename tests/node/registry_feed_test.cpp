@@ -1,0 +1,206 @@
+// The registry's token authority as the node reads it (node/admission/registry_feed.h) and the
+// Authenticator following an issuer's published keys (set_followed_issuer_keys).
+#include "node/admission/registry_feed.h"
+
+#include <gtest/gtest.h>
+
+#include <array>
+#include <atomic>
+#include <map>
+#include <thread>
+
+#include "node/admission/authenticator.h"
+#include "rcan/crypto/ed25519.h"
+#include "rcan/encoding.h"
+
+using namespace rcan;
+using namespace rcan::node;
+
+namespace {
+
+constexpr int64_t kNow = 1'800'000'000;
+const std::string kAud = "rcan://local.rcan/acme/rover/abcdef12";
+const std::string kIss = "https://registry.example";
+
+std::array<uint8_t, 32> seed(uint8_t fill) {
+  std::array<uint8_t, 32> s{};
+  s.fill(fill);
+  return s;
+}
+
+std::string jwk(uint8_t fill, const std::string& kid) {
+  auto pk = ed25519::public_key_from_seed(seed(fill));
+  return R"({"kty":"OKP","crv":"Ed25519","x":")" + base64url_encode(*pk) + R"(","kid":")" + kid +
+         R"(","use":"sig","alg":"EdDSA"})";
+}
+
+std::string token(uint8_t fill, const std::string& kid, const std::string& iss = kIss) {
+  auto key = jwt::SigningKey::ed25519_seed(seed(fill));
+  json::Object c{{"iss", iss},      {"sub", "ops"},     {"aud", kAud},
+                 {"role", "owner"}, {"iat", kNow - 10}, {"exp", kNow + 3600}};
+  return *jwt::issue(c, *key, kid);
+}
+
+std::vector<jwt::VerificationKey> parsed_keys(const std::string& jwks) {
+  auto set = parse_registry_jwks(jwks);
+  EXPECT_TRUE(set.ok()) << set.error().message;
+  return set.ok() ? std::move(set->keys) : std::vector<jwt::VerificationKey>{};
+}
+
+Authenticator make_auth() {
+  AuthOptions o;
+  auto local = jwt::SigningKey::ed25519_seed(seed(9));
+  o.trust.add("local", *local->verification_key());
+  o.verify.audience = kAud;
+  return Authenticator(std::move(o));
+}
+
+}  // namespace
+
+TEST(RegistryFeed, JwksKeepsOnlySignatureKeysWithAKid) {
+  auto set = parse_registry_jwks(
+      R"({"keys":[)" + jwk(1, "k1") + "," + jwk(2, "") +
+      R"(,{"kty":"oct","k":"c2VjcmV0c2VjcmV0c2VjcmV0c2VjcmV0c2VjcmV0","kid":"h"},)" +
+      R"({"kty":"RSA","kid":"r"}]})");
+  ASSERT_TRUE(set.ok()) << set.error().message;
+  ASSERT_EQ(set->keys.size(), 1u);
+  EXPECT_EQ(set->keys[0].kid(), "k1");
+  EXPECT_EQ(set->skipped, 3u);
+  for (const char* bad : {"", "[]", "{}", R"({"keys":{}})", R"({"keys":[]})",
+                          R"({"keys":[{"kty":"OKP","crv":"Ed25519","kid":"k"}]})", "not json"}) {
+    auto r = parse_registry_jwks(bad);
+    EXPECT_FALSE(r.ok()) << bad;
+    if (!r.ok()) {
+      EXPECT_FALSE(r.error().message.empty());
+    }
+  }
+}
+
+TEST(RegistryFeed, RevocationPage) {
+  auto p = parse_revocation_page(
+      R"({"revocations":[{"seq":12,"jti":"a","sub":null,"exp":1900000000,"revoked_at":"2026-11-27T05:35:00Z"},)"
+      R"({"seq":13,"jti":null,"sub":"alice","exp":null,"revoked_at":"2026-11-27T06:35:00.5+01:00"}],"next_since":13})",
+      11);
+  ASSERT_TRUE(p.ok()) << p.error().message;
+  ASSERT_EQ(p->entries.size(), 2u);
+  EXPECT_EQ(p->entries[0].jti, "a");
+  EXPECT_EQ(*p->entries[0].exp, 1'900'000'000);
+  EXPECT_EQ(p->entries[1].sub, "alice");
+  EXPECT_FALSE(p->entries[1].exp.has_value());
+  EXPECT_EQ(*p->entries[0].revoked_at_ms, 1'795'757'700'000);
+  EXPECT_EQ(*p->entries[1].revoked_at_ms, 1'795'757'700'500);
+  EXPECT_EQ(p->next_since, 13);
+  for (const char* bad :
+       {R"({"revocations":[{"seq":11,"jti":"a"}],"next_since":11})",  // not above since
+        R"({"revocations":[{"seq":12,"jti":null,"sub":null}],"next_since":12})",
+        R"({"revocations":[{"seq":12,"jti":5}],"next_since":12})",
+        R"({"revocations":[{"seq":13,"jti":"a"},{"seq":12,"jti":"b"}],"next_since":13})",
+        R"({"revocations":[],"next_since":3})",  // goes back
+        R"({"revocations":[{"seq":12,"jti":"a"}],"next_since":11})", R"({"next_since":11})",
+        "[]"}) {
+    auto r = parse_revocation_page(bad, 11);
+    EXPECT_FALSE(r.ok()) << bad;
+  }
+  EXPECT_FALSE(parse_iso8601_ms("2026-13-01T00:00:00Z").has_value());
+  EXPECT_FALSE(parse_iso8601_ms("2026-01-01T00:00:00").has_value());
+  EXPECT_EQ(*parse_iso8601_ms("1970-01-01T00:00:00Z"), 0);
+}
+
+TEST(FollowedIssuer, KeysAreSwappedInAndOutAndUnknownKidsReported) {
+  Authenticator auth = make_auth();
+  std::vector<std::string> asked;
+  auth.on_unknown_followed_key(
+      kIss, [&](const std::string& kid, std::string_view) { asked.push_back(kid); });
+  const std::string t1 = token(1, "k1");
+  EXPECT_FALSE(auth.authenticate_token(t1, kNow).ok());  // no keys yet: untrusted issuer
+  ASSERT_EQ(asked.size(), 1u);
+  EXPECT_EQ(asked[0], "k1");
+  auth.set_followed_issuer_keys(kIss, parsed_keys(R"({"keys":[)" + jwk(1, "k1") + "]}"));
+  auto p = auth.authenticate_token(t1, kNow);
+  ASSERT_TRUE(p.ok()) << p.error().message;
+  EXPECT_EQ(p->issuer, kIss);
+  EXPECT_EQ(p->role, Role::kOwner);
+  // A token of another issuer is not the registry's concern; a forged key under k1 is refused
+  // without asking for keys.
+  EXPECT_FALSE(auth.authenticate_token(token(1, "k1", "elsewhere"), kNow).ok());
+  EXPECT_FALSE(auth.authenticate_token(token(3, "k1"), kNow).ok());
+  EXPECT_EQ(asked.size(), 1u);
+  // Rotation: k2 is unknown, then known; once k1 leaves the JWKS its (cached) token is refused.
+  const std::string t2 = token(2, "k2");
+  EXPECT_FALSE(auth.authenticate_token(t2, kNow).ok());
+  EXPECT_EQ(asked.back(), "k2");
+  auth.set_followed_issuer_keys(kIss, parsed_keys(R"({"keys":[)" + jwk(2, "k2") + "]}"));
+  EXPECT_TRUE(auth.authenticate_token(t2, kNow).ok());
+  EXPECT_FALSE(auth.authenticate_token(t1, kNow).ok());
+  // The configured issuers are untouched by the swaps.
+  auto local = jwt::SigningKey::ed25519_seed(seed(9));
+  json::Object c{{"iss", "local"}, {"sub", "me"}, {"aud", kAud},
+                 {"role", "user"}, {"iat", kNow}, {"exp", kNow + 60}};
+  EXPECT_TRUE(auth.authenticate_token(*jwt::issue(c, *local), kNow).ok());
+}
+
+// Many threads verify while the keys are swapped (run under ThreadSanitizer in the tsan tree).
+TEST(FollowedIssuer, SwapWhileVerifying) {
+  Authenticator auth = make_auth();
+  const auto set = R"({"keys":[)" + jwk(1, "k1") + "]}";
+  auth.set_followed_issuer_keys(kIss, parsed_keys(set));
+  const std::string t1 = token(1, "k1");
+  std::atomic<bool> stop{false};
+  std::atomic<int> refused{0};
+  std::vector<std::thread> threads;
+  for (int i = 0; i < 4; ++i)
+    threads.emplace_back([&] {
+      while (!stop.load())
+        if (!auth.authenticate_token(t1, kNow).ok()) ++refused;
+    });
+  for (int i = 0; i < 200; ++i) auth.set_followed_issuer_keys(kIss, parsed_keys(set));
+  stop = true;
+  for (auto& t : threads) t.join();
+  EXPECT_EQ(refused.load(), 0);
+}
+
+// The registry's introspection answer stands in for a signature the node cannot check, never
+// for the checks of the claims: exp, aud, role and issuer are this node's to check.
+TEST(FollowedIssuer, IntrospectedClaimsAreCheckedLikeAVerifiedTokens) {
+  Authenticator auth = make_auth();
+  std::map<std::string, json::Object> answers;
+  int asked = 0;
+  auth.on_unknown_followed_key(
+      kIss, [&](const std::string&, std::string_view) { ++asked; },
+      [&](std::string_view t) -> std::optional<json::Object> {
+        auto it = answers.find(std::string(t));
+        if (it == answers.end()) return std::nullopt;
+        return it->second;
+      });
+  const std::string t = token(7, "kx");  // signed "owner" by a key the node never had
+  EXPECT_FALSE(auth.authenticate_token(t, kNow).ok());
+  EXPECT_EQ(asked, 1);
+  const json::Object answer{{"iss", kIss},
+                            {"sub", "carol"},
+                            {"aud", kAud},
+                            {"role", "user"},
+                            {"scope", "status control"},
+                            {"iat", kNow},
+                            {"exp", kNow + 100}};
+  answers[t] = answer;
+  auto p = auth.authenticate_token(t, kNow);
+  ASSERT_TRUE(p.ok()) << p.error().message;
+  EXPECT_EQ(p->sub, "carol");
+  EXPECT_EQ(p->role, Role::kUser);  // the answer's role, not the token's
+  EXPECT_TRUE(p->has_scope("control"));
+  EXPECT_EQ(p->issuer, kIss);
+  EXPECT_EQ(asked, 1);  // answered: nothing more to ask
+  // Another robot's audience, an expired answer, another issuer: refused.
+  answers[t] = answer;
+  answers[t].set("aud", "rcan://local.rcan/acme/rover/ffffffff");
+  EXPECT_FALSE(auth.authenticate_token(t, kNow).ok());
+  answers[t] = answer;
+  answers[t].set("exp", kNow - 3600);
+  EXPECT_FALSE(auth.authenticate_token(t, kNow).ok());
+  answers[t] = answer;
+  answers[t].set("iss", "elsewhere");
+  EXPECT_FALSE(auth.authenticate_token(t, kNow).ok());
+  answers[t] = answer;
+  answers[t].set("role", "emperor");
+  EXPECT_FALSE(auth.authenticate_token(t, kNow).ok());
+}
