@@ -1002,8 +1002,8 @@ void judge_idle_and_audit(const Soak& s, Verdicts& v) {
                 static_cast<double>(idle0.rss_kb) / 1024.0);
   std::string what = line;
   if (idle1.threads != idle0.threads)  // say which thread came or went
-    what += "\n      threads before: " + s.idle_threads0 + "\n      threads after:  " +
-            thread_names(pid);
+    what += "\n      threads before: " + s.idle_threads0 +
+            "\n      threads after:  " + thread_names(pid);
   v.judge(idle_fds1 == idle_fds0 && idle1.threads == idle0.threads, what);
   const uint64_t audit1 = dir_data_bytes(s.node.dir + "/audit");
   std::snprintf(line, sizeof line, "audit grows: %.1f MB → %.1f MB",

@@ -162,7 +162,7 @@ Status Daemon::join_registry() {
     auto r = register_with_registry(cfg_, *robot_keys_, 3000);
     audit::AuditEntry e;
     e.principal = "node";
-  e.message_id = new_uuid_v4();
+    e.message_id = new_uuid_v4();
     e.ruri = cfg_.ruri;
     e.event = r.ok() ? "REGISTRY_REGISTERED" : "REGISTRY_UNREACHABLE";
     e.outcome = r.ok() ? "ok" : "error";
