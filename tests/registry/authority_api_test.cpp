@@ -4,8 +4,10 @@
 // introspection, revocations, key rotation, the device authorization grant and two instances
 // on one PostgreSQL database.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <chrono>
+#include <fstream>
 #include <thread>
 
 #include "postgres.h"
@@ -42,6 +44,12 @@ HttpReply form(const RegistryDaemon& d, const std::string& path, const std::stri
       {"Content-Type", "application/x-www-form-urlencoded"}};
   h.insert(h.end(), extra.begin(), extra.end());
   return http(d.port(), "POST", path, body, h);
+}
+
+bool write_file(const std::string& path, const std::string& text) {
+  std::ofstream f(path, std::ios::binary);
+  f << text;
+  return static_cast<bool>(f);
 }
 
 std::string oauth_error_of(const HttpReply& r) { return str(body_of(r), "error"); }
@@ -477,6 +485,78 @@ TEST(RegistryAuthority, TwoInstancesOnOnePostgresDatabase) {
   ASSERT_EQ(b.send("POST", "/api/v1/authority/keys/rotate", "", b.admin_key()).status, 201);
   std::this_thread::sleep_for(std::chrono::milliseconds(1100));
   EXPECT_EQ(body_of(a.get("/.well-known/jwks.json")).get("keys")->as_array().size(), 2u);
+}
+
+TEST(RegistryAuthority, CliTokenGetAndLogin) {
+  TempDir dir;
+  RegistryDaemon d(dir.path());
+  Fixture s = setup(d);
+  auto [id, secret] = secret_client(d, s);
+  std::string secret_file = dir.file("client.secret");
+  ASSERT_TRUE(write_file(secret_file, secret + "\n"));
+  auto r = run_cli({"token", "get", "--registry", d.url(), "--client-id", id,
+                    "--client-secret-file", secret_file, "--robot", s.rrn_a, "--scope", "status"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  std::string tok = r.out.substr(0, r.out.find('\n'));
+  auto c = verify(d, tok, s.ruri_a);
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  EXPECT_TRUE(c->has_scope("status"));
+  r = run_cli({"token", "get", "--registry", d.url(), "--client-id", id, "--client-secret-file",
+               secret_file, "--robot", s.rrn_b});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("unauthorized_client"), std::string::npos) << r.err;
+
+  // private_key_jwt with a key directory's seed
+  Bytes seed = ed25519::random_seed();
+  auto pub = ed25519::public_key_from_seed(seed);
+  ASSERT_TRUE(pub.ok());
+  std::string seed_file = dir.file("ed25519.seed");
+  ASSERT_TRUE(write_file(seed_file, std::string(seed.begin(), seed.end())));
+  ::chmod(seed_file.c_str(), 0600);
+  auto cl =
+      d.send("POST", "/api/v1/clients",
+             R"({"name":"k","auth":"private_key_jwt","jwk":{"kty":"OKP","crv":"Ed25519","x":")" +
+                 base64url_encode(*pub) + R"("}})",
+             s.registrant);
+  std::string kid_client = str(body_of(cl), "client_id");
+  ASSERT_EQ(d.send("POST", "/api/v1/grants",
+                   R"({"principal":")" + kid_client + R"(","robot":")" + s.rrn_a +
+                       R"(","role":"guest","scope":["status"]})",
+                   s.registrant)
+                .status,
+            201);
+  std::string saved = dir.file("token.jwt");
+  r = run_cli({"token", "get", "--registry", d.url(), "--client-id", kid_client, "--client-key",
+               dir.path(), "--robot", s.ruri_a, "--save", saved});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  struct stat st {};
+  ASSERT_EQ(::stat(saved.c_str(), &st), 0);
+  EXPECT_EQ(st.st_mode & 0777, 0600u);
+
+  // rcan login: the device flow, approved by the registrant
+  auto c2 = d.send("POST", "/api/v1/clients", R"({"name":"cli"})", d.admin_key());
+  std::string cli_client = str(body_of(c2), "client_id");
+  ASSERT_EQ(d.send("POST", "/api/v1/grants",
+                   R"({"principal":"user:)" + s.registrant_id + R"(","robot":")" + s.rrn_a +
+                       R"(","role":"user","scope":["status"]})",
+                   s.registrant)
+                .status,
+            201);
+  std::string login_file = dir.file("login.jwt");
+  Process p;
+  ASSERT_TRUE(p.start({RCAN_CLI_PATH, "login", "--registry", d.url(), "--client-id", cli_client,
+                       "--resource", s.rrn_a, "--save", login_file}));
+  auto line = p.wait_for_line("enter the code", 10000);
+  ASSERT_TRUE(line.has_value()) << p.err();
+  std::string code = line->substr(line->find("enter the code ") + 15, 9);
+  auto ap = d.send("POST", "/api/v1/device/approve",
+                   R"({"user_code":")" + code + R"(","decision":"approve"})", s.registrant);
+  ASSERT_EQ(ap.status, 200) << ap.body;
+  ASSERT_TRUE(p.wait_for_line("token saved", 20000).has_value()) << p.err();
+  auto lt = read_file(login_file);
+  auto lc = verify(d, lt.substr(0, lt.find('\n')), s.ruri_a);
+  ASSERT_TRUE(lc.ok()) << lc.error().message;
+  EXPECT_EQ(lc->sub, "user:" + s.registrant_id);
 }
 
 }  // namespace
