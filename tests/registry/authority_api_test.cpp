@@ -487,6 +487,49 @@ TEST(RegistryAuthority, TwoInstancesOnOnePostgresDatabase) {
   EXPECT_EQ(body_of(a.get("/.well-known/jwks.json")).get("keys")->as_array().size(), 2u);
 }
 
+TEST(RegistryAuthority, FleetGrantGivesTheFleetForm) {
+  TempDir dir;
+  RegistryDaemon d(dir.path());
+  Fixture s = setup(d);
+  auto c = d.send("POST", "/api/v1/clients", R"({"name":"yard-ops"})", s.registrant);
+  std::string id = str(body_of(c), "client_id"), secret = str(body_of(c), "client_secret");
+  auto g = d.send("POST", "/api/v1/grants",
+                  R"({"principal":")" + id + R"(","fleet":"yard","robots":[")" + s.rrn_a +
+                      R"(",")" + s.rrn_b + R"("],"role":"user","scope":["status"]})",
+                  s.registrant);
+  ASSERT_EQ(g.status, 201) << g.body;
+  EXPECT_EQ(d.send("POST", "/api/v1/grants",
+                   R"({"principal":")" + id + R"(","fleet":"yard","role":"user"})", s.registrant)
+                .status,
+            400);  // a fleet grant lists its robots
+  auto r = form(d, "/oauth/token",
+                "grant_type=client_credentials&client_id=" + id + "&client_secret=" + secret +
+                    "&resource=fleet%3Ayard");
+  ASSERT_EQ(r.status, 200) << r.body;
+  std::string tok = str(body_of(r), "access_token");
+  auto jwks = jwt::parse_jwk_set(d.get("/.well-known/jwks.json").body);
+  ASSERT_TRUE(jwks.ok());
+  auto check = [&](const std::string& fleet_id) {
+    jwt::TrustStore ts;
+    for (auto& k : *jwks) ts.add(d.url(), k);
+    jwt::VerifyOptions vo;
+    vo.audience = s.ruri_a;
+    vo.fleet_ids = {fleet_id};
+    vo.fleet_audiences = {"rcan://fleet/yard"};
+    return jwt::JwtVerifier(std::move(ts), vo).verify(tok);
+  };
+  auto ok = check(s.rrn_a);
+  ASSERT_TRUE(ok.ok()) << ok.error().message;
+  ASSERT_TRUE(ok->fleet.has_value());
+  EXPECT_EQ(ok->fleet->size(), 2u);
+  EXPECT_FALSE(check("RRN-000000009999").ok());  // not a member
+  EXPECT_FALSE(verify(d, tok, s.ruri_a).ok());   // a robot not in fleet "yard"
+  EXPECT_EQ(oauth_error_of(form(d, "/oauth/token",
+                                "grant_type=client_credentials&client_id=" + id +
+                                    "&client_secret=" + secret + "&resource=fleet%3Aother")),
+            "unauthorized_client");
+}
+
 TEST(RegistryAuthority, CliTokenGetAndLogin) {
   TempDir dir;
   RegistryDaemon d(dir.path());
