@@ -136,6 +136,7 @@ int main(int argc, char** argv) {
   opts.key_overlap_s = flags->key_overlap_s;
   opts.key_lifetime_s = flags->key_lifetime_s;
   opts.max_token_ttl_s = flags->max_token_ttl_s;
+  opts.device_ttl_s = flags->device_ttl_s;
   registry::api::RegistryApi api(**store, audit_log->get(), opts);
 
   std::string key_file = dir + "/admin.key";

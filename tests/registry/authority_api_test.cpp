@@ -487,6 +487,31 @@ TEST(RegistryAuthority, TwoInstancesOnOnePostgresDatabase) {
   EXPECT_EQ(body_of(a.get("/.well-known/jwks.json")).get("keys")->as_array().size(), 2u);
 }
 
+TEST(RegistryAuthority, DeviceCodeExpires) {
+  TempDir dir;
+  RegistryDaemon d(dir.path(), {"--device-code-ttl", "1"});
+  Fixture s = setup(d);
+  auto c = d.send("POST", "/api/v1/clients", R"({"name":"cli"})", d.admin_key());
+  std::string client = str(body_of(c), "client_id");
+  auto r = form(d, "/oauth/device_authorization", "client_id=" + client + "&resource=" + s.rrn_a);
+  ASSERT_EQ(r.status, 200) << r.body;
+  EXPECT_EQ(num(body_of(r), "expires_in"), 1);
+  std::string code = str(body_of(r), "device_code"), user = str(body_of(r), "user_code");
+  std::this_thread::sleep_for(std::chrono::milliseconds(1200));
+  EXPECT_EQ(d.send("POST", "/api/v1/device/approve",
+                   R"({"user_code":")" + user + R"(","decision":"approve"})", s.registrant)
+                .status,
+            404);
+  auto p =
+      form(d, "/oauth/token",
+           "grant_type=urn%3Aietf%3Aparams%3Aoauth%3Agrant-type%3Adevice_code&client_id=" + client +
+               "&device_code=" + code);
+  EXPECT_EQ(oauth_error_of(p), "expired_token");
+  EXPECT_EQ(
+      oauth_error_of(form(d, "/oauth/device_authorization", "client_id=nope&resource=" + s.rrn_a)),
+      "invalid_client");
+}
+
 TEST(RegistryAuthority, FleetGrantGivesTheFleetForm) {
   TempDir dir;
   RegistryDaemon d(dir.path());
