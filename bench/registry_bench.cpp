@@ -5,7 +5,9 @@
 // Starts rcan-registry (SQLite, rate limits off) in a temporary data directory, registers N
 // robots with the admin key, then C client threads each hold one keep-alive connection and
 // send GET /api/v1/resolve/<random registered RRN> for S seconds, checking every answer is 200.
-// Prints resolves/s and the latency quantiles.
+// Prints resolves/s and the latency quantiles. Then the token authority: one client with a
+// secret and a grant on the first robot; C threads send POST /oauth/token (client
+// credentials, client_secret_post) on keep-alive connections for S seconds: tokens/s.
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
@@ -106,6 +108,31 @@ void client(uint16_t port, const std::vector<std::string>& rrns, int64_t until_u
   ::close(fd);
 }
 
+// POST /oauth/token on one keep-alive connection until `until_us`; every answer must be 200.
+void token_client(uint16_t port, const std::string& form, int64_t until_us, ClientResult& out) {
+  int fd = connect_loopback(port);
+  if (fd < 0) {
+    ++out.errors;
+    return;
+  }
+  std::string req =
+      "POST /oauth/token HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: "
+      "application/x-www-form-urlencoded\r\nContent-Length: " +
+      std::to_string(form.size()) + "\r\n\r\n" + form;
+  std::string buf;
+  while (bench::mono_us() < until_us) {
+    int64_t t0 = bench::mono_us();
+    int status = exchange(fd, req, buf);
+    if (status != 200) {
+      ++out.errors;
+      if (status == 0) break;
+      continue;
+    }
+    out.lat_us.push_back(static_cast<double>(bench::mono_us() - t0));
+  }
+  ::close(fd);
+}
+
 bool parse(int argc, char** argv, Args& a) {
   for (int i = 1; i + 1 < argc; i += 2) {
     std::string k = argv[i], v = argv[i + 1];
@@ -194,6 +221,51 @@ int main(int argc, char** argv) {
       a.clients, elapsed, all.size(), static_cast<double>(all.size()) / elapsed,
       bench::pct(all, 0.50), bench::pct(all, 0.99), all.empty() ? 0.0 : all.back(),
       static_cast<unsigned long long>(errors), ps.rss_kb, ps.cpu_s);
+
+  // The token authority: client credentials.
+  std::string out;
+  int st = bench::sync_http(port, http::verb::post, "/api/v1/clients",
+                            R"({"name":"bench","auth":"client_secret"})", admin, &out);
+  auto cl = json::parse(out);
+  if (st != 201 || !cl.ok()) {
+    std::fprintf(stderr, "client: %d %s\n", st, out.c_str());
+    return 1;
+  }
+  std::string id = cl->get("client_id")->as_string();
+  std::string secret = cl->get("client_secret")->as_string();
+  st = bench::sync_http(port, http::verb::post, "/api/v1/grants",
+                        R"({"principal":")" + id + R"(","robot":")" + rrns[0] +
+                            R"(","role":"user","scope":["status"]})",
+                        admin, &out);
+  if (st != 201) {
+    std::fprintf(stderr, "grant: %d %s\n", st, out.c_str());
+    return 1;
+  }
+  std::string form = "grant_type=client_credentials&client_id=" + id + "&client_secret=" + secret +
+                     "&resource=" + rrns[0];
+  int token_clients = std::min(a.clients, 16);
+  std::vector<ClientResult> tok(static_cast<size_t>(token_clients));
+  std::vector<std::thread> tthreads;
+  int64_t tstart = bench::mono_us();
+  int64_t tuntil = tstart + static_cast<int64_t>(a.seconds * 1e6);
+  for (int c = 0; c < token_clients; ++c)
+    tthreads.emplace_back(token_client, port, std::cref(form), tuntil,
+                          std::ref(tok[static_cast<size_t>(c)]));
+  for (auto& t : tthreads) t.join();
+  double telapsed = static_cast<double>(bench::mono_us() - tstart) / 1e6;
+  std::vector<double> tall;
+  uint64_t terrors = 0;
+  for (auto& r : tok) {
+    tall.insert(tall.end(), r.lat_us.begin(), r.lat_us.end());
+    terrors += r.errors;
+  }
+  std::sort(tall.begin(), tall.end());
+  std::printf(
+      "token (client credentials, audited): %d clients keep-alive, %.1f s: %zu tokens, %.0f "
+      "tokens/s, p50 %.0f us, p99 %.0f us, errors %llu\n",
+      token_clients, telapsed, tall.size(), static_cast<double>(tall.size()) / telapsed,
+      bench::pct(tall, 0.50), bench::pct(tall, 0.99), static_cast<unsigned long long>(terrors));
+  errors += terrors;
   reg.stop();
   std::error_code ec;
   std::filesystem::remove_all(dir, ec);

@@ -4,6 +4,7 @@
 pkg_check_modules(SQLITE3 REQUIRED IMPORTED_TARGET sqlite3)
 add_library(rcan_registry_store STATIC
   ${PROJECT_SOURCE_DIR}/src/registry/store.cpp
+  ${PROJECT_SOURCE_DIR}/src/registry/authority_store.cpp
   ${PROJECT_SOURCE_DIR}/src/registry/sqlite_store.cpp
   ${PROJECT_SOURCE_DIR}/src/registry/pg_store.cpp)
 target_include_directories(rcan_registry_store PUBLIC ${PROJECT_SOURCE_DIR}/src)

@@ -133,6 +133,10 @@ int main(int argc, char** argv) {
   opts.write_per_key = {flags->write_rate, flags->write_burst};
   opts.write_per_address = {flags->addr_write_rate, flags->addr_write_rate * 2};
   opts.read_per_address = {flags->read_rate, flags->read_rate * 2};
+  opts.key_overlap_s = flags->key_overlap_s;
+  opts.key_lifetime_s = flags->key_lifetime_s;
+  opts.max_token_ttl_s = flags->max_token_ttl_s;
+  opts.device_ttl_s = flags->device_ttl_s;
   registry::api::RegistryApi api(**store, audit_log->get(), opts);
 
   std::string key_file = dir + "/admin.key";

@@ -26,6 +26,8 @@ constexpr const char* kUsage =
     "                     [--public-url URL] [--host NAME] [--prefix P] [--operator NAME]\n"
     "                     [--contact EMAIL] [--write-rate R] [--write-burst B]\n"
     "                     [--address-write-rate R] [--read-rate R] [--io-threads N]\n"
+    "                     [--key-overlap S] [--key-lifetime S] [--max-token-ttl S]\n"
+    "                     [--device-code-ttl S]\n"
     "\n"
     "An RCAN robot registry (docs/REGISTRY.md): robots and their RRNs, resolve, federation\n"
     "nodes and the signed node manifest, compatible with rcan.dev and the official SDKs.\n"
@@ -41,6 +43,11 @@ constexpr const char* kUsage =
     "  --write-rate R      writes per second per API key (default 10, burst --write-burst 20)\n"
     "  --address-write-rate R  writes per second per client address (default 50)\n"
     "  --read-rate R       reads per second per client address (default 2000; 0 = unlimited)\n"
+    "  --key-overlap S     token authority: a new signing key is published S seconds before\n"
+    "                      it signs (default 600)\n"
+    "  --key-lifetime S    a signing key is replaced after S seconds (default 2592000)\n"
+    "  --max-token-ttl S   cap on issued tokens' lifetime (default 3600)\n"
+    "  --device-code-ttl S how long a device-flow code waits for approval (default 600)\n"
     "  --allow-http-node-urls  accept http:// node URLs in delegations (local tests only)\n"
     "\n"
     "The first start creates, in the data directory, an admin API key (admin.key, mode 0600),\n"
@@ -102,7 +109,8 @@ std::optional<Flags> parse_flags(int argc, char** argv, int& exit_code) {
     } else if (s == "--contact") {
       if (!value(f.contact)) return std::nullopt;
     } else if (s == "--write-rate" || s == "--write-burst" || s == "--address-write-rate" ||
-               s == "--read-rate" || s == "--io-threads") {
+               s == "--read-rate" || s == "--io-threads" || s == "--key-overlap" ||
+               s == "--key-lifetime" || s == "--max-token-ttl" || s == "--device-code-ttl") {
       if (!value(v)) return std::nullopt;
       if (!parse_number(v, d)) {
         std::fprintf(stderr, "rcan-registry: %s must be a number ≥ 0\n", s.c_str());
@@ -113,6 +121,10 @@ std::optional<Flags> parse_flags(int argc, char** argv, int& exit_code) {
       if (s == "--address-write-rate") f.addr_write_rate = d;
       if (s == "--read-rate") f.read_rate = d;
       if (s == "--io-threads") f.io_threads = std::max(1, static_cast<int>(d));
+      if (s == "--key-overlap") f.key_overlap_s = static_cast<int64_t>(d);
+      if (s == "--key-lifetime") f.key_lifetime_s = std::max<int64_t>(60, static_cast<int64_t>(d));
+      if (s == "--device-code-ttl") f.device_ttl_s = std::max<int64_t>(1, static_cast<int64_t>(d));
+      if (s == "--max-token-ttl") f.max_token_ttl_s = std::max<int64_t>(1, static_cast<int64_t>(d));
     } else {
       std::fprintf(stderr, "rcan-registry: unknown argument '%s'\n%s", s.c_str(), kUsage);
       return std::nullopt;

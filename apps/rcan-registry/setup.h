@@ -18,6 +18,8 @@ struct Flags {
   std::string public_url, host, prefix, operator_name, contact;
   double write_rate = 10, write_burst = 20, addr_write_rate = 50, read_rate = 2000;
   int io_threads = 2;
+  int64_t key_overlap_s = 600, key_lifetime_s = 2592000, max_token_ttl_s = 3600;
+  int64_t device_ttl_s = 600;
   bool allow_http_node_urls = false;
 };
 

@@ -51,11 +51,13 @@ const std::map<std::string, std::pair<std::string, std::string>>& table() {
       {"keys",
        {"generate derive show issuer", "--dir --mldsa-seed --ed25519-seed --name --json --help"}},
       {"token",
-       {"issue inspect revoke revocations",
+       {"issue inspect get revoke revocations",
         "--key --sub --role --aud --scope --ttl --iss --alg --kid --fleet --sender-type "
         "--cloud-provider "
         "--function-name --bind-key --bind-alg --secret --device --leeway --now --jti --exp "
-        "--reason --url --token-file --help"}},
+        "--reason --url --token-file --registry --client-id --client-secret-file --client-key "
+        "--robot --save --help"}},
+      {"login", {"", "--registry --client-id --resource --scope --save --help"}},
       {"fleet",
        {"estop resume command run status audit",
         "--broker --token --key-dir --prefix --ca-file --username --password-file --timeout-ms "

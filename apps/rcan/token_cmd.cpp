@@ -6,6 +6,7 @@
 #include <optional>
 
 #include "cli.h"
+#include "login_cmd.h"
 #include "node_http.h"
 #include "rcan/crypto/cnf.h"
 #include "rcan/crypto/jwt.h"
@@ -18,6 +19,9 @@ namespace {
 
 constexpr const char* kHelp =
     "usage:\n"
+    "  rcan token get --registry URL --client-id ID (--client-secret-file F | --client-key K)\n"
+    "                 --robot RRN|RURI|fleet:ID [--scope S] [--save F]\n"
+    "      Asks rcan-registry's token authority for a token (client credentials).\n"
     "  rcan token issue --key FILE --sub S --role R --aud RURI [--scope a,b] [--ttl 1h]\n"
     "                   [--iss I] [--alg EdDSA|ES256|RS256|HS256] [--kid K] [--fleet id1,id2]\n"
     "                   [--sender-type T] [--cloud-provider P] [--function-name F]\n"
@@ -300,14 +304,15 @@ int token_main(const Args& args) {
   Args rest(args.begin() + 1, args.end());
   if (args[0] == "issue") return issue_main(rest);
   if (args[0] == "inspect") return inspect_main(rest);
+  if (args[0] == "get") return token_get_main(rest);
   if (!rest.empty() && (rest[0] == "--help" || rest[0] == "-h")) {
     std::fputs(kHelp, stdout);
     return 0;
   }
   if (args[0] == "revoke") return revoke_main(rest);
   if (args[0] == "revocations") return revocations_main(rest);
-  return usage_error("token",
-                     "unknown subcommand " + args[0] + " (issue | inspect | revoke | revocations)");
+  return usage_error(
+      "token", "unknown subcommand " + args[0] + " (issue | inspect | get | revoke | revocations)");
 }
 
 const Registration kReg{"token", "issue, inspect and revoke JWTs", &token_main};

@@ -348,10 +348,16 @@ Result<RawResponse> http_exchange(const Endpoint& ep, const std::string& method,
       method + " " + ep.base_path + path + " HTTP/1.1\r\nHost: " + host + ":" +
       std::to_string(ep.port) +
       "\r\nConnection: close\r\nUser-Agent: rcan-client/0.1\r\nAccept: application/json\r\n";
-  for (const auto& [k, v] : headers) req += k + ": " + v + "\r\n";
+  bool typed = false;  // a Content-Type among `headers` replaces the JSON default
+  for (const auto& [k, v] : headers) {
+    req += k + ": " + v + "\r\n";
+    std::string lower = k;
+    for (char& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    typed = typed || lower == "content-type";
+  }
   if (!body.empty() || method == "POST" || method == "PUT")
-    req +=
-        "Content-Type: application/json\r\nContent-Length: " + std::to_string(body.size()) + "\r\n";
+    req += std::string(typed ? "" : "Content-Type: application/json\r\n") +
+           "Content-Length: " + std::to_string(body.size()) + "\r\n";
   req += "\r\n";
   req += body;
   ExchangeOptions o;

@@ -92,6 +92,62 @@ CREATE TABLE IF NOT EXISTS challenges (
   expires_at text NOT NULL
 );
 CREATE INDEX IF NOT EXISTS challenges_expiry ON challenges (expires_at);
+CREATE TABLE IF NOT EXISTS authority_keys (
+  kid          text PRIMARY KEY,
+  seed         text NOT NULL,
+  created_ms   bigint NOT NULL,
+  sign_from_ms bigint NOT NULL
+);
+CREATE TABLE IF NOT EXISTS authority_clients (
+  id           text PRIMARY KEY,
+  name         text NOT NULL,
+  auth         text NOT NULL,
+  salt         text NOT NULL,
+  hash         text NOT NULL,
+  jwk          text NOT NULL,
+  owner_key_id text NOT NULL,
+  created_at   text NOT NULL
+);
+CREATE TABLE IF NOT EXISTS authority_grants (
+  id         bigserial PRIMARY KEY,
+  principal  text NOT NULL,
+  rrn        text NOT NULL,
+  fleet      text NOT NULL,
+  role       text NOT NULL,
+  scope      text NOT NULL,
+  max_ttl_s  bigint NOT NULL,
+  created_by text NOT NULL,
+  created_at text NOT NULL
+);
+CREATE INDEX IF NOT EXISTS authority_grants_principal ON authority_grants (principal);
+CREATE TABLE IF NOT EXISTS authority_revocations (
+  seq        bigserial PRIMARY KEY,
+  jti        text,
+  sub        text,
+  exp        bigint,
+  revoked_at text NOT NULL,
+  revoked_ms bigint NOT NULL,
+  reason     text NOT NULL,
+  revoked_by text NOT NULL
+);
+CREATE INDEX IF NOT EXISTS authority_revocations_jti ON authority_revocations (jti);
+CREATE INDEX IF NOT EXISTS authority_revocations_sub ON authority_revocations (sub);
+CREATE TABLE IF NOT EXISTS authority_used_jtis (
+  jti    text PRIMARY KEY,
+  exp_ms bigint NOT NULL
+);
+CREATE TABLE IF NOT EXISTS authority_device_codes (
+  device_hash  text PRIMARY KEY,
+  user_code    text NOT NULL UNIQUE,
+  client_id    text NOT NULL,
+  resource     text NOT NULL,
+  scope        text NOT NULL,
+  expires_ms   bigint NOT NULL,
+  interval_s   bigint NOT NULL,
+  last_poll_ms bigint NOT NULL,
+  status       text NOT NULL,
+  subject      text NOT NULL
+);
 )SQL";
 
 #define ROBOT_COLUMNS                                                                        \
@@ -456,6 +512,19 @@ class PgStore final : public Store {
     auto rows = run("DELETE FROM challenges WHERE expires_at < $1", params(now));
     if (!rows) return rows.error();
     return rows->affected();
+  }
+
+  Result<std::vector<Row>> query(const std::string& sql, const Args& args) override {
+    auto rows = run(sql, args);
+    if (!rows) return rows.error();
+    std::vector<Row> out;
+    int cols = PQnfields(rows->get());
+    for (int i = 0; i < rows->size(); ++i) {
+      Row r;
+      for (int c = 0; c < cols; ++c) r.push_back(rows->text(i, c));
+      out.push_back(std::move(r));
+    }
+    return out;
   }
 
  private:

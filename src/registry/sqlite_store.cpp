@@ -97,6 +97,62 @@ CREATE TABLE IF NOT EXISTS challenges (
   expires_at TEXT NOT NULL
 );
 CREATE INDEX IF NOT EXISTS challenges_expiry ON challenges (expires_at);
+CREATE TABLE IF NOT EXISTS authority_keys (
+  kid          text PRIMARY KEY,
+  seed         text NOT NULL,
+  created_ms   INTEGER NOT NULL,
+  sign_from_ms INTEGER NOT NULL
+);
+CREATE TABLE IF NOT EXISTS authority_clients (
+  id           text PRIMARY KEY,
+  name         text NOT NULL,
+  auth         text NOT NULL,
+  salt         text NOT NULL,
+  hash         text NOT NULL,
+  jwk          text NOT NULL,
+  owner_key_id text NOT NULL,
+  created_at   text NOT NULL
+);
+CREATE TABLE IF NOT EXISTS authority_grants (
+  id         INTEGER PRIMARY KEY AUTOINCREMENT,
+  principal  text NOT NULL,
+  rrn        text NOT NULL,
+  fleet      text NOT NULL,
+  role       text NOT NULL,
+  scope      text NOT NULL,
+  max_ttl_s  INTEGER NOT NULL,
+  created_by text NOT NULL,
+  created_at text NOT NULL
+);
+CREATE INDEX IF NOT EXISTS authority_grants_principal ON authority_grants (principal);
+CREATE TABLE IF NOT EXISTS authority_revocations (
+  seq        INTEGER PRIMARY KEY AUTOINCREMENT,
+  jti        text,
+  sub        text,
+  exp        INTEGER,
+  revoked_at text NOT NULL,
+  revoked_ms INTEGER NOT NULL,
+  reason     text NOT NULL,
+  revoked_by text NOT NULL
+);
+CREATE INDEX IF NOT EXISTS authority_revocations_jti ON authority_revocations (jti);
+CREATE INDEX IF NOT EXISTS authority_revocations_sub ON authority_revocations (sub);
+CREATE TABLE IF NOT EXISTS authority_used_jtis (
+  jti    text PRIMARY KEY,
+  exp_ms INTEGER NOT NULL
+);
+CREATE TABLE IF NOT EXISTS authority_device_codes (
+  device_hash  text PRIMARY KEY,
+  user_code    text NOT NULL UNIQUE,
+  client_id    text NOT NULL,
+  resource     text NOT NULL,
+  scope        text NOT NULL,
+  expires_ms   INTEGER NOT NULL,
+  interval_s   INTEGER NOT NULL,
+  last_poll_ms INTEGER NOT NULL,
+  status       text NOT NULL,
+  subject      text NOT NULL
+);
 )SQL";
 
 #define ROBOT_COLUMNS                                                                        \
@@ -410,6 +466,27 @@ class SqliteStore final : public Store {
     auto n = changes("DELETE FROM challenges WHERE expires_at < ?", now);
     if (!n) return n.error();
     return *n;
+  }
+
+  Result<std::vector<Row>> query(const std::string& sql, const Args& args) override {
+    std::string q = sql;
+    for (char& c : q)
+      if (c == '$') c = '?';  // $1 → ?1 (no '$' elsewhere in the authority's SQL)
+    std::lock_guard lock(mu_);
+    auto st = prepare(q);
+    if (!st) return st.error();
+    Stmt s(*st);
+    for (const auto& a : args) s.bind(a);
+    int cols = sqlite3_column_count(*st);
+    std::vector<Row> out;
+    int rc;
+    while ((rc = s.step()) == SQLITE_ROW) {
+      Row r;
+      for (int i = 0; i < cols; ++i) r.push_back(s.text(i));
+      out.push_back(std::move(r));
+    }
+    if (rc != SQLITE_DONE) return error("authority");
+    return out;
   }
 
  private:

@@ -117,6 +117,54 @@ struct Challenge {
   std::string expires_at;
 };
 
+// ---- the token authority (docs/REGISTRY.md "Token authority"). Times in unix milliseconds.
+
+// An Ed25519 signing key of the authority. The seed is a secret (the database is the
+// registry's secret store). It is published in the JWKS from created_ms and signs from
+// sign_from_ms (created_ms + the configured overlap, so verifiers see it before it signs).
+struct SigningKeyRecord {
+  std::string kid;
+  std::string seed;  // base64url, 32 bytes
+  int64_t created_ms = 0, sign_from_ms = 0;
+};
+
+// An OAuth client. auth "client_secret": salt and hash as for API keys; "private_key_jwt":
+// jwk is the client's Ed25519 public JWK (JSON text).
+struct Client {
+  std::string id, name, auth, salt, hash, jwk;
+  std::string owner_key_id;  // the API key that created it
+  std::string created_at;
+};
+
+// Who may get which tokens for one robot (rrn) or one fleet (fleet).
+struct Grant {
+  int64_t id = 0;
+  std::string principal;   // a client id or "user:<name>"
+  std::string rrn, fleet;  // exactly one is set
+  std::string role;        // guest | user | leasee | owner
+  std::string scope;       // space-separated
+  int64_t max_ttl_s = 3600;
+  std::string created_by, created_at;
+};
+
+// A revoked token (by jti) or subject (every token of sub issued before revoked_ms).
+struct Revocation {
+  int64_t seq = 0;             // unique and increasing across instances
+  std::string jti, sub;        // one or both set
+  std::optional<int64_t> exp;  // unix seconds, when known
+  std::string revoked_at;      // ISO-8601
+  int64_t revoked_ms = 0;
+  std::string reason, revoked_by;
+};
+
+// A device authorization request (RFC 8628). The device code is stored hashed.
+struct DeviceCode {
+  std::string device_hash, user_code, client_id, resource, scope;
+  int64_t expires_ms = 0, interval_s = 5, last_poll_ms = 0;
+  std::string status = "pending";  // pending | approved | denied
+  std::string subject;             // set on approval
+};
+
 struct StoreOptions {
   std::string rrn_prefix;  // empty: root numbering "RRN-<12 digits>"
 };
@@ -169,6 +217,46 @@ class Store {
   virtual Result<std::optional<Challenge>> take_challenge(std::string_view id) = 0;
   // Drops challenges that expired before `now`; returns how many.
   virtual Result<int64_t> expire_challenges(std::string_view now) = 0;
+
+  // ---- the token authority. One implementation over both backends (authority_store.cpp) on
+  // query(): SQL written with $1… placeholders (SQLite runs them as ?1…), every value bound
+  // as text or NULL, every column read as text ("" for NULL).
+  Status put_signing_key(const SigningKeyRecord& k);
+  Result<std::vector<SigningKeyRecord>> signing_keys();  // oldest first
+  Result<bool> delete_signing_key(std::string_view kid);
+
+  Status put_client(const Client& c);
+  Result<std::optional<Client>> get_client(std::string_view id);
+  Result<std::vector<Client>> list_clients();
+  Result<bool> delete_client(std::string_view id);
+
+  Result<int64_t> add_grant(const Grant& g);  // the id
+  Result<std::vector<Grant>> grants_of(std::string_view principal);
+  Result<std::optional<Grant>> get_grant(int64_t id);
+  Result<std::vector<Grant>> list_grants();
+  Result<bool> delete_grant(int64_t id);
+
+  Result<int64_t> add_revocation(const Revocation& r);  // the seq
+  Result<std::vector<Revocation>> revocations_since(int64_t since, int limit);
+  // Whether a token (jti, sub, issued at iat_ms) is revoked.
+  Result<bool> is_revoked(std::string_view jti, std::string_view sub, int64_t iat_ms);
+
+  // Records a client assertion's jti until exp_ms; false when it is already recorded.
+  Result<bool> use_jti(std::string_view jti, int64_t exp_ms, int64_t now_ms);
+
+  Status put_device_code(const DeviceCode& d);
+  Result<std::optional<DeviceCode>> device_by_hash(std::string_view device_hash);
+  Result<std::optional<DeviceCode>> device_by_user_code(std::string_view user_code);
+  // Sets status and subject of a pending request; false when it is not pending.
+  Result<bool> decide_device(std::string_view user_code, std::string_view status,
+                             std::string_view subject);
+  Status touch_device(std::string_view device_hash, int64_t poll_ms, int64_t interval_s);
+  Result<bool> delete_device(std::string_view device_hash);
+
+ protected:
+  using Row = std::vector<std::string>;
+  using Args = std::vector<std::optional<std::string>>;
+  virtual Result<std::vector<Row>> query(const std::string& sql, const Args& args) = 0;
 };
 
 // Opens (creating the file and the schema when missing, mode 0600) a SQLite database in WAL

@@ -682,6 +682,138 @@ TEST_P(StoreTest, ReconnectsWhenTheServerDropsTheConnections) {
   EXPECT_TRUE(must(store_->register_robot(new_robot("unit-2"))).created);
 }
 
+// ---- the token authority (authority_store.cpp, over both backends)
+
+TEST_P(StoreTest, AuthoritySigningKeys) {
+  auto none = store_->signing_keys();
+  ASSERT_TRUE(none.ok()) << none.error().message;
+  EXPECT_TRUE(none->empty());
+  ASSERT_TRUE(store_->put_signing_key({"k2", "seed-2", 2000, 5000}).ok());
+  ASSERT_TRUE(store_->put_signing_key({"k1", "seed-1", 1000, 1000}).ok());
+  auto dup = store_->put_signing_key({"k1", "x", 1, 1});
+  ASSERT_FALSE(dup.ok());
+  EXPECT_EQ(dup.error().reason, "unique_violation");
+  auto keys = store_->signing_keys();
+  ASSERT_TRUE(keys.ok());
+  ASSERT_EQ(keys->size(), 2u);
+  EXPECT_EQ((*keys)[0].kid, "k1");  // by sign_from
+  EXPECT_EQ((*keys)[1].seed, "seed-2");
+  EXPECT_EQ((*keys)[1].sign_from_ms, 5000);
+  EXPECT_TRUE(*store_->delete_signing_key("k1"));
+  EXPECT_FALSE(*store_->delete_signing_key("k1"));
+  // Another instance on the same database sees them.
+  auto other = open();
+  ASSERT_TRUE(other.ok());
+  EXPECT_EQ((*other)->signing_keys()->size(), 1u);
+}
+
+TEST_P(StoreTest, AuthorityClientsAndGrants) {
+  Client c{"rcc_1", "ops'; DROP TABLE robots;--", "client_secret", "salt", "hash", "", "key1",
+           at(1)};
+  ASSERT_TRUE(store_->put_client(c).ok());
+  auto got = store_->get_client("rcc_1");
+  ASSERT_TRUE(got.ok() && got->has_value());
+  EXPECT_EQ((*got)->name, c.name);
+  EXPECT_EQ((*got)->owner_key_id, "key1");
+  EXPECT_FALSE(store_->get_client("rcc_2")->has_value());
+  EXPECT_EQ(store_->list_clients()->size(), 1u);
+  Grant g;
+  g.principal = "rcc_1";
+  g.rrn = "rrn-000000000001";
+  g.role = "user";
+  g.scope = "status teleop";
+  g.max_ttl_s = 600;
+  g.created_by = "apikey:key1";
+  g.created_at = at(2);
+  auto id1 = store_->add_grant(g);
+  ASSERT_TRUE(id1.ok()) << id1.error().message;
+  g.principal = "user:key9";
+  g.fleet = "yard";
+  auto id2 = store_->add_grant(g);
+  ASSERT_TRUE(id2.ok());
+  EXPECT_GT(*id2, *id1);
+  auto of = store_->grants_of("rcc_1");
+  ASSERT_TRUE(of.ok());
+  ASSERT_EQ(of->size(), 1u);
+  EXPECT_EQ((*of)[0].rrn, "RRN-000000000001");
+  EXPECT_EQ((*of)[0].scope, "status teleop");
+  EXPECT_EQ((*of)[0].max_ttl_s, 600);
+  EXPECT_EQ((*store_->get_grant(*id2))->fleet, "yard");
+  EXPECT_EQ(store_->list_grants()->size(), 2u);
+  EXPECT_TRUE(*store_->delete_grant(*id1));
+  EXPECT_FALSE(*store_->delete_grant(*id1));
+  EXPECT_TRUE(store_->grants_of("rcc_1")->empty());
+  EXPECT_TRUE(*store_->delete_client("rcc_1"));
+  EXPECT_FALSE(store_->get_client("rcc_1")->has_value());
+}
+
+TEST_P(StoreTest, AuthorityRevocationsAndUsedJtis) {
+  Revocation r;
+  r.jti = "j1";
+  r.exp = 1800000000;
+  r.revoked_at = at(1);
+  r.revoked_ms = 5000;
+  r.reason = "lost";
+  r.revoked_by = "apikey:a";
+  auto s1 = store_->add_revocation(r);
+  ASSERT_TRUE(s1.ok()) << s1.error().message;
+  Revocation by_sub;
+  by_sub.sub = "rcc_9";
+  by_sub.revoked_at = at(2);
+  by_sub.revoked_ms = 9000;
+  auto s2 = store_->add_revocation(by_sub);
+  ASSERT_TRUE(s2.ok());
+  EXPECT_GT(*s2, *s1);
+  auto other = open();  // a second instance continues the sequence
+  ASSERT_TRUE(other.ok());
+  auto s3 = (*other)->add_revocation(by_sub);
+  ASSERT_TRUE(s3.ok());
+  EXPECT_GT(*s3, *s2);
+  auto all = store_->revocations_since(0, 500);
+  ASSERT_TRUE(all.ok()) << all.error().message;
+  ASSERT_EQ(all->size(), 3u);
+  EXPECT_EQ((*all)[0].jti, "j1");
+  ASSERT_TRUE((*all)[0].exp.has_value());
+  EXPECT_EQ(*(*all)[0].exp, 1800000000);
+  EXPECT_FALSE((*all)[1].exp.has_value());
+  EXPECT_EQ(store_->revocations_since(*s1, 500)->size(), 2u);
+  EXPECT_EQ(store_->revocations_since(*s1, 1)->size(), 1u);
+  EXPECT_TRUE(store_->revocations_since(*s3, 500)->empty());
+  EXPECT_TRUE(*store_->is_revoked("j1", "anyone", 0));
+  EXPECT_FALSE(*store_->is_revoked("j2", "anyone", 0));
+  EXPECT_TRUE(*store_->is_revoked("j2", "rcc_9", 8000));    // issued before the sub revocation
+  EXPECT_FALSE(*store_->is_revoked("j2", "rcc_9", 10000));  // issued after
+
+  EXPECT_TRUE(*store_->use_jti("c:a", 2000, 1000));
+  EXPECT_FALSE(*store_->use_jti("c:a", 2000, 1500));  // replay
+  EXPECT_TRUE(*store_->use_jti("c:a", 9000, 3000));   // expired entry dropped
+}
+
+TEST_P(StoreTest, AuthorityDeviceCodes) {
+  DeviceCode d;
+  d.device_hash = "h1";
+  d.user_code = "BCDF-GHJK";
+  d.client_id = "rcc_1";
+  d.resource = "RRN-000000000001";
+  d.scope = "status";
+  d.expires_ms = 600000;
+  ASSERT_TRUE(store_->put_device_code(d).ok());
+  auto dup = d;
+  dup.device_hash = "h2";
+  EXPECT_FALSE(store_->put_device_code(dup).ok());  // user codes are unique
+  auto got = store_->device_by_user_code("BCDF-GHJK");
+  ASSERT_TRUE(got.ok() && got->has_value());
+  EXPECT_EQ((*got)->status, "pending");
+  ASSERT_TRUE(store_->touch_device("h1", 1234, 10).ok());
+  EXPECT_EQ((*store_->device_by_hash("h1"))->interval_s, 10);
+  EXPECT_EQ((*store_->device_by_hash("h1"))->last_poll_ms, 1234);
+  EXPECT_TRUE(*store_->decide_device("BCDF-GHJK", "approved", "user:k"));
+  EXPECT_FALSE(*store_->decide_device("BCDF-GHJK", "denied", "user:x"));  // decided once
+  EXPECT_EQ((*store_->device_by_hash("h1"))->subject, "user:k");
+  EXPECT_TRUE(*store_->delete_device("h1"));
+  EXPECT_FALSE(*store_->delete_device("h1"));
+}
+
 INSTANTIATE_TEST_SUITE_P(Backends, StoreTest, ::testing::Values("sqlite", "postgresql"),
                          [](const ::testing::TestParamInfo<std::string>& p) { return p.param; });
 

@@ -1,18 +1,33 @@
 // The registry API's internals, shared by its route files (not an interface).
 #pragma once
 
+#include <map>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <string_view>
 
+#include "rcan/crypto/jwt.h"
 #include "rcan/json.h"
 #include "registry/api/body.h"
+#include "registry/api/oauth_form.h"
 #include "registry/api/registry_api.h"
 
 namespace rcan::registry::api {
 
 using transport::HttpRequest;
 using transport::HttpResponse;
+
+// What a token is for: one robot (rrn, its owner) or a fleet; aud is the token's audience.
+struct Target {
+  std::string rrn, fleet, aud, owner_key_id;
+};
+// The grant that allows a token request, with the scopes and role the token gets.
+struct GrantChoice {
+  Grant grant;
+  std::vector<std::string> scopes;
+  std::string role;
+};
 
 // Who presented which API key.
 struct Caller {
@@ -69,6 +84,45 @@ class RegistryApi::Impl {
   void build_manifest();
   // The registration's proof of possession: nullopt when it holds (or there are no keys).
   std::optional<HttpResponse> check_proof(const Registration& r);
+
+  // ---- the token authority (authority.cpp, authority_routes.cpp)
+  HttpResponse jwks();
+  HttpResponse oauth_token(const HttpRequest& req);
+  HttpResponse introspect(const HttpRequest& req);
+  HttpResponse list_revocations(const HttpRequest& req);
+  HttpResponse revoke(const HttpRequest& req);
+  HttpResponse rotate_keys(const HttpRequest& req);
+  HttpResponse clients_route(const HttpRequest& req);
+  HttpResponse delete_client(const HttpRequest& req, const std::string& id);
+  HttpResponse grants_route(const HttpRequest& req);
+  HttpResponse delete_grant(const HttpRequest& req, const std::string& id);
+  HttpResponse device_authorization(const HttpRequest& req);
+  HttpResponse device_approve(const HttpRequest& req);
+  // The stored keys (cached for a second; `fresh` reloads), rotated when due.
+  Result<std::vector<SigningKeyRecord>> authority_keys(bool fresh = false);
+  // A new key that signs from now + overlap (now when there is none).
+  Result<SigningKeyRecord> new_signing_key(int64_t now_ms, bool first);
+  // Verifies a token of this authority (signature, iss, exp) and its revocation; the claims
+  // or an error saying why it is not active.
+  Result<jwt::Claims> check_own_token(std::string_view token);
+
+  // "fleet:<id>", an RRN or a RURI → the target (kNotFound reason "unknown" when none).
+  Result<Target> resolve_target(const std::string& resource);
+  // The first grant of `principal` for `t` that allows `scope` (space-separated; empty: the
+  // grant's) and `role` (empty: the grant's). Errors carry the OAuth error as reason
+  // (unauthorized_client, invalid_scope).
+  Result<GrantChoice> choose_grant(const std::string& principal, const Target& t,
+                                   const std::string& scope, const std::string& role);
+  // Signs a token for `sub` and answers the token response (RFC 6749 §5.1).
+  HttpResponse issue_token(const std::string& sub, const Target& t, const GrantChoice& c);
+
+  std::optional<Client> authenticate_client(const HttpRequest& req, const Form& f,
+                                            HttpResponse& err, bool allow_public);
+  HttpResponse device_token(const Client& client, const Form& f);
+
+  std::mutex keys_mu;
+  std::vector<SigningKeyRecord> keys_cache;
+  int64_t keys_loaded_ms = -1;
 
   Store& store;
   audit::AuditLog* audit_log;

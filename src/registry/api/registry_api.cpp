@@ -233,6 +233,10 @@ HttpResponse RegistryApi::Impl::serve(const HttpRequest& req) {
     r.headers.emplace_back("Cache-Control", "public, max-age=3600");
     return r;
   }
+  if (p == "/.well-known/jwks.json") return m == "GET" ? jwks() : not_allowed();
+  if (p == "/oauth/token") return oauth_token(req);
+  if (p == "/oauth/introspect") return introspect(req);
+  if (p == "/oauth/device_authorization") return device_authorization(req);
   constexpr std::string_view kApi = "/api/v1/";
   if (p.rfind(kApi, 0) != 0) return ref_error(404, "Not found");
   std::string_view rest = std::string_view(p).substr(kApi.size());
@@ -273,6 +277,19 @@ HttpResponse RegistryApi::Impl::serve(const HttpRequest& req) {
   }
   if (rest.rfind("keys/", 0) == 0)
     return m == "DELETE" ? revoke_key(req, std::string(rest.substr(5))) : not_allowed();
+  if (rest == "revocations") {
+    if (m == "GET") return list_revocations(req);
+    if (m == "POST") return revoke(req);
+    return not_allowed();
+  }
+  if (rest == "authority/keys/rotate") return m == "POST" ? rotate_keys(req) : not_allowed();
+  if (rest == "clients") return m == "GET" || m == "POST" ? clients_route(req) : not_allowed();
+  if (rest.rfind("clients/", 0) == 0)
+    return m == "DELETE" ? delete_client(req, std::string(rest.substr(8))) : not_allowed();
+  if (rest == "grants") return m == "GET" || m == "POST" ? grants_route(req) : not_allowed();
+  if (rest.rfind("grants/", 0) == 0)
+    return m == "DELETE" ? delete_grant(req, std::string(rest.substr(7))) : not_allowed();
+  if (rest == "device/approve") return m == "POST" ? device_approve(req) : not_allowed();
   return ref_error(404, "Not found");
 }
 
@@ -288,7 +305,16 @@ std::string route_label(std::string_view p) {
                                                 "/api/v1/nodes",
                                                 "/api/v1/resolve",
                                                 "/api/v1/challenge",
-                                                "/api/v1/keys"};
+                                                "/api/v1/keys",
+                                                "/.well-known/jwks.json",
+                                                "/oauth/token",
+                                                "/oauth/introspect",
+                                                "/oauth/device_authorization",
+                                                "/api/v1/revocations",
+                                                "/api/v1/authority/keys/rotate",
+                                                "/api/v1/clients",
+                                                "/api/v1/grants",
+                                                "/api/v1/device/approve"};
   for (auto f : kFixed)
     if (p == f) return std::string(f);
   static constexpr std::pair<std::string_view, std::string_view> kPrefixes[] = {
@@ -296,7 +322,9 @@ std::string route_label(std::string_view p) {
       {"/api/v1/robots/", "/api/v1/robots/{rrn}"},
       {"/api/v1/resolve/", "/api/v1/resolve/{rrn}"},
       {"/api/v1/nodes/", "/api/v1/nodes/{prefix}"},
-      {"/api/v1/keys/", "/api/v1/keys/{id}"}};
+      {"/api/v1/keys/", "/api/v1/keys/{id}"},
+      {"/api/v1/clients/", "/api/v1/clients/{id}"},
+      {"/api/v1/grants/", "/api/v1/grants/{id}"}};
   for (auto [pre, label] : kPrefixes)
     if (p.rfind(pre, 0) == 0) return std::string(label);
   return "other";

@@ -35,6 +35,12 @@ struct ApiOptions {
   // Accept http:// node URLs in delegations (local federation tests; never in production).
   bool allow_http_node_urls = false;
   std::function<int64_t()> wall_ms;  // unset: the system clock
+  // The token authority (docs/REGISTRY.md "Token authority").
+  int64_t key_overlap_s = 600;       // a new key is published this long before it signs
+  int64_t key_lifetime_s = 2592000;  // a key signs this long before one replaces it (30 days)
+  int64_t max_token_ttl_s = 3600;    // cap on every token's lifetime
+  int64_t jwks_max_age_s = 300;      // Cache-Control of the JWKS
+  int64_t device_ttl_s = 600, device_interval_s = 5;
 };
 
 // "2026-11-27T05:20:00.000Z"
