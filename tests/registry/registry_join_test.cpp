@@ -48,27 +48,33 @@ std::string registrant_key_file(const RegistryDaemon& reg, const std::string& re
 // A configured robot: keys, chain secret, a token issuer, and the `registry` block.
 class JoiningRobot {
  public:
-  JoiningRobot(const std::string& dir, const std::string& registry_url, const std::string& key_file)
-      : dir_(dir), data_(dir + "/data"), port_(free_port()) {
+  // `registry_yaml`: more keys of the registry block (indented by two); `extra_yaml`: more
+  // top-level blocks.
+  JoiningRobot(const std::string& dir, const std::string& registry_url, const std::string& key_file,
+               const std::string& ruri = kRuri, const std::string& registry_yaml = {},
+               const std::string& extra_yaml = {})
+      : dir_(dir), data_(dir + "/data"), ruri_(ruri), port_(free_port()) {
     fs::create_directories(data_);
     EXPECT_EQ(run_cli({"keys", "generate", "--dir", data_ + "/keys"}).exit_code, 0);
     EXPECT_EQ(run_cli({"audit", "new-secret", "--out", data_ + "/audit.secret"}).exit_code, 0);
     EXPECT_EQ(run_cli({"keys", "issuer", "--dir", dir_ + "/issuer"}).exit_code, 0);
     std::ofstream(dir_ + "/robot.rcan.yaml")
-        << "rcan_version: \"1.2\"\nruri: " << kRuri << "\n"
+        << "rcan_version: \"1.2\"\nruri: " << ruri_ << "\n"
         << "robot:\n  name: join-rover\n  manufacturer: acme\n  model: rover\n  type: mobile\n"
         << "driver:\n  type: sim\n"
         << "security:\n  jwt:\n    issuers:\n      - issuer: test.local\n        key_file: " << dir_
         << "/issuer/ed25519.pub.pem\n"
         << "registry:\n  registry_url: " << registry_url << "\n  key_file: " << key_file
-        << "\n  endpoint: " << url() << "\n  refresh_s: 10\n";
+        << "\n  endpoint: " << url() << "\n  refresh_s: 10\n"
+        << registry_yaml << extra_yaml;
   }
   // Where it serves (and what it publishes as its endpoint).
   std::string url() const { return "http://127.0.0.1:" + std::to_string(port_); }
+  uint16_t port() const { return port_; }
   // An OWNER token of its test issuer, in a file.
   std::string owner_token_file() const {
     auto t = run_cli({"token", "issue", "--key", dir_ + "/issuer/ed25519.seed", "--iss",
-                      "test.local", "--sub", "alice", "--role", "owner", "--aud", kRuri});
+                      "test.local", "--sub", "alice", "--role", "owner", "--aud", ruri_});
     EXPECT_EQ(t.exit_code, 0) << t.err;
     std::string path = dir_ + "/owner.token";
     write_private(path, t.out);
@@ -91,7 +97,7 @@ class JoiningRobot {
   const std::string& data() const { return data_; }
 
  private:
-  std::string dir_, data_;
+  std::string dir_, data_, ruri_;
   uint16_t port_ = 0;
   std::unique_ptr<Process> proc_;
 };
@@ -182,6 +188,93 @@ TEST(RegistryJoin, AnUnusableRegistryDoesNotStopTheRobotAndTheLinkRegistersLater
   // Adopted at the next start.
   EXPECT_EQ(robot.stop(), 0);
   EXPECT_EQ(robot.start(), rrn);
+}
+
+template <typename F>
+bool eventually(F f, int timeout_ms) {
+  for (int waited = 0; waited < timeout_ms; waited += 50) {
+    if (f()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return f();
+}
+
+// Seed §4.1–4.2 and §6.1 with every party real: a registry, two robots that register
+// themselves and trust its tokens, and an operator who gets a USER token for one of them from
+// the registry and drives it by RRN with rcan.
+TEST(RegistryEndToEnd,
+     ATokenFromTheRegistryDrivesItsRobotOnlyUntilRevokedAndTheRobotFollowsTheRegistry) {
+  TempDir dir;
+  const uint16_t reg_port = free_port();
+  auto reg = std::make_unique<RegistryDaemon>(
+      dir.file("registry"), std::vector<std::string>{"--port", std::to_string(reg_port)});
+  ASSERT_FALSE(reg->url().empty());
+  const std::string url = reg->url();
+  const std::string key =
+      registrant_key_file(*reg, dir.file("registry"), dir.file("registrant.key"));
+  const std::string trust =
+      "  trust_tokens: true\n  revocations_refresh_s: 1\n  max_key_age_s: 4\n";
+  const std::string offline = "offline:\n  issuer_poll_ms: 100\n  issuer_timeout_ms: 300\n";
+  JoiningRobot a(dir.file("a"), url, key, "rcan://local.rcan/acme/rover/0a1b2c3d", trust, offline);
+  JoiningRobot b(dir.file("b"), url, key, "rcan://local.rcan/acme/rover/0a1b2c3e", trust, offline);
+  const std::string rrn_a = a.start(), rrn_b = b.start();
+  ASSERT_FALSE(rrn_a.empty());
+  ASSERT_FALSE(rrn_b.empty());
+  ASSERT_NE(rrn_a, rrn_b);
+
+  // The registrant (who registered both robots) makes a client and grants it USER on robot A.
+  auto c = reg->send("POST", "/api/v1/clients", R"({"name":"alice-cli","auth":"client_secret"})",
+                     read_file(key).substr(0, read_file(key).find('\n')));
+  ASSERT_EQ(c.status, 201) << c.body;
+  const json::Value client = json_of(c.body);
+  write_private(dir.file("client.secret"), str(client, "client_secret"));
+  auto g = reg->send("POST", "/api/v1/grants",
+                     R"({"principal":")" + str(client, "client_id") + R"(","robot":")" + rrn_a +
+                         R"(","role":"user","scope":["status","control"],"max_ttl_s":600})",
+                     read_file(key).substr(0, read_file(key).find('\n')));
+  ASSERT_EQ(g.status, 201) << g.body;
+  auto t = run_cli({"token", "get", "--registry", url, "--client-id", str(client, "client_id"),
+                    "--client-secret-file", dir.file("client.secret"), "--robot", rrn_a, "--save",
+                    dir.file("user.token")});
+  ASSERT_EQ(t.exit_code, 0) << t.out << t.err;
+  const std::string token = dir.file("user.token");
+
+  // Robot A takes it (by RRN, through the registry): status, a claim, a move.
+  const std::vector<std::string> at_a{"--url", rrn_a, "--registry", url, "--token-file", token};
+  auto with = [](std::vector<std::string> v, const std::vector<std::string>& more) {
+    v.insert(v.end(), more.begin(), more.end());
+    return v;
+  };
+  auto st = run_cli(with({"status", "--json"}, at_a));
+  EXPECT_EQ(st.exit_code, 0) << st.out << st.err;
+  auto claim = run_cli(with({"claim"}, at_a));
+  EXPECT_EQ(claim.exit_code, 0) << claim.out << claim.err;
+  auto move = run_cli(with({"command", "move", "--linear", "0.2", "--duration-ms", "300"}, at_a));
+  EXPECT_EQ(move.exit_code, 0) << move.out << move.err;
+  // Robot B refuses it: not its audience.
+  auto at_b = run_cli({"status", "--url", rrn_b, "--registry", url, "--token-file", token});
+  EXPECT_EQ(at_b.exit_code, 1) << at_b.out << at_b.err;
+
+  // Revoked at the registry by the robot's owner: robot A refuses it within its poll interval.
+  auto rv = reg->send("POST", "/api/v1/revocations",
+                      R"({"token":")" + read_file(token).substr(0, read_file(token).find('\n')) +
+                          R"(","reason":"laptop lost"})",
+                      read_file(key).substr(0, read_file(key).find('\n')));
+  ASSERT_EQ(rv.status, 201) << rv.body;
+  EXPECT_TRUE(eventually([&] { return run_cli(with({"status"}, at_a)).exit_code == 1; }, 10'000));
+
+  // §6.1: the registry stops → OFFLINE_AUTONOMOUS, then (keys older than max_key_age_s)
+  // LOCKDOWN; it comes back → NORMAL.
+  auto mode = [&] {
+    return metric_value(http(a.port(), "GET", "/metrics", "", {}).body, "rcan_partition_mode");
+  };
+  EXPECT_TRUE(eventually([&] { return mode() == 0; }, 5000)) << mode();
+  reg.reset();
+  EXPECT_TRUE(eventually([&] { return mode() == 1; }, 5000)) << mode();
+  EXPECT_TRUE(eventually([&] { return mode() == 2; }, 10'000)) << mode();
+  reg = std::make_unique<RegistryDaemon>(
+      dir.file("registry"), std::vector<std::string>{"--port", std::to_string(reg_port)});
+  EXPECT_TRUE(eventually([&] { return mode() == 0; }, 5000)) << mode();
 }
 
 TEST(RegistryCli, RegisterWithProofGetListUpdateResolveDelete) {
