@@ -1,13 +1,18 @@
 // registry_bench — resolves per second from a real rcan-registry (docs/REGISTRY.md §Performance).
 //
 //   registry_bench --registry PATH [--robots N] [--clients C] [--seconds S]
+//                  [--database SPEC] [--instances K]
 //
-// Starts rcan-registry (SQLite, rate limits off) in a temporary data directory, registers N
-// robots with the admin key, then C client threads each hold one keep-alive connection and
-// send GET /api/v1/resolve/<random registered RRN> for S seconds, checking every answer is 200.
-// Prints resolves/s and the latency quantiles. Then the token authority: one client with a
-// secret and a grant on the first robot; C threads send POST /oauth/token (client
-// credentials, client_secret_post) on keep-alive connections for S seconds: tokens/s.
+// Starts K rcan-registry instances (rate limits off) on one database — SQLite in a temporary
+// data directory by default; several instances need a PostgreSQL URL (bench/registry_pg_bench.sh
+// starts a server) — and registers N robots with the admin key from 8 threads spread over the
+// instances. Then the race: 50 more robots, each registered at once through every instance,
+// must each get one RRN, and no RRN may be minted twice. Then C client threads (spread over
+// the instances) each hold one keep-alive connection and send GET /api/v1/resolve/<random
+// registered RRN> for S seconds, checking every answer is 200: resolves/s and the latency
+// quantiles. Then the token authority: one client with a secret and a grant on the first
+// robot; up to 16 threads send POST /oauth/token (client credentials, client_secret_post)
+// for S seconds: tokens/s.
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
@@ -19,7 +24,10 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <memory>
+#include <mutex>
 #include <random>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -33,8 +41,8 @@ using namespace rcan;
 namespace http = boost::beast::http;
 
 struct Args {
-  std::string registry;
-  int robots = 1000, clients = 64;
+  std::string registry, database;
+  int robots = 1000, clients = 64, instances = 1;
   double seconds = 5;
 };
 
@@ -144,10 +152,28 @@ bool parse(int argc, char** argv, Args& a) {
       a.clients = std::max(1, std::atoi(v.c_str()));
     else if (k == "--seconds")
       a.seconds = std::max(0.1, std::atof(v.c_str()));
+    else if (k == "--database")
+      a.database = v;
+    else if (k == "--instances")
+      a.instances = std::clamp(std::atoi(v.c_str()), 1, 8);
     else
       return false;
   }
-  return !a.registry.empty();
+  return !a.registry.empty() && (a.instances == 1 || a.database.rfind("postgres", 0) == 0);
+}
+
+// Registers one robot through `port`; its RRN, or empty (and the answer on stderr).
+std::string register_robot(uint16_t port, const std::string& admin, const std::string& device) {
+  std::string out;
+  std::string body =
+      R"({"manufacturer":"bench","model":"arm","version":"v1","device_id":")" + device + R"("})";
+  int st = bench::sync_http(port, http::verb::post, "/api/v1/robots", body, admin, &out);
+  auto v = json::parse(out);
+  if ((st != 201 && st != 200) || !v.ok() || v->get("rrn") == nullptr) {
+    std::fprintf(stderr, "register %s: %d %s\n", device.c_str(), st, out.c_str());
+    return {};
+  }
+  return v->get("rrn")->as_string();
 }
 
 }  // namespace
@@ -156,54 +182,116 @@ int main(int argc, char** argv) {
   Args a;
   if (!parse(argc, argv, a)) {
     std::fprintf(
-        stderr, "usage: registry_bench --registry PATH [--robots N] [--clients C] [--seconds S]\n");
+        stderr,
+        "usage: registry_bench --registry PATH [--robots N] [--clients C] [--seconds S]\n"
+        "                      [--database SPEC] [--instances K (a postgresql:// database)]\n");
     return 2;
   }
-  std::string dir =
+  std::string root =
       (std::filesystem::temp_directory_path() / ("registry-bench-" + std::to_string(getpid())))
           .string();
-  uint16_t port = bench::free_port();
-  bench::Child reg({a.registry, "--data-dir", dir, "--port", std::to_string(port), "--write-rate",
-                    "0", "--address-write-rate", "0", "--read-rate", "0", "--io-threads", "2"},
-                   "listening");
-  if (bench::wait_ready(reg, port) < 0) {
-    std::fprintf(stderr, "rcan-registry did not start:\n%s\n", reg.head().c_str());
-    return 1;
-  }
-  std::string admin;
-  {
-    FILE* f = std::fopen((dir + "/admin.key").c_str(), "r");
-    char b[256] = {};
-    if (f != nullptr) {
-      admin.assign(b, std::fread(b, 1, sizeof b - 1, f));
-      std::fclose(f);
+  std::vector<std::unique_ptr<bench::Child>> regs;
+  std::vector<uint16_t> ports;
+  std::string admin;  // the first instance's admin key (every instance takes it: one database)
+  for (int i = 0; i < a.instances; ++i) {
+    std::string dir = root + "/" + std::to_string(i);
+    uint16_t port = bench::free_port();
+    std::vector<std::string> cmd{a.registry,
+                                 "--data-dir",
+                                 dir,
+                                 "--port",
+                                 std::to_string(port),
+                                 "--write-rate",
+                                 "0",
+                                 "--address-write-rate",
+                                 "0",
+                                 "--read-rate",
+                                 "0",
+                                 "--io-threads",
+                                 "2"};
+    if (!a.database.empty()) {
+      cmd.push_back("--database");
+      cmd.push_back(a.database);
     }
-  }
-  std::vector<std::string> rrns;
-  int64_t t0 = bench::mono_us();
-  for (int i = 0; i < a.robots; ++i) {
-    std::string out;
-    std::string body =
-        R"({"manufacturer":"bench","model":"arm","version":"v1","device_id":"unit-)" +
-        std::to_string(i) + R"(","metadata":{"i":)" + std::to_string(i) + "}}";
-    int st = bench::sync_http(port, http::verb::post, "/api/v1/robots", body, admin, &out);
-    auto v = json::parse(out);
-    if (st != 201 || !v.ok() || v->get("rrn") == nullptr) {
-      std::fprintf(stderr, "register %d: %d %s\n", i, st, out.c_str());
+    regs.push_back(std::make_unique<bench::Child>(cmd, "listening"));
+    if (bench::wait_ready(*regs.back(), port) < 0) {
+      std::fprintf(stderr, "rcan-registry did not start:\n%s\n", regs.back()->head().c_str());
       return 1;
     }
-    rrns.push_back(v->get("rrn")->as_string());
+    ports.push_back(port);
+    if (i == 0) {
+      FILE* f = std::fopen((dir + "/admin.key").c_str(), "r");
+      char b[256] = {};
+      if (f != nullptr) {
+        admin.assign(b, std::fread(b, 1, sizeof b - 1, f));
+        std::fclose(f);
+      }
+    }
+  }
+  const uint16_t port = ports[0];
+  std::printf("%d instance(s) on %s\n", a.instances,
+              a.database.empty() ? "SQLite" : a.database.substr(0, a.database.find(':')).c_str());
+
+  // N robots from 8 threads, spread over the instances.
+  std::vector<std::string> rrns(static_cast<size_t>(a.robots));
+  std::atomic<int> next{0}, failed{0};
+  int64_t t0 = bench::mono_us();
+  {
+    std::vector<std::thread> ts;
+    for (int t = 0; t < 8; ++t)
+      ts.emplace_back([&, t] {
+        for (int i; (i = next++) < a.robots;) {
+          std::string r = register_robot(ports[static_cast<size_t>((i + t) % a.instances)], admin,
+                                         "unit-" + std::to_string(i));
+          if (r.empty()) ++failed;
+          rrns[static_cast<size_t>(i)] = r;
+        }
+      });
+    for (auto& t : ts) t.join();
   }
   double reg_s = static_cast<double>(bench::mono_us() - t0) / 1e6;
-  std::printf("registered %d robots in %.2f s (%.0f/s, one connection per request)\n", a.robots,
-              reg_s, a.robots / reg_s);
+  if (failed > 0) return 1;
+  std::printf("registered %d robots in %.2f s (%.0f/s, 8 threads, one connection per request)\n",
+              a.robots, reg_s, a.robots / reg_s);
+
+  // The race: each of 50 robots registered at once through every instance (2 threads each).
+  constexpr int kRace = 50;
+  std::vector<std::vector<std::string>> race(kRace);
+  {
+    std::vector<std::thread> ts;
+    for (int i = 0; i < kRace; ++i)
+      for (int k = 0; k < 2 * a.instances; ++k)
+        ts.emplace_back([&, i, k] {
+          std::string r = register_robot(ports[static_cast<size_t>(k % a.instances)], admin,
+                                         "race-" + std::to_string(i));
+          static std::mutex mu;
+          std::lock_guard<std::mutex> l(mu);
+          race[static_cast<size_t>(i)].push_back(r);
+        });
+    for (auto& t : ts) t.join();
+  }
+  std::set<std::string> distinct(rrns.begin(), rrns.end());
+  int race_split = 0;
+  for (const auto& answers : race) {
+    std::set<std::string> one(answers.begin(), answers.end());
+    if (one.size() != 1 || one.begin()->empty()) ++race_split;
+    distinct.insert(answers.begin(), answers.end());
+  }
+  const bool unique = distinct.size() == static_cast<size_t>(a.robots + kRace);
+  std::printf(
+      "race: %d robots each registered by %d concurrent requests over %d instance(s): %d got "
+      "more than one RRN; %zu distinct RRNs for %d robots (%s)\n",
+      kRace, 2 * a.instances, a.instances, race_split, distinct.size(), a.robots + kRace,
+      unique && race_split == 0 ? "no duplicate" : "DUPLICATES");
+  if (!unique || race_split != 0) return 1;
 
   std::vector<ClientResult> results(static_cast<size_t>(a.clients));
   std::vector<std::thread> threads;
   int64_t start = bench::mono_us();
   int64_t until = start + static_cast<int64_t>(a.seconds * 1e6);
   for (int c = 0; c < a.clients; ++c)
-    threads.emplace_back(client, port, std::cref(rrns), until, 1234u + static_cast<unsigned>(c),
+    threads.emplace_back(client, ports[static_cast<size_t>(c % a.instances)], std::cref(rrns),
+                         until, 1234u + static_cast<unsigned>(c),
                          std::ref(results[static_cast<size_t>(c)]));
   for (auto& t : threads) t.join();
   double elapsed = static_cast<double>(bench::mono_us() - start) / 1e6;
@@ -214,13 +302,19 @@ int main(int argc, char** argv) {
     errors += r.errors;
   }
   std::sort(all.begin(), all.end());
-  bench::ProcStat ps = bench::proc_stat(reg.pid());
+  long rss_kb = 0;
+  double cpu_s = 0;
+  for (auto& r : regs) {
+    bench::ProcStat ps = bench::proc_stat(r->pid());
+    rss_kb += ps.rss_kb;
+    cpu_s += ps.cpu_s;
+  }
   std::printf(
       "resolve: %d clients keep-alive, %.1f s: %zu answers, %.0f resolves/s, p50 %.0f us, "
-      "p99 %.0f us, max %.0f us, errors %llu; registry RSS %ld kB, CPU %.1f s\n",
+      "p99 %.0f us, max %.0f us, errors %llu; registry RSS %ld kB, CPU %.1f s (all instances)\n",
       a.clients, elapsed, all.size(), static_cast<double>(all.size()) / elapsed,
       bench::pct(all, 0.50), bench::pct(all, 0.99), all.empty() ? 0.0 : all.back(),
-      static_cast<unsigned long long>(errors), ps.rss_kb, ps.cpu_s);
+      static_cast<unsigned long long>(errors), rss_kb, cpu_s);
 
   // The token authority: client credentials.
   std::string out;
@@ -249,8 +343,8 @@ int main(int argc, char** argv) {
   int64_t tstart = bench::mono_us();
   int64_t tuntil = tstart + static_cast<int64_t>(a.seconds * 1e6);
   for (int c = 0; c < token_clients; ++c)
-    tthreads.emplace_back(token_client, port, std::cref(form), tuntil,
-                          std::ref(tok[static_cast<size_t>(c)]));
+    tthreads.emplace_back(token_client, ports[static_cast<size_t>(c % a.instances)],
+                          std::cref(form), tuntil, std::ref(tok[static_cast<size_t>(c)]));
   for (auto& t : tthreads) t.join();
   double telapsed = static_cast<double>(bench::mono_us() - tstart) / 1e6;
   std::vector<double> tall;
@@ -266,8 +360,8 @@ int main(int argc, char** argv) {
       token_clients, telapsed, tall.size(), static_cast<double>(tall.size()) / telapsed,
       bench::pct(tall, 0.50), bench::pct(tall, 0.99), static_cast<unsigned long long>(terrors));
   errors += terrors;
-  reg.stop();
+  for (auto& r : regs) r->stop();
   std::error_code ec;
-  std::filesystem::remove_all(dir, ec);
+  std::filesystem::remove_all(root, ec);
   return errors == 0 && !all.empty() ? 0 : 1;
 }
