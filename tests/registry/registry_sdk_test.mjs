@@ -149,7 +149,11 @@ try {
 } catch (e) {
   check(false, `federation: ${e.stack ?? e}`);
 }
-const insecure = await start();
+// With RCAN_REGISTRY_DATABASE (scripts/with_postgres.sh sets it) the registry the clients work
+// against runs on that database (PostgreSQL); the others stay on SQLite.
+const database = process.env.RCAN_REGISTRY_DATABASE ?? '';
+const insecure = await start(database ? ['--database', database] : []);
+console.log(`registry database: ${database ? 'PostgreSQL' : 'SQLite'}`);
 const secure = await start(['--public-url', 'https://registry.example']);
 try {
   await registryClient(insecure);

@@ -6,6 +6,9 @@ RegistryClient needs httpx: when python3 has it, register/get/list/search/update
 otherwise that part is reported as skipped (rcan-ts's RegistryClient covers it,
 registry_sdk_test.mjs).
 
+With RCAN_REGISTRY_DATABASE (scripts/with_postgres.sh sets it) the registry the clients work
+against runs on that database (PostgreSQL); the federation nodes stay on SQLite.
+
 Exit 0 pass, 1 fail, 77 skip (CTest SKIP_RETURN_CODE): RCAN_REGISTRY_PATH missing.
 """
 import base64
@@ -186,7 +189,9 @@ def federation_checks():
 
 def main():
     federation_checks()
-    reg = Registry()
+    database = os.environ.get("RCAN_REGISTRY_DATABASE", "")
+    reg = Registry(*(["--database", database] if database else []))
+    print("registry database: " + (database.split("@")[0] + "@…" if database else "SQLite"))
     try:
         node_client_checks(reg)
         registry_client_checks(reg)
