@@ -4,6 +4,7 @@
 
 #include <cstdlib>
 
+#include "client/net.h"
 #include "rcan/client.h"
 #include "rcan/errors.h"
 
@@ -65,6 +66,20 @@ Result<std::pair<int, std::string>> node_request(const std::string& url, const s
   auto t = parse_url(url);
   if (!t.ok()) return t.error();
   return request(*t, method, path, body, token);
+}
+
+Result<std::pair<int, std::string>> node_request(
+    const std::string& url, const std::string& method, const std::string& path,
+    const std::string& body, const std::string& token,
+    const std::vector<std::pair<std::string, std::string>>& headers) {
+  if (headers.empty()) return node_request(url, method, path, body, token);
+  auto ep = client::parse_endpoint(url);
+  if (!ep.ok()) return Error(ErrorCode::kSchemaValidationFailed, ep.error().message);
+  auto h = headers;
+  if (!token.empty()) h.emplace_back("Authorization", "Bearer " + token);
+  auto r = client::net::http_exchange(*ep, method, path, body, h, 10'000, "", false);
+  if (!r.ok()) return Error(ErrorCode::kNotFound, r.error().message);
+  return std::make_pair(r->status, r->body);
 }
 
 }  // namespace rcan::cli

@@ -3,6 +3,7 @@
 
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "cli.h"
 #include "rcan/result.h"
@@ -31,5 +32,10 @@ std::string node_token(const Options& o, bool required, std::string& err);
 Result<std::pair<int, std::string>> node_request(const std::string& url, const std::string& method,
                                                  const std::string& path, const std::string& body,
                                                  const std::string& token);
+// The same with more request headers (names and values as given).
+Result<std::pair<int, std::string>> node_request(
+    const std::string& url, const std::string& method, const std::string& path,
+    const std::string& body, const std::string& token,
+    const std::vector<std::pair<std::string, std::string>>& headers);
 
 }  // namespace rcan::cli

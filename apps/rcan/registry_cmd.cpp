@@ -3,6 +3,7 @@
 // $RCAN_REGISTRY; write operations present the API key in --key-file or $RCAN_REGISTRY_KEY_FILE.
 #include <sys/stat.h>
 
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <iostream>
@@ -31,7 +32,8 @@ constexpr const char* kUsage =
     "  get RRN | resolve RRN | delete RRN\n"
     "  list [--q TEXT] [--manufacturer M] [--model X] [--tier T] [--limit N] [--offset N]\n"
     "  search [--manufacturer M] [--model X] [--tier T]\n"
-    "  update RRN [--description T] [--contact-email E] [--endpoint URL]\n"
+    "  update RRN [--description T] [--contact-email E] [--endpoint URL] [--keys-dir D]\n"
+    "      A robot that registered its keys signs its updates with them (--keys-dir).\n"
     "  nodes [--prefix P] | manifest\n"
     "  keys create [--role registrant|admin] [--label L] [--save F] | keys list | keys revoke ID\n"
     "The registry: --registry URL, else $RCAN_REGISTRY, else http://127.0.0.1:8090. The API\n"
@@ -111,9 +113,10 @@ struct Answer {
 };
 
 Answer call(const std::string& base, const std::string& method, const std::string& path,
-            const std::string& body, const std::string& key) {
+            const std::string& body, const std::string& key,
+            const std::vector<std::pair<std::string, std::string>>& headers = {}) {
   Answer a;
-  auto r = node_request(base, method, path, body, key);
+  auto r = node_request(base, method, path, body, key, headers);
   if (!r.ok()) {
     a.exit = 3;
     a.text = r.error().message;
@@ -224,8 +227,25 @@ int do_update(const Options& o, const std::string& base, const std::string& key,
   if (o.has("endpoint")) body.set("endpoints", json::Array{json::Value(o.get("endpoint"))});
   if (body.empty())
     return usage_error("registry", "update needs --description, --contact-email or --endpoint");
-  return report("registry", call(base, "PATCH", "/api/v1/robots/" + rrn,
-                                 json::dump(json::Value(std::move(body))), key));
+  const std::string text = json::dump(json::Value(std::move(body)));
+  std::vector<std::pair<std::string, std::string>> headers;
+  if (o.has("keys-dir")) {  // a robot that proved its keys signs its own updates
+    auto k = keys::load_dir(o.get("keys-dir"));
+    if (!k.ok()) {
+      std::fprintf(stderr, "rcan registry: %s\n", k.error().message.c_str());
+      return 1;
+    }
+    const int64_t ts = std::chrono::duration_cast<std::chrono::milliseconds>(
+                           std::chrono::system_clock::now().time_since_epoch())
+                           .count();
+    auto sig = registry::sign_update(*k, registry::update_message(rrn, ts, text));
+    if (!sig.ok()) {
+      std::fprintf(stderr, "rcan registry: %s\n", sig.error().message.c_str());
+      return 1;
+    }
+    headers = {{"X-RCAN-Timestamp", std::to_string(ts)}, {"X-RCAN-Signature", *sig}};
+  }
+  return report("registry", call(base, "PATCH", "/api/v1/robots/" + rrn, text, key, headers));
 }
 
 int do_keys(const Options& o, const std::string& base, const std::string& key) {

@@ -41,14 +41,16 @@ struct Exchange {
   const config::NodeConfig& cfg;
   int timeout_ms;
 
-  Result<HttpAnswer> operator()(const std::string& method, const std::string& path,
-                                const std::string& body, const std::string& key) const {
+  Result<HttpAnswer> operator()(
+      const std::string& method, const std::string& path, const std::string& body,
+      const std::string& key, std::vector<std::pair<std::string, std::string>> headers = {}) const {
     std::string base = cfg.registry_url;
     while (!base.empty() && base.back() == '/') base.pop_back();
     auto u = parse_web_url(base + path);
     if (!u.ok()) return u.error();
     HttpRequestOptions o;
     o.ca_file = cfg.registry.ca_file;
+    o.headers = std::move(headers);
     if (!key.empty()) o.headers.emplace_back("Authorization", "Bearer " + key);
     return http_request(method, *u, body, timeout_ms, o);
   }
@@ -186,10 +188,22 @@ bool RegistryLink::refresh(const std::string& rrn) {
     log(LogLevel::kWarn, "registry_refresh_failed", json::Object{{"error", err}});
     return false;
   }
-  json::Object body;
-  body.set("endpoints", json::Value(endpoints(cfg_)));
-  auto a = Exchange{cfg_, kTimeoutMs}("PATCH", "/api/v1/robots/" + rrn,
-                                      json::dump(json::Value(std::move(body))), key);
+  json::Object fields;
+  fields.set("endpoints", json::Value(endpoints(cfg_)));
+  const std::string body = json::dump(json::Value(std::move(fields)));
+  // Signed with the identity key the registration proved (the registry refuses a robot's
+  // unsigned update once it holds its keys).
+  const int64_t ts = std::chrono::duration_cast<std::chrono::milliseconds>(
+                         std::chrono::system_clock::now().time_since_epoch())
+                         .count();
+  auto sig = registry::sign_update(keys_, registry::update_message(rrn, ts, body));
+  if (!sig.ok()) {
+    log(LogLevel::kWarn, "registry_refresh_failed", json::Object{{"error", sig.error().message}});
+    return false;
+  }
+  auto a = Exchange{cfg_, kTimeoutMs}(
+      "PATCH", "/api/v1/robots/" + rrn, body, key,
+      {{"X-RCAN-Timestamp", std::to_string(ts)}, {"X-RCAN-Signature", *sig}});
   const std::string why =
       !a.ok() ? a.error().message : (a->status == 200 ? std::string() : refusal(*a));
   std::lock_guard<std::mutex> l(mu_);

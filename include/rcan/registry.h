@@ -2,6 +2,7 @@
 // RRNs, the slugs that name a robot, and the bytes a robot signs to prove it holds its keys.
 #pragma once
 
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -23,5 +24,10 @@ std::optional<std::string> normalize_rrn(std::string_view s);
 std::string proof_message(std::string_view challenge_id, std::string_view nonce,
                           std::string_view manufacturer, std::string_view model,
                           std::string_view version, std::string_view device_id);
+
+// What a robot that proved its keys signs to change its own record (PATCH
+// /api/v1/robots/{rrn}, headers X-RCAN-Timestamp and X-RCAN-Signature):
+//   "rcan-registry-update:<RRN>:<timestamp, Unix ms>:" followed by the request body.
+std::string update_message(std::string_view rrn, int64_t timestamp_ms, std::string_view body);
 
 }  // namespace rcan::registry

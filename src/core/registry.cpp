@@ -1,6 +1,7 @@
 #include "rcan/registry.h"
 
 #include <cctype>
+#include <string>
 
 #include "rcan/ruri.h"
 
@@ -35,6 +36,12 @@ std::string proof_message(std::string_view challenge_id, std::string_view nonce,
   m.append(challenge_id).append(":").append(nonce).append(":");
   m.append(manufacturer).append("/").append(model).append("/").append(version).append("/");
   m.append(device_id);
+  return m;
+}
+
+std::string update_message(std::string_view rrn, int64_t timestamp_ms, std::string_view body) {
+  std::string m = "rcan-registry-update:";
+  m.append(rrn).append(":").append(std::to_string(timestamp_ms)).append(":").append(body);
   return m;
 }
 

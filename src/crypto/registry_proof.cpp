@@ -84,4 +84,26 @@ Status verify_proof(const std::string& ed25519_pub_b64url, const std::string& ml
   return Status::Ok();
 }
 
+Result<std::string> sign_update(const keys::RobotKeys& keys, const std::string& message) {
+  auto sig = ed25519::sign(keys.ed25519_seed.span(), bytes_of(message));
+  if (!sig.ok()) return sig.error();
+  return "ed25519=" + base64url_encode(*sig);
+}
+
+Status verify_update(const std::string& ed25519_pub_b64url, const std::string& message,
+                     std::string_view header) {
+  constexpr std::string_view kPrefix = "ed25519=";
+  if (header.substr(0, kPrefix.size()) != kPrefix)
+    return Error(ErrorCode::kSignatureInvalid, "X-RCAN-Signature must be ed25519=<base64url>",
+                 "X-RCAN-Signature", "signature_malformed");
+  auto pk = base64url_decode(ed25519_pub_b64url);
+  auto sig = base64url_decode(header.substr(kPrefix.size()));
+  if (!pk || pk->size() != ed25519::kPublicKeyBytes || !sig ||
+      !ed25519::verify(*pk, bytes_of(message), *sig))
+    return Error(ErrorCode::kSignatureInvalid,
+                 "the update is not signed by the robot's registered Ed25519 key",
+                 "X-RCAN-Signature", "bad_signature");
+  return Status::Ok();
+}
+
 }  // namespace rcan::registry

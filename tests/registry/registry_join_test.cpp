@@ -7,8 +7,11 @@
 #include <fstream>
 #include <thread>
 
+#include "rcan/crypto/keys.h"
+#include "rcan/crypto/registry_proof.h"
 #include "rcan/encoding.h"
 #include "rcan/json.h"
+#include "rcan/registry.h"
 #include "registry_daemon.h"
 #include "test_support.h"
 
@@ -102,6 +105,21 @@ class JoiningRobot {
   std::unique_ptr<Process> proc_;
 };
 
+template <typename F>
+bool eventually(F f, int timeout_ms) {
+  for (int waited = 0; waited < timeout_ms; waited += 50) {
+    if (f()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return f();
+}
+
+int64_t now_ms() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
 TEST(RegistryJoin, ARobotRegistersWithProofOfPossessionAndKeepsItsRrn) {
   TempDir dir;
   RegistryDaemon reg(dir.file("registry"));
@@ -133,6 +151,16 @@ TEST(RegistryJoin, ARobotRegistersWithProofOfPossessionAndKeepsItsRrn) {
   json::Value state = json_of(read_file(robot.data() + "/registry/state.json"));
   EXPECT_EQ(str(state, "rrn"), rrn);
   EXPECT_EQ(str(state, "robot_key").rfind("rcan_", 0), 0u);
+
+  // The link's first refresh (signed with the robot's key) is taken.
+  EXPECT_TRUE(eventually(
+      [&] {
+        json::Value now_rec = json_of(reg.get("/api/v1/robots/" + rrn).body);
+        return str(now_rec, "updated_at") > str(now_rec, "registered_at");
+      },
+      5000));
+  EXPECT_EQ(robot.proc().err().find("registry_refresh_failed"), std::string::npos)
+      << robot.proc().err();
 
   // Anyone resolves the robot's RURI to where it answers and to its keys.
   auto res = run_cli({"resolve", kRuri, "--registry", reg.url()});
@@ -188,15 +216,6 @@ TEST(RegistryJoin, AnUnusableRegistryDoesNotStopTheRobotAndTheLinkRegistersLater
   // Adopted at the next start.
   EXPECT_EQ(robot.stop(), 0);
   EXPECT_EQ(robot.start(), rrn);
-}
-
-template <typename F>
-bool eventually(F f, int timeout_ms) {
-  for (int waited = 0; waited < timeout_ms; waited += 50) {
-    if (f()) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  }
-  return f();
 }
 
 // Seed §4.1–4.2 and §6.1 with every party real: a registry, two robots that register
@@ -277,6 +296,63 @@ TEST(RegistryEndToEnd,
   EXPECT_TRUE(eventually([&] { return mode() == 0; }, 5000)) << mode();
 }
 
+// A robot that proved its keys changes its record only by requests it signs, fresh and once.
+TEST(RegistryCli, SignedUpdatesAreFreshOnceAndByTheRobotsOwnKey) {
+  TempDir dir;
+  RegistryDaemon reg(dir.file("registry"));
+  ASSERT_FALSE(reg.url().empty());
+  const std::string key =
+      registrant_key_file(reg, dir.file("registry"), dir.file("registrant.key"));
+  ASSERT_EQ(run_cli({"keys", "generate", "--dir", dir.file("keys")}).exit_code, 0);
+  ASSERT_EQ(run_cli({"keys", "generate", "--dir", dir.file("other")}).exit_code, 0);
+  auto r = run_cli({"registry", "register", "--manufacturer", "acme", "--model", "arm", "--version",
+                    "v1", "--device-id", "u1", "--keys-dir", dir.file("keys"), "--save-key",
+                    dir.file("robot.key"), "--registry", reg.url(), "--key-file", key});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  const std::string rrn = str(json_of(r.out), "rrn");
+  const std::string robot_key = read_file(dir.file("robot.key")).substr(0, 86);
+  auto k = keys::load_dir(dir.file("keys"));
+  auto other = keys::load_dir(dir.file("other"));
+  ASSERT_TRUE(k.ok() && other.ok());
+  const std::string body = R"({"description":"signed"})";
+  auto patch = [&](int64_t ts, const keys::RobotKeys& by) {
+    auto sig = registry::sign_update(by, registry::update_message(rrn, ts, body));
+    EXPECT_TRUE(sig.ok());
+    return http(reg.port(), "PATCH", "/api/v1/robots/" + rrn, body,
+                {{"Authorization", "Bearer " + robot_key},
+                 {"Content-Type", "application/json"},
+                 {"X-RCAN-Timestamp", std::to_string(ts)},
+                 {"X-RCAN-Signature", *sig}});
+  };
+  const int64_t now = now_ms();
+  auto ok = patch(now, *k);
+  EXPECT_EQ(ok.status, 200) << ok.body;
+  auto replay = patch(now, *k);  // the same request again
+  EXPECT_EQ(replay.status, 401) << replay.body;
+  EXPECT_NE(replay.body.find("replayed"), std::string::npos) << replay.body;
+  auto forged = patch(now + 10, *other);
+  EXPECT_EQ(forged.status, 401);
+  EXPECT_NE(forged.body.find("bad_signature"), std::string::npos) << forged.body;
+  auto stale = patch(now - 600'000, *k);
+  EXPECT_EQ(stale.status, 401);
+  EXPECT_NE(stale.body.find("timestamp_skew"), std::string::npos) << stale.body;
+  // The signature covers the body: another body under the same signature is refused.
+  auto sig = registry::sign_update(*k, registry::update_message(rrn, now + 20, body));
+  auto moved = http(reg.port(), "PATCH", "/api/v1/robots/" + rrn,
+                    R"({"description":"moved","endpoints":["https://evil.example"]})",
+                    {{"Authorization", "Bearer " + robot_key},
+                     {"Content-Type", "application/json"},
+                     {"X-RCAN-Timestamp", std::to_string(now + 20)},
+                     {"X-RCAN-Signature", *sig}});
+  EXPECT_EQ(moved.status, 401) << moved.body;
+  EXPECT_EQ(str(json_of(reg.get("/api/v1/robots/" + rrn).body), "description"), "signed");
+  // An admin may still correct a record without the robot's key.
+  EXPECT_EQ(
+      reg.send("PATCH", "/api/v1/robots/" + rrn, R"({"description":"by admin"})", reg.admin_key())
+          .status,
+      200);
+}
+
 TEST(RegistryCli, RegisterWithProofGetListUpdateResolveDelete) {
   TempDir dir;
   RegistryDaemon reg(dir.file("registry"));
@@ -307,8 +383,14 @@ TEST(RegistryCli, RegisterWithProofGetListUpdateResolveDelete) {
   // Updates are the robot's own (its key) — the registrant key is refused.
   r = run_cli({"registry", "update", rrn, "--endpoint", "https://arm7.example"}, {}, env);
   EXPECT_EQ(r.exit_code, 1) << r.out;
+  // It proved its keys, so its own key alone is not enough either: it signs its updates.
   r = run_cli({"registry", "update", rrn, "--endpoint", "https://arm7.example", "--key-file",
                dir.file("robot.key")},
+              {}, env);
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("signature_required"), std::string::npos) << r.out;
+  r = run_cli({"registry", "update", rrn, "--endpoint", "https://arm7.example", "--key-file",
+               dir.file("robot.key"), "--keys-dir", dir.file("keys")},
               {}, env);
   EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
   r = run_cli({"resolve", rrn}, {}, env);

@@ -36,4 +36,11 @@ Status check_proof_shape(const std::string& ed25519_pub_b64url,
 Status verify_proof(const std::string& ed25519_pub_b64url, const std::string& mldsa65_pub_b64url,
                     const std::string& message, const Proof& proof);
 
+// The X-RCAN-Signature of a signed update: "ed25519=<base64url signature of `message`>".
+Result<std::string> sign_update(const keys::RobotKeys& keys, const std::string& message);
+// Ok when `header` is such a signature of `message` by the key (base64url); else
+// SIGNATURE_INVALID (reason bad_signature, or signature_malformed for a header in another form).
+Status verify_update(const std::string& ed25519_pub_b64url, const std::string& message,
+                     std::string_view header);
+
 }  // namespace rcan::registry

@@ -84,6 +84,8 @@ class RegistryApi::Impl {
   void build_manifest();
   // The registration's proof of possession: nullopt when it holds (or there are no keys).
   std::optional<HttpResponse> check_proof(const Registration& r);
+  // A signed update by a robot that proved its keys: nullopt when it holds.
+  std::optional<HttpResponse> check_signed_update(const HttpRequest& req, const Robot& robot);
 
   // ---- the token authority (authority.cpp, authority_routes.cpp)
   HttpResponse jwks();

@@ -61,6 +61,26 @@ std::string iso_utc(int64_t ms) {
   return buf;
 }
 
+int64_t iso_utc_ms(std::string_view s) {
+  int y = 0, mo = 0, d = 0, h = 0, mi = 0, sec = 0, ms = 0;
+  char z = 0;
+  const std::string text(s.substr(0, 32));
+  if (s.size() != 24 ||
+      std::sscanf(text.c_str(), "%4d-%2d-%2dT%2d:%2d:%2d.%3d%c", &y, &mo, &d, &h, &mi, &sec, &ms,
+                  &z) != 8 ||
+      z != 'Z')
+    return -1;
+  std::tm tm{};
+  tm.tm_year = y - 1900;
+  tm.tm_mon = mo - 1;
+  tm.tm_mday = d;
+  tm.tm_hour = h;
+  tm.tm_min = mi;
+  tm.tm_sec = sec;
+  const std::time_t t = timegm(&tm);
+  return t < 0 ? -1 : static_cast<int64_t>(t) * 1000 + ms;
+}
+
 HttpResponse json_response(int status, const json::Value& body) {
   HttpResponse r;
   r.status = status;

@@ -45,6 +45,8 @@ struct ApiOptions {
 
 // "2026-11-27T05:20:00.000Z"
 std::string iso_utc(int64_t ms);
+// The inverse of iso_utc; -1 when `s` is not in that form.
+int64_t iso_utc_ms(std::string_view s);
 
 class RegistryApi : public transport::HttpHandler {
  public:

@@ -214,6 +214,39 @@ HttpResponse RegistryApi::Impl::get_robot(const std::string& rrn) {
   return out;
 }
 
+// A robot that proved its keys changes its record only by requests it signs: the key alone
+// (a bearer secret) is not enough. The timestamp must be within 5 minutes of the registry's
+// clock and later than the record's last change, so a captured request cannot be replayed.
+std::optional<HttpResponse> RegistryApi::Impl::check_signed_update(const HttpRequest& req,
+                                                                   const Robot& robot) {
+  auto refuse = [](std::string msg, std::string reason) {
+    return project_error(ErrorCode::kSignatureInvalid, std::move(msg), "X-RCAN-Signature",
+                         std::move(reason));
+  };
+  const std::string ts_text(req.header("x-rcan-timestamp"));
+  const std::string_view sig = req.header("x-rcan-signature");
+  int64_t ts = -1;
+  if (!ts_text.empty() && ts_text.size() <= 16 &&
+      ts_text.find_first_not_of("0123456789") == std::string::npos)
+    ts = std::stoll(ts_text);
+  if (ts < 0 || sig.empty())
+    return refuse(
+        "this robot proved its keys: its updates must be signed (X-RCAN-Timestamp, "
+        "X-RCAN-Signature: ed25519=<signature of rcan-registry-update:<RRN>:<timestamp>:<body>>)",
+        "signature_required");
+  const int64_t t = now_ms();
+  if (ts > t + 300'000 || ts < t - 300'000)
+    return refuse("X-RCAN-Timestamp is more than 5 minutes from the registry's clock",
+                  "timestamp_skew");
+  if (ts <= iso_utc_ms(robot.updated_at))
+    return refuse("X-RCAN-Timestamp is not later than the record's last change (a replay?)",
+                  "replayed");
+  if (Status s = verify_update(robot.ed25519_pub, update_message(robot.rrn, ts, req.body), sig);
+      !s.ok())
+    return refuse(s.error().message, s.error().reason);
+  return std::nullopt;
+}
+
 HttpResponse RegistryApi::Impl::patch_robot(const HttpRequest& req, const std::string& rrn) {
   HttpResponse err;
   auto caller = authenticate(req, err);
@@ -228,6 +261,8 @@ HttpResponse RegistryApi::Impl::patch_robot(const HttpRequest& req, const std::s
   if (!*r) return ref_error(404, "Robot not found: " + rrn);
   if (!caller->is("admin") && !(caller->is("robot") && caller->key.rrn == (*r)->rrn))
     return ref_error(403, "Invalid API key");
+  if (caller->is("robot") && !(*r)->ed25519_pub.empty())
+    if (auto refused = check_signed_update(req, **r)) return *refused;
   std::string t = now();
   auto u = parse_update(req.body, t);
   if (!u.ok()) return ref_error(400, u.error().message);
