@@ -29,7 +29,7 @@ constexpr const char* kInitUsage =
     "usage: rcand init [--dir D] [--name NAME] [--manufacturer M] [--model M] [--type TYPE]\n"
     "                  [--registry R] [--driver sim|ros2|process] [--port N] [--bind ADDR] "
     "[--issuer NAME]\n"
-    "                  [--config FILE] [--yes]\n"
+    "                  [--config FILE] [--join URL --registry-key FILE [--endpoint URL]] [--yes]\n"
     "\n"
     "Creates a configured robot in D (default: the data directory rcand uses, $RCAND_DATA_DIR,\n"
     "else ~/.local/share/rcand): D/robot.rcan.yaml (commented; its data directory is D), robot\n"
@@ -40,6 +40,10 @@ constexpr const char* kInitUsage =
     "--config FILE writes (or reads) the configuration there instead of D/robot.rcan.yaml, its\n"
     "data directory naming D (a packaged install: --dir /var/lib/rcand --config\n"
     "/etc/rcan/robot.rcan.yaml).\n"
+    "--join URL writes a `registry` block: at its first start the robot registers with the\n"
+    "rcan-registry at URL using the registrant API key in --registry-key FILE (mode 0600),\n"
+    "publishes --endpoint URL as where it answers, and trusts the registry's tokens\n"
+    "(docs/REGISTRY.md).\n"
     "On a terminal it asks for the robot's name, manufacturer and model; --yes takes the\n"
     "defaults and the flags. Then: rcand --config D/robot.rcan.yaml\n";
 
@@ -54,6 +58,7 @@ struct InitOptions {
   std::string bind = "127.0.0.1";
   std::string issuer = "rcand-local";
   std::string config;  // the robot.rcan.yaml to write or read; default <dir>/robot.rcan.yaml
+  std::string join, registry_key, endpoint;  // --join: the registry block
   int port = 8080;
   bool yes = false;
   std::vector<std::string> given;  // the flags named on the command line
@@ -105,6 +110,9 @@ std::optional<InitOptions> parse(int argc, char** argv, int& code) {
                           : a == "--bind"         ? &o.bind
                           : a == "--issuer"       ? &o.issuer
                           : a == "--config"       ? &o.config
+                          : a == "--join"         ? &o.join
+                          : a == "--registry-key" ? &o.registry_key
+                          : a == "--endpoint"     ? &o.endpoint
                                                   : nullptr;
     if (!target && a != "--port") {
       std::fprintf(stderr, "rcand init: unknown argument '%s'\n%s", a.c_str(), kInitUsage);
@@ -207,6 +215,20 @@ std::string template_yaml(const InitOptions& o, const std::string& ruri,
   y += "  limit_policy: {speed: clamp, joints: reject, workspace: reject}\n";
   y += "  heartbeat_timeout_ms: 2000      # the deadman of a control session\n\n";
   y += "watchdog:\n  enabled: true\n  timeout_s: 10\n\n";
+  if (!o.join.empty()) {
+    y += "# The registry this robot joins (docs/REGISTRY.md): it registers at its first start\n";
+    y += "# (proving it holds its keys), takes the registry's RRN, keeps its endpoint fresh, and\n";
+    y += "# accepts the tokens the registry issues for it.\n";
+    y += "registry:\n";
+    y += "  registry_url: " + yaml_quote(o.join) + "\n";
+    y += "  key_file: " + yaml_quote(o.registry_key) + "   # a registrant API key, mode 0600\n";
+    if (!o.endpoint.empty()) y += "  endpoint: " + yaml_quote(o.endpoint) + "\n";
+    y += "  trust_tokens: true\n\n";
+  } else {
+    y += "# To join a registry (docs/REGISTRY.md):\n";
+    y += "# registry: {registry_url: https://registry.example.com, key_file: registrant.key,\n";
+    y += "#            endpoint: https://this-robot.example.com:8080, trust_tokens: true}\n\n";
+  }
   y += "driver:\n";
   if (o.driver == "ros2") {
     y += "  type: ros2   # a ROS 2 robot over DDS, no ROS installation needed (docs/DRIVERS.md)\n";
@@ -271,6 +293,16 @@ int init(InitOptions o) {
                    o.driver.c_str());
       return 2;
     }
+    if (!o.join.empty() && (o.registry_key.empty() ||
+                            (o.join.rfind("http://", 0) != 0 && o.join.rfind("https://", 0) != 0) ||
+                            (!o.endpoint.empty() && o.endpoint.rfind("http://", 0) != 0 &&
+                             o.endpoint.rfind("https://", 0) != 0))) {
+      std::fprintf(stderr,
+                   "rcand init: --join needs an http(s) URL and --registry-key FILE; --endpoint "
+                   "an http(s) URL\n");
+      return 2;
+    }
+    if (!o.registry_key.empty()) o.registry_key = fs::absolute(o.registry_key).string();
     if (!segment_ok(o.manufacturer) || !segment_ok(o.model) || !registry_ok(o.registry)) {
       std::fprintf(stderr,
                    "rcand init: --manufacturer and --model are RURI segments (lower-case letters, "

@@ -189,6 +189,35 @@ TEST(RegistryJoin, ARobotRegistersWithProofOfPossessionAndKeepsItsRrn) {
   EXPECT_EQ(list.get("total")->as_int(), 1);
 }
 
+// `rcand init --join` writes the registry block; the robot it made joins at its first start.
+TEST(RegistryJoin, RcandInitJoinMakesARobotThatRegistersAtItsFirstStart) {
+  TempDir dir;
+  RegistryDaemon reg(dir.file("registry"));
+  ASSERT_FALSE(reg.url().empty());
+  const std::string key =
+      registrant_key_file(reg, dir.file("registry"), dir.file("registrant.key"));
+  const uint16_t port = free_port();
+  const std::string endpoint = "http://127.0.0.1:" + std::to_string(port);
+  auto init =
+      run({RCAND_PATH, "init", "--dir", dir.file("robot"), "--yes", "--port", std::to_string(port),
+           "--join", reg.url(), "--registry-key", key, "--endpoint", endpoint});
+  ASSERT_EQ(init.exit_code, 0) << init.out << init.err;
+  EXPECT_EQ(
+      run({RCAND_PATH, "init", "--dir", dir.file("other"), "--yes", "--join", reg.url()}).exit_code,
+      2);  // --join without a key
+  Process rcand;
+  ASSERT_TRUE(rcand.start({RCAND_PATH, "--config", dir.file("robot") + "/robot.rcan.yaml"}));
+  auto line = rcand.wait_for_line("\"event\":\"listening\"", 60000);
+  ASSERT_TRUE(line.has_value()) << rcand.err();
+  const std::string rrn = str(json_of(*line), "rrn");
+  auto rec = reg.get("/api/v1/robots/" + rrn);
+  ASSERT_EQ(rec.status, 200) << rrn << " " << rec.body;
+  auto res = json_of(reg.get("/api/v1/resolve/" + rrn).body);
+  ASSERT_TRUE(res.get("endpoints") != nullptr && res.get("endpoints")->is_array());
+  EXPECT_EQ(str(res.get("endpoints")->as_array().at(0), "url"), endpoint);
+  EXPECT_EQ(rcand.stop(SIGTERM, 15000), 0);
+}
+
 TEST(RegistryJoin, AnUnusableRegistryDoesNotStopTheRobotAndTheLinkRegistersLater) {
   TempDir dir;
   RegistryDaemon reg(dir.file("registry"));
