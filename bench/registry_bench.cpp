@@ -176,23 +176,10 @@ std::string register_robot(uint16_t port, const std::string& admin, const std::s
   return v->get("rrn")->as_string();
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  Args a;
-  if (!parse(argc, argv, a)) {
-    std::fprintf(
-        stderr,
-        "usage: registry_bench --registry PATH [--robots N] [--clients C] [--seconds S]\n"
-        "                      [--database SPEC] [--instances K (a postgresql:// database)]\n");
-    return 2;
-  }
-  std::string root =
-      (std::filesystem::temp_directory_path() / ("registry-bench-" + std::to_string(getpid())))
-          .string();
-  std::vector<std::unique_ptr<bench::Child>> regs;
-  std::vector<uint16_t> ports;
-  std::string admin;  // the first instance's admin key (every instance takes it: one database)
+// Starts the instances (each with its own data directory under `root`) on a.database.
+bool start_instances(const Args& a, const std::string& root,
+                     std::vector<std::unique_ptr<bench::Child>>& regs, std::vector<uint16_t>& ports,
+                     std::string& admin) {
   for (int i = 0; i < a.instances; ++i) {
     std::string dir = root + "/" + std::to_string(i);
     uint16_t port = bench::free_port();
@@ -216,7 +203,7 @@ int main(int argc, char** argv) {
     regs.push_back(std::make_unique<bench::Child>(cmd, "listening"));
     if (bench::wait_ready(*regs.back(), port) < 0) {
       std::fprintf(stderr, "rcan-registry did not start:\n%s\n", regs.back()->head().c_str());
-      return 1;
+      return false;
     }
     ports.push_back(port);
     if (i == 0) {
@@ -228,6 +215,54 @@ int main(int argc, char** argv) {
       }
     }
   }
+  return true;
+}
+
+// The race: each of 50 robots registered at once through every instance (2 requests per
+// instance). Adds the answers to `distinct`; returns how many robots got more than one RRN.
+int race(const std::vector<uint16_t>& ports, const std::string& admin,
+         std::set<std::string>& distinct) {
+  constexpr int kRace = 50;
+  const int instances = static_cast<int>(ports.size());
+  std::vector<std::vector<std::string>> answers(kRace);
+  std::mutex mu;
+  std::vector<std::thread> ts;
+  for (int i = 0; i < kRace; ++i)
+    for (int k = 0; k < 2 * instances; ++k)
+      ts.emplace_back([&, i, k] {
+        std::string r = register_robot(ports[static_cast<size_t>(k % instances)], admin,
+                                       "race-" + std::to_string(i));
+        std::lock_guard<std::mutex> l(mu);
+        answers[static_cast<size_t>(i)].push_back(r);
+      });
+  for (auto& t : ts) t.join();
+  int split = 0;
+  for (const auto& one_robot : answers) {
+    std::set<std::string> one(one_robot.begin(), one_robot.end());
+    if (one.size() != 1 || one.begin()->empty()) ++split;
+    distinct.insert(one_robot.begin(), one_robot.end());
+  }
+  return split;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Args a;
+  if (!parse(argc, argv, a)) {
+    std::fprintf(
+        stderr,
+        "usage: registry_bench --registry PATH [--robots N] [--clients C] [--seconds S]\n"
+        "                      [--database SPEC] [--instances K (a postgresql:// database)]\n");
+    return 2;
+  }
+  std::string root =
+      (std::filesystem::temp_directory_path() / ("registry-bench-" + std::to_string(getpid())))
+          .string();
+  std::vector<std::unique_ptr<bench::Child>> regs;
+  std::vector<uint16_t> ports;
+  std::string admin;  // the first instance's admin key (every instance takes it: one database)
+  if (!start_instances(a, root, regs, ports, admin)) return 1;
   const uint16_t port = ports[0];
   std::printf("%d instance(s) on %s\n", a.instances,
               a.database.empty() ? "SQLite" : a.database.substr(0, a.database.find(':')).c_str());
@@ -254,29 +289,10 @@ int main(int argc, char** argv) {
   std::printf("registered %d robots in %.2f s (%.0f/s, 8 threads, one connection per request)\n",
               a.robots, reg_s, a.robots / reg_s);
 
-  // The race: each of 50 robots registered at once through every instance (2 threads each).
+  // The race.
   constexpr int kRace = 50;
-  std::vector<std::vector<std::string>> race(kRace);
-  {
-    std::vector<std::thread> ts;
-    for (int i = 0; i < kRace; ++i)
-      for (int k = 0; k < 2 * a.instances; ++k)
-        ts.emplace_back([&, i, k] {
-          std::string r = register_robot(ports[static_cast<size_t>(k % a.instances)], admin,
-                                         "race-" + std::to_string(i));
-          static std::mutex mu;
-          std::lock_guard<std::mutex> l(mu);
-          race[static_cast<size_t>(i)].push_back(r);
-        });
-    for (auto& t : ts) t.join();
-  }
   std::set<std::string> distinct(rrns.begin(), rrns.end());
-  int race_split = 0;
-  for (const auto& answers : race) {
-    std::set<std::string> one(answers.begin(), answers.end());
-    if (one.size() != 1 || one.begin()->empty()) ++race_split;
-    distinct.insert(answers.begin(), answers.end());
-  }
+  const int race_split = race(ports, admin, distinct);
   const bool unique = distinct.size() == static_cast<size_t>(a.robots + kRace);
   std::printf(
       "race: %d robots each registered by %d concurrent requests over %d instance(s): %d got "
