@@ -137,6 +137,8 @@ int main(int argc, char** argv) {
   opts.key_lifetime_s = flags->key_lifetime_s;
   opts.max_token_ttl_s = flags->max_token_ttl_s;
   opts.device_ttl_s = flags->device_ttl_s;
+  opts.webhooks.backoff_ms = flags->webhook_backoff_ms;
+  opts.webhooks.timeout_ms = flags->webhook_timeout_ms;
   registry::api::RegistryApi api(**store, audit_log->get(), opts);
 
   std::string key_file = dir + "/admin.key";

@@ -20,6 +20,7 @@ struct Flags {
   int io_threads = 2;
   int64_t key_overlap_s = 600, key_lifetime_s = 2592000, max_token_ttl_s = 3600;
   int64_t device_ttl_s = 600;
+  int webhook_backoff_ms = 1000, webhook_timeout_ms = 5000;
   bool allow_http_node_urls = false;
 };
 

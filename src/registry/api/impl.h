@@ -85,6 +85,13 @@ class RegistryApi::Impl {
   // The registration's proof of possession: nullopt when it holds (or there are no keys).
   std::optional<HttpResponse> check_proof(const Registration& r);
 
+  // ---- webhooks (webhook_routes.cpp)
+  HttpResponse list_webhooks(const HttpRequest& req);
+  HttpResponse add_webhook(const HttpRequest& req);
+  HttpResponse delete_webhook(const HttpRequest& req, const std::string& id);
+  // Queues `event` about `r` for its namespace's subscriptions (record.deleted: `r` as it was).
+  void notify(const char* event, const Robot& r);
+
   // ---- the token authority (authority.cpp, authority_routes.cpp)
   HttpResponse jwks();
   HttpResponse oauth_token(const HttpRequest& req);
@@ -132,6 +139,8 @@ class RegistryApi::Impl {
   Metrics metrics;
   RateLimiter write_key, write_addr, read_addr;
   std::atomic<uint64_t> audit_failures{0};
+  // Last: its worker stops before the rest goes.
+  std::unique_ptr<WebhookDispatcher> webhooks;
 };
 
 // Answers.

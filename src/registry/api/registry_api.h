@@ -15,6 +15,7 @@
 #include "rcan/encoding.h"
 #include "rcan/result.h"
 #include "registry/api/rate_limit.h"
+#include "registry/api/webhooks.h"
 #include "registry/store.h"
 #include "transport/http_api.h"
 
@@ -41,6 +42,9 @@ struct ApiOptions {
   int64_t max_token_ttl_s = 3600;    // cap on every token's lifetime
   int64_t jwks_max_age_s = 300;      // Cache-Control of the JWKS
   int64_t device_ttl_s = 600, device_interval_s = 5;
+  // Webhook deliveries (docs/REGISTRY.md "Webhooks"); webhook URLs may be http:// only with
+  // allow_http_node_urls.
+  WebhookOptions webhooks;
 };
 
 // "2026-11-27T05:20:00.000Z"

@@ -126,6 +126,7 @@ HttpResponse RegistryApi::Impl::register_robot(const HttpRequest& req) {
   auto key = create_key("robot", r.rrn, "robot " + r.rrn, principal);
   audit("REGISTRY_ROBOT_REGISTERED", principal, r.rcan_uri,
         json::Object{{"rrn", r.rrn}, {"proof_of_possession", reg->proof.has_value()}});
+  notify("record.created", r);
   json::Object out{{"rrn", r.rrn},
                    {"rcan_uri", r.rcan_uri},
                    {"uri", r.rcan_uri},
@@ -250,6 +251,7 @@ HttpResponse RegistryApi::Impl::patch_robot(const HttpRequest& req, const std::s
     if (set) fields.emplace_back(name);
   audit("REGISTRY_ROBOT_UPDATED", "apikey:" + caller->key.id, (*done)->rcan_uri,
         json::Object{{"rrn", (*done)->rrn}, {"fields", std::move(fields)}});
+  notify("record.updated", **done);
   return json_response(200, robot_json(**done));
 }
 
@@ -272,6 +274,7 @@ HttpResponse RegistryApi::Impl::delete_robot(const HttpRequest& req, const std::
   if (!*done) return ref_error(404, "Robot not found: " + rrn);
   audit("REGISTRY_ROBOT_DELETED", "apikey:" + caller->key.id, (*r)->rcan_uri,
         json::Object{{"rrn", (*r)->rrn}});
+  notify("record.deleted", **r);
   return json_response(200,
                        json::Object{{"message", "Robot registration removed"}, {"rrn", (*r)->rrn}});
 }
