@@ -29,7 +29,8 @@ constexpr const char* kUsage =
     "                     [--address-write-rate R] [--read-rate R] [--io-threads N]\n"
     "                     [--key-overlap S] [--key-lifetime S] [--max-token-ttl S]\n"
     "                     [--device-code-ttl S] [--webhook-backoff-ms MS]\n"
-    "                     [--webhook-timeout-ms MS] [--allow-http-node-urls]\n"
+    "                     [--webhook-timeout-ms MS] [--sync-from URL]… [--sync-interval S]\n"
+    "                     [--allow-http-node-urls]\n"
     "\n"
     "An RCAN robot registry (docs/REGISTRY.md): robots and their RRNs, resolve, federation\n"
     "nodes and the signed node manifest, compatible with rcan.dev and the official SDKs.\n"
@@ -53,7 +54,10 @@ constexpr const char* kUsage =
     "  --webhook-backoff-ms MS  wait before a webhook delivery's 2nd attempt, doubled after\n"
     "                      (default 1000; 5 attempts)\n"
     "  --webhook-timeout-ms MS  one webhook delivery attempt's limit (default 5000)\n"
-    "  --allow-http-node-urls  accept http:// node and webhook URLs (local tests only)\n"
+    "  --sync-from URL     pull the robots of the authoritative node at URL (repeatable);\n"
+    "                      only those of prefixes delegated to that URL are taken\n"
+    "  --sync-interval S   seconds between sync pulls (default 60)\n"
+    "  --allow-http-node-urls  accept http:// node, webhook and sync URLs (local tests only)\n"
     "\n"
     "The first start creates, in the data directory, an admin API key (admin.key, mode 0600),\n"
     "the node's Ed25519 key (node-ed25519.seed) and the audit chain secret (audit.secret).\n"
@@ -107,6 +111,9 @@ std::optional<Flags> parse_flags(int argc, char** argv, int& exit_code) {
       if (!value(f.host)) return std::nullopt;
     } else if (s == "--allow-http-node-urls") {
       f.allow_http_node_urls = true;
+    } else if (s == "--sync-from") {
+      if (!value(v)) return std::nullopt;
+      f.sync_from.push_back(v);
     } else if (s == "--prefix") {
       if (!value(f.prefix)) return std::nullopt;
     } else if (s == "--operator") {
@@ -116,7 +123,8 @@ std::optional<Flags> parse_flags(int argc, char** argv, int& exit_code) {
     } else if (s == "--write-rate" || s == "--write-burst" || s == "--address-write-rate" ||
                s == "--read-rate" || s == "--io-threads" || s == "--key-overlap" ||
                s == "--key-lifetime" || s == "--max-token-ttl" || s == "--device-code-ttl" ||
-               s == "--webhook-backoff-ms" || s == "--webhook-timeout-ms") {
+               s == "--webhook-backoff-ms" || s == "--webhook-timeout-ms" ||
+               s == "--sync-interval") {
       if (!value(v)) return std::nullopt;
       if (!parse_number(v, d)) {
         std::fprintf(stderr, "rcan-registry: %s must be a number ≥ 0\n", s.c_str());
@@ -134,6 +142,7 @@ std::optional<Flags> parse_flags(int argc, char** argv, int& exit_code) {
         f.webhook_backoff_ms = std::clamp(static_cast<int>(d), 1, 600000);
       if (s == "--webhook-timeout-ms")
         f.webhook_timeout_ms = std::clamp(static_cast<int>(d), 100, 60000);
+      if (s == "--sync-interval") f.sync_interval_s = std::clamp(d, 0.1, 86400.0);
       if (s == "--max-token-ttl") f.max_token_ttl_s = std::max<int64_t>(1, static_cast<int64_t>(d));
     } else {
       std::fprintf(stderr, "rcan-registry: unknown argument '%s'\n%s", s.c_str(), kUsage);

@@ -131,6 +131,20 @@ RegistryApi::Impl::Impl(Store& s, audit::AuditLog* a, ApiOptions opts)
   for (const Counter& c : counters)
     metrics.add_counter_fn(c.name, c.help,
                            [v = c.value] { return static_cast<double>(v->load()); });
+  if (!o.sync_from.empty()) {
+    puller = std::make_unique<SyncPuller>(store, o.sync_from, o.sync_interval_ms,
+                                          o.allow_http_node_urls);
+    Counter sync_counters[] = {
+        {"rcan_registry_sync_pulls_total", "Sync pulls from authoritative nodes", &puller->pulls},
+        {"rcan_registry_sync_failures_total", "Sync pulls that failed", &puller->failures},
+        {"rcan_registry_sync_imported_total", "Robots taken from sync answers", &puller->imported},
+        {"rcan_registry_sync_refused_total",
+         "Sync records refused: malformed, or of a prefix not delegated to that node",
+         &puller->refused}};
+    for (const Counter& c : sync_counters)
+      metrics.add_counter_fn(c.name, c.help,
+                             [v = c.value] { return static_cast<double>(v->load()); });
+  }
   build_manifest();
 }
 
@@ -308,6 +322,7 @@ HttpResponse RegistryApi::Impl::serve(const HttpRequest& req) {
   if (rest == "grants") return m == "GET" || m == "POST" ? grants_route(req) : not_allowed();
   if (rest.rfind("grants/", 0) == 0)
     return m == "DELETE" ? delete_grant(req, std::string(rest.substr(7))) : not_allowed();
+  if (rest == "sync") return m == "GET" ? sync(req) : not_allowed();
   if (rest == "webhooks" || rest == "webhooks/register") {
     if (m == "GET" && rest == "webhooks") return list_webhooks(req);
     if (m == "POST") return add_webhook(req);
@@ -342,7 +357,8 @@ std::string route_label(std::string_view p) {
                                                 "/api/v1/grants",
                                                 "/api/v1/device/approve",
                                                 "/api/v1/webhooks",
-                                                "/api/v1/webhooks/register"};
+                                                "/api/v1/webhooks/register",
+                                                "/api/v1/sync"};
   for (auto f : kFixed)
     if (p == f) return std::string(f);
   static constexpr std::pair<std::string_view, std::string_view> kPrefixes[] = {

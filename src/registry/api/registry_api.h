@@ -9,6 +9,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "base/metrics.h"
 #include "rcan/audit/audit_log.h"
@@ -45,6 +46,9 @@ struct ApiOptions {
   // Webhook deliveries (docs/REGISTRY.md "Webhooks"); webhook URLs may be http:// only with
   // allow_http_node_urls.
   WebhookOptions webhooks;
+  // Federation sync: authoritative nodes (their public URLs) pulled every sync_interval_ms.
+  std::vector<std::string> sync_from;
+  int sync_interval_ms = 60000;
 };
 
 // "2026-11-27T05:20:00.000Z"
