@@ -1,6 +1,7 @@
 #include "registry/api/sync.h"
 
 #include <chrono>
+#include <set>
 
 #include "base/http_client.h"
 #include "base/log.h"
@@ -95,7 +96,20 @@ void SyncPuller::pull(const std::string& url) {
   pulls.fetch_add(1);
   if (url.rfind("https://", 0) != 0 && !(allow_http_ && url.rfind("http://", 0) == 0))
     return fail("sync URLs must be https:// (http:// needs --allow-http-node-urls)");
+  // The prefixes delegated to this URL; when they change, pull again from the start (records
+  // refused before a delegation existed are taken then).
+  auto dels = store_.list_delegations();
+  if (!dels.ok()) return fail(dels.error().message);
+  std::set<std::string> allowed;
+  for (const Delegation& d : *dels)
+    if (d.node_url == url) allowed.insert(d.prefix);
+  std::string fingerprint;
+  for (const std::string& p : allowed) fingerprint += p + ",";
   std::string& since = since_[url];
+  if (fingerprint_[url] != fingerprint) {
+    fingerprint_[url] = fingerprint;
+    since.clear();
+  }
   for (int page = 0; page < 20; ++page) {  // at most 20 pages of 500 a round
     auto u = parse_web_url(url + "/api/v1/sync?limit=500&since=" +
                            (since.empty() ? std::string("1970-01-01T00:00:00.000Z") : since));
@@ -114,16 +128,10 @@ void SyncPuller::pull(const std::string& url) {
     for (char c : next->as_string())
       if (!((c >= '0' && c <= '9') || c == '-' || c == ':' || c == '.' || c == 'T' || c == 'Z'))
         return fail("next_since is not an ISO time");
-    std::map<std::string, bool> allowed;  // prefix → delegated to this URL
     for (const json::Value& rec : recs->as_array()) {
       auto r = robot_from_sync(rec);
       auto p = r ? parse_rrn(r->rrn) : std::nullopt;
-      bool ok = r && p && !p->prefix.empty();
-      if (ok && !allowed.count(p->prefix)) {
-        auto d = store_.get_delegation(p->prefix);
-        allowed[p->prefix] = d.ok() && d->has_value() && (*d)->node_url == url;
-      }
-      if (!ok || !allowed[p->prefix]) {
+      if (!r || !p || p->prefix.empty() || allowed.count(p->prefix) == 0) {
         refused.fetch_add(1);
         continue;
       }

@@ -43,7 +43,8 @@ class SyncPuller {
   std::vector<std::string> urls_;
   int interval_ms_;
   bool allow_http_;
-  std::map<std::string, std::string> since_;  // per URL: next_since of its last answer
+  std::map<std::string, std::string> since_;        // per URL: next_since of its last answer
+  std::map<std::string, std::string> fingerprint_;  // per URL: the prefixes delegated to it
   std::mutex mu_;
   std::condition_variable cv_;
   bool stop_ = false;
