@@ -140,6 +140,7 @@ int main(int argc, char** argv) {
   opts.webhooks.backoff_ms = flags->webhook_backoff_ms;
   opts.webhooks.timeout_ms = flags->webhook_timeout_ms;
   opts.sync_from = flags->sync_from;
+  opts.sync_delegations = flags->sync_delegations;
   opts.sync_interval_ms = static_cast<int>(flags->sync_interval_s * 1000);
   registry::api::RegistryApi api(**store, audit_log->get(), opts);
 

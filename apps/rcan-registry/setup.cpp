@@ -29,7 +29,8 @@ constexpr const char* kUsage =
     "                     [--address-write-rate R] [--read-rate R] [--io-threads N]\n"
     "                     [--key-overlap S] [--key-lifetime S] [--max-token-ttl S]\n"
     "                     [--device-code-ttl S] [--webhook-backoff-ms MS]\n"
-    "                     [--webhook-timeout-ms MS] [--sync-from URL]… [--sync-interval S]\n"
+    "                     [--webhook-timeout-ms MS] [--sync-from URL]… [--sync-delegations]\n"
+    "                     [--sync-interval S]\n"
     "                     [--allow-http-node-urls]\n"
     "\n"
     "An RCAN robot registry (docs/REGISTRY.md): robots and their RRNs, resolve, federation\n"
@@ -56,6 +57,7 @@ constexpr const char* kUsage =
     "  --webhook-timeout-ms MS  one webhook delivery attempt's limit (default 5000)\n"
     "  --sync-from URL     pull the robots of the authoritative node at URL (repeatable);\n"
     "                      only those of prefixes delegated to that URL are taken\n"
+    "  --sync-delegations  pull every delegation's node_url too\n"
     "  --sync-interval S   seconds between sync pulls (default 60)\n"
     "  --allow-http-node-urls  accept http:// node, webhook and sync URLs (local tests only)\n"
     "\n"
@@ -111,6 +113,8 @@ std::optional<Flags> parse_flags(int argc, char** argv, int& exit_code) {
       if (!value(f.host)) return std::nullopt;
     } else if (s == "--allow-http-node-urls") {
       f.allow_http_node_urls = true;
+    } else if (s == "--sync-delegations") {
+      f.sync_delegations = true;
     } else if (s == "--sync-from") {
       if (!value(v)) return std::nullopt;
       f.sync_from.push_back(v);

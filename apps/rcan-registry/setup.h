@@ -23,6 +23,7 @@ struct Flags {
   int64_t device_ttl_s = 600;
   int webhook_backoff_ms = 1000, webhook_timeout_ms = 5000;
   std::vector<std::string> sync_from;  // --sync-from, repeatable
+  bool sync_delegations = false;
   double sync_interval_s = 60;
   bool allow_http_node_urls = false;
 };

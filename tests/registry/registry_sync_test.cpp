@@ -113,5 +113,20 @@ TEST(RegistrySync, RootPullsTheDelegatedNodeAndResolvesItsRobotsItself) {
   ASSERT_TRUE(wait_for([&] { return resolved().status == 307; }, 10000));
 }
 
+TEST(RegistrySync, SyncDelegationsPullsEveryDelegatedNode) {
+  TempDir d1, d2;
+  RegistryDaemon bd(d1.path(), {"--prefix", "BD"});
+  std::string rrn = register_robot(bd, "unit-9");
+  RegistryDaemon root(d2.path(),
+                      {"--allow-http-node-urls", "--sync-delegations", "--sync-interval", "0.3"});
+  EXPECT_EQ(root.get("/api/v1/resolve/" + rrn).status, 404);  // no delegation yet
+  auto n = root.send("POST", "/api/v1/nodes",
+                     R"({"prefix":"BD","operator":"BD Robotics","node_url":")" + bd.url() + "\"}",
+                     root.admin_key());
+  ASSERT_EQ(n.status, 201) << n.body;
+  ASSERT_TRUE(wait_for([&] { return root.get("/api/v1/resolve/" + rrn).status == 200; }, 15000));
+  EXPECT_EQ(str(body_of(root.get("/api/v1/resolve/" + rrn)), "resolved_by"), bd.url());
+}
+
 }  // namespace
 }  // namespace rcan::test

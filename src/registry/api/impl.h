@@ -149,7 +149,7 @@ class RegistryApi::Impl {
   std::atomic<uint64_t> audit_failures{0};
   // Last: its worker stops before the rest goes.
   std::unique_ptr<WebhookDispatcher> webhooks;
-  std::unique_ptr<SyncPuller> puller;  // with o.sync_from only
+  std::unique_ptr<SyncPuller> puller;  // with o.sync_from or o.sync_delegations only
 };
 
 // Answers.

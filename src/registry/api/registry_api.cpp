@@ -131,9 +131,9 @@ RegistryApi::Impl::Impl(Store& s, audit::AuditLog* a, ApiOptions opts)
   for (const Counter& c : counters)
     metrics.add_counter_fn(c.name, c.help,
                            [v = c.value] { return static_cast<double>(v->load()); });
-  if (!o.sync_from.empty()) {
+  if (!o.sync_from.empty() || o.sync_delegations) {
     puller = std::make_unique<SyncPuller>(store, o.sync_from, o.sync_interval_ms,
-                                          o.allow_http_node_urls);
+                                          o.allow_http_node_urls, o.sync_delegations);
     Counter sync_counters[] = {
         {"rcan_registry_sync_pulls_total", "Sync pulls from authoritative nodes", &puller->pulls},
         {"rcan_registry_sync_failures_total", "Sync pulls that failed", &puller->failures},

@@ -48,6 +48,7 @@ struct ApiOptions {
   WebhookOptions webhooks;
   // Federation sync: authoritative nodes (their public URLs) pulled every sync_interval_ms.
   std::vector<std::string> sync_from;
+  bool sync_delegations = false;  // also every delegation's node_url
   int sync_interval_ms = 60000;
 };
 

@@ -61,8 +61,12 @@ std::optional<Robot> robot_from_sync(const json::Value& rec) {
 }
 
 SyncPuller::SyncPuller(Store& store, std::vector<std::string> urls, int interval_ms,
-                       bool allow_http)
-    : store_(store), urls_(std::move(urls)), interval_ms_(interval_ms), allow_http_(allow_http) {
+                       bool allow_http, bool delegations)
+    : store_(store),
+      urls_(std::move(urls)),
+      interval_ms_(interval_ms),
+      allow_http_(allow_http),
+      delegations_(delegations) {
   for (std::string& u : urls_)
     while (!u.empty() && u.back() == '/') u.pop_back();
   worker_ = std::thread([this] { run(); });
@@ -83,7 +87,13 @@ void SyncPuller::run() {
     cv_.wait_for(lock, std::chrono::milliseconds(interval_ms_));
     if (stop_) break;
     lock.unlock();
-    for (const std::string& u : urls_) pull(u);
+    std::set<std::string> urls(urls_.begin(), urls_.end());
+    if (delegations_) {
+      auto dels = store_.list_delegations();
+      if (dels.ok())
+        for (const Delegation& d : *dels) urls.insert(d.node_url);
+    }
+    for (const std::string& u : urls) pull(u);
     lock.lock();
   }
 }

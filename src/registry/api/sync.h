@@ -28,7 +28,9 @@ std::optional<Robot> robot_from_sync(const json::Value& record);
 class SyncPuller {
  public:
   // `store` must outlive the puller. The first pull is one interval after start.
-  SyncPuller(Store& store, std::vector<std::string> urls, int interval_ms, bool allow_http);
+  // With `delegations`, every delegation's node_url is pulled too.
+  SyncPuller(Store& store, std::vector<std::string> urls, int interval_ms, bool allow_http,
+             bool delegations = false);
   ~SyncPuller();
   SyncPuller(const SyncPuller&) = delete;
   SyncPuller& operator=(const SyncPuller&) = delete;
@@ -43,6 +45,7 @@ class SyncPuller {
   std::vector<std::string> urls_;
   int interval_ms_;
   bool allow_http_;
+  bool delegations_;
   std::map<std::string, std::string> since_;        // per URL: next_since of its last answer
   std::map<std::string, std::string> fingerprint_;  // per URL: the prefixes delegated to it
   std::mutex mu_;
