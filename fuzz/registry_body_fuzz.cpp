@@ -1,7 +1,8 @@
 // libFuzzer: the registry's request bodies (src/registry/api/body.h). Any bytes must parse or
-// fail cleanly as registration, update, key and node requests; whatever is accepted must hold
-// the invariants the routes and the store rely on (slugs of [a-z0-9-] with one alphanumeric,
-// at most 64 characters; metadata a JSON object within its bound; endpoints a JSON array).
+// fail cleanly as registration, update, key, node and webhook subscription requests and sync
+// records; whatever is accepted must hold the invariants the routes and the store rely on (slugs of
+// [a-z0-9-] with one alphanumeric, at most 64 characters; metadata a JSON object within its bound;
+// endpoints a JSON array).
 #include <cstdint>
 #include <cstdlib>
 #include <string>
@@ -9,6 +10,7 @@
 
 #include "rcan/json.h"
 #include "registry/api/body.h"
+#include "registry/api/sync.h"
 
 namespace {
 
@@ -54,6 +56,27 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (auto n = api::parse_node_request(text); n.ok()) {
     require(api::valid_prefix(n->prefix));
     require(n->node_url.rfind("https://", 0) == 0);
+  }
+  if (auto iso = api::normalize_iso(text); iso) {
+    require(iso->size() == 24 && iso->back() == 'Z' && (*iso)[10] == 'T');
+  }
+  if (auto v = rcan::json::parse(text); v.ok()) {
+    if (auto r = api::robot_from_sync(*v); r) {  // a federation sync record
+      for (const auto* s : {&r->manufacturer, &r->model, &r->version, &r->device_id})
+        check_slug(*s);
+      require(api::parse_rrn(r->rrn).has_value());
+      check_json(r->metadata_json, true);
+      check_json(r->endpoints_json, false);
+    }
+  }
+  for (bool allow_http : {false, true}) {
+    if (auto w = api::parse_webhook_request(text, allow_http); w.ok()) {
+      require(w->prefix == "RRN" || api::valid_prefix(w->prefix));
+      require(w->url.rfind("https://", 0) == 0 || (allow_http && w->url.rfind("http://", 0) == 0));
+      for (char c : w->url) require(static_cast<unsigned char>(c) > 0x20 && c != 0x7f);
+      require(w->secret.size() >= api::kMinWebhookSecret &&
+              w->secret.size() <= api::kMaxWebhookSecret);
+    }
   }
   if (auto rrn = api::parse_rrn(text); rrn) {
     require(rrn->rrn.rfind("RRN-", 0) == 0);

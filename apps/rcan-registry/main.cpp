@@ -137,6 +137,11 @@ int main(int argc, char** argv) {
   opts.key_lifetime_s = flags->key_lifetime_s;
   opts.max_token_ttl_s = flags->max_token_ttl_s;
   opts.device_ttl_s = flags->device_ttl_s;
+  opts.webhooks.backoff_ms = flags->webhook_backoff_ms;
+  opts.webhooks.timeout_ms = flags->webhook_timeout_ms;
+  opts.sync_from = flags->sync_from;
+  opts.sync_delegations = flags->sync_delegations;
+  opts.sync_interval_ms = static_cast<int>(flags->sync_interval_s * 1000);
   registry::api::RegistryApi api(**store, audit_log->get(), opts);
 
   std::string key_file = dir + "/admin.key";

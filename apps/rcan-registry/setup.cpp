@@ -5,6 +5,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <charconv>
 #include <cstdio>
 #include <cstdlib>
@@ -27,7 +28,10 @@ constexpr const char* kUsage =
     "                     [--contact EMAIL] [--write-rate R] [--write-burst B]\n"
     "                     [--address-write-rate R] [--read-rate R] [--io-threads N]\n"
     "                     [--key-overlap S] [--key-lifetime S] [--max-token-ttl S]\n"
-    "                     [--device-code-ttl S]\n"
+    "                     [--device-code-ttl S] [--webhook-backoff-ms MS]\n"
+    "                     [--webhook-timeout-ms MS] [--sync-from URL]… [--sync-delegations]\n"
+    "                     [--sync-interval S]\n"
+    "                     [--allow-http-node-urls]\n"
     "\n"
     "An RCAN robot registry (docs/REGISTRY.md): robots and their RRNs, resolve, federation\n"
     "nodes and the signed node manifest, compatible with rcan.dev and the official SDKs.\n"
@@ -48,7 +52,14 @@ constexpr const char* kUsage =
     "  --key-lifetime S    a signing key is replaced after S seconds (default 2592000)\n"
     "  --max-token-ttl S   cap on issued tokens' lifetime (default 3600)\n"
     "  --device-code-ttl S how long a device-flow code waits for approval (default 600)\n"
-    "  --allow-http-node-urls  accept http:// node URLs in delegations (local tests only)\n"
+    "  --webhook-backoff-ms MS  wait before a webhook delivery's 2nd attempt, doubled after\n"
+    "                      (default 1000; 5 attempts)\n"
+    "  --webhook-timeout-ms MS  one webhook delivery attempt's limit (default 5000)\n"
+    "  --sync-from URL     pull the robots of the authoritative node at URL (repeatable);\n"
+    "                      only those of prefixes delegated to that URL are taken\n"
+    "  --sync-delegations  pull every delegation's node_url too\n"
+    "  --sync-interval S   seconds between sync pulls (default 60)\n"
+    "  --allow-http-node-urls  accept http:// node, webhook and sync URLs (local tests only)\n"
     "\n"
     "The first start creates, in the data directory, an admin API key (admin.key, mode 0600),\n"
     "the node's Ed25519 key (node-ed25519.seed) and the audit chain secret (audit.secret).\n"
@@ -102,6 +113,11 @@ std::optional<Flags> parse_flags(int argc, char** argv, int& exit_code) {
       if (!value(f.host)) return std::nullopt;
     } else if (s == "--allow-http-node-urls") {
       f.allow_http_node_urls = true;
+    } else if (s == "--sync-delegations") {
+      f.sync_delegations = true;
+    } else if (s == "--sync-from") {
+      if (!value(v)) return std::nullopt;
+      f.sync_from.push_back(v);
     } else if (s == "--prefix") {
       if (!value(f.prefix)) return std::nullopt;
     } else if (s == "--operator") {
@@ -110,7 +126,9 @@ std::optional<Flags> parse_flags(int argc, char** argv, int& exit_code) {
       if (!value(f.contact)) return std::nullopt;
     } else if (s == "--write-rate" || s == "--write-burst" || s == "--address-write-rate" ||
                s == "--read-rate" || s == "--io-threads" || s == "--key-overlap" ||
-               s == "--key-lifetime" || s == "--max-token-ttl" || s == "--device-code-ttl") {
+               s == "--key-lifetime" || s == "--max-token-ttl" || s == "--device-code-ttl" ||
+               s == "--webhook-backoff-ms" || s == "--webhook-timeout-ms" ||
+               s == "--sync-interval") {
       if (!value(v)) return std::nullopt;
       if (!parse_number(v, d)) {
         std::fprintf(stderr, "rcan-registry: %s must be a number ≥ 0\n", s.c_str());
@@ -124,6 +142,11 @@ std::optional<Flags> parse_flags(int argc, char** argv, int& exit_code) {
       if (s == "--key-overlap") f.key_overlap_s = static_cast<int64_t>(d);
       if (s == "--key-lifetime") f.key_lifetime_s = std::max<int64_t>(60, static_cast<int64_t>(d));
       if (s == "--device-code-ttl") f.device_ttl_s = std::max<int64_t>(1, static_cast<int64_t>(d));
+      if (s == "--webhook-backoff-ms")
+        f.webhook_backoff_ms = std::clamp(static_cast<int>(d), 1, 600000);
+      if (s == "--webhook-timeout-ms")
+        f.webhook_timeout_ms = std::clamp(static_cast<int>(d), 100, 60000);
+      if (s == "--sync-interval") f.sync_interval_s = std::clamp(d, 0.1, 86400.0);
       if (s == "--max-token-ttl") f.max_token_ttl_s = std::max<int64_t>(1, static_cast<int64_t>(d));
     } else {
       std::fprintf(stderr, "rcan-registry: unknown argument '%s'\n%s", s.c_str(), kUsage);

@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "rcan/encoding.h"
 #include "rcan/result.h"
@@ -20,6 +21,10 @@ struct Flags {
   int io_threads = 2;
   int64_t key_overlap_s = 600, key_lifetime_s = 2592000, max_token_ttl_s = 3600;
   int64_t device_ttl_s = 600;
+  int webhook_backoff_ms = 1000, webhook_timeout_ms = 5000;
+  std::vector<std::string> sync_from;  // --sync-from, repeatable
+  bool sync_delegations = false;
+  double sync_interval_s = 60;
   bool allow_http_node_urls = false;
 };
 

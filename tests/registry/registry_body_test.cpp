@@ -99,6 +99,34 @@ TEST(RegistryBody, UpdateKeyAndNodeRequests) {
   EXPECT_FALSE(parse_node_request(R"({"prefix":"BD","node_url":"https://x"})").ok());
 }
 
+TEST(RegistryBody, WebhookSubscription) {
+  auto w = parse_webhook_request(
+      R"({"node_prefix":"bd","webhook_url":"https://h.example.com/x","secret":"0123456789abcdef"})");
+  ASSERT_TRUE(w.ok()) << w.error().message;
+  EXPECT_EQ(w->prefix, "BD");
+  EXPECT_EQ(w->url, "https://h.example.com/x");
+  EXPECT_TRUE(parse_webhook_request(
+                  R"({"node_prefix":"RRN","webhook_url":"https://h/","secret":"0123456789abcdef"})")
+                  .ok());
+  const std::string http =
+      R"({"node_prefix":"RRN","webhook_url":"http://h/","secret":"0123456789abcdef"})";
+  EXPECT_FALSE(parse_webhook_request(http).ok());
+  EXPECT_TRUE(parse_webhook_request(http, true).ok());
+  for (const char* bad :
+       {R"({"webhook_url":"https://h/","secret":"0123456789abcdef"})",
+        R"({"node_prefix":"B","webhook_url":"https://h/","secret":"0123456789abcdef"})",
+        R"({"node_prefix":"RRN","webhook_url":"https://","secret":"0123456789abcdef"})",
+        R"({"node_prefix":"RRN","webhook_url":"https://h/a b","secret":"0123456789abcdef"})",
+        R"({"node_prefix":"RRN","webhook_url":"https://h/\u0000","secret":"0123456789abcdef"})",
+        R"({"node_prefix":"RRN","webhook_url":"https://h/","secret":"0123456789abcde"})",
+        R"({"node_prefix":"RRN","webhook_url":"https://h/","secret":"0123456789abcdef\n"})",
+        R"({"node_prefix":"RRN","webhook_url":"https://h/"})",
+        R"({"node_prefix":"RRN","webhook_url":7,"secret":"0123456789abcdef"})", "[]", "nope"})
+    EXPECT_FALSE(parse_webhook_request(bad, true).ok()) << bad;
+  auto e = parse_webhook_request("{}");
+  EXPECT_EQ(e.error().code, ErrorCode::kSchemaValidationFailed);
+}
+
 TEST(RegistryBody, TokenBucket) {
   RateLimiter l(BucketConfig{2, 3}, 4);
   int64_t t = 1'000'000;

@@ -234,4 +234,37 @@ Result<NodeRequest> parse_node_request(std::string_view body, bool allow_http) {
   return n;
 }
 
+Result<WebhookRequest> parse_webhook_request(std::string_view body, bool allow_http) {
+  auto o = parse_object(body);
+  if (!o.ok()) return o.error();
+  WebhookRequest w;
+  auto prefix = opt_string(*o, "node_prefix", 8);
+  if (!prefix.ok()) return prefix.error();
+  auto url = opt_string(*o, "webhook_url", kMaxUrl);
+  if (!url.ok()) return url.error();
+  auto secret = opt_string(*o, "secret", kMaxWebhookSecret);
+  if (!secret.ok()) return secret.error();
+  w.prefix = prefix->value_or("");
+  for (char& c : w.prefix) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+  if (w.prefix != "RRN" && !valid_prefix(w.prefix))
+    return invalid("node_prefix must be RRN or 2–8 uppercase alphanumeric characters",
+                   "node_prefix", "INVALID_PREFIX");
+  w.url = url->value_or("");
+  for (char c : w.url)
+    if (static_cast<unsigned char>(c) <= 0x20 || c == 0x7f)
+      return invalid("webhook_url must not contain whitespace or control characters", "webhook_url",
+                     "INVALID_URL");
+  bool https = w.url.rfind("https://", 0) == 0 && w.url.size() > 8;
+  bool http = allow_http && w.url.rfind("http://", 0) == 0 && w.url.size() > 7;
+  if (!https && !http)
+    return invalid("webhook_url must start with https://", "webhook_url", "INVALID_URL");
+  w.secret = secret->value_or("");
+  if (w.secret.size() < kMinWebhookSecret)
+    return invalid("secret is required: at least 16 bytes", "secret", "missing");
+  for (char c : w.secret)
+    if (static_cast<unsigned char>(c) < 0x20 || static_cast<unsigned char>(c) > 0x7e)
+      return invalid("secret must be printable ASCII", "secret");
+  return w;
+}
+
 }  // namespace rcan::registry::api

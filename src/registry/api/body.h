@@ -69,6 +69,18 @@ struct NodeRequest {
 // node_url must be https://; `allow_http` also takes http:// (local federation tests only).
 Result<NodeRequest> parse_node_request(std::string_view body, bool allow_http = false);
 
+// A webhook subscription (POST /api/v1/webhooks): {"node_prefix", "webhook_url", "secret"}.
+// node_prefix is a delegated prefix or "RRN" (the root namespace), upper-cased; webhook_url
+// must be https:// (`allow_http` also takes http://, local tests only), without whitespace or
+// control characters; secret is required, kMinWebhookSecret..kMaxWebhookSecret bytes of
+// printable ASCII.
+inline constexpr size_t kMinWebhookSecret = 16;
+inline constexpr size_t kMaxWebhookSecret = 256;
+struct WebhookRequest {
+  std::string prefix, url, secret;
+};
+Result<WebhookRequest> parse_webhook_request(std::string_view body, bool allow_http = false);
+
 // `endpoints`: an array of URL strings or of {"url": …} objects → the stored form
 // [{"url": …, "last_seen": now}].
 Result<std::string> normalize_endpoints(const json::Value& endpoints, std::string_view now);

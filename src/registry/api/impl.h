@@ -12,6 +12,7 @@
 #include "registry/api/body.h"
 #include "registry/api/oauth_form.h"
 #include "registry/api/registry_api.h"
+#include "registry/api/sync.h"
 
 namespace rcan::registry::api {
 
@@ -67,6 +68,10 @@ class RegistryApi::Impl {
   HttpResponse patch_robot(const HttpRequest& req, const std::string& rrn);
   HttpResponse delete_robot(const HttpRequest& req, const std::string& rrn);
   HttpResponse resolve(const HttpRequest& req, const std::string& raw);
+  // The resolve answer for `r`, resolved by `by` (this node, or the authoritative node of a
+  // synced copy), cache_status `cache`.
+  HttpResponse resolved(const Robot& r, const std::string& ns, const std::string& by,
+                        const char* cache);
   // GET /api/v1/resolve?uri=<RURI>: the robot registered here under that RURI (the 4-segment
   // canonical form names version v1, as rcand registers itself).
   HttpResponse resolve_uri(const HttpRequest& req);
@@ -86,6 +91,16 @@ class RegistryApi::Impl {
   std::optional<HttpResponse> check_proof(const Registration& r);
   // A signed update by a robot that proved its keys: nullopt when it holds.
   std::optional<HttpResponse> check_signed_update(const HttpRequest& req, const Robot& robot);
+
+  // ---- federation sync (sync_routes.cpp)
+  HttpResponse sync(const HttpRequest& req);
+
+  // ---- webhooks (webhook_routes.cpp)
+  HttpResponse list_webhooks(const HttpRequest& req);
+  HttpResponse add_webhook(const HttpRequest& req);
+  HttpResponse delete_webhook(const HttpRequest& req, const std::string& id);
+  // Queues `event` about `r` for its namespace's subscriptions (record.deleted: `r` as it was).
+  void notify(const char* event, const Robot& r);
 
   // ---- the token authority (authority.cpp, authority_routes.cpp)
   HttpResponse jwks();
@@ -134,6 +149,9 @@ class RegistryApi::Impl {
   Metrics metrics;
   RateLimiter write_key, write_addr, read_addr;
   std::atomic<uint64_t> audit_failures{0};
+  // Last: its worker stops before the rest goes.
+  std::unique_ptr<WebhookDispatcher> webhooks;
+  std::unique_ptr<SyncPuller> puller;  // with o.sync_from or o.sync_delegations only
 };
 
 // Answers.

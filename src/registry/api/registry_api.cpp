@@ -132,6 +132,39 @@ RegistryApi::Impl::Impl(Store& s, audit::AuditLog* a, ApiOptions opts)
   metrics.add_counter_fn("rcan_registry_audit_failures_total",
                          "Changes whose audit record could not be written",
                          [this] { return static_cast<double>(audit_failures.load()); });
+  webhooks = std::make_unique<WebhookDispatcher>(store, o.webhooks, [this] { return now_ms(); });
+  struct Counter {
+    const char* name;
+    const char* help;
+    std::atomic<uint64_t>* value;
+  } counters[] = {
+      {"rcan_registry_webhook_deliveries_total", "Webhook deliveries answered 2xx",
+       &webhooks->delivered},
+      {"rcan_registry_webhook_failures_total", "Webhook deliveries that failed every attempt",
+       &webhooks->failed},
+      {"rcan_registry_webhook_failed_attempts_total", "Webhook delivery attempts that failed",
+       &webhooks->attempts_failed},
+      {"rcan_registry_webhook_dropped_total", "Webhook events or deliveries dropped: queue full",
+       &webhooks->dropped},
+      {"rcan_registry_webhook_skipped_total",
+       "Webhook deliveries skipped: the subscription failed too often", &webhooks->skipped}};
+  for (const Counter& c : counters)
+    metrics.add_counter_fn(c.name, c.help,
+                           [v = c.value] { return static_cast<double>(v->load()); });
+  if (!o.sync_from.empty() || o.sync_delegations) {
+    puller = std::make_unique<SyncPuller>(store, o.sync_from, o.sync_interval_ms,
+                                          o.allow_http_node_urls, o.sync_delegations);
+    Counter sync_counters[] = {
+        {"rcan_registry_sync_pulls_total", "Sync pulls from authoritative nodes", &puller->pulls},
+        {"rcan_registry_sync_failures_total", "Sync pulls that failed", &puller->failures},
+        {"rcan_registry_sync_imported_total", "Robots taken from sync answers", &puller->imported},
+        {"rcan_registry_sync_refused_total",
+         "Sync records refused: malformed, or of a prefix not delegated to that node",
+         &puller->refused}};
+    for (const Counter& c : sync_counters)
+      metrics.add_counter_fn(c.name, c.help,
+                             [v = c.value] { return static_cast<double>(v->load()); });
+  }
   build_manifest();
 }
 
@@ -309,6 +342,14 @@ HttpResponse RegistryApi::Impl::serve(const HttpRequest& req) {
   if (rest == "grants") return m == "GET" || m == "POST" ? grants_route(req) : not_allowed();
   if (rest.rfind("grants/", 0) == 0)
     return m == "DELETE" ? delete_grant(req, std::string(rest.substr(7))) : not_allowed();
+  if (rest == "sync") return m == "GET" ? sync(req) : not_allowed();
+  if (rest == "webhooks" || rest == "webhooks/register") {
+    if (m == "GET" && rest == "webhooks") return list_webhooks(req);
+    if (m == "POST") return add_webhook(req);
+    return not_allowed();
+  }
+  if (rest.rfind("webhooks/", 0) == 0)
+    return m == "DELETE" ? delete_webhook(req, std::string(rest.substr(9))) : not_allowed();
   if (rest == "device/approve") return m == "POST" ? device_approve(req) : not_allowed();
   return ref_error(404, "Not found");
 }
@@ -334,7 +375,10 @@ std::string route_label(std::string_view p) {
                                                 "/api/v1/authority/keys/rotate",
                                                 "/api/v1/clients",
                                                 "/api/v1/grants",
-                                                "/api/v1/device/approve"};
+                                                "/api/v1/device/approve",
+                                                "/api/v1/webhooks",
+                                                "/api/v1/webhooks/register",
+                                                "/api/v1/sync"};
   for (auto f : kFixed)
     if (p == f) return std::string(f);
   static constexpr std::pair<std::string_view, std::string_view> kPrefixes[] = {
@@ -344,7 +388,8 @@ std::string route_label(std::string_view p) {
       {"/api/v1/nodes/", "/api/v1/nodes/{prefix}"},
       {"/api/v1/keys/", "/api/v1/keys/{id}"},
       {"/api/v1/clients/", "/api/v1/clients/{id}"},
-      {"/api/v1/grants/", "/api/v1/grants/{id}"}};
+      {"/api/v1/grants/", "/api/v1/grants/{id}"},
+      {"/api/v1/webhooks/", "/api/v1/webhooks/{id}"}};
   for (auto [pre, label] : kPrefixes)
     if (p.rfind(pre, 0) == 0) return std::string(label);
   return "other";

@@ -9,12 +9,14 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "base/metrics.h"
 #include "rcan/audit/audit_log.h"
 #include "rcan/encoding.h"
 #include "rcan/result.h"
 #include "registry/api/rate_limit.h"
+#include "registry/api/webhooks.h"
 #include "registry/store.h"
 #include "transport/http_api.h"
 
@@ -41,6 +43,13 @@ struct ApiOptions {
   int64_t max_token_ttl_s = 3600;    // cap on every token's lifetime
   int64_t jwks_max_age_s = 300;      // Cache-Control of the JWKS
   int64_t device_ttl_s = 600, device_interval_s = 5;
+  // Webhook deliveries (docs/REGISTRY.md "Webhooks"); webhook URLs may be http:// only with
+  // allow_http_node_urls.
+  WebhookOptions webhooks;
+  // Federation sync: authoritative nodes (their public URLs) pulled every sync_interval_ms.
+  std::vector<std::string> sync_from;
+  bool sync_delegations = false;  // also every delegation's node_url
+  int sync_interval_ms = 60000;
 };
 
 // "2026-11-27T05:20:00.000Z"

@@ -126,6 +126,7 @@ HttpResponse RegistryApi::Impl::register_robot(const HttpRequest& req) {
   auto key = create_key("robot", r.rrn, "robot " + r.rrn, principal);
   audit("REGISTRY_ROBOT_REGISTERED", principal, r.rcan_uri,
         json::Object{{"rrn", r.rrn}, {"proof_of_possession", reg->proof.has_value()}});
+  notify("record.created", r);
   json::Object out{{"rrn", r.rrn},
                    {"rcan_uri", r.rcan_uri},
                    {"uri", r.rcan_uri},
@@ -285,6 +286,7 @@ HttpResponse RegistryApi::Impl::patch_robot(const HttpRequest& req, const std::s
     if (set) fields.emplace_back(name);
   audit("REGISTRY_ROBOT_UPDATED", "apikey:" + caller->key.id, (*done)->rcan_uri,
         json::Object{{"rrn", (*done)->rrn}, {"fields", std::move(fields)}});
+  notify("record.updated", **done);
   return json_response(200, robot_json(**done));
 }
 
@@ -307,8 +309,28 @@ HttpResponse RegistryApi::Impl::delete_robot(const HttpRequest& req, const std::
   if (!*done) return ref_error(404, "Robot not found: " + rrn);
   audit("REGISTRY_ROBOT_DELETED", "apikey:" + caller->key.id, (*r)->rcan_uri,
         json::Object{{"rrn", (*r)->rrn}});
+  notify("record.deleted", **r);
   return json_response(200,
                        json::Object{{"message", "Robot registration removed"}, {"rrn", (*r)->rrn}});
+}
+
+HttpResponse RegistryApi::Impl::resolved(const Robot& r, const std::string& ns,
+                                         const std::string& by, const char* cache) {
+  json::Object rec = robot_json(r);
+  json::Object keys{
+      {"ed25519", rec.find("ed25519_public_key") ? *rec.find("ed25519_public_key") : json::Value()},
+      {"mldsa65",
+       rec.find("mldsa65_public_key") ? *rec.find("mldsa65_public_key") : json::Value()}};
+  json::Value endpoints = *rec.find("endpoints");
+  json::Object out{{"rrn", r.rrn},
+                   {"resolved_by", by},
+                   {"namespace", ns},
+                   {"record", std::move(rec)},
+                   {"keys", std::move(keys)},
+                   {"endpoints", std::move(endpoints)},
+                   {"cache_status", cache},
+                   {"resolved_at", now()}};
+  return json_response(200, out);
 }
 
 HttpResponse RegistryApi::Impl::resolve(const HttpRequest& req, const std::string& raw) {
@@ -343,6 +365,10 @@ HttpResponse RegistryApi::Impl::resolve(const HttpRequest& req, const std::strin
                                                   {"rrn", rrn},
                                                   {"expired_at", (*d)->expires_at}}),
                   o.public_url, ns);
+    // A copy synced from the authoritative node (--sync-from) is answered here.
+    auto copy = store.get_robot(rrn);
+    if (!copy.ok()) return store_error(copy.error());
+    if (*copy) return with(resolved(**copy, ns, (*d)->node_url, "SYNCED"), (*d)->node_url, ns);
     // No fan-out from here: the client is sent to the authoritative node.
     std::string loc = (*d)->node_url + "/api/v1/resolve/" + rrn;
     HttpResponse r = json_response(307, json::Object{{"rrn", rrn},
@@ -360,21 +386,7 @@ HttpResponse RegistryApi::Impl::resolve(const HttpRequest& req, const std::strin
   if (!*r)
     return with(json_response(404, json::Object{{"error", "NOT_FOUND"}, {"rrn", rrn}}),
                 o.public_url, ns);
-  json::Object rec = robot_json(**r);
-  json::Object keys{
-      {"ed25519", rec.find("ed25519_public_key") ? *rec.find("ed25519_public_key") : json::Value()},
-      {"mldsa65",
-       rec.find("mldsa65_public_key") ? *rec.find("mldsa65_public_key") : json::Value()}};
-  json::Value endpoints = *rec.find("endpoints");
-  json::Object out{{"rrn", rrn},
-                   {"resolved_by", o.public_url},
-                   {"namespace", ns},
-                   {"record", std::move(rec)},
-                   {"keys", std::move(keys)},
-                   {"endpoints", std::move(endpoints)},
-                   {"cache_status", "MISS"},
-                   {"resolved_at", now()}};
-  return with(json_response(200, out), o.public_url, ns);
+  return with(resolved(**r, ns, o.public_url, "MISS"), o.public_url, ns);
 }
 
 HttpResponse RegistryApi::Impl::resolve_uri(const HttpRequest& req) {
