@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <vector>
 
+#include "base/data_dir.h"
 #include "rcan/audit/secret.h"
 #include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/keys.h"
@@ -157,27 +158,7 @@ std::optional<Flags> parse_flags(int argc, char** argv, int& exit_code) {
 }
 
 Result<std::string> default_data_dir() {
-  auto env = [](const char* name) {
-    const char* v = std::getenv(name);
-    return v != nullptr ? std::string(v) : std::string();
-  };
-  if (std::string d = env("RCAN_REGISTRY_DATA_DIR"); !d.empty())
-    return fs::absolute(d).lexically_normal().string();
-  if (std::string x = env("XDG_DATA_HOME"); !x.empty() && x[0] == '/')
-    return (fs::path(x) / "rcan-registry").lexically_normal().string();
-  std::string home = env("HOME");
-  if (home.empty() || home[0] != '/') {
-    struct passwd pw {};
-    struct passwd* result = nullptr;
-    std::vector<char> buf(16384);
-    if (getpwuid_r(getuid(), &pw, buf.data(), buf.size(), &result) == 0 && result != nullptr &&
-        result->pw_dir != nullptr && result->pw_dir[0] == '/')
-      home = result->pw_dir;
-  }
-  if (home.empty() || home[0] != '/')
-    return Error(ErrorCode::kInternal,
-                 "no data directory: set RCAN_REGISTRY_DATA_DIR or HOME, or pass --data-dir");
-  return (fs::path(home) / ".local" / "share" / "rcan-registry").lexically_normal().string();
+  return user_data_dir("rcan-registry", "RCAN_REGISTRY_DATA_DIR");
 }
 
 Status make_private_dir(const std::string& dir) {

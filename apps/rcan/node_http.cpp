@@ -31,12 +31,15 @@ Result<std::pair<int, std::string>> request(const Target& t, const std::string& 
   return std::make_pair(r->status, r->body);
 }
 
-std::string token_from(const Options& o, bool required, std::string& err) {
-  std::string file = o.get("token-file");
+std::string secret_from(const Options& o, const std::string& option, const char* env, bool required,
+                        std::string& err) {
+  std::string file = o.get(option);
   if (file.empty())
-    if (const char* env = std::getenv("RCAN_TOKEN_FILE")) file = env;
+    if (const char* e = std::getenv(env)) file = e;
   if (file.empty()) {
-    if (required) err = "a token is required: --token-file F or RCAN_TOKEN_FILE";
+    if (required)
+      err = "a " + std::string(option == "token-file" ? "token" : "key") + " is required: --" +
+            option + " F or " + env;
     return {};
   }
   auto t = read_file(file);
@@ -47,6 +50,10 @@ std::string token_from(const Options& o, bool required, std::string& err) {
   std::string s = *t;
   while (!s.empty() && (s.back() == '\n' || s.back() == '\r' || s.back() == ' ')) s.pop_back();
   return s;
+}
+
+std::string token_from(const Options& o, bool required, std::string& err) {
+  return secret_from(o, "token-file", "RCAN_TOKEN_FILE", required, err);
 }
 
 std::string node_url(const Options& o) {

@@ -21,6 +21,10 @@ Result<Target> parse_url(const std::string& url);
 Result<std::pair<int, std::string>> request(const Target& t, const std::string& method,
                                             const std::string& path, const std::string& body,
                                             const std::string& token);
+// The first line of the secret file named by --<option> or $<env> (trailing whitespace
+// dropped); `err` set when required and absent, or unreadable.
+std::string secret_from(const Options& o, const std::string& option, const char* env, bool required,
+                        std::string& err);
 // The bearer token from --token-file or $RCAN_TOKEN_FILE; `err` set when required and absent.
 std::string token_from(const Options& o, bool required, std::string& err);
 

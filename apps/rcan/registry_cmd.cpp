@@ -63,21 +63,7 @@ std::string registry_url(const Options& o, const std::string& fallback = {}) {
 
 // The API key, or empty (then `err` says why when required).
 std::string api_key(const Options& o, bool required, std::string& err) {
-  std::string file = o.get("key-file");
-  if (file.empty())
-    if (const char* env = std::getenv("RCAN_REGISTRY_KEY_FILE")) file = env;
-  if (file.empty()) {
-    if (required) err = "an API key is required: --key-file F or RCAN_REGISTRY_KEY_FILE";
-    return {};
-  }
-  auto t = read_file(file);
-  if (!t.ok()) {
-    err = t.error().message;
-    return {};
-  }
-  std::string s = *t;
-  while (!s.empty() && (s.back() == '\n' || s.back() == '\r' || s.back() == ' ')) s.pop_back();
-  return s;
+  return secret_from(o, "key-file", "RCAN_REGISTRY_KEY_FILE", required, err);
 }
 
 // Percent-encodes a query value.

@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "base/data_dir.h"
 #include "config/config_internal.h"
 #include "rcan/hash.h"
 
@@ -230,34 +231,7 @@ Result<NodeConfig> default_config(const std::string& data_dir, std::string_view 
   return parse_config_text(text, opts);
 }
 
-Result<std::string> default_data_dir() {
-  auto env = [](const char* name) -> std::string {
-    const char* v = std::getenv(name);
-    return v != nullptr ? std::string(v) : std::string();
-  };
-  namespace fs = std::filesystem;
-  if (std::string d = env("RCAND_DATA_DIR"); !d.empty()) {
-    std::error_code ec;
-    fs::path abs = fs::absolute(d, ec);
-    return (ec ? fs::path(d) : abs).lexically_normal().string();
-  }
-  if (std::string x = env("XDG_DATA_HOME"); !x.empty() && x[0] == '/')
-    return (fs::path(x) / "rcand").lexically_normal().string();
-  std::string home = env("HOME");
-  if (home.empty() || home[0] != '/') {
-    struct passwd pw {};
-    struct passwd* result = nullptr;
-    std::vector<char> buf(16384);
-    if (getpwuid_r(getuid(), &pw, buf.data(), buf.size(), &result) == 0 && result != nullptr &&
-        result->pw_dir != nullptr && result->pw_dir[0] == '/')
-      home = result->pw_dir;
-  }
-  if (home.empty() || home[0] != '/')
-    return Error(ErrorCode::kSchemaValidationFailed,
-                 "no data directory: set RCAND_DATA_DIR or HOME, or pass --data-dir",
-                 "node.data_dir", "missing_key");
-  return (fs::path(home) / ".local" / "share" / "rcand").lexically_normal().string();
-}
+Result<std::string> default_data_dir() { return user_data_dir("rcand", "RCAND_DATA_DIR"); }
 
 Status apply_overrides(NodeConfig& cfg, std::optional<int> port,
                        std::optional<std::string> data_dir) {

@@ -50,6 +50,14 @@ class RegistryApi::Impl {
   std::optional<Caller> authenticate(const HttpRequest& req, HttpResponse& err);
   // 429 when `key_id`'s write bucket is empty.
   std::optional<HttpResponse> limit_key(const std::string& key_id);
+  // A write on /robots/{rrn}: the authenticated, rate-limited caller and the live robot, or
+  // nullopt with the refusal (the reference's wording) in `refusal`.
+  struct RobotWrite {
+    Caller caller;
+    Robot robot;
+  };
+  std::optional<RobotWrite> robot_write(const HttpRequest& req, const std::string& rrn,
+                                        HttpResponse& refusal);
   // Appends a change to the audit log (logs and counts a failure: the change is stored).
   void audit(const std::string& event, const std::string& principal, const std::string& ruri,
              json::Object detail);

@@ -248,22 +248,40 @@ std::optional<HttpResponse> RegistryApi::Impl::check_signed_update(const HttpReq
   return std::nullopt;
 }
 
-HttpResponse RegistryApi::Impl::patch_robot(const HttpRequest& req, const std::string& rrn) {
+std::optional<RegistryApi::Impl::RobotWrite> RegistryApi::Impl::robot_write(const HttpRequest& req,
+                                                                            const std::string& rrn,
+                                                                            HttpResponse& refusal) {
   HttpResponse err;
   auto caller = authenticate(req, err);
-  if (!caller && err.status >= 500) return err;
-  if (!caller)
-    return ref_error(err.status, err.status == 401 && req.bearer().empty()
-                                     ? "Authorization required"
-                                     : "Invalid API key");
-  if (auto l = limit_key(caller->key.id)) return *l;
+  if (!caller) {
+    refusal = err.status >= 500 ? err
+                                : ref_error(err.status, err.status == 401 && req.bearer().empty()
+                                                            ? "Authorization required"
+                                                            : "Invalid API key");
+    return std::nullopt;
+  }
+  if (auto l = limit_key(caller->key.id)) {
+    refusal = *l;
+    return std::nullopt;
+  }
   auto r = store.get_robot(rrn);
-  if (!r.ok()) return store_error(r.error());
-  if (!*r) return ref_error(404, "Robot not found: " + rrn);
-  if (!caller->is("admin") && !(caller->is("robot") && caller->key.rrn == (*r)->rrn))
+  if (!r.ok() || !*r) {
+    refusal = !r.ok() ? store_error(r.error()) : ref_error(404, "Robot not found: " + rrn);
+    return std::nullopt;
+  }
+  return RobotWrite{std::move(*caller), std::move(**r)};
+}
+
+HttpResponse RegistryApi::Impl::patch_robot(const HttpRequest& req, const std::string& rrn) {
+  HttpResponse refusal;
+  auto w = robot_write(req, rrn, refusal);
+  if (!w) return refusal;
+  const Caller* caller = &w->caller;
+  const Robot* robot = &w->robot;
+  if (!caller->is("admin") && !(caller->is("robot") && caller->key.rrn == robot->rrn))
     return ref_error(403, "Invalid API key");
-  if (caller->is("robot") && !(*r)->ed25519_pub.empty())
-    if (auto refused = check_signed_update(req, **r)) return *refused;
+  if (caller->is("robot") && !robot->ed25519_pub.empty())
+    if (auto refused = check_signed_update(req, *robot)) return *refused;
   std::string t = now();
   auto u = parse_update(req.body, t);
   if (!u.ok()) return ref_error(400, u.error().message);
@@ -275,7 +293,7 @@ HttpResponse RegistryApi::Impl::patch_robot(const HttpRequest& req, const std::s
   ru.metadata_json = u->metadata_json;
   ru.endpoints_json = u->endpoints_json;
   ru.now = t;
-  auto done = store.update_robot((*r)->rrn, ru);
+  auto done = store.update_robot(robot->rrn, ru);
   if (!done.ok()) return store_error(done.error());
   if (!*done) return ref_error(404, "Robot not found: " + rrn);
   json::Array fields;
@@ -291,27 +309,20 @@ HttpResponse RegistryApi::Impl::patch_robot(const HttpRequest& req, const std::s
 }
 
 HttpResponse RegistryApi::Impl::delete_robot(const HttpRequest& req, const std::string& rrn) {
-  HttpResponse err;
-  auto caller = authenticate(req, err);
-  if (!caller && err.status >= 500) return err;
-  if (!caller)
-    return ref_error(err.status, err.status == 401 && req.bearer().empty()
-                                     ? "Authorization required"
-                                     : "Invalid API key");
-  if (auto l = limit_key(caller->key.id)) return *l;
-  auto r = store.get_robot(rrn);
-  if (!r.ok()) return store_error(r.error());
-  if (!*r) return ref_error(404, "Robot not found: " + rrn);
-  if (!owns(*caller, **r)) return ref_error(403, "Invalid API key");
+  HttpResponse refusal;
+  auto w = robot_write(req, rrn, refusal);
+  if (!w) return refusal;
+  const Robot& robot = w->robot;
+  if (!owns(w->caller, robot)) return ref_error(403, "Invalid API key");
   if (auto a = audit_unavailable()) return *a;
-  auto done = store.delete_robot((*r)->rrn, now());
+  auto done = store.delete_robot(robot.rrn, now());
   if (!done.ok()) return store_error(done.error());
   if (!*done) return ref_error(404, "Robot not found: " + rrn);
-  audit("REGISTRY_ROBOT_DELETED", "apikey:" + caller->key.id, (*r)->rcan_uri,
-        json::Object{{"rrn", (*r)->rrn}});
-  notify("record.deleted", **r);
+  audit("REGISTRY_ROBOT_DELETED", "apikey:" + w->caller.key.id, robot.rcan_uri,
+        json::Object{{"rrn", robot.rrn}});
+  notify("record.deleted", robot);
   return json_response(200,
-                       json::Object{{"message", "Robot registration removed"}, {"rrn", (*r)->rrn}});
+                       json::Object{{"message", "Robot registration removed"}, {"rrn", robot.rrn}});
 }
 
 HttpResponse RegistryApi::Impl::resolved(const Robot& r, const std::string& ns,
