@@ -7,6 +7,7 @@
 #include <deque>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -134,39 +135,50 @@ class Session {
       while (!mo.password.empty() && (mo.password.back() == '\n' || mo.password.back() == '\r'))
         mo.password.pop_back();
     }
-    client_ = std::make_unique<transport::MqttClient>(mo);
-    for (const auto& s : subscriptions) client_->subscribe(s, 2);
-    client_->on_message([this](const transport::MqttMessage& m) {
-      auto body = mqtt::parse_payload(m.payload);
-      if (!body.ok()) return;
-      std::lock_guard<std::mutex> lk(mu_);
-      inbox_.push_back(Inbound{m.topic, std::move(body).value(), m.retained});
-      cv_.notify_all();
-    });
-    if (Status s = client_->start(); !s.ok()) return s;
-    const int64_t deadline = mono_ms() + timeout_ms_;
-    if (!client_->wait_subscribed(static_cast<int>(timeout_ms_)))
-      return Error(ErrorCode::kInternal, "cannot connect to the broker at " + mo.url);
-    // A clustered broker refuses subscriptions for a moment while it elects new stream
-    // leaders (a node died): ask again until the timeout.
-    auto refused = client_->refused_subscriptions();
-    while (!refused.empty() && mono_ms() + 500 < deadline) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(500));
-      client_->retry_refused();
-      client_->wait_subscribed(static_cast<int>(std::max<int64_t>(1, deadline - mono_ms())));
-      refused = client_->refused_subscriptions();
-    }
-    if (!refused.empty())
-      return Error(ErrorCode::kInsufficientPrivileges,
-                   "the broker refused the subscription to " + refused.front());
-    return Status::Ok();
+    mo_ = std::move(mo);
+    subscriptions_ = subscriptions;
+    return connect(mono_ms() + timeout_ms_);
   }
 
-  // Publishes and waits for the broker's acknowledgement (PUBACK, or PUBCOMP at QoS 2).
+  // Publishes and waits for the broker's acknowledgement (PUBACK, or PUBCOMP at QoS 2). A
+  // connection that drops first is replaced by a new one (to the next node of a cluster when
+  // --broker lists several) and the same message — the same message_id, which a member obeys
+  // once — is published again, up to kPublishAttempts times within the timeout: a node of a
+  // settling cluster drops its clients, and a stop must get through if any node takes it. A
+  // broker that refuses the publish drops every attempt: the error says how many were made.
   Status publish(const std::string& topic, const json::Value& v, int qos, bool retain) {
-    return client_->publish_confirmed(topic, json::dump(v), qos, retain,
-                                      static_cast<int>(timeout_ms_));
+    const std::string payload = json::dump(v);
+    const int64_t deadline = mono_ms() + timeout_ms_;
+    for (attempts_ = 1;; ++attempts_) {
+      bool dropped = false;
+      Status st =
+          client_->publish_confirmed(topic, payload, qos, retain, left_ms(deadline), &dropped);
+      if (st.ok()) return st;
+      // A new client, starting with the node after this one: the old client would send its
+      // queued copy on every reconnect by itself.
+      if (dropped && attempts_ < kPublishAttempts) {
+        const std::string at = client_->current_url();
+        client_->stop();
+        auto it = std::find(mo_.urls.begin(), mo_.urls.end(), at);
+        if (it != mo_.urls.end() && it + 1 != mo_.urls.end())
+          std::rotate(mo_.urls.begin(), it + 1, mo_.urls.end());
+      }
+      if (!dropped || attempts_ >= kPublishAttempts || !connect(deadline).ok()) {
+        if (attempts_ == 1) return st;
+        return Error(st.error().code,
+                     st.error().message + " (" + std::to_string(attempts_) + " attempts)");
+      }
+    }
   }
+  // One publish, no second attempt: PUBACK within `timeout_ms`, or the error (a drop shows in
+  // lost()).
+  Status publish_once(const std::string& topic, const json::Value& v, int qos, bool retain,
+                      int64_t timeout_ms) {
+    return client_->publish_confirmed(topic, json::dump(v), qos, retain,
+                                      static_cast<int>(std::max<int64_t>(1, timeout_ms)));
+  }
+  // How many times the last publish() went out.
+  int attempts() const { return attempts_; }
   // The QoS a publish at `qos` goes out with.
   int qos_for(int qos) const { return std::clamp(qos, 1, client_->qos_cap()); }
 
@@ -195,11 +207,53 @@ class Session {
   std::string url() const { return client_->current_url(); }
 
  private:
+  // A new client (its inbox is this session's) connected, with every subscription answered by
+  // `deadline`: retained messages follow the SUBACKs at once.
+  Status connect(int64_t deadline) {
+    if (client_) client_->stop();
+    client_ = std::make_unique<transport::MqttClient>(mo_);
+    for (const auto& s : subscriptions_) client_->subscribe(s, 2);
+    client_->on_message([this](const transport::MqttMessage& m) {
+      auto body = mqtt::parse_payload(m.payload);
+      if (!body.ok()) return;
+      std::lock_guard<std::mutex> lk(mu_);
+      inbox_.push_back(Inbound{m.topic, std::move(body).value(), m.retained});
+      cv_.notify_all();
+    });
+    if (Status s = client_->start(); !s.ok()) return s;
+    if (!client_->wait_subscribed(left_ms(deadline)))
+      return Error(ErrorCode::kInternal, "cannot connect to the broker at " + mo_.url);
+    return subscribed(deadline);
+  }
+  // Once the SUBACKs are in: a clustered broker refuses subscriptions for a moment while it
+  // elects new stream leaders (a node died), so the refused ones are asked for again until
+  // `deadline`.
+  Status subscribed(int64_t deadline) {
+    auto refused = client_->refused_subscriptions();
+    while (!refused.empty() && mono_ms() + 500 < deadline) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(500));
+      client_->retry_refused();
+      client_->wait_subscribed(left_ms(deadline));
+      refused = client_->refused_subscriptions();
+    }
+    if (!refused.empty())
+      return Error(ErrorCode::kInsufficientPrivileges,
+                   "the broker refused the subscription to " + refused.front());
+    return Status::Ok();
+  }
+  static int left_ms(int64_t deadline) {
+    return static_cast<int>(std::max<int64_t>(1, deadline - mono_ms()));
+  }
+
+  static constexpr int kPublishAttempts = 3;
+  transport::MqttOptions mo_;
+  std::vector<std::string> subscriptions_;
   std::unique_ptr<transport::MqttClient> client_;
   std::mutex mu_;
   std::condition_variable cv_;
   std::deque<Inbound> inbox_;
   int64_t timeout_ms_ = 10000;
+  int attempts_ = 0;
 };
 
 struct Common {
@@ -380,21 +434,45 @@ Result<Targets> open_fleet(Session& s, const Options& o, const Common& c,
   return t;
 }
 
-// Waits for each member's answer to `id` on its reply topic: ACK, ERROR and, with `complete`,
-// the COMPLETED / ABORTED event. Returns {member: {result, reply}}; `unconfirmed` gets every
-// member that did not confirm (refused, aborted, incomplete or silent).
+// A fleet ESTOP sent again while members have not confirmed it: every `every_ms`, a new ESTOP
+// (`make`: a fresh message_id and timestamp — a copy of the first would be stale past a
+// member's safety window) on the command topic of each member still silent. It reaches a member
+// that came back from a broker outage after the first was published, also when the broker
+// acknowledged the first but did not keep its retained copy (NATS 2.9 logs "unable to store
+// retained message" and acknowledges anyway, while its cluster elects leaders). Members that
+// confirmed get nothing more. A RESUME or a command is never sent twice.
+struct Resend {
+  std::function<json::Value()> make;
+  int64_t every_ms = 2000;
+  std::vector<std::string> ids;  // the message_ids sent again
+};
+
+// Waits for each member's answer to `id` (or to one of `resend`'s) on its reply topic: ACK,
+// ERROR and, with `complete`, the COMPLETED / ABORTED event. Returns {member: {result, reply}};
+// `unconfirmed` gets every member that did not confirm (refused, aborted, incomplete or silent).
 json::Object await_members(Session& s, const mqtt::FleetTopics& topics, const std::string& id,
-                           const Targets& t, bool complete, int64_t timeout_ms,
+                           const Targets& t, bool complete, int64_t timeout_ms, Resend* resend,
                            std::vector<std::string>* unconfirmed) {
   json::Object results;
   std::set<std::string> open(t.members.begin(), t.members.end());
-  std::set<std::string> acked;
+  std::set<std::string> acked, ids{id};
   int64_t deadline = mono_ms() + timeout_ms;
+  int64_t next_resend = resend != nullptr ? mono_ms() + resend->every_ms : INT64_MAX;
   const uint64_t connects = s.connects();
   while (!open.empty() && !s.lost(connects)) {  // a dropped connection loses the replies
-    auto m = s.next(std::min(deadline, mono_ms() + 200));
+    if (mono_ms() >= next_resend && mono_ms() < deadline) {
+      json::Value again = resend->make();
+      for (const auto& mem : open)
+        (void)s.publish_once(topics.member(mem).cmd(), again, 1, false,
+                             std::min<int64_t>(2000, deadline - mono_ms()));
+      ids.insert(str_of(again, "message_id"));
+      resend->ids.push_back(str_of(again, "message_id"));
+      next_resend = mono_ms() + resend->every_ms;
+      continue;
+    }
+    auto m = s.next(std::min({deadline, next_resend, mono_ms() + 200}));
     if (!m && mono_ms() >= deadline) break;
-    if (!m || str_of(m->body, "reply_to") != id) continue;
+    if (!m || ids.count(str_of(m->body, "reply_to")) == 0) continue;
     for (const auto& mem : t.members) {
       if (m->topic != topics.member(mem).reply() || open.count(mem) == 0) continue;
       std::string type = str_of(m->body, "type");
@@ -450,13 +528,15 @@ std::string name_unconfirmed(const std::vector<std::string>& unconfirmed,
 int publish_and_confirm(Session& s, const char* verb, const Common& c,
                         const mqtt::FleetTopics& topics, const Targets& t, const std::string& topic,
                         const json::Value& msg, int qos, bool retain, bool complete,
-                        json::Object out) {
+                        json::Object out, Resend* resend = nullptr) {
   const std::string id = str_of(msg, "message_id");
   const int used_qos = s.qos_for(c.qos != 0 ? c.qos : qos);
   out.set("message_id", id);
   out.set("qos", static_cast<int64_t>(used_qos));
   out.set("waited", c.wait);
-  if (Status st = s.publish(topic, msg, used_qos, retain); !st.ok()) {
+  Status sent = s.publish(topic, msg, used_qos, retain);
+  out.set("publish_attempts", static_cast<int64_t>(s.attempts()));
+  if (Status st = sent; !st.ok()) {
     s.close();
     out.set("ok", false);
     out.set("error", "not delivered: " + st.error().message);
@@ -465,7 +545,8 @@ int publish_and_confirm(Session& s, const char* verb, const Common& c,
   }
   std::vector<std::string> unconfirmed;
   const uint64_t connects = s.connects();
-  json::Object results = await_members(s, topics, id, t, complete, c.timeout_ms, &unconfirmed);
+  json::Object results =
+      await_members(s, topics, id, t, complete, c.timeout_ms, resend, &unconfirmed);
   const std::string lost =
       s.lost(connects) ? " (the connection to the broker at " + s.url() + " dropped)" : "";
   s.close();
@@ -476,6 +557,11 @@ int publish_and_confirm(Session& s, const char* verb, const Common& c,
   json::Array un;
   for (const auto& m : unconfirmed) un.emplace_back(m);
   out.set("unconfirmed", std::move(un));
+  if (resend != nullptr) {
+    json::Array again;
+    for (const auto& i : resend->ids) again.emplace_back(i);
+    out.set("resent", std::move(again));
+  }
   print(json::Value(std::move(out)));
   if (none_known)
     return failure(verb,
@@ -510,12 +596,15 @@ int estop_or_resume(const Options& o, bool estop) {
   }
   json::Object payload{{"safety_event", estop ? "ESTOP" : "RESUME"}, {"fleet_id", fleet}};
   payload.set("reason", o.get("reason", estop ? "fleet estop" : "fleet resume"));
-  json::Value msg = message("SAFETY", std::move(payload), *c);
+  json::Value msg = message("SAFETY", payload, *c);
   // Retained: the fleet's standing state, for members that connect later. Every member answers
-  // the same message id on its own reply topic.
+  // the same message id on its own reply topic. An ESTOP goes again to the members still
+  // silent (Resend).
+  Resend resend{[&] { return message("SAFETY", payload, *c); }, 2000, {}};
   return publish_and_confirm(
       s, verb, *c, topics, *t, topics.estop(), msg, 2, true, false,
-      json::Object{{"fleet_id", fleet}, {"event", estop ? "ESTOP" : "RESUME"}});
+      json::Object{{"fleet_id", fleet}, {"event", estop ? "ESTOP" : "RESUME"}},
+      estop ? &resend : nullptr);
 }
 
 int command_main(const Options& o) {

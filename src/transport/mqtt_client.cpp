@@ -439,10 +439,14 @@ Status MqttClient::publish(const std::string& topic, const std::string& payload,
 }
 
 Status MqttClient::publish_confirmed(const std::string& topic, const std::string& payload, int qos,
-                                     bool retain, int timeout_ms) {
+                                     bool retain, int timeout_ms, bool* dropped_out) {
+  if (dropped_out != nullptr) *dropped_out = false;
   if (impl_->m == nullptr || stopped_.load())
     return Error(ErrorCode::kInternal, "the MQTT client is not running");
-  if (!connected_.load()) return Error(ErrorCode::kInternal, "not connected to the broker");
+  if (!connected_.load()) {
+    if (dropped_out != nullptr) *dropped_out = true;
+    return Error(ErrorCode::kInternal, "not connected to the broker");
+  }
   qos = std::clamp(qos, 1, qos_cap_.load());
   uint64_t drops = 0;
   {
@@ -467,6 +471,7 @@ Status MqttClient::publish_confirmed(const std::string& topic, const std::string
   if (--confirm_waiters_ == 0) acked_.clear();
   if (acked) return Status::Ok();
   const std::string what = "the publish on " + topic + " at QoS " + std::to_string(qos);
+  if (dropped_out != nullptr) *dropped_out = dropped || rc == MOSQ_ERR_NO_CONN;
   if (rc != MOSQ_ERR_SUCCESS) {
     if (rc != MOSQ_ERR_NO_CONN) inflight_.fetch_sub(1);
     return Error(ErrorCode::kInternal, what + " failed: " + mosquitto_strerror(rc));

@@ -110,8 +110,10 @@ class MqttClient {
   // broker's acknowledgement of this message: PUBACK at QoS 1, PUBCOMP at QoS 2. Errors
   // (kInternal) when not connected, when the connection drops first (a broker refusing the
   // publish closes it: MQTT 3.1.1 has no negative acknowledgement) or at the timeout.
+  // `dropped`, when given, tells a lost or missing connection apart: the caller may publish
+  // again once reconnected.
   Status publish_confirmed(const std::string& topic, const std::string& payload, int qos,
-                           bool retain, int timeout_ms);
+                           bool retain, int timeout_ms, bool* dropped = nullptr);
   // Waits up to `timeout_ms` until connected and every subscription sent so far is answered by
   // a SUBACK. False on timeout.
   bool wait_subscribed(int timeout_ms);

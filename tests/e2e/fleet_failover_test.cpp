@@ -78,6 +78,14 @@ class Relay {
     while (!held_) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
   void cut() { cut_ = true; }
+  // The next `count` client packets that carry `needle` (a topic) are not forwarded: the relay
+  // closes the connection instead, as a broker refusing a publish does (or a node that dies
+  // before its PUBACK). The client may connect again.
+  void drop_packets_with(const std::string& needle, int count) {
+    needle_ = needle;
+    drops_left_ = count;
+  }
+  int dropped() const { return dropped_.load(); }
 
  private:
   void run() {
@@ -119,6 +127,12 @@ class Relay {
     if ((revents & (POLLIN | POLLHUP | POLLERR)) == 0) return true;
     char buf[16384];
     ssize_t n = ::read(from, buf, sizeof buf);
+    if (n > 0 && from == client_ && drops_left_.load() > 0 &&
+        std::string_view(buf, static_cast<size_t>(n)).find(needle_) != std::string_view::npos) {
+      --drops_left_;
+      ++dropped_;
+      return false;
+    }
     return n > 0 && ::write(to, buf, static_cast<size_t>(n)) == n;
   }
   // Frames the robot's packets (fixed header, remaining length) and answers each PINGREQ.
@@ -163,7 +177,8 @@ class Relay {
 
   uint16_t upstream_, port_ = 0;
   int lfd_ = -1, client_ = -1, up_ = -1;
-  std::string pending_;
+  std::string pending_, needle_;
+  std::atomic<int> drops_left_{0}, dropped_{0};
   std::atomic<bool> stop_{false}, frozen_{false}, cut_{false}, held_{false};
   std::thread thread_;
 };
@@ -238,9 +253,9 @@ TEST_F(FailoverTest, RobotsNodeDiesItFailsOverAndAFleetEstopLatchesIt) {
 // The robot's node dies in the middle of a fleet ESTOP: the robot still holds a connection to it
 // (a zombie: its host dropped off the network, no FIN), the operator publishes the ESTOP through
 // node 3 — the robot cannot hear it — and `rcan fleet estop` waits. The connection breaks, the
-// robot fails over to node 2, the cluster hands it the retained ESTOP on subscribe: it latches
-// and confirms, and the CLI exits 0.
-TEST_F(FailoverTest, RobotsNodeDiesDuringAFleetEstopItLatchesOnTheRetainedMessage) {
+// robot fails over to node 2 and gets the ESTOP it missed (the retained copy, its session's
+// queued copy or one the CLI sent again): it latches and confirms, and the CLI exits 0.
+TEST_F(FailoverTest, RobotsNodeDiesDuringAFleetEstopItLatchesWhenItIsBack) {
   Nats nats(tmp_.path(), 3);
   Relay relay(nats.mqtt_port(0));
   Robot& robot = robot_on(url_list({relay.url(), nats.url(1)}), "robot-a", "0000000a");
@@ -248,25 +263,24 @@ TEST_F(FailoverTest, RobotsNodeDiesDuringAFleetEstopItLatchesOnTheRetainedMessag
   relay.freeze();
   nats.kill(0);
   settle(nats.url(2), nats, 2);
+  // Sees the ESTOP go out live on node 3 (QoS 0: no JetStream consumer, which the settling
+  // cluster may be slow to make).
+  Watcher sent(nats.url(2), {"rcan/fleet/alpha/estop"}, 0);
   test::RunResult r;
   std::thread operator_([&] {
     // --members: the roster (retained member statuses) may still be unreadable on a cluster
     // that is electing leaders; what this test is about is the robot latching.
     r = fleet_via(nats.url(2), {"estop", "alpha", "--members", "robot-a", "--reason",
-                                "mid-failover", "--timeout-ms", "30000"});
+                                "mid-failover", "--timeout-ms", "55000"});
   });
-  // The cluster acknowledged the ESTOP: it stands, retained, on node 3 (a subscription a node
-  // refuses while it settles is simply made again).
-  bool published = false;
-  for (int i = 0; i < 40 && !published; ++i) {
-    Watcher w(nats.url(2), {"rcan/fleet/alpha/estop"});
-    published =
-        w.wait([](const Watcher::Msg& m) { return str_of(m.body, "type") == "SAFETY"; }, 500)
-            .has_value();
-  }
-  if (!published) {
+  if (!sent.wait([](const Watcher::Msg& m) { return str_of(m.body, "type") == "SAFETY"; }, 60000)) {
     operator_.join();
-    FAIL() << "the ESTOP was not published\n" << r.out << r.err;
+    nats.proc(1).drain(200);
+    nats.proc(2).drain(200);
+    FAIL() << "the ESTOP was not published\n"
+           << r.out << r.err << "\nnode 2:\n"
+           << nats.proc(1).err() << "\nnode 3:\n"
+           << nats.proc(2).err();
   }
   std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the robot would have heard it
   EXPECT_FALSE(latched("robot-a"));                             // it did not: its node is gone
@@ -282,15 +296,23 @@ TEST_F(FailoverTest, RobotsNodeDiesDuringAFleetEstopItLatchesOnTheRetainedMessag
               static_cast<long long>(latch_ms));
   EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
   EXPECT_EQ(str_at(parse(r.out), {"members", "robot-a", "result"}), "acknowledged") << r.out;
-  // It latched on the retained copy (the replay stage notes a standing fleet ESTOP).
-  bool standing = false;
-  for (const auto& e : audit_events(robot, fleet_token_, "ESTOP"))
-    standing |= !detail_str(e, "standing_fleet_estop_timestamp_ms").empty() &&
-                detail_str(e, "standing_fleet_estop_timestamp_ms") != "null";
-  EXPECT_TRUE(standing) << robot.audit(fleet_token_);
+  // It latched once back on node 2, on whichever copy NATS handed it first: the retained one
+  // (the replay stage notes a standing fleet ESTOP), the one the cluster queued for its session
+  // while it was away, or one the CLI sent again to its command topic (it had not confirmed).
   auto back = audit_events(robot, fleet_token_, "MQTT_RECONNECTED");
   ASSERT_FALSE(back.empty());
   EXPECT_EQ(detail_str(back.back(), "broker"), "\"" + nats.url(1) + "\"");
+  auto estops = audit_events(robot, fleet_token_, "ESTOP");
+  ASSERT_FALSE(estops.empty()) << robot.audit(fleet_token_);
+  const std::string route = detail_str(estops.front(), "route");
+  const bool resent = route == "\"rcan/fleet/alpha/robot/robot-a/cmd\"";
+  EXPECT_TRUE(resent || route == "\"rcan/fleet/alpha/estop\"") << route;
+  EXPECT_GT(int_at(estops.front(), {"seq"}), int_at(back.front(), {"seq"}));  // after it came back
+  const std::string standing = detail_str(estops.front(), "standing_fleet_estop_timestamp_ms");
+  std::printf("[ FIGURE   ] latched from the %s copy\n", resent ? "resent"
+                                                         : standing.empty() || standing == "null"
+                                                             ? "session's queued"
+                                                             : "retained");
 }
 
 // The node the operator's CLI is on dies while it waits for the members: it stops waiting (the
@@ -395,6 +417,91 @@ TEST(FleetConfig, BrokerIsAUrlOrAListOfThem) {
     ASSERT_FALSE(r.ok()) << b.yaml;
     EXPECT_EQ(r.error().field, b.field) << b.yaml << " → " << r.error().message;
   }
+}
+
+// The CLI's connection drops before the broker acknowledged the fleet ESTOP (a node dying, a
+// settling cluster dropping its clients): the CLI connects again and publishes the same message
+// (same message_id) once more — the robot obeys it once — and exits 0 only on the broker's
+// acknowledgement and the robot's confirmation. A broker that drops every attempt gets three,
+// then NOT DELIVERED with the count, and nothing moved.
+TEST_F(FleetTest, ADropBeforeTheAcknowledgementIsPublishedAgain) {
+  Robot& robot = *(robots_["robot-a"] = std::make_unique<Robot>(tmp_.path(), "robot-a", "0000000a",
+                                                                broker_->url(), secret_));
+  Watcher seen(broker_->url(), {"rcan/fleet/alpha/robot/+/status"});
+  ASSERT_TRUE(
+      seen.wait([](const Watcher::Msg& m) { return bool_at(m.body, {"online"}) == "true"; }));
+  Relay relay(broker_->port());
+  const std::vector<std::string> base{
+      "fleet",     "--broker", relay.url(), "--token", tmp_.file("fleet.token"),
+      "--key-dir", key_dir_,   "--members", "robot-a", "--timeout-ms",
+      "15000"};
+  auto latched = [&] {
+    return json::dump(robot.status(fleet_token_)).find("\"estop_active\":true") !=
+           std::string::npos;
+  };
+  auto verb = [&](std::vector<std::string> head) {
+    std::vector<std::string> args = base;
+    args.insert(args.begin() + 1, head.begin(), head.end());
+    return test::run_cli(args);
+  };
+
+  relay.drop_packets_with("rcan/fleet/alpha/estop", 1);
+  test::RunResult r = verb({"estop", "alpha"});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_EQ(relay.dropped(), 1);
+  json::Value out = parse(r.out);
+  EXPECT_EQ(int_at(out, {"publish_attempts"}), 2) << r.out;
+  EXPECT_EQ(str_at(out, {"members", "robot-a", "result"}), "acknowledged") << r.out;
+  EXPECT_TRUE(latched());
+
+  // Every attempt dropped: three, then NOT DELIVERED; the RESUME never reached the robot.
+  relay.drop_packets_with("rcan/fleet/alpha/estop", 100);
+  r = verb({"resume", "alpha"});
+  EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
+  EXPECT_EQ(relay.dropped(), 4);
+  EXPECT_NE(r.err.find("NOT DELIVERED"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("(3 attempts)"), std::string::npos) << r.err;
+  EXPECT_EQ(int_at(parse(r.out), {"publish_attempts"}), 3) << r.out;
+  EXPECT_TRUE(latched());
+}
+
+// A member that was away when the fleet ESTOP went out, on a broker that lost the retained copy
+// (NATS 2.9 acknowledges a retained publish it failed to store while its cluster elects leaders;
+// here the test deletes the copy): the CLI sends a new ESTOP to each member still silent every
+// 2 s, so the member latches as soon as it is back and the CLI exits 0, listing what it resent.
+TEST_F(FleetTest, AnEstopIsSentAgainToMembersThatHaveNotConfirmed) {
+  test::RunResult r;
+  std::thread operator_([&] {
+    r = test::run_cli({"fleet", "estop", "alpha", "--broker", broker_->url(), "--token",
+                       tmp_.file("fleet.token"), "--key-dir", key_dir_, "--members", "robot-a",
+                       "--timeout-ms", "40000"});
+  });
+  {
+    Watcher w(broker_->url(), {"rcan/fleet/alpha/estop"});
+    ASSERT_TRUE(
+        w.wait([](const Watcher::Msg& m) { return str_of(m.body, "type") == "SAFETY"; }, 20000));
+  }
+  transport::MqttOptions o;
+  o.url = broker_->url();
+  transport::MqttClient eraser(o);
+  ASSERT_TRUE(eraser.start().ok());
+  ASSERT_TRUE(eraser.wait_subscribed(5000));
+  ASSERT_TRUE(eraser.publish_confirmed("rcan/fleet/alpha/estop", "", 1, true, 5000).ok());
+  eraser.stop();
+  // The member starts now: no retained ESTOP, no session that queued the first.
+  Robot& robot = *(robots_["robot-a"] = std::make_unique<Robot>(tmp_.path(), "robot-a", "0000000a",
+                                                                broker_->url(), secret_));
+  operator_.join();
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  json::Value out = parse(r.out);
+  EXPECT_EQ(str_at(out, {"members", "robot-a", "result"}), "acknowledged") << r.out;
+  const json::Value* resent = path_of(out, {"resent"});
+  ASSERT_TRUE(resent != nullptr && resent->is_array() && !resent->as_array().empty()) << r.out;
+  const std::string reply_to = str_at(out, {"members", "robot-a", "reply", "reply_to"});
+  EXPECT_NE(reply_to, str_at(out, {"message_id"}));  // it answered a copy sent again
+  EXPECT_NE(json::dump(*resent).find(reply_to), std::string::npos) << r.out;
+  EXPECT_NE(json::dump(robot.status(fleet_token_)).find("\"estop_active\":true"),
+            std::string::npos);
 }
 
 }  // namespace

@@ -122,6 +122,7 @@ class Broker {
     if (proc_ && proc_->running()) proc_->stop(SIGTERM, 5000);
   }
   std::string url() const { return "mqtt://127.0.0.1:" + std::to_string(port_); }
+  uint16_t port() const { return port_; }
 
  private:
   std::string dir_;
@@ -137,11 +138,12 @@ class Watcher {
     json::Value body;
     bool retained = false;
   };
-  Watcher(const std::string& url, const std::vector<std::string>& filters) {
+  // `qos` 0: a subscription NATS serves without JetStream (which a settling cluster may not).
+  Watcher(const std::string& url, const std::vector<std::string>& filters, int qos = 1) {
     transport::MqttOptions o;
     o.url = url;
     client_ = std::make_unique<transport::MqttClient>(o);
-    for (const auto& f : filters) client_->subscribe(f, 1);
+    for (const auto& f : filters) client_->subscribe(f, qos);
     client_->on_message([this](const transport::MqttMessage& m) {
       auto v = json::parse(m.payload);
       std::lock_guard<std::mutex> lk(mu_);

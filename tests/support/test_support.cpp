@@ -148,7 +148,8 @@ RunResult run(const std::vector<std::string>& argv, const std::string& stdin_dat
       fds[n] = {in_fd, POLLOUT, 0};
       in_i = n++;
     }
-    if (poll(fds, static_cast<nfds_t>(n), 60000) <= 0) break;
+    // Silence is not a hang: a CLI may wait its own --timeout-ms (ctest's TIMEOUT ends a hang).
+    if (poll(fds, static_cast<nfds_t>(n), 300000) <= 0) break;
     if (out_i >= 0 && fds[out_i].revents) {
       ssize_t k = read(out_pipe[0], buf, sizeof buf);
       if (k <= 0)
