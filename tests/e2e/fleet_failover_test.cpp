@@ -294,6 +294,16 @@ TEST_F(FailoverTest, RobotsNodeDiesDuringAFleetEstopItLatchesWhenItIsBack) {
   ASSERT_TRUE(latched_after) << robot.proc().err();
   std::printf("[ FIGURE   ] connection to the dead node broken -> latched via failover: %lld ms\n",
               static_cast<long long>(latch_ms));
+  // The robot's answer crosses the cluster (node 2 to node 3) through JetStream: a cluster
+  // still electing leaders may lose it (seen once in eight runs with two clusters on two cores).
+  // The CLI then says the robot did not confirm — never the opposite — and an ESTOP sent again
+  // is confirmed (at most three times, each printed).
+  for (int i = 0; i < 3 && r.exit_code != 0; ++i) {
+    EXPECT_EQ(str_at(parse(r.out), {"members", "robot-a", "result"}), "timeout") << r.out;
+    std::printf("[ RETRY    ] the confirmation was lost on the settling cluster: %s",
+                r.err.c_str());
+    r = fleet_via(nats.url(2), {"estop", "alpha", "--members", "robot-a", "--timeout-ms", "20000"});
+  }
   EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
   EXPECT_EQ(str_at(parse(r.out), {"members", "robot-a", "result"}), "acknowledged") << r.out;
   // It latched once back on node 2, on whichever copy NATS handed it first: the retained one
