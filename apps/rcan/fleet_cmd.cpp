@@ -36,8 +36,9 @@ constexpr const char* kHelp =
     "      Publishes a retained ESTOP on the fleet's estop topic (QoS 2, or QoS 1 on a broker\n"
     "      without QoS 2): every member latches it, and so does a member that connects later.\n"
     "      Waits for the broker's acknowledgement, then for each member's: --members, else every\n"
-    "      member with a retained status on the broker (online or not). Names each robot that\n"
-    "      did not confirm. --no-wait: fire and forget (the broker must still acknowledge).\n"
+    "      member with a retained status on the broker (online or not), sending a new ESTOP\n"
+    "      every 2 s to each one still silent. Names each robot that did not confirm.\n"
+    "      --no-wait: fire and forget (the broker must still acknowledge).\n"
     "  rcan fleet resume FLEET [--members a,b,…] [--no-wait]\n"
     "      Replaces the retained ESTOP with a RESUME (LEASEE or above); live members resume.\n"
     "  rcan fleet command FLEET ACTION [--params JSON] [--members a,b,…] [--no-wait]\n"
@@ -70,8 +71,9 @@ constexpr const char* kHelp =
     "    --qos 1|2 (force the QoS of every publish and subscription; default: 2 for the estop\n"
     "    topic and 1 for commands, and 1 throughout when the broker's SUBACK grants less than 2).\n"
     "  Exit: 0 success; 1 the broker did not acknowledge a publish (it refused it, or the\n"
-    "    connection dropped), or a robot refused, failed or did not confirm in time, or no\n"
-    "    member is known to confirm; 2 usage error or no connection to the broker.\n";
+    "    connection dropped on each of 3 attempts, each on a new connection), or a robot\n"
+    "    refused, failed or did not confirm in time, or no member is known to confirm;\n"
+    "    2 usage error or no connection to the broker.\n";
 
 int64_t wall_ms() {
   return std::chrono::duration_cast<std::chrono::milliseconds>(
