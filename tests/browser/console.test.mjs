@@ -225,6 +225,14 @@ async function main() {
     await setPad([0, 0], false);
     await sleep(200);
     await page.evaluate(() => { delete document.visibilityState; });
+    await page.evaluate(() => { document.hasFocus = () => false; });
+    await setPad([0, -1], true);             // a fresh press while the window is not focused
+    const p2 = await pose();
+    await sleep(1500);
+    check(dist(await pose(), p2) < 0.005, 'a fresh press while the window is not focused does not drive');
+    await setPad([0, 0], false);
+    await sleep(200);
+    await page.evaluate(() => { delete document.hasFocus; });
     await page.evaluate(() => { window.__gp.connected = false; });
   }
 

@@ -58,7 +58,7 @@ function argsOf(cmd) {
 // base's; anything else is a key/value table.
 function paramRows(it) {
   const a = it.args;
-  const text = (v) => (typeof v === 'string' ? v : JSON.stringify(v)).slice(0, 200);
+  const text = (v) => String(typeof v === 'string' ? v : JSON.stringify(v)).slice(0, 200);
   const num = (v) => (typeof v === 'number' && isFinite(v) ? v.toFixed(2) : text(v));
   const rows = [];
   const done = new Set();

@@ -386,7 +386,8 @@ function pollGamepad() {
     return;
   }
   if (driving || !padArmed) return;
-  if (!motionOk || document.visibilityState !== 'visible' || document.body.dataset.view !== 'teleop') return;
+  if (!motionOk || document.visibilityState !== 'visible' || !document.hasFocus() ||
+      document.body.dataset.view !== 'teleop') return;
   padArmed = false;
   startHold('gamepad', 'gamepad', () => padVec);
 }
