@@ -5,13 +5,13 @@
 // Environment: RCAND_PATH, RCAN_CLI_PATH (set by CTest), CHROMIUM_PATH (default
 // /usr/bin/chromium), DASHBOARD_ARTIFACTS (screenshots and metrics.json; default a temp dir).
 
-import { spawn, execFileSync } from 'node:child_process';
-import { chmodSync, existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
+import { execFileSync } from 'node:child_process';
+import { mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { randomUUID } from 'node:crypto';
 import { createServer } from 'node:net';
-import { checker, http, launchBrowser, loadBrowser, runChecks, spawnRcand } from './harness.mjs';
+import { checker, http, launchBrowser, loadBrowser, runChecks, spawnRcand, startGatedRcand } from './harness.mjs';
 
 const rcandPath = process.env.RCAND_PATH;
 const cliPath = process.env.RCAN_CLI_PATH;
@@ -53,44 +53,6 @@ function command(action, params = {}) {
 function issueToken(ruri, sub, role, scopes, ttl = '1h') {
   return execFileSync(cliPath, ['token', 'issue', '--key', join(dataDir, 'issuer', 'ed25519.seed'), '--iss', 'rcand-local',
     '--sub', sub, '--role', role, '--aud', ruri, '--scope', scopes, '--ttl', ttl], { encoding: 'utf8' }).trim();
-}
-
-// A configured robot whose arm_move waits for a human (agent.hitl_gates), with its own issuer.
-async function startGatedRcand() {
-  const dir = join(work, 'gated');
-  const data = join(dir, 'data');
-  mkdirSync(data, { recursive: true, mode: 0o700 });
-  execFileSync(cliPath, ['keys', 'generate', '--dir', join(data, 'keys')]);
-  execFileSync(cliPath, ['audit', 'new-secret', '--out', join(data, 'audit.secret')]);
-  const key = join(dir, 'issuer.pem');
-  const pub = join(dir, 'issuer.pub.pem');
-  execFileSync('openssl', ['genpkey', '-algorithm', 'ed25519', '-out', key]);
-  chmodSync(key, 0o600);
-  execFileSync('openssl', ['pkey', '-in', key, '-pubout', '-out', pub]);
-  const ruri = 'rcan://local.rcan/acme/rover/0a1b2c3d';
-  const cfg = join(dir, 'robot.rcan.yaml');
-  writeFileSync(cfg, [
-    'rcan_version: "1.2"', `ruri: ${ruri}`,
-    'robot:', '  name: gated-rover', '  manufacturer: acme', '  model: rover', '  type: mobile',
-    'safety:', '  local_safety_wins: true',
-    'security:', '  jwt:', '    issuers:', '      - issuer: ops.example', `        key_file: ${pub}`,
-    'agent:', '  hitl_gates:', '    - action_types: [arm_move]', '      require_auth: true',
-    '      auth_timeout_ms: 60000', '      on_timeout: block', '      notify: [ws]', ''].join('\n'));
-  const proc = spawn(rcandPath, ['--config', cfg, '--data-dir', data, '--port', '0'], { stdio: ['ignore', 'ignore', 'pipe'] });
-  let log = '';
-  const url = await new Promise((resolve, reject) => {
-    const timer = setTimeout(() => reject(new Error(`configured rcand did not start:\n${log}`)), 20000);
-    proc.stderr.on('data', (d) => {
-      log += d.toString();
-      const m = log.match(/"event":"listening"[^\n]*"url":"(http:\/\/[^"]+)"/);
-      if (m) { clearTimeout(timer); resolve(m[1]); }
-    });
-    proc.on('exit', (code) => { clearTimeout(timer); reject(new Error(`configured rcand exited ${code}:\n${log}`)); });
-  });
-  proc.removeAllListeners('exit');
-  const tok = (sub, role, scopes) => execFileSync(cliPath, ['token', 'issue', '--key', key, '--iss', 'ops.example',
-    '--sub', sub, '--role', role, '--aud', ruri, '--scope', scopes, '--ttl', '1h'], { encoding: 'utf8' }).trim();
-  return { proc, url, owner: tok('owner-1', 'owner', 'status,control,config'), leasee: tok('leasee-1', 'leasee', 'status,control') };
 }
 
 const HOSTILE = '<img src=x onerror="window.__pwned=1">';
@@ -364,7 +326,7 @@ async function main() {
 
 // An approval made in the page releases a parked command (PROFILE §8, seed §16.4).
 async function approvals(context, consoleErrors, pageErrors, isApiRefusal) {
-  const g = await startGatedRcand();
+  const g = await startGatedRcand({ rcandPath, cliPath, dir: join(work, 'gated') });
   gated = g.proc;
   const page = await context.newPage();
   page.on('pageerror', (e) => pageErrors.push(String(e)));

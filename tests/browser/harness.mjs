@@ -2,8 +2,9 @@
 // browser or playwright-core is missing), pass/fail lines, starting an rcand and reading its
 // URL from the "listening" log line, and a small JSON-over-HTTP helper.
 
-import { spawn } from 'node:child_process';
-import { existsSync } from 'node:fs';
+import { spawn, execFileSync } from 'node:child_process';
+import { chmodSync, existsSync, mkdirSync, writeFileSync } from 'node:fs';
+import { join } from 'node:path';
 
 export const SKIP = 77;
 
@@ -49,6 +50,44 @@ export async function spawnRcand(rcandPath, dataDir, port = 0) {
   });
   proc.removeAllListeners('exit');
   return { proc, url };
+}
+
+// A configured robot whose `actions` wait for a human (agent.hitl_gates), with its own issuer,
+// in `dir`. Resolves { proc, url, owner, leasee } (tokens of that issuer).
+export async function startGatedRcand({ rcandPath, cliPath, dir, actions = ['arm_move'] }) {
+  const data = join(dir, 'data');
+  mkdirSync(data, { recursive: true, mode: 0o700 });
+  execFileSync(cliPath, ['keys', 'generate', '--dir', join(data, 'keys')]);
+  execFileSync(cliPath, ['audit', 'new-secret', '--out', join(data, 'audit.secret')]);
+  const key = join(dir, 'issuer.pem');
+  const pub = join(dir, 'issuer.pub.pem');
+  execFileSync('openssl', ['genpkey', '-algorithm', 'ed25519', '-out', key]);
+  chmodSync(key, 0o600);
+  execFileSync('openssl', ['pkey', '-in', key, '-pubout', '-out', pub]);
+  const ruri = 'rcan://local.rcan/acme/rover/0a1b2c3d';
+  const cfg = join(dir, 'robot.rcan.yaml');
+  writeFileSync(cfg, [
+    'rcan_version: "1.2"', `ruri: ${ruri}`,
+    'robot:', '  name: gated-rover', '  manufacturer: acme', '  model: rover', '  type: mobile',
+    'safety:', '  local_safety_wins: true',
+    'security:', '  jwt:', '    issuers:', '      - issuer: ops.example', `        key_file: ${pub}`,
+    'agent:', '  hitl_gates:', `    - action_types: [${actions.join(', ')}]`, '      require_auth: true',
+    '      auth_timeout_ms: 60000', '      on_timeout: block', '      notify: [ws]', ''].join('\n'));
+  const proc = spawn(rcandPath, ['--config', cfg, '--data-dir', data, '--port', '0'], { stdio: ['ignore', 'ignore', 'pipe'] });
+  let log = '';
+  const url = await new Promise((resolve, reject) => {
+    const timer = setTimeout(() => reject(new Error(`configured rcand did not start:\n${log}`)), 20000);
+    proc.stderr.on('data', (d) => {
+      log += d.toString();
+      const m = log.match(/"event":"listening"[^\n]*"url":"(http:\/\/[^"]+)"/);
+      if (m) { clearTimeout(timer); resolve(m[1]); }
+    });
+    proc.on('exit', (code) => { clearTimeout(timer); reject(new Error(`configured rcand exited ${code}:\n${log}`)); });
+  });
+  proc.removeAllListeners('exit');
+  const tok = (sub, role, scopes) => execFileSync(cliPath, ['token', 'issue', '--key', key, '--iss', 'ops.example',
+    '--sub', sub, '--role', role, '--aud', ruri, '--scope', scopes, '--ttl', '1h'], { encoding: 'utf8' }).trim();
+  return { proc, url, owner: tok('owner-1', 'owner', 'status,control,config'), leasee: tok('leasee-1', 'leasee', 'status,control') };
 }
 
 export async function http(base, method, path, token, body) {

@@ -38,19 +38,69 @@ function normalise(msg) {
     confidence: typeof p.confidence === 'number' ? p.confidence : (typeof ai.confidence === 'number' ? ai.confidence : null),
     expires,
     timeout: p.auth_timeout_ms,
-    params: paramsOf(ocp && Object.keys(ocp).length ? ocp : oc),
+    args: argsOf(ocp && Object.keys(ocp).length ? ocp : oc),
     raw: p,
   };
 }
 
 // What the command would do, without the fields already shown.
-function paramsOf(cmd) {
-  if (!cmd || typeof cmd !== 'object') return '';
+function argsOf(cmd) {
   const rest = {};
+  if (!cmd || typeof cmd !== 'object') return rest;
   for (const [k, v] of Object.entries(cmd)) {
     if (!['action', 'action_type', 'command', 'cmd', 'ai', 'thought', 'watermark_token'].includes(k)) rest[k] = v;
   }
-  return Object.keys(rest).length ? JSON.stringify(rest) : '';
+  return rest;
+}
+
+// The parameters against the robot's state now: rows [name, requested, telemetry path or ''].
+// An arm move shows each target joint against the joint now, a drive its speeds against the
+// base's; anything else is a key/value table.
+function paramRows(it) {
+  const a = it.args;
+  const text = (v) => String(typeof v === 'string' ? v : JSON.stringify(v)).slice(0, 200);
+  const num = (v) => (typeof v === 'number' && isFinite(v) ? v.toFixed(2) : text(v));
+  const rows = [];
+  const done = new Set();
+  if (/arm_move/.test(it.action) && Array.isArray(a.joints)) {
+    a.joints.slice(0, 12).forEach((v, i) => rows.push([`joint ${i + 1} (rad)`, num(v), `arm.joints_rad.${i}`]));
+    done.add('joints');
+  } else if (/drive|move/.test(it.action) && ('linear' in a || 'angular' in a)) {
+    for (const [k, path, unit] of [['linear', 'base.linear_mps', 'm/s'], ['angular', 'base.angular_radps', 'rad/s']]) {
+      if (k in a) { rows.push([`${k} (${unit})`, num(a[k]), path]); done.add(k); }
+    }
+  }
+  for (const [k, v] of Object.entries(a)) if (!done.has(k)) rows.push([k, text(v), '']);
+  return rows;
+}
+
+function valueAt(path) {
+  let v = app.telemetry;
+  for (const k of path.split('.')) v = v && typeof v === 'object' ? v[k] : undefined;
+  return typeof v === 'number' && isFinite(v) ? v : null;
+}
+
+function paramTable(it) {
+  const rows = paramRows(it);
+  if (!rows.length) return el('p', { class: 'muted small' }, 'No parameters.');
+  const withNow = rows.some((r) => r[2]);
+  return el('table', { class: 'params' },
+    el('thead', {}, el('tr', {}, el('th', { scope: 'col' }, 'parameter'), el('th', { scope: 'col' }, 'requested'),
+      withNow && el('th', { scope: 'col' }, 'robot now'))),
+    el('tbody', {}, rows.map(([k, v, path]) => el('tr', {},
+      el('td', {}, k), el('td', { class: 'mono' }, v),
+      withNow && el('td', { class: 'mono now', dataset: path ? { path, want: v } : {} }, path ? '…' : '')))));
+}
+
+// The "robot now" cells follow the telemetry; a value away from the request is marked.
+function renderNow() {
+  for (const td of document.querySelectorAll('#approvals-list td.now[data-path]')) {
+    const v = valueAt(td.dataset.path);
+    const differs = v !== null && Math.abs(v - Number(td.dataset.want)) > 0.005;
+    setText(td, v === null ? 'unknown' : `${v.toFixed(2)}${differs ? ' ≠' : ''}`);
+    td.classList.toggle('diff', differs);
+    td.title = differs ? 'differs from the request' : '';
+  }
 }
 
 // A new request announces itself beyond the tab badge: the window title counts what waits,
@@ -59,7 +109,44 @@ const BASE_TITLE = document.title;
 const reasons = new Map();   // item key → the reason typed so far (kept across refreshes)
 let renderedKeys = '';
 
+// Both announcements are off until the operator ticks them; the choice is remembered in this
+// browser (localStorage). The browser is asked for notification permission only on the tick.
+const SOUND_KEY = 'rcan-dashboard.approval-sound';
+const NOTIFY_KEY = 'rcan-dashboard.approval-notify';
+let audio = null;
+
+function remember(key, on) {
+  try { localStorage.setItem(key, on ? 'on' : 'off'); } catch (_) { /* storage may be off */ }
+}
+
+function remembered(key) {
+  try { return localStorage.getItem(key) === 'on'; } catch (_) { return false; }
+}
+
+// A short two-tone beep (WebAudio; no sound file). A browser may hold sound back until the page
+// has been clicked once since it loaded.
+function beep() {
+  const AC = window.AudioContext || window.webkitAudioContext;
+  if (!AC || !$('#sound-approvals').checked) return;
+  try {
+    audio = audio || new AC();
+    if (audio.state === 'suspended') audio.resume().catch(() => {});
+    const t = audio.currentTime;
+    const g = audio.createGain();
+    g.gain.value = 0.12;
+    g.connect(audio.destination);
+    [[880, 0], [660, 0.16]].forEach(([f, at]) => {
+      const o = audio.createOscillator();
+      o.frequency.value = f;
+      o.connect(g);
+      o.start(t + at);
+      o.stop(t + at + 0.14);
+    });
+  } catch (_) { /* no audio output */ }
+}
+
 function announce(it) {
+  beep();
   if (typeof Notification === 'undefined' || Notification.permission !== 'granted') return;
   if (!$('#notify-approvals') || !$('#notify-approvals').checked) return;
   try {
@@ -91,17 +178,21 @@ export async function refresh() {
   const asked = Date.now();
   try {
     const data = await request('GET', '/rcan/v1/pending');
-    available = true;
     const list = Array.isArray(data) ? data : (data && (data.pending || data.items || data.entries)) || [];
     const seen = new Set();
+    const first = available !== true;
     for (const m of list) {
       const it = normalise(m);
       if (!it.key) continue;
       seen.add(it.key);
+      // A request the stream did not push (or not yet) announces itself too, except in the
+      // list found on signing in.
+      if (!items.has(it.key) && !first) announce(it);
       items.set(it.key, it);
     }
     // Drop what the node no longer lists, unless it was pushed after this list was asked for.
     for (const [k, it] of Array.from(items.entries())) if (!seen.has(k) && !(it.pushedAt > asked)) items.delete(k);
+    available = true;
   } catch (e) {
     if (e.status === 404 || e.status === 405) available = false;
   }
@@ -156,8 +247,8 @@ function render() {
     return el('article', { class: 'approval', dataset: { key: it.key } },
       el('h3', {}, it.action || '(no action type)'),
       el('p', { class: 'desc' }, it.description),
+      paramTable(it),
       el('dl', { class: 'facts' },
-        el('dt', {}, 'Parameters'), el('dd', { class: 'mono' }, it.params || '–'),
         el('dt', {}, 'Requester'), el('dd', {}, it.requester || '–'),
         it.sender_type && [el('dt', {}, 'Sender'), el('dd', {}, it.sender_type)],
         el('dt', {}, 'Model'), el('dd', {}, it.model || '–'),
@@ -172,9 +263,11 @@ function render() {
         el('button', { type: 'button', class: 'primary approve', disabled: !canDecide, onclick: () => decide(it, 'approve') }, 'Approve'),
         el('button', { type: 'button', class: 'danger deny', disabled: !canDecide, onclick: () => decide(it, 'deny') }, 'Deny')));
   }));
+  renderNow();
 }
 
 function countdown() {
+  renderNow();
   for (const c of document.querySelectorAll('#approvals-list .countdown')) {
     const exp = Number(c.dataset.expires);
     if (!exp) continue;
@@ -184,16 +277,23 @@ function countdown() {
 }
 
 export function initApprovals() {
+  const sound = $('#sound-approvals');
+  sound.checked = remembered(SOUND_KEY);
+  if (!(window.AudioContext || window.webkitAudioContext)) sound.disabled = true;
+  sound.addEventListener('change', () => {
+    remember(SOUND_KEY, sound.checked);
+    if (sound.checked) beep();       // the tick is a user gesture: the browser lets the sound play
+  });
   const box = $('#notify-approvals');
-  if (box) {
-    if (typeof Notification === 'undefined') box.disabled = true;
-    box.addEventListener('change', async () => {
-      if (box.checked && Notification.permission !== 'granted') {
-        const got = await Notification.requestPermission().catch(() => 'denied');
-        if (got !== 'granted') { box.checked = false; toast('The browser did not allow notifications.', 'warn'); }
-      }
-    });
-  }
+  if (typeof Notification === 'undefined') box.disabled = true;
+  else box.checked = remembered(NOTIFY_KEY) && Notification.permission === 'granted';
+  box.addEventListener('change', async () => {
+    if (box.checked && Notification.permission !== 'granted') {
+      const got = await Notification.requestPermission().catch(() => 'denied');
+      if (got !== 'granted') { box.checked = false; toast('The browser did not allow notifications.', 'warn'); }
+    }
+    remember(NOTIFY_KEY, box.checked);
+  });
   clearInterval(tick);
   tick = setInterval(countdown, 250);
   render();

@@ -20,8 +20,10 @@ function fit(canvas) {
 }
 
 export class PositionPlot {
-  constructor(canvas, { trail = 600 } = {}) {
+  // fence: the view always holds the workspace fence (when known), not only the trail.
+  constructor(canvas, { trail = 600, fence = false } = {}) {
     this.canvas = canvas;
+    this.fence = fence;
     this.trail = [];
     this.max = trail;
     this.pose = null;
@@ -54,6 +56,11 @@ export class PositionPlot {
       minX = Math.min(minX, x - 0.5); maxX = Math.max(maxX, x + 0.5);
       minY = Math.min(minY, y - 0.5); maxY = Math.max(maxY, y + 0.5);
     }
+    const ws = this.workspace;
+    if (this.fence && ws) {
+      minX = Math.min(minX, ws.min_x - 0.5); maxX = Math.max(maxX, ws.max_x + 0.5);
+      minY = Math.min(minY, ws.min_y - 0.5); maxY = Math.max(maxY, ws.max_y + 0.5);
+    }
     const span = Math.max(maxX - minX, maxY - minY);
     const cx = (minX + maxX) / 2, cy = (minY + maxY) / 2;
     const scale = (Math.min(w, h) - 24) / span;
@@ -77,8 +84,7 @@ export class PositionPlot {
     ctx.moveTo(X(0), 0); ctx.lineTo(X(0), h);
     ctx.moveTo(0, Y(0)); ctx.lineTo(w, Y(0));
     ctx.stroke();
-    if (this.workspace) {
-      const ws = this.workspace;
+    if (ws) {
       ctx.strokeStyle = css('--plot-workspace', '#a36b1f');
       ctx.setLineDash([6, 4]);
       ctx.strokeRect(X(ws.min_x), Y(ws.max_y), (ws.max_x - ws.min_x) * scale, (ws.max_y - ws.min_y) * scale);

@@ -2,10 +2,10 @@
 // joint angles as scrolling charts, and the stream's connection state.
 import { $, el, replace, setText, fmtNum } from './dom.js';
 import { PositionPlot, TimeChart } from './charts.js';
-import { app } from './state.js';
+import { app, on } from './state.js';
 
 const JOINT_COLOURS = ['#3fa7ff', '#ffd166', '#06d6a0', '#ef476f', '#c77dff', '#f4a261'];
-let plot, speed, joints;
+let plot, speed, joints, traj;
 let lastDraw = 0;
 let rateWindow = [];
 
@@ -16,13 +16,71 @@ export function initLive() {
   replace($('#joint-legend'), JOINT_COLOURS.map((c, i) => [el('span', { class: `sw j${i}` }), `j${i + 1} `]));
   $('#clear-trail').addEventListener('click', () => plot.clearTrail());
   plot.draw();
-  window.addEventListener('resize', () => plot.draw());
+  // Beside the drive pad: the same frames as readouts and the odometry path inside the fence.
+  traj = new PositionPlot($('#traj'), { trail: 2000, fence: true });
+  $('#clear-path').addEventListener('click', () => { traj.clearTrail(); describePath(); });
+  traj.draw();
+  describePath();
+  renderTeleopFacts();
+  for (const ev of ['link', 'safety', 'status']) on(ev, renderTeleopFacts);
+  window.addEventListener('resize', () => { plot.draw(); traj.draw(); });
 }
 
-export function setWorkspace(ws) {
-  if (plot && ws && [ws.min_x, ws.max_x, ws.min_y, ws.max_y].every((v) => typeof v === 'number' && isFinite(v) && Math.abs(v) < 1e6)) {
-    plot.workspace = ws;
+// The path's text alternative: what the plot shows, in words.
+function describePath() {
+  const c = $('#traj');
+  const tr = traj.trail;
+  const ws = traj.workspace;
+  const fence = ws ? `the workspace fence is x ${fmtNum(ws.min_x, 1)} to ${fmtNum(ws.max_x, 1)} m, y ${fmtNum(ws.min_y, 1)} to ${fmtNum(ws.max_y, 1)} m`
+    : 'no workspace fence is in force';
+  let text;
+  if (!tr.length) text = `No path yet; ${fence}.`;
+  else {
+    let len = 0;
+    for (let i = 1; i < tr.length; i++) len += Math.hypot(tr[i][0] - tr[i - 1][0], tr[i][1] - tr[i - 1][1]);
+    const [x0, y0] = tr[0];
+    const [x1, y1] = tr[tr.length - 1];
+    text = `Path of ${tr.length} points, ${fmtNum(len)} m long, from (${fmtNum(x0)}, ${fmtNum(y0)}) to (${fmtNum(x1)}, ${fmtNum(y1)}) m; ${fence}.`;
   }
+  setText($('#traj-text'), text);
+  c.dataset.points = String(tr.length);
+}
+
+// The safety state in words, marked when the stream is not live (the last state seen).
+function safetyWords() {
+  const robot = (app.status && app.status.robot) || {};
+  const live = app.stream && app.stream.state === 'open';
+  let s = app.estop === null ? 'unknown' : app.estop ? 'ESTOP latched' : robot.state === 'safe_stop' ? 'safe stop' : 'running';
+  if (!live && app.estop !== null) s += ' (last known)';
+  return s;
+}
+
+export function renderTeleopFacts() {
+  const t = app.telemetry || {};
+  const b = t.base || {};
+  const j = (t.arm && Array.isArray(t.arm.joints_rad)) ? t.arm.joints_rad : [];
+  const box = $('#teleop-facts');
+  replace(box, [
+    ['safety', safetyWords()], ['motion', app.telemetry ? (t.stopped ? 'stopped' : 'moving') : '–'],
+    ['speed', `${fmtNum(b.linear_mps)} m/s`], ['turn', `${fmtNum(b.angular_radps)} rad/s`],
+    ['x', `${fmtNum(b.x)} m`], ['y', `${fmtNum(b.y)} m`], ['heading', `${fmtNum((b.theta || 0) * 180 / Math.PI, 0)}°`],
+    ...[0, 1, 2, 3, 4, 5].map((i) => [`joint ${i + 1}`, `${fmtNum(j[i])} rad`]),
+  ].map(([k, v]) => el('div', {}, el('dt', {}, k), el('dd', {}, v))));
+  box.dataset.x = String(b.x);
+  box.dataset.speed = String(b.linear_mps);
+}
+
+// The safety core's workspace fence (status robot.limits.workspace); none when it is off.
+export function setWorkspace(ws) {
+  const ok = ws && ws.enabled !== false &&
+    [ws.min_x, ws.max_x, ws.min_y, ws.max_y].every((v) => typeof v === 'number' && isFinite(v) && Math.abs(v) < 1e6);
+  const fence = ok ? { min_x: ws.min_x, max_x: ws.max_x, min_y: ws.min_y, max_y: ws.max_y } : null;
+  if (!plot || JSON.stringify(fence) === JSON.stringify(traj.workspace)) return;
+  plot.workspace = fence;
+  traj.workspace = fence;
+  plot.draw();
+  traj.draw();
+  describePath();
 }
 
 export function onTelemetry(frame) {
@@ -32,6 +90,9 @@ export function onTelemetry(frame) {
   rateWindow.push(now);
   while (rateWindow.length && rateWindow[0] < now - 5000) rateWindow.shift();
   plot.push(b.x, b.y, b.theta);
+  traj.push(b.x, b.y, b.theta);
+  describePath();
+  renderTeleopFacts();
   speed.push(now, [b.linear_mps, b.angular_radps]);
   const j = (t.arm && Array.isArray(t.arm.joints_rad)) ? t.arm.joints_rad : [];
   joints.push(now, j);

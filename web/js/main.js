@@ -69,7 +69,7 @@ async function refreshStatus() {
     setText($('#robot-name'), app.status.name || 'RCAN robot');
     setText($('#robot-ruri'), app.status.ruri || '');
     const lim = app.status.robot && app.status.robot.limits;
-    if (lim && lim.workspace) setWorkspace(lim.workspace);
+    if (lim) setWorkspace(lim.workspace);
     setDefaultRrn(app.status.rrn);
     emit('status');
   } catch (e) {
@@ -193,6 +193,7 @@ function showView(name) {
   }
   for (const v of $all('#views .view')) v.hidden = v.id !== `view-${name}`;
   document.body.dataset.view = name;
+  emit('view', name);
   if (name === 'audit' && !auditLoaded) { auditLoaded = true; loadAudit(); }
   if (name === 'approvals') refreshPending();
   if (name === 'teleop') renderControl();

@@ -21,7 +21,10 @@ const REPEAT_MS = 300;
 const DRIVE_TIMEOUT_MS = 800;
 const DRIVE_TTL_MS = 1000;
 const STREAM_SILENCE_MS = 1000;   // telemetry runs at 5 Hz: five frames missed
-let hold = null;                  // {dir, key, timer, moved}
+// The joystick and the gamepad's left stick are proportional: a deflection in [-1, 1] times the
+// slider's speed; inside DEADZONE the stick is centred and the robot is stopped.
+const DEADZONE = 0.15;
+let hold = null;                  // {dir, key, timer, moved, vec}
 let driveInFlight = false;
 // After an ESTOP the node refuses our session's drives until it is re-armed (docs/NODE.md,
 // "Re-arm after ESTOP"); the page re-arms on the operator's next press, never from a hold.
@@ -86,7 +89,20 @@ async function driveOnce(h) {
   if (driveInFlight) return;   // never queue a drive behind an unanswered one
   const lin = parseFloat($('#lin-speed').value);
   const ang = parseFloat($('#ang-speed').value);
-  const m = { fwd: [lin, 0], back: [-lin, 0], left: [0, ang], right: [0, -ang] }[h.dir];
+  let m;
+  if (h.vec) {
+    const clamp = (v) => Math.max(-1, Math.min(1, Number(v) || 0));
+    const [fl, fa] = h.vec().map(clamp);
+    if (Math.abs(fl) < DEADZONE && Math.abs(fa) < DEADZONE) {
+      // Centred: the robot stands still (one STOP if the last drive may have moved it).
+      if (h.moved) { h.moved = false; sendStop(`${h.dir} centred`); }
+      return;
+    }
+    const r = (v) => Math.round(v * 100) / 100;
+    m = [r(fl * lin), r(fa * ang)];
+  } else {
+    m = { fwd: [lin, 0], back: [-lin, 0], left: [0, ang], right: [0, -ang] }[h.dir];
+  }
   driveInFlight = true;
   h.moved = true;              // until the node says otherwise, this drive may move the robot
   lastSent = Date.now();
@@ -110,12 +126,14 @@ async function driveOnce(h) {
   }
 }
 
-async function startHold(dir, key) {
+// `vec` (the joystick, the gamepad): a function giving the deflection [forward, left] in
+// [-1, 1] at each repeat; without it the hold drives one pad direction at the sliders' speeds.
+async function startHold(dir, key, vec = null) {
   if (dir === 'stop') { endHold('■'); sendStop('■'); return; }
   if (hold && hold.dir === dir && hold.key === key) return;
   endHold('another direction');
   if (!streamLive()) { log(`drive ${dir}: not sent — the stream is not live`, false); return; }
-  const h = { dir, key, timer: 0, moved: false, logged: false, warned: false };
+  const h = { dir, key, vec, timer: 0, moved: false, logged: false, warned: false };
   hold = h;
   if (needRearm && !(await rearm())) { if (hold === h) hold = null; return; }
   if (hold !== h) return;      // let go while re-arming
@@ -129,6 +147,7 @@ function endHold(why) {
   hold = null;
   clearInterval(h.timer);
   if (h.moved || driveInFlight) sendStop(why);
+  if (h.dir === 'stick') { stickVec = [0, 0]; drawStick(); }
 }
 
 function startHeartbeat(timeoutMs) {
@@ -283,6 +302,96 @@ function sendArm() {
   act('arm_move', () => sendCommand('arm_move', { joints })).then((res) => { if (res) touched.clear(); });
 }
 
+// The on-screen joystick: a canvas the pointer drags (pointer capture keeps the drag while the
+// pointer leaves it); pointerup, pointercancel and lost capture end the hold.
+let stickVec = [0, 0];       // [forward, left] in [-1, 1]
+let motionOk = false;
+
+function drawStick() {
+  const c = $('#stick');
+  const ctx = c.getContext('2d');
+  const w = c.width, r = w / 2;
+  const cs = getComputedStyle(document.documentElement);
+  ctx.clearRect(0, 0, w, w);
+  ctx.fillStyle = cs.getPropertyValue('--plot-bg').trim() || '#0f1720';
+  ctx.strokeStyle = cs.getPropertyValue('--control-line').trim() || '#6b7f93';
+  ctx.lineWidth = 2;
+  ctx.beginPath(); ctx.arc(r, r, r - 2, 0, 2 * Math.PI); ctx.fill(); ctx.stroke();
+  ctx.beginPath(); ctx.arc(r, r, (r - 2) * DEADZONE, 0, 2 * Math.PI); ctx.stroke();
+  ctx.beginPath(); ctx.moveTo(r, 8); ctx.lineTo(r, w - 8); ctx.moveTo(8, r); ctx.lineTo(w - 8, r); ctx.stroke();
+  const travel = r * 0.7;
+  ctx.fillStyle = hold && hold.dir === 'stick' ? (cs.getPropertyValue('--plot-robot').trim() || '#ffd166') : '#8aa0b4';
+  ctx.beginPath(); ctx.arc(r - stickVec[1] * travel, r - stickVec[0] * travel, r * 0.24, 0, 2 * Math.PI); ctx.fill();
+}
+
+function setStick(c, e) {
+  const b = c.getBoundingClientRect();
+  const travel = (b.width / 2) * 0.7;
+  let dx = (e.clientX - (b.left + b.width / 2)) / travel;
+  let dy = (e.clientY - (b.top + b.height / 2)) / travel;
+  const n = Math.hypot(dx, dy);
+  if (n > 1) { dx /= n; dy /= n; }
+  stickVec = [-dy, -dx];
+  drawStick();
+}
+
+function initStick() {
+  const c = $('#stick');
+  const mine = (e) => hold && hold.key === `joy${e.pointerId}`;
+  c.addEventListener('pointerdown', (e) => {
+    e.preventDefault();
+    if (!motionOk) return;
+    try { c.setPointerCapture(e.pointerId); } catch (_) { /* not an active pointer */ }
+    setStick(c, e);
+    startHold('stick', `joy${e.pointerId}`, () => stickVec);
+  });
+  c.addEventListener('pointermove', (e) => { if (mine(e)) setStick(c, e); });
+  for (const ev of ['pointerup', 'pointercancel', 'lostpointercapture']) {
+    c.addEventListener(ev, () => {
+      stickVec = [0, 0];
+      if (hold && hold.key.startsWith('joy')) endHold(ev);
+      drawStick();
+    });
+  }
+  drawStick();
+}
+
+// The gamepad (standard mapping): the left stick drives while RB or RT is held — the deadman.
+// Letting go, the gamepad disconnecting, and everything that ends any other hold end it; a
+// deadman still held when a hold ended another way must be released and pressed again.
+const DEADMAN_BUTTONS = [5, 7];
+let padVec = [0, 0];
+let padArmed = true;
+let padSeen = '';
+
+function firstGamepad() {
+  const list = navigator.getGamepads ? Array.from(navigator.getGamepads() || []) : [];
+  return list.find((g) => g && g.connected) || null;
+}
+
+function pollGamepad() {
+  const gp = firstGamepad();
+  const id = gp ? String(gp.id || 'gamepad').slice(0, 60) : '';
+  const driving = hold && hold.key === 'gamepad';
+  const say = gp ? `Gamepad: ${id} — ${driving ? 'driving (let go of RB/RT to stop)' : 'hold RB or RT (the right bumper or trigger) and use the left stick to drive'}.`
+    : 'Gamepad: none connected. Connect one and press a button: the left stick drives while RB or RT (the right bumper or trigger) is held.';
+  if (say !== padSeen) { padSeen = say; setText($('#gamepad-state'), say); }
+  if (!gp) { if (driving) endHold('gamepad gone'); return; }
+  const axes = gp.axes || [];
+  padVec = [-(Number(axes[1]) || 0), -(Number(axes[0]) || 0)];
+  const btn = (i) => gp.buttons && gp.buttons[i] && (gp.buttons[i].pressed || gp.buttons[i].value > 0.5);
+  if (!DEADMAN_BUTTONS.some(btn)) {
+    padArmed = true;
+    if (driving) endHold('deadman released');
+    return;
+  }
+  if (driving || !padArmed) return;
+  if (!motionOk || document.visibilityState !== 'visible' || !document.hasFocus() ||
+      document.body.dataset.view !== 'teleop') return;
+  padArmed = false;
+  startHold('gamepad', 'gamepad', () => padVec);
+}
+
 const PAD_KEYS = { ArrowUp: 'fwd', ArrowDown: 'back', ArrowLeft: 'left', ArrowRight: 'right' };
 
 export function initTeleop() {
@@ -334,6 +443,11 @@ export function initTeleop() {
     startHold(dir, e.key);
   });
   pad.addEventListener('keyup', (e) => { if (hold && hold.key === e.key) endHold('key released'); });
+  initStick();
+  setInterval(pollGamepad, 50);
+  window.addEventListener('gamepaddisconnected', () => { if (hold && hold.key === 'gamepad') endHold('gamepad disconnected'); pollGamepad(); });
+  window.addEventListener('gamepadconnected', pollGamepad);
+  on('view', (name) => { if (name !== 'teleop') endHold('left the teleop view'); });
   window.addEventListener('blur', () => endHold('the window lost focus'));
   document.addEventListener('visibilitychange', () => { if (document.visibilityState !== 'visible') endHold('the tab was hidden'); });
   // The stream falling silent ends a hold even between repeats.
@@ -353,6 +467,8 @@ export function initTeleop() {
   const motionControls = () => {
     const mayDrive = roleAtLeast('USER');
     const ok = linkState === 'open' && app.estop !== true && mayDrive;
+    motionOk = ok;
+    $('#stick').setAttribute('aria-disabled', ok ? 'false' : 'true');
     for (const b of document.querySelectorAll('#pad button, #arm-send, #arm-home, #grip-open, #grip-close')) {
       b.disabled = !ok;
       b.title = mayDrive ? '' : `Driving needs USER or above (you are ${app.role || 'unknown'})`;
