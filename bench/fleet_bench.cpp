@@ -17,10 +17,20 @@
 //               [--broker mosquitto|nats] [--nats-nodes 3] [--light 0|1]
 //               [--mosquitto /usr/sbin/mosquitto] [--nats-server /usr/sbin/nats-server]
 //               [--perf-ctl FIFO --profile-round N] [--warm-up 0|1]
+//               [--nats-consumers replicated|memory] [--ramp N]
 //
 // --broker nats: a cluster of --nats-nodes nats-server processes (MQTT listener, JetStream,
 // routes between them, docs/FLEET.md §Running on NATS); robot i connects to node i mod N, the
 // coordinator to node 1, so most ESTOPs cross the cluster.
+//
+// --nats-consumers memory: the NATS nodes keep each MQTT subscription's JetStream consumer in
+// memory on one node (`mqtt { consumer_replicas: 1, consumer_memory_storage: true }`) instead of
+// replicated on disk as the streams are: a robot renews its subscriptions on every reconnect,
+// so a consumer lost with its node costs nothing that failover does not redo.
+//
+// --ramp N: robots start N at a time, each batch connected with every subscription granted
+// before the next starts (a broker that creates state per session, as NATS does in JetStream,
+// is not asked for 1,000 sessions at once).
 //
 // --light 1: light members, so that 1,000 fit on a small machine: each robot's audit log keeps
 // its records, chain and fsyncs but preallocates nothing (a preallocated segment per robot is
@@ -290,6 +300,8 @@ struct Options {
   int nats_nodes = 3;
   std::string nats_server = "/usr/sbin/nats-server";
   int light = 0;
+  std::string nats_consumers = "replicated";
+  int ramp = 0;  // 0: every robot at once
   int publish_qos() const { return broker == "nats" ? 1 : 2; }
 };
 
@@ -321,15 +333,20 @@ bool parse_options(int argc, char** argv, Options& o) {
       o.nats_server = argv[i + 1];
     else if (a == "--light")
       o.light = std::atoi(argv[i + 1]);
+    else if (a == "--nats-consumers")
+      o.nats_consumers = argv[i + 1];
+    else if (a == "--ramp")
+      o.ramp = std::atoi(argv[i + 1]);
   }
   if (o.robots_n < 1 || o.robots_n > 2000 || o.rounds < 1 || o.rounds > 1000 ||
       o.segment_bytes < (64u << 10) || (o.estop_qos != 1 && o.estop_qos != 2) ||
-      (o.broker != "mosquitto" && o.broker != "nats") || o.nats_nodes < 1 || o.nats_nodes > 5) {
+      (o.broker != "mosquitto" && o.broker != "nats") || o.nats_nodes < 1 || o.nats_nodes > 5 ||
+      (o.nats_consumers != "replicated" && o.nats_consumers != "memory") || o.ramp < 0) {
     std::fprintf(stderr,
                  "usage: fleet_bench [--robots 1..2000] [--rounds 1..1000] [--estop-qos 1|2] "
                  "[--segment-kib N] [--broker mosquitto|nats] [--nats-nodes 1..5] [--light 0|1] "
                  "[--mosquitto PATH] [--nats-server PATH] [--perf-ctl FIFO --profile-round N] "
-                 "[--warm-up 0|1]\n");
+                 "[--warm-up 0|1] [--nats-consumers replicated|memory] [--ramp N]\n");
     return false;
   }
   return true;
@@ -414,6 +431,9 @@ bool start_broker(Fleet& f) {
       conf << "server_name: " << name << "\nlisten: 127.0.0.1:" << ports[i][0]
            << "\nmax_connections: 10000\njetstream { store_dir: \""
            << (f.dir / ("js-" + name)).string() << "\" }\nmqtt { listen: 127.0.0.1:" << ports[i][2]
+           << (f.opt.nats_consumers == "memory"
+                   ? ", consumer_replicas: 1, consumer_memory_storage: true"
+                   : "")
            << " }\n";
       if (n > 1)
         conf << "cluster { name: rcan, listen: 127.0.0.1:" << ports[i][1] << ", routes: [" << routes
@@ -525,18 +545,12 @@ std::unique_ptr<Robot> start_robot(const Fleet& f, const config::FleetConfig& fc
   return r;
 }
 
-// Starts every robot (8 builder threads) and waits until all are connected to the broker;
-// false when one did not start.
-bool start_robots(Fleet& f) {
-  config::FleetConfig fc;
-  fc.fleet_id = "bench";
-  fc.robots = f.members;
-  f.robots.resize(f.size());
-  double t_start = mono_ms();
-  std::atomic<int> next{0};
+// Starts robots [from, to) (8 builder threads); false when one did not start.
+bool build_robots(Fleet& f, const config::FleetConfig& fc, int from, int to) {
+  std::atomic<int> next{from};
   std::atomic<bool> failed{false};
   auto build = [&] {
-    for (int i = next.fetch_add(1); i < f.opt.robots_n && !failed.load(); i = next.fetch_add(1)) {
+    for (int i = next.fetch_add(1); i < to && !failed.load(); i = next.fetch_add(1)) {
       auto r = start_robot(f, fc, i);
       if (!r) {
         failed.store(true);
@@ -545,27 +559,43 @@ bool start_robots(Fleet& f) {
       f.robots[static_cast<size_t>(i)] = std::move(r);
     }
   };
-  {
-    std::vector<std::thread> builders;
-    for (int t = 0; t < 8; ++t) builders.emplace_back(build);
-    for (auto& t : builders) t.join();
-  }
-  if (failed.load()) return false;
+  std::vector<std::thread> builders;
+  for (int t = 0; t < 8; ++t) builders.emplace_back(build);
+  for (auto& t : builders) t.join();
+  return !failed.load();
+}
+
+// Waits up to 2 minutes until robots [0, to) are connected with every subscription granted.
+bool wait_subscribed(Fleet& f, int to) {
+  auto first = f.robots.begin(), last = f.robots.begin() + to;
   size_t up = 0;
-  for (int i = 0; i < 12000; ++i) {  // up to 2 minutes
-    up = static_cast<size_t>(std::count_if(f.robots.begin(), f.robots.end(),
-                                           [](const auto& r) { return r->mqtt->subscribed(); }));
-    if (up == f.size()) break;
+  for (int i = 0; i < 12000; ++i) {
+    up = static_cast<size_t>(
+        std::count_if(first, last, [](const auto& r) { return r->mqtt->subscribed(); }));
+    if (up == static_cast<size_t>(to)) return true;
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
-  if (up != f.size()) {
-    const size_t connected = static_cast<size_t>(std::count_if(
-        f.robots.begin(), f.robots.end(), [](const auto& r) { return r->mqtt->connected(); }));
-    std::fprintf(stderr,
-                 "fleet_bench: after 2 minutes %zu of %zu robots are connected to the broker and "
-                 "%zu have every subscription granted\n",
-                 connected, f.size(), up);
-    return false;
+  const size_t connected = static_cast<size_t>(
+      std::count_if(first, last, [](const auto& r) { return r->mqtt->connected(); }));
+  std::fprintf(stderr,
+               "fleet_bench: after 2 minutes %zu of %d robots are connected to the broker and "
+               "%zu have every subscription granted\n",
+               connected, to, up);
+  return false;
+}
+
+// Starts every robot (--ramp N: N at a time, each batch subscribed before the next) and waits
+// until all are connected to the broker with every subscription granted.
+bool start_robots(Fleet& f) {
+  config::FleetConfig fc;
+  fc.fleet_id = "bench";
+  fc.robots = f.members;
+  f.robots.resize(f.size());
+  double t_start = mono_ms();
+  const int n = f.opt.robots_n, step = f.opt.ramp > 0 ? f.opt.ramp : n;
+  for (int from = 0; from < n; from += step) {
+    const int to = std::min(n, from + step);
+    if (!build_robots(f, fc, from, to) || !wait_subscribed(f, to)) return false;
   }
   std::this_thread::sleep_for(std::chrono::milliseconds(500));  // subscriptions settle
   const std::string where = f.opt.broker == "mosquitto"

@@ -34,7 +34,7 @@ bool valid_topic_segment(std::string_view s);
 bool valid_topic_prefix(std::string_view s);
 
 struct RobotTopics {
-  std::string base;  // <prefix>/robot/<registry>/<manufacturer>/<model>/<device_id>
+  std::string base;  // <prefix>/robot/<registry>/<manufacturer>/<model>/<device_id>, '.' → '_'
   std::string cmd() const { return base + "/cmd"; }
   std::string reply() const { return base + "/reply"; }
   std::string status() const { return base + "/status"; }
@@ -43,8 +43,10 @@ struct RobotTopics {
   std::string audit() const { return base + "/audit"; }
 };
 
-// Topics of a robot from its RURI. Errors: kInvalidRuri when a segment cannot be a topic
-// segment.
+// Topics of a robot from its RURI, each '.' of a segment written as '_' (`local.rcan` →
+// `local_rcan`): NATS maps topics onto its dotted subjects and refuses a '.' in a topic, and no
+// RURI segment may hold a '_', so the mapping is one-to-one. Errors: kInvalidRuri when a segment
+// cannot be a topic segment.
 Result<RobotTopics> robot_topics(std::string_view prefix, const Ruri& ruri);
 
 struct FleetTopics {

@@ -40,14 +40,18 @@ bool valid_topic_prefix(std::string_view s) {
 }
 
 Result<RobotTopics> robot_topics(std::string_view prefix, const Ruri& ruri) {
-  const std::string& device = ruri.device_id;
-  for (const std::string* seg : {&ruri.registry, &ruri.manufacturer, &ruri.model, &device}) {
-    if (!valid_topic_segment(*seg))
+  std::string base = std::string(prefix) + "/robot";
+  for (const std::string* seg :
+       {&ruri.registry, &ruri.manufacturer, &ruri.model, &ruri.device_id}) {
+    if (!valid_topic_segment(*seg) || seg->find('_') != std::string::npos)
       return Error(ErrorCode::kInvalidRuri,
                    "RURI segment \"" + *seg + "\" cannot be an MQTT topic segment", "ruri");
+    std::string s = *seg;
+    for (char& c : s)
+      if (c == '.') c = '_';
+    base += "/" + s;
   }
-  return RobotTopics{std::string(prefix) + "/robot/" + ruri.registry + "/" + ruri.manufacturer +
-                     "/" + ruri.model + "/" + device};
+  return RobotTopics{std::move(base)};
 }
 
 FleetTopics fleet_topics(std::string_view prefix, std::string_view fleet_id) {

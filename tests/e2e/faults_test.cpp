@@ -844,8 +844,8 @@ TEST(BrokerOutage, RobotKeepsServingHttpAndMqttCommandsResumeWithoutRunningTwice
   const std::string mqtt_owner =
       node.token("owner", {"status", "control", "config"}, "owner-1", 5, 3600,
                  *cnf::make(msgsig::Alg::kEd25519, sender->pub.ed25519_pk));
-  const std::string topic = "rcan/robot/local.rcan/acme/rover/0a1b2c3d/cmd";
-  const std::string reply = "rcan/robot/local.rcan/acme/rover/0a1b2c3d/reply";
+  const std::string topic = "rcan/robot/local_rcan/acme/rover/0a1b2c3d/cmd";
+  const std::string reply = "rcan/robot/local_rcan/acme/rover/0a1b2c3d/reply";
   auto mqtt_cmd = [&](const std::string& id) {
     json::Object m{
         {"version", "1.0.0"},

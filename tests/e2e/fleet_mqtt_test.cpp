@@ -295,8 +295,8 @@ TEST_F(FleetTest, LastWillShowsTheRobotOffline) {
 
 TEST_F(FleetTest, ReconnectAfterBrokerRestartNeverRunsACommandTwice) {
   Robot& a = add_robot("robot-a", "0000000a");
-  std::string cmd_topic = "rcan/robot/local.rcan/rcan/sim-rover/0000000a/cmd";
-  std::string reply_topic = "rcan/robot/local.rcan/rcan/sim-rover/0000000a/reply";
+  std::string cmd_topic = "rcan/robot/local_rcan/rcan/sim-rover/0000000a/cmd";
+  std::string reply_topic = "rcan/robot/local_rcan/rcan/sim-rover/0000000a/reply";
   std::string id = new_uuid_v4();
   json::Value msg = command_msg(
       "COMMAND", json::Object{{"action", "move"}, {"linear", 0.1}, {"duration_ms", 100}},
@@ -834,6 +834,34 @@ TEST_F(NatsFleetTest, ClusterFleetEstopLatchesTheRobotAndNamesItWhenItsBrokerIsG
   EXPECT_FALSE(latched("robot-a"));  // the exit code told the truth: it did not stop
 }
 
+// NATS refuses '.' in a topic (its subjects are dotted), and a robot's own topic carries its
+// registry (`local.rcan` by default): every subscription of a fleet member must still be granted
+// on NATS, its RURI topic answered, and a move longer than mqtt.failover_ms must not be cut
+// short as if the fleet channel were lost.
+TEST_F(NatsFleetTest, EveryTopicOfARobotWorksOnNats) {
+  Nats nats(tmp_.path(), 1);
+  Robot& robot = robot_on(nats.url(0), "robot-a", "0000000a", ", failover_ms: 500");
+  auto ruri = parse_ruri("rcan://local.rcan/rcan/sim-rover/0000000a");
+  ASSERT_TRUE(ruri.ok());
+  auto t = mqtt::robot_topics("rcan", *ruri);
+  ASSERT_TRUE(t.ok());
+  Watcher w(nats.url(0), {t->reply()});
+  const std::string id = new_uuid_v4();
+  w.publish(t->cmd(),
+            command_msg("COMMAND",
+                        json::Object{{"action", "move"}, {"linear", 0.1}, {"duration_ms", 2500}},
+                        token("owner", {}), id));
+  auto ack = w.wait([&](const Watcher::Msg& m) { return str_of(m.body, "reply_to") == id; });
+  ASSERT_TRUE(ack) << robot.proc().err();
+  EXPECT_EQ(str_of(ack->body, "type"), "ACK") << json::dump(ack->body);
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // 3 × failover_ms, moving
+  robot.proc().drain(100);
+  EXPECT_EQ(robot.proc().err().find("mqtt_subscription_refused"), std::string::npos)
+      << robot.proc().err();
+  EXPECT_EQ(robot.proc().err().find("fleet_channel_stop"), std::string::npos) << robot.proc().err();
+  EXPECT_EQ(json::dump(robot.status(fleet_token_)).find("fleet_channel_lost"), std::string::npos);
+}
+
 // A broker that refuses a publish — NATS, with QoS 2 forced by --qos 2 — makes every fleet verb
 // exit 1 with the reason, --no-wait included; nothing reaches the robot. Left to choose, the
 // same verbs work at QoS 1 on the same broker, also for a robot whose estop subscription asks
@@ -942,7 +970,7 @@ TEST(MqttTopics, LayoutAndParser) {
   ASSERT_TRUE(ruri.ok());
   auto t = mqtt::robot_topics("rcan", *ruri);
   ASSERT_TRUE(t.ok());
-  EXPECT_EQ(t->cmd(), "rcan/robot/local.rcan/acme/rover/0000000a/cmd");
+  EXPECT_EQ(t->cmd(), "rcan/robot/local_rcan/acme/rover/0000000a/cmd");
   EXPECT_EQ(mqtt::parse_topic("rcan", t->cmd()).kind, mqtt::TopicKind::kRobotCmd);
   auto f = mqtt::parse_topic("rcan", "rcan/fleet/alpha/robot/robot-a/cmd");
   EXPECT_EQ(f.kind, mqtt::TopicKind::kMemberCmd);

@@ -260,10 +260,14 @@ void MqttNode::tick_channel(int64_t now) {
   if (client_->connected() && !client_->refused_subscriptions().empty() &&
       now - last_retry_ms_ >= 500) {
     last_retry_ms_ = now;
+    const std::string topic = client_->refused_subscriptions().front();
     log(LogLevel::kWarn, "mqtt_subscription_refused",
         json::Object{{"broker", client_->current_url()},
-                     {"topic", client_->refused_subscriptions().front()},
-                     {"note", "asking again every 500 ms"}});
+                     {"topic", topic},
+                     {"note", topic.find('.') == std::string::npos
+                                  ? "asking again every 500 ms"
+                                  : "asking again every 500 ms; NATS never grants a topic with "
+                                    "a '.': use fleet, member and swarm ids without one"}});
     client_->retry_refused();
   }
   if (client_->all_subscribed()) {
