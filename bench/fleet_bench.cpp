@@ -65,6 +65,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -420,8 +421,14 @@ bool start_broker(Fleet& f) {
     const int n = f.opt.nats_nodes;
     std::vector<std::array<uint16_t, 3>> ports;  // client, cluster, MQTT
     std::string routes;
+    std::set<uint16_t> taken;  // free_port() may give a port twice: each one is bound later
+    auto port = [&] {
+      uint16_t p = free_port();
+      while (!taken.insert(p).second) p = free_port();
+      return p;
+    };
     for (int i = 0; i < n; ++i) {
-      ports.push_back({free_port(), free_port(), free_port()});
+      ports.push_back({port(), port(), port()});
       routes +=
           std::string(i ? ", " : "") + "nats-route://127.0.0.1:" + std::to_string(ports[i][1]);
     }

@@ -382,8 +382,14 @@ class Nats {
  public:
   Nats(const std::string& dir, int nodes) {
     std::string routes;
+    std::set<uint16_t> taken;  // free_port() may give a port twice: each one is bound later
+    auto port = [&] {
+      uint16_t p = free_port();
+      while (!taken.insert(p).second) p = free_port();
+      return p;
+    };
     for (int i = 0; i < nodes; ++i) {
-      ports_.push_back({free_port(), free_port(), free_port()});  // client, cluster, MQTT
+      ports_.push_back({port(), port(), port()});  // client, cluster, MQTT
       routes +=
           std::string(i ? ", " : "") + "nats-route://127.0.0.1:" + std::to_string(ports_.back()[1]);
     }
