@@ -1,6 +1,7 @@
 // Accessibility of the operator dashboard (WCAG 2.1 AA), checked by axe-core (pinned in
 // package-lock.json) in Debian's headless Chromium against a real rcand: every view — sign-in,
-// overview, live, teleop, approvals, audit, and the ESTOP banner — at a desktop (1280×800) and
+// overview, live, teleop, approvals, audit, chat (with a conversation), node, and the ESTOP
+// banner — at a desktop (1280×800) and
 // a phone (390×844) width. Any violation axe rates serious or critical fails the test; the
 // others are printed. Exit 0 pass, 1 fail, 77 skip (no browser, playwright-core or axe-core).
 //
@@ -62,8 +63,14 @@ async function main() {
     await page.fill('#token-input', owner);
     await page.click('#signin-form button[type=submit]');
     await page.waitForSelector('body[data-stream=open]', { timeout: 10000 });
-    for (const view of ['overview', 'live', 'teleop', 'approvals', 'audit']) {
+    for (const view of ['overview', 'live', 'teleop', 'approvals', 'audit', 'chat', 'node']) {
       await page.click(`#tabs button[data-view=${view}]`);
+      if (view === 'chat') {
+        await page.fill('#chat-input', 'Where are you?');
+        await page.press('#chat-input', 'Enter');
+        await page.waitForSelector('#chat-log > .robot', { timeout: 5000 });
+      }
+      if (view === 'node') await page.waitForSelector('#log-table tbody tr', { timeout: 5000 });
       await page.waitForTimeout(view === 'audit' ? 1500 : 600);
       await audit(page, `${label} ${view}`);
       await page.screenshot({ path: join(artifacts, `a11y-${label}-${view}.png`), fullPage: true });
@@ -75,16 +82,20 @@ async function main() {
       tabs: [...document.querySelectorAll('#tabs button')].map((b) => [b.getAttribute('role'), b.getAttribute('aria-selected')]),
       panel: document.querySelector('#view-audit').getAttribute('role'),
       pill: document.querySelector('#safety-pill').getAttribute('aria-live'),
+      chatLog: [document.querySelector('#chat-log').getAttribute('role'), document.querySelector('#chat-log').getAttribute('aria-live')],
+      chatLabel: document.querySelector('#chat-input').labels.length,
       charts: [...document.querySelectorAll('canvas')].map((c) => [c.getAttribute('role'), c.getAttribute('aria-label') || '']),
     }));
     check(sem.tablist === 'tablist' && sem.tabs.every(([r]) => r === 'tab') && sem.panel === 'tabpanel',
       `${label}: the tabs are a tablist of tabs controlling tabpanels`);
-    check(sem.tabs.filter(([, sel]) => sel === 'true').length === 1 && sem.tabs[4][1] === 'true',
+    check(sem.tabs.filter(([, sel]) => sel === 'true').length === 1 && sem.tabs[sem.tabs.length - 1][1] === 'true',
       `${label}: exactly the shown view's tab is aria-selected (${JSON.stringify(sem.tabs.map(([, x]) => x))})`);
     check(sem.pill === 'polite', `${label}: the safety state is a live region`);
+    check(sem.chatLog[0] === 'log' && sem.chatLog[1] === 'polite' && sem.chatLabel === 1,
+      `${label}: the conversation is a polite live log and the message field has its label (${JSON.stringify(sem.chatLog)})`);
     check(sem.charts.length >= 3 && sem.charts.every(([r, l]) => r === 'img' && l.length > 10),
       `${label}: every chart is an image with a name`);
-    await page.focus('#tabs button[data-view=audit]');
+    await page.focus('#tabs button[data-view=node]');
     await page.keyboard.press('ArrowRight');
     check(await page.evaluate(() => document.body.dataset.view === 'overview' && document.activeElement.dataset.view === 'overview'),
       `${label}: ArrowRight on the last tab wraps to the first and shows its view`);

@@ -236,7 +236,8 @@ async function main() {
     check(false, 'Export JSONL downloads a file');
   }
   await page.click('#verify-chain');
-  await page.waitForFunction(() => document.querySelector('#chain-result').textContent.length > 0);
+  // "Reading the chain…" shows while the export loads: wait for the verdict.
+  await page.waitForFunction(() => { const t = document.querySelector('#chain-result').textContent; return t.length > 0 && !/^Reading/.test(t); });
   const chainText = await page.textContent('#chain-result');
   check(/Chain links intact/.test(chainText), `verify chain: ${chainText.slice(0, 80)}`);
   check(await page.evaluate(() => window.__pwned === undefined), 'still nothing executed');

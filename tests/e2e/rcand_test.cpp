@@ -341,6 +341,85 @@ TEST_F(RcandTest, ChatAnswersFromStatus) {
   EXPECT_FALSE(reply.empty());
 }
 
+// GET /api/node/log: the node's newest log lines, for OWNER with scope config only. Every read
+// is recorded (LOG_READ, a refused one blocked), a bad `limit` is a 400 naming it, and what
+// the node logs after a command is there on the next read.
+TEST(RcandNodeLog, TheOwnerReadsRecentLinesOthersAreRefused) {
+  test::TempDir dir;
+  Daemon d(dir.path() + "/node");
+  ASSERT_NE(d.port(), 0);
+  auto lines = [&](const std::string& query) {
+    HttpReply r = d.get("/api/node/log" + query, d.owner_token());
+    EXPECT_EQ(r.status, 200) << r.body;
+    json::Value v = parse(r.body);
+    const json::Value* l = v.get("lines");
+    return l && l->is_array() ? l->as_array() : json::Array{};
+  };
+  auto has_event = [](const json::Array& ls, const std::string& ev) {
+    for (const auto& l : ls)
+      if (json::string_field(l, "event") == ev) return true;
+    return false;
+  };
+  json::Array first = lines("");
+  EXPECT_TRUE(has_event(first, "listening")) << "the start-up lines are in the ring";
+  EXPECT_FALSE(has_event(first, "stop.latency"));
+  HttpReply one = d.get("/api/node/log?limit=1", d.owner_token());
+  json::Value v = parse(one.body);
+  EXPECT_EQ(v.get("lines")->as_array().size(), 1u);
+  EXPECT_EQ(json::int_field(v, "limit"), 1);
+  EXPECT_EQ(json::int_field(v, "capacity"), 200);
+  EXPECT_GE(json::int_field(v, "written"), 1);
+
+  // A SAFETY STOP is logged (stop.latency); the next read shows it.
+  json::Object stop{
+      {"version", "1.0.0"},        {"message_id", new_uuid_v4()},
+      {"type", "SAFETY"},          {"priority", "SAFETY"},
+      {"timestamp_ms", wall_ms()}, {"payload", json::Object{{"safety_event", "STOP"}}}};
+  ASSERT_EQ(d.post("/rcan/v1/command", json::dump(json::Value(stop)), d.owner_token()).status, 200);
+  json::Array after = lines("?limit=200");
+  EXPECT_TRUE(has_event(after, "stop.latency"));
+  EXPECT_EQ(json::string_field(after.back(), "event"), "stop.latency") << "oldest first";
+
+  // Below OWNER, or OWNER without scope config: 403 with the PROFILE error body.
+  for (const std::string& tok :
+       {d.token("user", {"status", "control", "config"}, 3600, "log-user"),
+        d.token("guest", {"status", "chat"}, 3600, "log-guest"),
+        d.token("leasee", {"status", "control", "config"}, 3600, "log-leasee"),
+        d.token("owner", {"status", "control"}, 3600, "owner-no-config")}) {
+    HttpReply r = d.get("/api/node/log", tok);
+    EXPECT_EQ(r.status, 403) << r.body;
+    EXPECT_EQ(error_code(r), "INSUFFICIENT_PRIVILEGES") << r.body;
+    EXPECT_EQ(r.body.find("listening"), std::string::npos) << "no line leaks in a refusal";
+  }
+  EXPECT_EQ(d.get("/api/node/log").status, 401);
+
+  for (const char* bad : {"0", "201", "abc", "-1", "", "1e2", "99999999999999999999", "5%20"}) {
+    HttpReply r = d.get(std::string("/api/node/log?limit=") + bad, d.owner_token());
+    EXPECT_EQ(r.status, 400) << bad << ": " << r.body;
+    EXPECT_EQ(error_code(r), "SCHEMA_VALIDATION_FAILED") << bad;
+    EXPECT_NE(r.body.find("limit: must be 1..200"), std::string::npos) << r.body;
+  }
+  EXPECT_EQ(d.get("/api/node/log?limit=200", d.owner_token()).status, 200);
+
+  // Every read is recorded, and no token reached the ring.
+  HttpReply audit = d.get("/api/audit?event=LOG_READ&limit=100", d.owner_token());
+  ASSERT_EQ(audit.status, 200) << audit.body;
+  int ok = 0, blocked = 0;
+  json::Value listing = parse(audit.body);
+  ASSERT_TRUE(listing.get("entries") && listing.get("entries")->is_array()) << audit.body;
+  for (const auto& e : listing.get("entries")->as_array()) {
+    const json::Value* detail = e.get("detail");
+    ASSERT_TRUE(detail) << json::dump(e);
+    EXPECT_EQ(json::string_field(*detail, "route"), "/api/node/log") << json::dump(e);
+    (json::string_field(e, "outcome") == "ok" ? ok : blocked) += 1;
+  }
+  EXPECT_EQ(ok, 4);
+  EXPECT_EQ(blocked, 4);
+  HttpReply all = d.get("/api/node/log?limit=200", d.owner_token());
+  EXPECT_EQ(all.body.find(d.owner_token()), std::string::npos);
+  EXPECT_EQ(all.body.find("eyJ"), std::string::npos) << "no JWT in the node's log";
+}
+
 TEST_F(RcandTest, EstopLatchesRefusesCommandsAndNeedsLeaseeToResume) {
   std::string user = d().token("user", {"control"}, 3600, "estop-user");
   HttpReply stop = d().post("/api/stop", "{\"reason\":\"test\"}", user);

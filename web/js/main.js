@@ -9,6 +9,8 @@ import { initLive, onTelemetry, setWorkspace, renderStreamStats } from './live.j
 import { initTeleop, onTelemetryJoints, teleopSignOut, renderControl } from './teleop.js';
 import { initApprovals, onPending, onEvent as approvalsEvent, refresh as refreshPending } from './approvals.js';
 import { initAudit, loadAudit, setDefaultRrn } from './audit.js';
+import { initChat } from './chat.js';
+import { initNode } from './nodepanel.js';
 
 let pollTimer = 0;
 let auditLoaded = false;
@@ -132,6 +134,7 @@ async function signOut(why) {
   setText($('#who'), '');
   setConn('idle');
   showSignedIn(false);
+  emit('signed-out');
   setText($('#signin-error'), why || '');
 }
 
@@ -221,6 +224,8 @@ function init() {
   initTeleop();
   initApprovals();
   initAudit();
+  initChat();
+  initNode();
   on('refresh', refreshStatus);
   $('#estop').addEventListener('click', onEstop);
   // Escape anywhere on the page is ESTOP (an ESTOP is never harmful: it latches until RESUME).

@@ -133,6 +133,15 @@ void take(AuditPage& page, const Matcher& m, std::string_view line, uint64_t seq
 
 }  // namespace
 
+Result<size_t> parse_limit(std::optional<std::string_view> value, size_t default_limit,
+                           size_t max) {
+  if (!value) return default_limit;
+  uint64_t n = 0;
+  if (!parse_u64(*value, n) || n < 1 || n > max)
+    return bad("limit", "must be 1.." + std::to_string(max));
+  return static_cast<size_t>(n);
+}
+
 json::Object AuditQuery::to_json() const {
   json::Object o{{"limit", static_cast<int64_t>(limit)}};
   if (before) o.set("before", static_cast<int64_t>(before));
@@ -151,11 +160,9 @@ Result<AuditQuery> parse_audit_query(
     size_t default_limit) {
   AuditQuery q;
   q.limit = default_limit;
-  if (auto v = param("limit")) {
-    uint64_t n = 0;
-    if (!parse_u64(*v, n) || n < 1 || n > 1000) return bad("limit", "must be 1..1000");
-    q.limit = static_cast<size_t>(n);
-  }
+  auto limit = parse_limit(param("limit"), default_limit, 1000);
+  if (!limit.ok()) return limit.error();
+  q.limit = *limit;
   for (auto [name, dest] : {std::pair{"before", &q.before}, std::pair{"after", &q.after}}) {
     if (auto v = param(name)) {
       if (!parse_u64(*v, *dest) || *dest == 0)

@@ -32,6 +32,11 @@ struct AuditQuery {
   json::Object to_json() const;  // what AUDIT_READ records of the query
 };
 
+// A `limit` query parameter: absent is `default_limit`; otherwise digits only, 1..max, else
+// SCHEMA_VALIDATION_FAILED "limit: must be 1..max" naming `limit`. Used by GET /api/audit and
+// GET /api/node/log.
+Result<size_t> parse_limit(std::optional<std::string_view> value, size_t default_limit, size_t max);
+
 // Reads the query from the request's parameters (`param(name)` gives a value or nothing).
 // Errors: SCHEMA_VALIDATION_FAILED naming the parameter.
 Result<AuditQuery> parse_audit_query(

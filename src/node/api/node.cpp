@@ -563,7 +563,12 @@ bool Node::audit_reader(const Principal& p, const std::string& route, std::strin
 
 void Node::record_audit_read(const Principal& p, const std::string& route, json::Object query,
                              Respond& respond, std::function<void()> read) {
-  svc_.record("AUDIT_READ")
+  record_read("AUDIT_READ", p, route, std::move(query), respond, std::move(read));
+}
+
+void Node::record_read(const char* event, const Principal& p, const std::string& route,
+                       json::Object query, Respond& respond, std::function<void()> read) {
+  svc_.record(event)
       .by(p)
       .detail("route", route)
       .detail("query", std::move(query))
@@ -572,7 +577,7 @@ void Node::record_audit_read(const Principal& p, const std::string& route, json:
             if (r.ok()) return read();
             answer_error(respond, route,
                          Error(ErrorCode::kAuditUnavailable,
-                               "reading the audit log is recorded, and it cannot record now"));
+                               "this read is recorded, and the audit log cannot record now"));
           });
 }
 
@@ -661,6 +666,45 @@ void Node::audit_export(transport::HttpRequest& req, Respond& respond) {
   record_audit_read(*pr, route,
                     json::Object{{"from", from}, {"to", to}, {"format", std::move(format)}},
                     respond, std::move(read));
+}
+
+void Node::node_log(transport::HttpRequest& req, Respond& respond) {
+  const std::string route = "/api/node/log";
+  auto pr = bearer_principal(req);
+  if (!pr.ok()) return answer_error(respond, route, pr.error());
+  if (role_level(pr->role) < role_level(Role::kOwner) || !pr->has_scope("config")) {
+    Error err(ErrorCode::kInsufficientPrivileges,
+              "the node's log names addresses, files and principals: reading it needs OWNER and "
+              "scope config",
+              "role");
+    svc_.record("LOG_READ", "blocked")
+        .by(*pr)
+        .reason(std::string(error_name(err.code)))
+        .detail("route", route)
+        .write();
+    return answer_error(respond, route, err);
+  }
+  auto limit =
+      parse_limit(req.has_query("limit") ? std::optional(req.query_value("limit")) : std::nullopt,
+                  100, kLogRingCapacity);
+  if (!limit.ok()) return answer_error(respond, route, limit.error());
+  const size_t n = *limit;
+  auto read = [this, respond, route, n]() mutable {
+    RecentLog recent = recent_log_lines(n);
+    // The lines are JSON texts the node wrote itself: spliced into the answer as they are.
+    std::string body = "{\"count\":" + std::to_string(recent.lines.size()) +
+                       ",\"limit\":" + std::to_string(n) +
+                       ",\"capacity\":" + std::to_string(kLogRingCapacity) +
+                       ",\"written\":" + std::to_string(recent.written) + ",\"lines\":[";
+    for (size_t i = 0; i < recent.lines.size(); ++i) body += (i ? "," : "") + recent.lines[i];
+    body += "]}";
+    svc_.metrics.count_request(route, 200);
+    transport::HttpResponse r;
+    r.body = std::move(body);
+    respond(std::move(r));
+  };
+  record_read("LOG_READ", *pr, route, json::Object{{"limit", static_cast<int64_t>(n)}}, respond,
+              std::move(read));
 }
 
 }  // namespace rcan::node

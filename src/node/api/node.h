@@ -104,6 +104,13 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   void record_audit_read(const Principal& p, const std::string& route, json::Object query,
                          Respond& respond, std::function<void()> read);
   void list_audit(Respond& respond, const std::string& route, const AuditQuery& q);
+  // GET /api/node/log: the newest lines of the process's log ring (base/log.h), for OWNER with
+  // scope `config`; each read recorded as LOG_READ (a refused one as LOG_READ blocked).
+  void node_log(transport::HttpRequest& req, Respond& respond);
+  // Records `event` (who, the route, the query) and runs `read` once the record is durable; if
+  // it cannot be recorded, answers 503 AUDIT_UNAVAILABLE and reads nothing.
+  void record_read(const char* event, const Principal& p, const std::string& route,
+                   json::Object query, Respond& respond, std::function<void()> read);
   Result<Principal> bearer_principal(const transport::HttpRequest& req) const;
   void pump() EXCLUDES(streams_mu_, pump_mu_);
   void stream_text(const std::shared_ptr<StreamState>& st, std::string text);

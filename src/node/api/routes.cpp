@@ -86,6 +86,7 @@ void Node::add_routes() {
         [this](RouteCall& c) { audit_listing(c.req, c.respond); });
   t.add("GET", "/api/v1/audit", Body::kNone,
         [this](RouteCall& c) { audit_export(c.req, c.respond); });
+  t.add("GET", "/api/node/log", Body::kNone, [this](RouteCall& c) { node_log(c.req, c.respond); });
   // The operator dashboard (docs/DASHBOARD.md): its files answer with their security headers.
   for (const char* path : {"/", "/index.html", "/favicon.ico", "/ui", "/ui/", "/ui/*"})
     for (const char* method : {"GET", "HEAD"})
