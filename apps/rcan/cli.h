@@ -35,6 +35,8 @@ const std::vector<Verb>& verbs();
 std::string read_stdin();
 // Reads a whole file; Error with a message naming the path on failure.
 Result<std::string> read_file(const std::string& path);
+// "a,b,,c" → {a, b, c}: an option's comma-separated list, empty items dropped.
+std::vector<std::string> split_list(const std::string& s);
 
 // Prints the profile's error body (docs/PROTOCOL.md §Errors) for `err` to stdout.
 void print_error_body(const Error& err, std::string_view reply_to = {});

@@ -90,7 +90,6 @@ void print(const json::Value& v) { std::printf("%s\n", json::dump(v).c_str()); }
 
 using fleet::mono_ms;
 using fleet::Session;
-using fleet::split_list;
 
 struct Common {
   std::string prefix = "rcan";

@@ -31,21 +31,6 @@ inline int64_t mono_ms() {
       .count();
 }
 
-// "a,b,,c" → {a, b, c}.
-inline std::vector<std::string> split_list(const std::string& s) {
-  std::vector<std::string> out;
-  size_t start = 0;
-  while (start <= s.size() && !s.empty()) {
-    size_t comma = s.find(',', start);
-    std::string item =
-        s.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
-    if (!item.empty()) out.push_back(item);
-    if (comma == std::string::npos) break;
-    start = comma + 1;
-  }
-  return out;
-}
-
 // A connected client with an inbox.
 class Session {
  public:

@@ -605,16 +605,7 @@ int discover_main(const Args& args) {
   d.mdns = !o.has("no-mdns");
   d.ca_file = o.get("ca-file");
   d.insecure = o.has("insecure");
-  std::string hosts = o.get("hosts");
-  size_t start = 0;
-  while (start < hosts.size()) {
-    size_t comma = hosts.find(',', start);
-    std::string h =
-        hosts.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
-    if (!h.empty()) d.hosts.push_back(h);
-    if (comma == std::string::npos) break;
-    start = comma + 1;
-  }
+  d.hosts = split_list(o.get("hosts"));
   if (!o.has("hosts")) {
     std::string url = o.get("url");
     if (url.empty())

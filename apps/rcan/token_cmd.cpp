@@ -54,20 +54,6 @@ constexpr const char* kHelp =
     "  Exit: 0 issued / valid / revoked (or decoded, without a key), 1 invalid or refused by the\n"
     "  robot, 2 usage, malformed token or no answer.\n";
 
-std::vector<std::string> split_csv(const std::string& s) {
-  std::vector<std::string> out;
-  size_t start = 0;
-  while (start <= s.size()) {
-    size_t comma = s.find(',', start);
-    std::string part =
-        s.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
-    if (!part.empty()) out.push_back(part);
-    if (comma == std::string::npos) break;
-    start = comma + 1;
-  }
-  return out;
-}
-
 int64_t unix_now() {
   return std::chrono::duration_cast<std::chrono::seconds>(
              std::chrono::system_clock::now().time_since_epoch())
@@ -137,11 +123,11 @@ int issue_main(const Args& args) {
   c.set("aud", o.get("aud"));
   c.set("role", role);
   json::Array scopes;
-  for (auto& s : split_csv(o.get("scope"))) scopes.emplace_back(s);
+  for (auto& s : split_list(o.get("scope"))) scopes.emplace_back(s);
   c.set("scope", std::move(scopes));
   if (o.has("fleet")) {
     json::Array fleet;
-    for (auto& s : split_csv(o.get("fleet"))) fleet.emplace_back(s);
+    for (auto& s : split_list(o.get("fleet"))) fleet.emplace_back(s);
     c.set("fleet", std::move(fleet));
   }
   if (!sender_type.empty()) c.set("sender_type", sender_type);

@@ -13,7 +13,7 @@ import { mkdirSync, mkdtempSync, readFileSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { randomUUID } from 'node:crypto';
-import { checker, http, launchBrowser, loadBrowser, runChecks, spawnRcand, startGatedRcand } from './harness.mjs';
+import { checker, http, launchBrowser, loadBrowser, poseProbe, runChecks, spawnRcand, startGatedRcand } from './harness.mjs';
 
 const rcandPath = process.env.RCAND_PATH;
 const cliPath = process.env.RCAN_CLI_PATH;
@@ -83,24 +83,7 @@ async function main() {
   const owner = readFileSync(join(dataDir, 'owner.token'), 'utf8').trim();
   const status = async () => (await http(url, 'GET', '/rcan/v1/status', owner)).json;
   const base = async () => (await status()).robot.robot.base;
-  const pose = async () => { const b = await base(); return { x: b.x, y: b.y, th: b.theta }; };
-  const dist = (a, b) => Math.hypot(a.x - b.x, a.y - b.y) + Math.abs(a.th - b.th);
-  const fmt = (p) => `(${p.x.toFixed(3)}, ${p.y.toFixed(3)}, ${p.th.toFixed(3)})`;
-  async function waitStopped() {
-    for (let i = 0; i < 40; i++) {
-      const a = await pose();
-      await sleep(300);
-      if (dist(a, await pose()) < 1e-4) return;
-    }
-    throw new Error('the robot did not come to rest');
-  }
-  async function waitMoving(from) {
-    for (let i = 0; i < 100; i++) {
-      if (dist(await pose(), from) > 0.05) return true;
-      await sleep(50);
-    }
-    return false;
-  }
+  const { pose, dist, fmt, waitStopped, waitMoving } = poseProbe(url, owner);
   // After a hold ended: what was already applied runs out within its 0.5 s, then nothing moves.
   async function stays(what) {
     await sleep(800);

@@ -101,6 +101,34 @@ export async function http(base, method, path, token, body) {
   return { status: res.status, json, text, headers: res.headers };
 }
 
+// The robot's pose read from the node's own status (never from the page): `pose()`, the
+// distance between two poses, how one prints, and waits for the robot to rest or to move.
+export function poseProbe(base, token) {
+  const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+  const robot = async () => (await http(base, 'GET', '/rcan/v1/status', token)).json.robot.robot;
+  const pose = async () => { const r = await robot(); return { x: r.base.x, y: r.base.y, th: r.base.theta }; };
+  const dist = (a, b) => Math.hypot(a.x - b.x, a.y - b.y) + Math.abs(a.th - b.th);
+  const fmt = (p) => `(${p.x.toFixed(3)}, ${p.y.toFixed(3)}, ${p.th.toFixed(3)})`;
+  // At rest: the pose has not changed over 300 ms.
+  async function waitStopped() {
+    for (let i = 0; i < 40; i++) {
+      const a = await pose();
+      await sleep(300);
+      if (dist(a, await pose()) < 1e-4) return;
+    }
+    throw new Error('the robot did not come to rest');
+  }
+  // Moved more than 5 cm (or turned) from `from` within 5 s.
+  async function waitMoving(from) {
+    for (let i = 0; i < 100; i++) {
+      if (dist(await pose(), from) > 0.05) return true;
+      await sleep(50);
+    }
+    return false;
+  }
+  return { robot, pose, dist, fmt, waitStopped, waitMoving };
+}
+
 // Runs `main`, then `cleanup` whatever happened; prints the notes and the verdict and exits
 // 0 (every check passed) or 1.
 export async function runChecks(name, main, { failures, cleanup, artifacts, notes = [] }) {

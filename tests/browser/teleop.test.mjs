@@ -16,7 +16,7 @@ import { join } from 'node:path';
 import { randomUUID } from 'node:crypto';
 import { execFileSync } from 'node:child_process';
 import { createServer, connect } from 'node:net';
-import { checker, http, launchBrowser, loadBrowser, runChecks, spawnRcand } from './harness.mjs';
+import { checker, http, launchBrowser, loadBrowser, poseProbe, runChecks, spawnRcand } from './harness.mjs';
 
 const rcandPath = process.env.RCAND_PATH;
 const cliPath = process.env.RCAN_CLI_PATH;
@@ -89,26 +89,7 @@ async function main() {
   const viaProxy = `http://127.0.0.1:${proxy.port}`;
   console.log(`rcand at ${node}, the page reaches it through ${viaProxy}`);
 
-  const robot = async () => (await http(node, 'GET', '/rcan/v1/status', owner)).json.robot.robot;
-  const pose = async () => { const r = await robot(); return { x: r.base.x, y: r.base.y, th: r.base.theta }; };
-  const dist = (a, b) => Math.hypot(a.x - b.x, a.y - b.y) + Math.abs(a.th - b.th);
-  const fmt = (p) => `(${p.x.toFixed(3)}, ${p.y.toFixed(3)}, ${p.th.toFixed(3)})`;
-  // At rest: the pose has not changed over 300 ms.
-  async function waitStopped() {
-    for (let i = 0; i < 40; i++) {
-      const a = await pose();
-      await sleep(300);
-      if (dist(a, await pose()) < 1e-4) return;
-    }
-    throw new Error('the robot did not come to rest');
-  }
-  async function waitMoving(from) {
-    for (let i = 0; i < 100; i++) {
-      if (dist(await pose(), from) > 0.05) return true;
-      await sleep(50);
-    }
-    return false;
-  }
+  const { robot, pose, dist, fmt, waitStopped, waitMoving } = poseProbe(node, owner);
 
   browser = await launchBrowser(chromium, chromiumPath);
   const context = await browser.newContext({ viewport: { width: 1280, height: 860 } });

@@ -546,13 +546,19 @@ void Node::answer_waited(int64_t us) { respond_timer_->observe_us(static_cast<do
 
 bool Node::audit_reader(const Principal& p, const std::string& route, std::string_view scope,
                         Respond& respond) {
+  return owner_reader(p, route, scope, "AUDIT_READ", "the audit log names every principal",
+                      respond);
+}
+
+bool Node::owner_reader(const Principal& p, const std::string& route, std::string_view scope,
+                        const char* event, std::string_view why, Respond& respond) {
   if (role_level(p.role) >= role_level(Role::kOwner) && (scope.empty() || p.has_scope(scope)))
     return true;
   Error err(ErrorCode::kInsufficientPrivileges,
-            "the audit log names every principal: reading it needs OWNER" +
+            std::string(why) + ": reading it needs OWNER" +
                 (scope.empty() ? std::string() : " and scope " + std::string(scope)),
             "role");
-  svc_.record("AUDIT_READ", "blocked")
+  svc_.record(event, "blocked")
       .by(p)
       .reason(std::string(error_name(err.code)))
       .detail("route", route)
@@ -672,18 +678,9 @@ void Node::node_log(transport::HttpRequest& req, Respond& respond) {
   const std::string route = "/api/node/log";
   auto pr = bearer_principal(req);
   if (!pr.ok()) return answer_error(respond, route, pr.error());
-  if (role_level(pr->role) < role_level(Role::kOwner) || !pr->has_scope("config")) {
-    Error err(ErrorCode::kInsufficientPrivileges,
-              "the node's log names addresses, files and principals: reading it needs OWNER and "
-              "scope config",
-              "role");
-    svc_.record("LOG_READ", "blocked")
-        .by(*pr)
-        .reason(std::string(error_name(err.code)))
-        .detail("route", route)
-        .write();
-    return answer_error(respond, route, err);
-  }
+  if (!owner_reader(*pr, route, "config", "LOG_READ",
+                    "the node's log names addresses, files and principals", respond))
+    return;
   auto limit =
       parse_limit(req.has_query("limit") ? std::optional(req.query_value("limit")) : std::nullopt,
                   100, kLogRingCapacity);

@@ -99,6 +99,10 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   // AUDIT_READ blocked. Answers the refusal itself and returns false.
   bool audit_reader(const Principal& p, const std::string& route, std::string_view scope,
                     Respond& respond);
+  // True for OWNER holding `scope` (none: any OWNER); otherwise records `event` blocked,
+  // answers 403 INSUFFICIENT_PRIVILEGES ("<why>: reading it needs OWNER …") and returns false.
+  bool owner_reader(const Principal& p, const std::string& route, std::string_view scope,
+                    const char* event, std::string_view why, Respond& respond);
   // Records the read (AUDIT_READ: who, the route, the query) and runs `read` once the record is
   // durable; if it cannot be recorded, answers 503 AUDIT_UNAVAILABLE and reads nothing.
   void record_audit_read(const Principal& p, const std::string& route, json::Object query,
