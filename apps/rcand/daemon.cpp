@@ -11,6 +11,7 @@
 #include "node/api/node.h"
 #include "node/bindings/mqtt_node.h"
 #include "node/discovery/mdns.h"
+#include "node/discovery/robot_directory.h"
 #include "node/fleet/fleet.h"
 #include "node/safety/actuation_safety.h"
 #include "node/safety/safety.h"
@@ -220,6 +221,12 @@ Status Daemon::start_node() {
   // An ownership transfer clears personal data, the thought log included (docs/SESSIONS.md).
   services_->ownership.on_clear([ai = services_->ai] { ai->clear_thoughts(); });
   node_ = std::make_unique<node::Node>(*services_);
+  // The other robots of the dashboard's Robots view (dashboard.robots), read every poll_ms.
+  robots_ = std::make_unique<node::RobotDirectory>(
+      cfg_.dashboard, [clock = &services_->clock] { return clock->wall_ms(); });
+  node_->set_robot_directory(robots_.get());
+  robots_->start();
+  on_stop([this](int) { robots_->stop(); });
   core_->set_event_callback([node = node_.get()](const node::SafetyEvent& ev) {
     node->on_safety_event(ev.type, ev.session_id, ev.elapsed_ms, ev.detail);
   });

@@ -32,6 +32,7 @@ class NodeServices;
 class Node;
 class MqttNode;
 class MdnsAdvertiser;
+class RobotDirectory;
 class UdpService;
 class GrpcTransport;
 }  // namespace rcan::node
@@ -106,6 +107,7 @@ class Daemon {
   std::unique_ptr<node::SafetyCore> core_;
   std::unique_ptr<node::SafetyActuation> actuation_;
   std::unique_ptr<node::NodeServices> services_;
+  std::unique_ptr<node::RobotDirectory> robots_;  // dashboard.robots (outlives node_)
   std::unique_ptr<node::Node> node_;
   std::unique_ptr<RegistryTrust> registry_trust_;  // the registry's keys and revocations
   std::unique_ptr<node::UdpService> udp_;

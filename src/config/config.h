@@ -73,6 +73,15 @@ struct ServerConfig {
   ServerLimits limits;
 };
 
+// `dashboard` (docs/CONFIG.md §dashboard, docs/DASHBOARD.md §Robots): the other rcand nodes the
+// dashboard's Robots view lists, with their state, and can stop.
+struct DashboardConfig {
+  std::vector<std::string> robots;  // http(s)://host[:port] of each node, at most 64, no repeats
+  std::string ca_file;              // for https:// robots (default: the system's trust anchors)
+  uint32_t poll_ms = 2000;          // how often each robot's state is read
+  uint32_t stop_timeout_ms = 3000;  // a relayed ESTOP's answer
+};
+
 struct GrpcConfig {  // `grpc` (docs/CONFIG.md, docs/TRANSPORT.md §gRPC)
   bool enabled = false;
   uint16_t port = 8081;                    // 0 = any free port (logged)
@@ -408,6 +417,7 @@ struct NodeConfig {
   FleetConfig fleet;  // `fleet`
   SwarmConfig swarm;  // `swarm` seed §5.2 keys
   ControlConfig control;
+  DashboardConfig dashboard;  // `dashboard`
 
   // Validated blocks the node keeps but does not interpret, as JSON objects keyed by their
   // top-level name: bridge, hardware_safety, messaging, metadata, physics, drivers, network,

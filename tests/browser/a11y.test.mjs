@@ -63,7 +63,7 @@ async function main() {
     await page.fill('#token-input', owner);
     await page.click('#signin-form button[type=submit]');
     await page.waitForSelector('body[data-stream=open]', { timeout: 10000 });
-    for (const view of ['overview', 'live', 'teleop', 'approvals', 'audit', 'chat', 'node']) {
+    for (const view of ['overview', 'live', 'teleop', 'approvals', 'audit', 'chat', 'node', 'robots']) {
       await page.click(`#tabs button[data-view=${view}]`);
       if (view === 'chat') {
         await page.fill('#chat-input', 'Where are you?');
@@ -71,6 +71,7 @@ async function main() {
         await page.waitForSelector('#chat-log > .robot', { timeout: 5000 });
       }
       if (view === 'node') await page.waitForSelector('#log-table tbody tr', { timeout: 5000 });
+      if (view === 'robots') await page.waitForSelector('#robots-table tbody tr', { timeout: 5000 });
       await page.waitForTimeout(view === 'audit' ? 1500 : 600);
       await audit(page, `${label} ${view}`);
       await page.screenshot({ path: join(artifacts, `a11y-${label}-${view}.png`), fullPage: true });
@@ -95,7 +96,7 @@ async function main() {
       `${label}: the conversation is a polite live log and the message field has its label (${JSON.stringify(sem.chatLog)})`);
     check(sem.charts.length >= 3 && sem.charts.every(([r, l]) => r === 'img' && l.length > 10),
       `${label}: every chart is an image with a name`);
-    await page.focus('#tabs button[data-view=node]');
+    await page.focus('#tabs button[data-view=robots]');
     await page.keyboard.press('ArrowRight');
     check(await page.evaluate(() => document.body.dataset.view === 'overview' && document.activeElement.dataset.view === 'overview'),
       `${label}: ArrowRight on the last tab wraps to the first and shows its view`);

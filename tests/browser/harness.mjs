@@ -52,27 +52,38 @@ export async function spawnRcand(rcandPath, dataDir, port = 0) {
   return { proc, url };
 }
 
-// A configured robot whose `actions` wait for a human (agent.hitl_gates), with its own issuer,
-// in `dir`. Resolves { proc, url, owner, leasee } (tokens of that issuer).
-export async function startGatedRcand({ rcandPath, cliPath, dir, actions = ['arm_move'] }) {
-  const data = join(dir, 'data');
-  mkdirSync(data, { recursive: true, mode: 0o700 });
-  execFileSync(cliPath, ['keys', 'generate', '--dir', join(data, 'keys')]);
-  execFileSync(cliPath, ['audit', 'new-secret', '--out', join(data, 'audit.secret')]);
+// An Ed25519 token issuer in `dir` (openssl): { key, pub } PEM paths, the key 0600.
+export function makeIssuer(dir) {
+  mkdirSync(dir, { recursive: true, mode: 0o700 });
   const key = join(dir, 'issuer.pem');
   const pub = join(dir, 'issuer.pub.pem');
   execFileSync('openssl', ['genpkey', '-algorithm', 'ed25519', '-out', key]);
   chmodSync(key, 0o600);
   execFileSync('openssl', ['pkey', '-in', key, '-pubout', '-out', pub]);
-  const ruri = 'rcan://local.rcan/acme/rover/0a1b2c3d';
+  return { key, pub };
+}
+
+// A token of that issuer (issuer name ops.example) for `aud`.
+export function issueToken(cliPath, issuer, { sub, role, aud, scopes = 'status,control' }) {
+  return execFileSync(cliPath, ['token', 'issue', '--key', issuer.key, '--iss', 'ops.example',
+    '--sub', sub, '--role', role, '--aud', aud, '--scope', scopes, '--ttl', '1h'], { encoding: 'utf8' }).trim();
+}
+
+// A configured robot in `dir` (its keys, chain secret and YAML) trusting `issuer`, with
+// `extra` YAML lines. Resolves { proc, url }.
+export async function startConfiguredRcand({ rcandPath, cliPath, dir, ruri, name, issuer, extra = [] }) {
+  const data = join(dir, 'data');
+  mkdirSync(data, { recursive: true, mode: 0o700 });
+  execFileSync(cliPath, ['keys', 'generate', '--dir', join(data, 'keys')]);
+  execFileSync(cliPath, ['audit', 'new-secret', '--out', join(data, 'audit.secret')]);
+  const [, manufacturer, model] = /^rcan:\/\/[^/]+\/([^/]+)\/([^/]+)\//.exec(ruri);
   const cfg = join(dir, 'robot.rcan.yaml');
   writeFileSync(cfg, [
     'rcan_version: "1.2"', `ruri: ${ruri}`,
-    'robot:', '  name: gated-rover', '  manufacturer: acme', '  model: rover', '  type: mobile',
+    'robot:', `  name: ${name}`, `  manufacturer: ${manufacturer}`, `  model: ${model}`, '  type: mobile',
     'safety:', '  local_safety_wins: true',
-    'security:', '  jwt:', '    issuers:', '      - issuer: ops.example', `        key_file: ${pub}`,
-    'agent:', '  hitl_gates:', `    - action_types: [${actions.join(', ')}]`, '      require_auth: true',
-    '      auth_timeout_ms: 60000', '      on_timeout: block', '      notify: [ws]', ''].join('\n'));
+    'security:', '  jwt:', '    issuers:', '      - issuer: ops.example', `        key_file: ${issuer.pub}`,
+    ...extra, ''].join('\n'));
   const proc = spawn(rcandPath, ['--config', cfg, '--data-dir', data, '--port', '0'], { stdio: ['ignore', 'ignore', 'pipe'] });
   let log = '';
   const url = await new Promise((resolve, reject) => {
@@ -85,8 +96,18 @@ export async function startGatedRcand({ rcandPath, cliPath, dir, actions = ['arm
     proc.on('exit', (code) => { clearTimeout(timer); reject(new Error(`configured rcand exited ${code}:\n${log}`)); });
   });
   proc.removeAllListeners('exit');
-  const tok = (sub, role, scopes) => execFileSync(cliPath, ['token', 'issue', '--key', key, '--iss', 'ops.example',
-    '--sub', sub, '--role', role, '--aud', ruri, '--scope', scopes, '--ttl', '1h'], { encoding: 'utf8' }).trim();
+  return { proc, url };
+}
+
+// A configured robot whose `actions` wait for a human (agent.hitl_gates), with its own issuer,
+// in `dir`. Resolves { proc, url, owner, leasee } (tokens of that issuer).
+export async function startGatedRcand({ rcandPath, cliPath, dir, actions = ['arm_move'] }) {
+  const issuer = makeIssuer(dir);
+  const ruri = 'rcan://local.rcan/acme/rover/0a1b2c3d';
+  const { proc, url } = await startConfiguredRcand({ rcandPath, cliPath, dir, ruri, name: 'gated-rover', issuer, extra: [
+    'agent:', '  hitl_gates:', `    - action_types: [${actions.join(', ')}]`, '      require_auth: true',
+    '      auth_timeout_ms: 60000', '      on_timeout: block', '      notify: [ws]'] });
+  const tok = (sub, role, scopes) => issueToken(cliPath, issuer, { sub, role, aud: ruri, scopes });
   return { proc, url, owner: tok('owner-1', 'owner', 'status,control,config'), leasee: tok('leasee-1', 'leasee', 'status,control') };
 }
 

@@ -53,6 +53,10 @@ void expect_server_defaults(const NodeConfig& c) {
   EXPECT_TRUE(c.udp.heartbeat);
   EXPECT_TRUE(c.udp.discovery);
   EXPECT_EQ(c.udp.discovery_per_source_per_min, 30u);
+  EXPECT_TRUE(c.dashboard.robots.empty());
+  EXPECT_EQ(c.dashboard.ca_file, "");
+  EXPECT_EQ(c.dashboard.poll_ms, 2000u);
+  EXPECT_EQ(c.dashboard.stop_timeout_ms, 3000u);
 }
 
 void expect_security_defaults(const NodeConfig& c) {
@@ -274,7 +278,7 @@ TEST(ConfigBlockDefaults, EveryBlockGivenEmpty) {
       "security: {audit: {retention: {}}, jwt: {}, injection: {}, commitment: {}}\n"
       "rbac: {grants: {}, rate_limits: {}, guest_limits: {}}\n"
       "safety: {}\nwatchdog: {}\nagent: {layers: {}}\nbrain: {}\ndriver: {sim: {}}\n"
-      "offline: {}\ncontrol: {}\nqos: {}\nmqtt: {tls: {}, reconnect: {}}\n");
+      "offline: {}\ncontrol: {}\nqos: {}\nmqtt: {tls: {}, reconnect: {}}\ndashboard: {}\n");
   ASSERT_TRUE(r.ok()) << r.error().message;
   expect_all_defaults(*r);
 }
@@ -366,6 +370,18 @@ TEST(ConfigBlockKeys, TransportsSessionsAndFleet) {
   EXPECT_EQ(c.swarm.join_policy, "open");
   EXPECT_EQ(c.swarm.heartbeat_ms, 100u);
   EXPECT_EQ(c.swarm.leader_timeout_ms, 200u);
+}
+
+TEST(ConfigBlockKeys, DashboardRobots) {
+  auto r = parse(
+      "dashboard: {robots: ['http://10.0.0.12:8080', 'https://rover-2.example'], ca_file: ca.pem,\n"
+      "  poll_ms: 500, stop_timeout_ms: 1000}\n");
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_EQ(r->dashboard.robots,
+            (std::vector<std::string>{"http://10.0.0.12:8080", "https://rover-2.example"}));
+  EXPECT_EQ(r->dashboard.ca_file, "/etc/rcand/ca.pem");
+  EXPECT_EQ(r->dashboard.poll_ms, 500u);
+  EXPECT_EQ(r->dashboard.stop_timeout_ms, 1000u);
 }
 
 TEST(ConfigBlockKeys, ComputedDefaultsAndAliases) {
@@ -497,6 +513,13 @@ TEST(ConfigBlockRules, IdentityServerAndSecurity) {
       {"grpc: {enabled: true, port: 8080}\n", "grpc.port", "invalid_value",
        "must differ from server.port (8080)"},
       {"udp: {bind: 'a b'}\n", "udp.bind", "invalid_value", "expected an IP address"},
+      {"dashboard: {robots: ['ftp://r']}\n", "dashboard.robots[0]", "invalid_value",
+       "expected http://host[:port] or https://host[:port] (no path), got \"ftp://r\""},
+      {"dashboard: {robots: ['http://a:1', 'http://a:1/api']}\n", "dashboard.robots[1]",
+       "invalid_value",
+       "expected http://host[:port] or https://host[:port] (no path), got \"http://a:1/api\""},
+      {"dashboard: {robots: ['http://a:1', 'https://b', 'http://a:1']}\n", "dashboard.robots[2]",
+       "invalid_value", "listed twice"},
       {"udp: {enabled: true, heartbeat: false, discovery: false}\n", "udp.enabled", "invalid_value",
        "udp is enabled but both heartbeat and discovery are off"},
       {"security: {key_dir: ''}\n", "security.key_dir", "invalid_value", "must not be empty"},

@@ -407,13 +407,9 @@ class Nats {
       procs_.push_back(std::make_unique<test::Process>());
       EXPECT_TRUE(procs_.back()->start({nats_server_path(), "-c", dir + "/" + name + ".conf"}));
     }
-    for (auto& p : procs_) {
+    for (auto& p : procs_)
       EXPECT_TRUE(p->wait_for_line("Listening for MQTT clients", 15000)) << p->err();
-      // MQTT sessions live in JetStream: wait until the cluster elected its metadata leader.
-      if (nodes > 1 && p->err().find("metadata leader") == std::string::npos) {
-        EXPECT_TRUE(p->wait_for_line("metadata leader", 20000)) << p->err();
-      }
-    }
+    if (nodes > 1) wait_ready();
   }
   ~Nats() {
     for (auto& p : procs_)
@@ -424,6 +420,39 @@ class Nats {
   }
   uint16_t mqtt_port(int node) const { return ports_[static_cast<size_t>(node)][2]; }
   void kill(int node) { procs_[static_cast<size_t>(node)]->stop(SIGKILL, 5000); }
+
+ private:
+  // MQTT sessions live in JetStream. The cluster is ready when it has a metadata leader (the
+  // leader logs it; a follower may learn of it without a line) and every node opens a
+  // persistent session, which it can only do through that leader (up to 40 s in all).
+  void wait_ready() {
+    const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(40);
+    auto leader_logged = [&] {
+      for (auto& p : procs_)
+        if (p->err().find("metadata leader") != std::string::npos) return true;
+      return false;
+    };
+    while (!leader_logged() && std::chrono::steady_clock::now() < end)
+      for (auto& p : procs_) p->drain(100);
+    ASSERT_TRUE(leader_logged()) << procs_[0]->err();
+    for (size_t i = 0; i < procs_.size(); ++i) {
+      bool opened = false;
+      while (!opened && std::chrono::steady_clock::now() < end) {
+        transport::MqttOptions o;
+        o.url = url(static_cast<int>(i));
+        o.client_id = "ready-probe-" + std::to_string(i);
+        o.clean_session = false;
+        transport::MqttClient c(o);
+        if (!c.start().ok()) break;
+        for (int t = 0; t < 100 && !c.connected(); ++t)
+          std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        opened = c.connected();
+      }
+      EXPECT_TRUE(opened) << "node " << i + 1 << " opens no MQTT session\n" << procs_[i]->err();
+    }
+  }
+
+ public:
   test::Process& proc(int node) { return *procs_[static_cast<size_t>(node)]; }
 
  private:

@@ -11,6 +11,7 @@ import { initApprovals, onPending, onEvent as approvalsEvent, refresh as refresh
 import { initAudit, loadAudit, setDefaultRrn } from './audit.js';
 import { initChat } from './chat.js';
 import { initNode } from './nodepanel.js';
+import { initRobots } from './robots.js';
 
 let pollTimer = 0;
 let auditLoaded = false;
@@ -226,6 +227,7 @@ function init() {
   initAudit();
   initChat();
   initNode();
+  initRobots();
   on('refresh', refreshStatus);
   $('#estop').addEventListener('click', onEstop);
   // Escape anywhere on the page is ESTOP (an ESTOP is never harmful: it latches until RESUME).

@@ -1,8 +1,10 @@
 // This node's `node` block and its listeners: `server` (HTTP and WebSocket, or the
 // OpenCastor rcan_protocol.port), `grpc` and `udp` (docs/CONFIG.md §node and server, §grpc
-// and udp).
+// and udp), and `dashboard` (§dashboard).
 #include <regex>
+#include <set>
 
+#include "base/http_client.h"
 #include "config/blocks/blocks.h"
 
 namespace rcan::config::internal {
@@ -144,6 +146,30 @@ Table<UdpConfig> udp_rows() {
   };
 }
 
+Table<DashboardConfig> dashboard_rows() {
+  using D = Rows<DashboardConfig>;
+  return {
+      D::read("robots", Arr(Str(512), 64),
+              [](const At& a, DashboardConfig& d, Ctx&) {
+                d.robots = a.strs();
+                std::set<std::string> seen;
+                for (size_t i = 0; i < d.robots.size(); ++i) {
+                  auto u = parse_web_url(d.robots[i]);
+                  if (!u.ok() || u->path != "/")
+                    fail(a[i].path,
+                         "expected http://host[:port] or https://host[:port] (no path), got \"" +
+                             printable(d.robots[i]) + "\"",
+                         "invalid_value");
+                  if (!seen.insert(d.robots[i]).second)
+                    fail(a[i].path, "listed twice", "invalid_value");
+                }
+              }),
+      D::path("ca_file", Str(), &DashboardConfig::ca_file),
+      D::field("poll_ms", Int(250, 600'000), &DashboardConfig::poll_ms),
+      D::field("stop_timeout_ms", Int(100, 60'000), &DashboardConfig::stop_timeout_ms),
+  };
+}
+
 }  // namespace
 
 Table<NodeConfig> server_blocks() {
@@ -152,6 +178,7 @@ Table<NodeConfig> server_blocks() {
       R::block("server", server_rows(), &NodeConfig::server),
       R::block("grpc", grpc_rows(), &NodeConfig::grpc),
       R::block("udp", udp_rows(), &NodeConfig::udp),
+      R::block("dashboard", dashboard_rows(), &NodeConfig::dashboard),
       R::check([](const At& root, NodeConfig& c, Ctx&) {
         if (c.grpc.enabled && c.grpc.port != 0 && c.grpc.port == c.server.port)
           fail(root["grpc"]["port"].path,

@@ -308,6 +308,7 @@ void Node::shutdown() {
   }
   for (auto& st : copy) st->sink->close(1001, "node shutting down");
   worker_.shutdown();
+  relay_worker_.shutdown();
   svc_.flush_refusals(true);  // the counts of refusals not recorded one by one
   // Appended synchronously (blocks until durable): the last word of the run.
   (void)svc_.audit.append(std::move(svc_.record("SYSTEM_STOP").by_system().entry()));

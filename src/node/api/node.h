@@ -23,6 +23,7 @@
 namespace rcan::node {
 
 struct StreamState;
+class RobotDirectory;
 
 class Node final : public transport::HttpHandler, public transport::StreamHandler {
  public:
@@ -52,6 +53,10 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
     pipeline_.submit(std::move(in), std::move(done));
   }
 
+  // The robots the dashboard's Robots view lists and can stop (dashboard.robots); set before
+  // the transports start, and it must outlive the node. None: the view lists this node alone.
+  void set_robot_directory(RobotDirectory* robots);
+
   NodeServices& services() { return svc_; }
   Pipeline& pipeline() { return pipeline_; }
   size_t stream_count() const EXCLUDES(streams_mu_);
@@ -70,6 +75,9 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   // The route table: every HTTP route in one list (routes.cpp).
   void add_routes();
   void add_control_routes();
+  // GET /api/robots and POST /api/robots/estop (robots_routes.cpp).
+  void add_robots_routes();
+  void robots_estop(transport::HttpRequest& req, Respond& respond, const json::Value& body);
   // Control sessions, leases, ownership transfer, consent (control_routes.cpp).
   void queue_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
   void claim_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
@@ -138,6 +146,8 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   RouteTable routes_;
   Histogram* respond_timer_;  // stage "respond": answer handed over → its write begins
   Worker worker_{1};
+  RobotDirectory* robots_ = nullptr;
+  Worker relay_worker_{2};  // relayed stops (they wait on other robots' answers)
   mutable Mutex streams_mu_;
   std::vector<std::shared_ptr<StreamState>> streams_ GUARDED_BY(streams_mu_);
   // Principals (key) whose stream closed, and when: drop_streamless_claims looks at them.

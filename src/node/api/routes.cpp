@@ -81,6 +81,7 @@ void Node::add_routes() {
   });
   add_control_routes();
   add_revocation_routes();
+  add_robots_routes();
   add_ai_routes(t, svc_);
   t.add("GET", "/api/audit", Body::kNone,
         [this](RouteCall& c) { audit_listing(c.req, c.respond); });
