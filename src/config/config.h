@@ -78,6 +78,7 @@ struct ServerConfig {
 struct DashboardConfig {
   std::vector<std::string> robots;  // http(s)://host[:port] of each node, at most 64, no repeats
   std::string ca_file;              // for https:// robots (default: the system's trust anchors)
+  bool mdns = false;                // also list the rcand nodes announcing _rcan._tcp (no stop)
   uint32_t poll_ms = 2000;          // how often each robot's state is read
   uint32_t stop_timeout_ms = 3000;  // a relayed ESTOP's answer
 };

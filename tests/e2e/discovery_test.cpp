@@ -9,9 +9,11 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <fstream>
 #include <thread>
 
+#include "rcan/crypto/jwt.h"
 #include "rcan/json.h"
 #include "rcand_daemon.h"
 #include "test_support.h"
@@ -214,6 +216,88 @@ TEST_F(NetnsDiscovery, AdvertisementReturnsAfterTheAvahiDaemonRestarts) {
   ASSERT_TRUE(robot.is_object());
   EXPECT_EQ(robot.get("ruri")->as_string(), ruri_);
   EXPECT_TRUE(node_->running());
+}
+
+// The dashboard's Robots view with dashboard.mdns (docs/DASHBOARD.md §Robots): a node in B lists
+// the robot A announces, with the state it announces, and follows its ESTOP; a stop relayed to
+// it is refused with nothing sent, since an announcement is no reason to send a token anywhere.
+TEST_F(NetnsDiscovery, TheRobotsViewListsAnnouncedRobotsAndSendsThemNoToken) {
+  if (!exists("/usr/bin/curl")) GTEST_SKIP() << "skipped: curl is not installed";
+  start_node();
+  const std::string dir = b_.dir + "/viewer";
+  ::mkdir(dir.c_str(), 0700);
+  ASSERT_EQ(test::run_cli({"keys", "generate", "--dir", dir + "/keys"}).exit_code, 0);
+  ASSERT_EQ(test::run_cli({"audit", "new-secret", "--out", dir + "/audit.secret"}).exit_code, 0);
+  const std::string secret = dir + "/ops.secret";
+  std::ofstream(secret) << "0123456789abcdef0123456789abcdef-mdns-view-secret";
+  ::chmod(secret.c_str(), 0600);
+  const std::string viewer_ruri = "rcan://local.rcan/rcan/viewer/0000beef";
+  std::ofstream(dir + "/robot.yaml")
+      << "rcan_version: \"1.2\"\nruri: " << viewer_ruri << "\nnode: {data_dir: " << dir
+      << "}\nsecurity:\n  jwt:\n    issuers: [{issuer: ops, key_file: " << secret
+      << ", kind: hs256_secret}]\ndashboard: {mdns: true}\n";
+  test::Process viewer;
+  ASSERT_TRUE(viewer.start(b_.exec({RCAND_PATH, "--config", dir + "/robot.yaml", "--port", "8090"}),
+                           b_.env()));
+  ASSERT_TRUE(viewer.wait_for_line("\"event\":\"listening\"", 30000).has_value()) << viewer.err();
+  auto key = jwt::SigningKey::from_file(secret, true);
+  ASSERT_TRUE(key.ok());
+  const int64_t now = std::chrono::duration_cast<std::chrono::seconds>(
+                          std::chrono::system_clock::now().time_since_epoch())
+                          .count();
+  auto tok = jwt::issue(json::Object{{"iss", "ops"},
+                                     {"sub", "operator"},
+                                     {"aud", "rcan://local.rcan/rcan/*/*"},
+                                     {"role", "user"},
+                                     {"iat", now - 5},
+                                     {"exp", now + 600}},
+                        *key);
+  ASSERT_TRUE(tok.ok());
+  auto call = [&](const std::vector<std::string>& extra) {
+    std::vector<std::string> argv{"/usr/bin/curl", "-s", "-H", "Authorization: Bearer " + *tok};
+    argv.insert(argv.end(), extra.begin(), extra.end());
+    return test::run(b_.exec(argv)).out;
+  };
+  const std::string a_url = "http://" + a_.addr + ":8080";
+  // Until the view lists A with `status` (up to 15 s).
+  auto listed_as = [&](const std::string& status) {
+    json::Value last;
+    for (int i = 0; i < 75; ++i) {
+      last = parse(call({"http://127.0.0.1:8090/api/robots"}));
+      const json::Value* d = last.get("discovered");
+      if (d && d->is_array())
+        for (const json::Value& r : d->as_array())
+          if (r.get("ruri")->as_string() == ruri_ && r.get("status")->as_string() == status)
+            return r;
+      std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    }
+    ADD_FAILURE() << "never listed as " << status << ": " << json::dump(last) << "\n"
+                  << viewer.err();
+    return json::Value();
+  };
+  json::Value a = listed_as("available");
+  ASSERT_TRUE(a.is_object());
+  EXPECT_EQ(a.get("url")->as_string(), a_url);
+  EXPECT_EQ(a.get("source")->as_string(), "mdns");
+  EXPECT_EQ(a.get("interface")->as_string(), b_.veth);
+  json::Value all = parse(call({"http://127.0.0.1:8090/api/robots"}));
+  EXPECT_EQ(all.get("mdns")->as_string(), "on");
+  EXPECT_EQ(all.get("configured")->to_double(), 0);
+  for (const json::Value& r : all.get("discovered")->as_array())
+    EXPECT_NE(r.get("ruri")->as_string(), viewer_ruri);  // never itself
+  // A relay to the announced address: refused before anything is sent; A stays as it was.
+  std::string refused =
+      call({"-X", "POST", "-H", "Content-Type: application/json", "-d",
+            "{\"robots\":[\"" + a_url + "\"]}", "http://127.0.0.1:8090/api/robots/estop"});
+  EXPECT_NE(refused.find("nothing was sent"), std::string::npos) << refused;
+  std::this_thread::sleep_for(std::chrono::milliseconds(1000));
+  listed_as("available");
+  // A latched by its owner: the view follows the announcement.
+  ASSERT_EQ(
+      cli_in(b_, {"estop", "--url", a_url, "--token-file", node_dir_ + "/owner.token"}).exit_code,
+      0);
+  listed_as("estop");
+  viewer.stop(SIGTERM, 10000);
 }
 
 // No privileges needed: a node with no D-Bus / Avahi keeps serving and says so once; the CLI

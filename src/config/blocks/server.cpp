@@ -165,6 +165,7 @@ Table<DashboardConfig> dashboard_rows() {
                 }
               }),
       D::path("ca_file", Str(), &DashboardConfig::ca_file),
+      D::field("mdns", Bool(), &DashboardConfig::mdns),
       D::field("poll_ms", Int(250, 600'000), &DashboardConfig::poll_ms),
       D::field("stop_timeout_ms", Int(100, 60'000), &DashboardConfig::stop_timeout_ms),
   };

@@ -1,6 +1,8 @@
 // The dashboard's Robots view (docs/DASHBOARD.md §Robots, docs/NODE.md §Routes):
 //
-//   GET  /api/robots         this node and the robots of `dashboard.robots` with their state
+//   GET  /api/robots         this node and the robots of `dashboard.robots` with their state,
+//                            and (dashboard.mdns) those announcing _rcan._tcp, listed only,
+//                            and (dashboard.mdns) those announcing _rcan._tcp, listed only
 //   POST /api/robots/estop   {"robots":[url…] (default: every configured one), "reason"?}:
 //                            POST /api/stop on each at once with the caller's own token;
 //                            {"results":[{url, result, …}], "confirmed", "total", "ok"}
@@ -41,10 +43,13 @@ void Node::add_robots_routes() {
                       {"status", status_word(svc_)}};
     json::Array robots = robots_ ? robots_->snapshot() : json::Array{};
     const auto configured = static_cast<int64_t>(robots.size());
-    answer_json(
-        c.respond, c.route, 200,
-        json::Object{
-            {"self", std::move(self)}, {"robots", std::move(robots)}, {"configured", configured}});
+    answer_json(c.respond, c.route, 200,
+                json::Object{{"self", std::move(self)},
+                             {"robots", std::move(robots)},
+                             {"configured", configured},
+                             {"discovered",
+                              robots_ ? robots_->discovered(svc_.settings.ruri) : json::Array{}},
+                             {"mdns", robots_ ? robots_->mdns_state() : std::string("off")}});
   });
   t.add("POST", "/api/robots/estop", Body::kObjectOrEmpty,
         [this](RouteCall& c) { robots_estop(c.req, c.respond, c.body); });
@@ -55,8 +60,9 @@ void Node::robots_estop(transport::HttpRequest& req, Respond& respond, const jso
   auto pr = bearer_principal(req);
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   if (!robots_ || robots_->urls().empty())
-    return answer_error(respond, route,
-                        bad("no robot to stop: dashboard.robots lists none", "robots"));
+    return answer_error(
+        respond, route,
+        bad("no robot to stop: dashboard.robots lists none; nothing was sent", "robots"));
   std::string reason = "dashboard robots view";
   if (const json::Value* r = body.is_object() ? body.get("reason") : nullptr; r && !r->is_null()) {
     if (!r->is_string() || r->as_string().empty() || r->as_string().size() > kMaxReasonBytes)

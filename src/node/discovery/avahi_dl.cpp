@@ -1,6 +1,9 @@
 #include "node/discovery/avahi_dl.h"
 
 #include <dlfcn.h>
+#include <sys/stat.h>
+
+#include <cstdlib>
 
 namespace rcan::node {
 
@@ -35,6 +38,24 @@ Loaded load() {
 }
 
 }  // namespace
+
+// The socket Avahi's client would use: DBUS_SYSTEM_BUS_ADDRESS when it names a unix:path=,
+// else the standard one. Other address forms are tried as given.
+bool system_bus_present(std::string& why) {
+  std::string path = "/run/dbus/system_bus_socket";
+  if (const char* a = std::getenv("DBUS_SYSTEM_BUS_ADDRESS"); a && *a) {
+    std::string addr = a;
+    if (addr.rfind("unix:", 0) != 0) return true;
+    size_t p = addr.find("path=");
+    if (p == std::string::npos) return true;  // unix:abstract=…, unix:runtime=yes…
+    size_t end = addr.find_first_of(",;", p);
+    path = addr.substr(p + 5, end == std::string::npos ? std::string::npos : end - p - 5);
+  }
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0) return true;
+  why = "no D-Bus system bus at " + path;
+  return false;
+}
 
 const AvahiApi* avahi_api(std::string* error) {
   static const Loaded loaded = load();

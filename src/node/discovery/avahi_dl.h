@@ -5,7 +5,9 @@
 #pragma once
 
 #include <avahi-client/client.h>
+#include <avahi-client/lookup.h>
 #include <avahi-client/publish.h>
+#include <avahi-common/address.h>
 #include <avahi-common/alternative.h>
 #include <avahi-common/error.h>
 #include <avahi-common/malloc.h>
@@ -41,7 +43,15 @@ struct AvahiApi {
   X(entry_group_update_service_txt_strlst) \
   X(entry_group_commit)                    \
   X(entry_group_reset)                     \
-  X(entry_group_get_client)
+  X(entry_group_get_client)                \
+  X(service_browser_new)                   \
+  X(service_browser_free)                  \
+  X(service_resolver_new)                  \
+  X(service_resolver_free)                 \
+  X(address_snprint)                       \
+  X(string_list_get_next)                  \
+  X(string_list_get_text)                  \
+  X(string_list_get_size)
   RCAN_AVAHI_FUNCTIONS(RCAN_AVAHI_FN)
 #undef RCAN_AVAHI_FN
 };
@@ -49,5 +59,9 @@ struct AvahiApi {
 // The loaded API, or nullptr with *error saying why (library or symbol missing). Loaded once,
 // never unloaded; thread-safe.
 const AvahiApi* avahi_api(std::string* error = nullptr);
+
+// Whether the D-Bus system bus Avahi is reached through exists ($DBUS_SYSTEM_BUS_ADDRESS or
+// /run/dbus/system_bus_socket); otherwise false with `why`.
+bool system_bus_present(std::string& why);
 
 }  // namespace rcan::node

@@ -2,10 +2,8 @@
 #include "node/discovery/mdns.h"
 
 #include <pthread.h>
-#include <sys/stat.h>
 
 #include <chrono>
-#include <cstdlib>
 
 #include "base/log.h"
 #include "base/thread_annotations.h"
@@ -18,23 +16,6 @@ namespace {
 // Avahi, loaded by start() (avahi_dl.h); nothing below runs before it has loaded.
 const AvahiApi& av() { return *avahi_api(); }
 
-// Whether the D-Bus system bus socket Avahi's client would use exists: DBUS_SYSTEM_BUS_ADDRESS
-// when it names a unix:path=, else the standard socket. Other address forms are tried as given.
-bool system_bus_present(std::string& why) {
-  std::string path = "/run/dbus/system_bus_socket";
-  if (const char* a = std::getenv("DBUS_SYSTEM_BUS_ADDRESS"); a && *a) {
-    std::string addr = a;
-    if (addr.rfind("unix:", 0) != 0) return true;
-    size_t p = addr.find("path=");
-    if (p == std::string::npos) return true;  // unix:abstract=…, unix:runtime=yes…
-    size_t end = addr.find_first_of(",;", p);
-    path = addr.substr(p + 5, end == std::string::npos ? std::string::npos : end - p - 5);
-  }
-  struct stat st {};
-  if (::stat(path.c_str(), &st) == 0) return true;
-  why = "no D-Bus system bus at " + path;
-  return false;
-}
 }  // namespace
 
 struct MdnsAdvertiser::Impl {

@@ -43,6 +43,10 @@ RobotDirectory::RobotDirectory(const config::DashboardConfig& cfg, std::function
 RobotDirectory::~RobotDirectory() { stop(); }
 
 void RobotDirectory::start() {
+  if (cfg_.mdns && !mdns_) {
+    mdns_ = std::make_unique<MdnsBrowser>();
+    mdns_->start();
+  }
   if (urls_.empty() || poller_.joinable()) return;
   poller_ = std::thread([this] { loop(); });
 }
@@ -54,6 +58,7 @@ void RobotDirectory::stop() {
     cv_.notify_all();
   }
   if (poller_.joinable()) poller_.join();
+  if (mdns_) mdns_->stop();
 }
 
 bool RobotDirectory::configured(const std::string& url) const {
@@ -137,6 +142,35 @@ json::Array RobotDirectory::snapshot() const {
     out.emplace_back(std::move(o));
   }
   return out;
+}
+
+json::Array RobotDirectory::discovered(const std::string& self_ruri) const {
+  json::Array out;
+  if (!mdns_) return out;
+  auto txt = [](const MdnsRobot& m, const char* k) {
+    auto it = m.txt.find(k);
+    return it == m.txt.end() ? std::string() : it->second;
+  };
+  for (const MdnsRobot& m : mdns_->robots()) {
+    if (txt(m, "ruri") == self_ruri || configured(m.url())) continue;
+    const std::string word = txt(m, "status");
+    out.emplace_back(json::Object{
+        {"url", m.url()},
+        {"name", txt(m, "name").empty() ? m.instance : txt(m, "name")},
+        {"ruri", txt(m, "ruri")},
+        {"model", txt(m, "model")},
+        {"version", txt(m, "version")},
+        {"status", word == "available" || word == "claimed" || word == "estop" ? word : "unknown"},
+        {"interface", m.interface},
+        {"source", "mdns"}});
+  }
+  return out;
+}
+
+std::string RobotDirectory::mdns_state() const {
+  if (!mdns_) return "off";
+  std::string why = mdns_->unavailable();
+  return why.empty() ? "on" : why;
 }
 
 std::vector<RobotDirectory::StopResult> RobotDirectory::relay_stop(

@@ -11,6 +11,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <string>
 #include <thread>
 #include <vector>
@@ -18,6 +19,7 @@
 #include "base/http_client.h"
 #include "base/thread_annotations.h"
 #include "config/config.h"
+#include "node/discovery/mdns_browse.h"
 #include "rcan/json.h"
 
 namespace rcan::node {
@@ -40,7 +42,7 @@ class RobotDirectory {
   RobotDirectory(const RobotDirectory&) = delete;
   RobotDirectory& operator=(const RobotDirectory&) = delete;
 
-  // Starts the poll thread (nothing when no robot is configured).
+  // Starts the poll thread (when robots are configured) and the mDNS browser (dashboard.mdns).
   void start() EXCLUDES(mu_);
   void stop() EXCLUDES(mu_);
 
@@ -49,6 +51,12 @@ class RobotDirectory {
   // Each configured robot as last read: {url, name, ruri, model, version, status, reachable,
   // error, checked_ms, latency_ms}; status "unknown" before the first answer.
   json::Array snapshot() const EXCLUDES(mu_);
+  // The rcand nodes announcing _rcan._tcp (dashboard.mdns), without the one whose RURI is
+  // `self_ruri` and those already configured: {url, name, ruri, model, version, status,
+  // interface, source: "mdns"}. Listed only: a stop is never relayed to them.
+  json::Array discovered(const std::string& self_ruri) const;
+  // "off" (dashboard.mdns false), "on", or why browsing is not possible.
+  std::string mdns_state() const;
   // POST /api/stop on each of `urls` (configured ones only: the caller checked) at once, with
   // `authorization` and `reason`; returns when every robot answered or stop_timeout_ms passed.
   std::vector<StopResult> relay_stop(const std::vector<std::string>& urls,
@@ -76,6 +84,7 @@ class RobotDirectory {
   std::vector<State> states_ GUARDED_BY(mu_);
   bool quit_ GUARDED_BY(mu_) = false;
   std::thread poller_;
+  std::unique_ptr<MdnsBrowser> mdns_;
 };
 
 }  // namespace rcan::node
