@@ -11,6 +11,7 @@
 #include "cli.h"
 #include "rcan/errors.h"
 #include "rcan/json.h"
+#include "rcan/version.h"
 
 namespace rcan::cli {
 namespace {
@@ -144,7 +145,7 @@ int main(int argc, char** argv) {
     return argc < 2 ? 2 : 0;
   }
   if (std::strcmp(argv[1], "--version") == 0) {
-    std::printf("rcan 0.1.0 (RCAN protocol 1.0.0)\n");
+    std::printf("rcan %s (RCAN protocol 1.0.0)\n", std::string(rcan::kSoftwareVersion).c_str());
     return 0;
   }
   std::string verb = argv[1];

@@ -16,6 +16,7 @@
 #include "base/log.h"
 #include "daemon.h"
 #include "rcan/json.h"
+#include "rcan/version.h"
 #include "sd_notify.h"
 
 // Read by jemalloc, which rcand links (CMakeLists.txt), when it starts: a background thread
@@ -74,7 +75,7 @@ std::optional<rcand::DaemonOptions> parse_args(int argc, char** argv,
       exit_code = 0;
       return std::nullopt;
     } else if (s == "--version") {
-      std::puts("rcand 0.1.0 (RCAN protocol 1.0.0)");
+      std::printf("rcand %s (RCAN protocol 1.0.0)\n", std::string(kSoftwareVersion).c_str());
       exit_code = 0;
       return std::nullopt;
     } else if (s == "--config") {

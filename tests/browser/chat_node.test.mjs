@@ -91,6 +91,7 @@ async function main() {
   await page.waitForSelector('#log-table tbody tr', { timeout: 5000 });
   const facts = await page.textContent('#node-facts');
   check(/RCAN protocol\s*\S+/.test(facts) && facts.includes(ruri), `the node view shows the protocol version and RURI (${facts.replace(/\s+/g, ' ').slice(0, 200)})`);
+  check(/Software\s*rcand \d+\.\d+\.\d+/.test(facts), `the node view shows rcand's own version (${facts.replace(/\s+/g, ' ').slice(0, 200)})`);
   await page.waitForFunction(() => /Requests answered\s*\d+/.test(document.querySelector('#node-metrics').textContent), null, { timeout: 5000 });
   const mx = await page.textContent('#node-metrics');
   check(/Audit: last seq\s*\d+/.test(mx), `the node view shows key metrics (${mx.replace(/\s+/g, ' ').slice(0, 200)})`);

@@ -14,6 +14,7 @@
 #include "rcan/crypto/jwt.h"
 #include "rcan/errors.h"
 #include "rcan/json.h"
+#include "rcan/version.h"
 #include "test_support.h"
 
 namespace rcan {
@@ -169,10 +170,18 @@ TEST_F(RcandTest, StatusCarriesIdentityVersionAndState) {
   EXPECT_TRUE(v.get("estop_active")->is_bool());
   EXPECT_EQ(v.get("mode")->as_string(), "NORMAL");
   EXPECT_TRUE(v.get("capabilities")->is_array());
-  EXPECT_EQ(v.get("robot"), nullptr);  // robot detail only with a token
+  EXPECT_EQ(v.get("robot"), nullptr);     // robot detail only with a token
+  EXPECT_EQ(v.get("software"), nullptr);  // so is the software's version
   HttpReply detailed = d().get("/rcan/v1/status", d().owner_token());
   ASSERT_EQ(detailed.status, 200);
-  EXPECT_NE(parse(detailed.body).get("robot"), nullptr);
+  json::Value dv = parse(detailed.body);
+  EXPECT_NE(dv.get("robot"), nullptr);
+  ASSERT_NE(dv.get("software"), nullptr) << detailed.body;
+  EXPECT_EQ(dv.get("software")->get("name")->as_string(), "rcand");
+  EXPECT_EQ(dv.get("software")->get("version")->as_string(), std::string(kSoftwareVersion));
+  auto version = test::run({RCAND_PATH, "--version"});
+  EXPECT_EQ(version.exit_code, 0);
+  EXPECT_EQ(version.out, "rcand " + std::string(kSoftwareVersion) + " (RCAN protocol 1.0.0)\n");
   EXPECT_EQ(d().get("/rcan/v1/status", "not-a-token").status, 401);
 }
 

@@ -38,6 +38,7 @@ function renderFacts() {
     ['RURI', s.ruri, 'mono'],
     s.ruri_sdk && ['RURI (SDK form)', s.ruri_sdk, 'mono'],
     ['RRN', s.rrn || d.rrn, 'mono'],
+    s.software && ['Software', `${s.software.name || 'rcand'} ${s.software.version || ''}`.trim()],
     ['RCAN protocol', s.rcan_version || d.rcan_version],
     ['Extensions', list(s.extensions)],
     ['Capabilities', list(s.capabilities)],

@@ -3,6 +3,7 @@
 #include <optional>
 
 #include "rcan/errors.h"
+#include "rcan/version.h"
 #include "transport/http_api.h"
 
 namespace rcan::node {
@@ -166,6 +167,7 @@ json::Value NodeServices::status(bool detailed) {
   o.set("mode", std::string(net_mode_name(partition.mode())));
   o.set("control", std::string(control_state_name(sessions.state(now))));
   if (detailed) {
+    o.set("software", json::Object{{"name", "rcand"}, {"version", std::string(kSoftwareVersion)}});
     o.set("partition", partition.status_json(clock.wall_ms()));
     if (registry_status) o.set("registry", registry_status());
     o.set("ownership", ownership.to_json(clock.wall_ms(), false));
