@@ -125,7 +125,8 @@ class Node {
   test::Process& proc() { return proc_; }
   bool latched(const std::string& token) const {
     auto r = test::http(port_, "GET", "/api/status", "", {{"Authorization", "Bearer " + token}});
-    const json::Value* e = parse(r.body).get("estop_active");
+    const json::Value v = parse(r.body);
+    const json::Value* e = v.get("estop_active");
     return e && e->is_bool() && e->as_bool();
   }
 
