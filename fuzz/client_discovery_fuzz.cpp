@@ -1,8 +1,8 @@
-// libFuzzer: what the client reads from a node or the network before trusting it — mDNS TXT
-// items, status answers (GET /rcan/v1/status), error bodies of every shape, and URLs given by
-// the user or built from mDNS answers. Invariants: nothing crashes; TXT keys are non-empty and
-// lower-case; a failed status parse says SCHEMA_VALIDATION_FAILED; an accepted URL re-parses
-// to itself.
+// libFuzzer: what the client (and the node's mDNS browser) reads from a node or the network
+// before trusting it — mDNS TXT items, status answers (GET /rcan/v1/status), error bodies of every
+// shape, and URLs given by the user or built from mDNS answers. Invariants: nothing crashes; TXT
+// keys are non-empty and lower-case; a failed status parse says SCHEMA_VALIDATION_FAILED; an
+// accepted URL re-parses to itself.
 #include <cctype>
 #include <cstddef>
 #include <cstdint>
@@ -25,11 +25,19 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     if (z == std::string_view::npos) break;
     start = z + 1;
   }
-  for (const auto& [k, v] : rcan::client::parse_txt(items)) {
+  // The same parser reads the TXT records the node's mDNS browser hears (dashboard.mdns).
+  const auto txt = rcan::parse_txt(items);
+  for (const auto& [k, v] : txt) {
     if (k.empty()) std::abort();
     for (char c : k)
       if (std::isupper(static_cast<unsigned char>(c))) std::abort();
   }
+  const bool tls = rcan::txt_says_tls(txt);
+  const auto tls_of = txt.find("tls");
+  const auto scheme = txt.find("scheme");
+  if (tls != ((tls_of != txt.end() && tls_of->second == "1") ||
+              (scheme != txt.end() && scheme->second == "https")))
+    std::abort();
   auto st = rcan::client::parse_status(bytes);
   if (!st.ok() && st.error().code != "SCHEMA_VALIDATION_FAILED") std::abort();
   if (st.ok() && st->ruri.empty() && !st->raw.get("ruri")) std::abort();

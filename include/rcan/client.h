@@ -31,6 +31,7 @@
 
 #include "rcan/error_code.h"
 #include "rcan/json.h"
+#include "rcan/mdns_txt.h"
 #include "rcan/result.h"
 
 namespace rcan::client {
@@ -311,9 +312,7 @@ struct MdnsService {
 // MDNS_UNAVAILABLE) when no daemon can be reached.
 Result<std::vector<MdnsService>> browse_mdns(int timeout_ms);
 
-// TXT items ("key=value", "flag") → map with lower-cased keys; the first of duplicate keys
-// wins (RFC 6763 §6.4); items with an empty key are dropped; a key without '=' maps to "".
-// Values are kept as bytes.
-std::map<std::string, std::string> parse_txt(const std::vector<std::string>& items);
+// TXT items → map (rcan/mdns_txt.h: lower-cased keys, the first of duplicates wins).
+using rcan::parse_txt;
 
 }  // namespace rcan::client

@@ -458,19 +458,6 @@ Result<WatermarkVerdict> Client::watermark_verify(const std::string& token,
 // ---------------------------------------------------------------------------------------------
 // Discovery
 
-std::map<std::string, std::string> parse_txt(const std::vector<std::string>& items) {
-  std::map<std::string, std::string> out;
-  for (const auto& item : items) {
-    size_t eq = item.find('=');
-    std::string key = item.substr(0, eq);
-    if (key.empty()) continue;
-    for (auto& c : key) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-    std::string value = eq == std::string::npos ? std::string() : item.substr(eq + 1);
-    out.emplace(std::move(key), std::move(value));  // first wins
-  }
-  return out;
-}
-
 Result<DiscoveredRobot> probe(const std::string& host, const DiscoverOptions& options) {
   std::string url = host;
   if (url.find("://") == std::string::npos) {
@@ -536,7 +523,7 @@ DiscoverReport discover(const DiscoverOptions& options) {
         r.model = get("model");
         r.version = get("version");
         r.status_word = get("status");
-        bool tls = get("tls") == "1" || get("scheme") == "https";
+        bool tls = txt_says_tls(r.txt);
         // A service published by this host may listen on loopback only: try its address,
         // then loopback.
         std::vector<std::string> addrs{s.address};

@@ -5,10 +5,9 @@
 
 #include <net/if.h>
 
-#include <cctype>
-
 #include "base/log.h"
 #include "node/discovery/avahi_dl.h"
+#include "rcan/mdns_txt.h"
 
 namespace rcan::node {
 
@@ -131,16 +130,12 @@ struct MdnsBrowser::Impl {
       m.port = port;
       char ifname[IF_NAMESIZE] = {0};
       if (iface >= 0 && if_indextoname(static_cast<unsigned>(iface), ifname)) m.interface = ifname;
-      for (AvahiStringList* l = txt; l; l = av().string_list_get_next(l)) {
-        std::string item(reinterpret_cast<const char*>(av().string_list_get_text(l)),
-                         av().string_list_get_size(l));
-        size_t eq = item.find('=');
-        std::string k = item.substr(0, eq);
-        for (char& ch : k) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-        if (k.empty() || m.txt.count(k)) continue;  // RFC 6763 §6.4: the first one counts
-        m.txt[k] = eq == std::string::npos ? std::string() : item.substr(eq + 1);
-      }
-      m.tls = m.txt.count("tls") && m.txt["tls"] == "1";
+      std::vector<std::string> items;
+      for (AvahiStringList* l = txt; l; l = av().string_list_get_next(l))
+        items.emplace_back(reinterpret_cast<const char*>(av().string_list_get_text(l)),
+                           av().string_list_get_size(l));
+      m.txt = parse_txt(items);
+      m.tls = txt_says_tls(m.txt);
       MutexLock lock(im->mu);
       im->found[key(iface, name)] = std::move(m);
     }
