@@ -222,8 +222,7 @@ Status Daemon::start_node() {
   services_->ownership.on_clear([ai = services_->ai] { ai->clear_thoughts(); });
   node_ = std::make_unique<node::Node>(*services_);
   // The other robots of the dashboard's Robots view (dashboard.robots), read every poll_ms.
-  robots_ = std::make_unique<node::RobotDirectory>(
-      cfg_.dashboard, [clock = &services_->clock] { return clock->wall_ms(); });
+  robots_ = std::make_unique<node::RobotDirectory>(cfg_.dashboard, services_->clock);
   node_->set_robot_directory(robots_.get());
   robots_->start();
   on_stop([this](int) { robots_->stop(); });

@@ -8,11 +8,11 @@
 // Environment: RCAND_PATH (set by CTest), CHROMIUM_PATH (default /usr/bin/chromium),
 // DASHBOARD_ARTIFACTS (screenshots; default a temp dir).
 
-import { existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync } from 'node:fs';
+import { existsSync, mkdirSync, mkdtempSync, readFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join, dirname } from 'node:path';
 import { fileURLToPath } from 'node:url';
-import { checker, http, launchBrowser, loadBrowser, runChecks, skip, spawnRcand } from './harness.mjs';
+import { checker, http, launchBrowser, loadBrowser, runChecks, skip, spawnRcand, tearDown } from './harness.mjs';
 
 const here = dirname(fileURLToPath(import.meta.url));
 const rcandPath = process.env.RCAND_PATH;
@@ -118,10 +118,5 @@ await runChecks('accessibility', main, {
   failures,
   artifacts,
   notes,
-  async cleanup() {
-    if (browser) await browser.close().catch(() => {});
-    if (rcand) rcand.kill('SIGTERM');
-    await new Promise((r) => setTimeout(r, 300));
-    rmSync(work, { recursive: true, force: true });
-  },
+  cleanup: () => tearDown(browser, [rcand], work),
 });

@@ -10,11 +10,11 @@
 // /usr/bin/chromium), DASHBOARD_ARTIFACTS (screenshots; default a temp dir).
 
 import { execFileSync } from 'node:child_process';
-import { mkdirSync, mkdtempSync, readFileSync, rmSync } from 'node:fs';
+import { mkdirSync, mkdtempSync, readFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { randomUUID } from 'node:crypto';
-import { checker, http, launchBrowser, loadBrowser, runChecks, spawnRcand } from './harness.mjs';
+import { checker, http, launchBrowser, loadBrowser, runChecks, spawnRcand, tearDown } from './harness.mjs';
 
 const rcandPath = process.env.RCAND_PATH;
 const cliPath = process.env.RCAN_CLI_PATH;
@@ -151,10 +151,5 @@ await runChecks('chat and node view', main, {
   failures,
   artifacts,
   notes,
-  async cleanup() {
-    if (browser) await browser.close().catch(() => {});
-    if (rcand) rcand.kill('SIGTERM');
-    await new Promise((r) => setTimeout(r, 300));
-    rmSync(work, { recursive: true, force: true });
-  },
+  cleanup: () => tearDown(browser, [rcand], work),
 });

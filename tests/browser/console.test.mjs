@@ -9,11 +9,11 @@
 // Environment: RCAND_PATH, RCAN_CLI_PATH (set by CTest), CHROMIUM_PATH (default
 // /usr/bin/chromium), DASHBOARD_ARTIFACTS (screenshots; default a temp dir).
 
-import { mkdirSync, mkdtempSync, readFileSync, rmSync } from 'node:fs';
+import { mkdirSync, mkdtempSync, readFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { randomUUID } from 'node:crypto';
-import { checker, http, launchBrowser, loadBrowser, poseProbe, runChecks, spawnRcand, startGatedRcand } from './harness.mjs';
+import { checker, http, launchBrowser, loadBrowser, poseProbe, runChecks, spawnRcand, startGatedRcand, tearDown } from './harness.mjs';
 
 const rcandPath = process.env.RCAND_PATH;
 const cliPath = process.env.RCAN_CLI_PATH;
@@ -329,10 +329,5 @@ await runChecks('console', main, {
   failures,
   artifacts,
   notes,
-  async cleanup() {
-    if (browser) await browser.close().catch(() => {});
-    for (const p of procs) p.kill('SIGTERM');
-    await sleep(300);
-    rmSync(work, { recursive: true, force: true });
-  },
+  cleanup: () => tearDown(browser, procs, work),
 });

@@ -6,12 +6,12 @@
 // /usr/bin/chromium), DASHBOARD_ARTIFACTS (screenshots and metrics.json; default a temp dir).
 
 import { execFileSync } from 'node:child_process';
-import { mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
+import { mkdirSync, mkdtempSync, readFileSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { randomUUID } from 'node:crypto';
 import { createServer } from 'node:net';
-import { checker, http, launchBrowser, loadBrowser, runChecks, spawnRcand, startGatedRcand } from './harness.mjs';
+import { checker, http, launchBrowser, loadBrowser, runChecks, spawnRcand, startGatedRcand, tearDown } from './harness.mjs';
 
 const rcandPath = process.env.RCAND_PATH;
 const cliPath = process.env.RCAN_CLI_PATH;
@@ -424,11 +424,5 @@ await runChecks('dashboard', main, {
   failures,
   artifacts,
   notes,
-  async cleanup() {
-    if (browser) await browser.close().catch(() => {});
-    if (rcand) rcand.kill('SIGTERM');
-    if (gated) gated.kill('SIGTERM');
-    await new Promise((r) => setTimeout(r, 300));
-    rmSync(work, { recursive: true, force: true });
-  },
+  cleanup: () => tearDown(browser, [rcand, gated], work),
 });

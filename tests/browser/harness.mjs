@@ -3,7 +3,7 @@
 // URL from the "listening" log line, and a small JSON-over-HTTP helper.
 
 import { spawn, execFileSync } from 'node:child_process';
-import { chmodSync, existsSync, mkdirSync, writeFileSync } from 'node:fs';
+import { chmodSync, existsSync, mkdirSync, rmSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
 
 export const SKIP = 77;
@@ -148,6 +148,15 @@ export function poseProbe(base, token) {
     return false;
   }
   return { robot, pose, dist, fmt, waitStopped, waitMoving };
+}
+
+// What every test does last: closes the browser, stops the processes it started (null ones
+// skipped), gives them 300 ms and removes its working directory.
+export async function tearDown(browser, procs, work) {
+  if (browser) await browser.close().catch(() => {});
+  for (const p of procs) if (p) p.kill('SIGTERM');
+  await new Promise((r) => setTimeout(r, 300));
+  rmSync(work, { recursive: true, force: true });
 }
 
 // Runs `main`, then `cleanup` whatever happened; prints the notes and the verdict and exits

@@ -9,11 +9,11 @@
 // Environment: RCAND_PATH, RCAN_CLI_PATH (set by CTest), CHROMIUM_PATH (default
 // /usr/bin/chromium), DASHBOARD_ARTIFACTS (screenshots; default a temp dir).
 
-import { mkdirSync, mkdtempSync, rmSync } from 'node:fs';
+import { mkdirSync, mkdtempSync } from 'node:fs';
 import { createServer } from 'node:net';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
-import { checker, http, issueToken, launchBrowser, loadBrowser, makeIssuer, runChecks, startConfiguredRcand } from './harness.mjs';
+import { checker, http, issueToken, launchBrowser, loadBrowser, makeIssuer, runChecks, startConfiguredRcand, tearDown } from './harness.mjs';
 
 const rcandPath = process.env.RCAND_PATH;
 const cliPath = process.env.RCAN_CLI_PATH;
@@ -126,11 +126,4 @@ async function main() {
   await context.close();
 }
 
-async function cleanup() {
-  if (browser) await browser.close().catch(() => {});
-  for (const p of procs) p.kill('SIGTERM');
-  await sleep(300);
-  rmSync(work, { recursive: true, force: true });
-}
-
-await runChecks('robots view', main, { failures, cleanup, artifacts });
+await runChecks('robots view', main, { failures, cleanup: () => tearDown(browser, procs, work), artifacts });

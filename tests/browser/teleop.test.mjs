@@ -10,13 +10,13 @@
 // Environment: RCAND_PATH, RCAN_CLI_PATH (set by CTest), CHROMIUM_PATH (default
 // /usr/bin/chromium), DASHBOARD_ARTIFACTS (screenshots; default a temp dir).
 
-import { existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync } from 'node:fs';
+import { existsSync, mkdirSync, mkdtempSync, readFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { randomUUID } from 'node:crypto';
 import { execFileSync } from 'node:child_process';
 import { createServer, connect } from 'node:net';
-import { checker, http, launchBrowser, loadBrowser, poseProbe, runChecks, spawnRcand } from './harness.mjs';
+import { checker, http, launchBrowser, loadBrowser, poseProbe, runChecks, spawnRcand, tearDown } from './harness.mjs';
 
 const rcandPath = process.env.RCAND_PATH;
 const cliPath = process.env.RCAN_CLI_PATH;
@@ -349,10 +349,7 @@ await runChecks('teleop', main, {
   failures,
   artifacts,
   async cleanup() {
-    if (browser) await browser.close().catch(() => {});
     if (proxy) proxy.close();
-    if (rcand) rcand.kill('SIGTERM');
-    await sleep(300);
-    rmSync(work, { recursive: true, force: true });
+    await tearDown(browser, [rcand], work);
   },
 });

@@ -8,12 +8,6 @@
 namespace rcan::node {
 namespace {
 
-int64_t steady_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
-
 std::string str_in(const json::Value& v, const char* key) {
   const json::Value* f = v.is_object() ? v.get(key) : nullptr;
   return f && f->is_string() ? f->as_string() : std::string();
@@ -27,8 +21,8 @@ std::string shorten(std::string s) {
 
 }  // namespace
 
-RobotDirectory::RobotDirectory(const config::DashboardConfig& cfg, std::function<int64_t()> wall_ms)
-    : cfg_(cfg), wall_ms_(std::move(wall_ms)) {
+RobotDirectory::RobotDirectory(const config::DashboardConfig& cfg, const Clock& clock)
+    : cfg_(cfg), clock_(clock) {
   for (const std::string& url : cfg_.robots) {
     auto u = parse_web_url(url);  // the configuration checked it
     if (!u.ok()) continue;
@@ -74,10 +68,10 @@ RobotDirectory::State RobotDirectory::read_one(const HttpUrl& base) const {
   HttpRequestOptions o;
   o.ca_file = cfg_.ca_file;
   o.max_body = 16 * 1024;
-  const int64_t t0 = steady_ms();
+  const int64_t t0 = clock_.mono_ms();
   auto r = http_request("GET", u, "", static_cast<int>(std::min<uint32_t>(cfg_.poll_ms, 2000)), o);
-  s.latency_ms = steady_ms() - t0;
-  s.checked_ms = wall_ms_();
+  s.latency_ms = clock_.mono_ms() - t0;
+  s.checked_ms = clock_.wall_ms();
   if (!r.ok()) {
     s.status = "unreachable";
     s.error = r.error().message;
@@ -195,9 +189,9 @@ std::vector<RobotDirectory::StopResult> RobotDirectory::relay_stop(
       o.ca_file = cfg_.ca_file;
       o.max_body = 64 * 1024;
       o.headers.emplace_back("Authorization", authorization);
-      const int64_t t0 = steady_ms();
+      const int64_t t0 = clock_.mono_ms();
       auto a = http_request("POST", *u, body, static_cast<int>(cfg_.stop_timeout_ms), o);
-      r.elapsed_ms = steady_ms() - t0;
+      r.elapsed_ms = clock_.mono_ms() - t0;
       if (!a.ok()) {
         const std::string& m = a.error().message;
         r.result = m.find("timed out") != std::string::npos ||

@@ -10,12 +10,12 @@
 #pragma once
 
 #include <cstdint>
-#include <functional>
 #include <memory>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "base/clock.h"
 #include "base/http_client.h"
 #include "base/thread_annotations.h"
 #include "config/config.h"
@@ -36,8 +36,8 @@ class RobotDirectory {
     int64_t elapsed_ms = 0;
   };
 
-  // `wall_ms` gives the time stamps of the state (the node's clock).
-  RobotDirectory(const config::DashboardConfig& cfg, std::function<int64_t()> wall_ms);
+  // `clock` (the node's) stamps the state and times the answers; it must outlive this.
+  RobotDirectory(const config::DashboardConfig& cfg, const Clock& clock);
   ~RobotDirectory();
   RobotDirectory(const RobotDirectory&) = delete;
   RobotDirectory& operator=(const RobotDirectory&) = delete;
@@ -76,7 +76,7 @@ class RobotDirectory {
   State read_one(const HttpUrl& base) const;
 
   config::DashboardConfig cfg_;
-  std::function<int64_t()> wall_ms_;
+  const Clock& clock_;
   std::vector<std::string> urls_;
   std::vector<HttpUrl> bases_;
   mutable Mutex mu_;
