@@ -279,12 +279,15 @@ void RegistryTrust::request_early_refresh() {
 
 void RegistryTrust::request_introspection(std::string_view token) {
   {
-    std::lock_guard<std::mutex> a(answers_mu_);
-    auto it = answers_.find(std::string(token));
-    if (it != answers_.end() && it->second.until_ms > svc_.clock.wall_ms()) return;
-  }
-  {
+    // Under mu_ (then answers_mu_): a token whose call is running, or whose answer was stored
+    // just before that call ended, is not queued again — the registry is asked once.
     std::lock_guard<std::mutex> l(mu_);
+    if (token == introspecting_) return;
+    {
+      std::lock_guard<std::mutex> a(answers_mu_);
+      auto it = answers_.find(std::string(token));
+      if (it != answers_.end() && it->second.until_ms > svc_.clock.wall_ms()) return;
+    }
     if (to_introspect_.size() >= kMaxQueuedIntrospections) return;
     for (const auto& t : to_introspect_)
       if (t == token) return;
@@ -398,9 +401,11 @@ void RegistryTrust::run() {
       }
       if (window_calls >= kMaxIntrospectionsPerMinute) continue;  // dropped: stays refused
       ++window_calls;
+      introspecting_ = token;
       l.unlock();
-      introspect(token, kCallTimeoutMs);
+      introspect(token, kCallTimeoutMs);  // stores the answer before the token is let go
       l.lock();
+      introspecting_.clear();
       continue;
     }
     cv_.wait_until(l, std::min(next_keys, next_revs),

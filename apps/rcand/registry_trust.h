@@ -104,6 +104,9 @@ class RegistryTrust {
   std::string keys_error_;  // the last failure of the keys ("" once a fetch succeeds)
   std::string revs_error_;  // the last failure of the revocation feed
   std::deque<std::string> to_introspect_;  // guarded by mu_
+  // The token being put to the registry now (guarded by mu_): asked for again meanwhile, it is
+  // not queued a second time (its answer is stored before this is cleared).
+  std::string introspecting_;
 
   struct Answer {
     std::optional<json::Object> claims;  // active: the claims; inactive or failed: none
