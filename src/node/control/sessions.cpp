@@ -113,7 +113,10 @@ Session SessionTable::make_session_locked(const std::string& key, const Principa
   if (lease_link_locked(who, r, s.lease_id, end_wall, now_wall_ms)) s.role = r;
   if (end_wall) {
     int64_t end_mono = now_mono_ms + (end_wall - now_wall_ms);
-    if (s.expires_mono_ms == 0 || end_mono < s.expires_mono_ms) s.expires_mono_ms = end_mono;
+    if (s.expires_mono_ms == 0 || end_mono <= s.expires_mono_ms) {
+      s.expires_mono_ms = end_mono;
+      s.ends_with_lease = true;
+    }
   }
   expired_.erase(key);
   return s;
@@ -166,9 +169,19 @@ void SessionTable::promote_locked(int64_t now_mono_ms, int64_t now_wall_ms) {
 }
 
 void SessionTable::expire_locked(int64_t now_mono_ms) {
-  if (holder_ && holder_->expires_mono_ms != 0 && now_mono_ms >= holder_->expires_mono_ms)
-    drop_holder_locked(ControlEvent::kExpire, "the session's TTL ended without renewal",
-                       now_mono_ms);
+  if (holder_ && holder_->expires_mono_ms != 0 && now_mono_ms >= holder_->expires_mono_ms) {
+    if (holder_->ends_with_lease) {
+      bool leasee = false;
+      for (const auto& l : leases_)
+        if (l.id == holder_->lease_id && l.leasee.is(holder_->who())) leasee = true;
+      drop_holder_locked(
+          ControlEvent::kRevoke,
+          (leasee ? "the lease " : "the grant within lease ") + holder_->lease_id + " ended",
+          now_mono_ms);
+    } else
+      drop_holder_locked(ControlEvent::kExpire, "the session's TTL ended without renewal",
+                         now_mono_ms);
+  }
   if (reserved_ && now_mono_ms >= reserved_->until_mono_ms) {
     reserved_.reset();
     transit(ControlEvent::kWindowClose, ControlState::kAvailable);

@@ -65,6 +65,10 @@ struct Session {
   int64_t expires_mono_ms = 0;  // 0 = never (CREATOR)
   int64_t granted_wall_ms = 0;
   std::string lease_id;  // granted under this lease (as its leasee or a grantee)
+  // Its end is the lease's (or the grant's) end: reaching it is a revocation by the lease,
+  // whichever clock notices first (the lease is timed on the wall clock, sessions on the
+  // monotonic one).
+  bool ends_with_lease = false;
   bool fleet = false;
   PrincipalId who() const { return PrincipalId{iss, sub}; }
 };
