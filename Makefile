@@ -3,20 +3,22 @@
 #   make test   install what is missing, build, run every test (CTest summary) in the release
 #               tree, then again under ASan+UBSan, then the threaded tests under TSan
 # Other targets: build, test-release, debug, asan, test-asan, tsan, test-tsan, bench,
-# load-bench, fuzz, format, package (the .deb, docs/PACKAGING.md), clean.
+# load-bench, fuzz, format, package (the .deb, docs/PACKAGING.md), cross-arm64, test-arm64,
+# package-arm64 (docs/ARM64.md), clean.
 
 BUILD_DIR   ?= build/release
 DEBUG_DIR   ?= build/debug
 ASAN_DIR    ?= build/asan
 TSAN_DIR    ?= build/tsan
 FUZZ_DIR    ?= build/fuzz
+ARM64_DIR   ?= build/arm64
 JOBS        ?= $(shell nproc)
 GENERATOR   := -G Ninja
 CMAKE_FLAGS ?=
 # `make test` checks the packages once, then runs its phases with DEPS empty.
 DEPS        ?= deps
 
-.PHONY: package all deps build run test test-sanitizers sanitizer-phases test-release debug asan test-asan tsan test-tsan bench load-bench fuzz format clean
+.PHONY: cross-arm64 test-arm64 package-arm64 package all deps build run test test-sanitizers sanitizer-phases test-release debug asan test-asan tsan test-tsan bench load-bench fuzz format clean
 
 all: build
 
@@ -92,6 +94,23 @@ load-bench: build
 fuzz: deps
 	CXX=clang++-14 cmake -S . -B $(FUZZ_DIR) $(GENERATOR) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DRCAN_FUZZ=ON -DRCAN_WERROR=OFF -DRCAN_BUILD_TESTS=OFF -DRCAN_BUILD_BENCH=OFF
 	cmake --build $(FUZZ_DIR) -j $(JOBS) --target fuzzers
+
+# arm64: Debian's cross toolchain against an arm64 sysroot (scripts/arm64-sysroot.sh installs
+# the toolchain and qemu-user, and unpacks the sysroot); the core, crypto and audit tests run
+# under qemu-user. Outside `make test`: docs/ARM64.md.
+$(ARM64_DIR)/build.ninja:
+	cmake -S . -B $(ARM64_DIR) $(GENERATOR) -DCMAKE_BUILD_TYPE=Release -DCMAKE_TOOLCHAIN_FILE=cmake/toolchain-arm64.cmake -DRCAN_BUILD_BENCH=OFF $(CMAKE_FLAGS)
+
+cross-arm64:
+	@bash scripts/arm64-sysroot.sh
+	@$(MAKE) --no-print-directory $(ARM64_DIR)/build.ninja
+	cmake --build $(ARM64_DIR) -j $(JOBS)
+
+test-arm64: cross-arm64
+	ctest --test-dir $(ARM64_DIR) --output-on-failure -j $(JOBS) -L '^(core|crypto|audit)$$' $(CTEST_ARGS)
+
+package-arm64: cross-arm64
+	cd $(ARM64_DIR) && cpack -G DEB
 
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.h')

@@ -18,10 +18,20 @@ if(NOT RCAN_SANITIZE AND NOT RCAN_TSAN AND NOT RCAN_FUZZ)
       elseif(tool STREQUAL "rcan-registry")
         set(what "an RCAN robot registry")
       endif()
+      set(program $<TARGET_FILE:${target}>)
+      if(CMAKE_CROSSCOMPILING_EMULATOR)
+        # A cross build (docs/ARM64.md): help2man runs the program through the emulator, by
+        # a wrapper of the program's own name (help2man names the page after it).
+        set(program ${RCAN_GEN}/emulated/${tool})
+        list(JOIN CMAKE_CROSSCOMPILING_EMULATOR " " emulator)
+        file(GENERATE OUTPUT ${program}
+          CONTENT "#!/bin/sh\nexec ${emulator} $<TARGET_FILE:${target}> \"$@\"\n"
+          FILE_PERMISSIONS OWNER_READ OWNER_WRITE OWNER_EXECUTE GROUP_READ GROUP_EXECUTE)
+      endif()
       add_custom_command(OUTPUT ${RCAN_GEN}/${tool}.1.gz
         COMMAND ${CMAKE_COMMAND} -E make_directory ${RCAN_GEN}
         COMMAND ${RCAN_HELP2MAN} --no-info --no-discard-stderr --section 1 --name ${what}
-                --output ${RCAN_GEN}/${tool}.1 $<TARGET_FILE:${target}>
+                --output ${RCAN_GEN}/${tool}.1 ${program}
         COMMAND gzip -9nf ${RCAN_GEN}/${tool}.1
         DEPENDS ${target}
         COMMENT "man page: ${tool}(1)")
@@ -33,7 +43,8 @@ if(NOT RCAN_SANITIZE AND NOT RCAN_TSAN AND NOT RCAN_FUZZ)
   endif()
   add_custom_command(OUTPUT ${RCAN_GEN}/rcan.bash-completion
     COMMAND ${CMAKE_COMMAND} -E make_directory ${RCAN_GEN}
-    COMMAND $<TARGET_FILE:rcan_cli> completion bash > ${RCAN_GEN}/rcan.bash-completion
+    # The target's name, not its file: a cross build runs it through the emulator.
+    COMMAND rcan_cli completion bash > ${RCAN_GEN}/rcan.bash-completion
     DEPENDS rcan_cli
     COMMENT "bash completion: rcan")
   list(APPEND RCAN_PACKAGE_FILES ${RCAN_GEN}/rcan.bash-completion)
@@ -69,6 +80,18 @@ set(CPACK_DEBIAN_PACKAGE_MAINTAINER "rcan maintainers <maintainers@rcan.invalid>
 set(CPACK_DEBIAN_PACKAGE_SECTION misc)
 set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS ON)
 set(CPACK_DEBIAN_PACKAGE_DEPENDS "adduser")
+if(CMAKE_CROSSCOMPILING AND CMAKE_SYSTEM_PROCESSOR STREQUAL "aarch64")
+  # The arm64 package (make package-arm64, docs/ARM64.md): dpkg-shlibdeps knows only the
+  # machine's installed packages, so the Depends come from the sysroot's shlibs files.
+  set(CPACK_DEBIAN_PACKAGE_ARCHITECTURE arm64)
+  set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS OFF)
+  set(CPACK_PROJECT_CONFIG_FILE ${PROJECT_BINARY_DIR}/generated/cpack_arm64.cmake)
+  file(GENERATE OUTPUT ${CPACK_PROJECT_CONFIG_FILE} CONTENT
+"set(RCAN_PACKAGE_ELFS \"$<TARGET_FILE:rcand>;$<TARGET_FILE:rcan_cli>;$<TARGET_FILE:rcan-registry>;$<TARGET_FILE:rcand_grpc>\")
+set(RCAN_SYSROOT_SHLIBS \"${CMAKE_SYSROOT}/.shlibs\")
+include(\"${PROJECT_SOURCE_DIR}/cmake/cpack_arm64_depends.cmake\")
+")
+endif()
 set(CPACK_DEBIAN_PACKAGE_RECOMMENDS "avahi-daemon")
 set(CPACK_DEBIAN_PACKAGE_CONTROL_EXTRA
   ${PROJECT_SOURCE_DIR}/packaging/debian/postinst

@@ -9,6 +9,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
@@ -184,7 +185,18 @@ RunResult run(const std::vector<std::string>& argv, const std::string& stdin_dat
 
 RunResult run_cli(const std::vector<std::string>& args, const std::string& stdin_data,
                   const std::vector<std::string>& extra_env) {
-  std::vector<std::string> argv{RCAN_CLI_PATH};
+  std::vector<std::string> argv;
+#ifdef RCAN_TEST_EMULATOR
+  // A cross build's programs run under the emulator (qemu-user; cmake/toolchain-arm64.cmake),
+  // the CLI a test starts included: its words are separated by '|'.
+  std::string_view emu = RCAN_TEST_EMULATOR;
+  for (size_t at = 0; at <= emu.size();) {
+    size_t end = std::min(emu.find('|', at), emu.size());
+    if (end > at) argv.emplace_back(emu.substr(at, end - at));
+    at = end + 1;
+  }
+#endif
+  argv.push_back(RCAN_CLI_PATH);
   argv.insert(argv.end(), args.begin(), args.end());
   return run(argv, stdin_data, extra_env);
 }
