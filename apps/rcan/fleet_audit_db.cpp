@@ -100,14 +100,7 @@ Result<std::unique_ptr<FleetAuditDb>> FleetAuditDb::open(const std::string& conn
   return db;
 }
 
-namespace {
-
-std::string str_of(const json::Value& v, const char* key) {
-  const json::Value* f = v.is_object() ? v.get(key) : nullptr;
-  return f != nullptr && f->is_string() ? f->as_string() : std::string();
-}
-
-}  // namespace
+namespace {}  // namespace
 
 Result<std::vector<AuditProblem>> FleetAuditDb::ingest(const std::string& fleet_id,
                                                        const std::string& member,
@@ -118,7 +111,7 @@ Result<std::vector<AuditProblem>> FleetAuditDb::ingest(const std::string& fleet_
     problems.push_back(AuditProblem{fleet_id, member, seq, std::move(what), std::move(detail)});
   };
   const json::Value* seqv = record.is_object() ? record.get("seq") : nullptr;
-  std::string hmac = str_of(record, "hmac");
+  std::string hmac = json::string_field(record, "hmac");
   const json::Value* prevv = record.is_object() ? record.get("prev_hash") : nullptr;
   if (seqv == nullptr || !seqv->is_int() || seqv->as_int() < 1 || hmac.empty() ||
       prevv == nullptr || !(prevv->is_null() || prevv->is_string())) {
@@ -174,7 +167,7 @@ Result<std::vector<AuditProblem>> FleetAuditDb::ingest(const std::string& fleet_
   if (!after.ok()) return after.error();
   if (!after->empty()) {
     auto next = json::parse((*after)[0][0].value_or(""));
-    if (next.ok() && str_of(*next, "prev_hash") != hash)
+    if (next.ok() && json::string_field(*next, "prev_hash") != hash)
       problem(seq + 1, "break",
               "prev_hash does not match the record_hash of seq " + std::to_string(seq));
   }
@@ -228,13 +221,14 @@ Result<std::vector<AuditProblem>> FleetAuditDb::verify(
     if (s == nullptr || !s->is_int() || s->as_int() != seq)
       bad("malformed", "the line's seq differs from the row's");
     if (auto sec = secrets.find(m);
-        sec != secrets.end() && hmac_sha256_hex(sec->second, preimage) != str_of(*rec, "hmac"))
+        sec != secrets.end() &&
+        hmac_sha256_hex(sec->second, preimage) != json::string_field(*rec, "hmac"))
       bad("hmac_mismatch", "the record's hmac does not verify with the robot's chain secret");
     if (!first) {
       if (seq != last_seq + 1)
         bad("gap", "records " + std::to_string(last_seq + 1) + ".." + std::to_string(seq - 1) +
                        " are missing");
-      else if (str_of(*rec, "prev_hash") != last_hash)
+      else if (json::string_field(*rec, "prev_hash") != last_hash)
         bad("break", "prev_hash does not match the record_hash of seq " + std::to_string(last_seq));
     }
     last_hash = hash;

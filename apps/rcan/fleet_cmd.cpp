@@ -81,10 +81,6 @@ int64_t wall_ms() {
              std::chrono::system_clock::now().time_since_epoch())
       .count();
 }
-std::string str_of(const json::Value& v, const char* key) {
-  const json::Value* f = v.is_object() ? v.get(key) : nullptr;
-  return f != nullptr && f->is_string() ? f->as_string() : std::string();
-}
 
 void print(const json::Value& v) { std::printf("%s\n", json::dump(v).c_str()); }
 
@@ -182,10 +178,10 @@ json::Object await_replies(Session& s, const std::map<std::string, std::string>&
   while (!open.empty()) {
     auto m = s.next(deadline);
     if (!m) break;
-    std::string reply_to = str_of(m->body, "reply_to");
+    std::string reply_to = json::string_field(m->body, "reply_to");
     auto it = ids.find(reply_to);
     if (it == ids.end() || open.count(reply_to) == 0) continue;
-    std::string type = str_of(m->body, "type");
+    std::string type = json::string_field(m->body, "type");
     json::Object& r = results[reply_to];
     r.set("member", it->second);
     if (type == "ERROR") {
@@ -198,7 +194,7 @@ json::Object await_replies(Session& s, const std::map<std::string, std::string>&
       if (!complete) open.erase(reply_to);
     } else if (type == "EVENT") {
       const json::Value* p = m->body.get("payload");
-      std::string ev = p != nullptr ? str_of(*p, "event") : "";
+      std::string ev = p != nullptr ? json::string_field(*p, "event") : "";
       r.set("result", ev == "COMPLETED" ? "completed" : "aborted");
       open.erase(reply_to);
     }
@@ -209,9 +205,9 @@ json::Object await_replies(Session& s, const std::map<std::string, std::string>&
     auto it = results.find(id);
     json::Object r =
         it == results.end() ? json::Object{{"member", member}, {"result", "timeout"}} : it->second;
-    std::string res = str_of(json::Value(r), "result");
+    std::string res = json::string_field(json::Value(r), "result");
     if (open.count(id) != 0 && res == "acknowledged") r.set("result", "timeout");
-    res = str_of(json::Value(r), "result");
+    res = json::string_field(json::Value(r), "result");
     if (res != (complete ? "completed" : "acknowledged") && !(complete && res == "completed"))
       *all_ok = false;
     out.set(member, std::move(r));
@@ -298,17 +294,17 @@ json::Object await_members(Session& s, const mqtt::FleetTopics& topics, const st
     if (mono_ms() >= next_resend && mono_ms() < deadline) {
       json::Value again = resend->make();
       for (const auto& mem : open) s.publish_queued(topics.member(mem).cmd(), again, 1, false);
-      ids.insert(str_of(again, "message_id"));
-      resend->ids.push_back(str_of(again, "message_id"));
+      ids.insert(json::string_field(again, "message_id"));
+      resend->ids.push_back(json::string_field(again, "message_id"));
       next_resend = mono_ms() + resend->every_ms;
       continue;
     }
     auto m = s.next(std::min({deadline, next_resend, mono_ms() + 200}));
     if (!m && mono_ms() >= deadline) break;
-    if (!m || ids.count(str_of(m->body, "reply_to")) == 0) continue;
+    if (!m || ids.count(json::string_field(m->body, "reply_to")) == 0) continue;
     for (const auto& mem : t.members) {
       if (m->topic != topics.member(mem).reply() || open.count(mem) == 0) continue;
-      std::string type = str_of(m->body, "type");
+      std::string type = json::string_field(m->body, "type");
       if (type == "ACK" && complete) {
         acked.insert(mem);
         continue;
@@ -316,12 +312,13 @@ json::Object await_members(Session& s, const mqtt::FleetTopics& topics, const st
       std::string res = type == "ACK" ? "acknowledged" : type == "ERROR" ? "refused" : "";
       if (type == "EVENT") {
         const json::Value* p = m->body.get("payload");
-        res = p != nullptr && str_of(*p, "event") == "COMPLETED" ? "completed" : "aborted";
+        res = p != nullptr && json::string_field(*p, "event") == "COMPLETED" ? "completed"
+                                                                             : "aborted";
       }
       if (res.empty()) continue;
       results.set(mem, json::Object{{"result", res}, {"reply", m->body}});
       const json::Value* p = m->body.get("payload");
-      const std::string code = p != nullptr ? str_of(*p, "error_code") : "";
+      const std::string code = p != nullptr ? json::string_field(*p, "error_code") : "";
       // A late copy (a session's queued one after an outage): the retained ESTOP may still latch.
       if (code == "MESSAGE_STALE" || code == "REPLAY_DETECTED") continue;
       if (res != "acknowledged" && res != "completed") unconfirmed->push_back(mem);
@@ -350,7 +347,8 @@ std::string name_unconfirmed(const std::vector<std::string>& unconfirmed,
   std::string out;
   for (const auto& m : unconfirmed) {
     const json::Value* r = results.find(m);
-    out += (out.empty() ? "" : ", ") + m + " (" + (r ? str_of(*r, "result") : "?") + ")";
+    out +=
+        (out.empty() ? "" : ", ") + m + " (" + (r ? json::string_field(*r, "result") : "?") + ")";
   }
   return out;
 }
@@ -362,7 +360,7 @@ int publish_and_confirm(Session& s, const char* verb, const Common& c,
                         const mqtt::FleetTopics& topics, const Targets& t, const std::string& topic,
                         const json::Value& msg, int qos, bool retain, bool complete,
                         json::Object out, Resend* resend = nullptr) {
-  const std::string id = str_of(msg, "message_id");
+  const std::string id = json::string_field(msg, "message_id");
   const int used_qos = s.qos_for(c.qos != 0 ? c.qos : qos);
   out.set("message_id", id);
   out.set("qos", static_cast<int64_t>(used_qos));
@@ -488,9 +486,9 @@ Result<std::vector<Step>> parse_choreography(const json::Value& doc, std::string
                                              std::string* type, int64_t default_timeout) {
   auto bad = [](std::string m) { return Error(ErrorCode::kSchemaValidationFailed, std::move(m)); };
   if (!doc.is_object()) return bad("the choreography must be a JSON object");
-  std::string cmd = str_of(doc, "command");
+  std::string cmd = json::string_field(doc, "command");
   if (!cmd.empty() && cmd != "COORDINATED_MOVE") return bad("command must be COORDINATED_MOVE");
-  *fleet = str_of(doc, "fleet_id");
+  *fleet = json::string_field(doc, "fleet_id");
   if (!mqtt::valid_topic_segment(*fleet)) return bad("fleet_id is missing or not a valid id");
   std::set<std::string> targets;
   if (const json::Value* t = doc.get("targets"); t != nullptr) {
@@ -503,7 +501,7 @@ Result<std::vector<Step>> parse_choreography(const json::Value& doc, std::string
   }
   const json::Value* ch = doc.get("choreography");
   if (ch == nullptr || !ch->is_object()) return bad("choreography is required");
-  *type = str_of(*ch, "type");
+  *type = json::string_field(*ch, "type");
   if (*type != "sequential" && *type != "parallel")
     return bad("choreography.type must be sequential or parallel");
   const json::Value* steps = ch->get("steps");
@@ -517,8 +515,8 @@ Result<std::vector<Step>> parse_choreography(const json::Value& doc, std::string
     s.index = out.size();
     std::string where = "step " + std::to_string(s.index);
     if (!sv.is_object()) return bad(where + " must be an object");
-    s.robot = str_of(sv, "robot");
-    s.action = str_of(sv, "action");
+    s.robot = json::string_field(sv, "robot");
+    s.action = json::string_field(sv, "action");
     if (!mqtt::valid_topic_segment(s.robot))
       return bad(where + ": robot is missing or not a valid id");
     if (!targets.empty() && targets.count(s.robot) == 0)
@@ -659,22 +657,24 @@ int run_main(const Options& o) {
         deadline = std::min(deadline, s.sent_mono + s.timeout_ms);
     auto m = sess.next(deadline);
     if (m) {
-      std::string reply_to = str_of(m->body, "reply_to");
+      std::string reply_to = json::string_field(m->body, "reply_to");
       for (auto& s : st) {
         if (s.message_id != reply_to || m->topic != topics.member(s.robot).reply()) continue;
-        std::string t = str_of(m->body, "type");
+        std::string t = json::string_field(m->body, "type");
         const json::Value* p = m->body.get("payload");
         if (t == "ACK") {
           if (s.state == Step::State::kSent) s.state = Step::State::kAcked;
-        } else if (t == "EVENT" && p != nullptr && str_of(*p, "event") == "COMPLETED") {
+        } else if (t == "EVENT" && p != nullptr && json::string_field(*p, "event") == "COMPLETED") {
           s.state = Step::State::kDone;
         } else {
           s.state = Step::State::kFailed;
           s.reply = m->body;
           failed = s.index;
-          fail_reason = t == "ERROR" && p != nullptr
-                            ? "refused: " + str_of(*p, "error_code") + " " + str_of(*p, "error")
-                            : "aborted: " + (p != nullptr ? str_of(*p, "reason") : std::string());
+          fail_reason =
+              t == "ERROR" && p != nullptr
+                  ? "refused: " + json::string_field(*p, "error_code") + " " +
+                        json::string_field(*p, "error")
+                  : "aborted: " + (p != nullptr ? json::string_field(*p, "reason") : std::string());
         }
       }
     }
@@ -842,7 +842,7 @@ int audit_collect_main(const Options& o) {
     }
     if (sec != secrets->end() && m->body.is_object()) {
       std::string pre = json::canonical_without(m->body.as_object(), "hmac");
-      if (hmac_sha256_hex(sec->second, pre) != str_of(m->body, "hmac")) {
+      if (hmac_sha256_hex(sec->second, pre) != json::string_field(m->body, "hmac")) {
         const json::Value* sq = m->body.get("seq");
         ch.problems.emplace_back(
             json::Object{{"problem", "hmac_mismatch"},
@@ -851,7 +851,7 @@ int audit_collect_main(const Options& o) {
       }
     }
     const json::Value* seq = m->body.get("seq");
-    std::string prev = str_of(m->body, "prev_hash");
+    std::string prev = json::string_field(m->body, "prev_hash");
     // The chain links each record to the SHA-256 of its predecessor's canonical form without hmac.
     std::string hash =
         m->body.is_object() ? sha256_hex(json::canonical_without(m->body.as_object(), "hmac")) : "";

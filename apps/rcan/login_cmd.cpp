@@ -82,11 +82,6 @@ Reply post_form(const std::string& base, const std::string& path, const std::str
   return a;
 }
 
-std::string str(const json::Value& v, const char* k) {
-  const json::Value* x = v.is_object() ? v.get(k) : nullptr;
-  return x != nullptr && x->is_string() ? x->as_string() : std::string();
-}
-
 int64_t num(const json::Value& v, const char* k, int64_t def) {
   const json::Value* x = v.is_object() ? v.get(k) : nullptr;
   return x != nullptr && x->is_int() ? x->as_int() : def;
@@ -102,7 +97,7 @@ std::string base_of(const Options& o) {
 }
 
 int deliver(const std::string& verb, const Options& o, const Reply& a) {
-  std::string token = str(a.body, "access_token");
+  std::string token = json::string_field(a.body, "access_token");
   if (token.empty()) {
     std::fprintf(stderr, "rcan %s: no access_token in the answer\n", verb.c_str());
     return 1;
@@ -130,7 +125,8 @@ int refused(const std::string& verb, const Reply& a) {
     return 3;
   }
   std::fprintf(stderr, "rcan %s: the registry answered %d: %s %s\n", verb.c_str(), a.status,
-               str(a.body, "error").c_str(), str(a.body, "error_description").c_str());
+               json::string_field(a.body, "error").c_str(),
+               json::string_field(a.body, "error_description").c_str());
   return 1;
 }
 
@@ -149,13 +145,14 @@ int login_main(const Args& args) {
   if (o.has("scope")) body += "&scope=" + form_escape(o.get("scope"));
   Reply da = post_form(base, "/oauth/device_authorization", body);
   if (da.exit != 0) return refused("login", da);
-  std::string device_code = str(da.body, "device_code");
+  std::string device_code = json::string_field(da.body, "device_code");
   int64_t interval = num(da.body, "interval", 5);
   int64_t expires_in = num(da.body, "expires_in", 600);
   std::fprintf(stderr,
                "To approve, open %s and enter the code %s\n  (or: %s)\nWaiting for approval…\n",
-               str(da.body, "verification_uri").c_str(), str(da.body, "user_code").c_str(),
-               str(da.body, "verification_uri_complete").c_str());
+               json::string_field(da.body, "verification_uri").c_str(),
+               json::string_field(da.body, "user_code").c_str(),
+               json::string_field(da.body, "verification_uri_complete").c_str());
   auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(expires_in + 5);
   std::string poll =
       "grant_type=urn%3Aietf%3Aparams%3Aoauth%3Agrant-type%3Adevice_code"
@@ -165,7 +162,7 @@ int login_main(const Args& args) {
     std::this_thread::sleep_for(std::chrono::seconds(interval));
     Reply t = post_form(base, "/oauth/token", poll);
     if (t.exit == 0) return deliver("login", o, t);
-    std::string err = str(t.body, "error");
+    std::string err = json::string_field(t.body, "error");
     if (err == "authorization_pending") continue;
     if (err == "slow_down") {
       interval += 5;

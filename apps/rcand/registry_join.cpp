@@ -19,11 +19,6 @@ constexpr int kTimeoutMs = 5000;
 // <data-dir>/registry/state.json (0600): {"registry_url", "rrn", "robot_key"}.
 std::string state_path(const std::string& data_dir) { return data_dir + "/registry/state.json"; }
 
-std::string str_of(const json::Value& v, const char* key) {
-  const json::Value* m = v.get(key);
-  return m != nullptr && m->is_string() ? m->as_string() : std::string();
-}
-
 Error link_error(const std::string& msg) { return Error(ErrorCode::kInternal, msg); }
 
 std::string read_key_file(const std::string& path, std::string& err) {
@@ -61,8 +56,8 @@ std::string refusal(const HttpAnswer& a) {
   auto v = json::parse(a.body);
   std::string msg;
   if (v.ok()) {
-    msg = str_of(*v, "message");
-    if (msg.empty()) msg = str_of(*v, "error");
+    msg = json::string_field(*v, "message");
+    if (msg.empty()) msg = json::string_field(*v, "error");
   }
   return "the registry answered " + std::to_string(a.status) + (msg.empty() ? "" : ": " + msg);
 }
@@ -79,7 +74,7 @@ json::Array endpoints(const config::NodeConfig& cfg) {
 std::string stored_registry_rrn(const std::string& data_dir) {
   auto v = read_state_file(state_path(data_dir));
   if (!v.ok()) return {};
-  auto rrn = registry::normalize_rrn(str_of(*v, "rrn"));
+  auto rrn = registry::normalize_rrn(json::string_field(*v, "rrn"));
   return rrn ? *rrn : std::string();
 }
 
@@ -94,8 +89,8 @@ Result<std::string> register_with_registry(const config::NodeConfig& cfg,
   if (ch->status != 200) return link_error("registry challenge: " + refusal(*ch));
   auto challenge = json::parse(ch->body);
   if (!challenge.ok()) return link_error("registry challenge: not JSON");
-  const std::string id = str_of(*challenge, "challenge_id");
-  const std::string nonce = str_of(*challenge, "nonce");
+  const std::string id = json::string_field(*challenge, "challenge_id");
+  const std::string nonce = json::string_field(*challenge, "nonce");
   if (id.empty() || nonce.empty()) return link_error("registry challenge: malformed");
 
   // The robot's names as the registry keys them: its RURI's segments (version "v1", the
@@ -125,12 +120,13 @@ Result<std::string> register_with_registry(const config::NodeConfig& cfg,
     return link_error("registration: " + refusal(*posted));
   auto answer = json::parse(posted->body);
   if (!answer.ok()) return link_error("registration: the answer is not JSON");
-  auto rrn = registry::normalize_rrn(str_of(*answer, "rrn"));
+  auto rrn = registry::normalize_rrn(json::string_field(*answer, "rrn"));
   if (!rrn) return link_error("registration: the answer holds no RRN");
   // The robot's own key comes once, with a new registration; a robot registered before (its
   // state lost) keeps refreshing with the registrant key.
-  json::Object state{
-      {"registry_url", cfg.registry_url}, {"rrn", *rrn}, {"robot_key", str_of(*answer, "api_key")}};
+  json::Object state{{"registry_url", cfg.registry_url},
+                     {"rrn", *rrn},
+                     {"robot_key", json::string_field(*answer, "api_key")}};
   if (Status s = make_private_dir(cfg.data_dir + "/registry"); !s.ok()) return s.error();
   if (Status s = write_state_file(state_path(cfg.data_dir), json::Value(std::move(state))); !s.ok())
     return s.error();
@@ -181,7 +177,7 @@ void RegistryLink::record(const std::string& event, const std::string& outcome,
 
 bool RegistryLink::refresh(const std::string& rrn) {
   auto v = read_state_file(state_path(cfg_.data_dir));
-  std::string key = v.ok() ? str_of(*v, "robot_key") : std::string();
+  std::string key = v.ok() ? json::string_field(*v, "robot_key") : std::string();
   std::string err;
   if (key.empty()) key = read_key_file(cfg_.registry.key_file, err);
   if (!err.empty()) {

@@ -13,11 +13,6 @@
 namespace rcan::client {
 namespace {
 
-std::string str_of(const json::Value& v, std::string_view key) {
-  const json::Value* f = v.get(key);
-  return f && f->is_string() ? f->as_string() : std::string();
-}
-
 int64_t int_of(const json::Value& v, std::string_view key, int64_t def) {
   const json::Value* f = v.get(key);
   if (f && f->is_int()) return f->as_int();
@@ -54,10 +49,10 @@ Result<Reply> reply_from(int status, const json::Value& v) {
   if (!v.is_object()) return schema_error("the answer is not a JSON object", v);
   Reply r;
   r.http_status = status;
-  r.type = str_of(v, "type");
-  if (r.type.empty()) r.type = str_of(v, "message_type");
-  r.message_id = str_of(v, "message_id");
-  r.reply_to = str_of(v, "reply_to");
+  r.type = json::string_field(v, "type");
+  if (r.type.empty()) r.type = json::string_field(v, "message_type");
+  r.message_id = json::string_field(v, "message_id");
+  r.reply_to = json::string_field(v, "reply_to");
   if (const json::Value* p = v.get("payload")) r.payload = *p;
   r.raw = v;
   return r;
@@ -165,24 +160,24 @@ ClientError error_from_response(int status, std::string_view body, std::string_v
   e.body = *v;
   if (const json::Value* p = v->get("payload"); p && p->is_object()) {
     // The profile's body: payload.error_code / error / reason / detail.reason.
-    if (std::string c = str_of(*p, "error_code"); !c.empty()) e.code = c;
-    if (std::string m = str_of(*p, "error"); !m.empty()) e.message = m;
-    e.reason = str_of(*p, "reason");
+    if (std::string c = json::string_field(*p, "error_code"); !c.empty()) e.code = c;
+    if (std::string m = json::string_field(*p, "error"); !m.empty()) e.message = m;
+    e.reason = json::string_field(*p, "reason");
     if (e.reason.empty())
       if (const json::Value* d = p->get("detail"); d && d->is_object())
-        e.reason = str_of(*d, "reason");
+        e.reason = json::string_field(*d, "reason");
   } else {
     // Other shapes: {"error","code"} (§16.6 verify), {"error_code", …}, {"error": …}.
     for (const char* k : {"error_code", "code"})
-      if (std::string c = str_of(*v, k); !c.empty()) {
+      if (std::string c = json::string_field(*v, k); !c.empty()) {
         e.code = c;
         break;
       }
-    if (std::string m = str_of(*v, "error"); !m.empty())
+    if (std::string m = json::string_field(*v, "error"); !m.empty())
       e.message = m;
-    else if (std::string m2 = str_of(*v, "message"); !m2.empty())
+    else if (std::string m2 = json::string_field(*v, "message"); !m2.empty())
       e.message = m2;
-    e.reason = str_of(*v, "reason");
+    e.reason = json::string_field(*v, "reason");
   }
   return e;
 }
@@ -195,26 +190,26 @@ Result<RobotStatus> parse_status(std::string_view body) {
   if (!ruri || !ruri->is_string()) return schema_error("the status answer has no ruri", *v);
   RobotStatus s;
   s.ruri = ruri->as_string();
-  s.rrn = str_of(*v, "rrn");
-  s.name = str_of(*v, "name");
-  s.rcan_version = str_of(*v, "rcan_version");
-  if (s.rcan_version.empty()) s.rcan_version = str_of(*v, "version");
+  s.rrn = json::string_field(*v, "rrn");
+  s.name = json::string_field(*v, "name");
+  s.rcan_version = json::string_field(*v, "rcan_version");
+  if (s.rcan_version.empty()) s.rcan_version = json::string_field(*v, "version");
   s.extensions = strings_of(*v, "extensions");
   s.capabilities = strings_of(*v, "capabilities");
   if (const json::Value* e = v->get("estop_active"); e && e->is_bool())
     s.estop_active = e->as_bool();
-  s.mode = str_of(*v, "mode");
+  s.mode = json::string_field(*v, "mode");
   if (const json::Value* a = v->get("audit_available"); a && a->is_bool())
     s.audit_available = a->as_bool();
   if (const json::Value* l = v->get("sessions"); l && l->is_array()) {
     for (const auto& e : l->as_array()) {
       if (!e.is_object()) continue;
       SessionInfo si;
-      si.session_id = str_of(e, "session_id");
-      if (si.session_id.empty()) si.session_id = str_of(e, "id");
-      si.role = str_of(e, "role");
-      si.principal = str_of(e, "principal");
-      if (si.principal.empty()) si.principal = str_of(e, "user_id");
+      si.session_id = json::string_field(e, "session_id");
+      if (si.session_id.empty()) si.session_id = json::string_field(e, "id");
+      si.role = json::string_field(e, "role");
+      si.principal = json::string_field(e, "principal");
+      if (si.principal.empty()) si.principal = json::string_field(e, "user_id");
       si.expires_in_s = int_of(e, "expires_in", -1);
       s.sessions.push_back(std::move(si));
     }
@@ -279,11 +274,11 @@ Result<Grant> Client::claim(const std::string& role) {
   auto v = call_json("POST", "/rcan/v1/auth/claim", json::dump(json::Value(body)), true);
   if (!v.ok()) return v.error();
   const json::Value* p = v->get("payload");
-  if (!p || !p->is_object() || str_of(*p, "session_id").empty())
+  if (!p || !p->is_object() || json::string_field(*p, "session_id").empty())
     return schema_error("the claim answer carries no session_id", *v);
   Grant g;
-  g.session_id = str_of(*p, "session_id");
-  g.role = str_of(*p, "role");
+  g.session_id = json::string_field(*p, "session_id");
+  g.role = json::string_field(*p, "role");
   g.capabilities = strings_of(*p, "capabilities");
   g.heartbeat_timeout_ms = int_of(*p, "heartbeat_timeout_ms", 0);
   g.expires_in_s = int_of(*p, "expires_in", -1);
@@ -366,11 +361,11 @@ Result<std::vector<PendingAuth>> Client::pending() {
     const json::Value* p = e.get("payload");
     const json::Value& src = p && p->is_object() ? *p : e;
     PendingAuth pa;
-    pa.message_id = str_of(src, "message_id");
-    if (pa.message_id.empty()) pa.message_id = str_of(e, "message_id");
-    pa.action_type = str_of(src, "action_type");
-    pa.description = str_of(src, "description");
-    pa.principal = str_of(src, "principal");
+    pa.message_id = json::string_field(src, "message_id");
+    if (pa.message_id.empty()) pa.message_id = json::string_field(e, "message_id");
+    pa.action_type = json::string_field(src, "action_type");
+    pa.description = json::string_field(src, "description");
+    pa.principal = json::string_field(src, "principal");
     pa.auth_timeout_ms = int_of(src, "auth_timeout_ms", 0);
     pa.expires_at_ms = int_of(src, "expires_at_ms", 0);
     pa.raw = e;
@@ -426,13 +421,13 @@ Result<Thought> Client::thought(const std::string& id) {
   if (!v.ok()) return v.error();
   if (!v->is_object()) return schema_error("the thought is not an object", *v);
   Thought t;
-  t.id = str_of(*v, "id");
-  if (t.id.empty()) t.id = str_of(*v, "thought_id");
+  t.id = json::string_field(*v, "id");
+  if (t.id.empty()) t.id = json::string_field(*v, "thought_id");
   t.timestamp_ms = int_of(*v, "timestamp_ms", 0);
-  t.provider = str_of(*v, "provider");
-  t.model = str_of(*v, "model");
-  t.layer = str_of(*v, "layer");
-  t.instruction = str_of(*v, "instruction");
+  t.provider = json::string_field(*v, "provider");
+  t.model = json::string_field(*v, "model");
+  t.layer = json::string_field(*v, "layer");
+  t.instruction = json::string_field(*v, "instruction");
   if (const json::Value* c = v->get("confidence"); c && c->is_number())
     t.confidence = c->to_double();
   if (const json::Value* r = v->get("reasoning"); r && r->is_string()) t.reasoning = r->as_string();
@@ -449,8 +444,8 @@ Result<WatermarkVerdict> Client::watermark_verify(const std::string& token,
   if (!v.ok()) return v.error();
   WatermarkVerdict w;
   if (const json::Value* b = v->get("valid"); b && b->is_bool()) w.valid = b->as_bool();
-  w.rrn = str_of(*v, "rrn");
-  w.watermark_token = str_of(*v, "watermark_token");
+  w.rrn = json::string_field(*v, "rrn");
+  w.watermark_token = json::string_field(*v, "watermark_token");
   if (const json::Value* a = v->get("audit_entry")) w.audit_entry = *a;
   return w;
 }
@@ -491,7 +486,7 @@ Result<DiscoveredRobot> probe(const std::string& host, const DiscoverOptions& op
   r.ruri = st->ruri;
   r.version = st->rcan_version;
   if (const json::Value* d = st->raw.get("discovery"); d && d->is_object())
-    r.model = str_of(*d, "model");
+    r.model = json::string_field(*d, "model");
   r.status_word = st->estop_active ? "estop" : (st->active_sessions > 0 ? "claimed" : "available");
   r.reachable = true;
   r.status = std::move(st).value();

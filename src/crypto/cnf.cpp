@@ -13,11 +13,6 @@ Error bad(const std::string& what, const std::string& field) {
   return Error(ErrorCode::kAuthInvalid, "cnf: " + what, field);
 }
 
-std::string str(const json::Value& o, const char* k) {
-  const json::Value* v = o.get(k);
-  return v != nullptr && v->is_string() ? v->as_string() : std::string();
-}
-
 }  // namespace
 
 Result<BoundKey> parse(const json::Value& cnf) {
@@ -28,11 +23,12 @@ Result<BoundKey> parse(const json::Value& cnf) {
   }
   const json::Value* jwk = cnf.get("jwk");
   if (jwk == nullptr || !jwk->is_object()) return bad("jwk must be an object", "cnf.jwk");
-  if (str(*jwk, "kty") != "OKP") return bad("jwk.kty must be \"OKP\"", "cnf.jwk.kty");
-  const std::string crv = str(*jwk, "crv");
+  if (json::string_field(*jwk, "kty") != "OKP")
+    return bad("jwk.kty must be \"OKP\"", "cnf.jwk.kty");
+  const std::string crv = json::string_field(*jwk, "crv");
   BoundKey k;
   if (crv == "Ed25519") {
-    auto x = base64url_decode(str(*jwk, "x"));
+    auto x = base64url_decode(json::string_field(*jwk, "x"));
     if (!x || x->size() != ed25519::kPublicKeyBytes)
       return bad("jwk.x must be a base64url Ed25519 public key (32 bytes)", "cnf.jwk.x");
     k.alg = msgsig::Alg::kEd25519;

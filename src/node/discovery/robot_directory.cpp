@@ -8,11 +8,6 @@
 namespace rcan::node {
 namespace {
 
-std::string str_in(const json::Value& v, const char* key) {
-  const json::Value* f = v.is_object() ? v.get(key) : nullptr;
-  return f && f->is_string() ? f->as_string() : std::string();
-}
-
 // An answer's body, cut for a log line or a reason shown to an operator.
 std::string shorten(std::string s) {
   if (s.size() > 200) s = s.substr(0, 200) + "…";
@@ -86,11 +81,11 @@ RobotDirectory::State RobotDirectory::read_one(const HttpUrl& base) const {
     return s;
   }
   s.reachable = true;
-  s.name = str_in(*txt, "name");
-  s.ruri = str_in(*txt, "ruri");
-  s.model = str_in(*txt, "model");
-  s.version = str_in(*txt, "version");
-  const std::string word = str_in(*txt, "status");
+  s.name = json::string_field(*txt, "name");
+  s.ruri = json::string_field(*txt, "ruri");
+  s.model = json::string_field(*txt, "model");
+  s.version = json::string_field(*txt, "version");
+  const std::string word = json::string_field(*txt, "status");
   s.status = word == "available" || word == "claimed" || word == "estop" ? word : "unknown";
   return s;
 }
@@ -210,8 +205,8 @@ std::vector<RobotDirectory::StopResult> RobotDirectory::relay_stop(
       r.result = "refused";
       if (v.ok() && v->is_object())
         if (const json::Value* p = v->get("payload"); p && p->is_object()) {
-          r.error_code = str_in(*p, "error_code");
-          r.detail = str_in(*p, "error");
+          r.error_code = json::string_field(*p, "error_code");
+          r.detail = json::string_field(*p, "error");
         }
       if (r.detail.empty())
         r.detail = "HTTP " + std::to_string(a->status) + ": " + shorten(a->body);

@@ -10,11 +10,6 @@ namespace rcan::node {
 
 namespace {
 
-std::string str_of(const json::Value& v, const char* key) {
-  const json::Value* f = v.is_object() ? v.get(key) : nullptr;
-  return f != nullptr && f->is_string() ? f->as_string() : std::string();
-}
-
 json::Array to_array(const std::set<std::string>& s) {
   json::Array a;
   for (const auto& m : s) a.emplace_back(m);
@@ -94,7 +89,7 @@ void SwarmAgent::on_message(const mqtt::InboundTopic& t, const json::Value& body
   if (p == nullptr || !p->is_object()) return;
   const json::Value* ep = p->get("epoch");
   const json::Value* mem = p->get("members");
-  std::string leader = str_of(*p, "leader");
+  std::string leader = json::string_field(*p, "leader");
   if (ep == nullptr || !ep->is_int() || ep->as_int() < 0 || mem == nullptr || !mem->is_array() ||
       leader.empty())
     return;
@@ -191,10 +186,10 @@ void SwarmAgent::answer(const std::string& member, const std::string& type,
 
 void SwarmAgent::handle_join(const json::Value& body) {
   if (!body.is_object()) return;
-  std::string type = str_of(body, "type");
+  std::string type = json::string_field(body, "type");
   const json::Value* p = body.get("payload");
-  std::string member = p != nullptr ? str_of(*p, "member") : std::string();
-  std::string id = str_of(body, "message_id");
+  std::string member = p != nullptr ? json::string_field(*p, "member") : std::string();
+  std::string id = json::string_field(body, "message_id");
   {
     MutexLock lk(mu_);
     if (leader_ != cfg_.member_id) return;  // only the leader answers
@@ -214,7 +209,7 @@ void SwarmAgent::handle_join(const json::Value& body) {
   };
   // The same checks as every other inbound message: a verified token, signed by the key it is
   // bound to, and a fresh, unseen id.
-  auto principal = svc_.authenticate(str_of(body, "auth_token"));
+  auto principal = svc_.authenticate(json::string_field(body, "auth_token"));
   if (!principal.ok()) {
     record(type, "blocked", nullptr, std::string(error_name(principal.error().code)));
     answer(member, "DENIED", id, std::string(error_name(principal.error().code)));

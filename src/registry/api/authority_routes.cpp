@@ -15,11 +15,6 @@ HttpResponse forbidden(const std::string& msg) {
   return project_error(ErrorCode::kInsufficientPrivileges, msg, "authorization", "role");
 }
 
-std::string text(const json::Value& v, const char* k) {
-  const json::Value* x = v.get(k);
-  return x != nullptr && x->is_string() ? x->as_string() : std::string();
-}
-
 json::Object client_json(const Client& c) {
   return json::Object{
       {"client_id", c.id}, {"name", c.name}, {"auth", c.auth}, {"created_at", c.created_at}};
@@ -72,8 +67,8 @@ HttpResponse RegistryApi::Impl::clients_route(const HttpRequest& req) {
   if (!body || !body->is_object())
     return project_error(ErrorCode::kMalformedJson, "the body must be a JSON object");
   Client c;
-  c.name = text(*body, "name");
-  c.auth = text(*body, "auth");
+  c.name = json::string_field(*body, "name");
+  c.auth = json::string_field(*body, "auth");
   if (c.auth.empty()) c.auth = "client_secret";
   if (!valid_name(c.name, 128)) return bad_request("name: 1..128 characters", "name");
   std::string secret;
@@ -90,7 +85,7 @@ HttpResponse RegistryApi::Impl::clients_route(const HttpRequest& req) {
     auto vk = jwt::VerificationKey::from_jwk(*jwk);
     if (!vk || vk->alg() != jwt::Alg::kEdDSA)
       return bad_request("jwk must be an Ed25519 public key (kty OKP, crv Ed25519)", "jwk");
-    json::Object pub{{"kty", "OKP"}, {"crv", "Ed25519"}, {"x", text(*jwk, "x")}};
+    json::Object pub{{"kty", "OKP"}, {"crv", "Ed25519"}, {"x", json::string_field(*jwk, "x")}};
     c.jwk = json::dump(json::Value(std::move(pub)));
   } else {
     return bad_request("auth must be client_secret or private_key_jwt", "auth");
@@ -146,8 +141,8 @@ HttpResponse RegistryApi::Impl::grants_route(const HttpRequest& req) {
   if (!body || !body->is_object())
     return project_error(ErrorCode::kMalformedJson, "the body must be a JSON object");
   Grant g;
-  g.principal = text(*body, "principal");
-  g.role = text(*body, "role");
+  g.principal = json::string_field(*body, "principal");
+  g.role = json::string_field(*body, "role");
   if (g.principal.rfind("user:", 0) == 0) {
     if (!valid_name(g.principal, 128)) return bad_request("principal: too long", "principal");
   } else {
@@ -175,7 +170,8 @@ HttpResponse RegistryApi::Impl::grants_route(const HttpRequest& req) {
   }
   // The robots it covers; the caller must own each (or be an admin).
   std::vector<std::string> rrns;
-  std::string robot = text(*body, "robot"), fleet = text(*body, "fleet");
+  std::string robot = json::string_field(*body, "robot"),
+              fleet = json::string_field(*body, "fleet");
   if (robot.empty() == fleet.empty()) return bad_request("give robot or fleet", "robot");
   if (!robot.empty()) {
     rrns.push_back(robot);
@@ -280,10 +276,10 @@ HttpResponse RegistryApi::Impl::revoke(const HttpRequest& req) {
   if (!body || !body->is_object())
     return project_error(ErrorCode::kMalformedJson, "the body must be a JSON object");
   Revocation r;
-  r.jti = text(*body, "jti");
-  r.sub = text(*body, "sub");
-  r.reason = text(*body, "reason");
-  std::string token = text(*body, "token");
+  r.jti = json::string_field(*body, "jti");
+  r.sub = json::string_field(*body, "sub");
+  r.reason = json::string_field(*body, "reason");
+  std::string token = json::string_field(*body, "token");
   if (r.reason.size() > kMaxTextField) return bad_request("reason: too long", "reason");
   if (!caller->is("admin")) {
     // The owner of the robot a token was for presents the token itself: its signature and aud
@@ -361,8 +357,8 @@ HttpResponse RegistryApi::Impl::device_approve(const HttpRequest& req) {
   auto body = json::parse(req.body);
   if (!body || !body->is_object())
     return project_error(ErrorCode::kMalformedJson, "the body must be a JSON object");
-  std::string code = normalize_user_code(text(*body, "user_code"));
-  std::string decision = text(*body, "decision");
+  std::string code = normalize_user_code(json::string_field(*body, "user_code"));
+  std::string decision = json::string_field(*body, "decision");
   if (code.empty()) return bad_request("user_code: 8 letters like BCDF-GHJK", "user_code");
   if (decision != "approve" && decision != "deny")
     return bad_request("decision must be approve or deny", "decision");
