@@ -107,7 +107,7 @@ cross-arm64:
 	cmake --build $(ARM64_DIR) -j $(JOBS)
 
 test-arm64: cross-arm64
-	ctest --test-dir $(ARM64_DIR) --output-on-failure -j $(JOBS) -L '^(core|crypto|audit)$$' $(CTEST_ARGS)
+	ctest --test-dir $(ARM64_DIR) --output-on-failure -j $(JOBS) -L '^(core|crypto|audit|package)$$' $(CTEST_ARGS)
 
 package-arm64: cross-arm64
 	cd $(ARM64_DIR) && cpack -G DEB

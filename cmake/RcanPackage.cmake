@@ -30,7 +30,7 @@ if(NOT RCAN_SANITIZE AND NOT RCAN_TSAN AND NOT RCAN_FUZZ)
       endif()
       add_custom_command(OUTPUT ${RCAN_GEN}/${tool}.1.gz
         COMMAND ${CMAKE_COMMAND} -E make_directory ${RCAN_GEN}
-        COMMAND ${RCAN_HELP2MAN} --no-info --no-discard-stderr --section 1 --name ${what}
+        COMMAND ${RCAN_HELP2MAN} --no-info --no-discard-stderr --locale C.UTF-8 --section 1 --name ${what}
                 --output ${RCAN_GEN}/${tool}.1 ${program}
         COMMAND gzip -9nf ${RCAN_GEN}/${tool}.1
         DEPENDS ${target}
@@ -82,13 +82,14 @@ set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS ON)
 set(CPACK_DEBIAN_PACKAGE_DEPENDS "adduser")
 if(CMAKE_CROSSCOMPILING AND CMAKE_SYSTEM_PROCESSOR STREQUAL "aarch64")
   # The arm64 package (make package-arm64, docs/ARM64.md): dpkg-shlibdeps knows only the
-  # machine's installed packages, so the Depends come from the sysroot's shlibs files.
+  # machine's installed packages, so the Depends come from the sysroot's packages
+  # (cmake/cpack_arm64_depends.cmake).
   set(CPACK_DEBIAN_PACKAGE_ARCHITECTURE arm64)
   set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS OFF)
   set(CPACK_PROJECT_CONFIG_FILE ${PROJECT_BINARY_DIR}/generated/cpack_arm64.cmake)
   file(GENERATE OUTPUT ${CPACK_PROJECT_CONFIG_FILE} CONTENT
 "set(RCAN_PACKAGE_ELFS \"$<TARGET_FILE:rcand>;$<TARGET_FILE:rcan_cli>;$<TARGET_FILE:rcan-registry>;$<TARGET_FILE:rcand_grpc>\")
-set(RCAN_SYSROOT_SHLIBS \"${CMAKE_SYSROOT}/.shlibs\")
+set(RCAN_SYSROOT_LIBDEPS \"${CMAKE_SYSROOT}/.libdeps\")
 include(\"${PROJECT_SOURCE_DIR}/cmake/cpack_arm64_depends.cmake\")
 ")
 endif()

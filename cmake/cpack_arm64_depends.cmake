@@ -1,12 +1,13 @@
 # Read by cpack (CPACK_PROJECT_CONFIG_FILE) in a cross build (docs/ARM64.md): the package's
 # Depends, computed the way dpkg-shlibdeps computes them from shlibs files, for libraries that
 # are in the arm64 sysroot and not installed on the machine (dpkg-shlibdeps knows only those).
-# RCAN_PACKAGE_ELFS: the programs and modules the package holds; RCAN_SYSROOT_SHLIBS: the
-# sysroot's shlibs lines ("libssl 3 libssl3 (>= 3.0.22)", scripts/arm64-sysroot.sh).
+# RCAN_PACKAGE_ELFS: the programs and modules the package holds; RCAN_SYSROOT_LIBDEPS: what each
+# arm64 library package provides (its shlibs lines, "libssl 3 libssl3 (>= 3.0.22)", or
+# "soname=<soname> <package> (>= <version>)"; scripts/arm64-sysroot.sh).
 if(NOT CPACK_GENERATOR STREQUAL "DEB")
   return()
 endif()
-file(STRINGS ${RCAN_SYSROOT_SHLIBS} rcan_shlibs)
+file(STRINGS ${RCAN_SYSROOT_LIBDEPS} rcan_libdeps)
 set(rcan_depends adduser)
 foreach(elf ${RCAN_PACKAGE_ELFS})
   execute_process(COMMAND readelf -d ${elf} OUTPUT_VARIABLE dyn RESULT_VARIABLE rc)
@@ -16,18 +17,25 @@ foreach(elf ${RCAN_PACKAGE_ELFS})
   string(REGEX MATCHALL "\\(NEEDED\\)[^\n]*\\[[^]\n]+\\]" needed "${dyn}")
   foreach(line ${needed})
     string(REGEX REPLACE ".*\\[(.+)\\]$" "\\1" soname "${line}")
-    # libfoo.so.3 is "libfoo 3" in a shlibs file; libfoo-1.2.so is "libfoo 1.2".
-    if(soname MATCHES "^(.+)\\.so\\.(.+)$" OR soname MATCHES "^(.+)-([0-9][^-]*)\\.so$")
-      set(key "${CMAKE_MATCH_1} ${CMAKE_MATCH_2} ")
-    else()
-      message(FATAL_ERROR "${elf}: cannot read the library name ${soname}")
+    # libfoo.so.3 is "libfoo 3" in a shlibs file; libfoo-1.2.so is "libfoo 1.2" (if() does
+    # not short-circuit, so the two patterns are tried one after the other).
+    set(keys "soname=${soname} ")
+    if(soname MATCHES "^(.+)\\.so\\.(.+)$")
+      list(APPEND keys "${CMAKE_MATCH_1} ${CMAKE_MATCH_2} ")
+    elseif(soname MATCHES "^(.+)-([0-9][^-]*)\\.so$")
+      list(APPEND keys "${CMAKE_MATCH_1} ${CMAKE_MATCH_2} ")
     endif()
     set(dep "")
-    foreach(s ${rcan_shlibs})
-      string(FIND "${s}" "${key}" at)
-      if(at EQUAL 0)
-        string(LENGTH "${key}" n)
-        string(SUBSTRING "${s}" ${n} -1 dep)
+    foreach(s ${rcan_libdeps})
+      foreach(key ${keys})
+        string(FIND "${s}" "${key}" at)
+        if(at EQUAL 0)
+          string(LENGTH "${key}" n)
+          string(SUBSTRING "${s}" ${n} -1 dep)
+          break()
+        endif()
+      endforeach()
+      if(NOT dep STREQUAL "")
         break()
       endif()
     endforeach()

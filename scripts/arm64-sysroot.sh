@@ -39,22 +39,29 @@ if [ ${#missing[@]} -gt 0 ]; then
   $SUDO apt-get install -o DPkg::Lock::Timeout=600 -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 fi
 
-# Each library package's shlibs file ("libssl 3 libssl3 (>= 3.0.22)") goes to .shlibs: the
-# arm64 package's Depends are computed from it (cmake/cpack_arm64_depends.cmake), since
-# dpkg-shlibdeps only knows the packages installed on the machine.
-write_shlibs() {
-  local out="$SYSROOT/.shlibs" deb
+# What each arm64 library package provides, for the arm64 package's Depends
+# (cmake/cpack_arm64_depends.cmake; dpkg-shlibdeps knows only the machine's installed
+# packages). One line per library in $SYSROOT/.libdeps: its shlibs line ("libssl 3 libssl3
+# (>= 3.0.22)"), or, for a package with a symbols file and no shlibs file, "soname=<soname>
+# <package> (>= <version>)" from the symbols file's header with the package's own version.
+write_libdeps() {
+  local out="$SYSROOT/.libdeps" deb version
   : > "$out.tmp"
   for deb in "$APTDIR"/var/cache/apt/archives/*.deb; do
-    dpkg-deb -I "$deb" shlibs 2>/dev/null |
-      grep -v -e '^#' -e '^udeb:' -e '^[[:space:]]*$' >> "$out.tmp" || true
+    if dpkg-deb -I "$deb" shlibs >/dev/null 2>&1; then
+      dpkg-deb -I "$deb" shlibs | grep -v -e '^#' -e '^udeb:' -e '^[[:space:]]*$' >> "$out.tmp" || true
+    elif dpkg-deb -I "$deb" symbols >/dev/null 2>&1; then
+      version="$(dpkg-deb -f "$deb" Version)"
+      dpkg-deb -I "$deb" symbols | grep -E '^[^[:space:]|*#]' |
+        sed -E "s/^([^ ]+) ([^ ]+) #MINVER#.*/soname=\1 \2 (>= $version)/" >> "$out.tmp" || true
+    fi
   done
   mv "$out.tmp" "$out"
 }
 
 stamp="$SYSROOT/.packages"
 if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "${ARM64_PKGS[*]}" ]; then
-  [ -f "$SYSROOT/.shlibs" ] || write_shlibs
+  [ -f "$SYSROOT/.libdeps" ] || write_libdeps
   exit 0
 fi
 
@@ -84,6 +91,6 @@ find "$SYSROOT" -type l -lname '/*' | while read -r l; do
   t="$(readlink "$l")"
   ln -sfn "$SYSROOT$t" "$l"
 done
-write_shlibs
+write_libdeps
 echo "${ARM64_PKGS[*]}" > "$stamp"
 echo "arm64-sysroot: $n packages unpacked in $SYSROOT ($(du -sh "$SYSROOT" | cut -f1))" >&2

@@ -6,8 +6,14 @@
 # redirected into the root, and the node answers /healthz. Exit 0 pass, 1 fail, 77 skip.
 #
 # Usage: package_test.sh BUILD_DIR
+# A cross build's tree (make cross-arm64, docs/ARM64.md) sets RCAN_PACKAGE_RUN to its emulator
+# ("qemu-aarch64-static -L <sysroot>"), RCAN_PACKAGE_MACHINE to the ELF machine its programs
+# must be ("AArch64") and RCAN_PACKAGE_ARCH to the package's ("arm64"): the packaged programs
+# then run under the emulator.
 set -uo pipefail
 BUILD=${1:?build dir}
+RUN=${RCAN_PACKAGE_RUN:-}
+MACHINE=${RCAN_PACKAGE_MACHINE:-}
 for t in cpack dpkg-deb systemd-analyze curl; do
   command -v "$t" >/dev/null || { echo "SKIP: $t is not installed (scripts/install-deps.sh)"; exit 77; }
 done
@@ -35,7 +41,15 @@ for f in usr/lib/rcan/librcand_grpc.so usr/lib/systemd/system/rcand.service \
          usr/share/bash-completion/completions/rcan usr/share/doc/rcan/examples/sim-robot.rcan.yaml; do
   check "$f is packaged" test -s "$ROOT/$f"
 done
+if [ -n "$MACHINE" ]; then
+  for f in usr/bin/rcand usr/bin/rcan usr/bin/rcan-registry usr/lib/rcan/librcand_grpc.so; do
+    check "$f is built for $MACHINE" bash -c "readelf -h '$ROOT/$f' | grep -Eq 'Machine:[[:space:]]+$MACHINE'"
+  done
+  check "the control file says Architecture: ${RCAN_PACKAGE_ARCH:-?}" \
+    grep -q "^Architecture: ${RCAN_PACKAGE_ARCH:-?}\$" "$CTRL/control"
+fi
 check "the man pages hold the --help text" bash -c "zcat '$ROOT/usr/share/man/man1/rcand.1.gz' | grep -q 'rcand init'"
+check "the man pages keep the help's UTF-8 (no ???)" bash -c "! zcat '$ROOT/usr/share/man/man1/rcand.1.gz' | grep -q '???'"
 check "the completion completes rcan's verbs" grep -q "fleet" "$ROOT/usr/share/bash-completion/completions/rcan"
 check "no file is group- or world-writable" test -z "$(find "$ROOT" -perm /022 ! -type l)"
 check "no file is setuid or setgid" test -z "$(find "$ROOT" -perm /6000)"
@@ -75,7 +89,7 @@ done
 
 # 4. What postinst does, into the root: a configured robot in /var/lib/rcand, /etc/rcan.
 PORT=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
-"$ROOT/usr/bin/rcand" init --dir "$ROOT/var/lib/rcand" --config "$ROOT/etc/rcan/robot.rcan.yaml" \
+$RUN "$ROOT/usr/bin/rcand" init --dir "$ROOT/var/lib/rcand" --config "$ROOT/etc/rcan/robot.rcan.yaml" \
   --yes --port "$PORT" >"$WORK/init.log" 2>&1
 check "rcand init (postinst's step) makes the configured robot" test -s "$ROOT/var/lib/rcand/owner.token"
 
@@ -85,7 +99,7 @@ cmd=${exec_start//\/usr\/bin\//$ROOT/usr/bin/}
 cmd=${cmd//\/etc\/rcan/$ROOT/etc/rcan}
 cmd=${cmd//\/var\/lib\/rcand/$ROOT/var/lib/rcand}
 echo "note: starting: ${cmd#$ROOT}"
-$cmd 2>"$WORK/rcand.log" &
+$RUN $cmd 2>"$WORK/rcand.log" &
 PID=$!
 healthy=
 for _ in $(seq 1 100); do
@@ -94,7 +108,7 @@ for _ in $(seq 1 100); do
 done
 check "rcand started by the unit's command line answers /healthz" test -n "$healthy"
 check "the packaged CLI drives it with the OWNER token" bash -c \
-  "RCAN_URL=http://127.0.0.1:$PORT RCAN_TOKEN_FILE='$ROOT/var/lib/rcand/owner.token' '$ROOT/usr/bin/rcan' status >/dev/null"
+  "RCAN_URL=http://127.0.0.1:$PORT RCAN_TOKEN_FILE='$ROOT/var/lib/rcand/owner.token' $RUN '$ROOT/usr/bin/rcan' status >/dev/null"
 check "the packaged gRPC module is the one it would load" test -f "$ROOT/usr/lib/rcan/librcand_grpc.so"
 kill -TERM "$PID"; wait "$PID"; rc=$?; PID=
 check "SIGTERM stops it cleanly (exit $rc)" test "$rc" -eq 0
@@ -107,7 +121,7 @@ rcmd=${rcmd//\/usr\/bin\//$ROOT/usr/bin/}
 rcmd=${rcmd//\/var\/lib\/rcan-registry/$ROOT/var/lib/rcan-registry}
 rcmd=${rcmd//--port 8090/--port $RPORT}
 echo "note: starting: ${rcmd#$ROOT}"
-$rcmd 2>"$WORK/registry.log" &
+$RUN $rcmd 2>"$WORK/registry.log" &
 PID=$!
 healthy=
 for _ in $(seq 1 100); do
@@ -118,7 +132,7 @@ check "rcan-registry started by its unit's command line answers /healthz" test -
 check "its first start wrote the admin key 0600" \
   test "$(stat -c %a "$ROOT/var/lib/rcan-registry/admin.key" 2>/dev/null)" = 600
 check "the packaged CLI lists robots with it" bash -c \
-  "RCAN_REGISTRY=http://127.0.0.1:$RPORT '$ROOT/usr/bin/rcan' registry list >/dev/null"
+  "RCAN_REGISTRY=http://127.0.0.1:$RPORT $RUN '$ROOT/usr/bin/rcan' registry list >/dev/null"
 kill -TERM "$PID"; wait "$PID"; rc=$?; PID=
 check "SIGTERM stops rcan-registry cleanly (exit $rc)" test "$rc" -eq 0
 
