@@ -18,6 +18,16 @@ std::string_view fleet_policy_name(FleetPolicy p) {
   return "role";
 }
 
+namespace {
+
+// Why a session derived from a lease ended with it: the lease's end (its leasee's session) or
+// the end of a grant within it (a grantee's).
+std::string lease_end_reason(bool as_leasee, const std::string& lease_id) {
+  return (as_leasee ? "the lease " : "the grant within lease ") + lease_id + " ended";
+}
+
+}  // namespace
+
 std::optional<FleetPolicy> fleet_policy_from_name(std::string_view s) {
   if (s == "role") return FleetPolicy::kRole;
   if (s == "fleet_wins") return FleetPolicy::kFleetWins;
@@ -174,10 +184,8 @@ void SessionTable::expire_locked(int64_t now_mono_ms) {
       bool leasee = false;
       for (const auto& l : leases_)
         if (l.id == holder_->lease_id && l.leasee.is(holder_->who())) leasee = true;
-      drop_holder_locked(
-          ControlEvent::kRevoke,
-          (leasee ? "the lease " : "the grant within lease ") + holder_->lease_id + " ended",
-          now_mono_ms);
+      drop_holder_locked(ControlEvent::kRevoke, lease_end_reason(leasee, holder_->lease_id),
+                         now_mono_ms);
     } else
       drop_holder_locked(ControlEvent::kExpire, "the session's TTL ended without renewal",
                          now_mono_ms);
@@ -398,7 +406,7 @@ void SessionTable::tick(int64_t now_mono_ms, int64_t now_wall_ms) {
   for (auto it = leases_.begin(); it != leases_.end();) {
     if (now_wall_ms >= it->end_wall_ms) {
       if (holder_ && holder_->lease_id == it->id)
-        drop_holder_locked(ControlEvent::kRevoke, "the lease " + it->id + " ended", now_mono_ms);
+        drop_holder_locked(ControlEvent::kRevoke, lease_end_reason(true, it->id), now_mono_ms);
       ControlChange c;
       c.event = ControlEvent::kLeaseEnd;
       c.lease_id = it->id;
@@ -413,8 +421,7 @@ void SessionTable::tick(int64_t now_mono_ms, int64_t now_wall_ms) {
         for (const auto& g : it->grants)
           if (g.who.is(holder_->who()) && g.end_wall_ms > now_wall_ms) granted = true;
         if (!granted)
-          drop_holder_locked(ControlEvent::kRevoke, "the grant within lease " + it->id + " ended",
-                             now_mono_ms);
+          drop_holder_locked(ControlEvent::kRevoke, lease_end_reason(false, it->id), now_mono_ms);
       }
       ++it;
     }
