@@ -215,21 +215,30 @@ Result<SignatureBlock> read_sig(const json::Object& msg, std::string_view member
   return s;
 }
 
+// The member's name as the message spells it: rcan-py's snake_case, or rcan-ts's camelCase
+// (senderType, cloudProvider, delegationChain) when the snake_case one is absent.
+const char* spelled(const json::Object& o, const char* snake, const char* camel) {
+  return o.find(snake) == nullptr && o.find(camel) != nullptr ? camel : snake;
+}
+
 // Fields common to both shapes: sender identity, ai, sig, delegation chain.
 Status read_common(const json::Object& o, Message& m, const CodecLimits& lim) {
   Reader r(o);
-  auto st = r.str("sender_type", 32, true);
+  const char* st_key = spelled(o, "sender_type", "senderType");
+  auto st = r.str(st_key, 32, true);
   if (!st.ok()) return st.error();
   if (*st) {
     auto s = sender_type_from_name(**st);
     if (!s)
-      return schema("sender_type", "sender_type must be human, robot, cloud_function or system");
+      return schema(st_key,
+                    std::string(st_key) + " must be human, robot, cloud_function or system");
     m.sender_type = *s;
     m.sender_type_explicit = true;
   }
-  for (auto [key, dest] : {std::pair{"cloud_provider", &m.cloud_provider},
-                           std::pair{"function_name", &m.function_name},
-                           std::pair{"function_region", &m.function_region}}) {
+  for (auto [key, dest] :
+       {std::pair{spelled(o, "cloud_provider", "cloudProvider"), &m.cloud_provider},
+        std::pair{"function_name", &m.function_name},
+        std::pair{"function_region", &m.function_region}}) {
     auto f = r.str(key, 128, true);
     if (!f.ok()) return f.error();
     if (*f) *dest = **f;
@@ -240,14 +249,14 @@ Status read_common(const json::Object& o, Message& m, const CodecLimits& lim) {
     if (m.function_name.empty())
       return schema("function_name", "sender_type cloud_function requires function_name");
   }
-  if (const json::Value* dc = o.find("delegation_chain"); dc && !dc->is_null()) {
-    if (!dc->is_array()) return schema("delegation_chain", "delegation_chain must be an array");
+  const char* dc_key = spelled(o, "delegation_chain", "delegationChain");
+  if (const json::Value* dc = o.find(dc_key); dc && !dc->is_null()) {
+    const std::string k = dc_key;
+    if (!dc->is_array()) return schema(k, k + " must be an array");
     if (dc->as_array().size() > lim.max_delegation_hops)
-      return schema("delegation_chain", "delegation_chain has more than " +
-                                            std::to_string(lim.max_delegation_hops) + " hops");
+      return schema(k, k + " has more than " + std::to_string(lim.max_delegation_hops) + " hops");
     for (const auto& hop : dc->as_array())
-      if (!hop.is_object())
-        return schema("delegation_chain", "each delegation hop must be an object");
+      if (!hop.is_object()) return schema(k, "each delegation hop must be an object");
     if (!dc->as_array().empty()) m.delegation_chain = *dc;
   }
   if (m.sender_type == SenderType::kRobot && m.delegation_chain.is_null()) {

@@ -148,6 +148,37 @@ TEST(MessageCodec, RcanTsShapeIsReadWithADerivedReplayIdentity) {
   EXPECT_TRUE(parse_message(ts_with(R"(,"params":{"linear":0.1,"duration_ms":100})", "")).ok());
 }
 
+TEST(MessageCodec, RcanTsCamelCaseSenderFieldsAreRead) {
+  // rcan-ts writes senderType, cloudProvider and delegationChain; they mean what rcan-py's
+  // snake_case members mean (a robot sender still needs a delegation chain).
+  auto robot = parse_message(ts_with(
+      R"("params")",
+      R"("senderType":"robot","delegationChain":[{"issuerRuri":"rcan://a/b/c/d","scope":"control"}],"params")"));
+  ASSERT_TRUE(robot.ok()) << robot.error().message;
+  EXPECT_EQ(robot->sender_type, SenderType::kRobot);
+  EXPECT_TRUE(robot->sender_type_explicit);
+  ASSERT_TRUE(robot->delegation_chain.is_array());
+  EXPECT_EQ(robot->delegation_chain.as_array().size(), 1u);
+  auto no_chain = parse_message(ts_with(R"("params")", R"("senderType":"robot","params")"));
+  ASSERT_FALSE(no_chain.ok());
+  EXPECT_EQ(no_chain.error().code, ErrorCode::kMissingDelegationChain);
+  auto bad = parse_message(ts_with(R"("params")", R"("senderType":"wizard","params")"));
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.error().field, "senderType");
+  auto bad_chain = parse_message(ts_with(R"("params")", R"("delegationChain":{},"params")"));
+  ASSERT_FALSE(bad_chain.ok());
+  EXPECT_EQ(bad_chain.error().field, "delegationChain");
+  auto cloud = parse_message(ts_with(
+      R"("params")", R"("senderType":"cloud_function","cloudProvider":"aws","params")"));
+  ASSERT_FALSE(cloud.ok());  // rcan-ts has no functionName: a cloud function is not complete
+  EXPECT_EQ(cloud.error().field, "function_name");
+  // The snake_case member wins where a message carries both.
+  auto both = parse_message(
+      ts_with(R"("params")", R"("sender_type":"human","senderType":"robot","params")"));
+  ASSERT_TRUE(both.ok()) << both.error().message;
+  EXPECT_EQ(both->sender_type, SenderType::kHuman);
+}
+
 TEST(MessageCodec, InvokeInEveryShape) {
   // Seed shape: the type name round-trips.
   auto seed = parse_message(seed_msg("", R"({"skill":"scan_environment"})")

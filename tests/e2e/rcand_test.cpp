@@ -164,6 +164,15 @@ TEST_F(RcandTest, StatusCarriesIdentityVersionAndState) {
   ASSERT_EQ(r.status, 200);
   json::Value v = parse(r.body);
   EXPECT_EQ(v.get("ruri")->as_string(), d().ruri());
+  // The SDKs' 5-segment form too: the version segment before the device id (docs/PROTOCOL.md).
+  const std::string four = d().ruri();
+  const std::string five = four.substr(0, four.rfind('/')) + "/v1" + four.substr(four.rfind('/'));
+  ASSERT_NE(v.get("ruri_sdk"), nullptr) << r.body;
+  EXPECT_EQ(v.get("ruri_sdk")->as_string(), five);
+  json::Value disc = parse(d().get("/api/discovery").body);
+  ASSERT_NE(disc.get("txt_record"), nullptr);
+  ASSERT_NE(disc.get("txt_record")->get("ruri_sdk"), nullptr);
+  EXPECT_EQ(disc.get("txt_record")->get("ruri_sdk")->as_string(), five);
   EXPECT_EQ(v.get("rcan_version")->as_string(), "1.0.0");
   EXPECT_EQ(v.get("rrn")->as_string().substr(0, 4), "RRN-");
   EXPECT_TRUE(v.get("extensions")->is_array());
@@ -639,9 +648,34 @@ TEST_F(RcandTest, ConformanceL1CasesAgainstTheDaemon) {
         EXPECT_NE(disc.get("txt_record")->get(k.as_string()), nullptr);
       ++ran;
     }
-    // L1-RURI-* run in conformance_test (library); L1-INVOKE-* need skills (not implemented yet).
+    if (id == "L1-INVOKE-001" || id == "L1-INVOKE-002") {
+      // The suite's INVOKE (payload skill_id + args) naming the simulator's own skill, which
+      // needs the control scope: a USER with it runs it; a GUEST (status only) is refused.
+      json::Object payload = in.get("payload")->as_object();
+      payload.set("skill_id", "scan_environment");
+      const bool user = in.get("principal_role")->as_string() == "USER";
+      HttpReply r = d().post(
+          "/rcan/v1/command",
+          json::dump(json::Value(json::Object{{"version", "1.0.0"},
+                                              {"message_id", new_uuid_v4()},
+                                              {"type", "INVOKE"},
+                                              {"timestamp_ms", wall_ms()},
+                                              {"payload", payload}})),
+          user ? d().token("user", {"status", "control"}) : d().token("guest", {"status"}));
+      if (user) {
+        EXPECT_TRUE(expect.get("accepted")->as_bool());
+        EXPECT_EQ(r.status, 200) << r.body;
+        EXPECT_EQ(parse(r.body).get("type")->as_string(), "ACK") << r.body;
+      } else {
+        EXPECT_EQ(r.status, expect.get("http_status")->as_int()) << r.body;
+        EXPECT_EQ(error_code(r), expect.get("error_code")->as_string()) << r.body;
+      }
+      ++ran;
+    }
+    // L1-RURI-* run in conformance_test (library); L1-INVOKE-003 is an INVOKE_RESULT, which this
+    // node does not send (a skill runs as a COMMAND and is ACKed).
   }
-  EXPECT_EQ(ran, 4);
+  EXPECT_EQ(ran, 6);
 }
 
 TEST_F(RcandTest, WebSocketStreamHandshakePingTelemetryAndCommands) {

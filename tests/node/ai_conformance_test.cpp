@@ -54,14 +54,15 @@ std::string gate_yaml(const std::string& scope, double min, const std::string& o
 }
 
 TEST(Conformance, EveryL2AndL3CaseIsAccountedFor) {
-  // Where each case runs. §19 INVOKE and §21 registry are not part of this node.
+  // Where each case runs. §21 registry cases are rcan-registry's (tests/registry); INVOKE_RESULT
+  // is a message this node sends no skill results in (a skill runs as a COMMAND and is ACKed).
   const std::map<std::string, std::string> where{{"L2-SAFE-001", "here"},
                                                  {"L2-INJECT-001", "here"},
                                                  {"L2-HMAC-001", "here"},
                                                  {"L2-CONF-001", "here"},
                                                  {"L2-CONF-002", "here"},
                                                  {"L2-SAFE-002", "rcand_test RcandDeadman"},
-                                                 {"L2-INVOKE-001", "not implemented (§19)"},
+                                                 {"L2-INVOKE-001", "here"},
                                                  {"L3-AI-001", "here"},
                                                  {"L3-HITL-001", "here"},
                                                  {"L3-HITL-002", "here"},
@@ -70,7 +71,7 @@ TEST(Conformance, EveryL2AndL3CaseIsAccountedFor) {
                                                  {"L3-AI-002", "here"},
                                                  {"L3-REGISTRY-001", "not implemented (§21)"},
                                                  {"L3-REGISTRY-002", "not implemented (§21)"},
-                                                 {"L3-INVOKE-001", "not implemented (§19)"}};
+                                                 {"L3-INVOKE-001", "no INVOKE_RESULT (§19)"}};
   json::Value suite = test::load_vector("rcan-conformance-v1.3.json");
   size_t n = 0;
   for (const char* level : {"L2", "L3"})
@@ -280,6 +281,57 @@ TEST(Conformance, L2_SAFE_001_EstopRejectsCommands) {
   EXPECT_EQ(parse(r.body).get("payload")->get("reason")->as_string(),
             expect(c, "reason").as_string());
   EXPECT_EQ(n.records(id, "COMMAND").size(), 0u);
+}
+
+TEST(Conformance, L2_INVOKE_001_EstopRejectsInvoke) {
+  const json::Value& c = conformance_case("L2-INVOKE-001");
+  test::TempDir dir;
+  AiNode n(dir.path(), "");
+  ASSERT_TRUE(in(c, "device_state").get("estop_active")->as_bool());
+  ASSERT_EQ(n.post("/api/stop", "{}", n.owner()).status, 200);
+  // The suite's INVOKE (payload skill_id + args) by a USER, naming the simulator's own skill
+  // (the suite's navigate.to_waypoint is no skill of the simulator: it is not found at all).
+  json::Object payload = in(c, "payload").as_object();
+  payload.set("skill_id", "scan_environment");
+  const std::string token = n.token("user", {"status", "control"});
+  auto invoke = [&](const std::string& id, const json::Object& p) {
+    return json::dump(json::Value(json::Object{{"version", "1.0.0"},
+                                               {"message_id", id},
+                                               {"type", "INVOKE"},
+                                               {"timestamp_ms", wall_ms()},
+                                               {"payload", p}}));
+  };
+  std::string id = new_uuid_v4();
+  HttpReply r = n.command(token, invoke(id, payload));
+  EXPECT_EQ(r.status, 423) << r.body;
+  EXPECT_EQ(error_code(r), expect(c, "error_code").as_string()) << r.body;
+  EXPECT_EQ(parse(r.body).get("payload")->get("reason")->as_string(),
+            expect(c, "reason").as_string());
+  EXPECT_FALSE(expect(c, "dispatched").as_bool());
+  EXPECT_EQ(n.records(id, "COMMAND").size(), 0u);
+  // The suite's own skill: refused, not found (nothing to dispatch either).
+  std::string other = new_uuid_v4();
+  HttpReply nf = n.command(token, invoke(other, in(c, "payload").as_object()));
+  EXPECT_EQ(nf.status, 404) << nf.body;
+  EXPECT_EQ(parse(nf.body).get("payload")->get("detail")->get("field")->as_string(),
+            "payload.skill_id");
+  EXPECT_EQ(n.records(other, "COMMAND").size(), 0u);
+  // Released, the same INVOKE runs; args that are no object are a schema error.
+  HttpReply resumed = n.command(
+      n.owner(), json::dump(json::Value(json::Object{
+                     {"version", "1.0.0"},
+                     {"message_id", new_uuid_v4()},
+                     {"type", "SAFETY"},
+                     {"timestamp_ms", wall_ms()},
+                     {"payload", json::Object{{"safety_event", "RESUME"}}}})));
+  ASSERT_EQ(resumed.status, 200) << resumed.body;
+  HttpReply ok = n.command(token, invoke(new_uuid_v4(), payload));
+  EXPECT_EQ(ok.status, 200) << ok.body;
+  payload.set("args", "dock-01");
+  HttpReply bad = n.command(token, invoke(new_uuid_v4(), payload));
+  EXPECT_EQ(bad.status, 400) << bad.body;
+  EXPECT_EQ(parse(bad.body).get("payload")->get("detail")->get("field")->as_string(),
+            "payload.args");
 }
 
 TEST(Conformance, L2_INJECT_001_InjectionIsBlockedAndAudited) {

@@ -25,6 +25,7 @@ import sys
 import tempfile
 import threading
 import time
+import uuid
 import urllib.error
 import urllib.request
 
@@ -276,8 +277,10 @@ def main():
         sent = move()
         st, body = post(base, token, sent.to_dict())
         resp = RCANResponse.from_dict(body or {})
-        check(st == 200 and resp.ok and resp.msg_id == sent.msg_id,
-              f"rcan-py RCANResponse.from_dict reads rcand's ACK as ok for its msg_id ({resp.status}, {resp.msg_id})")
+        check(st == 200 and resp.ok and resp.msg_id == sent.msg_id and resp.safety_approved
+              and resp.result.get("applied", {}).get("drive", {}).get("linear_mps") == 0.1,
+              f"rcan-py RCANResponse.from_dict reads rcand's ACK as ok for its msg_id, with the result "
+              f"({resp.status}, {resp.msg_id}, {resp.result})")
 
         signed = sign_message(move(), operator)
         check(signed.to_dict()["sig"]["alg"] == "ml-dsa-65", "rcan-py sign_message wrote an ml-dsa-65 sig block")
@@ -393,6 +396,18 @@ def main():
             check(code_of(a) == "NOT_FOUND", f"WS: INVOKE of an unknown skill is NOT_FOUND ({code_of(a)})")
         finally:
             ws.close()
+
+        # --- A safety refusal as rcan-py reads it (last: the ESTOP stays latched) ----------------
+        st, body = post(base, token, {"version": "1.0.0", "message_id": str(uuid.uuid4()), "type": "SAFETY",
+                                      "timestamp_ms": int(time.time() * 1000), "payload": {"safety_event": "ESTOP"}})
+        check(st == 200 and body.get("type") == "ACK", f"HTTP: ESTOP is ACKed ({st} {code_of(body)})")
+        sent = move()
+        st, body = post(base, token, sent.to_dict())
+        resp = RCANResponse.from_dict(body or {})
+        check(st == 423 and resp.blocked and not resp.safety_approved and resp.safety_reason == "estop_active"
+              and resp.msg_id == sent.msg_id,
+              f"rcan-py RCANResponse.from_dict reads a move during ESTOP as blocked by safety "
+              f"({st} {resp.status} {resp.safety_approved} {resp.safety_reason})")
     except Exception as e:  # an exception is a failure, never a pass
         import traceback
         traceback.print_exc()

@@ -10,12 +10,16 @@
 // the SDK not built (dist/index.mjs).
 
 import { execFileSync, spawn } from 'node:child_process';
-import { generateKeyPairSync, randomBytes } from 'node:crypto';
+import { createHash, generateKeyPairSync, randomBytes, webcrypto } from 'node:crypto';
 import { chmodSync, existsSync, mkdirSync, mkdtempSync, rmSync, writeFileSync } from 'node:fs';
 import net from 'node:net';
 import { tmpdir } from 'node:os';
 import { dirname, join } from 'node:path';
 import { fileURLToPath } from 'node:url';
+
+// Node 18 (Debian 12's nodejs) has no global Web Crypto unless asked; the SDK's ML-DSA library
+// (@noble/post-quantum) draws its key seeds from globalThis.crypto.getRandomValues.
+if (!globalThis.crypto) globalThis.crypto = webcrypto;
 
 const SKIP = 77;
 const here = dirname(fileURLToPath(import.meta.url));
@@ -48,7 +52,7 @@ function ed25519Key() {
   return { seed: Buffer.from(jwk.d, 'base64url'), pub: Buffer.from(jwk.x, 'base64url'), privateKey, publicKey };
 }
 
-async function startRcand(work, operator, operatorEd) {
+async function startRcand(work, operator, operatorEd, peer, peerEd) {
   const data = join(work, 'data');
   mkdirSync(data, { recursive: true, mode: 0o700 });
   execFileSync(cliPath, ['keys', 'generate', '--dir', join(data, 'keys')]);
@@ -60,6 +64,8 @@ async function startRcand(work, operator, operatorEd) {
   execFileSync('openssl', ['pkey', '-in', key, '-pubout', '-out', pub]);
   writeFileSync(join(work, 'operator.mldsa65.pub'), operator.publicKey);
   writeFileSync(join(work, 'operator.ed25519.pub'), operatorEd.pub);
+  writeFileSync(join(work, 'peer.mldsa65.pub'), peer.publicKey);
+  writeFileSync(join(work, 'peer.ed25519.pub'), peerEd.pub);
   const cfg = join(work, 'robot.rcan.yaml');
   writeFileSync(cfg, [
     'rcan_version: "1.2"', `ruri: ${RURI}`,
@@ -68,6 +74,8 @@ async function startRcand(work, operator, operatorEd) {
     'security:', '  jwt:', '    issuers:', '      - issuer: ops.example', `        key_file: ${pub}`,
     '  trusted_signer_keys:',
     `    - {name: operator, mldsa65_pub_file: ${work}/operator.mldsa65.pub, ed25519_pub_file: ${work}/operator.ed25519.pub}`,
+    '  trusted_robot_keys:',
+    `    - {name: peer, mldsa65_pub_file: ${work}/peer.mldsa65.pub, ed25519_pub_file: ${work}/peer.ed25519.pub}`,
     ''].join('\n'));
   const proc = spawn(rcandPath, ['--config', cfg, '--data-dir', data, '--port', '0'], { stdio: ['ignore', 'ignore', 'pipe'] });
   let log = '';
@@ -83,7 +91,9 @@ async function startRcand(work, operator, operatorEd) {
   proc.removeAllListeners('exit');
   const token = execFileSync(cliPath, ['token', 'issue', '--key', key, '--iss', 'ops.example', '--sub', 'operator-1',
     '--role', 'user', '--aud', RURI, '--scope', 'status,control', '--ttl', '1h'], { encoding: 'utf8' }).trim();
-  return { proc, url, token };
+  const ownerToken = execFileSync(cliPath, ['token', 'issue', '--key', key, '--iss', 'ops.example', '--sub', 'auditor',
+    '--role', 'owner', '--aud', RURI, '--scope', 'status', '--ttl', '1h'], { encoding: 'utf8' }).trim();
+  return { proc, url, token, ownerToken };
 }
 
 async function post(base, token, body) {
@@ -183,8 +193,10 @@ async function main() {
     const operatorEd = ed25519Key();
     const stranger = await MLDSAKeyPair.generate();
     const strangerEd = ed25519Key();
-    let base, token;
-    ({ proc, url: base, token } = await startRcand(work, operator, operatorEd));
+    const peer = await MLDSAKeyPair.generate(); // a peer robot's keys (security.trusted_robot_keys)
+    const peerEd = ed25519Key();
+    let base, token, ownerToken;
+    ({ proc, url: base, token, ownerToken } = await startRcand(work, operator, operatorEd, peer, peerEd));
     console.log(`rcand at ${base}`);
 
     // The robot's identity as the SDK writes it, copied from status and the ANNOUNCE answer.
@@ -246,6 +258,32 @@ async function main() {
     check(r.status === 401 && codeOf(r.json) === 'SIGNATURE_INVALID', `HTTP: hybrid with an untrusted Ed25519 key is 401 SIGNATURE_INVALID (${r.status} ${codeOf(r.json)})`);
     r = await post(base, token, await hybridBody(move(), { privateKey: stranger.secretKey, publicKey: stranger.publicKey }));
     check(r.status === 401 && codeOf(r.json) === 'SIGNATURE_INVALID', `HTTP: hybrid with an untrusted ML-DSA-65 key is 401 SIGNATURE_INVALID (${r.status} ${codeOf(r.json)})`);
+
+    // A peer robot's key (security.trusted_robot_keys) verifies the rcan-ts forms too; the audit
+    // record names the robot key that signed (kid: first 8 hex of SHA-256 of the raw public key).
+    const kidOf = (pk) => createHash('sha256').update(pk).digest('hex').slice(0, 8);
+    const recordOf = async (msgId) => {
+      for (let i = 0; i < 50; i++) {
+        const res = await fetch(`${base}/api/audit?limit=1000`, { headers: { Authorization: `Bearer ${ownerToken}` } });
+        const rec = (await res.json()).entries?.find((e) => e.message_id === msgId);
+        if (rec) return rec;
+        await new Promise((res) => setTimeout(res, 100));
+      }
+      return null;
+    };
+    // A robot sender says so and names the human it acts for (§8.5), in rcan-ts's own camelCase.
+    const asRobot = () => move({ senderType: 'robot', delegationChain: [{ issuerRuri: RURI, humanSubject: 'operator-1',
+      timestamp: new Date().toISOString(), scope: 'control', signature: '' }] });
+    r = await post(base, token, (await signMessage(asRobot(), operator)).toJSONString());
+    check(r.status === 401 && codeOf(r.json) === 'AUTH_INVALID', `HTTP: senderType robot signed by an operator's key is 401 AUTH_INVALID (${r.status} ${codeOf(r.json)})`);
+    for (const [form, body] of [['signMessage', (await signMessage(asRobot(), peer)).toJSONString()],
+      ['signBody', await hybridBody(asRobot(), { privateKey: peer.secretKey, publicKey: peer.publicKey }, peerEd)]]) {
+      r = await post(base, token, body);
+      check(r.status === 200 && r.json?.type === 'ACK', `HTTP: ${form} by a trusted robot key is ACKed (${r.status} ${codeOf(r.json)} ${JSON.stringify(r.json?.payload)})`);
+      const rec = r.json?.msg_id ? await recordOf(r.json.msg_id) : null;
+      check(rec?.detail?.sig_kid === kidOf(peer.publicKey) && rec?.sender_type === 'robot',
+        `HTTP: the audit record of the ${form} message names the robot key and a robot sender (${rec?.detail?.sig_kid} ${rec?.sender_type})`);
+    }
 
     // signHybrid (the bytes-level primitive) over canonicalJson, carried in the signBody form.
     const sh = { ...move().toJSON(), pq_signing_pub: Buffer.from(operator.publicKey).toString('base64'), pq_kid: operator.keyId };

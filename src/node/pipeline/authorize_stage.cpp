@@ -74,7 +74,7 @@ class AuthorizeStage final : public Stage {
       return refuse(
           svc_, ctx,
           Error(ErrorCode::kNotFound, "no skill '" + action.substr(0, 64) + "' on this robot",
-                "payload.skill", "unknown_skill"),
+                ctx->skill_field, "unknown_skill"),
           "COMMAND_REJECTED");
     }
     if (!spec) {

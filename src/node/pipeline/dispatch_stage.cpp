@@ -233,7 +233,7 @@ class DispatchStage final : public Stage {
       if (ctx->invoke && err.reason == "unsupported_action")  // a skill this robot does not have
         err = Error(ErrorCode::kNotFound,
                     "this robot does not offer the skill '" + std::string(ctx->action->name) + "'",
-                    "payload.skill", "unknown_skill");
+                    ctx->skill_field, "unknown_skill");
       return refuse(svc_, ctx, err, "COMMAND_REJECTED");
     }
     auto e = accepted_entry(*ctx, "COMMAND");

@@ -65,14 +65,26 @@ class DecodeStage final : public Stage {
       ctx->fleet_command = true;
     }
     if (msg.type == MessageType::kInvoke) {  // a skill invocation runs as a COMMAND
-      const json::Value* skill = msg.payload.find("skill");
+      // The skill is payload.skill (the §19 page, rcan-py) or payload.skill_id with its
+      // arguments in payload.args (the conformance suite's form).
+      const char* skill_key = msg.payload.contains("skill") ? "skill" : "skill_id";
+      const json::Value* skill = msg.payload.find(skill_key);
       if (skill && !skill->is_string()) {
+        const std::string field = std::string("payload.") + skill_key;
         return refuse(svc_, ctx,
-                      Error(ErrorCode::kSchemaValidationFailed, "payload.skill must be a string",
-                            "payload.skill"),
+                      Error(ErrorCode::kSchemaValidationFailed, field + " must be a string", field),
                       "MESSAGE_REJECTED");
       }
       if (skill && msg.action().empty()) msg.payload.set("action", *skill);
+      ctx->skill_field = std::string("payload.") + skill_key;
+      if (const json::Value* args = msg.payload.find("args"); args && !args->is_null()) {
+        if (!args->is_object())
+          return refuse(svc_, ctx,
+                        Error(ErrorCode::kSchemaValidationFailed, "payload.args must be an object",
+                              "payload.args"),
+                        "MESSAGE_REJECTED");
+        if (!msg.payload.contains("params")) msg.payload.set("params", *args);
+      }
       msg.type = MessageType::kCommand;
       ctx->invoke = true;
     }

@@ -67,10 +67,23 @@ std::string token_of(const Context& ctx) {
 
 namespace {
 
+// A refusal by the robot's safety gates (ESTOP latched, re-arm needed, safe stop, lockdown, a
+// limit, prompt injection, the confidence gate, a human's denial): rcan-py's "blocked".
+bool blocked_by_safety(const json::Value& payload) {
+  const std::string code = json::string_field(payload, "error_code");
+  const std::string reason = json::string_field(payload, "reason");
+  if (code == "COMMAND_REJECTED")
+    return reason == "estop_active" || reason == "rearm_required" ||
+           reason == "prompt_injection" || reason == "limit_exceeded";
+  return code == "SAFE_STOP" || code == "LOCKDOWN" || code == "CONFIDENCE_GATE_FAIL" ||
+         code == "HITL_DENIED";
+}
+
 // The answer to an SDK-shaped message (rcan-py / rcan-ts: it has `cmd`) also carries the members
 // rcan-py's RCANResponse.from_dict reads: `msg_id` (the message's id — rcan-ts's derived one —
-// or the id it sent, when refused before decoding) and `status` ("ok", "pending", "error"),
-// plus `message` for an error. The seed's members are unchanged.
+// or the id it sent, when refused before decoding), `status` ("ok", "pending", "error", or
+// "blocked" for a safety refusal, with `safety_approved` false and `safety_reason`), `result`
+// (the command's result) and `message` for an error. The seed's members are unchanged.
 void add_sdk_response_fields(const Context& ctx, json::Value& body) {
   if (!ctx.in.body.is_object() || !ctx.in.body.as_object().contains("cmd")) return;
   if (!body.is_object()) return;
@@ -78,11 +91,22 @@ void add_sdk_response_fields(const Context& ctx, json::Value& body) {
   const std::string type = json::string_field(body, "type");
   std::string id = ctx.msg ? ctx.msg->message_id : json::string_field(ctx.in.body, "msg_id");
   o.set("msg_id", id.substr(0, 128));
+  const json::Value* p = o.find("payload");
   if (type == "ACK") {
     o.set("status", "ok");
+    if (const json::Value* r = p ? p->get("result") : nullptr; r && r->is_object())
+      o.set("result", *r);
   } else if (type == "ERROR") {
     o.set("status", "error");
-    if (const json::Value* p = o.find("payload")) o.set("message", json::string_field(*p, "error"));
+    if (p != nullptr) {
+      o.set("message", json::string_field(*p, "error"));
+      if (blocked_by_safety(*p)) {
+        const std::string reason = json::string_field(*p, "reason");
+        o.set("status", "blocked");
+        o.set("safety_approved", false);
+        o.set("safety_reason", reason.empty() ? json::string_field(*p, "error_code") : reason);
+      }
+    }
   } else if (type == "PENDING_AUTH") {
     o.set("status", "pending");
   }

@@ -83,6 +83,7 @@ struct Context {
   std::string session_id;      // control session the command runs under
   bool fleet_command = false;  // arrived as FLEET_COMMAND (decoded as a COMMAND)
   bool invoke = false;         // arrived as INVOKE (decoded as a COMMAND naming a skill)
+  std::string skill_field = "payload.skill";  // where an INVOKE named its skill
   // The replay stage remembered the message's id: when a §16 escalation runs the layer's
   // command (the same message_id) through the stages again, it is not a replay.
   bool replay_remembered = false;
