@@ -153,6 +153,7 @@ class TimedActuation final : public node::Actuation {
  public:
   explicit TimedActuation(node::SafetyActuation& inner) : inner_(inner) {}
   bool estop_active() const override { return inner_.estop_active(); }
+  uint64_t estop_epoch() const override { return inner_.estop_epoch(); }
   double estop(const std::string& source, const std::string& reason, Role by,
                node::EstopLatchFn on_latch) override {
     double r = inner_.estop(source, reason, by, std::move(on_latch));

@@ -3,6 +3,8 @@
 // commands are refused (423 COMMAND_REJECTED, reason rearm_required, audited) and the robot
 // stays where it stopped — until its holder re-arms with `rearm: true` on a claim or a renewal.
 // A renewal without it, heartbeats and further drives do not re-arm; stops are never refused.
+// A WebSocket stream without a control session follows the same rule: it is armed when it
+// connects, and after an ESTOP its motion commands need one that carries "rearm": true.
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -184,6 +186,72 @@ TEST_F(RearmTest, RearmOnAClaimAndSessionsClaimedAfterTheEstop) {
       200);
   HttpReply ok = post("/rcan/v1/command", drive(0.2, 200), user_);
   EXPECT_EQ(ok.status, 200) << ok.body;
+}
+
+// A stream's answer to the message sent (pushed events skipped): its reason, "" for an ACK.
+std::string answer_reason(test::WsClient& ws, const std::string& msg_id) {
+  for (int i = 0; i < 50; ++i) {
+    auto frame = ws.recv_text(5000);
+    if (!frame) return "no answer";
+    auto v = json::parse(*frame);
+    if (!v.ok()) continue;
+    const json::Value* rt = v->get("reply_to");
+    if (rt == nullptr || !rt->is_string() || rt->as_string() != msg_id) continue;
+    if (v->get("type")->as_string() == "ACK") return "";
+    const json::Value* reason = v->get("payload") ? v->get("payload")->get("reason") : nullptr;
+    return reason && reason->is_string() ? reason->as_string() : "error without a reason";
+  }
+  return "no answer";
+}
+
+TEST_F(RearmTest, AStreamWithoutASessionFromBeforeTheEstopNeedsARearmingCommand) {
+  test::WsClient ws;
+  ASSERT_EQ(ws.connect(d_->port(), "/rcan/v1/stream"), 101);
+  ASSERT_TRUE(ws.send_text("{\"type\":\"CONNECT\",\"token\":\"" + user_ + "\"}"));
+  auto ack = ws.recv_text(5000);
+  ASSERT_TRUE(ack.has_value());
+  ASSERT_NE(ack->find("CONNECT_ACK"), std::string::npos) << *ack;
+  auto send = [&](double linear, bool rearm) {
+    json::Value m = *json::parse(drive(linear, 300));
+    if (rearm) m.as_object().set("rearm", true);
+    const std::string id = m.get("message_id")->as_string();
+    EXPECT_TRUE(ws.send_text(json::dump(m)));
+    return answer_reason(ws, id);
+  };
+  EXPECT_EQ(send(0.3, false), "");  // armed at CONNECT: it drives
+  estop_and_resume();
+  wait_stopped();
+  const double x0 = x();
+  // The stream keeps "holding": every drive is refused and nothing moves.
+  for (int i = 0; i < 3; ++i) EXPECT_EQ(send(0.5, false), "rearm_required");
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_DOUBLE_EQ(x(), x0) << "a refused stream drive moved the robot";
+  // HTTP commands without a session are each their own action: not held by this rule.
+  EXPECT_EQ(post("/rcan/v1/command", drive(0.0, 100), user_).status, 200);
+  // The operator's fresh action re-arms the stream; later drives need no flag.
+  EXPECT_EQ(send(0.4, true), "");
+  EXPECT_EQ(send(0.4, false), "");
+  std::this_thread::sleep_for(std::chrono::milliseconds(400));
+  EXPECT_GT(x(), x0 + 0.01);
+  HttpReply audit =
+      test::http(d_->port(), "GET", "/api/v1/audit?format=jsonl", "", bearer(owner_), 30000);
+  ASSERT_EQ(audit.status, 200);
+  EXPECT_NE(audit.body.find("\"rearm_required\""), std::string::npos);
+  EXPECT_NE(audit.body.find("\"rearmed\":true"), std::string::npos);
+
+  // A stream that connects while the ESTOP is latched is armed after it: it drives after RESUME.
+  ASSERT_EQ(post("/api/stop", "{}", owner_).status, 200);
+  test::WsClient late;
+  ASSERT_EQ(late.connect(d_->port(), "/rcan/v1/stream"), 101);
+  ASSERT_TRUE(late.send_text("{\"type\":\"CONNECT\",\"token\":\"" + user_ + "\"}"));
+  ASSERT_TRUE(late.recv_text(5000).has_value());
+  ASSERT_EQ(
+      post("/rcan/v1/command", message("SAFETY", {{"safety_event", "RESUME"}}), owner_).status,
+      200);
+  json::Value m = *json::parse(drive(0.2, 200));
+  ASSERT_TRUE(late.send_text(json::dump(m)));
+  EXPECT_EQ(answer_reason(late, m.get("message_id")->as_string()), "");
+  EXPECT_EQ(send(0.2, false), "rearm_required");  // the first stream missed this ESTOP too
 }
 
 }  // namespace

@@ -38,6 +38,10 @@ class FakeActuation final : public Actuation {
     std::lock_guard<std::mutex> lock(mu_);
     return latched_;
   }
+  uint64_t estop_epoch() const override {
+    std::lock_guard<std::mutex> lock(mu_);
+    return estops_.size();
+  }
   // The latch is "durable" at once.
   double estop(const std::string& source, const std::string&, Role,
                EstopLatchFn on_latch) override {

@@ -27,6 +27,8 @@ struct StreamState {
   std::string stream_id;
   int64_t opened_mono = 0;
   bool reserve = false;  // opened over the connection limit: SAFETY messages only
+  // The ESTOP epoch this stream is armed at (Ingress::armed_epoch), set at CONNECT.
+  std::shared_ptr<std::atomic<uint64_t>> armed_epoch = std::make_shared<std::atomic<uint64_t>>(0);
 
   Mutex mu;
   bool connected GUARDED_BY(mu) = false;
@@ -109,6 +111,7 @@ void NodeStream::on_text(std::string text) {
       st->connected = true;
       st->principal = *p;
     }
+    st->armed_epoch->store(svc.act.estop_epoch());
     svc.record("STREAM_OPEN").by(*p).message(st->stream_id).detail("transport", "ws").write();
     json::Object ack{{"type", "CONNECT_ACK"},
                      {"session_id", st->stream_id},
@@ -176,6 +179,7 @@ void NodeStream::on_text(std::string text) {
   in.route = "/rcan/v1/stream";
   in.remote = st->sink->remote_addr();
   in.received_mono_us = received_us;
+  in.armed_epoch = st->armed_epoch;
   {
     MutexLock lock(st->mu);
     in.preauthenticated = st->principal;

@@ -139,6 +139,7 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
         return;
       }
       principal_ = *p;
+      armed_epoch_->store(svc.act.estop_epoch());
       svc.record("STREAM_OPEN").by(*p).message(stream_id_).detail("transport", "grpc").write();
       std::weak_ptr<StreamLink> weak = link_;
       event_sub_ = svc.events.subscribe([weak, who = *p](const Event& ev) {
@@ -308,6 +309,7 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
     in.route = kStreamRoute;
     in.remote = ctx_->peer();
     in.preauthenticated = principal_;
+    in.armed_epoch = armed_epoch_;
     {
       MutexLock lock(mu_);
       ++pending_;
@@ -345,6 +347,8 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
   std::string stream_id_;
   std::string bearer_;
   std::optional<Principal> principal_;
+  // The ESTOP epoch this stream is armed at (Ingress::armed_epoch), set when it authenticates.
+  std::shared_ptr<std::atomic<uint64_t>> armed_epoch_ = std::make_shared<std::atomic<uint64_t>>(0);
   uint64_t event_sub_ = 0;
   uint64_t revocation_sub_ = 0;
   RCANMessage in_;

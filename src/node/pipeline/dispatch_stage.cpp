@@ -237,6 +237,22 @@ class DispatchStage final : public Stage {
       return refuse(svc_, ctx, err, "COMMAND_REJECTED");
     }
     auto e = accepted_entry(*ctx, "COMMAND");
+    if (prepared->command && ctx->session_id.empty() && ctx->in.armed_epoch) {
+      // A stream that connected before the last ESTOP moves the robot again only by a fresh
+      // operator action: a command that says "rearm": true (a control session has its own rule,
+      // in the safety core). docs/NODE.md, "Re-arm after ESTOP".
+      const uint64_t epoch = svc_.act.estop_epoch();
+      if (json::bool_field(ctx->in.body, "rearm")) {
+        if (ctx->in.armed_epoch->exchange(epoch) < epoch) e.detail.set("rearmed", true);
+      } else if (ctx->in.armed_epoch->load() < epoch) {
+        return refuse(svc_, ctx,
+                      Error(ErrorCode::kCommandRejected,
+                            "an ESTOP latched since this stream connected; send the next motion "
+                            "command with \"rearm\": true (a fresh operator action) to drive again",
+                            "rearm", "rearm_required"),
+                      "COMMAND_REJECTED");
+      }
+    }
     if (prepared->clamped) {
       e.detail.set("clamped", prepared->clamp_note);
     }

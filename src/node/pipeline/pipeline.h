@@ -17,6 +17,7 @@
 #include <chrono>
 #include <cstdint>
 #include <functional>
+#include <atomic>
 #include <memory>
 #include <optional>
 #include <string>
@@ -54,6 +55,10 @@ struct Ingress {
   // A shared channel (MQTT): the token must be bound to a key (cnf) and the message signed by
   // it, or a reader of the channel could send messages of their own with a copied token.
   bool require_bound_key = false;
+  // A stream (WebSocket, gRPC): the ESTOP epoch it is armed at, set at CONNECT. A motion command
+  // on it without a control session is refused (rearm_required) once an ESTOP has latched since,
+  // until one carries "rearm": true (docs/NODE.md, "Re-arm after ESTOP"). Null: HTTP, MQTT.
+  std::shared_ptr<std::atomic<uint64_t>> armed_epoch;
   int64_t received_mono_us = 0;  // steady clock at arrival (transport read done); 0: at submit
 };
 

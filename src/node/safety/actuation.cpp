@@ -137,6 +137,7 @@ SafetyActuation::SafetyActuation(SafetyCore& core, std::string robot_name)
     : core_(core), robot_name_(std::move(robot_name)) {}
 
 bool SafetyActuation::estop_active() const { return core_.estop_active(); }
+uint64_t SafetyActuation::estop_epoch() const { return core_.estop_epoch(); }
 
 double SafetyActuation::estop(const std::string& source, const std::string& reason, Role by,
                               EstopLatchFn on_latch) {

@@ -37,6 +37,9 @@ class Actuation {
  public:
   virtual ~Actuation() = default;
   virtual bool estop_active() const = 0;
+  // How many times ESTOP has latched (SafetyCore::estop_epoch): a channel armed at an older
+  // epoch needs a fresh operator action before it moves the robot again.
+  virtual uint64_t estop_epoch() const = 0;
   // Latches ESTOP and stops the actuators now. Returns the microseconds from the call to
   // the driver's stop. Then `on_latch` is called exactly once, without blocking anyone (on
   // another thread, or before estop() returns): durable, once the latch is in its state file;

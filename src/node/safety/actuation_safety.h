@@ -20,6 +20,7 @@ class SafetyActuation final : public Actuation {
   SafetyActuation(SafetyCore& core, std::string robot_name);
 
   bool estop_active() const override;
+  uint64_t estop_epoch() const override;
   double estop(const std::string& source, const std::string& reason, Role by,
                EstopLatchFn on_latch) override;
   Status resume(Role role, const std::string& source) override;
