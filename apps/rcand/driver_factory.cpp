@@ -1,5 +1,7 @@
 #include "driver_factory.h"
 
+#include <numbers>
+
 #include "base/log.h"
 #include "drivers/process/process_driver.h"
 #include "drivers/ros2/ros2_driver.h"
@@ -24,6 +26,17 @@ drivers::ProcessDriverOptions process_options(const config::ProcessDriverConfig&
   i.linear_accel_mps2 = p.linear_accel_mps2;
   i.brake_decel_mps2 = p.brake_decel_mps2;
   i.capabilities = {"status", "teleop", "navigation"};
+  i.has_arm = p.arm_joints > 0;
+  i.arm_joints = static_cast<int>(p.arm_joints);
+  i.max_joint_speed_radps = p.max_joint_speed_radps;
+  for (int j = 0; j < node::kArmJoints; ++j) {
+    const auto at = static_cast<size_t>(j);
+    i.joint_min_rad[at] = at < p.joint_min_rad.size() ? p.joint_min_rad[at] : -std::numbers::pi;
+    i.joint_max_rad[at] = at < p.joint_max_rad.size() ? p.joint_max_rad[at] : std::numbers::pi;
+  }
+  if (i.has_arm) i.capabilities.push_back("arm");
+  i.has_gripper = p.gripper;
+  if (i.has_gripper) i.capabilities.push_back("gripper");
   return o;
 }
 

@@ -660,6 +660,16 @@ TEST(ConfigBlockKeys, DriverProcess) {
   EXPECT_EQ(p.restart_backoff_max_ms, 2000u);
   EXPECT_DOUBLE_EQ(p.max_linear_mps, 0.8);
   EXPECT_DOUBLE_EQ(p.brake_decel_mps2, 2.0);
+  EXPECT_EQ(p.arm_joints, 0u);  // a base only, unless told
+  EXPECT_FALSE(p.gripper);
+  auto arm = parse(
+      "driver: {type: process, process: {command: [drv], arm_joints: 4, max_joint_speed_radps: "
+      "0.5, joint_min_rad: [-1, -2], joint_max_rad: [1, 2], gripper: true}}\n");
+  ASSERT_TRUE(arm.ok()) << arm.error().message;
+  EXPECT_EQ(arm->driver.process.arm_joints, 4u);
+  EXPECT_DOUBLE_EQ(arm->driver.process.max_joint_speed_radps, 0.5);
+  EXPECT_EQ(arm->driver.process.joint_max_rad, (std::vector<double>{1, 2}));
+  EXPECT_TRUE(arm->driver.process.gripper);
   auto s = parse("driver: {type: process, process: {socket: run/drv.sock}}\n");
   ASSERT_TRUE(s.ok()) << s.error().message;
   EXPECT_EQ(s->driver.process.socket, "/etc/rcand/run/drv.sock");  // relative to the file
@@ -672,6 +682,11 @@ TEST(ConfigBlockKeys, DriverProcess) {
       {"driver: {process: {restart_backoff_ms: 500, restart_backoff_max_ms: 100}}\n",
        "driver.process.restart_backoff_max_ms", "out_of_range",
        "must not be below restart_backoff_ms"},
+      {"driver: {process: {arm_joints: 7}}\n", "driver.process.arm_joints", "out_of_range", ""},
+      {"driver: {process: {arm_joints: 2, joint_min_rad: [0, 1], joint_max_rad: [1, 1]}}\n",
+       "driver.process.joint_max_rad[1]", "invalid_value", "must be above joint_min_rad"},
+      {"driver: {process: {joint_max_rad: [1]}}\n", "driver.process.arm_joints", "invalid_value",
+       "joint ranges need an arm"},
   };
   for (const Rule& rule : rules) expect_rule(rule);
 }

@@ -8,6 +8,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <fstream>
 #include <functional>
 #include <string>
 #include <thread>
@@ -187,6 +188,85 @@ TEST(ProcessDriverE2E, SilenceLatchesEstopWithEstopOnDriverFault) {
   ASSERT_TRUE(eventually([&] { return count_events(node, owner, "DRIVER_FAULT") >= 1; }, 8000));
   EXPECT_TRUE(status(node, owner).get("estop_active")->as_bool());
   EXPECT_TRUE(node.proc().wait_for_line("no heartbeat", 1000).has_value());
+}
+
+// The frames the fake driver received (its --record file), one JSON object each.
+std::vector<json::Value> recorded(const std::string& path) {
+  std::vector<json::Value> out;
+  std::ifstream in(path);
+  for (std::string line; std::getline(in, line);)
+    if (auto v = json::parse(line); v.ok()) out.push_back(std::move(v).value());
+  return out;
+}
+
+// The last apply frame's command member carrying `key` ("arm", "gripper"), or null.
+json::Value last_apply(const std::string& path, const char* key) {
+  json::Value found;
+  for (const auto& f : recorded(path)) {
+    const json::Value* type = f.get("type");
+    const json::Value* cmd = f.get("command");
+    if (type && type->is_string() && type->as_string() == "apply" && cmd && cmd->get(key))
+      found = *cmd->get(key);
+  }
+  return found;
+}
+
+TEST(ProcessDriverE2E, AnArmAndAGripperBehindTheProcessGetLimitedCommands) {
+  TempDir rec;
+  const std::string frames = rec.path() + "/frames.jsonl";
+  ConfiguredNode node(
+      "", 2000, false, "",
+      driver_block("[\"python3\", \"" + kFake + "\", \"good\", \"--record\", \"" + frames + "\"]",
+                   "    arm_joints: 6\n    max_joint_speed_radps: 0.5\n"
+                   "    joint_min_rad: [-1.0, -1.0, -1.0, -1.0, -1.0, -1.0]\n"
+                   "    joint_max_rad: [1.0, 1.0, 1.0, 1.0, 1.0, 1.0]\n    gripper: true\n"));
+  const std::string owner = node.token("owner", {"control", "status", "safety"}, "alice");
+  ASSERT_GT(driver_pid(node, "driver_process_started"), 0);
+  // An arm move outside the joint range and over the joint speed reaches the process limited.
+  HttpReply r = node.post("/rcan/v1/command",
+                          command_json("arm_move", {{"joints", json::Array{0.2, 3.0, -2.0, 0, 0, 0}},
+                                                    {"max_joint_speed_radps", 2.0}}),
+                          owner);
+  ASSERT_EQ(r.status, 200) << r.body;
+  EXPECT_NE(r.body.find("joint_max_rad"), std::string::npos) << r.body;  // the clamp is named
+  json::Value arm;
+  ASSERT_TRUE(eventually(
+      [&] {
+        arm = last_apply(frames, "arm");
+        return !arm.is_null();
+      },
+      3000));
+  const json::Value* targets = arm.get("targets_rad");
+  ASSERT_NE(targets, nullptr) << json::dump(arm);
+  ASSERT_EQ(targets->as_array().size(), 6u);
+  EXPECT_DOUBLE_EQ(targets->as_array()[0].to_double(), 0.2);
+  EXPECT_DOUBLE_EQ(targets->as_array()[1].to_double(), 1.0);
+  EXPECT_DOUBLE_EQ(targets->as_array()[2].to_double(), -1.0);
+  EXPECT_LE(arm.get("max_joint_speed_radps")->to_double(), 0.5);
+  // The gripper.
+  r = node.post("/rcan/v1/command", command_json("gripper_close", {}), owner);
+  ASSERT_EQ(r.status, 200) << r.body;
+  json::Value grip;
+  ASSERT_TRUE(eventually(
+      [&] {
+        grip = last_apply(frames, "gripper");
+        return !grip.is_null();
+      },
+      3000));
+  EXPECT_EQ(json::dump(grip), "\"close\"");
+}
+
+TEST(ProcessDriverE2E, WithoutAnArmConfiguredArmCommandsAreRefused) {
+  ConfiguredNode node("", 2000, false, "",
+                      driver_block("[\"python3\", \"" + kFake + "\", \"good\"]"));
+  const std::string owner = node.token("owner", {"control", "status", "safety"}, "alice");
+  ASSERT_GT(driver_pid(node, "driver_process_started"), 0);
+  HttpReply r = node.post("/rcan/v1/command",
+                          command_json("arm_move", {{"joints", json::Array{0.2, 0, 0, 0, 0, 0}}}),
+                          owner);
+  EXPECT_EQ(r.status, 422) << r.body;
+  r = node.post("/rcan/v1/command", command_json("gripper_open", {}), owner);
+  EXPECT_EQ(r.status, 422) << r.body;
 }
 
 }  // namespace

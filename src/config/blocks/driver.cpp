@@ -41,7 +41,18 @@ Table<ProcessDriverConfig> process_rows() {
       P::field("max_angular_radps", Pos(), &ProcessDriverConfig::max_angular_radps),
       P::field("linear_accel_mps2", NonNeg(), &ProcessDriverConfig::linear_accel_mps2),
       P::field("brake_decel_mps2", NonNeg(), &ProcessDriverConfig::brake_decel_mps2),
+      P::field("arm_joints", Int(0, 6), &ProcessDriverConfig::arm_joints),
+      P::field("max_joint_speed_radps", Pos(), &ProcessDriverConfig::max_joint_speed_radps),
+      P::field("joint_min_rad", Arr(Num(), 6), &ProcessDriverConfig::joint_min_rad),
+      P::field("joint_max_rad", Arr(Num(), 6), &ProcessDriverConfig::joint_max_rad),
+      P::field("gripper", Bool(), &ProcessDriverConfig::gripper),
       P::check([](const At& at, ProcessDriverConfig& p, Ctx&) {
+        for (size_t i = 0; i < p.joint_min_rad.size() && i < p.joint_max_rad.size(); ++i)
+          if (!(p.joint_min_rad[i] < p.joint_max_rad[i]))
+            fail(at["joint_max_rad"][i].path, "must be above joint_min_rad", "invalid_value");
+        if (p.arm_joints == 0 && (!p.joint_min_rad.empty() || !p.joint_max_rad.empty()))
+          fail(at["arm_joints"].path, "joint ranges need an arm (arm_joints 1..6)",
+               "invalid_value");
         if (p.heartbeat_timeout_ms <= p.heartbeat_ms)
           fail(at["heartbeat_timeout_ms"].path, "must exceed heartbeat_ms", "out_of_range");
         if (p.restart_backoff_max_ms < p.restart_backoff_ms)
