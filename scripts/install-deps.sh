@@ -15,7 +15,7 @@ PKGS=(
   libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
   libgtest-dev libgmock-dev googletest libbenchmark-dev
   clang-14 libclang-rt-14-dev clang-format
-  python3 curl python3-grpcio python3-protobuf python3-cryptography
+  python3 curl python3-grpcio python3-protobuf python3-cryptography python3-httpx
   chromium fonts-dejavu-core nodejs
   avahi-daemon dbus libavahi-client-dev iproute2
   faketime e2fsprogs

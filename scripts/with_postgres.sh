@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs a command beside a PostgreSQL server of its own: a fresh cluster (initdb) in a temporary
-# directory, listening on a free loopback port, with an empty database; the command gets its
-# URL in RCAN_REGISTRY_DATABASE (postgresql://rcan@127.0.0.1:<port>/<db>). The server and its
+# directory, listening on a free loopback port, with empty databases; the command gets their
+# URLs in RCAN_REGISTRY_DATABASE (postgresql://rcan@127.0.0.1:<port>/<db>) and
+# RCAN_REGISTRY_DATABASE_2…_4. The server and its
 # files are removed afterwards; the command's exit status is returned.
 # PostgreSQL refuses to run as root: under root the server runs as the `postgres` user.
 #
@@ -31,6 +32,13 @@ for _ in $(seq 1 300); do
   sleep 0.1
 done
 [ -n "$ready" ] || { cat "$WORK/pg.log" >&2; exit 1; }
-"$BIN/psql" "host=127.0.0.1 port=$PORT user=rcan dbname=postgres" -qc "CREATE DATABASE rcan" || exit 1
+for db in rcan rcan_2 rcan_3 rcan_4; do
+  "$BIN/psql" "host=127.0.0.1 port=$PORT user=rcan dbname=postgres" -qc "CREATE DATABASE $db" || exit 1
+done
 export RCAN_REGISTRY_DATABASE="postgresql://rcan@127.0.0.1:$PORT/rcan"
+# Three more empty databases on the same server, for tests that run several registries at once
+# (a federation's root and its delegated node each have a database of their own).
+export RCAN_REGISTRY_DATABASE_2="postgresql://rcan@127.0.0.1:$PORT/rcan_2"
+export RCAN_REGISTRY_DATABASE_3="postgresql://rcan@127.0.0.1:$PORT/rcan_3"
+export RCAN_REGISTRY_DATABASE_4="postgresql://rcan@127.0.0.1:$PORT/rcan_4"
 "$@"

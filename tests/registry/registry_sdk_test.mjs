@@ -16,6 +16,12 @@ const SKIP = 77;
 const here = dirname(fileURLToPath(import.meta.url));
 const sdkDist = join(here, '..', 'peers', 'rcan-ts-3.4.2', 'dist', 'index.mjs');
 const REGISTRY = process.env.RCAN_REGISTRY_PATH ?? '';
+// With RCAN_REGISTRY_DATABASE (scripts/with_postgres.sh sets it and _2…_4) every registry of the
+// test runs on a PostgreSQL database of its own; without it, on SQLite.
+const onDatabase = (suffix = '') => {
+  const url = process.env[`RCAN_REGISTRY_DATABASE${suffix}`] ?? '';
+  return url ? ['--database', url] : [];
+};
 function skip(why) {
   console.log(`SKIP: ${why}`);
   process.exit(SKIP);
@@ -126,8 +132,8 @@ async function nodeClient(reg, rrn) {
 // A root delegating BD to a second rcan-registry (--prefix BD): resolve at the root follows
 // the root's 307 to the authoritative node.
 async function federation() {
-  const bd = await start(['--prefix', 'BD']);
-  const root = await start(['--allow-http-node-urls']);
+  const bd = await start(['--prefix', 'BD', ...onDatabase('_2')]);
+  const root = await start(['--allow-http-node-urls', ...onDatabase('_3')]);
   try {
     const made = await post(bd, '/api/v1/robots', { manufacturer: 'bd', model: 'spot', version: 'v1', device_id: 'f-1' }, bd.admin);
     check(made.status === 201 && made.body.rrn.startsWith('RRN-BD-'), 'the BD node mints RRN-BD-…');
@@ -149,12 +155,10 @@ try {
 } catch (e) {
   check(false, `federation: ${e.stack ?? e}`);
 }
-// With RCAN_REGISTRY_DATABASE (scripts/with_postgres.sh sets it) the registry the clients work
-// against runs on that database (PostgreSQL); the others stay on SQLite.
 const database = process.env.RCAN_REGISTRY_DATABASE ?? '';
-const insecure = await start(database ? ['--database', database] : []);
+const insecure = await start(onDatabase());
 console.log(`registry database: ${database ? 'PostgreSQL' : 'SQLite'}`);
-const secure = await start(['--public-url', 'https://registry.example']);
+const secure = await start(['--public-url', 'https://registry.example', ...onDatabase('_4')]);
 try {
   await registryClient(insecure);
   const r = await post(secure, '/api/v1/robots', { manufacturer: 'acme', model: 'arm', version: 'v2', device_id: 'n-1' }, secure.admin);

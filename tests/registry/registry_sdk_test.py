@@ -2,12 +2,14 @@
 
 NodeClient (urllib): manifest, verify_node (an http:// api_base fails it, --public-url https://…
 passes), nodes, discover, resolve; the manifest's Ed25519 signature checked with `cryptography`.
-RegistryClient needs httpx: when python3 has it, register/get/list/search/update run through it;
-otherwise that part is reported as skipped (rcan-ts's RegistryClient covers it,
-registry_sdk_test.mjs).
+RegistryClient needs httpx: register/get/list/search/update run through it. scripts/install-deps.sh
+installs Debian's python3-httpx; a python3 without httpx of its own (a pyenv build) takes that
+one, pure Python, from Debian's dist-packages, after its own packages. No httpx at all is a
+failure, not a skip.
 
 With RCAN_REGISTRY_DATABASE (scripts/with_postgres.sh sets it) the registry the clients work
-against runs on that database (PostgreSQL); the federation nodes stay on SQLite.
+against runs on that database (PostgreSQL), and the federation's two nodes and the https://
+instance on RCAN_REGISTRY_DATABASE_2…_4: every check runs on SQLite and on PostgreSQL.
 
 Exit 0 pass, 1 fail, 77 skip (CTest SKIP_RETURN_CODE): RCAN_REGISTRY_PATH missing.
 """
@@ -136,8 +138,15 @@ def registry_client_checks(reg):
     try:
         import httpx  # noqa: F401
     except ImportError:
-        print("skip RegistryClient: python3 has no httpx (rcan-ts's RegistryClient covers it)")
-        return
+        debian = os.path.join(os.sep, "usr", "lib", "python3", "dist-packages")  # python3-httpx
+        if os.path.isdir(os.path.join(debian, "httpx")):
+            sys.path.append(debian)  # after this python's own packages: theirs win
+        try:
+            import httpx  # noqa: F401,F811
+        except ImportError as e:
+            check(False, f"RegistryClient needs httpx (scripts/install-deps.sh installs python3-httpx): {e}")
+            return
+    print(f"RegistryClient over httpx {httpx.__version__}")
     import asyncio
 
     from rcan.registry import RegistryClient
@@ -160,11 +169,17 @@ def registry_client_checks(reg):
     asyncio.run(run())
 
 
+def on_database(suffix=""):
+    """--database URL for one registry instance when the test runs on PostgreSQL."""
+    url = os.environ.get("RCAN_REGISTRY_DATABASE" + suffix, "")
+    return ["--database", url] if url else []
+
+
 def federation_checks():
     """A root node delegating BD to a second rcan-registry (--prefix BD): NodeClient.resolve at
     the root follows the root's 307 to the authoritative node."""
-    bd = Registry("--prefix", "BD")
-    root = Registry("--allow-http-node-urls")
+    bd = Registry("--prefix", "BD", *on_database("_2"))
+    root = Registry("--allow-http-node-urls", *on_database("_3"))
     try:
         status, made = bd.call("POST", "/api/v1/robots", {
             "manufacturer": "bd", "model": "spot", "version": "v1", "device_id": "f-1"}, bd.admin)
@@ -190,14 +205,14 @@ def federation_checks():
 def main():
     federation_checks()
     database = os.environ.get("RCAN_REGISTRY_DATABASE", "")
-    reg = Registry(*(["--database", database] if database else []))
+    reg = Registry(*on_database())
     print("registry database: " + (database.split("@")[0] + "@…" if database else "SQLite"))
     try:
         node_client_checks(reg)
         registry_client_checks(reg)
     finally:
         reg.stop()
-    secure = Registry("--public-url", "https://registry.example")
+    secure = Registry("--public-url", "https://registry.example", *on_database("_4"))
     try:
         nc = NodeClient(root_url=secure.url, timeout=5)
         manifest = nc.get_node_manifest(secure.url)
