@@ -9,4 +9,4 @@ target_link_libraries(rcan_registry PUBLIC rcan_registry_store rcan_transport rc
 file(GLOB RCAN_REGISTRY_APP_SOURCES CONFIGURE_DEPENDS ${PROJECT_SOURCE_DIR}/apps/rcan-registry/*.cpp)
 add_executable(rcan-registry ${RCAN_REGISTRY_APP_SOURCES})
 set_target_properties(rcan-registry PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${PROJECT_BINARY_DIR}/bin)
-target_link_libraries(rcan-registry PRIVATE rcan_registry rcan_warnings)
+target_link_libraries(rcan-registry PRIVATE rcan_registry yaml-cpp rcan_warnings)

@@ -4,6 +4,7 @@
 #include <pwd.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <yaml-cpp/yaml.h>
 
 #include <algorithm>
 #include <charconv>
@@ -24,7 +25,8 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr const char* kUsage =
-    "usage: rcan-registry [--port N] [--bind ADDR] [--data-dir DIR] [--database SPEC]\n"
+    "usage: rcan-registry [--config FILE] [--port N] [--bind ADDR] [--data-dir DIR]\n"
+    "                     [--database SPEC]\n"
     "                     [--public-url URL] [--host NAME] [--prefix P] [--operator NAME]\n"
     "                     [--contact EMAIL] [--write-rate R] [--write-burst B]\n"
     "                     [--address-write-rate R] [--read-rate R] [--io-threads N]\n"
@@ -37,6 +39,10 @@ constexpr const char* kUsage =
     "An RCAN robot registry (docs/REGISTRY.md): robots and their RRNs, resolve, federation\n"
     "nodes and the signed node manifest, compatible with rcan.dev and the official SDKs.\n"
     "\n"
+    "  --config FILE       a YAML file whose keys are these flags' names without the\n"
+    "                      dashes (port: 8090, data-dir: /var/lib/rcan-registry,\n"
+    "                      sync-from: [URL, …], allow-http-node-urls: true); flags given\n"
+    "                      on the command line win; relative paths are the file's\n"
     "  --port N            TCP port (default 8090; 0 = any free port)\n"
     "  --bind ADDR         listen address (default 127.0.0.1)\n"
     "  --data-dir DIR      keys, audit log and the SQLite database (default\n"
@@ -72,19 +78,107 @@ bool parse_number(const std::string& s, double& out) {
   return !s.empty() && end == s.c_str() + s.size() && out >= 0;
 }
 
+std::optional<Flags> parse_args(const std::vector<std::string>& args, int& exit_code);
+
+// Flags that take no value (true in a config file).
+bool is_switch(const std::string& flag) {
+  return flag == "--allow-http-node-urls" || flag == "--sync-delegations";
+}
+
+// A YAML scalar as the flag's value; a relative path (data-dir, a SQLite database) is the
+// config file's.
+std::string config_value(const std::string& key, const std::string& v, const fs::path& dir) {
+  const bool path = key == "data-dir" || (key == "database" && v.rfind("postgresql://", 0) != 0 &&
+                                          v.rfind("postgres://", 0) != 0);
+  if (path && !v.empty() && fs::path(v).is_relative()) return (dir / v).lexically_normal().string();
+  return v;
+}
+
+// --config FILE: the file's keys become flags (before the command line's, which win). Errors
+// name the file and the key.
+Result<std::vector<std::string>> config_args(const std::string& file) {
+  auto bad = [&](const std::string& what) {
+    return Error(ErrorCode::kSchemaValidationFailed, file + ": " + what);
+  };
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(file);
+  } catch (const YAML::BadFile&) {
+    return bad("cannot be read");
+  } catch (const YAML::Exception& e) {
+    return bad(std::string("not valid YAML (") + e.what() + ")");
+  }
+  std::vector<std::string> out;
+  if (root.IsNull()) return out;
+  if (!root.IsMap()) return bad("must be a mapping of flag names to values");
+  const fs::path dir = fs::absolute(fs::path(file)).parent_path();
+  for (const auto& kv : root) {
+    if (!kv.first.IsScalar()) return bad("keys must be flag names");
+    const std::string key = kv.first.Scalar();
+    const std::string flag = "--" + key;
+    if (key == "config" || key == "help" || key.empty() ||
+        key.find_first_of(" =") != std::string::npos)
+      return bad("'" + key + "' is not a setting");
+    const YAML::Node& v = kv.second;
+    if (is_switch(flag)) {
+      if (!v.IsScalar() || (v.Scalar() != "true" && v.Scalar() != "false"))
+        return bad("'" + key + "' must be true or false");
+      if (v.Scalar() == "true") out.push_back(flag);
+    } else if (v.IsSequence() && key == "sync-from") {
+      for (const auto& item : v) {
+        if (!item.IsScalar()) return bad("'sync-from' must be a list of URLs");
+        out.push_back(flag);
+        out.push_back(item.Scalar());
+      }
+    } else if (v.IsScalar()) {
+      out.push_back(flag);
+      out.push_back(config_value(key, v.Scalar(), dir));
+    } else {
+      return bad("'" + key + "' must be a single value");
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 std::optional<Flags> parse_flags(int argc, char** argv, int& exit_code) {
-  Flags f;
   exit_code = 2;
-  for (int i = 1; i < argc; ++i) {
-    std::string s = argv[i];
+  std::vector<std::string> args;
+  std::vector<std::string> given(argv + 1, argv + argc);
+  for (size_t i = 0; i < given.size(); ++i) {
+    if (given[i] != "--config") continue;
+    if (i + 1 >= given.size()) {
+      std::fprintf(stderr, "rcan-registry: --config needs a value\n");
+      return std::nullopt;
+    }
+    auto from_file = config_args(given[i + 1]);
+    if (!from_file.ok()) {
+      std::fprintf(stderr, "rcan-registry: %s\n", from_file.error().message.c_str());
+      return std::nullopt;
+    }
+    args.insert(args.end(), from_file->begin(), from_file->end());
+    given.erase(given.begin() + static_cast<std::ptrdiff_t>(i),
+                given.begin() + static_cast<std::ptrdiff_t>(i) + 2);
+    --i;
+  }
+  args.insert(args.end(), given.begin(), given.end());
+  return parse_args(args, exit_code);
+}
+
+namespace {
+
+std::optional<Flags> parse_args(const std::vector<std::string>& args, int& exit_code) {
+  Flags f;
+  const size_t argc = args.size();
+  for (size_t i = 0; i < argc; ++i) {
+    std::string s = args[i];
     auto value = [&](std::string& out) {
       if (i + 1 >= argc) {
         std::fprintf(stderr, "rcan-registry: %s needs a value\n", s.c_str());
         return false;
       }
-      out = argv[++i];
+      out = args[++i];
       return true;
     };
     std::string v;
@@ -156,6 +250,8 @@ std::optional<Flags> parse_flags(int argc, char** argv, int& exit_code) {
   }
   return f;
 }
+
+}  // namespace
 
 Result<std::string> default_data_dir() {
   return user_data_dir("rcan-registry", "RCAN_REGISTRY_DATA_DIR");

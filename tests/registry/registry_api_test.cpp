@@ -5,6 +5,7 @@
 #include <sys/stat.h>
 
 #include <filesystem>
+#include <fstream>
 #include <thread>
 
 #include "postgres.h"
@@ -540,6 +541,41 @@ TEST(RegistryApi, FlagsHelpAndTheDefaultDataDirectory) {
   EXPECT_EQ(mode_of(dir), 0700u);
   EXPECT_EQ(mode_of(dir + "/admin.key"), 0600u);
   EXPECT_EQ(p.stop(SIGTERM, 10000), 0);
+}
+
+TEST(RegistryApi, AConfigFileSetsTheFlagsAndTheCommandLineWins) {
+  TempDir cfg;
+  const std::string file = cfg.path() + "/registry.yaml";
+  std::ofstream(file) << "port: 1\ndata-dir: state\nread-rate: 500\noperator: Acme robots\n"
+                         "allow-http-node-urls: true\nsync-from: []\n";
+  Process p;
+  // --port on the command line wins over the file's port 1; data-dir is the file's, relative
+  // to the file.
+  ASSERT_TRUE(p.start({RCAN_REGISTRY_PATH, "--config", file, "--port", "0"}));
+  auto line = p.wait_for_line("\"event\":\"listening\"", 30000);
+  ASSERT_TRUE(line) << p.err();
+  EXPECT_NE(line->find(cfg.path() + "/state"), std::string::npos) << *line;
+  EXPECT_EQ(mode_of(cfg.path() + "/state/admin.key"), 0600u);
+  EXPECT_EQ(p.stop(SIGTERM, 10000), 0);
+  // Bad files are refused with the file and the key named (exit 2), never half-applied.
+  const std::pair<std::string, std::string> bad[] = {
+      {"bogus: 1\n", "unknown argument '--bogus'"},
+      {"port: [1, 2]\n", "'port' must be a single value"},
+      {"allow-http-node-urls: maybe\n", "must be true or false"},
+      {"config: other.yaml\n", "'config' is not a setting"},
+      {"port: 70000\n", "--port must be 0..65535"},
+      {"- port\n", "must be a mapping"},
+      {"port: [\n", "not valid YAML"},
+  };
+  for (const auto& [text, message] : bad) {
+    std::ofstream(file, std::ios::trunc) << text;
+    auto r = run({RCAN_REGISTRY_PATH, "--config", file});
+    EXPECT_EQ(r.exit_code, 2) << text;
+    EXPECT_NE(r.err.find(message), std::string::npos) << text << " -> " << r.err;
+  }
+  auto missing = run({RCAN_REGISTRY_PATH, "--config", cfg.path() + "/none.yaml"});
+  EXPECT_EQ(missing.exit_code, 2);
+  EXPECT_NE(missing.err.find("cannot be read"), std::string::npos) << missing.err;
 }
 
 }  // namespace
