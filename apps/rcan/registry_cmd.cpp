@@ -36,6 +36,9 @@ constexpr const char* kUsage =
     "      A robot that registered its keys signs its updates with them (--keys-dir).\n"
     "  nodes [--prefix P] | manifest\n"
     "  keys create [--role registrant|admin] [--label L] [--save F] | keys list | keys revoke ID\n"
+    "  device approve CODE | device deny CODE\n"
+    "      Decides a device-flow request (rcan login on another machine shows the code): the\n"
+    "      token is issued for your key's grants on the robot or fleet it asked for.\n"
     "The registry: --registry URL, else $RCAN_REGISTRY, else http://127.0.0.1:8090. The API\n"
     "key: --key-file F, else $RCAN_REGISTRY_KEY_FILE (rcan-registry writes its admin key to\n"
     "<data-dir>/admin.key). Exit: 0 success, 1 refused by the registry, 2 usage, 3 unreachable.\n";
@@ -270,7 +273,8 @@ int registry_main(const Args& args) {
   if (pos.empty()) return usage_error("registry", "which command? (rcan registry --help)");
   const std::string& sub = pos[0];
   const std::string base = registry_url(o);
-  const bool writes = sub == "register" || sub == "update" || sub == "delete" || sub == "keys";
+  const bool writes =
+      sub == "register" || sub == "update" || sub == "delete" || sub == "keys" || sub == "device";
   std::string err;
   const std::string key = api_key(o, writes, err);
   if (!err.empty()) return usage_error("registry", err);
@@ -285,6 +289,14 @@ int registry_main(const Args& args) {
   std::string rrn;
   if (sub == "register") return do_register(o, base, key);
   if (sub == "keys") return do_keys(o, base, key);
+  if (sub == "device") {
+    const std::string decision = pos.size() > 1 ? pos[1] : "";
+    if ((decision != "approve" && decision != "deny") || pos.size() < 3)
+      return usage_error("registry", "device approve CODE | device deny CODE");
+    json::Object body{{"user_code", pos[2]}, {"decision", decision}};
+    return report("registry", call(base, "POST", "/api/v1/device/approve",
+                                   json::dump(json::Value(std::move(body))), key));
+  }
   if (sub == "list")
     return report(
         "registry",

@@ -617,9 +617,28 @@ TEST(RegistryAuthority, CliTokenGetAndLogin) {
   auto line = p.wait_for_line("enter the code", 10000);
   ASSERT_TRUE(line.has_value()) << p.err();
   std::string code = line->substr(line->find("enter the code ") + 15, 9);
-  auto ap = d.send("POST", "/api/v1/device/approve",
-                   R"({"user_code":")" + code + R"(","decision":"approve"})", s.registrant);
-  ASSERT_EQ(ap.status, 200) << ap.body;
+  // The verification page the person opens says how to decide, with the code; it reflects
+  // nothing else and runs no script.
+  auto page = d.send("GET", "/device?user_code=" + code, "", "");
+  ASSERT_EQ(page.status, 200) << page.body;
+  EXPECT_NE(page.body.find("rcan registry device approve " + code), std::string::npos) << page.body;
+  auto hostile = d.send("GET", "/device?user_code=%3Cscript%3Ealert(1)%3C/script%3E", "", "");
+  ASSERT_EQ(hostile.status, 200);
+  EXPECT_EQ(hostile.body.find("<script"), std::string::npos) << hostile.body;
+  EXPECT_EQ(hostile.body.find("alert"), std::string::npos) << hostile.body;
+  // The registrant approves at a CLI of their own with their key.
+  const std::string key_file = dir.file("registrant.key");
+  ASSERT_TRUE(write_file(key_file, s.registrant + "\n"));
+  ::chmod(key_file.c_str(), 0600);
+  auto ap = run_cli(
+      {"registry", "device", "approve", code, "--registry", d.url(), "--key-file", key_file});
+  ASSERT_EQ(ap.exit_code, 0) << ap.out << ap.err;
+  // Decided once: a second decision on the same code is not found (exit 1).
+  EXPECT_EQ(
+      run_cli({"registry", "device", "deny", code, "--registry", d.url(), "--key-file", key_file})
+          .exit_code,
+      1);
+  EXPECT_EQ(run_cli({"registry", "device", "maybe", code}).exit_code, 2);
   ASSERT_TRUE(p.wait_for_line("token saved", 20000).has_value()) << p.err();
   auto lt = read_file(login_file);
   auto lc = verify(d, lt.substr(0, lt.find('\n')), s.ruri_a);

@@ -123,6 +123,7 @@ class RegistryApi::Impl {
   HttpResponse delete_grant(const HttpRequest& req, const std::string& id);
   HttpResponse device_authorization(const HttpRequest& req);
   HttpResponse device_approve(const HttpRequest& req);
+  HttpResponse device_page(const HttpRequest& req) const;
   // The stored keys (cached for a second; `fresh` reloads), rotated when due.
   Result<std::vector<SigningKeyRecord>> authority_keys(bool fresh = false);
   // A new key that signs from now + overlap (now when there is none).

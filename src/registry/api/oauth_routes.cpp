@@ -150,6 +150,65 @@ HttpResponse RegistryApi::Impl::oauth_token(const HttpRequest& req) {
   return issue_token(client->id, *t, *c);
 }
 
+// GET /device (RFC 8628 verification_uri): what the person at a browser does with the code a
+// device showed them. The page reflects nothing but a well-formed user code and the registry's
+// own URL (escaped), and runs no script.
+HttpResponse RegistryApi::Impl::device_page(const HttpRequest& req) const {
+  auto escape = [](std::string_view in) {
+    std::string out;
+    for (char c : in) {
+      switch (c) {
+        case '<':
+          out += "&lt;";
+          break;
+        case '>':
+          out += "&gt;";
+          break;
+        case '&':
+          out += "&amp;";
+          break;
+        case '"':
+          out += "&quot;";
+          break;
+        case '\'':
+          out += "&#39;";
+          break;
+        default:
+          out.push_back(c);
+      }
+    }
+    return out;
+  };
+  const std::string code = normalize_user_code(req.query_value("user_code"));
+  const std::string shown = code.empty() ? "CODE" : code;
+  const std::string url = escape(o.public_url);
+  HttpResponse r;
+  r.content_type = "text/html; charset=utf-8";
+  r.headers.emplace_back("Content-Security-Policy", "default-src 'none'; base-uri 'none'");
+  r.headers.emplace_back("Cache-Control", "no-store");
+  r.body =
+      "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+      "<title>Approve a device - rcan-registry</title></head><body>\n<h1>Approve a device</h1>\n" +
+      std::string(code.empty()
+                      ? "<p>A program (rcan login, or a robot's own tooling) shows you a code of "
+                        "eight letters and sends you here.</p>\n"
+                      : "<p>A program asked this registry for a token and showed you the code "
+                        "<strong>" +
+                            code + "</strong>.</p>\n") +
+      "<p>If you started it, approve it with your registry API key:</p>\n<pre>rcan registry "
+      "device approve " +
+      shown + " --registry " + url +
+      " --key-file YOUR-KEY-FILE</pre>\n<p>If you did not, refuse it:</p>\n<pre>rcan registry "
+      "device deny " +
+      shown + " --registry " + url +
+      " --key-file YOUR-KEY-FILE</pre>\n<p>The token carries only the grants your key holds on "
+      "the robot or fleet the program asked for. A code expires " +
+      std::to_string(o.device_ttl_s / 60) +
+      " minutes after it was shown; the same decision is <code>POST /api/v1/device/approve</code> "
+      "with your key.</p>\n</body></html>\n";
+  return r;
+}
+
 HttpResponse RegistryApi::Impl::device_authorization(const HttpRequest& req) {
   if (req.method != "POST") return oauth_error(405, "invalid_request", "use POST");
   if (!form_content(req))

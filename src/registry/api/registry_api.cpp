@@ -290,6 +290,7 @@ HttpResponse RegistryApi::Impl::serve(const HttpRequest& req) {
   if (p == "/oauth/token") return oauth_token(req);
   if (p == "/oauth/introspect") return introspect(req);
   if (p == "/oauth/device_authorization") return device_authorization(req);
+  if (p == "/device" || p == "/device/") return m == "GET" ? device_page(req) : not_allowed();
   constexpr std::string_view kApi = "/api/v1/";
   if (p.rfind(kApi, 0) != 0) return ref_error(404, "Not found");
   std::string_view rest = std::string_view(p).substr(kApi.size());
@@ -371,6 +372,7 @@ std::string route_label(std::string_view p) {
                                                 "/oauth/token",
                                                 "/oauth/introspect",
                                                 "/oauth/device_authorization",
+                                                "/device",
                                                 "/api/v1/revocations",
                                                 "/api/v1/authority/keys/rotate",
                                                 "/api/v1/clients",
