@@ -64,7 +64,7 @@ const std::map<std::string, std::pair<std::string, std::string>>& table() {
         "--members --reason --params --wait-complete --no-wait --qos --out --db --secrets-dir "
         "--duration-ms --fleet --help"}},
       {"registry",
-       {"register get list search update delete resolve nodes manifest keys",
+       {"register get list search update delete resolve nodes manifest keys device",
         "--registry --key-file --manufacturer --model --version --device-id --description "
         "--contact-email --endpoint --keys-dir --save-key --q --tier --limit --offset --prefix "
         "--role --label --save --help"}},
