@@ -111,6 +111,26 @@ TEST(RegistrySync, RootPullsTheDelegatedNodeAndResolvesItsRobotsItself) {
   EXPECT_EQ(str(*body_of(resolved()).get("record"), "device_id"), "real-one");
   ASSERT_EQ(bd.send("DELETE", "/api/v1/robots/" + rrn, "", bd.admin_key()).status, 200);
   ASSERT_TRUE(wait_for([&] { return resolved().status == 307; }, 10000));
+
+  // Every change a pull made is in the root's audit chain, by the node it came from: the copy,
+  // the update and the delete.
+  auto exported = run_cli(
+      {"audit", "export", "--data-dir", d3.path(), "--secret-file", d3.path() + "/audit.secret"});
+  ASSERT_EQ(exported.exit_code, 0) << exported.err;
+  int imports = 0, deletes = 0;
+  size_t at = 0;
+  while ((at = exported.out.find("REGISTRY_SYNC_IMPORTED", at)) != std::string::npos) {
+    const size_t line_end = exported.out.find('\n', at);
+    const size_t line_start = exported.out.rfind('\n', at) + 1;
+    const std::string line = exported.out.substr(line_start, line_end - line_start);
+    EXPECT_NE(line.find("sync:" + bd.url()), std::string::npos) << line;
+    EXPECT_EQ(line.find("fake-one"), std::string::npos) << "a refused record was written";
+    if (line.find(rrn) != std::string::npos) ++imports;
+    if (line.find("\"deleted\":true") != std::string::npos) ++deletes;
+    at = line_end;
+  }
+  EXPECT_GE(imports, 3) << exported.out;
+  EXPECT_EQ(deletes, 1) << exported.out;
 }
 
 TEST(RegistrySync, SyncDelegationsPullsEveryDelegatedNode) {

@@ -152,8 +152,13 @@ RegistryApi::Impl::Impl(Store& s, audit::AuditLog* a, ApiOptions opts)
     metrics.add_counter_fn(c.name, c.help,
                            [v = c.value] { return static_cast<double>(v->load()); });
   if (!o.sync_from.empty() || o.sync_delegations) {
-    puller = std::make_unique<SyncPuller>(store, o.sync_from, o.sync_interval_ms,
-                                          o.allow_http_node_urls, o.sync_delegations);
+    // Every record a pull writes is a change of this registry: audited like the API's own.
+    puller = std::make_unique<SyncPuller>(
+        store, o.sync_from, o.sync_interval_ms, o.allow_http_node_urls, o.sync_delegations,
+        [this](const Robot& r, const std::string& from) {
+          audit("REGISTRY_SYNC_IMPORTED", "sync:" + from, r.rcan_uri,
+                json::Object{{"rrn", r.rrn}, {"deleted", r.deleted}, {"from", from}});
+        });
     Counter sync_counters[] = {
         {"rcan_registry_sync_pulls_total", "Sync pulls from authoritative nodes", &puller->pulls},
         {"rcan_registry_sync_failures_total", "Sync pulls that failed", &puller->failures},

@@ -61,12 +61,13 @@ std::optional<Robot> robot_from_sync(const json::Value& rec) {
 }
 
 SyncPuller::SyncPuller(Store& store, std::vector<std::string> urls, int interval_ms,
-                       bool allow_http, bool delegations)
+                       bool allow_http, bool delegations, Imported on_imported)
     : store_(store),
       urls_(std::move(urls)),
       interval_ms_(interval_ms),
       allow_http_(allow_http),
-      delegations_(delegations) {
+      delegations_(delegations),
+      on_imported_(std::move(on_imported)) {
   for (std::string& u : urls_)
     while (!u.empty() && u.back() == '/') u.pop_back();
   worker_ = std::thread([this] { run(); });
@@ -148,6 +149,7 @@ void SyncPuller::pull(const std::string& url) {
       r->owner_key_id.clear();  // nobody here owns it: only an admin may change the copy
       if (Status s = store_.upsert_synced_robot(*r); !s.ok()) return fail(s.error().message);
       imported.fetch_add(1);
+      if (on_imported_) on_imported_(*r, url);
     }
     since = next->as_string();
     const json::Value* more = v->get("has_more");

@@ -7,6 +7,7 @@
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -29,8 +30,10 @@ class SyncPuller {
  public:
   // `store` must outlive the puller. The first pull is one interval after start.
   // With `delegations`, every delegation's node_url is pulled too.
+  // Called (on the puller's thread) for each record it wrote: the registry audits the change.
+  using Imported = std::function<void(const Robot& robot, const std::string& from_url)>;
   SyncPuller(Store& store, std::vector<std::string> urls, int interval_ms, bool allow_http,
-             bool delegations = false);
+             bool delegations = false, Imported on_imported = {});
   ~SyncPuller();
   SyncPuller(const SyncPuller&) = delete;
   SyncPuller& operator=(const SyncPuller&) = delete;
@@ -46,6 +49,7 @@ class SyncPuller {
   int interval_ms_;
   bool allow_http_;
   bool delegations_;
+  Imported on_imported_;
   std::map<std::string, std::string> since_;        // per URL: next_since of its last answer
   std::map<std::string, std::string> fingerprint_;  // per URL: the prefixes delegated to it
   std::mutex mu_;
