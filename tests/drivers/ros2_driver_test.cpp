@@ -13,6 +13,7 @@
 #include <limits>
 #include <numbers>
 #include <thread>
+#include <vector>
 
 #include "drivers/ros2/ros2_convert.h"
 #include "ros2_peer.h"
@@ -163,6 +164,46 @@ TEST_F(Ros2DriverTest, DescribeReportsTheConfiguredEnvelope) {
   EXPECT_DOUBLE_EQ(d.joint_max_rad[0], 1.0);
   EXPECT_DOUBLE_EQ(d.joint_max_rad[1], std::numbers::pi);
   EXPECT_FALSE(driver_->at_rest());
+}
+
+TEST_F(Ros2DriverTest, StopIsSafeFromManyThreadsDuringAppliesAndSteps) {
+  // The safety core calls stop() from any thread (an ESTOP on an I/O thread, the tick, a fault)
+  // while apply() and step() run under its lock: nothing may race (the TSan build runs this),
+  // and after the last stop() the wire ends with a zero Twist.
+  start();
+  std::atomic<bool> done{false};
+  std::vector<std::thread> stoppers;
+  for (int t = 0; t < 4; ++t)
+    stoppers.emplace_back([&] {
+      while (!done.load()) {
+        driver_->stop();
+        std::this_thread::sleep_for(std::chrono::microseconds(200));
+      }
+    });
+  std::thread reader([&] {
+    while (!done.load()) {
+      (void)driver_->state();
+      (void)driver_->health();
+      std::this_thread::sleep_for(std::chrono::microseconds(300));
+    }
+  });
+  for (int i = 0; i < 60; ++i) {
+    (void)driver_->apply(node::ActuatorCommand::make_drive(0.2, 0.1, 200));
+    driver_->step(5);
+    sleep_ms(5);
+  }
+  done.store(true);
+  for (auto& t : stoppers) t.join();
+  reader.join();
+  driver_->stop();
+  // (A zero Twist already on the wire less than a period ago is not written again: the last one
+  // may come from an earlier stop().)
+  ASSERT_TRUE(peer_->wait([](const auto& v) { return !v.empty() && v.back().zero(); }, 2000))
+      << "the wire does not end with a zero Twist";
+  const size_t n = peer_->twists().size();
+  run_loop(200);  // the loop keeps stepping: nothing moves again
+  const auto v = peer_->twists();
+  for (size_t i = n; i < v.size(); ++i) EXPECT_TRUE(v[i].zero()) << "a moving Twist after stop()";
 }
 
 TEST_F(Ros2DriverTest, ADrivePublishesAtOnceRepublishesAtTheRateAndEndsWithAZeroTwist) {
