@@ -76,7 +76,7 @@ class DecodeStage final : public Stage {
                       "MESSAGE_REJECTED");
       }
       if (skill && msg.action().empty()) msg.payload.set("action", *skill);
-      ctx->skill_field = std::string("payload.") + skill_key;
+      if (skill) ctx->skill_field = std::string("payload.") + skill_key;
       if (const json::Value* args = msg.payload.find("args"); args && !args->is_null()) {
         if (!args->is_object())
           return refuse(svc_, ctx,
