@@ -3,7 +3,10 @@
 // overview, live, teleop, approvals, audit, chat (with a conversation), node, and the ESTOP
 // banner — at a desktop (1280×800) and
 // a phone (390×844) width. Any violation axe rates serious or critical fails the test; the
-// others are printed. Exit 0 pass, 1 fail, 77 skip (no browser, playwright-core or axe-core).
+// others are printed. At the phone's width it also checks the layout: no text squeezed to about
+// one character per line, the Live readouts at least four characters wide, every tab in view,
+// the audit table's outcome column in view. Exit 0 pass, 1 fail, 77 skip (no browser,
+// playwright-core or axe-core).
 //
 // Environment: RCAND_PATH (set by CTest), CHROMIUM_PATH (default /usr/bin/chromium),
 // DASHBOARD_ARTIFACTS (screenshots; default a temp dir).
@@ -48,6 +51,62 @@ async function audit(page, what) {
   check(bad.length === 0, `${what}: no serious or critical axe violation (${bad.map((v) => v.id).join(', ') || 'none'})`);
 }
 
+// At a phone's width, what an operator must be able to read: text of three characters or more
+// is never squeezed to under three characters a line (a readout wrapping "0.", "00", "m"), the
+// page does not scroll sideways, and per view the readouts, the tabs and the audit's outcome.
+async function phoneLayout(page, view) {
+  const r = await page.evaluate((view) => {
+    const vw = innerWidth;
+    const inView = (e) => { const b = e.getBoundingClientRect(); return b.width > 0 && b.left >= -0.5 && b.right <= vw + 0.5; };
+    const squeezed = [];
+    for (const root of [document.querySelector('header'), document.querySelector('#tabs'), document.querySelector(`#view-${view}`)]) {
+      const walk = document.createTreeWalker(root, NodeFilter.SHOW_TEXT);
+      for (let n = walk.nextNode(); n; n = walk.nextNode()) {
+        const chars = n.textContent.replace(/\s+/g, '').length;
+        if (chars < 3) continue;
+        const range = document.createRange();
+        range.selectNodeContents(n);
+        const lines = new Set([...range.getClientRects()].filter((q) => q.width > 0).map((q) => Math.round(q.top))).size;
+        if (lines >= 2 && chars / lines < 3) squeezed.push(`${n.parentElement.tagName.toLowerCase()}${n.parentElement.id ? '#' + n.parentElement.id : ''} "${n.textContent.trim().slice(0, 16)}" on ${lines} lines`);
+      }
+    }
+    // A readout narrower than four characters of its own font.
+    const ctx = document.createElement('canvas').getContext('2d');
+    const narrow = [...document.querySelectorAll(`#view-${view} #live-facts dd, #view-${view} #teleop-facts dd`)].filter((e) => {
+      const b = e.getBoundingClientRect();
+      if (!b.width) return false;
+      ctx.font = getComputedStyle(e).font;
+      return b.width < ctx.measureText('0000').width - 0.5;
+    }).map((e) => `${e.tagName.toLowerCase()} "${e.textContent}"`);
+    const tabs = [...document.querySelectorAll('#tabs button')];
+    const bar = document.querySelector('#tabs');
+    const outcome = [...document.querySelectorAll('#audit-table th:nth-child(4), #audit-table tbody td:nth-child(4)')];
+    const wrap = document.querySelector('#audit-table').closest('.table-wrap');
+    return {
+      squeezed, narrow,
+      readouts: document.querySelectorAll(`#view-${view} #live-facts dd`).length,
+      pageWidth: document.documentElement.scrollWidth, vw,
+      tabsOut: tabs.filter((b) => !inView(b)).map((b) => b.textContent.trim()),
+      tabsScroll: bar.scrollWidth > bar.clientWidth + 1,
+      outcome: outcome.length,
+      outcomeOut: outcome.filter((c) => !inView(c) || c.getBoundingClientRect().right > wrap.getBoundingClientRect().right + 0.5).length,
+      auditScroll: wrap.scrollWidth > wrap.clientWidth + 1,
+    };
+  }, view);
+  check(r.squeezed.length === 0, `phone ${view}: no text wraps to about one character per line (${r.squeezed.slice(0, 4).join('; ') || 'none'})`);
+  check(r.pageWidth <= r.vw, `phone ${view}: the page does not scroll sideways (${r.pageWidth} px in ${r.vw})`);
+  if (view === 'live') {
+    check(r.readouts >= 8 && r.narrow.length === 0, `phone live: ${r.readouts} readouts, none narrower than four characters (${r.narrow.slice(0, 4).join('; ') || 'none'})`);
+  }
+  if (view === 'overview') {
+    check(r.tabsOut.length === 0 && !r.tabsScroll, `phone: every tab is within the viewport, none scrolled out of the tab bar (${r.tabsOut.join(', ') || 'all in view'})`);
+  }
+  if (view === 'audit') {
+    check(r.outcome >= 2 && r.outcomeOut === 0 && !r.auditScroll,
+      `phone audit: the outcome column's ${r.outcome} cells are inside the viewport, the table does not scroll sideways (${r.outcomeOut} outside)`);
+  }
+}
+
 async function main() {
   let url;
   ({ proc: rcand, url } = await spawnRcand(rcandPath, dataDir));
@@ -74,6 +133,7 @@ async function main() {
       if (view === 'robots') await page.waitForSelector('#robots-table tbody tr', { timeout: 5000 });
       await page.waitForTimeout(view === 'audit' ? 1500 : 600);
       await audit(page, `${label} ${view}`);
+      if (label === 'phone') await phoneLayout(page, view);
       await page.screenshot({ path: join(artifacts, `a11y-${label}-${view}.png`), fullPage: true });
     }
     // Semantics axe cannot judge by itself: the tabs as a tab list (roles, the selected tab,

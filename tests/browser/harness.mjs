@@ -3,7 +3,7 @@
 // URL from the "listening" log line, and a small JSON-over-HTTP helper.
 
 import { spawn, execFileSync } from 'node:child_process';
-import { chmodSync, existsSync, mkdirSync, rmSync, writeFileSync } from 'node:fs';
+import { chmodSync, existsSync, mkdirSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
 
 export const SKIP = 77;
@@ -180,11 +180,44 @@ export async function runChecks(name, main, { failures, cleanup, artifacts, note
   process.exit(0);
 }
 
-// Headless Chromium as every browser test runs it.
-export function launchBrowser(chromium, chromiumPath) {
-  return chromium.launch({
+// Headless Chromium as every browser test runs it. With DASHBOARD_WEB_DIR set (a web/
+// directory), every context is served the page's files from there instead of those compiled
+// into rcand, with the node's own response headers (CSP and all): a change to the page can be
+// tried without rebuilding the node.
+export async function launchBrowser(chromium, chromiumPath) {
+  const webDir = process.env.DASHBOARD_WEB_DIR;
+  const browser = await chromium.launch({
     executablePath: chromiumPath,
     args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-background-networking',
-      '--disable-component-update', '--disable-sync', '--disable-dev-shm-usage'],
+      '--disable-component-update', '--disable-sync', '--disable-dev-shm-usage',
+      // A document the test serves has no address of its own: let it reach the local node.
+      ...(webDir ? ['--disable-features=LocalNetworkAccessChecks'] : [])],
+  });
+  if (webDir) {
+    const newContext = browser.newContext.bind(browser);
+    browser.newContext = async (options) => {
+      const context = await newContext(options);
+      await servePageFrom(context, webDir);
+      return context;
+    };
+  }
+  return browser;
+}
+
+// The page's own files (/, /index.html, /ui/…) from `webDir`; everything else untouched.
+async function servePageFrom(context, webDir) {
+  const fileOf = (url) => {
+    const path = new URL(url).pathname;
+    if (path === '/' || path === '/index.html') return join(webDir, 'index.html');
+    if (path.startsWith('/ui/') && !path.includes('..')) return join(webDir, path.slice(4));
+    return null;
+  };
+  await context.route((url) => fileOf(url.href) !== null, async (route) => {
+    const headers = { ...route.request().headers() };
+    delete headers['if-none-match'];
+    const response = await route.fetch({ headers });
+    const file = fileOf(route.request().url());
+    if (response.status() === 200 && existsSync(file)) await route.fulfill({ response, body: readFileSync(file) });
+    else await route.fulfill({ response });
   });
 }

@@ -271,11 +271,162 @@ async function main() {
     const shownMs = Date.now() - frozenAt;
     // The last frame came at most one period before the freeze; the watchdog looks every 0.1 s.
     check(shownMs <= 600 + 100 + 100, `frozen connection: "connection lost" and motion disabled ${shownMs} ms after the freeze`);
+    // What the page shows from the stream no longer looks live: the readouts beside the pad, the
+    // Live view's and the control text are amber and say "last known".
+    const staleView = () => page.evaluate(() => {
+      const q = (sel) => document.querySelector(sel);
+      const dd = (box, key) => {
+        const dt = [...document.querySelectorAll(`${box} dt`)].find((d) => d.textContent === key);
+        const v = dt && dt.nextElementSibling;
+        return v ? [v.textContent, getComputedStyle(v).color] : ['', ''];
+      };
+      const note = (sel) => (q(sel) && !q(sel).hidden ? q(sel).textContent : '');
+      return {
+        teleop: q('#teleop-facts').classList.contains('stale'), teleopNote: note('#teleop-stale'),
+        motion: dd('#teleop-facts', 'motion'), speed: dd('#teleop-facts', 'speed'),
+        live: q('#live-facts').classList.contains('stale'), liveNote: note('#live-stale'),
+        liveState: dd('#live-facts', 'state'), liveSpeed: dd('#live-facts', 'speed'),
+        control: [q('#control-state').textContent, getComputedStyle(q('#control-state')).color],
+        warn: getComputedStyle(document.documentElement).getPropertyValue('--warn').trim(),
+      };
+    });
+    const amber = 'rgb(245, 165, 36)';
+    const lost = await staleView();
+    check(lost.teleop && /last known, connection lost/.test(lost.teleopNote) &&
+      /\(last known\)/.test(lost.motion[0]) && /\(last known\)/.test(lost.speed[0]) &&
+      lost.motion[1] === amber && lost.speed[1] === amber,
+    `frozen connection: the readouts beside the pad are amber and "last known" (${lost.teleopNote} motion "${lost.motion[0]}", speed "${lost.speed[0]}", ${lost.motion[1]})`);
+    check(lost.live && /last known, connection lost/.test(lost.liveNote) && /\(last known\)/.test(lost.liveState[0]) &&
+      /\(last known\)/.test(lost.liveSpeed[0]) && lost.liveState[1] === amber,
+    `frozen connection: the Live view's readouts are amber and "last known" (${lost.liveNote} state "${lost.liveState[0]}")`);
+    check(/^Last known \(connection lost\): You hold control/.test(lost.control[0]) && lost.control[1] === amber,
+      `frozen connection: the control text says it is the last known (${lost.control[0].slice(0, 60)}…, ${lost.control[1]})`);
     await page.screenshot({ path: join(artifacts, 'dashboard-connection-lost.png') });
     proxy.thaw();
     await page.waitForFunction(() => document.body.dataset.stream === 'open' &&
       !document.querySelector('#pad button[data-drive=fwd]').disabled, null, { timeout: 10000 });
     check(true, 'when the network returns the stream is live again and motion is enabled');
+    const back = await staleView();
+    check(!back.teleop && !back.live && !back.teleopNote && !back.liveNote && !/last known/i.test(back.motion[0] + back.liveState[0] + back.control[0]),
+      'when the network returns the readouts and the control text are live again (no "last known")');
+  }
+
+  // 9b. Safe stop: the network stays frozen longer than the deadman (heartbeat_timeout_ms 2 s),
+  // so the node stops the robot itself (NETWORK_LOSS_SAFE_STOP). The header's pill says SAFE
+  // STOP with the reason, in amber, never "running"; the banner says so too; the next accepted
+  // command clears it.
+  {
+    proxy.freeze();
+    await sleep(3500);
+    proxy.thaw();
+    const st = (await http(node, 'GET', '/rcan/v1/status', owner)).json;
+    check(st.robot.state === 'safe_stop' && st.robot.safe_stop_detail && st.robot.safe_stop_detail.reason === 'NETWORK_LOSS_SAFE_STOP',
+      `the node safe-stopped while the network was frozen (robot.state ${st.robot.state})`);
+    const shown = await page.waitForFunction(() => /SAFE STOP \(NETWORK_LOSS_SAFE_STOP\)/.test(document.querySelector('#safety-pill').textContent) &&
+      document.body.dataset.stream === 'open', null, { timeout: 8000 }).then(() => true, () => false);
+    const pill = await page.evaluate(() => {
+      const p = document.querySelector('#safety-pill');
+      const b = document.querySelector('#safety-banner');
+      return { text: p.textContent, cls: p.className, bg: getComputedStyle(p).backgroundColor,
+        banner: b.hidden ? '' : b.textContent, bannerCls: b.className };
+    });
+    check(shown && !/running/.test(pill.text) && pill.bg === 'rgb(245, 165, 36)',
+      `safe stop: the header pill reads "${pill.text}" on amber (${pill.bg}), not "running"`);
+    check(/SAFE STOP \(NETWORK_LOSS_SAFE_STOP\)/.test(pill.banner) && /warn/.test(pill.bannerCls),
+      `safe stop: the amber banner says so with the reason (${pill.banner.trim().slice(0, 60)}…)`);
+    await page.screenshot({ path: join(artifacts, 'dashboard-safe-stop.png') });
+    await page.click('#grip-open');
+    const cleared = await page.waitForFunction(() => document.querySelector('#safety-pill').textContent === 'running' &&
+      document.querySelector('#safety-banner').hidden, null, { timeout: 8000 }).then(() => true, () => false);
+    check(cleared, `an accepted command clears the safe stop and the pill reads "running" again (${await page.textContent('#safety-pill')})`);
+  }
+
+  // 9c. ESTOP pressed while the network is frozen: "ESTOP sending…" at once; not confirmed
+  // within the request's timeout (5 s), "ESTOP NOT CONFIRMED" with a retry button, which stays
+  // until the latch is seen; the network back, the latch is confirmed.
+  {
+    const estopView = () => page.evaluate(() => {
+      const box = document.querySelector('#estop-status');
+      const retry = document.querySelector('#estop-retry');
+      const text = document.querySelector('#estop-status-text');
+      return { shown: !!box && !box.hidden, text: text ? text.textContent.trim() : '', retry: !!retry && !retry.hidden && !retry.disabled };
+    });
+    proxy.freeze();
+    const pressed = Date.now();
+    await page.click('#estop');
+    const sending = await estopView();
+    check(sending.shown && /^ESTOP sending…/.test(sending.text) && !sending.retry, `ESTOP on a frozen network: "${sending.text}" at once`);
+    const unconfirmed = await page.waitForFunction(() => /ESTOP NOT CONFIRMED/.test((document.querySelector('#estop-status') || {}).textContent || ''),
+      null, { timeout: 9000 }).then(() => true, () => false);
+    const after = Date.now() - pressed;
+    let v = await estopView();
+    check(unconfirmed && v.shown && v.retry && after >= 4500 && after <= 7000,
+      `ESTOP on a frozen network: "${v.text.slice(0, 60)}…" with a retry button ${after} ms after the press`);
+    await page.screenshot({ path: join(artifacts, 'dashboard-estop-not-confirmed.png') });
+    await sleep(2000);
+    v = await estopView();
+    check(v.shown && /ESTOP NOT CONFIRMED/.test(v.text) && v.retry, 'ESTOP NOT CONFIRMED stays on screen while nothing confirms it');
+    if (v.retry) await page.click('#estop-retry');
+    v = await estopView();
+    check(/^ESTOP sending…/.test(v.text), `the retry sends the ESTOP again ("${v.text}")`);
+    proxy.thaw();
+    const confirmed = await page.waitForFunction(() => {
+      const box = document.querySelector('#estop-status');
+      return box && (box.hidden || box.dataset.state === 'confirmed') && document.body.dataset.estop === 'latched';
+    }, null, { timeout: 10000 }).then(() => true, () => false);
+    const st = (await http(node, 'GET', '/rcan/v1/status', owner)).json;
+    check(confirmed && st.estop_active === true,
+      `the network back, the latch is confirmed and "NOT CONFIRMED" is gone (${(await estopView()).text || 'hidden'}; status estop_active ${st.estop_active})`);
+    const r = await http(node, 'POST', '/rcan/v1/command', owner, message('SAFETY', { safety_event: 'RESUME' }));
+    check(r.status === 200, `RESUME after the frozen-network ESTOP (${r.status})`);
+    await page.waitForSelector('body[data-estop=clear]', { timeout: 5000 });
+  }
+
+  // 9d. On a phone (390×844) a refusal is seen where the operator is: a USER's drive while the
+  // owner holds control is refused, and the refusal with its code is in the status line beside
+  // the pad and in a toast; a refused gripper command (far below the pad) in a toast.
+  {
+    const ruri = (await http(node, 'GET', '/rcan/v1/status', owner)).json.ruri;
+    const ctx = await browser.newContext({ viewport: { width: 390, height: 844 } });
+    const p = await ctx.newPage();
+    p.on('pageerror', (e) => pageErrors.push(`phone: ${e}`));
+    await p.goto(node + '/', { waitUntil: 'load' });
+    await p.fill('#token-input', issueToken(ruri, 'phone-op', 'user', 'status,control'));
+    await p.click('#signin-form button[type=submit]');
+    await p.waitForSelector('body[data-stream=open]', { timeout: 10000 });
+    await p.click('#tabs button[data-view=teleop]');
+    await p.waitForFunction(() => /Held by OWNER/.test(document.querySelector('#control-state').textContent), null, { timeout: 5000 });
+    const inView = (sel) => p.evaluate((s) => {
+      const e = document.querySelector(s);
+      if (!e || e.hidden || !e.textContent.trim()) return null;
+      const r = e.getBoundingClientRect();
+      const visible = r.width > 0 && r.height > 0 && r.top >= 0 && r.bottom <= innerHeight && r.left >= 0 && r.right <= innerWidth;
+      return { visible, text: e.textContent.trim(), role: e.getAttribute('role'), live: e.getAttribute('aria-live') };
+    }, sel);
+    const fwd = await p.$('#pad button[data-drive=fwd]');
+    await fwd.scrollIntoViewIfNeeded();
+    const bb = await fwd.boundingBox();
+    await p.mouse.move(bb.x + bb.width / 2, bb.y + bb.height / 2);
+    await p.mouse.down();
+    await p.waitForFunction(() => /drive fwd: [A-Z_]+/.test(document.querySelector('#teleop-log').textContent), null, { timeout: 5000 }).catch(() => {});
+    const line = await inView('#teleop-status');
+    const toastShown = await inView('#toast');
+    await p.mouse.up();
+    check(!!line && line.visible && /drive fwd: [A-Z_]{4,}/.test(line.text) && line.role === 'status' && line.live === 'polite',
+      `phone: the drive's refusal is in the status line beside the pad, in view (${line ? line.text.slice(0, 70) : 'nothing shown'})`);
+    check(!!toastShown && toastShown.visible && /drive fwd: [A-Z_]{4,}/.test(toastShown.text),
+      `phone: and in a toast in view (${toastShown ? toastShown.text.slice(0, 70) : 'no toast'})`);
+    await sleep(5500);                       // the drive's toast goes
+    const grip = await p.$('#grip-open');
+    await grip.scrollIntoViewIfNeeded();
+    await grip.click();
+    await p.waitForFunction(() => /gripper_open: [A-Z_]+/.test(document.querySelector('#teleop-log').textContent), null, { timeout: 5000 }).catch(() => {});
+    const gripToast = await inView('#toast');
+    const gripLog = await p.evaluate(() => document.querySelector('#teleop-log li') ? document.querySelector('#teleop-log li').className : '');
+    check(gripLog === 'bad' && !!gripToast && gripToast.visible && /gripper_open: [A-Z_]{4,}/.test(gripToast.text),
+      `phone: the gripper's refusal is a toast in view (${gripToast ? gripToast.text.slice(0, 70) : 'no toast'})`);
+    await p.screenshot({ path: join(artifacts, 'dashboard-phone-refusal.png') });
+    await ctx.close();
   }
   // 10. Control follows the operator: sign-out releases control, the queued operator's page is
   // told it was promoted and keeps the deadman fed, a closed tab leaves the queue, and a drive

@@ -152,8 +152,11 @@ export function safetyStop(reason, timeoutMs = 3000) {
   return safetyMessage('STOP', reason, { timeoutMs });
 }
 
+// An ESTOP not answered within this long is shown as not confirmed (and can be sent again).
+export const ESTOP_TIMEOUT_MS = 5000;
+
 export function estop() {
-  return request('POST', '/api/stop', { reason: 'dashboard ESTOP' }, { timeoutMs: 5000 });
+  return request('POST', '/api/stop', { reason: 'dashboard ESTOP' }, { timeoutMs: ESTOP_TIMEOUT_MS });
 }
 
 export function resume() {

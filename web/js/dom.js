@@ -47,11 +47,24 @@ export function replace(node, ...children) {
   append(node, children);
 }
 
-// A short-lived message at the bottom of the page.
+// A short-lived message at the bottom of the page. A refusal or warning is not replaced by a
+// lesser message (an event, a success) within its first 3 s: that one waits its turn.
 let toastTimer = 0;
+let laterTimer = 0;
+let shown = { rank: 0, at: 0 };
+const TOAST_RANK = { bad: 2, warn: 1 };
+const TOAST_KEEP_MS = 3000;
 export function toast(text, kind = 'info') {
   const t = $('#toast');
   if (!t) return;
+  const rank = TOAST_RANK[kind] || 0;
+  const keep = shown.at + TOAST_KEEP_MS - Date.now();
+  clearTimeout(laterTimer);
+  if (!t.hidden && rank < shown.rank && keep > 0) {
+    laterTimer = setTimeout(() => toast(text, kind), keep);
+    return;
+  }
+  shown = { rank, at: Date.now() };
   t.textContent = String(text);
   t.className = 'toast ' + kind;
   t.hidden = false;

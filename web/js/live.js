@@ -2,12 +2,13 @@
 // joint angles as scrolling charts, and the stream's connection state.
 import { $, el, replace, setText, fmtNum } from './dom.js';
 import { PositionPlot, TimeChart } from './charts.js';
-import { app, on } from './state.js';
+import { app, on, safetyState, staleWhy } from './state.js';
 
 const JOINT_COLOURS = ['#3fa7ff', '#ffd166', '#06d6a0', '#ef476f', '#c77dff', '#f4a261'];
 let plot, speed, joints, traj;
 let lastDraw = 0;
 let rateWindow = [];
+let lastFrame = null;       // the newest telemetry frame, for the readouts
 
 export function initLive() {
   plot = new PositionPlot($('#plot'));
@@ -23,6 +24,8 @@ export function initLive() {
   describePath();
   renderTeleopFacts();
   for (const ev of ['link', 'safety', 'status']) on(ev, renderTeleopFacts);
+  on('link', renderLiveFacts);
+  on('signed-out', () => { lastFrame = null; renderLiveFacts(); });
   window.addEventListener('resize', () => { plot.draw(); traj.draw(); });
 }
 
@@ -48,11 +51,22 @@ function describePath() {
 
 // The safety state in words, marked when the stream is not live (the last state seen).
 function safetyWords() {
-  const robot = (app.status && app.status.robot) || {};
   const live = app.stream && app.stream.state === 'open';
-  let s = app.estop === null ? 'unknown' : app.estop ? 'ESTOP latched' : robot.state === 'safe_stop' ? 'safe stop' : 'running';
-  if (!live && app.estop !== null) s += ' (last known)';
+  const { kind, why } = safetyState();
+  let s = { unknown: 'unknown', estop: 'ESTOP latched', safe_stop: `safe stop${why ? ` (${why})` : ''}`, running: 'running' }[kind];
+  if (!live && kind !== 'unknown') s += ' (last known)';
   return s;
+}
+
+// Readouts from the stream are marked when it is not live: a class on their container (amber)
+// and the words "last known", so a frozen page never looks like a moving robot's live state.
+function markStale(box, note, what) {
+  const why = staleWhy();
+  box.classList.toggle('stale', !!why);
+  box.dataset.stale = why ? 'yes' : 'no';
+  note.hidden = !why;
+  setText(note, why ? `${what} (last known, ${why}): not live.` : '');
+  return why ? ' (last known)' : '';
 }
 
 export function renderTeleopFacts() {
@@ -60,9 +74,10 @@ export function renderTeleopFacts() {
   const b = t.base || {};
   const j = (t.arm && Array.isArray(t.arm.joints_rad)) ? t.arm.joints_rad : [];
   const box = $('#teleop-facts');
+  const old = markStale(box, $('#teleop-stale'), 'Telemetry as last received');
   replace(box, [
-    ['safety', safetyWords()], ['motion', app.telemetry ? (t.stopped ? 'stopped' : 'moving') : '–'],
-    ['speed', `${fmtNum(b.linear_mps)} m/s`], ['turn', `${fmtNum(b.angular_radps)} rad/s`],
+    ['safety', safetyWords()], ['motion', app.telemetry ? (t.stopped ? 'stopped' : 'moving') + old : '–'],
+    ['speed', `${fmtNum(b.linear_mps)} m/s${old}`], ['turn', `${fmtNum(b.angular_radps)} rad/s${old}`],
     ['x', `${fmtNum(b.x)} m`], ['y', `${fmtNum(b.y)} m`], ['heading', `${fmtNum((b.theta || 0) * 180 / Math.PI, 0)}°`],
     ...[0, 1, 2, 3, 4, 5].map((i) => [`joint ${i + 1}`, `${fmtNum(j[i])} rad`]),
   ].map(([k, v]) => el('div', {}, el('dt', {}, k), el('dd', {}, v))));
@@ -97,17 +112,27 @@ export function onTelemetry(frame) {
   const j = (t.arm && Array.isArray(t.arm.joints_rad)) ? t.arm.joints_rad : [];
   joints.push(now, j);
   lastDraw = now;
+  lastFrame = frame;
+  renderLiveFacts();
+  renderStreamStats();
+}
+
+// The Live view's readouts from the newest frame, marked "last known" while the stream is not live.
+function renderLiveFacts() {
   const lf = $('#live-facts');
+  const old = markStale(lf, $('#live-stale'), 'Readouts as last received');
+  if (!lastFrame) { replace(lf); return; }
+  const t = lastFrame.payload || {};
+  const b = t.base || {};
   replace(lf, [
     ['x', `${fmtNum(b.x)} m`], ['y', `${fmtNum(b.y)} m`], ['heading', `${fmtNum((b.theta || 0) * 180 / Math.PI, 0)}°`],
-    ['speed', `${fmtNum(b.linear_mps)} m/s`], ['turn', `${fmtNum(b.angular_radps)} rad/s`],
+    ['speed', `${fmtNum(b.linear_mps)} m/s${old}`], ['turn', `${fmtNum(b.angular_radps)} rad/s${old}`],
     ['odometry', `${fmtNum(b.odometry_m)} m`],
     ['battery', typeof t.battery_pct === 'number' ? `${t.battery_pct.toFixed(1)} %` : '–'],
-    ['state', frame.estop_active ? 'ESTOP' : (t.stopped ? 'stopped' : 'moving')],
+    ['state', (lastFrame.estop_active ? 'ESTOP' : (t.stopped ? 'stopped' : 'moving')) + old],
   ].map(([k, v]) => [el('dt', {}, k), el('dd', {}, v)]));
   lf.dataset.x = String(b.x);
   lf.dataset.y = String(b.y);
-  renderStreamStats();
 }
 
 export function renderStreamStats() {

@@ -3,7 +3,7 @@
 import { $, $all, setText, toast, fmtDuration } from './dom.js';
 import * as api from './api.js';
 import { Stream } from './stream.js';
-import { app, emit, on } from './state.js';
+import { app, emit, on, safetyState } from './state.js';
 import { initOverview, renderOverview } from './overview.js';
 import { initLive, onTelemetry, setWorkspace, renderStreamStats } from './live.js';
 import { initTeleop, onTelemetryJoints, teleopSignOut, renderControl } from './teleop.js';
@@ -29,17 +29,20 @@ function setSafety(estop) {
   renderSafetyPill();
 }
 
-// The safety state as last reported; marked stale while the stream is down.
+// The safety state as last reported — red ESTOP LATCHED, amber SAFE STOP (reason), green
+// running — marked stale while the stream is down.
 function renderSafetyPill() {
   const estop = app.estop;
   const live = app.stream && app.stream.state === 'open';
   const pill = $('#safety-pill');
-  let text = estop === null ? 'status unknown' : estop ? 'ESTOP LATCHED' : 'running';
-  if (estop !== null && !live) text += ' (last known)';
+  const { kind, why } = safetyState();
+  let text = { unknown: 'status unknown', estop: 'ESTOP LATCHED', safe_stop: `SAFE STOP${why ? ` (${why})` : ''}`, running: 'running' }[kind];
+  if (kind !== 'unknown' && !live) text += ' (last known)';
   setText(pill, text);
-  pill.className = 'pill ' + (estop === null ? '' : estop ? 'bad' : live ? 'good' : 'warn');
+  pill.className = 'pill ' + { unknown: '', estop: 'bad', safe_stop: 'stopped', running: live ? 'good' : 'warn' }[kind];
   pill.title = live ? 'Safety state from the robot' : 'The stream is down: this is the last state the page saw';
   document.body.dataset.estop = estop ? 'latched' : 'clear';
+  document.body.dataset.safety = kind;
   renderBanner();
   emit('safety', estop);
 }
@@ -47,11 +50,11 @@ function renderSafetyPill() {
 // ESTOP and safe-stop as a full-width banner, RESUME beside it (for a latched ESTOP).
 function renderBanner() {
   const banner = $('#safety-banner');
-  const robot = (app.status && app.status.robot) || {};
-  const safeStop = !app.estop && robot.state === 'safe_stop';
+  const { kind, why } = safetyState();
+  const safeStop = kind === 'safe_stop';
   banner.hidden = !app.estop && !safeStop;
   banner.className = 'banner' + (safeStop ? ' warn' : '');
-  const why = safeStop && robot.safe_stop_detail ? robot.safe_stop_detail.reason : '';
+  document.body.dataset.banner = banner.hidden ? 'none' : kind;
   setText($('#safety-banner-text'), app.estop
     ? 'ESTOP LATCHED — nothing moves until RESUME. Motion controls are disabled.'
     : `SAFE STOP${why ? ` (${why})` : ''} — the robot stopped itself; the next accepted command clears it.`);
@@ -67,6 +70,7 @@ async function refreshStatus() {
     if (asked < app.statusAskedAt) return;   // an older answer overtaken by a newer request
     app.statusAskedAt = asked;
     app.status = st;
+    if (st.estop_active === true && estopSend.pressedAt && asked >= estopSend.pressedAt) estopConfirmed();
     setSafety(!!app.status.estop_active);
     renderBanner();
     setText($('#robot-name'), app.status.name || 'RCAN robot');
@@ -132,6 +136,7 @@ async function signOut(why) {
   app.role = '';
   app.claims = null;
   auditLoaded = false;
+  setEstopStatus('idle');
   setText($('#who'), '');
   setConn('idle');
   showSignedIn(false);
@@ -166,6 +171,8 @@ function wireStream(s) {
     const f = e.detail;
     api.noteServerTime(f.timestamp_ms);
     app.telemetry = f.payload || {};
+    // A frame made after the ESTOP was pressed that shows the latch confirms it.
+    if (f.estop_active === true && estopSend.pressedAtNode && f.timestamp_ms >= estopSend.pressedAtNode) estopConfirmed();
     if (typeof f.estop_active === 'boolean' && f.estop_active !== app.estop) {
       setSafety(f.estop_active);
       renderOverview();
@@ -203,18 +210,57 @@ function showView(name) {
   if (name === 'teleop') renderControl();
 }
 
+// An ESTOP is shown as sent at once ("ESTOP sending…"); one the node has not confirmed within
+// the request's timeout (a frozen network, a refusal) stays on screen as "ESTOP NOT CONFIRMED"
+// with a retry button, until an answer, a telemetry frame or a status read after the press
+// shows the latch.
+const estopSend = { state: 'idle', seq: 0, pressedAt: 0, pressedAtNode: 0, hideTimer: 0 };
+
+function setEstopStatus(state, detail = '') {
+  estopSend.state = state;
+  clearTimeout(estopSend.hideTimer);
+  if (state === 'idle') { estopSend.pressedAt = 0; estopSend.pressedAtNode = 0; }
+  const box = $('#estop-status');
+  box.hidden = state === 'idle';
+  box.className = `estop-status ${state}`;
+  box.dataset.state = state;
+  setText($('#estop-status-text'), {
+    idle: '',
+    sending: 'ESTOP sending…',
+    unconfirmed: `ESTOP NOT CONFIRMED — ${detail}. The robot may still be moving: retry, or stop it another way.`,
+    confirmed: 'ESTOP confirmed: the robot has latched it.',
+  }[state]);
+  $('#estop-retry').hidden = state !== 'unconfirmed';
+  if (state === 'confirmed') estopSend.hideTimer = setTimeout(() => setEstopStatus('idle'), 4000);
+}
+
+function estopConfirmed() {
+  if (estopSend.state === 'sending' || estopSend.state === 'unconfirmed') setEstopStatus('confirmed');
+}
+
 async function onEstop() {
   if (!api.getToken()) {
     toast('Sign in first — or run `rcan estop` on the robot.', 'bad');
     return;
   }
   emit('estop-pressed');
+  const seq = ++estopSend.seq;
+  if (estopSend.state !== 'sending' && estopSend.state !== 'unconfirmed') {
+    estopSend.pressedAt = Date.now();
+    estopSend.pressedAtNode = api.serverNow();
+  }
+  setEstopStatus('sending');
   try {
     await api.estop();
+    estopConfirmed();
     setSafety(true);
     toast('ESTOP latched. RESUME (LEASEE or above) clears it.', 'bad');
   } catch (e) {
-    toast(`ESTOP failed: ${e.code} — ${e.message}`, 'bad');
+    // Only the newest attempt speaks; a confirmation meanwhile has already cleared it.
+    if (seq === estopSend.seq && estopSend.state === 'sending') {
+      const why = e.code === 'TIMEOUT' ? `no answer within ${(api.ESTOP_TIMEOUT_MS / 1000).toFixed(0)} s` : `${e.code}: ${e.message}`;
+      setEstopStatus('unconfirmed', why);
+    }
   }
   refreshStatus();
 }
@@ -230,6 +276,7 @@ function init() {
   initRobots();
   on('refresh', refreshStatus);
   $('#estop').addEventListener('click', onEstop);
+  $('#estop-retry').addEventListener('click', onEstop);
   // Escape anywhere on the page is ESTOP (an ESTOP is never harmful: it latches until RESUME).
   document.addEventListener('keydown', (e) => {
     if (e.key === 'Escape' && !e.repeat && !e.ctrlKey && !e.altKey && !e.metaKey) {

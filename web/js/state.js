@@ -25,3 +25,26 @@ export function emit(name, detail) {
 export function on(name, fn) {
   app.bus.addEventListener(name, (e) => fn(e.detail));
 }
+
+// The robot's safety state as the page last saw it: ESTOP from the stream and the status,
+// safe stop (the robot stopped itself; the next accepted command clears it) from the status.
+// kind: unknown | estop | safe_stop | running; `why` names a safe stop's reason.
+export function safetyState() {
+  const robot = (app.status && app.status.robot) || {};
+  if (app.estop === null) return { kind: 'unknown', why: '' };
+  if (app.estop) return { kind: 'estop', why: '' };
+  if (robot.safe_stop === true || robot.state === 'safe_stop') {
+    const d = robot.safe_stop_detail;
+    return { kind: 'safe_stop', why: d && d.reason ? String(d.reason) : '' };
+  }
+  return { kind: 'running', why: '' };
+}
+
+// Why what the page shows from the stream is not live ('' while it is): the liveness watchdog
+// found the connection silent, or the stream is down and reconnecting.
+export function staleWhy() {
+  const s = app.stream;
+  if (!s || s.state === 'open' || s.state === 'idle') return '';
+  if (s.state === 'connecting' && !s.reconnects) return '';   // the first connection: nothing shown from it yet
+  return { lost: 'connection lost', refused: 'stream refused', connecting: 'stream connecting' }[s.state] || 'stream reconnecting';
+}

@@ -2,7 +2,7 @@
 // an ordinary RCAN message through the node's pipeline, so refusals come back with their code.
 import { $, el, setText, toast, fmtNum } from './dom.js';
 import { request, sendCommand, safetyStop, uuid, serverNow, getToken } from './api.js';
-import { app, emit, on, roleAtLeast } from './state.js';
+import { app, emit, on, roleAtLeast, safetyState, staleWhy } from './state.js';
 
 const DEFAULT_MIN = [-3.1, -2.0, -2.5, -3.1, -2.0, -3.1];
 const DEFAULT_MAX = [3.1, 2.0, 2.5, 3.1, 2.0, 3.1];
@@ -30,12 +30,21 @@ let driveInFlight = false;
 // "Re-arm after ESTOP"); the page re-arms on the operator's next press, never from a hold.
 let needRearm = false;
 
-// `kind`: true (done), false (refused or failed) or 'warn' (done, but not as asked).
-function log(text, kind) {
+// `kind`: true (done), false (refused or failed) or 'warn' (done, but not as asked). The newest
+// result is also the status line beside the pad (a polite live region), and a refusal is a
+// toast as well: the log itself may be below the fold (on a phone it always is). `quiet`: a
+// success that goes to the log only (the automatic stop after a hold, which would otherwise
+// hide the refusal that ended it).
+function log(text, kind, quiet = false) {
   const list = $('#teleop-log');
   const cls = kind === 'warn' ? 'warn' : kind ? 'good' : 'bad';
   list.insertBefore(el('li', { class: cls }, `${new Date().toLocaleTimeString()}  ${text}`), list.firstChild);
   while (list.children.length > 30) list.removeChild(list.lastChild);
+  if (quiet && kind === true) return;
+  const line = $('#teleop-status');
+  setText(line, text);
+  line.className = `teleop-status ${cls}`;
+  if (!kind) toast(text, 'bad');
 }
 
 // A command the safety core limited (clamped to a limit, shortened or stopped at the workspace
@@ -51,15 +60,21 @@ function limitedNote(label, res) {
 
 let lastSent = 0;
 
-async function act(label, fn) {
+// An accepted command clears a safe stop on the node: read the status now rather than at the
+// next poll, so the header stops saying SAFE STOP at once.
+function accepted() {
+  if (safetyState().kind === 'safe_stop') emit('refresh');
+}
+
+async function act(label, fn, quiet = false) {
   lastSent = Date.now();
   try {
     const res = await fn();
-    if (!limitedNote(label, res)) log(`${label}: ${res && (res.type || res.message_type) || 'OK'}`, true);
+    if (!limitedNote(label, res)) log(`${label}: ${res && (res.type || res.message_type) || 'OK'}`, true, quiet);
+    accepted();
     return res;
   } catch (e) {
     log(`${label}: ${e.code}${e.reason ? ' / ' + e.reason : ''} — ${e.message}`, false);
-    if (e.status === 401) toast(`${label}: ${e.code}`, 'bad');
     if (e.reason === 'rearm_required') needRearm = true;
     return null;
   }
@@ -70,9 +85,10 @@ export function streamLive() {
   return !!s && s.state === 'open' && Date.now() - (s.lastFrameAt || 0) < STREAM_SILENCE_MS;
 }
 
-function sendStop(why) {
+// `quiet` unless the operator asked for this stop (■): see log().
+function sendStop(why, quiet = true) {
   lastSent = Date.now();
-  return act(`stop (${why})`, () => safetyStop(`dashboard: ${why}`));
+  return act(`stop (${why})`, () => safetyStop(`dashboard: ${why}`), quiet);
 }
 
 async function rearm() {
@@ -112,14 +128,12 @@ async function driveOnce(h) {
     // One line per hold, and one warning the first time the hold is limited.
     if (!h.warned && limitedNote(`drive ${h.dir}`, res)) h.warned = true;
     else if (!h.logged) log(`drive ${h.dir}: ${res && (res.type || res.message_type) || 'OK'}`, true);
+    if (!h.logged) accepted();
     h.logged = true;
   } catch (e) {
-    log(`drive ${h.dir}: ${e.code}${e.reason ? ' / ' + e.reason : ''} — ${e.message}`, false);
-    if (e.status === 401) toast(`drive: ${e.code}`, 'bad');
-    if (e.reason === 'rearm_required') {
-      needRearm = true;
-      log('ESTOP since this session was armed: let go and press again to re-arm', false);
-    }
+    const rearmHint = e.reason === 'rearm_required' ? ' (an ESTOP since this session was armed: let go and press again to re-arm)' : '';
+    log(`drive ${h.dir}: ${e.code}${e.reason ? ' / ' + e.reason : ''} — ${e.message}${rearmHint}`, false);
+    if (e.reason === 'rearm_required') needRearm = true;
     endHold(e.status ? 'refused' : 'no answer');
   } finally {
     driveInFlight = false;
@@ -129,7 +143,7 @@ async function driveOnce(h) {
 // `vec` (the joystick, the gamepad): a function giving the deflection [forward, left] in
 // [-1, 1] at each repeat; without it the hold drives one pad direction at the sliders' speeds.
 async function startHold(dir, key, vec = null) {
-  if (dir === 'stop') { endHold('■'); sendStop('■'); return; }
+  if (dir === 'stop') { endHold('■'); sendStop('■', false); return; }
   if (hold && hold.dir === dir && hold.key === key) return;
   endHold('another direction');
   if (!streamLive()) { log(`drive ${dir}: not sent — the stream is not live`, false); return; }
@@ -180,7 +194,11 @@ export function renderControl() {
   else if (app.queued) text = `You are number ${app.queued} in the queue for control${holder ? ` (held by ${holder.role || '?'} ${holder.user_id || ''})` : ''}. This page takes over and starts heart-beating when the node promotes you; closing it leaves the queue.`;
   else if (holder) text = `Held by ${holder.role || '?'} ${holder.user_id || ''}. Your motion commands are refused (CONTROL_CONFLICT) unless your role pre-empts theirs when you claim.`;
   else text = 'Nobody holds control: any authorised principal may drive. Claim it to keep others off.';
-  setText($('#control-state'), text);
+  // Without a live stream, who holds control may have changed since: say it is the last known.
+  const stale = staleWhy();
+  const box = $('#control-state');
+  setText(box, stale ? `Last known (${stale}): ${text}` : text);
+  box.classList.toggle('stale', !!stale);
   const rel = $('#release');
   rel.disabled = !app.session && !app.queued;
   setText(rel, !app.session && app.queued ? 'Leave queue' : 'Release');
@@ -209,7 +227,6 @@ async function claim() {
       log(`claim: queued at position ${app.queued} — this page is told when control passes to you`, 'warn');
     } else {
       log(`claim: ${e.code}${e.reason ? ' / ' + e.reason : ''} — ${e.message}`, false);
-      if (e.status === 401) toast(`claim: ${e.code}`, 'bad');
     }
   }
   renderControl();
@@ -482,6 +499,7 @@ export function initTeleop() {
     linkState = state;
     if (state !== 'open') endHold(`stream ${state}`);
     motionControls();
+    renderControl();
   });
   on('safety', (estop) => {
     if (estop) endHold('ESTOP');
