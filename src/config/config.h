@@ -293,10 +293,10 @@ struct ProcessDriverConfig {
   double brake_decel_mps2 = 0.0;
   // An arm and a gripper behind the process (0 joints = no arm): the safety core checks arm
   // targets against these ranges and speed before an apply frame carries them.
-  uint32_t arm_joints = 0;              // 0..6
+  uint32_t arm_joints = 0;  // 0..6
   double max_joint_speed_radps = 1.0;
-  std::vector<double> joint_min_rad;    // per arm joint; missing entries -pi
-  std::vector<double> joint_max_rad;    // missing entries +pi
+  std::vector<double> joint_min_rad;  // per arm joint; missing entries -pi
+  std::vector<double> joint_max_rad;  // missing entries +pi
   bool gripper = false;
 };
 

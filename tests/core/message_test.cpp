@@ -168,8 +168,8 @@ TEST(MessageCodec, RcanTsCamelCaseSenderFieldsAreRead) {
   auto bad_chain = parse_message(ts_with(R"("params")", R"("delegationChain":{},"params")"));
   ASSERT_FALSE(bad_chain.ok());
   EXPECT_EQ(bad_chain.error().field, "delegationChain");
-  auto cloud = parse_message(ts_with(
-      R"("params")", R"("senderType":"cloud_function","cloudProvider":"aws","params")"));
+  auto cloud = parse_message(
+      ts_with(R"("params")", R"("senderType":"cloud_function","cloudProvider":"aws","params")"));
   ASSERT_FALSE(cloud.ok());  // rcan-ts has no functionName: a cloud function is not complete
   EXPECT_EQ(cloud.error().field, "function_name");
   // The snake_case member wins where a message carries both.

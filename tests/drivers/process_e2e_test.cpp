@@ -223,10 +223,11 @@ TEST(ProcessDriverE2E, AnArmAndAGripperBehindTheProcessGetLimitedCommands) {
   const std::string owner = node.token("owner", {"control", "status", "safety"}, "alice");
   ASSERT_GT(driver_pid(node, "driver_process_started"), 0);
   // An arm move outside the joint range and over the joint speed reaches the process limited.
-  HttpReply r = node.post("/rcan/v1/command",
-                          command_json("arm_move", {{"joints", json::Array{0.2, 3.0, -2.0, 0, 0, 0}},
-                                                    {"max_joint_speed_radps", 2.0}}),
-                          owner);
+  HttpReply r =
+      node.post("/rcan/v1/command",
+                command_json("arm_move", {{"joints", json::Array{0.2, 3.0, -2.0, 0, 0, 0}},
+                                          {"max_joint_speed_radps", 2.0}}),
+                owner);
   ASSERT_EQ(r.status, 200) << r.body;
   EXPECT_NE(r.body.find("joint_max_rad"), std::string::npos) << r.body;  // the clamp is named
   json::Value arm;
@@ -261,9 +262,9 @@ TEST(ProcessDriverE2E, WithoutAnArmConfiguredArmCommandsAreRefused) {
                       driver_block("[\"python3\", \"" + kFake + "\", \"good\"]"));
   const std::string owner = node.token("owner", {"control", "status", "safety"}, "alice");
   ASSERT_GT(driver_pid(node, "driver_process_started"), 0);
-  HttpReply r = node.post("/rcan/v1/command",
-                          command_json("arm_move", {{"joints", json::Array{0.2, 0, 0, 0, 0, 0}}}),
-                          owner);
+  HttpReply r =
+      node.post("/rcan/v1/command",
+                command_json("arm_move", {{"joints", json::Array{0.2, 0, 0, 0, 0, 0}}}), owner);
   EXPECT_EQ(r.status, 422) << r.body;
   r = node.post("/rcan/v1/command", command_json("gripper_open", {}), owner);
   EXPECT_EQ(r.status, 422) << r.body;

@@ -318,12 +318,12 @@ TEST(Conformance, L2_INVOKE_001_EstopRejectsInvoke) {
   EXPECT_EQ(n.records(other, "COMMAND").size(), 0u);
   // Released, the same INVOKE runs; args that are no object are a schema error.
   HttpReply resumed = n.command(
-      n.owner(), json::dump(json::Value(json::Object{
-                     {"version", "1.0.0"},
-                     {"message_id", new_uuid_v4()},
-                     {"type", "SAFETY"},
-                     {"timestamp_ms", wall_ms()},
-                     {"payload", json::Object{{"safety_event", "RESUME"}}}})));
+      n.owner(),
+      json::dump(json::Value(json::Object{{"version", "1.0.0"},
+                                          {"message_id", new_uuid_v4()},
+                                          {"type", "SAFETY"},
+                                          {"timestamp_ms", wall_ms()},
+                                          {"payload", json::Object{{"safety_event", "RESUME"}}}})));
   ASSERT_EQ(resumed.status, 200) << resumed.body;
   HttpReply ok = n.command(token, invoke(new_uuid_v4(), payload));
   EXPECT_EQ(ok.status, 200) << ok.body;

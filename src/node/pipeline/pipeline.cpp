@@ -73,8 +73,8 @@ bool blocked_by_safety(const json::Value& payload) {
   const std::string code = json::string_field(payload, "error_code");
   const std::string reason = json::string_field(payload, "reason");
   if (code == "COMMAND_REJECTED")
-    return reason == "estop_active" || reason == "rearm_required" ||
-           reason == "prompt_injection" || reason == "limit_exceeded";
+    return reason == "estop_active" || reason == "rearm_required" || reason == "prompt_injection" ||
+           reason == "limit_exceeded";
   return code == "SAFE_STOP" || code == "LOCKDOWN" || code == "CONFIDENCE_GATE_FAIL" ||
          code == "HITL_DENIED";
 }

@@ -14,10 +14,10 @@
 // the node's order is node/api/stage_order.cpp (docs/NODE.md).
 #pragma once
 
+#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <functional>
-#include <atomic>
 #include <memory>
 #include <optional>
 #include <string>
