@@ -92,6 +92,15 @@ async function main() {
   const facts = await page.textContent('#node-facts');
   check(/RCAN protocol\s*\S+/.test(facts) && facts.includes(ruri), `the node view shows the protocol version and RURI (${facts.replace(/\s+/g, ' ').slice(0, 200)})`);
   check(/Software\s*rcand \d+\.\d+\.\d+/.test(facts), `the node view shows rcand's own version (${facts.replace(/\s+/g, ' ').slice(0, 200)})`);
+  // The safety limits in force, as the node's detailed status gives them.
+  const st = (await http(url, 'GET', '/rcan/v1/status', owner)).json;
+  const lim = st.robot.limits;
+  const shown = await page.textContent('#node-limits');
+  check(shown.includes(`Max linear speed${Math.round(lim.max_linear_mps * 1000) / 1000} m/s`) &&
+    shown.includes(`Max drive duration${lim.max_drive_duration_ms} ms`) &&
+    shown.includes(st.robot.limit_policy === 'clamp' ? 'clamp to the limit' : 'refuse beyond a limit') &&
+    /Workspace fence\s*(off|x )/.test(shown),
+    `the node view shows the safety limits in force (${shown.replace(/\s+/g, ' ').slice(0, 240)})`);
   await page.waitForFunction(() => /Requests answered\s*\d+/.test(document.querySelector('#node-metrics').textContent), null, { timeout: 5000 });
   const mx = await page.textContent('#node-metrics');
   check(/Audit: last seq\s*\d+/.test(mx), `the node view shows key metrics (${mx.replace(/\s+/g, ' ').slice(0, 200)})`);

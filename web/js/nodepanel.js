@@ -47,6 +47,37 @@ function renderFacts() {
     reg && ['Registry', reg.url || reg.state || reg.status || 'linked'],
     ['Audit log', s.audit_available === false ? 'UNAVAILABLE' : 'recording', s.audit_available === false ? 'bad' : 'good'],
   ]);
+  renderLimits();
+}
+
+// The safety core's limits as it enforces them (the detailed status's robot.limits: the
+// configuration's safety block met with the driver's envelope), and its limit policy.
+const num = (v, unit) => (typeof v === 'number' && isFinite(v) ? `${Math.round(v * 1000) / 1000} ${unit}` : undefined);
+function joints(lo, hi) {
+  if (!Array.isArray(lo) || !Array.isArray(hi)) return undefined;
+  return lo.map((l, i) => `J${i + 1} ${num(l, '')}…${num(hi[i], 'rad')}`.replace(/ +…/, '…')).join(', ');
+}
+function renderLimits() {
+  const r = (app.status || {}).robot || {};
+  const l = r.limits;
+  if (!l || typeof l !== 'object') {
+    facts($('#node-limits'), [['Limits', 'shown to a signed-in user (the detailed status)']]);
+    return;
+  }
+  const w = l.workspace || {};
+  const fence = w.enabled
+    ? `x ${num(w.min_x, 'm')} … ${num(w.max_x, 'm')}, y ${num(w.min_y, 'm')} … ${num(w.max_y, 'm')}`
+    : 'off';
+  const policy = { clamp: 'clamp to the limit', reject: 'refuse beyond a limit' }[r.limit_policy] || r.limit_policy;
+  facts($('#node-limits'), [
+    ['Beyond a limit', policy],
+    ['Max linear speed', num(l.max_linear_mps, 'm/s')],
+    ['Max turn rate', num(l.max_angular_radps, 'rad/s')],
+    ['Max drive duration', num(l.max_drive_duration_ms, 'ms')],
+    r.driver && r.driver.has_arm && ['Max joint speed', num(l.max_joint_speed_radps, 'rad/s')],
+    r.driver && r.driver.has_arm && ['Joint ranges', joints(l.joint_min_rad, l.joint_max_rad)],
+    ['Workspace fence', fence],
+  ]);
 }
 
 // The transports the page can see: HTTP (it is talking to it) and the WebSocket stream, plus
