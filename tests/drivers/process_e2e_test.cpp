@@ -92,11 +92,10 @@ TEST(ProcessDriverE2E, MoveArrivesAsWheelSpeedsAndEstopStopsAtOnce) {
                 owner);
   ASSERT_EQ(r.status, 200) << r.body;
   EXPECT_EQ(pty.line_starting("V ", 3000).value_or("none"), "V 0.500 0.500");
-  const auto t0 = std::chrono::steady_clock::now();
+  // The stop line follows (how fast is bench/process_driver_bench's to say, not a test's).
   r = node.post("/rcan/v1/command", estop_json(), owner);
   ASSERT_EQ(r.status, 200) << r.body;
   EXPECT_EQ(pty.line_starting("V ", 2000).value_or("none"), "V 0.000 0.000");
-  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::milliseconds(1000));
   EXPECT_TRUE(status(node, owner).get("estop_active")->as_bool());
   // Latched: motion is refused, and the base keeps getting stops (a few a second) and
   // nothing else.

@@ -588,13 +588,9 @@ TEST_F(RcandTest, LiveCheckerL1Probes) {
   // L1-MDNS-001 via /api/discovery: exactly "_rcan._tcp", TXT ruri/role/version.
   json::Value disc = parse(d().get("/api/discovery").body);
   EXPECT_EQ(disc.get("service_type")->as_string(), "_rcan._tcp");
-  // POST /api/stop answers (well) within 500 ms.
-  auto t0 = std::chrono::steady_clock::now();
+  // POST /api/stop answers (how fast is bench/estop_load_bench's to say, not a test's).
   HttpReply stop = d().post("/api/stop", "{}", d().owner_token());
-  double ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   EXPECT_EQ(stop.status, 200);
-  EXPECT_LT(ms, 500.0);
   d().post("/rcan/v1/command",
            "{\"version\":\"1.0.0\",\"type\":\"SAFETY\",\"message_id\":\"" + new_uuid_v4() +
                "\",\"timestamp_ms\":" + std::to_string(wall_ms()) +
