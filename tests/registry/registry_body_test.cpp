@@ -2,8 +2,10 @@
 // and RRN pattern, field validation, the proof-of-possession string, endpoint normalisation.
 #include <gtest/gtest.h>
 
+#include "rcan/encoding.h"
 #include "rcan/json.h"
 #include "registry/api/body.h"
+#include "registry/api/oauth_form.h"
 #include "registry/api/rate_limit.h"
 
 namespace rcan::registry::api {
@@ -137,6 +139,36 @@ TEST(RegistryBody, TokenBucket) {
   for (int i = 0; i < 10; ++i) l.take("k" + std::to_string(i), t);  // bounded table
   EXPECT_LE(l.size(), 4u);
   EXPECT_EQ(RateLimiter(BucketConfig{0, 0}).take("x", t), 0);  // 0 = unlimited
+}
+
+}  // namespace
+}  // namespace rcan::registry::api
+
+namespace rcan::registry::api {
+namespace {
+
+// A NUL byte in a token request (raw, or as %00) is refused: it would end the client id where a
+// C string ends, so the database could look up another client than the one checked (found by
+// the oauth_form fuzz target; fuzz/regressions/oauth_form/raw-nul-in-form).
+TEST(OAuthForm, NulBytesAreRefusedInFormsAndBasicCredentials) {
+  using namespace std::string_literals;
+  ASSERT_TRUE(parse_form("grant_type=client_credentials&client_id=abc").ok());
+  for (const std::string& body :
+       {"client_id=abc\0x&client_secret=s"s, "a\0b=1"s, "client_secret=s\0"s}) {
+    auto f = parse_form(body);
+    ASSERT_FALSE(f.ok()) << body;
+    EXPECT_NE(f.error().message.find("NUL"), std::string::npos) << f.error().message;
+  }
+  EXPECT_FALSE(parse_form("client_id=abc%00x").ok());  // percent_decode refuses an escaped NUL
+  auto basic = [](const std::string& raw) {
+    return parse_basic("Basic " +
+                       base64_encode(reinterpret_cast<const uint8_t*>(raw.data()), raw.size()));
+  };
+  ASSERT_TRUE(basic("client:secret").has_value());
+  EXPECT_EQ(basic("client:secret")->id, "client");
+  EXPECT_FALSE(basic("cli\0ent:secret"s).has_value());
+  EXPECT_FALSE(basic("client:sec\0ret"s).has_value());
+  EXPECT_FALSE(basic("cli%00ent:secret").has_value());
 }
 
 }  // namespace

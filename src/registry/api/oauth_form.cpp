@@ -31,6 +31,10 @@ Result<Form> parse_form(std::string_view body) {
             eq == std::string_view::npos ? std::string_view() : part.substr(eq + 1), true, v))
       return bad("a malformed percent escape in the form");
     if (k.empty()) return bad("a form field without a name");
+    // A NUL byte (sent raw, which percent_decode passes on, or as %00) ends a C string: the
+    // database would see another client id than the one checked here.
+    if (k.find('\0') != std::string::npos || v.find('\0') != std::string::npos)
+      return bad("a NUL byte in the form");
     if (!f.fields.emplace(std::move(k), std::move(v)).second) return bad("a parameter is repeated");
   }
   return f;
@@ -52,6 +56,7 @@ std::optional<BasicCredentials> parse_basic(std::string_view h) {
       !transport::detail::percent_decode(std::string_view(s).substr(colon + 1), true, c.secret))
     return {};
   if (c.id.empty()) return {};
+  if (c.id.find('\0') != std::string::npos || c.secret.find('\0') != std::string::npos) return {};
   return c;
 }
 
