@@ -165,8 +165,9 @@ class TimedActuation final : public node::Actuation {
   }
   void stop(const std::string& source) override { inner_.stop(source); }
   Result<node::PreparedCommand> prepare(const Message& msg, const ActionSpec& spec,
-                                        int64_t deadline, const std::string& sid) override {
-    return inner_.prepare(msg, spec, deadline, sid);
+                                        int64_t deadline, const std::string& sid,
+                                        std::optional<uint64_t> stream_epoch) override {
+    return inner_.prepare(msg, spec, deadline, sid, stream_epoch);
   }
   Result<json::Value> apply(const node::PreparedCommand& cmd) override { return inner_.apply(cmd); }
   void arm_deadman(const std::string& s, int64_t t) override { inner_.arm_deadman(s, t); }

@@ -178,7 +178,7 @@ void run_actuation(int ms) {
   while (now_ns() < end) {
     for (int i = 0; i < 256; ++i) {
       const int64_t t0 = now_ns();
-      auto pc = act.prepare(m, move, 0, "");
+      auto pc = act.prepare(m, move, 0, "", std::nullopt);
       const int64_t t1 = now_ns();
       if (!pc.ok()) {
         std::fprintf(stderr, "prepare failed: %s\n", pc.error().message.c_str());

@@ -526,6 +526,33 @@ TEST(SafetyWorkspace, GuardStopsBaseThatDriftsOut) {
 
 // ---- re-arm after ESTOP (docs/NODE.md, "Re-arm after ESTOP") ------------------------------
 
+TEST(SafetyRearm, AStreamEpochIsCheckedWhenPreparedAndAgainWhenApplied) {
+  // A session-less stream's command carries the epoch its stream is armed at. An ESTOP and its
+  // RESUME that come between the check (before the command's audit record) and the dispatch
+  // (after it) still refuse it: the core checks at both.
+  Rig r;
+  DispatchOptions stream;
+  stream.stream_epoch = r.core->estop_epoch();
+  ASSERT_TRUE(r.core->check(ActuatorCommand::make_drive(0.5, 0, 300), stream).ok());
+  r.core->estop("http", "operator");
+  ASSERT_TRUE(r.core->resume(4, "owner").ok());
+  r.run(300);
+  const double x0 = r.core->robot_state().x;
+  auto d = r.core->dispatch(ActuatorCommand::make_drive(0.5, 0, 300), stream);
+  ASSERT_FALSE(d.ok());
+  EXPECT_EQ(d.error().reason, "rearm_required");
+  EXPECT_EQ(d.error().field, "rearm");
+  EXPECT_EQ(http_status(d.error().code, d.error().reason), 423);
+  EXPECT_TRUE(r.core->dispatch(ActuatorCommand::make_stop(), stream).ok());  // never refused
+  r.run(300);
+  EXPECT_DOUBLE_EQ(r.core->robot_state().x, x0);
+  // Armed at the current epoch (the stream's "rearm": true), and without a stream epoch (HTTP),
+  // it drives.
+  stream.stream_epoch = r.core->estop_epoch();
+  EXPECT_TRUE(r.core->dispatch(ActuatorCommand::make_drive(0.5, 0, 300), stream).ok());
+  EXPECT_TRUE(r.core->dispatch(ActuatorCommand::make_drive(0.5, 0, 300), {}).ok());
+}
+
 TEST(SafetyRearm, ASessionArmedBeforeAnEstopNeedsRearmAfterResume) {
   Rig r;
   r.core->arm_deadman("held", 60000);
@@ -996,7 +1023,7 @@ Result<ActuatorCommand> translate(const Message& m, const SafetyLimits& limits) 
 }
 
 Result<PreparedCommand> prepare(SafetyActuation& act, const Message& m) {
-  return act.prepare(m, spec_of(m), 0, "");
+  return act.prepare(m, spec_of(m), 0, "", std::nullopt);
 }
 
 TEST(TranslateCommand, FlatParametersWinOverParamsOverParameters) {

@@ -66,7 +66,7 @@ class FakeActuation final : public Actuation {
     ++stops_;
   }
   Result<PreparedCommand> prepare(const Message&, const ActionSpec& spec, int64_t deadline_mono_ms,
-                                  const std::string& session_id) override {
+                                  const std::string& session_id, std::optional<uint64_t>) override {
     PreparedCommand p;
     p.action_name = spec.name;
     p.action = json::Object{{"action", p.action_name}};

@@ -227,7 +227,20 @@ class DispatchStage final : public Stage {
       return refuse(svc_, ctx, Error(ErrorCode::kInternal, "a command reached dispatch unchecked"),
                     "INTERNAL_ERROR");
     }
-    auto prepared = svc_.act.prepare(m, *ctx->action, deadline, ctx->session_id);
+    // A stream without a control session is held by the ESTOP epoch it is armed at (the safety
+    // core refuses its motion once an ESTOP has latched since); a command that says
+    // "rearm": true is the client's fresh operator action and arms it at the current epoch.
+    // docs/NODE.md, "Re-arm after ESTOP".
+    std::optional<uint64_t> stream_epoch;
+    bool rearmed = false;
+    if (ctx->session_id.empty() && ctx->in.armed_epoch) {
+      if (json::bool_field(ctx->in.body, "rearm")) {
+        const uint64_t now = svc_.act.estop_epoch();
+        rearmed = ctx->in.armed_epoch->exchange(now) < now;
+      }
+      stream_epoch = ctx->in.armed_epoch->load();
+    }
+    auto prepared = svc_.act.prepare(m, *ctx->action, deadline, ctx->session_id, stream_epoch);
     if (!prepared.ok()) {
       Error err = prepared.error();
       if (ctx->invoke && err.reason == "unsupported_action")  // a skill this robot does not have
@@ -237,22 +250,7 @@ class DispatchStage final : public Stage {
       return refuse(svc_, ctx, err, "COMMAND_REJECTED");
     }
     auto e = accepted_entry(*ctx, "COMMAND");
-    if (prepared->command && ctx->session_id.empty() && ctx->in.armed_epoch) {
-      // A stream that connected before the last ESTOP moves the robot again only by a fresh
-      // operator action: a command that says "rearm": true (a control session has its own rule,
-      // in the safety core). docs/NODE.md, "Re-arm after ESTOP".
-      const uint64_t epoch = svc_.act.estop_epoch();
-      if (json::bool_field(ctx->in.body, "rearm")) {
-        if (ctx->in.armed_epoch->exchange(epoch) < epoch) e.detail.set("rearmed", true);
-      } else if (ctx->in.armed_epoch->load() < epoch) {
-        return refuse(svc_, ctx,
-                      Error(ErrorCode::kCommandRejected,
-                            "an ESTOP latched since this stream connected; send the next motion "
-                            "command with \"rearm\": true (a fresh operator action) to drive again",
-                            "rearm", "rearm_required"),
-                      "COMMAND_REJECTED");
-      }
-    }
+    if (rearmed) e.detail.set("rearmed", true);
     if (prepared->clamped) {
       e.detail.set("clamped", prepared->clamp_note);
     }

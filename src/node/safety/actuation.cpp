@@ -157,10 +157,12 @@ void SafetyActuation::stop(const std::string& source) {
 
 Result<PreparedCommand> SafetyActuation::prepare(const Message& msg, const ActionSpec& spec,
                                                  int64_t deadline_mono_ms,
-                                                 const std::string& session_id) {
+                                                 const std::string& session_id,
+                                                 std::optional<uint64_t> stream_epoch) {
   PreparedCommand pc;
   pc.deadline_mono_ms = deadline_mono_ms;
   pc.session_id = session_id;
+  pc.stream_epoch = stream_epoch;
   pc.action_name = spec.name;
   const std::string& action = pc.action_name;
   if (spec.kind == ActionKind::kInformational) {
@@ -181,6 +183,7 @@ Result<PreparedCommand> SafetyActuation::prepare(const Message& msg, const Actio
   DispatchOptions opts;
   opts.deadline_mono_ms = deadline_mono_ms;
   opts.session_id = session_id;
+  opts.stream_epoch = stream_epoch;
   auto checked = core_.check(*cmd, opts);
   if (!checked.ok()) return checked.error();
   pc.clamped = checked->clamped;
@@ -209,6 +212,7 @@ Result<json::Value> SafetyActuation::apply(const PreparedCommand& pc) {
   DispatchOptions opts;
   opts.deadline_mono_ms = pc.deadline_mono_ms;
   opts.session_id = pc.session_id;
+  opts.stream_epoch = pc.stream_epoch;
   auto out = core_.dispatch(*pc.command, opts);
   if (!out.ok()) return out.error();
   return json::Value(out->to_json());

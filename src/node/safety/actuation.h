@@ -28,6 +28,7 @@ struct PreparedCommand {
   std::string clamp_note;        // which limit clamped it
   int64_t deadline_mono_ms = 0;  // 0 = none
   std::string session_id;
+  std::optional<uint64_t> stream_epoch;  // see prepare()
 };
 
 // How estop() says whether the latch survives a restart (see Actuation::estop).
@@ -56,9 +57,12 @@ class Actuation {
   // Validates a COMMAND of action `spec` (looked up by the authorize stage) against the state
   // and the local limits, clamping where the policy says so. Errors: COMMAND_REJECTED
   // (estop_active, limit_exceeded, unsupported_action), SCHEMA_VALIDATION_FAILED (parameters).
+  // `stream_epoch`: for a command from a stream without a control session, the ESTOP epoch
+  // the stream is armed at (Ingress::armed_epoch); the core refuses it (rearm_required) once an
+  // ESTOP has latched since, here and again in apply().
   virtual Result<PreparedCommand> prepare(const Message& msg, const ActionSpec& spec,
-                                          int64_t deadline_mono_ms,
-                                          const std::string& session_id) = 0;
+                                          int64_t deadline_mono_ms, const std::string& session_id,
+                                          std::optional<uint64_t> stream_epoch) = 0;
   // Applies a prepared command. Errors: COMMAND_REJECTED estop_active when an ESTOP came in
   // between prepare() and apply(); MESSAGE_STALE past its deadline.
   virtual Result<json::Value> apply(const PreparedCommand& cmd) = 0;

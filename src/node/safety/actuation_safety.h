@@ -26,7 +26,8 @@ class SafetyActuation final : public Actuation {
   Status resume(Role role, const std::string& source) override;
   void stop(const std::string& source) override;
   Result<PreparedCommand> prepare(const Message& msg, const ActionSpec& spec,
-                                  int64_t deadline_mono_ms, const std::string& session_id) override;
+                                  int64_t deadline_mono_ms, const std::string& session_id,
+                                  std::optional<uint64_t> stream_epoch) override;
   Result<json::Value> apply(const PreparedCommand& cmd) override;
   void arm_deadman(const std::string& session_id, int64_t timeout_ms) override;
   void feed_deadman(const std::string& session_id) override;

@@ -104,8 +104,11 @@ struct SafetyConfig {
 };
 
 struct DispatchOptions {
-  int64_t deadline_mono_ms = 0;       // 0 = no deadline; else refused when now > deadline
-  std::string session_id;             // empty = session-less
+  int64_t deadline_mono_ms = 0;  // 0 = no deadline; else refused when now > deadline
+  std::string session_id;        // empty = session-less
+  // A session-less command from a stream: the ESTOP epoch the stream is armed at; refused
+  // (rearm_required) while it is older than the current epoch.
+  std::optional<uint64_t> stream_epoch;
   std::optional<LimitPolicy> policy;  // default: SafetyConfig::policy
 };
 

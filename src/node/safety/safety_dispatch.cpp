@@ -220,6 +220,11 @@ Result<DispatchOutcome> SafetyCore::precheck(const ActuatorCommand& cmd,
                    "session", "rearm_required");
     }
   }
+  if (opts.stream_epoch && *opts.stream_epoch < estop_epoch_.load(std::memory_order_acquire))
+    return Error(ErrorCode::kCommandRejected,
+                 "an ESTOP latched since this stream connected; send the next motion command "
+                 "with \"rearm\": true (a fresh operator action) to drive again",
+                 "rearm", "rearm_required");
   RobotState snapshot;
   {
     MutexLock lock(apply_mu_);
