@@ -5,8 +5,12 @@
 #include <openssl/evp.h>
 #include <openssl/pem.h>
 
+#include <algorithm>
+#include <array>
+#include <iterator>
 #include <memory>
 
+#include "rcan/encoding.h"
 #include "rcan/hash.h"
 
 namespace rcan::ed25519 {
@@ -91,37 +95,52 @@ Result<Bytes> sign(std::span<const uint8_t> seed, std::span<const uint8_t> messa
   return sig;
 }
 
+namespace {
+
+// The key object of the last public key this thread verified with. A node verifies most
+// messages with the few keys it trusts (a fleet's coordinator, an operator's bound key), and
+// building OpenSSL's key object (a provider look-up under a process-wide lock) costs as much as
+// a third of the verification itself. One entry per thread: no lock, nothing shared.
+EVP_PKEY* verification_key(std::span<const uint8_t> public_key) {
+  thread_local std::array<uint8_t, kPublicKeyBytes> last{};
+  thread_local PkeyPtr pkey;
+  if (pkey && std::equal(last.begin(), last.end(), public_key.begin())) return pkey.get();
+  pkey.reset(
+      EVP_PKEY_new_raw_public_key(EVP_PKEY_ED25519, nullptr, public_key.data(), public_key.size()));
+  if (pkey) std::copy(public_key.begin(), public_key.end(), last.begin());
+  return pkey.get();
+}
+
+}  // namespace
+
 bool verify(std::span<const uint8_t> public_key, std::span<const uint8_t> message,
             std::span<const uint8_t> signature) {
   if (public_key.size() != kPublicKeyBytes || signature.size() != kSignatureBytes) return false;
   if (!scalar_is_canonical(signature.data() + 32)) return false;
-  PkeyPtr pkey(
-      EVP_PKEY_new_raw_public_key(EVP_PKEY_ED25519, nullptr, public_key.data(), public_key.size()));
+  EVP_PKEY* pkey = verification_key(public_key);
   MdCtxPtr ctx(EVP_MD_CTX_new());
-  if (!pkey || !ctx ||
-      EVP_DigestVerifyInit(ctx.get(), nullptr, nullptr, nullptr, pkey.get()) != 1) {
+  if (pkey == nullptr || !ctx ||
+      EVP_DigestVerifyInit(ctx.get(), nullptr, nullptr, nullptr, pkey) != 1) {
     return false;
   }
   return EVP_DigestVerify(ctx.get(), signature.data(), signature.size(), data_or_empty(message),
                           message.size()) == 1;
 }
 
+// RFC 8410 SubjectPublicKeyInfo, written directly: the DER is a fixed 12-byte prefix and the
+// key, and its PEM is one base64 line — byte for byte what OpenSSL's PEM writer produces, without
+// its encoder look-ups (a key id is the hash of this text, computed for every signed message).
 Result<std::string> public_key_to_pem(std::span<const uint8_t> public_key) {
   if (public_key.size() != kPublicKeyBytes) {
     return Error(ErrorCode::kInternal, "Ed25519 public key must be 32 bytes", "public_key");
   }
-  PkeyPtr pkey(
-      EVP_PKEY_new_raw_public_key(EVP_PKEY_ED25519, nullptr, public_key.data(), public_key.size()));
-  BioPtr bio(BIO_new(BIO_s_mem()));
-  if (!pkey || !bio || PEM_write_bio_PUBKEY(bio.get(), pkey.get()) != 1) {
-    return Error(ErrorCode::kInternal, "cannot write the Ed25519 public key as PEM");
-  }
-  char* data = nullptr;
-  const long len = BIO_get_mem_data(bio.get(), &data);
-  if (len <= 0 || data == nullptr) {
-    return Error(ErrorCode::kInternal, "cannot write the Ed25519 public key as PEM");
-  }
-  return std::string(data, static_cast<size_t>(len));
+  static constexpr uint8_t kSpkiPrefix[12] = {0x30, 0x2a, 0x30, 0x05, 0x06, 0x03,
+                                              0x2b, 0x65, 0x70, 0x03, 0x21, 0x00};
+  std::array<uint8_t, sizeof kSpkiPrefix + kPublicKeyBytes> der{};
+  std::copy(std::begin(kSpkiPrefix), std::end(kSpkiPrefix), der.begin());
+  std::copy(public_key.begin(), public_key.end(), der.begin() + sizeof kSpkiPrefix);
+  return "-----BEGIN PUBLIC KEY-----\n" + base64_encode(der.data(), der.size()) +
+         "\n-----END PUBLIC KEY-----\n";
 }
 
 Result<Bytes> public_key_from_pem(std::string_view pem) {
