@@ -18,6 +18,7 @@
 #include "node/control/control_machine.h"
 #include "node/control/ownership.h"
 #include "node/control/partition.h"
+#include "node/services/refusal_ledger.h"
 #include "node_fixture.h"
 #include "rcan/errors.h"
 
@@ -281,6 +282,66 @@ TEST(OwnershipMachine, RequestAcceptCancelExpireAndFormerOwnersAreCapped) {
   copy.cap(old2);
   EXPECT_EQ(old2.role, Role::kGuest);
   EXPECT_EQ(o.transition_violations(), 0u);
+}
+
+// The node's control tick sleeps while nothing waits for a time (Node::pump): each piece of
+// timed control state says when it is quiet, and calls its change hook on every change, so that
+// the tick wakes when something timed begins.
+TEST(ControlTick, EveryTimedStateSaysWhenItIsQuietAndCallsItsHookWhenItChanges) {
+  int calls = 0;
+  auto hook = [&] { ++calls; };
+
+  SessionTable t;
+  t.on_change(hook);
+  EXPECT_TRUE(t.quiet());
+  int64_t now = 1000;
+  auto a = t.claim(who("a", Role::kUser), std::nullopt, now, kWall);
+  ASSERT_TRUE(a.ok());
+  EXPECT_GT(calls, 0);
+  EXPECT_FALSE(t.quiet());  // a holder: its expiry is timed
+  ASSERT_TRUE(t.release(a->session.id, who("a", Role::kUser), now, kWall).ok());
+  (void)t.take_changes();
+  EXPECT_TRUE(t.quiet());
+
+  calls = 0;
+  node::Ownership o;
+  o.on_change(hook);
+  EXPECT_TRUE(o.quiet());
+  ASSERT_TRUE(o.request(who("alice", Role::kOwner), named("bob"), "", kWall).ok());
+  EXPECT_GT(calls, 0);
+  EXPECT_FALSE(o.quiet());  // a pending transfer: its window is timed
+  ASSERT_TRUE(o.expire(kWall + 25 * 3600 * 1000LL).has_value());
+  EXPECT_TRUE(o.quiet());
+
+  calls = 0;
+  node::ConsentBook c;
+  c.on_change(hook);
+  EXPECT_TRUE(c.quiet());
+  node::ConsentRequest r;
+  r.requester_sub = "someone";
+  r.scopes = {"control"};
+  ASSERT_TRUE(c.add(r, kWall).ok());
+  EXPECT_GT(calls, 0);
+  EXPECT_FALSE(c.quiet());  // a pending request: its expiry is timed
+  EXPECT_EQ(c.expire(kWall + 25 * 3600 * 1000LL).size(), 1u);
+  EXPECT_TRUE(c.quiet());
+
+  calls = 0;
+  node::RefusalLedger l;
+  l.on_change(hook);
+  EXPECT_TRUE(l.quiet());
+  EXPECT_TRUE(l.admit({"192.0.2.1", "AUTH_FAILED", "AUTH_INVALID", "/x"}, kWall));
+  EXPECT_EQ(calls, 1);
+  EXPECT_FALSE(l.admit({"192.0.2.1", "AUTH_FAILED", "AUTH_INVALID", "/x"}, kWall + 1));
+  EXPECT_EQ(calls, 1);      // the same window: nothing new is timed
+  EXPECT_FALSE(l.quiet());  // an open window: its summary is due when it closes
+  EXPECT_EQ(l.due(kWall + 3600 * 1000LL).size(), 1u);
+  EXPECT_TRUE(l.quiet());
+
+  t.on_change({});  // removed: changes no longer call it
+  calls = 0;
+  ASSERT_TRUE(t.claim(who("b", Role::kUser), std::nullopt, now, kWall).ok());
+  EXPECT_EQ(calls, 0);
 }
 
 TEST(ConsentNotification, CloudFunctionIdentityIsInTitleBodyAndHighlight) {
@@ -572,6 +633,21 @@ TEST_F(SessionsE2E, PreemptionWhileCommandsAreInFlightDropsThemAndTellsTheHolder
   for (int s : statuses) refused += s == 409;
   EXPECT_GE(refused, 1u);
   EXPECT_GE(statuses.size(), refused);
+}
+
+// An idle node's control tick sleeps up to 5 s (Node::pump); a session granted meanwhile wakes
+// it, so the session still ends at its TTL. No stream is open (a stream keeps the pump at 10 ms).
+TEST_F(SessionsE2E, ASessionGrantedToAnIdleNodeStillExpiresOnTime) {
+  start("control:\n  max_session_s: 1\n");
+  std::this_thread::sleep_for(std::chrono::milliseconds(700));  // the tick is asleep by now
+  std::string user = n().token("user", "idle");
+  HttpReply c = n().post("/rcan/v1/auth/claim", "{}", user);
+  ASSERT_EQ(c.status, 200) << c.body;
+  // Recorded by the control tick, 1 s after the grant; a tick that slept on would record it
+  // only at its 5 s wake-up, more than 4 s after the grant.
+  auto expired = n().audit_eventually("SESSION_EXPIRED", owner_, 1, 3000);
+  ASSERT_EQ(expired.size(), 1u);
+  EXPECT_EQ(expired[0].get("message_id")->as_string(), session_of(c));
 }
 
 TEST_F(SessionsE2E, ExpiredSessionGetsSessionExpiredUntilItClaimsAgainAndRenewalIsExplicit) {

@@ -81,6 +81,13 @@ void Node::publish_to(const std::string& principal_key, json::Object ev) {
 }
 
 void Node::control_start() {
+  // Every change to timed control state wakes the control tick (Node::pump sleeps while there
+  // is none); cleared again in shutdown().
+  auto wake = [this] { wake_pump(); };
+  svc_.sessions.on_change(wake);
+  svc_.ownership.on_change(wake);
+  svc_.consent.on_change(wake);
+  svc_.refusals.on_change(wake);
   if (!svc_.settings.state_dir.empty()) {
     int64_t now = svc_.clock.wall_ms();
     if (auto v = read_state_file(svc_.settings.state_dir + "/leases.json"); v.ok())

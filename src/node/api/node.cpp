@@ -303,6 +303,10 @@ void Node::shutdown() {
   { MutexLock wake(pump_mu_); }
   pump_cv_.notify_all();
   if (pump_.joinable()) pump_.join();
+  svc_.sessions.on_change({});
+  svc_.ownership.on_change({});
+  svc_.consent.on_change({});
+  svc_.refusals.on_change({});
   svc_.partition.stop();
   save_control_state();
   std::vector<std::shared_ptr<StreamState>> copy;
@@ -345,7 +349,10 @@ void Node::unregister_stream(const std::shared_ptr<StreamState>& st) {
       break;
     }
   }
-  if (!key.empty()) closed_streams_of_[key] = svc_.clock.mono_ms();
+  if (!key.empty()) {
+    closed_streams_of_[key] = svc_.clock.mono_ms();
+    wake_pump();  // its grace is timed
+  }
 }
 
 void Node::drop_streamless_claims() {
@@ -372,26 +379,54 @@ void Node::drop_streamless_claims() {
   for (const auto& key : due) (void)svc_.sessions.drop_queued(key, "stream_closed");
 }
 
+void Node::wake_pump() {
+  MutexLock lk(pump_mu_);
+  pump_woken_ = true;
+  pump_cv_.notify_one();
+}
+
+bool Node::control_quiet() {
+  {
+    MutexLock lock(streams_mu_);
+    if (!closed_streams_of_.empty()) return false;
+  }
+  return svc_.sessions.quiet() && svc_.ownership.quiet() && svc_.consent.quiet() &&
+         svc_.refusals.quiet();
+}
+
 void Node::pump() {
   // Telemetry at each stream's rate; streams that never CONNECT are closed after 10 s.
   // With streams open it wakes every 10 ms (telemetry rates up to 100 Hz); without, only for
   // the control tick — an idle node costs next to nothing (bench/fleet_bench prints the figure).
+  // The control tick runs every 100 ms while something waits for a time (a session, a lease,
+  // a queued claim, a transfer, a consent request, a refusal window, a closed stream's grace);
+  // when nothing does, the pump sleeps until a change wakes it (wake_pump(), called by the
+  // session table, ownership, consent book and refusal ledger on every change), and at the
+  // latest after kQuietTickMs. A thousand idle robots in one process cost a few wake-ups a
+  // second each (bench/fleet_bench prints them), not ten.
+  constexpr int64_t kControlTickMs = 100, kQuietTickMs = 5000;
   int64_t next_control_tick = 0;
   while (running_.load()) {
+    bool woken;
     {
-      bool idle;
+      bool streams;
       {
         MutexLock lock(streams_mu_);
-        idle = streams_.empty();
+        streams = !streams_.empty();
       }
+      int64_t wait_ms = next_control_tick - svc_.clock.mono_ms();
+      if (streams) wait_ms = std::min<int64_t>(wait_ms, 10);  // telemetry at up to 100 Hz
       MutexLock lk(pump_mu_);
-      pump_cv_.wait_for(pump_mu_, std::chrono::milliseconds(idle ? 100 : 10));
+      if (!pump_woken_ && wait_ms > 0)
+        pump_cv_.wait_for(pump_mu_, std::chrono::milliseconds(wait_ms));
+      woken = pump_woken_;
+      pump_woken_ = false;
     }
     if (!running_.load()) break;
     int64_t now = svc_.clock.mono_ms();
-    if (now >= next_control_tick) {  // expiries, promotions, lease ends (control_routes.cpp)
-      next_control_tick = now + 100;
-      control_tick();
+    if (woken || now >= next_control_tick) {
+      control_tick();  // expiries, promotions, lease ends (control_routes.cpp)
+      next_control_tick = now + (control_quiet() ? kQuietTickMs : kControlTickMs);
     }
     std::vector<std::shared_ptr<StreamState>> copy;
     {

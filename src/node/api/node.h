@@ -125,6 +125,11 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
                    json::Object query, Respond& respond, std::function<void()> read);
   Result<Principal> bearer_principal(const transport::HttpRequest& req) const;
   void pump() EXCLUDES(streams_mu_, pump_mu_);
+  // Wakes the pump for a control tick now: something timed may have begun (a session, a
+  // transfer, a consent request, a refusal window, a closed stream).
+  void wake_pump() EXCLUDES(pump_mu_);
+  // True when no control state waits for a time: the pump may sleep until woken.
+  bool control_quiet() EXCLUDES(streams_mu_);
   void stream_text(const std::shared_ptr<StreamState>& st, std::string text);
   void register_stream(const std::shared_ptr<StreamState>& st) EXCLUDES(streams_mu_, pump_mu_);
   void unregister_stream(const std::shared_ptr<StreamState>& st) EXCLUDES(streams_mu_);
@@ -155,7 +160,8 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   std::atomic<bool> running_{false};
   std::thread pump_;
   Mutex pump_mu_;
-  CondVar pump_cv_;  // wakes the pump on a new stream and on shutdown
+  CondVar pump_cv_;  // wakes the pump on a new stream, a control change and on shutdown
+  bool pump_woken_ GUARDED_BY(pump_mu_) = false;
   uint64_t event_sub_ = 0;
   uint64_t revocation_sub_ = 0;
   Mutex control_mu_;

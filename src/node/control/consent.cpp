@@ -76,7 +76,7 @@ Result<ConsentRequest> ConsentBook::add(ConsentRequest r, int64_t now_ms) {
   r.expires_ms = now_ms + ttl_ms_;
   r.status = "PENDING";
   items_.push_back(r);
-  ++version_;
+  bump();
   return r;
 }
 
@@ -95,7 +95,7 @@ Result<ConsentRequest> ConsentBook::decide(const std::string& id, bool grant, co
     if (x.id != id) continue;
     if (x.status == "PENDING" && now_ms >= x.expires_ms) {
       x.status = "EXPIRED";
-      ++version_;
+      bump();
     }
     if (x.status == "EXPIRED")
       return Error(ErrorCode::kSessionExpired, "the consent request expired", "consent_id");
@@ -107,10 +107,22 @@ Result<ConsentRequest> ConsentBook::decide(const std::string& id, bool grant, co
     x.decided_ms = now_ms;
     x.grant_kind = grant ? kind : "";
     x.lease_id = lease_id;
-    ++version_;
+    bump();
     return x;
   }
   return Error(ErrorCode::kNotFound, "no consent request " + id.substr(0, 64), "consent_id");
+}
+
+void ConsentBook::bump() {
+  ++version_;
+  if (on_change_) on_change_();
+}
+
+bool ConsentBook::quiet() {
+  MutexLock lock(mu_);
+  for (const auto& x : items_)
+    if (x.status == "PENDING") return false;
+  return true;
 }
 
 std::vector<ConsentRequest> ConsentBook::expire(int64_t now_ms) {
@@ -120,7 +132,7 @@ std::vector<ConsentRequest> ConsentBook::expire(int64_t now_ms) {
     if (x.status == "PENDING" && now_ms >= x.expires_ms) {
       x.status = "EXPIRED";
       out.push_back(x);
-      ++version_;
+      bump();
     }
   return out;
 }
@@ -133,7 +145,7 @@ std::vector<ConsentRequest> ConsentBook::list() {
 void ConsentBook::clear() {
   MutexLock lock(mu_);
   items_.clear();
-  ++version_;
+  bump();
 }
 
 json::Value ConsentBook::persist_json() {
@@ -173,7 +185,7 @@ void ConsentBook::load_json(const json::Value& v) {
     if (r.id.empty() || r.status.empty()) continue;
     items_.push_back(std::move(r));
   }
-  ++version_;
+  bump();
 }
 
 uint64_t ConsentBook::version() {

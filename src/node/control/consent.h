@@ -5,6 +5,8 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
+#include <utility>
 #include <string>
 #include <vector>
 
@@ -55,6 +57,16 @@ class ConsentBook {
                                 const std::string& kind, const std::string& lease_id,
                                 int64_t now_ms) EXCLUDES(mu_);
   std::vector<ConsentRequest> expire(int64_t now_ms) EXCLUDES(mu_);
+  // True when no request is pending (nothing for expire() to find, however late).
+  bool quiet() EXCLUDES(mu_);
+  // `fn` runs (under this object's lock: it must not call back) after every change, so that
+  // the node's control tick, asleep while nothing is timed, wakes to plan again. Set once,
+  // before the object is shared; an empty function removes it.
+  void on_change(std::function<void()> fn) EXCLUDES(mu_) {
+    MutexLock lock(mu_);
+    on_change_ = std::move(fn);
+  }
+
   std::vector<ConsentRequest> list() EXCLUDES(mu_);
   void clear() EXCLUDES(mu_);
   json::Value persist_json() EXCLUDES(mu_);
@@ -66,6 +78,8 @@ class ConsentBook {
   std::vector<ConsentRequest> items_ GUARDED_BY(mu_);
   int64_t ttl_ms_ GUARDED_BY(mu_) = 24 * 3600 * 1000LL;
   uint64_t version_ GUARDED_BY(mu_) = 0;
+  std::function<void()> on_change_ GUARDED_BY(mu_);
+  void bump() REQUIRES(mu_);  // a change: the version, and on_change
 };
 
 }  // namespace rcan::node

@@ -4,10 +4,15 @@
 
 namespace rcan::node {
 
+void Ownership::bump() {
+  ++version_;
+  if (on_change_) on_change_();
+}
+
 void Ownership::transit(OwnershipEvent event, OwnershipState to) {
   if (!ownership_transition_allowed(state_, event, to)) ++violations_;
   state_ = to;
-  ++version_;
+  bump();
 }
 
 bool Ownership::is_owner_locked(const Principal& p) const {
@@ -113,7 +118,7 @@ void Ownership::cap(Principal& p) const {
 
 void Ownership::note_user(const std::string& sub) {
   MutexLock lock(mu_);
-  if (users_.size() < 10000 && users_.insert(sub).second) ++version_;
+  if (users_.size() < 10000 && users_.insert(sub).second) bump();
 }
 
 void Ownership::on_clear(std::function<void()> fn) {
@@ -218,7 +223,7 @@ void Ownership::load_json(const json::Value& v) {
       state_ = OwnershipState::kTransferPending;  // an expired one is recorded by the next tick
     }
   }
-  ++version_;
+  bump();
 }
 
 uint64_t Ownership::version() {

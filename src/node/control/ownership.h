@@ -60,6 +60,19 @@ class Ownership {
   Result<PendingTransfer> cancel(const Principal& p, int64_t now_wall_ms) EXCLUDES(mu_);
   // The pending transfer whose window passed (once).
   std::optional<PendingTransfer> expire(int64_t now_wall_ms) EXCLUDES(mu_);
+  // True when no transfer is pending (nothing for expire() to find, however late).
+  bool quiet() const EXCLUDES(mu_) {
+    MutexLock lock(mu_);
+    return !pending_;
+  }
+  // `fn` runs (under this object's lock: it must not call back) after every change, so that
+  // the node's control tick, asleep while nothing is timed, wakes to plan again. Set once,
+  // before the object is shared; an empty function removes it.
+  void on_change(std::function<void()> fn) EXCLUDES(mu_) {
+    MutexLock lock(mu_);
+    on_change_ = std::move(fn);
+  }
+
 
   // Lowers the role of a former owner's token (GUEST).
   void cap(Principal& p) const;
@@ -83,6 +96,7 @@ class Ownership {
 
  private:
   void transit(OwnershipEvent event, OwnershipState to) REQUIRES(mu_);
+  void bump() REQUIRES(mu_);  // a change: the version, and on_change
   bool is_owner_locked(const Principal& p) const REQUIRES(mu_);
   mutable Mutex mu_;
   int64_t window_ms_ GUARDED_BY(mu_) = 24 * 3600 * 1000LL;
@@ -94,6 +108,7 @@ class Ownership {
   std::vector<std::function<void()>> clear_hooks_ GUARDED_BY(mu_);
   uint64_t version_ GUARDED_BY(mu_) = 0;
   uint64_t violations_ GUARDED_BY(mu_) = 0;
+  std::function<void()> on_change_ GUARDED_BY(mu_);
 };
 
 }  // namespace rcan::node

@@ -67,7 +67,17 @@ ControlState SessionTable::state_locked() const {
 void SessionTable::transit(ControlEvent event, ControlState to) {
   if (!control_transition_allowed(state_, event, to)) ++violations_;
   state_ = to;
+  bump();
+}
+
+void SessionTable::bump() {
   ++version_;
+  if (on_change_) on_change_();
+}
+
+bool SessionTable::quiet() {
+  MutexLock lock(mu_);
+  return !holder_ && !reserved_ && queue_.empty() && leases_.empty() && changes_.empty();
 }
 
 uint64_t SessionTable::version() {
@@ -357,7 +367,7 @@ bool SessionTable::leave_queue(const Principal& p) {
   for (auto it = queue_.begin(); it != queue_.end(); ++it) {
     if (it->principal_key == p.key()) {
       queue_.erase(it);
-      ++version_;
+      bump();
       return true;
     }
   }
@@ -374,7 +384,7 @@ bool SessionTable::drop_queued(const std::string& principal_key, const std::stri
     c.reason = reason;
     changes_.push_back(std::move(c));
     queue_.erase(it);
-    ++version_;
+    bump();
     return true;
   }
   return false;
@@ -390,7 +400,7 @@ void SessionTable::absorb_wall_step_locked(int64_t now_mono_ms, int64_t now_wall
         l.end_wall_ms += step;
         for (auto& g : l.grants) g.end_wall_ms += step;
       }
-      if (!leases_.empty()) ++version_;  // persisted with the shifted times
+      if (!leases_.empty()) bump();  // persisted with the shifted times
     }
   }
   anchor_mono_ms_ = now_mono_ms;
@@ -413,7 +423,7 @@ void SessionTable::tick(int64_t now_mono_ms, int64_t now_wall_ms) {
       c.reason = "expired";
       changes_.push_back(std::move(c));
       it = leases_.erase(it);
-      ++version_;
+      bump();
     } else {
       // A grant inside a running lease can end earlier than the lease.
       if (holder_ && holder_->lease_id == it->id && !it->leasee.is(holder_->who())) {
@@ -461,7 +471,7 @@ void SessionTable::revoke_all(const std::string& reason, int64_t now_mono_ms) {
   }
   leases_.clear();
   expired_.clear();
-  ++version_;
+  bump();
 }
 
 std::optional<Reservation> SessionTable::reservation(int64_t now_mono_ms) {
@@ -572,7 +582,7 @@ Result<Lease> SessionTable::grant_lease(const Principal& owner, PrincipalId leas
   l.start_wall_ms = now_wall_ms;
   l.end_wall_ms = now_wall_ms + duration_ms;
   leases_.push_back(l);
-  ++version_;
+  bump();
   return l;
 }
 
@@ -605,7 +615,7 @@ Result<Lease> SessionTable::grant_within_lease(const Principal& leasee, const st
         replaced = true;
       }
     if (!replaced) l.grants.push_back(g);
-    ++version_;
+    bump();
     return l;
   }
   return Error(ErrorCode::kNotFound, "no running lease " + lease_id, "lease_id");
@@ -627,7 +637,7 @@ Result<Lease> SessionTable::revoke_lease(const Principal& p, const std::string& 
     c.reason = "revoked by " + p.sub;
     changes_.push_back(std::move(c));
     leases_.erase(it);
-    ++version_;
+    bump();
     promote_locked(now_mono_ms, now_wall_ms);
     return l;
   }
@@ -681,7 +691,7 @@ void SessionTable::load_json(const json::Value& v, int64_t now_wall_ms) {
     }
     leases_.push_back(std::move(l));
   }
-  ++version_;
+  bump();
 }
 
 }  // namespace rcan::node

@@ -161,6 +161,17 @@ class SessionTable {
 
   // Expiries, window closes, lease ends. Call often (the node does every 100 ms).
   void tick(int64_t now_mono_ms, int64_t now_wall_ms) EXCLUDES(mu_);
+  // True when nothing here waits for a time (no holder, reservation, queued claim, lease, or
+  // change to announce): tick() would do nothing however long the node waits.
+  bool quiet() EXCLUDES(mu_);
+  // `fn` runs (under this object's lock: it must not call back) after every change, so that
+  // the node's control tick, asleep while nothing is timed, wakes to plan again. Set once,
+  // before the object is shared; an empty function removes it.
+  void on_change(std::function<void()> fn) EXCLUDES(mu_) {
+    MutexLock lock(mu_);
+    on_change_ = std::move(fn);
+  }
+
   std::vector<ControlChange> take_changes() EXCLUDES(mu_);
 
   // Ends every session, the queue, the reservation and every lease (ownership transfer).
@@ -209,6 +220,7 @@ class SessionTable {
 
  private:
   void transit(ControlEvent event, ControlState to) REQUIRES(mu_);
+  void bump() REQUIRES(mu_);  // a change: the version, and on_change
   ControlState state_locked() const REQUIRES(mu_);
   void expire_locked(int64_t now_mono_ms) REQUIRES(mu_);
   void drop_holder_locked(ControlEvent event, const std::string& reason, int64_t now_mono_ms)
@@ -240,6 +252,7 @@ class SessionTable {
   int64_t anchor_wall_ms_ GUARDED_BY(mu_) = 0;
   uint64_t violations_ GUARDED_BY(mu_) = 0;
   uint64_t version_ GUARDED_BY(mu_) = 0;
+  std::function<void()> on_change_ GUARDED_BY(mu_);
 };
 
 }  // namespace rcan::node

@@ -21,10 +21,13 @@ bool RefusalLedger::admit(RefusalKey key, int64_t now_ms) {
       // The table is full: counted under one overflow key (source, event, code, route "*").
       const RefusalKey overflow{"*", "*", "*", "*"};
       it = windows_.find(overflow);
-      if (it == windows_.end())
+      if (it == windows_.end()) {
         it = windows_.emplace(overflow, Window{now_ms, RefusalSummary{overflow, 0, 0, 0}}).first;
+        if (on_change_) on_change_();
+      }
     } else {
       windows_.emplace(key, Window{now_ms, RefusalSummary{key, 0, 0, 0}});
+      if (on_change_) on_change_();
       return true;  // the first of its kind in this window: recorded as usual
     }
   }

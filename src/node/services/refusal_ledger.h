@@ -9,6 +9,8 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
+#include <utility>
 #include <map>
 #include <string>
 #include <tuple>
@@ -49,6 +51,18 @@ class RefusalLedger {
   // forgotten. Only keys that counted something give a summary.
   std::vector<RefusalSummary> due(int64_t now_ms, bool all = false) EXCLUDES(mu_);
   uint64_t suppressed_total() const EXCLUDES(mu_);
+  // True when no window is open (nothing for due() to close, however late).
+  bool quiet() const EXCLUDES(mu_) {
+    MutexLock lock(mu_);
+    return windows_.empty();
+  }
+  // `fn` runs (under the ledger's lock: it must not call back) when a window opens, so that
+  // the node's control tick, asleep while nothing is timed, wakes to close it in time. Set
+  // once, before the ledger is shared; an empty function removes it.
+  void on_change(std::function<void()> fn) EXCLUDES(mu_) {
+    MutexLock lock(mu_);
+    on_change_ = std::move(fn);
+  }
 
   // "192.0.2.7:4711" → "192.0.2.7", "[::1]:80" → "::1".
   static std::string source_of(const std::string& remote);
@@ -62,6 +76,7 @@ class RefusalLedger {
   mutable Mutex mu_;
   std::map<RefusalKey, Window> windows_ GUARDED_BY(mu_);
   uint64_t suppressed_total_ GUARDED_BY(mu_) = 0;
+  std::function<void()> on_change_ GUARDED_BY(mu_);
 };
 
 }  // namespace rcan::node
