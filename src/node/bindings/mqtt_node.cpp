@@ -150,9 +150,12 @@ Status MqttNode::start() {
     next_audit_seq_ = st.last_seq == 0 ? 1 : st.last_seq;  // from the latest record on
   }
   // The events topic is shared by whoever may subscribe to it at the broker: it carries the
-  // events for everyone, never one principal's or the owners' (event_bus.h).
+  // events for everyone, never one principal's or the owners' (event_bus.h). QoS 0, like
+  // telemetry: a live feed, whose durable twin is the audit topic (QoS 1). On a broker that
+  // keeps QoS 1 messages in a replicated store (NATS: JetStream) an event at QoS 1 doubled what
+  // a fleet ESTOP cost the cluster (docs/FLEET.md §Benchmark).
   event_sub_ = svc_.events.subscribe([this](const Event& ev) {
-    if (ev.audience.is_everyone()) publish_json(out_.events(), ev.body, 1, false);
+    if (ev.audience.is_everyone()) publish_json(out_.events(), ev.body, 0, false);
   });
   warn_about_exposure();
   running_.store(true);
