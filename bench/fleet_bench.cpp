@@ -11,13 +11,14 @@
 //   2. RESUME, then a broadcast FLEET_COMMAND (`status`, then a short `move`): times publish →
 //      each robot's ACK at the coordinator.
 //
-// Repeats each round --rounds times and prints percentiles over all robot×round samples.
+// Repeats each round --rounds times, each once the robots and the brokers are back to their idle
+// CPU rates, and prints percentiles over all robot×round samples.
 //
 //   fleet_bench [--robots 200] [--rounds 5] [--estop-qos 1|2] [--segment-kib 1024]
 //               [--broker mosquitto|nats] [--nats-nodes 3] [--light 0|1]
 //               [--mosquitto /usr/sbin/mosquitto] [--nats-server /usr/sbin/nats-server]
 //               [--perf-ctl FIFO --profile-round N] [--warm-up 0|1]
-//               [--nats-consumers replicated|memory] [--ramp N]
+//               [--nats-consumers replicated|memory] [--ramp N] [--reply-qos 0|1]
 //
 // --broker nats: a cluster of --nats-nodes nats-server processes (MQTT listener, JetStream,
 // routes between them, docs/FLEET.md §Running on NATS); robot i connects to node i mod N, the
@@ -35,6 +36,9 @@
 // --light 1: light members, so that 1,000 fit on a small machine: each robot's audit log keeps
 // its records, chain and fsyncs but preallocates nothing (a preallocated segment per robot is
 // 1,000 zero-filled files written while measuring) and writes its index inline.
+//
+// --reply-qos 0: the robots answer at QoS 0 (mqtt.reply_qos, docs/FLEET.md §Replies at QoS 0);
+// the coordinator still subscribes at QoS 1.
 //
 // --warm-up 1: one broadcast `status` before round 1, so that the first ESTOP is no longer each
 // robot's first message (the fleet token is verified then); separates first-message costs from
@@ -307,6 +311,7 @@ struct Options {
   int light = 0;
   std::string nats_consumers = "replicated";
   int ramp = 0;  // 0: every robot at once
+  int reply_qos = 1;
   int publish_qos() const { return broker == "nats" ? 1 : 2; }
 };
 
@@ -342,16 +347,20 @@ bool parse_options(int argc, char** argv, Options& o) {
       o.nats_consumers = argv[i + 1];
     else if (a == "--ramp")
       o.ramp = std::atoi(argv[i + 1]);
+    else if (a == "--reply-qos")
+      o.reply_qos = std::atoi(argv[i + 1]);
   }
   if (o.robots_n < 1 || o.robots_n > 2000 || o.rounds < 1 || o.rounds > 1000 ||
       o.segment_bytes < (64u << 10) || (o.estop_qos != 1 && o.estop_qos != 2) ||
       (o.broker != "mosquitto" && o.broker != "nats") || o.nats_nodes < 1 || o.nats_nodes > 5 ||
-      (o.nats_consumers != "replicated" && o.nats_consumers != "memory") || o.ramp < 0) {
+      (o.nats_consumers != "replicated" && o.nats_consumers != "memory") || o.ramp < 0 ||
+      (o.reply_qos != 0 && o.reply_qos != 1)) {
     std::fprintf(stderr,
                  "usage: fleet_bench [--robots 1..2000] [--rounds 1..1000] [--estop-qos 1|2] "
                  "[--segment-kib N] [--broker mosquitto|nats] [--nats-nodes 1..5] [--light 0|1] "
                  "[--mosquitto PATH] [--nats-server PATH] [--perf-ctl FIFO --profile-round N] "
-                 "[--warm-up 0|1] [--nats-consumers replicated|memory] [--ramp N]\n");
+                 "[--warm-up 0|1] [--nats-consumers replicated|memory] [--ramp N] "
+                 "[--reply-qos 0|1]\n");
     return false;
   }
   return true;
@@ -546,6 +555,7 @@ std::unique_ptr<Robot> start_robot(const Fleet& f, const config::FleetConfig& fc
   mo.mqtt.telemetry_hz = 0;
   mo.mqtt.publish_audit = false;
   mo.mqtt.estop_qos = f.opt.estop_qos;
+  mo.mqtt.reply_qos = f.opt.reply_qos;
   mo.fleet = mine;
   mo.ruri = *parse_ruri(ruri);
   r->mqtt = std::make_unique<node::MqttNode>(*r->node, *r->svc, mo);
@@ -616,8 +626,9 @@ bool start_robots(Fleet& f) {
                                       std::to_string(f.opt.nats_nodes) + ", coordinator on node 1)";
   std::printf(
       "fleet_bench: %d %s robots (one MQTT connection each, estop subscription QoS %d, ESTOP "
-      "published at QoS %d) on %s, up in %.0f ms\n",
+      "published at QoS %d, replies at QoS %d) on %s, up in %.0f ms\n",
       f.opt.robots_n, f.opt.light ? "light" : "full", f.opt.estop_qos, f.opt.publish_qos(),
+      f.opt.reply_qos,
       where.c_str(), mono_ms() - t_start);
   return true;
 }
@@ -646,14 +657,18 @@ double broker_cpu_now(const std::vector<pid_t>& pids) {
 
 // What the idle fleet costs: CPU of this process (all robots) over 2 s with no traffic, and
 // which threads woke how often. Returns the CPU seconds used per second.
-double report_idle_cost(int robots_n) {
+double report_idle_cost(int robots_n, const std::vector<pid_t>& brokers,
+                        double* broker_share) {
   auto wake0 = wakeups_by_thread();
-  double c0 = cpu_now(), w0 = mono_ms();
+  double c0 = cpu_now(), b0 = broker_cpu_now(brokers), w0 = mono_ms();
   std::this_thread::sleep_for(std::chrono::seconds(2));
   const double secs = (mono_ms() - w0) / 1000.0;
   double share = (cpu_now() - c0) / secs;
-  std::printf("idle: %.1f%% of one core for %d robots (%.0f us of CPU per robot per second)\n",
-              share * 100, robots_n, share * 1e6 / robots_n);
+  *broker_share = (broker_cpu_now(brokers) - b0) / secs;
+  std::printf(
+      "idle: %.1f%% of one core for %d robots (%.0f us of CPU per robot per second); "
+      "broker(s) %.1f%%\n",
+      share * 100, robots_n, share * 1e6 / robots_n, *broker_share * 100);
   std::printf("idle wake-ups per robot per second:");
   for (auto& [name, n_wakes] : wakeups_by_thread())
     if (n_wakes - wake0[name] > 0)
@@ -661,6 +676,21 @@ double report_idle_cost(int robots_n) {
                   static_cast<double>(n_wakes - wake0[name]) / secs / robots_n);
   std::printf("\n");
   return share;
+}
+
+// Waits (up to 10 s) until this process and the brokers are back to their idle CPU rates: the
+// previous round's broadcast move completes 50 ms after its ACK and each robot then publishes
+// its COMPLETED, so a round that began at once would share the CPU with the last one's tail.
+void settle(const std::vector<pid_t>& brokers, double idle_share, double broker_idle_share) {
+  const double t0 = mono_ms();
+  while (mono_ms() - t0 < 10000) {
+    double c0 = cpu_now(), b0 = broker_cpu_now(brokers), w0 = mono_ms();
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    const double secs = (mono_ms() - w0) / 1000.0;
+    if ((cpu_now() - c0) / secs <= idle_share * 1.5 + 0.02 &&
+        (broker_cpu_now(brokers) - b0) / secs <= broker_idle_share * 1.5 + 0.05)
+      break;
+  }
 }
 
 // What the rounds measured, over all robot×round samples.
@@ -833,16 +863,19 @@ int main(int argc, char** argv) {
     stop_fleet(f);
     return 1;
   }
-  const double idle_share = report_idle_cost(f.opt.robots_n);
+  double broker_idle_share = 0;
+  const double idle_share = report_idle_cost(f.opt.robots_n, f.brokers, &broker_idle_share);
 
   Coordinator coord(f.url);
   Results res;
   res.idle_share = idle_share;
   if (f.opt.warm_up != 0) warm_up(f, coord);
+  settle(f.brokers, res.idle_share, broker_idle_share);
   for (int round = 0; round < f.opt.rounds; ++round) {
     estop_round(f, coord, round, res);
     resume_and_command(f, coord, res);
     std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    settle(f.brokers, res.idle_share, broker_idle_share);
   }
   print_report(f, res);
   stop_fleet(f);

@@ -40,6 +40,10 @@ struct MqttConfig {
   // The highest QoS of every publish and subscription (docs/FLEET.md §Brokers capped at QoS 1):
   // 1 for brokers without QoS 2. With 2, a broker's SUBACK granting less lowers it to 1.
   int max_qos = 2;
+  // QoS of the robot's replies (answers and motion completions, docs/FLEET.md §Replies at QoS 0):
+  // 1 is sent again after a reconnect; 0 is not, and costs a broker that keeps QoS 1 messages in
+  // a replicated store (NATS: JetStream) a fraction of the work.
+  int reply_qos = 1;
   // The longest a fleet member stays without its broker while it moves: past it (no URL took
   // it back) its motion is stopped, not latched, and audited, and again while the outage lasts.
   uint32_t failover_ms = 5000;

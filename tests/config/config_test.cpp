@@ -571,6 +571,17 @@ TEST(ConfigMqtt, EstopSubscriptionQos) {
   EXPECT_EQ(two->mqtt.estop_qos, 2);
 }
 
+TEST(ConfigMqtt, ReplyQos) {
+  auto dflt = parse("mqtt:\n  enabled: true\n");
+  ASSERT_TRUE(dflt.ok()) << dflt.error().message;
+  EXPECT_EQ(dflt->mqtt.reply_qos, 1);
+  auto zero = parse("mqtt:\n  enabled: true\n  reply_qos: 0\n");
+  ASSERT_TRUE(zero.ok()) << zero.error().message;
+  EXPECT_EQ(zero->mqtt.reply_qos, 0);
+  expect_error(parse("mqtt:\n  reply_qos: 2\n"), "mqtt.reply_qos", "out_of_range");
+  expect_error(parse("mqtt:\n  reply_qos: -1\n"), "mqtt.reply_qos", "out_of_range");
+}
+
 TEST(ConfigMqtt, MaxQos) {
   auto dflt = parse("mqtt:\n  enabled: true\n");
   ASSERT_TRUE(dflt.ok()) << dflt.error().message;

@@ -138,6 +138,7 @@ class Watcher {
     std::string topic;
     json::Value body;
     bool retained = false;
+    int qos = 0;  // as delivered: the lower of the publisher's and this subscription's
   };
   // `qos` 0: a subscription NATS serves without JetStream (which a settling cluster may not).
   Watcher(const std::string& url, const std::vector<std::string>& filters, int qos = 1) {
@@ -148,7 +149,7 @@ class Watcher {
     client_->on_message([this](const transport::MqttMessage& m) {
       auto v = json::parse(m.payload);
       std::lock_guard<std::mutex> lk(mu_);
-      msgs_.push_back(Msg{m.topic, v.ok() ? *v : json::Value(), m.retained});
+      msgs_.push_back(Msg{m.topic, v.ok() ? *v : json::Value(), m.retained, m.qos});
       cv_.notify_all();
     });
     EXPECT_TRUE(client_->start().ok());

@@ -183,6 +183,33 @@ TEST_F(FleetTest, FleetEstopDeliveredTwiceIsHarmlessAtEitherQos) {
   }
 }
 
+// mqtt.reply_qos: 0 (docs/FLEET.md §Replies at QoS 0) sends the answers at QoS 0; the default
+// at QoS 1. `rcan fleet estop` is confirmed by either.
+TEST_F(FleetTest, RepliesGoOutAtTheConfiguredQos) {
+  add_robot("robot-a", "0000000a");
+  add_robot("robot-b", "0000000b", "", ", reply_qos: 0");
+  Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/+/reply"});  // subscribed at QoS 1
+  std::string id = new_uuid_v4();
+  w.publish("rcan/fleet/alpha/cmd",
+            command_msg("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "alpha"}},
+                        fleet_token_, id));
+  for (const auto& [member, qos] : {std::pair<std::string, int>{"robot-a", 1}, {"robot-b", 0}}) {
+    auto ack = w.wait([&](const Watcher::Msg& m) {
+      return m.topic == "rcan/fleet/alpha/robot/" + member + "/reply" &&
+             str_of(m.body, "reply_to") == id;
+    });
+    ASSERT_TRUE(ack.has_value()) << member;
+    EXPECT_EQ(str_of(ack->body, "type"), "ACK") << member;
+    EXPECT_EQ(ack->qos, qos) << member;
+  }
+  auto r = fleet({"estop", "alpha", "--members", "robot-a,robot-b"});
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  for (const char* m : {"robot-a", "robot-b"})
+    EXPECT_NE(json::dump(robots_[m]->status(fleet_token_)).find("\"estop_active\":true"),
+              std::string::npos)
+        << m;
+}
+
 // Without --members, `rcan fleet estop` waits for every member with a retained status on the
 // broker, online or not, and names each one that did not confirm (exit 1); --no-wait only needs
 // the broker's acknowledgement. Mosquitto does QoS 2: the ESTOP goes out at QoS 2.

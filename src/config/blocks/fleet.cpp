@@ -94,6 +94,7 @@ Table<MqttConfig> mqtt_rows() {
       M::field("publish_audit", Bool(), &MqttConfig::publish_audit),
       M::field("estop_qos", Int(1, 2), &MqttConfig::estop_qos),
       M::field("max_qos", Int(1, 2), &MqttConfig::max_qos),
+      M::field("reply_qos", Int(0, 1), &MqttConfig::reply_qos),
       M::field("failover_ms", Int(100, 600000), &MqttConfig::failover_ms),
       M::check([](const At& mq, MqttConfig& m, Ctx&) {
         if (m.estop_qos > m.max_qos)

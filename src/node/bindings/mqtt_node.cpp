@@ -354,7 +354,7 @@ void MqttNode::on_message(const transport::MqttMessage& msg) {
   }
   auto body = mqtt::parse_payload(msg.payload);
   if (!body.ok()) {
-    publish_json(reply_topic, svc_.error(body.error()), 1, false);
+    publish_json(reply_topic, svc_.error(body.error()), opts_.mqtt.reply_qos, false);
     return;
   }
   // Commands are never retained: a retained message on a command topic is stale history.
@@ -398,7 +398,7 @@ void MqttNode::submit(const json::Value& body, const std::string& route,
         loop_cv_.notify_all();
       }
     }
-    publish_json(reply_topic, b, 1, false);
+    publish_json(reply_topic, b, opts_.mqtt.reply_qos, false);
   });
 }
 
@@ -452,7 +452,8 @@ void MqttNode::tick_completions() {
                          {"ruri", svc_.settings.ruri}};
     if (estop) payload.set("reason", "estop_active");
     publish_json(p.reply_topic,
-                 svc_.envelope(MessageType::kEvent, std::move(payload), p.message_id), 1, false);
+                 svc_.envelope(MessageType::kEvent, std::move(payload), p.message_id),
+                 opts_.mqtt.reply_qos, false);
   }
 }
 
