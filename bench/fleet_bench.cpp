@@ -628,8 +628,7 @@ bool start_robots(Fleet& f) {
       "fleet_bench: %d %s robots (one MQTT connection each, estop subscription QoS %d, ESTOP "
       "published at QoS %d, replies at QoS %d) on %s, up in %.0f ms\n",
       f.opt.robots_n, f.opt.light ? "light" : "full", f.opt.estop_qos, f.opt.publish_qos(),
-      f.opt.reply_qos,
-      where.c_str(), mono_ms() - t_start);
+      f.opt.reply_qos, where.c_str(), mono_ms() - t_start);
   return true;
 }
 
@@ -657,8 +656,7 @@ double broker_cpu_now(const std::vector<pid_t>& pids) {
 
 // What the idle fleet costs: CPU of this process (all robots) over 2 s with no traffic, and
 // which threads woke how often. Returns the CPU seconds used per second.
-double report_idle_cost(int robots_n, const std::vector<pid_t>& brokers,
-                        double* broker_share) {
+double report_idle_cost(int robots_n, const std::vector<pid_t>& brokers, double* broker_share) {
   auto wake0 = wakeups_by_thread();
   double c0 = cpu_now(), b0 = broker_cpu_now(brokers), w0 = mono_ms();
   std::this_thread::sleep_for(std::chrono::seconds(2));
@@ -697,9 +695,9 @@ void settle(const std::vector<pid_t>& brokers, double idle_share, double broker_
 struct Results {
   std::vector<double> latch, estop_ack, status_ack, move_ack;
   double estop_cpu_ms = 0;
-  double estop_net_cpu_ms = 0;     // less what the idle fleet would have used meanwhile
-  double estop_broker_cpu_ms = 0;  // the broker process(es), same window
-  double idle_share = 0;           // CPU seconds per second of the idle fleet
+  double estop_net_cpu_ms = 0;                // less what the idle fleet would have used meanwhile
+  double estop_broker_cpu_ms = 0;             // the broker process(es), same window
+  double idle_share = 0;                      // CPU seconds per second of the idle fleet
   std::map<std::string, long> estop_wakeups;  // summed over the ESTOP rounds
   int failures = 0;
 };
@@ -822,8 +820,9 @@ void print_report(const Fleet& f, const Results& res) {
       "fleet ESTOP CPU less the idle fleet's over the same window: %.1f ms per round, %.0f us per "
       "robot\n",
       res.estop_net_cpu_ms / rounds, res.estop_net_cpu_ms * 1000 / rounds / robots_n);
-  std::printf("broker CPU (all broker processes, same window): %.1f ms per round, %.0f us per robot\n",
-              res.estop_broker_cpu_ms / rounds, res.estop_broker_cpu_ms * 1000 / rounds / robots_n);
+  std::printf(
+      "broker CPU (all broker processes, same window): %.1f ms per round, %.0f us per robot\n",
+      res.estop_broker_cpu_ms / rounds, res.estop_broker_cpu_ms * 1000 / rounds / robots_n);
   std::printf("fleet ESTOP thread wake-ups per robot:");
   for (auto& [name, n_wakes] : res.estop_wakeups)
     if (n_wakes > 0)

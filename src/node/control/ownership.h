@@ -73,7 +73,6 @@ class Ownership {
     on_change_ = std::move(fn);
   }
 
-
   // Lowers the role of a former owner's token (GUEST).
   void cap(Principal& p) const;
   // A principal that used the robot (the user list, personal data).

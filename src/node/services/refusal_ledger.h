@@ -10,10 +10,10 @@
 
 #include <cstdint>
 #include <functional>
-#include <utility>
 #include <map>
 #include <string>
 #include <tuple>
+#include <utility>
 #include <vector>
 
 #include "base/thread_annotations.h"
