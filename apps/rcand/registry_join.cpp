@@ -6,6 +6,7 @@
 #include "base/log.h"
 #include "base/state_file.h"
 #include "identity.h"
+#include "node/admission/registry_feed.h"
 #include "rcan/crypto/registry_proof.h"
 #include "rcan/encoding.h"
 #include "rcan/errors.h"
@@ -52,15 +53,7 @@ struct Exchange {
 };
 
 // The registry's refusal, in one line: its error body's message when it sent one.
-std::string refusal(const HttpAnswer& a) {
-  auto v = json::parse(a.body);
-  std::string msg;
-  if (v.ok()) {
-    msg = json::string_field(*v, "message");
-    if (msg.empty()) msg = json::string_field(*v, "error");
-  }
-  return "the registry answered " + std::to_string(a.status) + (msg.empty() ? "" : ": " + msg);
-}
+std::string refusal(const HttpAnswer& a) { return node::registry_refusal(a.status, a.body); }
 
 // The endpoints this robot advertises.
 json::Array endpoints(const config::NodeConfig& cfg) {
@@ -87,11 +80,9 @@ Result<std::string> register_with_registry(const config::NodeConfig& cfg,
   auto ch = call("GET", "/api/v1/challenge", "", key);
   if (!ch.ok()) return link_error("registry challenge: " + ch.error().message);
   if (ch->status != 200) return link_error("registry challenge: " + refusal(*ch));
-  auto challenge = json::parse(ch->body);
-  if (!challenge.ok()) return link_error("registry challenge: not JSON");
-  const std::string id = json::string_field(*challenge, "challenge_id");
-  const std::string nonce = json::string_field(*challenge, "nonce");
-  if (id.empty() || nonce.empty()) return link_error("registry challenge: malformed");
+  auto challenge = node::parse_registry_challenge(ch->body);
+  if (!challenge.ok()) return link_error("registry challenge: " + challenge.error().message);
+  const std::string id = challenge->id, nonce = challenge->nonce;
 
   // The robot's names as the registry keys them: its RURI's segments (version "v1", the
   // SDKs' 5-segment form).
@@ -118,19 +109,16 @@ Result<std::string> register_with_registry(const config::NodeConfig& cfg,
   if (!posted.ok()) return link_error("registration: " + posted.error().message);
   if (posted->status != 200 && posted->status != 201)
     return link_error("registration: " + refusal(*posted));
-  auto answer = json::parse(posted->body);
-  if (!answer.ok()) return link_error("registration: the answer is not JSON");
-  auto rrn = registry::normalize_rrn(json::string_field(*answer, "rrn"));
-  if (!rrn) return link_error("registration: the answer holds no RRN");
+  auto answer = node::parse_registration_answer(posted->body);
+  if (!answer.ok()) return link_error("registration: " + answer.error().message);
   // The robot's own key comes once, with a new registration; a robot registered before (its
   // state lost) keeps refreshing with the registrant key.
-  json::Object state{{"registry_url", cfg.registry_url},
-                     {"rrn", *rrn},
-                     {"robot_key", json::string_field(*answer, "api_key")}};
+  json::Object state{
+      {"registry_url", cfg.registry_url}, {"rrn", answer->rrn}, {"robot_key", answer->robot_key}};
   if (Status s = make_private_dir(cfg.data_dir + "/registry"); !s.ok()) return s.error();
   if (Status s = write_state_file(state_path(cfg.data_dir), json::Value(std::move(state))); !s.ok())
     return s.error();
-  return *rrn;
+  return answer->rrn;
 }
 
 RegistryLink::RegistryLink(const config::NodeConfig& cfg, const keys::RobotKeys& keys,

@@ -328,20 +328,16 @@ void RegistryTrust::introspect(const std::string& token, int timeout_ms) {
     o.headers.emplace_back("Authorization", "Bearer " + key->as_string());
     // A compact JWS is base64url and dots: nothing in it needs form encoding.
     auto a = http_request("POST", *u, "token=" + token, timeout_ms, o);
-    auto doc = a.ok() && a->status == 200 ? json::parse(a->body) : Result<json::Value>(Error());
-    const json::Value* active = doc.ok() ? doc->get("active") : nullptr;
     if (!a.ok()) {
       err = a.error().message;
     } else if (a->status != 200) {
-      err = "the registry answered " + std::to_string(a->status);
-    } else if (!active || !active->is_bool()) {
-      err = "the introspection answer is not RFC 7662 JSON";
-    } else if (active->as_bool()) {
-      json::Object claims = doc->as_object();
-      claims.erase("active");
-      const json::Value* exp = claims.find("exp");
-      if (exp && exp->is_int())
-        answer = Answer{std::move(claims), std::min(exp->as_int() * 1000, now + kActiveAnswerMs)};
+      err = node::registry_refusal(a->status, a->body);
+    } else if (auto parsed = node::parse_introspection_answer(a->body, now, kActiveAnswerMs,
+                                                              kInactiveAnswerMs);
+               !parsed.ok()) {
+      err = parsed.error().message;
+    } else {
+      answer = Answer{std::move(parsed->claims), parsed->until_ms};
     }
   }
   if (!err.empty()) {

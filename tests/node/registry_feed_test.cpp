@@ -12,6 +12,7 @@
 #include "node/admission/authenticator.h"
 #include "rcan/crypto/ed25519.h"
 #include "rcan/encoding.h"
+#include "rcan/registry.h"
 
 using namespace rcan;
 using namespace rcan::node;
@@ -203,4 +204,81 @@ TEST(FollowedIssuer, IntrospectedClaimsAreCheckedLikeAVerifiedTokens) {
   answers[t] = answer;
   answers[t].set("role", "emperor");
   EXPECT_FALSE(auth.authenticate_token(t, kNow).ok());
+}
+
+// What rcand reads back when it introspects a token (RFC 7662) and registers itself.
+TEST(RegistryAnswers, IntrospectionAnswers) {
+  const int64_t now = kNow * 1000, active = 60'000, inactive = 30'000;
+  auto a = parse_introspection_answer(
+      R"({"active":true,"iss":"https://registry.example","sub":"carol","exp":)" +
+          std::to_string(kNow + 10) + "}",
+      now, active, inactive);
+  ASSERT_TRUE(a.ok()) << a.error().message;
+  ASSERT_TRUE(a->claims.has_value());
+  EXPECT_EQ(a->claims->find("active"), nullptr);
+  EXPECT_EQ(json::string_field(json::Value(*a->claims), "sub"), "carol");
+  EXPECT_EQ(a->until_ms, (kNow + 10) * 1000);  // before now + 60 s: the token's own end
+  a = parse_introspection_answer(R"({"active":true,"exp":)" + std::to_string(kNow + 3600) + "}",
+                                 now, active, inactive);
+  ASSERT_TRUE(a.ok());
+  EXPECT_EQ(a->until_ms, now + active);
+  // An exp so large that exp × 1000 overflows is capped, not wrapped into the past; one far in
+  // the past ends the answer at once.
+  for (const char* exp : {"9223372036854775807", "9223372036854776"}) {
+    a = parse_introspection_answer(std::string(R"({"active":true,"exp":)") + exp + "}", now, active,
+                                   inactive);
+    ASSERT_TRUE(a.ok()) << exp;
+    EXPECT_EQ(a->until_ms, now + active) << exp;
+  }
+  a = parse_introspection_answer(R"({"active":true,"exp":-9223372036854775807})", now, active,
+                                 inactive);
+  ASSERT_TRUE(a.ok());
+  EXPECT_LT(a->until_ms, now);
+  // Inactive, or active without an integer exp: no claims, remembered as inactive.
+  for (const char* body : {R"({"active":false})", R"({"active":true})",
+                           R"({"active":true,"exp":"soon"})", R"({"active":true,"exp":1.5})"}) {
+    a = parse_introspection_answer(body, now, active, inactive);
+    ASSERT_TRUE(a.ok()) << body;
+    EXPECT_FALSE(a->claims.has_value()) << body;
+    EXPECT_EQ(a->until_ms, now + inactive) << body;
+  }
+  for (const char* body : {"", "[]", "{}", R"({"active":"true"})", "not json", R"({"active":1})"})
+    EXPECT_FALSE(parse_introspection_answer(body, now, active, inactive).ok()) << body;
+  std::string huge =
+      R"({"active":true,"pad":")" + std::string(kMaxRegistryAnswerBytes, 'x') + "\"}";
+  EXPECT_FALSE(parse_introspection_answer(huge, now, active, inactive).ok());
+}
+
+TEST(RegistryAnswers, ChallengeRegistrationAndRefusal) {
+  auto c = parse_registry_challenge(R"({"challenge_id":"c1","nonce":"n1","expires_in":60})");
+  ASSERT_TRUE(c.ok()) << c.error().message;
+  EXPECT_EQ(c->id, "c1");
+  EXPECT_EQ(c->nonce, "n1");
+  for (const char* body : {R"({"challenge_id":"c1"})", R"({"challenge_id":"","nonce":"n"})",
+                           R"({"challenge_id":7,"nonce":"n"})", "[]", "nope"})
+    EXPECT_FALSE(parse_registry_challenge(body).ok()) << body;
+  EXPECT_FALSE(
+      parse_registry_challenge(R"({"challenge_id":")" + std::string(513, 'c') + R"(","nonce":"n"})")
+          .ok());
+
+  auto r = parse_registration_answer(R"({"rrn":"RRN-000000000042","api_key":"rk_1"})");
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_EQ(r->rrn, *registry::normalize_rrn("RRN-000000000042"));
+  EXPECT_EQ(r->robot_key, "rk_1");
+  r = parse_registration_answer(R"({"rrn":"RRN-000000000042"})");
+  ASSERT_TRUE(r.ok());
+  EXPECT_TRUE(r->robot_key.empty());
+  for (const char* body : {R"({"rrn":"not-an-rrn"})", R"({"rrn":42})", "{}", "", "[1]"})
+    EXPECT_FALSE(parse_registration_answer(body).ok()) << body;
+
+  EXPECT_EQ(registry_refusal(409, R"({"message":"already registered"})"),
+            "the registry answered 409: already registered");
+  EXPECT_EQ(registry_refusal(403, R"({"error":"forbidden"})"),
+            "the registry answered 403: forbidden");
+  EXPECT_EQ(registry_refusal(500, "<html>"), "the registry answered 500");
+  // A long message is cut at a character boundary (it goes into logs and audit records).
+  std::string msg(511, 'a');
+  msg += "\xC3\xA9\xC3\xA9";  // é é: the cut falls inside the first
+  const std::string line = registry_refusal(400, R"({"message":")" + msg + "\"}");
+  EXPECT_EQ(line, "the registry answered 400: " + std::string(511, 'a'));
 }

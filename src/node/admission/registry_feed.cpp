@@ -1,9 +1,12 @@
 #include "node/admission/registry_feed.h"
 
+#include <algorithm>
 #include <cctype>
 #include <ctime>
+#include <limits>
 
 #include "rcan/json.h"
+#include "rcan/registry.h"
 
 namespace rcan::node {
 namespace {
@@ -131,6 +134,80 @@ std::optional<int64_t> parse_iso8601_ms(std::string_view s) {
   const int64_t doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
   const int64_t days = era * 146097 + doe - 719468;
   return (days * 86400 + h * 3600 + mi * 60 + se - offset_s) * 1000 + ms;
+}
+
+namespace {
+
+Result<json::Value> answer_json(std::string_view body) {
+  auto v = json::parse(body, {.max_depth = 16, .max_bytes = kMaxRegistryAnswerBytes});
+  if (!v.ok()) return bad("the registry's answer is not JSON: " + v.error().message);
+  if (!v->is_object()) return bad("the registry's answer is not a JSON object");
+  return v;
+}
+
+}  // namespace
+
+Result<IntrospectionAnswer> parse_introspection_answer(std::string_view body, int64_t now_ms,
+                                                       int64_t active_ms, int64_t inactive_ms) {
+  auto doc = answer_json(body);
+  if (!doc.ok()) return doc.error();
+  const json::Value* active = doc->get("active");
+  if (active == nullptr || !active->is_bool())
+    return bad("the introspection answer is not RFC 7662 JSON (no boolean active)", "active");
+  IntrospectionAnswer out{std::nullopt, now_ms + inactive_ms};
+  if (!active->as_bool()) return out;
+  json::Object claims = doc->as_object();
+  claims.erase("active");
+  const json::Value* exp = claims.find("exp");
+  if (exp == nullptr || !exp->is_int()) return out;  // unusable: treated as inactive
+  // exp is seconds; an absurd one must not overflow into the past or the far future.
+  const int64_t limit = std::numeric_limits<int64_t>::max() / 1000;
+  const int64_t exp_ms = exp->as_int() >= limit    ? std::numeric_limits<int64_t>::max()
+                         : exp->as_int() <= -limit ? std::numeric_limits<int64_t>::min()
+                                                   : exp->as_int() * 1000;
+  out.until_ms = std::min(exp_ms, now_ms + active_ms);
+  out.claims = std::move(claims);
+  return out;
+}
+
+Result<RegistryChallenge> parse_registry_challenge(std::string_view body) {
+  auto doc = answer_json(body);
+  if (!doc.ok()) return doc.error();
+  RegistryChallenge c;
+  if (!opt_string(*doc, "challenge_id", c.id) || !opt_string(*doc, "nonce", c.nonce) ||
+      c.id.empty() || c.nonce.empty())
+    return bad("the registry's challenge needs challenge_id and nonce (strings, 1-512 bytes)");
+  return c;
+}
+
+Result<RegistrationAnswer> parse_registration_answer(std::string_view body) {
+  auto doc = answer_json(body);
+  if (!doc.ok()) return doc.error();
+  RegistrationAnswer a;
+  std::string rrn;
+  if (!opt_string(*doc, "rrn", rrn)) return bad("the registration answer's rrn is not a string");
+  auto normal = registry::normalize_rrn(rrn);
+  if (!normal) return bad("the registration answer holds no RRN", "rrn");
+  a.rrn = *normal;
+  const json::Value* key = doc->get("api_key");
+  if (key != nullptr && key->is_string() && key->as_string().size() <= 4096)
+    a.robot_key = key->as_string();
+  return a;
+}
+
+std::string registry_refusal(int status, std::string_view body) {
+  std::string msg;
+  auto v = json::parse(body, {.max_depth = 16, .max_bytes = kMaxRegistryAnswerBytes});
+  if (v.ok() && v->is_object()) {
+    msg = json::string_field(*v, "message");
+    if (msg.empty()) msg = json::string_field(*v, "error");
+  }
+  if (msg.size() > 512) {  // cut at a character boundary: the line goes into logs and records
+    size_t n = 512;
+    while (n > 0 && (static_cast<unsigned char>(msg[n]) & 0xC0) == 0x80) --n;
+    msg.resize(n);
+  }
+  return "the registry answered " + std::to_string(status) + (msg.empty() ? "" : ": " + msg);
 }
 
 }  // namespace rcan::node
