@@ -184,7 +184,10 @@ TEST_F(FleetTest, FleetEstopDeliveredTwiceIsHarmlessAtEitherQos) {
 }
 
 // mqtt.reply_qos: 0 (docs/FLEET.md §Replies at QoS 0) sends the answers at QoS 0; the default
-// at QoS 1. `rcan fleet estop` is confirmed by either.
+// at QoS 1. `rcan fleet estop` is confirmed by either. The first message answering the command
+// is its ACK: the `status` command's COMPLETED, published by the robot's MQTT loop as soon as it
+// sees the command pending, once overtook it (seen under TSan), and `rcan fleet command` then
+// counted the member as failed.
 TEST_F(FleetTest, RepliesGoOutAtTheConfiguredQos) {
   add_robot("robot-a", "0000000a");
   add_robot("robot-b", "0000000b", "", ", reply_qos: 0");

@@ -385,6 +385,11 @@ void MqttNode::submit(const json::Value& body, const std::string& route,
   node_.submit(std::move(in), [this, reply_topic, is_command](Outcome out) {
     if (!running_.load()) return;
     const json::Value& b = out.body;
+    // The answer is queued on the connection before its completion can be: the loop publishes
+    // COMPLETED as soon as it sees the command pending and the robot at rest (at once for a
+    // `status`), and an EVENT overtaking its ACK made `rcan fleet command` report a member that
+    // had acknowledged as failed.
+    publish_json(reply_topic, b, opts_.mqtt.reply_qos, false);
     if (is_command && out.status == 200 && str_field(b, "type") == "ACK") {
       const json::Value* p = field(b, "payload");
       std::string cmd = p != nullptr ? str_field(*p, "command") : std::string();
@@ -398,7 +403,6 @@ void MqttNode::submit(const json::Value& body, const std::string& route,
         loop_cv_.notify_all();
       }
     }
-    publish_json(reply_topic, b, opts_.mqtt.reply_qos, false);
   });
 }
 
