@@ -239,12 +239,13 @@ std::optional<HttpResponse> RegistryApi::Impl::check_signed_update(const HttpReq
   if (ts > t + 300'000 || ts < t - 300'000)
     return refuse("X-RCAN-Timestamp is more than 5 minutes from the registry's clock",
                   "timestamp_skew");
-  if (ts <= iso_utc_ms(robot.updated_at))
-    return refuse("X-RCAN-Timestamp is not later than the record's last change (a replay?)",
-                  "replayed");
+  // The signature first: a request the robot did not sign learns nothing about the record.
   if (Status s = verify_update(robot.ed25519_pub, update_message(robot.rrn, ts, req.body), sig);
       !s.ok())
     return refuse(s.error().message, s.error().reason);
+  if (ts <= iso_utc_ms(robot.updated_at))
+    return refuse("X-RCAN-Timestamp is not later than the record's last change (a replay?)",
+                  "replayed");
   return std::nullopt;
 }
 
