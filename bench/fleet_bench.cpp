@@ -19,6 +19,7 @@
 //               [--mosquitto /usr/sbin/mosquitto] [--nats-server /usr/sbin/nats-server]
 //               [--perf-ctl FIFO --profile-round N] [--warm-up 0|1]
 //               [--nats-consumers replicated|memory] [--ramp N] [--reply-qos 0|1]
+//               [--coordinator-alg ed25519|ml-dsa-65]
 //
 // --broker nats: a cluster of --nats-nodes nats-server processes (MQTT listener, JetStream,
 // routes between them, docs/FLEET.md §Running on NATS); robot i connects to node i mod N, the
@@ -36,6 +37,9 @@
 // --light 1: light members, so that 1,000 fit on a small machine: each robot's audit log keeps
 // its records, chain and fsyncs but preallocates nothing (a preallocated segment per robot is
 // 1,000 zero-filled files written while measuring) and writes its index inline.
+//
+// --coordinator-alg ml-dsa-65: the coordinator signs with ML-DSA-65 (its fleet token binds that
+// key) instead of Ed25519; the robots verify an ML-DSA-65 signature instead of an Ed25519 one.
 //
 // --reply-qos 0: the robots answer at QoS 0 (mqtt.reply_qos, docs/FLEET.md §Replies at QoS 0);
 // the coordinator still subscribes at QoS 1.
@@ -90,6 +94,7 @@
 #include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/jwt.h"
 #include "rcan/crypto/message_sig.h"
+#include "rcan/crypto/mldsa65.h"
 #include "rcan/errors.h"
 #include "rcan/json.h"
 #include "transport/mqtt_client.h"
@@ -312,6 +317,7 @@ struct Options {
   std::string nats_consumers = "replicated";
   int ramp = 0;  // 0: every robot at once
   int reply_qos = 1;
+  std::string coordinator_alg = "ed25519";
   int publish_qos() const { return broker == "nats" ? 1 : 2; }
 };
 
@@ -349,18 +355,21 @@ bool parse_options(int argc, char** argv, Options& o) {
       o.ramp = std::atoi(argv[i + 1]);
     else if (a == "--reply-qos")
       o.reply_qos = std::atoi(argv[i + 1]);
+    else if (a == "--coordinator-alg")
+      o.coordinator_alg = argv[i + 1];
   }
   if (o.robots_n < 1 || o.robots_n > 2000 || o.rounds < 1 || o.rounds > 1000 ||
       o.segment_bytes < (64u << 10) || (o.estop_qos != 1 && o.estop_qos != 2) ||
       (o.broker != "mosquitto" && o.broker != "nats") || o.nats_nodes < 1 || o.nats_nodes > 5 ||
       (o.nats_consumers != "replicated" && o.nats_consumers != "memory") || o.ramp < 0 ||
-      (o.reply_qos != 0 && o.reply_qos != 1)) {
+      (o.reply_qos != 0 && o.reply_qos != 1) ||
+      (o.coordinator_alg != "ed25519" && o.coordinator_alg != "ml-dsa-65")) {
     std::fprintf(stderr,
                  "usage: fleet_bench [--robots 1..2000] [--rounds 1..1000] [--estop-qos 1|2] "
                  "[--segment-kib N] [--broker mosquitto|nats] [--nats-nodes 1..5] [--light 0|1] "
                  "[--mosquitto PATH] [--nats-server PATH] [--perf-ctl FIFO --profile-round N] "
                  "[--warm-up 0|1] [--nats-consumers replicated|memory] [--ramp N] "
-                 "[--reply-qos 0|1]\n");
+                 "[--reply-qos 0|1] [--coordinator-alg ed25519|ml-dsa-65]\n");
     return false;
   }
   return true;
@@ -374,8 +383,9 @@ struct Fleet {
   std::vector<std::string> urls;  // one per broker node; the coordinator uses the first
   std::string url;
   std::vector<std::string> members;
-  std::string token;  // bound (cnf) to the coordinator's Ed25519 key, as MQTT requires
+  std::string token;  // bound (cnf) to the coordinator's key, as MQTT requires
   std::array<uint8_t, 32> coordinator_seed{};
+  std::optional<mldsa65::KeyPair> coordinator_pq;  // --coordinator-alg ml-dsa-65
   std::optional<jwt::VerificationKey> verify;
   std::vector<std::unique_ptr<Robot>> robots;
 
@@ -385,7 +395,10 @@ struct Fleet {
     json::Object m{{"version", "1.0.0"},  {"message_id", id},
                    {"type", type},        {"timestamp_ms", wall_ms()},
                    {"auth_token", token}, {"payload", std::move(payload)}};
-    if (!msgsig::sign_ed25519(m, coordinator_seed).ok()) std::fprintf(stderr, "cannot sign\n");
+    Status signed_ = coordinator_pq ? msgsig::sign_mldsa65(m, coordinator_pq->secret_key,
+                                                           coordinator_pq->public_key)
+                                    : msgsig::sign_ed25519(m, coordinator_seed);
+    if (!signed_.ok()) std::fprintf(stderr, "cannot sign\n");
     return json::Value(std::move(m));
   }
 };
@@ -492,17 +505,22 @@ void issue_fleet_token(Fleet& f) {
   json::Array fleet_claim{"fleet:bench"};
   f.coordinator_seed.fill(0x5a);
   auto pub = ed25519::public_key_from_seed(f.coordinator_seed);
+  if (f.opt.coordinator_alg == "ml-dsa-65")
+    f.coordinator_pq = *mldsa65::keygen_from_seed(f.coordinator_seed);
   int64_t now_s = wall_ms() / 1000;
-  f.token = *jwt::issue(json::Object{{"iss", "fleet-issuer"},
-                                     {"sub", "bench"},
-                                     {"aud", "rcan://local.rcan/bench/sim/*"},
-                                     {"role", "owner"},
-                                     {"scope", json::Array{"status", "control"}},
-                                     {"fleet", fleet_claim},
-                                     {"cnf", *cnf::make(msgsig::Alg::kEd25519, *pub)},
-                                     {"iat", now_s - 5},
-                                     {"exp", now_s + 3600}},
-                        *signing);
+  f.token = *jwt::issue(
+      json::Object{
+          {"iss", "fleet-issuer"},
+          {"sub", "bench"},
+          {"aud", "rcan://local.rcan/bench/sim/*"},
+          {"role", "owner"},
+          {"scope", json::Array{"status", "control"}},
+          {"fleet", fleet_claim},
+          {"cnf", f.coordinator_pq ? *cnf::make(msgsig::Alg::kMlDsa65, f.coordinator_pq->public_key)
+                                   : *cnf::make(msgsig::Alg::kEd25519, *pub)},
+          {"iat", now_s - 5},
+          {"exp", now_s + 3600}},
+      *signing);
 }
 
 // Robot `i`'s node stack, started, with its MQTT connection; null (after saying why) when a

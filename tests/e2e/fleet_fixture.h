@@ -284,11 +284,11 @@ class FleetTest : public ::testing::Test {
   }
   // An HS256 token from the fleet issuer, for every sim-rover of the registry; `fleet`
   // lists the members it may command (empty: no fleet claim). `bound`: bound (cnf) to the
-  // commander's Ed25519 key, as robots require on MQTT.
+  // commander's key, as robots require on MQTT — its Ed25519 key, or its ML-DSA-65 key (`alg`).
   std::string token(const std::string& role, std::vector<std::string> fleet,
                     const std::string& sub = "coordinator",
                     const std::string& aud = "rcan://local.rcan/rcan/sim-rover/*",
-                    bool bound = true) {
+                    bool bound = true, msgsig::Alg alg = msgsig::Alg::kEd25519) {
     auto key = jwt::SigningKey::from_file(secret_, true);
     EXPECT_TRUE(key.ok());
     int64_t now = wall_ms() / 1000;
@@ -304,7 +304,9 @@ class FleetTest : public ::testing::Test {
       for (auto& m : fleet) f.emplace_back(m);
       claims.set("fleet", f);
     }
-    if (bound) claims.set("cnf", *cnf::make(msgsig::Alg::kEd25519, keys_->pub.ed25519_pk));
+    if (bound)
+      claims.set("cnf", *cnf::make(alg, alg == msgsig::Alg::kEd25519 ? keys_->pub.ed25519_pk
+                                                                     : keys_->pub.mldsa65_pk));
     auto t = jwt::issue(claims, *key);
     EXPECT_TRUE(t.ok());
     return t.ok() ? *t : "";

@@ -250,6 +250,46 @@ TEST_F(FleetTest, FleetEstopWaitsForTheRosterAndNamesWhoDidNotConfirm) {
   EXPECT_NE(lone.err.find("nothing was sent"), std::string::npos) << lone.err;
 }
 
+// A commander whose fleet token binds its ML-DSA-65 key (rcan token issue --bind-alg ml-dsa-65):
+// the CLI signs with that key, and the robots verify it (docs/FLEET.md §Benchmark: an ML-DSA-65
+// signature costs a robot a quarter of an Ed25519 one's CPU). A message from it signed with its
+// Ed25519 key instead is refused: the token names the one key.
+TEST_F(FleetTest, AFleetTokenBoundToAnMlDsaKeyStopsAndResumesTheFleet) {
+  add_robot("robot-a", "0000000a");
+  add_robot("robot-b", "0000000b");
+  const std::string pq_token =
+      token("owner", {"robot-a", "robot-b"}, "coordinator", "rcan://local.rcan/rcan/sim-rover/*",
+            true, msgsig::Alg::kMlDsa65);
+  write_file(tmp_.file("fleet.token"), pq_token);
+  auto stopped = fleet({"estop", "alpha", "--members", "robot-a,robot-b", "--reason", "pq"});
+  ASSERT_EQ(stopped.exit_code, 0) << stopped.out << stopped.err;
+  for (const char* m : {"robot-a", "robot-b"}) {
+    EXPECT_EQ(str_at(parse(stopped.out), {"members", m, "result"}), "acknowledged") << m;
+    EXPECT_NE(json::dump(robots_[m]->status(fleet_token_)).find("\"estop_active\":true"),
+              std::string::npos)
+        << m;
+  }
+  auto resumed = fleet({"resume", "alpha", "--members", "robot-a,robot-b"});
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.out << resumed.err;
+  for (const char* m : {"robot-a", "robot-b"})
+    EXPECT_NE(json::dump(robots_[m]->status(fleet_token_)).find("\"estop_active\":false"),
+              std::string::npos)
+        << m;
+  // The same token on a message signed with the commander's Ed25519 key: not the bound key.
+  Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/robot-a/reply"});
+  json::Value wrong =
+      command_msg("SAFETY", {{"safety_event", "ESTOP"}, {"fleet_id", "alpha"}}, pq_token);
+  w.publish("rcan/fleet/alpha/robot/robot-a/cmd", wrong);
+  auto reply = w.wait([&](const Watcher::Msg& m) {
+    return str_of(m.body, "reply_to") == str_of(wrong, "message_id") &&
+           str_of(m.body, "type") != "EVENT";
+  });
+  ASSERT_TRUE(reply);
+  EXPECT_EQ(payload_str(reply->body, "error_code"), "SIGNATURE_INVALID") << json::dump(reply->body);
+  EXPECT_NE(json::dump(robots_["robot-a"]->status(fleet_token_)).find("\"estop_active\":false"),
+            std::string::npos);
+}
+
 // A broker that accepts a publish and drops it: Mosquitto denying the operator write access by
 // ACL. Over MQTT 3.1.1 (what the CLI speaks) Mosquitto still answers PUBACK, so the broker's
 // acknowledgement proves nothing here; waiting for the members does: every verb exits 1 and
