@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -223,6 +224,96 @@ TEST(Revocation, BySubjectAndByIssuerKeyId) {
   EXPECT_EQ(revoke(d, owner, json::Object{}).status, 400);
   EXPECT_EQ(revoke(d, owner, json::Object{{"sub", "x"}, {"kid", "y"}}).status, 400);
   EXPECT_EQ(revoke(d, owner, json::Object{{"token", "not-a-jwt"}}).status, 400);
+}
+
+// A session remembers the token that claimed it: revoking that token (by jti or by its header
+// kid) ends the session at once, and a queued claim made with a revoked token is dropped rather
+// than promoted. Another token of the same subject, revoked, leaves the session alone.
+TEST(Revocation, ATokensJtiOrKidRevocationEndsTheControlItClaimedAndItsPlaceInTheQueue) {
+  test::TempDir dir;
+  test::RcandDaemon d(dir.path() + "/node");
+  ASSERT_FALSE(d.url().empty());
+  const std::string owner = trimmed(test::read_file(d.owner_token_file()));
+  const std::string alice = mint(d, "user", "alice"), alice_other = mint(d, "user", "alice");
+  const std::string carol = mint(d, "user", "carol"), dave = mint(d, "user", "dave", "k-dave");
+  const std::string erin = mint(d, "user", "erin");
+  auto claim = [&](const std::string& t) {
+    return test::http(d.port(), "POST", "/rcan/v1/auth/claim", "{}", bearer(t));
+  };
+  auto queued = [&] {
+    const json::Value v = parse(queue(d, owner).body);
+    const json::Value* q = v.is_object() ? v.get("queue") : nullptr;
+    std::string who;
+    if (q && q->is_array())
+      for (const auto& e : q->as_array())
+        who += (who.empty() ? "" : ",") + e.get("user_id")->as_string();
+    return who;
+  };
+  ASSERT_EQ(claim(alice).status, 200);
+  ASSERT_EQ(claim(carol).status, 409);  // same role: queued behind alice
+  ASSERT_EQ(queued(), "carol");
+
+  // carol's token revoked by jti: her queued claim goes; she is never promoted.
+  ASSERT_EQ(revoke(d, owner, json::Object{{"token", carol}}).status, 201);
+  EXPECT_EQ(queued(), "");
+  // Another token of alice's, revoked: the session alice's first token holds stays hers.
+  ASSERT_EQ(revoke(d, owner, json::Object{{"token", alice_other}}).status, 201);
+  EXPECT_EQ(claim(erin).status, 409);
+  EXPECT_EQ(queued(), "erin");
+  ASSERT_EQ(test::http(d.port(), "DELETE", "/rcan/v1/auth/queue", "", bearer(erin)).status, 200);
+  // alice drives; the token that claimed her session, revoked by jti: the session ends now, not
+  // at its deadline, and the robot stops the drive it was given.
+  json::Object move{
+      {"version", "1.0.0"},
+      {"message_id", new_uuid_v4()},
+      {"type", "COMMAND"},
+      {"timestamp_ms", now_s() * 1000},
+      {"payload", json::Object{{"action", "move"}, {"linear", 0.3}, {"duration_ms", 60'000}}}};
+  HttpReply drive = test::http(d.port(), "POST", "/rcan/v1/command", json::dump(json::Value(move)),
+                               bearer(alice));
+  ASSERT_EQ(drive.status, 200) << drive.body;
+  auto speed = [&] {
+    const json::Value st =
+        parse(test::http(d.port(), "GET", "/rcan/v1/status", "", bearer(owner)).body);
+    std::string s = json::dump(st);
+    const size_t at = s.find("\"linear_mps\":");
+    return at == std::string::npos ? -1.0 : std::atof(s.c_str() + at + 13);
+  };
+  EXPECT_TRUE(test::eventually([&] { return speed() > 0.0; }, 5000)) << speed();
+  auto decoded = jwt::decode(alice);
+  ASSERT_TRUE(decoded.ok());
+  const json::Value* jti = decoded->claims.find("jti");
+  ASSERT_TRUE(jti && jti->is_string());
+  ASSERT_EQ(revoke(d, owner, json::Object{{"jti", jti->as_string()}}).status, 201);
+  EXPECT_TRUE(test::eventually([&] { return speed() == 0.0; }, 5000)) << speed();
+  EXPECT_EQ(claim(dave).status, 200);
+  // dave's token revoked by its header kid: the same.
+  ASSERT_EQ(revoke(d, owner, json::Object{{"kid", "k-dave"}}).status, 201);
+  EXPECT_EQ(claim(erin).status, 200);
+
+  const std::string audit =
+      test::http(d.port(), "GET", "/api/audit?limit=200", "", bearer(owner)).body;
+  const json::Value records = parse(audit);
+  int released = 0, dropped = 0;
+  std::set<std::string> kinds;
+  const json::Value* list = records.is_object() ? records.get("entries") : nullptr;
+  ASSERT_TRUE(list && list->is_array()) << audit.substr(0, 400);
+  for (const auto& r : list->as_array()) {
+    const std::string d_json = json::dump(r);
+    if (d_json.find("\"RELEASE\"") != std::string::npos &&
+        d_json.find("token_revoked") != std::string::npos) {
+      ++released;
+      for (const char* k : {"jti", "kid"})
+        if (d_json.find(std::string("\"revoked_by\":\"") + k + "\"") != std::string::npos)
+          kinds.insert(k);
+    }
+    if (d_json.find("\"CLAIM_DROPPED\"") != std::string::npos &&
+        d_json.find("token_revoked") != std::string::npos)
+      ++dropped;
+  }
+  EXPECT_EQ(released, 2) << audit.substr(0, 2000);
+  EXPECT_EQ(kinds, (std::set<std::string>{"jti", "kid"}));
+  EXPECT_EQ(dropped, 1) << audit.substr(0, 2000);
 }
 
 TEST(Revocation, TheCliRevokesByTokenAndJtiAndListsWithRcanUrlAndTokenFile) {

@@ -162,12 +162,7 @@ class ConfiguredNode {
 
   // Polls `pred` (every 20 ms) until it holds or `timeout_ms` passes.
   static bool eventually(const std::function<bool()>& pred, int timeout_ms = 5000) {
-    auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
-    while (std::chrono::steady_clock::now() < end) {
-      if (pred()) return true;
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    }
-    return pred();
+    return test::eventually(pred, timeout_ms);
   }
 
  private:

@@ -4,6 +4,7 @@
 #include <sys/types.h>
 
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -59,6 +60,9 @@ RunResult run(const std::vector<std::string>& argv, const std::string& stdin_dat
 // Runs the rcan CLI built alongside the tests.
 RunResult run_cli(const std::vector<std::string>& args, const std::string& stdin_data = {},
                   const std::vector<std::string>& extra_env = {});
+
+// Polls `pred` (every 20 ms) until it holds or `timeout_ms` passes; then its last answer.
+bool eventually(const std::function<bool()>& pred, int timeout_ms = 5000);
 
 // A loopback TCP port that was free a moment ago (bound to port 0, then closed): for servers
 // the test starts that take a port on their command line.

@@ -216,9 +216,9 @@ Node::Node(NodeServices& services)
       st->sink->send_text(text);
     }
   });
-  revocation_sub_ = svc_.revocations.subscribe([this](const Revocation& r) {
+  revocation_sub_ = svc_.revocations.subscribe([this](const Revocation&) {
     close_revoked_streams();
-    end_revoked_control(r);
+    end_revoked_control();
   });
   svc_.metrics.add_gauge("rcan_estop_active", "1 while ESTOP is latched.",
                          [this] { return svc_.act.estop_active() ? 1.0 : 0.0; });

@@ -140,8 +140,9 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   // Closes (1008, after an AUTH_INVALID `token_revoked` frame) every stream whose CONNECT
   // principal the revocation list now names.
   void close_revoked_streams() EXCLUDES(streams_mu_);
-  // Ends the control session of a principal revoked by subject (revocation_routes.cpp).
-  void end_revoked_control(const Revocation& r);
+  // Ends the control session, and drops the queued claims, of revoked tokens
+  // (revocation_routes.cpp).
+  void end_revoked_control();
   // Revocation routes (revocation_routes.cpp): GET and POST /rcan/v1/revocations, OWNER.
   void add_revocation_routes();
   void revocations_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);

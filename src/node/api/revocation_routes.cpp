@@ -73,30 +73,38 @@ Result<Revocation> requested(const json::Value& body) {
 
 }  // namespace
 
-// A subject's revocation also ends its control session (a session does not know which of the
-// subject's tokens claimed it, so a jti or kid revocation leaves it to its heartbeat deadline;
-// the revoked token can send nothing meanwhile). Released as the holder would: RELEASE
-// recorded with reason token_revoked, AVAILABLE or the next claimant promoted.
-void Node::end_revoked_control(const Revocation& r) {
-  if (r.kind != Revocation::Kind::kSubject) return;
+// A revocation also ends the control session of the token it names (by jti, header kid, or
+// subject for tokens issued up to it): the session remembers the token that claimed it or last
+// renewed it. Released as the holder would, its motion stopped: RELEASE recorded with reason
+// token_revoked, AVAILABLE or the next claimant promoted. A queued claim made with a revoked
+// token is dropped (CLAIM_DROPPED, token_revoked), so that it is never promoted to control.
+void Node::end_revoked_control() {
+  bool changed = false;
+  for (const QueuedClaim& q : svc_.sessions.queued())
+    if (svc_.revocations.revoked(q.as_principal()))
+      changed = svc_.sessions.drop_queued(q.principal_key, "token_revoked") || changed;
   const int64_t mono = svc_.clock.mono_ms(), wall = svc_.clock.wall_ms();
   auto holder = svc_.sessions.controller(mono);
-  if (!holder || holder->granted_wall_ms > r.at_ms) return;
-  if (!PrincipalId{r.iss, r.value}.is(holder->who())) return;
-  Principal p;
-  p.authenticated = true;
-  p.issuer = holder->iss;
-  p.sub = holder->sub;
-  p.role = holder->role;
-  if (!svc_.sessions.release(holder->id, p, mono, wall).ok()) return;
-  svc_.act.disarm_deadman(holder->id);
-  svc_.record("RELEASE", "ok").by(p).message(holder->id).reason("token_revoked").write();
-  if (svc_.sessions.state(mono) == ControlState::kAvailable)
-    svc_.events.publish(json::Value(json::Object{{"type", "AVAILABLE"},
-                                                 {"released_session", holder->id},
-                                                 {"window_ms", svc_.settings.handoff_window_ms},
-                                                 {"timestamp_ms", wall}}));
-  announce_control_changes();
+  const Principal p = holder ? holder->as_principal() : Principal{};
+  const auto why = holder ? svc_.revocations.revoked(p) : std::nullopt;
+  if (why && svc_.sessions.release(holder->id, p, mono, wall).ok()) {
+    // Disarming the session's deadman stops the motion the session owns (SafetyCore): nothing
+    // the revoked token commanded outlives it (Revocation.ATokensJti… drives, then revokes).
+    svc_.act.disarm_deadman(holder->id);
+    svc_.record("RELEASE", "ok")
+        .by(p)
+        .message(holder->id)
+        .reason("token_revoked")
+        .detail("revoked_by", *why)
+        .write();
+    if (svc_.sessions.state(mono) == ControlState::kAvailable)
+      svc_.events.publish(json::Value(json::Object{{"type", "AVAILABLE"},
+                                                   {"released_session", holder->id},
+                                                   {"window_ms", svc_.settings.handoff_window_ms},
+                                                   {"timestamp_ms", wall}}));
+    changed = true;
+  }
+  if (changed) announce_control_changes();
 }
 
 void Node::add_revocation_routes() {

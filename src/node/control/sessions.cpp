@@ -111,11 +111,30 @@ bool SessionTable::lease_link_locked(const PrincipalId& who, Role& role, std::st
   return role_level(role) >= role_level(Role::kOwner);  // the owner stays above any lease
 }
 
+namespace {
+Principal claimant(const std::string& iss, const std::string& sub, Role role,
+                   const ClaimToken& token) {
+  Principal p;
+  p.authenticated = true;
+  p.issuer = iss;
+  p.sub = sub;
+  p.role = role;
+  p.jti = token.jti;
+  p.kid = token.kid;
+  p.token_iat = token.iat;
+  return p;
+}
+}  // namespace
+
+Principal Session::as_principal() const { return claimant(iss, sub, role, token); }
+Principal QueuedClaim::as_principal() const { return claimant(iss, sub, role, token); }
+
 Session SessionTable::make_session_locked(const std::string& key, const PrincipalId& who, Role role,
-                                          bool fleet, int64_t now_mono_ms, int64_t now_wall_ms,
-                                          const std::string& id) {
+                                          bool fleet, const ClaimToken& token, int64_t now_mono_ms,
+                                          int64_t now_wall_ms, const std::string& id) {
   Session s;
   s.id = id.empty() ? new_uuid_v4() : id;
+  s.token = token;
   s.principal_key = key;
   s.iss = who.iss;
   s.sub = who.sub;
@@ -178,8 +197,8 @@ void SessionTable::promote_locked(int64_t now_mono_ms, int64_t now_wall_ms) {
       continue;
     }
     // AVAILABLE for an instant: the head of the queue claims it.
-    holder_ =
-        make_session_locked(q.principal_key, q.who(), role, q.fleet, now_mono_ms, now_wall_ms);
+    holder_ = make_session_locked(q.principal_key, q.who(), role, q.fleet, q.token, now_mono_ms,
+                                  now_wall_ms);
     transit(ControlEvent::kClaim, ControlState::kHeld);
     ControlChange c;
     c.event = ControlEvent::kPromote;
@@ -223,8 +242,8 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
     // Explicit renewal by re-claiming: a fresh TTL, same session id; the role may be lowered,
     // never raised above the session's (a handoff's cap stays).
     if (role_level(holder_->role) < role_level(role)) role = holder_->role;
-    Session s = make_session_locked(p.key(), PrincipalId::of(p), role, fleet, now_mono_ms,
-                                    now_wall_ms, holder_->id);
+    Session s = make_session_locked(p.key(), PrincipalId::of(p), role, fleet, ClaimToken::of(p),
+                                    now_mono_ms, now_wall_ms, holder_->id);
     holder_ = s;
     transit(ControlEvent::kRenew, ControlState::kHeld);
     r.outcome = ClaimOutcome::kRenewed;
@@ -249,8 +268,8 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
     if (reserved_->max_role && role_level(*reserved_->max_role) < role_level(role))
       role = *reserved_->max_role;
     reserved_.reset();
-    holder_ =
-        make_session_locked(p.key(), PrincipalId::of(p), role, fleet, now_mono_ms, now_wall_ms);
+    holder_ = make_session_locked(p.key(), PrincipalId::of(p), role, fleet, ClaimToken::of(p),
+                                  now_mono_ms, now_wall_ms);
     transit(ControlEvent::kClaim, ControlState::kHeld);
     r.session = *holder_;
     return r;
@@ -264,8 +283,8 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
     }
     if (preempt) {
       r.preempted = holder_;
-      holder_ =
-          make_session_locked(p.key(), PrincipalId::of(p), role, fleet, now_mono_ms, now_wall_ms);
+      holder_ = make_session_locked(p.key(), PrincipalId::of(p), role, fleet, ClaimToken::of(p),
+                                    now_mono_ms, now_wall_ms);
       transit(ControlEvent::kPreempt, ControlState::kHeld);
       r.session = *holder_;
       return r;
@@ -279,6 +298,7 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
     for (size_t i = 0; i < queue_.size(); ++i) {
       if (queue_[i].principal_key == p.key()) {
         queue_[i].role = role;
+        queue_[i].token = ClaimToken::of(p);
         r.outcome = ClaimOutcome::kQueued;
         r.queue_position = i + 1;
         return r;
@@ -286,13 +306,15 @@ Result<ClaimResult> SessionTable::claim(const Principal& p, std::optional<Role> 
     }
     if (queue_.size() >= opts_.queue_max)
       return Error(ErrorCode::kControlConflict, "the control queue is full", "session");
-    queue_.push_back(QueuedClaim{p.key(), p.issuer, p.sub, role, fleet, now_mono_ms});
+    queue_.push_back(
+        QueuedClaim{p.key(), p.issuer, p.sub, role, fleet, now_mono_ms, ClaimToken::of(p)});
     transit(ControlEvent::kQueue, ControlState::kHeld);
     r.outcome = ClaimOutcome::kQueued;
     r.queue_position = queue_.size();
     return r;
   }
-  holder_ = make_session_locked(p.key(), PrincipalId::of(p), role, fleet, now_mono_ms, now_wall_ms);
+  holder_ = make_session_locked(p.key(), PrincipalId::of(p), role, fleet, ClaimToken::of(p),
+                                now_mono_ms, now_wall_ms);
   transit(ControlEvent::kClaim, ControlState::kHeld);
   r.session = *holder_;
   return r;
@@ -321,8 +343,8 @@ Result<Session> SessionTable::renew(const std::string& session_id, const Princip
     return Error(ErrorCode::kInsufficientPrivileges, "only the holder may renew this session",
                  "session_id");
   Role role = std::min(holder_->role, p.role);
-  holder_ = make_session_locked(p.key(), PrincipalId::of(p), role, holder_->fleet, now_mono_ms,
-                                now_wall_ms, holder_->id);
+  holder_ = make_session_locked(p.key(), PrincipalId::of(p), role, holder_->fleet,
+                                ClaimToken::of(p), now_mono_ms, now_wall_ms, holder_->id);
   transit(ControlEvent::kRenew, ControlState::kHeld);
   return *holder_;
 }
@@ -388,6 +410,11 @@ bool SessionTable::drop_queued(const std::string& principal_key, const std::stri
     return true;
   }
   return false;
+}
+
+std::vector<QueuedClaim> SessionTable::queued() {
+  MutexLock lock(mu_);
+  return {queue_.begin(), queue_.end()};
 }
 
 void SessionTable::absorb_wall_step_locked(int64_t now_mono_ms, int64_t now_wall_ms) {

@@ -55,6 +55,15 @@ struct ControlOptions {
   int64_t max_session_ms = 0;  // caps every role's TTL (control.max_session_s); 0 = role TTLs
 };
 
+// The token a claim was made with: a revocation of it (by jti, header kid or subject) ends the
+// session it holds and drops its queued claim (Node::end_revoked_control).
+struct ClaimToken {
+  std::string jti;
+  std::string kid;
+  std::optional<int64_t> iat;  // unix seconds
+  static ClaimToken of(const Principal& p) { return ClaimToken{p.jti, p.kid, p.token_iat}; }
+};
+
 struct Session {
   std::string id;
   std::string principal_key;
@@ -70,7 +79,10 @@ struct Session {
   // monotonic one).
   bool ends_with_lease = false;
   bool fleet = false;
+  ClaimToken token;  // the one that claimed it or last renewed it
   PrincipalId who() const { return PrincipalId{iss, sub}; }
+  // The holder as the revocation list judges it: with that token.
+  Principal as_principal() const;
 };
 
 struct Reservation {
@@ -87,7 +99,9 @@ struct QueuedClaim {
   Role role = Role::kGuest;
   bool fleet = false;
   int64_t enqueued_mono_ms = 0;
+  ClaimToken token;  // the one it last claimed with
   PrincipalId who() const { return PrincipalId{iss, sub}; }
+  Principal as_principal() const;
 };
 
 struct LeaseGrant {
@@ -158,6 +172,8 @@ class SessionTable {
   // Drops this principal's queued claim, announced and audited as CLAIM_DROPPED with `reason`
   // (take_changes). True when it was queued.
   bool drop_queued(const std::string& principal_key, const std::string& reason) EXCLUDES(mu_);
+  // The queued claims, first in line first.
+  std::vector<QueuedClaim> queued() EXCLUDES(mu_);
 
   // Expiries, window closes, lease ends. Call often (the node does every 100 ms).
   void tick(int64_t now_mono_ms, int64_t now_wall_ms) EXCLUDES(mu_);
@@ -227,8 +243,8 @@ class SessionTable {
       REQUIRES(mu_);
   void promote_locked(int64_t now_mono_ms, int64_t now_wall_ms) REQUIRES(mu_);
   Session make_session_locked(const std::string& key, const PrincipalId& who, Role role, bool fleet,
-                              int64_t now_mono_ms, int64_t now_wall_ms, const std::string& id = {})
-      REQUIRES(mu_);
+                              const ClaimToken& token, int64_t now_mono_ms, int64_t now_wall_ms,
+                              const std::string& id = {}) REQUIRES(mu_);
   const Lease* active_lease_locked(int64_t now_wall_ms) const REQUIRES(mu_);
   // The lease link and role cap of a claimant; false when a lease runs and excludes it.
   bool lease_link_locked(const PrincipalId& who, Role& role, std::string& lease_id,
