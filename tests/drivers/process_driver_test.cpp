@@ -32,14 +32,7 @@ const std::string kReference =
     std::string(RCAN_SOURCE_DIR) + "/examples/drivers/serial_diffbase.py";
 const std::string kFake = std::string(RCAN_SOURCE_DIR) + "/tests/drivers/fake_driver.py";
 
-bool eventually(const std::function<bool()>& pred, int timeout_ms) {
-  const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
-  while (std::chrono::steady_clock::now() < end) {
-    if (pred()) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  return pred();
-}
+using test::eventually;
 
 ProcessDriverOptions options(std::vector<std::string> command) {
   ProcessDriverOptions o;

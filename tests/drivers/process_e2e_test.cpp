@@ -35,14 +35,7 @@ std::string reference_block(const PtyBase& pty) {
                       "\", \"--wheel-base\", \"0.3\"]");
 }
 
-bool eventually(const std::function<bool()>& pred, int timeout_ms) {
-  const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
-  while (std::chrono::steady_clock::now() < end) {
-    if (pred()) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  return pred();
-}
+using test::eventually;
 
 std::string estop_json() {
   json::Object m{{"version", "1.0.0"},

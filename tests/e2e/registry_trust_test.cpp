@@ -97,15 +97,7 @@ void write(const std::string& path, const std::string& text) {
   out << text;
 }
 
-// Waits up to `ms` for `pred`.
-bool eventually(const std::function<bool()>& pred, int ms) {
-  const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(ms);
-  while (std::chrono::steady_clock::now() < until) {
-    if (pred()) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
-  return pred();
-}
+using test::eventually;
 
 struct RegistryKey {
   std::string kid;
