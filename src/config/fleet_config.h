@@ -68,6 +68,9 @@ struct SwarmConfig {     // the seed §5.2 keys of `swarm` (the other keys stay 
   std::string join_policy = "closed";  // open | approval | closed
   uint32_t heartbeat_ms = 500;
   uint32_t leader_timeout_ms = 2000;  // a leader silent this long is replaced
+  // The members' shared secret (a 0600 file, ≥ 32 bytes): announces and heartbeats carry an
+  // HMAC under it, and a member drops what does not (docs/FLEET.md §Swarms). Required.
+  std::string secret_file;
 };
 
 }  // namespace rcan::config

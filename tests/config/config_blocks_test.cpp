@@ -3,6 +3,7 @@
 // with its path and message, and the order in which a file with several faults reports them.
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -312,7 +313,7 @@ TEST(ConfigBlockKeys, TransportsSessionsAndFleet) {
       "fleet: {fleet_id: yard, robots: [r1, r2], member_id: r2, access_mode: independent,\n"
       "  commands: {broadcast: false, individual: true, choreographed: false}}\n"
       "swarm: {swarm_id: s1, members: [r3, r1], leader: r3, formation: line,\n"
-      "  join_policy: open, heartbeat_ms: 100, leader_timeout_ms: 200}\n");
+      "  join_policy: open, heartbeat_ms: 100, leader_timeout_ms: 200, secret_file: sw.key}\n");
   ASSERT_TRUE(r.ok()) << r.error().message;
   const NodeConfig& c = *r;
   EXPECT_TRUE(c.grpc.enabled);
@@ -370,6 +371,7 @@ TEST(ConfigBlockKeys, TransportsSessionsAndFleet) {
   EXPECT_EQ(c.swarm.join_policy, "open");
   EXPECT_EQ(c.swarm.heartbeat_ms, 100u);
   EXPECT_EQ(c.swarm.leader_timeout_ms, 200u);
+  EXPECT_EQ(std::filesystem::path(c.swarm.secret_file).filename(), "sw.key");
 }
 
 TEST(ConfigBlockKeys, DashboardRobots) {
@@ -388,7 +390,7 @@ TEST(ConfigBlockKeys, ComputedDefaultsAndAliases) {
   // The member ids default to the RURI device id; the swarm leader to the first member.
   auto r = parse(
       "mqtt: {enabled: true}\nfleet: {fleet_id: f, robots: [0a1b2c3d, zz]}\n"
-      "swarm: {swarm_id: s, members: [zz]}\n");
+      "swarm: {swarm_id: s, members: [zz], secret_file: sw.key}\n");
   ASSERT_TRUE(r.ok()) << r.error().message;
   EXPECT_EQ(r->fleet.member_id, "0a1b2c3d");
   EXPECT_EQ(r->swarm.member_id, "0a1b2c3d");

@@ -317,6 +317,16 @@ class FleetTest : public ::testing::Test {
                                             extra_yaml, mqtt_extra);
     return *robots_[name];
   }
+  // The swarm block of the swarm tests, with the members' shared secret (written 0600 once).
+  std::string swarm_yaml() {
+    const std::string secret = tmp_.file("swarm.secret");
+    if (!fs::exists(secret))
+      write_file(secret, "swarm-test-secret-0123456789abcdef0123456789abcdef");
+    return "swarm: {swarm_id: s42, members: [robot-a, robot-b, robot-c], leader: robot-a, "
+           "formation: follow-leader, join_policy: approval, heartbeat_ms: 100, "
+           "leader_timeout_ms: 600, secret_file: " +
+           secret + "}\n";
+  }
   void three_robots(const std::string& extra_yaml = "") {
     add_robot("robot-a", "0000000a", extra_yaml);
     add_robot("robot-b", "0000000b", extra_yaml);

@@ -3,7 +3,10 @@
 // test that watches the topics (docs/FLEET.md).
 #include <gtest/gtest.h>
 
+#include <atomic>
+
 #include "fleet_fixture.h"
+#include "node/bindings/mqtt_node.h"
 #include "postgres.h"
 
 namespace rcan {
@@ -692,11 +695,7 @@ TEST_F(FleetTest, EventsTopicCarriesNoOnePrincipalsEvents) {
 }
 
 TEST_F(FleetTest, SwarmLeaderFailoverAndJoinPolicy) {
-  const std::string swarm =
-      "swarm: {swarm_id: s42, members: [robot-a, robot-b, robot-c], leader: robot-a, formation: "
-      "follow-leader,"
-      " join_policy: approval, heartbeat_ms: 100, leader_timeout_ms: 600}\n";
-  three_robots(swarm);
+  three_robots(swarm_yaml());
   Watcher w(broker_->url(), {"rcan/swarm/s42/announce", "rcan/swarm/s42/join/+"});
   auto first =
       w.wait([](const Watcher::Msg& m) { return payload_str(m.body, "leader") == "robot-a"; });
@@ -769,6 +768,76 @@ TEST_F(FleetTest, SwarmLeaderFailoverAndJoinPolicy) {
     if (!audited) std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   EXPECT_TRUE(audited);
+}
+
+// docs/FLEET.md §Swarms, authenticity: announces and heartbeats carry an HMAC under the
+// members' shared secret. A client with the broker's credentials but not the secret forges a
+// retained announce naming itself leader, and keeps a dead leader "alive" with heartbeats, forged
+// and replayed: the members drop them all, the leader puts its own announce back, and when the
+// leader really dies the next member takes over.
+TEST_F(FleetTest, SwarmMessagesWithoutTheSecretAreDropped) {
+  three_robots(swarm_yaml());
+  Watcher w(broker_->url(), {"rcan/swarm/s42/announce", "rcan/swarm/s42/heartbeat/robot-a"});
+  auto first = w.wait([](const Watcher::Msg& m) {
+    return m.topic == "rcan/swarm/s42/announce" && payload_str(m.body, "leader") == "robot-a";
+  });
+  ASSERT_TRUE(first);
+  EXPECT_EQ(str_of(first->body, "swarm_mac").size(), 64u) << json::dump(first->body);
+  auto beat = w.wait([](const Watcher::Msg& m) { return str_of(m.body, "type") == "HEARTBEAT"; });
+  ASSERT_TRUE(beat);
+  EXPECT_EQ(str_of(beat->body, "swarm_mac").size(), 64u) << json::dump(beat->body);
+
+  // A forged retained announce (no MAC, then a made-up one): mallory leads at epoch 1000.
+  json::Object forged{
+      {"type", "SWARM_ANNOUNCE"},
+      {"message_id", new_uuid_v4()},
+      {"timestamp_ms", wall_ms()},
+      {"payload", json::Object{{"swarm_id", "s42"},
+                               {"members", json::Array{"mallory", "robot-a", "robot-b", "robot-c"}},
+                               {"leader", "mallory"},
+                               {"epoch", 1000},
+                               {"announced_by", "mallory"}}}};
+  w.publish("rcan/swarm/s42/announce", json::Value(forged), true);
+  forged.set("swarm_mac", std::string(64, 'a'));
+  w.publish("rcan/swarm/s42/announce", json::Value(forged), true);
+  auto restored = w.wait([](const Watcher::Msg& m) {
+    return payload_str(m.body, "reason") == "restored" &&
+           payload_str(m.body, "leader") == "robot-a";
+  });
+  ASSERT_TRUE(restored);
+  // What a member starting now is greeted with is the swarm's own announce.
+  {
+    Watcher late(broker_->url(), {"rcan/swarm/s42/announce"});
+    auto retained = late.wait([](const Watcher::Msg& m) { return m.retained; });
+    ASSERT_TRUE(retained);
+    EXPECT_EQ(payload_str(retained->body, "leader"), "robot-a") << json::dump(retained->body);
+  }
+
+  // The leader dies; robot-a's captured heartbeat is replayed and fresh ones are forged.
+  robots_["robot-a"]->kill9();
+  std::atomic<bool> done{false};
+  std::thread keep_alive([&] {
+    json::Value replay = beat->body;
+    while (!done.load()) {
+      w.publish("rcan/swarm/s42/heartbeat/robot-a", replay);
+      json::Object fresh = beat->body.as_object();
+      fresh.set("timestamp_ms", wall_ms());
+      w.publish("rcan/swarm/s42/heartbeat/robot-a", json::Value(fresh));
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+  });
+  auto next =
+      w.wait([](const Watcher::Msg& m) { return payload_str(m.body, "reason") == "leader_silent"; },
+             15000);
+  done = true;
+  keep_alive.join();
+  ASSERT_TRUE(next);
+  EXPECT_EQ(payload_str(next->body, "leader"), "robot-b");
+  EXPECT_EQ(payload_str(next->body, "previous_leader"), "robot-a");
+  const std::string members = json::dump(*next->body.get("payload")->get("members"));
+  EXPECT_EQ(members.find("mallory"), std::string::npos) << members;
+  // The members said what they dropped.
+  EXPECT_TRUE(robots_["robot-b"]->proc().wait_for_line("swarm_message_dropped", 5000));
 }
 
 TEST_F(FleetTest, FleetAuditIntoPostgresCatchesTamperingAndGaps) {
@@ -1006,7 +1075,8 @@ TEST(FleetConfig, MqttFleetAndSwarmBlocksAreStrict) {
       "mqtt: {enabled: true, broker: \"mqtt://broker.local:1884\"}\n"
       "fleet: {fleet_id: alpha, member_id: robot-a, robots: [robot-a, robot-b],"
       " commands: {broadcast: false}}\n"
-      "swarm: {swarm_id: s1, member_id: robot-a, members: [robot-b, robot-a]}\n");
+      "swarm: {swarm_id: s1, member_id: robot-a, members: [robot-b, robot-a],"
+      " secret_file: /tmp/x/swarm.secret}\n");
   ASSERT_TRUE(ok.ok()) << ok.error().message;
   EXPECT_TRUE(ok->mqtt.enabled);
   EXPECT_EQ(ok->fleet.fleet_id, "alpha");
@@ -1027,12 +1097,29 @@ TEST(FleetConfig, MqttFleetAndSwarmBlocksAreStrict) {
        "fleet.fleet_id"},
       {"mqtt: {enabled: true}\nswarm: {swarm_id: s, members: [a], leader: z}\n", "swarm.leader"},
       {"mqtt: {enabled: true}\nswarm: {swarm_id: s, join_policy: maybe}\n", "swarm.join_policy"},
+      {"mqtt: {enabled: true}\nswarm: {swarm_id: s}\n", "swarm.secret_file"},
   };
   for (const auto& b : bad) {
     auto r = config::parse_config_text(base + b.yaml);
     ASSERT_FALSE(r.ok()) << b.yaml;
     EXPECT_EQ(r.error().field, b.field) << b.yaml << " → " << r.error().message;
   }
+  // The swarm's secret file is read at start: private and long enough, or rcand says why.
+  test::TempDir dir;
+  config::NodeConfig c = *ok;
+  c.swarm.secret_file = dir.file("swarm.secret");
+  EXPECT_EQ(node::mqtt_node_options(c).error().code, ErrorCode::kNotFound);
+  write_file(c.swarm.secret_file, "0123456789abcdef0123456789abcdef-swarm",
+             fs::perms::owner_read | fs::perms::owner_write | fs::perms::group_read);
+  auto open = node::mqtt_node_options(c);
+  ASSERT_FALSE(open.ok());
+  EXPECT_NE(open.error().message.find("chmod 600"), std::string::npos) << open.error().message;
+  write_file(c.swarm.secret_file, "too short");
+  EXPECT_EQ(node::mqtt_node_options(c).error().code, ErrorCode::kSchemaValidationFailed);
+  write_file(c.swarm.secret_file, "0123456789abcdef0123456789abcdef-swarm\n");
+  auto good = node::mqtt_node_options(c);
+  ASSERT_TRUE(good.ok()) << good.error().message;
+  EXPECT_EQ(good->swarm_secret, "0123456789abcdef0123456789abcdef-swarm");
 }
 
 TEST(MqttTopics, LayoutAndParser) {

@@ -194,6 +194,15 @@ Table<SwarmConfig> swarm_rows() {
                 if (s.leader_timeout_ms < 2 * s.heartbeat_ms)
                   fail(a.path, "must be at least twice swarm.heartbeat_ms", "out_of_range");
               }),
+      W::read("secret_file", Str(),
+              [](const At& a, SwarmConfig& s, Ctx& x) {
+                s.secret_file = resolve_path(a.str(), x.opts.base_dir);
+                if (s.secret_file.empty())
+                  fail(a.path,
+                       "a swarm needs the members' shared secret file, which authenticates its "
+                       "announces and heartbeats (make one with: rcan audit new-secret --out F)",
+                       "missing_key");
+              }),
   };
 }
 

@@ -55,6 +55,34 @@ bool is_loopback_host(const std::string& host) {
 
 }  // namespace
 
+namespace {
+
+// A secret file's text without its trailing newline: the file must be private (0600 or
+// stricter) and hold `min`..`max` bytes.
+Result<std::string> read_private_file(const std::string& path, const std::string& what, size_t min,
+                                      size_t max) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0)
+    return Error(ErrorCode::kNotFound, "cannot read " + what + " " + path);
+  if ((st.st_mode & 077) != 0)
+    return Error(ErrorCode::kInsufficientPrivileges,
+                 what + " " + path + " must not be group/world accessible (chmod 600)");
+  std::string text;
+  if (FILE* f = std::fopen(path.c_str(), "rb")) {
+    char buf[4200];
+    size_t n = std::fread(buf, 1, sizeof buf, f);
+    std::fclose(f);
+    text.assign(buf, n);
+  }
+  while (!text.empty() && (text.back() == '\n' || text.back() == '\r')) text.pop_back();
+  if (text.size() < min || text.size() > max)
+    return Error(ErrorCode::kSchemaValidationFailed, what + " must hold " + std::to_string(min) +
+                                                         " to " + std::to_string(max) + " bytes");
+  return text;
+}
+
+}  // namespace
+
 Result<MqttNodeOptions> mqtt_node_options(const config::NodeConfig& cfg) {
   MqttNodeOptions o;
   o.mqtt = cfg.mqtt;
@@ -62,25 +90,14 @@ Result<MqttNodeOptions> mqtt_node_options(const config::NodeConfig& cfg) {
   o.swarm = cfg.swarm;
   o.ruri = cfg.ruri_parts;
   if (!cfg.mqtt.password_file.empty()) {
-    struct stat st {};
-    if (::stat(cfg.mqtt.password_file.c_str(), &st) != 0)
-      return Error(ErrorCode::kNotFound,
-                   "cannot read mqtt.password_file " + cfg.mqtt.password_file);
-    if ((st.st_mode & 077) != 0)
-      return Error(ErrorCode::kInsufficientPrivileges,
-                   "mqtt.password_file " + cfg.mqtt.password_file +
-                       " must not be group/world accessible (chmod 600)");
-    std::string pw;
-    if (FILE* f = std::fopen(cfg.mqtt.password_file.c_str(), "rb")) {
-      char buf[1100];
-      size_t n = std::fread(buf, 1, sizeof buf, f);
-      std::fclose(f);
-      pw.assign(buf, n);
-    }
-    while (!pw.empty() && (pw.back() == '\n' || pw.back() == '\r')) pw.pop_back();
-    if (pw.empty() || pw.size() > 1024)
-      return Error(ErrorCode::kSchemaValidationFailed, "mqtt.password_file is empty or too long");
-    o.password = std::move(pw);
+    auto pw = read_private_file(cfg.mqtt.password_file, "mqtt.password_file", 1, 1024);
+    if (!pw.ok()) return pw.error();
+    o.password = std::move(pw).value();
+  }
+  if (!cfg.swarm.swarm_id.empty()) {
+    auto secret = read_private_file(cfg.swarm.secret_file, "swarm.secret_file", 32, 4096);
+    if (!secret.ok()) return secret.error();
+    o.swarm_secret = std::move(secret).value();
   }
   return o;
 }
@@ -135,7 +152,7 @@ Status MqttNode::start() {
   }
   if (!opts_.swarm.swarm_id.empty()) {
     swarm_ = std::make_unique<SwarmAgent>(
-        svc_, opts_.swarm, mq.topic_prefix,
+        svc_, opts_.swarm, opts_.swarm_secret, mq.topic_prefix,
         [this](const std::string& topic, const json::Value& body, int qos, bool retain) {
           publish_json(topic, body, qos, retain);
         },

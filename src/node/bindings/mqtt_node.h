@@ -45,11 +45,12 @@ struct MqttNodeOptions {
   config::FleetConfig fleet;
   config::SwarmConfig swarm;
   Ruri ruri;
-  std::string password;  // read from mqtt.password_file
+  std::string password;      // read from mqtt.password_file
+  std::string swarm_secret;  // read from swarm.secret_file
 };
 
-// The options from a validated configuration; reads mqtt.password_file (which must not be
-// group/world accessible).
+// The options from a validated configuration; reads mqtt.password_file and swarm.secret_file
+// (neither may be group/world accessible).
 Result<MqttNodeOptions> mqtt_node_options(const config::NodeConfig& cfg);
 
 class MqttNode {

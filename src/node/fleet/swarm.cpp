@@ -5,6 +5,7 @@
 #include "base/log.h"
 #include "node/services/node_services.h"
 #include "rcan/errors.h"
+#include "rcan/hash.h"
 
 namespace rcan::node {
 
@@ -16,15 +17,23 @@ json::Array to_array(const std::set<std::string>& s) {
   return a;
 }
 
+constexpr const char* kMacKey = "swarm_mac";
+constexpr int64_t kHeartbeatSkewMs = 30'000;  // PROFILE §3: a message's freshness window
+
+std::string mac_of(const std::string& secret, const json::Object& body) {
+  return hmac_sha256_hex(secret, "rcan-swarm-v1:" + json::canonical_without(body, kMacKey));
+}
+
 }  // namespace
 
-SwarmAgent::SwarmAgent(NodeServices& svc, config::SwarmConfig cfg, std::string prefix,
-                       Publish publish, bool require_bound_tokens)
+SwarmAgent::SwarmAgent(NodeServices& svc, config::SwarmConfig cfg, std::string secret,
+                       std::string prefix, Publish publish, bool require_bound_tokens)
     : svc_(svc),
       cfg_(std::move(cfg)),
       topics_(mqtt::swarm_topics(prefix, cfg_.swarm_id)),
       publish_(std::move(publish)),
-      require_bound_tokens_(require_bound_tokens) {
+      require_bound_tokens_(require_bound_tokens),
+      secret_(std::move(secret)) {
   members_.insert(cfg_.members.begin(), cfg_.members.end());
   leader_ = cfg_.leader;
 }
@@ -40,7 +49,35 @@ std::string SwarmAgent::leader() const {
 
 json::Value SwarmAgent::state() const {
   MutexLock lk(mu_);
-  return announce_body("state", "");
+  json::Value v = announce_body("state", "");
+  v.as_object().find("payload")->as_object().set("dropped", static_cast<int64_t>(dropped_));
+  return v;
+}
+
+json::Value SwarmAgent::sealed(json::Value body) const {
+  json::Object& o = body.as_object();
+  o.set(kMacKey, mac_of(secret_, o));
+  return body;
+}
+
+bool SwarmAgent::authentic(const json::Value& body) const {
+  if (secret_.empty() || !body.is_object()) return false;
+  const json::Value* mac = body.get(kMacKey);
+  return mac != nullptr && mac->is_string() &&
+         constant_time_equal(mac->as_string(), mac_of(secret_, body.as_object()));
+}
+
+void SwarmAgent::drop(const std::string& topic, const std::string& reason) {
+  const int64_t now = svc_.clock.mono_ms();
+  MutexLock lk(mu_);
+  ++dropped_;
+  if (drop_logged_mono_ >= 0 && now - drop_logged_mono_ < 10'000) return;
+  drop_logged_mono_ = now;
+  log(LogLevel::kWarn, "swarm_message_dropped",
+      json::Object{{"swarm_id", cfg_.swarm_id},
+                   {"topic", topic},
+                   {"reason", reason},
+                   {"dropped", static_cast<int64_t>(dropped_)}});
 }
 
 json::Value SwarmAgent::announce_body(const std::string& reason,
@@ -63,7 +100,7 @@ json::Value SwarmAgent::announce_body(const std::string& reason,
 }
 
 void SwarmAgent::announce_locked(const std::string& reason, const std::string& previous) {
-  publish_(topics_.announce(), announce_body(reason, previous), 1, true);
+  publish_(topics_.announce(), sealed(announce_body(reason, previous)), 1, true);
 }
 
 void SwarmAgent::on_connected(int64_t now) {
@@ -74,17 +111,45 @@ void SwarmAgent::on_connected(int64_t now) {
 }
 
 void SwarmAgent::on_message(const mqtt::InboundTopic& t, const json::Value& body, int64_t now) {
-  if (t.kind == mqtt::TopicKind::kSwarmHeartbeat) {
-    MutexLock lk(mu_);
-    if (members_.count(t.member) == 0) return;
-    last_seen_[t.member] = now;
-    return;
-  }
   if (t.kind == mqtt::TopicKind::kSwarmJoin) {
     handle_join(body);
     return;
   }
-  if (t.kind != mqtt::TopicKind::kSwarmAnnounce) return;
+  if (t.kind != mqtt::TopicKind::kSwarmHeartbeat && t.kind != mqtt::TopicKind::kSwarmAnnounce)
+    return;
+  const std::string topic =
+      t.kind == mqtt::TopicKind::kSwarmHeartbeat ? topics_.heartbeat(t.member) : topics_.announce();
+  if (!authentic(body)) {
+    drop(topic, "bad_mac");
+    // A retained announce we drop would greet every member that starts later: the leader puts
+    // the swarm's own back — at most once a second, so that two leaders holding different
+    // secrets (a misconfigured member) do not answer each other without end.
+    MutexLock lk(mu_);
+    if (t.kind == mqtt::TopicKind::kSwarmAnnounce && leader_ == cfg_.member_id &&
+        (restored_mono_ < 0 || now - restored_mono_ >= 1000)) {
+      restored_mono_ = now;
+      announce_locked("restored", "");
+    }
+    return;
+  }
+  if (t.kind == mqtt::TopicKind::kSwarmHeartbeat) {
+    const json::Value* ts = body.get("timestamp_ms");
+    const int64_t wall = svc_.clock.wall_ms();
+    if (json::string_field(body, "member") != t.member) return drop(topic, "other_member");
+    if (ts == nullptr || !ts->is_int() || ts->as_int() < wall - kHeartbeatSkewMs ||
+        ts->as_int() > wall + kHeartbeatSkewMs)
+      return drop(topic, "stale");
+    ReleasableMutexLock lk(mu_);
+    if (members_.count(t.member) == 0) return;
+    auto last = last_beat_ts_.find(t.member);
+    if (last != last_beat_ts_.end() && ts->as_int() <= last->second) {
+      lk.unlock();
+      return drop(topic, "replayed");
+    }
+    last_beat_ts_[t.member] = ts->as_int();
+    last_seen_[t.member] = now;
+    return;
+  }
   const json::Value* p = body.get("payload");
   if (p == nullptr || !p->is_object()) return;
   const json::Value* ep = p->get("epoch");
@@ -128,11 +193,11 @@ void SwarmAgent::tick(int64_t now) {
     last_beat_ = now;
     last_seen_[cfg_.member_id] = now;
     publish_(topics_.heartbeat(cfg_.member_id),
-             json::Value(json::Object{{"type", "HEARTBEAT"},
-                                      {"member", cfg_.member_id},
-                                      {"leader", leader_},
-                                      {"epoch", static_cast<int64_t>(epoch_)},
-                                      {"timestamp_ms", svc_.clock.wall_ms()}}),
+             sealed(json::Value(json::Object{{"type", "HEARTBEAT"},
+                                             {"member", cfg_.member_id},
+                                             {"leader", leader_},
+                                             {"epoch", static_cast<int64_t>(epoch_)},
+                                             {"timestamp_ms", svc_.clock.wall_ms()}})),
              0, false);
   }
   if (leader_ == cfg_.member_id) return;

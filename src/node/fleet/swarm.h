@@ -11,6 +11,17 @@
 // previous_leader). An announce with a higher epoch (or an equal epoch and a smaller leader)
 // wins, so members converge after a partition.
 //
+// Authenticity: every announce and heartbeat carries `swarm_mac`, the hex HMAC-SHA256 under the
+// members' shared secret (swarm.secret_file) of "rcan-swarm-v1:" + the canonical JSON of the
+// message without it. A member drops an announce or heartbeat whose MAC does not verify, a
+// heartbeat whose member is not its topic's, and a heartbeat not newer than the last one of
+// its member or more than 30 s from its own clock; it logs `swarm_message_dropped` (at most
+// every 10 s) and counts them in state() `dropped`; the leader answers a dropped announce by
+// announcing again (reason "restored", at most once a second), so the retained announce is the
+// swarm's own. Anyone without the secret — another
+// fleet's robot, a client with the broker's credentials — can neither change the swarm's
+// members or leader nor keep a silent leader alive.
+//
 // Joins: SWARM_JOIN {member, auth_token, message_id, timestamp_ms} on <prefix>/swarm/<id>/join.
 // The leader alone answers, on <prefix>/swarm/<id>/join/<member>: the token must verify (as
 // on every other route); then `open` grants (the member is added and announced), `closed`
@@ -41,8 +52,8 @@ class SwarmAgent {
 
   // `require_bound_tokens`: join and approval requests need a key-bound token and a signature
   // by its key (mqtt.require_bound_tokens), like every other message over MQTT.
-  SwarmAgent(NodeServices& svc, config::SwarmConfig cfg, std::string prefix, Publish publish,
-             bool require_bound_tokens = true);
+  SwarmAgent(NodeServices& svc, config::SwarmConfig cfg, std::string secret, std::string prefix,
+             Publish publish, bool require_bound_tokens = true);
 
   // Topic filters to subscribe to.
   std::vector<std::string> subscriptions() const;
@@ -53,7 +64,7 @@ class SwarmAgent {
   // Heartbeat and leader check; call every few tens of milliseconds.
   void tick(int64_t now_mono_ms) EXCLUDES(mu_);
 
-  // {swarm_id, member, members, leader, epoch, formation, join_policy, pending}
+  // {swarm_id, members, leader, epoch, formation, join_policy, pending, dropped}
   json::Value state() const EXCLUDES(mu_);
   std::string leader() const EXCLUDES(mu_);
 
@@ -61,6 +72,10 @@ class SwarmAgent {
   json::Value announce_body(const std::string& reason, const std::string& previous) const
       REQUIRES(mu_);
   void announce_locked(const std::string& reason, const std::string& previous) REQUIRES(mu_);
+  // `body` with its swarm_mac; whether a received body's swarm_mac verifies.
+  json::Value sealed(json::Value body) const;
+  bool authentic(const json::Value& body) const;
+  void drop(const std::string& topic, const std::string& reason) EXCLUDES(mu_);
   void handle_join(const json::Value& body) EXCLUDES(mu_);
   void answer(const std::string& member, const std::string& type, const std::string& reply_to,
               const std::string& reason);
@@ -70,6 +85,7 @@ class SwarmAgent {
   mqtt::SwarmTopics topics_;
   Publish publish_;
   const bool require_bound_tokens_;
+  const std::string secret_;
 
   mutable Mutex mu_;
   std::set<std::string> members_ GUARDED_BY(mu_);
@@ -79,6 +95,10 @@ class SwarmAgent {
   std::map<std::string, int64_t> last_seen_ GUARDED_BY(mu_);
   int64_t last_beat_ GUARDED_BY(mu_) = 0;
   int64_t connected_since_ GUARDED_BY(mu_) = 0;
+  std::map<std::string, int64_t> last_beat_ts_ GUARDED_BY(mu_);  // member → its heartbeat's ms
+  uint64_t dropped_ GUARDED_BY(mu_) = 0;
+  int64_t drop_logged_mono_ GUARDED_BY(mu_) = -1;
+  int64_t restored_mono_ GUARDED_BY(mu_) = -1;
 };
 
 }  // namespace rcan::node
