@@ -229,13 +229,19 @@ TEST(ProcessDriver, ReferenceDriverStopsTheBaseWhenRcandFallsSilent) {
   test::Process py;
   ASSERT_TRUE(py.start(
       {"/usr/bin/env", "python3", kReference, "--port", pty.slave_path(), "--listen", path}));
-  struct stat st {};
-  ASSERT_TRUE(eventually([&] { return ::stat(path.c_str(), &st) == 0; }, 10000));
-  const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
+  // The socket file appears at bind(), a moment before the driver listens: connect until it
+  // is accepted.
   sockaddr_un addr{};
   addr.sun_family = AF_UNIX;
   std::strncpy(addr.sun_path, path.c_str(), sizeof addr.sun_path - 1);
-  ASSERT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+  int fd = -1;
+  ASSERT_TRUE(eventually(
+      [&] {
+        if (fd >= 0) ::close(fd);
+        fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+        return ::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0;
+      },
+      10000));
   auto send_frame = [&](const std::string& f) {
     return ::send(fd, f.data(), f.size(), MSG_NOSIGNAL) == static_cast<ssize_t>(f.size());
   };

@@ -53,10 +53,6 @@ bool is_loopback_host(const std::string& host) {
   return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
 }
 
-}  // namespace
-
-namespace {
-
 // A secret file's text without its trailing newline: the file must be private (0600 or
 // stricter) and hold `min`..`max` bytes.
 Result<std::string> read_private_file(const std::string& path, const std::string& what, size_t min,
