@@ -88,9 +88,10 @@ void Node::end_revoked_control() {
   const Principal p = holder ? holder->as_principal() : Principal{};
   const auto why = holder ? svc_.revocations.revoked(p) : std::nullopt;
   if (why && svc_.sessions.release(holder->id, p, mono, wall).ok()) {
-    // Disarming the session's deadman stops the motion the session owns (SafetyCore): nothing
-    // the revoked token commanded outlives it (Revocation.ATokensJti… drives, then revokes).
+    // Nothing the revoked token commanded outlives it, as with a pre-empted holder
+    // (Revocation.ATokensJti… drives, then revokes).
     svc_.act.disarm_deadman(holder->id);
+    svc_.act.stop("token revoked: " + p.display());
     svc_.record("RELEASE", "ok")
         .by(p)
         .message(holder->id)

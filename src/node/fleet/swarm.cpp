@@ -20,8 +20,11 @@ json::Array to_array(const std::set<std::string>& s) {
 constexpr const char* kMacKey = "swarm_mac";
 constexpr int64_t kHeartbeatSkewMs = 30'000;  // PROFILE §3: a message's freshness window
 
-std::string mac_of(const std::string& secret, const json::Object& body) {
-  return hmac_sha256_hex(secret, "rcan-swarm-v1:" + json::canonical_without(body, kMacKey));
+// Over the swarm's id too: swarms that share a secret file cannot replay into each other.
+std::string mac_of(const std::string& secret, const std::string& swarm_id,
+                   const json::Object& body) {
+  return hmac_sha256_hex(
+      secret, "rcan-swarm-v1:" + swarm_id + ":" + json::canonical_without(body, kMacKey));
 }
 
 }  // namespace
@@ -56,7 +59,7 @@ json::Value SwarmAgent::state() const {
 
 json::Value SwarmAgent::sealed(json::Value body) const {
   json::Object& o = body.as_object();
-  o.set(kMacKey, mac_of(secret_, o));
+  o.set(kMacKey, mac_of(secret_, cfg_.swarm_id, o));
   return body;
 }
 
@@ -64,7 +67,7 @@ bool SwarmAgent::authentic(const json::Value& body) const {
   if (secret_.empty() || !body.is_object()) return false;
   const json::Value* mac = body.get(kMacKey);
   return mac != nullptr && mac->is_string() &&
-         constant_time_equal(mac->as_string(), mac_of(secret_, body.as_object()));
+         constant_time_equal(mac->as_string(), mac_of(secret_, cfg_.swarm_id, body.as_object()));
 }
 
 void SwarmAgent::drop(const std::string& topic, const std::string& reason) {
@@ -99,6 +102,13 @@ json::Value SwarmAgent::announce_body(const std::string& reason,
                                   {"payload", std::move(p)}});
 }
 
+void SwarmAgent::reannounce_locked(const std::string& reason, int64_t now) {
+  if (leader_ != cfg_.member_id || (reannounced_mono_ >= 0 && now - reannounced_mono_ < 1000))
+    return;
+  reannounced_mono_ = now;
+  announce_locked(reason, "");
+}
+
 void SwarmAgent::announce_locked(const std::string& reason, const std::string& previous) {
   publish_(topics_.announce(), sealed(announce_body(reason, previous)), 1, true);
 }
@@ -125,11 +135,7 @@ void SwarmAgent::on_message(const mqtt::InboundTopic& t, const json::Value& body
     // the swarm's own back — at most once a second, so that two leaders holding different
     // secrets (a misconfigured member) do not answer each other without end.
     MutexLock lk(mu_);
-    if (t.kind == mqtt::TopicKind::kSwarmAnnounce && leader_ == cfg_.member_id &&
-        (restored_mono_ < 0 || now - restored_mono_ >= 1000)) {
-      restored_mono_ = now;
-      announce_locked("restored", "");
-    }
+    if (t.kind == mqtt::TopicKind::kSwarmAnnounce) reannounce_locked("restored", now);
     return;
   }
   if (t.kind == mqtt::TopicKind::kSwarmHeartbeat) {
@@ -167,8 +173,9 @@ void SwarmAgent::on_message(const mqtt::InboundTopic& t, const json::Value& body
   bool newer = epoch > epoch_ || (epoch == epoch_ && leader < leader_) ||
                (epoch == epoch_ && leader == leader_);
   if (!newer) {
-    // A stale announce (e.g. the retained one of a leader we replaced): correct it.
-    if (leader_ == cfg_.member_id) announce_locked("superseded", "");
+    // A stale announce (e.g. the retained one of a leader we replaced, or a captured one
+    // replayed): correct it.
+    reannounce_locked("superseded", now);
     return;
   }
   if (leader != leader_)

@@ -12,8 +12,8 @@
 // wins, so members converge after a partition.
 //
 // Authenticity: every announce and heartbeat carries `swarm_mac`, the hex HMAC-SHA256 under the
-// members' shared secret (swarm.secret_file) of "rcan-swarm-v1:" + the canonical JSON of the
-// message without it. A member drops an announce or heartbeat whose MAC does not verify, a
+// members' shared secret (swarm.secret_file) of "rcan-swarm-v1:<swarm_id>:" + the canonical JSON of
+// the message without it. A member drops an announce or heartbeat whose MAC does not verify, a
 // heartbeat whose member is not its topic's, and a heartbeat not newer than the last one of
 // its member or more than 30 s from its own clock; it logs `swarm_message_dropped` (at most
 // every 10 s) and counts them in state() `dropped`; the leader answers a dropped announce by
@@ -72,6 +72,9 @@ class SwarmAgent {
   json::Value announce_body(const std::string& reason, const std::string& previous) const
       REQUIRES(mu_);
   void announce_locked(const std::string& reason, const std::string& previous) REQUIRES(mu_);
+  // The leader's answer to an announce it drops or finds stale: its own again, at most once a
+  // second (two leaders holding different secrets, or a flood of replays, never loop).
+  void reannounce_locked(const std::string& reason, int64_t now) REQUIRES(mu_);
   // `body` with its swarm_mac; whether a received body's swarm_mac verifies.
   json::Value sealed(json::Value body) const;
   bool authentic(const json::Value& body) const;
@@ -98,7 +101,7 @@ class SwarmAgent {
   std::map<std::string, int64_t> last_beat_ts_ GUARDED_BY(mu_);  // member → its heartbeat's ms
   uint64_t dropped_ GUARDED_BY(mu_) = 0;
   int64_t drop_logged_mono_ GUARDED_BY(mu_) = -1;
-  int64_t restored_mono_ GUARDED_BY(mu_) = -1;
+  int64_t reannounced_mono_ GUARDED_BY(mu_) = -1;
 };
 
 }  // namespace rcan::node
