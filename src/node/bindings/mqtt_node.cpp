@@ -14,6 +14,7 @@
 #include "node/api/node.h"
 #include "node/fleet/swarm.h"
 #include "node/services/node_services.h"
+#include "rcan/crypto/keys.h"
 #include "rcan/errors.h"
 
 namespace rcan::node {
@@ -53,23 +54,18 @@ bool is_loopback_host(const std::string& host) {
   return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
 }
 
-// A secret file's text without its trailing newline: the file must be private (0600 or
-// stricter) and hold `min`..`max` bytes.
+// A secret file's text without its trailing newline: read by keys::read_secret_file (a
+// regular file, 0600 or stricter), and `min`..`max` bytes long.
 Result<std::string> read_private_file(const std::string& path, const std::string& what, size_t min,
                                       size_t max) {
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0)
     return Error(ErrorCode::kNotFound, "cannot read " + what + " " + path);
-  if ((st.st_mode & 077) != 0)
-    return Error(ErrorCode::kInsufficientPrivileges,
-                 what + " " + path + " must not be group/world accessible (chmod 600)");
-  std::string text;
-  if (FILE* f = std::fopen(path.c_str(), "rb")) {
-    char buf[4200];
-    size_t n = std::fread(buf, 1, sizeof buf, f);
-    std::fclose(f);
-    text.assign(buf, n);
-  }
+  auto secret = keys::read_secret_file(path);
+  if (!secret.ok())
+    return Error(secret.error().code, what + ": " + secret.error().message, what,
+                 secret.error().reason);
+  std::string text(reinterpret_cast<const char*>(secret->data()), secret->size());
   while (!text.empty() && (text.back() == '\n' || text.back() == '\r')) text.pop_back();
   if (text.size() < min || text.size() > max)
     return Error(ErrorCode::kSchemaValidationFailed, what + " must hold " + std::to_string(min) +
