@@ -1,12 +1,15 @@
 #include "transport/mqtt_client.h"
 
 #include <mosquitto.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
 #include <poll.h>
 #include <pthread.h>
 #include <sys/eventfd.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cctype>
 #include <cerrno>
 #include <chrono>
@@ -77,9 +80,10 @@ Result<BrokerUrl> parse_broker_url(std::string_view url) {
 
 struct MqttClient::Impl {
   mosquitto* m = nullptr;
-  std::vector<std::string> url_text;  // MqttOptions::urls, or {url}
-  std::vector<BrokerUrl> urls;        // parsed by start()
-  std::thread net;                    // run()
+  std::vector<std::string> url_text;      // MqttOptions::urls, or {url}
+  std::vector<BrokerUrl> urls;            // parsed by start()
+  std::thread net;                        // run()
+  std::atomic<std::thread::id> net_id{};  // set by the network thread when it starts
   // Wakes the network thread's poll() when another thread queued a packet (a publish, a
   // subscription, the DISCONNECT of stop()). libmosquitto's own wake-up belongs to its select()
   // loop, which this client does not use (see serve()).
@@ -98,17 +102,31 @@ struct MqttClient::Impl {
 
 namespace {
 
+// How long the network thread sleeps with nothing to read or write: a quarter of the keepalive
+// (libmosquitto then sends its PINGREQ at most a quarter late, well inside the broker's 1.5×
+// keepalive), at most 5 s. A robot's idle connection wakes its thread that often, not every
+// second.
+int idle_poll_ms(int keepalive_s) {
+  if (keepalive_s <= 0) return 5000;
+  return std::clamp(keepalive_s * 250, 100, 5000);
+}
+
+bool set_cork(int fd, bool on) {
+  const int v = on ? 1 : 0;
+  return ::setsockopt(fd, IPPROTO_TCP, TCP_CORK, &v, sizeof v) == 0;
+}
+
 // Serves the connection of `m` until it drops or `stopped` is set: reads what arrives, writes
 // what is queued, keeps the connection alive. poll() rather than mosquitto_loop(), whose
 // select() refuses a socket numbered 1024 or more (a robot with many clients, files or driver
 // sockets open would lose its fleet channel for good). False when the connection is gone.
-bool serve(mosquitto* m, int wake_fd, bool tls, const std::atomic<bool>& stopped) {
+bool serve(mosquitto* m, int wake_fd, bool tls, int idle_ms, const std::atomic<bool>& stopped) {
   while (!stopped.load()) {
     const int fd = mosquitto_socket(m);
     if (fd < 0) return false;
     pollfd p[2] = {{fd, static_cast<short>(POLLIN | (mosquitto_want_write(m) ? POLLOUT : 0)), 0},
                    {wake_fd, POLLIN, 0}};
-    const int ready = ::poll(p, 2, 1000);
+    const int ready = ::poll(p, 2, idle_ms);
     if (ready < 0 && errno != EINTR) return false;
     if (p[1].revents & POLLIN) {
       uint64_t count = 0;
@@ -117,11 +135,19 @@ bool serve(mosquitto* m, int wake_fd, bool tls, const std::atomic<bool>& stopped
     }
     // TLS may hold decrypted bytes that poll() cannot see: read on every turn (a read with
     // nothing there is answered EAGAIN, which is not an error).
+    // What arrived is answered together: the PUBACK of a command and what handling it queued
+    // (its EVENT, an ACK ready at once) leave in one TCP segment, not one each (TCP_CORK until
+    // the queue is written; libmosquitto writes every packet with a write() of its own).
+    bool corked = false;
     if (tls || (p[0].revents & (POLLIN | POLLERR | POLLHUP))) {
+      corked = set_cork(fd, true);
       if (mosquitto_loop_read(m, 1) != MOSQ_ERR_SUCCESS) return false;
     }
     if (mosquitto_socket(m) < 0) return false;
-    if (mosquitto_want_write(m) && mosquitto_loop_write(m, 1) != MOSQ_ERR_SUCCESS) return false;
+    const bool wrote_ok =
+        !mosquitto_want_write(m) || mosquitto_loop_write(m, 1) == MOSQ_ERR_SUCCESS;
+    if (corked) set_cork(fd, false);
+    if (!wrote_ok) return false;
     if (mosquitto_loop_misc(m) != MOSQ_ERR_SUCCESS) return false;  // keepalive, timeouts
   }
   return true;
@@ -371,7 +397,8 @@ Status MqttClient::start() {
   started_ = true;
   // A broker that is down now is retried by the network thread (failover, backoff).
   impl_->net = std::thread([this] {
-    pthread_setname_np(pthread_self(), "mqtt-io");
+    impl_->net_id.store(std::this_thread::get_id());
+    pthread_setname_np(pthread_self(), opts_.thread_name.substr(0, 15).c_str());
     run();
   });
   return Status::Ok();
@@ -390,7 +417,7 @@ void MqttClient::run() {
     const BrokerUrl& u = impl_->urls[at];
     const uint64_t before = connects_.load();
     if (mosquitto_connect(m, u.host.c_str(), u.port, opts_.keepalive_s) == MOSQ_ERR_SUCCESS)
-      serve(m, impl_->wake_fd, u.tls, stopped_);
+      serve(m, impl_->wake_fd, u.tls, idle_poll_ms(opts_.keepalive_s), stopped_);
     if (stopped_.load()) break;
     if (connects_.load() != before) fails = 0;  // this one served: a new outage begins
     ++fails;
@@ -428,7 +455,9 @@ Status MqttClient::publish(const std::string& topic, const std::string& payload,
   if (qos > 0) inflight_.fetch_add(1);
   int rc = mosquitto_publish(impl_->m, nullptr, topic.c_str(), static_cast<int>(payload.size()),
                              payload.data(), qos, retain);
-  if (rc == MOSQ_ERR_SUCCESS) impl_->wake();
+  // From the network thread itself (a message handler's answer) the loop writes the packet when
+  // the handler returns: waking it would only cost a write now and an empty turn later.
+  if (rc == MOSQ_ERR_SUCCESS && std::this_thread::get_id() != impl_->net_id.load()) impl_->wake();
   if (rc != MOSQ_ERR_SUCCESS && rc != MOSQ_ERR_NO_CONN) {
     if (qos > 0) inflight_.fetch_sub(1);
     return Error(ErrorCode::kInternal, std::string("MQTT publish: ") + mosquitto_strerror(rc));

@@ -75,6 +75,7 @@ struct MqttOptions {
   // A SUBACK granting less than a requested QoS 2 lowers qos_cap() to 1. False: QoS 2 stays,
   // whatever the broker grants (`rcan fleet --qos 2` forces it).
   bool downgrade_on_suback = true;
+  std::string thread_name = "mqtt-io";  // the network thread's name (at most 15 characters)
 };
 
 struct MqttMessage {
