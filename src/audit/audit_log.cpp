@@ -137,7 +137,7 @@ class AuditLog::Impl {
   std::string idx_path(uint64_t id) const { return path(internal::index_file_name(id)); }
 
   Status open();
-  void submit(AuditEntry entry, Callback done);
+  void submit(AuditEntry entry, Callback done, Commit commit);
   Status export_range(int64_t from, int64_t to, const LineSink& sink) const;
   Result<std::vector<std::string>> find(bool watermark, std::string_view key) const;
   Result<std::string> get(uint64_t seq) const;
@@ -161,6 +161,7 @@ class AuditLog::Impl {
   Status rotate();
   Status apply_retention();
   void writer_loop();
+  void commit(std::vector<Pending>& batch, std::string& buf);
   void syncer_loop();
   void wait_synced();
   void sync_and_ack(std::vector<Ticket>& tickets);
@@ -202,6 +203,9 @@ class AuditLog::Impl {
   std::condition_variable cv_;
   std::deque<Pending> queue_;
   bool stop_ = false;
+  // A group is being committed, by the writer or by an appender (Commit::kHereIfIdle): the
+  // writer-side state (file_, next_seq_, last_hash_, active_bytes_, rotation) is theirs alone.
+  bool committing_ = false;
   std::atomic<bool> failed_{false};
   Error fail_error_;
   std::thread writer_;
@@ -604,7 +608,7 @@ Status AuditLog::Impl::write_records(std::vector<AuditEntry> entries) {
   return Status::Ok();
 }
 
-void AuditLog::Impl::submit(AuditEntry entry, Callback done) {
+void AuditLog::Impl::submit(AuditEntry entry, Callback done, Commit commit_mode) {
   if (entry.timestamp_ms == 0) entry.timestamp_ms = env_->now_ms();
   Status v = validate(entry);
   if (!v.ok()) {
@@ -639,6 +643,21 @@ void AuditLog::Impl::submit(AuditEntry entry, Callback done) {
                    "audit log: " + std::to_string(opts_.max_queued_records) +
                        " records already wait for the disk",
                    "", "audit_queue_full"));
+      return;
+    }
+    if (commit_mode == Commit::kHereIfIdle && !pipelined_ && !committing_ && queue_.empty()) {
+      committing_ = true;
+      l.unlock();
+      std::vector<Pending> batch;
+      batch.push_back(std::move(p));
+      std::string buf;
+      commit(batch, buf);
+      l.lock();
+      committing_ = false;
+      // The writer waits for the end of this commit only when there is work for it.
+      const bool wake = !queue_.empty() || stop_ || failed_.load();
+      l.unlock();
+      if (wake) cv_.notify_all();
       return;
     }
     queue_.push_back(std::move(p));
@@ -827,6 +846,7 @@ void AuditLog::Impl::writer_loop() {
     bool stopping = false;
     {
       std::unique_lock<std::mutex> l(mu_);
+      cv_.wait(l, [&] { return !committing_; });  // an appender's commit (Commit::kHereIfIdle)
       if (failed_.load() && opts_.recovery_interval_ms > 0) {
         // Failed: nothing is queued (submit() refuses); probe the disk once per interval.
         bool woken = cv_.wait_for(l, std::chrono::milliseconds(opts_.recovery_interval_ms),
@@ -837,7 +857,12 @@ void AuditLog::Impl::writer_loop() {
           continue;
         }
       } else {
-        cv_.wait(l, [&] { return !queue_.empty() || stop_; });
+        // An appender's commit may fail the log: the writer then probes for recovery.
+        const bool probe = opts_.recovery_interval_ms > 0;
+        cv_.wait(l, [&] {
+          return !committing_ && (!queue_.empty() || stop_ || (probe && failed_.load()));
+        });
+        if (queue_.empty() && !stop_) continue;
       }
       stopping = stop_;
       size_t n = std::min(queue_.size(), opts_.max_group_records);
@@ -845,11 +870,24 @@ void AuditLog::Impl::writer_loop() {
         batch.push_back(std::move(queue_.front()));
         queue_.pop_front();
       }
+      if (batch.empty() && stopping) break;
+      committing_ = true;
     }
-    if (batch.empty() && stopping) break;
+    commit(batch, buf);
+    std::lock_guard<std::mutex> l(mu_);
+    committing_ = false;
+  }
+  if (pipelined) wait_synced();
+}
+
+// Seals `batch` in order, writes it with one write() and syncs it (or hands it to the syncer),
+// then rotates if the segment is full. By whoever holds committing_.
+void AuditLog::Impl::commit(std::vector<Pending>& batch, std::string& buf) {
+  const bool pipelined = pipelined_;
+  {
     if (failed_.load()) {
       fail_all(batch, fail_error_);
-      continue;
+      return;
     }
     Ticket t;
     buf.clear();
@@ -878,7 +916,7 @@ void AuditLog::Impl::writer_loop() {
     if (!s.ok()) {
       set_failed(s.error().message);
       fail_all(batch, fail_error_);
-      continue;
+      return;
     }
     active_bytes_ += buf.size();
     t.items = std::move(batch);
@@ -930,7 +968,6 @@ void AuditLog::Impl::writer_loop() {
       }
     }
   }
-  if (pipelined) wait_synced();
 }
 
 void AuditLog::Impl::wait_synced() {
@@ -1465,17 +1502,20 @@ Result<Receipt> AuditLog::append(AuditEntry entry) {
     std::optional<Result<Receipt>> result;
   };
   auto slot = std::make_shared<Slot>();
-  impl_->submit(std::move(entry), [slot](Result<Receipt> r) {
-    slot->result.emplace(std::move(r));
-    slot->done.store(1, std::memory_order_release);
-    slot->done.notify_one();
-  });
+  impl_->submit(
+      std::move(entry),
+      [slot](Result<Receipt> r) {
+        slot->result.emplace(std::move(r));
+        slot->done.store(1, std::memory_order_release);
+        slot->done.notify_one();
+      },
+      Commit::kWriter);
   slot->done.wait(0, std::memory_order_acquire);
   return std::move(*slot->result);
 }
 
-void AuditLog::append_async(AuditEntry entry, Callback done) {
-  impl_->submit(std::move(entry), std::move(done));
+void AuditLog::append_async(AuditEntry entry, Callback done, Commit commit) {
+  impl_->submit(std::move(entry), std::move(done), commit);
 }
 
 Status AuditLog::export_range(int64_t from_ms, int64_t to_ms, const LineSink& sink) const {

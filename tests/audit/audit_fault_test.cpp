@@ -9,6 +9,7 @@
 #include <atomic>
 #include <condition_variable>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <thread>
 
@@ -332,6 +333,43 @@ void fail_then_recover(uint64_t fail_at, bool torn, bool pipelined) {
   // And it reopens cleanly.
   auto again = AuditLog::open(dir, fault_options(&env, false));
   ASSERT_TRUE(again.ok()) << again.error().message;
+}
+
+// A commit on the appender's thread (Commit::kHereIfIdle) that meets a failing disk: the
+// appender is told at once, the log fails closed, and the writer, idle until then, probes the
+// disk and recovers the log when it takes writes again.
+TEST(AuditFault, AFailedCommitOnTheAppendersThreadIsRecoveredByTheWriter) {
+  TempDir tmp;
+  const std::string dir = tmp.path() + "/log";
+  FaultInjectionEnv env(Env::posix());
+  AuditOptions o = fault_options(&env, false);
+  o.recovery_interval_ms = 20;
+  auto log = AuditLog::open(dir, o);
+  ASSERT_TRUE(log.ok());
+  // Every append here commits on this thread: the writer stays idle throughout.
+  std::optional<Result<Receipt>> first;
+  (*log)->append_async(
+      entry(0), [&](Result<Receipt> got) { first.emplace(std::move(got)); }, Commit::kHereIfIdle);
+  ASSERT_TRUE(first.has_value() && first->ok());
+  env.fail_after(1);
+  std::optional<Result<Receipt>> r;
+  (*log)->append_async(
+      entry(1), [&](Result<Receipt> got) { r.emplace(std::move(got)); }, Commit::kHereIfIdle);
+  ASSERT_TRUE(r.has_value());
+  ASSERT_FALSE(r->ok());
+  EXPECT_EQ(r->error().code, ErrorCode::kAuditUnavailable);
+  EXPECT_FALSE((*log)->available());
+  env.fail_after(0);  // the disk is back
+  ASSERT_TRUE(rcan::test::eventually([&] { return (*log)->available(); }))
+      << "the writer never probed the disk after the appender's commit failed";
+  std::optional<Result<Receipt>> again;
+  (*log)->append_async(
+      entry(2), [&](Result<Receipt> got) { again.emplace(std::move(got)); }, Commit::kHereIfIdle);
+  ASSERT_TRUE(again.has_value());
+  ASSERT_TRUE(again->ok()) << again->error().message;
+  log->reset();
+  auto v = verify_dir(dir, kSecret);
+  EXPECT_TRUE(v.ok) << v.why;
 }
 
 TEST(AuditFault, DiskFailureRecoversWhenTheDiskDoes) {

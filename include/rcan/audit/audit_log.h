@@ -39,6 +39,17 @@
 
 namespace rcan::audit {
 
+// Who commits a record appended with append_async().
+enum class Commit {
+  kWriter,  // the writer thread (default): the caller never waits for the disk
+  // The calling thread itself when no record waits and the writer is idle: it seals, writes and
+  // syncs the record, and `done` runs on it before append_async() returns — no hand-off to the
+  // writer and back. Otherwise as kWriter. For a caller whose thread may block for one
+  // fdatasync (a transport thread serving one connection, recording a stop that has already
+  // happened).
+  kHereIfIdle,
+};
+
 enum class SyncPolicy {
   kPerGroup,  // fdatasync after every group (default): lowest latency under load
   kInterval,  // at most one fdatasync per `sync_interval_ms`; acks wait for it
@@ -129,7 +140,9 @@ class AuditLog {
   Result<Receipt> append(AuditEntry entry);
   // Non-blocking: `done` runs on the writer thread once the record is durable (or
   // failed). It must be quick and must not call back into this log's append().
-  void append_async(AuditEntry entry, Callback done);
+  // Commit::kHereIfIdle: see Commit (then `done` may run on this thread, before this returns;
+  // never with pipelined sync).
+  void append_async(AuditEntry entry, Callback done, Commit commit = Commit::kWriter);
 
   // Lines whose timestamp_ms is within [from_ms, to_ms], in seq order, from a snapshot
   // of what was durable when the call started. Safe while appends continue.
