@@ -225,6 +225,10 @@ void MqttNode::stop() {
 void MqttNode::on_connection(bool up, int code) {
   const std::string url = client_->current_url();
   const int64_t now = svc_.clock.mono_ms();
+  {
+    MutexLock wake(loop_mu_);  // the loop watches the channel from now on (tick_channel)
+  }
+  loop_cv_.notify_all();
   if (up) {
     publish_status(true, "connected");
     if (swarm_) swarm_->on_connected(now);
@@ -372,14 +376,17 @@ void MqttNode::on_message(const transport::MqttMessage& msg) {
     if (t.kind != mqtt::TopicKind::kFleetEstop || !is_estop_message(*body)) return;
     standing = true;
   }
-  submit(*body, msg.topic, reply_topic, fleet_id, fleet_mode, standing);
+  submit(std::move(body).value(), msg.topic, reply_topic, fleet_id, fleet_mode, standing);
 }
 
-void MqttNode::submit(const json::Value& body, const std::string& route,
-                      const std::string& reply_topic, const std::string& fleet_id,
-                      const std::string& fleet_mode, bool standing_estop) {
+void MqttNode::submit(json::Value body, const std::string& route, const std::string& reply_topic,
+                      const std::string& fleet_id, const std::string& fleet_mode,
+                      bool standing_estop) {
+  const bool is_command = upper(str_field(body, "type")) == "COMMAND" ||
+                          upper(str_field(body, "type")) == "FLEET_COMMAND" ||
+                          field(body, "cmd") != nullptr;
   Ingress in;
-  in.body = body;
+  in.body = std::move(body);  // a fleet message with an ML-DSA signature is some 8 KiB
   in.transport = "mqtt";
   in.route = route;
   in.remote = "mqtt";
@@ -387,10 +394,8 @@ void MqttNode::submit(const json::Value& body, const std::string& route,
   in.fleet_mode = fleet_mode;
   in.standing_estop = standing_estop;
   in.require_bound_key = opts_.mqtt.require_bound_tokens;
+  in.may_commit_audit = true;  // the client's network thread: this robot's connection alone
   in.received_mono_us = steady_us();
-  bool is_command = upper(str_field(body, "type")) == "COMMAND" ||
-                    upper(str_field(body, "type")) == "FLEET_COMMAND" ||
-                    field(body, "cmd") != nullptr;
   node_.submit(std::move(in), [this, reply_topic, is_command](Outcome out) {
     if (!running_.load()) return;
     const json::Value& b = out.body;
@@ -422,8 +427,9 @@ void MqttNode::loop() {
   MutexLock lk(loop_mu_);
   while (running_.load()) {
     // Wake often only while there is something to watch: a motion to complete (20 ms), the
-    // swarm's heartbeat, telemetry, new audit records; otherwise once a second.
-    int64_t wait_ms = 1000;
+    // swarm's heartbeat, telemetry, new audit records, a channel not (yet) up; otherwise every
+    // 5 s (on_connection() wakes the loop at once when the broker goes or comes back).
+    int64_t wait_ms = client_->all_subscribed() ? 5000 : 1000;
     {
       MutexLock plk(mu_);
       if (!pending_.empty()) wait_ms = 20;

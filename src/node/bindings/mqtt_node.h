@@ -78,7 +78,7 @@ class MqttNode {
   void on_message(const transport::MqttMessage& msg);
   void on_connection(bool up, int code);
   void tick_channel(int64_t now_mono_ms);
-  void submit(const json::Value& body, const std::string& route, const std::string& reply_topic,
+  void submit(json::Value body, const std::string& route, const std::string& reply_topic,
               const std::string& fleet_id, const std::string& fleet_mode, bool standing_estop);
   void publish_json(const std::string& topic, const json::Value& v, int qos, bool retain);
   void publish_status(bool online, const std::string& reason);

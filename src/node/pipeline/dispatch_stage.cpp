@@ -178,9 +178,12 @@ class DispatchStage final : public Stage {
     }
     auto e = accepted_entry(*ctx, estop ? "ESTOP" : "STOP");
     if (!reason.empty()) e.reason = reason;
-    // The stop already happened; the answer waits for the record (or its failure).
-    svc_.write_audit(std::move(e),
-                     [answer](rcan::Result<audit::Receipt> r) { answer->audited(r.ok()); });
+    // The stop already happened; the answer waits for the record (or its failure). A transport
+    // thread that may wait for the disk commits it itself: a message after a stop waits one
+    // fdatasync at most, and the robot is stopped meanwhile.
+    svc_.write_audit(
+        std::move(e), [answer](rcan::Result<audit::Receipt> r) { answer->audited(r.ok()); },
+        ctx->in.may_commit_audit ? audit::Commit::kHereIfIdle : audit::Commit::kWriter);
     answer->ready(json::Object{{"command", safety_action_name(ctx->safety)},
                                {"result", estop ? "estop_latched" : "stopped"},
                                {"estop_active", svc_.act.estop_active()}});

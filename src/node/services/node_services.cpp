@@ -38,8 +38,8 @@ void AuditRecord::write(std::function<void(Result<audit::Receipt>)> cb) {
   svc_.write_audit(std::move(e_), std::move(cb));
 }
 
-void NodeServices::write_audit(audit::AuditEntry e,
-                               std::function<void(Result<audit::Receipt>)> cb) {
+void NodeServices::write_audit(audit::AuditEntry e, std::function<void(Result<audit::Receipt>)> cb,
+                               audit::Commit commit) {
   if (NetMode m = partition.mode(); m != NetMode::kNormal) {  // seed §6.1 log_for_sync()
     e.detail.set("partition_mode", std::string(net_mode_name(m)));
     e.detail.set("sync_pending", true);
@@ -54,21 +54,24 @@ void NodeServices::write_audit(audit::AuditEntry e,
   std::optional<audit::AuditEntry> stop_copy;
   if (e.event == "ESTOP" || e.event == "STOP") stop_copy = e;
   audit_inflight.fetch_add(1, std::memory_order_relaxed);
-  audit.append_async(std::move(e), [this, cb = std::move(cb), stop_copy = std::move(stop_copy)](
-                                       Result<audit::Receipt> r) mutable {
-    audit_inflight.fetch_sub(1, std::memory_order_relaxed);
-    if (!r.ok()) {
-      audit_failures.fetch_add(1, std::memory_order_relaxed);
-      if (r.error().code == ErrorCode::kAuditUnavailable) {
-        audit_unavailable.store(true);
-        if (stop_copy) stop_backlog.keep(*stop_copy);
-      }
-    } else {
-      audit_unavailable.store(
-          false);  // the log recovered (AuditLog::available() is the live state)
-    }
-    if (cb) cb(std::move(r));
-  });
+  audit.append_async(
+      std::move(e),
+      [this, cb = std::move(cb),
+       stop_copy = std::move(stop_copy)](Result<audit::Receipt> r) mutable {
+        audit_inflight.fetch_sub(1, std::memory_order_relaxed);
+        if (!r.ok()) {
+          audit_failures.fetch_add(1, std::memory_order_relaxed);
+          if (r.error().code == ErrorCode::kAuditUnavailable) {
+            audit_unavailable.store(true);
+            if (stop_copy) stop_backlog.keep(*stop_copy);
+          }
+        } else {
+          audit_unavailable.store(
+              false);  // the log recovered (AuditLog::available() is the live state)
+        }
+        if (cb) cb(std::move(r));
+      },
+      commit);
 }
 
 bool NodeServices::record_refusal(const std::string& source, const std::string& event,

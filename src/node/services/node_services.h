@@ -139,8 +139,10 @@ class NodeServices {
 
   // A new audit record of `event` (audit_record.h): anonymous until `by…` says who.
   AuditRecord record(const std::string& event, const std::string& outcome = "ok");
-  // Appends asynchronously; `cb` (optional) runs once the record is durable or failed.
-  void write_audit(audit::AuditEntry e, std::function<void(Result<audit::Receipt>)> cb = {});
+  // Appends asynchronously; `cb` (optional) runs once the record is durable or failed (with
+  // Commit::kHereIfIdle possibly on this thread, before this returns: audit::Commit).
+  void write_audit(audit::AuditEntry e, std::function<void(Result<audit::Receipt>)> cb = {},
+                   audit::Commit commit = audit::Commit::kWriter);
 
   // ESTOP/STOP records that could not be written while the audit log was failed (the stop
   // itself happened): spilled to `<state_dir>/stops-unrecorded.jsonl` (else memory) and
