@@ -852,8 +852,13 @@ void AuditLog::Impl::writer_loop() {
         bool woken = cv_.wait_for(l, std::chrono::milliseconds(opts_.recovery_interval_ms),
                                   [&] { return !queue_.empty() || stop_; });
         if (!woken) {
+          // Recovery owns the writer's state as a commit does: once it clears failed_, an
+          // appender's commit (Commit::kHereIfIdle) waits for it to end.
+          committing_ = true;
           l.unlock();
           try_recover();
+          l.lock();
+          committing_ = false;
           continue;
         }
       } else {

@@ -146,7 +146,7 @@ bool serve(mosquitto* m, int wake_fd, bool tls, int idle_ms, const std::atomic<b
     if (mosquitto_socket(m) < 0) return false;
     const bool wrote_ok =
         !mosquitto_want_write(m) || mosquitto_loop_write(m, 1) == MOSQ_ERR_SUCCESS;
-    if (corked) set_cork(fd, false);
+    if (corked && mosquitto_socket(m) == fd) set_cork(fd, false);  // else closed, maybe reused
     if (!wrote_ok) return false;
     if (mosquitto_loop_misc(m) != MOSQ_ERR_SUCCESS) return false;  // keepalive, timeouts
   }

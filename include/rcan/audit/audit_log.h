@@ -44,9 +44,9 @@ enum class Commit {
   kWriter,  // the writer thread (default): the caller never waits for the disk
   // The calling thread itself when no record waits and the writer is idle: it seals, writes and
   // syncs the record, and `done` runs on it before append_async() returns — no hand-off to the
-  // writer and back. Otherwise as kWriter. For a caller whose thread may block for one
-  // fdatasync (a transport thread serving one connection, recording a stop that has already
-  // happened).
+  // writer and back. Otherwise as kWriter. For a caller whose thread may block for that
+  // commit — one fdatasync, and a rotation when the segment is full (a transport thread
+  // serving one connection, recording a stop that has already happened).
   kHereIfIdle,
 };
 

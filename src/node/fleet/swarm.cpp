@@ -103,9 +103,15 @@ json::Value SwarmAgent::announce_body(const std::string& reason,
 }
 
 void SwarmAgent::reannounce_locked(const std::string& reason, int64_t now) {
-  if (leader_ != cfg_.member_id || (reannounced_mono_ >= 0 && now - reannounced_mono_ < 1000))
+  if (leader_ != cfg_.member_id) return;
+  if (reannounced_mono_ >= 0 && now - reannounced_mono_ < 1000) {
+    // Within a second of the last one: put it back from tick() once the second is over, so that
+    // a second forged announce right after the first is not left standing.
+    reannounce_due_ = reason;
     return;
+  }
   reannounced_mono_ = now;
+  reannounce_due_.clear();
   announce_locked(reason, "");
 }
 
@@ -196,6 +202,8 @@ void SwarmAgent::on_message(const mqtt::InboundTopic& t, const json::Value& body
 
 void SwarmAgent::tick(int64_t now) {
   MutexLock lk(mu_);
+  if (!reannounce_due_.empty() && now - reannounced_mono_ >= 1000)
+    reannounce_locked(std::string(reannounce_due_), now);
   if (now - last_beat_ >= cfg_.heartbeat_ms) {
     last_beat_ = now;
     last_seen_[cfg_.member_id] = now;

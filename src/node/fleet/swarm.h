@@ -102,6 +102,7 @@ class SwarmAgent {
   uint64_t dropped_ GUARDED_BY(mu_) = 0;
   int64_t drop_logged_mono_ GUARDED_BY(mu_) = -1;
   int64_t reannounced_mono_ GUARDED_BY(mu_) = -1;
+  std::string reannounce_due_ GUARDED_BY(mu_);  // a re-announce the once-a-second limit held
 };
 
 }  // namespace rcan::node
