@@ -132,6 +132,10 @@ struct CodecLimits {
 // MALFORMED_JSON; everything else as described above.
 Result<Message> parse_message(std::string_view body, const CodecLimits& limits = {});
 Result<Message> decode_message(const json::Value& value, const CodecLimits& limits = {});
+// The same, keeping `value` itself as the message's wire object instead of a copy (a fleet
+// message with a post-quantum signature is some KiB). `value` is moved from when the message
+// decodes, and unchanged when it does not.
+Result<Message> decode_message(json::Value&& value, const CodecLimits& limits = {});
 
 // The pre-authentication shape check of the live conformance checker's order: a JSON object
 // whose `payload` (seed shape) or `cmd` (rcan-py shape) is present. Nothing else is

@@ -656,6 +656,14 @@ Result<Message> decode_message(const json::Value& value, const CodecLimits& limi
   return m;
 }
 
+Result<Message> decode_message(json::Value&& value, const CodecLimits& limits) {
+  if (!value.is_object()) return schema("", "a message must be a JSON object");
+  auto& o = value.as_object();
+  Result<Message> m = looks_rcanpy(o) ? decode_rcanpy(o, limits) : decode_seed(o, limits);
+  if (m.ok()) m->wire = std::move(o);
+  return m;
+}
+
 Result<Message> parse_message(std::string_view body, const CodecLimits& limits) {
   if (body.size() > limits.max_body_bytes) {
     return Error(ErrorCode::kBodyTooLarge, "message of " + std::to_string(body.size()) +

@@ -94,6 +94,30 @@ TEST(MessageCodec, RcanPyShapeNormalisesToACommand) {
   }
 }
 
+// decode_message(json::Value&&) keeps the received object itself as the wire object: the same
+// message as from a copy; a message that does not decode leaves the value as it was.
+TEST(MessageCodec, DecodingFromAMovedValueGivesTheSameMessageAndKeepsARefusedOne) {
+  const std::string text = std::string(R"({"rcan":"3.2","msg_id":")") + kId +
+                           R"(","timestamp":1740721482.934,"cmd":"move_forward",)"
+                           R"("target":"rcan://local.rcan/acme/rover/abcdef12","params":{"d":1}})";
+  auto v = json::parse(text);
+  ASSERT_TRUE(v.ok());
+  const json::Value original = *v;
+  auto copied = decode_message(original);
+  auto moved = decode_message(std::move(*v));
+  ASSERT_TRUE(copied.ok() && moved.ok());
+  EXPECT_EQ(json::Value(moved->wire), original);
+  EXPECT_EQ(json::Value(moved->wire), json::Value(copied->wire));
+  EXPECT_EQ(moved->message_id, copied->message_id);
+  EXPECT_EQ(moved->action(), "move_forward");
+
+  auto bad = json::parse(R"({"rcan":"3.2","msg_id":"x y","timestamp":1,"cmd":"stop"})");
+  ASSERT_TRUE(bad.ok());
+  const json::Value before = *bad;
+  EXPECT_FALSE(decode_message(std::move(*bad)).ok());
+  EXPECT_EQ(*bad, before);  // NOLINT(bugprone-use-after-move): unchanged on failure
+}
+
 TEST(MessageCodec, RcanPyTimestampSecondsBecomeMilliseconds) {
   auto m = parse_message(
       std::string(R"({"rcan":"3.2","msg_id":")") + kId +

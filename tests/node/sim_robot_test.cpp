@@ -154,6 +154,38 @@ TEST(SimRobot, StopBrakesBaseAndFreezesArm) {
   EXPECT_EQ(s.joints_rad, joints_before);
 }
 
+// The safety loop rests up to a second between ticks at rest: one long step of a robot at rest
+// must leave exactly the state of many short ones (clock, battery, pose), and a long step of a
+// robot still braking must still brake.
+TEST(SimRobot, ALongStepAtRestEqualsShortStepsAndALongStepStillBrakes) {
+  SimRobot a, b;
+  for (SimRobot* r : {&a, &b}) {
+    ASSERT_TRUE(r->apply(ActuatorCommand::make_drive(0.5, 0.3, 400)).ok());
+    run(*r, 2000, 20);  // drove, then came to rest
+    ASSERT_TRUE(r->state().stopped);
+  }
+  run(a, 3000, 1000);
+  run(b, 3000, 5);
+  const auto sa = a.state(), sb = b.state();
+  EXPECT_EQ(sa.t_ms, sb.t_ms);
+  EXPECT_EQ(sa.battery_pct, sb.battery_pct);
+  EXPECT_EQ(sa.battery_v, sb.battery_v);
+  EXPECT_EQ(sa.x, sb.x);
+  EXPECT_EQ(sa.y, sb.y);
+  EXPECT_EQ(sa.theta, sb.theta);
+  EXPECT_LT(sa.battery_pct, 100.0);
+  EXPECT_TRUE(sa.stopped);
+
+  SimRobot c(no_battery());
+  ASSERT_TRUE(c.apply(ActuatorCommand::make_drive(1.0, 0.0, 5000)).ok());
+  run(c, 1000);
+  const double x_before = c.state().x;
+  c.stop();
+  c.step(1000);  // one tick after a second's rest: braking at 3 m/s^2 from 1 m/s
+  EXPECT_TRUE(c.state().stopped);
+  EXPECT_NEAR(c.state().x - x_before, 1.0 / 6.0, 1e-6);
+}
+
 TEST(SimRobot, StopIsSafeFromManyThreads) {
   SimRobot r(no_battery());
   ASSERT_TRUE(r.apply(ActuatorCommand::make_drive(1.0, 0.0, 5000)).ok());

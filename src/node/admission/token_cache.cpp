@@ -5,7 +5,7 @@ namespace rcan::node {
 std::optional<Principal> TokenCache::find(std::string_view token, int64_t now_s) {
   if (capacity_ == 0) return std::nullopt;
   MutexLock lock(mu_);
-  auto it = map_.find(std::string(token));
+  auto it = map_.find(token);
   if (it == map_.end()) return std::nullopt;
   if (now_s < it->second.valid_from_s || now_s >= it->second.valid_until_s) {
     map_.erase(it);  // outside its window: the caller verifies (and refuses) afresh
@@ -19,8 +19,7 @@ void TokenCache::insert(std::string_view token, const Principal& p, int64_t vali
                         int64_t valid_until_s) {
   if (capacity_ == 0 || valid_until_s <= valid_from_s) return;
   MutexLock lock(mu_);
-  if (map_.size() >= capacity_ && map_.find(std::string(token)) == map_.end())
-    map_.erase(map_.begin());
+  if (map_.size() >= capacity_ && map_.find(token) == map_.end()) map_.erase(map_.begin());
   map_.insert_or_assign(std::string(token), Entry{p, valid_from_s, valid_until_s});
 }
 

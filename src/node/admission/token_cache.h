@@ -13,6 +13,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <optional>
 #include <string>
@@ -50,7 +51,14 @@ class TokenCache {
   };
   const size_t capacity_;
   mutable Mutex mu_;
-  std::unordered_map<std::string, Entry> map_ GUARDED_BY(mu_);
+  // Looked up by the token's view (a fleet message's token is some KiB: no copy per message).
+  struct Hash {
+    using is_transparent = void;
+    size_t operator()(std::string_view s) const noexcept {
+      return std::hash<std::string_view>{}(s);
+    }
+  };
+  std::unordered_map<std::string, Entry, Hash, std::equal_to<>> map_ GUARDED_BY(mu_);
   uint64_t hits_ GUARDED_BY(mu_) = 0;
 };
 

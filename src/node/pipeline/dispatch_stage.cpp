@@ -237,7 +237,8 @@ class DispatchStage final : public Stage {
     std::optional<uint64_t> stream_epoch;
     bool rearmed = false;
     if (ctx->session_id.empty() && ctx->in.armed_epoch) {
-      if (json::bool_field(ctx->in.body, "rearm")) {
+      const json::Value* rearm = ctx->msg->wire.find("rearm");
+      if (rearm && rearm->is_bool() && rearm->as_bool()) {
         const uint64_t now = svc_.act.estop_epoch();
         rearmed = ctx->in.armed_epoch->exchange(now) < now;
       }

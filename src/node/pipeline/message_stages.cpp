@@ -54,8 +54,13 @@ class DecodeStage final : public Stage {
   }
   const char* name() const override { return "decode"; }
   Result run(const std::shared_ptr<Context>& ctx) override {
-    auto m = decode_message(ctx->in.body, svc_.settings.codec);
+    // The body becomes the message's wire object (no copy); from here on the stages read the
+    // received members through wire_of().
+    json::Value body = std::move(ctx->in.body);
+    ctx->in.body = json::Value();
+    auto m = decode_message(std::move(body), svc_.settings.codec);
     if (!m.ok()) {
+      ctx->in.body = std::move(body);  // a refused message's members (the SDK answer's msg_id)
       return refuse(svc_, ctx, m.error(), "MESSAGE_REJECTED");
     }
     ctx->msg = std::move(m).value();

@@ -58,9 +58,15 @@ const char* safety_action_name(SafetyAction e) {
   return "NONE";
 }
 
-std::string token_of(const Context& ctx) {
+const json::Object* wire_of(const Context& ctx) {
+  if (ctx.msg) return &ctx.msg->wire;
+  return ctx.in.body.is_object() ? &ctx.in.body.as_object() : nullptr;
+}
+
+std::string_view token_of(const Context& ctx) {
   if (!ctx.in.bearer.empty()) return ctx.in.bearer;
-  if (const json::Value* t = ctx.in.body.get("auth_token"); t && t->is_string())
+  const json::Object* wire = wire_of(ctx);
+  if (const json::Value* t = wire ? wire->find("auth_token") : nullptr; t && t->is_string())
     return t->as_string();
   return {};
 }
@@ -85,11 +91,14 @@ bool blocked_by_safety(const json::Value& payload) {
 // "blocked" for a safety refusal, with `safety_approved` false and `safety_reason`), `result`
 // (the command's result) and `message` for an error. The seed's members are unchanged.
 void add_sdk_response_fields(const Context& ctx, json::Value& body) {
-  if (!ctx.in.body.is_object() || !ctx.in.body.as_object().contains("cmd")) return;
+  const json::Object* wire = wire_of(ctx);
+  if (!wire || !wire->contains("cmd")) return;
   if (!body.is_object()) return;
   json::Object& o = body.as_object();
   const std::string type = json::string_field(body, "type");
-  std::string id = ctx.msg ? ctx.msg->message_id : json::string_field(ctx.in.body, "msg_id");
+  std::string id = ctx.msg ? ctx.msg->message_id : std::string();
+  if (!ctx.msg)
+    if (const json::Value* v = wire->find("msg_id"); v && v->is_string()) id = v->as_string();
   o.set("msg_id", id.substr(0, 128));
   const json::Value* p = o.find("payload");
   if (type == "ACK") {

@@ -36,7 +36,10 @@ std::unique_ptr<Stage> make_dispatch_stage(NodeServices& services);  // audit, t
 SafetyAction safety_action_of(const Message& m);
 // "ESTOP", "STOP", "RESUME" or "NONE".
 const char* safety_action_name(SafetyAction a);
+// The received JSON object: the decoded message's wire object once the decode stage has run
+// (it moves the body there), before that the body; null when the body is not an object.
+const json::Object* wire_of(const Context& ctx);
 // The bearer token of a context: the transport's, else the message's auth_token.
-std::string token_of(const Context& ctx);
+std::string_view token_of(const Context& ctx);
 
 }  // namespace rcan::node

@@ -176,6 +176,25 @@ void SimRobot::step(int64_t dt_ms) {
   if (dt_ms <= 0) return;
   MutexLock lock(mu_);
   absorb_stop_locked();
+  if (st_.drive_remaining_ms == 0 && stopped_locked()) {
+    // At rest nothing moves: only the clock and the battery's idle drain advance, sub-step by
+    // sub-step as below (the same sums), without the trigonometry of integrate_locked. The
+    // safety loop rests up to a second between ticks, i.e. 200 sub-steps.
+    braking_ = false;
+    st_.linear_mps = st_.target_linear_mps;  // all zero; as integrate_locked leaves them
+    st_.angular_radps = st_.target_angular_radps;
+    for (int64_t left = dt_ms; left > 0; left -= kSubStepMs) {
+      const double dt = static_cast<double>(std::min(left, kSubStepMs)) / 1000.0;
+      if (cfg_.battery) drain_pct_ += (0.002 + 0.05 * 0.0) * dt;
+    }
+    st_.t_ms += dt_ms;
+    if (cfg_.battery) {
+      st_.battery_pct = std::max(0.0, 100.0 - drain_pct_);
+      st_.battery_v = 10.5 + 2.1 * st_.battery_pct / 100.0;
+    }
+    st_.stopped = true;
+    return;
+  }
   int64_t left = dt_ms;
   while (left > 0) {
     int64_t sub = std::min(left, kSubStepMs);
