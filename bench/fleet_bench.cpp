@@ -184,17 +184,19 @@ uint16_t free_port() {
   return ntohs(a.sin_port);
 }
 
-// Records when the safety core was asked to latch.
+// Records when the safety core latched: the call plus the time it took to stop the driver
+// (estop()'s result), not the latch file written after it.
 class TimedActuation final : public node::Actuation {
  public:
   explicit TimedActuation(node::SafetyActuation& inner) : inner_(inner) {}
   bool estop_active() const override { return inner_.estop_active(); }
   uint64_t estop_epoch() const override { return inner_.estop_epoch(); }
   double estop(const std::string& source, const std::string& reason, Role by,
-               node::EstopLatchFn on_latch) override {
-    double r = inner_.estop(source, reason, by, std::move(on_latch));
-    latched_at.store(mono_ms());
-    return r;
+               node::EstopLatchFn on_latch, bool persist_here) override {
+    const double called_at = mono_ms();
+    double us = inner_.estop(source, reason, by, std::move(on_latch), persist_here);
+    latched_at.store(called_at + us / 1000.0);
+    return us;
   }
   Status resume(Role role, const std::string& source) override {
     return inner_.resume(role, source);
@@ -576,6 +578,12 @@ std::unique_ptr<Robot> start_robot(const Fleet& f, const config::FleetConfig& fc
   node::SimRobotConfig sim;
   node::SafetyConfig sc;
   r->core = std::make_unique<node::SafetyCore>(std::make_unique<node::SimRobot>(sim), sc);
+  // The latch file, as rcand keeps it (<data_dir>/safety): an ESTOP's ACK waits until it is
+  // durable, and a RESUME rewrites it.
+  if (Status s = r->core->open((rd / "safety").string()); !s.ok()) {
+    std::fprintf(stderr, "safety state: %s\n", s.error().message.c_str());
+    return nullptr;
+  }
   r->act = std::make_unique<node::SafetyActuation>(*r->core, r->member);
   r->timed = std::make_unique<TimedActuation>(*r->act);
   audit::AuditOptions ao;

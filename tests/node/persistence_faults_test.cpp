@@ -9,6 +9,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <fstream>
 #include <future>
@@ -284,6 +285,59 @@ TEST(SafetyLatchFile, WhenPersistedAnswersOnlyOnceTheFileIsDurable) {
 
 // A write that fails is answered at once with its error; one that hangs is answered by the
 // control loop once latch_ack_timeout_ms has passed. The write goes on in both cases.
+// An ESTOP from a thread that may block for the disk (one MQTT connection's) writes the latch
+// file itself: the answer is decided before estop() returns, on that thread. While another
+// write is under way (the persister's, on a hung disk) it does not wait: the persister writes
+// the new latch after its own and answers then.
+TEST(SafetyLatchFile, AnEstopThatMayWaitWritesItsLatchFileItselfUnlessAWriteIsUnderWay) {
+  {
+    TempDir dir;
+    SafetyRig r;
+    ASSERT_TRUE(r.core->open(dir.path()).ok());
+    node::SafetyActuation act(*r.core, "r");
+    std::atomic<bool> answered{false}, durable{false};
+    std::thread::id answered_on;
+    (void)act.estop(
+        "mqtt", "fleet", Role::kOwner,
+        [&](bool d, const std::string&) {
+          durable = d;
+          answered_on = std::this_thread::get_id();
+          answered = true;
+        },
+        true);
+    EXPECT_TRUE(answered.load());
+    EXPECT_TRUE(durable.load());
+    EXPECT_EQ(answered_on, std::this_thread::get_id());
+    auto file = json::parse(test::read_file(dir.file("safety_state.json")));
+    ASSERT_TRUE(file.ok());
+    EXPECT_TRUE(file->get("estop_active")->as_bool());
+  }
+  TempDir dir;
+  FaultInjectionEnv env(Env::posix());
+  SafetyRig r;
+  ASSERT_TRUE(r.core->open(dir.path(), &env).ok());
+  node::SafetyActuation act(*r.core, "r");
+  env.hold(true);  // the persister's write of the first latch hangs
+  (void)act.estop("http", "first", Role::kLeasee, {}, false);
+  for (int i = 0; i < 500 && env.held() == 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  ASSERT_GT(env.held(), 0u);
+  std::promise<bool> second;
+  const auto t0 = std::chrono::steady_clock::now();
+  (void)act.estop(
+      "mqtt", "second", Role::kOwner, [&](bool d, const std::string&) { second.set_value(d); },
+      true);
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(1));  // did not wait
+  auto got = second.get_future();
+  EXPECT_EQ(got.wait_for(std::chrono::milliseconds(100)), std::future_status::timeout);
+  env.hold(false);
+  ASSERT_EQ(got.wait_for(std::chrono::seconds(5)), std::future_status::ready);
+  EXPECT_TRUE(got.get());
+  auto file = json::parse(test::read_file(dir.file("safety_state.json")));
+  ASSERT_TRUE(file.ok());
+  EXPECT_EQ(file->get("by_level")->as_int(), role_level(Role::kOwner));
+}
+
 TEST(SafetyLatchFile, WhenPersistedSaysSoWhenTheWriteFailsOrHangs) {
   {
     TempDir dir;

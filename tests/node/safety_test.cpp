@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 #include <pthread.h>
+#include <sys/stat.h>
 
 #include <atomic>
 #include <chrono>
@@ -208,6 +209,92 @@ TEST(SafetyEstop, CorruptStateComesUpLatched) {
     EXPECT_TRUE(r2.core->estop_active());
     EXPECT_EQ(r2.core->status().startup_note, "ESTOP was latched before restart; still latched");
   }
+}
+
+ino_t inode_of(const std::string& path) {
+  struct stat st {};
+  return ::stat(path.c_str(), &st) == 0 ? st.st_ino : 0;
+}
+
+// The latch file is one page with a check of its contents. A latch rewrites it in place (the
+// same inode: no new file, rename or directory sync on the ESTOP's path); a clear replaces it
+// whole (a new inode), so that a clear that cannot be made durable leaves the latched file.
+TEST(SafetyEstop, ALatchRewritesTheLatchFileInPlaceAClearReplacesIt) {
+  rcan::test::TempDir dir;
+  const std::string f = dir.file("safety_state.json");
+  Rig r;
+  ASSERT_TRUE(r.core->open(dir.path()).ok());
+  auto e = r.core->estop("http", "first");
+  ASSERT_TRUE(r.core->wait_persisted(e.state_seq, 5000));
+  const std::string first = rcan::test::read_file(f);
+  EXPECT_EQ(first.size(), 4096u);
+  auto parsed = json::parse(first);
+  ASSERT_TRUE(parsed.ok()) << parsed.error().message;
+  EXPECT_EQ(parsed->get("check")->as_string().size(), 64u);
+  const ino_t latched_inode = inode_of(f);
+
+  ASSERT_TRUE(r.core->resume(4, "owner").ok());
+  ASSERT_TRUE(r.core->wait_persisted(r.core->state_seq(), 5000));
+  const ino_t cleared_inode = inode_of(f);
+  EXPECT_NE(cleared_inode, latched_inode);  // replaced whole
+  EXPECT_FALSE(json::parse(rcan::test::read_file(f))->get("estop_active")->as_bool());
+
+  auto again = r.core->estop("mqtt", "second");
+  ASSERT_TRUE(r.core->wait_persisted(again.state_seq, 5000));
+  EXPECT_EQ(inode_of(f), cleared_inode);  // rewritten in place
+  const std::string second = rcan::test::read_file(f);
+  EXPECT_EQ(second.size(), 4096u);
+  EXPECT_TRUE(json::parse(second)->get("estop_active")->as_bool());
+  EXPECT_FALSE(std::ifstream(f + ".tmp").good());
+
+  Rig r2;  // and it loads
+  ASSERT_TRUE(r2.core->open(dir.path()).ok());
+  EXPECT_TRUE(r2.core->estop_active());
+  EXPECT_EQ(r2.core->status().estop_source, "mqtt");
+  EXPECT_EQ(r2.core->status().startup_note, "ESTOP was latched before restart; still latched");
+}
+
+// A latch file whose contents do not match its check (an in-place write torn by a crash: a
+// sector of the new state over the old) comes up latched, even when it still parses and says
+// cleared. A file from before the check (no "check" member) loads as it did.
+TEST(SafetyEstop, ALatchFileFailingItsCheckComesUpLatchedOneWithoutACheckLoads) {
+  rcan::test::TempDir dir;
+  const std::string f = dir.file("safety_state.json");
+  {
+    Rig r;
+    ASSERT_TRUE(r.core->open(dir.path()).ok());
+    auto e = r.core->estop("http", "aaaa");
+    ASSERT_TRUE(r.core->wait_persisted(e.state_seq, 5000));
+    ASSERT_TRUE(r.core->resume(4, "owner").ok());
+    ASSERT_TRUE(r.core->wait_persisted(r.core->state_seq(), 5000));
+  }
+  std::string body = rcan::test::read_file(f);
+  const size_t at = body.find("\"reason\":\"");
+  ASSERT_NE(at, std::string::npos);
+  body[at + 10] = body[at + 10] == 'x' ? 'y' : 'x';  // still JSON, still "estop_active":false
+  { std::ofstream(f, std::ios::binary | std::ios::trunc) << body; }
+  ASSERT_TRUE(json::parse(body).ok());
+  {
+    Rig r;
+    ASSERT_TRUE(r.core->open(dir.path()).ok());
+    EXPECT_TRUE(r.core->estop_active());
+    EXPECT_NE(r.core->status().startup_note.find("check"), std::string::npos)
+        << r.core->status().startup_note;
+    EXPECT_TRUE(std::ifstream(f + ".corrupt").good());
+  }
+
+  rcan::test::TempDir old;
+  {
+    std::ofstream(old.file("safety_state.json"))
+        << R"({"format":"rcan-safety-state-v1","estop_active":true,"source":"cli",)"
+        << R"("reason":"before","since_ms":1,"by_level":4,"written_ms":1})"
+        << "\n";
+  }
+  Rig r;
+  ASSERT_TRUE(r.core->open(old.path()).ok());
+  EXPECT_TRUE(r.core->estop_active());
+  EXPECT_EQ(r.core->status().estop_source, "cli");
+  EXPECT_EQ(r.core->status().startup_note, "ESTOP was latched before restart; still latched");
 }
 
 TEST(SafetyEstop, EstopOnStartupConfig) {
@@ -1102,7 +1189,7 @@ TEST(SafetyActuationApply, AppliesWhatPrepareCheckedAndAnswersChat) {
   // An ESTOP between prepare() and apply() refuses the prepared command.
   auto again = prepare(act, command_msg(json::Object{{"action", "move"}, {"linear", 0.1}}));
   ASSERT_TRUE(again.ok());
-  (void)act.estop("test", "between", Role::kOwner, {});
+  (void)act.estop("test", "between", Role::kOwner, {}, false);
   auto refused = act.apply(*again);
   ASSERT_FALSE(refused.ok());
   EXPECT_EQ(refused.error().reason, "estop_active");

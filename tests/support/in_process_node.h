@@ -43,8 +43,8 @@ class FakeActuation final : public Actuation {
     return estops_.size();
   }
   // The latch is "durable" at once.
-  double estop(const std::string& source, const std::string&, Role,
-               EstopLatchFn on_latch) override {
+  double estop(const std::string& source, const std::string&, Role, EstopLatchFn on_latch,
+               bool) override {
     {
       std::lock_guard<std::mutex> lock(mu_);
       latched_ = true;

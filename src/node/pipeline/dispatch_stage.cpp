@@ -139,10 +139,12 @@ class DispatchStage final : public Stage {
     const int64_t t_call = steady_us();
     if (estop) {
       // The ACK waits for the latch file too: an acknowledged ESTOP survives a restart, or
-      // its answer says that it may not (latch: not_durable, with why).
+      // its answer says that it may not (latch: not_durable, with why). A transport thread
+      // that may wait for the disk writes it itself (as the record below).
       us = svc_.act.estop(
           source, reason, ctx->principal.role,
-          [answer](bool durable, const std::string& error) { answer->latched(durable, error); });
+          [answer](bool durable, const std::string& error) { answer->latched(durable, error); },
+          ctx->in.may_commit_audit);
     } else {
       svc_.act.stop(source);
       us = static_cast<double>(steady_us() - t_call);

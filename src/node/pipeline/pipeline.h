@@ -60,9 +60,10 @@ struct Ingress {
   // until one carries "rearm": true (docs/NODE.md, "Re-arm after ESTOP"). Null: HTTP, MQTT.
   std::shared_ptr<std::atomic<uint64_t>> armed_epoch;
   int64_t received_mono_us = 0;  // steady clock at arrival (transport read done); 0: at submit
-  // The transport's thread serves this one connection and may block for an audit commit: the
-  // record of a stop (which has already happened) is then committed on it when the audit log is
-  // idle, and the answer goes out from it (audit::Commit::kHereIfIdle).
+  // The transport's thread serves this one connection and may block for the disk: an ESTOP's
+  // latch file is then written on it, and the record of a stop (which has already happened)
+  // committed on it, when nothing else is writing them (audit::Commit::kHereIfIdle,
+  // SafetyCore::persist_here_if_idle), and the answer goes out from it.
   bool may_commit_audit = false;
 };
 

@@ -140,8 +140,11 @@ bool SafetyActuation::estop_active() const { return core_.estop_active(); }
 uint64_t SafetyActuation::estop_epoch() const { return core_.estop_epoch(); }
 
 double SafetyActuation::estop(const std::string& source, const std::string& reason, Role by,
-                              EstopLatchFn on_latch) {
-  EstopResult r = core_.estop(source, reason, role_level(by));
+                              EstopLatchFn on_latch, bool persist_here) {
+  EstopResult r = core_.estop(source, reason, role_level(by), !persist_here);
+  // Written here first, the latch is durable before the waiter is registered: answered at once,
+  // no timer armed on the control loop.
+  if (persist_here) core_.persist_here_if_idle();
   if (on_latch) core_.when_persisted(r.state_seq, std::move(on_latch));
   return static_cast<double>(r.stop_latency_ns) / 1000.0;
 }

@@ -47,8 +47,11 @@ class Actuation {
   // or not, with why — the write failed or did not finish in time (the latch holds in memory
   // and the write is retried), or there is no state file.
   // `by` is the role of the principal who asked: only that role or OWNER may clear it.
+  // `persist_here`: the calling thread serves one channel and may block for the disk; the
+  // latch file is then written on it when no other write is under way (then `on_latch` is
+  // called on it, before estop() returns), else on the safety core's own thread.
   virtual double estop(const std::string& source, const std::string& reason, Role by,
-                       EstopLatchFn on_latch) = 0;
+                       EstopLatchFn on_latch, bool persist_here) = 0;
   // Clears a latched ESTOP. Errors: INSUFFICIENT_PRIVILEGES below LEASEE, or below the role
   // that latched it (OWNER clears any).
   virtual Status resume(Role role, const std::string& source) = 0;

@@ -21,8 +21,8 @@ class SafetyActuation final : public Actuation {
 
   bool estop_active() const override;
   uint64_t estop_epoch() const override;
-  double estop(const std::string& source, const std::string& reason, Role by,
-               EstopLatchFn on_latch) override;
+  double estop(const std::string& source, const std::string& reason, Role by, EstopLatchFn on_latch,
+               bool persist_here) override;
   Status resume(Role role, const std::string& source) override;
   void stop(const std::string& source) override;
   Result<PreparedCommand> prepare(const Message& msg, const ActionSpec& spec,

@@ -17,6 +17,7 @@
 #include <sstream>
 
 #include "base/clock.h"
+#include "rcan/hash.h"
 
 // How the guarantees of safety.h are kept:
 //   * estop() sets an atomic flag and calls Driver::stop() first (no lock, no I/O on that
@@ -24,6 +25,9 @@
 //     for that one apply, then a second stop()), then hands the new latch state to the
 //     persister thread, which writes it through audit::Env::write_file_atomic (temp file,
 //     fsync, rename, fsync of the directory) and retries every 200 ms until it is durable.
+//     The file is padded to a fixed size (kStateFileBytes) and carries a SHA-256 of its other
+//     members ("check"): a latch (never a clear) then rewrites it in place, one write and one
+//     fdatasync. A write torn by a crash fails the check and the node comes up latched.
 //   * The deadman table (deadmen_, by control session id) is scanned by tick(); a lost
 //     deadman is revived by feed_deadman(), but only the next accepted command clears the
 //     safe-stop it caused.
@@ -34,6 +38,7 @@ namespace {
 
 constexpr const char* kStateFile = "safety_state.json";
 constexpr const char* kStateFormat = "rcan-safety-state-v1";
+constexpr size_t kStateFileBytes = 4096;  // one page; a longer state is written whole instead
 constexpr size_t kLatencyRing = 4096;
 constexpr int64_t kMaxStepMs = 60'000;
 constexpr int kLevelLeasee = 3;
@@ -213,11 +218,22 @@ Status SafetyCore::open(const std::string& state_dir, audit::Env* env) {
       } else {
         const auto* fmt = parsed->get("format");
         const auto* active = parsed->get("estop_active");
+        const auto* check = parsed->get("check");  // absent in files written before it
+        std::string check_of;
+        if (check && check->is_string()) {
+          json::Object rest = parsed->as_object();
+          rest.erase("check");
+          check_of = sha256_hex(json::dump(json::Value(std::move(rest))));
+        }
         if (!fmt || !fmt->is_string() || fmt->as_string() != kStateFormat || !active ||
             !active->is_bool()) {
           corrupt = true;
           why = "state file has an unknown format";
+        } else if (check && (!check->is_string() || check->as_string() != check_of)) {
+          corrupt = true;
+          why = "state file fails its check (a write torn by a crash?)";
         } else {
+          state_file_fixed_ = check != nullptr && ss.str().size() == kStateFileBytes;
           loaded.active = active->as_bool();
           if (const auto* s = parsed->get("source"); s && s->is_string())
             loaded.source = s->as_string();
@@ -284,7 +300,8 @@ void SafetyCore::emit(const SafetyEvent& ev) {
 
 // ---- ESTOP / RESUME -------------------------------------------------------------------------
 
-EstopResult SafetyCore::estop(std::string_view source, std::string_view reason, int by_level) {
+EstopResult SafetyCore::estop(std::string_view source, std::string_view reason, int by_level,
+                              bool wake_persister) {
   const int64_t t0 = steady_ns();
   // The epoch first: a session armed from here on is armed at the new epoch, one armed before
   // (a hold that started before this ESTOP) needs rearm() after the RESUME.
@@ -333,7 +350,7 @@ EstopResult SafetyCore::estop(std::string_view source, std::string_view reason, 
     }
     r.state_seq = latch_seq_;
   }
-  if (r.newly_latched) persist_cv_.notify_all();
+  if (r.newly_latched && wake_persister) persist_cv_.notify_all();
   r.return_latency_ns = steady_ns() - t0;
   return r;
 }
@@ -460,41 +477,85 @@ Status SafetyCore::write_state_file(const LatchState& st) {
                  {"source", st.source},           {"reason", st.reason},
                  {"since_ms", st.since_wall_ms},  {"by_level", st.by_level},
                  {"written_ms", clock_.wall_ms()}};
-  const std::string body = json::dump(json::Value(std::move(o))) + "\n";
-  Status s = env_->write_file_atomic(state_dir_ + "/" + kStateFile, body);
+  json::Object file{{"check", sha256_hex(json::dump(json::Value(o)))}};
+  for (auto& [k, v] : o) file.set(k, std::move(v));
+  std::string body = json::dump(json::Value(std::move(file)));
+  if (body.size() < kStateFileBytes) body.resize(kStateFileBytes - 1, ' ');
+  body += '\n';
+  const std::string path = state_dir_ + "/" + kStateFile;
+  const bool fixed = body.size() == kStateFileBytes;
+  Status s;
+  if (st.active && fixed && state_file_fixed_) {
+    // A latch over a file of the same size: in place (no new inode, rename or directory sync).
+    // A crash in the middle leaves the old state or a torn file, which comes up latched.
+    auto f = env_->open_writable_at(path, 0);
+    if (!f.ok()) {
+      s = f.error();
+    } else {
+      s = (*f)->append(body);
+      if (s.ok()) s = (*f)->sync();
+      if (Status c = (*f)->close(); s.ok()) s = c;
+    }
+  } else {
+    // A clear, or a file of another shape: replaced whole, so that a clear that cannot be made
+    // durable leaves the latched file as it was.
+    s = env_->write_file_atomic(path, body);
+  }
+  state_file_fixed_ = s.ok() && fixed;
   if (!s.ok()) return Error(ErrorCode::kInternal, s.error().message);
   return Status::Ok();
+}
+
+Status SafetyCore::write_latest_locked(ReleasableMutexLock& lock) {
+  const uint64_t seq = latch_seq_;
+  const LatchState snapshot = latch_;
+  lock.unlock();
+  Status st = write_state_file(snapshot);
+  lock.lock();
+  std::vector<PersistWaiter> answered;
+  if (st.ok()) {
+    persisted_seq_ = std::max(persisted_seq_, seq);
+    persist_error_.clear();
+    durable_cv_.notify_all();
+    const uint64_t durable = persisted_seq_;
+    answered = take_waiters_locked([durable](const PersistWaiter& w) { return w.seq <= durable; });
+  } else {
+    persist_error_ = st.error().message;
+    durable_cv_.notify_all();
+    answered = take_waiters_locked([seq](const PersistWaiter& w) { return w.seq <= seq; });
+  }
+  if (!answered.empty()) {  // answered unlocked: a callback may ask for the status
+    const std::string error = persist_error_;
+    lock.unlock();
+    for (auto& w : answered) w.fn(st.ok(), error);
+    lock.lock();
+  }
+  return st;
+}
+
+void SafetyCore::persist_here_if_idle() {
+  ReleasableMutexLock lock(meta_mu_);
+  if (!persist_enabled_ || persist_busy_ || persisted_seq_ >= latch_seq_) return;
+  persist_busy_ = true;
+  (void)write_latest_locked(lock);
+  persist_busy_ = false;
+  // Behind still (a newer change, or this write failed: retried), or shutting down while this
+  // thread wrote: the persister's turn. Otherwise it sleeps on.
+  const bool hand_over = persisted_seq_ < latch_seq_ || persist_quit_;
+  lock.unlock();
+  if (hand_over) persist_cv_.notify_all();
 }
 
 void SafetyCore::persist_loop() {
   ReleasableMutexLock lock(meta_mu_);
   for (;;) {
-    while (!persist_quit_ && persisted_seq_ >= latch_seq_) persist_cv_.wait(meta_mu_);
+    while (persist_busy_ || (!persist_quit_ && persisted_seq_ >= latch_seq_))
+      persist_cv_.wait(meta_mu_);
     if (persisted_seq_ >= latch_seq_) return;  // shutting down, nothing pending
     const uint64_t seq = latch_seq_;
-    const LatchState snapshot = latch_;
-    lock.unlock();
-    Status st = write_state_file(snapshot);
-    lock.lock();
-    std::vector<PersistWaiter> answered;
-    if (st.ok()) {
-      persisted_seq_ = std::max(persisted_seq_, seq);
-      persist_error_.clear();
-      durable_cv_.notify_all();
-      const uint64_t durable = persisted_seq_;
-      answered =
-          take_waiters_locked([durable](const PersistWaiter& w) { return w.seq <= durable; });
-    } else {
-      persist_error_ = st.error().message;
-      durable_cv_.notify_all();
-      answered = take_waiters_locked([seq](const PersistWaiter& w) { return w.seq <= seq; });
-    }
-    if (!answered.empty()) {  // answered unlocked: a callback may ask for the status
-      const std::string error = persist_error_;
-      lock.unlock();
-      for (auto& w : answered) w.fn(st.ok(), error);
-      lock.lock();
-    }
+    persist_busy_ = true;
+    Status st = write_latest_locked(lock);
+    persist_busy_ = false;
     if (st.ok()) continue;
     if (persist_quit_) return;
     // Retry every 200 ms, sooner on a new change or shutdown (which makes one last attempt).

@@ -218,7 +218,15 @@ class SafetyCore {
   // After it returns (fenced), no dispatch reaches the driver until resume().
   // `by_level`: the role level of the principal asking (0: the node itself — watchdog,
   // start-up). A latch remembers the highest level that latched it (in its state file too).
-  EstopResult estop(std::string_view source, std::string_view reason, int by_level = 0);
+  // `wake_persister` false: the caller writes the latch file itself next (persist_here_if_idle).
+  EstopResult estop(std::string_view source, std::string_view reason, int by_level = 0,
+                    bool wake_persister = true);
+  // Writes the latch file on the calling thread when it is behind and no write is under way
+  // (otherwise the persister thread does, as after estop()), and answers when_persisted()
+  // waiters that it made durable, on this thread. It may block for the disk: for a thread that
+  // serves one channel, whose ESTOP has already stopped the robot (audit::Commit::kHereIfIdle
+  // is the audit log's counterpart). A failed write is retried by the persister.
+  void persist_here_if_idle();
   // Clears the latch for a principal of LEASEE or above whose level is at least the latch's
   // (OWNER and above clear any latch). Errors: INSUFFICIENT_PRIVILEGES, estop_clear_forbidden.
   Status resume(int principal_role_level, std::string_view source);
@@ -347,7 +355,16 @@ class SafetyCore {
   std::string safe_stop_session_ GUARDED_BY(meta_mu_);
   int64_t safe_stop_since_wall_ms_ GUARDED_BY(meta_mu_) = 0;
   std::string driver_fault_ GUARDED_BY(meta_mu_);
-  std::string state_dir_;         // set once by open()
+  std::string state_dir_;  // set once by open()
+  // A latch file write is under way (by the persister or a persist_here_if_idle() caller);
+  // whoever set it owns write_state_file() and state_file_fixed_ until it clears it.
+  bool persist_busy_ GUARDED_BY(meta_mu_) = false;
+  // The latch file has the fixed size and checked form (kStateFileBytes, "check") and may be
+  // latched by rewriting it in place. Set by open(), then only by the persister thread.
+  bool state_file_fixed_ = false;
+  // Writes the latest latch state (persist_busy_ set by the caller, meta_mu_ held on entry and
+  // on return, released meanwhile) and answers the waiters it decided.
+  Status write_latest_locked(ReleasableMutexLock& lock) REQUIRES(meta_mu_);
   bool persist_enabled_ = false;  // set once by open()
   bool persist_quit_ GUARDED_BY(meta_mu_) = false;
   CondVar persist_cv_;  // the persister waits on meta_mu_
