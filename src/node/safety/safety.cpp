@@ -506,12 +506,12 @@ Status SafetyCore::write_state_file(const LatchState& st) {
   return Status::Ok();
 }
 
-Status SafetyCore::write_latest_locked(ReleasableMutexLock& lock) {
+Status SafetyCore::write_latest_locked() {
   const uint64_t seq = latch_seq_;
   const LatchState snapshot = latch_;
-  lock.unlock();
+  meta_mu_.unlock();
   Status st = write_state_file(snapshot);
-  lock.lock();
+  meta_mu_.lock();
   std::vector<PersistWaiter> answered;
   if (st.ok()) {
     persisted_seq_ = std::max(persisted_seq_, seq);
@@ -526,9 +526,9 @@ Status SafetyCore::write_latest_locked(ReleasableMutexLock& lock) {
   }
   if (!answered.empty()) {  // answered unlocked: a callback may ask for the status
     const std::string error = persist_error_;
-    lock.unlock();
+    meta_mu_.unlock();
     for (auto& w : answered) w.fn(st.ok(), error);
-    lock.lock();
+    meta_mu_.lock();
   }
   return st;
 }
@@ -537,7 +537,7 @@ void SafetyCore::persist_here_if_idle() {
   ReleasableMutexLock lock(meta_mu_);
   if (!persist_enabled_ || persist_busy_ || persisted_seq_ >= latch_seq_) return;
   persist_busy_ = true;
-  (void)write_latest_locked(lock);
+  (void)write_latest_locked();
   persist_busy_ = false;
   // Behind still (a newer change, or this write failed: retried), or shutting down while this
   // thread wrote: the persister's turn. Otherwise it sleeps on.
@@ -554,7 +554,7 @@ void SafetyCore::persist_loop() {
     if (persisted_seq_ >= latch_seq_) return;  // shutting down, nothing pending
     const uint64_t seq = latch_seq_;
     persist_busy_ = true;
-    Status st = write_latest_locked(lock);
+    Status st = write_latest_locked();
     persist_busy_ = false;
     if (st.ok()) continue;
     if (persist_quit_) return;

@@ -364,7 +364,7 @@ class SafetyCore {
   bool state_file_fixed_ = false;
   // Writes the latest latch state (persist_busy_ set by the caller, meta_mu_ held on entry and
   // on return, released meanwhile) and answers the waiters it decided.
-  Status write_latest_locked(ReleasableMutexLock& lock) REQUIRES(meta_mu_);
+  Status write_latest_locked() REQUIRES(meta_mu_);
   bool persist_enabled_ = false;  // set once by open()
   bool persist_quit_ GUARDED_BY(meta_mu_) = false;
   CondVar persist_cv_;  // the persister waits on meta_mu_
