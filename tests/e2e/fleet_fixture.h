@@ -324,7 +324,9 @@ class FleetTest : public ::testing::Test {
       write_file(secret, "swarm-test-secret-0123456789abcdef0123456789abcdef");
     return "swarm: {swarm_id: s42, members: [robot-a, robot-b, robot-c], leader: robot-a, "
            "formation: follow-leader, join_policy: approval, heartbeat_ms: 100, "
-           "leader_timeout_ms: 600, secret_file: " +
+           // 15 missed heartbeats: a loaded test machine (sanitizers, e2e tests in parallel)
+           // must not make the leader look dead before the test has watched it lead.
+           "leader_timeout_ms: 1500, secret_file: " +
            secret + "}\n";
   }
   void three_robots(const std::string& extra_yaml = "") {
