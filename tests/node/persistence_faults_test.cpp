@@ -283,8 +283,6 @@ TEST(SafetyLatchFile, WhenPersistedAnswersOnlyOnceTheFileIsDurable) {
   EXPECT_TRUE(again);
 }
 
-// A write that fails is answered at once with its error; one that hangs is answered by the
-// control loop once latch_ack_timeout_ms has passed. The write goes on in both cases.
 // An ESTOP from a thread that may block for the disk (one MQTT connection's) writes the latch
 // file itself: the answer is decided before estop() returns, on that thread. While another
 // write is under way (the persister's, on a hung disk) it does not wait: the persister writes
@@ -338,6 +336,8 @@ TEST(SafetyLatchFile, AnEstopThatMayWaitWritesItsLatchFileItselfUnlessAWriteIsUn
   EXPECT_EQ(file->get("by_level")->as_int(), role_level(Role::kOwner));
 }
 
+// A write that fails is answered at once with its error; one that hangs is answered by the
+// control loop once latch_ack_timeout_ms has passed. The write goes on in both cases.
 TEST(SafetyLatchFile, WhenPersistedSaysSoWhenTheWriteFailsOrHangs) {
   {
     TempDir dir;

@@ -246,11 +246,18 @@ TEST(SafetyEstop, ALatchRewritesTheLatchFileInPlaceAClearReplacesIt) {
   EXPECT_EQ(second.size(), 4096u);
   EXPECT_TRUE(json::parse(second)->get("estop_active")->as_bool());
   EXPECT_FALSE(std::ifstream(f + ".tmp").good());
+  // Latched again by a higher role: replaced whole (torn in place, it would come up latched by
+  // the node, which a lower role may clear).
+  auto higher = r.core->estop("cli", "third", 5);
+  ASSERT_TRUE(higher.newly_latched);
+  ASSERT_TRUE(r.core->wait_persisted(higher.state_seq, 5000));
+  EXPECT_NE(inode_of(f), cleared_inode);
+  EXPECT_EQ(json::parse(rcan::test::read_file(f))->get("by_level")->as_int(), 5);
 
   Rig r2;  // and it loads
   ASSERT_TRUE(r2.core->open(dir.path()).ok());
   EXPECT_TRUE(r2.core->estop_active());
-  EXPECT_EQ(r2.core->status().estop_source, "mqtt");
+  EXPECT_EQ(r2.core->status().estop_source, "mqtt");  // the first latch's, raised by "cli"
   EXPECT_EQ(r2.core->status().startup_note, "ESTOP was latched before restart; still latched");
 }
 

@@ -164,8 +164,12 @@ TEST(SimRobot, ALongStepAtRestEqualsShortStepsAndALongStepStillBrakes) {
     run(*r, 2000, 20);  // drove, then came to rest
     ASSERT_TRUE(r->state().stopped);
   }
+  const double before = a.state().battery_pct;
+  const int64_t t_before = a.state().t_ms;
   run(a, 3000, 1000);
   run(b, 3000, 5);
+  EXPECT_EQ(a.state().t_ms, t_before + 3000);
+  EXPECT_NEAR(before - a.state().battery_pct, 0.002 * 3.0, 1e-9);  // the idle drain, 0.002 %/s
   const auto sa = a.state(), sb = b.state();
   EXPECT_EQ(sa.t_ms, sb.t_ms);
   EXPECT_EQ(sa.battery_pct, sb.battery_pct);

@@ -194,6 +194,9 @@ void AiServices::escalate(const std::shared_ptr<Context>& ctx, const config::Con
     esc.set("thought_id", t.id);
     ctx->audit_detail.erase("confidence_gate");
     ctx->audit_detail.set("escalation", esc);
+    // What was received stays what the answer and the later stages read (wire_of): an SDK
+    // message's msg_id and shape, its rearm flag.
+    if (!ctx->in.body.is_object()) ctx->in.body = json::Value(std::move(ctx->msg->wire));
     ctx->msg = std::move(next);
     ctx->capability.reset();
     ctx->action = nullptr;

@@ -239,7 +239,8 @@ class DispatchStage final : public Stage {
     std::optional<uint64_t> stream_epoch;
     bool rearmed = false;
     if (ctx->session_id.empty() && ctx->in.armed_epoch) {
-      const json::Value* rearm = ctx->msg->wire.find("rearm");
+      const json::Object* wire = wire_of(*ctx);
+      const json::Value* rearm = wire ? wire->find("rearm") : nullptr;
       if (rearm && rearm->is_bool() && rearm->as_bool()) {
         const uint64_t now = svc_.act.estop_epoch();
         rearmed = ctx->in.armed_epoch->exchange(now) < now;

@@ -59,8 +59,8 @@ const char* safety_action_name(SafetyAction e) {
 }
 
 const json::Object* wire_of(const Context& ctx) {
-  if (ctx.msg) return &ctx.msg->wire;
-  return ctx.in.body.is_object() ? &ctx.in.body.as_object() : nullptr;
+  if (ctx.in.body.is_object()) return &ctx.in.body.as_object();  // before decoding; escalated
+  return ctx.msg ? &ctx.msg->wire : nullptr;
 }
 
 std::string_view token_of(const Context& ctx) {

@@ -36,8 +36,9 @@ std::unique_ptr<Stage> make_dispatch_stage(NodeServices& services);  // audit, t
 SafetyAction safety_action_of(const Message& m);
 // "ESTOP", "STOP", "RESUME" or "NONE".
 const char* safety_action_name(SafetyAction a);
-// The received JSON object: the decoded message's wire object once the decode stage has run
-// (it moves the body there), before that the body; null when the body is not an object.
+// The received JSON object: the body, which the decode stage moves into the decoded message's
+// wire object (read there from then on), and an AI escalation puts back when it replaces the
+// message; null when it is not an object.
 const json::Object* wire_of(const Context& ctx);
 // The bearer token of a context: the transport's, else the message's auth_token.
 std::string_view token_of(const Context& ctx);

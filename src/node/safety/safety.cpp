@@ -234,6 +234,7 @@ Status SafetyCore::open(const std::string& state_dir, audit::Env* env) {
           why = "state file fails its check (a write torn by a crash?)";
         } else {
           state_file_fixed_ = check != nullptr && ss.str().size() == kStateFileBytes;
+          state_file_latched_ = active->as_bool();
           loaded.active = active->as_bool();
           if (const auto* s = parsed->get("source"); s && s->is_string())
             loaded.source = s->as_string();
@@ -485,9 +486,16 @@ Status SafetyCore::write_state_file(const LatchState& st) {
   const std::string path = state_dir_ + "/" + kStateFile;
   const bool fixed = body.size() == kStateFileBytes;
   Status s;
-  if (st.active && fixed && state_file_fixed_) {
-    // A latch over a file of the same size: in place (no new inode, rename or directory sync).
-    // A crash in the middle leaves the old state or a torn file, which comes up latched.
+  // In place only from cleared to latched, over the file of the same size that is still there:
+  // no new inode, rename or directory sync. A crash in the middle leaves the cleared state (not
+  // yet acknowledged) or a torn file, which comes up latched. A re-latch (a higher role) is
+  // replaced whole: torn, it would come up latched by the node, which a lower role may clear.
+  bool in_place = st.active && fixed && state_file_fixed_ && !state_file_latched_;
+  if (in_place) {
+    auto size = env_->file_size(path);  // gone (removed by hand): created whole, dir synced
+    in_place = size.ok() && *size == kStateFileBytes;
+  }
+  if (in_place) {
     auto f = env_->open_writable_at(path, 0);
     if (!f.ok()) {
       s = f.error();
@@ -502,6 +510,7 @@ Status SafetyCore::write_state_file(const LatchState& st) {
     s = env_->write_file_atomic(path, body);
   }
   state_file_fixed_ = s.ok() && fixed;
+  state_file_latched_ = s.ok() ? st.active : true;  // unknown after a failure: never in place
   if (!s.ok()) return Error(ErrorCode::kInternal, s.error().message);
   return Status::Ok();
 }

@@ -226,7 +226,7 @@ class SafetyCore {
   // waiters that it made durable, on this thread. It may block for the disk: for a thread that
   // serves one channel, whose ESTOP has already stopped the robot (audit::Commit::kHereIfIdle
   // is the audit log's counterpart). A failed write is retried by the persister.
-  void persist_here_if_idle();
+  void persist_here_if_idle() EXCLUDES(meta_mu_);
   // Clears the latch for a principal of LEASEE or above whose level is at least the latch's
   // (OWNER and above clear any latch). Errors: INSUFFICIENT_PRIVILEGES, estop_clear_forbidden.
   Status resume(int principal_role_level, std::string_view source);
@@ -359,9 +359,12 @@ class SafetyCore {
   // A latch file write is under way (by the persister or a persist_here_if_idle() caller);
   // whoever set it owns write_state_file() and state_file_fixed_ until it clears it.
   bool persist_busy_ GUARDED_BY(meta_mu_) = false;
-  // The latch file has the fixed size and checked form (kStateFileBytes, "check") and may be
-  // latched by rewriting it in place. Set by open(), then only by the persister thread.
+  // The latch file has the fixed size and checked form (kStateFileBytes, "check"), and what it
+  // says (latched: a latch is then written whole). Set by open(), then only by the thread that
+  // holds persist_busy_ (the persister or a persist_here_if_idle() caller), whose hand-over
+  // under meta_mu_ orders the accesses.
   bool state_file_fixed_ = false;
+  bool state_file_latched_ = true;
   // Writes the latest latch state (persist_busy_ set by the caller, meta_mu_ held on entry and
   // on return, released meanwhile) and answers the waiters it decided.
   Status write_latest_locked() REQUIRES(meta_mu_);
