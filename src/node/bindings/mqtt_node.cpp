@@ -225,13 +225,16 @@ void MqttNode::stop() {
 void MqttNode::on_connection(bool up, int code) {
   const std::string url = client_->current_url();
   const int64_t now = svc_.clock.mono_ms();
+  // The swarm first: the loop (woken next, or on its own timer) ticks it as soon as the client
+  // says connected, and its silence clocks must have started by then.
+  if (swarm_ && up) swarm_->on_connected(now);
+  if (swarm_ && !up) swarm_->on_disconnected();
   {
     MutexLock wake(loop_mu_);  // the loop watches the channel from now on (tick_channel)
   }
   loop_cv_.notify_all();
   if (up) {
     publish_status(true, "connected");
-    if (swarm_) swarm_->on_connected(now);
     const int64_t since = lost_since_ms_.exchange(0);
     const bool again = !last_url_.empty();
     const bool failover = again && url != last_url_;

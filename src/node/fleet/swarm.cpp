@@ -126,6 +126,11 @@ void SwarmAgent::on_connected(int64_t now) {
   if (leader_ == cfg_.member_id) announce_locked("connected", "");
 }
 
+void SwarmAgent::on_disconnected() {
+  MutexLock lk(mu_);
+  connected_since_ = -1;
+}
+
 void SwarmAgent::on_message(const mqtt::InboundTopic& t, const json::Value& body, int64_t now) {
   if (t.kind == mqtt::TopicKind::kSwarmJoin) {
     handle_join(body);
@@ -202,6 +207,7 @@ void SwarmAgent::on_message(const mqtt::InboundTopic& t, const json::Value& body
 
 void SwarmAgent::tick(int64_t now) {
   MutexLock lk(mu_);
+  if (connected_since_ < 0) return;  // the silence clocks start at on_connected()
   if (!reannounce_due_.empty() && now - reannounced_mono_ >= 1000)
     reannounce_locked(std::string(reannounce_due_), now);
   if (now - last_beat_ >= cfg_.heartbeat_ms) {

@@ -57,8 +57,12 @@ class SwarmAgent {
 
   // Topic filters to subscribe to.
   std::vector<std::string> subscriptions() const;
-  // Called on every (re)connect: starts the silence clocks and announces when leader.
+  // Called on every (re)connect: starts the silence clocks and announces when leader. Until it
+  // has been called (and again after on_disconnected()), tick() neither beats nor judges the
+  // leader: the client may report the connection up before its callback has run, and a
+  // member ticked in between would find everyone silent since the last connection.
   void on_connected(int64_t now_mono_ms) EXCLUDES(mu_);
+  void on_disconnected() EXCLUDES(mu_);
   void on_message(const mqtt::InboundTopic& topic, const json::Value& body, int64_t now_mono_ms)
       EXCLUDES(mu_);
   // Heartbeat and leader check; call every few tens of milliseconds.
@@ -97,7 +101,7 @@ class SwarmAgent {
   uint64_t epoch_ GUARDED_BY(mu_) = 0;
   std::map<std::string, int64_t> last_seen_ GUARDED_BY(mu_);
   int64_t last_beat_ GUARDED_BY(mu_) = 0;
-  int64_t connected_since_ GUARDED_BY(mu_) = 0;
+  int64_t connected_since_ GUARDED_BY(mu_) = -1;                 // -1: no connection callback yet
   std::map<std::string, int64_t> last_beat_ts_ GUARDED_BY(mu_);  // member → its heartbeat's ms
   uint64_t dropped_ GUARDED_BY(mu_) = 0;
   int64_t drop_logged_mono_ GUARDED_BY(mu_) = -1;

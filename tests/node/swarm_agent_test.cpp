@@ -1,0 +1,125 @@
+// The swarm agent's leader election on a manual clock, its members wired through an in-memory
+// bus (tests/e2e/fleet_mqtt_test.cpp runs the same over a broker, with rcand).
+#include <gtest/gtest.h>
+
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "in_process_node.h"
+#include "node/fleet/swarm.h"
+#include "rcan/mqtt_topics.h"
+
+namespace rcan::node {
+namespace {
+
+constexpr const char* kPrefix = "rcan";
+constexpr const char* kSwarm = "s1";
+
+class SwarmAgentTest : public test_node::InProcessNode {
+ protected:
+  // A member of the swarm {robot-a, robot-b, robot-c} led by robot-a; what it publishes reaches
+  // every connected member, as a broker would deliver it.
+  SwarmAgent& member(const std::string& id) {
+    config::SwarmConfig cfg;
+    cfg.swarm_id = kSwarm;
+    cfg.member_id = id;
+    cfg.members = {"robot-a", "robot-b", "robot-c"};
+    cfg.leader = "robot-a";
+    cfg.heartbeat_ms = 100;
+    cfg.leader_timeout_ms = 1000;
+    auto agent = std::make_unique<SwarmAgent>(
+        *services_, cfg, std::string(40, 'k'), kPrefix,
+        [this, id](const std::string& topic, const json::Value& body, int, bool) {
+          published_.push_back(topic);
+          mqtt::InboundTopic t = mqtt::parse_topic(kPrefix, topic);
+          for (auto& [other, a] : agents_)
+            if (other != id && connected_[other]) a->on_message(t, body, clock_.mono_ms());
+        });
+    connected_[id] = false;
+    return *(agents_[id] = std::move(agent));
+  }
+
+  // Each connected member ticks, then the clock moves on by `ms`; `steps` times.
+  void run(int steps, int64_t ms) {
+    for (int i = 0; i < steps; ++i) {
+      for (auto& [id, a] : agents_)
+        if (connected_[id]) a->tick(clock_.mono_ms());
+      clock_.advance(ms);
+    }
+  }
+
+  std::map<std::string, std::unique_ptr<SwarmAgent>> agents_;
+  std::map<std::string, bool> connected_;
+  std::vector<std::string> published_;
+};
+
+// The MQTT client reports its connection up before its connection callback has run, and the
+// node's loop ticks the swarm whenever the client says connected. A member ticked in that
+// window had no silence clock for the leader and took the lead at once, deposing a live one
+// (the swarm tests' failures on a loaded machine: the last member to start announced itself
+// leader at epoch 1).
+TEST_F(SwarmAgentTest, AMemberTickedBeforeItsConnectionCallbackDoesNotTakeTheLead) {
+  SwarmAgent& a = member("robot-a");
+  SwarmAgent& c = member("robot-c");
+  connected_["robot-a"] = true;
+  a.on_connected(clock_.mono_ms());
+  run(20, 50);  // robot-a leads and beats for a second
+
+  connected_["robot-c"] = true;  // the client says connected; the callback has not run yet
+  c.tick(clock_.mono_ms());
+  EXPECT_EQ(c.leader(), "robot-a");
+  c.on_connected(clock_.mono_ms());
+  run(40, 50);  // two leader timeouts, with robot-a beating
+  EXPECT_EQ(c.leader(), "robot-a");
+  EXPECT_EQ(a.leader(), "robot-a");
+  EXPECT_EQ(c.state().get("payload")->get("epoch")->as_int(), 0);
+}
+
+TEST_F(SwarmAgentTest, AfterALostConnectionTheSilenceClockWaitsForTheNextOne) {
+  SwarmAgent& a = member("robot-a");
+  SwarmAgent& c = member("robot-c");
+  for (const char* id : {"robot-a", "robot-c"}) {
+    connected_[id] = true;
+    agents_[id]->on_connected(clock_.mono_ms());
+  }
+  run(20, 50);
+  EXPECT_EQ(c.leader(), "robot-a");
+
+  connected_["robot-c"] = false;  // robot-c is cut off for 5 s, while robot-a goes on leading
+  c.on_disconnected();
+  run(100, 50);
+  connected_["robot-c"] = true;  // back: ticked before the callback, then after it
+  c.tick(clock_.mono_ms());
+  EXPECT_EQ(c.leader(), "robot-a");
+  c.on_connected(clock_.mono_ms());
+  run(40, 50);
+  EXPECT_EQ(c.leader(), "robot-a");
+  EXPECT_EQ(a.leader(), "robot-a");
+}
+
+// The clocks still do their work: a leader silent for longer than the timeout is replaced by
+// the first live member in byte order, which announces a new epoch that the others follow.
+TEST_F(SwarmAgentTest, ASilentLeaderIsReplacedByTheFirstLiveMember) {
+  for (const char* id : {"robot-a", "robot-b", "robot-c"}) member(id);
+  for (const char* id : {"robot-a", "robot-b", "robot-c"}) {
+    connected_[id] = true;
+    agents_[id]->on_connected(clock_.mono_ms());
+  }
+  run(20, 50);
+  for (const char* id : {"robot-a", "robot-b", "robot-c"})
+    EXPECT_EQ(agents_[id]->leader(), "robot-a") << id;
+
+  connected_["robot-a"] = false;  // the leader falls silent
+  agents_["robot-a"]->on_disconnected();
+  run(10, 50);  // half a timeout: still robot-a
+  EXPECT_EQ(agents_["robot-c"]->leader(), "robot-a");
+  run(30, 50);
+  EXPECT_EQ(agents_["robot-b"]->leader(), "robot-b");
+  EXPECT_EQ(agents_["robot-c"]->leader(), "robot-b");
+  EXPECT_EQ(agents_["robot-c"]->state().get("payload")->get("epoch")->as_int(), 1);
+}
+
+}  // namespace
+}  // namespace rcan::node
