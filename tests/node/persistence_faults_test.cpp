@@ -47,6 +47,15 @@ unsigned mode_of(const std::string& path) {
 
 bool present(const std::string& path) { return ::access(path.c_str(), F_OK) == 0; }
 
+// The latch file says latched (it is written cleared at the first start, and a latch rewrites
+// it in place).
+bool says_latched(const std::string& path) {
+  if (!present(path)) return false;
+  auto v = json::parse(test::read_file(path));
+  const json::Value* a = v.ok() ? v->get("estop_active") : nullptr;
+  return a != nullptr && a->is_bool() && a->as_bool();
+}
+
 // ---- Env::write_file_atomic on the real file system -----------------------------------------
 
 TEST(AtomicWrite, ReplacesTheFileWithMode0600AndNoTemporaryLeft) {
@@ -215,11 +224,11 @@ TEST(SafetyLatchFile, AFailedWriteKeepsTheLatchReportsItAndIsRetried) {
   EXPECT_TRUE(st.persistence_enabled);
   EXPECT_FALSE(st.persisted);
   EXPECT_NE(st.persist_error.find("injected fault"), std::string::npos) << st.persist_error;
-  EXPECT_NE(st.persist_error.find("safety_state.json.tmp"), std::string::npos) << st.persist_error;
+  EXPECT_NE(st.persist_error.find("safety_state.json"), std::string::npos) << st.persist_error;
   auto j = json::Value(st.to_json());
   EXPECT_FALSE(j.get("persistence")->get("durable")->as_bool());
   EXPECT_EQ(j.get("persistence")->get("error")->as_string(), st.persist_error);
-  EXPECT_FALSE(present(dir.file("safety_state.json")));
+  EXPECT_FALSE(says_latched(dir.file("safety_state.json")));
 
   env.fail_after(0);  // the disk is back: the next retry persists the latch
   ASSERT_TRUE(r.core->wait_persisted(e.state_seq, 5000));
@@ -271,12 +280,12 @@ TEST(SafetyLatchFile, WhenPersistedAnswersOnlyOnceTheFileIsDurable) {
   });
   auto got = answered.get_future();
   EXPECT_EQ(got.wait_for(std::chrono::milliseconds(300)), std::future_status::timeout);
-  EXPECT_FALSE(present(dir.file("safety_state.json")));
+  EXPECT_FALSE(says_latched(dir.file("safety_state.json")));
   env.hold(false);
   ASSERT_EQ(got.wait_for(std::chrono::seconds(5)), std::future_status::ready);
   auto [durable, error] = got.get();
   EXPECT_TRUE(durable) << error;
-  EXPECT_TRUE(present(dir.file("safety_state.json")));
+  EXPECT_TRUE(says_latched(dir.file("safety_state.json")));
   // Already durable: answered at once, on the caller's thread.
   bool again = false;
   r.core->when_persisted(e.state_seq, [&](bool d, const std::string&) { again = d; });
@@ -471,11 +480,11 @@ TEST_F(EstopAnswer, ComesOnlyOnceTheLatchFileIsDurable) {
   EXPECT_TRUE(core_->estop_active());  // the robot stopped at once
   EXPECT_EQ(got.wait_for(std::chrono::milliseconds(500)), std::future_status::timeout)
       << "the ESTOP was acknowledged before its latch was written";
-  EXPECT_FALSE(present(latch_file()));
+  EXPECT_FALSE(says_latched(latch_file()));
   env_.hold(false);
   ASSERT_EQ(got.wait_for(std::chrono::seconds(10)), std::future_status::ready);
   node::Outcome o = got.get();
-  EXPECT_TRUE(present(latch_file()));
+  EXPECT_TRUE(says_latched(latch_file()));
   ASSERT_EQ(o.status, 200) << json::dump(o.body);
   const json::Value& p = *o.body.get("payload");
   EXPECT_EQ(json::string_field(p, "result"), "estop_latched");

@@ -224,8 +224,10 @@ TEST(SafetyEstop, ALatchRewritesTheLatchFileInPlaceAClearReplacesIt) {
   const std::string f = dir.file("safety_state.json");
   Rig r;
   ASSERT_TRUE(r.core->open(dir.path()).ok());
+  const ino_t started_inode = inode_of(f);  // written cleared at the first start
   auto e = r.core->estop("http", "first");
   ASSERT_TRUE(r.core->wait_persisted(e.state_seq, 5000));
+  EXPECT_EQ(inode_of(f), started_inode);  // the first latch too is rewritten in place
   const std::string first = rcan::test::read_file(f);
   EXPECT_EQ(first.size(), 4096u);
   auto parsed = json::parse(first);
@@ -259,6 +261,50 @@ TEST(SafetyEstop, ALatchRewritesTheLatchFileInPlaceAClearReplacesIt) {
   EXPECT_TRUE(r2.core->estop_active());
   EXPECT_EQ(r2.core->status().estop_source, "mqtt");  // the first latch's, raised by "cli"
   EXPECT_EQ(r2.core->status().startup_note, "ESTOP was latched before restart; still latched");
+}
+
+// A first start writes the latch file, cleared, in the fixed form (as does a start over a
+// cleared file of an older form), so that the first ESTOP rewrites it in place: one pwrite and
+// one fdatasync on the stop's path, not a new file, a rename and a directory sync.
+TEST(SafetyEstop, TheFirstStartWritesTheClearedLatchFileAnOlderClearedOneIsRewritten) {
+  rcan::test::TempDir dir;
+  const std::string f = dir.file("safety_state.json");
+  {
+    Rig r;
+    ASSERT_TRUE(r.core->open(dir.path()).ok());
+    EXPECT_FALSE(r.core->estop_active());
+    EXPECT_EQ(r.core->status().startup_note, "no safety state file (first start)");
+    const std::string body = rcan::test::read_file(f);
+    EXPECT_EQ(body.size(), 4096u);
+    auto parsed = json::parse(body);
+    ASSERT_TRUE(parsed.ok()) << parsed.error().message;
+    EXPECT_FALSE(parsed->get("estop_active")->as_bool());
+    EXPECT_EQ(parsed->get("check")->as_string().size(), 64u);
+    struct stat st {};
+    ASSERT_EQ(::stat(f.c_str(), &st), 0);
+    EXPECT_EQ(st.st_mode & 07777, 0600u);
+  }
+  {
+    Rig r;  // and a restart over it is an ordinary cleared start
+    ASSERT_TRUE(r.core->open(dir.path()).ok());
+    EXPECT_FALSE(r.core->estop_active());
+    EXPECT_EQ(r.core->status().startup_note, "");
+  }
+  rcan::test::TempDir old;
+  const std::string g = old.file("safety_state.json");
+  {
+    std::ofstream(g) << R"({"format":"rcan-safety-state-v1","estop_active":false,"source":"",)"
+                     << R"("reason":"","since_ms":0,"by_level":0,"written_ms":1})"
+                     << "\n";
+  }
+  Rig r;
+  ASSERT_TRUE(r.core->open(old.path()).ok());
+  EXPECT_FALSE(r.core->estop_active());
+  const ino_t rewritten = inode_of(g);
+  EXPECT_EQ(rcan::test::read_file(g).size(), 4096u);
+  auto e = r.core->estop("http", "x");
+  ASSERT_TRUE(r.core->wait_persisted(e.state_seq, 5000));
+  EXPECT_EQ(inode_of(g), rewritten);
 }
 
 // A latch file whose contents do not match its check (an in-place write torn by a crash: a

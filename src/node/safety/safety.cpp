@@ -17,6 +17,7 @@
 #include <sstream>
 
 #include "base/clock.h"
+#include "base/log.h"
 #include "rcan/hash.h"
 
 // How the guarantees of safety.h are kept:
@@ -254,6 +255,8 @@ Status SafetyCore::open(const std::string& state_dir, audit::Env* env) {
   }
 
   bool need_write = false;
+  bool write_cleared = false;
+  LatchState cleared;
   {
     MutexLock lock(meta_mu_);
     state_dir_ = state_dir;
@@ -276,6 +279,28 @@ Status SafetyCore::open(const std::string& state_dir, audit::Env* env) {
       latched_.store(true, std::memory_order_release);
     }
     if (need_write) ++latch_seq_;
+    // No file yet, or a cleared one of an older form: written now, cleared, in the fixed form,
+    // so that the first latch is rewritten in place like every later one (one pwrite and one
+    // fdatasync, not a new file, a rename and a directory sync on the first ESTOP's path).
+    // It says what a missing file says. Best effort: should it fail, the first latch writes
+    // the file whole, as before.
+    write_cleared = !latch_.active && !corrupt && (missing || !state_file_fixed_);
+    if (write_cleared) {
+      cleared = latch_;
+      persist_busy_ = true;  // the file is this thread's until it is written
+    }
+  }
+  if (write_cleared) {
+    Status s = write_state_file(cleared);
+    if (!s.ok())
+      log(LogLevel::kWarn, "safety_state_not_written",
+          json::Object{{"error", s.error().message},
+                       {"note", "the first ESTOP writes the latch file whole"}});
+    {
+      MutexLock lock(meta_mu_);
+      persist_busy_ = false;
+    }
+    persist_cv_.notify_all();
   }
   if (latched_.load()) driver_->stop();
   persister_ = std::thread([this] {
