@@ -241,6 +241,85 @@ TEST(SafetyLatchFile, AFailedWriteKeepsTheLatchReportsItAndIsRetried) {
   EXPECT_EQ(mode_of(dir.file("safety_state.json")), 0600u);
 }
 
+ino_t inode_of(const std::string& path) {
+  struct stat st {};
+  return ::stat(path.c_str(), &st) == 0 ? st.st_ino : 0;
+}
+
+// The in-place latch whose fdatasync fails: not durable, answered so with the sync's error,
+// and the retry writes the file whole (a new inode: what the failed write left is not trusted).
+TEST(SafetyLatchFile, AnInPlaceLatchWhoseSyncFailsIsNotDurableAndIsWrittenWholeOnRetry) {
+  TempDir dir;
+  const std::string f = dir.file("safety_state.json");
+  FaultInjectionEnv env(Env::posix());
+  SafetyRig r;
+  ASSERT_TRUE(r.core->open(dir.path(), &env).ok());
+  const ino_t started = inode_of(f);
+  ASSERT_NE(started, 0u);
+  env.fail_after(2);  // the page's write goes through, its fdatasync fails
+  auto e = r.core->estop("http", "button");
+  std::promise<std::pair<bool, std::string>> answered;
+  r.core->when_persisted(e.state_seq, [&](bool durable, const std::string& error) {
+    answered.set_value({durable, error});
+  });
+  auto got = answered.get_future();
+  ASSERT_EQ(got.wait_for(std::chrono::seconds(5)), std::future_status::ready);
+  auto [durable, error] = got.get();
+  EXPECT_FALSE(durable);
+  EXPECT_NE(error.find("injected fault: sync"), std::string::npos) << error;
+  EXPECT_FALSE(r.core->status().persisted);
+  env.fail_after(0);
+  ASSERT_TRUE(r.core->wait_persisted(e.state_seq, 5000));
+  EXPECT_NE(inode_of(f), started);
+  EXPECT_TRUE(says_latched(f));
+  EXPECT_EQ(test::read_file(f).size(), 4096u);
+}
+
+// The start's write of the cleared file fails (a state directory that cannot be written): the
+// node starts, its status says the latch file is not durable and why, the write is retried, and
+// a latch meanwhile is written whole and survives a restart.
+TEST(SafetyLatchFile, AStartWhoseClearedFileCannotBeWrittenSaysSoAndRetries) {
+  TempDir dir;
+  const std::string f = dir.file("safety_state.json");
+  {
+    FaultInjectionEnv env(Env::posix());
+    env.fail_after(1);
+    SafetyRig r;
+    ASSERT_TRUE(r.core->open(dir.path(), &env).ok());
+    EXPECT_FALSE(r.core->estop_active());
+    auto st = r.core->status();
+    EXPECT_FALSE(st.persisted);
+    EXPECT_NE(st.persist_error.find("injected fault"), std::string::npos) << st.persist_error;
+    EXPECT_FALSE(present(f));
+    env.fail_after(0);
+    ASSERT_TRUE(r.core->wait_persisted(r.core->state_seq(), 5000));
+    EXPECT_FALSE(says_latched(f));
+    EXPECT_EQ(test::read_file(f).size(), 4096u);
+    EXPECT_EQ(r.core->status().persist_error, "");
+  }
+  {
+    FaultInjectionEnv env(Env::posix());
+    env.fail_after(1);
+    SafetyRig r;
+    ASSERT_TRUE(r.core->open(dir.path(), &env).ok());  // over the good file: nothing to write
+    EXPECT_TRUE(r.core->status().persisted);
+  }
+  TempDir other;
+  {
+    FaultInjectionEnv env(Env::posix());
+    env.fail_after(1);
+    SafetyRig r;
+    ASSERT_TRUE(r.core->open(other.path(), &env).ok());
+    auto e = r.core->estop("http", "button");
+    env.fail_after(0);
+    ASSERT_TRUE(r.core->wait_persisted(e.state_seq, 5000));
+    EXPECT_TRUE(says_latched(other.file("safety_state.json")));
+  }
+  SafetyRig r;
+  ASSERT_TRUE(r.core->open(other.path()).ok());
+  EXPECT_TRUE(r.core->estop_active());
+}
+
 // Clearing the latch when the disk fails: the robot may move again in this process, but the
 // file still says latched, so a restart comes up latched (fail safe).
 TEST(SafetyLatchFile, AClearThatCannotBeWrittenComesBackLatched) {
@@ -280,7 +359,7 @@ TEST(SafetyLatchFile, WhenPersistedAnswersOnlyOnceTheFileIsDurable) {
   });
   auto got = answered.get_future();
   EXPECT_EQ(got.wait_for(std::chrono::milliseconds(300)), std::future_status::timeout);
-  EXPECT_FALSE(says_latched(dir.file("safety_state.json")));
+  EXPECT_FALSE(says_latched(dir.file("safety_state.json")));  // held before its write
   env.hold(false);
   ASSERT_EQ(got.wait_for(std::chrono::seconds(5)), std::future_status::ready);
   auto [durable, error] = got.get();

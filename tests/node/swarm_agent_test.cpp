@@ -20,7 +20,8 @@ constexpr const char* kSwarm = "s1";
 class SwarmAgentTest : public test_node::InProcessNode {
  protected:
   // A member of the swarm {robot-a, robot-b, robot-c} led by robot-a; what it publishes reaches
-  // every connected member, as a broker would deliver it.
+  // every other member that is connected and hears, as a broker would deliver it (after the
+  // publisher's call has returned: deliver()).
   SwarmAgent& member(const std::string& id) {
     config::SwarmConfig cfg;
     cfg.swarm_id = kSwarm;
@@ -32,27 +33,49 @@ class SwarmAgentTest : public test_node::InProcessNode {
     auto agent = std::make_unique<SwarmAgent>(
         *services_, cfg, std::string(40, 'k'), kPrefix,
         [this, id](const std::string& topic, const json::Value& body, int, bool) {
-          published_.push_back(topic);
-          mqtt::InboundTopic t = mqtt::parse_topic(kPrefix, topic);
-          for (auto& [other, a] : agents_)
-            if (other != id && connected_[other]) a->on_message(t, body, clock_.mono_ms());
+          queued_.push_back({id, topic, body});
         });
     connected_[id] = false;
+    hearing_[id] = true;
     return *(agents_[id] = std::move(agent));
+  }
+
+  void deliver() {
+    while (!queued_.empty()) {
+      Sent m = std::move(queued_.front());
+      queued_.erase(queued_.begin());
+      mqtt::InboundTopic t = mqtt::parse_topic(kPrefix, m.topic);
+      for (auto& [other, a] : agents_)
+        if (other != m.from && connected_[other] && hearing_[other])
+          a->on_message(t, m.body, clock_.mono_ms());
+    }
+  }
+
+  void connect(const std::string& id) {
+    connected_[id] = true;
+    agents_[id]->on_connected(clock_.mono_ms());
+    deliver();
   }
 
   // Each connected member ticks, then the clock moves on by `ms`; `steps` times.
   void run(int steps, int64_t ms) {
     for (int i = 0; i < steps; ++i) {
-      for (auto& [id, a] : agents_)
-        if (connected_[id]) a->tick(clock_.mono_ms());
+      for (auto& [id, a] : agents_) {
+        if (connected_[id]) a->tick(clock_.mono_ms(), hearing_[id]);
+        deliver();
+      }
       clock_.advance(ms);
     }
   }
 
+  struct Sent {
+    std::string from, topic;
+    json::Value body;
+  };
   std::map<std::string, std::unique_ptr<SwarmAgent>> agents_;
   std::map<std::string, bool> connected_;
-  std::vector<std::string> published_;
+  std::map<std::string, bool> hearing_;  // its subscriptions are granted
+  std::vector<Sent> queued_;
 };
 
 // The MQTT client reports its connection up before its connection callback has run, and the
@@ -63,14 +86,14 @@ class SwarmAgentTest : public test_node::InProcessNode {
 TEST_F(SwarmAgentTest, AMemberTickedBeforeItsConnectionCallbackDoesNotTakeTheLead) {
   SwarmAgent& a = member("robot-a");
   SwarmAgent& c = member("robot-c");
-  connected_["robot-a"] = true;
-  a.on_connected(clock_.mono_ms());
+  connect("robot-a");
   run(20, 50);  // robot-a leads and beats for a second
 
   connected_["robot-c"] = true;  // the client says connected; the callback has not run yet
   c.tick(clock_.mono_ms());
+  deliver();
   EXPECT_EQ(c.leader(), "robot-a");
-  c.on_connected(clock_.mono_ms());
+  connect("robot-c");
   run(40, 50);  // two leader timeouts, with robot-a beating
   EXPECT_EQ(c.leader(), "robot-a");
   EXPECT_EQ(a.leader(), "robot-a");
@@ -80,10 +103,7 @@ TEST_F(SwarmAgentTest, AMemberTickedBeforeItsConnectionCallbackDoesNotTakeTheLea
 TEST_F(SwarmAgentTest, AfterALostConnectionTheSilenceClockWaitsForTheNextOne) {
   SwarmAgent& a = member("robot-a");
   SwarmAgent& c = member("robot-c");
-  for (const char* id : {"robot-a", "robot-c"}) {
-    connected_[id] = true;
-    agents_[id]->on_connected(clock_.mono_ms());
-  }
+  for (const char* id : {"robot-a", "robot-c"}) connect(id);
   run(20, 50);
   EXPECT_EQ(c.leader(), "robot-a");
 
@@ -92,21 +112,37 @@ TEST_F(SwarmAgentTest, AfterALostConnectionTheSilenceClockWaitsForTheNextOne) {
   run(100, 50);
   connected_["robot-c"] = true;  // back: ticked before the callback, then after it
   c.tick(clock_.mono_ms());
+  deliver();
   EXPECT_EQ(c.leader(), "robot-a");
-  c.on_connected(clock_.mono_ms());
+  connect("robot-c");
   run(40, 50);
   EXPECT_EQ(c.leader(), "robot-a");
   EXPECT_EQ(a.leader(), "robot-a");
+}
+
+// Connected but not yet subscribed (a clustered broker refuses subscriptions for a while after a
+// failover): the member hears nobody, beats, and does not judge the leader until it can hear;
+// then its silence clocks start from there.
+TEST_F(SwarmAgentTest, AMemberThatCannotHearYetDoesNotJudgeTheLeader) {
+  SwarmAgent& a = member("robot-a");
+  SwarmAgent& c = member("robot-c");
+  connect("robot-a");
+  hearing_["robot-c"] = false;
+  connect("robot-c");
+  run(80, 50);  // four leader timeouts, deaf
+  EXPECT_EQ(c.leader(), "robot-a");
+  hearing_["robot-c"] = true;
+  run(40, 50);
+  EXPECT_EQ(c.leader(), "robot-a");
+  EXPECT_EQ(a.leader(), "robot-a");
+  EXPECT_EQ(c.state().get("payload")->get("epoch")->as_int(), 0);
 }
 
 // The clocks still do their work: a leader silent for longer than the timeout is replaced by
 // the first live member in byte order, which announces a new epoch that the others follow.
 TEST_F(SwarmAgentTest, ASilentLeaderIsReplacedByTheFirstLiveMember) {
   for (const char* id : {"robot-a", "robot-b", "robot-c"}) member(id);
-  for (const char* id : {"robot-a", "robot-b", "robot-c"}) {
-    connected_[id] = true;
-    agents_[id]->on_connected(clock_.mono_ms());
-  }
+  for (const char* id : {"robot-a", "robot-b", "robot-c"}) connect(id);
   run(20, 50);
   for (const char* id : {"robot-a", "robot-b", "robot-c"})
     EXPECT_EQ(agents_[id]->leader(), "robot-a") << id;

@@ -225,8 +225,8 @@ void MqttNode::stop() {
 void MqttNode::on_connection(bool up, int code) {
   const std::string url = client_->current_url();
   const int64_t now = svc_.clock.mono_ms();
-  // The swarm first: the loop (woken next, or on its own timer) ticks it as soon as the client
-  // says connected, and its silence clocks must have started by then.
+  // The swarm hears of it before the loop is woken. The client says connected before this
+  // callback runs, so a tick may come first; the swarm does not judge until it has heard.
   if (swarm_ && up) swarm_->on_connected(now);
   if (swarm_ && !up) swarm_->on_disconnected();
   {
@@ -448,7 +448,7 @@ void MqttNode::loop() {
     tick_channel(now);
     tick_completions();
     if (opts_.mqtt.publish_audit) tick_audit();
-    if (swarm_ && client_->connected()) swarm_->tick(now);
+    if (swarm_ && client_->connected()) swarm_->tick(now, client_->all_subscribed());
     if (telemetry_period > 0 && now - last_telemetry >= telemetry_period && client_->connected()) {
       last_telemetry = now;
       publish_json(out_.telemetry(), svc_.act.telemetry(), 0, false);

@@ -129,6 +129,7 @@ void SwarmAgent::on_connected(int64_t now) {
 void SwarmAgent::on_disconnected() {
   MutexLock lk(mu_);
   connected_since_ = -1;
+  hearing_ = false;
 }
 
 void SwarmAgent::on_message(const mqtt::InboundTopic& t, const json::Value& body, int64_t now) {
@@ -205,7 +206,7 @@ void SwarmAgent::on_message(const mqtt::InboundTopic& t, const json::Value& body
       if (m.is_string() && mqtt::valid_topic_segment(m.as_string())) pending_.insert(m.as_string());
 }
 
-void SwarmAgent::tick(int64_t now) {
+void SwarmAgent::tick(int64_t now, bool hearing) {
   MutexLock lk(mu_);
   if (connected_since_ < 0) return;  // the silence clocks start at on_connected()
   if (!reannounce_due_.empty() && now - reannounced_mono_ >= 1000)
@@ -222,6 +223,15 @@ void SwarmAgent::tick(int64_t now) {
              0, false);
   }
   if (leader_ == cfg_.member_id) return;
+  if (!hearing) {
+    hearing_ = false;
+    return;
+  }
+  if (!hearing_) {  // subscribed (again): everyone gets a full timeout of grace from now
+    hearing_ = true;
+    for (const auto& m : members_) last_seen_[m] = now;
+    return;
+  }
   auto it = last_seen_.find(leader_);
   int64_t seen = it == last_seen_.end() ? connected_since_ : it->second;
   if (now - seen <= static_cast<int64_t>(cfg_.leader_timeout_ms)) return;

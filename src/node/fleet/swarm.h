@@ -65,8 +65,11 @@ class SwarmAgent {
   void on_disconnected() EXCLUDES(mu_);
   void on_message(const mqtt::InboundTopic& topic, const json::Value& body, int64_t now_mono_ms)
       EXCLUDES(mu_);
-  // Heartbeat and leader check; call every few tens of milliseconds.
-  void tick(int64_t now_mono_ms) EXCLUDES(mu_);
+  // Heartbeat and leader check; call every few tens of milliseconds. `hearing`: the member's
+  // subscriptions are granted. A member that cannot hear yet (a clustered broker refuses
+  // subscriptions for a few seconds after a failover) beats but does not judge the leader,
+  // and the silence clocks start again, a full timeout of grace, once it can.
+  void tick(int64_t now_mono_ms, bool hearing = true) EXCLUDES(mu_);
 
   // {swarm_id, members, leader, epoch, formation, join_policy, pending, dropped}
   json::Value state() const EXCLUDES(mu_);
@@ -101,7 +104,8 @@ class SwarmAgent {
   uint64_t epoch_ GUARDED_BY(mu_) = 0;
   std::map<std::string, int64_t> last_seen_ GUARDED_BY(mu_);
   int64_t last_beat_ GUARDED_BY(mu_) = 0;
-  int64_t connected_since_ GUARDED_BY(mu_) = -1;                 // -1: no connection callback yet
+  int64_t connected_since_ GUARDED_BY(mu_) = -1;  // -1: no connection callback yet
+  bool hearing_ GUARDED_BY(mu_) = false;          // heard since the silence clocks last started
   std::map<std::string, int64_t> last_beat_ts_ GUARDED_BY(mu_);  // member → its heartbeat's ms
   uint64_t dropped_ GUARDED_BY(mu_) = 0;
   int64_t drop_logged_mono_ GUARDED_BY(mu_) = -1;

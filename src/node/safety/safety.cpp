@@ -282,8 +282,8 @@ Status SafetyCore::open(const std::string& state_dir, audit::Env* env) {
     // No file yet, or a cleared one of an older form: written now, cleared, in the fixed form,
     // so that the first latch is rewritten in place like every later one (one pwrite and one
     // fdatasync, not a new file, a rename and a directory sync on the first ESTOP's path).
-    // It says what a missing file says. Best effort: should it fail, the first latch writes
-    // the file whole, as before.
+    // It says what a missing file says. Should it fail, it is retried like a latch's write, and
+    // a latch meanwhile writes the file whole.
     write_cleared = !latch_.active && !corrupt && (missing || !state_file_fixed_);
     if (write_cleared) {
       cleared = latch_;
@@ -295,10 +295,14 @@ Status SafetyCore::open(const std::string& state_dir, audit::Env* env) {
     if (!s.ok())
       log(LogLevel::kWarn, "safety_state_not_written",
           json::Object{{"error", s.error().message},
-                       {"note", "the first ESTOP writes the latch file whole"}});
+                       {"note", "retried every 200 ms; the status shows persistence.error"}});
     {
       MutexLock lock(meta_mu_);
       persist_busy_ = false;
+      if (!s.ok()) {  // the persister retries it, and the status says so before any ESTOP
+        persist_error_ = s.error().message;
+        ++latch_seq_;
+      }
     }
     persist_cv_.notify_all();
   }

@@ -194,8 +194,11 @@ class SafetyCore {
   // Loads the persisted latch from `state_dir` (created 0700 if missing) and starts the
   // persister. Missing file → not latched (unless estop_on_startup); corrupt/unreadable file →
   // latched, source "startup", startup_note says why (the bad file is kept as *.corrupt).
-  // Call once, before start(). Without open() the latch lives in memory only. The latch file
-  // is written through `env` (nullptr → audit::Env::posix(); tests inject faults with it).
+  // A missing file, or a cleared one of an older form, is written cleared in the fixed form
+  // before open() returns, so that the first latch rewrites it in place (a failure is retried
+  // by the persister and shown in status()). Call once, before start(). Without open() the latch
+  // lives in memory only. The latch file is written through `env` (nullptr → audit::Env::posix();
+  // tests inject faults with it).
   Status open(const std::string& state_dir, audit::Env* env = nullptr);
 
   void set_event_callback(EventFn fn);
@@ -356,12 +359,12 @@ class SafetyCore {
   int64_t safe_stop_since_wall_ms_ GUARDED_BY(meta_mu_) = 0;
   std::string driver_fault_ GUARDED_BY(meta_mu_);
   std::string state_dir_;  // set once by open()
-  // A latch file write is under way (by the persister or a persist_here_if_idle() caller);
+  // A latch file write is under way (by open(), the persister or a persist_here_if_idle() caller);
   // whoever set it owns write_state_file() and state_file_fixed_ until it clears it.
   bool persist_busy_ GUARDED_BY(meta_mu_) = false;
   // The latch file has the fixed size and checked form (kStateFileBytes, "check"), and what it
   // says (latched: a latch is then written whole). Set by open(), then only by the thread that
-  // holds persist_busy_ (the persister or a persist_here_if_idle() caller), whose hand-over
+  // holds persist_busy_ (open(), the persister or a persist_here_if_idle() caller), whose hand-over
   // under meta_mu_ orders the accesses.
   bool state_file_fixed_ = false;
   bool state_file_latched_ = true;
