@@ -97,6 +97,13 @@ class PosixEnv final : public Env {
     return std::unique_ptr<WritableFile>(new PosixPositionalFile(fd, path, offset));
   }
 
+  Result<std::unique_ptr<WritableFile>> open_existing_at(const std::string& path,
+                                                         uint64_t offset) override {
+    int fd = ::open(path.c_str(), O_WRONLY | O_CLOEXEC | O_NOFOLLOW);
+    if (fd < 0) return io_error("open", path, errno);
+    return std::unique_ptr<WritableFile>(new PosixPositionalFile(fd, path, offset));
+  }
+
   Status write_zeros_synced(const std::string& path, uint64_t bytes) override {
     int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
     if (fd < 0) return io_error("open", path, errno);

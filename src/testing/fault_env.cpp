@@ -1,5 +1,7 @@
 #include "testing/fault_env.h"
 
+#include <algorithm>
+
 namespace rcan::audit {
 namespace {
 
@@ -116,19 +118,37 @@ void FaultInjectionEnv::note_synced(const std::string& path) {
   std::lock_guard<std::mutex> l(mu_);
   auto& f = files_[path];
   f.durable = f.size;
+  rewrites_.erase(path);
 }
 
 Status FaultInjectionEnv::drop_unsynced(double keep_fraction) {
   std::map<std::string, FileState> files;
   std::set<std::string> fresh;
+  std::map<std::string, std::string> rewrites;
   {
     std::lock_guard<std::mutex> l(mu_);
     files = files_;
     fresh = new_files_;
+    rewrites = rewrites_;
     files_.clear();
     new_files_.clear();
+    rewrites_.clear();
     failed_ = false;
     fail_at_ = 0;
+  }
+  // An unsynced rewrite in place: the first `keep_fraction` of what is there now, the rest as it
+  // was before (the bytes past the old end are dropped).
+  for (const auto& [path, before] : rewrites) {
+    files.erase(path);
+    if (!base_->exists(path)) continue;
+    auto now = base_->read_file(path);
+    if (!now.ok()) return now.error();
+    const size_t keep = std::min(
+        now->size(), static_cast<size_t>(static_cast<double>(now->size()) * keep_fraction));
+    std::string out = now->substr(0, keep);
+    if (before.size() > keep) out += before.substr(keep);
+    Status s = base_->write_file_synced(path, out);
+    if (!s.ok()) return s;
   }
   for (const auto& path : fresh) {
     if (base_->exists(path)) {
@@ -168,6 +188,19 @@ Result<std::unique_ptr<WritableFile>> FaultInjectionEnv::open_appendable(const s
       uint64_t n = size.ok() ? *size : 0;
       files_[path] = FileState{n, n};
     }
+  }
+  return std::unique_ptr<WritableFile>(new FaultWritableFile(this, path, std::move(*base)));
+}
+
+Result<std::unique_ptr<WritableFile>> FaultInjectionEnv::open_existing_at(const std::string& path,
+                                                                          uint64_t offset) {
+  auto before = base_->read_file(path);
+  auto base = base_->open_existing_at(path, offset);
+  if (!base.ok()) return base.error();
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    if (before.ok() && rewrites_.count(path) == 0) rewrites_[path] = *before;
+    files_.erase(path);  // tracked as a rewrite, not by its length
   }
   return std::unique_ptr<WritableFile>(new FaultWritableFile(this, path, std::move(*base)));
 }

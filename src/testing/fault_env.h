@@ -45,6 +45,10 @@ class FaultInjectionEnv : public Env {
   Status drop_unsynced(double keep_fraction = 0.0);
 
   Result<std::unique_ptr<WritableFile>> open_appendable(const std::string& path) override;
+  // A file rewritten in place: its contents at the open are what a crash before its next sync
+  // goes back to (drop_unsynced keeps `keep_fraction` of the new bytes over them: a torn write).
+  Result<std::unique_ptr<WritableFile>> open_existing_at(const std::string& path,
+                                                         uint64_t offset) override;
   Result<std::unique_ptr<WritableFile>> open_writable_at(const std::string& path,
                                                          uint64_t offset) override;
   Status write_zeros_synced(const std::string& path, uint64_t bytes) override;
@@ -91,7 +95,8 @@ class FaultInjectionEnv : public Env {
   bool torn_appends_ = false;
   std::atomic<int64_t> clock_offset_ms_{0};
   std::map<std::string, FileState> files_;
-  std::set<std::string> new_files_;  // created, directory not yet synced
+  std::set<std::string> new_files_;              // created, directory not yet synced
+  std::map<std::string, std::string> rewrites_;  // rewritten in place, not yet synced: before
 };
 
 }  // namespace rcan::audit

@@ -275,6 +275,41 @@ TEST(SafetyLatchFile, AnInPlaceLatchWhoseSyncFailsIsNotDurableAndIsWrittenWholeO
   EXPECT_EQ(test::read_file(f).size(), 4096u);
 }
 
+// A crash in the middle of the in-place latch (its page written, the process dead at its
+// fdatasync, so the ESTOP was never acknowledged as durable): the file goes back to the cleared
+// page, keeps the latched one, or is torn between them. The node comes up cleared, latched by
+// the ESTOP, or — torn — latched by the node (fail safe); never anything else.
+TEST(SafetyLatchFile, ACrashDuringAnInPlaceLatchComesUpClearedLatchedOrLatchedByTheNode) {
+  for (double keep : {0.0, 0.02, 1.0}) {  // 0.02: the new page's check over the old state
+    TempDir dir;
+    {
+      FaultInjectionEnv env(Env::posix());
+      {
+        SafetyRig r;
+        ASSERT_TRUE(r.core->open(dir.path(), &env).ok());
+        env.fail_after(2);
+        auto e = r.core->estop("http", "button", 4);
+        EXPECT_FALSE(r.core->wait_persisted(e.state_seq, 300));
+      }
+      ASSERT_TRUE(env.drop_unsynced(keep).ok());
+    }
+    EXPECT_EQ(test::read_file(dir.file("safety_state.json")).size(), 4096u) << keep;
+    SafetyRig r;
+    ASSERT_TRUE(r.core->open(dir.path()).ok());
+    const auto st = r.core->status();
+    if (keep == 0.0) {
+      EXPECT_FALSE(r.core->estop_active());
+    } else if (keep == 1.0) {
+      EXPECT_TRUE(r.core->estop_active());
+      EXPECT_EQ(st.estop_source, "http");
+    } else {
+      EXPECT_TRUE(r.core->estop_active());
+      EXPECT_EQ(st.estop_source, "startup");
+      EXPECT_NE(st.startup_note.find("check"), std::string::npos) << st.startup_note;
+    }
+  }
+}
+
 // The start's write of the cleared file fails (a state directory that cannot be written): the
 // node starts, its status says the latch file is not durable and why, the write is retried, and
 // a latch meanwhile is written whole and survives a restart.

@@ -39,6 +39,11 @@ class Env {
   // used on preallocated segments, whose file size is larger than their data.
   virtual Result<std::unique_ptr<WritableFile>> open_writable_at(const std::string& path,
                                                                  uint64_t offset) = 0;
+  // Opens `path`, which must exist (nothing is created; a symbolic link is refused), for
+  // positional writes starting at `offset`: a file rewritten in place, which is gone when it
+  // was removed meanwhile.
+  virtual Result<std::unique_ptr<WritableFile>> open_existing_at(const std::string& path,
+                                                                 uint64_t offset) = 0;
   // Creates/overwrites `path` with `bytes` zero bytes, written (not just allocated) and
   // fsync'ed, so that later overwrites need no metadata journal commit on fdatasync.
   virtual Status write_zeros_synced(const std::string& path, uint64_t bytes) = 0;

@@ -515,24 +515,21 @@ Status SafetyCore::write_state_file(const LatchState& st) {
   const std::string path = state_dir_ + "/" + kStateFile;
   const bool fixed = body.size() == kStateFileBytes;
   Status s;
-  // In place only from cleared to latched, over the file of the same size that is still there:
-  // no new inode, rename or directory sync. A crash in the middle leaves the cleared state (not
-  // yet acknowledged) or a torn file, which comes up latched. A re-latch (a higher role) is
-  // replaced whole: torn, it would come up latched by the node, which a lower role may clear.
-  bool in_place = st.active && fixed && state_file_fixed_ && !state_file_latched_;
+  // In place only from cleared to latched, over the file that is still there (opened without
+  // creating it): no new inode, rename or directory sync. A crash in the middle leaves the
+  // cleared state (not yet acknowledged) or a torn file, which comes up latched. A re-latch (a
+  // higher role) is replaced whole: torn, it would come up latched by the node, which a lower
+  // role may clear.
+  const bool in_place = st.active && fixed && state_file_fixed_ && !state_file_latched_;
+  std::unique_ptr<audit::WritableFile> f;
   if (in_place) {
-    auto size = env_->file_size(path);  // gone (removed by hand): created whole, dir synced
-    in_place = size.ok() && *size == kStateFileBytes;
+    auto opened = env_->open_existing_at(path, 0);  // gone (removed by hand): written whole below
+    if (opened.ok()) f = std::move(opened).value();
   }
-  if (in_place) {
-    auto f = env_->open_writable_at(path, 0);
-    if (!f.ok()) {
-      s = f.error();
-    } else {
-      s = (*f)->append(body);
-      if (s.ok()) s = (*f)->sync();
-      if (Status c = (*f)->close(); s.ok()) s = c;
-    }
+  if (f) {
+    s = f->append(body);
+    if (s.ok()) s = f->sync();
+    if (Status c = f->close(); s.ok()) s = c;
   } else {
     // A clear, or a file of another shape: replaced whole, so that a clear that cannot be made
     // durable leaves the latched file as it was.
