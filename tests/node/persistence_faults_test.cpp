@@ -47,6 +47,20 @@ unsigned mode_of(const std::string& path) {
 
 bool present(const std::string& path) { return ::access(path.c_str(), F_OK) == 0; }
 
+// What when_persisted() answers for `seq` (within 5 s; otherwise a failure and "no answer").
+std::pair<bool, std::string> latch_answer(node::SafetyCore& core, uint64_t seq) {
+  auto answered = std::make_shared<std::promise<std::pair<bool, std::string>>>();
+  auto got = answered->get_future();
+  core.when_persisted(seq, [answered](bool durable, const std::string& error) {
+    answered->set_value({durable, error});
+  });
+  if (got.wait_for(std::chrono::seconds(5)) != std::future_status::ready) {
+    ADD_FAILURE() << "the latch was not answered within 5 s";
+    return {false, "no answer"};
+  }
+  return got.get();
+}
+
 // The latch file says latched (it is written cleared at the first start, and a latch rewrites
 // it in place).
 bool says_latched(const std::string& path) {
@@ -258,13 +272,7 @@ TEST(SafetyLatchFile, AnInPlaceLatchWhoseSyncFailsIsNotDurableAndIsWrittenWholeO
   ASSERT_NE(started, 0u);
   env.fail_after(2);  // the page's write goes through, its fdatasync fails
   auto e = r.core->estop("http", "button");
-  std::promise<std::pair<bool, std::string>> answered;
-  r.core->when_persisted(e.state_seq, [&](bool durable, const std::string& error) {
-    answered.set_value({durable, error});
-  });
-  auto got = answered.get_future();
-  ASSERT_EQ(got.wait_for(std::chrono::seconds(5)), std::future_status::ready);
-  auto [durable, error] = got.get();
+  auto [durable, error] = latch_answer(*r.core, e.state_seq);
   EXPECT_FALSE(durable);
   EXPECT_NE(error.find("injected fault: sync"), std::string::npos) << error;
   EXPECT_FALSE(r.core->status().persisted);
@@ -469,13 +477,7 @@ TEST(SafetyLatchFile, WhenPersistedSaysSoWhenTheWriteFailsOrHangs) {
     ASSERT_TRUE(r.core->open(dir.path(), &env).ok());
     env.fail_after(1);
     auto e = r.core->estop("http", "button");
-    std::promise<std::pair<bool, std::string>> answered;
-    r.core->when_persisted(e.state_seq, [&](bool durable, const std::string& error) {
-      answered.set_value({durable, error});
-    });
-    auto got = answered.get_future();
-    ASSERT_EQ(got.wait_for(std::chrono::seconds(5)), std::future_status::ready);
-    auto [durable, error] = got.get();
+    auto [durable, error] = latch_answer(*r.core, e.state_seq);
     EXPECT_FALSE(durable);
     EXPECT_NE(error.find("injected fault"), std::string::npos) << error;
     env.fail_after(0);
