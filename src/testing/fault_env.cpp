@@ -199,7 +199,12 @@ Result<std::unique_ptr<WritableFile>> FaultInjectionEnv::open_existing_at(const 
   if (!base.ok()) return base.error();
   {
     std::lock_guard<std::mutex> l(mu_);
-    if (before.ok() && rewrites_.count(path) == 0) rewrites_[path] = *before;
+    if (before.ok() && rewrites_.count(path) == 0) {
+      // What a crash goes back to: the durable part of what is there.
+      if (auto it = files_.find(path); it != files_.end() && it->second.durable < before->size())
+        before->resize(it->second.durable);
+      rewrites_[path] = std::move(*before);
+    }
     files_.erase(path);  // tracked as a rewrite, not by its length
   }
   return std::unique_ptr<WritableFile>(new FaultWritableFile(this, path, std::move(*base)));
@@ -231,6 +236,7 @@ Status FaultInjectionEnv::write_zeros_synced(const std::string& path, uint64_t b
   if (s.ok()) {
     std::lock_guard<std::mutex> l(mu_);
     files_[path] = FileState{bytes, bytes};
+    rewrites_.erase(path);
     if (!existed) new_files_.insert(path);
   }
   return s;
@@ -276,6 +282,7 @@ Status FaultInjectionEnv::remove_file(const std::string& path) {
   std::lock_guard<std::mutex> l(mu_);
   files_.erase(path);
   new_files_.erase(path);
+  rewrites_.erase(path);
   return s;
 }
 
@@ -290,6 +297,11 @@ Status FaultInjectionEnv::rename_file(const std::string& from, const std::string
       files_.erase(it);
     }
     if (new_files_.erase(from)) new_files_.insert(to);
+    rewrites_.erase(to);  // replaced: what it held before is gone
+    if (auto it = rewrites_.find(from); it != rewrites_.end()) {
+      rewrites_[to] = std::move(it->second);
+      rewrites_.erase(it);
+    }
   }
   return s;
 }
@@ -304,6 +316,7 @@ Status FaultInjectionEnv::truncate_file(const std::string& path, uint64_t size) 
       it->second.size = size;
       it->second.durable = size;
     }
+    rewrites_.erase(path);
   }
   return s;
 }
@@ -327,6 +340,7 @@ Status FaultInjectionEnv::synced_write(const std::string& path, std::string_view
   if (s.ok()) {
     std::lock_guard<std::mutex> l(mu_);
     files_[path] = FileState{data.size(), data.size()};
+    rewrites_.erase(path);
     if (!existed) new_files_.insert(path);
   }
   return s;

@@ -13,7 +13,9 @@
 //     hung — before it goes on (or fails as above); held() counts the ones waiting.
 //   * drop_unsynced(): after the owner of the Env is gone, cuts every tracked file back
 //     to its durable length (keeping `keep_fraction` of the unsynced tail to model a
-//     torn page), and deletes files created since the last sync_dir of their directory.
+//     torn page), puts back what a file rewritten in place (open_existing_at) held before
+//     its unsynced rewrite (keeping the first `keep_fraction` of the new bytes: a torn
+//     write), and deletes files created since the last sync_dir of their directory.
 // `*base` must outlive this object.
 #pragma once
 

@@ -299,6 +299,17 @@ bool MqttClient::all_subscribed() const {
   return connected_.load() && ready_connects_ > 0 && sub_pending_.empty() && sub_refused_.empty();
 }
 
+bool MqttClient::granted(const std::vector<std::string>& filters) const {
+  MutexLock lk(mu_);
+  if (!connected_.load() || ready_connects_ == 0) return false;
+  for (const auto& f : filters) {
+    for (const auto& [mid, sub] : sub_pending_)
+      if (sub.first == f) return false;
+    if (std::find(sub_refused_.begin(), sub_refused_.end(), f) != sub_refused_.end()) return false;
+  }
+  return true;
+}
+
 std::vector<std::string> MqttClient::refused_subscriptions() const {
   MutexLock lk(mu_);
   return sub_refused_;

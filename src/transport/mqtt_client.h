@@ -123,6 +123,8 @@ class MqttClient {
   int qos_cap() const { return qos_cap_.load(); }
   // Connected, and every subscription answered by a SUBACK that did not refuse it.
   bool all_subscribed() const EXCLUDES(mu_);
+  // The same for `filters` alone (subscribed earlier with subscribe()).
+  bool granted(const std::vector<std::string>& filters) const EXCLUDES(mu_);
   // Subscriptions the broker refused (SUBACK 0x80) at QoS 1 or 0.
   std::vector<std::string> refused_subscriptions() const EXCLUDES(mu_);
   // Sends the refused subscriptions again (a clustered broker refuses while it elects a new

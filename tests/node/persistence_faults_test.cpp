@@ -271,8 +271,17 @@ TEST(SafetyLatchFile, AnInPlaceLatchWhoseSyncFailsIsNotDurableAndIsWrittenWholeO
   const ino_t started = inode_of(f);
   ASSERT_NE(started, 0u);
   env.fail_after(2);  // the page's write goes through, its fdatasync fails
-  auto e = r.core->estop("http", "button");
-  auto [durable, error] = latch_answer(*r.core, e.state_seq);
+  // Written on this thread once the answer is awaited (the persister's retry would otherwise
+  // answer a waiter that came late, with its own error).
+  auto e = r.core->estop("http", "button", 0, false);
+  std::promise<std::pair<bool, std::string>> answered;
+  r.core->when_persisted(e.state_seq, [&](bool d, const std::string& why) {
+    answered.set_value({d, why});
+  });
+  r.core->persist_here_if_idle();
+  auto got = answered.get_future();
+  ASSERT_EQ(got.wait_for(std::chrono::seconds(0)), std::future_status::ready);
+  auto [durable, error] = got.get();
   EXPECT_FALSE(durable);
   EXPECT_NE(error.find("injected fault: sync"), std::string::npos) << error;
   EXPECT_FALSE(r.core->status().persisted);

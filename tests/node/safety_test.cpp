@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <pthread.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <chrono>
@@ -305,6 +306,44 @@ TEST(SafetyEstop, TheFirstStartWritesTheClearedLatchFileAnOlderClearedOneIsRewri
   auto e = r.core->estop("http", "x");
   ASSERT_TRUE(r.core->wait_persisted(e.state_seq, 5000));
   EXPECT_EQ(inode_of(g), rewritten);
+}
+
+// The in-place latch opens the file that is there, without creating one and without following
+// a symbolic link: a link put in its place is replaced by the latched file (its target is left
+// as it was), and a file removed meanwhile is written whole. Both come back latched.
+TEST(SafetyEstop, ALatchOverALinkOrARemovedFileIsWrittenWhole) {
+  {
+    rcan::test::TempDir dir;
+    const std::string f = dir.file("safety_state.json");
+    const std::string target = dir.file("elsewhere.json");
+    Rig r;
+    ASSERT_TRUE(r.core->open(dir.path()).ok());
+    const std::string cleared = rcan::test::read_file(f);
+    ASSERT_EQ(cleared.size(), 4096u);
+    { std::ofstream(target, std::ios::binary) << cleared; }
+    ASSERT_EQ(::unlink(f.c_str()), 0);
+    ASSERT_EQ(::symlink(target.c_str(), f.c_str()), 0);
+    auto e = r.core->estop("http", "x");
+    ASSERT_TRUE(r.core->wait_persisted(e.state_seq, 5000));
+    struct stat st {};
+    ASSERT_EQ(::lstat(f.c_str(), &st), 0);
+    EXPECT_TRUE(S_ISREG(st.st_mode));
+    EXPECT_TRUE(json::parse(rcan::test::read_file(f))->get("estop_active")->as_bool());
+    EXPECT_EQ(rcan::test::read_file(target), cleared);
+  }
+  rcan::test::TempDir dir;
+  const std::string f = dir.file("safety_state.json");
+  {
+    Rig r;
+    ASSERT_TRUE(r.core->open(dir.path()).ok());
+    ASSERT_EQ(::unlink(f.c_str()), 0);
+    auto e = r.core->estop("http", "x");
+    ASSERT_TRUE(r.core->wait_persisted(e.state_seq, 5000));
+    EXPECT_TRUE(json::parse(rcan::test::read_file(f))->get("estop_active")->as_bool());
+  }
+  Rig r;
+  ASSERT_TRUE(r.core->open(dir.path()).ok());
+  EXPECT_TRUE(r.core->estop_active());
 }
 
 // A latch file whose contents do not match its check (an in-place write torn by a crash: a

@@ -90,7 +90,7 @@ TEST_F(SwarmAgentTest, AMemberTickedBeforeItsConnectionCallbackDoesNotTakeTheLea
   run(20, 50);  // robot-a leads and beats for a second
 
   connected_["robot-c"] = true;  // the client says connected; the callback has not run yet
-  c.tick(clock_.mono_ms());
+  c.tick(clock_.mono_ms(), true);
   deliver();
   EXPECT_EQ(c.leader(), "robot-a");
   connect("robot-c");
@@ -111,7 +111,7 @@ TEST_F(SwarmAgentTest, AfterALostConnectionTheSilenceClockWaitsForTheNextOne) {
   c.on_disconnected();
   run(100, 50);
   connected_["robot-c"] = true;  // back: ticked before the callback, then after it
-  c.tick(clock_.mono_ms());
+  c.tick(clock_.mono_ms(), true);
   deliver();
   EXPECT_EQ(c.leader(), "robot-a");
   connect("robot-c");
@@ -136,6 +136,29 @@ TEST_F(SwarmAgentTest, AMemberThatCannotHearYetDoesNotJudgeTheLeader) {
   EXPECT_EQ(c.leader(), "robot-a");
   EXPECT_EQ(a.leader(), "robot-a");
   EXPECT_EQ(c.state().get("payload")->get("epoch")->as_int(), 0);
+}
+
+// Deaf while its leader dies: it takes over one leader timeout after it can hear, not before,
+// and its state says whether it hears.
+TEST_F(SwarmAgentTest, AMemberThatHearsAgainReplacesADeadLeaderOneTimeoutLater) {
+  member("robot-a");
+  SwarmAgent& c = member("robot-c");
+  connect("robot-a");
+  hearing_["robot-c"] = false;
+  connect("robot-c");
+  run(10, 50);
+  connected_["robot-a"] = false;  // the leader dies while robot-c cannot hear
+  agents_["robot-a"]->on_disconnected();
+  run(80, 50);
+  EXPECT_EQ(c.leader(), "robot-a");
+  EXPECT_FALSE(c.state().get("payload")->get("hearing")->as_bool());
+  hearing_["robot-c"] = true;
+  run(18, 50);  // 0.9 s of the 1 s timeout: still waiting
+  EXPECT_EQ(c.leader(), "robot-a");
+  EXPECT_TRUE(c.state().get("payload")->get("hearing")->as_bool());
+  run(6, 50);
+  EXPECT_EQ(c.leader(), "robot-c");
+  EXPECT_EQ(c.state().get("payload")->get("epoch")->as_int(), 1);
 }
 
 // The clocks still do their work: a leader silent for longer than the timeout is replaced by

@@ -448,7 +448,8 @@ void MqttNode::loop() {
     tick_channel(now);
     tick_completions();
     if (opts_.mqtt.publish_audit) tick_audit();
-    if (swarm_ && client_->connected()) swarm_->tick(now, client_->all_subscribed());
+    if (swarm_ && client_->connected())
+      swarm_->tick(now, client_->granted(swarm_->hearing_subscriptions()));
     if (telemetry_period > 0 && now - last_telemetry >= telemetry_period && client_->connected()) {
       last_telemetry = now;
       publish_json(out_.telemetry(), svc_.act.telemetry(), 0, false);

@@ -45,6 +45,10 @@ std::vector<std::string> SwarmAgent::subscriptions() const {
   return {topics_.announce(), topics_.heartbeats(), topics_.join()};
 }
 
+std::vector<std::string> SwarmAgent::hearing_subscriptions() const {
+  return {topics_.announce(), topics_.heartbeats()};
+}
+
 std::string SwarmAgent::leader() const {
   MutexLock lk(mu_);
   return leader_;
@@ -53,7 +57,9 @@ std::string SwarmAgent::leader() const {
 json::Value SwarmAgent::state() const {
   MutexLock lk(mu_);
   json::Value v = announce_body("state", "");
-  v.as_object().find("payload")->as_object().set("dropped", static_cast<int64_t>(dropped_));
+  json::Object& p = v.as_object().find("payload")->as_object();
+  p.set("dropped", static_cast<int64_t>(dropped_));
+  p.set("hearing", connected_since_ >= 0 && hearing_);
   return v;
 }
 
@@ -222,7 +228,6 @@ void SwarmAgent::tick(int64_t now, bool hearing) {
                                              {"timestamp_ms", svc_.clock.wall_ms()}})),
              0, false);
   }
-  if (leader_ == cfg_.member_id) return;
   if (!hearing) {
     hearing_ = false;
     return;
@@ -232,6 +237,7 @@ void SwarmAgent::tick(int64_t now, bool hearing) {
     for (const auto& m : members_) last_seen_[m] = now;
     return;
   }
+  if (leader_ == cfg_.member_id) return;
   auto it = last_seen_.find(leader_);
   int64_t seen = it == last_seen_.end() ? connected_since_ : it->second;
   if (now - seen <= static_cast<int64_t>(cfg_.leader_timeout_ms)) return;

@@ -55,8 +55,10 @@ class SwarmAgent {
   SwarmAgent(NodeServices& svc, config::SwarmConfig cfg, std::string secret, std::string prefix,
              Publish publish, bool require_bound_tokens = true);
 
-  // Topic filters to subscribe to.
+  // Topic filters to subscribe to; those a member must hear to judge its leader (announce and
+  // heartbeats).
   std::vector<std::string> subscriptions() const;
+  std::vector<std::string> hearing_subscriptions() const;
   // Called on every (re)connect: starts the silence clocks and announces when leader. Until it
   // has been called (and again after on_disconnected()), tick() neither beats nor judges the
   // leader: the client may report the connection up before its callback has run, and a
@@ -66,12 +68,12 @@ class SwarmAgent {
   void on_message(const mqtt::InboundTopic& topic, const json::Value& body, int64_t now_mono_ms)
       EXCLUDES(mu_);
   // Heartbeat and leader check; call every few tens of milliseconds. `hearing`: the member's
-  // subscriptions are granted. A member that cannot hear yet (a clustered broker refuses
-  // subscriptions for a few seconds after a failover) beats but does not judge the leader,
-  // and the silence clocks start again, a full timeout of grace, once it can.
-  void tick(int64_t now_mono_ms, bool hearing = true) EXCLUDES(mu_);
+  // hearing_subscriptions() are granted. A member that cannot hear yet (a clustered broker
+  // refuses subscriptions for a few seconds after a failover) beats but does not judge the
+  // leader, and the silence clocks start again, a full timeout of grace, once it can.
+  void tick(int64_t now_mono_ms, bool hearing) EXCLUDES(mu_);
 
-  // {swarm_id, members, leader, epoch, formation, join_policy, pending, dropped}
+  // {swarm_id, members, leader, epoch, formation, join_policy, pending, dropped, hearing}
   json::Value state() const EXCLUDES(mu_);
   std::string leader() const EXCLUDES(mu_);
 
