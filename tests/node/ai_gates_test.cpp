@@ -252,6 +252,28 @@ TEST_F(AiGates, EscalationClimbsLayersUntilTheGatePassesThenDispatchesWithAWater
   EXPECT_EQ(planner_->requests_seen(), 1);
 }
 
+// An SDK-shaped message (rcan-py: `cmd`, `msg_id`) that escalates is answered in its own shape:
+// the answer reads the received message, not the layer's command that replaced it.
+TEST_F(AiGates, AnEscalatedSdkMessageIsAnsweredInTheSdkShape) {
+  const std::string t = AiNode::kRuri;
+  const std::string target = t.substr(0, t.rfind('/')) + "/v1" + t.substr(t.rfind('/'));
+  const std::string id = new_uuid_v4();
+  json::Object m{{"rcan", "3.2"},
+                 {"msg_id", id},
+                 {"timestamp", static_cast<double>(wall_ms()) / 1000.0},
+                 {"cmd", "move"},
+                 {"target", target},
+                 {"params", json::Object{{"linear", 0.2}, {"duration_ms", 100}}},
+                 {"ai", ai_block("sim", "sim-reactive", 0.3, "reactive")}};
+  HttpReply r = n().command(n().leasee(), json::dump(json::Value(m)));
+  ASSERT_EQ(r.status, 200) << r.body;
+  json::Value ack = parse(r.body);
+  EXPECT_EQ(ack.get("type")->as_string(), "ACK") << r.body;
+  ASSERT_NE(ack.get("msg_id"), nullptr) << r.body;
+  EXPECT_EQ(ack.get("status")->as_string(), "ok") << r.body;
+  EXPECT_EQ(n().records(id, "CONFIDENCE_GATE_ESCALATED", 2).size(), 2u);
+}
+
 TEST_F(AiGates, EscalationWithNoHigherLayerIsABlock) {
   std::string id = new_uuid_v4();
   HttpReply r = n().command(n().leasee(), cmd(id, "move", {{"linear", 0.2}, {"duration_ms", 100}},
