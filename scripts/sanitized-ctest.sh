@@ -30,15 +30,18 @@ esac
 ctest --test-dir "$dir" --output-on-failure -j "$jobs" "$@"
 rc=$?
 
-# LeakSanitizer's own tracer can crash while it stops a process's threads at exit (a known
-# fault of the GCC 12 runtime when a thread is half-way through exiting). Such a file holds no
-# finding about our code — only "Tracer caught signal" and LeakSanitizer's fatal-error lines —
-# so it is shown and set aside; any other line in it (a leak, an ASan or UBSan error) counts.
+# LeakSanitizer's own tracer can fail while it stops a process's threads at exit (a known
+# fault of the GCC 12 runtime when a thread is half-way through exiting): it crashes ("Tracer
+# caught signal") or cannot read a thread's registers ("Unable to get registers from thread").
+# Such a file holds no finding about our code — only those lines and LeakSanitizer's
+# fatal-error lines — so it is shown and set aside; any other line in it (a leak, an ASan or
+# UBSan error) counts.
 for f in $(find "$logs" -type f | sort); do
-  if grep -q 'Tracer caught signal' "$f" &&
-     ! grep -v -e 'Tracer caught signal' -e 'LeakSanitizer has encountered a fatal error' \
+  if grep -q -e 'Tracer caught signal' -e 'Unable to get registers from thread' "$f" &&
+     ! grep -v -e 'Tracer caught signal' -e 'Unable to get registers from thread [0-9]*\.$' \
+         -e 'LeakSanitizer has encountered a fatal error' \
          -e '^==[0-9]*==HINT: ' -e '^[[:space:]]*$' "$f" | grep -q .; then
-    echo "== $kind: LeakSanitizer's tracer crashed in $(basename "$f") (no finding; leak check lost for that process):"
+    echo "== $kind: LeakSanitizer's tracer failed in $(basename "$f") (no finding; that process's leak check is lost or incomplete):"
     cat "$f"
     mkdir -p "$logs.tracer"
     mv "$f" "$logs.tracer/"
