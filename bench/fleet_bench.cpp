@@ -15,7 +15,7 @@
 // Repeats each round --rounds times, each once the robots and the brokers are back to their idle
 // CPU rates, and prints percentiles over all robot×round samples.
 //
-//   fleet_bench [--robots 200] [--rounds 5] [--estop-qos 1|2] [--segment-kib 1024]
+//   fleet_bench [--robots 200] [--rounds 5] [--estop-qos 0|1|2] [--segment-kib 1024]
 //               [--broker mosquitto|nats] [--nats-nodes 3] [--light 0|1]
 //               [--mosquitto /usr/sbin/mosquitto] [--nats-server /usr/sbin/nats-server]
 //               [--perf-ctl FIFO --profile-round N] [--warm-up 0|1]
@@ -400,13 +400,13 @@ bool parse_options(int argc, char** argv, Options& o) {
       o.coordinator_alg = argv[i + 1];
   }
   if (o.robots_n < 1 || o.robots_n > 2000 || o.rounds < 1 || o.rounds > 1000 ||
-      o.segment_bytes < (64u << 10) || (o.estop_qos != 1 && o.estop_qos != 2) ||
+      o.segment_bytes < (64u << 10) || (o.estop_qos < 0 || o.estop_qos > 2) ||
       (o.broker != "mosquitto" && o.broker != "nats") || o.nats_nodes < 1 || o.nats_nodes > 5 ||
       (o.nats_consumers != "replicated" && o.nats_consumers != "memory") || o.ramp < 0 ||
       (o.reply_qos != 0 && o.reply_qos != 1) || (o.members != "node" && o.members != "transport") ||
       (o.coordinator_alg != "ed25519" && o.coordinator_alg != "ml-dsa-65")) {
     std::fprintf(stderr,
-                 "usage: fleet_bench [--robots 1..2000] [--rounds 1..1000] [--estop-qos 1|2] "
+                 "usage: fleet_bench [--robots 1..2000] [--rounds 1..1000] [--estop-qos 0|1|2] "
                  "[--segment-kib N] [--broker mosquitto|nats] [--nats-nodes 1..5] [--light 0|1] "
                  "[--mosquitto PATH] [--nats-server PATH] [--perf-ctl FIFO --profile-round N] "
                  "[--warm-up 0|1] [--nats-consumers replicated|memory] [--ramp N] "

@@ -35,7 +35,10 @@ struct MqttConfig {
   uint32_t telemetry_hz = 1;  // 0 = no telemetry over MQTT
   bool publish_audit = true;  // audit records on the audit topic
   // QoS of the robot's subscription to its fleet's estop topic (docs/FLEET.md): 1 acts on the
-  // first PUBLISH that arrives; 2 only after the PUBREL round trip through the broker.
+  // first PUBLISH that arrives; 2 only after the PUBREL round trip through the broker; 0 takes
+  // no acknowledgement (a large fleet on NATS, docs/FLEET.md §The fleet ESTOP at QoS 0): a copy
+  // lost with the connection is made up by the retained ESTOP on the reconnect and by the
+  // coordinator's sending it again to each member that has not confirmed.
   int estop_qos = 1;
   // The highest QoS of every publish and subscription (docs/FLEET.md §Brokers capped at QoS 1):
   // 1 for brokers without QoS 2. With 2, a broker's SUBACK granting less lowers it to 1.

@@ -558,7 +558,7 @@ TEST(ConfigErrors, Ranges) {
   expect_error(parse("driver:\n  sim: {tick_hz: 10, telemetry_hz: 20}\n"),
                "driver.sim.telemetry_hz", "out_of_range");
   expect_error(parse("bridge:\n  ros_domain_id: 233\n"), "bridge.ros_domain_id", "out_of_range");
-  expect_error(parse("mqtt:\n  estop_qos: 0\n"), "mqtt.estop_qos", "out_of_range");
+  expect_error(parse("mqtt:\n  estop_qos: -1\n"), "mqtt.estop_qos", "out_of_range");
   expect_error(parse("mqtt:\n  estop_qos: 3\n"), "mqtt.estop_qos", "out_of_range");
 }
 
@@ -569,6 +569,9 @@ TEST(ConfigMqtt, EstopSubscriptionQos) {
   auto two = parse("mqtt:\n  enabled: true\n  estop_qos: 2\n");
   ASSERT_TRUE(two.ok()) << two.error().message;
   EXPECT_EQ(two->mqtt.estop_qos, 2);
+  auto zero = parse("mqtt:\n  enabled: true\n  estop_qos: 0\n  max_qos: 1\n");
+  ASSERT_TRUE(zero.ok()) << zero.error().message;
+  EXPECT_EQ(zero->mqtt.estop_qos, 0);
 }
 
 TEST(ConfigMqtt, ReplyQos) {

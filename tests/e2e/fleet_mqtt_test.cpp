@@ -119,9 +119,10 @@ TEST_F(FleetTest, RetainedFleetEstopIsObeyedByALateJoiner) {
     EXPECT_NE(json::dump(robots_[m]->status(fleet_token_)).find("\"estop_active\":true"),
               std::string::npos)
         << m;
-  // robot-c starts after the ESTOP was published: the retained message latches it too.
+  // robot-c starts after the ESTOP was published: the retained message latches it too, also
+  // through a subscription at QoS 0 (mqtt.estop_qos: 0 takes the retained copy like any other).
   Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/robot-c/reply"});
-  add_robot("robot-c", "0000000c");
+  add_robot("robot-c", "0000000c", "", ", estop_qos: 0");
   auto ack = w.wait([](const Watcher::Msg& m) { return str_of(m.body, "type") == "ACK"; });
   ASSERT_TRUE(ack);
   EXPECT_NE(json::dump(robots_["robot-c"]->status(fleet_token_)).find("\"estop_active\":true"),
@@ -144,17 +145,18 @@ TEST_F(FleetTest, RetainedFleetEstopIsObeyedByALateJoiner) {
 // ESTOP twice — a redelivery after a reconnect, a publisher's retry. A stop is idempotent and
 // a fresh SAFETY stop is never refused as a replay (src/node/admission/replay.h): the second copy
 // stops the (already stopped) robot again, is answered, and its record says it was a duplicate
-// (`duplicate_safety_message`). The same at QoS 2 (mqtt.estop_qos: 2).
-TEST_F(FleetTest, FleetEstopDeliveredTwiceIsHarmlessAtEitherQos) {
+// (`duplicate_safety_message`). The same at QoS 2 (mqtt.estop_qos: 2) and at QoS 0.
+TEST_F(FleetTest, FleetEstopDeliveredTwiceIsHarmlessAtEveryQos) {
   add_robot("robot-a", "0000000a");
   add_robot("robot-b", "0000000b", "", ", estop_qos: 2");
+  add_robot("robot-c", "0000000c", "", ", estop_qos: 0");
   std::string id = new_uuid_v4();
   json::Value msg =
       command_msg("SAFETY", json::Object{{"safety_event", "ESTOP"}}, fleet_token_, id);
   Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/+/reply"});
   w.publish("rcan/fleet/alpha/estop", msg);
   w.publish("rcan/fleet/alpha/estop", msg);  // exactly what an at-least-once redelivery looks like
-  for (const char* m : {"robot-a", "robot-b"}) {
+  for (const char* m : {"robot-a", "robot-b", "robot-c"}) {
     const std::string reply = std::string("rcan/fleet/alpha/robot/") + m + "/reply";
     int acks = 0;
     for (int attempt = 0; attempt < 100 && acks < 2; ++attempt) {
@@ -1008,18 +1010,20 @@ TEST_F(NatsFleetTest, EveryTopicOfARobotWorksOnNats) {
 // A broker that refuses a publish — NATS, with QoS 2 forced by --qos 2 — makes every fleet verb
 // exit 1 with the reason, --no-wait included; nothing reaches the robot. Left to choose, the
 // same verbs work at QoS 1 on the same broker, also for a robot whose estop subscription asks
-// for QoS 2 (mqtt.estop_qos: 2, granted 1) and one capped by mqtt.max_qos: 1.
+// for QoS 2 (mqtt.estop_qos: 2, granted 1), one capped by mqtt.max_qos: 1 and one that takes the
+// fleet ESTOP at QoS 0 (mqtt.estop_qos: 0: no JetStream consumer for it).
 TEST_F(NatsFleetTest, ARefusedPublishFailsEveryVerb) {
   Nats nats(tmp_.path(), 1);
   robot_on(nats.url(0), "robot-a", "0000000a", ", estop_qos: 2");
   robot_on(nats.url(0), "robot-b", "0000000b", ", max_qos: 1");
+  robot_on(nats.url(0), "robot-c", "0000000c", ", estop_qos: 0");
   write_file(tmp_.file("run.json"), R"({"command":"COORDINATED_MOVE","fleet_id":"alpha",
     "choreography":{"type":"sequential","steps":[
       {"robot":"robot-a","action":"move","params":{"linear":0.1,"duration_ms":100}}]}})");
   const std::vector<std::vector<std::string>> verbs{
       {"estop", "alpha"},
       {"estop", "alpha", "--no-wait"},
-      {"resume", "alpha", "--members", "robot-a,robot-b"},
+      {"resume", "alpha", "--members", "robot-a,robot-b,robot-c"},
       {"command", "alpha", "move", "--params", R"({"linear":0.1,"duration_ms":100})"},
       {"run", tmp_.file("run.json")},
   };
@@ -1030,14 +1034,15 @@ TEST_F(NatsFleetTest, ARefusedPublishFailsEveryVerb) {
     EXPECT_NE(r.err.find("closed the connection before acknowledging"), std::string::npos)
         << args[0] << ": " << r.err;
   }
-  EXPECT_FALSE(latched("robot-a"));
-  EXPECT_FALSE(latched("robot-b"));
-  // Chosen automatically: QoS 1, acknowledged by the broker and by both robots.
+  for (const char* m : {"robot-a", "robot-b", "robot-c"}) EXPECT_FALSE(latched(m)) << m;
+  // Chosen automatically: QoS 1, acknowledged by the broker and by every robot.
   auto e = fleet_via(nats.url(0), {"estop", "alpha"});
   ASSERT_EQ(e.exit_code, 0) << e.out << e.err;
   EXPECT_EQ(int_at(parse(e.out), {"qos"}), 1);
-  EXPECT_TRUE(latched("robot-a"));
-  EXPECT_TRUE(latched("robot-b"));
+  for (const char* m : {"robot-a", "robot-b", "robot-c"}) {
+    EXPECT_TRUE(latched(m)) << m;
+    EXPECT_EQ(str_at(parse(e.out), {"members", m, "result"}), "acknowledged") << e.out;
+  }
   auto r = fleet_via(nats.url(0), {"resume", "alpha", "--qos", "1"});
   ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
   auto c = fleet_via(nats.url(0), {"command", "alpha", "move", "--params",

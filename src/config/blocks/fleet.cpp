@@ -92,7 +92,7 @@ Table<MqttConfig> mqtt_rows() {
                }),
       M::field("telemetry_hz", Int(0, 50), &MqttConfig::telemetry_hz),
       M::field("publish_audit", Bool(), &MqttConfig::publish_audit),
-      M::field("estop_qos", Int(1, 2), &MqttConfig::estop_qos),
+      M::field("estop_qos", Int(0, 2), &MqttConfig::estop_qos),
       M::field("max_qos", Int(1, 2), &MqttConfig::max_qos),
       M::field("reply_qos", Int(0, 1), &MqttConfig::reply_qos),
       M::field("failover_ms", Int(100, 600000), &MqttConfig::failover_ms),
