@@ -64,7 +64,7 @@ class PosixWritableFile final : public PosixFile {
   Status append(std::string_view data) override { return write_all(fd_, data, path_); }
 };
 
-class PosixPositionalFile final : public PosixFile {
+class PosixPositionalFile : public PosixFile {
  public:
   PosixPositionalFile(int fd, std::string path, uint64_t offset)
       : PosixFile(fd, std::move(path)), offset_(offset) {}
@@ -88,6 +88,21 @@ class PosixPositionalFile final : public PosixFile {
   uint64_t offset_;
 };
 
+// A file rewritten in place (open_existing_at): a sync also says whether the file is still
+// there. Removed (or renamed over) between the open and the sync, what was written is durable
+// in an inode that no name reaches: an error, so that the caller writes the file anew.
+class PosixLinkedFile final : public PosixPositionalFile {
+ public:
+  using PosixPositionalFile::PosixPositionalFile;
+  Status sync() override {
+    if (Status s = PosixPositionalFile::sync(); !s.ok()) return s;
+    struct stat st {};
+    if (::fstat(fd_, &st) != 0) return io_error("fstat", path_, errno);
+    if (st.st_nlink == 0) return io_error("fdatasync (removed while written)", path_, ENOENT);
+    return Status::Ok();
+  }
+};
+
 class PosixEnv final : public Env {
  public:
   Result<std::unique_ptr<WritableFile>> open_writable_at(const std::string& path,
@@ -99,9 +114,26 @@ class PosixEnv final : public Env {
 
   Result<std::unique_ptr<WritableFile>> open_existing_at(const std::string& path,
                                                          uint64_t offset) override {
-    int fd = ::open(path.c_str(), O_WRONLY | O_CLOEXEC | O_NOFOLLOW);
+    // O_NONBLOCK: a FIFO put in the file's place would block the open until a reader came
+    // (without it; with it the open fails at once), and anything but a regular file is refused.
+    int fd = ::open(path.c_str(), O_WRONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
     if (fd < 0) return io_error("open", path, errno);
-    return std::unique_ptr<WritableFile>(new PosixPositionalFile(fd, path, offset));
+    struct stat st {};
+    if (::fstat(fd, &st) != 0) {
+      const int e = errno;
+      ::close(fd);
+      return io_error("fstat", path, e);
+    }
+    if (!S_ISREG(st.st_mode)) {
+      ::close(fd);
+      return io_error("open (not a regular file)", path, EINVAL);
+    }
+    if (int fl = ::fcntl(fd, F_GETFL); fl < 0 || ::fcntl(fd, F_SETFL, fl & ~O_NONBLOCK) != 0) {
+      const int e = errno;
+      ::close(fd);
+      return io_error("fcntl", path, e);
+    }
+    return std::unique_ptr<WritableFile>(new PosixLinkedFile(fd, path, offset));
   }
 
   Status write_zeros_synced(const std::string& path, uint64_t bytes) override {

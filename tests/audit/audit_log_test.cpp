@@ -769,5 +769,35 @@ TEST(AuditCli, ExportAndVerify) {
   EXPECT_EQ(usage.exit_code, 2);
 }
 
+// A file rewritten in place (Env::open_existing_at, the latch file): a FIFO in its place is
+// refused at once instead of blocking the open until a reader comes, and a file removed between
+// the open and the sync fails the sync, since what was written is then in no file.
+TEST(PosixEnv, AnInPlaceFileThatIsNotRegularOrWasRemovedIsAnError) {
+  TempDir dir;
+  Env* env = Env::posix();
+  const std::string fifo = dir.file("fifo");
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  auto opened_fifo = env->open_existing_at(fifo, 0);
+  ASSERT_FALSE(opened_fifo.ok());
+  EXPECT_NE(opened_fifo.error().message.find(fifo), std::string::npos)
+      << opened_fifo.error().message;
+  const std::string f = dir.file("state");
+  ASSERT_TRUE(env->write_file_synced(f, "cleared").ok());
+  {
+    auto kept = env->open_existing_at(f, 0);
+    ASSERT_TRUE(kept.ok()) << kept.error().message;
+    ASSERT_TRUE((*kept)->append("latched").ok());
+    EXPECT_TRUE((*kept)->sync().ok());
+  }
+  auto removed = env->open_existing_at(f, 0);
+  ASSERT_TRUE(removed.ok()) << removed.error().message;
+  ASSERT_EQ(::unlink(f.c_str()), 0);
+  ASSERT_TRUE((*removed)->append("latched").ok());
+  Status s = (*removed)->sync();
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.error().message.find("removed while written"), std::string::npos)
+      << s.error().message;
+}
+
 }  // namespace
 }  // namespace rcan::audit

@@ -4,11 +4,13 @@
 #include "node/safety/safety.h"
 
 #include <gtest/gtest.h>
+#include <fcntl.h>
 #include <pthread.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <atomic>
+#include <csignal>
 #include <chrono>
 #include <cmath>
 #include <fstream>
@@ -310,8 +312,31 @@ TEST(SafetyEstop, TheFirstStartWritesTheClearedLatchFileAnOlderClearedOneIsRewri
 
 // The in-place latch opens the file that is there, without creating one and without following
 // a symbolic link: a link put in its place is replaced by the latched file (its target is left
-// as it was), and a file removed meanwhile is written whole. Both come back latched.
-TEST(SafetyEstop, ALatchOverALinkOrARemovedFileIsWrittenWhole) {
+// as it was), a FIFO too (its open would have blocked the persister until a reader came), and
+// a file removed meanwhile is written whole. All come back latched.
+TEST(SafetyEstop, ALatchOverALinkAFifoOrARemovedFileIsWrittenWhole) {
+  {
+    rcan::test::TempDir dir;
+    const std::string f = dir.file("safety_state.json");
+    Rig r;
+    ASSERT_TRUE(r.core->open(dir.path()).ok());
+    ASSERT_EQ(::unlink(f.c_str()), 0);
+    ASSERT_EQ(::mkfifo(f.c_str(), 0600), 0);
+    auto e = r.core->estop("http", "x");
+    const bool persisted = r.core->wait_persisted(e.state_seq, 5000);
+    // A writer blocked on the FIFO (as before the open refused it) is let go, so that a failure
+    // ends the test instead of hanging it; then the FIFO has a reader no more and is removed.
+    if (!persisted) {
+      int rd = ::open(f.c_str(), O_RDONLY | O_NONBLOCK);
+      ::signal(SIGPIPE, SIG_IGN);
+      if (rd >= 0) ::close(rd);
+    }
+    ASSERT_TRUE(persisted);
+    struct stat st {};
+    ASSERT_EQ(::lstat(f.c_str(), &st), 0);
+    EXPECT_TRUE(S_ISREG(st.st_mode));
+    EXPECT_TRUE(json::parse(rcan::test::read_file(f))->get("estop_active")->as_bool());
+  }
   {
     rcan::test::TempDir dir;
     const std::string f = dir.file("safety_state.json");

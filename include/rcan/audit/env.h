@@ -39,9 +39,10 @@ class Env {
   // used on preallocated segments, whose file size is larger than their data.
   virtual Result<std::unique_ptr<WritableFile>> open_writable_at(const std::string& path,
                                                                  uint64_t offset) = 0;
-  // Opens `path`, which must exist (nothing is created; a symbolic link is refused), for
-  // positional writes starting at `offset`: a file rewritten in place, which is gone when it
-  // was removed meanwhile.
+  // Opens `path`, which must exist and be a regular file (nothing is created; a symbolic link,
+  // a FIFO or a device is refused, without blocking), for positional writes starting at
+  // `offset`: a file rewritten in place, which is gone when it was removed meanwhile. Its sync
+  // fails when the file was removed after the open (its data would be in no file).
   virtual Result<std::unique_ptr<WritableFile>> open_existing_at(const std::string& path,
                                                                  uint64_t offset) = 0;
   // Creates/overwrites `path` with `bytes` zero bytes, written (not just allocated) and

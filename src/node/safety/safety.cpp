@@ -523,14 +523,18 @@ Status SafetyCore::write_state_file(const LatchState& st) {
   const bool in_place = st.active && fixed && state_file_fixed_ && !state_file_latched_;
   std::unique_ptr<audit::WritableFile> f;
   if (in_place) {
-    auto opened = env_->open_existing_at(path, 0);  // gone (removed by hand): written whole below
+    // Gone (removed by hand) or not a regular file (a link, a FIFO): written whole below.
+    auto opened = env_->open_existing_at(path, 0);
     if (opened.ok()) f = std::move(opened).value();
   }
   if (f) {
     s = f->append(body);
     if (s.ok()) s = f->sync();
     if (Status c = f->close(); s.ok()) s = c;
-  } else {
+    // Removed while it was written (the sync says so): the latch went to no file; write it whole.
+    if (!s.ok() && !env_->exists(path)) f.reset();
+  }
+  if (!f) {
     // A clear, or a file of another shape: replaced whole, so that a clear that cannot be made
     // durable leaves the latched file as it was.
     s = env_->write_file_atomic(path, body);
