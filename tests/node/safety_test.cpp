@@ -3,16 +3,16 @@
 // the watchdog, driver faults, and ESTOP racing many real dispatching threads.
 #include "node/safety/safety.h"
 
-#include <gtest/gtest.h>
 #include <fcntl.h>
+#include <gtest/gtest.h>
 #include <pthread.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <atomic>
-#include <csignal>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <fstream>
 #include <limits>
 #include <stdexcept>

@@ -145,8 +145,6 @@ json::Object SafetyStatus::to_json() const {
   return o;
 }
 
-// ---------------------------------------------------------------------------------------------
-
 SafetyCore::SafetyCore(std::unique_ptr<Driver> driver, SafetyConfig cfg, Clock& clock)
     : driver_(std::move(driver)),
       cfg_(std::move(cfg)),
@@ -522,16 +520,14 @@ Status SafetyCore::write_state_file(const LatchState& st) {
   // role may clear.
   const bool in_place = st.active && fixed && state_file_fixed_ && !state_file_latched_;
   std::unique_ptr<audit::WritableFile> f;
-  if (in_place) {
-    // Gone (removed by hand) or not a regular file (a link, a FIFO): written whole below.
+  if (in_place) {  // gone, or not a regular file (a link, a FIFO): written whole below
     auto opened = env_->open_existing_at(path, 0);
     if (opened.ok()) f = std::move(opened).value();
   }
-  if (f) {
+  if (f) {  // removed while written (the sync says so): the latch is in no file, written whole
     s = f->append(body);
     if (s.ok()) s = f->sync();
     if (Status c = f->close(); s.ok()) s = c;
-    // Removed while it was written (the sync says so): the latch went to no file; write it whole.
     if (!s.ok() && !env_->exists(path)) f.reset();
   }
   if (!f) {
