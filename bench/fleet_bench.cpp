@@ -6,7 +6,7 @@
 //
 //   1. fleet ESTOP: publishes a retained SAFETY ESTOP on the fleet's estop topic (QoS 2 on
 //      Mosquitto, QoS 1 on NATS, which does no QoS 2; the robots subscribe at mqtt.estop_qos,
-//      1 unless --estop-qos 2) and
+//      1 unless --estop-qos 0 or 2) and
 //      times, per robot, publish → the safety core latching (measured inside the robot's
 //      Actuation) and publish → the robot's ACK arriving back at the coordinator;
 //   2. RESUME, then a broadcast FLEET_COMMAND (`status`, then a short `move`): times publish →
