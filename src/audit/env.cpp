@@ -115,8 +115,9 @@ class PosixEnv final : public Env {
   Result<std::unique_ptr<WritableFile>> open_existing_at(const std::string& path,
                                                          uint64_t offset) override {
     // O_NONBLOCK: a FIFO put in the file's place would block the open until a reader came
-    // (without it; with it the open fails at once), and anything but a regular file is refused.
-    int fd = ::open(path.c_str(), O_WRONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
+    // (without it; with it the open fails at once), and anything but a regular file is refused
+    // (O_NOCTTY: a terminal put there never becomes the process's).
+    int fd = ::open(path.c_str(), O_WRONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK | O_NOCTTY);
     if (fd < 0) return io_error("open", path, errno);
     struct stat st {};
     if (::fstat(fd, &st) != 0) {

@@ -194,9 +194,9 @@ Result<std::unique_ptr<WritableFile>> FaultInjectionEnv::open_appendable(const s
 
 Result<std::unique_ptr<WritableFile>> FaultInjectionEnv::open_existing_at(const std::string& path,
                                                                           uint64_t offset) {
-  auto before = base_->read_file(path);
-  auto base = base_->open_existing_at(path, offset);
+  auto base = base_->open_existing_at(path, offset);  // first: a FIFO is refused, not read
   if (!base.ok()) return base.error();
+  auto before = base_->read_file(path);
   {
     std::lock_guard<std::mutex> l(mu_);
     if (before.ok() && rewrites_.count(path) == 0) {

@@ -1,6 +1,7 @@
 // AuditLog: records, chain, reopen, rotation, retention, indexes, tampering detection, CLI.
 #include "rcan/audit/audit_log.h"
 
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
@@ -777,10 +778,19 @@ TEST(PosixEnv, AnInPlaceFileThatIsNotRegularOrWasRemovedIsAnError) {
   Env* env = Env::posix();
   const std::string fifo = dir.file("fifo");
   ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
-  auto opened_fifo = env->open_existing_at(fifo, 0);
-  ASSERT_FALSE(opened_fifo.ok());
-  EXPECT_NE(opened_fifo.error().message.find(fifo), std::string::npos)
-      << opened_fifo.error().message;
+  {
+    // With a reader the open itself succeeds: refused as not a regular file.
+    const int reader = ::open(fifo.c_str(), O_RDONLY | O_NONBLOCK);
+    ASSERT_GE(reader, 0);
+    auto opened = env->open_existing_at(fifo, 0);
+    ::close(reader);
+    ASSERT_FALSE(opened.ok());
+    EXPECT_NE(opened.error().message.find("not a regular file"), std::string::npos)
+        << opened.error().message;
+  }
+  auto no_reader = env->open_existing_at(fifo, 0);  // refused at once, not blocked
+  ASSERT_FALSE(no_reader.ok());
+  EXPECT_NE(no_reader.error().message.find(fifo), std::string::npos) << no_reader.error().message;
   const std::string f = dir.file("state");
   ASSERT_TRUE(env->write_file_synced(f, "cleared").ok());
   {

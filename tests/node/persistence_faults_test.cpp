@@ -292,6 +292,43 @@ TEST(SafetyLatchFile, AnInPlaceLatchWhoseSyncFailsIsNotDurableAndIsWrittenWholeO
   EXPECT_EQ(test::read_file(f).size(), 4096u);
 }
 
+// The latch file replaced (renamed over) between the in-place latch's open and its write: the
+// page would go to the old inode, which no name reaches any more. Its sync says so, and the
+// latch is written whole at once: durable, and the file under the name says latched.
+class ReplacingEnv final : public FaultInjectionEnv {
+ public:
+  using FaultInjectionEnv::FaultInjectionEnv;
+  Result<std::unique_ptr<audit::WritableFile>> open_existing_at(const std::string& path,
+                                                                uint64_t offset) override {
+    auto opened = FaultInjectionEnv::open_existing_at(path, offset);
+    const std::string copy = path + ".copy";
+    { std::ofstream(copy, std::ios::binary) << test::read_file(path); }
+    EXPECT_EQ(::rename(copy.c_str(), path.c_str()), 0);
+    return opened;
+  }
+};
+
+TEST(SafetyLatchFile, AnInPlaceLatchOverAFileReplacedMeanwhileIsWrittenWholeAtOnce) {
+  TempDir dir;
+  const std::string f = dir.file("safety_state.json");
+  ReplacingEnv env(Env::posix());
+  SafetyRig r;
+  ASSERT_TRUE(r.core->open(dir.path(), &env).ok());
+  ASSERT_FALSE(says_latched(f));
+  auto e = r.core->estop("http", "button", 0, false);
+  std::promise<std::pair<bool, std::string>> answered;
+  r.core->when_persisted(e.state_seq, [&](bool d, const std::string& why) {
+    answered.set_value({d, why});
+  });
+  r.core->persist_here_if_idle();
+  auto got = answered.get_future();
+  ASSERT_EQ(got.wait_for(std::chrono::seconds(0)), std::future_status::ready);
+  auto [durable, error] = got.get();
+  EXPECT_TRUE(durable) << error;
+  EXPECT_TRUE(says_latched(f));
+  EXPECT_EQ(test::read_file(f).size(), 4096u);
+}
+
 // A crash in the middle of the in-place latch (its page written, the process dead at its
 // fdatasync, so the ESTOP was never acknowledged as durable): the file goes back to the cleared
 // page, keeps the latched one, or is torn between them. The node comes up cleared, latched by

@@ -524,16 +524,17 @@ Status SafetyCore::write_state_file(const LatchState& st) {
     auto opened = env_->open_existing_at(path, 0);
     if (opened.ok()) f = std::move(opened).value();
   }
-  if (f) {  // removed while written (the sync says so): the latch is in no file, written whole
+  if (f) {
     s = f->append(body);
     if (s.ok()) s = f->sync();
     if (Status c = f->close(); s.ok()) s = c;
-    if (!s.ok() && !env_->exists(path)) f.reset();
   }
-  if (!f) {
-    // A clear, or a file of another shape: replaced whole, so that a clear that cannot be made
-    // durable leaves the latched file as it was.
+  // Replaced whole: a clear (one not made durable leaves the latched file as it was), a file of
+  // another shape, a failed in-place latch (a failed sync, the file removed or replaced meanwhile).
+  if (!f || !s.ok()) {
+    const std::string in_place_error = s.ok() ? "" : s.error().message + "; written whole: ";
     s = env_->write_file_atomic(path, body);
+    if (!s.ok()) s = Error(s.error().code, in_place_error + s.error().message);
   }
   state_file_fixed_ = s.ok() && fixed;
   state_file_latched_ = s.ok() ? st.active : true;  // unknown after a failure: never in place
