@@ -361,6 +361,12 @@ struct Options {
 
 // False (after printing the usage) when an option is out of range.
 bool parse_options(int argc, char** argv, Options& o) {
+  // A QoS: the whole argument a number, else -1 (refused below; atoi would make "x" QoS 0).
+  auto qos_arg = [](const char* s) {
+    char* end = nullptr;
+    const long v = std::strtol(s, &end, 10);
+    return end != s && *end == '\0' && v >= 0 && v <= 2 ? static_cast<int>(v) : -1;
+  };
   for (int i = 1; i + 1 < argc; i += 2) {
     std::string a = argv[i];
     if (a == "--robots")
@@ -368,7 +374,7 @@ bool parse_options(int argc, char** argv, Options& o) {
     else if (a == "--rounds")
       o.rounds = std::atoi(argv[i + 1]);
     else if (a == "--estop-qos")
-      o.estop_qos = std::atoi(argv[i + 1]);
+      o.estop_qos = qos_arg(argv[i + 1]);
     else if (a == "--mosquitto")
       o.mosquitto = argv[i + 1];
     else if (a == "--perf-ctl")
@@ -395,7 +401,7 @@ bool parse_options(int argc, char** argv, Options& o) {
     else if (a == "--ramp")
       o.ramp = std::atoi(argv[i + 1]);
     else if (a == "--reply-qos")
-      o.reply_qos = std::atoi(argv[i + 1]);
+      o.reply_qos = qos_arg(argv[i + 1]);
     else if (a == "--coordinator-alg")
       o.coordinator_alg = argv[i + 1];
   }

@@ -255,77 +255,94 @@ TEST_F(FailoverTest, RobotsNodeDiesItFailsOverAndAFleetEstopLatchesIt) {
 // node 3 — the robot cannot hear it — and `rcan fleet estop` waits. The connection breaks, the
 // robot fails over to node 2 and gets the ESTOP it missed (the retained copy, its session's
 // queued copy or one the CLI sent again): it latches and confirms, and the CLI exits 0.
-TEST_F(FailoverTest, RobotsNodeDiesDuringAFleetEstopItLatchesWhenItIsBack) {
-  Nats nats(tmp_.path(), 3);
-  Relay relay(nats.mqtt_port(0));
-  Robot& robot = robot_on(url_list({relay.url(), nats.url(1)}), "robot-a", "0000000a");
-  see_online(nats.url(2));
-  relay.freeze();
-  nats.kill(0);
-  settle(nats.url(2), nats, 2);
-  // Sees the ESTOP go out live on node 3 (QoS 0: no JetStream consumer, which the settling
-  // cluster may be slow to make).
-  Watcher sent(nats.url(2), {"rcan/fleet/alpha/estop"}, 0);
-  test::RunResult r;
-  std::thread operator_([&] {
-    // --members: the roster (retained member statuses) may still be unreadable on a cluster
-    // that is electing leaders; what this test is about is the robot latching.
-    r = fleet_via(nats.url(2), {"estop", "alpha", "--members", "robot-a", "--reason",
-                                "mid-failover", "--timeout-ms", "80000"});
-  });
-  if (!sent.wait([](const Watcher::Msg& m) { return str_of(m.body, "type") == "SAFETY"; }, 60000)) {
+// The same with the robot's estop subscription at QoS 0 (mqtt.estop_qos: 0, docs/FLEET.md §The
+// fleet ESTOP at QoS 0): no session keeps a copy for it, the retained one or the CLI's does.
+class NodeDiesDuringAnEstopTest : public FailoverTest {
+ protected:
+  void run(const std::string& mqtt_extra) {
+    Nats nats(tmp_.path(), 3);
+    Relay relay(nats.mqtt_port(0));
+    Robot& robot =
+        robot_on(url_list({relay.url(), nats.url(1)}), "robot-a", "0000000a", mqtt_extra);
+    see_online(nats.url(2));
+    relay.freeze();
+    nats.kill(0);
+    settle(nats.url(2), nats, 2);
+    // Sees the ESTOP go out live on node 3 (QoS 0: no JetStream consumer, which the settling
+    // cluster may be slow to make).
+    Watcher sent(nats.url(2), {"rcan/fleet/alpha/estop"}, 0);
+    test::RunResult r;
+    std::thread operator_([&] {
+      // --members: the roster (retained member statuses) may still be unreadable on a cluster
+      // that is electing leaders; what this test is about is the robot latching.
+      r = fleet_via(nats.url(2), {"estop", "alpha", "--members", "robot-a", "--reason",
+                                  "mid-failover", "--timeout-ms", "80000"});
+    });
+    if (!sent.wait([](const Watcher::Msg& m) { return str_of(m.body, "type") == "SAFETY"; },
+                   60000)) {
+      operator_.join();
+      nats.proc(1).drain(200);
+      nats.proc(2).drain(200);
+      FAIL() << "the ESTOP was not published\n"
+             << r.out << r.err << "\nnode 2:\n"
+             << nats.proc(1).err() << "\nnode 3:\n"
+             << nats.proc(2).err();
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the robot would have heard it
+    EXPECT_FALSE(latched("robot-a"));                             // it did not: its node is gone
+    EXPECT_EQ(robot.proc().err().find("\"failover\":true"), std::string::npos);
+    const int64_t cut = mono_ms();
+    relay.cut();
+    // NATS may hold each new connection 4 s and close it until a node takes the session: up to
+    // 30 s with two clusters on two cores.
+    const bool latched_after = wait_latched("robot-a", 60000);
+    const int64_t latch_ms = mono_ms() - cut;
     operator_.join();
-    nats.proc(1).drain(200);
-    nats.proc(2).drain(200);
-    FAIL() << "the ESTOP was not published\n"
-           << r.out << r.err << "\nnode 2:\n"
-           << nats.proc(1).err() << "\nnode 3:\n"
-           << nats.proc(2).err();
+    robot.proc().drain(200);
+    ASSERT_TRUE(latched_after) << robot.proc().err();
+    std::printf(
+        "[ FIGURE   ] connection to the dead node broken -> latched via failover: %lld ms\n",
+        static_cast<long long>(latch_ms));
+    // The robot's answer crosses the cluster (node 2 to node 3) through JetStream: a cluster
+    // still electing leaders may lose it (seen once in eight runs with two clusters on two cores).
+    // The CLI then says the robot did not confirm — never the opposite — and an ESTOP sent again
+    // is confirmed (at most three times, each printed).
+    for (int i = 0; i < 3 && r.exit_code != 0; ++i) {
+      EXPECT_EQ(str_at(parse(r.out), {"members", "robot-a", "result"}), "timeout") << r.out;
+      std::printf("[ RETRY    ] the confirmation was lost on the settling cluster: %s",
+                  r.err.c_str());
+      r = fleet_via(nats.url(2),
+                    {"estop", "alpha", "--members", "robot-a", "--timeout-ms", "20000"});
+    }
+    EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+    EXPECT_EQ(str_at(parse(r.out), {"members", "robot-a", "result"}), "acknowledged") << r.out;
+    // It latched once back on node 2, on whichever copy NATS handed it first: the retained one
+    // (the replay stage notes a standing fleet ESTOP), the one the cluster queued for its session
+    // while it was away, or one the CLI sent again to its command topic (it had not confirmed).
+    auto back = audit_events(robot, fleet_token_, "MQTT_RECONNECTED");
+    ASSERT_FALSE(back.empty());
+    EXPECT_EQ(detail_str(back.back(), "broker"), "\"" + nats.url(1) + "\"");
+    auto estops = audit_events(robot, fleet_token_, "ESTOP");
+    ASSERT_FALSE(estops.empty()) << robot.audit(fleet_token_);
+    const std::string route = detail_str(estops.front(), "route");
+    const bool resent = route == "\"rcan/fleet/alpha/robot/robot-a/cmd\"";
+    EXPECT_TRUE(resent || route == "\"rcan/fleet/alpha/estop\"") << route;
+    if (!resent && mqtt_extra.find("estop_qos: 0") != std::string::npos) {
+      EXPECT_EQ(int_at(estops.front(), {"detail", "mqtt_qos"}), 0);
+    }
+    EXPECT_GT(int_at(estops.front(), {"seq"}),
+              int_at(back.front(), {"seq"}));  // after it came back
+    const std::string standing = detail_str(estops.front(), "standing_fleet_estop_timestamp_ms");
+    std::printf("[ FIGURE   ] latched from the %s copy\n", resent ? "resent"
+                                                           : standing.empty() || standing == "null"
+                                                               ? "session's queued"
+                                                               : "retained");
   }
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the robot would have heard it
-  EXPECT_FALSE(latched("robot-a"));                             // it did not: its node is gone
-  EXPECT_EQ(robot.proc().err().find("\"failover\":true"), std::string::npos);
-  const int64_t cut = mono_ms();
-  relay.cut();
-  // NATS may hold each new connection 4 s and close it until a node takes the session: up to
-  // 30 s with two clusters on two cores.
-  const bool latched_after = wait_latched("robot-a", 60000);
-  const int64_t latch_ms = mono_ms() - cut;
-  operator_.join();
-  robot.proc().drain(200);
-  ASSERT_TRUE(latched_after) << robot.proc().err();
-  std::printf("[ FIGURE   ] connection to the dead node broken -> latched via failover: %lld ms\n",
-              static_cast<long long>(latch_ms));
-  // The robot's answer crosses the cluster (node 2 to node 3) through JetStream: a cluster
-  // still electing leaders may lose it (seen once in eight runs with two clusters on two cores).
-  // The CLI then says the robot did not confirm — never the opposite — and an ESTOP sent again
-  // is confirmed (at most three times, each printed).
-  for (int i = 0; i < 3 && r.exit_code != 0; ++i) {
-    EXPECT_EQ(str_at(parse(r.out), {"members", "robot-a", "result"}), "timeout") << r.out;
-    std::printf("[ RETRY    ] the confirmation was lost on the settling cluster: %s",
-                r.err.c_str());
-    r = fleet_via(nats.url(2), {"estop", "alpha", "--members", "robot-a", "--timeout-ms", "20000"});
-  }
-  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
-  EXPECT_EQ(str_at(parse(r.out), {"members", "robot-a", "result"}), "acknowledged") << r.out;
-  // It latched once back on node 2, on whichever copy NATS handed it first: the retained one
-  // (the replay stage notes a standing fleet ESTOP), the one the cluster queued for its session
-  // while it was away, or one the CLI sent again to its command topic (it had not confirmed).
-  auto back = audit_events(robot, fleet_token_, "MQTT_RECONNECTED");
-  ASSERT_FALSE(back.empty());
-  EXPECT_EQ(detail_str(back.back(), "broker"), "\"" + nats.url(1) + "\"");
-  auto estops = audit_events(robot, fleet_token_, "ESTOP");
-  ASSERT_FALSE(estops.empty()) << robot.audit(fleet_token_);
-  const std::string route = detail_str(estops.front(), "route");
-  const bool resent = route == "\"rcan/fleet/alpha/robot/robot-a/cmd\"";
-  EXPECT_TRUE(resent || route == "\"rcan/fleet/alpha/estop\"") << route;
-  EXPECT_GT(int_at(estops.front(), {"seq"}), int_at(back.front(), {"seq"}));  // after it came back
-  const std::string standing = detail_str(estops.front(), "standing_fleet_estop_timestamp_ms");
-  std::printf("[ FIGURE   ] latched from the %s copy\n", resent ? "resent"
-                                                         : standing.empty() || standing == "null"
-                                                             ? "session's queued"
-                                                             : "retained");
-}
+};
+
+TEST_F(NodeDiesDuringAnEstopTest, RobotsNodeDiesDuringAFleetEstopItLatchesWhenItIsBack) { run(""); }
+
+TEST_F(NodeDiesDuringAnEstopTest, AtQos0TooTheRobotLatchesWhenItIsBack) { run(", estop_qos: 0"); }
 
 // The node the operator's CLI is on dies while it waits for the members: it stops waiting (the
 // replies can no longer reach it), exits 1 and says that its broker connection dropped.

@@ -175,6 +175,9 @@ TEST_F(FleetTest, FleetEstopDeliveredTwiceIsHarmlessAtEveryQos) {
     json::Value entries = parse(robots_[m]->audit(fleet_token_));
     for (const auto& e : entries.get("entries")->as_array()) {
       if (str_of(e, "message_id") != id || str_of(e, "event") != "ESTOP") continue;
+      // Published at QoS 1: delivered at 1 to robot-a (subscribed at 1) and robot-b (2), at 0
+      // to robot-c — its subscription is at QoS 0, not raised.
+      EXPECT_EQ(int_at(e, {"detail", "mqtt_qos"}), std::string(m) == "robot-c" ? 0 : 1) << m;
       const json::Value* detail = e.get("detail");
       const json::Value* dup =
           detail != nullptr ? detail->get("duplicate_safety_message") : nullptr;

@@ -379,12 +379,12 @@ void MqttNode::on_message(const transport::MqttMessage& msg) {
     if (t.kind != mqtt::TopicKind::kFleetEstop || !is_estop_message(*body)) return;
     standing = true;
   }
-  submit(std::move(body).value(), msg.topic, reply_topic, fleet_id, fleet_mode, standing);
+  submit(std::move(body).value(), msg.topic, reply_topic, fleet_id, fleet_mode, standing, msg.qos);
 }
 
 void MqttNode::submit(json::Value body, const std::string& route, const std::string& reply_topic,
                       const std::string& fleet_id, const std::string& fleet_mode,
-                      bool standing_estop) {
+                      bool standing_estop, int qos) {
   const bool is_command = upper(str_field(body, "type")) == "COMMAND" ||
                           upper(str_field(body, "type")) == "FLEET_COMMAND" ||
                           field(body, "cmd") != nullptr;
@@ -396,6 +396,7 @@ void MqttNode::submit(json::Value body, const std::string& route, const std::str
   in.fleet_id = fleet_id;
   in.fleet_mode = fleet_mode;
   in.standing_estop = standing_estop;
+  in.mqtt_qos = qos;
   in.require_bound_key = opts_.mqtt.require_bound_tokens;
   in.may_commit_audit = true;  // the client's network thread: this robot's connection alone
   in.received_mono_us = steady_us();

@@ -79,7 +79,8 @@ class MqttNode {
   void on_connection(bool up, int code);
   void tick_channel(int64_t now_mono_ms);
   void submit(json::Value body, const std::string& route, const std::string& reply_topic,
-              const std::string& fleet_id, const std::string& fleet_mode, bool standing_estop);
+              const std::string& fleet_id, const std::string& fleet_mode, bool standing_estop,
+              int qos);
   void publish_json(const std::string& topic, const json::Value& v, int qos, bool retain);
   void publish_status(bool online, const std::string& reason);
   void warn_about_exposure() const;

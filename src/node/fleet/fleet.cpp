@@ -30,6 +30,7 @@ class FleetStage final : public Stage {
     const auto& cfg = fleet->config;
     ctx->audit_detail.set("fleet_id", cfg.fleet_id);
     if (!ctx->in.fleet_mode.empty()) ctx->audit_detail.set("fleet_mode", ctx->in.fleet_mode);
+    if (ctx->in.mqtt_qos >= 0) ctx->audit_detail.set("mqtt_qos", ctx->in.mqtt_qos);
     if (const json::Value* step = m.payload.find("step"); step != nullptr && step->is_int())
       ctx->audit_detail.set("fleet_step", step->as_int());
     if (std::string cid = payload_string(m, "choreography_id"); !cid.empty() && cid.size() <= 64)

@@ -52,6 +52,7 @@ struct Ingress {
   std::string fleet_id;         // MQTT: the fleet topic it came in on (empty: not a fleet topic)
   std::string fleet_mode;       // MQTT: "broadcast", "individual" or "estop" (docs/FLEET.md)
   bool standing_estop = false;  // MQTT: the retained fleet ESTOP, obeyed whatever its age
+  int mqtt_qos = -1;            // MQTT: the QoS the broker delivered it at (-1: not MQTT)
   // A shared channel (MQTT): the token must be bound to a key (cnf) and the message signed by
   // it, or a reader of the channel could send messages of their own with a copied token.
   bool require_bound_key = false;
