@@ -16,6 +16,7 @@
 #include <memory>
 #include <string>
 #include <thread>
+#include <tuple>
 #include <vector>
 
 #include "base/clock.h"
@@ -260,6 +261,30 @@ ino_t inode_of(const std::string& path) {
   return ::stat(path.c_str(), &st) == 0 ? st.st_ino : 0;
 }
 
+// An ESTOP whose latch file is written on this thread once its answer is awaited (the
+// persister's retry would otherwise answer a waiter that came late, with its own error): its
+// state sequence and the answer (durable, and why not).
+struct HereLatch {
+  uint64_t seq = 0;
+  bool answered = false, durable = false;
+  std::string error;
+};
+HereLatch latch_here(SafetyRig& r) {
+  auto e = r.core->estop("http", "button", 0, false);
+  std::promise<std::pair<bool, std::string>> answered;
+  r.core->when_persisted(e.state_seq, [&](bool d, const std::string& why) {
+    answered.set_value({d, why});
+  });
+  r.core->persist_here_if_idle();
+  auto got = answered.get_future();
+  HereLatch out;
+  out.seq = e.state_seq;
+  if (got.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return out;
+  out.answered = true;
+  std::tie(out.durable, out.error) = got.get();
+  return out;
+}
+
 // The in-place latch whose fdatasync fails: not durable, answered so with the sync's error,
 // and the retry writes the file whole (a new inode: what the failed write left is not trusted).
 TEST(SafetyLatchFile, AnInPlaceLatchWhoseSyncFailsIsNotDurableAndIsWrittenWholeOnRetry) {
@@ -271,22 +296,13 @@ TEST(SafetyLatchFile, AnInPlaceLatchWhoseSyncFailsIsNotDurableAndIsWrittenWholeO
   const ino_t started = inode_of(f);
   ASSERT_NE(started, 0u);
   env.fail_after(2);  // the page's write goes through, its fdatasync fails
-  // Written on this thread once the answer is awaited (the persister's retry would otherwise
-  // answer a waiter that came late, with its own error).
-  auto e = r.core->estop("http", "button", 0, false);
-  std::promise<std::pair<bool, std::string>> answered;
-  r.core->when_persisted(e.state_seq, [&](bool d, const std::string& why) {
-    answered.set_value({d, why});
-  });
-  r.core->persist_here_if_idle();
-  auto got = answered.get_future();
-  ASSERT_EQ(got.wait_for(std::chrono::seconds(0)), std::future_status::ready);
-  auto [durable, error] = got.get();
-  EXPECT_FALSE(durable);
-  EXPECT_NE(error.find("injected fault: sync"), std::string::npos) << error;
+  const HereLatch l = latch_here(r);
+  ASSERT_TRUE(l.answered);
+  EXPECT_FALSE(l.durable);
+  EXPECT_NE(l.error.find("injected fault: sync"), std::string::npos) << l.error;
   EXPECT_FALSE(r.core->status().persisted);
   env.fail_after(0);
-  ASSERT_TRUE(r.core->wait_persisted(e.state_seq, 5000));
+  ASSERT_TRUE(r.core->wait_persisted(l.seq, 5000));
   EXPECT_NE(inode_of(f), started);
   EXPECT_TRUE(says_latched(f));
   EXPECT_EQ(test::read_file(f).size(), 4096u);
@@ -315,16 +331,9 @@ TEST(SafetyLatchFile, AnInPlaceLatchOverAFileReplacedMeanwhileIsWrittenWholeAtOn
   SafetyRig r;
   ASSERT_TRUE(r.core->open(dir.path(), &env).ok());
   ASSERT_FALSE(says_latched(f));
-  auto e = r.core->estop("http", "button", 0, false);
-  std::promise<std::pair<bool, std::string>> answered;
-  r.core->when_persisted(e.state_seq, [&](bool d, const std::string& why) {
-    answered.set_value({d, why});
-  });
-  r.core->persist_here_if_idle();
-  auto got = answered.get_future();
-  ASSERT_EQ(got.wait_for(std::chrono::seconds(0)), std::future_status::ready);
-  auto [durable, error] = got.get();
-  EXPECT_TRUE(durable) << error;
+  const HereLatch l = latch_here(r);
+  ASSERT_TRUE(l.answered);
+  EXPECT_TRUE(l.durable) << l.error;
   EXPECT_TRUE(says_latched(f));
   EXPECT_EQ(test::read_file(f).size(), 4096u);
 }
