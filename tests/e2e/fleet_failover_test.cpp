@@ -22,18 +22,6 @@ int64_t mono_ms() {
       .count();
 }
 
-// The audit records of `event` in a robot's log (GET /api/audit).
-std::vector<json::Value> audit_events(const Robot& r, const std::string& token,
-                                      const std::string& event) {
-  std::vector<json::Value> out;
-  json::Value all = parse(r.audit(token));
-  const json::Value* entries = all.get("entries");
-  if (entries == nullptr || !entries->is_array()) return out;
-  for (const auto& e : entries->as_array())
-    if (str_of(e, "event") == event) out.push_back(e);
-  return out;
-}
-
 // `mqtt.broker` as a YAML flow list of quoted URLs.
 std::string url_list(std::initializer_list<std::string> urls) {
   std::string out = "[";

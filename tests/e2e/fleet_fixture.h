@@ -263,6 +263,18 @@ class Robot {
   std::unique_ptr<test::Process> proc_;
 };
 
+// The audit records of `event` in a robot's log (GET /api/audit).
+inline std::vector<json::Value> audit_events(const Robot& r, const std::string& token,
+                                             const std::string& event) {
+  std::vector<json::Value> out;
+  json::Value all = parse(r.audit(token));
+  const json::Value* entries = all.get("entries");
+  if (entries == nullptr || !entries->is_array()) return out;
+  for (const auto& e : entries->as_array())
+    if (str_of(e, "event") == event) out.push_back(e);
+  return out;
+}
+
 class FleetTest : public ::testing::Test {
  protected:
   void SetUp() override {

@@ -127,6 +127,9 @@ TEST_F(FleetTest, RetainedFleetEstopIsObeyedByALateJoiner) {
   ASSERT_TRUE(ack);
   EXPECT_NE(json::dump(robots_["robot-c"]->status(fleet_token_)).find("\"estop_active\":true"),
             std::string::npos);
+  auto late = audit_events(*robots_["robot-c"], fleet_token_, "ESTOP");
+  ASSERT_FALSE(late.empty());
+  EXPECT_EQ(int_at(late.front(), {"detail", "mqtt_qos"}), 0);  // the retained copy, at QoS 0
   // A command is refused while latched.
   auto c = fleet({"command", "alpha", "move", "--params", R"({"linear":0.1,"duration_ms":100})",
                   "--members", "robot-c"});
@@ -1045,6 +1048,11 @@ TEST_F(NatsFleetTest, ARefusedPublishFailsEveryVerb) {
   for (const char* m : {"robot-a", "robot-b", "robot-c"}) {
     EXPECT_TRUE(latched(m)) << m;
     EXPECT_EQ(str_at(parse(e.out), {"members", m, "result"}), "acknowledged") << e.out;
+    // Delivered at the granted QoS: 1 (NATS grants a requested 2 at 1), 0 for robot-c.
+    auto estops = audit_events(*robots_[m], fleet_token_, "ESTOP");
+    ASSERT_FALSE(estops.empty()) << m;
+    EXPECT_EQ(int_at(estops.front(), {"detail", "mqtt_qos"}), std::string(m) == "robot-c" ? 0 : 1)
+        << m;
   }
   auto r = fleet_via(nats.url(0), {"resume", "alpha", "--qos", "1"});
   ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
