@@ -62,15 +62,17 @@ class Reader {
 
   const json::Value* get(std::string_view k) const { return o_.find(k); }
 
-  Result<std::optional<std::string>> str(std::string_view k, size_t max_len,
-                                         bool allow_null = false) const {
+  // The member's string, in place (null when absent): a signature or a token is copied once,
+  // into the message, not once more on the way.
+  Result<const std::string*> str(std::string_view k, size_t max_len,
+                                 bool allow_null = false) const {
     const json::Value* v = o_.find(k);
-    if (!v || (allow_null && v->is_null())) return std::optional<std::string>{};
+    if (!v || (allow_null && v->is_null())) return static_cast<const std::string*>(nullptr);
     if (!v->is_string()) return schema(std::string(k), std::string(k) + " must be a string");
     if (v->as_string().size() > max_len)
       return schema(std::string(k),
                     std::string(k) + " is longer than " + std::to_string(max_len) + " bytes");
-    return std::optional<std::string>{v->as_string()};
+    return &v->as_string();
   }
 
  private:
@@ -164,7 +166,7 @@ Result<AiBlock> read_ai(const json::Value& v) {
     auto s = r.str(key, 128, true);
     if (!s.ok())
       return schema(std::string("ai.") + key, std::string("ai.") + key + " must be a string");
-    *dest = *s;
+    *dest = *s ? std::optional<std::string>(**s) : std::nullopt;
   }
   if (const json::Value* c = o.find("confidence"); c && !c->is_null()) {
     if (!c->is_number()) return schema("ai.confidence", "ai.confidence must be a number");
