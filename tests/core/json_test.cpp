@@ -7,6 +7,8 @@
 #include <cstring>
 #include <fstream>
 #include <sstream>
+#include <utility>
+#include <vector>
 
 #include "rcan/hash.h"
 #include "test_support.h"
@@ -105,6 +107,44 @@ TEST(Writers, EscapesBetweenRunsOfPlainCharacters) {
   EXPECT_EQ(back->as_string(), s);
   EXPECT_EQ(dump(Value(std::string("\\"))), R"("\\")");
   EXPECT_EQ(dump(Value(std::string("x"))), R"("x")");
+}
+
+// Plain runs are found eight bytes at a time. Every character that ends a run (and its
+// neighbours in value, which do not), at every offset of a word and at both ends of strings
+// around a word's length, is written and parsed back as one byte at a time would; a raw control
+// character anywhere is refused by the parser.
+TEST(Writers, EveryEndOfAPlainRunAtEveryOffsetOfAWord) {
+  const std::vector<std::pair<std::string, std::string>> chars = {{"\"", R"(\")"},
+                                                                  {"\\", R"(\\)"},
+                                                                  {"\n", R"(\n)"},
+                                                                  {"\x01", R"(\u0001)"},
+                                                                  {"\x1f", R"(\u001f)"},
+                                                                  {"\xc3\xa9", "\xc3\xa9"},
+                                                                  {"\x7f", "\x7f"},
+                                                                  {" ", " "},
+                                                                  {"!", "!"},
+                                                                  {"#", "#"},
+                                                                  {"[", "["},
+                                                                  {"]", "]"}};
+  for (size_t len : {0, 1, 7, 8, 9, 15, 16, 17, 24, 33}) {
+    for (size_t at = 0; at <= len; ++at) {
+      for (const auto& [raw, escaped] : chars) {
+        const std::string s = std::string(at, 'a') + raw + std::string(len - at, 'b');
+        const std::string want =
+            "\"" + std::string(at, 'a') + escaped + std::string(len - at, 'b') + "\"";
+        EXPECT_EQ(dump(Value(s)), want) << "at " << at << " of " << len;
+        auto back = parse(want);
+        ASSERT_TRUE(back.ok()) << want;
+        EXPECT_EQ(back->as_string(), s);
+      }
+      const std::string with_control =
+          "\"" + std::string(at, 'a') + "\x01" + std::string(len - at, 'b') + "\"";
+      EXPECT_FALSE(parse(with_control).ok()) << "at " << at << " of " << len;
+      // A byte that is not UTF-8 is written as the code point of its value.
+      EXPECT_EQ(dump(Value(std::string(at, 'a') + "\x80" + std::string(len - at, 'b'))),
+                "\"" + std::string(at, 'a') + "\xc2\x80" + std::string(len - at, 'b') + "\"");
+    }
+  }
 }
 
 TEST(PythonDumps, DefaultSeparatorsAndEnsureAscii) {
