@@ -107,12 +107,12 @@ extern "C" int mallctl(const char*, void*, size_t*, void*, size_t) __attribute__
 namespace {
 
 // The network thread allocates without jemalloc's per-thread cache. A fleet ESTOP is handled on
-// this thread, and with the cache every ESTOP of a robot's first dozen or so took pages never
-// touched before (the cache takes objects from the arena in batches and hands them back later,
-// so the thread's next batch comes from fresh pages): 6-7 page faults per ESTOP after the first,
-// about 40 in the first, measured by bench/fleet_bench. Without it, the thread reuses the pages
-// its last message freed. The HTTP threads keep their caches: a command over HTTP costs a
-// quarter more CPU without one (bench/load_bench), and this thread's traffic is the fleet's.
+// this thread; with the cache (which takes objects from the arena in batches and hands them back
+// later) a robot's first ESTOP took about 40 page faults and each of the next ones 6-7, writing
+// pages never touched before; without it, 18-22 and then 2-4 (bench/fleet_bench, 1,000 light
+// members). The first ESTOP after a start costs about 15 % less CPU; later ones about the same,
+// as each allocation then takes the arena's lock. The HTTP threads keep their caches: a command
+// over HTTP costs a quarter more CPU without one (bench/load_bench).
 void no_thread_cache() {
   if (mallctl == nullptr) return;
   bool enabled = false;
