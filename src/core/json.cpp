@@ -234,8 +234,8 @@ size_t decode_utf8(std::string_view s, size_t i, uint32_t& cp) {
   return len;
 }
 
-// The index of the first byte in s[i, stop) that a JSON string does not carry as it is: a
-// quote, a backslash, a control character, or a byte of a multi-byte UTF-8 sequence (which the
+// The index (i <= stop) of the first byte in s[i, stop) that a JSON string does not carry as it is:
+// a quote, a backslash, a control character, or a byte of a multi-byte UTF-8 sequence (which the
 // callers check one sequence at a time); `stop` when there is none. Eight bytes at a time: a
 // fleet message's token and signature are some KiB of base64 with nothing to escape. Each test
 // below is exact about whether such a byte is in the word (the borrow of a subtraction only

@@ -55,15 +55,15 @@ Error missing(std::string field, std::string msg) {
                "missing_field");
 }
 
-// Typed field readers: absent → nullopt (ok); wrong type → error.
+// Typed field readers: absent (or null, where allowed) → null (ok); wrong type → error.
 class Reader {
  public:
   explicit Reader(const json::Object& o) : o_(o) {}
 
   const json::Value* get(std::string_view k) const { return o_.find(k); }
 
-  // The member's string, in place (null when absent): a signature or a token is copied once,
-  // into the message, not once more on the way.
+  // The member's string, in place: null when absent (or JSON null, with `allow_null`). A token
+  // or a signature is then copied once, into the message, not once more on the way.
   Result<const std::string*> str(std::string_view k, size_t max_len,
                                  bool allow_null = false) const {
     const json::Value* v = o_.find(k);
@@ -269,7 +269,7 @@ Status read_common(const json::Object& o, Message& m, const CodecLimits& lim) {
     if (const json::Value* s = o.find(member); s && !s->is_null()) {
       auto sig = read_sig(o, member);
       if (!sig.ok()) return sig.error();
-      m.sig = *sig;
+      m.sig = std::move(*sig);
       break;
     }
   }
@@ -285,7 +285,7 @@ Status read_ai_blocks(const json::Object& o, Message& m) {
   if (ai && !ai->is_null()) {
     auto a = read_ai(*ai);
     if (!a.ok()) return a.error();
-    m.ai = *a;
+    m.ai = std::move(*a);
   }
   return Status::Ok();
 }

@@ -109,10 +109,14 @@ namespace {
 // The network thread allocates without jemalloc's per-thread cache. A fleet ESTOP is handled on
 // this thread; with the cache (which takes objects from the arena in batches and hands them back
 // later) a robot's first ESTOP took about 40 page faults and each of the next ones 6-7, writing
-// pages never touched before; without it, 18-22 and then 2-4 (bench/fleet_bench, 1,000 light
-// members). The first ESTOP after a start costs about 15 % less CPU; later ones about the same,
-// as each allocation then takes the arena's lock. The HTTP threads keep their caches: a command
-// over HTTP costs a quarter more CPU without one (bench/load_bench).
+// pages never touched before; without it, 21-22 and then 2-6 (bench/fleet_bench, 1,000 light
+// members, together with the JSON and decoding savings of the same change: the first ESTOP
+// after a start 12-16 % less CPU, later ones about the same). Every other message that comes in
+// over MQTT (a command on the robot's own topic, a fleet broadcast, swarm traffic) is handled
+// here too, and each allocation now takes a lock of its arena's bins: over HTTP a command costs
+// a quarter more CPU without a cache (bench/load_bench), which is why the HTTP threads keep
+// theirs. An MQTT command's cost was not measured. (A jemalloc built with a symbol prefix
+// exports je_mallctl: then this does nothing.)
 void no_thread_cache() {
   if (mallctl == nullptr) return;
   bool enabled = false;

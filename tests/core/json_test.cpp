@@ -140,9 +140,32 @@ TEST(Writers, EveryEndOfAPlainRunAtEveryOffsetOfAWord) {
       const std::string with_control =
           "\"" + std::string(at, 'a') + "\x01" + std::string(len - at, 'b') + "\"";
       EXPECT_FALSE(parse(with_control).ok()) << "at " << at << " of " << len;
-      // A byte that is not UTF-8 is written as the code point of its value.
+      // A byte that is not UTF-8 is refused by the parser and written as the code point of its
+      // value.
+      EXPECT_FALSE(
+          parse("\"" + std::string(at, 'a') + "\x80" + std::string(len - at, 'b') + "\"").ok())
+          << "at " << at << " of " << len;
       EXPECT_EQ(dump(Value(std::string(at, 'a') + "\x80" + std::string(len - at, 'b'))),
                 "\"" + std::string(at, 'a') + "\xc2\x80" + std::string(len - at, 'b') + "\"");
+    }
+  }
+}
+
+// The string size limit bounds the word-at-a-time scan: a string of exactly the limit is
+// accepted and one byte more refused, at every alignment of the string in the document.
+TEST(JsonParse, StringLimitHoldsAtEveryAlignment) {
+  for (size_t limit : {7, 8, 9, 16, 17}) {
+    ParseOptions o;
+    o.max_string_bytes = limit;
+    for (size_t pad = 0; pad < 8; ++pad) {
+      const std::string at_limit =
+          "[" + std::string(pad, ' ') + "\"" + std::string(limit, 'a') + "\"]";
+      auto ok = parse(at_limit, o);
+      ASSERT_TRUE(ok.ok()) << "limit " << limit << " pad " << pad;
+      EXPECT_EQ(ok->as_array()[0].as_string(), std::string(limit, 'a'));
+      const std::string over =
+          "[" + std::string(pad, ' ') + "\"" + std::string(limit + 1, 'a') + "\"]";
+      EXPECT_FALSE(parse(over, o).ok()) << "limit " << limit << " pad " << pad;
     }
   }
 }
