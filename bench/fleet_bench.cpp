@@ -821,6 +821,7 @@ struct Results {
   double estop_broker_cpu_ms = 0;  // the broker process(es), same window
   double idle_share = 0;           // CPU seconds per second of the idle fleet
   std::map<std::string, ThreadCounts> estop_threads;  // summed over the ESTOP rounds
+  double status_net_cpu_ms = 0;  // broadcast `status`, publish to last ACK, less idle
   int failures = 0;
 };
 
@@ -900,6 +901,8 @@ void estop_round(const Fleet& f, Coordinator& coord, int round, Results& res) {
 }
 
 // After a round's ESTOP: RESUME, then a broadcast `status` and a short `move`.
+// After a round's ESTOP: RESUME, then a broadcast `status` (its CPU measured like the ESTOP's,
+// less the idle fleet's, the coordinator included: an MQTT command's cost) and a short `move`.
 void resume_and_command(const Fleet& f, Coordinator& coord, Results& res) {
   const size_t n = f.size();
   double t0 = 0;
@@ -911,10 +914,12 @@ void resume_and_command(const Fleet& f, Coordinator& coord, Results& res) {
       rid, f.opt.publish_qos(), true, n, &t0, 10000, &errors);
   res.failures += errors + static_cast<int>(n - acks.size());
   std::string sid = new_uuid_v4();
+  const double cpu0 = cpu_now(), w0 = mono_ms();
   acks = coord.round(
       "rcan/fleet/bench/cmd",
       f.message("FLEET_COMMAND", json::Object{{"command", "status"}, {"fleet_id", "bench"}}, sid),
       sid, 1, false, n, &t0, 10000, &errors);
+  res.status_net_cpu_ms += (cpu_now() - cpu0) * 1000 - res.idle_share * (mono_ms() - w0);
   for (auto& [m, t] : acks) res.status_ack.push_back(t - t0);
   res.failures += errors + static_cast<int>(n - acks.size());
   std::string mid = new_uuid_v4();
@@ -953,6 +958,9 @@ void print_report(const Fleet& f, const Results& res) {
       "us per robot\n",
       (res.estop_net_cpu_ms - coord_ms) / rounds,
       (res.estop_net_cpu_ms - coord_ms) * 1000 / rounds / robots_n);
+  std::printf(
+      "broadcast status CPU less the idle fleet's (coordinator included): %.0f us per robot\n",
+      res.status_net_cpu_ms * 1000 / rounds / robots_n);
   std::printf(
       "broker CPU (all broker processes, same window): %.1f ms per round, %.0f us per robot\n",
       res.estop_broker_cpu_ms / rounds, res.estop_broker_cpu_ms * 1000 / rounds / robots_n);
