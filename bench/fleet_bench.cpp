@@ -21,6 +21,7 @@
 //               [--perf-ctl FIFO --profile-round N] [--warm-up 0|1]
 //               [--nats-consumers replicated|memory] [--ramp N] [--reply-qos 0|1]
 //               [--coordinator-alg ed25519|ml-dsa-65] [--members node|transport]
+//               [--robot-dir DIR] [--preallocate 0|1]
 //
 // --broker nats: a cluster of --nats-nodes nats-server processes (MQTT listener, JetStream,
 // routes between them, docs/FLEET.md §Running on NATS); robot i connects to node i mod N, the
@@ -38,6 +39,14 @@
 // --light 1: light members, so that 1,000 fit on a small machine: each robot's audit log keeps
 // its records, chain and fsyncs but preallocates nothing (a preallocated segment per robot is
 // 1,000 zero-filled files written while measuring) and writes its index inline.
+//
+// --robot-dir DIR: the robots' latch files and audit logs go under DIR (the brokers' files stay
+// in the temporary directory). `--robot-dir /dev/shm` puts them in memory, where fdatasync
+// costs nothing: not a configuration that keeps a latch or a record, but the measure of what the
+// two durable writes of an ESTOP cost on this machine's disk (the difference between the runs).
+//
+// --preallocate 0|1: each audit segment zero-filled before use (rcand's default) or not,
+// whatever --light says.
 //
 // --coordinator-alg ml-dsa-65: the coordinator signs with ML-DSA-65 (its fleet token binds that
 // key) instead of Ed25519; the robots verify an ML-DSA-65 signature instead of an Ed25519 one.
@@ -356,6 +365,8 @@ struct Options {
   int ramp = 0;  // 0: every robot at once
   int reply_qos = 1;
   std::string coordinator_alg = "ed25519";
+  std::string robot_dir;  // where the robots' state goes; empty: with the brokers' files
+  int preallocate = -1;   // the audit segments zero-filled: -1 as --light says, 0 no, 1 yes
   int publish_qos() const { return broker == "nats" ? 1 : 2; }
 };
 
@@ -404,20 +415,25 @@ bool parse_options(int argc, char** argv, Options& o) {
       o.reply_qos = qos_arg(argv[i + 1]);
     else if (a == "--coordinator-alg")
       o.coordinator_alg = argv[i + 1];
+    else if (a == "--robot-dir")
+      o.robot_dir = argv[i + 1];
+    else if (a == "--preallocate")
+      o.preallocate = std::atoi(argv[i + 1]);
   }
   if (o.robots_n < 1 || o.robots_n > 2000 || o.rounds < 1 || o.rounds > 1000 ||
       o.segment_bytes < (64u << 10) || (o.estop_qos < 0 || o.estop_qos > 2) ||
       (o.broker != "mosquitto" && o.broker != "nats") || o.nats_nodes < 1 || o.nats_nodes > 5 ||
       (o.nats_consumers != "replicated" && o.nats_consumers != "memory") || o.ramp < 0 ||
       (o.reply_qos != 0 && o.reply_qos != 1) || (o.members != "node" && o.members != "transport") ||
-      (o.coordinator_alg != "ed25519" && o.coordinator_alg != "ml-dsa-65")) {
+      (o.coordinator_alg != "ed25519" && o.coordinator_alg != "ml-dsa-65") || o.preallocate < -1 ||
+      o.preallocate > 1) {
     std::fprintf(stderr,
                  "usage: fleet_bench [--robots 1..2000] [--rounds 1..1000] [--estop-qos 0|1|2] "
                  "[--segment-kib N] [--broker mosquitto|nats] [--nats-nodes 1..5] [--light 0|1] "
                  "[--mosquitto PATH] [--nats-server PATH] [--perf-ctl FIFO --profile-round N] "
                  "[--warm-up 0|1] [--nats-consumers replicated|memory] [--ramp N] "
                  "[--reply-qos 0|1] [--coordinator-alg ed25519|ml-dsa-65] "
-                 "[--members node|transport]\n");
+                 "[--members node|transport] [--robot-dir DIR] [--preallocate 0|1]\n");
     return false;
   }
   return true;
@@ -427,6 +443,7 @@ bool parse_options(int argc, char** argv, Options& o) {
 struct Fleet {
   Options opt;
   fs::path dir;
+  fs::path robots_dir;  // each robot's latch file and audit log, under <robots_dir>/<member>
   std::vector<pid_t> brokers;
   std::vector<std::string> urls;  // one per broker node; the coordinator uses the first
   std::string url;
@@ -579,7 +596,7 @@ std::unique_ptr<Robot> start_robot(const Fleet& f, const config::FleetConfig& fc
   char dev[16];
   std::snprintf(dev, sizeof dev, "%08x", i + 1);
   std::string ruri = std::string("rcan://local.rcan/bench/sim/") + dev;
-  fs::path rd = f.dir / r->member;
+  fs::path rd = f.robots_dir / r->member;
   fs::create_directories(rd);
   node::SimRobotConfig sim;
   node::SafetyConfig sc;
@@ -600,6 +617,7 @@ std::unique_ptr<Robot> start_robot(const Fleet& f, const config::FleetConfig& fc
     ao.preallocate = false;
     ao.background_index = false;
   }
+  if (f.opt.preallocate >= 0) ao.preallocate = f.opt.preallocate == 1;
   auto log = audit::AuditLog::open((rd / "audit").string(), std::move(ao));
   if (!log.ok()) {
     std::fprintf(stderr, "audit log: %s\n", log.error().message.c_str());
@@ -999,6 +1017,7 @@ void stop_fleet(Fleet& f) {
   for (pid_t b : f.brokers) waitpid(b, nullptr, 0);
   std::error_code ec;
   fs::remove_all(f.dir, ec);
+  if (f.robots_dir != f.dir) fs::remove_all(f.robots_dir, ec);
 }
 
 }  // namespace
@@ -1024,6 +1043,10 @@ int main(int argc, char** argv) {
   signal(SIGPIPE, SIG_IGN);
   f.dir = fs::temp_directory_path() / ("fleet_bench_" + std::to_string(getpid()));
   fs::create_directories(f.dir);
+  f.robots_dir = f.opt.robot_dir.empty()
+                     ? f.dir
+                     : fs::path(f.opt.robot_dir) / ("fleet_bench_" + std::to_string(getpid()));
+  fs::create_directories(f.robots_dir);
   issue_fleet_token(f);
   if (!start_broker(f) || !start_robots(f)) {
     stop_fleet(f);
