@@ -722,6 +722,23 @@ TEST_F(FleetTest, SwarmLeaderFailoverAndJoinPolicy) {
   auto pending = w.wait([&](const Watcher::Msg& m) { return str_of(m.body, "reply_to") == jid; });
   ASSERT_TRUE(pending);
   EXPECT_EQ(str_of(pending->body, "type"), "PENDING_AUTH");
+  // The announce with the request pending raised the epoch: a replay of the swarm's own earlier
+  // announce (its MAC is valid, nothing pending in it) is stale, and the leader puts its state
+  // back. Were it of the same epoch, the leader would take it and forget the pending request,
+  // and the OWNER's approval below would be refused.
+  auto with_pending = w.wait([](const Watcher::Msg& m) {
+    return payload_str(m.body, "reason") == "join_pending" &&
+           json::dump(*m.body.get("payload")->get("pending")).find("robot-d") != std::string::npos;
+  });
+  ASSERT_TRUE(with_pending);
+  EXPECT_GT(with_pending->body.get("payload")->get("epoch")->as_int(),
+            first->body.get("payload")->get("epoch")->as_int());
+  w.publish("rcan/swarm/s42/announce", first->body);
+  auto put_back = w.wait([](const Watcher::Msg& m) {
+    return payload_str(m.body, "reason") == "superseded" &&
+           json::dump(*m.body.get("payload")->get("pending")).find("robot-d") != std::string::npos;
+  });
+  EXPECT_TRUE(put_back) << "the replayed announce was taken";
   std::string aid = new_uuid_v4();
   w.publish("rcan/swarm/s42/join",
             signed_msg(json::Object{{"type", "SWARM_APPROVE"},

@@ -367,7 +367,10 @@ void SwarmAgent::handle_join(const json::Value& body) {
     record(type, "ok", &*principal, "open");
     answer(member, "GRANTED", id, "open");
   } else if (cfg_.join_policy == "approval") {
-    pending_.insert(member);
+    // A new pending request changes the swarm's state, so it raises the epoch as every other
+    // change does: an announce of the same epoch then always says the same, and a replay of an
+    // earlier one (without the request) is stale, not taken (which forgot the request).
+    if (pending_.insert(member).second) ++epoch_;
     announce_locked("join_pending", "");
     lk.unlock();
     record(type, "ok", &*principal, "pending_approval");
