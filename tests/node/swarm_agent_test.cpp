@@ -180,5 +180,29 @@ TEST_F(SwarmAgentTest, ASilentLeaderIsReplacedByTheFirstLiveMember) {
   EXPECT_EQ(agents_["robot-c"]->state().get("payload")->get("epoch")->as_int(), 1);
 }
 
+// A member that cannot hear still beats (its leader, if it is one, is alive), but says so: the
+// others do not count it when they choose a new leader. Counted, it was chosen (robot-b is first
+// in byte order), and being deaf it never took over: robot-c followed a leader that never
+// announced, and the swarm had none until robot-b could hear again.
+TEST_F(SwarmAgentTest, AMemberThatCannotHearIsNotChosenToLead) {
+  for (const char* id : {"robot-a", "robot-b", "robot-c"}) member(id);
+  for (const char* id : {"robot-a", "robot-b", "robot-c"}) connect(id);
+  run(20, 50);
+  hearing_["robot-b"] = false;  // its subscriptions refused (a broker node failed over)
+  run(10, 50);
+  connected_["robot-a"] = false;  // then the leader dies
+  agents_["robot-a"]->on_disconnected();
+  run(60, 50);  // three leader timeouts
+  EXPECT_EQ(agents_["robot-c"]->leader(), "robot-c");
+  EXPECT_EQ(agents_["robot-c"]->state().get("payload")->get("epoch")->as_int(), 1);
+  EXPECT_EQ(agents_["robot-b"]->leader(), "robot-a");  // deaf: it has heard nothing of it
+  // Able to hear again, robot-b judges too, one timeout later; the swarm ends with one leader
+  // that both follow (ties of epoch go to the smaller id).
+  hearing_["robot-b"] = true;
+  run(60, 50);
+  EXPECT_EQ(agents_["robot-b"]->leader(), agents_["robot-c"]->leader());
+  EXPECT_NE(agents_["robot-c"]->leader(), "robot-a");
+}
+
 }  // namespace
 }  // namespace rcan::node

@@ -172,6 +172,10 @@ void SwarmAgent::on_message(const mqtt::InboundTopic& t, const json::Value& body
     }
     last_beat_ts_[t.member] = ts->as_int();
     last_seen_[t.member] = now;
+    if (const json::Value* h = body.get("hearing"); h != nullptr && h->is_bool() && !h->as_bool())
+      deaf_.insert(t.member);
+    else
+      deaf_.erase(t.member);
     return;
   }
   const json::Value* p = body.get("payload");
@@ -225,6 +229,7 @@ void SwarmAgent::tick(int64_t now, bool hearing) {
                                              {"member", cfg_.member_id},
                                              {"leader", leader_},
                                              {"epoch", static_cast<int64_t>(epoch_)},
+                                             {"hearing", hearing},
                                              {"timestamp_ms", svc_.clock.wall_ms()}})),
              0, false);
   }
@@ -241,14 +246,15 @@ void SwarmAgent::tick(int64_t now, bool hearing) {
   auto it = last_seen_.find(leader_);
   int64_t seen = it == last_seen_.end() ? connected_since_ : it->second;
   if (now - seen <= static_cast<int64_t>(cfg_.leader_timeout_ms)) return;
-  // The deterministic rule: the first live member in byte order, other than the silent leader.
+  // The deterministic rule: the first live member in byte order, other than the silent leader
+  // and those that say they cannot hear (this one can: it is judging).
   std::string next;
   for (const auto& m : members_) {
     if (m == leader_) continue;
     auto s = last_seen_.find(m);
     bool live =
-        m == cfg_.member_id ||
-        (s != last_seen_.end() && now - s->second <= static_cast<int64_t>(cfg_.leader_timeout_ms));
+        m == cfg_.member_id || (deaf_.count(m) == 0 && s != last_seen_.end() &&
+                                now - s->second <= static_cast<int64_t>(cfg_.leader_timeout_ms));
     if (live) {
       next = m;
       break;

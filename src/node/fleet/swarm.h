@@ -109,6 +109,9 @@ class SwarmAgent {
   int64_t connected_since_ GUARDED_BY(mu_) = -1;  // -1: no connection callback yet
   bool hearing_ GUARDED_BY(mu_) = false;          // heard since the silence clocks last started
   std::map<std::string, int64_t> last_beat_ts_ GUARDED_BY(mu_);  // member → its heartbeat's ms
+  // Members whose last heartbeat said they cannot hear: alive (a leader among them still leads)
+  // but never chosen to lead, since they would not learn that they had been.
+  std::set<std::string> deaf_ GUARDED_BY(mu_);
   uint64_t dropped_ GUARDED_BY(mu_) = 0;
   int64_t drop_logged_mono_ GUARDED_BY(mu_) = -1;
   int64_t reannounced_mono_ GUARDED_BY(mu_) = -1;
