@@ -2,6 +2,7 @@
 // bus (tests/e2e/fleet_mqtt_test.cpp runs the same over a broker, with rcand).
 #include <gtest/gtest.h>
 
+#include <fstream>
 #include <map>
 #include <memory>
 #include <string>
@@ -22,7 +23,7 @@ class SwarmAgentTest : public test_node::InProcessNode {
   // A member of the swarm {robot-a, robot-b, robot-c} led by robot-a; what it publishes reaches
   // every other member that is connected and hears, as a broker would deliver it (after the
   // publisher's call has returned: deliver()).
-  SwarmAgent& member(const std::string& id) {
+  SwarmAgent& member(const std::string& id, const std::string& state_file = "") {
     config::SwarmConfig cfg;
     cfg.swarm_id = kSwarm;
     cfg.member_id = id;
@@ -34,7 +35,9 @@ class SwarmAgentTest : public test_node::InProcessNode {
         *services_, cfg, std::string(40, 'k'), kPrefix,
         [this, id](const std::string& topic, const json::Value& body, int, bool) {
           queued_.push_back({id, topic, body});
-        });
+          published_.push_back({id, topic, body});
+        },
+        true, state_file);
     connected_[id] = false;
     hearing_[id] = true;
     return *(agents_[id] = std::move(agent));
@@ -76,6 +79,7 @@ class SwarmAgentTest : public test_node::InProcessNode {
   std::map<std::string, bool> connected_;
   std::map<std::string, bool> hearing_;  // its subscriptions are granted
   std::vector<Sent> queued_;
+  std::vector<Sent> published_;  // everything, in order
 };
 
 // The MQTT client reports its connection up before its connection callback has run, and the
@@ -202,6 +206,45 @@ TEST_F(SwarmAgentTest, AMemberThatCannotHearIsNotChosenToLead) {
   run(60, 50);
   EXPECT_EQ(agents_["robot-b"]->leader(), agents_["robot-c"]->leader());
   EXPECT_NE(agents_["robot-c"]->leader(), "robot-a");
+}
+
+// A member that restarts keeps the swarm's state it knew (its state file, rcand's
+// <data_dir>/swarm.json): an announce of an earlier epoch — a captured one replayed once the
+// broker no longer holds the retained announce — is still stale, not taken. Without it the
+// member came back at epoch 0 under the configured leader and took the replay.
+TEST_F(SwarmAgentTest, ARestartedMemberKeepsItsEpochAndTakesNoEarlierAnnounce) {
+  const std::string file = dir_.file("swarm-c.json");
+  member("robot-a");
+  member("robot-b");
+  member("robot-c", file);
+  for (const char* id : {"robot-a", "robot-b", "robot-c"}) connect(id);
+  run(20, 50);
+  const Sent first = published_.front();  // robot-a's announce at epoch 0
+  ASSERT_EQ(first.from, "robot-a");
+  ASSERT_EQ(first.body.get("type")->as_string(), "SWARM_ANNOUNCE");
+  connected_["robot-a"] = false;
+  agents_["robot-a"]->on_disconnected();
+  run(40, 50);
+  ASSERT_EQ(agents_["robot-c"]->leader(), "robot-b");
+
+  agents_.erase("robot-c");  // restarted
+  SwarmAgent& c = member("robot-c", file);
+  EXPECT_EQ(c.leader(), "robot-b");
+  EXPECT_EQ(c.state().get("payload")->get("epoch")->as_int(), 1);
+  c.on_connected(clock_.mono_ms());
+  c.on_message(mqtt::parse_topic(kPrefix, first.topic), first.body, clock_.mono_ms());
+  EXPECT_EQ(c.leader(), "robot-b");
+  EXPECT_EQ(c.state().get("payload")->get("epoch")->as_int(), 1);
+
+  // Another member's state, or a file that does not parse, is not taken: the configured start.
+  const std::string other = dir_.file("swarm-b.json");
+  agents_.erase("robot-b");
+  member("robot-b", other);
+  agents_.erase("robot-c");
+  EXPECT_EQ(member("robot-c", other).state().get("payload")->get("epoch")->as_int(), 0);
+  { std::ofstream(other, std::ios::trunc) << "{not json"; }
+  agents_.erase("robot-c");
+  EXPECT_EQ(member("robot-c", other).leader(), "robot-a");
 }
 
 }  // namespace

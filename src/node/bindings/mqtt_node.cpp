@@ -148,7 +148,8 @@ Status MqttNode::start() {
         [this](const std::string& topic, const json::Value& body, int qos, bool retain) {
           publish_json(topic, body, qos, retain);
         },
-        mq.require_bound_tokens);
+        mq.require_bound_tokens,
+        svc_.settings.state_dir.empty() ? "" : svc_.settings.state_dir + "/swarm.json");
     for (const auto& f : swarm_->subscriptions()) client_->subscribe(f, 1);
   }
   client_->on_message([this](const transport::MqttMessage& m) { on_message(m); });

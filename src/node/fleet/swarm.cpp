@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "base/log.h"
+#include "base/state_file.h"
 #include "node/services/node_services.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
@@ -30,15 +31,69 @@ std::string mac_of(const std::string& secret, const std::string& swarm_id,
 }  // namespace
 
 SwarmAgent::SwarmAgent(NodeServices& svc, config::SwarmConfig cfg, std::string secret,
-                       std::string prefix, Publish publish, bool require_bound_tokens)
+                       std::string prefix, Publish publish, bool require_bound_tokens,
+                       std::string state_file)
     : svc_(svc),
       cfg_(std::move(cfg)),
       topics_(mqtt::swarm_topics(prefix, cfg_.swarm_id)),
       publish_(std::move(publish)),
       require_bound_tokens_(require_bound_tokens),
+      state_file_(std::move(state_file)),
       secret_(std::move(secret)) {
+  MutexLock lk(mu_);
   members_.insert(cfg_.members.begin(), cfg_.members.end());
   leader_ = cfg_.leader;
+  restore_locked();
+}
+
+void SwarmAgent::restore_locked() {
+  if (state_file_.empty()) return;
+  auto v = read_state_file(state_file_);
+  if (!v.ok()) {
+    if (v.error().code != ErrorCode::kNotFound)
+      log(LogLevel::kWarn, "swarm_state_unreadable",
+          json::Object{{"file", state_file_}, {"error", v.error().message}});
+    return;
+  }
+  const json::Value* ep = v->is_object() ? v->get("epoch") : nullptr;
+  const json::Value* mem = v->is_object() ? v->get("members") : nullptr;
+  const std::string leader = v->is_object() ? json::string_field(*v, "leader") : "";
+  std::set<std::string> members;
+  if (mem != nullptr && mem->is_array())
+    for (const auto& m : mem->as_array())
+      if (m.is_string() && mqtt::valid_topic_segment(m.as_string())) members.insert(m.as_string());
+  if (!v->is_object() || json::string_field(*v, "swarm_id") != cfg_.swarm_id ||
+      json::string_field(*v, "member_id") != cfg_.member_id || ep == nullptr || !ep->is_int() ||
+      ep->as_int() < 0 || members.count(leader) == 0 || members.size() > 1024) {
+    log(LogLevel::kWarn, "swarm_state_ignored",
+        json::Object{{"file", state_file_}, {"reason", "not this member's swarm state"}});
+    return;
+  }
+  epoch_ = static_cast<uint64_t>(ep->as_int());
+  leader_ = leader;
+  members_.insert(members.begin(), members.end());
+  if (const json::Value* pend = v->get("pending"); pend != nullptr && pend->is_array())
+    for (const auto& m : pend->as_array())
+      if (m.is_string() && mqtt::valid_topic_segment(m.as_string())) pending_.insert(m.as_string());
+  persist_locked();  // the configured members added to what it held
+}
+
+void SwarmAgent::persist_locked() {
+  if (state_file_.empty()) return;
+  json::Value doc(json::Object{{"swarm_id", cfg_.swarm_id},
+                               {"member_id", cfg_.member_id},
+                               {"epoch", static_cast<int64_t>(epoch_)},
+                               {"leader", leader_},
+                               {"members", to_array(members_)},
+                               {"pending", to_array(pending_)}});
+  std::string text = json::dump(doc);
+  if (text == persisted_) return;
+  if (Status st = write_state_file(state_file_, doc); !st.ok()) {
+    log(LogLevel::kError, "swarm_state_write_failed",
+        json::Object{{"file", state_file_}, {"error", st.error().message}});
+    return;
+  }
+  persisted_ = std::move(text);
 }
 
 std::vector<std::string> SwarmAgent::subscriptions() const {
@@ -122,6 +177,7 @@ void SwarmAgent::reannounce_locked(const std::string& reason, int64_t now) {
 }
 
 void SwarmAgent::announce_locked(const std::string& reason, const std::string& previous) {
+  persist_locked();  // before it is announced: a restart never falls back below what was said
   publish_(topics_.announce(), sealed(announce_body(reason, previous)), 1, true);
 }
 
@@ -214,6 +270,7 @@ void SwarmAgent::on_message(const mqtt::InboundTopic& t, const json::Value& body
   if (const json::Value* pend = p->get("pending"); pend != nullptr && pend->is_array())
     for (const auto& m : pend->as_array())
       if (m.is_string() && mqtt::valid_topic_segment(m.as_string())) pending_.insert(m.as_string());
+  persist_locked();
 }
 
 void SwarmAgent::tick(int64_t now, bool hearing) {
@@ -264,6 +321,7 @@ void SwarmAgent::tick(int64_t now, bool hearing) {
   std::string previous = leader_;
   leader_ = next;
   last_seen_[next] = now;
+  if (next != cfg_.member_id) persist_locked();  // else with its announce, at the new epoch
   log(LogLevel::kWarn, "swarm_leader_silent",
       json::Object{{"swarm_id", cfg_.swarm_id}, {"previous_leader", previous}, {"leader", next}});
   if (next == cfg_.member_id) {

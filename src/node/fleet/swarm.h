@@ -6,8 +6,9 @@
 //
 // Leader loss: when the leader has not been heard for leader_timeout_ms, every member applies
 // the same rule — the new leader is the first member, in byte order, among those heard within
-// the timeout (a member always counts itself) other than the silent leader. The member the
-// rule names takes over: it raises the epoch and announces (reason "leader_silent",
+// the timeout (a member always counts itself) other than the silent leader and those whose
+// heartbeat says they cannot hear (`hearing: false`: chosen, they would not learn it). The member
+// the rule names takes over: it raises the epoch and announces (reason "leader_silent",
 // previous_leader). An announce with a higher epoch (or an equal epoch and a smaller leader)
 // wins, so members converge after a partition.
 //
@@ -21,6 +22,9 @@
 // swarm's own. Anyone without the secret — another
 // fleet's robot, a client with the broker's credentials — can neither change the swarm's
 // members or leader nor keep a silent leader alive.
+//
+// Every change of the state raises the epoch (a pending join request too), so two announces of
+// one epoch say the same; the state is kept in a file (state_file) across restarts.
 //
 // Joins: SWARM_JOIN {member, auth_token, message_id, timestamp_ms} on <prefix>/swarm/<id>/join.
 // The leader alone answers, on <prefix>/swarm/<id>/join/<member>: the token must verify (as
@@ -52,8 +56,12 @@ class SwarmAgent {
 
   // `require_bound_tokens`: join and approval requests need a key-bound token and a signature
   // by its key (mqtt.require_bound_tokens), like every other message over MQTT.
+  // `state_file` ("" = not kept): the swarm's state as this member last knew it (epoch, leader,
+  // members, pending), written on every change and read back here, so that after a restart an
+  // announce of an earlier epoch (a replayed one, when the broker no longer holds the retained
+  // announce) is still stale. The configured members are kept too.
   SwarmAgent(NodeServices& svc, config::SwarmConfig cfg, std::string secret, std::string prefix,
-             Publish publish, bool require_bound_tokens = true);
+             Publish publish, bool require_bound_tokens = true, std::string state_file = "");
 
   // Topic filters to subscribe to; those a member must hear to judge its leader (announce and
   // heartbeats).
@@ -81,6 +89,9 @@ class SwarmAgent {
   json::Value announce_body(const std::string& reason, const std::string& previous) const
       REQUIRES(mu_);
   void announce_locked(const std::string& reason, const std::string& previous) REQUIRES(mu_);
+  // Writes the state file when the state differs from what it holds; read back at start.
+  void persist_locked() REQUIRES(mu_);
+  void restore_locked() REQUIRES(mu_);
   // The leader's answer to an announce it drops or finds stale: its own again, at most once a
   // second (two leaders holding different secrets, or a flood of replays, never loop).
   void reannounce_locked(const std::string& reason, int64_t now) REQUIRES(mu_);
@@ -97,6 +108,7 @@ class SwarmAgent {
   mqtt::SwarmTopics topics_;
   Publish publish_;
   const bool require_bound_tokens_;
+  const std::string state_file_;
   const std::string secret_;
 
   mutable Mutex mu_;
@@ -112,6 +124,7 @@ class SwarmAgent {
   // Members whose last heartbeat said they cannot hear: alive (a leader among them still leads)
   // but never chosen to lead, since they would not learn that they had been.
   std::set<std::string> deaf_ GUARDED_BY(mu_);
+  std::string persisted_ GUARDED_BY(mu_);  // what the state file holds
   uint64_t dropped_ GUARDED_BY(mu_) = 0;
   int64_t drop_logged_mono_ GUARDED_BY(mu_) = -1;
   int64_t reannounced_mono_ GUARDED_BY(mu_) = -1;
