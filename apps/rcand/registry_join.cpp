@@ -62,6 +62,22 @@ json::Array endpoints(const config::NodeConfig& cfg) {
   return eps;
 }
 
+// Whether the registry's record `rrn` holds `keys` (both public keys, as registered).
+Status same_keys(const Exchange& call, const std::string& rrn, const keys::RobotKeys& keys) {
+  auto got = call("GET", "/api/v1/robots/" + rrn, "", "");
+  if (!got.ok()) return link_error("registration: reading " + rrn + ": " + got.error().message);
+  if (got->status != 200) return link_error("registration: reading " + rrn + ": " + refusal(*got));
+  auto rec = json::parse(got->body);
+  if (!rec.ok() || !rec->is_object())
+    return link_error("registration: the registry's record " + rrn + " is not a JSON object");
+  if (json::string_field(*rec, "ed25519_public_key") != base64url_encode(keys.pub.ed25519_pk) ||
+      json::string_field(*rec, "mldsa65_public_key") != base64url_encode(keys.pub.mldsa65_pk))
+    return link_error("registration: the registry already holds this robot's names as " + rrn +
+                      " with other keys: not adopted (someone registered them first; the "
+                      "registry's admin must remove that record)");
+  return Status::Ok();
+}
+
 }  // namespace
 
 std::string stored_registry_rrn(const std::string& data_dir) {
@@ -111,6 +127,10 @@ Result<std::string> register_with_registry(const config::NodeConfig& cfg,
     return link_error("registration: " + refusal(*posted));
   auto answer = node::parse_registration_answer(posted->body);
   if (!answer.ok()) return link_error("registration: " + answer.error().message);
+  // A record that was there before is this robot's only if it holds this robot's keys
+  // (docs/THREATS.md T3): names registered first by someone else are not adopted.
+  if (answer->robot_key.empty())
+    if (Status s = same_keys(call, answer->rrn, keys); !s.ok()) return s.error();
   // The robot's own key comes once, with a new registration; a robot registered before (its
   // state lost) keeps refreshing with the registrant key.
   json::Object state{

@@ -117,6 +117,7 @@ Result<node::AuthOptions> auth_options(const config::NodeConfig& cfg, jwt::Trust
   auth.trust = std::move(trust);
   auth.verify.audience = cfg.ruri;
   auth.verify.fleet_ids = {cfg.ruri_parts.device_id, cfg.ruri, rrn};
+  auth.own_rrn = rrn;
   if (!cfg.fleet.fleet_id.empty()) {
     auth.verify.fleet_ids.push_back(cfg.fleet.member_id);
     // "fleet:<fleet_id>" in the claim names every member of the fleet: a token for a fleet of

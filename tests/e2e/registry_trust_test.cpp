@@ -174,22 +174,28 @@ class RegistryTrustTest : public ::testing::Test {
     const std::string url = lv.get("url")->as_string();
     port_ = static_cast<uint16_t>(std::stoi(url.substr(url.rfind(':') + 1)));
     ruri_ = lv.get("ruri")->as_string();
+    rrn_ = lv.get("rrn")->as_string();
   }
   void stop_rcand() { EXPECT_EQ(rcand_->stop(SIGTERM, 15000), 0) << rcand_->err(); }
 
+  // A token as the registry issues one for this robot (its RURI in aud, its RRN in rrn);
+  // `change` edits the claims first.
   std::string token(const RegistryKey& k, const std::string& jti, const std::string& sub = "ops",
-                    const std::string& aud = {}) {
+                    const std::string& aud = {},
+                    const std::function<void(json::Object&)>& change = {}) {
     auto key = jwt::SigningKey::ed25519_seed(k.seed);
     EXPECT_TRUE(key.ok());
     const int64_t now = now_s();
     json::Object claims{{"iss", registry_url_},
                         {"sub", sub},
                         {"aud", aud.empty() ? ruri_ : aud},
+                        {"rrn", rrn_},
                         {"role", "owner"},
                         {"scope", json::Array{"status", "control", "config"}},
                         {"jti", jti},
                         {"iat", now - 5},
                         {"exp", now + 3600}};
+    if (change) change(claims);
     auto t = jwt::issue(claims, *key, k.kid);
     EXPECT_TRUE(t.ok());
     return t.ok() ? *t : "";
@@ -219,7 +225,7 @@ class RegistryTrustTest : public ::testing::Test {
   }
 
   test::TempDir dir_;
-  std::string reg_dir_, data_, script_, registry_url_, ruri_;
+  std::string reg_dir_, data_, script_, registry_url_, ruri_, rrn_;
   uint16_t reg_port_ = 0, port_ = 0;
   RegistryKey k1_, k2_;
   std::unique_ptr<test::Process> registry_, rcand_;
@@ -258,6 +264,49 @@ TEST_F(RegistryTrustTest, RegistryTokenIsAcceptedAndARotatedKeyAfterOneEarlyFetc
   std::this_thread::sleep_for(std::chrono::milliseconds(500));
   EXPECT_EQ(count_requests("/.well-known/jwks.json"), fetches + 1);
   EXPECT_TRUE(has(audit_events(t2), "REGISTRY_KEYS_UPDATED"));
+}
+
+// docs/THREATS.md T1: the registry's token authority signs for every registrant of the
+// registry, so its signature alone says nothing about which robot a token is for. A token of
+// the registry must name this robot exactly — its RURI without a wildcard, and its RRN — or,
+// for a fleet token, list its RRN. Before the fix every one of these was accepted as OWNER.
+TEST_F(RegistryTrustTest, ARegistryTokenMustNameThisRobotExactlyByRuriAndRrn) {
+  start_registry();
+  start_rcand("");
+  ASSERT_FALSE(rrn_.empty());
+  EXPECT_EQ(status_code(token(k1_, "e0")), 200);
+  auto refused_with = [&](const std::string& tok, const std::string& reason) {
+    auto r = get("/api/audit?limit=1", tok);
+    EXPECT_EQ(r.status, 401) << r.body;
+    EXPECT_NE(r.body.find(reason), std::string::npos) << r.body;
+  };
+  // Wildcards that aud_matches() would take from a configured issuer.
+  for (const char* aud : {"rcan://*/*/*/*", "rcan://local.rcan/acme/rover/*", "rcan://*/acme/rover/0a1b2c3d"})
+    refused_with(token(k1_, std::string("e1") + aud, "mallory", aud), "aud_not_exact");
+  refused_with(token(k1_, "e2", "mallory", {},
+                     [&](json::Object& c) {
+                       c.set("aud", json::Array{"rcan://*/*/*/*", "rcan://fleet/other"});
+                     }),
+               "aud_not_exact");
+  // The exact RURI but another robot's RRN, or none.
+  refused_with(token(k1_, "e3", "mallory", {},
+                     [](json::Object& c) { c.set("rrn", "RRN-000000000777"); }),
+               "rrn_mismatch");
+  refused_with(token(k1_, "e4", "mallory", {}, [](json::Object& c) { c.erase("rrn"); }),
+               "rrn_mismatch");
+  // A fleet token of the registry lists this robot's RRN, not only its device id.
+  refused_with(token(k1_, "e5", "mallory", {},
+                     [&](json::Object& c) {
+                       c.erase("rrn");
+                       c.set("fleet", json::Array{"0a1b2c3d", ruri_, "RRN-000000000777"});
+                     }),
+               "fleet_mismatch");
+  EXPECT_EQ(status_code(token(k1_, "e6", "ops", {},
+                              [&](json::Object& c) {
+                                c.erase("rrn");
+                                c.set("fleet", json::Array{"RRN-000000000777", rrn_});
+                              })),
+            200);
 }
 
 TEST_F(RegistryTrustTest, MalformedJwksKeepsTheKeysInUse) {

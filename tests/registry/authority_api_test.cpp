@@ -69,10 +69,8 @@ Fixture setup(const RegistryDaemon& d) {
   s.registrant = str(body_of(k), "key");
   s.registrant_id = str(body_of(k), "id");
   auto reg = [&](const std::string& dev, const std::string& ruri, std::string& key) {
-    auto r = d.send("POST", "/api/v1/robots",
-                    R"({"manufacturer":"acme","model":"arm","version":"v1","device_id":")" + dev +
-                        R"(","metadata":{"ruri":")" + ruri + R"("}})",
-                    s.registrant);
+    auto r = d.register_proven(s.registrant, "acme", "arm", "v1", dev,
+                               R"({"ruri":")" + ruri + R"("})");
     EXPECT_EQ(r.status, 201) << r.body;
     key = str(body_of(r), "api_key");
     return str(body_of(r), "rrn");

@@ -8,7 +8,11 @@
 #include <string>
 #include <vector>
 
+#include "rcan/crypto/keys.h"
+#include "rcan/crypto/registry_proof.h"
+#include "rcan/encoding.h"
 #include "rcan/json.h"
+#include "rcan/registry.h"
 #include "test_support.h"
 
 namespace rcan::test {
@@ -40,6 +44,40 @@ class RegistryDaemon {
   const std::string& url() const { return url_; }
   uint16_t port() const { return port_; }
   const std::string& admin_key() const { return admin_; }
+
+  // Registers manufacturer/model/version/device with `key` as a robot does: a challenge, fresh
+  // identity keys (`keys`, when given, receives them) and their proof of possession, and
+  // `metadata` (a JSON object's text).
+  HttpReply register_proven(const std::string& key, const std::string& manufacturer,
+                            const std::string& model, const std::string& version,
+                            const std::string& device, const std::string& metadata = "{}",
+                            keys::RobotKeys* keys = nullptr) const {
+    auto ch = get("/api/v1/challenge");
+    EXPECT_EQ(ch.status, 200) << ch.body;
+    auto c = json::parse(ch.body);
+    auto k = keys::generate();
+    auto meta = json::parse(metadata);
+    if (!c.ok() || !k.ok() || !meta.ok()) {
+      ADD_FAILURE() << "challenge, keys or metadata: " << ch.body << " " << metadata;
+      return {};
+    }
+    const std::string id = json::string_field(*c, "challenge_id");
+    auto proof = registry::sign_proof(
+        *k, id,
+        registry::proof_message(id, json::string_field(*c, "nonce"), manufacturer, model, version,
+                                device));
+    EXPECT_TRUE(proof.ok());
+    json::Object body{{"manufacturer", manufacturer},
+                      {"model", model},
+                      {"version", version},
+                      {"device_id", device},
+                      {"metadata", *meta},
+                      {"ed25519_public_key", base64url_encode(k->pub.ed25519_pk)},
+                      {"mldsa65_public_key", base64url_encode(k->pub.mldsa65_pk)},
+                      {"proof", proof->to_json()}};
+    if (keys != nullptr) *keys = std::move(*k);
+    return send("POST", "/api/v1/robots", json::dump(json::Value(std::move(body))), key);
+  }
   Process& proc() { return proc_; }
 
   HttpReply get(const std::string& target, const std::string& key = {}) const {

@@ -46,6 +46,42 @@ void Authenticator::on_unknown_followed_key(std::string issuer, UnknownKey fn,
   introspected_ = std::move(introspected);
 }
 
+Status Authenticator::check_followed_claims(const jwt::Claims& c) const {
+  auto refused = [](std::string msg, const char* field, const char* reason) {
+    return Error(ErrorCode::kAuthInvalid, std::move(msg), field, reason);
+  };
+  const jwt::VerifyOptions& v = opts_.verify;
+  const bool fleet_token = c.fleet.has_value();
+  const bool exact = std::any_of(c.aud.begin(), c.aud.end(), [&](const std::string& a) {
+    if (a.find('*') != std::string::npos) return false;
+    if (fleet_token &&
+        std::find(v.fleet_audiences.begin(), v.fleet_audiences.end(), a) != v.fleet_audiences.end())
+      return true;
+    return jwt::aud_matches(a, v.audience);
+  });
+  if (!exact)
+    return refused("a token of the registry (" + c.iss +
+                       ") must name this robot in aud exactly, without a wildcard (" + v.audience +
+                       ")",
+                   "aud", "aud_not_exact");
+  if (opts_.own_rrn.empty())
+    return refused("this robot has no RRN to compare a registry token with", "rrn",
+                   "rrn_mismatch");
+  if (fleet_token) {
+    if (std::find(c.fleet->begin(), c.fleet->end(), opts_.own_rrn) == c.fleet->end())
+      return refused("a fleet token of the registry must list this robot's RRN (" +
+                         opts_.own_rrn + ") in its fleet claim",
+                     "fleet", "fleet_mismatch");
+    return Status::Ok();
+  }
+  const json::Value* rrn = c.raw.find("rrn");
+  if (rrn == nullptr || !rrn->is_string() || rrn->as_string() != opts_.own_rrn)
+    return refused("a token of the registry names another robot: its rrn is not this robot's (" +
+                       opts_.own_rrn + ")",
+                   "rrn", "rrn_mismatch");
+  return Status::Ok();
+}
+
 Result<Principal> Authenticator::unverifiable(std::string_view token, int64_t now_s,
                                               Error e) const {
   auto d = jwt::decode(token, opts_.verify.max_token_bytes);
@@ -62,6 +98,7 @@ Result<Principal> Authenticator::unverifiable(std::string_view token, int64_t no
       if (claims->iss != followed_issuer_)
         return Error(ErrorCode::kAuthInvalid, "the introspected token names another issuer", "iss",
                      "untrusted_issuer");
+      if (Status s = check_followed_claims(*claims); !s.ok()) return s.error();
       claims->kid = d->header.kid;
       return principal_of(std::move(claims).value());
     }
@@ -82,6 +119,8 @@ Result<Principal> Authenticator::authenticate_token(std::string_view token, int6
       return unverifiable(token, now_s, std::move(e));
     return e;
   }
+  if (!followed_issuer_.empty() && claims->iss == followed_issuer_)
+    if (Status s = check_followed_claims(*claims); !s.ok()) return s.error();
   // The window in which jwt::check_claims' time checks pass (exp required; nbf, iat optional).
   const int64_t leeway = std::max<int64_t>(0, opts_.verify.leeway_s);
   int64_t from = std::numeric_limits<int64_t>::min();

@@ -81,6 +81,9 @@ struct AuthOptions {
   bool require_signature = false;
   // Verified tokens remembered (node/token_cache.h); 0 verifies every token every time.
   size_t token_cache_entries = 4096;
+  // This robot's RRN. A token of the followed issuer (a registry, which serves many robots'
+  // registrants) must name it: its `rrn` claim, or its `fleet` claim for a fleet token.
+  std::string own_rrn;
 };
 
 class TokenCache;
@@ -134,6 +137,11 @@ class Authenticator {
   std::shared_ptr<const jwt::JwtVerifier> verifier() const EXCLUDES(verifier_mu_);
   // The principal of claims that passed verification (or the issuer's introspection).
   Result<Principal> principal_of(jwt::Claims&& claims) const;
+  // A token of the followed issuer must name this robot exactly (docs/THREATS.md, T1): an
+  // audience without a wildcard that matches its RURI (or its fleet's), and its RRN in the
+  // `rrn` claim (or, for a fleet token, in the `fleet` claim). A registry's token authority
+  // serves every registrant of the registry: no registrant's token may reach another's robot.
+  Status check_followed_claims(const jwt::Claims& c) const;
   // A followed issuer's token its keys cannot verify: its introspected principal, or `e`.
   Result<Principal> unverifiable(std::string_view token, int64_t now_s, Error e) const;
 

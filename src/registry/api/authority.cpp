@@ -2,6 +2,7 @@
 // the JWKS, the OAuth 2.0 token endpoint (client credentials with a secret or private_key_jwt,
 // RFC 7523; the device authorization grant, RFC 8628) and introspection (RFC 7662).
 #include <algorithm>
+#include <tuple>
 
 #include "rcan/crypto/ed25519.h"
 #include "rcan/errors.h"
@@ -163,14 +164,59 @@ Result<jwt::Claims> RegistryApi::Impl::check_own_token(std::string_view token) {
 
 // ---- target resolution and issuance
 
-std::string robot_audience(const Robot& r, const std::string& host) {
+Result<std::string> robot_audience(const Robot& r, const std::string& host) {
+  auto refused = [&](std::string why) {
+    return Error(ErrorCode::kInsufficientPrivileges,
+                 (r.rrn.empty() ? std::string("this robot") : r.rrn) + ": " + std::move(why) +
+                     ": the registry issues no token for it",
+                 "resource", "unproven_robot");
+  };
+  if (r.ed25519_pub.empty() && r.mldsa65_pub.empty())
+    return refused("the robot proved no key at its registration");
+  std::string claimed = "rcan://" + host + "/" + r.manufacturer + "/" + r.model + "/" + r.device_id;
   auto meta = json::parse(r.metadata_json);
-  if (meta.ok() && meta->is_object()) {
-    const json::Value* ruri = meta->get("ruri");
-    if (ruri != nullptr && ruri->is_string() && ruri->as_string().rfind("rcan://", 0) == 0)
-      return ruri->as_string();
+  if (meta.ok() && meta->is_object())
+    if (const json::Value* ruri = meta->get("ruri"); ruri != nullptr) {
+      if (!ruri->is_string()) return refused("metadata.ruri is not a string");
+      claimed = ruri->as_string();
+    }
+  // parse_ruri refuses a wildcard: a RURI names one robot.
+  auto p = parse_ruri(claimed);
+  if (!p.ok()) return refused("its RURI " + claimed.substr(0, 128) + ": " + p.error().message);
+  if (p->form == Ruri::Form::kDiscovered || !p->capability.empty() || p->port)
+    return refused("its RURI names an address or a capability, not a robot");
+  if (p->manufacturer != r.manufacturer || p->model != r.model || p->device_id != r.device_id ||
+      (p->form == Ruri::Form::kSdk5 && p->version != r.version))
+    return refused("its RURI " + p->base() + " is not the robot its proof named (" +
+                   r.manufacturer + "/" + r.model + "/" + r.version + "/" + r.device_id + ")");
+  return p->base();
+}
+
+Status RegistryApi::Impl::unique_audience(const Robot& r, const std::string& aud) {
+  RobotQuery q;
+  q.manufacturer = r.manufacturer;
+  q.model = r.model;
+  q.limit = 100;
+  for (int64_t offset = 0;; offset += q.limit) {
+    q.offset = offset;
+    auto page = store.list_robots(q);
+    if (!page) return page.error();
+    for (const Robot& other : page->robots) {
+      if (other.rrn == r.rrn || other.device_id != r.device_id || other.version == r.version)
+        continue;
+      auto its = robot_audience(other, o.host);
+      if (!its.ok() || *its != aud) continue;
+      // The first registration keeps the name; a later one that claims it gets nothing.
+      if (r.registered_at.empty() ||
+          std::tie(other.registered_at, other.rrn) < std::tie(r.registered_at, r.rrn))
+        return Error(ErrorCode::kInsufficientPrivileges,
+                     aud + " is the RURI of " + other.rrn + ", registered before" +
+                         (r.rrn.empty() ? std::string() : " " + r.rrn),
+                     "resource", "ruri_taken");
+    }
+    if (static_cast<int64_t>(page->robots.size()) < q.limit) break;
   }
-  return "rcan://" + host + "/" + r.manufacturer + "/" + r.model + "/" + r.device_id;
+  return Status::Ok();
 }
 
 Result<Target> RegistryApi::Impl::resolve_target(const std::string& resource) {
@@ -207,7 +253,11 @@ Result<Target> RegistryApi::Impl::resolve_target(const std::string& resource) {
                  "unknown");
   t.rrn = robot->rrn;
   t.owner_key_id = robot->owner_key_id;
-  t.aud = robot_audience(*robot, o.host);
+  auto aud = robot_audience(*robot, o.host);
+  if (Status unique = aud.ok() ? unique_audience(*robot, *aud) : Status(aud.error()); unique.ok())
+    t.aud = *aud;
+  else
+    t.refused = unique.error();
   return t;
 }
 
@@ -248,6 +298,7 @@ Result<GrantChoice> RegistryApi::Impl::choose_grant(const std::string& principal
 
 HttpResponse RegistryApi::Impl::issue_token(const std::string& sub, const Target& t,
                                             const GrantChoice& c) {
+  if (t.refused) return oauth_error(400, "invalid_target", t.refused->message);
   auto keys = authority_keys();
   if (!keys) return store_error(keys.error());
   int64_t now = now_ms();

@@ -13,9 +13,12 @@ transport::HttpResponse oauth_error(int status, const std::string& error,
                                     const std::string& description);
 std::string random_b64url(size_t bytes);
 std::string random_hex_id(size_t bytes);
-// The audience of tokens for a robot: metadata.ruri when the robot registered one (rcand
-// does), else rcan://<host>/<manufacturer>/<model>/<device_id>.
-std::string robot_audience(const Robot& r, const std::string& host);
+// The audience of tokens for a robot (docs/THREATS.md T1): the RURI of the robot its
+// registration proved — metadata.ruri when it gave one (rcand does), else
+// rcan://<host>/<manufacturer>/<model>/<device_id> — exact (parse_ruri refuses a wildcard) and
+// naming the manufacturer, model, device id (and version) its proof of possession signed. A
+// record that proved no key, or whose RURI names another robot, gets no token.
+Result<std::string> robot_audience(const Robot& r, const std::string& host);
 bool grant_covers_target(const Grant& g, const Target& t);
 std::vector<std::string> split_words(const std::string& s);
 

@@ -22,6 +22,9 @@ using transport::HttpResponse;
 // What a token is for: one robot (rrn, its owner) or a fleet; aud is the token's audience.
 struct Target {
   std::string rrn, fleet, aud, owner_key_id;
+  // Why no token may be issued for this robot (robot_audience, unique_audience); the target
+  // still names the robot for a revocation by its owner.
+  std::optional<Error> refused;
 };
 // The grant that allows a token request, with the scopes and role the token gets.
 struct GrantChoice {
@@ -132,6 +135,9 @@ class RegistryApi::Impl {
   // or an error saying why it is not active.
   Result<jwt::Claims> check_own_token(std::string_view token);
 
+  // Whether `aud` (robot_audience of `r`) is `r`'s alone: refused (reason ruri_taken) when
+  // another live record registered before `r` (any, for a record not stored yet) has it.
+  Status unique_audience(const Robot& r, const std::string& aud);
   // "fleet:<id>", an RRN or a RURI → the target (kNotFound reason "unknown" when none).
   Result<Target> resolve_target(const std::string& resource);
   // The first grant of `principal` for `t` that allows `scope` (space-separated; empty: the

@@ -4,6 +4,7 @@
 #include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/mldsa65.h"
 #include "rcan/ruri.h"
+#include "registry/api/authority_internal.h"
 #include "registry/api/impl.h"
 
 namespace rcan::registry::api {
@@ -28,6 +29,13 @@ std::string trimmed(std::string_view v) {
 json::Value parsed_or(const std::string& text, json::Value def) {
   auto v = json::parse(text);
   return v.ok() ? std::move(v).value() : std::move(def);
+}
+
+// metadata.ruri as JSON text ("" when absent): what an update may not change.
+std::string ruri_of(const std::string& metadata_json) {
+  auto v = json::parse(metadata_json);
+  const json::Value* r = v.ok() && v->is_object() ? v->get("ruri") : nullptr;
+  return r == nullptr ? std::string() : json::dump(*r);
 }
 
 bool owns(const Caller& c, const Robot& r) {
@@ -98,6 +106,23 @@ HttpResponse RegistryApi::Impl::register_robot(const HttpRequest& req) {
   auto reg = parse_registration(req.body, t);
   if (!reg.ok()) return ref_error(400, reg.error().message);
   if (auto bad = check_proof(*reg)) return *bad;
+  if (reg->proof && !ruri_of(reg->metadata_json).empty()) {
+    // The RURI its tokens will name (docs/THREATS.md T1): the robot the proof named, and no
+    // other live record's. (Without one, the tokens name rcan://<host>/<names>, checked when a
+    // token is asked for.)
+    Robot claimed;
+    claimed.manufacturer = reg->manufacturer;
+    claimed.model = reg->model;
+    claimed.version = reg->version;
+    claimed.device_id = reg->device_id;
+    claimed.metadata_json = reg->metadata_json;
+    claimed.ed25519_pub = reg->ed25519_pub;
+    claimed.mldsa65_pub = reg->mldsa65_pub;
+    auto aud = robot_audience(claimed, o.host);
+    if (!aud.ok()) return project_error(ErrorCode::kSchemaValidationFailed, aud.error().message,
+                                        "metadata.ruri", "ruri_not_proven");
+    if (Status s = unique_audience(claimed, *aud); !s.ok()) return ref_error(409, s.error().message);
+  }
   if (auto a = audit_unavailable()) return *a;
   NewRobot n;
   n.manufacturer = reg->manufacturer;
@@ -117,6 +142,10 @@ HttpResponse RegistryApi::Impl::register_robot(const HttpRequest& req) {
   auto done = store.register_robot(n);
   if (!done.ok()) return store_error(done.error());
   const Robot& r = done->robot;
+  // Names registered by another registrant are not this caller's to adopt (docs/THREATS.md T3).
+  if (!done->created && !owns(*caller, r))
+    return ref_error(409, "these names are registered as " + r.rrn +
+                              " by another registrant: an admin must remove that record first");
   if (!done->created)
     return json_response(200, json::Object{{"rrn", r.rrn},
                                            {"rcan_uri", r.rcan_uri},
@@ -287,6 +316,13 @@ HttpResponse RegistryApi::Impl::patch_robot(const HttpRequest& req, const std::s
   auto u = parse_update(req.body, t);
   if (!u.ok()) return ref_error(400, u.error().message);
   if (u->empty()) return ref_error(400, "No updatable fields provided");
+  // The RURI a proven robot's tokens name is set by its registration, never by an update.
+  if (u->metadata_json && (!robot->ed25519_pub.empty() || !robot->mldsa65_pub.empty()) &&
+      ruri_of(*u->metadata_json) != ruri_of(robot->metadata_json))
+    return project_error(ErrorCode::kSchemaValidationFailed,
+                         "metadata.ruri of a robot that proved its keys is set at its "
+                         "registration and does not change",
+                         "metadata.ruri", "ruri_fixed");
   if (auto a = audit_unavailable()) return *a;
   RobotUpdate ru;
   ru.description = u->description;

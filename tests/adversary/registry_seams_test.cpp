@@ -1,0 +1,168 @@
+// The seams between a robot and its registry, tried as an attacker with only the public
+// interfaces would (docs/THREATS.md T1, T3): a real rcan-registry and real rcand nodes on
+// loopback, both started here. The attacker is a registrant of the registry the robot trusts —
+// anyone the registry's admin gave a registrant key, or anyone at all on an open registry.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <string>
+
+#include "joining_robot.h"
+#include "rcan/json.h"
+#include "registry_daemon.h"
+#include "test_support.h"
+
+namespace rcan::test {
+namespace {
+
+const std::string kTrust = "  trust_tokens: true\n";
+
+std::string first_line(const std::string& path) {
+  std::string k = read_file(path);
+  return k.substr(0, k.find('\n'));
+}
+
+// A registrant key of its own, made by the registry's admin.
+std::string new_registrant(const RegistryDaemon& reg, const std::string& label) {
+  auto k = reg.send("POST", "/api/v1/keys", R"({"role":"registrant","label":")" + label + R"("})",
+                    reg.admin_key());
+  EXPECT_EQ(k.status, 201) << k.body;
+  return str(json_of(k.body), "key");
+}
+
+// What a registrant can get from the registry for `rrn`: a client of its own, an OWNER grant on
+// the record and a token for it. Empty when the registry refuses any step.
+std::string owner_token(const RegistryDaemon& reg, const std::string& key, const std::string& rrn,
+                        std::string* refusal = nullptr) {
+  auto c = reg.send("POST", "/api/v1/clients", R"({"name":"ops","auth":"client_secret"})", key);
+  EXPECT_EQ(c.status, 201) << c.body;
+  const json::Value client = json_of(c.body);
+  auto g = reg.send("POST", "/api/v1/grants",
+                    R"({"principal":")" + str(client, "client_id") + R"(","robot":")" + rrn +
+                        R"(","role":"owner","scope":["status","control","config"]})",
+                    key);
+  EXPECT_EQ(g.status, 201) << g.body;
+  auto t = http(reg.port(), "POST", "/oauth/token",
+                "grant_type=client_credentials&client_id=" + str(client, "client_id") +
+                    "&client_secret=" + str(client, "client_secret") + "&resource=" + rrn,
+                {{"Content-Type", "application/x-www-form-urlencoded"}});
+  if (t.status != 200) {
+    if (refusal != nullptr) *refusal = t.body;
+    return {};
+  }
+  return str(json_of(t.body), "access_token");
+}
+
+// The OWNER-only audit log of the robot at `port`, read with `token`.
+int read_audit(uint16_t port, const std::string& token) {
+  return http(port, "GET", "/api/audit?limit=1", "", {{"Authorization", "Bearer " + token}})
+      .status;
+}
+
+// T1 (review finding F1, HIGH). Before the fix: the registry took a token's aud from the
+// record's unchecked metadata.ruri, and rcand accepted '*' per segment from the registry's
+// issuer without comparing the rrn claim with its own RRN; a registrant who wrote
+// rcan://*/*/*/* (or the victim's RURI, readable by anyone) into its own record's metadata and
+// granted itself OWNER there read the victim robot's audit log (200), claimed it and moved it.
+TEST(AdversaryRegistryToRobot, ARegistrantCannotMintItselfOwnerOfAnotherRegistrantsRobot) {
+  TempDir dir;
+  RegistryDaemon reg(dir.file("registry"));
+  ASSERT_FALSE(reg.url().empty());
+  const std::string alice_file =
+      registrant_key_file(reg, dir.file("registry"), dir.file("alice.key"));
+  JoiningRobot robot(dir.file("robot"), reg.url(), alice_file, kRuri, kTrust);
+  const std::string victim = robot.start();
+  ASSERT_EQ(victim.rfind("RRN-", 0), 0u);
+  // The control: its own registrant's OWNER token works, so a 401 below is the robot's verdict.
+  const std::string alice_token = owner_token(reg, first_line(alice_file), victim);
+  ASSERT_FALSE(alice_token.empty());
+  EXPECT_EQ(read_audit(robot.port(), alice_token), 200);
+
+  const std::string mallory = new_registrant(reg, "mallory");
+  struct Attempt {
+    std::string what, model, version, device, metadata;
+  };
+  const std::vector<Attempt> attempts{
+      {"a wildcard RURI in its own record", "bot", "v1", "deadbeef",
+       R"({"ruri":"rcan://*/*/*/*"})"},
+      {"the victim's RURI in its own record", "bot", "v1", "deadbee1",
+       R"({"ruri":")" + std::string(kRuri) + R"("})"},
+      {"the victim's names under another version", "rover", "v2", "0a1b2c3d",
+       R"({"ruri":")" + std::string(kRuri) + R"("})"},
+  };
+  for (const Attempt& a : attempts) {
+    SCOPED_TRACE(a.what);
+    const std::string manufacturer = a.model == "rover" ? "acme" : "evil";
+    auto r = reg.register_proven(mallory, manufacturer, a.model, a.version, a.device, a.metadata);
+    // The registry refuses a record whose RURI is not the robot its proof named, or is taken.
+    EXPECT_TRUE(r.status == 400 || r.status == 409) << r.status << " " << r.body;
+    if (r.status != 201) continue;
+    // Registered all the same: whatever token it gets, the robot must refuse it.
+    const std::string tok = owner_token(reg, mallory, str(json_of(r.body), "rrn"));
+    if (!tok.empty()) {
+      EXPECT_EQ(read_audit(robot.port(), tok), 401);
+    }
+  }
+  // The victim's own names: not the attacker's to adopt.
+  auto squat = reg.register_proven(mallory, "acme", "rover", "v1", "0a1b2c3d", "{}");
+  EXPECT_EQ(squat.status, 409) << squat.body;
+  EXPECT_NE(squat.body.find(victim), std::string::npos) << squat.body;
+  // Its own robot, proven and consistent, gets tokens that name that robot alone.
+  auto own = reg.register_proven(mallory, "evil", "bot", "v1", "deadbee2",
+                                 R"({"ruri":"rcan://local.rcan/evil/bot/deadbee2"})");
+  ASSERT_EQ(own.status, 201) << own.body;
+  const std::string own_token = owner_token(reg, mallory, str(json_of(own.body), "rrn"));
+  ASSERT_FALSE(own_token.empty());
+  EXPECT_EQ(read_audit(robot.port(), own_token), 401);
+  // A record that proved no key gets no token at all.
+  auto unproven = reg.send("POST", "/api/v1/robots",
+                           R"({"manufacturer":"evil","model":"bot","version":"v1",)"
+                           R"("device_id":"deadbee3","metadata":{"ruri":"rcan://*/*/*/*"}})",
+                           mallory);
+  ASSERT_EQ(unproven.status, 201) << unproven.body;
+  std::string why;
+  EXPECT_TRUE(owner_token(reg, mallory, str(json_of(unproven.body), "rrn"), &why).empty());
+  EXPECT_NE(why.find("proved no key"), std::string::npos) << why;
+  EXPECT_EQ(read_audit(robot.port(), alice_token), 200);
+}
+
+// T3 (review finding F3). Before the fix: names registered before the robot joined were
+// answered `already_existed` to anyone, and rcand adopted that RRN without comparing keys —
+// it then served under the squatter's record and could never refresh it (403 forever).
+TEST(AdversaryRegistryToRobot, ARobotDoesNotAdoptARecordSomeoneElseRegisteredFirst) {
+  TempDir dir;
+  RegistryDaemon reg(dir.file("registry"));
+  ASSERT_FALSE(reg.url().empty());
+  const std::string alice_file =
+      registrant_key_file(reg, dir.file("registry"), dir.file("alice.key"));
+
+  // Another registrant registers the robot's names first, with keys of its own.
+  const std::string mallory = new_registrant(reg, "mallory");
+  auto squat = reg.register_proven(mallory, "acme", "rover", "v1", "0a1b2c3d",
+                                   R"({"ruri":")" + std::string(kRuri) + R"("})");
+  ASSERT_EQ(squat.status, 201) << squat.body;
+  const std::string squatted = str(json_of(squat.body), "rrn");
+  JoiningRobot a(dir.file("a"), reg.url(), alice_file, kRuri);
+  const std::string rrn_a = a.start();
+  EXPECT_NE(rrn_a, squatted);
+  EXPECT_FALSE(std::filesystem::exists(a.data() + "/registry/state.json"));
+  EXPECT_NE(a.proc().err().find(squatted), std::string::npos) << a.proc().err();
+  EXPECT_EQ(a.stop(), 0);
+
+  // The same registrant's key registered the names with other keys (a key shared by a team, a
+  // copied robot): the registry answers already_existed, and the robot compares the keys.
+  const std::string ruri_b = "rcan://local.rcan/acme/rover/0a1b2c3e";
+  auto earlier = reg.register_proven(first_line(alice_file), "acme", "rover", "v1", "0a1b2c3e",
+                                     R"({"ruri":")" + ruri_b + R"("})");
+  ASSERT_EQ(earlier.status, 201) << earlier.body;
+  const std::string other_keys = str(json_of(earlier.body), "rrn");
+  JoiningRobot b(dir.file("b"), reg.url(), alice_file, ruri_b);
+  const std::string rrn_b = b.start();
+  EXPECT_NE(rrn_b, other_keys);
+  EXPECT_FALSE(std::filesystem::exists(b.data() + "/registry/state.json"));
+  EXPECT_NE(b.proc().err().find(other_keys + " with other keys"), std::string::npos)
+      << b.proc().err();
+}
+
+}  // namespace
+}  // namespace rcan::test
