@@ -282,7 +282,7 @@ class SqliteStore final : public Store {
   }
   Result<std::optional<Robot>> find_robot_by_uri(std::string_view uri) override {
     return one_robot("SELECT " ROBOT_COLUMNS
-                     " FROM robots WHERE rcan_uri = ? AND deleted = 0 ORDER BY seq DESC LIMIT 1",
+                     " FROM robots WHERE rcan_uri = ? AND deleted = 0 ORDER BY synced, seq DESC LIMIT 1",
                      uri);
   }
   Result<RobotPage> list_robots(const RobotQuery& q) override;

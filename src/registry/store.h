@@ -182,6 +182,8 @@ class Store {
   virtual Result<Registered> register_robot(const NewRobot& r) = 0;
   // A live robot by RRN (compared case-insensitively), or nullopt.
   virtual Result<std::optional<Robot>> get_robot(std::string_view rrn) = 0;
+  // A live robot by its rcan_uri: a record of this registry's own before a synced copy (a copy
+  // never shadows one), else the newest.
   virtual Result<std::optional<Robot>> find_robot_by_uri(std::string_view rcan_uri) = 0;
   virtual Result<RobotPage> list_robots(const RobotQuery& q) = 0;
   // The updated robot, or nullopt when no live robot has that RRN.

@@ -55,8 +55,7 @@ std::string owner_token(const RegistryDaemon& reg, const std::string& key, const
 
 // The OWNER-only audit log of the robot at `port`, read with `token`.
 int read_audit(uint16_t port, const std::string& token) {
-  return http(port, "GET", "/api/audit?limit=1", "", {{"Authorization", "Bearer " + token}})
-      .status;
+  return http(port, "GET", "/api/audit?limit=1", "", {{"Authorization", "Bearer " + token}}).status;
 }
 
 // T1 (review finding F1, HIGH). Before the fix: the registry took a token's aud from the

@@ -281,7 +281,8 @@ TEST_F(RegistryTrustTest, ARegistryTokenMustNameThisRobotExactlyByRuriAndRrn) {
     EXPECT_NE(r.body.find(reason), std::string::npos) << r.body;
   };
   // Wildcards that aud_matches() would take from a configured issuer.
-  for (const char* aud : {"rcan://*/*/*/*", "rcan://local.rcan/acme/rover/*", "rcan://*/acme/rover/0a1b2c3d"})
+  for (const char* aud :
+       {"rcan://*/*/*/*", "rcan://local.rcan/acme/rover/*", "rcan://*/acme/rover/0a1b2c3d"})
     refused_with(token(k1_, std::string("e1") + aud, "mallory", aud), "aud_not_exact");
   refused_with(token(k1_, "e2", "mallory", {},
                      [&](json::Object& c) {
@@ -289,9 +290,9 @@ TEST_F(RegistryTrustTest, ARegistryTokenMustNameThisRobotExactlyByRuriAndRrn) {
                      }),
                "aud_not_exact");
   // The exact RURI but another robot's RRN, or none.
-  refused_with(token(k1_, "e3", "mallory", {},
-                     [](json::Object& c) { c.set("rrn", "RRN-000000000777"); }),
-               "rrn_mismatch");
+  refused_with(
+      token(k1_, "e3", "mallory", {}, [](json::Object& c) { c.set("rrn", "RRN-000000000777"); }),
+      "rrn_mismatch");
   refused_with(token(k1_, "e4", "mallory", {}, [](json::Object& c) { c.erase("rrn"); }),
                "rrn_mismatch");
   // A fleet token of the registry lists this robot's RRN, not only its device id.

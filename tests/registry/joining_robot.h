@@ -31,12 +31,13 @@ inline std::string str(const json::Value& v, const char* k) {
 
 inline void write_private(const std::string& path, const std::string& text) {
   std::ofstream(path) << text;
-  std::filesystem::permissions(path, std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
+  std::filesystem::permissions(
+      path, std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
 }
 
 // A registrant key made with the admin key, in a 0600 file.
 inline std::string registrant_key_file(const RegistryDaemon& reg, const std::string& reg_dir,
-                                const std::string& path) {
+                                       const std::string& path) {
   auto r = run_cli({"registry", "keys", "create", "--registry", reg.url(), "--label", "fleet-ops",
                     "--save", path},
                    {}, {"RCAN_REGISTRY_KEY_FILE=" + reg_dir + "/admin.key"});

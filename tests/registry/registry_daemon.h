@@ -62,10 +62,10 @@ class RegistryDaemon {
       return {};
     }
     const std::string id = json::string_field(*c, "challenge_id");
-    auto proof = registry::sign_proof(
-        *k, id,
-        registry::proof_message(id, json::string_field(*c, "nonce"), manufacturer, model, version,
-                                device));
+    auto proof =
+        registry::sign_proof(*k, id,
+                             registry::proof_message(id, json::string_field(*c, "nonce"),
+                                                     manufacturer, model, version, device));
     EXPECT_TRUE(proof.ok());
     json::Object body{{"manufacturer", manufacturer},
                       {"model", model},

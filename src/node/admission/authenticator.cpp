@@ -65,12 +65,11 @@ Status Authenticator::check_followed_claims(const jwt::Claims& c) const {
                        ")",
                    "aud", "aud_not_exact");
   if (opts_.own_rrn.empty())
-    return refused("this robot has no RRN to compare a registry token with", "rrn",
-                   "rrn_mismatch");
+    return refused("this robot has no RRN to compare a registry token with", "rrn", "rrn_mismatch");
   if (fleet_token) {
     if (std::find(c.fleet->begin(), c.fleet->end(), opts_.own_rrn) == c.fleet->end())
-      return refused("a fleet token of the registry must list this robot's RRN (" +
-                         opts_.own_rrn + ") in its fleet claim",
+      return refused("a fleet token of the registry must list this robot's RRN (" + opts_.own_rrn +
+                         ") in its fleet claim",
                      "fleet", "fleet_mismatch");
     return Status::Ok();
   }

@@ -119,9 +119,11 @@ HttpResponse RegistryApi::Impl::register_robot(const HttpRequest& req) {
     claimed.ed25519_pub = reg->ed25519_pub;
     claimed.mldsa65_pub = reg->mldsa65_pub;
     auto aud = robot_audience(claimed, o.host);
-    if (!aud.ok()) return project_error(ErrorCode::kSchemaValidationFailed, aud.error().message,
-                                        "metadata.ruri", "ruri_not_proven");
-    if (Status s = unique_audience(claimed, *aud); !s.ok()) return ref_error(409, s.error().message);
+    if (!aud.ok())
+      return project_error(ErrorCode::kSchemaValidationFailed, aud.error().message, "metadata.ruri",
+                           "ruri_not_proven");
+    if (Status s = unique_audience(claimed, *aud); !s.ok())
+      return ref_error(409, s.error().message);
   }
   if (auto a = audit_unavailable()) return *a;
   NewRobot n;

@@ -1,11 +1,14 @@
 #include "registry/api/sync.h"
 
+#include <cctype>
 #include <chrono>
+#include <map>
 #include <set>
 
 #include "base/http_client.h"
 #include "base/log.h"
 #include "registry/api/body.h"
+#include "registry/api/registry_api.h"
 
 namespace rcan::registry::api {
 namespace {
@@ -99,6 +102,29 @@ void SyncPuller::run() {
   }
 }
 
+Result<std::string> SyncPuller::judge(Robot& r, const std::string& node_host) {
+  // The node speaks for the names under its own host, never for another registry's.
+  const std::string own_uri = "rcan://" + node_host + "/" + r.manufacturer + "/" + r.model + "/" +
+                              r.version + "/" + r.device_id;
+  if (r.rcan_uri != own_uri) return std::string("uri_not_under_node");
+  auto existing = store_.get_robot(r.rrn);
+  if (!existing.ok()) return existing.error();
+  // A record of this registry's own (it has an owner here) is never replaced by a copy.
+  if (*existing && !(*existing)->owner_key_id.empty()) return std::string("rrn_is_local");
+  auto same_uri = store_.find_robot_by_uri(r.rcan_uri);
+  if (!same_uri.ok()) return same_uri.error();
+  if (*same_uri && (*same_uri)->rrn != r.rrn) return std::string("uri_taken");
+  // What this registry says of the copy is its own judgement: the tier it gave (community until
+  // an admin here says otherwise) and its own times, never the node's.
+  r.verification_tier = *existing ? (*existing)->verification_tier : std::string("community");
+  const std::string now = iso_utc(std::chrono::duration_cast<std::chrono::milliseconds>(
+                                      std::chrono::system_clock::now().time_since_epoch())
+                                      .count());
+  r.registered_at = *existing ? (*existing)->registered_at : now;
+  r.updated_at = now;
+  return std::string();
+}
+
 void SyncPuller::pull(const std::string& url) {
   auto fail = [&](const std::string& why) {
     failures.fetch_add(1);
@@ -121,6 +147,27 @@ void SyncPuller::pull(const std::string& url) {
     fingerprint_[url] = fingerprint;
     since.clear();
   }
+  auto node = parse_web_url(url);
+  if (!node.ok()) return fail(node.error().message);
+  std::string node_host = node->host;
+  for (char& c : node_host) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  // Records refused for what they claim (below), by reason: one log line a pull, not one each.
+  std::map<std::string, std::vector<std::string>> refusals;
+  struct LogRefusals {
+    const std::string& url;
+    std::map<std::string, std::vector<std::string>>& by_reason;
+    ~LogRefusals() {
+      for (auto& [reason, rrns] : by_reason) {
+        json::Array some;
+        for (size_t i = 0; i < rrns.size() && i < 10; ++i) some.emplace_back(rrns[i]);
+        log(LogLevel::kWarn, "registry_sync_refused",
+            json::Object{{"from", url},
+                         {"reason", reason},
+                         {"count", static_cast<int64_t>(rrns.size())},
+                         {"rrns", std::move(some)}});
+      }
+    }
+  } log_refusals{url, refusals};
   for (int page = 0; page < 20; ++page) {  // at most 20 pages of 500 a round
     auto u = parse_web_url(url + "/api/v1/sync?limit=500&since=" +
                            (since.empty() ? std::string("1970-01-01T00:00:00.000Z") : since));
@@ -146,7 +193,13 @@ void SyncPuller::pull(const std::string& url) {
         refused.fetch_add(1);
         continue;
       }
-      r->owner_key_id.clear();  // nobody here owns it: only an admin may change the copy
+      auto why = judge(*r, node_host);
+      if (!why.ok()) return fail(why.error().message);
+      if (!why->empty()) {
+        refused.fetch_add(1);
+        refusals[*why].push_back(r->rrn);
+        continue;
+      }
       if (Status s = store_.upsert_synced_robot(*r); !s.ok()) return fail(s.error().message);
       imported.fetch_add(1);
       if (on_imported_) on_imported_(*r, url);

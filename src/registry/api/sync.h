@@ -1,7 +1,8 @@
 // Federation sync (docs/REGISTRY.md "Federation sync"): a root pulls the robots of the nodes it
 // delegated prefixes to from their GET /api/v1/sync, on its own thread, into the store
 // (Store::upsert_synced_robot), so that it resolves their RRNs itself. A node's records are
-// taken only for the prefixes delegated to that node's URL.
+// taken only for the prefixes delegated to that node's URL, only under the node's own host, and
+// never in place of a record of this registry's own.
 #pragma once
 
 #include <atomic>
@@ -43,6 +44,10 @@ class SyncPuller {
  private:
   void run();
   void pull(const std::string& url);
+  // Whether the copy `r` of a record of the node at `node_host` may be written (docs/THREATS.md
+  // T2): "" when it may (its tier and times then set to this registry's own), else the reason
+  // it is refused (uri_not_under_node, rrn_is_local, uri_taken).
+  Result<std::string> judge(Robot& r, const std::string& node_host);
 
   Store& store_;
   std::vector<std::string> urls_;
