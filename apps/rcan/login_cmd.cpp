@@ -21,11 +21,12 @@ namespace {
 
 constexpr const char* kLoginUsage =
     "usage: rcan login --registry URL --client-id ID --resource RRN|RURI|fleet:ID [--scope S]\n"
-    "                  [--save F]\n"
+    "                  [--client-secret-file F | --client-key DIR-or-seed-file] [--save F]\n"
     "  Asks the registry for a token by the device flow: prints a code and the page where a\n"
-    "  person approves it (POST /api/v1/device/approve with their API key), then waits. The\n"
-    "  token is printed, or written to F (mode 0600). Exit: 0 token, 1 refused or expired,\n"
-    "  2 usage, 3 unreachable.\n";
+    "  person approves it (POST /api/v1/device/approve with their API key), then waits. A\n"
+    "  public client (auth none) needs no credential; a confidential one authenticates as with\n"
+    "  rcan token get. The token is printed, or written to F (mode 0600). Exit: 0 token,\n"
+    "  1 refused or expired, 2 usage, 3 unreachable.\n";
 
 constexpr const char* kGetUsage =
     "usage: rcan token get --registry URL --client-id ID\n"
@@ -130,8 +131,42 @@ int refused(const std::string& verb, const Reply& a) {
   return 1;
 }
 
+// The client's credential as form fields ("&client_id=…&client_secret=…", or a fresh
+// private_key_jwt assertion: one per request, its jti is used once); "&client_id=…" alone for a
+// public client (neither option given).
+Result<std::string> client_auth(const Options& o, const std::string& id, const std::string& base) {
+  if (o.has("client-secret-file")) {
+    auto secret = read_file(o.get("client-secret-file"));
+    if (!secret.ok()) return secret.error();
+    std::string s = *secret;
+    while (!s.empty() && (s.back() == '\n' || s.back() == '\r' || s.back() == ' ')) s.pop_back();
+    return "&client_id=" + form_escape(id) + "&client_secret=" + form_escape(s);
+  }
+  if (!o.has("client-key")) return "&client_id=" + form_escape(id);
+  std::string path = o.get("client-key");
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) path += "/ed25519.seed";
+  auto key = jwt::SigningKey::from_file(path);
+  if (!key.ok()) return key.error();
+  if (key->alg() != jwt::Alg::kEdDSA)
+    return Error(ErrorCode::kSchemaValidationFailed, "--client-key must be an Ed25519 key");
+  const int64_t now = std::chrono::duration_cast<std::chrono::seconds>(
+                          std::chrono::system_clock::now().time_since_epoch())
+                          .count();
+  json::Object c{{"iss", id},  {"sub", id},        {"aud", base + "/oauth/token"},
+                 {"iat", now}, {"exp", now + 120}, {"jti", new_uuid_v4()}};
+  auto assertion = jwt::issue(c, *key);
+  if (!assertion.ok()) return assertion.error();
+  return "&client_id=" + form_escape(id) +
+         "&client_assertion_type=urn%3Aietf%3Aparams%3Aoauth%3Aclient-assertion-type%3Ajwt-"
+         "bearer&client_assertion=" +
+         *assertion;
+}
+
 int login_main(const Args& args) {
-  Options o(args, {"help"}, {"registry", "client-id", "resource", "scope", "save"});
+  Options o(
+      args, {"help"},
+      {"registry", "client-id", "resource", "scope", "save", "client-secret-file", "client-key"});
   if (!o.ok()) return usage_error("login", o.error());
   if (o.has("help")) {
     std::fputs(kLoginUsage, stdout);
@@ -139,9 +174,12 @@ int login_main(const Args& args) {
   }
   if (o.get("client-id").empty() || o.get("resource").empty())
     return usage_error("login", "--client-id and --resource are required");
+  if (o.has("client-secret-file") && o.has("client-key"))
+    return usage_error("login", "give at most one of --client-secret-file and --client-key");
   std::string base = base_of(o);
-  std::string body = "client_id=" + form_escape(o.get("client-id")) +
-                     "&resource=" + form_escape(o.get("resource"));
+  auto auth = client_auth(o, o.get("client-id"), base);
+  if (!auth.ok()) return usage_error("login", auth.error().message);
+  std::string body = "resource=" + form_escape(o.get("resource")) + *auth;
   if (o.has("scope")) body += "&scope=" + form_escape(o.get("scope"));
   Reply da = post_form(base, "/oauth/device_authorization", body);
   if (da.exit != 0) return refused("login", da);
@@ -154,13 +192,14 @@ int login_main(const Args& args) {
                json::string_field(da.body, "user_code").c_str(),
                json::string_field(da.body, "verification_uri_complete").c_str());
   auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(expires_in + 5);
-  std::string poll =
-      "grant_type=urn%3Aietf%3Aparams%3Aoauth%3Agrant-type%3Adevice_code"
-      "&client_id=" +
-      form_escape(o.get("client-id")) + "&device_code=" + form_escape(device_code);
   while (std::chrono::steady_clock::now() < deadline) {
     std::this_thread::sleep_for(std::chrono::seconds(interval));
-    Reply t = post_form(base, "/oauth/token", poll);
+    auto poll_auth = client_auth(o, o.get("client-id"), base);
+    if (!poll_auth.ok()) return usage_error("login", poll_auth.error().message);
+    Reply t = post_form(base, "/oauth/token",
+                        "grant_type=urn%3Aietf%3Aparams%3Aoauth%3Agrant-type%3Adevice_code"
+                        "&device_code=" +
+                            form_escape(device_code) + *poll_auth);
     if (t.exit == 0) return deliver("login", o, t);
     std::string err = json::string_field(t.body, "error");
     if (err == "authorization_pending") continue;
@@ -172,12 +211,6 @@ int login_main(const Args& args) {
   }
   std::fprintf(stderr, "rcan login: the code expired before it was approved\n");
   return 1;
-}
-
-int64_t now_s() {
-  return std::chrono::duration_cast<std::chrono::seconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
 }
 
 }  // namespace
@@ -199,30 +232,9 @@ int token_get_main(const Args& args) {
   std::string base = base_of(o);
   std::string body = "grant_type=client_credentials&resource=" + form_escape(robot);
   if (o.has("scope")) body += "&scope=" + form_escape(o.get("scope"));
-  if (o.has("client-secret-file")) {
-    auto secret = read_file(o.get("client-secret-file"));
-    if (!secret.ok()) return usage_error("token get", secret.error().message);
-    std::string s = *secret;
-    while (!s.empty() && (s.back() == '\n' || s.back() == '\r' || s.back() == ' ')) s.pop_back();
-    body += "&client_id=" + form_escape(id) + "&client_secret=" + form_escape(s);
-  } else {
-    std::string path = o.get("client-key");
-    std::error_code ec;
-    if (std::filesystem::is_directory(path, ec)) path += "/ed25519.seed";
-    auto key = jwt::SigningKey::from_file(path);
-    if (!key.ok()) return usage_error("token get", key.error().message);
-    if (key->alg() != jwt::Alg::kEdDSA)
-      return usage_error("token get", "--client-key must be an Ed25519 key");
-    int64_t now = now_s();
-    json::Object c{{"iss", id},  {"sub", id},        {"aud", base + "/oauth/token"},
-                   {"iat", now}, {"exp", now + 120}, {"jti", new_uuid_v4()}};
-    auto assertion = jwt::issue(c, *key);
-    if (!assertion.ok()) return usage_error("token get", assertion.error().message);
-    body +=
-        "&client_assertion_type=urn%3Aietf%3Aparams%3Aoauth%3Aclient-assertion-type%3Ajwt-"
-        "bearer&client_assertion=" +
-        *assertion;
-  }
+  auto auth = client_auth(o, id, base);
+  if (!auth.ok()) return usage_error("token get", auth.error().message);
+  body += *auth;
   Reply t = post_form(base, "/oauth/token", body);
   if (t.exit != 0) return refused("token get", t);
   return deliver("token get", o, t);

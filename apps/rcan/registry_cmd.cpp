@@ -2,6 +2,7 @@
 // registry that speaks the rcan.dev API. The registry's URL comes from --registry or
 // $RCAN_REGISTRY; write operations present the API key in --key-file or $RCAN_REGISTRY_KEY_FILE.
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <cstdio>
@@ -36,9 +37,12 @@ constexpr const char* kUsage =
     "      A robot that registered its keys signs its updates with them (--keys-dir).\n"
     "  nodes [--prefix P] | manifest\n"
     "  keys create [--role registrant|admin] [--label L] [--save F] | keys list | keys revoke ID\n"
-    "  device approve CODE | device deny CODE\n"
-    "      Decides a device-flow request (rcan login on another machine shows the code): the\n"
-    "      token is issued for your key's grants on the robot or fleet it asked for.\n"
+    "  device show CODE | device approve CODE [--yes] | device deny CODE\n"
+    "      A device-flow request (rcan login on another machine shows the code): show prints\n"
+    "      which client asks (its name, id and who made it), for which robot or fleet and\n"
+    "      scopes, and what your grant would give. approve prints the same and asks before it\n"
+    "      approves (--yes: without asking, as a script would); the token is issued for your\n"
+    "      key's grants to whoever holds the request, so approve only a client you started.\n"
     "The registry: --registry URL, else $RCAN_REGISTRY, else http://127.0.0.1:8090. The API\n"
     "key: --key-file F, else $RCAN_REGISTRY_KEY_FILE (rcan-registry writes its admin key to\n"
     "<data-dir>/admin.key). Exit: 0 success, 1 refused by the registry, 2 usage, 3 unreachable.\n";
@@ -262,12 +266,71 @@ int do_keys(const Options& o, const std::string& base, const std::string& key) {
   return rc;
 }
 
+// A device request as the approver reads it, on stderr.
+void print_device_request(const json::Value& r) {
+  auto at = [&](const char* obj, const char* k) {
+    const json::Value* o_v = r.get(obj);
+    const json::Value* v = o_v != nullptr && o_v->is_object() ? o_v->get(k) : nullptr;
+    return v != nullptr && v->is_string() ? v->as_string() : std::string("-");
+  };
+  const json::Value* grant = r.get("your_grant");
+  std::string gives = "nothing: you hold no grant for it";
+  if (grant != nullptr && grant->is_object()) {
+    gives = json::string_field(*grant, "role");
+    if (const json::Value* sc = grant->get("scopes"); sc != nullptr && sc->is_array()) {
+      gives += " with";
+      for (const auto& x : sc->as_array())
+        if (x.is_string()) gives += " " + x.as_string();
+    }
+  }
+  const std::string scope = json::string_field(r, "scope");
+  std::fprintf(stderr,
+               "device request %s\n  client      %s (%s, %s)\n  made by     API key %s (%s)\n"
+               "  for         %s %s\n  scopes      %s\n  your grant  %s\n",
+               json::string_field(r, "user_code").c_str(), at("client", "name").c_str(),
+               at("client", "client_id").c_str(), at("client", "auth").c_str(),
+               at("client", "created_by").c_str(), at("client", "created_by_label").c_str(),
+               at("target", "resource").c_str(), at("target", "rcan_uri").c_str(),
+               scope.empty() ? "all that the grant holds" : scope.c_str(), gives.c_str());
+}
+
+// device show|approve|deny CODE: an approval is made knowing what it approves (docs/THREATS.md
+// T7): the request is shown first, and approved after a yes at the terminal or --yes.
+int do_device(const Options& o, const std::string& base, const std::string& key) {
+  const auto& pos = o.positional();
+  const std::string verb = pos.size() > 1 ? pos[1] : "";
+  if ((verb != "show" && verb != "approve" && verb != "deny") || pos.size() < 3)
+    return usage_error("registry",
+                       "device show CODE | device approve CODE [--yes] | device deny CODE");
+  const std::string& code = pos[2];
+  if (verb != "deny") {
+    Answer shown = call(base, "GET", "/api/v1/device/requests/" + q_escape(code), "", key);
+    if (verb == "show" || shown.exit != 0) return report("registry", shown);
+    print_device_request(shown.body);
+    if (!o.has("yes")) {
+      if (::isatty(0) == 0)
+        return usage_error("registry",
+                           "approve asks at a terminal; give --yes to approve without asking "
+                           "(read the request above first)");
+      std::fprintf(stderr, "Approve? The token goes to whoever started this request. [y/N] ");
+      std::string line;
+      if (!std::getline(std::cin, line) || (line != "y" && line != "Y" && line != "yes")) {
+        std::fprintf(stderr, "rcan registry: not approved\n");
+        return 1;
+      }
+    }
+  }
+  json::Object body{{"user_code", code}, {"decision", verb}};
+  return report("registry", call(base, "POST", "/api/v1/device/approve",
+                                 json::dump(json::Value(std::move(body))), key));
+}
+
 int registry_main(const Args& args) {
   if (args.empty() || args[0] == "--help" || args[0] == "-h") {
     std::fputs(kUsage, args.empty() ? stderr : stdout);
     return args.empty() ? 2 : 0;
   }
-  Options o(args, {}, kValued);
+  Options o(args, {"yes"}, kValued);
   if (!o.ok()) return usage_error("registry", o.error());
   const auto& pos = o.positional();
   if (pos.empty()) return usage_error("registry", "which command? (rcan registry --help)");
@@ -289,14 +352,7 @@ int registry_main(const Args& args) {
   std::string rrn;
   if (sub == "register") return do_register(o, base, key);
   if (sub == "keys") return do_keys(o, base, key);
-  if (sub == "device") {
-    const std::string decision = pos.size() > 1 ? pos[1] : "";
-    if ((decision != "approve" && decision != "deny") || pos.size() < 3)
-      return usage_error("registry", "device approve CODE | device deny CODE");
-    json::Object body{{"user_code", pos[2]}, {"decision", decision}};
-    return report("registry", call(base, "POST", "/api/v1/device/approve",
-                                   json::dump(json::Value(std::move(body))), key));
-  }
+  if (sub == "device") return do_device(o, base, key);
   if (sub == "list")
     return report(
         "registry",

@@ -163,5 +163,83 @@ TEST(AdversaryRegistryToRobot, ARobotDoesNotAdoptARecordSomeoneElseRegisteredFir
       << b.proc().err();
 }
 
+HttpReply form_post(const RegistryDaemon& reg, const std::string& path, const std::string& body) {
+  return http(reg.port(), "POST", path, body,
+              {{"Content-Type", "application/x-www-form-urlencoded"}});
+}
+
+// T7 (review finding F7). Before the fix: anyone started a device request for a victim's robot
+// under any client id (the victim's own confidential client included: its id is no secret),
+// `rcan registry device approve` showed the victim only {user_code, decision}, and the
+// attacker's poll returned an OWNER token for the victim's robot.
+TEST(AdversaryRegistryDeviceFlow, AnApprovalIsInformedAndAConfidentialClientCannotBeBorrowed) {
+  TempDir dir;
+  RegistryDaemon reg(dir.file("registry"));
+  ASSERT_FALSE(reg.url().empty());
+  const std::string alice_file =
+      registrant_key_file(reg, dir.file("registry"), dir.file("alice.key"));
+  const std::string alice = first_line(alice_file);
+  auto robot = reg.register_proven(alice, "acme", "rover", "v1", "0a1b2c3d",
+                                   R"({"ruri":")" + std::string(kRuri) + R"("})");
+  ASSERT_EQ(robot.status, 201) << robot.body;
+  const std::string rrn = str(json_of(robot.body), "rrn");
+  // Alice's key holds OWNER on her robot (so her approval would give OWNER), and her own
+  // confidential client for her tools.
+  std::string alice_id;
+  auto keys = json_of(reg.get("/api/v1/keys", reg.admin_key()).body);
+  for (const auto& k : keys.get("keys")->as_array())
+    if (str(k, "label") == "fleet-ops") alice_id = str(k, "id");
+  ASSERT_FALSE(alice_id.empty());
+  ASSERT_EQ(reg.send("POST", "/api/v1/grants",
+                     R"({"principal":"user:)" + alice_id + R"(","robot":")" + rrn +
+                         R"(","role":"owner","scope":["status","control","config"]})",
+                     alice)
+                .status,
+            201);
+  auto own_client =
+      reg.send("POST", "/api/v1/clients", R"({"name":"alice-cli","auth":"client_secret"})", alice);
+  ASSERT_EQ(own_client.status, 201);
+
+  // Mallory borrows Alice's client id: refused without its secret.
+  auto borrowed =
+      form_post(reg, "/oauth/device_authorization",
+                "client_id=" + str(json_of(own_client.body), "client_id") + "&resource=" + rrn);
+  EXPECT_EQ(borrowed.status, 401) << borrowed.body;
+
+  // Mallory makes a public client of her own with the same name and sends Alice the code.
+  const std::string mallory = new_registrant(reg, "mallory");
+  auto decoy =
+      reg.send("POST", "/api/v1/clients", R"({"name":"alice-cli","auth":"none"})", mallory);
+  ASSERT_EQ(decoy.status, 201) << decoy.body;
+  const std::string decoy_id = str(json_of(decoy.body), "client_id");
+  auto started =
+      form_post(reg, "/oauth/device_authorization", "client_id=" + decoy_id + "&resource=" + rrn);
+  ASSERT_EQ(started.status, 200) << started.body;
+  const std::string user_code = str(json_of(started.body), "user_code");
+  const std::string device_code = str(json_of(started.body), "device_code");
+
+  // What Alice sees names the client's maker, not only its name: Mallory's key.
+  auto shown = run_cli(
+      {"registry", "device", "show", user_code, "--registry", reg.url(), "--key-file", alice_file});
+  ASSERT_EQ(shown.exit_code, 0) << shown.out << shown.err;
+  EXPECT_NE(shown.out.find("\"created_by_label\":\"mallory\""), std::string::npos) << shown.out;
+  EXPECT_NE(shown.out.find("\"role\":\"owner\""), std::string::npos) << shown.out;
+  auto page = reg.get("/device?user_code=" + user_code);
+  EXPECT_NE(page.body.find("mallory"), std::string::npos) << page.body;
+  // Others do not learn of the request.
+  EXPECT_EQ(reg.get("/api/v1/device/requests/" + user_code, new_registrant(reg, "eve")).status,
+            404);
+  // An approval typed without reading is not taken: it asks, and with no one to ask, refuses.
+  auto approve = run_cli({"registry", "device", "approve", user_code, "--registry", reg.url(),
+                          "--key-file", alice_file});
+  EXPECT_EQ(approve.exit_code, 2) << approve.out << approve.err;
+  EXPECT_NE(approve.err.find("mallory"), std::string::npos) << approve.err;
+  auto poll = form_post(reg, "/oauth/token",
+                        "grant_type=urn%3Aietf%3Aparams%3Aoauth%3Agrant-type%3Adevice_code"
+                        "&client_id=" +
+                            decoy_id + "&device_code=" + device_code);
+  EXPECT_EQ(str(json_of(poll.body), "error"), "authorization_pending") << poll.body;
+}
+
 }  // namespace
 }  // namespace rcan::test

@@ -69,8 +69,8 @@ Fixture setup(const RegistryDaemon& d) {
   s.registrant = str(body_of(k), "key");
   s.registrant_id = str(body_of(k), "id");
   auto reg = [&](const std::string& dev, const std::string& ruri, std::string& key) {
-    auto r = d.register_proven(s.registrant, "acme", "arm", "v1", dev,
-                               R"({"ruri":")" + ruri + R"("})");
+    auto r =
+        d.register_proven(s.registrant, "acme", "arm", "v1", dev, R"({"ruri":")" + ruri + R"("})");
     EXPECT_EQ(r.status, 201) << r.body;
     key = str(body_of(r), "api_key");
     return str(body_of(r), "rrn");
@@ -390,8 +390,19 @@ TEST(RegistryAuthority, DeviceAuthorizationGrant) {
   TempDir dir;
   RegistryDaemon d(dir.path());
   Fixture s = setup(d);
-  auto c = d.send("POST", "/api/v1/clients", R"({"name":"rcan-cli"})", d.admin_key());
+  auto c = d.send("POST", "/api/v1/clients", R"({"name":"rcan-cli","auth":"none"})", d.admin_key());
   std::string client = str(body_of(c), "client_id");
+  // A confidential client's id alone starts nothing (docs/THREATS.md T7).
+  auto conf = d.send("POST", "/api/v1/clients", R"({"name":"ops"})", d.admin_key());
+  auto unauth = form(d, "/oauth/device_authorization",
+                     "client_id=" + str(body_of(conf), "client_id") + "&resource=" + s.rrn_a);
+  EXPECT_EQ(unauth.status, 401) << unauth.body;
+  EXPECT_EQ(oauth_error_of(unauth), "invalid_client");
+  // A public client gets no token by client credentials.
+  EXPECT_EQ(oauth_error_of(
+                form(d, "/oauth/token",
+                     "grant_type=client_credentials&client_id=" + client + "&resource=" + s.rrn_a)),
+            "invalid_client");
   ASSERT_EQ(d.send("POST", "/api/v1/grants",
                    R"({"principal":"user:)" + s.registrant_id + R"(","robot":")" + s.rrn_a +
                        R"(","role":"owner","scope":["status","config"]})",
@@ -489,7 +500,7 @@ TEST(RegistryAuthority, DeviceCodeExpires) {
   TempDir dir;
   RegistryDaemon d(dir.path(), {"--device-code-ttl", "1"});
   Fixture s = setup(d);
-  auto c = d.send("POST", "/api/v1/clients", R"({"name":"cli"})", d.admin_key());
+  auto c = d.send("POST", "/api/v1/clients", R"({"name":"cli","auth":"none"})", d.admin_key());
   std::string client = str(body_of(c), "client_id");
   auto r = form(d, "/oauth/device_authorization", "client_id=" + client + "&resource=" + s.rrn_a);
   ASSERT_EQ(r.status, 200) << r.body;
@@ -600,7 +611,7 @@ TEST(RegistryAuthority, CliTokenGetAndLogin) {
   EXPECT_EQ(st.st_mode & 0777, 0600u);
 
   // rcan login: the device flow, approved by the registrant
-  auto c2 = d.send("POST", "/api/v1/clients", R"({"name":"cli"})", d.admin_key());
+  auto c2 = d.send("POST", "/api/v1/clients", R"({"name":"cli","auth":"none"})", d.admin_key());
   std::string cli_client = str(body_of(c2), "client_id");
   ASSERT_EQ(d.send("POST", "/api/v1/grants",
                    R"({"principal":"user:)" + s.registrant_id + R"(","robot":")" + s.rrn_a +
@@ -628,9 +639,17 @@ TEST(RegistryAuthority, CliTokenGetAndLogin) {
   const std::string key_file = dir.file("registrant.key");
   ASSERT_TRUE(write_file(key_file, s.registrant + "\n"));
   ::chmod(key_file.c_str(), 0600);
-  auto ap = run_cli(
-      {"registry", "device", "approve", code, "--registry", d.url(), "--key-file", key_file});
+  // They see what they approve: the client, who made it, the robot and what their grant gives.
+  auto shown =
+      run_cli({"registry", "device", "show", code, "--registry", d.url(), "--key-file", key_file});
+  ASSERT_EQ(shown.exit_code, 0) << shown.out << shown.err;
+  EXPECT_NE(shown.out.find(cli_client), std::string::npos) << shown.out;
+  EXPECT_NE(shown.out.find(s.rrn_a), std::string::npos) << shown.out;
+  EXPECT_NE(shown.out.find("\"role\":\"user\""), std::string::npos) << shown.out;
+  auto ap = run_cli({"registry", "device", "approve", code, "--yes", "--registry", d.url(),
+                     "--key-file", key_file});
   ASSERT_EQ(ap.exit_code, 0) << ap.out << ap.err;
+  EXPECT_NE(ap.err.find("client      cli (" + cli_client), std::string::npos) << ap.err;
   // Decided once: a second decision on the same code is not found (exit 1).
   EXPECT_EQ(
       run_cli({"registry", "device", "deny", code, "--registry", d.url(), "--key-file", key_file})

@@ -87,8 +87,8 @@ HttpResponse RegistryApi::Impl::clients_route(const HttpRequest& req) {
       return bad_request("jwk must be an Ed25519 public key (kty OKP, crv Ed25519)", "jwk");
     json::Object pub{{"kty", "OKP"}, {"crv", "Ed25519"}, {"x", json::string_field(*jwk, "x")}};
     c.jwk = json::dump(json::Value(std::move(pub)));
-  } else {
-    return bad_request("auth must be client_secret or private_key_jwt", "auth");
+  } else if (c.auth != "none") {  // "none": a public client, for the device flow only
+    return bad_request("auth must be client_secret, private_key_jwt or none", "auth");
   }
   if (auto a = audit_unavailable()) return *a;
   c.id = "rcc_" + random_hex_id(12);
@@ -347,6 +347,69 @@ HttpResponse RegistryApi::Impl::rotate_keys(const HttpRequest& req) {
   return json_response(201, json::Object{{"kid", k->kid},
                                          {"published_at", iso_utc(k->created_ms)},
                                          {"signs_from", iso_utc(k->sign_from_ms)}});
+}
+
+Result<json::Object> RegistryApi::Impl::device_request(const std::string& user_code) {
+  auto none = [] {
+    return Error(ErrorCode::kNotFound, "no pending request with that code", "user_code",
+                 "not_found");
+  };
+  const std::string code = normalize_user_code(user_code);
+  if (code.empty()) return none();
+  auto d = store.device_by_user_code(code);
+  if (!d) return d.error();
+  if (!*d || (*d)->expires_ms <= now_ms() || (*d)->status != "pending") return none();
+  auto c = store.get_client((*d)->client_id);
+  if (!c) return c.error();
+  if (!*c) return none();
+  json::Object client = client_json(**c);
+  client.set("created_by", (*c)->owner_key_id);
+  auto maker = store.get_api_key((*c)->owner_key_id);
+  client.set("created_by_label", maker.ok() && *maker ? (*maker)->label : std::string());
+  json::Object target{{"resource", (*d)->resource}};
+  if (auto t = resolve_target((*d)->resource); t.ok()) {
+    if (!t->fleet.empty()) {
+      target.set("fleet", t->fleet);
+    } else {
+      target.set("rrn", t->rrn);
+      target.set("owner_key_id", t->owner_key_id);
+      if (auto r = store.get_robot(t->rrn); r.ok() && *r) {
+        target.set("rcan_uri", (*r)->rcan_uri);
+        target.set("description", (*r)->description);
+      }
+    }
+  }
+  return json::Object{{"user_code", code},
+                      {"client", std::move(client)},
+                      {"target", std::move(target)},
+                      {"scope", (*d)->scope},
+                      {"expires_in", ((*d)->expires_ms - now_ms() + 999) / 1000}};
+}
+
+HttpResponse RegistryApi::Impl::device_request_route(const HttpRequest& req,
+                                                     const std::string& user_code) {
+  HttpResponse err;
+  auto caller = authenticate(req, err);
+  if (!caller) return err;
+  auto shown = device_request(user_code);
+  if (!shown) return from_error(shown.error());
+  auto d = store.device_by_user_code(normalize_user_code(user_code));
+  if (!d || !*d) return from_error(Error(ErrorCode::kNotFound, "no pending request", "user_code"));
+  auto t = resolve_target((*d)->resource);
+  // The role and scopes the caller's approval would give; only who could approve sees it.
+  auto c = t ? choose_grant("user:" + caller->key.id, *t, (*d)->scope, "")
+             : Result<GrantChoice>(t.error());
+  if (!c && !caller->is("admin"))
+    return project_error(ErrorCode::kNotFound, "no pending request with that code", "user_code",
+                         "not_found");
+  if (c) {
+    json::Array scopes;
+    for (const auto& sc : c->scopes) scopes.emplace_back(sc);
+    shown->set("your_grant", json::Object{{"role", c->role}, {"scopes", std::move(scopes)}});
+  } else {
+    shown->set("your_grant", json::Value());
+  }
+  return json_response(200, *shown);
 }
 
 HttpResponse RegistryApi::Impl::device_approve(const HttpRequest& req) {

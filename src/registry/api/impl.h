@@ -126,7 +126,16 @@ class RegistryApi::Impl {
   HttpResponse delete_grant(const HttpRequest& req, const std::string& id);
   HttpResponse device_authorization(const HttpRequest& req);
   HttpResponse device_approve(const HttpRequest& req);
-  HttpResponse device_page(const HttpRequest& req) const;
+  HttpResponse device_page(const HttpRequest& req);
+  // A pending device request as its approver sees it (docs/THREATS.md T7): the client (name,
+  // id, auth, the API key that made it and its label), the target (resource, RRN or fleet, the
+  // robot's RURI and owner key), the scopes asked and when it expires. kNotFound when the code
+  // names no pending request.
+  Result<json::Object> device_request(const std::string& user_code);
+  // GET /api/v1/device/requests/{user_code}: device_request, for an admin or a key that holds a
+  // grant on its target (who else could approve it), with the role and scopes the caller's
+  // grant would give.
+  HttpResponse device_request_route(const HttpRequest& req, const std::string& user_code);
   // The stored keys (cached for a second; `fresh` reloads), rotated when due.
   Result<std::vector<SigningKeyRecord>> authority_keys(bool fresh = false);
   // A new key that signs from now + overlap (now when there is none).

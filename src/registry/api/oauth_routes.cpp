@@ -68,8 +68,14 @@ std::optional<Client> RegistryApi::Impl::authenticate_client(const HttpRequest& 
   if (!*c) return fail("client authentication failed");
   const Client& client = **c;
   if (methods == 0) {
-    if (allow_public) return client;
-    return fail("client authentication required");
+    // Only a public client (auth "none", made for the device flow) goes without: a confidential
+    // client's id is no secret, and whoever starts a device request under it gets the token the
+    // approver meant for that client (docs/THREATS.md T7).
+    if (allow_public && client.auth == "none") return client;
+    return fail(client.auth == "none" ? "a public client is for the device flow only"
+                                      : "client authentication required: this client is "
+                                        "confidential (" +
+                                            client.auth + ")");
   }
   if (basic || f.has("client_secret")) {
     if (client.auth != "client_secret") return fail("client authentication failed");
@@ -153,7 +159,7 @@ HttpResponse RegistryApi::Impl::oauth_token(const HttpRequest& req) {
 // GET /device (RFC 8628 verification_uri): what the person at a browser does with the code a
 // device showed them. The page reflects nothing but a well-formed user code and the registry's
 // own URL (escaped), and runs no script.
-HttpResponse RegistryApi::Impl::device_page(const HttpRequest& req) const {
+HttpResponse RegistryApi::Impl::device_page(const HttpRequest& req) {
   auto escape = [](std::string_view in) {
     std::string out;
     for (char c : in) {
@@ -181,6 +187,30 @@ HttpResponse RegistryApi::Impl::device_page(const HttpRequest& req) const {
   };
   const std::string code = normalize_user_code(req.query_value("user_code"));
   const std::string shown = code.empty() ? "CODE" : code;
+  // What is asked, so that a person approves knowing it (docs/THREATS.md T7): the client by
+  // name and id and who made it, the robot or fleet, the scopes. Only for a pending code.
+  std::string asked;
+  if (!code.empty())
+    if (auto req_json = device_request(code); req_json.ok()) {
+      const json::Object& d = *req_json;
+      auto field = [&](const char* obj, const char* k) {
+        const json::Value* o_v = d.find(obj);
+        const json::Value* v = o_v != nullptr && o_v->is_object() ? o_v->get(k) : nullptr;
+        return v != nullptr && v->is_string() ? escape(v->as_string()) : std::string("?");
+      };
+      const json::Value* scope = d.find("scope");
+      asked = "<table>\n<tr><th>client</th><td>" + field("client", "name") + " (" +
+              field("client", "client_id") + ", " + field("client", "auth") +
+              ")</td></tr>\n<tr><th>made by</th><td>API key " + field("client", "created_by") +
+              " (" + field("client", "created_by_label") + ")</td></tr>\n<tr><th>for</th><td>" +
+              field("target", "resource") + " " + field("target", "rcan_uri") +
+              "</td></tr>\n<tr><th>scopes</th><td>" +
+              (scope != nullptr && scope->is_string() && !scope->as_string().empty()
+                   ? escape(scope->as_string())
+                   : std::string("all that your grant holds")) +
+              "</td></tr>\n</table>\n<p>Approve only a client you know and started "
+              "yourself: the token goes to whoever holds this request.</p>\n";
+    }
   const std::string url = escape(o.public_url);
   HttpResponse r;
   r.content_type = "text/html; charset=utf-8";
@@ -194,7 +224,7 @@ HttpResponse RegistryApi::Impl::device_page(const HttpRequest& req) const {
                         "eight letters and sends you here.</p>\n"
                       : "<p>A program asked this registry for a token and showed you the code "
                         "<strong>" +
-                            code + "</strong>.</p>\n") +
+                            code + "</strong>.</p>\n" + asked) +
       "<p>If you started it, approve it with your registry API key:</p>\n<pre>rcan registry "
       "device approve " +
       shown + " --registry " + url +

@@ -357,6 +357,8 @@ HttpResponse RegistryApi::Impl::serve(const HttpRequest& req) {
   if (rest.rfind("webhooks/", 0) == 0)
     return m == "DELETE" ? delete_webhook(req, std::string(rest.substr(9))) : not_allowed();
   if (rest == "device/approve") return m == "POST" ? device_approve(req) : not_allowed();
+  if (rest.rfind("device/requests/", 0) == 0)
+    return m == "GET" ? device_request_route(req, std::string(rest.substr(16))) : not_allowed();
   return ref_error(404, "Not found");
 }
 
@@ -396,7 +398,8 @@ std::string route_label(std::string_view p) {
       {"/api/v1/keys/", "/api/v1/keys/{id}"},
       {"/api/v1/clients/", "/api/v1/clients/{id}"},
       {"/api/v1/grants/", "/api/v1/grants/{id}"},
-      {"/api/v1/webhooks/", "/api/v1/webhooks/{id}"}};
+      {"/api/v1/webhooks/", "/api/v1/webhooks/{id}"},
+      {"/api/v1/device/requests/", "/api/v1/device/requests/{user_code}"}};
   for (auto [pre, label] : kPrefixes)
     if (p.rfind(pre, 0) == 0) return std::string(label);
   return "other";
