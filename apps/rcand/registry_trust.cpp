@@ -169,16 +169,31 @@ bool RegistryTrust::poll_revocations(int timeout_ms) {
       r.at_ms = e.revoked_at_ms.value_or(now_ms);
       r.by = node::PrincipalId{issuer_, "registry"};
       r.reason = "registry revocation " + std::to_string(e.seq);
+      r.feed = true;  // its own table: a flood of the feed never crowds out the OWNER's entries
       auto added = svc_.revocations.add(r, now_ms / 1000);  // persisted; closes its streams
-      auto rec =
-          svc_.record("TOKEN_REVOKED", added.ok() ? (*added ? "ok" : "unchanged") : "failed");
+      // A full feed table is not a fault to wait out: the entry is skipped, counted and
+      // recorded, and the feed read on (a stalled cursor would stop every later revocation).
+      const bool skipped = !added.ok() && added.error().reason == "revocation_feed_full";
+      auto rec = svc_.record("TOKEN_REVOKED", added.ok() ? (*added ? "ok" : "unchanged")
+                                              : skipped  ? "skipped"
+                                                         : "failed");
       rec.by_system()
           .detail("source", "registry")
           .detail("registry_seq", e.seq)
           .detail("kind", std::string(node::revocation_kind_name(r.kind)))
           .detail("iss", issuer_);
-      if (added.ok()) rec.detail(std::string(node::revocation_kind_name(r.kind)), r.value);
+      if (added.ok() || skipped)
+        rec.detail(std::string(node::revocation_kind_name(r.kind)), r.value);
+      if (skipped) rec.reason("revocation_feed_full");
       rec.write();
+      if (skipped) {
+        ++revocations_skipped_;
+        log(LogLevel::kWarn, "registry_revocation_skipped",
+            json::Object{{"seq", e.seq}, {"error", added.error().message}});
+        std::lock_guard<std::mutex> l(mu_);
+        since_ = e.seq;
+        continue;
+      }
       if (!added.ok()) {
         ++rev_failures_;
         save_cursor();  // what was applied before it stays applied
@@ -241,6 +256,9 @@ void RegistryTrust::prime(int timeout_ms) {
           "Polls of the registry's revocation feed that failed.", rev_failures_);
   counter("rcan_registry_revocations_applied_total",
           "Revocations from the registry added to the node's list.", revocations_applied_);
+  counter("rcan_registry_revocations_skipped_total",
+          "Revocations from the registry skipped: the feed's table was full.",
+          revocations_skipped_);
   counter("rcan_registry_introspections_total", "Tokens the registry was asked about (RFC 7662).",
           introspections_);
   counter("rcan_registry_introspection_failures_total",

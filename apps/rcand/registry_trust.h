@@ -88,7 +88,8 @@ class RegistryTrust {
   std::atomic<int64_t> fetched_ms_{0};
   std::atomic<int64_t> last_early_ms_{0};
   std::atomic<uint64_t> jwks_fetches_{0}, jwks_failures_{0}, rev_polls_{0}, rev_failures_{0},
-      revocations_applied_{0}, introspections_{0}, introspection_failures_{0};
+      revocations_applied_{0}, revocations_skipped_{0}, introspections_{0},
+      introspection_failures_{0};
 
   mutable std::mutex mu_;
   std::condition_variable cv_;

@@ -85,6 +85,7 @@ node::NodeSettings node_settings(const config::NodeConfig& cfg, const keys::Robo
   ns.guest_limits = cfg.rbac.guest_limits.to_guest_limits();
   ns.handoff_window_ms = int64_t{cfg.control.handoff_window_s} * 1000;
   ns.state_dir = cfg.data_dir;
+  ns.feed_revocations = cfg.registry.max_feed_revocations;
   ns.consent_webhook = cfg.control.consent_webhook;
   return ns;
 }

@@ -390,6 +390,7 @@ struct RegistryLinkConfig {
   std::string issuer;                   // their `iss` (resolved: registry_url when not given)
   uint32_t jwks_refresh_s = 300;        // how often the keys are fetched again
   uint32_t revocations_refresh_s = 30;  // how often the revocation feed is polled
+  uint32_t max_feed_revocations = 10'000;  // the feed's entries kept in force (their own table)
   uint32_t max_key_age_s = 86400;       // keys trusted this long without a successful fetch
 };
 

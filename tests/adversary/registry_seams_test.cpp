@@ -17,11 +17,6 @@ namespace {
 
 const std::string kTrust = "  trust_tokens: true\n";
 
-std::string first_line(const std::string& path) {
-  std::string k = read_file(path);
-  return k.substr(0, k.find('\n'));
-}
-
 // A registrant key of its own, made by the registry's admin.
 std::string new_registrant(const RegistryDaemon& reg, const std::string& label) {
   auto k = reg.send("POST", "/api/v1/keys", R"({"role":"registrant","label":")" + label + R"("})",

@@ -171,7 +171,7 @@ TEST(Revocation, OwnerRevokesAUserTokenRefusedOnHttpStreamClosedAtOnceAndAfterRe
   ASSERT_EQ(list.status, 200) << list.body;
   EXPECT_EQ(count_of(list.body), 1);
   struct stat st {};
-  ASSERT_EQ(::stat((d->dir() + "/revocations.json").c_str(), &st), 0);
+  ASSERT_EQ(::stat((d->dir() + "/revocations.json.journal").c_str(), &st), 0);
   EXPECT_EQ(st.st_mode & 0777, 0600u);
   const std::string audit =
       test::http(d->port(), "GET", "/api/audit?limit=200", "", bearer(owner)).body;

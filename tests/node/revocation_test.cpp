@@ -6,6 +6,8 @@
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
+#include <algorithm>
+#include <filesystem>
 #include <fstream>
 #include <string>
 
@@ -106,10 +108,12 @@ TEST(RevocationList, PersistsWithMode0600AndLoadsBackDroppingExpiredJtis) {
     ASSERT_TRUE(*list.add(r, kNow));
   }
   struct stat st {};
-  ASSERT_EQ(::stat(path.c_str(), &st), 0);
+  ASSERT_EQ(::stat((path + ".journal").c_str(), &st), 0);
   EXPECT_EQ(st.st_mode & 0777, 0600u);
   RevocationList back(path);
   ASSERT_TRUE(back.load(kNow).ok());
+  ASSERT_EQ(::stat(path.c_str(), &st), 0);  // the start folded the journal into the snapshot
+  EXPECT_EQ(st.st_mode & 0777, 0600u);
   ASSERT_EQ(back.size(), 2u);
   EXPECT_EQ(back.list()[1].reason, "key leaked");
   EXPECT_EQ(back.list()[1].by.sub, "local-owner");
@@ -175,6 +179,77 @@ TEST(RevocationList, AnEntryTheFileCouldNotHoldIsNotInForce) {
   ASSERT_TRUE(*list.add(entry(Revocation::Kind::kSubject, "bob"), kNow));
   EXPECT_TRUE(list.revoked(who("a", "bob")));
   EXPECT_EQ(heard, 1);
+}
+
+// docs/THREATS.md T4: an entry is one appended line, not a rewrite of the whole list (a flood
+// of a registry's feed cost every trusting robot a rewrite and an fsync of the list per entry).
+TEST(RevocationList, AnEntryIsAppendedToTheJournalAndTheStartFoldsItIn) {
+  test::TempDir dir;
+  const std::string path = dir.file("revocations.json");
+  RevocationList list(path);
+  ASSERT_TRUE(list.load(kNow).ok());
+  for (int i = 0; i < 50; ++i)
+    ASSERT_TRUE(
+        *list.add(entry(Revocation::Kind::kJti, "j" + std::to_string(i), "a", kNow + 100), kNow));
+  EXPECT_FALSE(std::filesystem::exists(path));  // no rewrite of a snapshot per entry
+  const std::string journal = test::read_file(path + ".journal");
+  EXPECT_EQ(std::count(journal.begin(), journal.end(), '\n'), 50);
+  // A crash during the 51st append leaves part of its line: never acknowledged, dropped.
+  { std::ofstream(path + ".journal", std::ios::app) << R"({"kind":"jti","jti":"j5)"; }
+  RevocationList back(path);
+  ASSERT_TRUE(back.load(kNow).ok());
+  EXPECT_EQ(back.size(), 50u);
+  EXPECT_TRUE(back.revoked(who("a", "u", "j49")));
+  EXPECT_EQ(std::filesystem::file_size(path + ".journal"), 0u);
+  EXPECT_TRUE(std::filesystem::exists(path));
+  ASSERT_TRUE(*back.add(entry(Revocation::Kind::kSubject, "bob"), kNow));
+  RevocationList again(path);
+  ASSERT_TRUE(again.load(kNow).ok());
+  EXPECT_EQ(again.size(), 51u);
+  // A complete line that does not parse is damage, not a torn append: the start refuses.
+  { std::ofstream(path + ".journal", std::ios::app) << "{\"kind\":\"who\"}\n"; }
+  RevocationList damaged(path);
+  Status s = damaged.load(kNow);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.error().message.find("line 1"), std::string::npos) << s.error().message;
+}
+
+TEST(RevocationList, TheJournalIsFoldedInEveryCompactEveryEntries) {
+  test::TempDir dir;
+  const std::string path = dir.file("revocations.json");
+  RevocationList list(path, 5000);
+  for (size_t i = 0; i < RevocationList::kCompactEvery + 3; ++i)
+    ASSERT_TRUE(*list.add(entry(Revocation::Kind::kKid, "k" + std::to_string(i)), kNow));
+  const std::string journal = test::read_file(path + ".journal");
+  EXPECT_EQ(std::count(journal.begin(), journal.end(), '\n'), 3);
+  RevocationList back(path, 5000);
+  ASSERT_TRUE(back.load(kNow).ok());
+  EXPECT_EQ(back.size(), RevocationList::kCompactEvery + 3);
+}
+
+// The OWNER's entries and those of a registry's feed are bounded apart: a full feed table
+// refuses only feed entries (revocation_feed_full), and the OWNER still revokes.
+TEST(RevocationList, FeedEntriesHaveATableOfTheirOwn) {
+  RevocationList list({}, 2, 60, nullptr, 3);
+  auto feed = [](const std::string& jti, int64_t exp = kNow + 1000) {
+    Revocation r = entry(Revocation::Kind::kJti, jti, "reg", exp);
+    r.feed = true;
+    return r;
+  };
+  for (const char* j : {"f1", "f2", "f3"}) ASSERT_TRUE(*list.add(feed(j), kNow));
+  auto full = list.add(feed("f4"), kNow);
+  ASSERT_FALSE(full.ok());
+  EXPECT_EQ(full.error().reason, "revocation_feed_full");
+  ASSERT_TRUE(*list.add(entry(Revocation::Kind::kSubject, "mallory"), kNow));
+  ASSERT_TRUE(*list.add(entry(Revocation::Kind::kKid, "k1"), kNow));
+  auto own_full = list.add(entry(Revocation::Kind::kKid, "k2"), kNow);
+  ASSERT_FALSE(own_full.ok());
+  EXPECT_EQ(own_full.error().reason, "revocation_list_full");
+  // Expired feed entries make room for new ones.
+  ASSERT_TRUE(*list.add(feed("f5", kNow + 5000), kNow + 1061));
+  // The source survives the file.
+  EXPECT_TRUE(Revocation::from_json(feed("x").to_json())->feed);
+  EXPECT_FALSE(Revocation::from_json(entry(Revocation::Kind::kSubject, "y").to_json())->feed);
 }
 
 }  // namespace

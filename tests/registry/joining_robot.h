@@ -36,6 +36,12 @@ inline void write_private(const std::string& path, const std::string& text) {
 }
 
 // A registrant key made with the admin key, in a 0600 file.
+// The first line of a file (a key or a token saved with its newline).
+inline std::string first_line(const std::string& path) {
+  std::string k = read_file(path);
+  return k.substr(0, k.find('\n'));
+}
+
 inline std::string registrant_key_file(const RegistryDaemon& reg, const std::string& reg_dir,
                                        const std::string& path) {
   auto r = run_cli({"registry", "keys", "create", "--registry", reg.url(), "--label", "fleet-ops",

@@ -324,6 +324,10 @@ Table<NodeConfig> identity_blocks() {
                       [](const At& a, NodeConfig& c, Ctx&) {
                         c.registry.revocations_refresh_s = a.u32(30);
                       }),
+              R::read("max_feed_revocations", Int(1, 100'000),
+                      [](const At& a, NodeConfig& c, Ctx&) {
+                        c.registry.max_feed_revocations = a.u32(10'000);
+                      }),
               R::read("max_key_age_s", Int(1, 30 * 86'400),
                       [](const At& a, NodeConfig& c, Ctx&) {
                         c.registry.max_key_age_s = a.u32(86400);

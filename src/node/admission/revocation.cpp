@@ -57,6 +57,7 @@ json::Value Revocation::to_json() const {
   o.set("at_ms", at_ms);
   o.set("by", json::Object{{"iss", by.iss}, {"sub", by.sub}});
   if (!reason.empty()) o.set("reason", reason);
+  if (feed) o.set("source", "feed");
   return json::Value(std::move(o));
 }
 
@@ -100,14 +101,20 @@ Result<Revocation> Revocation::from_json(const json::Value& v) {
   auto reason = text(v, "reason");
   if (!reason.ok()) return reason.error();
   r.reason = std::move(*reason);
+  auto source = text(v, "source");
+  if (!source.ok()) return source.error();
+  if (!source->empty() && *source != "feed") return bad("source must be feed or absent", "source");
+  r.feed = *source == "feed";
   return r;
 }
 
-RevocationList::RevocationList(std::string path, size_t capacity, int64_t leeway_s, audit::Env* env)
+RevocationList::RevocationList(std::string path, size_t capacity, int64_t leeway_s, audit::Env* env,
+                               size_t feed_capacity)
     : path_(std::move(path)),
       capacity_(capacity),
       leeway_s_(std::max<int64_t>(0, leeway_s)),
-      env_(env) {}
+      env_(env != nullptr ? env : audit::Env::posix()),
+      feed_capacity_(feed_capacity) {}
 
 Result<std::vector<Revocation>> RevocationList::parse(const json::Value& doc, size_t capacity) {
   if (!doc.is_object()) return bad("not a JSON object", "");
@@ -135,76 +142,190 @@ Result<std::vector<Revocation>> RevocationList::parse(const json::Value& doc, si
   return out;
 }
 
+Result<std::vector<Revocation>> RevocationList::read_journal() const {
+  std::vector<Revocation> out;
+  const std::string jpath = journal_path();
+  if (!env_->exists(jpath)) return out;
+  auto text_r = env_->read_file(jpath);
+  if (!text_r.ok())
+    return bad("the revocation journal " + jpath + ": " + text_r.error().message, jpath);
+  std::string_view rest(*text_r);
+  size_t line_no = 0;
+  while (!rest.empty()) {
+    const size_t nl = rest.find('\n');
+    if (nl == std::string_view::npos) break;  // a torn last line: its append never returned
+    std::string_view line = rest.substr(0, nl);
+    rest.remove_prefix(nl + 1);
+    ++line_no;
+    auto v = json::parse(line);
+    auto r = v.ok() ? Revocation::from_json(*v) : Result<Revocation>(v.error());
+    if (!r.ok())
+      return bad("the revocation journal " + jpath + " is unreadable at line " +
+                     std::to_string(line_no) + ": " + r.error().message +
+                     "; move it away only if you accept that the tokens it revoked are valid "
+                     "again",
+                 jpath);
+    out.push_back(std::move(r).value());
+  }
+  return out;
+}
+
 Status RevocationList::load(int64_t now_s) {
   if (path_.empty()) return Status::Ok();
   MutexLock w(write_mu_);
+  std::vector<Revocation> entries;
   auto doc = read_state_file(path_);
   if (!doc.ok()) {
-    if (doc.error().code == ErrorCode::kNotFound) return Status::Ok();
-    return bad("the revocation list " + path_ + " is not a JSON object; move it away only if " +
-                   "you accept that the tokens it revoked are valid again",
-               path_);
+    if (doc.error().code != ErrorCode::kNotFound)
+      return bad("the revocation list " + path_ + " is not a JSON object; move it away only if " +
+                     "you accept that the tokens it revoked are valid again",
+                 path_);
+  } else {
+    auto parsed = parse(*doc, capacity_ + feed_capacity_);
+    if (!parsed.ok())
+      return bad("the revocation list " + path_ + " is unreadable: " + parsed.error().message,
+                 path_);
+    entries = std::move(*parsed);
   }
-  auto entries = parse(*doc, capacity_);
-  if (!entries.ok())
-    return bad("the revocation list " + path_ + " is unreadable: " + entries.error().message,
+  auto journal = read_journal();
+  if (!journal.ok()) return journal.error();
+  const bool had_journal = env_->exists(journal_path());
+  for (Revocation& r : *journal) entries.push_back(std::move(r));
+  std::erase_if(entries, [&](const Revocation& r) { return expired(r, now_s, leeway_s_); });
+  const auto feed = static_cast<size_t>(
+      std::count_if(entries.begin(), entries.end(), [](const Revocation& r) { return r.feed; }));
+  if (entries.size() - feed > capacity_ || feed > feed_capacity_)
+    return bad("the revocation list " + path_ + " holds " + std::to_string(entries.size() - feed) +
+                   " entries of the node's own and " + std::to_string(feed) +
+                   " of the registry's, more than " + std::to_string(capacity_) + " and " +
+                   std::to_string(feed_capacity_),
                path_);
-  std::erase_if(*entries, [&](const Revocation& r) { return expired(r, now_s, leeway_s_); });
-  install(std::move(*entries));
+  install(std::move(entries));
+  if (!had_journal) return Status::Ok();
+  // Folded in at every start: the journal starts empty, with no torn line to append after.
+  if (Status s = compact(); !s.ok())
+    return Error(ErrorCode::kInternal,
+                 "the revocation list " + path_ + " could not be rewritten: " + s.error().message);
   return Status::Ok();
 }
 
 void RevocationList::install(std::vector<Revocation> entries) {
   std::unordered_map<std::string, int64_t> index;
+  size_t own = 0, feed = 0;
   for (const Revocation& r : entries) {
     int64_t at_s = r.at_ms / 1000;
     auto [it, fresh] = index.emplace(index_key(r.kind, r.iss, r.value), at_s);
     if (!fresh) it->second = std::max(it->second, at_s);
+    ++(r.feed ? feed : own);
   }
   MutexLock lock(mu_);
   entries_ = std::move(entries);
   index_ = std::move(index);
+  own_count_ = own;
+  feed_count_ = feed;
 }
 
-std::vector<Revocation> RevocationList::pruned(int64_t now_s) const {
-  std::vector<Revocation> out = list();
-  std::erase_if(out, [&](const Revocation& r) { return expired(r, now_s, leeway_s_); });
-  return out;
+void RevocationList::insert(const Revocation& r) {
+  MutexLock lock(mu_);
+  auto [it, fresh] = index_.emplace(index_key(r.kind, r.iss, r.value), r.at_ms / 1000);
+  if (!fresh) it->second = std::max(it->second, r.at_ms / 1000);
+  ++(r.feed ? feed_count_ : own_count_);
+  entries_.push_back(r);
+}
+
+void RevocationList::prune(int64_t now_s) {
+  std::vector<Revocation> kept = list();
+  std::erase_if(kept, [&](const Revocation& r) { return expired(r, now_s, leeway_s_); });
+  install(std::move(kept));
+}
+
+Status RevocationList::compact() {
+  json::Array arr;
+  for (const Revocation& e : list()) arr.push_back(e.to_json());
+  json::Value doc(json::Object{{"version", 1}, {"revocations", std::move(arr)}});
+  if (Status s = write_state_file(path_, doc, env_); !s.ok()) return s;
+  if (journal_) {
+    (void)journal_->close();
+    journal_.reset();
+  }
+  if (env_->exists(journal_path()))
+    if (Status s = env_->truncate_file(journal_path(), 0); !s.ok()) return s;
+  journal_lines_ = 0;
+  journal_torn_ = false;
+  return Status::Ok();
+}
+
+Status RevocationList::append(const Revocation& r) {
+  if (!journal_) {
+    auto f = env_->open_appendable(journal_path());
+    if (!f.ok()) return f.error();
+    journal_ = std::move(*f);
+  }
+  Status s = journal_->append(json::dump(r.to_json()) + "\n");
+  if (s.ok()) s = journal_->sync();
+  if (!s.ok()) {
+    (void)journal_->close();
+    journal_.reset();
+    journal_torn_ = true;
+    return s;
+  }
+  ++journal_lines_;
+  return Status::Ok();
 }
 
 Result<bool> RevocationList::add(Revocation r, int64_t now_s) {
   if (r.value.empty()) return bad("nothing to revoke", "");
   if (expired(r, now_s, leeway_s_)) return false;  // the token is refused as expired anyway
-  Revocation copy = r;
   {
     MutexLock w(write_mu_);
-    std::vector<Revocation> next = pruned(now_s);
-    for (const Revocation& e : next) {
-      if (e.kind != r.kind || e.iss != r.iss || e.value != r.value) continue;
-      if (r.kind == Revocation::Kind::kJti || r.kind == Revocation::Kind::kKid) return false;
+    const std::string key = index_key(r.kind, r.iss, r.value);
+    auto table_full = [&] {
+      MutexLock lock(mu_);
+      return (r.feed ? feed_count_ : own_count_) >= (r.feed ? feed_capacity_ : capacity_);
+    };
+    {
+      MutexLock lock(mu_);
+      if (r.kind != Revocation::Kind::kSubject && index_.count(key) != 0) return false;
     }
-    if (next.size() >= capacity_)
+    if (table_full()) prune(now_s);
+    if (table_full()) {
+      if (r.feed)
+        return Error(ErrorCode::kCommandRejected,
+                     "the table of the registry's revocations is full (" +
+                         std::to_string(feed_capacity_) + " entries in force)",
+                     "", "revocation_feed_full");
       return Error(ErrorCode::kCommandRejected,
                    "the revocation list is full (" + std::to_string(capacity_) +
                        " entries in force); revoke by sub or kid instead",
                    "", "revocation_list_full");
-    next.push_back(std::move(r));
-    if (!path_.empty()) {
-      json::Array arr;
-      for (const Revocation& e : next) arr.push_back(e.to_json());
-      json::Value doc(json::Object{{"version", 1}, {"revocations", std::move(arr)}});
-      if (Status s = write_state_file(path_, doc, env_); !s.ok())
+    }
+    if (!path_.empty() && journal_torn_) {
+      // The journal may end in part of a line: this entry goes in with a fresh snapshot.
+      std::vector<Revocation> before = list();
+      insert(r);
+      if (Status s = compact(); !s.ok()) {
+        install(std::move(before));
         return Error(ErrorCode::kInternal,
                      "the revocation could not be recorded: " + s.error().message);
+      }
+    } else {
+      if (!path_.empty())
+        if (Status s = append(r); !s.ok())
+          return Error(ErrorCode::kInternal,
+                       "the revocation could not be recorded: " + s.error().message);
+      insert(r);
+      if (!path_.empty() && journal_lines_ >= kCompactEvery) {
+        prune(now_s);
+        (void)compact();  // the entries are in the journal already; a failure retries later
+      }
     }
-    install(std::move(next));
   }
   std::vector<Listener> fns;
   {
     MutexLock lock(lmu_);
     for (auto& [id, fn] : listeners_) fns.push_back(fn);
   }
-  for (auto& fn : fns) fn(copy);
+  for (auto& fn : fns) fn(r);
   return true;
 }
 

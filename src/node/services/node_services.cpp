@@ -15,7 +15,8 @@ NodeServices::NodeServices(NodeSettings s, Clock& c, AuthOptions a, Actuation& a
       auth(std::move(a)),
       revocations(
           settings.state_dir.empty() ? std::string() : settings.state_dir + "/revocations.json",
-          RevocationList::kDefaultCapacity, auth.verify_options().leeway_s),
+          RevocationList::kDefaultCapacity, auth.verify_options().leeway_s, nullptr,
+          settings.feed_revocations),
       replay(settings.replay),
       injection(settings.injection_patterns),
       act(actuation),

@@ -1,6 +1,7 @@
 // The token authority's management routes: clients, grants, revocations, key rotation and the
 // approval of device requests (docs/REGISTRY.md "Token authority").
 #include <algorithm>
+#include <chrono>
 
 #include "rcan/hash.h"
 #include "registry/api/authority_internal.h"
@@ -313,6 +314,21 @@ HttpResponse RegistryApi::Impl::revoke(const HttpRequest& req) {
   }
   if (r.jti.empty() && r.sub.empty()) return bad_request("give jti or sub", "jti");
   if (r.jti.size() > 256 || r.sub.size() > 256) return bad_request("jti/sub: too long", "jti");
+  if (!caller->is("admin")) {
+    const int64_t now_us = std::chrono::duration_cast<std::chrono::microseconds>(
+                               std::chrono::steady_clock::now().time_since_epoch())
+                               .count();
+    if (int64_t wait = revoke_by_key.take(caller->key.id, now_us); wait > 0) {
+      HttpResponse limited = project_error(
+          ErrorCode::kRateLimited,
+          "this key has revoked " + std::to_string(static_cast<int>(kRevocationBurstPerKey)) +
+              " tokens lately: every robot that trusts the registry keeps each revocation, so a "
+              "key gets one a minute after that (an admin revokes more, or by sub)",
+          "revocations", "revocation_rate");
+      limited.headers.emplace_back("Retry-After", std::to_string(wait));
+      return limited;
+    }
+  }
   if (auto a = audit_unavailable()) return *a;
   r.revoked_ms = now_ms();
   r.revoked_at = iso_utc(r.revoked_ms);

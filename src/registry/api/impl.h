@@ -172,6 +172,11 @@ class RegistryApi::Impl {
   std::string manifest;
   Metrics metrics;
   RateLimiter write_key, write_addr, read_addr;
+  // Revocations by one non-admin API key (docs/THREATS.md T4): every robot that trusts this
+  // registry keeps each one, so a registrant may not turn its own tokens into a flood of them.
+  RateLimiter revoke_by_key{BucketConfig{kRevocationsPerKeyPerS, kRevocationBurstPerKey}};
+  static constexpr double kRevocationsPerKeyPerS = 1.0 / 60;  // one a minute, after the burst
+  static constexpr double kRevocationBurstPerKey = 60;
   std::atomic<uint64_t> audit_failures{0};
   // Last: its worker stops before the rest goes.
   std::unique_ptr<WebhookDispatcher> webhooks;
