@@ -651,22 +651,8 @@ Result<Registered> SqliteStore::register_robot(const NewRobot& r) {
       n = q.integer(0);
       if (q.finish() != SQLITE_DONE) return error("register_robot: counter");
     }
-    Robot robot;
+    Robot robot = robot_of(r);
     robot.rrn = detail::format_rrn(opts_.rrn_prefix, n);
-    robot.manufacturer = r.manufacturer;
-    robot.model = r.model;
-    robot.version = r.version;
-    robot.device_id = r.device_id;
-    robot.rcan_uri = detail::robot_uri(r);
-    robot.description = r.description;
-    robot.contact_email = r.contact_email;
-    robot.source = r.source;
-    robot.metadata_json = r.metadata_json;
-    robot.ed25519_pub = r.ed25519_pub;
-    robot.mldsa65_pub = r.mldsa65_pub;
-    robot.endpoints_json = r.endpoints_json;
-    robot.owner_key_id = r.owner_key_id;
-    robot.registered_at = robot.updated_at = r.now;
     auto ins = prepare("INSERT INTO robots (" ROBOT_COLUMNS ") VALUES (" ROBOT_VALUES ")");
     if (!ins) return ins.error();
     int rc;

@@ -53,6 +53,25 @@ Error db_error(std::string_view what, std::string_view detail) {
 
 }  // namespace detail
 
+Robot robot_of(const NewRobot& r) {
+  Robot robot;
+  robot.manufacturer = r.manufacturer;
+  robot.model = r.model;
+  robot.version = r.version;
+  robot.device_id = r.device_id;
+  robot.rcan_uri = detail::robot_uri(r);
+  robot.description = r.description;
+  robot.contact_email = r.contact_email;
+  robot.source = r.source;
+  robot.metadata_json = r.metadata_json;
+  robot.ed25519_pub = r.ed25519_pub;
+  robot.mldsa65_pub = r.mldsa65_pub;
+  robot.endpoints_json = r.endpoints_json;
+  robot.owner_key_id = r.owner_key_id;
+  robot.registered_at = robot.updated_at = r.now;
+  return robot;
+}
+
 Result<std::unique_ptr<Store>> open_store(const std::string& spec, const StoreOptions& o) {
   if (spec.starts_with("postgresql://") || spec.starts_with("postgres://"))
     return open_postgres(spec, o);

@@ -52,6 +52,9 @@ struct NewRobot {
   std::string now;
 };
 
+// The record `r` makes (rcan_uri from its base and names, both times `r.now`), without an RRN.
+Robot robot_of(const NewRobot& r);
+
 struct Registered {
   Robot robot;
   bool created = false;  // false: (manufacturer, model, version, device_id) was already live

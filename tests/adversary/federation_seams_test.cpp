@@ -7,6 +7,7 @@
 #include <fstream>
 #include <string>
 
+#include "joining_robot.h"
 #include "rcan/json.h"
 #include "registry_daemon.h"
 #include "test_support.h"
@@ -37,17 +38,6 @@ print('peer serving', file=sys.stderr, flush=True)
 s.serve_forever()
 )PY";
 
-json::Value body_of(const HttpReply& r) {
-  auto v = json::parse(r.body);
-  EXPECT_TRUE(v.ok()) << r.status << " " << r.body;
-  return v.ok() ? *v : json::Value(json::Object{});
-}
-
-std::string str(const json::Value& v, std::string_view key) {
-  const json::Value* m = v.get(key);
-  return m != nullptr && m->is_string() ? m->as_string() : std::string();
-}
-
 json::Value record(const std::string& rrn, const std::string& device, const std::string& uri,
                    const std::string& tier) {
   return json::Object{{"rrn", rrn},
@@ -76,10 +66,10 @@ TEST(AdversaryRegistryToRegistry, ADelegatedPeerCannotTakeOverNamesOrJudgeItsOwn
   auto k =
       root.send("POST", "/api/v1/keys", R"({"role":"registrant","label":"ops"})", root.admin_key());
   ASSERT_EQ(k.status, 201) << k.body;
-  auto mine = root.register_proven(str(body_of(k), "key"), "acme", "arm", "v1", "a1b2c3d4");
+  auto mine = root.register_proven(str(json_of(k.body), "key"), "acme", "arm", "v1", "a1b2c3d4");
   ASSERT_EQ(mine.status, 201) << mine.body;
-  const std::string local_rrn = str(body_of(mine), "rrn");
-  const std::string local_uri = str(body_of(mine), "rcan_uri");
+  const std::string local_rrn = str(json_of(mine.body), "rrn");
+  const std::string local_uri = str(json_of(mine.body), "rcan_uri");
   ASSERT_EQ(local_uri, "rcan://127.0.0.1/acme/arm/v1/a1b2c3d4");  // the peer's host too, here
 
   const uint16_t peer_port = free_port();
@@ -108,7 +98,7 @@ TEST(AdversaryRegistryToRegistry, ADelegatedPeerCannotTakeOverNamesOrJudgeItsOwn
   // Its own robot is taken, with the root's judgement: community, the root's times.
   auto own = [&] { return root.get("/api/v1/resolve/RRN-BD-000000000002"); };
   ASSERT_TRUE(eventually([&] { return own().status == 200; }, 15000)) << own().body;
-  const json::Value copy = *body_of(own()).get("record");
+  const json::Value copy = *json_of(own().body).get("record");
   EXPECT_EQ(str(copy, "verification_tier"), "community");
   EXPECT_NE(str(copy, "registered_at"), "2001-01-01T00:00:00.000Z");
   EXPECT_NE(str(copy, "updated_at"), "2026-01-01T00:00:00.000Z");
@@ -116,7 +106,7 @@ TEST(AdversaryRegistryToRegistry, ADelegatedPeerCannotTakeOverNamesOrJudgeItsOwn
   // The root robot's URI still resolves to the root robot, and the hijacking copy is not kept.
   auto by_uri = root.get("/api/v1/resolve?uri=" + local_uri);
   ASSERT_EQ(by_uri.status, 200) << by_uri.body;
-  EXPECT_EQ(str(body_of(by_uri), "rrn"), local_rrn);
+  EXPECT_EQ(str(json_of(by_uri.body), "rrn"), local_rrn);
   // (307: the root holds no copy and sends the client to the delegated node, which answers for
   // its own prefix alone.)
   EXPECT_EQ(root.get("/api/v1/resolve/RRN-BD-000000000001").status, 307);

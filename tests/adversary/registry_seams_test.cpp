@@ -53,17 +53,24 @@ int read_audit(uint16_t port, const std::string& token) {
   return http(port, "GET", "/api/audit?limit=1", "", {{"Authorization", "Bearer " + token}}).status;
 }
 
+// A registry with one registrant, Alice (her key in a 0600 file), whose robots the attacks aim at.
+class AdversaryRegistry : public ::testing::Test {
+ protected:
+  void SetUp() override { ASSERT_FALSE(reg.url().empty()); }
+  TempDir dir;
+  RegistryDaemon reg{dir.file("registry")};
+  const std::string alice_file =
+      registrant_key_file(reg, dir.file("registry"), dir.file("alice.key"));
+};
+using AdversaryRegistryToRobot = AdversaryRegistry;
+using AdversaryRegistryDeviceFlow = AdversaryRegistry;
+
 // T1 (review finding F1, HIGH). Before the fix: the registry took a token's aud from the
 // record's unchecked metadata.ruri, and rcand accepted '*' per segment from the registry's
 // issuer without comparing the rrn claim with its own RRN; a registrant who wrote
 // rcan://*/*/*/* (or the victim's RURI, readable by anyone) into its own record's metadata and
 // granted itself OWNER there read the victim robot's audit log (200), claimed it and moved it.
-TEST(AdversaryRegistryToRobot, ARegistrantCannotMintItselfOwnerOfAnotherRegistrantsRobot) {
-  TempDir dir;
-  RegistryDaemon reg(dir.file("registry"));
-  ASSERT_FALSE(reg.url().empty());
-  const std::string alice_file =
-      registrant_key_file(reg, dir.file("registry"), dir.file("alice.key"));
+TEST_F(AdversaryRegistryToRobot, ARegistrantCannotMintItselfOwnerOfAnotherRegistrantsRobot) {
   JoiningRobot robot(dir.file("robot"), reg.url(), alice_file, kRuri, kTrust);
   const std::string victim = robot.start();
   ASSERT_EQ(victim.rfind("RRN-", 0), 0u);
@@ -123,39 +130,27 @@ TEST(AdversaryRegistryToRobot, ARegistrantCannotMintItselfOwnerOfAnotherRegistra
 // T3 (review finding F3). Before the fix: names registered before the robot joined were
 // answered `already_existed` to anyone, and rcand adopted that RRN without comparing keys —
 // it then served under the squatter's record and could never refresh it (403 forever).
-TEST(AdversaryRegistryToRobot, ARobotDoesNotAdoptARecordSomeoneElseRegisteredFirst) {
-  TempDir dir;
-  RegistryDaemon reg(dir.file("registry"));
-  ASSERT_FALSE(reg.url().empty());
-  const std::string alice_file =
-      registrant_key_file(reg, dir.file("registry"), dir.file("alice.key"));
-
-  // Another registrant registers the robot's names first, with keys of its own.
-  const std::string mallory = new_registrant(reg, "mallory");
-  auto squat = reg.register_proven(mallory, "acme", "rover", "v1", "0a1b2c3d",
-                                   R"({"ruri":")" + std::string(kRuri) + R"("})");
-  ASSERT_EQ(squat.status, 201) << squat.body;
-  const std::string squatted = str(json_of(squat.body), "rrn");
-  JoiningRobot a(dir.file("a"), reg.url(), alice_file, kRuri);
-  const std::string rrn_a = a.start();
-  EXPECT_NE(rrn_a, squatted);
-  EXPECT_FALSE(std::filesystem::exists(a.data() + "/registry/state.json"));
-  EXPECT_NE(a.proc().err().find(squatted), std::string::npos) << a.proc().err();
-  EXPECT_EQ(a.stop(), 0);
-
-  // The same registrant's key registered the names with other keys (a key shared by a team, a
-  // copied robot): the registry answers already_existed, and the robot compares the keys.
-  const std::string ruri_b = "rcan://local.rcan/acme/rover/0a1b2c3e";
-  auto earlier = reg.register_proven(first_line(alice_file), "acme", "rover", "v1", "0a1b2c3e",
-                                     R"({"ruri":")" + ruri_b + R"("})");
-  ASSERT_EQ(earlier.status, 201) << earlier.body;
-  const std::string other_keys = str(json_of(earlier.body), "rrn");
-  JoiningRobot b(dir.file("b"), reg.url(), alice_file, ruri_b);
-  const std::string rrn_b = b.start();
-  EXPECT_NE(rrn_b, other_keys);
-  EXPECT_FALSE(std::filesystem::exists(b.data() + "/registry/state.json"));
-  EXPECT_NE(b.proc().err().find(other_keys + " with other keys"), std::string::npos)
-      << b.proc().err();
+TEST_F(AdversaryRegistryToRobot, ARobotDoesNotAdoptARecordSomeoneElseRegisteredFirst) {
+  // `key` registers `ruri`'s names with keys of its own first; a robot of Alice's with that
+  // RURI then joins, and must not adopt the record: `says` is in its log.
+  auto joins_without_adopting = [&](const std::string& key, const std::string& ruri,
+                                    const std::string& device, const std::string& says) {
+    auto first =
+        reg.register_proven(key, "acme", "rover", "v1", device, R"({"ruri":")" + ruri + R"("})");
+    ASSERT_EQ(first.status, 201) << first.body;
+    const std::string taken = str(json_of(first.body), "rrn");
+    JoiningRobot robot(dir.file(device), reg.url(), alice_file, ruri);
+    EXPECT_NE(robot.start(), taken);
+    EXPECT_FALSE(std::filesystem::exists(robot.data() + "/registry/state.json"));
+    EXPECT_NE(robot.proc().err().find(taken + says), std::string::npos) << robot.proc().err();
+    EXPECT_EQ(robot.stop(), 0);
+  };
+  // Another registrant registered the names: the registry does not answer already_existed.
+  joins_without_adopting(new_registrant(reg, "mallory"), kRuri, "0a1b2c3d", "");
+  // The same registrant's key registered them with other keys (a key shared by a team, a copied
+  // robot): the registry answers already_existed, and the robot compares the keys.
+  joins_without_adopting(first_line(alice_file), "rcan://local.rcan/acme/rover/0a1b2c3e",
+                         "0a1b2c3e", " with other keys");
 }
 
 HttpReply form_post(const RegistryDaemon& reg, const std::string& path, const std::string& body) {
@@ -167,12 +162,7 @@ HttpReply form_post(const RegistryDaemon& reg, const std::string& path, const st
 // under any client id (the victim's own confidential client included: its id is no secret),
 // `rcan registry device approve` showed the victim only {user_code, decision}, and the
 // attacker's poll returned an OWNER token for the victim's robot.
-TEST(AdversaryRegistryDeviceFlow, AnApprovalIsInformedAndAConfidentialClientCannotBeBorrowed) {
-  TempDir dir;
-  RegistryDaemon reg(dir.file("registry"));
-  ASSERT_FALSE(reg.url().empty());
-  const std::string alice_file =
-      registrant_key_file(reg, dir.file("registry"), dir.file("alice.key"));
+TEST_F(AdversaryRegistryDeviceFlow, AnApprovalIsInformedAndAConfidentialClientCannotBeBorrowed) {
   const std::string alice = first_line(alice_file);
   auto robot = reg.register_proven(alice, "acme", "rover", "v1", "0a1b2c3d",
                                    R"({"ruri":")" + std::string(kRuri) + R"("})");

@@ -2,15 +2,18 @@
 // its own tokens into revocations, which every trusting robot copies from the registry's feed.
 // Two halves, each against real processes on loopback: the registry (rcan-registry) bounds what
 // one key may revoke; the robot (rcand) keeps the feed in a table of its own, appends instead of
-// rewriting, and reads on past what it cannot keep. The robot's half is fed by a scripted feed
-// (what a registry that let a flood through would serve).
+// rewriting, and reads on past what it cannot keep. The robot's half is fed by the registry
+// stand-in (tests/support/fake_registry.h) serving what a registry that let a flood through
+// would serve.
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <filesystem>
 #include <fstream>
 #include <string>
 #include <thread>
 
+#include "fake_registry.h"
 #include "joining_robot.h"
 #include "rcan/json.h"
 #include "registry_daemon.h"
@@ -74,42 +77,6 @@ TEST(AdversaryRevocationFlood, OneRegistrantKeyCannotFloodTheRevocationFeed) {
       201);
 }
 
-// The robot's half: a feed of 10,050 revocations (more than the robot keeps of the feed).
-constexpr const char* kFloodedFeed = R"PY(
-import json, sys, time, http.server, urllib.parse
-port, total = int(sys.argv[1]), int(sys.argv[2])
-class H(http.server.BaseHTTPRequestHandler):
-    def log_message(self, *a):
-        pass
-    def send(self, code, body):
-        b = body.encode()
-        self.send_response(code)
-        self.send_header('Content-Type', 'application/json')
-        self.send_header('Content-Length', str(len(b)))
-        self.end_headers()
-        self.wfile.write(b)
-    def do_GET(self):
-        u = urllib.parse.urlparse(self.path)
-        if u.path == '/healthz':
-            return self.send(200, '{"status":"ok"}')
-        if u.path == '/.well-known/jwks.json':
-            return self.send(200, '{"keys":[]}')
-        if u.path == '/api/v1/revocations':
-            since = int(urllib.parse.parse_qs(u.query).get('since', ['0'])[0])
-            exp = int(time.time()) + 3600
-            revs = [{'seq': s, 'jti': 'junk-%d' % s, 'sub': None, 'exp': exp,
-                     'revoked_at': '2026-12-01T00:00:00Z'} for s in range(since + 1, min(since + 500, total) + 1)]
-            return self.send(200, json.dumps({'revocations': revs,
-                                              'next_since': revs[-1]['seq'] if revs else since}))
-        self.send(404, '{}')
-    def do_POST(self):
-        self.send(404, '{}')
-http.server.ThreadingHTTPServer.allow_reuse_address = True
-s = http.server.ThreadingHTTPServer(('127.0.0.1', port), H)
-print('feed serving', file=sys.stderr, flush=True)
-s.serve_forever()
-)PY";
-
 // T4, the robot's half (review finding F4). Before the fix the robot rewrote and synced its
 // whole revocations.json per feed entry (so a flood took minutes and more to read), and at
 // 10,000 entries it refused the OWNER's own revocations and stalled its feed cursor on the
@@ -117,13 +84,29 @@ s.serve_forever()
 TEST(AdversaryRevocationFlood, AFloodedFeedNeitherCrowdsOutTheOwnerNorStallsTheRobot) {
   TempDir dir;
   constexpr int kTotal = 10'050;
+  // The registry stand-in serves a feed of kTotal revocations of tokens valid for an hour.
+  const std::string root = dir.file("registry");
+  std::filesystem::create_directories(root);
+  std::ofstream(root + "/jwks.json") << R"({"keys":[]})";
+  json::Array feed_entries;
+  const int64_t exp = std::chrono::duration_cast<std::chrono::seconds>(
+                          std::chrono::system_clock::now().time_since_epoch())
+                          .count() +
+                      3600;
+  for (int seq = 1; seq <= kTotal; ++seq)
+    feed_entries.emplace_back(json::Object{{"seq", seq},
+                                           {"jti", "junk-" + std::to_string(seq)},
+                                           {"sub", json::Value()},
+                                           {"exp", exp},
+                                           {"revoked_at", "2026-12-01T00:00:00Z"}});
+  std::ofstream(root + "/revocations.json") << json::dump(json::Value(std::move(feed_entries)));
+  std::ofstream(dir.file("registry.py")) << kFakeRegistry;
   const uint16_t feed_port = free_port();
   const std::string feed_url = "http://127.0.0.1:" + std::to_string(feed_port);
-  std::ofstream(dir.file("feed.py")) << kFloodedFeed;
   Process feed;
-  ASSERT_TRUE(feed.start({"/usr/bin/env", "python3", dir.file("feed.py"), std::to_string(feed_port),
-                          std::to_string(kTotal)}));
-  ASSERT_TRUE(feed.wait_for_line("feed serving", 15000)) << feed.err();
+  ASSERT_TRUE(feed.start(
+      {"/usr/bin/env", "python3", dir.file("registry.py"), std::to_string(feed_port), root}));
+  ASSERT_TRUE(feed.wait_for_line("fake registry serving", 15000)) << feed.err();
   // A robot that trusts the feed's registry (it joins nothing: no registrant key is valid there).
   write_private(dir.file("none.key"), "rcan_0123456789abcdef_" + std::string(64, '0') + "\n");
   JoiningRobot robot(dir.file("robot"), feed_url, dir.file("none.key"), kRuri,

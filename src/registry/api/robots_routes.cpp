@@ -106,25 +106,6 @@ HttpResponse RegistryApi::Impl::register_robot(const HttpRequest& req) {
   auto reg = parse_registration(req.body, t);
   if (!reg.ok()) return ref_error(400, reg.error().message);
   if (auto bad = check_proof(*reg)) return *bad;
-  if (reg->proof && !ruri_of(reg->metadata_json).empty()) {
-    // The RURI its tokens will name (docs/THREATS.md T1): the robot the proof named, and no
-    // other live record's. (Without one, the tokens name rcan://<host>/<names>, checked when a
-    // token is asked for.)
-    Robot claimed;
-    claimed.manufacturer = reg->manufacturer;
-    claimed.model = reg->model;
-    claimed.version = reg->version;
-    claimed.device_id = reg->device_id;
-    claimed.metadata_json = reg->metadata_json;
-    claimed.ed25519_pub = reg->ed25519_pub;
-    claimed.mldsa65_pub = reg->mldsa65_pub;
-    auto aud = robot_audience(claimed, o.host);
-    if (!aud.ok())
-      return project_error(ErrorCode::kSchemaValidationFailed, aud.error().message, "metadata.ruri",
-                           "ruri_not_proven");
-    if (Status s = unique_audience(claimed, *aud); !s.ok())
-      return ref_error(409, s.error().message);
-  }
   if (auto a = audit_unavailable()) return *a;
   NewRobot n;
   n.manufacturer = reg->manufacturer;
@@ -141,6 +122,19 @@ HttpResponse RegistryApi::Impl::register_robot(const HttpRequest& req) {
   n.endpoints_json = reg->endpoints_json;
   n.owner_key_id = caller->key.id;
   n.now = t;
+  if (reg->proof && !ruri_of(reg->metadata_json).empty()) {
+    // The RURI its tokens will name (docs/THREATS.md T1): the robot the proof named, and no
+    // other live record's. (Without one, the tokens name rcan://<host>/<names>, checked when a
+    // token is asked for.)
+    Robot claimed = robot_of(n);
+    claimed.registered_at.clear();  // not stored yet: every live record comes before it
+    auto aud = robot_audience(claimed, o.host);
+    if (!aud.ok())
+      return project_error(ErrorCode::kSchemaValidationFailed, aud.error().message, "metadata.ruri",
+                           "ruri_not_proven");
+    if (Status s = unique_audience(claimed, *aud); !s.ok())
+      return ref_error(409, s.error().message);
+  }
   auto done = store.register_robot(n);
   if (!done.ok()) return store_error(done.error());
   const Robot& r = done->robot;
