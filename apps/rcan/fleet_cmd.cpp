@@ -71,7 +71,7 @@ constexpr const char* kHelp =
     "    MQTT messages only with a key-bound token, signed by its key: rcan token issue\n"
     "    --bind-key D),\n"
     "    --members-dir D (default $RCAN_FLEET_MEMBERS_DIR: one directory per member, named by its\n"
-    "    member id, holding that robot's ed25519.pub and/or mldsa65.pub from its key_dir; a\n"
+    "    member id, holding that robot's ed25519.pub from its key_dir; a\n"
     "    reply or status counts only when that robot signed it; needed to wait for members),\n"
     "    --ca-file F (mqtts), --username U --password-file F, --timeout-ms N (default 10000),\n"
     "    --qos 1|2 (force the QoS of every publish and subscription; default: 2 for the estop\n"

@@ -36,7 +36,7 @@ inline int64_t mono_ms() {
 
 // The fleet's robots and their public keys: --members-dir DIR (or $RCAN_FLEET_MEMBERS_DIR), one
 // directory per member, named by its member id, holding the public half of that robot's
-// identity — ed25519.pub (and/or mldsa65.pub), copied from the robot's security.key_dir
+// Ed25519 identity key — ed25519.pub, copied from the robot's security.key_dir
 // (docs/FLEET.md, "Signed replies"). A member's reply or status counts only when that robot's key
 // signed it, over the seed-shape canonical pre-image (every field: reply_to too), and it names
 // the fleet and the member: anyone who can write the broker's topics can publish a reply, and
@@ -53,23 +53,20 @@ class FleetMembers {
       if (!mqtt::valid_topic_segment(name))
         return Error(ErrorCode::kSchemaValidationFailed,
                      "--members-dir " + dir + ": " + name + " is not a valid member id");
-      msgsig::TrustedKeys k;
-      for (const char* file : {"ed25519.pub", "mldsa65.pub"}) {
-        const auto path = e.path() / file;
-        if (!std::filesystem::exists(path)) continue;
-        auto raw = read_file(path.string());
-        if (!raw.ok()) return raw.error();
-        const bool ed = file[0] == 'e';
-        if (raw->size() != (ed ? 32u : 1952u))
-          return Error(ErrorCode::kSchemaValidationFailed,
-                       path.string() + " is not a raw " + (ed ? "Ed25519" : "ML-DSA-65") +
-                           " public key (" + (ed ? "32" : "1952") + " bytes)");
-        (ed ? k.ed25519 : k.mldsa65).emplace_back(raw->begin(), raw->end());
-      }
-      if (k.ed25519.empty() && k.mldsa65.empty())
+      // Robots sign their replies with their Ed25519 key (one signature per reply, after the
+      // latch): that is the key to know.
+      const auto path = e.path() / "ed25519.pub";
+      if (!std::filesystem::exists(path))
         return Error(ErrorCode::kSchemaValidationFailed,
                      "--members-dir " + dir + ": " + name +
-                         " holds no ed25519.pub or mldsa65.pub (the robot's public keys)");
+                         " holds no ed25519.pub (the robot's public key, from its key_dir)");
+      auto raw = read_file(path.string());
+      if (!raw.ok()) return raw.error();
+      if (raw->size() != 32)
+        return Error(ErrorCode::kSchemaValidationFailed,
+                     path.string() + " is not a raw Ed25519 public key (32 bytes)");
+      msgsig::TrustedKeys k;
+      k.ed25519.emplace_back(raw->begin(), raw->end());
       out.keys_[name] = std::move(k);
     }
     if (ec) return Error(ErrorCode::kNotFound, "cannot read --members-dir " + dir);
