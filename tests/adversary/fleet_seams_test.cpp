@@ -139,7 +139,7 @@ TEST_F(FleetSeamsTest, AnErasedStatusDoesNotTakeARobotOffTheFleet) {
   Watcher look(broker_->url(), {"rcan/fleet/alpha/robot/+/status"});
   ASSERT_TRUE(look.wait([](const Watcher::Msg& m) { return m.retained; }, 5000));
   for (const auto& m : look.all()) EXPECT_NE(m.topic, status_topic("robot-b"));
-  auto r = cli({"estop", "alpha", "--timeout-ms", "3000"});
+  auto r = cli({"estop", "alpha", "--timeout-ms", "2000"});
   EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
   json::Value out = parse(r.out);
   EXPECT_EQ(str_at(out, {"members", "robot-a", "result"}), "acknowledged") << r.out;
