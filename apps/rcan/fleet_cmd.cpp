@@ -36,9 +36,10 @@ constexpr const char* kHelp =
     "  rcan fleet estop FLEET [--members a,b,…] [--no-wait] [--reason TEXT]\n"
     "      Publishes a retained ESTOP on the fleet's estop topic (QoS 2, or QoS 1 on a broker\n"
     "      without QoS 2): every member latches it, and so does a member that connects later.\n"
-    "      Waits for the broker's acknowledgement, then for each member's: --members, else every\n"
-    "      member with a retained status on the broker (online or not), sending a new ESTOP\n"
-    "      every 2 s to each one still silent. Names each robot that did not confirm.\n"
+    "      Waits for the broker's acknowledgement, then for each member's signed confirmation:\n"
+    "      --members, else every member of --members-dir, sending a new ESTOP every 2 s to each\n"
+    "      one still silent. Names each robot that did not confirm (a reply its robot did not\n"
+    "      sign is not believed). Without --members-dir it is still published, and exit 1.\n"
     "      --no-wait: fire and forget (the broker must still acknowledge).\n"
     "  rcan fleet resume FLEET [--members a,b,…] [--no-wait]\n"
     "      Replaces the retained ESTOP with a RESUME (LEASEE or above); live members resume.\n"
@@ -50,9 +51,10 @@ constexpr const char* kHelp =
     "      Runs a COORDINATED_MOVE: publishes each step to its robot, waits for its completion\n"
     "      (sequential, or parallel with wait_for), and on a refusal, an abort, a timeout or a\n"
     "      publish the broker did not acknowledge stops every robot it moved and reports the\n"
-    "      failed step.\n"
+    "      failed step. Needs --members-dir with every robot of the run.\n"
     "  rcan fleet status FLEET\n"
-    "      Prints each member's retained status (online or offline).\n"
+    "      Prints each member's retained status (online or offline); with --members-dir only\n"
+    "      the statuses their robots signed, and the members without one.\n"
     "  rcan fleet audit collect FLEET (--out DIR | --db CONNINFO) [--secrets-dir D] [--duration-ms "
     "N]\n"
     "      Subscribes to the members' audit topics for N ms (default 5000) and checks each\n"
@@ -68,12 +70,16 @@ constexpr const char* kHelp =
     "    --key-dir D (default $RCAN_KEY_DIR: the key pair the token is bound to; robots accept\n"
     "    MQTT messages only with a key-bound token, signed by its key: rcan token issue\n"
     "    --bind-key D),\n"
+    "    --members-dir D (default $RCAN_FLEET_MEMBERS_DIR: one directory per member, named by its\n"
+    "    member id, holding that robot's ed25519.pub from its key_dir; a\n"
+    "    reply or status counts only when that robot signed it; needed to wait for members),\n"
     "    --ca-file F (mqtts), --username U --password-file F, --timeout-ms N (default 10000),\n"
     "    --qos 1|2 (force the QoS of every publish and subscription; default: 2 for the estop\n"
     "    topic and 1 for commands, and 1 throughout when the broker's SUBACK grants less than 2).\n"
     "  Exit: 0 success; 1 the broker did not acknowledge a publish (it refused it, or the\n"
     "    connection dropped on each of 3 attempts, each on a new connection), or a robot\n"
-    "    refused, failed or did not confirm in time, or no member is known to confirm;\n"
+    "    refused, failed or did not confirm in time (its signed reply), or no member's\n"
+    "    confirmation can be verified;\n"
     "    2 usage error or no connection to the broker.\n";
 
 int64_t wall_ms() {
@@ -99,7 +105,7 @@ struct Common {
 const std::vector<std::string> kValued{
     "broker",     "token",       "prefix", "ca-file", "username", "password-file",
     "timeout-ms", "members",     "reason", "params",  "out",      "duration-ms",
-    "db",         "secrets-dir", "fleet",  "qos",     "key-dir"};
+    "db",         "secrets-dir", "fleet",  "qos",     "key-dir",  "members-dir"};
 const std::vector<std::string> kFlags{"wait-complete", "no-wait"};
 
 Result<Common> common(const Options& o, bool need_token) {
@@ -215,35 +221,27 @@ json::Object await_replies(Session& s, const std::map<std::string, std::string>&
   return out;
 }
 
-// The members of the fleet the broker knows: the statuses on <base>/robot/+/status (retained,
-// online or not, or published during the window), read for `window_ms` after the subscriptions
-// were answered.
-std::map<std::string, json::Value> roster(Session& s, const mqtt::FleetTopics& topics,
-                                          int64_t window_ms) {
-  std::map<std::string, json::Value> out;
-  const std::string head = topics.base + "/robot/";
-  int64_t deadline = mono_ms() + window_ms;
-  while (auto m = s.next(deadline)) {
-    if (m->topic.rfind(head, 0) != 0) continue;  // retained, or a member connecting just now
-    std::string rest = m->topic.substr(head.size());
-    size_t slash = rest.find('/');
-    if (slash == std::string::npos || rest.substr(slash) != "/status") continue;
-    std::string member = rest.substr(0, slash);
-    if (mqtt::valid_topic_segment(member)) out[member] = m->body;
-  }
-  return out;
-}
-
-// Who must confirm: --members, else the roster; with --no-wait, nobody.
+// Who must confirm: --members, else every member of --members-dir; with --no-wait, nobody.
+// Members come from the operator's configuration, never from what the broker holds: a topic
+// writer can erase a retained status (and with it a member) or add one.
 struct Targets {
   std::vector<std::string> members;
-  std::map<std::string, json::Value> last_status;  // from the roster
-  bool from_roster = false;
+  std::vector<std::string> no_key;            // of them, those whose replies cannot be verified
+  std::shared_ptr<fleet::FleetMembers> keys;  // null: no --members-dir
 };
 
-// Opens the session (member statuses and replies subscribed) and names the members that must
-// confirm. Errors are usage/connection errors (exit 2).
-Result<Targets> open_fleet(Session& s, const Options& o, const Common& c,
+Result<std::shared_ptr<fleet::FleetMembers>> members_dir(const Options& o) {
+  const char* env = std::getenv("RCAN_FLEET_MEMBERS_DIR");
+  const std::string dir = o.get("members-dir", env != nullptr ? env : "");
+  if (dir.empty()) return std::shared_ptr<fleet::FleetMembers>();
+  auto m = fleet::FleetMembers::load(dir);
+  if (!m.ok()) return m.error();
+  return std::make_shared<fleet::FleetMembers>(std::move(m).value());
+}
+
+// Opens the session (member replies and statuses subscribed, believed only when signed by their
+// robot) and names the members that must confirm. Errors are usage/connection errors (exit 2).
+Result<Targets> open_fleet(Session& s, const Options& o, const Common& c, const std::string& fleet,
                            const mqtt::FleetTopics& topics) {
   Targets t;
   t.members = split_list(o.get("members"));
@@ -251,17 +249,20 @@ Result<Targets> open_fleet(Session& s, const Options& o, const Common& c,
     return Error(ErrorCode::kSchemaValidationFailed, "bad member id in --members");
   s.set_timeout(c.timeout_ms);
   std::vector<std::string> subs{topics.base + "/robot/+/reply"};
-  const bool need_roster = c.wait && t.members.empty();
-  if (need_roster) subs.push_back(topics.base + "/robot/+/status");
-  if (Status st = s.open(o, subs, c.qos); !st.ok()) return st.error();
-  if (!c.wait) {
+  if (c.wait) {
+    auto keys = members_dir(o);
+    if (!keys.ok()) return keys.error();
+    t.keys = std::move(keys).value();
+    if (t.members.empty() && t.keys) t.members = t.keys->names();
+    for (const auto& m : t.members)
+      if (!t.keys || !t.keys->knows(m)) t.no_key.push_back(m);
+    // Statuses: each silent member's last word (signed too), for the report.
+    subs.push_back(topics.base + "/robot/+/status");
+  } else {
     t.members.clear();
-  } else if (need_roster) {
-    // Retained messages follow the SUBACK at once; a clustered broker may take a moment more.
-    t.last_status = roster(s, topics, std::min<int64_t>(c.timeout_ms, 700));
-    for (const auto& [member, status] : t.last_status) t.members.push_back(member);
-    t.from_roster = true;
   }
+  s.vouched_by(fleet, topics.base, t.keys.get());
+  if (Status st = s.open(o, subs, c.qos); !st.ok()) return st.error();
   return t;
 }
 
@@ -286,6 +287,8 @@ json::Object await_members(Session& s, const mqtt::FleetTopics& topics, const st
                            std::vector<std::string>* unconfirmed) {
   json::Object results;
   std::set<std::string> open(t.members.begin(), t.members.end());
+  for (const auto& m : t.no_key) open.erase(m);  // nothing it says could be believed
+  std::map<std::string, json::Value> last_status;
   std::set<std::string> acked, ids{id};
   int64_t deadline = mono_ms() + timeout_ms;
   int64_t next_resend = resend != nullptr ? mono_ms() + resend->every_ms : INT64_MAX;
@@ -301,6 +304,11 @@ json::Object await_members(Session& s, const mqtt::FleetTopics& topics, const st
     }
     auto m = s.next(std::min({deadline, next_resend, mono_ms() + 200}));
     if (!m && mono_ms() >= deadline) break;
+    if (m && m->topic.size() > 7 && m->topic.compare(m->topic.size() - 7, 7, "/status") == 0) {
+      for (const auto& mem : t.members)
+        if (m->topic == topics.member(mem).status()) last_status[mem] = m->body;
+      continue;
+    }
     if (!m || ids.count(json::string_field(m->body, "reply_to")) == 0) continue;
     for (const auto& mem : t.members) {
       if (m->topic != topics.member(mem).reply() || open.count(mem) == 0) continue;
@@ -333,22 +341,40 @@ json::Object await_members(Session& s, const mqtt::FleetTopics& topics, const st
     json::Object r{{"result", acked.count(mem)   ? "incomplete"
                               : s.lost(connects) ? "broker_lost"
                                                  : "timeout"}};
-    auto st = t.last_status.find(mem);
-    if (st != t.last_status.end()) r.set("last_status", st->second);
+    auto st = last_status.find(mem);
+    if (st != last_status.end()) r.set("last_status", st->second);
     results.set(mem, std::move(r));
     unconfirmed->push_back(mem);
+  }
+  for (const auto& mem : t.no_key) {
+    results.set(mem, json::Object{{"result", "no_key"}});
+    unconfirmed->push_back(mem);
+  }
+  // What a topic writer (or a robot with another key) said in a member's name: never believed,
+  // always shown.
+  for (const auto& [mem, d] : s.dropped()) {
+    json::Value* r = results.find(mem);
+    if (r == nullptr || !r->is_object()) continue;
+    r->as_object().set("unverified_replies", d.count);
+    r->as_object().set("unverified_reason", d.reason);
   }
   return results;
 }
 
-// "robot-a (timeout), robot-b (refused)".
+// "robot-a (timeout), robot-b (refused)"; "robot-c (timeout; 1 message not signed by robot-c
+// ignored: unsigned)".
 std::string name_unconfirmed(const std::vector<std::string>& unconfirmed,
                              const json::Object& results) {
   std::string out;
   for (const auto& m : unconfirmed) {
     const json::Value* r = results.find(m);
-    out +=
-        (out.empty() ? "" : ", ") + m + " (" + (r ? json::string_field(*r, "result") : "?") + ")";
+    std::string why = r ? json::string_field(*r, "result") : "?";
+    const json::Value* n = r ? r->get("unverified_replies") : nullptr;
+    if (n != nullptr && n->is_int())
+      why += "; " + std::to_string(n->as_int()) + " message" + (n->as_int() == 1 ? "" : "s") +
+             " not signed by " + m + " ignored: " + json::string_field(*r, "unverified_reason");
+    if (why == "no_key") why = "no key in --members-dir: its reply cannot be verified";
+    out += (out.empty() ? "" : ", ") + m + " (" + why + ")";
   }
   return out;
 }
@@ -396,15 +422,33 @@ int publish_and_confirm(Session& s, const char* verb, const Common& c,
   print(json::Value(std::move(out)));
   if (none_known)
     return failure(verb,
-                   "the broker acknowledged the message, but no member is known to confirm it "
-                   "(no retained member status on the broker): name them with --members a,b,… "
-                   "or use --no-wait");
+                   "the broker acknowledged the message, but no member's confirmation can be "
+                   "verified: give the fleet's robots' public keys with --members-dir D (or "
+                   "RCAN_FLEET_MEMBERS_DIR), or use --no-wait");
   if (!ok)
     return failure(verb, std::to_string(unconfirmed.size()) + " of " +
                              std::to_string(t.members.size()) + " robots did not confirm within " +
                              std::to_string(c.timeout_ms) + " ms" + lost + ": " +
                              name_unconfirmed(unconfirmed, results));
   return 0;
+}
+
+// A RESUME or a command is sent only when every member it waits for can confirm it verifiably:
+// exit 1, nothing sent, otherwise. 0: go on.
+int unverifiable(Session& s, const char* verb, const Common& c, const Targets& t,
+                 const char* what) {
+  if (!c.wait || (!t.members.empty() && t.no_key.empty())) return 0;
+  s.close();
+  if (t.members.empty())
+    return failure(verb, std::string("no member's confirmation of ") + what +
+                             " can be verified: give the fleet's robots' public keys with "
+                             "--members-dir D (or RCAN_FLEET_MEMBERS_DIR), or use --no-wait; "
+                             "nothing was sent");
+  std::string names;
+  for (const auto& m : t.no_key) names += (names.empty() ? "" : ", ") + m;
+  return failure(verb, std::string("no key in --members-dir for ") + names +
+                           ": no confirmation of " + what +
+                           " from them could be believed; nothing was sent");
 }
 
 int estop_or_resume(const Options& o, bool estop) {
@@ -416,14 +460,11 @@ int estop_or_resume(const Options& o, bool estop) {
   if (!mqtt::valid_topic_segment(fleet)) return usage_error(verb, "bad fleet id");
   auto topics = mqtt::fleet_topics(c->prefix, fleet);
   Session s;
-  auto t = open_fleet(s, o, *c, topics);
+  auto t = open_fleet(s, o, *c, fleet, topics);
   if (!t.ok()) return usage_error(verb, t.error().message);
-  // An ESTOP goes out even when nobody is known to confirm it; a RESUME does not.
-  if (!estop && c->wait && t->members.empty()) {
-    s.close();
-    return failure(verb,
-                   "no member is known to confirm a RESUME (no retained member status on the "
-                   "broker): name them with --members a,b,… or use --no-wait; nothing was sent");
+  // An ESTOP goes out even when no confirmation can be verified; a RESUME does not.
+  if (!estop) {
+    if (int e = unverifiable(s, verb, *c, *t, "a RESUME"); e != 0) return e;
   }
   json::Object payload{{"safety_event", estop ? "ESTOP" : "RESUME"}, {"fleet_id", fleet}};
   payload.set("reason", o.get("reason", estop ? "fleet estop" : "fleet resume"));
@@ -454,14 +495,9 @@ int command_main(const Options& o) {
   }
   auto topics = mqtt::fleet_topics(c->prefix, fleet);
   Session s;
-  auto t = open_fleet(s, o, *c, topics);
+  auto t = open_fleet(s, o, *c, fleet, topics);
   if (!t.ok()) return usage_error("fleet command", t.error().message);
-  if (c->wait && t->members.empty()) {
-    s.close();
-    return failure("fleet command",
-                   "no member is known to confirm the command (no retained member status on the "
-                   "broker): name them with --members a,b,… or use --no-wait; nothing was sent");
-  }
+  if (int e = unverifiable(s, "fleet command", *c, *t, "the command"); e != 0) return e;
   json::Value msg = message("FLEET_COMMAND", std::move(payload), *c);
   return publish_and_confirm(s, "fleet command", *c, topics, *t, topics.cmd(), msg, 1, false,
                              o.has("wait-complete"), json::Object{{"fleet_id", fleet}});
@@ -600,8 +636,21 @@ int run_main(const Options& o) {
   auto topics = mqtt::fleet_topics(c->prefix, fleet);
   std::set<std::string> robots;
   for (const auto& s : *steps) robots.insert(s.robot);
+  // Each step waits for its robot's signed ACK and completion: a step started on a completion a
+  // topic writer made up would move a robot next to one still moving.
+  auto keys = members_dir(o);
+  if (!keys.ok()) return usage_error("fleet run", keys.error().message);
+  if (!*keys)
+    return usage_error("fleet run",
+                       "--members-dir D (or RCAN_FLEET_MEMBERS_DIR) is required: the robots' "
+                       "public keys, which every step's confirmation must be signed by");
+  for (const auto& r : robots)
+    if (!(*keys)->knows(r))
+      return usage_error("fleet run", "no key in --members-dir for " + r +
+                                          ": its confirmations could not be believed");
   Session sess;
   sess.set_timeout(c->timeout_ms);
+  sess.vouched_by(fleet, topics.base, keys->get());
   std::vector<std::string> subs;
   for (const auto& r : robots) subs.push_back(topics.member(r).reply());
   if (Status st = sess.open(o, subs, c->qos); !st.ok())
@@ -704,6 +753,10 @@ int run_main(const Options& o) {
     report.emplace_back(std::move(r));
   }
   json::Object out{{"fleet_id", fleet}, {"choreography_id", choreography_id}, {"type", type}};
+  json::Object unverified;
+  for (const auto& [robot, d] : sess.dropped())
+    unverified.set(robot, json::Object{{"count", d.count}, {"reason", d.reason}});
+  if (!unverified.empty()) out.set("unverified_replies", std::move(unverified));
   if (!failed) {
     out.set("ok", true);
     out.set("steps", std::move(report));
@@ -731,8 +784,13 @@ int status_main(const Options& o) {
   const std::string fleet = o.positional()[1];
   if (!mqtt::valid_topic_segment(fleet)) return usage_error("fleet status", "bad fleet id");
   auto topics = mqtt::fleet_topics(c->prefix, fleet);
+  auto keys = members_dir(o);
+  if (!keys.ok()) return usage_error("fleet status", keys.error().message);
   Session s;
   s.set_timeout(c->timeout_ms);
+  // With --members-dir only the statuses their robots signed are shown; without, what the broker
+  // holds, said to be unverified.
+  if (*keys) s.vouched_by(fleet, topics.base, keys->get());
   if (Status st = s.open(o, {topics.base + "/robot/+/status"}, c->qos); !st.ok())
     return usage_error("fleet status", st.error().message);
   json::Object members;
@@ -744,7 +802,19 @@ int status_main(const Options& o) {
     members.set(member, m->body);
   }
   s.close();
-  print(json::Value(json::Object{{"fleet_id", fleet}, {"members", std::move(members)}}));
+  json::Object out{{"fleet_id", fleet}, {"verified", *keys != nullptr}};
+  if (*keys) {
+    json::Array missing;
+    for (const auto& m : (*keys)->names())
+      if (members.find(m) == nullptr) missing.emplace_back(m);
+    out.set("missing", std::move(missing));  // members with no status their robot signed
+    json::Object unverified;
+    for (const auto& [member, d] : s.dropped())
+      unverified.set(member, json::Object{{"count", d.count}, {"reason", d.reason}});
+    out.set("unverified", std::move(unverified));
+  }
+  out.set("members", std::move(members));
+  print(json::Value(std::move(out)));
   return 0;
 }
 

@@ -10,6 +10,8 @@
 #include <cstdint>
 #include <cstdlib>
 #include <deque>
+#include <filesystem>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -18,6 +20,7 @@
 #include <vector>
 
 #include "cli.h"
+#include "rcan/crypto/message_sig.h"
 #include "rcan/errors.h"
 #include "rcan/json.h"
 #include "rcan/mqtt_topics.h"
@@ -31,6 +34,76 @@ inline int64_t mono_ms() {
       .count();
 }
 
+// The fleet's robots and their public keys: --members-dir DIR (or $RCAN_FLEET_MEMBERS_DIR), one
+// directory per member, named by its member id, holding the public half of that robot's
+// Ed25519 identity key — ed25519.pub, copied from the robot's security.key_dir
+// (docs/FLEET.md, "Signed replies"). A member's reply or status counts only when that robot's key
+// signed it, over the seed-shape canonical pre-image (every field: reply_to too), and it names
+// the fleet and the member: anyone who can write the broker's topics can publish a reply, and
+// a robot's genuine reply copied onto another member's topic, or to another ESTOP, no longer
+// verifies.
+class FleetMembers {
+ public:
+  static Result<FleetMembers> load(const std::string& dir) {
+    FleetMembers out;
+    std::error_code ec;
+    for (const auto& e : std::filesystem::directory_iterator(dir, ec)) {
+      const std::string name = e.path().filename().string();
+      if (!e.is_directory() || name.empty() || name[0] == '.') continue;
+      if (!mqtt::valid_topic_segment(name))
+        return Error(ErrorCode::kSchemaValidationFailed,
+                     "--members-dir " + dir + ": " + name + " is not a valid member id");
+      // Robots sign their replies with their Ed25519 key (one signature per reply, after the
+      // latch): that is the key to know.
+      const auto path = e.path() / "ed25519.pub";
+      if (!std::filesystem::exists(path))
+        return Error(ErrorCode::kSchemaValidationFailed,
+                     "--members-dir " + dir + ": " + name +
+                         " holds no ed25519.pub (the robot's public key, from its key_dir)");
+      auto raw = read_file(path.string());
+      if (!raw.ok()) return raw.error();
+      if (raw->size() != 32)
+        return Error(ErrorCode::kSchemaValidationFailed,
+                     path.string() + " is not a raw Ed25519 public key (32 bytes)");
+      msgsig::TrustedKeys k;
+      k.ed25519.emplace_back(raw->begin(), raw->end());
+      out.keys_[name] = std::move(k);
+    }
+    if (ec) return Error(ErrorCode::kNotFound, "cannot read --members-dir " + dir);
+    if (out.keys_.empty())
+      return Error(ErrorCode::kSchemaValidationFailed,
+                   "--members-dir " + dir + " names no member (one directory per robot)");
+    return out;
+  }
+  bool knows(const std::string& member) const { return keys_.count(member) != 0; }
+  std::vector<std::string> names() const {
+    std::vector<std::string> out;
+    for (const auto& [m, k] : keys_) out.push_back(m);
+    return out;
+  }
+  // Whether `body`, from <fleet>/robot/<member>/(reply|status), is that robot's word.
+  Status verify(const std::string& fleet_id, const std::string& member,
+                const json::Value& body) const {
+    auto k = keys_.find(member);
+    if (k == keys_.end())
+      return Error(ErrorCode::kSignatureInvalid, "no key for this member in --members-dir");
+    if (!body.is_object() || msgsig::signature_member(body.as_object()) == nullptr)
+      return Error(ErrorCode::kAuthRequired, "unsigned");
+    // Only the pre-image that covers every field: rcan-py's covers six, reply_to not among them.
+    if (msgsig::preimage_kind(body.as_object()) != msgsig::Preimage::kCanonical)
+      return Error(ErrorCode::kSignatureInvalid, "not a canonical (whole-message) signature");
+    if (json::string_field(body, "fleet_id") != fleet_id ||
+        json::string_field(body, "member") != member)
+      return Error(ErrorCode::kSignatureInvalid, "names another fleet or member");
+    auto v = msgsig::verify_block(body.as_object(), k->second);
+    if (!v.ok()) return Error(ErrorCode::kSignatureInvalid, "bad signature: " + v.error().message);
+    return Status::Ok();
+  }
+
+ private:
+  std::map<std::string, msgsig::TrustedKeys> keys_;
+};
+
 // A connected client with an inbox.
 class Session {
  public:
@@ -39,6 +112,24 @@ class Session {
     json::Value body;
     bool retained = false;
   };
+
+  // From now on a message on <base>/robot/<member>/reply or …/status reaches the inbox only when
+  // `members` vouches for it (FleetMembers::verify); the others are dropped and counted per
+  // member (dropped()). Null `members`: none is believed. Call before open().
+  void vouched_by(const std::string& fleet_id, const std::string& base,
+                  const FleetMembers* members) {
+    fleet_id_ = fleet_id;
+    vouch_base_ = base + "/robot/";
+    members_ = members;
+  }
+  struct Dropped {
+    int64_t count = 0;
+    std::string reason;  // the last one's
+  };
+  std::map<std::string, Dropped> dropped() {
+    std::lock_guard<std::mutex> lk(mu_);
+    return dropped_;
+  }
 
   // Connects and subscribes, each filter at QoS 2 (the broker's SUBACK shows whether it does
   // QoS 2: if it grants less, publishes stay at QoS 1) or at `forced_qos` (1 or 2; 0: auto).
@@ -140,6 +231,13 @@ class Session {
     client_->on_message([this](const transport::MqttMessage& m) {
       auto body = mqtt::parse_payload(m.payload);
       if (!body.ok()) return;
+      if (Status v = vouch(m.topic, *body); !v.ok()) {
+        std::lock_guard<std::mutex> lk(mu_);
+        Dropped& d = dropped_[v.error().field];
+        ++d.count;
+        d.reason = v.error().message;
+        return;
+      }
       std::lock_guard<std::mutex> lk(mu_);
       inbox_.push_back(Inbound{m.topic, std::move(body).value(), m.retained});
       cv_.notify_all();
@@ -165,6 +263,21 @@ class Session {
                    "the broker refused the subscription to " + refused.front());
     return Status::Ok();
   }
+  // A member's reply or status that its robot did not sign: an error whose field is the member.
+  Status vouch(const std::string& topic, const json::Value& body) const {
+    if (vouch_base_.empty() || topic.rfind(vouch_base_, 0) != 0) return Status::Ok();
+    const std::string rest = topic.substr(vouch_base_.size());
+    const size_t slash = rest.find('/');
+    if (slash == std::string::npos) return Status::Ok();
+    const std::string kind = rest.substr(slash + 1);
+    if (kind != "reply" && kind != "status") return Status::Ok();  // audit: its own HMAC chain
+    const std::string member = rest.substr(0, slash);
+    Status v = members_ != nullptr
+                   ? members_->verify(fleet_id_, member, body)
+                   : Status(Error(ErrorCode::kSignatureInvalid, "no --members-dir"));
+    if (v.ok()) return v;
+    return Error(v.error().code, v.error().message, member);
+  }
   static int left_ms(int64_t deadline) {
     return static_cast<int>(std::max<int64_t>(1, deadline - mono_ms()));
   }
@@ -176,6 +289,9 @@ class Session {
   std::mutex mu_;
   std::condition_variable cv_;
   std::deque<Inbound> inbox_;
+  std::map<std::string, Dropped> dropped_;  // member → its replies/statuses not believed
+  std::string fleet_id_, vouch_base_;
+  const FleetMembers* members_ = nullptr;
   int64_t timeout_ms_ = 10000;
   int attempts_ = 0;
 };

@@ -308,6 +308,8 @@ Status Daemon::start_transports() {
   if (cfg_.mqtt.enabled) {
     auto mo = node::mqtt_node_options(cfg_);
     if (!mo.ok()) return failed("mqtt: ", mo.error());
+    // Its replies and status are signed with its identity key (docs/FLEET.md, "Signed replies").
+    mo->reply_key = std::make_shared<const keys::SecretBytes>(robot_keys_->ed25519_seed.clone());
     mqtt_ = std::make_unique<node::MqttNode>(*node_, *services_, std::move(mo).value());
     on_stop([this](int) { mqtt_->stop(); });
     if (Status s = mqtt_->start(); !s.ok()) return failed("mqtt: ", s.error());

@@ -261,8 +261,7 @@ class NodeDiesDuringAnEstopTest : public FailoverTest {
     Watcher sent(nats.url(2), {"rcan/fleet/alpha/estop"}, 0);
     test::RunResult r;
     std::thread operator_([&] {
-      // --members: the roster (retained member statuses) may still be unreadable on a cluster
-      // that is electing leaders; what this test is about is the robot latching.
+      // --members: what this test is about is the robot latching.
       r = fleet_via(nats.url(2), {"estop", "alpha", "--members", "robot-a", "--reason",
                                   "mid-failover", "--timeout-ms", "80000"});
     });
@@ -338,6 +337,7 @@ TEST_F(FailoverTest, PublishersNodeDiesTheCliReportsIt) {
   Nats nats(tmp_.path(), 3);
   robot_on(url_list({nats.url(0), nats.url(1)}), "robot-a", "0000000a");
   see_online(nats.url(2));
+  member_keys(tmp_.path(), "robot-z");  // a member the operator knows, never started
   test::RunResult r;
   int64_t killed = 0;
   std::thread operator_([&] {
@@ -371,7 +371,8 @@ TEST_F(FleetTest, MosquittoFailoverKeepsTheRobotReachable) {
   Watcher w(second.url(), {"rcan/fleet/alpha/robot/+/status"});
   ASSERT_TRUE(w.wait([](const Watcher::Msg& m) { return bool_at(m.body, {"online"}) == "true"; }));
   test::RunResult r = test::run_cli({"fleet", "estop", "alpha", "--broker", second.url(), "--token",
-                                     tmp_.file("fleet.token"), "--key-dir", key_dir_});
+                                     tmp_.file("fleet.token"), "--key-dir", key_dir_,
+                                     "--members-dir", members_dir()});
   ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
   EXPECT_NE(json::dump(robot.status(fleet_token_)).find("\"estop_active\":true"),
             std::string::npos);
@@ -449,9 +450,9 @@ TEST_F(FleetTest, ADropBeforeTheAcknowledgementIsPublishedAgain) {
       seen.wait([](const Watcher::Msg& m) { return bool_at(m.body, {"online"}) == "true"; }));
   Relay relay(broker_->port());
   const std::vector<std::string> base{
-      "fleet",     "--broker", relay.url(), "--token", tmp_.file("fleet.token"),
-      "--key-dir", key_dir_,   "--members", "robot-a", "--timeout-ms",
-      "15000"};
+      "fleet",     "--broker",      relay.url(),  "--token", tmp_.file("fleet.token"),
+      "--key-dir", key_dir_,        "--members",  "robot-a", "--timeout-ms",
+      "15000",     "--members-dir", members_dir()};
   auto latched = [&] {
     return json::dump(robot.status(fleet_token_)).find("\"estop_active\":true") !=
            std::string::npos;
@@ -488,10 +489,11 @@ TEST_F(FleetTest, ADropBeforeTheAcknowledgementIsPublishedAgain) {
 // 2 s, so the member latches as soon as it is back and the CLI exits 0, listing what it resent.
 TEST_F(FleetTest, AnEstopIsSentAgainToMembersThatHaveNotConfirmed) {
   test::RunResult r;
+  member_keys(tmp_.path(), "robot-a");  // the operator knows the member before it first runs
   std::thread operator_([&] {
     r = test::run_cli({"fleet", "estop", "alpha", "--broker", broker_->url(), "--token",
                        tmp_.file("fleet.token"), "--key-dir", key_dir_, "--members", "robot-a",
-                       "--timeout-ms", "40000"});
+                       "--members-dir", members_dir(), "--timeout-ms", "40000"});
   });
   {
     Watcher w(broker_->url(), {"rcan/fleet/alpha/estop"});

@@ -203,16 +203,30 @@ inline std::string quoted(const std::string& broker) {
   return !broker.empty() && broker.front() == '[' ? broker : "\"" + broker + "\"";
 }
 
-// One fleet member: its own data directory, keys, chain secret and config.
+// A fleet member's robot keys in <root>/<name>/keys (made once), and the public half of its
+// Ed25519 key in <root>/members/<name>/ed25519.pub: the fleet's members directory, which
+// `rcan fleet --members-dir` verifies every reply and status against (docs/FLEET.md). The
+// operator has it before the robot first runs.
+inline void member_keys(const std::string& root, const std::string& name) {
+  const std::string dir = root + "/" + name;
+  fs::create_directories(dir);
+  fs::permissions(dir, fs::perms::owner_all);
+  if (!fs::exists(dir + "/keys")) {
+    EXPECT_EQ(test::run_cli({"keys", "generate", "--dir", dir + "/keys"}).exit_code, 0);
+  }
+  fs::create_directories(root + "/members/" + name);
+  fs::copy_file(dir + "/keys/ed25519.pub", root + "/members/" + name + "/ed25519.pub",
+                fs::copy_options::overwrite_existing);
+}
+
+// One fleet member: its own data directory, keys (member_keys), chain secret and config.
 class Robot {
  public:
   Robot(const std::string& root, const std::string& name, const std::string& device,
         const std::string& broker, const std::string& secret_file,
         const std::string& extra_yaml = "", const std::string& mqtt_extra = "")
       : dir_(root + "/" + name), name_(name) {
-    fs::create_directories(dir_);
-    fs::permissions(dir_, fs::perms::owner_all);
-    EXPECT_EQ(test::run_cli({"keys", "generate", "--dir", dir_ + "/keys"}).exit_code, 0);
+    member_keys(root, name);
     EXPECT_EQ(test::run_cli({"audit", "new-secret", "--out", dir_ + "/audit.secret"}).exit_code, 0);
     ruri_ = "rcan://local.rcan/rcan/sim-rover/" + device;
     std::string yaml =
@@ -349,9 +363,11 @@ class FleetTest : public ::testing::Test {
   test::RunResult fleet(std::vector<std::string> args) {
     args.insert(args.begin(), "fleet");
     args.insert(args.end(), {"--broker", broker_->url(), "--token", tmp_.file("fleet.token"),
-                             "--key-dir", key_dir_});
+                             "--key-dir", key_dir_, "--members-dir", members_dir()});
     return test::run_cli(args);
   }
+  // The fleet's members directory: each robot's public key, written by Robot.
+  std::string members_dir() const { return tmp_.path() + "/members"; }
   // A message as `rcan fleet` sends it: signed by the commander's key unless `sign` is false.
   json::Value command_msg(const std::string& type, json::Object payload, const std::string& tok,
                           const std::string& id = new_uuid_v4(), bool sign = true) {
@@ -502,8 +518,8 @@ class NatsFleetTest : public FleetTest {
   }
   test::RunResult fleet_via(const std::string& url, std::vector<std::string> args) {
     args.insert(args.begin(), "fleet");
-    args.insert(args.end(),
-                {"--broker", url, "--token", tmp_.file("fleet.token"), "--key-dir", key_dir_});
+    args.insert(args.end(), {"--broker", url, "--token", tmp_.file("fleet.token"), "--key-dir",
+                             key_dir_, "--members-dir", members_dir()});
     return test::run_cli(args);
   }
   bool latched(const std::string& name) {

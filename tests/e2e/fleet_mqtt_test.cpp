@@ -94,7 +94,9 @@ TEST_F(FleetTest, FailingStepStopsEveryRobotTheRunMoved) {
 
 TEST_F(FleetTest, StepTimeoutIsAFailure) {
   add_robot("robot-a", "0000000a");
-  // robot-b is in the fleet but not running: its step never acknowledges.
+  // robot-b is in the fleet (the operator has its key) but not running: its step never
+  // acknowledges.
+  member_keys(tmp_.path(), "robot-b");
   write_file(tmp_.file("to.json"), R"({"command":"COORDINATED_MOVE","fleet_id":"alpha",
     "choreography":{"type":"parallel","steps":[
       {"robot":"robot-a","action":"move","params":{"linear":0.2,"duration_ms":30000}},
@@ -224,13 +226,14 @@ TEST_F(FleetTest, RepliesGoOutAtTheConfiguredQos) {
         << m;
 }
 
-// Without --members, `rcan fleet estop` waits for every member with a retained status on the
-// broker, online or not, and names each one that did not confirm (exit 1); --no-wait only needs
-// the broker's acknowledgement. Mosquitto does QoS 2: the ESTOP goes out at QoS 2.
+// Without --members, `rcan fleet estop` waits for every member of the fleet's members directory
+// (--members-dir), reports each silent one's last signed status (here the will) and names each
+// one that did not confirm (exit 1); --no-wait only needs the broker's acknowledgement. Mosquitto
+// does QoS 2: the ESTOP goes out at QoS 2.
 TEST_F(FleetTest, FleetEstopWaitsForTheRosterAndNamesWhoDidNotConfirm) {
   three_robots();
   Watcher w(broker_->url(), {"rcan/fleet/alpha/robot/robot-c/status"});
-  robots_["robot-c"]->kill9();  // its will says it is offline: it stays on the roster
+  robots_["robot-c"]->kill9();  // its will says it is offline: still a member
   ASSERT_TRUE(w.wait([](const Watcher::Msg& m) {
     return m.body.get("online") && !m.body.get("online")->as_bool();
   }));
@@ -255,10 +258,14 @@ TEST_F(FleetTest, FleetEstopWaitsForTheRosterAndNamesWhoDidNotConfirm) {
   auto fire = fleet({"estop", "alpha", "--no-wait"});
   EXPECT_EQ(fire.exit_code, 0) << fire.out << fire.err;
   EXPECT_EQ(bool_at(parse(fire.out), {"waited"}), "false");
-  // A RESUME or a command nobody is known to confirm is not sent.
-  auto lone = fleet({"resume", "beta"});
+  // A RESUME or a command no member's confirmation of could be verified (no --members-dir) is
+  // not sent.
+  auto lone = test::run_cli({"fleet", "resume", "alpha", "--broker", broker_->url(), "--token",
+                             tmp_.file("fleet.token"), "--key-dir", key_dir_});
   EXPECT_EQ(lone.exit_code, 1);
   EXPECT_NE(lone.err.find("nothing was sent"), std::string::npos) << lone.err;
+  EXPECT_NE(json::dump(robots_["robot-a"]->status(fleet_token_)).find("\"estop_active\":true"),
+            std::string::npos);
 }
 
 // A commander whose fleet token binds its ML-DSA-65 key (rcan token issue --bind-alg ml-dsa-65):
@@ -318,7 +325,7 @@ TEST_F(FleetTest, AnAclDenialIsCaughtByWaitingForTheMembers) {
     "choreography":{"type":"sequential","steps":[
       {"robot":"robot-a","action":"move","params":{"linear":0.1,"duration_ms":100}}]}})");
   const std::vector<std::vector<std::string>> verbs{
-      {"estop", "alpha"},  // the roster: robot-a's retained status
+      {"estop", "alpha"},  // the members directory: robot-a
       {"resume", "alpha"},
       {"command", "alpha", "move", "--params", R"({"linear":0.1,"duration_ms":100})"},
       {"run", tmp_.file("run.json")},
@@ -327,7 +334,7 @@ TEST_F(FleetTest, AnAclDenialIsCaughtByWaitingForTheMembers) {
     args.insert(args.begin(), "fleet");
     args.insert(args.end(),
                 {"--broker", acl.url(), "--token", tmp_.file("fleet.token"), "--key-dir", key_dir_,
-                 "--username", "operator", "--timeout-ms", "1500"});
+                 "--members-dir", members_dir(), "--username", "operator", "--timeout-ms", "1500"});
     auto r = test::run_cli(args);
     EXPECT_EQ(r.exit_code, 1) << args[1] << "\n" << r.out << r.err;
     EXPECT_NE(r.err.find("robot-a"), std::string::npos) << args[1] << ": " << r.err;
@@ -335,9 +342,9 @@ TEST_F(FleetTest, AnAclDenialIsCaughtByWaitingForTheMembers) {
   EXPECT_EQ(json::dump(robots_["robot-a"]->status(fleet_token_)).find("\"estop_active\":true"),
             std::string::npos);
   // The control: an anonymous client may write, and the same ESTOP latches the robot.
-  auto allowed =
-      test::run_cli({"fleet", "estop", "alpha", "--members", "robot-a", "--broker", acl.url(),
-                     "--token", tmp_.file("fleet.token"), "--key-dir", key_dir_});
+  auto allowed = test::run_cli({"fleet", "estop", "alpha", "--members", "robot-a", "--broker",
+                                acl.url(), "--token", tmp_.file("fleet.token"), "--key-dir",
+                                key_dir_, "--members-dir", members_dir()});
   EXPECT_EQ(allowed.exit_code, 0) << allowed.out << allowed.err;
   EXPECT_NE(json::dump(robots_["robot-a"]->status(fleet_token_)).find("\"estop_active\":true"),
             std::string::npos);
@@ -947,7 +954,7 @@ TEST_F(FleetTest, FleetAuditIntoPostgresCatchesTamperingAndGaps) {
 // ---- fleets on NATS (docs/FLEET.md §Running on NATS)
 
 // The reproduction of issue 32 on a 3-node NATS cluster: the robot is on node 1, the operator on
-// node 3. `rcan fleet estop` (no --members: the roster comes from the retained statuses) goes
+// node 3. `rcan fleet estop` (no --members: the members directory names robot-a) goes
 // out at QoS 1 — the cluster's SUBACK granted no more — and exits 0 only once the robot has
 // confirmed the latch. With node 1 gone (and no failover URL) the robot cannot hear it: the CLI
 // exits 1 and names it.
@@ -984,8 +991,8 @@ TEST_F(NatsFleetTest, ClusterFleetEstopLatchesTheRobotAndNamesItWhenItsBrokerIsG
       std::this_thread::sleep_for(std::chrono::milliseconds(500));
   }
   ASSERT_GE(settled_after, 0) << nats.proc(2).err();
-  // --members: the roster may still be unreadable while the cluster settles; a publish the
-  // settling cluster drops before its PUBACK is NOT DELIVERED (exit 1 too) and sent again.
+  // A publish the settling cluster drops before its PUBACK is NOT DELIVERED (exit 1 too) and
+  // sent again.
   test::RunResult gone;
   for (int i = 0; i < 5; ++i) {
     gone =

@@ -15,6 +15,7 @@
 #include "node/fleet/swarm.h"
 #include "node/services/node_services.h"
 #include "rcan/crypto/keys.h"
+#include "rcan/crypto/message_sig.h"
 #include "rcan/errors.h"
 
 namespace rcan::node {
@@ -129,10 +130,10 @@ Status MqttNode::start() {
   co.reconnect_max_s = static_cast<int>(mq.reconnect_max_s);
   co.max_qos = mq.max_qos;  // every publish and subscription at most this (brokers without QoS 2)
   co.will.topic = out_.status();
-  co.will.payload = json::dump(json::Value(json::Object{{"online", false},
-                                                        {"ruri", svc_.settings.ruri},
-                                                        {"member", opts_.fleet.member_id},
-                                                        {"reason", "connection_lost"}}));
+  co.will.payload = json::dump(vouched(json::Value(json::Object{{"online", false},
+                                                                {"ruri", svc_.settings.ruri},
+                                                                {"member", opts_.fleet.member_id},
+                                                                {"reason", "connection_lost"}})));
   co.will.qos = 1;
   co.will.retain = true;
   client_ = std::make_unique<transport::MqttClient>(co);
@@ -317,6 +318,19 @@ void MqttNode::publish_json(const std::string& topic, const json::Value& v, int 
         json::Object{{"topic", topic}, {"error", s.error().message}});
 }
 
+json::Value MqttNode::vouched(json::Value v) const {
+  if (!v.is_object()) return v;
+  json::Object& o = v.as_object();
+  if (in_fleet_) {
+    o.set("fleet_id", opts_.fleet.fleet_id);
+    o.set("member", opts_.fleet.member_id);
+  }
+  if (opts_.reply_key)
+    if (Status s = msgsig::sign_ed25519(o, opts_.reply_key->span()); !s.ok())
+      log(LogLevel::kWarn, "mqtt_reply_unsigned", json::Object{{"error", s.error().message}});
+  return v;
+}
+
 void MqttNode::publish_status(bool online, const std::string& reason) {
   json::Object o{{"online", online},
                  {"ruri", svc_.settings.ruri},
@@ -325,7 +339,7 @@ void MqttNode::publish_status(bool online, const std::string& reason) {
                  {"estop_active", svc_.act.estop_active()},
                  {"reason", reason},
                  {"timestamp_ms", svc_.clock.wall_ms()}};
-  publish_json(out_.status(), json::Value(std::move(o)), 1, true);
+  publish_json(out_.status(), vouched(json::Value(std::move(o))), 1, true);
 }
 
 void MqttNode::on_message(const transport::MqttMessage& msg) {
@@ -371,7 +385,7 @@ void MqttNode::on_message(const transport::MqttMessage& msg) {
   }
   auto body = mqtt::parse_payload(msg.payload);
   if (!body.ok()) {
-    publish_json(reply_topic, svc_.error(body.error()), opts_.mqtt.reply_qos, false);
+    publish_json(reply_topic, vouched(svc_.error(body.error())), opts_.mqtt.reply_qos, false);
     return;
   }
   // Commands are never retained: a retained message on a command topic is stale history.
@@ -408,7 +422,7 @@ void MqttNode::submit(json::Value body, const std::string& route, const std::str
     // COMPLETED as soon as it sees the command pending and the robot at rest (at once for a
     // `status`), and an EVENT overtaking its ACK made `rcan fleet command` report a member that
     // had acknowledged as failed.
-    publish_json(reply_topic, b, opts_.mqtt.reply_qos, false);
+    publish_json(reply_topic, vouched(b), opts_.mqtt.reply_qos, false);
     if (is_command && out.status == 200 && str_field(b, "type") == "ACK") {
       const json::Value* p = field(b, "payload");
       std::string cmd = p != nullptr ? str_field(*p, "command") : std::string();
@@ -477,7 +491,7 @@ void MqttNode::tick_completions() {
                          {"ruri", svc_.settings.ruri}};
     if (estop) payload.set("reason", "estop_active");
     publish_json(p.reply_topic,
-                 svc_.envelope(MessageType::kEvent, std::move(payload), p.message_id),
+                 vouched(svc_.envelope(MessageType::kEvent, std::move(payload), p.message_id)),
                  opts_.mqtt.reply_qos, false);
   }
 }

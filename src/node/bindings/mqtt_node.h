@@ -25,6 +25,7 @@
 
 #include "base/thread_annotations.h"
 #include "config/fleet_config.h"
+#include "rcan/crypto/keys.h"
 #include "rcan/mqtt_topics.h"
 #include "rcan/result.h"
 #include "rcan/ruri.h"
@@ -47,6 +48,10 @@ struct MqttNodeOptions {
   Ruri ruri;
   std::string password;      // read from mqtt.password_file
   std::string swarm_secret;  // read from swarm.secret_file
+  // The robot's Ed25519 identity seed (<key_dir>/ed25519.seed): every reply, completion and
+  // status it publishes is signed with it, so a coordinator believes no confirmation a topic
+  // writer made up (docs/FLEET.md, "Signed replies"). Null: published unsigned.
+  std::shared_ptr<const keys::SecretBytes> reply_key;
 };
 
 // The options from a validated configuration; reads mqtt.password_file and swarm.secret_file
@@ -82,6 +87,9 @@ class MqttNode {
               const std::string& fleet_id, const std::string& fleet_mode, bool standing_estop,
               int qos);
   void publish_json(const std::string& topic, const json::Value& v, int qos, bool retain);
+  // A reply, completion or status as the robot vouches for it: its fleet and member named in it
+  // and signed by its key (seed-shape canonical pre-image: reply_to and every field covered).
+  json::Value vouched(json::Value v) const;
   void publish_status(bool online, const std::string& reason);
   void warn_about_exposure() const;
   void loop() EXCLUDES(loop_mu_, mu_);

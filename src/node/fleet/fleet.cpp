@@ -1,7 +1,11 @@
 #include "node/fleet/fleet.h"
 
 #include <algorithm>
+#include <atomic>
+#include <mutex>
 
+#include "base/log.h"
+#include "node/fleet/estop_ledger.h"
 #include "node/services/node_services.h"
 
 namespace rcan::node {
@@ -35,7 +39,14 @@ class FleetStage final : public Stage {
       ctx->audit_detail.set("fleet_step", step->as_int());
     if (std::string cid = payload_string(m, "choreography_id"); !cid.empty() && cid.size() <= 64)
       ctx->audit_detail.set("choreography_id", cid);
-    if (stop) return Result::kContinue;  // an ESTOP/STOP is refused only for failed authentication
+    // The fleet's own ESTOPs and RESUMEs, on its topics: the ledger bounds a standing ESTOP.
+    if (ctx->in.fleet_id == cfg.fleet_id &&
+        (ctx->safety == SafetyAction::kEstop || ctx->safety == SafetyAction::kResume)) {
+      if (Result r = bound_standing_order(ctx, cfg); r != Result::kContinue) return r;
+    }
+    // An ESTOP/STOP is refused only for failed authentication, or as a replay of one the fleet
+    // has resumed since (above).
+    if (stop) return Result::kContinue;
     if ((!ctx->in.fleet_id.empty() && ctx->in.fleet_id != cfg.fleet_id) ||
         (!claimed.empty() && claimed != cfg.fleet_id))
       return deny(ctx,
@@ -64,12 +75,76 @@ class FleetStage final : public Stage {
   }
 
  private:
+  std::shared_ptr<FleetEstopLedger> ledger(const config::FleetConfig& cfg) {
+    std::call_once(ledger_once_, [&] {
+      const std::string& dir = svc_.settings.state_dir;
+      ledger_ = std::make_shared<FleetEstopLedger>(dir.empty() ? "" : dir + "/fleet_estops.json",
+                                                   cfg.fleet_id, cfg.member_id,
+                                                   svc_.clock.wall_ms() / 1000);
+      // The counter outlives the stage if /metrics is rendered after the pipeline is gone.
+      svc_.metrics.add_counter_fn(
+          "rcan_fleet_estop_replays_refused_total",
+          "Fleet ESTOPs refused because the fleet had resumed the robot since (a replay)",
+          [n = refused_] { return static_cast<double>(n->load()); });
+    });
+    return ledger_;
+  }
+
+  // A fleet ESTOP the fleet has resumed since is refused (a replay: its token and signature are
+  // still good); an ESTOP obeyed and a RESUME applied are remembered once the robot has acted
+  // on them (the answer is an ACK), never before: a RESUME refused for its role must not
+  // supersede anything.
+  Result bound_standing_order(const std::shared_ptr<Context>& ctx, const config::FleetConfig& cfg) {
+    const Message& m = *ctx->msg;
+    auto book = ledger(cfg);
+    if (ctx->safety == SafetyAction::kEstop) {
+      auto verdict = book->judge(m.message_id, m.timestamp_ms, ctx->in.standing_estop);
+      if (verdict != FleetEstopLedger::Verdict::kObey) {
+        const char* why = verdict == FleetEstopLedger::Verdict::kSuperseded
+                              ? "superseded_by_fleet_resume"
+                              : "older_than_fleet_resume";
+        ++*refused_;
+        ctx->audit_detail.set("fleet_estop_refused", why);
+        ctx->audit_detail.set("last_fleet_resume_timestamp_ms", book->last_resume_ms());
+        const int64_t now = svc_.clock.mono_ms();
+        if (int64_t last = logged_mono_.load(); last == 0 || now - last >= 10'000) {
+          logged_mono_.store(now);  // at most every 10 s: each copy is audited anyway
+          log(LogLevel::kWarn, "fleet_estop_replay_refused",
+              json::Object{{"message_id", m.message_id},
+                           {"reason", why},
+                           {"standing", ctx->in.standing_estop},
+                           {"refused", static_cast<int64_t>(refused_->load())}});
+        }
+        return refuse(svc_, ctx,
+                      Error(ErrorCode::kMessageStale,
+                            "this fleet ESTOP was superseded by the fleet's RESUME (a replay)",
+                            "message_id", why),
+                      "MESSAGE_STALE");
+      }
+    }
+    auto done = std::move(ctx->done);
+    ctx->done = [done = std::move(done), book, estop = ctx->safety == SafetyAction::kEstop,
+                 id = m.message_id, ts = m.timestamp_ms, exp = ctx->principal.token_exp,
+                 clock = &svc_.clock](Outcome out) {
+      const bool acted = out.status == 200 && json::string_field(out.body, "type") == "ACK";
+      const int64_t now_s = clock->wall_ms() / 1000;
+      if (acted && !estop) book->resumed(ts, now_s);  // before the answer: RESUME then ESTOP
+      done(std::move(out));
+      if (acted && estop) book->honoured(id, ts, exp, now_s);  // after: the stop comes first
+    };
+    return Result::kContinue;
+  }
+
   Result deny(const std::shared_ptr<Context>& ctx, std::string msg, std::string field) {
     return refuse(svc_, ctx,
                   Error(ErrorCode::kInsufficientPrivileges, std::move(msg), std::move(field)),
                   "COMMAND_REJECTED");
   }
   NodeServices& svc_;
+  std::once_flag ledger_once_;
+  std::shared_ptr<FleetEstopLedger> ledger_;
+  std::shared_ptr<std::atomic<uint64_t>> refused_ = std::make_shared<std::atomic<uint64_t>>(0);
+  std::atomic<int64_t> logged_mono_{0};
 };
 
 }  // namespace

@@ -7,7 +7,10 @@
 // the token is a fleet JWT (a `fleet` claim, which the JWT verifier has already checked lists
 // this robot); the fleet allows the command form (broadcast / individual / choreographed).
 // ESTOP and STOP are exempt from all but authentication (PROFILE.md §3): any authenticated
-// principal may stop a robot, through any topic.
+// principal may stop a robot, through any topic. One bound: a fleet ESTOP (on the fleet's
+// topics) that the fleet has resumed since — a captured one put back on the estop topic — is
+// refused as a replay, and a retained one must be newer than the last fleet RESUME applied
+// (estop_ledger.h).
 //
 // Fleet command vs individual command (seed §5.3 "fleet owner decides the policy"): the
 // policy itself belongs to the control-session rules; FleetMembership::conflict is the hook they
