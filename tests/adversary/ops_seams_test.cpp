@@ -1,7 +1,9 @@
 // The operational seams, tried as an attacker with only the public interfaces would
-// (docs/THREATS.md): a real rcan-registry started here on loopback. The attackers: anyone who
-// shares the registrant's address (every client of the registry behind its TLS proxy does), an
-// admin's webhook URL that names an internal address, and anyone who reads a command line in `ps`.
+// (docs/THREATS.md): a real rcan-registry and a real rcand with a driver process, started here on
+// loopback. The attackers: anyone who shares the registrant's address (every client of the
+// registry behind its TLS proxy does), an admin's webhook URL that names an internal address,
+// anyone who reads a command line in `ps`, and a driver program that writes to its stdout and
+// stderr.
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -12,6 +14,7 @@
 #include <thread>
 #include <vector>
 
+#include "configured_node.h"
 #include "rcan/json.h"
 #include "registry_daemon.h"
 #include "test_support.h"
@@ -281,6 +284,100 @@ TEST(AdversaryOps, TheFirstStartBannerKeepsTheAdminKeyOffEveryCommandLine) {
   auto r = run_cli(args, {}, env);
   EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
   EXPECT_NE(r.out.find("RRN-"), std::string::npos) << r.out;
+}
+
+// F13 (LOW). Before the fix the driver process wrote to rcand's own stdout and stderr: a line it
+// printed was a line of rcand's JSON log (a forged "listening" with another URL, a forged ESTOP),
+// for the operator, journald and a log shipper alike.
+TEST(AdversaryOps, WhatTheDriverPrintsIsRelayedAsTheDriversNeverAsRcandsOwnLog) {
+  TempDir dir;
+  // A driver that works (it answers describe and heartbeats) and prints what it likes.
+  const std::string script = dir.file("forger.py");
+  std::ofstream(script) << R"PY(
+import json, os, socket, struct, sys, threading, time
+out, err = sys.stdout, sys.stderr
+print('{"ts":"2026-01-01T00:00:00.000Z","level":"info","event":"listening",'
+      '"url":"http://203.0.113.9:1"}', file=out, flush=True)
+print('{"ts":"2026-01-01T00:00:00.000Z","level":"error","event":"estop_latched",'
+      '"forged_by":"203.0.113.9"}', file=err, flush=True)
+print('cursor\x1b[2Aup 203.0.113.9', file=err, flush=True)
+print('x' * 5000, file=out, flush=True)
+def chatter():
+    for i in range(3000):
+        print('flood %d' % i, file=out)
+    out.flush()
+    time.sleep(1)
+    print('after-the-flood', file=out, flush=True)
+threading.Thread(target=chatter, daemon=True).start()
+sock = socket.socket(fileno=int(os.environ["RCAN_DRIVER_FD"]))
+buf = b""
+def send(obj):
+    data = json.dumps(obj).encode()
+    sock.sendall(struct.pack(">I", len(data)) + data)
+while True:
+    chunk = sock.recv(65536)
+    if not chunk:
+        sys.exit(0)
+    buf += chunk
+    while len(buf) >= 4:
+        (n,) = struct.unpack(">I", buf[:4])
+        if len(buf) < 4 + n:
+            break
+        f = json.loads(buf[4:4 + n])
+        buf = buf[4 + n:]
+        if f["type"] == "describe":
+            send({"type": "describe", "protocol": 1, "name": "forger", "max_linear_mps": 5.0})
+        elif f["type"] == "heartbeat":
+            send({"type": "heartbeat", "seq": f["seq"]})
+)PY";
+  const std::string driver =
+      "driver:\n  type: process\n  sim:\n    tick_hz: 100\n  process:\n    command: "
+      "[\"python3\", \"" +
+      script +
+      "\"]\n    heartbeat_ms: 50\n    heartbeat_timeout_ms: 500\n"
+      "    max_linear_mps: 1.0\n    max_angular_radps: 3.0\n";
+  ConfiguredNode node("", 2000, false, "", driver);
+  // The forged ESTOP line on stderr, in whatever form rcand's log has it; then the end of the flood
+  // on stdout (before the fix rcand's own stdout, which is not its log).
+  ASSERT_TRUE(node.proc().wait_for_line("estop_latched", 30000)) << node.proc().err();
+  EXPECT_TRUE(node.proc().wait_for_line("after-the-flood", 20000));
+  // Every line of rcand's stderr that carries the driver's words is rcand's driver_output line, the
+  // driver's text one escaped field of it.
+  std::istringstream lines(node.proc().err());
+  int relayed = 0, flood = 0;
+  bool cut = false, dropped = false;
+  for (std::string line; std::getline(lines, line);) {
+    auto v = json::parse(line);
+    const bool driver_words = line.find("203.0.113.9") != std::string::npos ||
+                              line.find("flood ") != std::string::npos ||
+                              line.find("xxxxxxxx") != std::string::npos;
+    if (!v.ok()) {
+      EXPECT_FALSE(driver_words) << "a raw line in rcand's log: " << line;
+      continue;
+    }
+    const std::string event = json::string_field(*v, "event");
+    if (event == "driver_output_dropped") dropped = true;
+    if (!driver_words) continue;
+    EXPECT_EQ(event, "driver_output") << line;
+    if (event != "driver_output") continue;
+    ++relayed;
+    const std::string text = json::string_field(*v, "line");
+    EXPECT_LE(text.size(), 1024u) << line;
+    if (text.rfind("flood ", 0) == 0) ++flood;
+    if (const json::Value* t = v->get("truncated"); t != nullptr && t->is_bool() && t->as_bool())
+      cut = true;
+    if (text.find("estop_latched") != std::string::npos) {
+      EXPECT_EQ(json::string_field(*v, "stream"), "stderr");
+    }
+  }
+  EXPECT_GE(relayed, 4);
+  EXPECT_TRUE(cut);  // the 5,000-byte line
+  // The flood is bounded: not every line reaches the log, and the drop is said.
+  EXPECT_GT(flood, 0);
+  EXPECT_LT(flood, 3000);
+  EXPECT_TRUE(dropped);
+  // The fixture itself found rcand's own "listening" line, not the driver's forgery.
+  EXPECT_EQ(node.get("/healthz", "").status, 200);
 }
 
 }  // namespace
