@@ -5,6 +5,7 @@
 //   rcan-registry --help           the flags
 #include <signal.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cstdio>
 #include <filesystem>
@@ -132,7 +133,11 @@ int main(int argc, char** argv) {
   opts.allow_http_node_urls = flags->allow_http_node_urls;
   opts.write_per_key = {flags->write_rate, flags->write_burst};
   opts.write_per_address = {flags->addr_write_rate, flags->addr_write_rate * 2};
+  opts.anonymous_per_address = {flags->anon_rate, std::max(2.0, flags->anon_rate * 2)};
   opts.read_per_address = {flags->read_rate, flags->read_rate * 2};
+  for (const std::string& c : flags->trusted_proxies)
+    opts.trusted_proxies.push_back(*registry::api::parse_cidr(c));
+  opts.webhooks.allow_private = flags->allow_private_webhooks;
   opts.key_overlap_s = flags->key_overlap_s;
   opts.key_lifetime_s = flags->key_lifetime_s;
   opts.max_token_ttl_s = flags->max_token_ttl_s;
@@ -150,17 +155,19 @@ int main(int argc, char** argv) {
     if (!key.ok()) return fail("admin key: " + key.error().message);
     if (Status s = registry_app::write_private_file(key_file, *key); !s.ok())
       return fail(s.error().message);
-    std::fprintf(
-        stderr,
-        "\nrcan-registry: a new admin API key is in %s (mode 0600; shown only there).\n"
-        "Register a robot with it:\n"
-        "  curl -H \"Authorization: Bearer $(cat %s)\" -H 'Content-Type: application/json' \\\n"
-        "       -d "
-        "'{\"manufacturer\":\"acme\",\"model\":\"arm\",\"version\":\"v1\",\"device_id\":\"unit-1\"}"
-        "' \\\n"
-        "       %s/api/v1/robots\n"
-        "More keys: POST %s/api/v1/keys {\"role\":\"registrant\"} with the same header.\n\n",
-        key_file.c_str(), key_file.c_str(), url.c_str(), url.c_str());
+    // The key stays in its file: a command line is visible to every local user (ps).
+    std::fprintf(stderr,
+                 "\nrcan-registry: a new admin API key is in %s (mode 0600; shown only there).\n"
+                 "Register a robot with it (the CLI reads the key from the file, never from a "
+                 "command line):\n"
+                 "  RCAN_REGISTRY=%s RCAN_REGISTRY_KEY_FILE=%s \\\n"
+                 "  rcan registry register --manufacturer acme --model arm --version v1 "
+                 "--device-id unit-1\n"
+                 "More keys: rcan registry keys create --role registrant --save FILE (the same "
+                 "variables).\n"
+                 "With curl: a file of mode 0600 holding the line 'Authorization: Bearer <key>', "
+                 "given as -H @FILE.\n\n",
+                 key_file.c_str(), url.c_str(), key_file.c_str());
   }
   forward.api.store(&api);
   log(LogLevel::kInfo, "listening",

@@ -18,6 +18,7 @@
 #include "rcan/audit/secret.h"
 #include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/keys.h"
+#include "registry/api/address.h"
 
 namespace rcan::registry_app {
 namespace fs = std::filesystem;
@@ -29,12 +30,13 @@ constexpr const char* kUsage =
     "                     [--database SPEC]\n"
     "                     [--public-url URL] [--host NAME] [--prefix P] [--operator NAME]\n"
     "                     [--contact EMAIL] [--write-rate R] [--write-burst B]\n"
-    "                     [--address-write-rate R] [--read-rate R] [--io-threads N]\n"
+    "                     [--address-write-rate R] [--anonymous-rate R] [--read-rate R]\n"
+    "                     [--trusted-proxy CIDR]… [--io-threads N]\n"
     "                     [--key-overlap S] [--key-lifetime S] [--max-token-ttl S]\n"
     "                     [--device-code-ttl S] [--webhook-backoff-ms MS]\n"
     "                     [--webhook-timeout-ms MS] [--sync-from URL]… [--sync-delegations]\n"
     "                     [--sync-interval S]\n"
-    "                     [--allow-http-node-urls]\n"
+    "                     [--allow-http-node-urls] [--allow-private-webhooks]\n"
     "\n"
     "An RCAN robot registry (docs/REGISTRY.md): robots and their RRNs, resolve, federation\n"
     "nodes and the signed node manifest, compatible with rcan.dev and the official SDKs.\n"
@@ -47,12 +49,20 @@ constexpr const char* kUsage =
     "  --bind ADDR         listen address (default 127.0.0.1)\n"
     "  --data-dir DIR      keys, audit log and the SQLite database (default\n"
     "                      $RCAN_REGISTRY_DATA_DIR, else ~/.local/share/rcan-registry)\n"
-    "  --database SPEC     postgresql://… or a SQLite path (default <data-dir>/registry.db)\n"
+    "  --database SPEC     postgresql://… or a SQLite path (default <data-dir>/registry.db);\n"
+    "                      never a password here (argv is visible to every local user):\n"
+    "                      PostgreSQL reads it from PGPASSFILE or ~/.pgpass (0600)\n"
     "  --public-url URL    the URL clients use (manifest api_base; default http://ADDR:PORT)\n"
     "  --host NAME         registry host in rcan:// URIs (default: the public URL's host)\n"
     "  --prefix P          authoritative for the delegated prefix P: RRNs are RRN-P-…\n"
     "  --write-rate R      writes per second per API key (default 10, burst --write-burst 20)\n"
-    "  --address-write-rate R  writes per second per client address (default 50)\n"
+    "  --address-write-rate R  writes per second per client address by callers with a valid\n"
+    "                      API key or client credentials (default 50)\n"
+    "  --anonymous-rate R  writes per second per client address without one: challenges,\n"
+    "                      token requests that prove no client (default 20; burst twice\n"
+    "                      that, at least 2)\n"
+    "  --trusted-proxy CIDR  a proxy in front of the registry (repeatable): from these peers\n"
+    "                      only, X-Forwarded-For names the client the rate limits count\n"
     "  --read-rate R       reads per second per client address (default 2000; 0 = unlimited)\n"
     "  --key-overlap S     token authority: a new signing key is published S seconds before\n"
     "                      it signs (default 600)\n"
@@ -67,6 +77,8 @@ constexpr const char* kUsage =
     "  --sync-delegations  pull every delegation's node_url too\n"
     "  --sync-interval S   seconds between sync pulls (default 60)\n"
     "  --allow-http-node-urls  accept http:// node, webhook and sync URLs (local tests only)\n"
+    "  --allow-private-webhooks  deliver webhooks to loopback, private and link-local\n"
+    "                      addresses too (by default only to public ones)\n"
     "\n"
     "The first start creates, in the data directory, an admin API key (admin.key, mode 0600),\n"
     "the node's Ed25519 key (node-ed25519.seed) and the audit chain secret (audit.secret).\n"
@@ -80,9 +92,36 @@ bool parse_number(const std::string& s, double& out) {
 
 std::optional<Flags> parse_args(const std::vector<std::string>& args, int& exit_code);
 
+constexpr const char* kPasswordAlternatives =
+    "give PostgreSQL the password in PGPASSFILE or ~/.pgpass (mode 0600), or put the URL in a "
+    "--config file of mode 0600";
+
+// Whether a PostgreSQL connection URI carries a password: postgresql://user:password@… or a
+// password= parameter.
+bool database_has_password(std::string_view spec) {
+  if (spec.rfind("postgresql://", 0) != 0 && spec.rfind("postgres://", 0) != 0) return false;
+  std::string_view rest = spec.substr(spec.find("://") + 3);
+  const size_t end = rest.find_first_of("/?");
+  const std::string_view authority = rest.substr(0, end);
+  const size_t at = authority.rfind('@');
+  if (at != std::string_view::npos && authority.substr(0, at).find(':') != std::string_view::npos)
+    return true;
+  const size_t q = spec.find('?');
+  if (q == std::string_view::npos) return false;
+  std::string_view query = spec.substr(q + 1);
+  while (!query.empty()) {
+    const size_t amp = query.find('&');
+    if (query.substr(0, amp).rfind("password=", 0) == 0) return true;
+    if (amp == std::string_view::npos) break;
+    query.remove_prefix(amp + 1);
+  }
+  return false;
+}
+
 // Flags that take no value (true in a config file).
 bool is_switch(const std::string& flag) {
-  return flag == "--allow-http-node-urls" || flag == "--sync-delegations";
+  return flag == "--allow-http-node-urls" || flag == "--sync-delegations" ||
+         flag == "--allow-private-webhooks";
 }
 
 // A YAML scalar as the flag's value; a relative path (data-dir, a SQLite database) is the
@@ -124,13 +163,20 @@ Result<std::vector<std::string>> config_args(const std::string& file) {
       if (!v.IsScalar() || (v.Scalar() != "true" && v.Scalar() != "false"))
         return bad("'" + key + "' must be true or false");
       if (v.Scalar() == "true") out.push_back(flag);
-    } else if (v.IsSequence() && key == "sync-from") {
+    } else if (v.IsSequence() && (key == "sync-from" || key == "trusted-proxy")) {
       for (const auto& item : v) {
-        if (!item.IsScalar()) return bad("'sync-from' must be a list of URLs");
+        if (!item.IsScalar()) return bad("'" + key + "' must be a list");
         out.push_back(flag);
         out.push_back(item.Scalar());
       }
     } else if (v.IsScalar()) {
+      // Read by the registry's user alone, a password there stays off the command line.
+      struct stat st {};
+      if (key == "database" && database_has_password(v.Scalar()) &&
+          (::stat(file.c_str(), &st) != 0 || (st.st_mode & 077) != 0))
+        return bad(
+            "'database' carries a password: the file must be mode 0600 (or give PostgreSQL the "
+            "password in PGPASSFILE or ~/.pgpass, mode 0600)");
       out.push_back(flag);
       out.push_back(config_value(key, v.Scalar(), dir));
     } else {
@@ -162,6 +208,15 @@ std::optional<Flags> parse_flags(int argc, char** argv, int& exit_code) {
                 given.begin() + static_cast<std::ptrdiff_t>(i) + 2);
     --i;
   }
+  // A password on the command line is in every local user's `ps` and /proc/<pid>/cmdline.
+  for (size_t i = 0; i + 1 < given.size(); ++i)
+    if (given[i] == "--database" && database_has_password(given[i + 1])) {
+      std::fprintf(stderr,
+                   "rcan-registry: --database must not carry a password (the command line is "
+                   "visible to every local user): %s\n",
+                   kPasswordAlternatives);
+      return std::nullopt;
+    }
   args.insert(args.end(), given.begin(), given.end());
   return parse_args(args, exit_code);
 }
@@ -210,6 +265,15 @@ std::optional<Flags> parse_args(const std::vector<std::string>& args, int& exit_
       f.allow_http_node_urls = true;
     } else if (s == "--sync-delegations") {
       f.sync_delegations = true;
+    } else if (s == "--allow-private-webhooks") {
+      f.allow_private_webhooks = true;
+    } else if (s == "--trusted-proxy") {
+      if (!value(v)) return std::nullopt;
+      if (auto c = registry::api::parse_cidr(v); !c.ok()) {
+        std::fprintf(stderr, "rcan-registry: --trusted-proxy: %s\n", c.error().message.c_str());
+        return std::nullopt;
+      }
+      f.trusted_proxies.push_back(v);
     } else if (s == "--sync-from") {
       if (!value(v)) return std::nullopt;
       f.sync_from.push_back(v);
@@ -220,10 +284,10 @@ std::optional<Flags> parse_args(const std::vector<std::string>& args, int& exit_
     } else if (s == "--contact") {
       if (!value(f.contact)) return std::nullopt;
     } else if (s == "--write-rate" || s == "--write-burst" || s == "--address-write-rate" ||
-               s == "--read-rate" || s == "--io-threads" || s == "--key-overlap" ||
-               s == "--key-lifetime" || s == "--max-token-ttl" || s == "--device-code-ttl" ||
-               s == "--webhook-backoff-ms" || s == "--webhook-timeout-ms" ||
-               s == "--sync-interval") {
+               s == "--anonymous-rate" || s == "--read-rate" || s == "--io-threads" ||
+               s == "--key-overlap" || s == "--key-lifetime" || s == "--max-token-ttl" ||
+               s == "--device-code-ttl" || s == "--webhook-backoff-ms" ||
+               s == "--webhook-timeout-ms" || s == "--sync-interval") {
       if (!value(v)) return std::nullopt;
       if (!parse_number(v, d)) {
         std::fprintf(stderr, "rcan-registry: %s must be a number ≥ 0\n", s.c_str());
@@ -232,6 +296,7 @@ std::optional<Flags> parse_args(const std::vector<std::string>& args, int& exit_
       if (s == "--write-rate") f.write_rate = d;
       if (s == "--write-burst") f.write_burst = d;
       if (s == "--address-write-rate") f.addr_write_rate = d;
+      if (s == "--anonymous-rate") f.anon_rate = d;
       if (s == "--read-rate") f.read_rate = d;
       if (s == "--io-threads") f.io_threads = std::max(1, static_cast<int>(d));
       if (s == "--key-overlap") f.key_overlap_s = static_cast<int64_t>(d);

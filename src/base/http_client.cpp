@@ -18,6 +18,8 @@ Error describe(const client::net::ExchangeFailure& f, const HttpUrl& url, int ti
   switch (f.at) {
     case FailedAt::kResolve:
       return fail("cannot resolve " + url.host);
+    case FailedAt::kAddress:
+      return fail("refused: " + url.host + " resolves to no allowed address");
     case FailedAt::kConnect:
       if (f.timed_out) return fail("connect to " + where + " timed out");
       return fail("connect to " + where + " failed: " + std::strerror(f.sys_error));
@@ -147,6 +149,7 @@ Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std
   opts.max_body = o.max_body;
   opts.refuse_chunked = true;
   opts.ca_file = o.ca_file;
+  opts.allow_address = o.allow_address;
   client::net::ExchangeFailure failure;
   auto r = client::net::exchange(ep, req, opts, &failure);
   if (!r.ok()) return describe(failure, url, timeout_ms);

@@ -7,7 +7,10 @@
 // its errors.
 #pragma once
 
+#include <sys/socket.h>
+
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -55,6 +58,9 @@ struct HttpRequestOptions {
   std::string ca_file;
   size_t max_body = 256 * 1024;
   std::string content_type = "application/json";  // of a body (an RFC 7662 form, say)
+  // Set: only the addresses it allows are connected to, judged after the name resolved (the
+  // registry's webhooks: public addresses only).
+  std::function<bool(const sockaddr*)> allow_address;
 };
 Result<HttpAnswer> http_request(std::string_view method, const HttpUrl& url, std::string_view body,
                                 int timeout_ms, const HttpRequestOptions& opts);

@@ -96,7 +96,7 @@ void Conn::close() {
 bool Conn::pending() const { return ssl_ && SSL_pending(ssl_) > 0; }
 
 Result<bool> Conn::open(const Endpoint& ep, int timeout_ms, const std::string& ca_file,
-                        bool insecure) {
+                        bool insecure, const AddressFilter& allow) {
   close();
   int64_t deadline = mono_ms() + timeout_ms;
   addrinfo hints{};
@@ -111,7 +111,10 @@ Result<bool> Conn::open(const Endpoint& ep, int timeout_ms, const std::string& c
   std::string last = "no address";
   int last_errno = 0;
   bool timed_out = false;
+  bool any_allowed = false;
   for (addrinfo* ai = res; ai; ai = ai->ai_next) {
+    if (allow && !allow(ai->ai_addr)) continue;
+    any_allowed = true;
     int fd =
         ::socket(ai->ai_family, ai->ai_socktype | SOCK_CLOEXEC | SOCK_NONBLOCK, ai->ai_protocol);
     if (fd < 0) {
@@ -142,6 +145,9 @@ Result<bool> Conn::open(const Endpoint& ep, int timeout_ms, const std::string& c
     ::close(fd);
   }
   ::freeaddrinfo(res);
+  if (!any_allowed)
+    return fail(FailedAt::kAddress, false, 0, "CONNECTION_FAILED",
+                "refused to connect to " + ep.host + ": it resolves to no allowed address");
   if (fd_ < 0)
     return fail(FailedAt::kConnect, timed_out, last_errno, "CONNECTION_FAILED",
                 "cannot connect to " + ep.host + ":" + port + ": " + last + " (is rcand running?)");
@@ -303,7 +309,8 @@ Result<RawResponse> exchange(const Endpoint& ep, std::string_view request,
     if (failure) *failure = ExchangeFailure{at, timed_out, 0};
     return e;
   };
-  if (auto o = c.open(ep, opts.timeout_ms, opts.ca_file, opts.insecure); !o.ok())
+  if (auto o = c.open(ep, opts.timeout_ms, opts.ca_file, opts.insecure, opts.allow_address);
+      !o.ok())
     return conn_failed(o.error());
   if (auto w = c.write_all(request, static_cast<int>(deadline - mono_ms())); !w.ok())
     return conn_failed(w.error());

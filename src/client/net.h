@@ -6,8 +6,10 @@
 #pragma once
 
 #include <openssl/ssl.h>
+#include <sys/socket.h>
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <string_view>
@@ -26,6 +28,7 @@ enum class FailedAt : uint8_t {
   kNone,
   kResolve,    // the host name did not resolve
   kConnect,    // no address accepted the connection
+  kAddress,    // every address the name resolved to was refused (ExchangeOptions::allow_address)
   kTls,        // the TLS set-up or handshake
   kSend,       // writing the request
   kReceive,    // reading the answer
@@ -47,8 +50,12 @@ class Conn {
   Conn(const Conn&) = delete;
   Conn& operator=(const Conn&) = delete;
 
-  // Connects within timeout_ms (and does the TLS handshake when ep.tls).
-  Result<bool> open(const Endpoint& ep, int timeout_ms, const std::string& ca_file, bool insecure);
+  // Connects within timeout_ms (and does the TLS handshake when ep.tls). With `allow`, an
+  // address it refuses is never connected to: the check is on what the name resolved to, at
+  // connect time (a name that resolves elsewhere later gains nothing).
+  using AddressFilter = std::function<bool(const sockaddr*)>;
+  Result<bool> open(const Endpoint& ep, int timeout_ms, const std::string& ca_file, bool insecure,
+                    const AddressFilter& allow = {});
   Result<bool> write_all(std::string_view data, int timeout_ms);
   // Appends what arrives within timeout_ms to `buf`. Returns bytes read; 0 = peer closed.
   // TIMEOUT error when nothing came in time.
@@ -77,7 +84,8 @@ struct ExchangeOptions {
   std::string ca_file;      // TLS: trust anchors (empty: the system's)
   bool insecure = false;    // TLS: no certificate check
   size_t max_body = wire::kMaxBodyBytes;
-  bool refuse_chunked = false;  // fail as soon as the head of a chunked answer arrives
+  bool refuse_chunked = false;        // fail as soon as the head of a chunked answer arrives
+  Conn::AddressFilter allow_address;  // set: only the addresses it allows are connected to
 };
 
 // Sends `request` (complete: head and body, written as given) on a fresh connection to `ep` and

@@ -11,6 +11,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <mutex>
 #include <string>
@@ -280,6 +281,34 @@ TEST(NodeHttpClient, SendsHeadersAndRefusesOnesThatWouldSplitTheRequest) {
     ASSERT_FALSE(r.ok());
     EXPECT_EQ(r.error().code, ErrorCode::kSchemaValidationFailed);
   }
+}
+
+// The registry's webhooks connect to public addresses only: the filter sees every address the
+// name resolved to, at connect time, and one it refuses is never connected to.
+TEST(NodeHttpClient, AnAddressFilterJudgesWhatTheNameResolvesTo) {
+  OneShotServer s("HTTP/1.1 200 OK\r\nContent-Length: 2\r\n\r\nok");
+  auto u = parse_http_url("http://localhost:" + std::to_string(s.port()) + "/hook");
+  ASSERT_TRUE(u.ok());
+  std::vector<std::string> seen;
+  HttpRequestOptions refuse;
+  refuse.allow_address = [&](const sockaddr* sa) {
+    char text[INET6_ADDRSTRLEN] = {};
+    if (sa->sa_family == AF_INET)
+      inet_ntop(AF_INET, &reinterpret_cast<const sockaddr_in*>(sa)->sin_addr, text, sizeof text);
+    else if (sa->sa_family == AF_INET6)
+      inet_ntop(AF_INET6, &reinterpret_cast<const sockaddr_in6*>(sa)->sin6_addr, text, sizeof text);
+    seen.emplace_back(text);
+    return false;
+  };
+  EXPECT_EQ(refusal(http_request("POST", *u, "{}", 2000, refuse)),
+            "refused: localhost resolves to no allowed address");
+  EXPECT_NE(std::find(seen.begin(), seen.end(), "127.0.0.1"), seen.end());
+  EXPECT_TRUE(s.request().empty());  // nothing connected
+  HttpRequestOptions v4;
+  v4.allow_address = [](const sockaddr* sa) { return sa->sa_family == AF_INET; };
+  auto r = http_request("POST", *u, "{}", 2000, v4);
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_EQ(r->status, 200);
 }
 
 // https against `openssl s_server` with a certificate for 127.0.0.1: answered when the

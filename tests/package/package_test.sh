@@ -93,6 +93,49 @@ $RUN "$ROOT/usr/bin/rcand" init --dir "$ROOT/var/lib/rcand" --config "$ROOT/etc/
   --yes --port "$PORT" >"$WORK/init.log" 2>&1
 check "rcand init (postinst's step) makes the configured robot" test -s "$ROOT/var/lib/rcand/owner.token"
 
+# 4b. The postinst itself, in a sandbox: its paths redirected into a root of its own, the
+# commands that need root or the system's users stubbed (runuser runs the command as it is:
+# this machine has no rcand user). The rcand user owns /var/lib/rcand: a link it planted there
+# (init.log → a file of root's) must not be followed by root. Before: root's shell redirected
+# rcand init's output through it.
+SB=$WORK/sandbox STUBS=$WORK/stubs
+mkdir -p "$SB/var/lib/rcand" "$SB/etc" "$STUBS"
+for c in getent addgroup adduser systemctl; do printf '#!/bin/sh\nexit 0\n' >"$STUBS/$c"; done
+printf '#!/bin/sh\necho "chown $*" >>"%s"\n' "$WORK/stub.log" >"$STUBS/chown"
+# install: as asked, less the owner and group (the users do not exist here).
+cat >"$STUBS/install" <<'EOF_STUB'
+#!/bin/sh
+args=
+while [ $# -gt 0 ]; do
+  case $1 in -o|-g) shift 2 ;; *) args="$args $1"; shift ;; esac
+done
+exec /usr/bin/install $args
+EOF_STUB
+cat >"$STUBS/runuser" <<EOF_STUB
+#!/bin/sh
+[ "\$1" = "-u" ] && [ "\$3" = "--" ] || { echo "runuser: unexpected \$*" >&2; exit 2; }
+echo "runuser \$*" >>"$WORK/stub.log"
+shift 3
+exec "\$@"
+EOF_STUB
+chmod +x "$STUBS"/*
+ln -s "$WORK/root-only" "$SB/var/lib/rcand/init.log"
+sed -e "s|/var/lib/rcand|$SB/var/lib/rcand|g" -e "s|/etc/rcan|$SB/etc/rcan|g" \
+    -e "s|/usr/bin/rcand|${RUN:+$RUN }$ROOT/usr/bin/rcand|g" "$CTRL/postinst" >"$WORK/postinst"
+PATH="$STUBS:$PATH" sh "$WORK/postinst" configure >"$WORK/postinst.log" 2>&1
+rc=$?
+check "postinst configure succeeds in the sandbox (exit $rc)" test "$rc" -eq 0
+check "postinst writes nothing through a link the rcand user planted in its directory" \
+  test ! -e "$WORK/root-only"
+check "postinst runs rcand init as the rcand user" grep -q -- "^runuser -u rcand -- .*usr/bin/rcand init" "$WORK/stub.log"
+check "postinst redirects nothing into /var/lib/rcand" \
+  bash -c "! grep -Eq '>[[:space:]]*\"?/var/lib/rcand' '$CTRL/postinst'"
+check "postinst made the robot (owner token, configuration naming its own path)" bash -c \
+  "test -s '$SB/var/lib/rcand/owner.token' && grep -q 'rcand --config $SB/etc/rcan/robot.rcan.yaml' '$SB/etc/rcan/robot.rcan.yaml'"
+check "the configuration is 0644 and no staging directory is left" bash -c \
+  "test \"\$(stat -c %a '$SB/etc/rcan/robot.rcan.yaml')\" = 644 && test -z \"\$(ls -A '$SB/etc/rcan' | grep -v '^robot.rcan.yaml\$')\""
+[ "$rc" -eq 0 ] || cat "$WORK/postinst.log"
+
 # 5. The unit's ExecStart, its paths redirected into the root: the node serves.
 exec_start=$(sed -n 's/^ExecStart=//p' "$UNIT")
 cmd=${exec_start//\/usr\/bin\//$ROOT/usr/bin/}

@@ -59,7 +59,11 @@ TEST(RegistryApi, FirstStartFilesHealthMetricsAndSignedManifest) {
   EXPECT_EQ(mode_of(dir.file("node-ed25519.seed")), 0600u);
   EXPECT_EQ(mode_of(dir.file("registry.db")), 0600u);
   EXPECT_EQ(d.admin_key().rfind("rcan_", 0), 0u);
-  EXPECT_NE(d.proc().err().find("Authorization: Bearer $(cat"), std::string::npos);
+  // The banner's usage keeps the key off every command line (F12).
+  EXPECT_NE(d.proc().err().find("RCAN_REGISTRY_KEY_FILE=" + dir.file("admin.key")),
+            std::string::npos)
+      << d.proc().err();
+  EXPECT_EQ(d.proc().err().find("$(cat"), std::string::npos) << d.proc().err();
 
   auto h = d.get("/healthz");
   EXPECT_EQ(h.status, 200);
@@ -576,6 +580,93 @@ TEST(RegistryApi, AConfigFileSetsTheFlagsAndTheCommandLineWins) {
   auto missing = run({RCAN_REGISTRY_PATH, "--config", cfg.path() + "/none.yaml"});
   EXPECT_EQ(missing.exit_code, 2);
   EXPECT_NE(missing.err.find("cannot be read"), std::string::npos) << missing.err;
+}
+
+// rcan-registry started with `args`: its exit status when it refuses to start, -1 when it
+// serves (then it is stopped); `err` receives its stderr.
+int refused_start(const std::vector<std::string>& args, std::string& err) {
+  std::vector<std::string> argv{RCAN_REGISTRY_PATH};
+  argv.insert(argv.end(), args.begin(), args.end());
+  Process p;
+  EXPECT_TRUE(p.start(argv));
+  const bool served = p.wait_for_line("\"event\":\"listening\"", 30000).has_value();
+  const int status = p.stop(SIGTERM, 10000);
+  err = p.err();
+  return served ? -1 : status;
+}
+
+// F12: a database password on the command line is in every local user's `ps`. rcan-registry
+// refuses one in --database (naming where it goes instead) and in a config file others can read;
+// PostgreSQL's own PGPASSFILE carries it. Before: the password URL was taken as given.
+TEST(RegistryApi, ADatabasePasswordComesFromPgpassfileNeverFromTheCommandLine) {
+  Postgres pg;
+  // A role that must give a password: password authentication for it, ahead of the trust lines.
+  ASSERT_EQ(pg.sql("CREATE ROLE registry LOGIN PASSWORD 'pg-secret-7f3a'").exit_code, 0);
+  ASSERT_EQ(pg.sql("CREATE DATABASE reg OWNER registry").exit_code, 0);
+  auto hba = pg.sql("SHOW hba_file");
+  ASSERT_EQ(hba.exit_code, 0) << hba.err;
+  const std::string hba_file = hba.out.substr(0, hba.out.find('\n'));
+  const std::string rules = read_file(hba_file);
+  std::ofstream(hba_file, std::ios::trunc) << "host all registry 127.0.0.1/32 scram-sha-256\n"
+                                           << rules;
+  ASSERT_EQ(pg.sql("SELECT pg_reload_conf()").exit_code, 0);
+  const std::string port = std::to_string(pg.port());
+  const std::string plain = "postgresql://registry@127.0.0.1:" + port + "/reg";
+  TempDir dir;
+
+  // In the URL, either form: refused before anything is opened (exit 2), the way out named.
+  for (const std::string& with_password :
+       {"postgresql://registry:pg-secret-7f3a@127.0.0.1:" + port + "/reg",
+        plain + "?sslmode=disable&password=pg-secret-7f3a"}) {
+    std::string err;
+    EXPECT_EQ(refused_start(
+                  {"--data-dir", dir.file("a"), "--port", "0", "--database", with_password}, err),
+              2)
+        << with_password << ": " << err;
+    EXPECT_NE(err.find("--database must not carry a password"), std::string::npos) << err;
+    EXPECT_NE(err.find("PGPASSFILE"), std::string::npos) << err;
+  }
+  // In a config file others can read: refused too.
+  const std::string cfg = dir.file("registry.yaml");
+  std::ofstream(cfg) << "database: postgresql://registry:pg-secret-7f3a@127.0.0.1:" << port
+                     << "/reg\n";
+  ::chmod(cfg.c_str(), 0644);
+  std::string readable;
+  EXPECT_EQ(refused_start({"--config", cfg, "--data-dir", dir.file("b"), "--port", "0"}, readable),
+            2)
+      << readable;
+  EXPECT_NE(readable.find("mode 0600"), std::string::npos) << readable;
+
+  // The password must come from somewhere: without it the server refuses the registry.
+  auto none =
+      run({RCAN_REGISTRY_PATH, "--data-dir", dir.file("c"), "--port", "0", "--database", plain}, {},
+          {"PGPASSFILE=" + dir.file("no-such-file")});
+  EXPECT_NE(none.exit_code, 0);
+  EXPECT_NE(none.err.find("password"), std::string::npos) << none.err;
+  // PGPASSFILE (0600): the registry runs on that database.
+  const std::string pgpass = dir.file("pgpass");
+  std::ofstream(pgpass) << "127.0.0.1:" << port << ":reg:registry:pg-secret-7f3a\n";
+  ::chmod(pgpass.c_str(), 0600);
+  {
+    Process p;
+    ASSERT_TRUE(p.start(
+        {RCAN_REGISTRY_PATH, "--data-dir", dir.file("d"), "--port", "0", "--database", plain},
+        {"PGPASSFILE=" + pgpass}));
+    auto line = p.wait_for_line("\"event\":\"listening\"", 30000);
+    ASSERT_TRUE(line) << p.err();
+    EXPECT_NE(line->find("\"backend\":\"postgresql\""), std::string::npos) << *line;
+    EXPECT_EQ(p.stop(SIGTERM, 10000), 0);
+  }
+  // A config file only its owner reads may hold the URL with the password.
+  ::chmod(cfg.c_str(), 0600);
+  Process q;
+  ASSERT_TRUE(
+      q.start({RCAN_REGISTRY_PATH, "--config", cfg, "--data-dir", dir.file("e"), "--port", "0"},
+              {"PGPASSFILE=" + dir.file("no-such-file")}));
+  auto line = q.wait_for_line("\"event\":\"listening\"", 30000);
+  ASSERT_TRUE(line) << q.err();
+  EXPECT_NE(line->find("\"backend\":\"postgresql\""), std::string::npos) << *line;
+  EXPECT_EQ(q.stop(SIGTERM, 10000), 0);
 }
 
 }  // namespace

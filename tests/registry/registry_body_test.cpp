@@ -4,6 +4,7 @@
 
 #include "rcan/encoding.h"
 #include "rcan/json.h"
+#include "registry/api/address.h"
 #include "registry/api/body.h"
 #include "registry/api/oauth_form.h"
 #include "registry/api/rate_limit.h"
@@ -139,6 +140,70 @@ TEST(RegistryBody, TokenBucket) {
   for (int i = 0; i < 10; ++i) l.take("k" + std::to_string(i), t);  // bounded table
   EXPECT_LE(l.size(), 4u);
   EXPECT_EQ(RateLimiter(BucketConfig{0, 0}).take("x", t), 0);  // 0 = unlimited
+}
+
+// --trusted-proxy: the client is the right-most X-Forwarded-For address that is not a trusted
+// proxy, and only when the peer is one.
+TEST(RegistryAddress, ClientAddressBelievesXForwardedForFromTrustedProxiesOnly) {
+  std::vector<Cidr> trusted{*parse_cidr("10.0.0.0/8"), *parse_cidr("fd00::/8"),
+                            *parse_cidr("192.0.2.1")};
+  EXPECT_EQ(client_address("203.0.113.5", {"198.51.100.1"}, trusted), "203.0.113.5");
+  EXPECT_EQ(client_address("203.0.113.5", {"198.51.100.1"}, {}), "203.0.113.5");
+  EXPECT_EQ(client_address("10.1.2.3", {"198.51.100.1"}, trusted), "198.51.100.1");
+  EXPECT_EQ(client_address("10.1.2.3", {"6.6.6.6, 198.51.100.1"}, trusted), "198.51.100.1");
+  EXPECT_EQ(client_address("10.1.2.3", {"198.51.100.1, 10.9.9.9"}, trusted), "198.51.100.1");
+  EXPECT_EQ(client_address("10.1.2.3", {"6.6.6.6", "198.51.100.1"}, trusted), "198.51.100.1");
+  EXPECT_EQ(client_address("192.0.2.1", {" 2001:db8::7 "}, trusted), "2001:db8::7");
+  EXPECT_EQ(client_address("fd00::1", {"198.51.100.1"}, trusted), "198.51.100.1");
+  // All trusted: the left-most. A hop that is no address ends the walk at the last believed.
+  EXPECT_EQ(client_address("10.1.2.3", {"10.0.0.9, 10.0.0.8"}, trusted), "10.0.0.9");
+  EXPECT_EQ(client_address("10.1.2.3", {"198.51.100.1, junk"}, trusted), "10.1.2.3");
+  EXPECT_EQ(client_address("10.1.2.3", {"6.6.6.6, junk, 10.0.0.7"}, trusted), "10.0.0.7");
+  EXPECT_EQ(client_address("10.1.2.3", {}, trusted), "10.1.2.3");
+  EXPECT_EQ(client_address("::ffff:10.1.2.3", {"198.51.100.1"}, trusted), "198.51.100.1");
+  EXPECT_FALSE(parse_cidr("10.0.0.0/33").ok());
+  EXPECT_FALSE(parse_cidr("proxy.example").ok());
+  EXPECT_FALSE(parse_cidr("10.0.0.0/").ok());
+  EXPECT_FALSE(parse_cidr("fd00::/129").ok());
+  EXPECT_TRUE(parse_cidr("0.0.0.0/0").ok());
+}
+
+// Webhooks go to public addresses only (--allow-private-webhooks aside).
+TEST(RegistryAddress, OnlyPublicAddressesArePublic) {
+  for (const char* a : {"8.8.8.8", "1.1.1.1", "203.0.114.1", "2606:4700::1111", "2001:4860::8888"})
+    EXPECT_TRUE(is_public_address(*parse_ip(a))) << a;
+  for (const char* a : {"127.0.0.1",
+                        "127.255.0.1",
+                        "10.0.0.1",
+                        "172.16.0.1",
+                        "172.31.255.255",
+                        "192.168.1.1",
+                        "169.254.169.254",
+                        "100.64.0.1",
+                        "100.127.255.255",
+                        "0.0.0.0",
+                        "224.0.0.1",
+                        "255.255.255.255",
+                        "240.0.0.1",
+                        "192.0.2.1",
+                        "198.18.0.1",
+                        "::",
+                        "::1",
+                        "::ffff:8.8.8.8",
+                        "::ffff:127.0.0.1",
+                        "::127.0.0.1",
+                        "64:ff9b::a00:1",
+                        "2002:a00:1::",
+                        "fc00::1",
+                        "fd12::1",
+                        "fe80::1",
+                        "ff02::1",
+                        "2001:db8::1",
+                        "2001::1"})
+    EXPECT_FALSE(is_public_address(*parse_ip(a))) << a;
+  EXPECT_FALSE(parse_ip("localhost"));
+  EXPECT_FALSE(parse_ip("127.1"));  // glibc's resolver takes it: the connect-time check sees it
+  EXPECT_TRUE(parse_ip("[::1]"));
 }
 
 }  // namespace

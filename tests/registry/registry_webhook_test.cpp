@@ -121,8 +121,10 @@ class RegistryWebhooks : public ::testing::Test {
     server_->stop(500);
   }
   std::unique_ptr<RegistryDaemon> start(std::vector<std::string> extra = {}) {
-    extra.insert(extra.end(), {"--allow-http-node-urls", "--webhook-backoff-ms", "50",
-                               "--webhook-timeout-ms", "300"});
+    // The receiver is on loopback: a private address (tests/adversary/ops_seams_test.cpp shows
+    // the refusal without the flag).
+    extra.insert(extra.end(), {"--allow-http-node-urls", "--allow-private-webhooks",
+                               "--webhook-backoff-ms", "50", "--webhook-timeout-ms", "300"});
     return std::make_unique<RegistryDaemon>(dir_.path(), extra);
   }
   static std::string subscription(const std::string& url, const std::string& secret,

@@ -46,13 +46,18 @@ std::string exit_text(int status) {
 }
 
 // Starts `argv` in its own process group with an empty signal mask and default dispositions
-// (rcand blocks its termination signals in every thread), `child_fd` as fd 3 and no other
-// descriptor of rcand. Returns the pid or -errno.
-pid_t spawn_driver(const std::vector<std::string>& command, int child_fd) {
+// (rcand blocks its termination signals in every thread), /dev/null as stdin, `out_fd` and
+// `err_fd` (rcand's pipes: never rcand's own stdout and stderr, whose lines are rcand's log) as
+// its stdout and stderr, `child_fd` as fd 3 and no other descriptor of rcand. Returns the pid or
+// -errno.
+pid_t spawn_driver(const std::vector<std::string>& command, int child_fd, int out_fd, int err_fd) {
   posix_spawn_file_actions_t fa;
   posix_spawnattr_t attr;
   posix_spawn_file_actions_init(&fa);
   posix_spawnattr_init(&attr);
+  posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
+  posix_spawn_file_actions_adddup2(&fa, out_fd, 1);  // out_fd, err_fd > 2: rcand holds 0-2
+  posix_spawn_file_actions_adddup2(&fa, err_fd, 2);
   posix_spawn_file_actions_adddup2(&fa, child_fd, 3);
 #if defined(__GLIBC__) && (__GLIBC__ > 2 || (__GLIBC__ == 2 && __GLIBC_MINOR__ >= 34))
   posix_spawn_file_actions_addclosefrom_np(&fa, 4);
@@ -96,6 +101,8 @@ ProcessDriver::~ProcessDriver() {
   wake();
   if (io_.joinable()) io_.join();
   if (wake_fd_ >= 0) ::close(wake_fd_);
+  for (Output& o : output_)
+    if (o.fd >= 0) ::close(o.fd);
 }
 
 Status ProcessDriver::start() {
@@ -278,17 +285,38 @@ bool ProcessDriver::connect_or_spawn(int64_t now) {
       fault("cannot create the driver socket: " + errno_text(errno), now);
       return false;
     }
+    // Its stdout and stderr: pipes read by this thread (relay_output), fresh for each process.
+    int out[2] = {-1, -1}, err[2] = {-1, -1};
+    if (pipe2(out, O_CLOEXEC) != 0 || pipe2(err, O_CLOEXEC) != 0) {
+      const int e = errno;
+      for (int f : {out[0], out[1], err[0], err[1], sv[0], sv[1]})
+        if (f >= 0) ::close(f);
+      fault("cannot create the driver's output pipes: " + errno_text(e), now);
+      return false;
+    }
     int child_end = sv[1];
     if (child_end == 3) {  // dup2(3, 3) would keep close-on-exec set
       child_end = fcntl(sv[1], F_DUPFD_CLOEXEC, 4);
       ::close(sv[1]);
     }
-    pid = child_end < 0 ? -EMFILE : spawn_driver(opts_.command, child_end);
+    pid = child_end < 0 ? -EMFILE : spawn_driver(opts_.command, child_end, out[1], err[1]);
     if (child_end >= 0) ::close(child_end);
+    ::close(out[1]);
+    ::close(err[1]);
     if (pid < 0) {
       ::close(sv[0]);
+      ::close(out[0]);
+      ::close(err[0]);
       fault("cannot start the driver process " + opts_.command[0] + ": " + errno_text(-pid), now);
       return false;
+    }
+    for (int i = 0; i < 2; ++i) {
+      Output& o = output_[i];
+      if (o.fd >= 0) drain_output(i, true);  // the last process's last words, then its pipe goes
+      o.fd = i == 0 ? out[0] : err[0];
+      fcntl(o.fd, F_SETFL, fcntl(o.fd, F_GETFL) | O_NONBLOCK);
+      o.partial.clear();
+      o.skipping = false;
     }
     fd = sv[0];
     fcntl(fd, F_SETFL, fcntl(fd, F_GETFL) | O_NONBLOCK);
@@ -477,6 +505,66 @@ std::string ProcessDriver::closed_reason() {
   return "the driver process closed the connection";
 }
 
+void ProcessDriver::drain_output(int stream, bool last) {
+  Output& o = output_[stream];
+  char buf[4096];
+  // At most 64 KiB a turn: a driver that writes without end cannot hold the I/O thread.
+  for (int turn = 0; turn < 16 && o.fd >= 0; ++turn) {
+    const ssize_t got = ::read(o.fd, buf, sizeof buf);
+    if (got < 0 && errno == EINTR) continue;
+    if (got <= 0) {
+      if (got == 0 || (errno != EAGAIN && errno != EWOULDBLOCK)) last = true;
+      break;
+    }
+    for (ssize_t i = 0; i < got; ++i) {
+      const char c = buf[i];
+      if (c == '\n') {
+        if (!o.skipping) relay_line(stream, o.partial, false);
+        o.partial.clear();
+        o.skipping = false;
+      } else if (!o.skipping) {
+        o.partial.push_back(c);
+        if (o.partial.size() >= kMaxOutputLine) {  // cut; the rest of the line is dropped
+          relay_line(stream, o.partial, true);
+          o.partial.clear();
+          o.skipping = true;
+        }
+      }
+    }
+  }
+  if (!last) return;
+  if (!o.partial.empty() && !o.skipping) relay_line(stream, o.partial, false);
+  o.partial.clear();
+  o.skipping = false;
+  if (o.fd >= 0) ::close(o.fd);
+  o.fd = -1;
+}
+
+void ProcessDriver::relay_line(int stream, const std::string& line, bool cut) {
+  // A token bucket shared by both streams; what it refuses is counted and said once it refills.
+  const int64_t now = now_ms();
+  output_tokens_ = std::min(
+      static_cast<double>(kOutputBurst),
+      output_tokens_ + static_cast<double>(now - output_at_ms_) * kOutputLinesPerS / 1000.0);
+  output_at_ms_ = now;
+  if (output_tokens_ < 1.0) {
+    ++output_dropped_;
+    return;
+  }
+  output_tokens_ -= 1.0;
+  if (output_dropped_ > 0) {
+    log(LogLevel::kWarn, "driver_output_dropped",
+        json::Object{{"lines", static_cast<int64_t>(output_dropped_)},
+                     {"limit_per_s", static_cast<int64_t>(kOutputLinesPerS)}});
+    output_dropped_ = 0;
+  }
+  json::Object f{{"stream", stream == 0 ? "stdout" : "stderr"},
+                 {"pid", static_cast<int64_t>(child_pid_.load(std::memory_order_acquire))},
+                 {"line", line}};
+  if (cut) f.set("truncated", true);
+  log(LogLevel::kInfo, "driver_output", std::move(f));
+}
+
 void ProcessDriver::io_loop() {
   char buf[16384];
   while (!quit_.load(std::memory_order_acquire)) {
@@ -521,14 +609,19 @@ void ProcessDriver::io_loop() {
       wait = std::min<int64_t>(wait, std::max<int64_t>(1, limit - since + 1));
     }
     if (reaping_pid_ > 0) wait = std::min<int64_t>(wait, 20);
-    pollfd p[2] = {{wake_fd_, POLLIN, 0},
-                   {fd, static_cast<short>(POLLIN | (want_out ? POLLOUT : 0)), 0}};
-    const int n = ::poll(p, fd >= 0 ? 2 : 1, static_cast<int>(wait));
+    // The driver's stdout and stderr (fd -1: poll ignores the entry).
+    pollfd p[4] = {{wake_fd_, POLLIN, 0},
+                   {fd, static_cast<short>(POLLIN | (want_out ? POLLOUT : 0)), 0},
+                   {output_[0].fd, POLLIN, 0},
+                   {output_[1].fd, POLLIN, 0}};
+    const int n = ::poll(p, 4, static_cast<int>(wait));
     if (n < 0 && errno != EINTR) break;
     if (p[0].revents & POLLIN) {
       uint64_t v;
       [[maybe_unused]] ssize_t r = ::read(wake_fd_, &v, sizeof v);
     }
+    for (int i = 0; i < 2; ++i)
+      if (p[2 + i].revents & (POLLIN | POLLHUP | POLLERR)) drain_output(i, false);
     if (fd < 0) continue;
     now = now_ms();
     bool write_ok = true;

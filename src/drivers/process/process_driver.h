@@ -4,7 +4,8 @@
 // receives what apply() is given, which the core has already validated and limited.
 //
 // Connection: with `command`, rcand starts the process itself (its own process group, an
-// empty signal mask) and hands it one end of a socketpair as file descriptor 3
+// empty signal mask, stdin /dev/null, stdout and stderr pipes whose lines rcand relays as
+// "driver_output" log lines) and hands it one end of a socketpair as file descriptor 3
 // (RCAN_DRIVER_FD=3 in its environment); with `socket`, rcand connects to a process already
 // listening on that path. Either way rcand sends `describe` first; the link is healthy once the
 // process has answered `describe` and sent a heartbeat.
@@ -88,6 +89,12 @@ class ProcessDriver final : public node::Driver {
   };
 
   void io_loop();
+  // Reads what the driver wrote to its stdout (0) or stderr (1) and relays it line by line as
+  // rcand's own "driver_output" log lines (its text escaped as a field, never a line of
+  // rcand's log itself), cut at kMaxOutputLine bytes, at most kOutputLinesPerS lines a second;
+  // `last`: the pipe goes (a partial line is relayed).
+  void drain_output(int stream, bool last);
+  void relay_line(int stream, const std::string& line, bool cut);
   bool connect_or_spawn(int64_t now_ms);
   void on_frame(const std::string& payload, int64_t now_ms);
   void fault(const std::string& why, int64_t now_ms);
@@ -153,6 +160,18 @@ class ProcessDriver final : public node::Driver {
   pid_t reaping_pid_ = -1;  // a process being terminated
   int64_t kill_at_ms_ = 0;  // SIGKILL when it has not exited by then
   bool ever_connected_ = false;
+  // The driver's stdout and stderr, relayed (drain_output).
+  static constexpr size_t kMaxOutputLine = 1024;
+  static constexpr int kOutputLinesPerS = 50, kOutputBurst = 200;
+  struct Output {
+    int fd = -1;
+    std::string partial;    // a line not yet ended
+    bool skipping = false;  // a cut line's rest, dropped up to its newline
+  };
+  Output output_[2];
+  double output_tokens_ = kOutputBurst;
+  int64_t output_at_ms_ = 0;
+  uint64_t output_dropped_ = 0;
 };
 
 }  // namespace rcan::drivers

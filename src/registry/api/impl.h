@@ -51,6 +51,10 @@ class RegistryApi::Impl {
   // Who the bearer is: nullopt with `err` set (401) when the key is missing, malformed,
   // unknown, revoked or wrong.
   std::optional<Caller> authenticate(const HttpRequest& req, HttpResponse& err);
+  // Whether the request proves who sends it: a valid API key, or at the OAuth endpoints a
+  // client's valid secret or signed assertion. Without side effects; what proves nothing is
+  // anonymous (serve(): its own, smaller rate limit).
+  bool proves_credential(const HttpRequest& req);
   // 429 when `key_id`'s write bucket is empty.
   std::optional<HttpResponse> limit_key(const std::string& key_id);
   // A write on /robots/{rrn}: the authenticated, rate-limited caller and the live robot, or
@@ -171,7 +175,7 @@ class RegistryApi::Impl {
   Bytes node_pub;
   std::string manifest;
   Metrics metrics;
-  RateLimiter write_key, write_addr, read_addr;
+  RateLimiter write_key, write_addr, anon_addr, read_addr;
   // Revocations by one non-admin API key (docs/THREATS.md T4): every robot that trusts this
   // registry keeps each one, so a registrant may not turn its own tokens into a flood of them.
   RateLimiter revoke_by_key{BucketConfig{kRevocationsPerKeyPerS, kRevocationBurstPerKey}};

@@ -29,6 +29,13 @@ std::string address_of(const std::string& remote) {
   return a;
 }
 
+std::vector<std::string> forwarded_for(const HttpRequest& req) {
+  std::vector<std::string> out;
+  for (const auto& [name, value] : req.headers)
+    if (name == "x-forwarded-for") out.push_back(value);
+  return out;
+}
+
 HttpResponse too_many(int64_t retry_after_s, const std::string& what) {
   HttpResponse r = project_error(ErrorCode::kRateLimited, "Rate limited — slow down requests", what,
                                  "rate_limited");
@@ -118,6 +125,7 @@ RegistryApi::Impl::Impl(Store& s, audit::AuditLog* a, ApiOptions opts)
       o(std::move(opts)),
       write_key(o.write_per_key),
       write_addr(o.write_per_address),
+      anon_addr(o.anonymous_per_address),
       read_addr(o.read_per_address) {
   while (!o.public_url.empty() && o.public_url.back() == '/') o.public_url.pop_back();
   if (o.node_seed.size() != ed25519::kSeedBytes) o.node_seed = ed25519::random_seed();
@@ -147,7 +155,10 @@ RegistryApi::Impl::Impl(Store& s, audit::AuditLog* a, ApiOptions opts)
       {"rcan_registry_webhook_dropped_total", "Webhook events or deliveries dropped: queue full",
        &webhooks->dropped},
       {"rcan_registry_webhook_skipped_total",
-       "Webhook deliveries skipped: the subscription failed too often", &webhooks->skipped}};
+       "Webhook deliveries skipped: the subscription failed too often", &webhooks->skipped},
+      {"rcan_registry_webhook_refused_address_total",
+       "Webhook deliveries refused: the host resolved to no public address",
+       &webhooks->refused_address}};
   for (const Counter& c : counters)
     metrics.add_counter_fn(c.name, c.help,
                            [v = c.value] { return static_cast<double>(v->load()); });
@@ -203,6 +214,49 @@ std::optional<Caller> RegistryApi::Impl::authenticate(const HttpRequest& req, Ht
   std::string presented = sha256_hex((*key)->salt + std::string(secret));
   if (!constant_time_equal(presented, (*key)->hash)) return std::nullopt;
   return Caller{std::move(**key)};
+}
+
+bool RegistryApi::Impl::proves_credential(const HttpRequest& req) {
+  const std::string_view authorization = req.header("authorization");
+  if (!req.bearer().empty()) {
+    HttpResponse err;
+    return authenticate(req, err).has_value();
+  }
+  if (req.path != "/oauth/token" && req.path != "/oauth/introspect" &&
+      req.path != "/oauth/device_authorization")
+    return false;
+  // A client's credentials (oauth_routes.cpp authenticate_client), checked without spending an
+  // assertion's jti: the route checks them again, and in full.
+  std::optional<Form> f;
+  if (req.header("content-type").substr(0, 33) == "application/x-www-form-urlencoded")
+    if (auto parsed = parse_form(req.body); parsed.ok()) f = std::move(*parsed);
+  std::string id, secret;
+  if (auto basic = parse_basic(authorization)) {
+    id = basic->id;
+    secret = basic->secret;
+  } else if (f && f->has("client_secret")) {
+    id = f->get("client_id");
+    secret = f->get("client_secret");
+  } else if (f && f->has("client_assertion")) {
+    auto d = jwt::decode(f->get("client_assertion"));
+    const json::Value* iss = d ? d->claims.find("iss") : nullptr;
+    if (iss == nullptr || !iss->is_string()) return false;
+    id = iss->as_string();
+    if (id.empty() || id.size() > 64) return false;
+    auto c = store.get_client(id);
+    if (!c.ok() || !*c || (*c)->auth != "private_key_jwt") return false;
+    auto jwk = json::parse((*c)->jwk);
+    if (!jwk) return false;
+    auto vk = jwt::VerificationKey::from_jwk(*jwk);
+    return vk && d->header.alg == jwt::alg_name(vk->alg()) &&
+           vk->verify(d->signing_input, d->signature);
+  } else {
+    return false;
+  }
+  if (id.empty() || id.size() > 64) return false;
+  auto c = store.get_client(id);
+  return c.ok() && *c && (*c)->auth == "client_secret" &&
+         constant_time_equal(sha256_hex((*c)->salt + secret), (*c)->hash);
 }
 
 std::optional<HttpResponse> RegistryApi::Impl::limit_key(const std::string& key_id) {
@@ -262,15 +316,20 @@ HttpResponse RegistryApi::Impl::serve(const HttpRequest& req) {
   // A challenge is a row in the store whatever the method: it counts as a write.
   bool write =
       m == "POST" || m == "PATCH" || m == "DELETE" || m == "PUT" || p == "/api/v1/challenge";
-  std::string addr = address_of(req.remote_addr);
   if (m == "OPTIONS") {
     HttpResponse r;
     r.status = 204;
     r.content_type.clear();
     return r;
   }
-  if (int64_t wait = (write ? write_addr : read_addr).take(addr, steady_us()); wait > 0)
-    return too_many(wait, "address");
+  // The client's address (behind a trusted proxy: the one it forwarded for). A write is judged
+  // by who proves to send it first: one that proves a credential spends its address's bucket of
+  // such writes (and its key's, in the route), never the anonymous one a flood empties.
+  const std::string addr =
+      client_address(address_of(req.remote_addr), forwarded_for(req), o.trusted_proxies);
+  RateLimiter& bucket = !write ? read_addr : proves_credential(req) ? write_addr : anon_addr;
+  if (int64_t wait = bucket.take(addr, steady_us()); wait > 0)
+    return too_many(wait, &bucket == &anon_addr ? "anonymous" : "address");
   auto not_allowed = [&] { return ref_error(405, "Method not allowed"); };
   if (p == "/healthz") {
     return m == "GET" ? json_response(200, json::Object{{"status", "ok"},

@@ -15,6 +15,7 @@
 #include "rcan/audit/audit_log.h"
 #include "rcan/encoding.h"
 #include "rcan/result.h"
+#include "registry/api/address.h"
 #include "registry/api/rate_limit.h"
 #include "registry/api/webhooks.h"
 #include "registry/store.h"
@@ -29,10 +30,18 @@ struct ApiOptions {
   Bytes node_seed;                                   // the node's Ed25519 seed (32 bytes)
   std::string operator_name = "rcan-registry";
   std::string contact;
-  // Rate limits (rate 0 = unlimited): writes per API key, writes and reads per client address.
+  // Rate limits (rate 0 = unlimited): writes per API key; per client address, the writes of
+  // callers who proved a credential (a valid API key, a token request's valid client
+  // credentials), anonymous writes (challenges and every write without such a credential:
+  // their own, smaller bucket, so that an anonymous flood from a shared address never spends
+  // what a registrant there needs), and reads.
   BucketConfig write_per_key{10, 20};
   BucketConfig write_per_address{50, 100};
+  BucketConfig anonymous_per_address{20, 40};
   BucketConfig read_per_address{2000, 4000};
+  // Peers whose X-Forwarded-For names the client (the TLS proxy in front of the registry);
+  // from any other peer the header is ignored.
+  std::vector<Cidr> trusted_proxies;
   int challenge_ttl_s = 300;
   // Accept http:// node URLs in delegations (local federation tests; never in production).
   bool allow_http_node_urls = false;

@@ -62,6 +62,12 @@ HttpResponse RegistryApi::Impl::add_webhook(const HttpRequest& req) {
   if (!w.ok()) return ref_error(400, w.error().message);
   auto url = parse_web_url(w->url);
   if (!url.ok()) return ref_error(400, "webhook_url is not a valid URL");
+  // A literal address is judged now; a name when a delivery connects (webhooks.h).
+  if (auto ip = parse_ip(url->host); ip && !is_public_address(*ip) && !o.webhooks.allow_private)
+    return project_error(ErrorCode::kSchemaValidationFailed,
+                         "webhook_url names a loopback, private or link-local address: webhooks "
+                         "go to public addresses only (rcan-registry --allow-private-webhooks)",
+                         "webhook_url", "private_address");
   // The reference's rule: a namespace this registry knows (RRN: the root namespace).
   bool known = w->prefix == "RRN" || w->prefix == o.prefix;
   if (!known) {

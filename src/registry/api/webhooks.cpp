@@ -7,6 +7,7 @@
 #include "base/log.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
+#include "registry/api/address.h"
 #include "registry/api/registry_api.h"
 
 namespace rcan::registry::api {
@@ -129,6 +130,7 @@ void WebhookDispatcher::attempt(Item it) {
   }
   std::string error;
   int status = 0;
+  bool refused = false;  // no public address: no use trying again
   auto url = parse_web_url(h.url);
   if (!url.ok()) {
     error = url.error().message;
@@ -140,14 +142,25 @@ void WebhookDispatcher::attempt(Item it) {
                   {"X-RCAN-Delivery-Id", it.delivery_id},
                   {"X-RCAN-Timestamp", ts},
                   {"X-RCAN-Signature", webhook_signature(h.secret, ts, it.body)}};
+    if (!o_.allow_private)
+      ro.allow_address = [](const sockaddr* sa) {
+        auto a = ip_of(sa);
+        return a && is_public_address(*a);
+      };
     auto answer = http_request("POST", *url, it.body, o_.timeout_ms, ro);
-    if (!answer.ok())
+    if (!answer.ok() && answer.error().message.rfind("refused: ", 0) == 0) {
+      refused = true;
+      error = answer.error().message + " (a webhook goes to public addresses only)";
+      refused_address.fetch_add(1);
+      log(LogLevel::kWarn, "registry_webhook_refused_address",
+          json::Object{{"webhook_id", h.id}, {"delivery_id", it.delivery_id}, {"host", url->host}});
+    } else if (!answer.ok())
       error = answer.error().message;
     else if ((status = answer->status) < 200 || status > 299)
       error = "HTTP " + std::to_string(status);
   }
   bool ok = error.empty();
-  bool last = !ok && (it.attempt >= o_.attempts || !url.ok());
+  bool last = !ok && (it.attempt >= o_.attempts || !url.ok() || refused);
   if (!ok) attempts_failed.fetch_add(1);
   if (ok || last) {
     if (ok) {

@@ -28,6 +28,11 @@ struct WebhookOptions {
   int backoff_ms = 1000;          // before the 2nd attempt; doubled each time after
   int timeout_ms = 5000;          // per attempt, connect to answer
   int max_failures = 5;           // consecutive failed deliveries that switch a subscription off
+  // Deliver to loopback, private, link-local… addresses too (address.h is_public_address). Off:
+  // a delivery connects only to the public addresses its host resolves to, checked at connect
+  // time (a name that resolves to the cloud's metadata service or the registry's own network
+  // is refused then, whatever it resolved to when the subscription was made).
+  bool allow_private = false;
 };
 
 // "sha256=<hex HMAC-SHA256(secret, timestamp + "." + body)>"
@@ -49,6 +54,8 @@ class WebhookDispatcher {
                json::Value record);
 
   std::atomic<uint64_t> delivered{0}, failed{0}, attempts_failed{0}, dropped{0}, skipped{0};
+  // Deliveries refused because the host resolved to no public address (counted in failed too).
+  std::atomic<uint64_t> refused_address{0};
 
  private:
   struct Item {
