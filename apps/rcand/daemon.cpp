@@ -267,8 +267,12 @@ void Daemon::add_http_metrics() {
        "Connections refused 503 for server.limits.max_connections_per_address.",
        &Stats::rejected_per_address, false},
       {"rcan_http_reserve_connections_total",
-       "Connections accepted from the reserve over max_connections (for a stop).",
+       "Connections accepted from the reserve over max_connections or "
+       "max_connections_per_address (for a stop).",
        &Stats::reserve_connections, false},
+      {"rcan_http_connections_evicted_total",
+       "Never-authenticated idle connections closed to make room for a new connection.",
+       &Stats::evicted_idle, false},
       {"rcan_http_reserve_refused_total",
        "Requests other than a stop on a reserve connection, answered 503.", &Stats::reserve_refused,
        false},

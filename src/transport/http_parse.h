@@ -7,7 +7,9 @@
 //
 // Transport-level answers (docs/TRANSPORT.md):
 //   400 MALFORMED_JSON            unparsable request line / header / chunking, bad target,
-//                                 invalid percent-encoding, a malformed WebSocket upgrade
+//                                 invalid percent-encoding, a malformed WebSocket upgrade,
+//                                 a Transfer-Encoding other than exactly "chunked" (also in
+//                                 HTTP/1.0 or with Content-Length), obs-fold (check_framing)
 //   408 SCHEMA_VALIDATION_FAILED  the whole request did not arrive within read_timeout_ms
 //                                 (reason "read_timeout")
 //   413 BODY_TOO_LARGE            Content-Length or chunked body over max_body_bytes
@@ -95,6 +97,8 @@ inline std::optional<TransportError> classify_read_error(const beast::error_code
   if (ec == http::error::end_of_stream || ec == http::error::partial_message) return std::nullopt;
   if (ec == http::error::buffer_overflow)
     return bad_request("line_too_long", "request line or chunk header too long");
+  if (ec == http::error::bad_transfer_encoding)
+    return bad_request("bad_transfer_encoding", "Transfer-Encoding other than chunked");
   if (ec.category() == http::make_error_code(http::error::bad_method).category())
     return bad_request("bad_request", "malformed HTTP request");
   return std::nullopt;
@@ -226,6 +230,46 @@ inline bool has_token(std::string_view value, std::string_view token) {
   return false;
 }
 
+// Request framing by RFC 9112, where Beast 1.81 is lenient: it reads a Transfer-Encoding whose
+// last coding is not "chunked" ("xchunked", "chunked, identity") as no body at all, so that the
+// body is parsed as a second request (smuggling past any proxy that frames it otherwise), takes
+// chunked in HTTP/1.0, and unfolds obs-fold. Any of these is 400 and the connection closed
+// (§6.3 point 4, §6.1, §5.2). A Transfer-Encoding with a Content-Length is 400 too (§6.3 point
+// 3, the strict choice): the parser refuses chunked with one in either order, and any other
+// coding is refused here. `header_block` is the raw bytes the parser consumed for the header
+// (from the request line; what follows the empty line is ignored), `header` the parsed header.
+inline std::optional<TransportError> check_header_block(std::string_view header_block) {
+  if (const size_t end = header_block.find("\r\n\r\n"); end != std::string_view::npos)
+    header_block = header_block.substr(0, end + 2);
+  for (size_t eol = header_block.find("\r\n");
+       eol != std::string_view::npos && eol + 2 < header_block.size();
+       eol = header_block.find("\r\n", eol + 2)) {
+    const char next = header_block[eol + 2];
+    if (next == ' ' || next == '\t')
+      return bad_request("obs_fold", "obsolete line folding in a header field");
+  }
+  return std::nullopt;
+}
+
+template <class Header>
+std::optional<TransportError> check_framing(const Header& header) {
+  size_t te_fields = 0;
+  std::string_view te;
+  for (const auto& f : header) {
+    if (f.name() != http::field::transfer_encoding) continue;
+    ++te_fields;
+    te = f.value();
+  }
+  if (te_fields == 0) return std::nullopt;
+  while (!te.empty() && (te.front() == ' ' || te.front() == '\t')) te.remove_prefix(1);
+  while (!te.empty() && (te.back() == ' ' || te.back() == '\t')) te.remove_suffix(1);
+  if (te_fields != 1 || !beast::iequals(te, "chunked"))
+    return bad_request("bad_transfer_encoding", "Transfer-Encoding other than chunked");
+  if (header.version() < 11)
+    return bad_request("bad_transfer_encoding", "Transfer-Encoding in an HTTP/1.0 request");
+  return std::nullopt;  // chunked with a Content-Length: the parser has refused it already
+}
+
 // Converts a parsed message (the body is moved out). Fails on a bad target.
 template <class Fields>
 std::optional<TransportError> to_http_request(http::request<http::string_body, Fields>& msg,
@@ -296,9 +340,23 @@ inline ParseOutcome parse_request_bytes(std::string_view bytes, size_t max_heade
   parser.eager(true);
   beast::error_code ec;
   size_t used = 0;
+  std::optional<TransportError> framing;
   while (!parser.is_done() && used < bytes.size()) {
+    const bool had_header = parser.is_header_done();
     const size_t n =
         parser.put(boost::asio::const_buffer(bytes.data() + used, bytes.size() - used), ec);
+    if (!had_header && parser.is_header_done()) {
+      // The parser takes the header whole: these bytes start at the request line.
+      framing = check_header_block(bytes.substr(used, n));
+      if (!framing) framing = check_framing(parser.get());
+      if (framing) {
+        out.consumed = used + n;
+        out.kind = ParseOutcome::Kind::kError;
+        out.error = *framing;
+        out.error_body = error_json(*framing);
+        return out;
+      }
+    }
     used += n;
     if (ec == http::error::need_more) {
       ec = {};

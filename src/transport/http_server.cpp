@@ -2,11 +2,13 @@
 //
 // Shape (Beast's advanced server, with C++20 coroutines):
 //   Impl::accept_loop      accepts; admit() counts it per address and against
-//                          max_connections, then the reserve (for a stop); refused →
-//                          reject() writes 503 and closes
+//                          max_connections — over either, the oldest connection that never
+//                          authenticated and waits for a request is closed to make room, else
+//                          the reserve (for a stop); refused → reject() writes 503 and closes
 //   Conn<Stream>::serve    per connection, on its own strand:
 //                            [TLS handshake] → loop { idle wait → serve_one() } → close
-//   Conn<Stream>::serve_one  read one request under the read deadline → limits/errors →
+//   Conn<Stream>::serve_one  read one request under the read deadline (read_header checks
+//                            the framing, http_parse.h) → limits/errors →
 //                            handler → wait for respond() → write → keep-alive?
 //   Conn<Stream>::serve_websocket  node's open() → accept → read loop; pump() writes the
 //                            sink's queue, then the close frame
@@ -19,6 +21,7 @@
 #pragma GCC diagnostic ignored "-Wnull-dereference"
 
 #include <pthread.h>
+#include <sys/ioctl.h>
 
 #include <algorithm>
 #include <atomic>
@@ -27,6 +30,7 @@
 #include <deque>
 #include <exception>
 #include <optional>
+#include <set>
 #include <thread>
 #include <type_traits>
 #include <unordered_map>
@@ -342,45 +346,108 @@ class HttpServer::Impl : public std::enable_shared_from_this<HttpServer::Impl> {
   void spawn_conn(detail::tcp::socket sock, std::string remote, std::string addr, bool reserve)
       EXCLUDES(mu);
 
-  // Where a new connection from `addr` goes: an ordinary slot, the reserve (over
-  // max_connections), or nowhere (per-address limit, or everything full). Counts it when taken.
+  // Where a new connection from `addr` goes: an ordinary slot, the reserve, or nowhere. Over
+  // max_connections_per_address, or over max_connections, the oldest evictable connection (never
+  // authenticated, waiting for a request: mark_idle) — of that address, or of any — is closed and
+  // its slot taken (docs/TRANSPORT.md "Connection limits"): a client cannot hold slots with idle
+  // connections against one that comes to send a request, and cannot evict one that presented a
+  // credential. With nothing to evict, the reserve (at most kReservePerAddress per address) takes
+  // it for a stop. Counts it when taken.
   enum class Admit { kOrdinary, kReserve, kPerAddress, kFull };
-  Admit admit(const std::string& addr) EXCLUDES(mu) {
+  struct Admission {
+    Admit admit = Admit::kFull;
+    bool over_address = false;                       // the reserve taken over the per-address limit
+    bool evicted = false;                            // a connection was evicted for it
+    std::shared_ptr<detail::ConnBase> evicted_conn;  // to close (its slot is handed over already)
+    std::string evicted_remote;
+  };
+  Admission admit(const std::string& addr) EXCLUDES(mu) {
     MutexLock lock(mu);
+    Admission out;
     auto it = per_address.find(addr);
     const PerAddress have = it == per_address.end() ? PerAddress{} : it->second;
-    if (opt.max_connections_per_address != 0 && have.total >= opt.max_connections_per_address)
-      return Admit::kPerAddress;
-    Admit a;
-    if (ordinary_open < opt.max_connections) {
+    const bool reserve_room =
+        reserve_open < opt.reserved_connections && have.reserve < detail::kReservePerAddress;
+    if (opt.max_connections_per_address != 0 && have.total >= opt.max_connections_per_address) {
+      if (!evict_oldest_idle(&addr, out)) {
+        if (!reserve_room) {
+          out.admit = Admit::kPerAddress;
+          return out;
+        }
+        out.over_address = true;
+      }
+    } else if (ordinary_open >= opt.max_connections) {
+      evict_oldest_idle(nullptr, out);
+    }
+    if (!out.over_address && ordinary_open < opt.max_connections) {
       ++ordinary_open;
-      a = Admit::kOrdinary;
-    } else if (reserve_open < opt.reserved_connections &&
-               have.reserve < detail::kReservePerAddress) {
+      out.admit = Admit::kOrdinary;
+    } else if (reserve_room) {
       ++reserve_open;
-      a = Admit::kReserve;
+      out.admit = Admit::kReserve;
     } else {
-      return Admit::kFull;
+      out.admit = Admit::kFull;
+      return out;
     }
     PerAddress& slot = per_address[addr];
     ++slot.total;
-    if (a == Admit::kReserve) ++slot.reserve;
-    return a;
+    if (out.admit == Admit::kReserve) ++slot.reserve;
+    return out;
   }
-  void conn_gone(uint64_t id, const std::string& addr, bool reserve) EXCLUDES(mu) {
+  // Closes (through `out`) the oldest idle connection, of `addr` when given, and hands its
+  // ordinary slot over now: the connection no longer counts, though it ends a moment later.
+  bool evict_oldest_idle(const std::string* addr, Admission& out) REQUIRES(mu) {
+    for (auto i = idle.begin(); i != idle.end(); ++i) {
+      ConnEntry& e = conns.at(*i);
+      if (addr != nullptr && e.addr != *addr) continue;
+      // A request's first bytes are waiting for the connection's strand: not idle any more.
+      int pending = 0;
+      if (e.fd >= 0 && ::ioctl(e.fd, FIONREAD, &pending) == 0 && pending > 0) continue;
+      e.evicted = true;
+      idle.erase(i);
+      release_slot(e.addr, false);
+      out.evicted = true;
+      out.evicted_conn = e.conn.lock();  // null when it is ending already
+      out.evicted_remote = e.remote;
+      return true;
+    }
+    return false;
+  }
+  void release_slot(const std::string& addr, bool reserve) REQUIRES(mu) {
+    if (reserve) {
+      --reserve_open;
+    } else {
+      --ordinary_open;
+    }
+    auto it = per_address.find(addr);
+    if (it != per_address.end()) {
+      if (reserve && it->second.reserve > 0) --it->second.reserve;
+      if (--it->second.total == 0) per_address.erase(it);
+    }
+  }
+  // A connection that never authenticated starts (true) or ends (false) waiting for a request:
+  // only then may admit() evict it. False when it was evicted meanwhile: it must close, its slot
+  // belongs to another connection now.
+  bool mark_idle(uint64_t id, bool waiting) EXCLUDES(mu) {
+    MutexLock lock(mu);
+    auto it = conns.find(id);
+    if (it == conns.end() || it->second.evicted) return false;
+    if (waiting) {
+      idle.insert(id);
+    } else {
+      idle.erase(id);
+    }
+    return true;
+  }
+  void conn_gone(uint64_t id) EXCLUDES(mu) {
     {
       MutexLock lock(mu);
-      conns.erase(id);
       --connections_open;
-      if (reserve) {
-        --reserve_open;
-      } else {
-        --ordinary_open;
-      }
-      auto it = per_address.find(addr);
-      if (it != per_address.end()) {
-        if (reserve && it->second.reserve > 0) --it->second.reserve;
-        if (--it->second.total == 0) per_address.erase(it);
+      idle.erase(id);
+      auto it = conns.find(id);
+      if (it != conns.end()) {
+        if (!it->second.evicted) release_slot(it->second.addr, it->second.reserve);
+        conns.erase(it);
       }
     }
     cv.notify_all();
@@ -388,8 +455,8 @@ class HttpServer::Impl : public std::enable_shared_from_this<HttpServer::Impl> {
   std::vector<std::shared_ptr<detail::ConnBase>> snapshot() EXCLUDES(mu) {
     std::vector<std::shared_ptr<detail::ConnBase>> out;
     MutexLock lock(mu);
-    for (auto& [id, weak] : conns)
-      if (auto c = weak.lock()) out.push_back(std::move(c));
+    for (auto& [id, e] : conns)
+      if (auto c = e.conn.lock()) out.push_back(std::move(c));
     return out;
   }
 
@@ -407,13 +474,24 @@ class HttpServer::Impl : public std::enable_shared_from_this<HttpServer::Impl> {
   std::atomic<uint64_t> rejected_per_address{0};
   std::atomic<uint64_t> reserve_connections{0};
   std::atomic<uint64_t> reserve_refused{0};
+  std::atomic<uint64_t> evicted_idle{0};
   std::atomic<uint64_t> rejected_limits{0};
   std::atomic<uint64_t> bad_requests{0};
   std::atomic<int> rejecting{0};
 
   Mutex mu;
   CondVar cv;  // signalled when a connection or an I/O thread ends
-  std::unordered_map<uint64_t, std::weak_ptr<detail::ConnBase>> conns GUARDED_BY(mu);
+  struct ConnEntry {
+    std::weak_ptr<detail::ConnBase> conn;
+    std::string addr;  // counted under (max_connections_per_address)
+    std::string remote;
+    int fd = -1;  // the socket, for the bytes waiting in it (evict_oldest_idle)
+    bool reserve = false;
+    bool evicted = false;  // closed by admit(): its slot was handed over
+  };
+  std::unordered_map<uint64_t, ConnEntry> conns GUARDED_BY(mu);
+  // Connections admit() may evict, by id: the oldest first.
+  std::set<uint64_t> idle GUARDED_BY(mu);
   uint64_t next_id GUARDED_BY(mu) = 0;
   struct PerAddress {
     size_t total = 0;    // open connections from the address, ordinary and reserve
@@ -461,15 +539,13 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
  public:
   static constexpr bool kTls = std::is_same_v<Stream, TlsStream>;
 
-  Conn(HttpServer::Impl& srv, uint64_t id, tcp::socket sock, std::string remote, std::string addr,
-       bool reserve)
+  Conn(HttpServer::Impl& srv, uint64_t id, tcp::socket sock, std::string remote, bool reserve)
       : srv_(srv),
         opt_(srv.opt),
         id_(id),
         ex_(sock.get_executor()),
         stream_(make_stream<Stream>(srv, std::move(sock))),
         remote_(std::move(remote)),
-        addr_(std::move(addr)),
         reserve_(reserve),
         read_timeout_ms_(reserve ? std::min(opt_.read_timeout_ms, short_idle_ms(opt_))
                                  : opt_.read_timeout_ms),
@@ -478,7 +554,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
         response_timer_(ex_),
         close_timer_(ex_),
         started_(SteadyClock::now()) {}
-  ~Conn() override { srv_.conn_gone(id_, addr_, reserve_); }
+  ~Conn() override { srv_.conn_gone(id_); }
   Conn(const Conn&) = delete;
   Conn& operator=(const Conn&) = delete;
 
@@ -513,7 +589,15 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
 
   asio::awaitable<void> serve() {
     if constexpr (kTls) {
-      lowest().expires_after(Ms(read_timeout_ms_));
+      // Evictable until the client's first byte, as a plain connection is.
+      if (!reserve_) {
+        if (!srv_.mark_idle(id_, true)) co_return;
+        arm_read_deadline(started_ + Ms(read_timeout_ms_));
+        auto [wec] = co_await lowest().socket().async_wait(tcp::socket::wait_read, kNoThrow);
+        disarm_read_deadline();
+        if (!srv_.mark_idle(id_, false) || wec) co_return;
+      }
+      lowest().expires_at(started_ + Ms(read_timeout_ms_));
       auto [ec] = co_await stream_.async_handshake(ssl::stream_base::server, kNoThrow);
       if (ec) {
         rcan::log(LogLevel::kDebug, "tls.handshake_failed",
@@ -528,16 +612,14 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
       SteadyClock::time_point request_start = started_;
       if (buf_.size() == 0) {
         // The first request must arrive whole within read_timeout of the accept; later ones
-        // may take idle_timeout to start.
-        if (first) {
-          lowest().expires_at(started_ + Ms(read_timeout_ms_));
-        } else {
-          // The long keep-alive only once an answer said the client presented a credential.
-          lowest().expires_after(Ms(authenticated_ ? opt_.idle_timeout_ms : short_idle_ms(opt_)));
-        }
-        auto [ec, n] = co_await stream_.async_read_some(buf_.prepare(4096), kNoThrow);
-        if (ec) break;  // idle timeout, peer closed, shutdown: close quietly
-        buf_.commit(n);
+        // may take idle_timeout to start — the long one only once an answer said the client
+        // presented a credential.
+        const SteadyClock::time_point until =
+            first ? started_ + Ms(read_timeout_ms_)
+                  : SteadyClock::now() +
+                        Ms(authenticated_ ? opt_.idle_timeout_ms : short_idle_ms(opt_));
+        // Idle timeout, peer closed, shutdown, evicted: close quietly.
+        if (!co_await wait_for_request(until)) break;
         if (!first) request_start = SteadyClock::now();
       } else if (!first) {
         request_start = SteadyClock::now();  // pipelined: the next request is already here
@@ -552,15 +634,42 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     co_await close_connection();
   }
 
+  // Waits for the first byte of the next request. Until it has authenticated, a connection doing
+  // so may be closed to make room for a new one (Impl::admit); once a byte is here it may not.
+  // A plain connection waits for readability and leaves the byte in the socket, where admit()
+  // sees it (ConnEntry::fd): a request that has arrived is never evicted, even before this
+  // strand has run again. False when the connection is to close.
+  asio::awaitable<bool> wait_for_request(SteadyClock::time_point until) {
+    const bool evictable = !authenticated_ && !reserve_;
+    if (evictable && !srv_.mark_idle(id_, true)) co_return false;
+    bool ok;
+    if constexpr (kTls) {  // the TLS layer may hold a record already read: read through it
+      lowest().expires_at(until);
+      auto [ec, n] = co_await stream_.async_read_some(buf_.prepare(4096), kNoThrow);
+      lowest().expires_never();
+      if (!ec) buf_.commit(n);
+      ok = !ec;
+    } else {
+      arm_read_deadline(until);
+      auto [ec] = co_await lowest().socket().async_wait(tcp::socket::wait_read, kNoThrow);
+      ok = !disarm_read_deadline() && !ec;
+    }
+    if (evictable && !srv_.mark_idle(id_, false)) co_return false;  // its slot is another's
+    co_return ok;
+  }
+
   // Reads, handles and answers one request. Returns whether to keep the connection.
   asio::awaitable<bool> serve_one(SteadyClock::time_point request_start) {
     http::request_parser<http::string_body> parser;
     apply_limits(parser, opt_.max_header_bytes, opt_.max_body_bytes);
     arm_read_deadline(request_start + Ms(read_timeout_ms_));
-    beast::error_code ec;
-    {
-      auto [hec, hn] = co_await http::async_read_header(stream_, buf_, parser, kNoThrow);
-      ec = hec;
+    std::optional<TransportError> framing;
+    beast::error_code ec = co_await read_header(parser, framing);
+    if (!ec && !framing) framing = check_framing(parser.get());
+    if (!ec && framing) {
+      disarm_read_deadline();
+      co_await answer_error(*framing, parser.get().version());
+      co_return false;
     }
     if (!ec && !parser.is_done()) {
       if (has_token(parser.get()[http::field::expect], "100-continue")) {
@@ -664,6 +773,32 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
                  {"ms", static_cast<int64_t>(ms)}});
     }
     co_return !wec && keep_alive;
+  }
+
+  // http::async_read_header, with the raw header block checked (check_header_block) while it
+  // is still in the buffer: the parser takes the header in one piece, once it is whole, so the
+  // bytes of the put() that completes it start at the request line.
+  asio::awaitable<beast::error_code> read_header(http::request_parser<http::string_body>& parser,
+                                                 std::optional<TransportError>& framing) {
+    for (;;) {
+      if (buf_.size() != 0) {
+        beast::error_code ec;
+        const auto data = buf_.data();
+        const size_t used = parser.put(data, ec);
+        if (used != 0 && parser.is_header_done())
+          framing = check_header_block({static_cast<const char*>(data.data()), used});
+        buf_.consume(used);
+        if (ec != http::error::need_more) co_return ec;
+      }
+      const size_t size = beast::read_size(buf_, 65536);
+      if (size == 0) co_return beast::error_code(http::error::buffer_overflow);
+      auto [rec, n] = co_await stream_.async_read_some(buf_.prepare(size), kNoThrow);
+      buf_.commit(n);
+      if (rec == asio::error::eof)
+        co_return beast::error_code(parser.got_some() ? http::error::partial_message
+                                                      : http::error::end_of_stream);
+      if (rec) co_return rec;
+    }
   }
 
   bool serve_on_reserve(const HttpRequest& req) {
@@ -907,8 +1042,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
   Stream stream_;  // moved into ws_ on upgrade
   std::optional<websocket::stream<Stream>> ws_;
   const std::string remote_;
-  const std::string addr_;  // the IP it is counted under (max_connections_per_address)
-  const bool reserve_;      // accepted from the reserve, over max_connections
+  const bool reserve_;  // accepted from the reserve, over max_connections
   const int read_timeout_ms_;
   bool authenticated_ = false;  // an answer said the client presented a valid credential
   beast::flat_buffer buf_;
@@ -957,13 +1091,14 @@ void HttpServer::Impl::spawn_conn(detail::tcp::socket sock, std::string remote, 
     MutexLock lock(mu);
     id = ++next_id;
     ++connections_open;
+    conns[id] = ConnEntry{{}, addr, remote, sock.native_handle(), reserve, false};
   }
   ++connections_total;
   auto conn = std::make_shared<detail::Conn<Stream>>(*this, id, std::move(sock), std::move(remote),
-                                                     std::move(addr), reserve);
+                                                     reserve);
   {
     MutexLock lock(mu);
-    conns[id] = conn;
+    conns[id].conn = conn;
   }
   auto ex = conn->executor();
   detail::asio::co_spawn(ex, detail::Conn<Stream>::run(std::move(conn)),
@@ -972,6 +1107,8 @@ void HttpServer::Impl::spawn_conn(detail::tcp::socket sock, std::string remote, 
 
 detail::asio::awaitable<void> HttpServer::Impl::accept_loop() {
   namespace asio = detail::asio;
+  detail::SteadyClock::time_point last_evicted_log{};
+  uint64_t evicted_unlogged = 0;
   for (;;) {
     auto [ec, peer] = co_await acceptor->async_accept(asio::make_strand(ioc), detail::kNoThrow);
     if (stopping.load()) co_return;
@@ -989,7 +1126,25 @@ detail::asio::awaitable<void> HttpServer::Impl::accept_loop() {
     std::string remote = rec ? std::string("unknown") : detail::endpoint_string(ep);
     std::string addr = rec ? std::string("unknown") : detail::address_key(ep);
     sock.set_option(detail::tcp::no_delay(true), rec);
-    const Admit admitted = admit(addr);
+    Admission admission = admit(addr);
+    const Admit admitted = admission.admit;
+    if (admission.evicted) {  // its slot is this connection's now
+      ++evicted_idle;
+      // At most one line a second: a client re-opening connections must not set the pace of
+      // the log (the count says how many since the last line).
+      ++evicted_unlogged;
+      const auto now = detail::SteadyClock::now();
+      if (now - last_evicted_log >= std::chrono::seconds(1)) {
+        rcan::log(rcan::LogLevel::kWarn, "http.connection_evicted",
+                  {{"remote", remote},
+                   {"evicted", admission.evicted_remote},
+                   {"evicted_since_last", evicted_unlogged},
+                   {"open", connections_open.load()}});
+        evicted_unlogged = 0;
+        last_evicted_log = now;
+      }
+      if (admission.evicted_conn) admission.evicted_conn->force_close();
+    }
     if (admitted == Admit::kPerAddress || admitted == Admit::kFull) {
       const bool by_address = admitted == Admit::kPerAddress;
       ++(by_address ? rejected_per_address : rejected_connections);
@@ -1006,8 +1161,11 @@ detail::asio::awaitable<void> HttpServer::Impl::accept_loop() {
     const bool reserve = admitted == Admit::kReserve;
     if (reserve) {
       ++reserve_connections;
-      rcan::log(rcan::LogLevel::kWarn, "http.reserve_connection",
-                {{"remote", remote}, {"open", connections_open.load()}});
+      rcan::log(
+          rcan::LogLevel::kWarn, "http.reserve_connection",
+          {{"remote", remote},
+           {"over", admission.over_address ? "max_connections_per_address" : "max_connections"},
+           {"open", connections_open.load()}});
     }
     if (opt.tls) {
       spawn_conn<detail::TlsStream>(std::move(sock), std::move(remote), std::move(addr), reserve);
@@ -1182,6 +1340,7 @@ ServerStats HttpServer::Impl::stats() const {
   s.rejected_per_address = rejected_per_address.load();
   s.reserve_connections = reserve_connections.load();
   s.reserve_refused = reserve_refused.load();
+  s.evicted_idle = evicted_idle.load();
   s.rejected_limits = rejected_limits.load();
   s.bad_requests = bad_requests.load();
   return s;

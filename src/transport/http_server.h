@@ -33,11 +33,15 @@ struct ServerOptions {
   int read_timeout_ms = 10000;         // whole request, first byte to last (defeats slow-loris)
   int idle_timeout_ms = 60000;         // keep-alive idle wait for the next request's first byte
   size_t max_connections = 1024;       // beyond it: the reserve, then accepted, 503, closed
-  // Connections open at once from one IP address (ordinary and reserve together); the next one
-  // is answered 503 `too_many_connections_from_address` and closed. 0 = no limit.
+  // Connections open at once from one IP address (ordinary and reserve together). Over it (and
+  // over max_connections) a new connection closes the oldest one that never authenticated
+  // (HttpResponse::authenticated) and waits for a request, and takes its slot; with none, it is
+  // taken from the reserve; with no reserve left it is answered 503
+  // `too_many_connections_from_address` and closed. 0 = no limit.
   size_t max_connections_per_address = 64;
-  // Connections accepted over max_connections, each for one request that
-  // HttpHandler::serve_on_reserve() admits (a stop); at most 2 of them per address. 0 = none.
+  // Connections accepted over max_connections or max_connections_per_address when no connection
+  // can be evicted, each for one request that HttpHandler::serve_on_reserve() admits (a stop); at
+  // most 2 of them per address. 0 = none.
   size_t reserved_connections = 16;
   // Keep-alive wait of a connection none of whose answers said `authenticated` (HttpResponse);
   // also the deadline for the one request of a reserve connection. Capped by idle_timeout_ms.
@@ -61,6 +65,7 @@ struct ServerStats {
   uint64_t rejected_per_address = 0;  // refused with 503 for max_connections_per_address
   uint64_t reserve_connections = 0;   // accepted from the reserve over max_connections
   uint64_t reserve_refused = 0;       // requests on a reserve connection answered 503 (not a stop)
+  uint64_t evicted_idle = 0;          // never-authenticated idle connections closed for a new one
   uint64_t rejected_limits = 0;       // 413, 431, 408 answers and WS queue/size closes
   uint64_t bad_requests = 0;          // 400 answers for unparsable HTTP or bad percent-encoding
 };

@@ -19,6 +19,7 @@
 #include <condition_variable>
 #include <cstdlib>
 #include <cstring>
+#include <deque>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -799,11 +800,12 @@ TEST_F(HttpServerTest, ConnectionsOverTheLimitGet503AndAreClosed) {
   o.max_connections = 2;
   o.reserved_connections = 0;  // no reserve: the third connection is refused at once
   start(o);
+  // Authenticated: never evicted for a new connection.
   auto a = std::make_unique<Client>(port_);
   Client b(port_);
-  ASSERT_TRUE(a->send(get("/echo")));
+  ASSERT_TRUE(a->send(get("/auth")));
   ASSERT_TRUE(a->read_response());
-  ASSERT_TRUE(b.send(get("/echo")));
+  ASSERT_TRUE(b.send(get("/auth")));
   ASSERT_TRUE(b.read_response());
   Client extra(port_);
   auto r = extra.read_response(3000);
@@ -830,11 +832,12 @@ TEST_F(HttpServerTest, ConnectionsOverTheLimitGet503AndAreClosed) {
 TEST_F(HttpServerTest, OneAddressGetsMaxConnectionsPerAddressAndNoMore) {
   ServerOptions o;
   o.max_connections_per_address = 3;
+  o.reserved_connections = 0;  // no reserve: the fourth connection is refused at once
   start(o);
   std::vector<std::unique_ptr<Client>> held;
-  for (int i = 0; i < 3; ++i) {
+  for (int i = 0; i < 3; ++i) {  // authenticated: never evicted for a new connection
     held.push_back(std::make_unique<Client>(port_, 0, "127.0.0.2"));
-    ASSERT_TRUE(held.back()->send(get("/echo")));
+    ASSERT_TRUE(held.back()->send(get("/auth")));
     ASSERT_TRUE(held.back()->read_response());
   }
   Client fourth(port_, 0, "127.0.0.2");
@@ -918,6 +921,201 @@ TEST_F(HttpServerTest, UnauthenticatedKeepAliveIsShortAuthenticatedKeepsTheLongO
   auto r = authed.read_response(2000);
   ASSERT_TRUE(r);
   EXPECT_EQ(r->status, 200);
+}
+
+// Finding F14: over the per-address limit a new connection closes the oldest connection of that
+// address that never authenticated and waits for a request, and takes its slot; authenticated
+// ones and ones in the middle of a request are never closed for it.
+TEST_F(HttpServerTest, OverThePerAddressLimitTheOldestUnauthenticatedIdleConnectionMakesRoom) {
+  ServerOptions o;
+  o.max_connections_per_address = 4;
+  start(o);
+  Client anon1(port_, 0, "127.0.0.2"), authed(port_, 0, "127.0.0.2");
+  ASSERT_TRUE(anon1.send(get("/echo")));  // answered, not authenticated: idle and evictable
+  ASSERT_TRUE(anon1.read_response());
+  ASSERT_TRUE(authed.send(get("/auth")));
+  ASSERT_TRUE(authed.read_response());
+  Client silent(port_, 0, "127.0.0.2");   // never sent a byte: evictable too, but newer
+  Client partial(port_, 0, "127.0.0.2");  // a request under way: not evictable
+  ASSERT_TRUE(partial.send("GET /echo HTTP/1.1\r\nHost: x\r\n"));
+  std::this_thread::sleep_for(100ms);   // the four accepted, in this order
+  Client other(port_, 0, "127.0.0.3");  // another address has its own slots
+  ASSERT_TRUE(other.send(get("/echo")));
+  ASSERT_TRUE(other.read_response());
+  Client fifth(port_, 0, "127.0.0.2");
+  ASSERT_TRUE(fifth.send(get("/echo")));
+  auto r = fifth.read_response(3000);
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 200);
+  EXPECT_TRUE(anon1.wait_closed(3000));  // the oldest unauthenticated one
+  Client sixth(port_, 0, "127.0.0.2");
+  ASSERT_TRUE(sixth.send(get("/echo")));
+  auto r6 = sixth.read_response(3000);
+  ASSERT_TRUE(r6);
+  EXPECT_EQ(r6->status, 200);
+  EXPECT_TRUE(silent.wait_closed(3000));  // the next oldest, never the authenticated one
+  ASSERT_TRUE(authed.send(get("/echo")));
+  auto ra = authed.read_response(3000);
+  ASSERT_TRUE(ra);
+  EXPECT_EQ(ra->status, 200);
+  ASSERT_TRUE(partial.send("\r\n"));  // the request under way completes
+  auto rp = partial.read_response(3000);
+  ASSERT_TRUE(rp);
+  EXPECT_EQ(rp->status, 200);
+  ASSERT_TRUE(other.send(get("/echo")));
+  EXPECT_TRUE(other.read_response(3000));
+  EXPECT_EQ(server_->stats().evicted_idle, 2u);
+  EXPECT_EQ(server_->stats().rejected_per_address, 0u);
+}
+
+// Finding F14: over max_connections the oldest unauthenticated idle connection of any address
+// makes room; with only authenticated ones, the reserve is used.
+TEST_F(HttpServerTest, OverTheConnectionLimitTheOldestUnauthenticatedIdleConnectionMakesRoom) {
+  ServerOptions o;
+  o.max_connections = 2;
+  o.reserved_connections = 4;
+  start(o);
+  Client anon(port_, 0, "127.0.0.2"), authed(port_, 0, "127.0.0.3");
+  ASSERT_TRUE(anon.send(get("/echo")));
+  ASSERT_TRUE(anon.read_response());
+  ASSERT_TRUE(authed.send(get("/auth")));
+  ASSERT_TRUE(authed.read_response());
+  Client next(port_, 0, "127.0.0.4");
+  ASSERT_TRUE(next.send(get("/auth")));
+  auto r = next.read_response(3000);
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 200);
+  EXPECT_FALSE(http_.last().reserve);  // an ordinary slot: anon's
+  EXPECT_TRUE(anon.wait_closed(3000));
+  Client over(port_, 0, "127.0.0.2");  // both authenticated now: the reserve, for a stop only
+  ASSERT_TRUE(over.send(get("/echo")));
+  auto refused = over.read_response(3000);
+  ASSERT_TRUE(refused);
+  EXPECT_EQ(refused->status, 503);
+  EXPECT_EQ(refused->error_reason(), "reserve_for_stop_only");
+  EXPECT_EQ(server_->stats().evicted_idle, 1u);
+}
+
+// Finding F14: an address whose every connection is authenticated or busy still gets a stop
+// through, from the reserve, over the per-address limit — and nothing else.
+TEST_F(HttpServerTest, AStopIsServedFromTheReserveOverThePerAddressLimit) {
+  ServerOptions o;
+  o.max_connections_per_address = 2;
+  start(o);
+  Client a(port_, 0, "127.0.0.2"), b(port_, 0, "127.0.0.2");
+  for (Client* c : {&a, &b}) {
+    ASSERT_TRUE(c->send(get("/auth")));
+    ASSERT_TRUE(c->read_response());
+  }
+  Client status(port_, 0, "127.0.0.2");
+  ASSERT_TRUE(status.send(get("/echo")));
+  auto refused = status.read_response(3000);
+  ASSERT_TRUE(refused);
+  EXPECT_EQ(refused->status, 503);
+  EXPECT_EQ(refused->error_reason(), "reserve_for_stop_only");
+  EXPECT_TRUE(status.wait_closed(3000));
+  Client stop(port_, 0, "127.0.0.2");
+  ASSERT_TRUE(stop.send(post("/stop", "{}")));
+  auto s = stop.read_response(3000);
+  ASSERT_TRUE(s);
+  EXPECT_EQ(s->status, 200);
+  EXPECT_EQ(s->header("connection"), "close");
+  EXPECT_TRUE(http_.last().reserve);
+  EXPECT_EQ(server_->stats().reserve_connections, 2u);
+  EXPECT_EQ(server_->stats().evicted_idle, 0u);
+}
+
+// Finding F14: a client re-opening idle connections from the same address as fast as they are
+// closed cannot keep a stop from that address out, nor evict an authenticated connection.
+TEST_F(HttpServerTest, AStopGetsThroughWhileTheSameAddressReopensIdleConnections) {
+  ServerOptions o;
+  o.max_connections_per_address = 16;
+  start(o);
+  Client authed(port_, 0, "127.0.0.2");
+  ASSERT_TRUE(authed.send(get("/auth")));
+  ASSERT_TRUE(authed.read_response());
+  std::atomic<bool> done{false};
+  std::atomic<int> opened{0};
+  std::thread flood([&] {
+    std::deque<std::unique_ptr<Client>> held;
+    while (!done.load()) {
+      held.push_back(std::make_unique<Client>(port_, 0, "127.0.0.2"));
+      if (held.back()->connected()) ++opened;
+      if (held.size() > 64) held.pop_front();  // closed by the server long since
+    }
+  });
+  while (opened.load() < 200) std::this_thread::sleep_for(1ms);
+  int served = 0;
+  for (int i = 0; i < 20; ++i) {
+    Client stop(port_, 0, "127.0.0.2");
+    ASSERT_TRUE(stop.send(post("/stop", "{}")));
+    auto s = stop.read_response(3000);
+    if (s && s->status == 200) ++served;
+  }
+  const int opened_during = opened.load();
+  done = true;
+  flood.join();
+  EXPECT_EQ(served, 20);
+  EXPECT_GT(opened_during, 200);
+  EXPECT_GT(server_->stats().evicted_idle, 100u);
+  ASSERT_TRUE(authed.send(get("/echo")));  // never evicted
+  auto ra = authed.read_response(3000);
+  ASSERT_TRUE(ra);
+  EXPECT_EQ(ra->status, 200);
+}
+
+// Finding F9: a Transfer-Encoding other than exactly "chunked" (RFC 9112 §6.1, §6.3), one in an
+// HTTP/1.0 request or with a Content-Length, and obs-fold (§5.2) are 400 and the connection is
+// closed: the body is never parsed as a second request. Beast alone took "xchunked" and
+// "chunked, identity" as no body and answered the smuggled request.
+TEST_F(HttpServerTest, FramingOtherThanTheRfcsIs400AndCloseAndNothingIsSmuggled) {
+  start();
+  const std::string smuggled = get("/smuggled");
+  struct Case {
+    std::string head;
+    std::string reason;
+  };
+  const std::vector<Case> cases = {
+      {"Transfer-Encoding: xchunked\r\n", "bad_transfer_encoding"},
+      {"Transfer-Encoding: chunked, identity\r\n", "bad_transfer_encoding"},
+      {"Transfer-Encoding: identity\r\n", "bad_transfer_encoding"},
+      {"Transfer-Encoding: gzip, chunked\r\n", "bad_transfer_encoding"},
+      {"Transfer-Encoding: identity\r\nTransfer-Encoding: chunked\r\n", "bad_transfer_encoding"},
+      {"Transfer-Encoding: xchunked\r\nContent-Length: 0\r\n", "bad_transfer_encoding"},
+      {"Transfer-Encoding: chunked\r\nContent-Length: 0\r\n", "bad_request"},
+      {"X-Test: a\r\n b\r\n", "obs_fold"},
+      {"X-Test: a\r\n\tb\r\n", "obs_fold"},
+  };
+  for (const auto& c : cases) {
+    Client cl(port_);
+    ASSERT_TRUE(cl.send("POST /echo HTTP/1.1\r\nHost: x\r\n" + c.head + "\r\n" + smuggled));
+    auto r = cl.read_response(3000);
+    ASSERT_TRUE(r) << c.head;
+    EXPECT_EQ(r->status, 400) << c.head;
+    EXPECT_EQ(r->error_code(), "MALFORMED_JSON") << c.head;
+    EXPECT_EQ(r->error_reason(), c.reason) << c.head;
+    EXPECT_EQ(r->header("connection"), "close") << c.head;
+    EXPECT_TRUE(cl.wait_closed(3000)) << c.head;
+    EXPECT_EQ(cl.buffer(), "") << c.head;  // no second answer
+  }
+  {
+    Client cl(port_);
+    ASSERT_TRUE(cl.send("POST /echo HTTP/1.0\r\nTransfer-Encoding: chunked\r\n\r\n0\r\n\r\n"));
+    auto r = cl.read_response(3000);
+    ASSERT_TRUE(r);
+    EXPECT_EQ(r->status, 400);
+    EXPECT_EQ(r->error_reason(), "bad_transfer_encoding");
+  }
+  EXPECT_EQ(http_.calls.load(), 0);
+  // Exactly "chunked", in any case and with whitespace around it, is the one coding served.
+  Client ok(port_);
+  ASSERT_TRUE(
+      ok.send("POST /echo HTTP/1.1\r\nHost: x\r\nTransfer-Encoding:  ChUnKeD \r\n\r\n"
+              "2\r\nhi\r\n0\r\n\r\n"));
+  auto r = ok.read_response(3000);
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 200);
+  EXPECT_EQ(r->json().get("body")->as_string(), "hi");
 }
 
 TEST_F(HttpServerTest, HandlerThatDropsRespondOrThrowsGets500) {
