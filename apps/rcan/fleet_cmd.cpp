@@ -19,6 +19,7 @@
 
 #include "cli.h"
 #include "fleet_audit_db.h"
+#include "fleet_choreography.h"
 #include "fleet_session.h"
 #include "message_signer.h"
 #include "rcan/audit/secret.h"
@@ -503,92 +504,7 @@ int command_main(const Options& o) {
                              o.has("wait-complete"), json::Object{{"fleet_id", fleet}});
 }
 
-// ---- choreography
-
-struct Step {
-  size_t index = 0;
-  std::string robot;
-  std::string action;
-  json::Value params;
-  std::vector<std::string> wait_for;
-  int64_t timeout_ms = 0;
-  enum class State { kPending, kSent, kAcked, kDone, kFailed } state = State::kPending;
-  std::string message_id;
-  int64_t sent_mono = 0;
-  json::Value reply;
-};
-
-Result<std::vector<Step>> parse_choreography(const json::Value& doc, std::string* fleet,
-                                             std::string* type, int64_t default_timeout) {
-  auto bad = [](std::string m) { return Error(ErrorCode::kSchemaValidationFailed, std::move(m)); };
-  if (!doc.is_object()) return bad("the choreography must be a JSON object");
-  std::string cmd = json::string_field(doc, "command");
-  if (!cmd.empty() && cmd != "COORDINATED_MOVE") return bad("command must be COORDINATED_MOVE");
-  *fleet = json::string_field(doc, "fleet_id");
-  if (!mqtt::valid_topic_segment(*fleet)) return bad("fleet_id is missing or not a valid id");
-  std::set<std::string> targets;
-  if (const json::Value* t = doc.get("targets"); t != nullptr) {
-    if (!t->is_array()) return bad("targets must be an array of robot ids");
-    for (const auto& r : t->as_array()) {
-      if (!r.is_string() || !mqtt::valid_topic_segment(r.as_string()))
-        return bad("targets must be robot ids");
-      targets.insert(r.as_string());
-    }
-  }
-  const json::Value* ch = doc.get("choreography");
-  if (ch == nullptr || !ch->is_object()) return bad("choreography is required");
-  *type = json::string_field(*ch, "type");
-  if (*type != "sequential" && *type != "parallel")
-    return bad("choreography.type must be sequential or parallel");
-  const json::Value* steps = ch->get("steps");
-  if (steps == nullptr || !steps->is_array() || steps->as_array().empty() ||
-      steps->as_array().size() > 1000)
-    return bad("choreography.steps must be a non-empty array (at most 1000)");
-  std::vector<Step> out;
-  std::set<std::string> seen;
-  for (const auto& sv : steps->as_array()) {
-    Step s;
-    s.index = out.size();
-    std::string where = "step " + std::to_string(s.index);
-    if (!sv.is_object()) return bad(where + " must be an object");
-    s.robot = json::string_field(sv, "robot");
-    s.action = json::string_field(sv, "action");
-    if (!mqtt::valid_topic_segment(s.robot))
-      return bad(where + ": robot is missing or not a valid id");
-    if (!targets.empty() && targets.count(s.robot) == 0)
-      return bad(where + ": robot " + s.robot + " is not in targets");
-    if (s.action.empty() || s.action.size() > 128) return bad(where + ": action is required");
-    if (const json::Value* p = sv.get("params"); p != nullptr) {
-      if (!p->is_object()) return bad(where + ": params must be an object");
-      s.params = *p;
-    } else {
-      s.params = json::Object{};
-    }
-    if (const json::Value* w = sv.get("wait_for"); w != nullptr) {
-      std::vector<std::string> names;
-      if (w->is_string())
-        names.push_back(w->as_string());
-      else if (w->is_array())
-        for (const auto& n : w->as_array())
-          names.push_back(n.is_string() ? n.as_string() : std::string());
-      else
-        return bad(where + ": wait_for must be a robot id or a list of them");
-      for (const auto& n : names)
-        if (seen.count(n) == 0)
-          return bad(where + ": wait_for names " + n + ", which has no earlier step");
-      s.wait_for = std::move(names);
-    }
-    s.timeout_ms = default_timeout;
-    if (const json::Value* t = sv.get("timeout_ms"); t != nullptr) {
-      if (!t->is_int() || t->as_int() < 1 || t->as_int() > 3'600'000)
-        return bad(where + ": timeout_ms must be 1..3600000");
-      s.timeout_ms = t->as_int();
-    }
-    seen.insert(s.robot);
-    out.push_back(std::move(s));
-  }
-  return out;
-}
+// ---- choreography (fleet_choreography.h)
 
 // Sends a SAFETY STOP to every robot a failed run moved and waits for their ACKs; records
 // `stopped`, `stops_not_delivered` and `all_stops_acknowledged` in `out`.
@@ -657,101 +573,21 @@ int run_main(const Options& o) {
     return usage_error("fleet run", st.error().message);
   const int qos = c->qos != 0 ? c->qos : 1;
 
-  std::string choreography_id = new_uuid_v4();
-  std::set<std::string> moved;
-  std::optional<size_t> failed;
-  std::string fail_reason;
-  auto& st = *steps;
-  auto robot_done = [&](const std::string& robot, size_t before) {
-    for (size_t i = 0; i < before; ++i)
-      if (st[i].robot == robot && st[i].state != Step::State::kDone) return false;
-    return true;
-  };
-  while (!failed) {
-    // Publish every step that may start now.
-    bool all_done = true;
-    for (auto& s : st) {
-      if (s.state != Step::State::kDone) all_done = false;
-      if (s.state != Step::State::kPending) continue;
-      bool ready = true;
-      if (type == "sequential")
-        for (size_t i = 0; i < s.index; ++i) ready = ready && st[i].state == Step::State::kDone;
-      for (const auto& w : s.wait_for) ready = ready && robot_done(w, s.index);
-      // A robot runs its own steps in order.
-      ready = ready && robot_done(s.robot, s.index);
-      if (!ready) continue;
-      json::Object payload{{"command", s.action},
-                           {"params", s.params},
-                           {"fleet_id", fleet},
-                           {"choreography_id", choreography_id},
-                           {"step", static_cast<int64_t>(s.index)}};
-      s.message_id = new_uuid_v4();
-      Status ps =
-          sess.publish(topics.member(s.robot).cmd(),
-                       message("FLEET_COMMAND", std::move(payload), *c, s.message_id), qos, false);
-      if (!ps.ok()) {
-        failed = s.index;
-        fail_reason = "publish failed: " + ps.error().message;
-        break;
-      }
-      s.state = Step::State::kSent;
-      s.sent_mono = mono_ms();
-      moved.insert(s.robot);
-    }
-    if (failed || all_done) break;
-    // The earliest step deadline.
-    int64_t deadline = mono_ms() + 1000;
-    for (const auto& s : st)
-      if (s.state == Step::State::kSent || s.state == Step::State::kAcked)
-        deadline = std::min(deadline, s.sent_mono + s.timeout_ms);
-    auto m = sess.next(deadline);
-    if (m) {
-      std::string reply_to = json::string_field(m->body, "reply_to");
-      for (auto& s : st) {
-        if (s.message_id != reply_to || m->topic != topics.member(s.robot).reply()) continue;
-        std::string t = json::string_field(m->body, "type");
-        const json::Value* p = m->body.get("payload");
-        if (t == "ACK") {
-          if (s.state == Step::State::kSent) s.state = Step::State::kAcked;
-        } else if (t == "EVENT" && p != nullptr && json::string_field(*p, "event") == "COMPLETED") {
-          s.state = Step::State::kDone;
-        } else {
-          s.state = Step::State::kFailed;
-          s.reply = m->body;
-          failed = s.index;
-          fail_reason =
-              t == "ERROR" && p != nullptr
-                  ? "refused: " + json::string_field(*p, "error_code") + " " +
-                        json::string_field(*p, "error")
-                  : "aborted: " + (p != nullptr ? json::string_field(*p, "reason") : std::string());
-        }
-      }
-    }
-    int64_t now = mono_ms();
-    for (auto& s : st) {
-      if (failed) break;
-      if ((s.state == Step::State::kSent || s.state == Step::State::kAcked) &&
-          now >= s.sent_mono + s.timeout_ms) {
-        fail_reason =
-            std::string(s.state == Step::State::kAcked ? "timeout waiting for completion"
-                                                       : "timeout waiting for acknowledgement") +
-            " after " + std::to_string(s.timeout_ms) + " ms";
-        s.state = Step::State::kFailed;
-        failed = s.index;
-      }
-    }
+  Choreography run(std::move(*steps), type);
+  while (!run.failed()) {
+    auto make = [&](json::Object payload, const std::string& id) {
+      return message("FLEET_COMMAND", std::move(payload), *c, id);
+    };
+    if (!run.publish_ready(sess, topics, fleet, make, qos) || run.all_done()) break;
+    if (auto m = sess.next(run.next_deadline())) run.on_reply(*m, topics);
+    run.check_timeouts();
   }
-
-  json::Array report;
-  for (const auto& s : st) {
-    const char* names[] = {"pending", "sent", "acknowledged", "completed", "failed"};
-    json::Object r{{"step", static_cast<int64_t>(s.index)},
-                   {"robot", s.robot},
-                   {"action", s.action},
-                   {"state", names[static_cast<int>(s.state)]}};
-    if (!s.reply.is_null()) r.set("reply", s.reply);
-    report.emplace_back(std::move(r));
-  }
+  const std::string& choreography_id = run.id();
+  const std::optional<size_t> failed = run.failed();
+  const std::string& fail_reason = run.fail_reason();
+  const std::vector<Step>& st = run.steps();
+  const std::set<std::string>& moved = run.moved();
+  json::Array report = run.report();
   json::Object out{{"fleet_id", fleet}, {"choreography_id", choreography_id}, {"type", type}};
   json::Object unverified;
   for (const auto& [robot, d] : sess.dropped())

@@ -386,12 +386,12 @@ struct RegistryLinkConfig {
   uint32_t refresh_s = 300;       // how often the robot tells the registry it is there
   std::string ca_file;            // https: trust anchors (empty: the system's)
   // Tokens issued by the registry (docs/SECURITY.md §Tokens from the registry).
-  bool trust_tokens = false;            // verify tokens with the registry's published keys
-  std::string issuer;                   // their `iss` (resolved: registry_url when not given)
-  uint32_t jwks_refresh_s = 300;        // how often the keys are fetched again
-  uint32_t revocations_refresh_s = 30;  // how often the revocation feed is polled
+  bool trust_tokens = false;               // verify tokens with the registry's published keys
+  std::string issuer;                      // their `iss` (resolved: registry_url when not given)
+  uint32_t jwks_refresh_s = 300;           // how often the keys are fetched again
+  uint32_t revocations_refresh_s = 30;     // how often the revocation feed is polled
   uint32_t max_feed_revocations = 10'000;  // the feed's entries kept in force (their own table)
-  uint32_t max_key_age_s = 86400;       // keys trusted this long without a successful fetch
+  uint32_t max_key_age_s = 86400;          // keys trusted this long without a successful fetch
 };
 
 struct NodeConfig {

@@ -351,9 +351,10 @@ class PgStore final : public Store {
                      params(detail::upper(rrn)));
   }
   Result<std::optional<Robot>> find_robot_by_uri(std::string_view uri) override {
-    return one_robot("SELECT " ROBOT_COLUMNS
-                     " FROM robots WHERE rcan_uri = $1 AND NOT deleted ORDER BY synced, seq DESC LIMIT 1",
-                     params(uri));
+    return one_robot(
+        "SELECT " ROBOT_COLUMNS
+        " FROM robots WHERE rcan_uri = $1 AND NOT deleted ORDER BY synced, seq DESC LIMIT 1",
+        params(uri));
   }
   Result<RobotPage> list_robots(const RobotQuery& q) override;
   Result<std::optional<Robot>> update_robot(std::string_view rrn, const RobotUpdate& u) override {

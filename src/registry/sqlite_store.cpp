@@ -281,9 +281,10 @@ class SqliteStore final : public Store {
                      detail::upper(rrn));
   }
   Result<std::optional<Robot>> find_robot_by_uri(std::string_view uri) override {
-    return one_robot("SELECT " ROBOT_COLUMNS
-                     " FROM robots WHERE rcan_uri = ? AND deleted = 0 ORDER BY synced, seq DESC LIMIT 1",
-                     uri);
+    return one_robot(
+        "SELECT " ROBOT_COLUMNS
+        " FROM robots WHERE rcan_uri = ? AND deleted = 0 ORDER BY synced, seq DESC LIMIT 1",
+        uri);
   }
   Result<RobotPage> list_robots(const RobotQuery& q) override;
   Result<std::optional<Robot>> update_robot(std::string_view rrn, const RobotUpdate& u) override {

@@ -7,12 +7,12 @@
 #include <fstream>
 #include <thread>
 
+#include "joining_robot.h"
 #include "rcan/crypto/keys.h"
 #include "rcan/crypto/registry_proof.h"
 #include "rcan/encoding.h"
 #include "rcan/json.h"
 #include "rcan/registry.h"
-#include "joining_robot.h"
 #include "registry_daemon.h"
 #include "test_support.h"
 

@@ -84,8 +84,8 @@ struct NodeSettings {
   int telemetry_hz = 5;
   size_t audit_listing = 50;  // entries in GET /api/audit
   int64_t handoff_window_ms = 30'000;
-  GuestLimits guest_limits;     // seed §6.3 (guest_limits.h)
-  std::string state_dir;        // leases, ownership, consent, credential cache ("" = not kept)
+  GuestLimits guest_limits;  // seed §6.3 (guest_limits.h)
+  std::string state_dir;     // leases, ownership, consent, credential cache ("" = not kept)
   // Entries of a registry's revocation feed kept in force (a table of their own, revocation.h).
   size_t feed_revocations = RevocationList::kDefaultCapacity;
   std::string consent_webhook;  // http:// URL the owner notification is POSTed to ("" = none)
