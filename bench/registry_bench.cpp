@@ -33,7 +33,11 @@
 #include <vector>
 
 #include "bench_support.h"
+#include "rcan/crypto/keys.h"
+#include "rcan/crypto/registry_proof.h"
+#include "rcan/encoding.h"
 #include "rcan/json.h"
+#include "rcan/registry.h"
 
 namespace {
 
@@ -174,6 +178,42 @@ std::string register_robot(uint16_t port, const std::string& admin, const std::s
     return {};
   }
   return v->get("rrn")->as_string();
+}
+
+// Registers a robot as rcand does — fresh identity keys and their proof of possession over the
+// registry's challenge, its RURI in metadata — so that the registry issues tokens for it; its RRN,
+// or empty.
+std::string register_proven_robot(uint16_t port, const std::string& admin) {
+  std::string out;
+  int st = bench::sync_http(port, http::verb::get, "/api/v1/challenge", "", admin, &out);
+  auto ch = json::parse(out);
+  auto keys = rcan::keys::generate();
+  if (st != 200 || !ch.ok() || !keys.ok()) {
+    std::fprintf(stderr, "challenge: %d %s\n", st, out.c_str());
+    return {};
+  }
+  const std::string id = json::string_field(*ch, "challenge_id");
+  auto proof =
+      rcan::registry::sign_proof(*keys, id,
+                                 rcan::registry::proof_message(id, json::string_field(*ch, "nonce"),
+                                                               "bench", "arm", "v1", "b0000001"));
+  if (!proof.ok()) return {};
+  json::Object body{{"manufacturer", "bench"},
+                    {"model", "arm"},
+                    {"version", "v1"},
+                    {"device_id", "b0000001"},
+                    {"metadata", json::Object{{"ruri", "rcan://local.rcan/bench/arm/b0000001"}}},
+                    {"ed25519_public_key", rcan::base64url_encode(keys->pub.ed25519_pk)},
+                    {"mldsa65_public_key", rcan::base64url_encode(keys->pub.mldsa65_pk)},
+                    {"proof", proof->to_json()}};
+  st = bench::sync_http(port, http::verb::post, "/api/v1/robots",
+                        json::dump(json::Value(std::move(body))), admin, &out);
+  auto v = json::parse(out);
+  if (st != 201 || !v.ok()) {
+    std::fprintf(stderr, "register with proof: %d %s\n", st, out.c_str());
+    return {};
+  }
+  return json::string_field(*v, "rrn");
 }
 
 // Starts the instances (each with its own data directory under `root`) on a.database.
@@ -332,7 +372,10 @@ int main(int argc, char** argv) {
       bench::pct(all, 0.50), bench::pct(all, 0.99), all.empty() ? 0.0 : all.back(),
       static_cast<unsigned long long>(errors), rss_kb, cpu_s);
 
-  // The token authority: client credentials.
+  // The token authority: client credentials, for a robot that proved its keys (the registry
+  // issues no robot token for a record that did not).
+  const std::string proven = register_proven_robot(port, admin);
+  if (proven.empty()) return 1;
   std::string out;
   int st = bench::sync_http(port, http::verb::post, "/api/v1/clients",
                             R"({"name":"bench","auth":"client_secret"})", admin, &out);
@@ -344,7 +387,7 @@ int main(int argc, char** argv) {
   std::string id = cl->get("client_id")->as_string();
   std::string secret = cl->get("client_secret")->as_string();
   st = bench::sync_http(port, http::verb::post, "/api/v1/grants",
-                        R"({"principal":")" + id + R"(","robot":")" + rrns[0] +
+                        R"({"principal":")" + id + R"(","robot":")" + proven +
                             R"(","role":"user","scope":["status"]})",
                         admin, &out);
   if (st != 201) {
@@ -352,7 +395,7 @@ int main(int argc, char** argv) {
     return 1;
   }
   std::string form = "grant_type=client_credentials&client_id=" + id + "&client_secret=" + secret +
-                     "&resource=" + rrns[0];
+                     "&resource=" + proven;
   int token_clients = std::min(a.clients, 16);
   std::vector<ClientResult> tok(static_cast<size_t>(token_clients));
   std::vector<std::thread> tthreads;

@@ -31,7 +31,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     const auto& a = (*entries)[i];
     const auto& b = (*again)[i];
     if (a.kind != b.kind || a.value != b.value || a.iss != b.iss || a.exp != b.exp ||
-        a.at_ms != b.at_ms || a.by != b.by || a.reason != b.reason)
+        a.at_ms != b.at_ms || a.by != b.by || a.reason != b.reason || a.feed != b.feed)
       std::abort();
   }
   node::RevocationList list;

@@ -209,8 +209,13 @@ TEST_F(AdversaryRegistryDeviceFlow, AnApprovalIsInformedAndAConfidentialClientCa
   ASSERT_EQ(shown.exit_code, 0) << shown.out << shown.err;
   EXPECT_NE(shown.out.find("\"created_by_label\":\"mallory\""), std::string::npos) << shown.out;
   EXPECT_NE(shown.out.find("\"role\":\"owner\""), std::string::npos) << shown.out;
+  // The page anyone with the code opens shows what is asked, and sends the approver to `show`
+  // for who made the client (no key id or label for whoever holds a code).
   auto page = reg.get("/device?user_code=" + user_code);
-  EXPECT_NE(page.body.find("mallory"), std::string::npos) << page.body;
+  EXPECT_NE(page.body.find("alice-cli"), std::string::npos) << page.body;
+  EXPECT_NE(page.body.find(rrn), std::string::npos) << page.body;
+  EXPECT_NE(page.body.find("rcan registry device show " + user_code), std::string::npos);
+  EXPECT_EQ(page.body.find("mallory"), std::string::npos) << page.body;
   // Others do not learn of the request.
   EXPECT_EQ(reg.get("/api/v1/device/requests/" + user_code, new_registrant(reg, "eve")).status,
             404);

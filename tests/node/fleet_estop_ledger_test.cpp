@@ -29,7 +29,10 @@ TEST(FleetEstopLedger, AResumedEstopNeverLatchesAgainAndANewOneAlwaysDoes) {
   // Its replay, live or retained, and a standing ESTOP older than the RESUME: refused.
   EXPECT_EQ(book.judge("e1", kMs, true), V::kSuperseded);
   EXPECT_EQ(book.judge("e1", kMs, false), V::kSuperseded);
-  EXPECT_EQ(book.judge("never-seen", kMs + 1000, true), V::kOlderThanResume);
+  EXPECT_EQ(book.judge("never-seen", kMs + 5000 - FleetEstopLedger::kClockMarginMs, true),
+            V::kOlderThanResume);
+  // A standing ESTOP of a coordinator whose clock is behind the RESUME's stops the robot.
+  EXPECT_EQ(book.judge("behind", kMs + 1000, true), V::kObey);
   // Even when its own stamp is later than the RESUME's (another coordinator's clock ahead).
   book.honoured("e2", kMs + 9000, kNow + 3600, kNow + 6);
   book.resumed(kMs + 8000, kNow + 7);
@@ -39,6 +42,7 @@ TEST(FleetEstopLedger, AResumedEstopNeverLatchesAgainAndANewOneAlwaysDoes) {
   // after the last RESUME.
   EXPECT_EQ(book.judge("e3", kMs + 1000, false), V::kObey);
   EXPECT_EQ(book.judge("e3", kMs + 8001, true), V::kObey);
+  EXPECT_EQ(book.judge("e3", kMs + 8000 - FleetEstopLedger::kClockMarginMs + 1, true), V::kObey);
 }
 
 TEST(FleetEstopLedger, KeptAcrossARestartIn0600AndForgottenWhenTheTokenExpires) {
@@ -55,7 +59,7 @@ TEST(FleetEstopLedger, KeptAcrossARestartIn0600AndForgottenWhenTheTokenExpires) 
   EXPECT_EQ(st.st_mode & 0777, 0600u);
   FleetEstopLedger again(path, "alpha", "robot-a", kNow + 6);
   EXPECT_EQ(again.judge("e1", kMs, true), V::kSuperseded);
-  EXPECT_EQ(again.judge("other", kMs + 4000, true), V::kOlderThanResume);
+  EXPECT_EQ(again.judge("other", kMs - 30'000, true), V::kOlderThanResume);
   EXPECT_EQ(again.size(), 2u);
   // Past its token's expiry an entry is dropped (the token no longer verifies either).
   FleetEstopLedger later(path, "alpha", "robot-a", kNow + 11);

@@ -21,6 +21,7 @@ namespace {
 
 constexpr int64_t kNow = 1'800'000'000;
 const std::string kAud = "rcan://local.rcan/acme/rover/abcdef12";
+const std::string kRrn = "RRN-000000000042";
 const std::string kIss = "https://registry.example";
 
 std::array<uint8_t, 32> seed(uint8_t fill) {
@@ -37,7 +38,7 @@ std::string jwk(uint8_t fill, const std::string& kid) {
 
 std::string token(uint8_t fill, const std::string& kid, const std::string& iss = kIss) {
   auto key = jwt::SigningKey::ed25519_seed(seed(fill));
-  json::Object c{{"iss", iss},      {"sub", "ops"},     {"aud", kAud},
+  json::Object c{{"iss", iss},      {"sub", "ops"},     {"aud", kAud},       {"rrn", kRrn},
                  {"role", "owner"}, {"iat", kNow - 10}, {"exp", kNow + 3600}};
   return *jwt::issue(c, *key, kid);
 }
@@ -53,6 +54,7 @@ Authenticator make_auth() {
   auto local = jwt::SigningKey::ed25519_seed(seed(9));
   o.trust.add("local", *local->verification_key());
   o.verify.audience = kAud;
+  o.own_rrn = kRrn;
   return Authenticator(std::move(o));
 }
 
@@ -176,13 +178,9 @@ TEST(FollowedIssuer, IntrospectedClaimsAreCheckedLikeAVerifiedTokens) {
   const std::string t = token(7, "kx");  // signed "owner" by a key the node never had
   EXPECT_FALSE(auth.authenticate_token(t, kNow).ok());
   EXPECT_EQ(asked, 1);
-  const json::Object answer{{"iss", kIss},
-                            {"sub", "carol"},
-                            {"aud", kAud},
-                            {"role", "user"},
-                            {"scope", "status control"},
-                            {"iat", kNow},
-                            {"exp", kNow + 100}};
+  const json::Object answer{{"iss", kIss}, {"sub", "carol"},   {"aud", kAud},
+                            {"rrn", kRrn}, {"role", "user"},   {"scope", "status control"},
+                            {"iat", kNow}, {"exp", kNow + 100}};
   answers[t] = answer;
   auto p = auth.authenticate_token(t, kNow);
   ASSERT_TRUE(p.ok()) << p.error().message;
@@ -204,6 +202,13 @@ TEST(FollowedIssuer, IntrospectedClaimsAreCheckedLikeAVerifiedTokens) {
   answers[t] = answer;
   answers[t].set("role", "emperor");
   EXPECT_FALSE(auth.authenticate_token(t, kNow).ok());
+  // The registry's word names this robot exactly (docs/SECURITY.md R20): its RRN, no wildcard.
+  answers[t] = answer;
+  answers[t].set("rrn", "RRN-000000000777");
+  EXPECT_EQ(auth.authenticate_token(t, kNow).error().reason, "rrn_mismatch");
+  answers[t] = answer;
+  answers[t].set("aud", "rcan://*/*/*/*");
+  EXPECT_EQ(auth.authenticate_token(t, kNow).error().reason, "aud_not_exact");
 }
 
 // What rcand reads back when it introspects a token (RFC 7662) and registers itself.

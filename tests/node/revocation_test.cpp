@@ -13,6 +13,7 @@
 
 #include "rcan/audit/env.h"
 #include "rcan/errors.h"
+#include "rcan/json.h"
 #include "test_support.h"
 #include "testing/fault_env.h"
 
@@ -212,6 +213,28 @@ TEST(RevocationList, AnEntryIsAppendedToTheJournalAndTheStartFoldsItIn) {
   Status s = damaged.load(kNow);
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.error().message.find("line 1"), std::string::npos) << s.error().message;
+}
+
+// A crash between a fold's snapshot and its emptying of the journal leaves entries in both; a
+// list written before the feed had its own table holds the registry's entries as its own.
+TEST(RevocationList, AnEntryInTheSnapshotAndTheJournalCountsOnceAndOldFeedEntriesAreTheFeeds) {
+  test::TempDir dir;
+  const std::string path = dir.file("revocations.json");
+  Revocation a = entry(Revocation::Kind::kKid, "k1");
+  Revocation reg = entry(Revocation::Kind::kJti, "r1", "https://reg", kNow + 1000);
+  reg.by = PrincipalId{"https://reg", "registry"};
+  reg.reason = "registry revocation 7";
+  json::Array snap{a.to_json(), reg.to_json()};
+  write(path, json::dump(json::Value(json::Object{{"version", 1}, {"revocations", snap}})));
+  write(path + ".journal", json::dump(a.to_json()) + "\n" +
+                               json::dump(entry(Revocation::Kind::kKid, "k2").to_json()) + "\n");
+  // Room for two entries of the node's own: k1 twice would not fit, nor the registry's r1.
+  RevocationList list(path, 2, 60, nullptr, 1);
+  ASSERT_TRUE(list.load(kNow).ok());
+  EXPECT_EQ(list.size(), 3u);
+  EXPECT_TRUE(list.revoked(who("https://reg", "u", "r1")));
+  const auto all = list.list();
+  EXPECT_EQ(std::count_if(all.begin(), all.end(), [](const Revocation& r) { return r.feed; }), 1);
 }
 
 TEST(RevocationList, TheJournalIsFoldedInEveryCompactEveryEntries) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 
+#include "base/log.h"
 #include "base/state_file.h"
 #include "rcan/errors.h"
 
@@ -192,6 +193,23 @@ Status RevocationList::load(int64_t now_s) {
   const bool had_journal = env_->exists(journal_path());
   for (Revocation& r : *journal) entries.push_back(std::move(r));
   std::erase_if(entries, [&](const Revocation& r) { return expired(r, now_s, leeway_s_); });
+  // A crash between a fold's snapshot and its emptying of the journal leaves entries in both:
+  // one entry each (a subject's revocation keeps its latest second).
+  std::unordered_map<std::string, size_t> seen;
+  std::vector<Revocation> unique;
+  unique.reserve(entries.size());
+  for (Revocation& r : entries) {
+    // Lists written before the feed had a table of its own: the registry link's entries.
+    if (!r.feed && r.by.sub == "registry" && r.reason.rfind("registry revocation ", 0) == 0)
+      r.feed = true;
+    auto [it, fresh] = seen.emplace(index_key(r.kind, r.iss, r.value), unique.size());
+    if (fresh) {
+      unique.push_back(std::move(r));
+    } else if (r.at_ms > unique[it->second].at_ms) {
+      unique[it->second] = std::move(r);
+    }
+  }
+  entries = std::move(unique);
   const auto feed = static_cast<size_t>(
       std::count_if(entries.begin(), entries.end(), [](const Revocation& r) { return r.feed; }));
   if (entries.size() - feed > capacity_ || feed > feed_capacity_)
@@ -203,9 +221,13 @@ Status RevocationList::load(int64_t now_s) {
   install(std::move(entries));
   if (!had_journal) return Status::Ok();
   // Folded in at every start: the journal starts empty, with no torn line to append after.
-  if (Status s = compact(); !s.ok())
-    return Error(ErrorCode::kInternal,
-                 "the revocation list " + path_ + " could not be rewritten: " + s.error().message);
+  // Where that cannot be written, the node runs on the journal (every entry in it is in force),
+  // and the next entry goes in by a fold (the journal may end in a torn line).
+  if (Status s = compact(); !s.ok()) {
+    journal_torn_ = true;
+    log(LogLevel::kWarn, "revocations_not_folded",
+        json::Object{{"file", path_}, {"error", s.error().message}});
+  }
   return Status::Ok();
 }
 

@@ -71,9 +71,10 @@ class RevocationList {
                           int64_t leeway_s = 60, audit::Env* env = nullptr,
                           size_t feed_capacity = kDefaultCapacity);
 
-  // Reads the snapshot and the journal (absent: an empty list) and folds the journal in.
-  // Errors: SCHEMA_VALIDATION_FAILED naming the file and what is wrong with it (the list is then
-  // unchanged); INTERNAL when the folded snapshot cannot be written.
+  // Reads the snapshot and the journal (absent: an empty list; an entry in both counts once) and
+  // folds the journal in (where that cannot be written it is logged, and the list runs on the
+  // journal). Errors: SCHEMA_VALIDATION_FAILED naming the file and what is wrong with it (the
+  // list is then unchanged).
   Status load(int64_t now_s) EXCLUDES(mu_, write_mu_);
   // The whole file's content: {"version":1,"revocations":[…]}. Errors as from_json.
   static Result<std::vector<Revocation>> parse(const json::Value& doc, size_t capacity);

@@ -54,8 +54,11 @@ FleetEstopLedger::Verdict FleetEstopLedger::judge(const std::string& id, int64_t
   auto it = entries_.find(id);
   if (it != entries_.end() && it->second.superseded) return Verdict::kSuperseded;
   // A live ESTOP is judged by the freshness window like any message; a standing one has no
-  // other bound than this.
-  if (standing && last_resume_ms_ != 0 && ts_ms <= last_resume_ms_)
+  // other bound than this. Both stamps are their senders' clocks: two coordinators' may differ,
+  // so a standing ESTOP is refused by its stamp only when it is older than the RESUME by more
+  // than a message's freshness window — a genuine new ESTOP from a coordinator whose clock is
+  // behind still stops the robot (a replay of one this robot obeyed is refused by its id).
+  if (standing && last_resume_ms_ != 0 && ts_ms + kClockMarginMs <= last_resume_ms_)
     return Verdict::kOlderThanResume;
   return Verdict::kObey;
 }

@@ -9,7 +9,8 @@
 //   * a fleet ESTOP this robot honoured is superseded by the next fleet RESUME it applies and is
 //     never obeyed again (live or retained), until its token expires and the entry is dropped
 //     (the token no longer verifies from then on either);
-//   * a retained ESTOP must be newer (its own timestamp_ms) than the last fleet RESUME applied.
+//   * a retained ESTOP must not be older (its own timestamp_ms) than the last fleet RESUME
+//     applied by more than kClockMarginMs (coordinators' clocks may differ).
 // A new ESTOP — an id never honoured, or one stamped after the RESUME, or any live one not yet
 // superseded — is obeyed as before. Kept in <state_dir>/fleet_estops.json (0600, written
 // atomically on every change) and read back at start-up, so a restart forgets nothing.
@@ -42,6 +43,10 @@ class FleetEstopLedger {
 
   int64_t last_resume_ms() const EXCLUDES(mu_);
   size_t size() const EXCLUDES(mu_);
+
+  // How much older than the last RESUME a standing ESTOP's stamp may be and still be obeyed:
+  // the freshness window every message is held to (the senders' clocks may differ by that).
+  static constexpr int64_t kClockMarginMs = 30'000;
 
   // Entries kept at most (the oldest are dropped first; a dropped superseded ESTOP is still
   // older than the RESUME that superseded it).

@@ -202,7 +202,10 @@ Status RegistryApi::Impl::unique_audience(const Robot& r, const std::string& aud
     auto page = store.list_robots(q);
     if (!page) return page.error();
     for (const Robot& other : page->robots) {
-      if (other.rrn == r.rrn || other.device_id != r.device_id || other.version == r.version)
+      // A synced copy (no owner here) is a peer's to answer for, under its own host: it claims no
+      // name of this registry's robots (a peer could otherwise keep them from their tokens).
+      if (other.rrn == r.rrn || other.device_id != r.device_id || other.version == r.version ||
+          other.owner_key_id.empty())
         continue;
       auto its = robot_audience(other, o.host);
       if (!its.ok() || *its != aud) continue;

@@ -199,17 +199,18 @@ HttpResponse RegistryApi::Impl::device_page(const HttpRequest& req) {
         return v != nullptr && v->is_string() ? escape(v->as_string()) : std::string("?");
       };
       const json::Value* scope = d.find("scope");
-      asked = "<table>\n<tr><th>client</th><td>" + field("client", "name") + " (" +
-              field("client", "client_id") + ", " + field("client", "auth") +
-              ")</td></tr>\n<tr><th>made by</th><td>API key " + field("client", "created_by") +
-              " (" + field("client", "created_by_label") + ")</td></tr>\n<tr><th>for</th><td>" +
-              field("target", "resource") + " " + field("target", "rcan_uri") +
+      // Anyone holding the code reads this page: the client's name and what it asks for, not
+      // who made it (an API key's id and label are for an approver, device show).
+      asked = "<table>\n<tr><th>client</th><td>" + field("client", "name") +
+              "</td></tr>\n<tr><th>for</th><td>" + field("target", "resource") +
               "</td></tr>\n<tr><th>scopes</th><td>" +
               (scope != nullptr && scope->is_string() && !scope->as_string().empty()
                    ? escape(scope->as_string())
                    : std::string("all that your grant holds")) +
-              "</td></tr>\n</table>\n<p>Approve only a client you know and started "
-              "yourself: the token goes to whoever holds this request.</p>\n";
+              "</td></tr>\n</table>\n<p>A client's name is whatever its maker chose. Approve "
+              "only a request you started yourself: the token goes to whoever holds it. "
+              "<code>rcan registry device show " +
+              code + "</code> names the API key that made the client.</p>\n";
     }
   const std::string url = escape(o.public_url);
   HttpResponse r;
