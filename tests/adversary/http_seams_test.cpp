@@ -36,18 +36,9 @@ using namespace std::chrono_literals;
 class RawConn {
  public:
   explicit RawConn(uint16_t port, const char* source = nullptr) {
-    fd_ = ::socket(AF_INET, SOCK_STREAM, 0);
-    if (source != nullptr) {
-      sockaddr_in src{};
-      src.sin_family = AF_INET;
-      ::inet_pton(AF_INET, source, &src.sin_addr);
-      if (::bind(fd_, reinterpret_cast<sockaddr*>(&src), sizeof src) != 0) return;
-    }
-    sockaddr_in addr{};
-    addr.sin_family = AF_INET;
-    addr.sin_port = htons(port);
-    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    connected_ = ::connect(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0;
+    const LoopbackSocket s = loopback_socket(port, source);
+    fd_ = s.fd;
+    connected_ = s.connected;
   }
   ~RawConn() {
     if (fd_ >= 0) ::close(fd_);

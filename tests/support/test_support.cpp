@@ -224,6 +224,25 @@ uint16_t free_port() {
   return port;
 }
 
+LoopbackSocket loopback_socket(uint16_t port, const char* source, int rcvbuf) {
+  LoopbackSocket s;
+  s.fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  if (s.fd < 0) return s;
+  if (rcvbuf > 0) ::setsockopt(s.fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof rcvbuf);
+  if (source != nullptr) {
+    sockaddr_in src{};
+    src.sin_family = AF_INET;
+    ::inet_pton(AF_INET, source, &src.sin_addr);
+    if (::bind(s.fd, reinterpret_cast<sockaddr*>(&src), sizeof src) != 0) return s;
+  }
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_port = htons(port);
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  s.connected = ::connect(s.fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0;
+  return s;
+}
+
 }  // namespace rcan::test
 
 // ---------------------------------------------------------------------------------------------

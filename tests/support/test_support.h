@@ -68,6 +68,15 @@ bool eventually(const std::function<bool()>& pred, int timeout_ms = 5000);
 // the test starts that take a port on their command line.
 uint16_t free_port();
 
+// A TCP connection to 127.0.0.1:`port` from `source` (a loopback address such as 127.0.0.2, to
+// be another client address; null: any), with a receive buffer of `rcvbuf` bytes when positive.
+// `fd` is the socket (-1 when none could be made), `connected` whether the connect succeeded.
+struct LoopbackSocket {
+  int fd = -1;
+  bool connected = false;
+};
+LoopbackSocket loopback_socket(uint16_t port, const char* source = nullptr, int rcvbuf = 0);
+
 }  // namespace rcan::test
 
 namespace rcan::test {
