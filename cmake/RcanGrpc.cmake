@@ -28,15 +28,15 @@ target_link_libraries(rcan_proto PUBLIC PkgConfig::GRPCPP)
 
 # The message conversion (src/transport/grpc_convert.cpp) and the node's gRPC binding
 # (src/node/bindings/grpc_*.cpp), compiled once (PIC) for two consumers.
-file(GLOB RCAN_GRPC_SOURCES CONFIGURE_DEPENDS ${PROJECT_SOURCE_DIR}/src/transport/grpc_*.cpp
-     ${PROJECT_SOURCE_DIR}/src/node/bindings/grpc_*.cpp)
+set(RCAN_GRPC_SOURCES ${PROJECT_SOURCE_DIR}/src/transport/grpc_convert.cpp
+    ${PROJECT_SOURCE_DIR}/src/node/bindings/grpc_module.cpp ${PROJECT_SOURCE_DIR}/src/node/bindings/grpc_server.cpp)
 add_library(rcan_grpc_objects OBJECT ${RCAN_GRPC_SOURCES})
 set_target_properties(rcan_grpc_objects PROPERTIES POSITION_INDEPENDENT_CODE ON)
-target_link_libraries(rcan_grpc_objects PUBLIC rcan_proto PRIVATE rcan_node rcan_warnings)
+target_link_libraries(rcan_grpc_objects PUBLIC rcan_proto PRIVATE rcan_node_bindings rcan_node_api rcan_node_services rcan_transport rcan_warnings)
 
 # rcan_grpc: the gRPC transport linked statically with the node (the gRPC tests and fuzz target).
 add_library(rcan_grpc STATIC $<TARGET_OBJECTS:rcan_grpc_objects>)
-target_link_libraries(rcan_grpc PUBLIC rcan_node rcan_proto)
+target_link_libraries(rcan_grpc PUBLIC rcan_node_bindings rcan_node_api rcan_node_services rcan_transport rcan_proto)
 
 # librcand_grpc.so: the gRPC transport as the module rcand dlopen()s when grpc.enabled is true
 # (src/node/bindings/grpc_module.h, apps/rcand/grpc_loader.cpp). It links gRPC and protobuf but not

@@ -29,13 +29,12 @@ add_library(rcan_ros2_msgs STATIC ${RCAN_ROS2_GENERATED})
 target_include_directories(rcan_ros2_msgs SYSTEM PUBLIC ${RCAN_ROS2_GEN_DIR})
 target_link_libraries(rcan_ros2_msgs PUBLIC CycloneDDS::ddsc)
 
-file(GLOB RCAN_ROS2_SOURCES CONFIGURE_DEPENDS ${PROJECT_SOURCE_DIR}/src/drivers/ros2/*.cpp)
-add_library(rcan_ros2 STATIC ${RCAN_ROS2_SOURCES})
+rcan_add_library(rcan_ros2 src/drivers/ros2 ros2_convert.cpp ros2_driver.cpp)
 target_include_directories(rcan_ros2 PUBLIC ${PROJECT_SOURCE_DIR}/src)
-target_link_libraries(rcan_ros2 PUBLIC rcan_config rcan_ros2_msgs PRIVATE rcan_warnings)
+target_link_libraries(rcan_ros2 PUBLIC rcan_node_safety rcan_config rcan_base rcan_ros2_msgs)
 
 # examples/ros2_sim_base: the simulated robot as a ROS 2 robot on DDS (docs/DRIVERS.md), for
 # watching the chain without hardware; the end-to-end test drives it through rcand.
 add_executable(ros2_sim_base ${PROJECT_SOURCE_DIR}/examples/ros2_sim_base/main.cpp)
 set_target_properties(ros2_sim_base PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${PROJECT_BINARY_DIR}/bin)
-target_link_libraries(ros2_sim_base PRIVATE rcan_ros2 rcan_node rcan_warnings)
+target_link_libraries(ros2_sim_base PRIVATE rcan_ros2 rcan_node_safety rcan_warnings)

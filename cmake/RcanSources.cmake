@@ -1,0 +1,101 @@
+# Read at the end of the configuration, when every target exists.
+#
+# 1. Every .cpp under src/ and apps/ is in a target: the libraries name their sources one by
+#    one, so a file added without naming it would otherwise be left out of the build in silence.
+# 2. The link graph of the product's targets (src/, apps/) is written to
+#    generated/layers_cmake.txt, one target a line: its name, its sources, the targets it links
+#    (directly). scripts/check_layers.py --cmake reads it (ctest source.layers_cmake) and checks
+#    it against the graph the includes are held to.
+
+# All targets of `dir` and the directories below it.
+function(rcan_targets_below dir out)
+  get_property(targets DIRECTORY ${dir} PROPERTY BUILDSYSTEM_TARGETS)
+  get_property(subdirs DIRECTORY ${dir} PROPERTY SUBDIRECTORIES)
+  foreach(sub ${subdirs})
+    rcan_targets_below(${sub} more)
+    list(APPEND targets ${more})
+  endforeach()
+  set(${out} ${targets} PARENT_SCOPE)
+endfunction()
+
+# The sources of `target` as paths relative to the project (generated files and generator
+# expressions left out).
+function(rcan_target_sources target out)
+  get_target_property(dir ${target} SOURCE_DIR)
+  get_target_property(srcs ${target} SOURCES)
+  set(result "")
+  if(srcs)
+    foreach(s ${srcs})
+      if(s MATCHES "^\\$<")
+        continue()
+      endif()
+      get_filename_component(abs ${s} ABSOLUTE BASE_DIR ${dir})
+      file(RELATIVE_PATH rel ${PROJECT_SOURCE_DIR} ${abs})
+      if(NOT rel MATCHES "^\\.\\./")
+        list(APPEND result ${rel})
+      endif()
+    endforeach()
+  endif()
+  set(${out} ${result} PARENT_SCOPE)
+endfunction()
+
+rcan_targets_below(${PROJECT_SOURCE_DIR} rcan_all_targets)
+set(rcan_built "")
+set(rcan_graph "")
+foreach(t ${rcan_all_targets})
+  rcan_target_sources(${t} srcs)
+  list(APPEND rcan_built ${srcs})
+  set(product OFF)
+  foreach(s ${srcs})
+    if(s MATCHES "^(src|apps)/")
+      set(product ON)
+    endif()
+  endforeach()
+  get_target_property(type ${t} TYPE)
+  if(type STREQUAL "INTERFACE_LIBRARY")
+    get_target_property(links ${t} INTERFACE_LINK_LIBRARIES)
+    if(t MATCHES "^rcan_" AND NOT t STREQUAL "rcan_warnings")
+      set(product ON)  # an aggregate of the product's libraries (rcan_node)
+    endif()
+  else()
+    get_target_property(links ${t} LINK_LIBRARIES)
+  endif()
+  if(NOT product)
+    continue()
+  endif()
+  # Executables built from an OBJECT library's objects ($<TARGET_OBJECTS:x>) stand on x.
+  get_target_property(raw ${t} SOURCES)
+  set(deps "")
+  foreach(item ${links} ${raw})
+    if(item MATCHES "^\\$<TARGET_OBJECTS:([^>]+)>$")
+      set(item ${CMAKE_MATCH_1})
+    endif()
+    if(TARGET ${item} AND item IN_LIST rcan_all_targets AND NOT item STREQUAL "rcan_warnings")
+      list(APPEND deps ${item})
+    endif()
+  endforeach()
+  list(REMOVE_DUPLICATES deps)
+  list(JOIN srcs " " s_text)
+  list(JOIN deps " " d_text)
+  string(APPEND rcan_graph "${t}\t${s_text}\t${d_text}\n")
+endforeach()
+
+file(GLOB_RECURSE rcan_all_cpp CONFIGURE_DEPENDS RELATIVE ${PROJECT_SOURCE_DIR} ${PROJECT_SOURCE_DIR}/src/*.cpp
+     ${PROJECT_SOURCE_DIR}/apps/*.cpp)
+set(rcan_orphans "")
+foreach(f ${rcan_all_cpp})
+  if(NOT f IN_LIST rcan_built)
+    list(APPEND rcan_orphans ${f})
+  endif()
+endforeach()
+if(rcan_orphans)
+  list(JOIN rcan_orphans "\n  " text)
+  message(FATAL_ERROR "These sources are in no target: name each in its folder's library "
+    "(CMakeLists.txt, cmake/*.cmake):\n  ${text}")
+endif()
+file(WRITE ${PROJECT_BINARY_DIR}/generated/layers_cmake.txt "${rcan_graph}")
+if(RCAN_BUILD_TESTS)
+  find_package(Python3 COMPONENTS Interpreter REQUIRED)
+  add_test(NAME source.layers_cmake COMMAND ${Python3_EXECUTABLE} ${PROJECT_SOURCE_DIR}/scripts/check_layers.py
+           --cmake ${PROJECT_BINARY_DIR}/generated/layers_cmake.txt ${PROJECT_SOURCE_DIR})
+endif()
