@@ -99,7 +99,8 @@ BOTTOM = "base"
 CONSUMERS = {"tests/support", "tests/librcan", "tests/fixtures", "tests", "bench", "fuzz", "examples"}
 # What base still includes in this tree although it is the bottom: librcan's result types and
 # the file-system Env (audit), and the client's HTTP exchange (its outbound HTTP client). They
-# count for what is reachable through base; empty this when base stands on nothing.
+# count for what is reachable through base, except from librcan itself (librcan may use base,
+# not what base uses); empty this when base stands on nothing.
 TRANSITIONAL = {"base": {"core", "audit", "http"}}
 # Units held to their direct includes too, whatever they reach: the CLI is a client of robots,
 # not a robot (it links neither the node nor Boost.Beast); the test doubles stand on librcan.
@@ -130,6 +131,7 @@ def unit_of(path):
 def reach(unit, transitional=True):
     """The units `unit` may include: itself, base, and everything its dependencies reach."""
     seen, todo = {unit}, [unit]
+    transitional = transitional and unit not in LIBRCAN
     while todo:
         u = todo.pop()
         deps = set(UNITS[u][1]) | ({BOTTOM} if u != BOTTOM else set())
@@ -354,6 +356,8 @@ def self_test():
          {"src/registry/api/registry_api.h": '#include "node/api/node.h"\n'}, "registry/api may not include"),
         ("librcan including the node", {"src/core/json.cpp": '#include "node/api/node.h"\n'},
          "core may not include"),
+        ("librcan including the client (which base still uses)",
+         {"src/core/json.cpp": '#include "client/net.h"\n', "src/client/net.h": ""}, "core may not include"),
         ("an include against the graph (downwards is fine, upwards is not)",
          {"src/transport/http_api.h": '#include "node/api/node.h"\n'}, "transport may not include"),
         ("a cycle inside one unit", {"src/node/pipeline/sub/x.h": '#include "node/pipeline/pipeline.h"\n',
