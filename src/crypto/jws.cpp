@@ -7,6 +7,7 @@
 //
 // All signature work goes through OpenSSL EVP directly, so the verifier depends on nothing but
 // libcrypto. Verification answers only true or false (every OpenSSL error is cleared).
+#include <openssl/ec.h>
 #include <openssl/err.h>
 
 #include "crypto/jwt_internal.h"
@@ -17,9 +18,6 @@ namespace rcan::jwt {
 
 using detail::auth_invalid;
 using detail::b64url_segment;
-using detail::EcdsaSigFree;
-using detail::es256_der_to_raw;
-using detail::es256_raw_to_der;
 using detail::MdCtxPtr;
 
 namespace detail {
@@ -30,6 +28,14 @@ std::optional<Bytes> b64url_segment(std::string_view s) {
   if (s.find('=') != std::string_view::npos || s.size() % 4 == 1) return std::nullopt;
   return base64url_decode(s);
 }
+
+}  // namespace detail
+
+namespace {
+
+struct EcdsaSigFree {
+  void operator()(ECDSA_SIG* s) const { ECDSA_SIG_free(s); }
+};
 
 // ES256: JOSE raw r‖s (64 bytes) → DER ECDSA-Sig-Value.
 std::optional<Bytes> es256_raw_to_der(std::span<const uint8_t> raw) {
@@ -64,10 +70,6 @@ std::optional<Bytes> es256_der_to_raw(std::span<const uint8_t> der) {
     return std::nullopt;
   return raw;
 }
-
-}  // namespace detail
-
-namespace {
 
 bool evp_verify(EVP_PKEY* pk, const EVP_MD* md, std::string_view input,
                 std::span<const uint8_t> sig) {

@@ -10,13 +10,11 @@
 
 #include <openssl/bio.h>
 #include <openssl/bn.h>
-#include <openssl/ec.h>
 #include <openssl/evp.h>
 #include <openssl/param_build.h>
 
 #include <memory>
 #include <optional>
-#include <span>
 #include <string>
 #include <string_view>
 
@@ -65,9 +63,6 @@ struct ParamBldFree {
 struct ParamFree {
   void operator()(OSSL_PARAM* p) const { OSSL_PARAM_free(p); }
 };
-struct EcdsaSigFree {
-  void operator()(ECDSA_SIG* s) const { ECDSA_SIG_free(s); }
-};
 
 inline constexpr size_t kMaxPemBytes = 64 * 1024;
 inline constexpr int kMinRsaBits = 2048;
@@ -83,9 +78,6 @@ std::string trim_secret_newline(std::string_view s);
 
 // Strict base64url for JWS segments: url alphabet only, no padding, canonical bits (jws.cpp).
 std::optional<Bytes> b64url_segment(std::string_view s);
-// ES256 signatures: JOSE raw r‖s (64 bytes) ↔ DER ECDSA-Sig-Value (jws.cpp).
-std::optional<Bytes> es256_raw_to_der(std::span<const uint8_t> raw);
-std::optional<Bytes> es256_der_to_raw(std::span<const uint8_t> der);
 
 }  // namespace detail
 
