@@ -4,7 +4,7 @@
   - no function over 150 lines, anywhere in src/, apps/, tests/, bench/ and fuzz/;
   - no file over 1,000 lines under src/node/, src/config/ and apps/.
 
-Two long, well-mapped library files may keep their long functions (LONG_FUNCTIONS_ALLOWED).
+One long, well-mapped library file may keep their long functions (LONG_FUNCTIONS_ALLOWED).
 A function is a brace block at namespace or class scope whose head has a parameter list; comments,
 strings and preprocessor lines are skipped first. TEST() bodies count as functions.
 
@@ -20,7 +20,7 @@ MAX_FUNCTION_LINES = 150
 MAX_FILE_LINES = 1000
 FILE_LIMITED = ("src/node/", "src/config/", "apps/")
 SCANNED = ("src/", "apps/", "tests/", "bench/", "fuzz/", "include/")
-LONG_FUNCTIONS_ALLOWED = {"src/audit/audit_log.cpp", "src/crypto/mldsa65.cpp"}
+LONG_FUNCTIONS_ALLOWED = {"src/crypto/mldsa65.cpp"}
 
 
 def strip_code(src):
