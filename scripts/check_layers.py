@@ -16,11 +16,16 @@ import sys
 
 # Bottom to top. A file's layer is the entry with the longest prefix matching its path.
 LAYERS = [
+    # The bottom: header-only helpers every layer may use, librcan and the CLI included (they
+    # link nothing): the clocks and the ASCII string helpers.
+    ("base", ["src/base/clock.h", "src/base/strings.h"]),
     ("core", ["include/rcan/json.h", "include/rcan/result.h", "include/rcan/", "src/core/"]),
     ("crypto", ["include/rcan/crypto/", "src/crypto/"]),
     ("audit", ["include/rcan/audit/", "src/audit/"]),
     ("client", ["include/rcan/client.h", "src/client/"]),
-    ("base", ["src/base/"]),
+    # The rest of src/base still includes the library (log.h, state_file.h, http_client.cpp), so
+    # it ranks above it.
+    ("base/runtime", ["src/base/"]),
     ("transport", ["src/transport/"]),
     ("config", ["src/config/"]),
     ("registry", ["src/registry/"]),
@@ -43,8 +48,8 @@ LAYERS = [
 # Layers that must not reach some lower layers even though they sit above them: the CLI is a
 # client of robots, not a robot (it links neither the node nor Boost.Beast).
 FORBIDDEN = {
-    "apps/rcan": {"base", "transport", "config"} | {n for n, _ in LAYERS if n.startswith("node/")},
-    "testing": {n for n, _ in LAYERS if n.startswith("node/")} | {"base", "transport", "config"},
+    "apps/rcan": {"base/runtime", "transport", "config"} | {n for n, _ in LAYERS if n.startswith("node/")},
+    "testing": {n for n, _ in LAYERS if n.startswith("node/")} | {"base/runtime", "transport", "config"},
 }
 # Only these files of the forbidden layers may be used by the CLI: the MQTT client (its own
 # library) and the configuration loader, which `rcan doctor` runs exactly as the node does

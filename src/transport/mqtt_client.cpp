@@ -17,6 +17,7 @@
 #include <string_view>
 #include <thread>
 
+#include "base/clock.h"
 #include "rcan/encoding.h"
 #include "rcan/hash.h"
 
@@ -357,7 +358,7 @@ void MqttClient::retry_refused() {
 }
 
 bool MqttClient::wait_subscribed(int timeout_ms) {
-  auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  auto deadline = steady_now() + std::chrono::milliseconds(timeout_ms);
   MutexLock lk(mu_);
   while (!(ready_connects_ > 0 && connected_.load() && sub_pending_.empty())) {
     if (cv_.wait_until(mu_, deadline) == std::cv_status::timeout)
@@ -462,7 +463,7 @@ void MqttClient::run() {
       delay_ms =
           std::min<int64_t>(int64_t{opts_.reconnect_min_s} << round, opts_.reconnect_max_s) * 1000;
     }
-    auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(delay_ms);
+    auto deadline = steady_now() + std::chrono::milliseconds(delay_ms);
     MutexLock lk(mu_);
     while (!stopped_.load() && cv_.wait_until(mu_, deadline) != std::cv_status::timeout) {
     }
@@ -522,7 +523,7 @@ Status MqttClient::publish_confirmed(const std::string& topic, const std::string
   int rc = mosquitto_publish(impl_->m, &mid, topic.c_str(), static_cast<int>(payload.size()),
                              payload.data(), qos, retain);
   if (rc == MOSQ_ERR_SUCCESS) impl_->wake();
-  auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  auto deadline = steady_now() + std::chrono::milliseconds(timeout_ms);
   MutexLock lk(mu_);
   if (rc == MOSQ_ERR_SUCCESS) {
     while (acked_.count(mid) == 0 && drops_ == drops &&
@@ -549,9 +550,9 @@ Status MqttClient::publish_confirmed(const std::string& topic, const std::string
 }
 
 bool MqttClient::flush(int timeout_ms) {
-  auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  auto deadline = steady_now() + std::chrono::milliseconds(timeout_ms);
   while (inflight_.load() > 0) {
-    if (std::chrono::steady_clock::now() >= deadline || !connected_.load()) return false;
+    if (steady_now() >= deadline || !connected_.load()) return false;
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
   }
   return true;
