@@ -109,8 +109,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     if (colon == std::string_view::npos || colon == 0) continue;
     std::string value(header.substr(colon + 1));
     while (!value.empty() && value.front() == ' ') value.erase(0, 1);
-    req.headers.emplace_back(rcan::transport::detail::ascii_lower(header.substr(0, colon)),
-                             expand(value, h.admin));
+    req.headers.emplace_back(rcan::ascii_lower(header.substr(0, colon)), expand(value, h.admin));
   }
   req.body = expand(std::string(in.substr(std::min(at, in.size()))), h.admin);
   req.remote_addr = "127.0.0.1:40000";

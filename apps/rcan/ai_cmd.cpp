@@ -5,6 +5,7 @@
 #include <cstdlib>
 #include <iostream>
 
+#include "base/clock.h"
 #include "cli.h"
 #include "node_http.h"
 #include "rcan/errors.h"
@@ -29,11 +30,7 @@ constexpr const char* kThoughtsHelp =
     "  Prints a §16.5 thought record (GET /api/thoughts/<id>); reasoning only with a config-scope\n"
     "  token. Exit: 0 found, 1 refused or unknown, 2 usage or unreachable.\n";
 
-int64_t now_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
+int64_t now_ms() { return unix_ms(); }
 
 struct Conn {
   Target target;

@@ -17,6 +17,7 @@
 #include <thread>
 #include <vector>
 
+#include "base/clock.h"
 #include "cli.h"
 #include "fleet_audit_db.h"
 #include "fleet_choreography.h"
@@ -83,11 +84,7 @@ constexpr const char* kHelp =
     "    confirmation can be verified;\n"
     "    2 usage error or no connection to the broker.\n";
 
-int64_t wall_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
+int64_t wall_ms() { return unix_ms(); }
 
 void print(const json::Value& v) { std::printf("%s\n", json::dump(v).c_str()); }
 

@@ -19,6 +19,7 @@
 #include <thread>
 #include <vector>
 
+#include "base/clock.h"
 #include "cli.h"
 #include "rcan/crypto/message_sig.h"
 #include "rcan/errors.h"
@@ -28,11 +29,7 @@
 
 namespace rcan::cli::fleet {
 
-inline int64_t mono_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
+inline int64_t mono_ms() { return steady_ms(); }
 
 // The fleet's robots and their public keys: --members-dir DIR (or $RCAN_FLEET_MEMBERS_DIR), one
 // directory per member, named by its member id, holding the public half of that robot's

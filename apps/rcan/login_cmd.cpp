@@ -9,6 +9,7 @@
 #include <iostream>
 #include <thread>
 
+#include "base/clock.h"
 #include "client/net.h"
 #include "rcan/client.h"
 #include "rcan/crypto/jwt.h"
@@ -150,9 +151,7 @@ Result<std::string> client_auth(const Options& o, const std::string& id, const s
   if (!key.ok()) return key.error();
   if (key->alg() != jwt::Alg::kEdDSA)
     return Error(ErrorCode::kSchemaValidationFailed, "--client-key must be an Ed25519 key");
-  const int64_t now = std::chrono::duration_cast<std::chrono::seconds>(
-                          std::chrono::system_clock::now().time_since_epoch())
-                          .count();
+  const int64_t now = unix_seconds();
   json::Object c{{"iss", id},  {"sub", id},        {"aud", base + "/oauth/token"},
                  {"iat", now}, {"exp", now + 120}, {"jti", new_uuid_v4()}};
   auto assertion = jwt::issue(c, *key);
@@ -191,8 +190,8 @@ int login_main(const Args& args) {
                json::string_field(da.body, "verification_uri").c_str(),
                json::string_field(da.body, "user_code").c_str(),
                json::string_field(da.body, "verification_uri_complete").c_str());
-  auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(expires_in + 5);
-  while (std::chrono::steady_clock::now() < deadline) {
+  auto deadline = steady_now() + std::chrono::seconds(expires_in + 5);
+  while (steady_now() < deadline) {
     std::this_thread::sleep_for(std::chrono::seconds(interval));
     auto poll_auth = client_auth(o, o.get("client-id"), base);
     if (!poll_auth.ok()) return usage_error("login", poll_auth.error().message);

@@ -8,6 +8,8 @@
 #include <iterator>
 #include <sstream>
 
+#include "base/clock.h"
+#include "base/strings.h"
 #include "cli.h"
 #include "rcan/errors.h"
 #include "rcan/json.h"
@@ -53,15 +55,7 @@ std::string read_stdin() {
 
 std::vector<std::string> split_list(const std::string& s) {
   std::vector<std::string> out;
-  size_t start = 0;
-  while (start < s.size()) {
-    size_t comma = s.find(',', start);
-    std::string item =
-        s.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
-    if (!item.empty()) out.push_back(item);
-    if (comma == std::string::npos) break;
-    start = comma + 1;
-  }
+  for (std::string_view item : split(s, ',', /*keep_empty=*/false)) out.emplace_back(item);
   return out;
 }
 
@@ -74,9 +68,7 @@ Result<std::string> read_file(const std::string& path) {
 }
 
 void print_error_body(const Error& err, std::string_view reply_to) {
-  auto now_ms = std::chrono::duration_cast<std::chrono::milliseconds>(
-                    std::chrono::system_clock::now().time_since_epoch())
-                    .count();
+  auto now_ms = unix_ms();
   std::cout << json::dump(error_body(err, reply_to, now_ms)) << "\n";
 }
 

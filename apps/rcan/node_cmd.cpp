@@ -10,17 +10,14 @@
 #include <iostream>
 #include <thread>
 
+#include "base/clock.h"
 #include "net_common.h"
 #include "rcan/errors.h"
 
 namespace rcan::cli {
 namespace {
 
-int64_t now_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
+int64_t now_ms() { return unix_ms(); }
 
 std::vector<std::string> with_net(std::vector<std::string> v, bool flags) {
   const auto& extra = flags ? net_flags() : net_valued();
@@ -513,13 +510,13 @@ int stream_main(const Args& args) {
   sa.sa_handler = on_sigint;
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
-  auto started = std::chrono::steady_clock::now();
+  auto started = steady_now();
   std::atomic<bool> done{false};
   std::thread watchdog([&] {
     while (!done.load()) {
       std::this_thread::sleep_for(std::chrono::milliseconds(50));
-      if (g_interrupted.load() || (seconds > 0 && std::chrono::steady_clock::now() - started >=
-                                                      std::chrono::seconds(seconds))) {
+      if (g_interrupted.load() ||
+          (seconds > 0 && steady_now() - started >= std::chrono::seconds(seconds))) {
         stream.stop();
         return;
       }

@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <iostream>
 
+#include "base/clock.h"
 #include "cli.h"
 #include "net_common.h"
 #include "node_http.h"
@@ -228,9 +229,7 @@ int do_update(const Options& o, const std::string& base, const std::string& key,
       std::fprintf(stderr, "rcan registry: %s\n", k.error().message.c_str());
       return 1;
     }
-    const int64_t ts = std::chrono::duration_cast<std::chrono::milliseconds>(
-                           std::chrono::system_clock::now().time_since_epoch())
-                           .count();
+    const int64_t ts = unix_ms();
     auto sig = registry::sign_update(*k, registry::update_message(rrn, ts, text));
     if (!sig.ok()) {
       std::fprintf(stderr, "rcan registry: %s\n", sig.error().message.c_str());

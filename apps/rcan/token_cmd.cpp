@@ -5,6 +5,8 @@
 #include <iostream>
 #include <optional>
 
+#include "base/clock.h"
+#include "base/strings.h"
 #include "cli.h"
 #include "login_cmd.h"
 #include "node_http.h"
@@ -54,11 +56,7 @@ constexpr const char* kHelp =
     "  Exit: 0 issued / valid / revoked (or decoded, without a key), 1 invalid or refused by the\n"
     "  robot, 2 usage, malformed token or no answer.\n";
 
-int64_t unix_now() {
-  return std::chrono::duration_cast<std::chrono::seconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
+int64_t unix_now() { return unix_seconds(); }
 
 // The `cnf` claim for the public key of `alg` in the key directory `dir`.
 Result<json::Value> bound_key_claim(const std::string& dir, const std::string& alg) {
@@ -146,21 +144,13 @@ int issue_main(const Args& args) {
   return 0;
 }
 
-std::string trim(std::string s) {
-  auto ws = [](char ch) { return ch == ' ' || ch == '\n' || ch == '\r' || ch == '\t'; };
-  while (!s.empty() && ws(s.back())) s.pop_back();
-  size_t i = 0;
-  while (i < s.size() && ws(s[i])) ++i;
-  return s.substr(i);
-}
-
 int inspect_main(const Args& args) {
   Options o(args, {}, {"key", "secret", "iss", "aud", "device", "leeway", "now"});
   if (!o.ok()) return usage_error("token inspect", o.error());
   if (o.positional().size() > 1) return usage_error("token inspect", "give at most one token");
   if (o.has("key") && o.has("secret"))
     return usage_error("token inspect", "give --key or --secret, not both");
-  std::string token = trim(o.positional().empty() ? read_stdin() : o.positional()[0]);
+  std::string token(trim(o.positional().empty() ? read_stdin() : o.positional()[0]));
   auto d = jwt::decode(token);
   json::Object out;
   if (!d.ok()) {
@@ -249,7 +239,7 @@ int revoke_main(const Args& args) {
       std::getline(std::cin, line);
       t = line;
     }
-    t = trim(t);
+    t = std::string(trim(t));
     if (t.empty()) return usage_error("token revoke", "TOKEN is empty");
     body.set("token", t);
   }

@@ -13,6 +13,7 @@
 #include <thread>
 #include <vector>
 
+#include "base/clock.h"
 #include "cli.h"
 #include "rcan/encoding.h"
 #include "rcan/hash.h"
@@ -103,11 +104,9 @@ int discover_main(const Args& args) {
   }
   int found = 0;
   std::vector<std::string> asked_again;  // each node is asked a second time at most once
-  auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  auto until = steady_now() + std::chrono::milliseconds(timeout_ms);
   while (true) {
-    auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
-                    until - std::chrono::steady_clock::now())
-                    .count();
+    auto left = std::chrono::duration_cast<std::chrono::milliseconds>(until - steady_now()).count();
     if (left <= 0) break;
     pollfd p{fd, POLLIN, 0};
     if (::poll(&p, 1, static_cast<int>(left)) <= 0) break;
@@ -154,12 +153,8 @@ int heartbeat_main(const Args& args) {
   long interval = std::atol(o.get("interval-ms", "500").c_str());
   if (count < 1 || interval < 1)
     return usage_error("udp-heartbeat", "--count and --interval-ms must be positive");
-  uint64_t seq =
-      o.has("first-seq")
-          ? std::strtoull(o.get("first-seq").c_str(), nullptr, 10)
-          : static_cast<uint64_t>(std::chrono::duration_cast<std::chrono::microseconds>(
-                                      std::chrono::system_clock::now().time_since_epoch())
-                                      .count());
+  uint64_t seq = o.has("first-seq") ? std::strtoull(o.get("first-seq").c_str(), nullptr, 10)
+                                    : static_cast<uint64_t>(unix_us());
   sockaddr_in to{};
   if (!to_addr(o.get("host", "127.0.0.1"), port, to))
     return usage_error("udp-heartbeat", "--host must be an IPv4 address");

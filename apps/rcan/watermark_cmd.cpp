@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <iostream>
 
+#include "base/clock.h"
 #include "cli.h"
 #include "net_common.h"
 #include "rcan/crypto/watermark.h"
@@ -40,7 +41,7 @@ int compute_or_verify(const Args& args, bool verify) {
     return usage_error(verb, verify ? "give exactly one TOKEN" : "unexpected argument");
   std::string ts = o.get("timestamp");
   if (ts == "now") {
-    ts = watermark::format_timestamp(std::chrono::system_clock::now());
+    ts = watermark::format_timestamp(wall_now());
     std::fprintf(stderr, "timestamp: %s\n", ts.c_str());
   }
   auto key = watermark::load_key(o.get("key-file"));

@@ -58,7 +58,7 @@ void Daemon::safety_estop(const std::string& reason) {
 }
 
 Status Daemon::start(const DaemonOptions& options) {
-  const auto started = std::chrono::steady_clock::now();
+  const auto started = steady_now();
   Status s = load_configuration(options);
   for (auto step : {&Daemon::open_identity, &Daemon::open_audit_log, &Daemon::join_registry,
                     &Daemon::start_safety_core, &Daemon::start_node, &Daemon::start_transports}) {
@@ -70,7 +70,7 @@ Status Daemon::start(const DaemonOptions& options) {
     return s;
   }
   const double startup_ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - started).count();
+      std::chrono::duration<double, std::milli>(steady_now() - started).count();
   log(LogLevel::kInfo, "listening",
       json::Object{{"url", info_.url},
                    {"ruri", cfg_.ruri},

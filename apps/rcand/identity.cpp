@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 
+#include "base/clock.h"
 #include "rcan/audit/env.h"
 #include "rcan/audit/secret.h"
 #include "rcan/crypto/ed25519.h"
@@ -87,9 +88,7 @@ Status ensure_issuer_and_token(const LocalIdentity& id, const std::string& ruri,
   if (!verify.ok()) return verify.error();
   trust.add(id.issuer, *verify);
   token_created = false;
-  const int64_t now = std::chrono::duration_cast<std::chrono::seconds>(
-                          std::chrono::system_clock::now().time_since_epoch())
-                          .count();
+  const int64_t now = unix_seconds();
   if (fs::exists(id.owner_token_file) && !owner_token_expired(id.owner_token_file, now))
     return Status::Ok();
   // First run, or the last owner token has expired (or is no JWT): a fresh one, with its own

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "base/clock.h"
 #include "config/config.h"
 #include "identity.h"
 #include "rcan/audit/env.h"
@@ -163,7 +164,7 @@ std::string yaml_quote(const std::string& s) {
 
 std::string template_yaml(const InitOptions& o, const std::string& ruri,
                           const std::string& yaml_path) {
-  std::time_t t = std::time(nullptr);
+  std::time_t t = static_cast<std::time_t>(unix_seconds());
   char date[32];
   std::strftime(date, sizeof date, "%Y-%m-%d", std::gmtime(&t));
   std::string y;

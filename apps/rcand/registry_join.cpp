@@ -2,6 +2,7 @@
 
 #include <chrono>
 
+#include "base/clock.h"
 #include "base/http_client.h"
 #include "base/log.h"
 #include "base/state_file.h"
@@ -197,9 +198,7 @@ bool RegistryLink::refresh(const std::string& rrn) {
   const std::string body = json::dump(json::Value(std::move(fields)));
   // Signed with the identity key the registration proved (the registry refuses a robot's
   // unsigned update once it holds its keys).
-  const int64_t ts = std::chrono::duration_cast<std::chrono::milliseconds>(
-                         std::chrono::system_clock::now().time_since_epoch())
-                         .count();
+  const int64_t ts = unix_ms();
   auto sig = registry::sign_update(keys_, registry::update_message(rrn, ts, body));
   if (!sig.ok()) {
     log(LogLevel::kWarn, "registry_refresh_failed", json::Object{{"error", sig.error().message}});

@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <cstring>
 
+#include "base/clock.h"
 #include "base/log.h"
 
 namespace rcan::rcand {
@@ -57,18 +58,18 @@ void SystemdNotifier::start_watchdog(std::function<uint64_t()> loop_count,
         // for max(2 s, half the watchdog period).
         const auto stall = std::max<std::chrono::microseconds>(period, std::chrono::seconds(2));
         uint64_t last = loop_count();
-        auto last_turn = std::chrono::steady_clock::now();
+        auto last_turn = steady_now();
         (void)notify("WATCHDOG=1");
         for (;;) {
           {
             MutexLock lock(mu_);
-            auto until = std::chrono::steady_clock::now() + period;
+            auto until = steady_now() + period;
             while (!stop_)
               if (cv_.wait_until(mu_, until) == std::cv_status::timeout) break;
             if (stop_) return;
           }
           const uint64_t now = loop_count();
-          const auto t = std::chrono::steady_clock::now();
+          const auto t = steady_now();
           if (now != last) last_turn = t;
           if (now == last && t - last_turn >= stall) {
             // A hung node. Latch an ESTOP (it may block on the hang: its own thread) and let

@@ -1,22 +1,12 @@
 #include "base/clock.h"
 
-#include <chrono>
-
 namespace rcan {
 namespace {
 
 class SystemClock final : public Clock {
  public:
-  int64_t wall_ms() const override {
-    return std::chrono::duration_cast<std::chrono::milliseconds>(
-               std::chrono::system_clock::now().time_since_epoch())
-        .count();
-  }
-  int64_t mono_ms() const override {
-    return std::chrono::duration_cast<std::chrono::milliseconds>(
-               std::chrono::steady_clock::now().time_since_epoch())
-        .count();
-  }
+  int64_t wall_ms() const override { return unix_ms(); }
+  int64_t mono_ms() const override { return steady_ms(); }
 };
 
 }  // namespace

@@ -11,20 +11,35 @@
 
 namespace rcan {
 
-// The steady clock in microseconds: the clock of received_mono_us and answered_mono_us and of
-// the node's stage timers, which subtract them from one another across transport and node.
-inline int64_t steady_us() {
-  return std::chrono::duration_cast<std::chrono::microseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
+// Every read of the process's clocks goes through here or through an injected Clock (below),
+// so that one place says which clock a duration or a timestamp comes from. Header-only: the
+// library and the CLI use these free functions without linking rcan_base.
+
+// The steady clock: deadlines, condition-variable waits and intervals; it never jumps when the
+// wall clock is stepped.
+inline std::chrono::steady_clock::time_point steady_now() {
+  return std::chrono::steady_clock::now();
+}
+// The wall clock: timestamps other parties read (messages, tokens, records, gRPC deadlines).
+inline std::chrono::system_clock::time_point wall_now() { return std::chrono::system_clock::now(); }
+
+template <class Unit, class TimePoint>
+int64_t count_since_epoch(TimePoint t) {
+  return std::chrono::duration_cast<Unit>(t.time_since_epoch()).count();
 }
 
+// The steady clock in milliseconds (a monotonic counter with no meaning across processes).
+inline int64_t steady_ms() { return count_since_epoch<std::chrono::milliseconds>(steady_now()); }
+// The steady clock in microseconds: the clock of received_mono_us and answered_mono_us and of
+// the node's stage timers, which subtract them from one another across transport and node.
+inline int64_t steady_us() { return count_since_epoch<std::chrono::microseconds>(steady_now()); }
 // The steady clock in nanoseconds (latency measurements).
-inline int64_t steady_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
+inline int64_t steady_ns() { return count_since_epoch<std::chrono::nanoseconds>(steady_now()); }
+
+// Unix time: seconds (JWT iat/exp), milliseconds (message and record timestamps), microseconds.
+inline int64_t unix_seconds() { return count_since_epoch<std::chrono::seconds>(wall_now()); }
+inline int64_t unix_ms() { return count_since_epoch<std::chrono::milliseconds>(wall_now()); }
+inline int64_t unix_us() { return count_since_epoch<std::chrono::microseconds>(wall_now()); }
 
 class Clock {
  public:

@@ -4,16 +4,11 @@
 #include <cctype>
 #include <cstdlib>
 
+#include "base/strings.h"
 #include "rcan/errors.h"
 
 namespace rcan {
 namespace {
-
-std::string lower(std::string_view s) {
-  std::string out(s);
-  for (auto& c : out) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return out;
-}
 
 using K = ActionKind;
 using C = Capability;
@@ -96,7 +91,7 @@ const ActionTable& ActionTable::builtin() {
 
 const ActionSpec* ActionTable::find(std::string_view name) const {
   if (name.empty() || name.size() > 128) return nullptr;
-  std::string n = lower(name);
+  std::string n = ascii_lower(name);
   for (const auto& e : entries_) {
     if (e.name == n) return &e;
     for (const auto& s : e.synonyms)
@@ -106,8 +101,8 @@ const ActionSpec* ActionTable::find(std::string_view name) const {
 }
 
 Status ActionTable::add(ActionSpec spec) {
-  spec.name = lower(spec.name);
-  for (auto& s : spec.synonyms) s = lower(s);
+  spec.name = ascii_lower(spec.name);
+  for (auto& s : spec.synonyms) s = ascii_lower(s);
   std::vector<std::string> names = spec.synonyms;
   names.push_back(spec.name);
   for (const auto& n : names) {

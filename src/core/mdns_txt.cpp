@@ -2,15 +2,16 @@
 
 #include <cctype>
 
+#include "base/strings.h"
+
 namespace rcan {
 
 std::map<std::string, std::string> parse_txt(const std::vector<std::string>& items) {
   std::map<std::string, std::string> out;
   for (const auto& item : items) {
     size_t eq = item.find('=');
-    std::string key = item.substr(0, eq);
+    std::string key = ascii_lower(item.substr(0, eq));
     if (key.empty()) continue;
-    for (auto& c : key) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
     std::string value = eq == std::string::npos ? std::string() : item.substr(eq + 1);
     out.emplace(std::move(key), std::move(value));  // first wins
   }

@@ -3,6 +3,7 @@
 #include <cctype>
 #include <string>
 
+#include "base/strings.h"
 #include "rcan/ruri.h"
 
 namespace rcan::registry {
@@ -22,9 +23,7 @@ std::string slugify(std::string_view s) {
 }
 
 std::optional<std::string> normalize_rrn(std::string_view s) {
-  std::string up(s);
-  for (char& c : up) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
-  auto r = parse_rrn(up);
+  auto r = parse_rrn(ascii_upper(s));
   if (!r.ok()) return std::nullopt;
   return r->str();
 }

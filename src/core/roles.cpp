@@ -4,6 +4,8 @@
 #include <array>
 #include <cctype>
 
+#include "base/strings.h"
+
 namespace rcan {
 namespace {
 
@@ -30,12 +32,6 @@ constexpr std::array<std::array<A, 5>, kCapabilityCount> kMatrix{{
     {A::kNone, A::kNone, A::kNone, A::kNone, A::kFull},         // model deployment
     {A::kNone, A::kNone, A::kConditional, A::kFull, A::kFull},  // hardware diagnostics
 }};
-
-std::string lower(std::string_view s) {
-  std::string out(s);
-  for (auto& c : out) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return out;
-}
 
 }  // namespace
 
@@ -72,7 +68,7 @@ std::string_view role_claim_name(Role r) {
 }
 
 std::optional<Role> role_from_name(std::string_view name) {
-  std::string n = lower(name);
+  std::string n = ascii_lower(name);
   if (n == "guest") return Role::kGuest;
   if (n == "user") return Role::kUser;
   if (n == "leasee") return Role::kLeasee;

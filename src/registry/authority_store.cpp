@@ -2,6 +2,7 @@
 // Store::query(): portable SQL with $n placeholders, values bound as text.
 #include <string>
 
+#include "base/strings.h"
 #include "registry/store.h"
 #include "registry/store_internal.h"
 
@@ -120,7 +121,7 @@ Result<int64_t> Store::add_grant(const Grant& g) {
   auto rows = query(
       "INSERT INTO authority_grants (principal, rrn, fleet, role, scope, max_ttl_s, created_by, "
       "created_at) VALUES ($1, $2, $3, $4, $5, $6, $7, $8) RETURNING id",
-      {t(g.principal), t(detail::upper(g.rrn)), t(g.fleet), t(g.role), t(g.scope), n(g.max_ttl_s),
+      {t(g.principal), t(ascii_upper(g.rrn)), t(g.fleet), t(g.role), t(g.scope), n(g.max_ttl_s),
        t(g.created_by), t(g.created_at)});
   if (!rows) return rows.error();
   if (rows->empty()) return detail::db_error("add_grant", "no id");

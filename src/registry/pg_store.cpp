@@ -10,6 +10,7 @@
 #include <mutex>
 #include <unordered_map>
 
+#include "base/strings.h"
 #include "registry/store.h"
 #include "registry/store_internal.h"
 
@@ -348,7 +349,7 @@ class PgStore final : public Store {
   Result<Registered> register_robot(const NewRobot& r) override;
   Result<std::optional<Robot>> get_robot(std::string_view rrn) override {
     return one_robot("SELECT " ROBOT_COLUMNS " FROM robots WHERE rrn = $1 AND NOT deleted",
-                     params(detail::upper(rrn)));
+                     params(ascii_upper(rrn)));
   }
   Result<std::optional<Robot>> find_robot_by_uri(std::string_view uri) override {
     return one_robot(
@@ -366,12 +367,12 @@ class PgStore final : public Store {
         "verification_tier = coalesce($7, verification_tier), updated_at = $8 "
         "WHERE rrn = $9 AND NOT deleted RETURNING " ROBOT_COLUMNS,
         params(u.description, u.contact_email, u.metadata_json, u.endpoints_json, u.ed25519_pub,
-               u.mldsa65_pub, u.verification_tier, u.now, detail::upper(rrn)));
+               u.mldsa65_pub, u.verification_tier, u.now, ascii_upper(rrn)));
   }
   Result<bool> delete_robot(std::string_view rrn, std::string_view now) override {
     return changed(
         "UPDATE robots SET deleted = true, updated_at = $1 WHERE rrn = $2 AND NOT deleted",
-        params(now, detail::upper(rrn)));
+        params(now, ascii_upper(rrn)));
   }
   Result<std::vector<Robot>> robots_changed_since(std::string_view since, int limit) override {
     auto rows = run("SELECT " ROBOT_COLUMNS
@@ -394,10 +395,10 @@ class PgStore final : public Store {
             "endpoints_json = excluded.endpoints_json, owner_key_id = excluded.owner_key_id, "
             "registered_at = excluded.registered_at, updated_at = excluded.updated_at, "
             "deleted = excluded.deleted, synced = true",
-            params(detail::upper(r.rrn), r.manufacturer, r.model, r.version, r.device_id,
-                   r.rcan_uri, r.verification_tier, r.description, r.contact_email, r.source,
-                   r.metadata_json, r.ed25519_pub, r.mldsa65_pub, r.endpoints_json, r.owner_key_id,
-                   r.registered_at, r.updated_at, r.deleted));
+            params(ascii_upper(r.rrn), r.manufacturer, r.model, r.version, r.device_id, r.rcan_uri,
+                   r.verification_tier, r.description, r.contact_email, r.source, r.metadata_json,
+                   r.ed25519_pub, r.mldsa65_pub, r.endpoints_json, r.owner_key_id, r.registered_at,
+                   r.updated_at, r.deleted));
     if (!rows) return rows.error();
     return Status::Ok();
   }
@@ -434,14 +435,14 @@ class PgStore final : public Store {
     return changed(
         "INSERT INTO delegations (prefix, operator_name, node_url, node_pubkey, contact, "
         "delegated_at, expires_at) VALUES ($1, $2, $3, $4, $5, $6, $7) ON CONFLICT DO NOTHING",
-        params(detail::upper(d.prefix), d.operator_name, d.node_url, d.node_pubkey, d.contact,
+        params(ascii_upper(d.prefix), d.operator_name, d.node_url, d.node_pubkey, d.contact,
                d.delegated_at, d.expires_at));
   }
   Result<std::optional<Delegation>> get_delegation(std::string_view prefix) override {
     auto v = delegations(
         "SELECT prefix, operator_name, node_url, node_pubkey, contact, delegated_at, expires_at "
         "FROM delegations WHERE prefix = $1",
-        params(detail::upper(prefix)));
+        params(ascii_upper(prefix)));
     if (!v) return v.error();
     if (v->empty()) return std::optional<Delegation>();
     return std::optional<Delegation>(std::move(v->front()));
@@ -576,7 +577,7 @@ class PgStore final : public Store {
 };
 
 Result<Registered> PgStore::register_robot(const NewRobot& r) {
-  const std::string prefix = opts_.rrn_prefix.empty() ? "" : detail::upper(opts_.rrn_prefix) + "-";
+  const std::string prefix = opts_.rrn_prefix.empty() ? "" : ascii_upper(opts_.rrn_prefix) + "-";
   const std::string uri = detail::robot_uri(r);
   // Insert with a fresh number unless any unique constraint objects (the live robot with these
   // slugs exists, or a synced robot holds that RRN); then return the live robot. Nothing live

@@ -13,6 +13,8 @@
 #include <thread>
 #include <unordered_map>
 
+#include "base/clock.h"
+#include "base/strings.h"
 #include "registry/store.h"
 #include "registry/store_internal.h"
 
@@ -243,11 +245,11 @@ class SqliteStore final : public Store {
   // Two processes opening a fresh file at once can see SQLITE_BUSY without the busy handler
   // (the switch to WAL, the first WAL recovery): every step is idempotent, so it is retried.
   Status init() {
-    auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    auto deadline = steady_now() + std::chrono::seconds(10);
     for (;;) {
       busy_ = false;
       Status s = init_once();
-      if (s.ok() || !busy_ || std::chrono::steady_clock::now() > deadline) return s;
+      if (s.ok() || !busy_ || steady_now() > deadline) return s;
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
     }
   }
@@ -278,7 +280,7 @@ class SqliteStore final : public Store {
   Result<Registered> register_robot(const NewRobot& r) override;
   Result<std::optional<Robot>> get_robot(std::string_view rrn) override {
     return one_robot("SELECT " ROBOT_COLUMNS " FROM robots WHERE rrn = ? AND deleted = 0",
-                     detail::upper(rrn));
+                     ascii_upper(rrn));
   }
   Result<std::optional<Robot>> find_robot_by_uri(std::string_view uri) override {
     return one_robot(
@@ -299,7 +301,7 @@ class SqliteStore final : public Store {
     if (!st) return st.error();
     Stmt q(*st);
     q.bind_all(u.description, u.contact_email, u.metadata_json, u.endpoints_json, u.ed25519_pub,
-               u.mldsa65_pub, u.verification_tier, u.now, detail::upper(rrn));
+               u.mldsa65_pub, u.verification_tier, u.now, ascii_upper(rrn));
     int rc = q.step();
     if (rc == SQLITE_DONE) return std::optional<Robot>();
     if (rc != SQLITE_ROW) return error("update_robot");
@@ -309,7 +311,7 @@ class SqliteStore final : public Store {
   }
   Result<bool> delete_robot(std::string_view rrn, std::string_view now) override {
     return changed("UPDATE robots SET deleted = 1, updated_at = ? WHERE rrn = ? AND deleted = 0",
-                   now, detail::upper(rrn));
+                   now, ascii_upper(rrn));
   }
   Result<std::vector<Robot>> robots_changed_since(std::string_view since, int limit) override {
     std::lock_guard lock(mu_);
@@ -337,7 +339,7 @@ class SqliteStore final : public Store {
         "endpoints_json = excluded.endpoints_json, owner_key_id = excluded.owner_key_id, "
         "registered_at = excluded.registered_at, updated_at = excluded.updated_at, "
         "deleted = excluded.deleted, synced = 1",
-        detail::upper(r.rrn), r.manufacturer, r.model, r.version, r.device_id, r.rcan_uri,
+        ascii_upper(r.rrn), r.manufacturer, r.model, r.version, r.device_id, r.rcan_uri,
         r.verification_tier, r.description, r.contact_email, r.source, r.metadata_json,
         r.ed25519_pub, r.mldsa65_pub, r.endpoints_json, r.owner_key_id, r.registered_at,
         r.updated_at, r.deleted);
@@ -375,14 +377,14 @@ class SqliteStore final : public Store {
     return changed(
         "INSERT INTO delegations (prefix, operator_name, node_url, node_pubkey, contact, "
         "delegated_at, expires_at) VALUES (?, ?, ?, ?, ?, ?, ?) ON CONFLICT DO NOTHING",
-        detail::upper(d.prefix), d.operator_name, d.node_url, d.node_pubkey, d.contact,
+        ascii_upper(d.prefix), d.operator_name, d.node_url, d.node_pubkey, d.contact,
         d.delegated_at, d.expires_at);
   }
   Result<std::optional<Delegation>> get_delegation(std::string_view prefix) override {
     auto v = delegations(
         "SELECT prefix, operator_name, node_url, node_pubkey, contact, delegated_at, expires_at "
         "FROM delegations WHERE prefix = ?",
-        detail::upper(prefix));
+        ascii_upper(prefix));
     if (!v) return v.error();
     if (v->empty()) return std::optional<Delegation>();
     return std::optional<Delegation>(std::move(v->front()));

@@ -3,6 +3,7 @@
 
 #include <cstdio>
 
+#include "base/strings.h"
 #include "registry/store_internal.h"
 
 namespace rcan::registry {
@@ -12,27 +13,13 @@ std::string format_rrn(std::string_view prefix, int64_t n) {
   char digits[32];
   std::snprintf(digits, sizeof digits, "%012lld", static_cast<long long>(n));
   std::string out = "RRN-";
-  if (!prefix.empty()) out += upper(prefix) + "-";
+  if (!prefix.empty()) out += ascii_upper(prefix) + "-";
   return out + digits;
-}
-
-std::string upper(std::string_view s) {
-  std::string out(s);
-  for (char& c : out)
-    if (c >= 'a' && c <= 'z') c = static_cast<char>(c - 'a' + 'A');
-  return out;
-}
-
-std::string lower(std::string_view s) {
-  std::string out(s);
-  for (char& c : out)
-    if (c >= 'A' && c <= 'Z') c = static_cast<char>(c - 'A' + 'a');
-  return out;
 }
 
 std::string like_contains(std::string_view q) {
   std::string out = "%";
-  for (char c : lower(q)) {
+  for (char c : ascii_lower(q)) {
     if (c == '%' || c == '_' || c == '\\') out += '\\';
     out += c;
   }

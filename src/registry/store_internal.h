@@ -11,9 +11,6 @@ namespace rcan::registry::detail {
 
 // "RRN-" + 12 zero-padded digits, or "RRN-<PREFIX>-" + 12 digits when `prefix` is set.
 std::string format_rrn(std::string_view prefix, int64_t n);
-// ASCII upper/lower case (RRNs are stored upper-case; `q` is compared lower-case).
-std::string upper(std::string_view s);
-std::string lower(std::string_view s);
 // A LIKE pattern matching `q` as a literal substring, lower-cased, with '\' as the escape
 // character (… LIKE ? ESCAPE '\').
 std::string like_contains(std::string_view q);

@@ -33,6 +33,8 @@
 #include <utility>
 #include <vector>
 
+#include "base/clock.h"
+#include "base/strings.h"
 #include "rcan/errors.h"
 #include "rcan/json.h"
 #include "transport/beast.h"
@@ -82,9 +84,7 @@ inline TransportError shutting_down_error() {
 
 // The JSON error body for `err` (the project's single error body, rcan/errors.h).
 inline std::string error_json(const TransportError& err) {
-  const auto now = std::chrono::duration_cast<std::chrono::milliseconds>(
-                       std::chrono::system_clock::now().time_since_epoch())
-                       .count();
+  const auto now = unix_ms();
   Error e(err.code, std::string(err.message), {}, std::string(err.reason));
   return json::dump(error_body(e, {}, static_cast<int64_t>(now)));
 }
@@ -201,21 +201,12 @@ inline std::optional<TransportError> split_target(
   return std::nullopt;
 }
 
-inline std::string ascii_lower(std::string_view s) {
-  std::string out(s);
-  for (char& c : out)
-    if (c >= 'A' && c <= 'Z') c = static_cast<char>(c - 'A' + 'a');
-  return out;
-}
-
 // True when the comma-separated header value contains `token` (case-insensitive).
 inline bool has_token(std::string_view value, std::string_view token) {
   while (!value.empty()) {
     const size_t comma = value.find(',');
-    std::string_view part = value.substr(0, comma);
+    const std::string_view part = trim(value.substr(0, comma), " \t");
     value = comma == std::string_view::npos ? std::string_view() : value.substr(comma + 1);
-    while (!part.empty() && (part.front() == ' ' || part.front() == '\t')) part.remove_prefix(1);
-    while (!part.empty() && (part.back() == ' ' || part.back() == '\t')) part.remove_suffix(1);
     if (part.size() != token.size()) continue;
     bool eq = true;
     for (size_t i = 0; i < part.size() && eq; ++i) {

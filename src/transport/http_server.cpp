@@ -78,7 +78,7 @@ using TlsStream = beast::ssl_stream<beast::tcp_stream>;
 inline std::string http_date() {
   thread_local std::time_t cached_t = -1;
   thread_local std::string cached;
-  const std::time_t t = std::time(nullptr);
+  const std::time_t t = static_cast<std::time_t>(unix_seconds());
   if (t != cached_t) {
     std::tm tm{};
     gmtime_r(&t, &tm);
@@ -684,7 +684,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
       }
     }
     const bool timed_out = disarm_read_deadline();
-    const int64_t received_us = rcan::steady_us();
+    const int64_t received_us = steady_us();
     if (ec) {
       std::optional<TransportError> err =
           timed_out ? std::optional<TransportError>(read_timeout_error()) : classify_read_error(ec);
@@ -756,8 +756,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     const int status = response_->status;
     if (response_->authenticated) authenticated_ = true;
     if (response_->answered_mono_us > 0)
-      srv_.http.answer_waited(
-          std::max<int64_t>(0, rcan::steady_us() - response_->answered_mono_us));
+      srv_.http.answer_waited(std::max<int64_t>(0, steady_us() - response_->answered_mono_us));
     const std::string wire = response_bytes(std::move(*response_), version, head, keep_alive);
     response_.reset();
     lowest().expires_after(Ms(opt_.read_timeout_ms));
@@ -1313,7 +1312,7 @@ void HttpServer::Impl::stop(int drain_ms) {
   bool threads_ended;
   {
     MutexLock lock(mu);
-    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(3);
+    const auto until = steady_now() + std::chrono::seconds(3);
     while (running_threads != 0) {
       if (cv.wait_until(mu, until) == std::cv_status::timeout) break;
     }

@@ -17,6 +17,7 @@
 #include <string_view>
 #include <thread>
 
+#include "base/clock.h"
 #include "rcan/encoding.h"
 #include "rcan/hash.h"
 
@@ -107,17 +108,13 @@ extern "C" int mallctl(const char*, void*, size_t*, void*, size_t) __attribute__
 namespace {
 
 // The network thread allocates without jemalloc's per-thread cache. A fleet ESTOP is handled on
-// this thread; with the cache (which takes objects from the arena in batches and hands them back
-// later) a robot's first ESTOP took about 40 page faults and each of the next ones 6-7, writing
-// pages never touched before; without it, 21-22 and then 2-6 (bench/fleet_bench, 1,000 light
-// members, together with the JSON and decoding savings of the same change: the first ESTOP
-// after a start 12-16 % less CPU, later ones about the same). Every other message that comes in
-// over MQTT (a command on the robot's own topic, a fleet broadcast, swarm traffic) is handled
-// here too, and each allocation now takes a lock of its arena's bins: over HTTP a command costs
-// a quarter more CPU without a cache (bench/load_bench), which is why the HTTP threads keep
-// theirs; a broadcast `status` over MQTT about a tenth more (362-407 -> 404-445 us per robot,
-// bench/fleet_bench, 200 robots). (A jemalloc built with a symbol prefix exports je_mallctl:
-// then this does nothing.)
+// this thread, and the cache (which takes objects from the arena in batches and hands them back
+// later) makes the first ESTOP after a start write pages never touched before: without it, that
+// ESTOP takes about half the page faults. The price is a lock of the arena's bins on each
+// allocation of every message handled here (a broadcast `status` costs about a tenth more CPU),
+// which is why the HTTP threads, where commands are the steady load, keep their cache;
+// bench/fleet_bench and bench/load_bench measure both sides. (A jemalloc built with a symbol
+// prefix exports je_mallctl: then this does nothing.)
 void no_thread_cache() {
   if (mallctl == nullptr) return;
   bool enabled = false;
@@ -357,7 +354,7 @@ void MqttClient::retry_refused() {
 }
 
 bool MqttClient::wait_subscribed(int timeout_ms) {
-  auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  auto deadline = steady_now() + std::chrono::milliseconds(timeout_ms);
   MutexLock lk(mu_);
   while (!(ready_connects_ > 0 && connected_.load() && sub_pending_.empty())) {
     if (cv_.wait_until(mu_, deadline) == std::cv_status::timeout)
@@ -462,7 +459,7 @@ void MqttClient::run() {
       delay_ms =
           std::min<int64_t>(int64_t{opts_.reconnect_min_s} << round, opts_.reconnect_max_s) * 1000;
     }
-    auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(delay_ms);
+    auto deadline = steady_now() + std::chrono::milliseconds(delay_ms);
     MutexLock lk(mu_);
     while (!stopped_.load() && cv_.wait_until(mu_, deadline) != std::cv_status::timeout) {
     }
@@ -522,7 +519,7 @@ Status MqttClient::publish_confirmed(const std::string& topic, const std::string
   int rc = mosquitto_publish(impl_->m, &mid, topic.c_str(), static_cast<int>(payload.size()),
                              payload.data(), qos, retain);
   if (rc == MOSQ_ERR_SUCCESS) impl_->wake();
-  auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  auto deadline = steady_now() + std::chrono::milliseconds(timeout_ms);
   MutexLock lk(mu_);
   if (rc == MOSQ_ERR_SUCCESS) {
     while (acked_.count(mid) == 0 && drops_ == drops &&
@@ -549,9 +546,9 @@ Status MqttClient::publish_confirmed(const std::string& topic, const std::string
 }
 
 bool MqttClient::flush(int timeout_ms) {
-  auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  auto deadline = steady_now() + std::chrono::milliseconds(timeout_ms);
   while (inflight_.load() > 0) {
-    if (std::chrono::steady_clock::now() >= deadline || !connected_.load()) return false;
+    if (steady_now() >= deadline || !connected_.load()) return false;
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
   }
   return true;

@@ -16,6 +16,7 @@
 #include <algorithm>
 #include <chrono>
 
+#include "base/clock.h"
 #include "base/log.h"
 
 extern char** environ;
@@ -28,11 +29,7 @@ constexpr int64_t kRedundantStopMs = 250;    // a stop with nothing moved since:
 constexpr int64_t kBackoffResetMs = 10'000;  // healthy this long: the back-off starts over
 constexpr int64_t kMaxPollMs = 100;
 
-int64_t now_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
+int64_t now_ms() { return steady_ms(); }
 
 std::string errno_text(int e) {
   char buf[128];
@@ -113,11 +110,9 @@ Status ProcessDriver::start() {
     pthread_setname_np(pthread_self(), "driver-io");
     io_loop();
   });
-  const auto deadline =
-      std::chrono::steady_clock::now() + std::chrono::milliseconds(opts_.startup_timeout_ms);
+  const auto deadline = steady_now() + std::chrono::milliseconds(opts_.startup_timeout_ms);
   MutexLock lock(rmu_);
-  while (!ready_.load(std::memory_order_acquire) && faults_ == 0 &&
-         std::chrono::steady_clock::now() < deadline)
+  while (!ready_.load(std::memory_order_acquire) && faults_ == 0 && steady_now() < deadline)
     ready_cv_.wait_until(rmu_, deadline);
   if (!ready_.load(std::memory_order_acquire))
     log(LogLevel::kWarn, "driver_process_not_ready", json::Object{{"fault", fault_}});

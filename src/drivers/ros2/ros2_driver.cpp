@@ -5,16 +5,13 @@
 #include <cmath>
 #include <numbers>
 
+#include "base/clock.h"
 #include "drivers/ros2/ros2_convert.h"
 
 namespace rcan::drivers::ros2 {
 namespace {
 
-int64_t now_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
+int64_t now_ns() { return steady_ns(); }
 
 constexpr double kRestEps = 1e-3;  // m/s, rad/s: below this the base counts as stopped
 constexpr int kTakeBatch = 8;      // samples per dds_take

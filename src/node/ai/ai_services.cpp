@@ -9,6 +9,7 @@
 
 #include "base/http_client.h"
 #include "base/log.h"
+#include "base/strings.h"
 #include "node/ai/brain_layers.h"
 #include "node/pipeline/pipeline.h"
 #include "node/services/node_services.h"
@@ -18,13 +19,8 @@
 namespace rcan::node {
 namespace {
 
-std::string lower(std::string s) {
-  for (auto& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return s;
-}
-
 bool is_stream_channel(const std::string& n) {
-  std::string l = lower(n);
+  std::string l = ascii_lower(n);
   return l == "ws" || l == "websocket" || l == "stream" || l == "app";
 }
 
@@ -218,7 +214,7 @@ const config::HitlGate* AiServices::hitl_gate_for(const std::string& action) con
   // synonym holds the action it names. A gate naming no known action matches that name only.
   auto canonical = [&](const std::string& name) {
     const ActionSpec* s = svc_.actions.find(name);
-    return s ? s->name : lower(name);
+    return s ? s->name : ascii_lower(name);
   };
   std::string a = canonical(action);
   for (const auto& g : opts_.hitl_gates) {

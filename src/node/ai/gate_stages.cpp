@@ -4,6 +4,7 @@
 
 #include <chrono>
 
+#include "base/clock.h"
 #include "node/ai/ai_services.h"
 #include "node/ai/brain_layers.h"
 #include "node/services/node_services.h"
@@ -145,7 +146,7 @@ class WatermarkStage final : public Stage {
       return Result::kContinue;
     }
     std::string thought_id = m.ai->thought_id.value_or(m.message_id);
-    std::string ts = watermark::format_timestamp(std::chrono::system_clock::now());
+    std::string ts = watermark::format_timestamp(wall_now());
     std::string token = svc_.ai->watermark(thought_id, ts);
     m.payload.set("watermark_token", token);
     ctx->watermark_token = token;

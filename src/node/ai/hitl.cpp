@@ -4,6 +4,7 @@
 #include <cctype>
 #include <cstdio>
 
+#include "base/strings.h"
 #include "rcan/errors.h"
 #include "rcan/message.h"
 
@@ -26,11 +27,6 @@ std::vector<std::string> strings_of(const json::Value* v) {
     for (const auto& e : v->as_array())
       if (e.is_string()) out.push_back(e.as_string());
   return out;
-}
-
-std::string lower(std::string s) {
-  for (auto& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return s;
 }
 
 }  // namespace
@@ -213,7 +209,7 @@ Result<AuthorizeRequest> parse_authorize(const json::Value& body) {
   const json::Value* d = p.get("decision");
   if (!d || !d->is_string())
     return schema("payload.decision", "decision is required (approve or deny)", "missing_field");
-  std::string dec = lower(d->as_string());
+  std::string dec = ascii_lower(d->as_string());
   if (dec == "approve" || dec == "approved")
     r.approve = true;
   else if (dec == "deny" || dec == "denied" || dec == "reject" || dec == "rejected")

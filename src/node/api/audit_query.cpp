@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <vector>
 
+#include "base/strings.h"
 #include "rcan/errors.h"
 
 namespace rcan::node {
@@ -26,12 +27,6 @@ bool parse_u64(std::string_view s, uint64_t& out) {
   return true;
 }
 
-std::string lower(std::string_view s) {
-  std::string out(s);
-  for (char& c : out) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return out;
-}
-
 // Case-insensitive substring; `needle` is already lower case.
 bool contains_folded(std::string_view hay, const std::string& needle) {
   if (needle.empty()) return true;
@@ -44,13 +39,7 @@ bool contains_folded(std::string_view hay, const std::string& needle) {
 
 std::vector<std::string> split_commas(std::string_view s) {
   std::vector<std::string> out;
-  size_t i = 0;
-  while (i <= s.size()) {
-    size_t j = s.find(',', i);
-    if (j == std::string_view::npos) j = s.size();
-    if (j > i) out.emplace_back(s.substr(i, j - i));
-    i = j + 1;
-  }
+  for (std::string_view field : split(s, ',', /*keep_empty=*/false)) out.emplace_back(field);
   return out;
 }
 
@@ -59,8 +48,8 @@ struct Matcher {
   explicit Matcher(const AuditQuery& q)
       : q_(q),
         events_(split_commas(q.event)),
-        principal_(lower(q.principal)),
-        text_(lower(q.text)) {}
+        principal_(ascii_lower(q.principal)),
+        text_(ascii_lower(q.text)) {}
   // Cheap test on the raw line, before parsing it.
   bool line_may_match(std::string_view line) const { return contains_folded(line, text_); }
   bool matches(const json::Value& v) const {

@@ -11,6 +11,7 @@
 #include <set>
 #include <sstream>
 
+#include "base/clock.h"
 #include "base/log.h"
 #include "base/thread_annotations.h"
 #include "node/api/node.h"
@@ -505,8 +506,7 @@ void GrpcServer::stop(int drain_ms) {
     MutexLock l(link->mu);
     if (link->r) link->r->end(grpc::Status(grpc::StatusCode::UNAVAILABLE, "node shutting down"));
   }
-  im.server->Shutdown(std::chrono::system_clock::now() +
-                      std::chrono::milliseconds(std::max(0, drain_ms)));
+  im.server->Shutdown(wall_now() + std::chrono::milliseconds(std::max(0, drain_ms)));
   im.server->Wait();
   log(LogLevel::kInfo, "grpc.stopped", json::Object{});
 }

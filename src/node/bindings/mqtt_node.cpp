@@ -10,6 +10,7 @@
 
 #include "base/clock.h"
 #include "base/log.h"
+#include "base/strings.h"
 #include "config/config.h"
 #include "node/api/node.h"
 #include "node/fleet/swarm.h"
@@ -21,11 +22,6 @@
 namespace rcan::node {
 
 namespace {
-
-std::string upper(std::string s) {
-  for (auto& c : s) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
-  return s;
-}
 
 const json::Value* field(const json::Value& v, const char* key) {
   return v.is_object() ? v.get(key) : nullptr;
@@ -39,13 +35,13 @@ std::string str_field(const json::Value& v, const char* key) {
 // Only a retained ESTOP stands on the fleet's estop topic; a retained RESUME or anything else
 // is history and never acts on a robot that subscribes later.
 bool is_estop_message(const json::Value& body) {
-  std::string type = upper(str_field(body, "type"));
-  if (type.empty()) type = upper(str_field(body, "message_type"));
+  std::string type = ascii_upper(str_field(body, "type"));
+  if (type.empty()) type = ascii_upper(str_field(body, "message_type"));
   if (type != "SAFETY") return false;
   const json::Value* p = field(body, "payload");
   if (p == nullptr || !p->is_object()) return true;
   for (const char* k : {"safety_event", "action", "cmd", "command"}) {
-    std::string w = upper(str_field(*p, k));
+    std::string w = ascii_upper(str_field(*p, k));
     if (!w.empty()) return w == "ESTOP" || w == "E_STOP" || w == "EMERGENCY_STOP";
   }
   return true;
@@ -400,8 +396,8 @@ void MqttNode::on_message(const transport::MqttMessage& msg) {
 void MqttNode::submit(json::Value body, const std::string& route, const std::string& reply_topic,
                       const std::string& fleet_id, const std::string& fleet_mode,
                       bool standing_estop, int qos) {
-  const bool is_command = upper(str_field(body, "type")) == "COMMAND" ||
-                          upper(str_field(body, "type")) == "FLEET_COMMAND" ||
+  const bool is_command = ascii_upper(str_field(body, "type")) == "COMMAND" ||
+                          ascii_upper(str_field(body, "type")) == "FLEET_COMMAND" ||
                           field(body, "cmd") != nullptr;
   Ingress in;
   in.body = std::move(body);  // a fleet message with an ML-DSA signature is some 8 KiB

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 
+#include "base/clock.h"
 #include "base/http_client.h"
 
 namespace rcan::node {
@@ -82,8 +83,7 @@ void PartitionMonitor::start(std::function<int64_t()> wall_now,
     for (;;) {
       probe_once();
       MutexLock lock(run_mu_);
-      const auto until =
-          std::chrono::steady_clock::now() + std::chrono::milliseconds(opts_.poll_interval_ms);
+      const auto until = steady_now() + std::chrono::milliseconds(opts_.poll_interval_ms);
       while (running_) {
         if (run_cv_.wait_until(run_mu_, until) == std::cv_status::timeout) break;
       }

@@ -5,6 +5,7 @@
 
 #include <chrono>
 
+#include "base/clock.h"
 #include "base/log.h"
 #include "base/thread_annotations.h"
 #include "node/discovery/avahi_dl.h"
@@ -230,18 +231,18 @@ void MdnsAdvertiser::start() {
   im->watcher = std::thread([im, connect] {
     pthread_setname_np(pthread_self(), "mdns-watch");
     ReleasableMutexLock lock(im->mu);
-    auto next_try = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+    auto next_try = steady_now() + std::chrono::seconds(5);
     while (!im->stopping) {
-      const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(1);
+      const auto until = steady_now() + std::chrono::seconds(1);
       while (!im->stopping && !im->poked) {
         if (im->cv.wait_until(im->mu, until) == std::cv_status::timeout) break;
       }
       if (im->stopping) break;
       im->poked = false;
       lock.unlock();
-      if (std::chrono::steady_clock::now() >= next_try) {
+      if (steady_now() >= next_try) {
         connect(false);
-        next_try = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+        next_try = steady_now() + std::chrono::seconds(5);
       }
       if (!im->poll) {
         lock.lock();

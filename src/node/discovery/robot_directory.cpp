@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 
+#include "base/clock.h"
 #include "base/log.h"
 
 namespace rcan::node {
@@ -107,8 +108,8 @@ void RobotDirectory::loop() {
                   json::Object{{"url", urls_[i]}, {"error", fresh[i].error}});
       states_[i] = std::move(fresh[i]);
     }
-    const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(cfg_.poll_ms);
-    while (!quit_ && std::chrono::steady_clock::now() < until) cv_.wait_until(mu_, until);
+    const auto until = steady_now() + std::chrono::milliseconds(cfg_.poll_ms);
+    while (!quit_ && steady_now() < until) cv_.wait_until(mu_, until);
     if (quit_) return;
   }
 }

@@ -5,19 +5,13 @@
 #include <cctype>
 
 #include "base/clock.h"
+#include "base/strings.h"
 #include "node/pipeline/stages.h"
 #include "node/services/node_services.h"
 #include "rcan/errors.h"
 
 namespace rcan::node {
-namespace {
-
-std::string upper(std::string s) {
-  for (auto& c : s) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
-  return s;
-}
-
-}  // namespace
+namespace {}  // namespace
 
 // The SAFETY event a message asks for, if any: a SAFETY message's safety_event / action /
 // cmd, or a COMMAND whose action is a stop word. An ESTOP request is honoured in any form.
@@ -27,13 +21,13 @@ SafetyAction safety_action_of(const Message& m) {
     for (const char* k : {"safety_event", "action", "cmd", "command"}) {
       const json::Value* v = m.payload.find(k);
       if (v && v->is_string()) {
-        word = upper(v->as_string());
+        word = ascii_upper(v->as_string());
         break;
       }
     }
     if (word.empty()) word = "ESTOP";  // a SAFETY message that says nothing more stops the robot
   } else if (m.type == MessageType::kCommand) {
-    word = upper(m.action());
+    word = ascii_upper(m.action());
   } else {
     return SafetyAction::kNone;
   }

@@ -6,6 +6,8 @@
 #include <cstdio>
 #include <numbers>
 
+#include "base/strings.h"
+
 namespace rcan::node {
 namespace {
 
@@ -230,12 +232,6 @@ RobotState SimRobot::state() const {
 
 namespace {
 
-std::string lower(std::string_view s) {
-  std::string out(s);
-  for (char& c : out) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return out;
-}
-
 bool has(const std::string& q, std::string_view word) { return q.find(word) != std::string::npos; }
 
 std::string fmt(const char* f, double a) {
@@ -288,7 +284,7 @@ std::string arm_sentence(const RobotState& s) {
 }  // namespace
 
 std::string chat(std::string_view question, const RobotState& s, const ChatContext& ctx) {
-  const std::string q = lower(question);
+  const std::string q = ascii_lower(question);
   if (has(q, "where") || has(q, "position") || has(q, "pose") || has(q, "location"))
     return pose_sentence(s);
   if (has(q, "battery") || has(q, "charge") || has(q, "power")) return battery_sentence(s);

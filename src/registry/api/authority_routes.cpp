@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 
+#include "base/clock.h"
 #include "rcan/hash.h"
 #include "registry/api/authority_internal.h"
 
@@ -315,9 +316,7 @@ HttpResponse RegistryApi::Impl::revoke(const HttpRequest& req) {
   if (r.jti.empty() && r.sub.empty()) return bad_request("give jti or sub", "jti");
   if (r.jti.size() > 256 || r.sub.size() > 256) return bad_request("jti/sub: too long", "jti");
   if (!caller->is("admin")) {
-    const int64_t now_us = std::chrono::duration_cast<std::chrono::microseconds>(
-                               std::chrono::steady_clock::now().time_since_epoch())
-                               .count();
+    const int64_t now_us = steady_us();
     if (int64_t wait = revoke_by_key.take(caller->key.id, now_us); wait > 0) {
       HttpResponse limited = project_error(
           ErrorCode::kRateLimited,

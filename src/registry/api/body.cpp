@@ -2,6 +2,7 @@
 
 #include <cctype>
 
+#include "base/strings.h"
 #include "rcan/ruri.h"
 
 namespace rcan::registry::api {
@@ -221,7 +222,7 @@ Result<NodeRequest> parse_node_request(std::string_view body, bool allow_http) {
     if (!s.ok()) return s.error();
     if (*s) *f.out = **s;
   }
-  for (char& c : n.prefix) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+  n.prefix = ascii_upper(n.prefix);
   if (!valid_prefix(n.prefix))
     return invalid("prefix must be 2–8 uppercase alphanumeric characters (e.g. BD, ACME)", "prefix",
                    "INVALID_PREFIX");
@@ -244,8 +245,7 @@ Result<WebhookRequest> parse_webhook_request(std::string_view body, bool allow_h
   if (!url.ok()) return url.error();
   auto secret = opt_string(*o, "secret", kMaxWebhookSecret);
   if (!secret.ok()) return secret.error();
-  w.prefix = prefix->value_or("");
-  for (char& c : w.prefix) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+  w.prefix = ascii_upper(prefix->value_or(""));
   if (w.prefix != "RRN" && !valid_prefix(w.prefix))
     return invalid("node_prefix must be RRN or 2–8 uppercase alphanumeric characters",
                    "node_prefix", "INVALID_PREFIX");

@@ -101,9 +101,7 @@ HttpResponse ref_error(int status, std::string msg) {
 
 HttpResponse project_error(ErrorCode code, std::string msg, std::string field, std::string reason) {
   Error e(code, std::move(msg), std::move(field), std::move(reason));
-  int64_t ms = std::chrono::duration_cast<std::chrono::milliseconds>(
-                   std::chrono::system_clock::now().time_since_epoch())
-                   .count();
+  int64_t ms = unix_ms();
   json::Value body = error_body(e, "", ms);
   // The SDK clients show body.error: keep the message there too.
   body.as_object().set("error", e.message);
@@ -186,9 +184,7 @@ RegistryApi::Impl::Impl(Store& s, audit::AuditLog* a, ApiOptions opts)
 
 int64_t RegistryApi::Impl::now_ms() const {
   if (o.wall_ms) return o.wall_ms();
-  return std::chrono::duration_cast<std::chrono::milliseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
+  return unix_ms();
 }
 
 std::optional<Caller> RegistryApi::Impl::authenticate(const HttpRequest& req, HttpResponse& err) {

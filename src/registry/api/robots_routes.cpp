@@ -1,6 +1,7 @@
 // Robots: register, list, search, get, update, delete, and resolve.
 #include <charconv>
 
+#include "base/strings.h"
 #include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/mldsa65.h"
 #include "rcan/ruri.h"
@@ -20,11 +21,7 @@ int64_t int_param(const HttpRequest& req, std::string_view name, int64_t def) {
   return out;
 }
 
-std::string trimmed(std::string_view v) {
-  while (!v.empty() && v.front() == ' ') v.remove_prefix(1);
-  while (!v.empty() && v.back() == ' ') v.remove_suffix(1);
-  return std::string(v);
-}
+std::string trimmed(std::string_view v) { return std::string(trim(v, " ")); }
 
 json::Value parsed_or(const std::string& text, json::Value def) {
   auto v = json::parse(text);
@@ -387,9 +384,8 @@ HttpResponse RegistryApi::Impl::resolve(const HttpRequest& req, const std::strin
     return r;
   };
   if (!parsed) {
-    std::string up;
-    for (char c : raw) up.push_back(static_cast<char>(std::toupper(static_cast<unsigned char>(c))));
-    return with(json_response(400, json::Object{{"error", "INVALID_RRN_FORMAT"}, {"rrn", up}}),
+    return with(json_response(
+                    400, json::Object{{"error", "INVALID_RRN_FORMAT"}, {"rrn", ascii_upper(raw)}}),
                 o.public_url, "");
   }
   const std::string& rrn = parsed->rrn;

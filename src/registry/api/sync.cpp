@@ -5,8 +5,10 @@
 #include <map>
 #include <set>
 
+#include "base/clock.h"
 #include "base/http_client.h"
 #include "base/log.h"
+#include "base/strings.h"
 #include "registry/api/body.h"
 #include "registry/api/registry_api.h"
 
@@ -117,9 +119,7 @@ Result<std::string> SyncPuller::judge(Robot& r, const std::string& node_host) {
   // What this registry says of the copy is its own judgement: the tier it gave (community until
   // an admin here says otherwise) and its own times, never the node's.
   r.verification_tier = *existing ? (*existing)->verification_tier : std::string("community");
-  const std::string now = iso_utc(std::chrono::duration_cast<std::chrono::milliseconds>(
-                                      std::chrono::system_clock::now().time_since_epoch())
-                                      .count());
+  const std::string now = iso_utc(unix_ms());
   r.registered_at = *existing ? (*existing)->registered_at : now;
   r.updated_at = now;
   return std::string();
@@ -149,8 +149,7 @@ void SyncPuller::pull(const std::string& url) {
   }
   auto node = parse_web_url(url);
   if (!node.ok()) return fail(node.error().message);
-  std::string node_host = node->host;
-  for (char& c : node_host) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  const std::string node_host = ascii_lower(node->host);
   // Records refused for what they claim (below), by reason: one log line a pull, not one each.
   std::map<std::string, std::vector<std::string>> refusals;
   struct LogRefusals {
