@@ -4,7 +4,7 @@
 file(GLOB RCAN_REGISTRY_API_SOURCES CONFIGURE_DEPENDS ${PROJECT_SOURCE_DIR}/src/registry/api/*.cpp)
 add_library(rcan_registry STATIC ${RCAN_REGISTRY_API_SOURCES})
 target_include_directories(rcan_registry PUBLIC ${PROJECT_SOURCE_DIR}/src)
-target_link_libraries(rcan_registry PUBLIC rcan_registry_store rcan_transport rcan_base rcan PRIVATE rcan_warnings)
+target_link_libraries(rcan_registry PUBLIC rcan_registry_store rcan_transport rcan_runtime rcan PRIVATE rcan_warnings)
 
 file(GLOB RCAN_REGISTRY_APP_SOURCES CONFIGURE_DEPENDS ${PROJECT_SOURCE_DIR}/apps/rcan-registry/*.cpp)
 add_executable(rcan-registry ${RCAN_REGISTRY_APP_SOURCES})

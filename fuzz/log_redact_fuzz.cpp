@@ -8,8 +8,8 @@
 #include <string>
 #include <string_view>
 
-#include "base/log.h"
 #include "rcan/json.h"
+#include "runtime/log.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace rcan;

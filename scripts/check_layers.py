@@ -16,11 +16,12 @@ import sys
 
 # Bottom to top. A file's layer is the entry with the longest prefix matching its path.
 LAYERS = [
+    ("base", ["include/rcan/base/", "src/base/"]),  # the bottom: clocks, locks, the file-system Env
     ("core", ["include/rcan/json.h", "include/rcan/result.h", "include/rcan/", "src/core/"]),
     ("crypto", ["include/rcan/crypto/", "src/crypto/"]),
     ("audit", ["include/rcan/audit/", "src/audit/"]),
     ("client", ["include/rcan/client.h", "src/client/"]),
-    ("base", ["src/base/"]),
+    ("runtime", ["src/runtime/"]),  # log, state files, the data directory, outbound HTTP
     ("transport", ["src/transport/"]),
     ("config", ["src/config/"]),
     ("registry", ["src/registry/"]),
@@ -43,12 +44,12 @@ LAYERS = [
 # Layers that must not reach some lower layers even though they sit above them: the CLI is a
 # client of robots, not a robot (it links neither the node nor Boost.Beast).
 FORBIDDEN = {
-    "apps/rcan": {"base", "transport", "config"} | {n for n, _ in LAYERS if n.startswith("node/")},
-    "testing": {n for n, _ in LAYERS if n.startswith("node/")} | {"base", "transport", "config"},
+    "apps/rcan": {"runtime", "transport", "config"} | {n for n, _ in LAYERS if n.startswith("node/")},
+    "testing": {n for n, _ in LAYERS if n.startswith("node/")} | {"runtime", "transport", "config"},
 }
 # Only these files of the forbidden layers may be used by the CLI: the MQTT client (its own
 # library) and the configuration loader, which `rcan doctor` runs exactly as the node does
-# (rcan_config links rcan_base and the MQTT client, neither the node nor Boost.Beast).
+# (rcan_config links rcan_runtime and the MQTT client, neither the node nor Boost.Beast).
 CLI_ALLOWED = {"src/transport/mqtt_client.h", "src/config/config.h"}
 SCANNED = ("include/", "src/", "apps/")
 INCLUDE_RE = re.compile(r'^\s*#\s*include\s+"([^"]+)"')
@@ -153,8 +154,8 @@ def self_test():
         made.append(d)
         base = {
             "include/rcan/json.h": "",
-            "src/base/log.h": '#include "rcan/json.h"\n',
-            "src/transport/http_api.h": '#include "base/log.h"\n',
+            "src/runtime/log.h": '#include "rcan/json.h"\n',
+            "src/transport/http_api.h": '#include "runtime/log.h"\n',
             "src/node/pipeline/pipeline.h": '#include "transport/http_api.h"\n',
             "src/node/api/node.h": '#include "node/pipeline/pipeline.h"\n',
             "apps/rcan/main.cpp": '#include "rcan/json.h"\n',

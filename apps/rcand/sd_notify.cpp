@@ -10,7 +10,7 @@
 #include <cstdlib>
 #include <cstring>
 
-#include "base/log.h"
+#include "runtime/log.h"
 
 namespace rcan::rcand {
 

@@ -130,7 +130,7 @@ TEST(ThoughtFile, AnotherSenderCannotOverwriteAThoughtAndClearEmptiesTheFile) {
 
 TEST(ThoughtFile, AThoughtTheFileCannotTakeIsKeptInMemoryAndCounted) {
   test::TempDir dir;
-  audit::FaultInjectionEnv env(audit::Env::posix());
+  base::FaultInjectionEnv env(base::Env::posix());
   ThoughtLog log(10, dir.file("thoughts.jsonl"), &env);
   ASSERT_TRUE(log.open().ok());
   env.fail_after(1);

@@ -16,7 +16,7 @@
 #include <algorithm>
 #include <chrono>
 
-#include "base/log.h"
+#include "runtime/log.h"
 
 extern char** environ;
 

@@ -11,11 +11,11 @@
 #include <set>
 #include <sstream>
 
-#include "base/log.h"
 #include "base/thread_annotations.h"
 #include "node/api/node.h"
 #include "rcan.grpc.pb.h"
 #include "rcan/errors.h"
+#include "runtime/log.h"
 #include "transport/grpc_convert.h"
 #include "transport/http_api.h"
 

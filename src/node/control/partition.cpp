@@ -5,7 +5,7 @@
 #include <algorithm>
 #include <chrono>
 
-#include "base/http_client.h"
+#include "runtime/http_client.h"
 
 namespace rcan::node {
 

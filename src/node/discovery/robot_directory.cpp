@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <chrono>
 
-#include "base/log.h"
+#include "runtime/log.h"
 
 namespace rcan::node {
 namespace {

@@ -5,10 +5,10 @@
 #include <map>
 #include <set>
 
-#include "base/http_client.h"
-#include "base/log.h"
 #include "registry/api/body.h"
 #include "registry/api/registry_api.h"
+#include "runtime/http_client.h"
+#include "runtime/log.h"
 
 namespace rcan::registry::api {
 namespace {

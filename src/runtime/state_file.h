@@ -5,15 +5,15 @@
 
 #include <string>
 
-#include "rcan/audit/env.h"
+#include "rcan/base/env.h"
 #include "rcan/json.h"
 #include "rcan/result.h"
 
 namespace rcan {
 
-// `v` as one line of JSON, through audit::Env::write_file_atomic of `env` (nullptr →
-// audit::Env::posix()). Errors: INTERNAL, naming the step, the file and errno.
-Status write_state_file(const std::string& path, const json::Value& v, audit::Env* env = nullptr);
+// `v` as one line of JSON, through base::Env::write_file_atomic of `env` (nullptr →
+// base::Env::posix()). Errors: INTERNAL, naming the step, the file and errno.
+Status write_state_file(const std::string& path, const json::Value& v, base::Env* env = nullptr);
 // NOT_FOUND when absent; SCHEMA_VALIDATION_FAILED when it does not parse.
 Result<json::Value> read_state_file(const std::string& path);
 

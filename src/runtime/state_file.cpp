@@ -1,4 +1,4 @@
-#include "base/state_file.h"
+#include "runtime/state_file.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -8,9 +8,9 @@
 
 namespace rcan {
 
-Status write_state_file(const std::string& path, const json::Value& v, audit::Env* env) {
-  if (!env) env = audit::Env::posix();
-  Status s = env->write_file_atomic(path, json::dump(v) + "\n");
+Status write_state_file(const std::string& path, const json::Value& v, base::Env* env) {
+  if (!env) env = base::Env::posix();
+  base::IoStatus s = env->write_file_atomic(path, json::dump(v) + "\n");
   if (!s.ok()) return Error(ErrorCode::kInternal, s.error().message);
   return Status::Ok();
 }

@@ -1,4 +1,4 @@
-#include "base/log.h"
+#include "runtime/log.h"
 
 #include <algorithm>
 #include <atomic>

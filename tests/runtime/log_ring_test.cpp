@@ -6,8 +6,8 @@
 #include <thread>
 #include <vector>
 
-#include "base/log.h"
 #include "rcan/json.h"
+#include "runtime/log.h"
 
 namespace rcan {
 namespace {
