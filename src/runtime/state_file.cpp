@@ -1,9 +1,5 @@
 #include "runtime/state_file.h"
 
-#include <fcntl.h>
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include "rcan/errors.h"
 
 namespace rcan {
@@ -15,16 +11,13 @@ Status write_state_file(const std::string& path, const json::Value& v, base::Env
   return Status::Ok();
 }
 
-Result<json::Value> read_state_file(const std::string& path) {
-  int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) return Error(ErrorCode::kNotFound, "no state file " + path);
-  std::string text;
-  char buf[8192];
-  ssize_t n;
-  while ((n = ::read(fd, buf, sizeof buf)) > 0 && text.size() < (4u << 20))
-    text.append(buf, static_cast<size_t>(n));
-  ::close(fd);
-  auto v = json::parse(text, {.max_depth = 32, .max_bytes = 4u << 20});
+Result<json::Value> read_state_file(const std::string& path, base::Env* env) {
+  constexpr size_t kMaxBytes = 4u << 20;
+  if (!env) env = base::Env::posix();
+  // One byte past the limit is enough to refuse a longer file without reading it whole.
+  auto text = env->read_range(path, 0, kMaxBytes + 1);
+  if (!text.ok()) return Error(ErrorCode::kNotFound, "no state file " + path);
+  auto v = json::parse(*text, {.max_depth = 32, .max_bytes = kMaxBytes});
   if (!v.ok() || !v->is_object())
     return Error(ErrorCode::kSchemaValidationFailed,
                  "state file " + path + " is not a JSON object");
