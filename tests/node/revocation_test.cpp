@@ -11,7 +11,7 @@
 #include <fstream>
 #include <string>
 
-#include "rcan/audit/env.h"
+#include "rcan/base/env.h"
 #include "rcan/errors.h"
 #include "rcan/json.h"
 #include "test_support.h"

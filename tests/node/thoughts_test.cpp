@@ -9,7 +9,7 @@
 #include <fstream>
 #include <string>
 
-#include "rcan/audit/env.h"
+#include "rcan/base/env.h"
 #include "test_support.h"
 #include "testing/fault_env.h"
 
