@@ -102,7 +102,6 @@
 #include <vector>
 
 #include "base/clock.h"
-#include "base/log.h"
 #include "node/api/node.h"
 #include "node/bindings/mqtt_node.h"
 #include "node/fleet/fleet.h"
@@ -119,6 +118,7 @@
 #include "rcan/errors.h"
 #include "rcan/json.h"
 #include "rcan/mqtt_topics.h"
+#include "runtime/log.h"
 #include "transport/mqtt_client.h"
 
 using namespace rcan;

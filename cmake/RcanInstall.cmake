@@ -1,5 +1,6 @@
 # librcan for other programs (docs/ARCHITECTURE.md): `cmake --install <tree> --component devel`
-# puts the public headers (include/rcan, without the client library's client.h), librcan.a,
+# puts the public headers (include/rcan, without the client library's client.h), librcan.a and
+# librcan_base.a,
 # the CMake package (find_package(rcan CONFIG): the imported target rcan::rcan, which brings
 # OpenSSL's libcrypto, threads and C++20) and rcan.pc (pkg-config) under the prefix.
 #
@@ -8,7 +9,8 @@
 include(CMakePackageConfigHelpers)
 
 set(RCAN_CMAKE_DIR ${CMAKE_INSTALL_LIBDIR}/cmake/rcan)
-install(TARGETS rcan EXPORT rcanTargets ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR} COMPONENT devel)
+# librcan_base.a is base (src/base: clocks, the file-system Env), which librcan stands on.
+install(TARGETS rcan rcan_base EXPORT rcanTargets ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR} COMPONENT devel)
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/include/rcan DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}
         COMPONENT devel FILES_MATCHING PATTERN "*.h" PATTERN "client.h" EXCLUDE)
 install(EXPORT rcanTargets NAMESPACE rcan:: DESTINATION ${RCAN_CMAKE_DIR} COMPONENT devel)

@@ -31,7 +31,7 @@ target_link_libraries(rcan_ros2_msgs PUBLIC CycloneDDS::ddsc)
 
 rcan_add_library(rcan_ros2 src/drivers/ros2 ros2_convert.cpp ros2_driver.cpp)
 target_include_directories(rcan_ros2 PUBLIC ${PROJECT_SOURCE_DIR}/src)
-target_link_libraries(rcan_ros2 PUBLIC rcan_node_safety rcan_config rcan_base rcan_ros2_msgs)
+target_link_libraries(rcan_ros2 PUBLIC rcan_node_safety rcan_config rcan_runtime rcan_ros2_msgs)
 
 # examples/ros2_sim_base: the simulated robot as a ROS 2 robot on DDS (docs/DRIVERS.md), for
 # watching the chain without hardware; the end-to-end test drives it through rcand.

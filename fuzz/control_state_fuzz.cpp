@@ -6,12 +6,12 @@
 #include <cstdlib>
 #include <string_view>
 
-#include "base/http_client.h"
 #include "node/control/consent.h"
 #include "node/control/ownership.h"
 #include "node/control/partition.h"
 #include "node/control/sessions.h"
 #include "rcan/json.h"
+#include "runtime/http_client.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   std::string_view text(reinterpret_cast<const char*>(data), size);

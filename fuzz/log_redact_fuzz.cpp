@@ -1,4 +1,4 @@
-// libFuzzer target: the log ring's URL redaction (base/log.h redact_urls()), which reads log
+// libFuzzer target: the log ring's URL redaction (runtime/log.h redact_urls()), which reads log
 // text that carries attacker-influenced strings (error messages, names). It must never crash;
 // its result is redacted already (a second pass changes nothing); and a JSON line stays JSON
 // (the ring's lines are spliced into GET /api/node/log's answer as they are).
@@ -8,8 +8,8 @@
 #include <string>
 #include <string_view>
 
-#include "base/log.h"
 #include "rcan/json.h"
+#include "runtime/log.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace rcan;

@@ -2,9 +2,10 @@
 """The lock rules of the node, its base, its transports, its drivers and the audit log, checked by
 Clang's thread-safety analysis (src/base/thread_annotations.h) in `make test`.
 
-Every .cpp under src/node/, src/base/, src/transport/, src/drivers/ and src/audit/ is compiled
-with clang++ (14 or later) -fsyntax-only -Wthread-safety -Werror=thread-safety, with the include
-paths and definitions the build uses (the release tree's compile_commands.json). A member GUARDED_BY a
+Every .cpp under src/node/, src/base/, src/runtime/, src/transport/, src/drivers/ and src/audit/
+is compiled with clang++ (14 or later) -fsyntax-only -Wthread-safety -Werror=thread-safety, with
+the include paths and definitions the build uses (the release tree's compile_commands.json). A
+member GUARDED_BY a
 mutex touched without it, a REQUIRES function called without the lock, an EXCLUDES function
 called with it or a lock left held on some path fails the check, with clang's diagnostic.
 
@@ -26,7 +27,7 @@ import sys
 import tempfile
 import time
 
-CHECKED = ("src/node/", "src/base/", "src/transport/", "src/drivers/", "src/audit/")
+CHECKED = ("src/node/", "src/base/", "src/runtime/", "src/transport/", "src/drivers/", "src/audit/")
 CHECK_FLAGS = ["-fsyntax-only", "-std=c++20", "-Wthread-safety", "-Werror=thread-safety"]
 # What is kept of the build's command line: where headers are and what is defined.
 KEPT_WITH_VALUE = {"-I", "-isystem", "-iquote", "-idirafter", "-D", "-U", "-include"}

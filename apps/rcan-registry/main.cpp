@@ -11,10 +11,10 @@
 #include <filesystem>
 #include <memory>
 
-#include "base/log.h"
 #include "rcan/audit/audit_log.h"
 #include "registry/api/registry_api.h"
 #include "registry/store.h"
+#include "runtime/log.h"
 #include "setup.h"
 #include "transport/http_server.h"
 

@@ -14,11 +14,11 @@
 #include <filesystem>
 #include <vector>
 
-#include "base/data_dir.h"
 #include "rcan/audit/secret.h"
 #include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/keys.h"
 #include "registry/api/address.h"
+#include "runtime/data_dir.h"
 
 namespace rcan::registry_app {
 namespace fs = std::filesystem;

@@ -5,7 +5,6 @@
 #include <filesystem>
 
 #include "base/clock.h"
-#include "base/log.h"
 #include "driver_factory.h"
 #include "node/ai/ai_services.h"
 #include "node/api/node.h"
@@ -21,6 +20,7 @@
 #include "rcan/hash.h"
 #include "registry_join.h"
 #include "registry_trust.h"
+#include "runtime/log.h"
 #include "settings.h"
 #include "transport/http_server.h"
 #include "transports.h"

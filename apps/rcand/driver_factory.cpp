@@ -2,9 +2,9 @@
 
 #include <numbers>
 
-#include "base/log.h"
 #include "drivers/process/process_driver.h"
 #include "drivers/ros2/ros2_driver.h"
+#include "runtime/log.h"
 
 namespace rcan::rcand {
 namespace {

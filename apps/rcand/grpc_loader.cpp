@@ -5,8 +5,8 @@
 
 #include <filesystem>
 
-#include "base/log.h"
 #include "rcan/errors.h"
+#include "runtime/log.h"
 
 namespace rcan::rcand {
 

@@ -8,8 +8,8 @@
 #include <filesystem>
 
 #include "base/clock.h"
-#include "rcan/audit/env.h"
 #include "rcan/audit/secret.h"
+#include "rcan/base/env.h"
 #include "rcan/crypto/ed25519.h"
 #include "rcan/encoding.h"
 #include "rcan/errors.h"
@@ -105,7 +105,7 @@ Status ensure_issuer_and_token(const LocalIdentity& id, const std::string& ruri,
   auto token = jwt::issue(claims, *signing);
   if (!token.ok()) return token.error();
   std::string text = *token + "\n";
-  if (Status s = audit::Env::posix()->write_file_atomic(id.owner_token_file, text); !s.ok())
+  if (base::IoStatus s = base::Env::posix()->write_file_atomic(id.owner_token_file, text); !s.ok())
     return Error(ErrorCode::kInternal,
                  "cannot write " + id.owner_token_file + ": " + s.error().message);
   token_created = true;

@@ -13,10 +13,10 @@
 #include <optional>
 #include <string>
 
-#include "base/log.h"
 #include "daemon.h"
 #include "rcan/json.h"
 #include "rcan/version.h"
+#include "runtime/log.h"
 #include "sd_notify.h"
 
 // Read by jemalloc, which rcand links (CMakeLists.txt), when it starts: a background thread

@@ -3,15 +3,15 @@
 #include <chrono>
 
 #include "base/clock.h"
-#include "base/http_client.h"
-#include "base/log.h"
-#include "base/state_file.h"
 #include "identity.h"
 #include "node/admission/registry_feed.h"
 #include "rcan/crypto/registry_proof.h"
 #include "rcan/encoding.h"
 #include "rcan/errors.h"
 #include "rcan/registry.h"
+#include "runtime/http_client.h"
+#include "runtime/log.h"
+#include "runtime/state_file.h"
 
 namespace rcan::rcand {
 namespace {

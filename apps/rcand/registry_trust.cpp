@@ -3,12 +3,12 @@
 #include <algorithm>
 #include <chrono>
 
-#include "base/http_client.h"
-#include "base/log.h"
-#include "base/state_file.h"
 #include "identity.h"
 #include "node/admission/registry_feed.h"
 #include "node/services/node_services.h"
+#include "runtime/http_client.h"
+#include "runtime/log.h"
+#include "runtime/state_file.h"
 
 namespace rcan::rcand {
 namespace {

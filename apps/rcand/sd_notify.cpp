@@ -11,7 +11,7 @@
 #include <cstring>
 
 #include "base/clock.h"
-#include "base/log.h"
+#include "runtime/log.h"
 
 namespace rcan::rcand {
 

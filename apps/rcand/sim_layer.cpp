@@ -9,8 +9,8 @@
 #include <cstring>
 #include <string>
 
-#include "base/log.h"
 #include "node/ai/brain_layers.h"
+#include "runtime/log.h"
 #include "transport/http_server.h"
 
 using namespace rcan;

@@ -8,6 +8,7 @@
 
 #include <chrono>
 
+#include "base/clock.h"
 #include "rcan/client.h"
 
 namespace rcan::client {
@@ -102,11 +103,10 @@ Result<std::vector<MdnsService>> browse_mdns(int timeout_ms) {
       avahi_service_browser_new(client, AVAHI_IF_UNSPEC, AVAHI_PROTO_INET, "_rcan._tcp", nullptr,
                                 static_cast<AvahiLookupFlags>(0), on_browse, &st);
   if (!browser) st.failure = avahi_strerror(avahi_client_errno(client));
-  auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  auto deadline = steady_now() + std::chrono::milliseconds(timeout_ms);
   while (browser && st.failure.empty()) {
-    auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
-                    deadline - std::chrono::steady_clock::now())
-                    .count();
+    auto left =
+        std::chrono::duration_cast<std::chrono::milliseconds>(deadline - steady_now()).count();
     if (left <= 0) break;
     // Done early once the daemon has said "all for now" and every resolution finished.
     if (st.all_for_now && st.outstanding == 0 && !st.found.empty()) break;

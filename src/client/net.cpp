@@ -16,6 +16,9 @@
 #include <chrono>
 #include <cstring>
 
+#include "base/clock.h"
+#include "base/strings.h"
+
 namespace rcan::client {
 
 // With the connection code: the exchange's errors name the endpoint, and this file (rcan_http)
@@ -29,17 +32,9 @@ std::string Endpoint::url() const {
 
 namespace rcan::client::net {
 
-int64_t mono_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
+int64_t mono_ms() { return steady_ms(); }
 
-int64_t wall_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
+int64_t wall_ms() { return unix_ms(); }
 
 namespace {
 
@@ -280,9 +275,7 @@ namespace {
 bool is_chunked(const wire::ParsedResponse& pr) {
   for (const auto& [k, v] : pr.headers) {
     if (k != "transfer-encoding") continue;
-    std::string low = v;
-    for (auto& c : low) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-    if (low.find("chunked") != std::string::npos) return true;
+    if (ascii_lower(v).find("chunked") != std::string::npos) return true;
   }
   return false;
 }
@@ -358,9 +351,7 @@ Result<RawResponse> http_exchange(const Endpoint& ep, const std::string& method,
   bool typed = false;  // a Content-Type among `headers` replaces the JSON default
   for (const auto& [k, v] : headers) {
     req += k + ": " + v + "\r\n";
-    std::string lower = k;
-    for (char& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-    typed = typed || lower == "content-type";
+    typed = typed || ascii_lower(k) == "content-type";
   }
   if (!body.empty() || method == "POST" || method == "PUT")
     req += std::string(typed ? "" : "Content-Type: application/json\r\n") +

@@ -1,5 +1,5 @@
 // Blocking TCP (+ TLS) connections: one HTTP/1.1 exchange, or a WebSocket. The client
-// library's transport, and also the node's outbound HTTP client (base/http_client.h), which
+// library's transport, and also the node's outbound HTTP client (runtime/http_client.h), which
 // words its own errors from ExchangeFailure. net.cpp and wire.cpp are their own small library
 // (rcan_http), so that the node links them without the client's mDNS browsing (Avahi);
 // ws_handshake is in ws_handshake.cpp, part of rcan_client.

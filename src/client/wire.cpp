@@ -5,16 +5,11 @@
 #include <cctype>
 #include <cstring>
 
+#include "base/strings.h"
 #include "rcan/encoding.h"
 
 namespace rcan::client::wire {
 namespace {
-
-std::string lower(std::string_view s) {
-  std::string o(s);
-  for (auto& c : o) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return o;
-}
 
 std::string_view trim(std::string_view s) {
   while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
@@ -143,7 +138,7 @@ Parse parse_response(std::string_view buf, bool eof, ParsedResponse& out, size_t
         error = "malformed header field";
         return Parse::kError;
       }
-      out.headers.emplace_back(lower(line.substr(0, colon)),
+      out.headers.emplace_back(ascii_lower(line.substr(0, colon)),
                                std::string(trim(line.substr(colon + 1))));
     }
     size_t body_start = head_end + 4;
@@ -155,7 +150,8 @@ Parse parse_response(std::string_view buf, bool eof, ParsedResponse& out, size_t
     bool have_length = false;
     uint64_t length = 0;
     for (const auto& [k, v] : out.headers) {
-      if (k == "transfer-encoding" && lower(v).find("chunked") != std::string::npos) chunked = true;
+      if (k == "transfer-encoding" && ascii_lower(v).find("chunked") != std::string::npos)
+        chunked = true;
       if (k == "content-length") {
         uint64_t n = 0;
         if (!parse_size(trim(v), 10, n) || (have_length && n != length)) {

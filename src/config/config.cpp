@@ -13,9 +13,9 @@
 #include <filesystem>
 #include <fstream>
 
-#include "base/data_dir.h"
 #include "config/config_internal.h"
 #include "rcan/hash.h"
+#include "runtime/data_dir.h"
 
 namespace rcan::config {
 

@@ -10,22 +10,15 @@
 
 #include <chrono>
 
+#include "base/clock.h"
+#include "base/strings.h"
 #include "crypto/jwt_internal.h"
 
 namespace rcan::jwt {
 
 using detail::auth_invalid;
 
-namespace {
-
-std::string lower(std::string_view s) {
-  std::string o(s);
-  for (char& c : o)
-    if (c >= 'A' && c <= 'Z') c = static_cast<char>(c - 'A' + 'a');
-  return o;
-}
-
-}  // namespace
+namespace {}  // namespace
 
 // ---------------------------------------------------------------------------------------
 // JwtVerifier
@@ -34,7 +27,8 @@ Result<Claims> JwtVerifier::verify(std::string_view token, int64_t now) const {
   auto d = decode(token, opts_.max_token_bytes);
   if (!d.ok()) return d.error();
   const std::string& alg_s = d->header.alg;
-  if (lower(alg_s) == "none") return auth_invalid("alg none is not accepted", "alg", "alg_none");
+  if (ascii_lower(alg_s) == "none")
+    return auth_invalid("alg none is not accepted", "alg", "alg_none");
   auto alg = alg_from_name(alg_s);
   if (!alg) return auth_invalid("unsupported alg \"" + alg_s + "\"", "alg", "bad_alg");
   if (d->header.raw.find("crit"))
@@ -70,10 +64,7 @@ Result<Claims> JwtVerifier::verify(std::string_view token, int64_t now) const {
 }
 
 Result<Claims> JwtVerifier::verify(std::string_view token) const {
-  auto now = std::chrono::duration_cast<std::chrono::seconds>(
-                 std::chrono::system_clock::now().time_since_epoch())
-                 .count();
-  return verify(token, static_cast<int64_t>(now));
+  return verify(token, unix_seconds());
 }
 
 }  // namespace rcan::jwt

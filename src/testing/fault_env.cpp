@@ -2,7 +2,7 @@
 
 #include <algorithm>
 
-namespace rcan::audit {
+namespace rcan::base {
 namespace {
 
 std::string parent_dir(const std::string& path) {
@@ -10,8 +10,8 @@ std::string parent_dir(const std::string& path) {
   return pos == std::string::npos ? std::string(".") : path.substr(0, pos);
 }
 
-Error injected(const std::string& what) {
-  return Error(ErrorCode::kAuditUnavailable, "injected fault: " + what);
+IoError injected(const std::string& what) {
+  return IoError{IoCode::kInjected, 0, "injected fault: " + what};
 }
 
 class FaultWritableFile final : public WritableFile {
@@ -19,8 +19,8 @@ class FaultWritableFile final : public WritableFile {
   FaultWritableFile(FaultInjectionEnv* env, std::string path, std::unique_ptr<WritableFile> base)
       : env_(env), path_(std::move(path)), base_(std::move(base)) {}
 
-  Status append(std::string_view data) override {
-    Status s = env_->before_mutation("append " + path_);
+  IoStatus append(std::string_view data) override {
+    IoStatus s = env_->before_mutation("append " + path_);
     if (!s.ok()) {
       // The operation that "kills" the process may leave half of its bytes behind.
       if (env_->torn_appends() && env_->is_failing_now() && data.size() > 1) {
@@ -33,14 +33,14 @@ class FaultWritableFile final : public WritableFile {
     if (s.ok()) env_->note_appended(path_, data.size());
     return s;
   }
-  Status sync() override {
-    Status s = env_->before_mutation("sync " + path_);
+  IoStatus sync() override {
+    IoStatus s = env_->before_mutation("sync " + path_);
     if (!s.ok()) return s;
     s = base_->sync();
     if (s.ok()) env_->note_synced(path_);
     return s;
   }
-  Status close() override { return base_->close(); }
+  IoStatus close() override { return base_->close(); }
 
  private:
   FaultInjectionEnv* env_;
@@ -87,7 +87,7 @@ size_t FaultInjectionEnv::held() const {
   return held_;
 }
 
-Status FaultInjectionEnv::before_mutation(const std::string& what) {
+IoStatus FaultInjectionEnv::before_mutation(const std::string& what) {
   std::unique_lock<std::mutex> l(mu_);
   if (hold_) {
     ++held_;
@@ -106,7 +106,7 @@ Status FaultInjectionEnv::before_mutation(const std::string& what) {
     ops_ = fail_at_;
     return injected(what);
   }
-  return Status::Ok();
+  return IoStatus::Ok();
 }
 
 void FaultInjectionEnv::note_appended(const std::string& path, uint64_t n) {
@@ -121,7 +121,7 @@ void FaultInjectionEnv::note_synced(const std::string& path) {
   rewrites_.erase(path);
 }
 
-Status FaultInjectionEnv::drop_unsynced(double keep_fraction) {
+IoStatus FaultInjectionEnv::drop_unsynced(double keep_fraction) {
   std::map<std::string, FileState> files;
   std::set<std::string> fresh;
   std::map<std::string, std::string> rewrites;
@@ -147,12 +147,12 @@ Status FaultInjectionEnv::drop_unsynced(double keep_fraction) {
         now->size(), static_cast<size_t>(static_cast<double>(now->size()) * keep_fraction));
     std::string out = now->substr(0, keep);
     if (before.size() > keep) out += before.substr(keep);
-    Status s = base_->write_file_synced(path, out);
+    IoStatus s = base_->write_file_synced(path, out);
     if (!s.ok()) return s;
   }
   for (const auto& path : fresh) {
     if (base_->exists(path)) {
-      Status s = base_->remove_file(path);
+      IoStatus s = base_->remove_file(path);
       if (!s.ok()) return s;
     }
     files.erase(path);
@@ -165,17 +165,18 @@ Status FaultInjectionEnv::drop_unsynced(double keep_fraction) {
     auto size = base_->file_size(path);
     if (!size.ok()) return size.error();
     if (*size > keep) {
-      Status s = base_->truncate_file(path, keep);
+      IoStatus s = base_->truncate_file(path, keep);
       if (!s.ok()) return s;
     }
   }
-  return Status::Ok();
+  return IoStatus::Ok();
 }
 
-Result<std::unique_ptr<WritableFile>> FaultInjectionEnv::open_appendable(const std::string& path) {
+IoResult<std::unique_ptr<WritableFile>> FaultInjectionEnv::open_appendable(
+    const std::string& path) {
   bool existed = base_->exists(path);
   if (!existed) {
-    Status s = before_mutation("create " + path);
+    IoStatus s = before_mutation("create " + path);
     if (!s.ok()) return s.error();
   }
   auto base = base_->open_appendable(path);
@@ -192,8 +193,8 @@ Result<std::unique_ptr<WritableFile>> FaultInjectionEnv::open_appendable(const s
   return std::unique_ptr<WritableFile>(new FaultWritableFile(this, path, std::move(*base)));
 }
 
-Result<std::unique_ptr<WritableFile>> FaultInjectionEnv::open_existing_at(const std::string& path,
-                                                                          uint64_t offset) {
+IoResult<std::unique_ptr<WritableFile>> FaultInjectionEnv::open_existing_at(const std::string& path,
+                                                                            uint64_t offset) {
   auto base = base_->open_existing_at(path, offset);  // first: a FIFO is refused, not read
   if (!base.ok()) return base.error();
   auto before = base_->read_file(path);
@@ -210,11 +211,11 @@ Result<std::unique_ptr<WritableFile>> FaultInjectionEnv::open_existing_at(const 
   return std::unique_ptr<WritableFile>(new FaultWritableFile(this, path, std::move(*base)));
 }
 
-Result<std::unique_ptr<WritableFile>> FaultInjectionEnv::open_writable_at(const std::string& path,
-                                                                          uint64_t offset) {
+IoResult<std::unique_ptr<WritableFile>> FaultInjectionEnv::open_writable_at(const std::string& path,
+                                                                            uint64_t offset) {
   bool existed = base_->exists(path);
   if (!existed) {
-    Status s = before_mutation("create " + path);
+    IoStatus s = before_mutation("create " + path);
     if (!s.ok()) return s.error();
   }
   auto base = base_->open_writable_at(path, offset);
@@ -228,9 +229,9 @@ Result<std::unique_ptr<WritableFile>> FaultInjectionEnv::open_writable_at(const 
   return std::unique_ptr<WritableFile>(new FaultWritableFile(this, path, std::move(*base)));
 }
 
-Status FaultInjectionEnv::write_zeros_synced(const std::string& path, uint64_t bytes) {
+IoStatus FaultInjectionEnv::write_zeros_synced(const std::string& path, uint64_t bytes) {
   bool existed = base_->exists(path);
-  Status s = before_mutation("preallocate " + path);
+  IoStatus s = before_mutation("preallocate " + path);
   if (!s.ok()) return s;
   s = base_->write_zeros_synced(path, bytes);
   if (s.ok()) {
@@ -242,24 +243,26 @@ Status FaultInjectionEnv::write_zeros_synced(const std::string& path, uint64_t b
   return s;
 }
 
-Result<std::string> FaultInjectionEnv::read_file(const std::string& path) {
+IoResult<std::string> FaultInjectionEnv::read_file(const std::string& path) {
+  if (fail_reads_.load()) return injected("read " + path);
   return base_->read_file(path);
 }
-Result<std::string> FaultInjectionEnv::read_range(const std::string& path, uint64_t offset,
-                                                  size_t n) {
+IoResult<std::string> FaultInjectionEnv::read_range(const std::string& path, uint64_t offset,
+                                                    size_t n) {
+  if (fail_reads_.load()) return injected("pread " + path);
   return base_->read_range(path, offset, n);
 }
-Result<uint64_t> FaultInjectionEnv::file_size(const std::string& path) {
+IoResult<uint64_t> FaultInjectionEnv::file_size(const std::string& path) {
   return base_->file_size(path);
 }
 bool FaultInjectionEnv::exists(const std::string& path) { return base_->exists(path); }
-Result<std::vector<std::string>> FaultInjectionEnv::children(const std::string& dir) {
+IoResult<std::vector<std::string>> FaultInjectionEnv::children(const std::string& dir) {
   return base_->children(dir);
 }
-Status FaultInjectionEnv::create_dir(const std::string& dir) { return base_->create_dir(dir); }
+IoStatus FaultInjectionEnv::create_dir(const std::string& dir) { return base_->create_dir(dir); }
 
-Status FaultInjectionEnv::sync_dir(const std::string& dir) {
-  Status s = before_mutation("sync_dir " + dir);
+IoStatus FaultInjectionEnv::sync_dir(const std::string& dir) {
+  IoStatus s = before_mutation("sync_dir " + dir);
   if (!s.ok()) return s;
   s = base_->sync_dir(dir);
   if (s.ok()) {
@@ -275,8 +278,8 @@ Status FaultInjectionEnv::sync_dir(const std::string& dir) {
   return s;
 }
 
-Status FaultInjectionEnv::remove_file(const std::string& path) {
-  Status s = before_mutation("remove " + path);
+IoStatus FaultInjectionEnv::remove_file(const std::string& path) {
+  IoStatus s = before_mutation("remove " + path);
   if (!s.ok()) return s;
   s = base_->remove_file(path);
   std::lock_guard<std::mutex> l(mu_);
@@ -286,8 +289,8 @@ Status FaultInjectionEnv::remove_file(const std::string& path) {
   return s;
 }
 
-Status FaultInjectionEnv::rename_file(const std::string& from, const std::string& to) {
-  Status s = before_mutation("rename " + from);
+IoStatus FaultInjectionEnv::rename_file(const std::string& from, const std::string& to) {
+  IoStatus s = before_mutation("rename " + from);
   if (!s.ok()) return s;
   s = base_->rename_file(from, to);
   if (s.ok()) {
@@ -306,8 +309,8 @@ Status FaultInjectionEnv::rename_file(const std::string& from, const std::string
   return s;
 }
 
-Status FaultInjectionEnv::truncate_file(const std::string& path, uint64_t size) {
-  Status s = before_mutation("truncate " + path);
+IoStatus FaultInjectionEnv::truncate_file(const std::string& path, uint64_t size) {
+  IoStatus s = before_mutation("truncate " + path);
   if (!s.ok()) return s;
   s = base_->truncate_file(path, size);
   if (s.ok()) {
@@ -321,19 +324,19 @@ Status FaultInjectionEnv::truncate_file(const std::string& path, uint64_t size) 
   return s;
 }
 
-Status FaultInjectionEnv::write_file_synced(const std::string& path, std::string_view data) {
+IoStatus FaultInjectionEnv::write_file_synced(const std::string& path, std::string_view data) {
   return synced_write(path, data, false);
 }
 
-Status FaultInjectionEnv::write_private_file_synced(const std::string& path,
-                                                    std::string_view data) {
+IoStatus FaultInjectionEnv::write_private_file_synced(const std::string& path,
+                                                      std::string_view data) {
   return synced_write(path, data, true);
 }
 
-Status FaultInjectionEnv::synced_write(const std::string& path, std::string_view data,
-                                       bool private_file) {
+IoStatus FaultInjectionEnv::synced_write(const std::string& path, std::string_view data,
+                                         bool private_file) {
   bool existed = base_->exists(path);
-  Status s = before_mutation("write " + path);
+  IoStatus s = before_mutation("write " + path);
   if (!s.ok()) return s;
   s = private_file ? base_->write_private_file_synced(path, data)
                    : base_->write_file_synced(path, data);
@@ -346,8 +349,10 @@ Status FaultInjectionEnv::synced_write(const std::string& path, std::string_view
   return s;
 }
 
-Result<int> FaultInjectionEnv::lock_file(const std::string& path) { return base_->lock_file(path); }
+IoResult<int> FaultInjectionEnv::lock_file(const std::string& path) {
+  return base_->lock_file(path);
+}
 void FaultInjectionEnv::unlock_file(int handle) { base_->unlock_file(handle); }
 int64_t FaultInjectionEnv::now_ms() { return base_->now_ms() + clock_offset_ms_.load(); }
 
-}  // namespace rcan::audit
+}  // namespace rcan::base

@@ -1,4 +1,4 @@
-// FaultInjectionEnv — an Env that fails on purpose (tests only; cf. LevelDB
+// FaultInjectionEnv — a base::Env that fails on purpose (tests only; cf. LevelDB
 // db/fault_injection_test.cc).
 //
 // It forwards to a base Env and remembers, per file written through it, how many bytes
@@ -9,6 +9,8 @@
 //     be torn: half of its bytes reach the file before it fails (set_torn_appends).
 //     Env::write_file_atomic is three of them (the temporary file's synced write, the
 //     rename, the directory sync), so each of its steps can be the one that fails.
+//   * fail_reads(true): every read (read_file, read_range) fails until fail_reads(false) —
+//     a file that is there but cannot be read (EIO); reads count as no operation above.
 //   * hold(true): every mutating operation waits until hold(false) — a disk that is slow or
 //     hung — before it goes on (or fails as above); held() counts the ones waiting.
 //   * drop_unsynced(): after the owner of the Env is gone, cuts every tracked file back
@@ -26,8 +28,9 @@
 #include <set>
 
 #include "rcan/audit/env.h"
+#include "rcan/base/env.h"
 
-namespace rcan::audit {
+namespace rcan::base {
 
 class FaultInjectionEnv : public Env {
  public:
@@ -39,39 +42,42 @@ class FaultInjectionEnv : public Env {
   void hold(bool on);
   size_t held() const;
   void set_torn_appends(bool torn) { torn_appends_ = torn; }
+  void fail_reads(bool on) { fail_reads_ = on; }
   bool failed() const;
   // Shifts now_ms() by `ms` (tests of age-based retention).
   void advance_clock(int64_t ms) { clock_offset_ms_ += ms; }
   uint64_t mutations() const;  // mutating operations seen so far
+  // This file system as the audit log sees it (AuditLog::Options::env).
+  audit::Env* audit() { return &audit_; }
   // Simulates the machine losing power; see above. Call with no writer running.
-  Status drop_unsynced(double keep_fraction = 0.0);
+  IoStatus drop_unsynced(double keep_fraction = 0.0);
 
-  Result<std::unique_ptr<WritableFile>> open_appendable(const std::string& path) override;
+  IoResult<std::unique_ptr<WritableFile>> open_appendable(const std::string& path) override;
   // A file rewritten in place: its contents at the open are what a crash before its next sync
   // goes back to (drop_unsynced keeps `keep_fraction` of the new bytes over them: a torn write).
-  Result<std::unique_ptr<WritableFile>> open_existing_at(const std::string& path,
-                                                         uint64_t offset) override;
-  Result<std::unique_ptr<WritableFile>> open_writable_at(const std::string& path,
-                                                         uint64_t offset) override;
-  Status write_zeros_synced(const std::string& path, uint64_t bytes) override;
-  Result<std::string> read_file(const std::string& path) override;
-  Result<std::string> read_range(const std::string& path, uint64_t offset, size_t n) override;
-  Result<uint64_t> file_size(const std::string& path) override;
+  IoResult<std::unique_ptr<WritableFile>> open_existing_at(const std::string& path,
+                                                           uint64_t offset) override;
+  IoResult<std::unique_ptr<WritableFile>> open_writable_at(const std::string& path,
+                                                           uint64_t offset) override;
+  IoStatus write_zeros_synced(const std::string& path, uint64_t bytes) override;
+  IoResult<std::string> read_file(const std::string& path) override;
+  IoResult<std::string> read_range(const std::string& path, uint64_t offset, size_t n) override;
+  IoResult<uint64_t> file_size(const std::string& path) override;
   bool exists(const std::string& path) override;
-  Result<std::vector<std::string>> children(const std::string& dir) override;
-  Status create_dir(const std::string& dir) override;
-  Status sync_dir(const std::string& dir) override;
-  Status remove_file(const std::string& path) override;
-  Status rename_file(const std::string& from, const std::string& to) override;
-  Status truncate_file(const std::string& path, uint64_t size) override;
-  Status write_file_synced(const std::string& path, std::string_view data) override;
-  Status write_private_file_synced(const std::string& path, std::string_view data) override;
-  Result<int> lock_file(const std::string& path) override;
+  IoResult<std::vector<std::string>> children(const std::string& dir) override;
+  IoStatus create_dir(const std::string& dir) override;
+  IoStatus sync_dir(const std::string& dir) override;
+  IoStatus remove_file(const std::string& path) override;
+  IoStatus rename_file(const std::string& from, const std::string& to) override;
+  IoStatus truncate_file(const std::string& path, uint64_t size) override;
+  IoStatus write_file_synced(const std::string& path, std::string_view data) override;
+  IoStatus write_private_file_synced(const std::string& path, std::string_view data) override;
+  IoResult<int> lock_file(const std::string& path) override;
   void unlock_file(int handle) override;
   int64_t now_ms() override;
 
   // Internal (used by the file wrapper).
-  Status before_mutation(const std::string& what);
+  IoStatus before_mutation(const std::string& what);
   void note_appended(const std::string& path, uint64_t n);
   void note_synced(const std::string& path);
   bool torn_appends() const { return torn_appends_; }
@@ -79,13 +85,14 @@ class FaultInjectionEnv : public Env {
 
  private:
   // write_file_synced and write_private_file_synced: one mutation, tracked as durable.
-  Status synced_write(const std::string& path, std::string_view data, bool private_file);
+  IoStatus synced_write(const std::string& path, std::string_view data, bool private_file);
 
   struct FileState {
     uint64_t size = 0;
     uint64_t durable = 0;
   };
   Env* base_;
+  audit::Env audit_{this};
   mutable std::mutex mu_;
   uint64_t ops_ = 0;
   uint64_t fail_at_ = 0;  // absolute op number; 0 = never
@@ -96,9 +103,10 @@ class FaultInjectionEnv : public Env {
   bool just_tripped_ = false;
   bool torn_appends_ = false;
   std::atomic<int64_t> clock_offset_ms_{0};
+  std::atomic<bool> fail_reads_{false};
   std::map<std::string, FileState> files_;
   std::set<std::string> new_files_;              // created, directory not yet synced
   std::map<std::string, std::string> rewrites_;  // rewritten in place, not yet synced: before
 };
 
-}  // namespace rcan::audit
+}  // namespace rcan::base

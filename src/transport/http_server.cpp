@@ -38,8 +38,8 @@
 #include <vector>
 
 #include "base/clock.h"
-#include "base/log.h"
 #include "base/thread_annotations.h"
+#include "runtime/log.h"
 #include "transport/beast.h"
 #include "transport/http_parse.h"
 

@@ -26,6 +26,7 @@ namespace rcan::audit {
 namespace {
 
 using namespace testutil;
+using base::FaultInjectionEnv;
 using rcan::test::TempDir;
 
 TEST(AuditConcurrency, ManyAppendersAndAnExporterMakeOneValidChain) {
@@ -159,9 +160,9 @@ TEST(AuditConcurrency, QuietAndBurstyAppendsAckInOrderAndReadBack) {
 // whose writer has work commits it on the writer, in order behind that work.
 TEST(AuditConcurrency, AnIdleLogCommitsOnTheAppendersThreadABusyOneOnTheWriters) {
   TempDir tmp;
-  FaultInjectionEnv env(Env::posix());
+  FaultInjectionEnv env(base::Env::posix());
   AuditOptions o = options();
-  o.env = &env;
+  o.env = env.audit();
   o.preallocate = false;
   auto opened = AuditLog::open(tmp.path() + "/log", o);
   ASSERT_TRUE(opened.ok()) << opened.error().message;

@@ -23,6 +23,7 @@ namespace rcan::audit {
 namespace {
 
 using namespace testutil;
+using base::FaultInjectionEnv;
 using rcan::test::TempDir;
 
 // The fault env models the disk (what was synced survives); the real fsyncs underneath
@@ -48,7 +49,7 @@ AuditOptions fault_options(Env* env, bool retention) {
 // Appends until the injected fault stops the log. Returns whether a fault happened.
 bool run_workload(const std::string& dir, FaultInjectionEnv& env, uint64_t fail_at, bool retention,
                   bool grouped, int n, std::vector<Acked>* acked) {
-  auto log = AuditLog::open(dir, fault_options(&env, retention));
+  auto log = AuditLog::open(dir, fault_options(env.audit(), retention));
   if (!log.ok()) return true;  // died during open
   env.fail_after(fail_at);
   int i = 0;
@@ -129,7 +130,7 @@ void crash_everywhere(bool retention, bool grouped, double keep_fraction, bool t
   for (uint64_t k = 1;; ++k) {
     TempDir tmp;
     std::string dir = tmp.path() + "/log";
-    FaultInjectionEnv env(Env::posix());
+    FaultInjectionEnv env(base::Env::posix());
     env.set_torn_appends(torn_appends);
     std::vector<Acked> acked;
     bool crashed = run_workload(dir, env, k, retention, grouped, 24, &acked);
@@ -149,9 +150,9 @@ void crash_everywhere(bool retention, bool grouped, double keep_fraction, bool t
 // refused at once (audit_queue_full), and every record it took is written once the disk moves.
 TEST(AuditFault, TheWriterQueueIsBoundedAndRefusesWhatItCannotHold) {
   TempDir tmp;
-  FaultInjectionEnv env(Env::posix());
+  FaultInjectionEnv env(base::Env::posix());
   AuditOptions o = options();
-  o.env = &env;
+  o.env = env.audit();
   o.preallocate = false;
   o.max_queued_records = 4;
   auto log = AuditLog::open(tmp.path() + "/log", o);
@@ -214,15 +215,15 @@ TEST(AuditFault, CrashInsideRecovery) {
       std::string dir = tmp.path() + "/log";
       std::vector<Acked> acked;
       {
-        FaultInjectionEnv env(Env::posix());
+        FaultInjectionEnv env(base::Env::posix());
         env.set_torn_appends(true);
         run_workload(dir, env, first, false, false, 24, &acked);
         ASSERT_TRUE(env.drop_unsynced(0.5).ok());
       }
       {
-        FaultInjectionEnv env(Env::posix());
+        FaultInjectionEnv env(base::Env::posix());
         env.fail_after(second);
-        auto log = AuditLog::open(dir, fault_options(&env, false));
+        auto log = AuditLog::open(dir, fault_options(env.audit(), false));
         if (log.ok()) (void)(*log)->append(entry(100));
         log = Error();  // drop it
         ASSERT_TRUE(env.drop_unsynced(0.5).ok());
@@ -237,8 +238,8 @@ TEST(AuditFault, CrashInsideRecovery) {
 
 TEST(AuditFault, DiskFailureFailsClosed) {
   TempDir tmp;
-  FaultInjectionEnv env(Env::posix());
-  AuditOptions o = fault_options(&env, false);
+  FaultInjectionEnv env(base::Env::posix());
+  AuditOptions o = fault_options(env.audit(), false);
   o.recovery_interval_ms = 0;  // no probe: failed until reopened
   auto log = AuditLog::open(tmp.path() + "/log", o);
   ASSERT_TRUE(log.ok());
@@ -265,9 +266,9 @@ void fail_then_recover(uint64_t fail_at, bool torn, bool pipelined) {
                (pipelined ? " pipelined" : ""));
   TempDir tmp;
   const std::string dir = tmp.path() + "/log";
-  FaultInjectionEnv env(Env::posix());
+  FaultInjectionEnv env(base::Env::posix());
   env.set_torn_appends(torn);
-  AuditOptions o = fault_options(&env, false);
+  AuditOptions o = fault_options(env.audit(), false);
   o.background_index = pipelined;
   o.pipelined_sync = pipelined;
   o.recovery_interval_ms = 20;
@@ -331,7 +332,7 @@ void fail_then_recover(uint64_t fail_at, bool torn, bool pipelined) {
   VerifyReport drep = verify_dir(dir, kSecret);
   EXPECT_TRUE(drep.ok) << drep.why << " at seq " << drep.first_bad_seq;
   // And it reopens cleanly.
-  auto again = AuditLog::open(dir, fault_options(&env, false));
+  auto again = AuditLog::open(dir, fault_options(env.audit(), false));
   ASSERT_TRUE(again.ok()) << again.error().message;
 }
 
@@ -341,8 +342,8 @@ void fail_then_recover(uint64_t fail_at, bool torn, bool pipelined) {
 TEST(AuditFault, AFailedCommitOnTheAppendersThreadIsRecoveredByTheWriter) {
   TempDir tmp;
   const std::string dir = tmp.path() + "/log";
-  FaultInjectionEnv env(Env::posix());
-  AuditOptions o = fault_options(&env, false);
+  FaultInjectionEnv env(base::Env::posix());
+  AuditOptions o = fault_options(env.audit(), false);
   o.recovery_interval_ms = 20;
   auto log = AuditLog::open(dir, o);
   ASSERT_TRUE(log.ok());

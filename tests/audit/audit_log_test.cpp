@@ -24,6 +24,7 @@ namespace rcan::audit {
 namespace {
 
 using namespace testutil;
+using base::FaultInjectionEnv;
 using rcan::test::TempDir;
 
 std::unique_ptr<AuditLog> open_log(const std::string& dir, AuditOptions o = options()) {
@@ -586,9 +587,9 @@ TEST(AuditStorage, RetentionKeepsWhatRemainsVerifiable) {
 
 TEST(AuditStorage, AgeRetention) {
   TempDir tmp;
-  FaultInjectionEnv env(Env::posix());
+  FaultInjectionEnv env(base::Env::posix());
   AuditOptions o = options(2048);
-  o.env = &env;
+  o.env = env.audit();
   o.retention_max_age_ms = 1000;
   auto log = open_log(tmp.path() + "/log", o);
   for (int i = 1; i <= 100; ++i) {

@@ -12,7 +12,6 @@
 #include <sstream>
 #include <thread>
 
-#include "base/http_client.h"
 #include "config/config.h"
 #include "node/control/consent.h"
 #include "node/control/control_machine.h"
@@ -21,6 +20,7 @@
 #include "node/services/refusal_ledger.h"
 #include "node_fixture.h"
 #include "rcan/errors.h"
+#include "runtime/http_client.h"
 
 namespace rcan {
 namespace {

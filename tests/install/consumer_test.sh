@@ -18,10 +18,11 @@ for f in include/rcan/json.h include/rcan/result.h include/rcan/crypto/ed25519.h
          include/rcan/audit/audit_log.h; do
   [ -f "$prefix/$f" ] || { echo "missing: $f"; fail=1; }
 done
-for pattern in 'librcan.a' 'rcanConfig.cmake' 'rcanConfigVersion.cmake' 'rcanTargets.cmake' 'rcan.pc'; do
+for pattern in 'librcan.a' 'librcan_base.a' 'rcanConfig.cmake' 'rcanConfigVersion.cmake' 'rcanTargets.cmake' 'rcan.pc'; do
   [ -n "$(find "$prefix" -name "$pattern")" ] || { echo "missing: $pattern"; fail=1; }
 done
 others=$(cd "$prefix" && find . -type f ! -path './include/rcan/*' ! -name 'librcan.a' \
+         ! -name 'librcan_base.a' \
          ! -name 'rcan*.cmake' ! -name 'rcan.pc' | sort)
 if [ -n "$others" ]; then
   echo "installed besides librcan:"; echo "$others"; fail=1

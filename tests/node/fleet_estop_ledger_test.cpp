@@ -6,8 +6,8 @@
 
 #include <fstream>
 
-#include "base/state_file.h"
 #include "node/fleet/estop_ledger.h"
+#include "runtime/state_file.h"
 #include "test_support.h"
 
 namespace rcan::node {

@@ -1,6 +1,6 @@
 // The node's small durable files — the state files (leases, ownership, consent, credentials),
 // the HiTL pending file and the safety core's ESTOP latch — are all written with
-// audit::Env::write_file_atomic. Here: what it does on the real file system (mode, no
+// base::Env::write_file_atomic. Here: what it does on the real file system (mode, no
 // temporary left behind, no symbolic link followed), and, through FaultInjectionEnv, that a
 // write failing at any step leaves the previous file whole, and what the safety core does when
 // its latch cannot be persisted — and that an ESTOP is acknowledged only once its latch file
@@ -20,7 +20,6 @@
 #include <vector>
 
 #include "base/clock.h"
-#include "base/state_file.h"
 #include "in_process_node.h"
 #include "node/ai/hitl.h"
 #include "node/safety/actuation_safety.h"
@@ -28,16 +27,17 @@
 #include "node/safety/sim_robot.h"
 #include "node/services/node_services.h"
 #include "node/services/stop_backlog.h"
-#include "rcan/audit/env.h"
+#include "rcan/base/env.h"
 #include "rcan/errors.h"
+#include "runtime/state_file.h"
 #include "test_support.h"
 #include "testing/fault_env.h"
 
 namespace rcan {
 namespace {
 
-using audit::Env;
-using audit::FaultInjectionEnv;
+using base::Env;
+using base::FaultInjectionEnv;
 using test::TempDir;
 
 unsigned mode_of(const std::string& path) {
@@ -79,7 +79,7 @@ TEST(AtomicWrite, ReplacesTheFileWithMode0600AndNoTemporaryLeft) {
   { std::ofstream(f) << "old"; }
   ASSERT_EQ(::chmod(f.c_str(), 0644), 0);
   const mode_t old_mask = ::umask(0);  // the mode must not depend on the umask
-  Status s = Env::posix()->write_file_atomic(f, "new contents\n");
+  base::IoStatus s = Env::posix()->write_file_atomic(f, "new contents\n");
   ::umask(old_mask);
   ASSERT_TRUE(s.ok()) << s.error().message;
   EXPECT_EQ(test::read_file(f), "new contents\n");
@@ -105,7 +105,7 @@ TEST(AtomicWrite, DoesNotWriteThroughASymlinkedTemporary) {
   { std::ofstream(f) << "previous"; }
   { std::ofstream(victim) << "not yours"; }
   ASSERT_EQ(::symlink(victim.c_str(), (f + ".tmp").c_str()), 0);
-  Status s = Env::posix()->write_file_atomic(f, "new");
+  base::IoStatus s = Env::posix()->write_file_atomic(f, "new");
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.error().message.find("open " + f + ".tmp: "), std::string::npos) << s.error().message;
   EXPECT_EQ(test::read_file(victim), "not yours");
@@ -115,7 +115,7 @@ TEST(AtomicWrite, DoesNotWriteThroughASymlinkedTemporary) {
 TEST(AtomicWrite, ErrorsNameTheStepTheFileAndErrno) {
   TempDir dir;
   const std::string f = dir.file("missing-dir/state.json");
-  Status s = Env::posix()->write_file_atomic(f, "x");
+  base::IoStatus s = Env::posix()->write_file_atomic(f, "x");
   ASSERT_FALSE(s.ok());
   EXPECT_EQ(s.error().message, "open " + f + ".tmp: No such file or directory");
 }
@@ -137,7 +137,7 @@ TEST(AtomicWrite, AFailureAtAnyStepLeavesTheOldOrTheNewFileWhole) {
     ASSERT_TRUE(Env::posix()->write_file_atomic(f, "old").ok());
     FaultInjectionEnv env(Env::posix());
     env.fail_after(step);
-    Status s = env.write_file_atomic(f, "new");
+    base::IoStatus s = env.write_file_atomic(f, "new");
     ASSERT_FALSE(s.ok());
     EXPECT_NE(s.error().message.find("injected fault"), std::string::npos) << s.error().message;
     // Before the rename the old file stands; a failed directory sync comes after it.
@@ -314,8 +314,8 @@ TEST(SafetyLatchFile, AnInPlaceLatchWhoseSyncFailsIsNotDurableAndIsWrittenWholeO
 class ReplacingEnv final : public FaultInjectionEnv {
  public:
   using FaultInjectionEnv::FaultInjectionEnv;
-  Result<std::unique_ptr<audit::WritableFile>> open_existing_at(const std::string& path,
-                                                                uint64_t offset) override {
+  base::IoResult<std::unique_ptr<base::WritableFile>> open_existing_at(const std::string& path,
+                                                                       uint64_t offset) override {
     auto opened = FaultInjectionEnv::open_existing_at(path, offset);
     const std::string copy = path + ".copy";
     { std::ofstream(copy, std::ios::binary) << test::read_file(path); }
@@ -766,7 +766,7 @@ TEST(StopBacklog, EveryStopDuringAnAuditOutageIsRecordedAfterIt) {
   ao.robot_ruri = "rcan://local.rcan/acme/bot/00000001";
   ao.preallocate = false;
   ao.recovery_interval_ms = 20;
-  ao.env = &env;
+  ao.env = env.audit();
   auto log = audit::AuditLog::open(dir.file("audit"), ao);
   ASSERT_TRUE(log.ok()) << log.error().message;
   node::test_node::FakeActuation act;

@@ -11,7 +11,7 @@
 #include <fstream>
 #include <string>
 
-#include "rcan/audit/env.h"
+#include "rcan/base/env.h"
 #include "rcan/errors.h"
 #include "rcan/json.h"
 #include "test_support.h"
@@ -166,7 +166,7 @@ TEST(RevocationList, BadFileContentIsAClearErrorAndChangesNothing) {
 
 TEST(RevocationList, AnEntryTheFileCouldNotHoldIsNotInForce) {
   test::TempDir dir;
-  audit::FaultInjectionEnv env(audit::Env::posix());
+  base::FaultInjectionEnv env(base::Env::posix());
   RevocationList list(dir.file("revocations.json"), RevocationList::kDefaultCapacity, 60, &env);
   int heard = 0;
   list.subscribe([&](const Revocation&) { ++heard; });

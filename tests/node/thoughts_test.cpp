@@ -9,7 +9,7 @@
 #include <fstream>
 #include <string>
 
-#include "rcan/audit/env.h"
+#include "rcan/base/env.h"
 #include "test_support.h"
 #include "testing/fault_env.h"
 
@@ -130,7 +130,7 @@ TEST(ThoughtFile, AnotherSenderCannotOverwriteAThoughtAndClearEmptiesTheFile) {
 
 TEST(ThoughtFile, AThoughtTheFileCannotTakeIsKeptInMemoryAndCounted) {
   test::TempDir dir;
-  audit::FaultInjectionEnv env(audit::Env::posix());
+  base::FaultInjectionEnv env(base::Env::posix());
   ThoughtLog log(10, dir.file("thoughts.jsonl"), &env);
   ASSERT_TRUE(log.open().ok());
   env.fail_after(1);

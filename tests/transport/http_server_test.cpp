@@ -28,8 +28,8 @@
 #include <thread>
 #include <vector>
 
-#include "base/log.h"
 #include "rcan/json.h"
+#include "runtime/log.h"
 #include "test_support.h"
 
 namespace rcan::transport {

@@ -1,8 +1,8 @@
 // Control sessions and the v1.5 session blocks: `control` (this node's), `offline` (the
 // credential cache and partition watch) and `qos` (docs/CONFIG.md §Control sessions, §v1.5
 // blocks; docs/SESSIONS.md).
-#include "base/http_client.h"
 #include "config/blocks/blocks.h"
+#include "runtime/http_client.h"
 
 namespace rcan::config::internal {
 namespace {

@@ -5,8 +5,8 @@
 #include <cctype>
 #include <regex>
 
-#include "base/http_client.h"
 #include "config/blocks/blocks.h"
+#include "runtime/http_client.h"
 
 namespace rcan::config::internal {
 namespace {

@@ -4,8 +4,8 @@
 #include <regex>
 #include <set>
 
-#include "base/http_client.h"
 #include "config/blocks/blocks.h"
+#include "runtime/http_client.h"
 
 namespace rcan::config::internal {
 namespace {

@@ -17,7 +17,7 @@
 #include <chrono>
 
 #include "base/clock.h"
-#include "base/log.h"
+#include "runtime/log.h"
 
 extern char** environ;
 

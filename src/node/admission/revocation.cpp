@@ -2,9 +2,9 @@
 
 #include <algorithm>
 
-#include "base/log.h"
-#include "base/state_file.h"
 #include "rcan/errors.h"
+#include "runtime/log.h"
+#include "runtime/state_file.h"
 
 namespace rcan::node {
 namespace {
@@ -109,12 +109,12 @@ Result<Revocation> Revocation::from_json(const json::Value& v) {
   return r;
 }
 
-RevocationList::RevocationList(std::string path, size_t capacity, int64_t leeway_s, audit::Env* env,
+RevocationList::RevocationList(std::string path, size_t capacity, int64_t leeway_s, base::Env* env,
                                size_t feed_capacity)
     : path_(std::move(path)),
       capacity_(capacity),
       leeway_s_(std::max<int64_t>(0, leeway_s)),
-      env_(env != nullptr ? env : audit::Env::posix()),
+      env_(env != nullptr ? env : base::Env::posix()),
       feed_capacity_(feed_capacity) {}
 
 Result<std::vector<Revocation>> RevocationList::parse(const json::Value& doc, size_t capacity) {
@@ -271,7 +271,8 @@ Status RevocationList::compact() {
     journal_.reset();
   }
   if (env_->exists(journal_path()))
-    if (Status s = env_->truncate_file(journal_path(), 0); !s.ok()) return s;
+    if (base::IoStatus s = env_->truncate_file(journal_path(), 0); !s.ok())
+      return Error(ErrorCode::kInternal, s.error().message);
   journal_lines_ = 0;
   journal_torn_ = false;
   return Status::Ok();
@@ -280,16 +281,16 @@ Status RevocationList::compact() {
 Status RevocationList::append(const Revocation& r) {
   if (!journal_) {
     auto f = env_->open_appendable(journal_path());
-    if (!f.ok()) return f.error();
+    if (!f.ok()) return Error(ErrorCode::kInternal, f.error().message);
     journal_ = std::move(*f);
   }
-  Status s = journal_->append(json::dump(r.to_json()) + "\n");
+  base::IoStatus s = journal_->append(json::dump(r.to_json()) + "\n");
   if (s.ok()) s = journal_->sync();
   if (!s.ok()) {
     (void)journal_->close();
     journal_.reset();
     journal_torn_ = true;
-    return s;
+    return Error(ErrorCode::kInternal, s.error().message);
   }
   ++journal_lines_;
   return Status::Ok();

@@ -35,7 +35,7 @@
 
 #include "base/thread_annotations.h"
 #include "node/admission/authenticator.h"
-#include "rcan/audit/env.h"
+#include "rcan/base/env.h"
 #include "rcan/json.h"
 #include "rcan/result.h"
 
@@ -68,7 +68,7 @@ class RevocationList {
   // `path` empty: nothing is persisted (tests). `leeway_s`: the verifier's clock leeway, kept
   // after a jti entry's `exp` before it is dropped.
   explicit RevocationList(std::string path = {}, size_t capacity = kDefaultCapacity,
-                          int64_t leeway_s = 60, audit::Env* env = nullptr,
+                          int64_t leeway_s = 60, base::Env* env = nullptr,
                           size_t feed_capacity = kDefaultCapacity);
 
   // Reads the snapshot and the journal (absent: an empty list; an entry in both counts once) and
@@ -119,10 +119,10 @@ class RevocationList {
   const std::string path_;
   const size_t capacity_;
   const int64_t leeway_s_;
-  audit::Env* env_;
+  base::Env* env_;
   const size_t feed_capacity_;
   Mutex write_mu_;  // one writer of the files at a time; lookups never wait for a write
-  std::unique_ptr<audit::WritableFile> journal_ GUARDED_BY(write_mu_);
+  std::unique_ptr<base::WritableFile> journal_ GUARDED_BY(write_mu_);
   size_t journal_lines_ GUARDED_BY(write_mu_) = 0;
   // A failed append may have left part of a line: the next entry goes in by a compaction.
   bool journal_torn_ GUARDED_BY(write_mu_) = false;

@@ -7,14 +7,14 @@
 #include <chrono>
 #include <cstdio>
 
-#include "base/http_client.h"
-#include "base/log.h"
 #include "base/strings.h"
 #include "node/ai/brain_layers.h"
 #include "node/pipeline/pipeline.h"
 #include "node/services/node_services.h"
 #include "rcan/crypto/watermark.h"
 #include "rcan/errors.h"
+#include "runtime/http_client.h"
+#include "runtime/log.h"
 
 namespace rcan::node {
 namespace {

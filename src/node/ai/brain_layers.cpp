@@ -4,8 +4,8 @@
 #include <thread>
 
 #include "base/clock.h"
-#include "base/log.h"
 #include "rcan/errors.h"
+#include "runtime/log.h"
 
 namespace rcan::node {
 namespace {

@@ -140,12 +140,12 @@ json::Object PendingItem::public_view(int64_t now_ms) const {
 }
 
 Status save_pending(const std::string& path, const std::vector<PendingItem>& items,
-                    audit::Env* env) {
+                    base::Env* env) {
   json::Array arr;
   for (const auto& i : items) arr.push_back(i.to_json());
   std::string text = json::dump(json::Value(json::Object{{"version", 1}, {"pending", arr}})) + "\n";
-  if (!env) env = audit::Env::posix();
-  Status s = env->write_file_atomic(path, text);
+  if (!env) env = base::Env::posix();
+  base::IoStatus s = env->write_file_atomic(path, text);
   if (!s.ok()) return Error(ErrorCode::kInternal, s.error().message);
   return Status::Ok();
 }

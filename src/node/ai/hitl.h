@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "rcan/audit/env.h"
+#include "rcan/base/env.h"
 #include "rcan/json.h"
 #include "rcan/result.h"
 #include "rcan/roles.h"
@@ -48,10 +48,10 @@ struct PendingItem {
 };
 
 // The pending file: {"version":1,"pending":[…]}. Written atomically (temp file, fsync,
-// rename, directory fsync) with mode 0600, through audit::Env::write_file_atomic of `env`
-// (nullptr → audit::Env::posix()). Errors: INTERNAL, naming the step, the file and errno.
+// rename, directory fsync) with mode 0600, through base::Env::write_file_atomic of `env`
+// (nullptr → base::Env::posix()). Errors: INTERNAL, naming the step, the file and errno.
 Status save_pending(const std::string& path, const std::vector<PendingItem>& items,
-                    audit::Env* env = nullptr);
+                    base::Env* env = nullptr);
 // A missing file is an empty list. Entries that do not parse are skipped (`skipped` counts them).
 Result<std::vector<PendingItem>> load_pending(const std::string& path, size_t* skipped = nullptr);
 

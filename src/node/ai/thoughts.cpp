@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <tuple>
 
-#include "base/log.h"
 #include "rcan/errors.h"
+#include "runtime/log.h"
 
 namespace rcan::node {
 namespace {
@@ -176,7 +176,7 @@ Status ThoughtLog::rewrite_locked() {
     body += json::canonical(json::Value(thought_record(by_id_.at(id))));
     body += '\n';
   }
-  Status st = env_->write_file_atomic(file_, body);
+  base::IoStatus st = env_->write_file_atomic(file_, body);
   if (!st.ok())
     return Error(ErrorCode::kInternal, "thought log " + file_ + ": " + st.error().message);
   lines_ = order_.size();
@@ -188,7 +188,7 @@ void ThoughtLog::append_locked(const Thought& t) {
   if (lines_ >= 2 * capacity_ && rewrite_locked().ok()) {
     // compacted: the thought below is appended to the rewritten file
   }
-  Status st = Status::Ok();
+  base::IoStatus st = base::IoStatus::Ok();
   if (!out_) {
     auto f = env_->open_appendable(file_);
     if (f.ok()) {

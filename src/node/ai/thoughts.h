@@ -18,7 +18,7 @@
 #include <unordered_map>
 
 #include "base/thread_annotations.h"
-#include "rcan/audit/env.h"
+#include "rcan/base/env.h"
 #include "rcan/json.h"
 #include "rcan/message.h"
 #include "rcan/result.h"
@@ -53,11 +53,11 @@ Thought thought_from_command(const Message& m, const json::Value* thought, int64
 
 class ThoughtLog {
  public:
-  // `file` "" keeps the log in memory only; `env` nullptr → audit::Env::posix().
-  explicit ThoughtLog(size_t capacity = 1000, std::string file = {}, audit::Env* env = nullptr)
+  // `file` "" keeps the log in memory only; `env` nullptr → base::Env::posix().
+  explicit ThoughtLog(size_t capacity = 1000, std::string file = {}, base::Env* env = nullptr)
       : capacity_(capacity ? capacity : 1),
         file_(std::move(file)),
-        env_(env ? env : audit::Env::posix()) {}
+        env_(env ? env : base::Env::posix()) {}
   // Reads the file (when there is one): the newest `capacity` thoughts. A line that cannot be
   // read (torn by a crash) is skipped and counted in the result. Errors: INTERNAL when the file
   // exists and cannot be read.
@@ -78,8 +78,8 @@ class ThoughtLog {
   mutable Mutex mu_;
   size_t capacity_;
   std::string file_;
-  audit::Env* env_;
-  std::unique_ptr<audit::WritableFile> out_ GUARDED_BY(mu_);
+  base::Env* env_;
+  std::unique_ptr<base::WritableFile> out_ GUARDED_BY(mu_);
   size_t lines_ GUARDED_BY(mu_) = 0;  // in the file
   uint64_t unpersisted_ GUARDED_BY(mu_) = 0;
   std::deque<std::string> order_ GUARDED_BY(mu_);

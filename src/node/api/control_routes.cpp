@@ -4,11 +4,11 @@
 // verified token (lowered for former owners), and every refusal and every step is audited.
 #include <algorithm>
 
-#include "base/http_client.h"
-#include "base/log.h"
-#include "base/state_file.h"
 #include "node/api/node.h"
 #include "rcan/errors.h"
+#include "runtime/http_client.h"
+#include "runtime/log.h"
+#include "runtime/state_file.h"
 
 namespace rcan::node {
 namespace {

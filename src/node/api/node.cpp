@@ -7,12 +7,12 @@
 #include <cstdlib>
 
 #include "base/clock.h"
-#include "base/log.h"
 #include "node/api/ai_routes.h"
 #include "node/api/stage_order.h"
 #include "node/api/web_assets.h"
 #include "node/discovery/mdns.h"
 #include "rcan/errors.h"
+#include "runtime/log.h"
 
 namespace rcan::node {
 

@@ -116,7 +116,7 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   void record_audit_read(const Principal& p, const std::string& route, json::Object query,
                          Respond& respond, std::function<void()> read);
   void list_audit(Respond& respond, const std::string& route, const AuditQuery& q);
-  // GET /api/node/log: the newest lines of the process's log ring (base/log.h), for OWNER with
+  // GET /api/node/log: the newest lines of the process's log ring (runtime/log.h), for OWNER with
   // scope `config`; each read recorded as LOG_READ (a refused one as LOG_READ blocked).
   void node_log(transport::HttpRequest& req, Respond& respond);
   // Records `event` (who, the route, the query) and runs `read` once the record is durable; if

@@ -12,11 +12,11 @@
 #include <sstream>
 
 #include "base/clock.h"
-#include "base/log.h"
 #include "base/thread_annotations.h"
 #include "node/api/node.h"
 #include "rcan.grpc.pb.h"
 #include "rcan/errors.h"
+#include "runtime/log.h"
 #include "transport/grpc_convert.h"
 #include "transport/http_api.h"
 

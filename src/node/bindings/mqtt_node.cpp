@@ -9,7 +9,6 @@
 #include <cstdio>
 
 #include "base/clock.h"
-#include "base/log.h"
 #include "base/strings.h"
 #include "config/config.h"
 #include "node/api/node.h"
@@ -18,6 +17,7 @@
 #include "rcan/crypto/keys.h"
 #include "rcan/crypto/message_sig.h"
 #include "rcan/errors.h"
+#include "runtime/log.h"
 
 namespace rcan::node {
 

@@ -13,13 +13,13 @@
 #include <map>
 #include <unordered_map>
 
-#include "base/log.h"
 #include "base/thread_annotations.h"
 #include "node/services/node_services.h"
 #include "rcan/encoding.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
 #include "rcan/udp_wire.h"
+#include "runtime/log.h"
 
 namespace rcan::node {
 

@@ -6,7 +6,7 @@
 #include <chrono>
 
 #include "base/clock.h"
-#include "base/http_client.h"
+#include "runtime/http_client.h"
 
 namespace rcan::node {
 

@@ -6,10 +6,10 @@
 #include <chrono>
 
 #include "base/clock.h"
-#include "base/log.h"
 #include "base/thread_annotations.h"
 #include "node/discovery/avahi_dl.h"
 #include "node/services/node_services.h"
+#include "runtime/log.h"
 
 namespace rcan::node {
 

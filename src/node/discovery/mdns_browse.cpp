@@ -5,9 +5,9 @@
 
 #include <net/if.h>
 
-#include "base/log.h"
 #include "node/discovery/avahi_dl.h"
 #include "rcan/mdns_txt.h"
+#include "runtime/log.h"
 
 namespace rcan::node {
 

@@ -4,7 +4,7 @@
 #include <chrono>
 
 #include "base/clock.h"
-#include "base/log.h"
+#include "runtime/log.h"
 
 namespace rcan::node {
 namespace {

@@ -16,11 +16,11 @@
 #include <vector>
 
 #include "base/clock.h"
-#include "base/http_client.h"
 #include "base/thread_annotations.h"
 #include "config/config.h"
 #include "node/discovery/mdns_browse.h"
 #include "rcan/json.h"
+#include "runtime/http_client.h"
 
 namespace rcan::node {
 

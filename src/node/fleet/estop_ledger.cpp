@@ -3,9 +3,9 @@
 #include <algorithm>
 #include <vector>
 
-#include "base/log.h"
-#include "base/state_file.h"
 #include "rcan/errors.h"
+#include "runtime/log.h"
+#include "runtime/state_file.h"
 
 namespace rcan::node {
 

@@ -4,9 +4,9 @@
 #include <atomic>
 #include <mutex>
 
-#include "base/log.h"
 #include "node/fleet/estop_ledger.h"
 #include "node/services/node_services.h"
+#include "runtime/log.h"
 
 namespace rcan::node {
 

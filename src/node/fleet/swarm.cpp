@@ -2,11 +2,11 @@
 
 #include <algorithm>
 
-#include "base/log.h"
-#include "base/state_file.h"
 #include "node/services/node_services.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
+#include "runtime/log.h"
+#include "runtime/state_file.h"
 
 namespace rcan::node {
 

@@ -3,11 +3,11 @@
 #include <cctype>
 
 #include "base/clock.h"
-#include "base/log.h"
 #include "node/pipeline/stages.h"
 #include "node/services/node_services.h"
 #include "rcan/errors.h"
 #include "rcan/ruri.h"
+#include "runtime/log.h"
 
 namespace rcan::node {
 namespace {

@@ -12,23 +12,18 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <iterator>
-#include <sstream>
 
 #include "base/clock.h"
-#include "base/log.h"
-#include "rcan/hash.h"
+#include "runtime/log.h"
 
 // How the guarantees of safety.h are kept:
 //   * estop() sets an atomic flag and calls Driver::stop() first (no lock, no I/O on that
 //     path), then fences out a dispatch() that was already inside the driver (a lock-free wait
 //     for that one apply, then a second stop()), then hands the new latch state to the
-//     persister thread, which writes it through audit::Env::write_file_atomic (temp file,
-//     fsync, rename, fsync of the directory) and retries every 200 ms until it is durable.
-//     The file is padded to a fixed size (kStateFileBytes) and carries a SHA-256 of its other
-//     members ("check"): a latch (never a clear) then rewrites it in place, one write and one
-//     fdatasync. A write torn by a crash fails the check and the node comes up latched.
+//     persister thread, which writes the latch file (LatchFile, latch_file.h: in place or
+//     replaced whole, durably) and retries every 200 ms until it is durable. A write torn by a
+//     crash fails the file's check and the node comes up latched.
 //   * The deadman table (deadmen_, by control session id) is scanned by tick(); a lost
 //     deadman is revived by feed_deadman(), but only the next accepted command clears the
 //     safe-stop it caused.
@@ -37,9 +32,6 @@
 namespace rcan::node {
 namespace {
 
-constexpr const char* kStateFile = "safety_state.json";
-constexpr const char* kStateFormat = "rcan-safety-state-v1";
-constexpr size_t kStateFileBytes = 4096;  // one page; a longer state is written whole instead
 constexpr size_t kLatencyRing = 4096;
 constexpr int64_t kMaxStepMs = 60'000;
 constexpr int kLevelLeasee = 3;
@@ -178,7 +170,7 @@ SafetyCore::~SafetyCore() {
   for (auto& w : left) w.fn(false, why);
 }
 
-Status SafetyCore::open(const std::string& state_dir, audit::Env* env) {
+Status SafetyCore::open(const std::string& state_dir, base::Env* env) {
   namespace fs = std::filesystem;
   {
     MutexLock lock(meta_mu_);
@@ -190,74 +182,23 @@ Status SafetyCore::open(const std::string& state_dir, audit::Env* env) {
     return Error(ErrorCode::kInternal,
                  "cannot create safety state dir " + state_dir + ": " + ec.message());
   ::chmod(state_dir.c_str(), 0700);
-  env_ = env ? env : audit::Env::posix();
-  const std::string path = state_dir + "/" + kStateFile;
+  latch_file_.emplace(state_dir, env);
 
-  LatchState loaded;
-  bool corrupt = false;
-  bool missing = false;
-  std::string why;
-  {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) {
-      if (!fs::exists(path, ec)) {
-        missing = true;
-      } else {
-        corrupt = true;
-        why = "state file unreadable";
-      }
-    } else {
-      std::stringstream ss;
-      ss << in.rdbuf();
-      auto parsed = json::parse(ss.str());
-      if (!parsed.ok() || !parsed->is_object()) {
-        corrupt = true;
-        why = parsed.ok() ? "state file is not an object"
-                          : "state file corrupt: " + parsed.error().message;
-      } else {
-        const auto* fmt = parsed->get("format");
-        const auto* active = parsed->get("estop_active");
-        const auto* check = parsed->get("check");  // absent in files written before it
-        std::string check_of;
-        if (check && check->is_string()) {
-          json::Object rest = parsed->as_object();
-          rest.erase("check");
-          check_of = sha256_hex(json::dump(json::Value(std::move(rest))));
-        }
-        if (!fmt || !fmt->is_string() || fmt->as_string() != kStateFormat || !active ||
-            !active->is_bool()) {
-          corrupt = true;
-          why = "state file has an unknown format";
-        } else if (check && (!check->is_string() || check->as_string() != check_of)) {
-          corrupt = true;
-          why = "state file fails its check (a write torn by a crash?)";
-        } else {
-          state_file_fixed_ = check != nullptr && ss.str().size() == kStateFileBytes;
-          state_file_latched_ = active->as_bool();
-          loaded.active = active->as_bool();
-          if (const auto* s = parsed->get("source"); s && s->is_string())
-            loaded.source = s->as_string();
-          if (const auto* r = parsed->get("reason"); r && r->is_string())
-            loaded.reason = r->as_string();
-          if (const auto* t = parsed->get("since_ms"); t && t->is_int())
-            loaded.since_wall_ms = t->as_int();
-          // Absent in files written before latches kept it: LEASEE's rule, as then.
-          if (const auto* b = parsed->get("by_level"); b && b->is_int())
-            loaded.by_level = static_cast<int>(std::clamp<int64_t>(b->as_int(), 0, 5));
-        }
-      }
-    }
-  }
-  if (corrupt) {
-    fs::rename(path, path + ".corrupt", ec);  // keep it for forensics; best effort
-  }
+  // A file that cannot be read is as good as a corrupt one: the node comes up latched.
+  auto read = latch_file_->read();
+  LatchRead file =
+      read.ok() ? std::move(read).value() : LatchRead{false, true, "state file unreadable", {}};
+  const bool corrupt = file.corrupt;
+  const bool missing = file.missing;
+  const std::string& why = file.why;
+  const LatchState& loaded = file.state;
+  if (corrupt) latch_file_->set_aside();
 
   bool need_write = false;
   bool write_cleared = false;
   LatchState cleared;
   {
     MutexLock lock(meta_mu_);
-    state_dir_ = state_dir;
     persist_enabled_ = true;
     if (corrupt) {
       latch_ = LatchState{true, "startup", why + "; came up latched (fail safe)", clock_.wall_ms()};
@@ -282,14 +223,14 @@ Status SafetyCore::open(const std::string& state_dir, audit::Env* env) {
     // fdatasync, not a new file, a rename and a directory sync on the first ESTOP's path).
     // It says what a missing file says. Should it fail, it is retried like a latch's write, and
     // a latch meanwhile writes the file whole.
-    write_cleared = !latch_.active && !corrupt && (missing || !state_file_fixed_);
+    write_cleared = !latch_.active && !corrupt && (missing || !latch_file_->fixed());
     if (write_cleared) {
       cleared = latch_;
       persist_busy_ = true;  // the file is this thread's until it is written
     }
   }
   if (write_cleared) {
-    Status s = write_state_file(cleared);
+    Status s = latch_file_->write(cleared, clock_.wall_ms());
     if (!s.ok())
       log(LogLevel::kWarn, "safety_state_not_written",
           json::Object{{"error", s.error().message},
@@ -413,7 +354,7 @@ Status SafetyCore::resume(int principal_role_level, std::string_view source) {
 bool SafetyCore::wait_persisted(uint64_t seq, int64_t timeout_ms) {
   MutexLock lock(meta_mu_);
   if (!persist_enabled_) return false;
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  const auto deadline = steady_now() + std::chrono::milliseconds(timeout_ms);
   while (persisted_seq_ < seq)
     if (durable_cv_.wait_until(meta_mu_, deadline) == std::cv_status::timeout)
       return persisted_seq_ >= seq;
@@ -500,53 +441,11 @@ LatencyStats SafetyCore::estop_latency() const {
 
 // ---- persistence ----------------------------------------------------------------------------
 
-Status SafetyCore::write_state_file(const LatchState& st) {
-  json::Object o{{"format", kStateFormat},        {"estop_active", st.active},
-                 {"source", st.source},           {"reason", st.reason},
-                 {"since_ms", st.since_wall_ms},  {"by_level", st.by_level},
-                 {"written_ms", clock_.wall_ms()}};
-  json::Object file{{"check", sha256_hex(json::dump(json::Value(o)))}};
-  for (auto& [k, v] : o) file.set(k, std::move(v));
-  std::string body = json::dump(json::Value(std::move(file)));
-  if (body.size() < kStateFileBytes) body.resize(kStateFileBytes - 1, ' ');
-  body += '\n';
-  const std::string path = state_dir_ + "/" + kStateFile;
-  const bool fixed = body.size() == kStateFileBytes;
-  Status s;
-  // In place only from cleared to latched, over the file that is still there (opened without
-  // creating it): no new inode, rename or directory sync. A crash in the middle leaves the
-  // cleared state (not yet acknowledged) or a torn file, which comes up latched. A re-latch (a
-  // higher role) is replaced whole: torn, it would come up latched by the node, which a lower
-  // role may clear.
-  const bool in_place = st.active && fixed && state_file_fixed_ && !state_file_latched_;
-  std::unique_ptr<audit::WritableFile> f;
-  if (in_place) {  // gone, or not a regular file (a link, a FIFO): written whole below
-    auto opened = env_->open_existing_at(path, 0);
-    if (opened.ok()) f = std::move(opened).value();
-  }
-  if (f) {
-    s = f->append(body);
-    if (s.ok()) s = f->sync();
-    if (Status c = f->close(); s.ok()) s = c;
-  }
-  // Replaced whole: a clear (one not made durable leaves the latched file as it was), a file of
-  // another shape, a failed in-place latch (a failed sync, the file removed or replaced meanwhile).
-  if (!f || !s.ok()) {
-    const std::string in_place_error = s.ok() ? "" : s.error().message + "; written whole: ";
-    s = env_->write_file_atomic(path, body);
-    if (!s.ok()) s = Error(s.error().code, in_place_error + s.error().message);
-  }
-  state_file_fixed_ = s.ok() && fixed;
-  state_file_latched_ = s.ok() ? st.active : true;  // unknown after a failure: never in place
-  if (!s.ok()) return Error(ErrorCode::kInternal, s.error().message);
-  return Status::Ok();
-}
-
 Status SafetyCore::write_latest_locked() {
   const uint64_t seq = latch_seq_;
   const LatchState snapshot = latch_;
   meta_mu_.unlock();
-  Status st = write_state_file(snapshot);
+  Status st = latch_file_->write(snapshot, clock_.wall_ms());
   meta_mu_.lock();
   std::vector<PersistWaiter> answered;
   if (st.ok()) {
@@ -595,7 +494,7 @@ void SafetyCore::persist_loop() {
     if (st.ok()) continue;
     if (persist_quit_) return;
     // Retry every 200 ms, sooner on a new change or shutdown (which makes one last attempt).
-    const auto retry_at = std::chrono::steady_clock::now() + std::chrono::milliseconds(200);
+    const auto retry_at = steady_now() + std::chrono::milliseconds(200);
     while (!persist_quit_ && latch_seq_ == seq)
       if (persist_cv_.wait_until(meta_mu_, retry_at) == std::cv_status::timeout) break;
   }
@@ -880,7 +779,7 @@ void SafetyCore::start() {
   ticker_ = std::thread([this] {
     pthread_setname_np(pthread_self(), "safety-tick");
     const auto period = std::chrono::milliseconds(std::max<int64_t>(1, cfg_.tick_period_ms));
-    auto next = std::chrono::steady_clock::now() + period;
+    auto next = steady_now() + period;
     while (running_.load(std::memory_order_acquire)) {
       tick();
       {
@@ -893,20 +792,20 @@ void SafetyCore::start() {
       const int64_t rest_ms = rest_for_ms();
       MutexLock wl(tick_wait_mu_);
       if (rest_ms > 0) {
-        const auto wake_at = std::chrono::steady_clock::now() + std::chrono::milliseconds(rest_ms);
+        const auto wake_at = steady_now() + std::chrono::milliseconds(rest_ms);
         while (!wake_requested_ && running_.load(std::memory_order_acquire))
           if (tick_wait_cv_.wait_until(tick_wait_mu_, wake_at) == std::cv_status::timeout) break;
         // resting_ stays set until the next tick() has stepped the driver (it clears it under
         // apply_mu_): a command arriving between this wake-up and that step still brings the
         // driver up to its own moment, instead of being integrated over the whole rest.
-        next = std::chrono::steady_clock::now() + period;
+        next = steady_now() + period;
         continue;
       }
       resting_.store(false, std::memory_order_seq_cst);
       while (running_.load(std::memory_order_acquire))
         if (tick_wait_cv_.wait_until(tick_wait_mu_, next) == std::cv_status::timeout) break;
       next += period;
-      const auto now = std::chrono::steady_clock::now();
+      const auto now = steady_now();
       if (next < now) next = now + period;  // overran: do not try to catch up
     }
   });

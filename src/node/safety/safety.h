@@ -55,7 +55,8 @@
 #include "base/thread_annotations.h"
 #include "config/safety_types.h"
 #include "node/safety/driver.h"
-#include "rcan/audit/env.h"
+#include "node/safety/latch_file.h"
+#include "rcan/base/env.h"
 #include "rcan/json.h"
 #include "rcan/result.h"
 
@@ -197,9 +198,9 @@ class SafetyCore {
   // A missing file, or a cleared one of an older form, is written cleared in the fixed form
   // before open() returns, so that the first latch rewrites it in place (a failure is retried
   // by the persister and shown in status()). Call once, before start(). Without open() the latch
-  // lives in memory only. The latch file is written through `env` (nullptr → audit::Env::posix();
-  // tests inject faults with it).
-  Status open(const std::string& state_dir, audit::Env* env = nullptr);
+  // lives in memory only. The latch file is read and written through `env` (nullptr →
+  // base::Env::posix(); tests inject faults with it).
+  Status open(const std::string& state_dir, base::Env* env = nullptr);
 
   void set_event_callback(EventFn fn);
 
@@ -293,13 +294,6 @@ class SafetyCore {
     bool lost = false;
     uint64_t armed_epoch = 0;  // the ESTOP epoch it was armed at (a new session, or rearm())
   };
-  struct LatchState {
-    bool active = false;
-    std::string source;
-    std::string reason;
-    int64_t since_wall_ms = 0;
-    int by_level = 0;  // the highest role level that latched it; 0: the node itself
-  };
 
   Result<DispatchOutcome> precheck(const ActuatorCommand& cmd, const DispatchOptions& opts,
                                    int64_t now) const;
@@ -320,7 +314,6 @@ class SafetyCore {
   template <typename Pred>
   std::vector<PersistWaiter> take_waiters_locked(Pred pred) REQUIRES(meta_mu_);
   void expire_persist_waiters(int64_t now);
-  Status write_state_file(const LatchState& st);
   void request_persist(uint64_t seq);
   void emit(const SafetyEvent& ev);
   RobotState decorate(RobotState st) const;
@@ -330,7 +323,6 @@ class SafetyCore {
   Clock& clock_;
   const DriverInfo driver_info_;
   const SafetyLimits limits_;  // effective: min(config, hardware)
-  audit::Env* env_ = nullptr;  // set once by open(): the latch file's writes
 
   // The SAFETY lane flag: read by dispatch() (before and under apply_mu_) and tick().
   std::atomic<bool> latched_{false};
@@ -358,16 +350,13 @@ class SafetyCore {
   std::string safe_stop_session_ GUARDED_BY(meta_mu_);
   int64_t safe_stop_since_wall_ms_ GUARDED_BY(meta_mu_) = 0;
   std::string driver_fault_ GUARDED_BY(meta_mu_);
-  std::string state_dir_;  // set once by open()
   // A latch file write is under way (by open(), the persister or a persist_here_if_idle() caller);
-  // whoever set it owns write_state_file() and state_file_fixed_ until it clears it.
+  // whoever set it owns latch_file_ until it clears it.
   bool persist_busy_ GUARDED_BY(meta_mu_) = false;
-  // The latch file has the fixed size and checked form (kStateFileBytes, "check"), and what it
-  // says (latched: a latch is then written whole). Set by open(), then only by the thread that
-  // holds persist_busy_ (open(), the persister or a persist_here_if_idle() caller), whose hand-over
-  // under meta_mu_ orders the accesses.
-  bool state_file_fixed_ = false;
-  bool state_file_latched_ = true;
+  // The latch file (set once by open()). Used by open(), then only by the thread that holds
+  // persist_busy_ (the persister or a persist_here_if_idle() caller), whose hand-over under
+  // meta_mu_ orders the accesses.
+  std::optional<LatchFile> latch_file_;
   // Writes the latest latch state (persist_busy_ set by the caller, meta_mu_ held on entry and
   // on return, released meanwhile) and answers the waiters it decided.
   Status write_latest_locked() REQUIRES(meta_mu_);

@@ -1,12 +1,12 @@
 // The stop backlog (stop_backlog.h).
 #include "node/services/stop_backlog.h"
 
-#include "base/log.h"
+#include "runtime/log.h"
 
 namespace rcan::node {
 
-StopBacklog::StopBacklog(std::string spill_path, audit::Env* env, Limits limits)
-    : path_(std::move(spill_path)), env_(env ? env : audit::Env::posix()), limits_(limits) {
+StopBacklog::StopBacklog(std::string spill_path, base::Env* env, Limits limits)
+    : path_(std::move(spill_path)), env_(env ? env : base::Env::posix()), limits_(limits) {
   if (path_.empty() || !env_->exists(path_)) return;
   auto text = env_->read_file(path_);
   if (!text.ok()) return;

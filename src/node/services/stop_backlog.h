@@ -14,8 +14,8 @@
 #include <vector>
 
 #include "base/thread_annotations.h"
-#include "rcan/audit/env.h"
 #include "rcan/audit/record.h"
+#include "rcan/base/env.h"
 #include "rcan/json.h"
 
 namespace rcan::node {
@@ -28,9 +28,9 @@ struct StopBacklogLimits {
 class StopBacklog {
  public:
   using Limits = StopBacklogLimits;
-  // `spill_path` "" keeps records in memory only. `env` nullptr → audit::Env::posix(). A spill
+  // `spill_path` "" keeps records in memory only. `env` nullptr → base::Env::posix(). A spill
   // file left by an earlier run is picked up: its records are handed over by the next take().
-  explicit StopBacklog(std::string spill_path, audit::Env* env = nullptr, Limits limits = {});
+  explicit StopBacklog(std::string spill_path, base::Env* env = nullptr, Limits limits = {});
 
   void keep(const audit::AuditEntry& e) EXCLUDES(mu_);
   // Everything kept (spill file first, then memory; each oldest first); the backlog is emptied.
@@ -47,10 +47,10 @@ class StopBacklog {
   void count_lost(uint64_t n, const char* why);
 
   const std::string path_;
-  audit::Env* const env_;
+  base::Env* const env_;
   const Limits limits_;
   mutable Mutex mu_;
-  std::unique_ptr<audit::WritableFile> file_ GUARDED_BY(mu_);
+  std::unique_ptr<base::WritableFile> file_ GUARDED_BY(mu_);
   size_t spilled_ GUARDED_BY(mu_) = 0;  // records in the spill file
   std::vector<audit::AuditEntry> memory_ GUARDED_BY(mu_);
   std::atomic<uint64_t> pending_{0};

@@ -4,11 +4,11 @@
 #include <ctime>
 
 #include "base/clock.h"
-#include "base/log.h"
 #include "rcan/crypto/ed25519.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
 #include "registry/api/impl.h"
+#include "runtime/log.h"
 
 namespace rcan::registry::api {
 namespace {

@@ -6,11 +6,11 @@
 #include <set>
 
 #include "base/clock.h"
-#include "base/http_client.h"
-#include "base/log.h"
 #include "base/strings.h"
 #include "registry/api/body.h"
 #include "registry/api/registry_api.h"
+#include "runtime/http_client.h"
+#include "runtime/log.h"
 
 namespace rcan::registry::api {
 namespace {

@@ -4,9 +4,9 @@
 #include <charconv>
 #include <set>
 
-#include "base/http_client.h"
 #include "rcan/errors.h"
 #include "registry/api/impl.h"
+#include "runtime/http_client.h"
 
 namespace rcan::registry::api {
 namespace {

@@ -3,12 +3,12 @@
 #include <chrono>
 
 #include "base/clock.h"
-#include "base/http_client.h"
-#include "base/log.h"
 #include "rcan/errors.h"
 #include "rcan/hash.h"
 #include "registry/api/address.h"
 #include "registry/api/registry_api.h"
+#include "runtime/http_client.h"
+#include "runtime/log.h"
 
 namespace rcan::registry::api {
 

@@ -1,4 +1,4 @@
-#include "base/data_dir.h"
+#include "runtime/data_dir.h"
 
 #include <pwd.h>
 #include <unistd.h>

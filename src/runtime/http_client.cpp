@@ -1,4 +1,4 @@
-#include "base/http_client.h"
+#include "runtime/http_client.h"
 
 #include <cstring>
 

@@ -1,4 +1,4 @@
-// The log's in-memory ring (base/log.h): the newest lines, bounded, URLs cut to their host,
+// The log's in-memory ring (runtime/log.h): the newest lines, bounded, URLs cut to their host,
 // whole under concurrent writers.
 #include <gtest/gtest.h>
 
@@ -6,8 +6,8 @@
 #include <thread>
 #include <vector>
 
-#include "base/log.h"
 #include "rcan/json.h"
+#include "runtime/log.h"
 
 namespace rcan {
 namespace {

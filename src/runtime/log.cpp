@@ -1,4 +1,4 @@
-#include "base/log.h"
+#include "runtime/log.h"
 
 #include <algorithm>
 #include <atomic>
@@ -8,6 +8,7 @@
 #include <deque>
 #include <utility>
 
+#include "base/clock.h"
 #include "base/thread_annotations.h"
 
 namespace rcan {
@@ -68,9 +69,7 @@ Output& output() {
 
 // ISO 8601 UTC with milliseconds.
 std::string now_iso8601() {
-  const auto now = std::chrono::system_clock::now();
-  const auto ms =
-      std::chrono::duration_cast<std::chrono::milliseconds>(now.time_since_epoch()).count();
+  const int64_t ms = unix_ms();
   const std::time_t secs = static_cast<std::time_t>(ms / 1000);
   std::tm tm{};
   gmtime_r(&secs, &tm);

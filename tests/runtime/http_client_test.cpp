@@ -1,8 +1,8 @@
-// The node's outbound HTTP client (base/http_client.h) against a loopback server that answers
+// The node's outbound HTTP client (runtime/http_client.h) against a loopback server that answers
 // one connection with canned bytes: the request it writes (byte for byte, the Content-Type
 // rule), the answers it takes (Content-Length, until close) and the ones it refuses, each with
 // its message (chunked, over the cap, malformed, none), the one deadline, a refused connect.
-#include "base/http_client.h"
+#include "runtime/http_client.h"
 
 #include <arpa/inet.h>
 #include <gtest/gtest.h>
