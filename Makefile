@@ -2,7 +2,7 @@
 #   make run    install what is missing, build, start the node on its embedded simulated robot
 #   make test   install what is missing, build, run every test (CTest summary) in the release
 #               tree, then again under ASan+UBSan, then the threaded tests under TSan
-# Other targets: build, test-release, debug, asan, test-asan, tsan, test-tsan, bench,
+# Other targets: build, test-release, debug, asan, test-asan, tsan, test-tsan, soak-ci, bench,
 # load-bench, fuzz, format, package (the .deb, docs/PACKAGING.md), cross-arm64, test-arm64,
 # package-arm64 (docs/ARM64.md), clean.
 
@@ -18,7 +18,7 @@ CMAKE_FLAGS ?=
 # `make test` checks the packages once, then runs its phases with DEPS empty.
 DEPS        ?= deps
 
-.PHONY: cross-arm64 test-arm64 package-arm64 package all deps build run test test-sanitizers sanitizer-phases test-release debug asan test-asan tsan test-tsan bench load-bench fuzz format clean
+.PHONY: cross-arm64 test-arm64 package-arm64 package all deps build run test test-sanitizers sanitizer-phases test-release soak-ci debug asan test-asan tsan test-tsan bench load-bench fuzz format clean
 
 all: build
 
@@ -57,7 +57,12 @@ sanitizer-phases:
 	@$(MAKE) --no-print-directory DEPS= test-tsan
 
 test-release: build
-	ctest --test-dir $(BUILD_DIR) --output-on-failure -j $(JOBS)
+	ctest --test-dir $(BUILD_DIR) --output-on-failure -j $(JOBS) $(CTEST_ARGS)
+
+# The five-minute soak (docs/SOAK.md): the hour's traffic and judgement against a real rcand,
+# outside `make test` (scripts/soak.sh runs the hour).
+soak-ci: build
+	timeout 480 $(BUILD_DIR)/bench/soak --minutes 5 --rcand $(BUILD_DIR)/bin/rcand --rcan $(BUILD_DIR)/bin/rcan
 
 debug: deps
 	cmake -S . -B $(DEBUG_DIR) $(GENERATOR) -DCMAKE_BUILD_TYPE=Debug $(CMAKE_FLAGS)

@@ -8,6 +8,7 @@
 
 #include <atomic>
 #include <condition_variable>
+#include <cstdlib>
 #include <mutex>
 #include <optional>
 #include <set>
@@ -27,11 +28,26 @@ using base::FaultInjectionEnv;
 using rcan::test::TempDir;
 
 // The fault env models the disk (what was synced survives); the real fsyncs underneath
-// only cost time, so run on tmpfs when there is one.
-const bool kUseShm = [] {
-  if (::access("/dev/shm", W_OK) == 0) ::setenv("TMPDIR", "/dev/shm", 1);
-  return true;
-}();
+// only cost time, so this suite's temporary directories go to tmpfs when there is one. Set for
+// the suite only and restored after it: the folder's other suites share this program.
+class AuditFault : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    const char* old = std::getenv("TMPDIR");
+    saved_tmpdir_ = old != nullptr ? std::optional<std::string>(old) : std::nullopt;
+    if (::access("/dev/shm", W_OK) == 0) ::setenv("TMPDIR", "/dev/shm", 1);
+  }
+  static void TearDownTestSuite() {
+    if (saved_tmpdir_) {
+      ::setenv("TMPDIR", saved_tmpdir_->c_str(), 1);
+    } else {
+      ::unsetenv("TMPDIR");
+    }
+  }
+
+ private:
+  static inline std::optional<std::string> saved_tmpdir_;
+};
 
 struct Acked {
   uint64_t seq;
@@ -148,7 +164,7 @@ void crash_everywhere(bool retention, bool grouped, double keep_fraction, bool t
 
 // A disk slower than the records coming in: the queue is bounded, the records beyond it are
 // refused at once (audit_queue_full), and every record it took is written once the disk moves.
-TEST(AuditFault, TheWriterQueueIsBoundedAndRefusesWhatItCannotHold) {
+TEST_F(AuditFault, TheWriterQueueIsBoundedAndRefusesWhatItCannotHold) {
   TempDir tmp;
   FaultInjectionEnv env(base::Env::posix());
   AuditOptions o = options();
@@ -188,27 +204,27 @@ TEST(AuditFault, TheWriterQueueIsBoundedAndRefusesWhatItCannotHold) {
   EXPECT_EQ(static_cast<int>(export_lines(**log).size()), 1 + ok);  // the genesis checkpoint too
 }
 
-TEST(AuditFault, CrashAtEveryOperationLosesNoAcknowledgedRecord) {
+TEST_F(AuditFault, CrashAtEveryOperationLosesNoAcknowledgedRecord) {
   crash_everywhere(/*retention=*/false, /*grouped=*/false, 0.0, false);
 }
 
-TEST(AuditFault, TornTailsAreCutAndRecorded) {
+TEST_F(AuditFault, TornTailsAreCutAndRecorded) {
   g_torn_cuts = 0;
   crash_everywhere(/*retention=*/false, /*grouped=*/false, 0.5, true);
   EXPECT_GT(g_torn_cuts, 10);
 }
 
-TEST(AuditFault, CrashDuringGroupCommits) {
+TEST_F(AuditFault, CrashDuringGroupCommits) {
   crash_everywhere(/*retention=*/false, /*grouped=*/true, 0.7, true);
 }
 
-TEST(AuditFault, CrashDuringRotationAndRetention) {
+TEST_F(AuditFault, CrashDuringRotationAndRetention) {
   crash_everywhere(/*retention=*/true, /*grouped=*/false, 0.3, true);
 }
 
 // A second crash inside recovery (cutting the tail, writing the quarantine file, the
 // recovery record) must still leave a log that recovers.
-TEST(AuditFault, CrashInsideRecovery) {
+TEST_F(AuditFault, CrashInsideRecovery) {
   for (uint64_t first : {7u, 12u, 19u}) {
     for (uint64_t second = 1; second < 40; ++second) {
       TempDir tmp;
@@ -236,7 +252,7 @@ TEST(AuditFault, CrashInsideRecovery) {
   }
 }
 
-TEST(AuditFault, DiskFailureFailsClosed) {
+TEST_F(AuditFault, DiskFailureFailsClosed) {
   TempDir tmp;
   FaultInjectionEnv env(base::Env::posix());
   AuditOptions o = fault_options(env.audit(), false);
@@ -339,7 +355,7 @@ void fail_then_recover(uint64_t fail_at, bool torn, bool pipelined) {
 // A commit on the appender's thread (Commit::kHereIfIdle) that meets a failing disk: the
 // appender is told at once, the log fails closed, and the writer, idle until then, probes the
 // disk and recovers the log when it takes writes again.
-TEST(AuditFault, AFailedCommitOnTheAppendersThreadIsRecoveredByTheWriter) {
+TEST_F(AuditFault, AFailedCommitOnTheAppendersThreadIsRecoveredByTheWriter) {
   TempDir tmp;
   const std::string dir = tmp.path() + "/log";
   FaultInjectionEnv env(base::Env::posix());
@@ -373,7 +389,7 @@ TEST(AuditFault, AFailedCommitOnTheAppendersThreadIsRecoveredByTheWriter) {
   EXPECT_TRUE(v.ok) << v.why;
 }
 
-TEST(AuditFault, DiskFailureRecoversWhenTheDiskDoes) {
+TEST_F(AuditFault, DiskFailureRecoversWhenTheDiskDoes) {
   for (uint64_t k = 1; k <= 12; ++k) {
     fail_then_recover(k, false, false);
     if (::testing::Test::HasFailure()) return;

@@ -148,6 +148,9 @@ TEST_F(CliNodeTest, ClaimDriveStopResumeRelease) {
   EXPECT_NE(rel.out.find("RELEASED"), std::string::npos);
   EXPECT_EQ(cli({"release"}, "", alice).exit_code, 1);  // nothing held any more
   EXPECT_EQ(test::run_cli({"claim", "--url", daemon_->url()}).exit_code, 2);  // no token
+  // bob queued behind alice and her release promoted him: he lets go, so that the suite's next
+  // test (same rcand) finds the robot free.
+  EXPECT_EQ(cli({"release"}, "", bob).exit_code, 0);
 }
 
 TEST_F(CliNodeTest, MessageSendChecksLocallyThenSendsAsIs) {

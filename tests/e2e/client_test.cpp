@@ -119,6 +119,10 @@ TEST_F(ClientNodeTest, ClaimCommandReleaseAndConflict) {
   auto again = a.release();
   ASSERT_FALSE(again.ok());
   EXPECT_EQ(again.error().http_status, 400);
+  // b queued behind a and a's release promoted it: it lets go, so that the suite's next test
+  // (same rcand) finds the robot free.
+  auto promoted = b.release();
+  EXPECT_TRUE(promoted.ok()) << promoted.error().message;
 }
 
 TEST_F(ClientNodeTest, HandoffReservesTheRobotForItsTarget) {

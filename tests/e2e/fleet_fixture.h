@@ -212,7 +212,7 @@ inline void member_keys(const std::string& root, const std::string& name) {
   fs::create_directories(dir);
   fs::permissions(dir, fs::perms::owner_all);
   if (!fs::exists(dir + "/keys")) {
-    EXPECT_EQ(test::run_cli({"keys", "generate", "--dir", dir + "/keys"}).exit_code, 0);
+    EXPECT_TRUE(test::generate_robot_keys(dir + "/keys"));
   }
   fs::create_directories(root + "/members/" + name);
   fs::copy_file(dir + "/keys/ed25519.pub", root + "/members/" + name + "/ed25519.pub",
@@ -227,7 +227,7 @@ class Robot {
         const std::string& extra_yaml = "", const std::string& mqtt_extra = "")
       : dir_(root + "/" + name), name_(name) {
     member_keys(root, name);
-    EXPECT_EQ(test::run_cli({"audit", "new-secret", "--out", dir_ + "/audit.secret"}).exit_code, 0);
+    EXPECT_TRUE(test::create_audit_secret(dir_ + "/audit.secret"));
     ruri_ = "rcan://local.rcan/rcan/sim-rover/" + device;
     std::string yaml =
         "rcan_version: \"1.2\"\nruri: " + ruri_ + "\nnode: {data_dir: " + dir_ +
@@ -297,7 +297,7 @@ class FleetTest : public ::testing::Test {
     write_file(secret_, "0123456789abcdef0123456789abcdef-fleet-test-secret");
     // The commander's key pair: fleet tokens are bound to it (cnf), and its messages signed.
     key_dir_ = tmp_.file("fleet-keys");
-    ASSERT_EQ(test::run_cli({"keys", "generate", "--dir", key_dir_}).exit_code, 0);
+    ASSERT_TRUE(test::generate_robot_keys(key_dir_));
     auto k = keys::load_dir(key_dir_);
     ASSERT_TRUE(k.ok()) << k.error().message;
     keys_ = std::make_shared<keys::RobotKeys>(std::move(k).value());

@@ -61,9 +61,9 @@ class JoiningRobot {
                const std::string& extra_yaml = {})
       : dir_(dir), data_(dir + "/data"), ruri_(ruri), port_(free_port()) {
     std::filesystem::create_directories(data_);
-    EXPECT_EQ(run_cli({"keys", "generate", "--dir", data_ + "/keys"}).exit_code, 0);
-    EXPECT_EQ(run_cli({"audit", "new-secret", "--out", data_ + "/audit.secret"}).exit_code, 0);
-    EXPECT_EQ(run_cli({"keys", "issuer", "--dir", dir_ + "/issuer"}).exit_code, 0);
+    EXPECT_TRUE(generate_robot_keys(data_ + "/keys"));
+    EXPECT_TRUE(create_audit_secret(data_ + "/audit.secret"));
+    EXPECT_TRUE(create_token_issuer(dir_ + "/issuer"));
     std::ofstream(dir_ + "/robot.rcan.yaml")
         << "rcan_version: \"1.2\"\nruri: " << ruri_ << "\n"
         << "robot:\n  name: join-rover\n  manufacturer: acme\n  model: rover\n  type: mobile\n"

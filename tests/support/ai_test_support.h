@@ -203,9 +203,8 @@ class AiNode {
     if (fresh) {
       std::filesystem::create_directories(data);
       std::filesystem::permissions(data, std::filesystem::perms::owner_all);
-      EXPECT_EQ(test::run_cli({"keys", "generate", "--dir", data + "/keys"}).exit_code, 0);
-      EXPECT_EQ(test::run_cli({"audit", "new-secret", "--out", data + "/audit.secret"}).exit_code,
-                0);
+      EXPECT_TRUE(test::generate_robot_keys(data + "/keys"));
+      EXPECT_TRUE(test::create_audit_secret(data + "/audit.secret"));
       Bytes seed(32);
       EXPECT_TRUE(random_bytes(seed.data(), seed.size()));
       {

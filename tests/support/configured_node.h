@@ -1,5 +1,5 @@
 // A configured rcand (--config) for the transport tests: robot keys and chain secret made with
-// the CLI, a test token issuer (Ed25519) named in the config, gRPC and UDP on ephemeral ports.
+// the library, a test token issuer (Ed25519) named in the config, gRPC and UDP on ephemeral ports.
 // Header-only; include from one test program at a time.
 #pragma once
 
@@ -48,8 +48,8 @@ class ConfiguredNode {
                           const std::string& driver_yaml = {}) {
     data_ = dir_.file("data");
     std::filesystem::create_directories(data_);
-    EXPECT_EQ(run_cli({"keys", "generate", "--dir", data_ + "/keys"}).exit_code, 0);
-    EXPECT_EQ(run_cli({"audit", "new-secret", "--out", data_ + "/audit.secret"}).exit_code, 0);
+    EXPECT_TRUE(generate_robot_keys(data_ + "/keys"));
+    EXPECT_TRUE(create_audit_secret(data_ + "/audit.secret"));
     seed_file_ = dir_.file("issuer.seed");
     {
       uint8_t seed[32];

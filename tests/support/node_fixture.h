@@ -1,5 +1,5 @@
 // A configured rcand for the control-session tests: its own data directory, robot keys and
-// chain secret made with the CLI, a test token issuer, and YAML the test adds to. Header-only.
+// chain secret made with the library, a test token issuer, and YAML the test adds to. Header-only.
 #pragma once
 
 #include <gtest/gtest.h>
@@ -60,8 +60,8 @@ class ConfiguredNode {
     data_ = dir_ + "/data";
     fs::create_directories(data_);
     fs::permissions(data_, fs::perms::owner_all);
-    EXPECT_EQ(run_cli({"keys", "generate", "--dir", data_ + "/keys"}).exit_code, 0);
-    EXPECT_EQ(run_cli({"audit", "new-secret", "--out", data_ + "/audit.secret"}).exit_code, 0);
+    EXPECT_TRUE(generate_robot_keys(data_ + "/keys"));
+    EXPECT_TRUE(create_audit_secret(data_ + "/audit.secret"));
     auto seed = hex("0909090909090909090909090909090909090909090909090909090909090909");
     seed_file_ = dir_ + "/issuer.seed";
     {

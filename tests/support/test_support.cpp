@@ -17,6 +17,9 @@
 #include <fstream>
 #include <sstream>
 
+#include "rcan/audit/secret.h"
+#include "rcan/crypto/keys.h"
+
 extern char** environ;
 
 namespace rcan::test {
@@ -199,6 +202,29 @@ RunResult run_cli(const std::vector<std::string>& args, const std::string& stdin
   argv.push_back(RCAN_CLI_PATH);
   argv.insert(argv.end(), args.begin(), args.end());
   return run(argv, stdin_data, extra_env);
+}
+
+bool generate_robot_keys(const std::string& dir) {
+  auto k = keys::generate();
+  if (!k.ok()) {
+    ADD_FAILURE() << "robot keys: " << k.error().message;
+    return false;
+  }
+  Status s = keys::write_dir(dir, *k);
+  if (!s.ok()) ADD_FAILURE() << "robot keys in " << dir << ": " << s.error().message;
+  return s.ok();
+}
+
+bool create_audit_secret(const std::string& path) {
+  Status s = audit::create_secret_file(path);
+  if (!s.ok()) ADD_FAILURE() << "audit secret " << path << ": " << s.error().message;
+  return s.ok();
+}
+
+bool create_token_issuer(const std::string& dir) {
+  auto made = keys::ensure_issuer_dir(dir);
+  if (!made.ok()) ADD_FAILURE() << "token issuer in " << dir << ": " << made.error().message;
+  return made.ok();
 }
 
 bool eventually(const std::function<bool()>& pred, int timeout_ms) {

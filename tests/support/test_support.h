@@ -61,6 +61,15 @@ RunResult run(const std::vector<std::string>& argv, const std::string& stdin_dat
 RunResult run_cli(const std::vector<std::string>& args, const std::string& stdin_data = {},
                   const std::vector<std::string>& extra_env = {});
 
+// What a configured node's fixture needs on disk, made through the library instead of the CLI
+// (the tests about the CLI run it themselves): a new robot key pair in `dir`, as `rcan keys
+// generate --dir` writes it; a new audit chain secret at `path` (0600), as `rcan audit
+// new-secret --out`; an Ed25519 token issuer in `dir`, as `rcan keys issuer --dir`. Each
+// reports a failure to the running test and returns false.
+bool generate_robot_keys(const std::string& dir);
+bool create_audit_secret(const std::string& path);
+bool create_token_issuer(const std::string& dir);
+
 // Polls `pred` (every 20 ms) until it holds or `timeout_ms` passes; then its last answer.
 bool eventually(const std::function<bool()>& pred, int timeout_ms = 5000);
 
