@@ -2,13 +2,14 @@
 """The folder map of docs/ARCHITECTURE.md against the tree, and the paths the docs name.
 
   - Every folder of the tree (under src/, include/ and apps/ three levels deep, e.g.
-    src/node/api; under tests/, fuzz/ and web/ two, e.g. tests/e2e; bench/ and scripts/
-    themselves) appears in the map (the tables of the section "## The folder map": every
+    src/node/api; under tests/, fuzz/, web/ and third_party/ two, e.g. tests/e2e; bench/ and
+    scripts/ themselves) appears in the map (the tables of the section "## The folder map": every
     `folder/` in a row's first cell), and every folder the map names exists. A row whose first
     cell says "(planned)" names a folder that may not exist yet.
   - Every path of the source tree that docs/*.md or README.md names (src/..., apps/...,
-    tests/..., include/..., bench/..., fuzz/..., scripts/..., web/...; globs like grpc_*.cpp and
-    braces like x.{h,cpp} included; a program, bench/fleet_bench, by its source) exists.
+    tests/..., include/..., bench/..., fuzz/..., scripts/..., web/..., third_party/...; globs
+    like grpc_*.cpp and braces like x.{h,cpp} included; a program, bench/fleet_bench, by its
+    source) exists.
 
   scripts/check_folder_map.py [ROOT]      exit 0: map and paths agree with the tree; 1: they do not
   scripts/check_folder_map.py --self-test  shows that the check fails on a folder missing from the
@@ -24,7 +25,7 @@ MAP_DOC = "docs/ARCHITECTURE.md"
 MAP_HEADING = "## The folder map"
 # How deep the map must go under each top folder (path components, the top one included).
 DEPTH = {"src": 3, "include": 3, "apps": 2, "tests": 2, "fuzz": 2, "web": 2, "bench": 1,
-         "scripts": 1}
+         "scripts": 1, "third_party": 2}
 TOPS = tuple(DEPTH)
 SKIP_DIRS = {"__pycache__", "node_modules"}
 PATH_RE = re.compile(r"(?<![\w./<>-])((?:%s)/[A-Za-z0-9_.*{},+/-]*)" % "|".join(TOPS))

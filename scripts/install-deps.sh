@@ -58,12 +58,12 @@ if [ -n "$stale" ]; then
   (cd "$B" && PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 npm ci --no-audit --no-fund --loglevel=error >/dev/null)
 fi
 
-# The SDK client tests (tests/sdk) run rcan-ts 3.4.2, copied in tests/peers/rcan-ts-3.4.2 and
+# The SDK client tests (tests/sdk) run rcan-ts 3.4.2, copied in third_party/rcan-ts and
 # built here with its own lockfile: npm ci (no install scripts), then tsup into dist/. Skipped
 # when dist/ is newer than the lockfile and the sources.
-T="$ROOT/tests/peers/rcan-ts-3.4.2"
+T="$ROOT/third_party/rcan-ts"
 if [ ! -f "$T/dist/index.mjs" ] || [ -n "$(find "$T/package-lock.json" "$T/package.json" "$T/src" "$T/tsup.config.ts" -newer "$T/dist/index.mjs" 2>/dev/null | head -1)" ]; then
-  echo "install-deps: npm ci + tsup in tests/peers/rcan-ts-3.4.2" >&2
+  echo "install-deps: npm ci + tsup in third_party/rcan-ts" >&2
   # tsup's output (warnings about rcan-ts's own config) is shown only when the build fails.
   (cd "$T" && npm ci --ignore-scripts --no-audit --no-fund --loglevel=error >/dev/null &&
     { out="$(npx --no-install tsup 2>&1)" || { echo "$out" >&2; exit 1; }; })

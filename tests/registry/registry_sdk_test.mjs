@@ -1,4 +1,4 @@
-// rcan-ts 3.4.2 (tests/peers, built by scripts/install-deps.sh) as a real client of a live
+// rcan-ts 3.4.2 (third_party/rcan-ts, built by scripts/install-deps.sh) as a real client of a live
 // rcan-registry (docs/REGISTRY.md): RegistryClient get/list/search/patch/delete and NodeClient
 // getNodeManifest/verifyNode/listNodes/discover/resolve. rcan-ts's register() sends no
 // Authorization header, so the registry refuses it (401, shown as RCANRegistryError); robots are
@@ -14,7 +14,7 @@ import { fileURLToPath } from 'node:url';
 
 const SKIP = 77;
 const here = dirname(fileURLToPath(import.meta.url));
-const sdkDist = join(here, '..', 'peers', 'rcan-ts-3.4.2', 'dist', 'index.mjs');
+const sdkDist = join(here, '..', '..', 'third_party', 'rcan-ts', 'dist', 'index.mjs');
 const REGISTRY = process.env.RCAN_REGISTRY_PATH ?? '';
 // With RCAN_REGISTRY_DATABASE (scripts/with_postgres.sh sets it and _2…_4) every registry of the
 // test runs on a PostgreSQL database of its own; without it, on SQLite.
@@ -27,7 +27,7 @@ function skip(why) {
   process.exit(SKIP);
 }
 if (!existsSync(REGISTRY)) skip('RCAN_REGISTRY_PATH does not name rcan-registry');
-if (!existsSync(sdkDist)) skip('rcan-ts is not built (scripts/install-deps.sh runs npm ci + tsup in tests/peers/rcan-ts-3.4.2)');
+if (!existsSync(sdkDist)) skip('rcan-ts is not built (scripts/install-deps.sh runs npm ci + tsup in third_party/rcan-ts)');
 const sdk = await import(sdkDist);
 
 const failures = [];

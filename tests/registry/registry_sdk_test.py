@@ -1,4 +1,4 @@
-"""rcan-py 3.4.1 (tests/peers) as a real client of a live rcan-registry (docs/REGISTRY.md).
+"""rcan-py 3.4.1 (third_party/rcan-py) as a real client of a live rcan-registry (docs/REGISTRY.md).
 
 NodeClient (urllib): manifest, verify_node (an http:// api_base fails it, --public-url https://…
 passes), nodes, discover, resolve; the manifest's Ed25519 signature checked with `cryptography`.
@@ -27,7 +27,7 @@ import urllib.request
 
 SKIP = 77
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(os.path.dirname(HERE), "peers", "rcan-py-3.4.1"))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(HERE)), "third_party", "rcan-py"))
 REGISTRY = os.environ.get("RCAN_REGISTRY_PATH", "")
 if not os.path.isfile(REGISTRY):
     print("SKIP: RCAN_REGISTRY_PATH does not name rcan-registry")

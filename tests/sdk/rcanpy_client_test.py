@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""rcan-py 3.4.1 (tests/peers) as a real client of a live rcand.
+"""rcan-py 3.4.1 (third_party/rcan-py) as a real client of a live rcand.
 
 Messages are built with the SDK's RCANMessage / RobotURI and signed with its own functions
 (rcan.signing.sign_message with MLDSAKeyPair, rcan.hybrid.sign_body); they go to rcand over HTTP
@@ -31,9 +31,9 @@ import urllib.request
 
 SKIP = 77
 HERE = os.path.dirname(os.path.abspath(__file__))
-PEERS = os.path.join(os.path.dirname(HERE), "peers")
-sys.path.insert(0, os.path.join(PEERS, "rcan-py-3.4.1"))
-sys.path.insert(0, os.path.join(PEERS, "dilithium-py-1.4.0", "src"))
+THIRD_PARTY = os.path.join(os.path.dirname(os.path.dirname(HERE)), "third_party")
+sys.path.insert(0, os.path.join(THIRD_PARTY, "rcan-py"))
+sys.path.insert(0, os.path.join(THIRD_PARTY, "dilithium-py", "src"))
 
 
 def skip(why):

@@ -1,4 +1,4 @@
-// rcan-ts 3.4.2 (tests/peers, built by scripts/install-deps.sh) as a real client of a live rcand.
+// rcan-ts 3.4.2 (third_party/rcan-ts, built by scripts/install-deps.sh) as a real client of a live rcand.
 // Messages are built with the SDK's RCANMessage / RobotURI and signed with its own functions
 // (signMessage with MLDSAKeyPair, signBody, signHybrid over canonicalJson); they go to rcand over
 // HTTP (POST /rcan/v1/command) and over the WebSocket stream (/rcan/v1/stream), and every answer
@@ -23,7 +23,7 @@ if (!globalThis.crypto) globalThis.crypto = webcrypto;
 
 const SKIP = 77;
 const here = dirname(fileURLToPath(import.meta.url));
-const sdkDist = join(here, '..', 'peers', 'rcan-ts-3.4.2', 'dist', 'index.mjs');
+const sdkDist = join(here, '..', '..', 'third_party', 'rcan-ts', 'dist', 'index.mjs');
 const rcandPath = process.env.RCAND_PATH;
 const cliPath = process.env.RCAN_CLI_PATH;
 
@@ -33,7 +33,7 @@ function skip(why) {
 }
 if (!rcandPath || !existsSync(rcandPath)) skip('RCAND_PATH does not name an rcand binary');
 if (!cliPath || !existsSync(cliPath)) skip('RCAN_CLI_PATH does not name the rcan CLI');
-if (!existsSync(sdkDist)) skip('rcan-ts is not built (scripts/install-deps.sh runs npm ci + tsup in tests/peers/rcan-ts-3.4.2)');
+if (!existsSync(sdkDist)) skip('rcan-ts is not built (scripts/install-deps.sh runs npm ci + tsup in third_party/rcan-ts)');
 const sdk = await import(sdkDist);
 const { RCANMessage, MessageType, RobotURI, MLDSAKeyPair, signMessage, verifyMessage, signBody, verifyBody, signHybrid, canonicalJson } = sdk;
 
