@@ -59,7 +59,6 @@ void NodeServices::write_audit(audit::AuditEntry e, std::function<void(Result<au
       std::move(e),
       [this, cb = std::move(cb),
        stop_copy = std::move(stop_copy)](Result<audit::Receipt> r) mutable {
-        audit_inflight.fetch_sub(1, std::memory_order_relaxed);
         if (!r.ok()) {
           audit_failures.fetch_add(1, std::memory_order_relaxed);
           if (r.error().code == ErrorCode::kAuditUnavailable) {
@@ -70,6 +69,9 @@ void NodeServices::write_audit(audit::AuditEntry e, std::function<void(Result<au
           audit_unavailable.store(
               false);  // the log recovered (AuditLog::available() is the live state)
         }
+        // Out of flight only once a failed stop is in the backlog: whoever waits for no write in
+        // flight then finds every stop either recorded or kept.
+        audit_inflight.fetch_sub(1, std::memory_order_release);
         if (cb) cb(std::move(r));
       },
       commit);
