@@ -12,7 +12,8 @@
 #   rcan_node_bindings   MQTT and UDP (gRPC: cmake/RcanGrpc.cmake)
 # rcan_node is all ten, for the programs that run a node (rcand, tests, benchmarks, fuzz targets).
 rcan_add_library(rcan_node_admission src/node/admission authenticator.cpp injection.cpp rate_limit.cpp
-  registry_feed.cpp replay.cpp revocation.cpp token_cache.cpp)
+  registry_feed.cpp registry_keys.cpp registry_revocations.cpp registry_trust.cpp
+  registry_trust_link.cpp replay.cpp revocation.cpp token_cache.cpp)
 target_link_libraries(rcan_node_admission PUBLIC rcan_runtime)
 
 rcan_add_library(rcan_node_control src/node/control consent.cpp control_machine.cpp ownership.cpp

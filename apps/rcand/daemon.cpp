@@ -6,6 +6,7 @@
 
 #include "base/clock.h"
 #include "driver_factory.h"
+#include "node/admission/registry_trust.h"
 #include "node/ai/ai_services.h"
 #include "node/api/node.h"
 #include "node/bindings/mqtt_node.h"
@@ -19,7 +20,6 @@
 #include "rcan/errors.h"
 #include "rcan/hash.h"
 #include "registry_join.h"
-#include "registry_trust.h"
 #include "runtime/log.h"
 #include "settings.h"
 #include "transport/http_server.h"
@@ -33,6 +33,34 @@ namespace {
 // An error whose message is `context` followed by the cause's message.
 Error failed(const std::string& context, const Error& cause) {
   return Error(ErrorCode::kInternal, context + cause.message);
+}
+
+// The link to the registry whose tokens the node trusts (registry.trust_tokens), primed before
+// the node serves: its keys (fetched, else cached), its revocation cursor, its records in the
+// node's audit log, its metrics and its part of the detailed status.
+std::unique_ptr<node::RegistryTrust> start_registry_trust(const config::NodeConfig& cfg,
+                                                          node::NodeServices& svc) {
+  node::RegistryTrustOptions o;
+  o.registry_url = cfg.registry_url;
+  o.issuer = cfg.registry.issuer.empty() ? cfg.registry_url : cfg.registry.issuer;
+  o.data_dir = cfg.data_dir;
+  o.ca_file = cfg.registry.ca_file;
+  o.rrn = svc.settings.rrn;
+  o.jwks_refresh_s = cfg.registry.jwks_refresh_s;
+  o.revocations_refresh_s = cfg.registry.revocations_refresh_s;
+  o.max_key_age_s = cfg.registry.max_key_age_s;
+  auto record = [&svc](node::TrustRecord r) {
+    auto rec = svc.record(r.event, r.outcome);
+    rec.by_system();
+    if (!r.reason.empty()) rec.reason(r.reason);
+    for (const auto& [key, value] : r.detail) rec.detail(key, value);
+    rec.write();
+  };
+  auto trust = std::make_unique<node::RegistryTrust>(std::move(o), svc.clock, svc.auth,
+                                                     svc.revocations, svc.metrics, record);
+  trust->prime(3000);
+  svc.registry_status = [t = trust.get()] { return t->status_json(); };
+  return trust;
 }
 
 }  // namespace
@@ -207,11 +235,10 @@ Status Daemon::start_node() {
   if (!cfg_.fleet.fleet_id.empty())
     services_->fleet =
         std::make_shared<node::FleetMembership>(node::FleetMembership{cfg_.fleet, {}});
-  // Tokens from the registry (registry_trust.h): its keys before the node serves.
+  // Tokens from the registry (node/admission/registry_trust.h): its keys before the node serves.
   std::function<int64_t()> keys_fetched;
   if (cfg_.registry.trust_tokens) {
-    registry_trust_ = std::make_unique<RegistryTrust>(cfg_, *services_);
-    registry_trust_->prime(3000);
+    registry_trust_ = start_registry_trust(cfg_, *services_);
     keys_fetched = [t = registry_trust_.get()] { return t->keys_fetched_ms(); };
   }
   configure_control(*services_, cfg_, std::move(keys_fetched));

@@ -32,6 +32,7 @@ class NodeServices;
 class Node;
 class MqttNode;
 class MdnsAdvertiser;
+class RegistryTrust;  // node/admission/registry_trust.h
 class RobotDirectory;
 class UdpService;
 class GrpcTransport;
@@ -42,8 +43,7 @@ class HttpServer;
 
 namespace rcan::rcand {
 
-class RegistryLink;   // registry_join.h
-class RegistryTrust;  // registry_trust.h
+class RegistryLink;  // registry_join.h
 
 struct DaemonOptions {
   std::optional<std::string> config;    // --config: a configured robot; none: the embedded default
@@ -109,7 +109,7 @@ class Daemon {
   std::unique_ptr<node::NodeServices> services_;
   std::unique_ptr<node::RobotDirectory> robots_;  // dashboard.robots (outlives node_)
   std::unique_ptr<node::Node> node_;
-  std::unique_ptr<RegistryTrust> registry_trust_;  // the registry's keys and revocations
+  std::unique_ptr<node::RegistryTrust> registry_trust_;  // the registry's keys and revocations
   std::unique_ptr<node::UdpService> udp_;
   std::unique_ptr<transport::HttpServer> http_;
   std::unique_ptr<node::GrpcTransport> grpc_;

@@ -1,11 +1,11 @@
 // Config → the settings of each part rcand starts (settings.h).
 #include "settings.h"
 
-#include <cstdio>
 #include <cstdlib>
 
 #include "node/control/sessions.h"
 #include "rcan/errors.h"
+#include "rcan/ruri.h"
 #include "registry_join.h"
 
 namespace rcan::rcand {
@@ -55,9 +55,7 @@ node::NodeSettings node_settings(const config::NodeConfig& cfg, const keys::Robo
     // A stable local registration number from the robot's key id (digits only).
     std::string kid = robot.pub.kid();
     uint64_t v = std::strtoull(kid.c_str(), nullptr, 16) % 1'000'000'000'000ULL;
-    char b[32];
-    std::snprintf(b, sizeof b, "RRN-%012llu", static_cast<unsigned long long>(v));
-    ns.rrn = b;
+    ns.rrn = format_rrn(static_cast<int64_t>(v));
   }
   ns.name = cfg.robot.name.empty() ? "rcan-robot" : cfg.robot.name;
   ns.manufacturer =

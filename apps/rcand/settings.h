@@ -31,9 +31,9 @@ Result<node::AuthOptions> auth_options(const config::NodeConfig& cfg, jwt::Trust
                                        const std::string& rrn);
 
 // Control sessions, ownership transfer, consent and the partition watch (docs/SESSIONS.md).
-// `registry_keys_fetched_ms` (set when registry.trust_tokens is on, registry_trust.h): the
-// partition monitor probes the registry and calls its keys fresh from their last fetch, unless
-// offline.issuer_url names something else to probe.
+// `registry_keys_fetched_ms` (set when registry.trust_tokens is on,
+// node/admission/registry_trust.h): the partition monitor probes the registry and calls its keys
+// fresh from their last fetch, unless offline.issuer_url names something else to probe.
 void configure_control(node::NodeServices& services, const config::NodeConfig& cfg,
                        std::function<int64_t()> registry_keys_fetched_ms = {});
 

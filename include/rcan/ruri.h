@@ -73,5 +73,9 @@ struct Rrn {
   std::string str() const;
 };
 Result<Rrn> parse_rrn(std::string_view text);
+// The one text form of registration number `n` (>= 0): "RRN-" + `n` in 12 zero-padded digits
+// (more when it has more), or "RRN-<PREFIX>-" + the same when `prefix` is set (upper-cased).
+// The registry mints RRNs with it; a node without one makes its local RRN with it.
+std::string format_rrn(int64_t n, std::string_view prefix = {});
 
 }  // namespace rcan

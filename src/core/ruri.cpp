@@ -1,7 +1,10 @@
 #include "rcan/ruri.h"
 
 #include <charconv>
+#include <cstdio>
 #include <vector>
+
+#include "base/strings.h"
 
 namespace rcan {
 namespace {
@@ -396,8 +399,23 @@ bool aud_matches(std::string_view pattern, const Ruri& robot) {
   return cap == robot.capability;
 }
 
-std::string Rrn::str() const {
-  return prefix.empty() ? "RRN-" + digits : "RRN-" + prefix + "-" + digits;
+namespace {
+
+// "RRN-" + digits, or "RRN-<prefix>-" + digits.
+std::string rrn_text(std::string_view prefix, std::string_view digits) {
+  std::string out = "RRN-";
+  if (!prefix.empty()) out.append(prefix).push_back('-');
+  return out.append(digits);
+}
+
+}  // namespace
+
+std::string Rrn::str() const { return rrn_text(prefix, digits); }
+
+std::string format_rrn(int64_t n, std::string_view prefix) {
+  char digits[32];
+  std::snprintf(digits, sizeof digits, "%012lld", static_cast<long long>(n));
+  return rrn_text(ascii_upper(prefix), digits);
 }
 
 Result<Rrn> parse_rrn(std::string_view text) {

@@ -11,6 +11,7 @@
 #include <unordered_map>
 
 #include "base/strings.h"
+#include "rcan/ruri.h"
 #include "registry/store.h"
 #include "registry/store_internal.h"
 
@@ -577,21 +578,23 @@ class PgStore final : public Store {
 };
 
 Result<Registered> PgStore::register_robot(const NewRobot& r) {
-  const std::string prefix = opts_.rrn_prefix.empty() ? "" : ascii_upper(opts_.rrn_prefix) + "-";
   const std::string uri = detail::robot_uri(r);
   // Insert with a fresh number unless any unique constraint objects (the live robot with these
   // slugs exists, or a synced robot holds that RRN); then return the live robot. Nothing live
-  // and nothing inserted: it was deleted meanwhile, or the RRN was taken: try again.
+  // and nothing inserted: it was deleted meanwhile, or the RRN was taken: try again (each
+  // attempt takes a number of its own, as the SQLite store's does).
   for (int attempt = 0; attempt < 100; ++attempt) {
-    auto ins =
-        run("INSERT INTO robots (" ROBOT_COLUMNS
-            ") VALUES ("
-            "'RRN-' || $1::text || lpad(nextval('rrn_seq')::text, 12, '0'), $2, $3, $4, $5, $6, "
-            "'community', $7, $8, $9, $10, $11, $12, $13, $14, $15, $15, false) "
-            "ON CONFLICT DO NOTHING RETURNING " ROBOT_COLUMNS,
-            params(prefix, r.manufacturer, r.model, r.version, r.device_id, uri, r.description,
-                   r.contact_email, r.source, r.metadata_json, r.ed25519_pub, r.mldsa65_pub,
-                   r.endpoints_json, r.owner_key_id, r.now));
+    auto seq = run("SELECT nextval('rrn_seq')", Params{});
+    if (!seq) return seq.error();
+    const std::string rrn = format_rrn(seq->integer(0, 0), opts_.rrn_prefix);  // rcan/ruri.h
+    auto ins = run("INSERT INTO robots (" ROBOT_COLUMNS
+                   ") VALUES ("
+                   "$1, $2, $3, $4, $5, $6, "
+                   "'community', $7, $8, $9, $10, $11, $12, $13, $14, $15, $15, false) "
+                   "ON CONFLICT DO NOTHING RETURNING " ROBOT_COLUMNS,
+                   params(rrn, r.manufacturer, r.model, r.version, r.device_id, uri, r.description,
+                          r.contact_email, r.source, r.metadata_json, r.ed25519_pub, r.mldsa65_pub,
+                          r.endpoints_json, r.owner_key_id, r.now));
     if (!ins) return ins.error();
     if (ins->size() == 1) return Registered{ins->robot(0), true};
     auto live = one_robot("SELECT " ROBOT_COLUMNS

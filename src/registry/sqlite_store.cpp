@@ -15,6 +15,7 @@
 
 #include "base/clock.h"
 #include "base/strings.h"
+#include "rcan/ruri.h"
 #include "registry/store.h"
 #include "registry/store_internal.h"
 
@@ -655,7 +656,7 @@ Result<Registered> SqliteStore::register_robot(const NewRobot& r) {
       if (q.finish() != SQLITE_DONE) return error("register_robot: counter");
     }
     Robot robot = robot_of(r);
-    robot.rrn = detail::format_rrn(opts_.rrn_prefix, n);
+    robot.rrn = format_rrn(n, opts_.rrn_prefix);  // rcan/ruri.h
     auto ins = prepare("INSERT INTO robots (" ROBOT_COLUMNS ") VALUES (" ROBOT_VALUES ")");
     if (!ins) return ins.error();
     int rc;

@@ -1,21 +1,11 @@
 // open_store and the helpers both backends share (store_internal.h).
 #include "registry/store.h"
 
-#include <cstdio>
-
 #include "base/strings.h"
 #include "registry/store_internal.h"
 
 namespace rcan::registry {
 namespace detail {
-
-std::string format_rrn(std::string_view prefix, int64_t n) {
-  char digits[32];
-  std::snprintf(digits, sizeof digits, "%012lld", static_cast<long long>(n));
-  std::string out = "RRN-";
-  if (!prefix.empty()) out += ascii_upper(prefix) + "-";
-  return out + digits;
-}
 
 std::string like_contains(std::string_view q) {
   std::string out = "%";

@@ -9,8 +9,6 @@
 
 namespace rcan::registry::detail {
 
-// "RRN-" + 12 zero-padded digits, or "RRN-<PREFIX>-" + 12 digits when `prefix` is set.
-std::string format_rrn(std::string_view prefix, int64_t n);
 // A LIKE pattern matching `q` as a literal substring, lower-cased, with '\' as the escape
 // character (… LIKE ? ESCAPE '\').
 std::string like_contains(std::string_view q);

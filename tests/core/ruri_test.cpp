@@ -270,5 +270,20 @@ TEST(Rrn, CanonicalAndAcceptedForms) {
   }
 }
 
+// The one text form the registry mints and a node without a registration makes for itself.
+TEST(Rrn, FormattedFromANumber) {
+  EXPECT_EQ(format_rrn(0), "RRN-000000000000");
+  EXPECT_EQ(format_rrn(42), "RRN-000000000042");
+  EXPECT_EQ(format_rrn(999'999'999'999), "RRN-999999999999");
+  EXPECT_EQ(format_rrn(1'000'000'000'000), "RRN-1000000000000");  // more digits when it has more
+  EXPECT_EQ(format_rrn(42, "BD"), "RRN-BD-000000000042");
+  EXPECT_EQ(format_rrn(42, "bd"), "RRN-BD-000000000042");  // the prefix upper-cased
+  for (int64_t n : {int64_t{1}, int64_t{123'456'789'012}}) {
+    auto r = parse_rrn(format_rrn(n, "ACME"));
+    ASSERT_TRUE(r.ok()) << n;
+    EXPECT_EQ(r->str(), format_rrn(n, "ACME"));
+  }
+}
+
 }  // namespace
 }  // namespace rcan

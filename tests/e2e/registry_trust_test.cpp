@@ -1,5 +1,5 @@
 // rcand trusts, follows and falls back on its registry's token authority (registry.trust_tokens,
-// apps/rcand/registry_trust.h): a real rcand against a small registry stand-in (python3's
+// node/admission/registry_trust.h): a real rcand against a small registry stand-in (python3's
 // http.server, started as a child process, serving the JWKS, the revocation feed and /healthz
 // from files the test writes). Tokens are signed here with keys whose public halves the
 // stand-in publishes.

@@ -1,7 +1,7 @@
 // What a robot reads from its registry's token authority (docs/SECURITY.md §Tokens from the
 // registry): the signing keys it publishes (GET /.well-known/jwks.json) and the pages of its
 // revocation feed (GET /api/v1/revocations?since=<seq>). Parsers only: the fetching, caching
-// and applying is rcand's (apps/rcand/registry_trust.h). Both refuse rather than guess: a
+// and applying is RegistryTrust's (registry_trust.h). Both refuse rather than guess: a
 // document that is not what the contract says is an error, and the caller keeps what it had.
 #pragma once
 
@@ -53,7 +53,7 @@ Result<RevocationPage> parse_revocation_page(std::string_view text, int64_t sinc
 std::optional<int64_t> parse_iso8601_ms(std::string_view s);
 
 // What rcand reads back from the registry when it introspects a token and registers itself
-// (apps/rcand/registry_trust.h, registry_join.h): answers straight off the network, parsed
+// (registry_trust.h; rcand's registry_join.h): answers straight off the network, parsed
 // here so that they are fuzzed (fuzz/registry_answer_fuzz.cpp).
 inline constexpr size_t kMaxRegistryAnswerBytes = 64 * 1024;
 
