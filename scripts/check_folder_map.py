@@ -21,6 +21,9 @@ import os
 import re
 import sys
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import check_tree  # noqa: E402  (scripts/check_tree.py)
+
 MAP_DOC = "docs/ARCHITECTURE.md"
 MAP_HEADING = "## The folder map"
 # How deep the map must go under each top folder (path components, the top one included).
@@ -123,8 +126,6 @@ def check(root):
 
 def self_test():
     """A tree whose map and docs agree with it, then each way to disagree: each must be caught."""
-    import shutil
-    import tempfile
 
     good = {
         "src/core/a.cpp": "",
@@ -142,30 +143,8 @@ def self_test():
          "which does not exist"),
         ("a stale path in a doc", {"docs/X.md": "See `src/core/gone.cpp`.\n"}, "does not exist"),
     ]
-    failed = 0
-    for name, extra, expect in cases:
-        d = tempfile.mkdtemp(prefix="check_folder_map.")
-        try:
-            for path, text in {**good, **extra}.items():
-                os.makedirs(os.path.dirname(os.path.join(d, path)), exist_ok=True)
-                with open(os.path.join(d, path), "w", encoding="utf-8") as fh:
-                    fh.write(text)
-            print(f"-- {name}")
-            errors = check(d)
-        finally:
-            shutil.rmtree(d, ignore_errors=True)
-        ok = (not errors) if expect is None else any(expect in e for e in errors)
-        print(f"   {'ok' if ok else 'FAILED'}: expected {expect or 'no problem'}")
-        failed += not ok
-    return 1 if failed else 0
-
-
-def main():
-    if sys.argv[1:] == ["--self-test"]:
-        return self_test()
-    root = sys.argv[1] if len(sys.argv) > 1 else os.path.join(os.path.dirname(__file__), "..")
-    return 1 if check(os.path.abspath(root)) else 0
+    return check_tree.run_self_test("check_folder_map.", good, cases, check, "no problem")
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(check_tree.main(check, self_test))

@@ -15,6 +15,9 @@ import os
 import re
 import sys
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import check_tree  # noqa: E402  (scripts/check_tree.py)
+
 SCANNED = ("include/", "src/", "apps/")
 BOTTOM = "src/base/"
 # Files that still read the clock themselves or keep a private lower(); each entry is to be
@@ -62,8 +65,6 @@ def check(root):
 
 def self_test():
     """A tree that follows the rules, then each rule broken once: each break must be caught."""
-    import shutil
-    import tempfile
 
     ok_tree = {
         "src/base/clock.h": "inline auto steady_now() { return std::chrono::steady_clock::now(); }\n",
@@ -77,30 +78,8 @@ def self_test():
         ("a private lower()", {"src/core/b.cpp": "std::string lower(std::string_view s) {\n}\n"},
          "private case folding"),
     ]
-    failed = 0
-    for name, extra, expect in cases:
-        d = tempfile.mkdtemp(prefix="check_primitives.")
-        try:
-            for path, text in {**ok_tree, **extra}.items():
-                os.makedirs(os.path.dirname(os.path.join(d, path)), exist_ok=True)
-                with open(os.path.join(d, path), "w", encoding="utf-8") as fh:
-                    fh.write(text)
-            print(f"-- {name}")
-            errors = check(d)
-        finally:
-            shutil.rmtree(d, ignore_errors=True)
-        ok = (not errors) if expect is None else any(expect in e for e in errors)
-        print(f"   {'ok' if ok else 'FAILED'}: expected {expect or 'no violation'}")
-        failed += not ok
-    return 1 if failed else 0
-
-
-def main():
-    if sys.argv[1:] == ["--self-test"]:
-        return self_test()
-    root = sys.argv[1] if len(sys.argv) > 1 else os.path.join(os.path.dirname(__file__), "..")
-    return 1 if check(os.path.abspath(root)) else 0
+    return check_tree.run_self_test("check_primitives.", ok_tree, cases, check, "no violation")
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(check_tree.main(check, self_test))

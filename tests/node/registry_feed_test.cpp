@@ -13,49 +13,20 @@
 #include "rcan/crypto/ed25519.h"
 #include "rcan/encoding.h"
 #include "rcan/registry.h"
+#include "registry_token_fixture.h"
 
 using namespace rcan;
 using namespace rcan::node;
 
 namespace {
 
-constexpr int64_t kNow = 1'800'000'000;
-const std::string kAud = "rcan://local.rcan/acme/rover/abcdef12";
-const std::string kRrn = "RRN-000000000042";
-const std::string kIss = "https://registry.example";
-
-std::array<uint8_t, 32> seed(uint8_t fill) {
-  std::array<uint8_t, 32> s{};
-  s.fill(fill);
-  return s;
-}
-
-std::string jwk(uint8_t fill, const std::string& kid) {
-  auto pk = ed25519::public_key_from_seed(seed(fill));
-  return R"({"kty":"OKP","crv":"Ed25519","x":")" + base64url_encode(*pk) + R"(","kid":")" + kid +
-         R"(","use":"sig","alg":"EdDSA"})";
-}
-
-std::string token(uint8_t fill, const std::string& kid, const std::string& iss = kIss) {
-  auto key = jwt::SigningKey::ed25519_seed(seed(fill));
-  json::Object c{{"iss", iss},      {"sub", "ops"},     {"aud", kAud},       {"rrn", kRrn},
-                 {"role", "owner"}, {"iat", kNow - 10}, {"exp", kNow + 3600}};
-  return *jwt::issue(c, *key, kid);
-}
+using namespace registry_fixture;
+constexpr int64_t kNow = kNowS;
 
 std::vector<jwt::VerificationKey> parsed_keys(const std::string& jwks) {
   auto set = parse_registry_jwks(jwks);
   EXPECT_TRUE(set.ok()) << set.error().message;
   return set.ok() ? std::move(set->keys) : std::vector<jwt::VerificationKey>{};
-}
-
-Authenticator make_auth() {
-  AuthOptions o;
-  auto local = jwt::SigningKey::ed25519_seed(seed(9));
-  o.trust.add("local", *local->verification_key());
-  o.verify.audience = kAud;
-  o.own_rrn = kRrn;
-  return Authenticator(std::move(o));
 }
 
 }  // namespace

@@ -19,46 +19,16 @@
 #include "rcan/crypto/ed25519.h"
 #include "rcan/encoding.h"
 #include "rcan/json.h"
+#include "registry_token_fixture.h"
 #include "runtime/state_file.h"
 #include "test_support.h"
 
 namespace rcan::node {
 namespace {
 
-constexpr int64_t kNowS = 1'800'000'000;
-const std::string kAud = "rcan://local.rcan/acme/rover/abcdef12";
-const std::string kRrn = "RRN-000000000042";
-const std::string kIss = "https://registry.example";
+using namespace registry_fixture;
 // Nothing listens there: every call to the registry fails at once.
 const std::string kDownRegistry = "http://127.0.0.1:1";
-
-std::array<uint8_t, 32> seed(uint8_t fill) {
-  std::array<uint8_t, 32> s{};
-  s.fill(fill);
-  return s;
-}
-
-std::string jwk(uint8_t fill, const std::string& kid) {
-  auto pk = ed25519::public_key_from_seed(seed(fill));
-  return R"({"kty":"OKP","crv":"Ed25519","x":")" + base64url_encode(*pk) + R"(","kid":")" + kid +
-         R"(","use":"sig","alg":"EdDSA"})";
-}
-
-std::string token(uint8_t fill, const std::string& kid) {
-  auto key = jwt::SigningKey::ed25519_seed(seed(fill));
-  json::Object c{{"iss", kIss},     {"sub", "ops"},      {"aud", kAud},        {"rrn", kRrn},
-                 {"role", "owner"}, {"iat", kNowS - 10}, {"exp", kNowS + 3600}};
-  return *jwt::issue(c, *key, kid);
-}
-
-Authenticator make_auth() {
-  AuthOptions o;
-  auto local = jwt::SigningKey::ed25519_seed(seed(9));
-  o.trust.add("local", *local->verification_key());
-  o.verify.audience = kAud;
-  o.own_rrn = kRrn;
-  return Authenticator(std::move(o));
-}
 
 // A node's parts the link works with, and the records it wrote.
 struct Node {
