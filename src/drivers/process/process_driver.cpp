@@ -536,22 +536,23 @@ void ProcessDriver::drain_output(int stream, bool last) {
 }
 
 void ProcessDriver::relay_line(int stream, const std::string& line, bool cut) {
-  // A token bucket shared by both streams; what it refuses is counted and said once it refills.
+  // A token bucket per stream; what it refuses is counted and said once it refills.
+  Output& o = output_[stream];
   const int64_t now = now_ms();
-  output_tokens_ = std::min(
-      static_cast<double>(kOutputBurst),
-      output_tokens_ + static_cast<double>(now - output_at_ms_) * kOutputLinesPerS / 1000.0);
-  output_at_ms_ = now;
-  if (output_tokens_ < 1.0) {
-    ++output_dropped_;
+  o.tokens = std::min(static_cast<double>(kOutputBurst),
+                      o.tokens + static_cast<double>(now - o.at_ms) * kOutputLinesPerS / 1000.0);
+  o.at_ms = now;
+  if (o.tokens < 1.0) {
+    ++o.dropped;
     return;
   }
-  output_tokens_ -= 1.0;
-  if (output_dropped_ > 0) {
+  o.tokens -= 1.0;
+  if (o.dropped > 0) {
     log(LogLevel::kWarn, "driver_output_dropped",
-        json::Object{{"lines", static_cast<int64_t>(output_dropped_)},
+        json::Object{{"stream", stream == 0 ? "stdout" : "stderr"},
+                     {"lines", static_cast<int64_t>(o.dropped)},
                      {"limit_per_s", static_cast<int64_t>(kOutputLinesPerS)}});
-    output_dropped_ = 0;
+    o.dropped = 0;
   }
   json::Object f{{"stream", stream == 0 ? "stdout" : "stderr"},
                  {"pid", static_cast<int64_t>(child_pid_.load(std::memory_order_acquire))},

@@ -91,8 +91,9 @@ class ProcessDriver final : public node::Driver {
   void io_loop();
   // Reads what the driver wrote to its stdout (0) or stderr (1) and relays it line by line as
   // rcand's own "driver_output" log lines (its text escaped as a field, never a line of
-  // rcand's log itself), cut at kMaxOutputLine bytes, at most kOutputLinesPerS lines a second;
-  // `last`: the pipe goes (a partial line is relayed).
+  // rcand's log itself), cut at kMaxOutputLine bytes, at most kOutputLinesPerS lines a second
+  // per stream (each its own bucket: chatter on stdout never silences what the driver says on
+  // stderr); `last`: the pipe goes (a partial line is relayed).
   void drain_output(int stream, bool last);
   void relay_line(int stream, const std::string& line, bool cut);
   bool connect_or_spawn(int64_t now_ms);
@@ -165,13 +166,13 @@ class ProcessDriver final : public node::Driver {
   static constexpr int kOutputLinesPerS = 50, kOutputBurst = 200;
   struct Output {
     int fd = -1;
-    std::string partial;    // a line not yet ended
-    bool skipping = false;  // a cut line's rest, dropped up to its newline
+    std::string partial;           // a line not yet ended
+    bool skipping = false;         // a cut line's rest, dropped up to its newline
+    double tokens = kOutputBurst;  // the stream's own bucket of lines
+    int64_t at_ms = 0;
+    uint64_t dropped = 0;  // refused since the last line relayed
   };
   Output output_[2];
-  double output_tokens_ = kOutputBurst;
-  int64_t output_at_ms_ = 0;
-  uint64_t output_dropped_ = 0;
 };
 
 }  // namespace rcan::drivers
