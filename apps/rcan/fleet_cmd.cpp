@@ -686,6 +686,67 @@ int audit_verify_main(const Options& o) {
   return ok ? 0 : 1;
 }
 
+// One robot's audit chain as `fleet audit collect` sees it: the records kept, the last sequence
+// number and hash, and every problem found (a gap, a break, a duplicate, a tampered record).
+struct CollectedChain {
+  uint64_t last_seq = 0;
+  std::string last_hash;
+  int64_t records = 0;
+  json::Array problems;
+
+  // A record the database took: the problems it found in it.
+  void stored(const std::vector<AuditProblem>& found, const json::Value& body) {
+    for (const auto& p : found) problems.push_back(p.to_json());
+    if (found.empty() || found.front().problem == "gap" || found.front().problem == "break")
+      ++records;
+    const json::Value* sq = body.get("seq");
+    if (sq != nullptr && sq->is_int() && sq->as_int() > 0)
+      last_seq = std::max<uint64_t>(last_seq, static_cast<uint64_t>(sq->as_int()));
+  }
+
+  // A record for the files: checked against the robot's chain secret (when known) and linked to
+  // its predecessor; false when it is not kept (tampered, malformed, duplicate or reordered).
+  bool take(const json::Value& body, const std::string* secret) {
+    if (secret != nullptr && body.is_object()) {
+      std::string pre = json::canonical_without(body.as_object(), "hmac");
+      if (hmac_sha256_hex(*secret, pre) != json::string_field(body, "hmac")) {
+        const json::Value* sq = body.get("seq");
+        problems.emplace_back(
+            json::Object{{"problem", "hmac_mismatch"},
+                         {"seq", sq != nullptr && sq->is_int() ? sq->as_int() : 0}});
+        return false;
+      }
+    }
+    const json::Value* seq = body.get("seq");
+    std::string prev = json::string_field(body, "prev_hash");
+    // The chain links each record to the SHA-256 of its predecessor's canonical form without hmac.
+    std::string hash =
+        body.is_object() ? sha256_hex(json::canonical_without(body.as_object(), "hmac")) : "";
+    if (seq == nullptr || !seq->is_int() || seq->as_int() < 1) {
+      problems.emplace_back(json::Object{{"problem", "malformed"}});
+      return false;
+    }
+    uint64_t n = static_cast<uint64_t>(seq->as_int());
+    if (records > 0) {
+      if (n <= last_seq) {
+        problems.emplace_back(
+            json::Object{{"problem", "duplicate_or_reordered"}, {"seq", static_cast<int64_t>(n)}});
+        return false;
+      }
+      if (n != last_seq + 1)
+        problems.emplace_back(json::Object{{"problem", "gap"},
+                                           {"after_seq", static_cast<int64_t>(last_seq)},
+                                           {"seq", static_cast<int64_t>(n)}});
+      else if (!last_hash.empty() && prev != last_hash)
+        problems.emplace_back(json::Object{{"problem", "break"}, {"seq", static_cast<int64_t>(n)}});
+    }
+    last_seq = n;
+    last_hash = hash;
+    ++records;
+    return true;
+  }
+};
+
 int audit_collect_main(const Options& o) {
   if (o.positional().size() != 3) return usage_error("fleet audit collect", "give the fleet id");
   auto c = common(o, false);
@@ -714,72 +775,25 @@ int audit_collect_main(const Options& o) {
   s.set_timeout(c->timeout_ms);
   if (Status st = s.open(o, {topics.base + "/robot/+/audit"}, c->qos); !st.ok())
     return usage_error("fleet audit collect", st.error().message);
-  struct Chain {
-    uint64_t last_seq = 0;
-    std::string last_hash;
-    int64_t records = 0;
-    json::Array problems;
-  };
-  std::map<std::string, Chain> chains;
+  std::map<std::string, CollectedChain> chains;
   int64_t deadline = mono_ms() + duration;
   while (auto m = s.next(deadline)) {
     std::string member = m->topic.substr(topics.base.size() + 7);
     member = member.substr(0, member.find('/'));
     if (!mqtt::valid_topic_segment(member)) continue;
-    Chain& ch = chains[member];
+    CollectedChain& ch = chains[member];
     auto sec = secrets->find(member);
+    const std::string* secret = sec == secrets->end() ? nullptr : &sec->second;
     if (db) {
-      auto found =
-          db->ingest(fleet, member, m->body, sec == secrets->end() ? nullptr : &sec->second);
+      auto found = db->ingest(fleet, member, m->body, secret);
       if (!found.ok()) {
         s.close();
         return usage_error("fleet audit collect", found.error().message);
       }
-      for (const auto& p : *found) ch.problems.push_back(p.to_json());
-      if (found->empty() || found->front().problem == "gap" || found->front().problem == "break")
-        ++ch.records;
-      const json::Value* sq = m->body.get("seq");
-      if (sq != nullptr && sq->is_int() && sq->as_int() > 0)
-        ch.last_seq = std::max<uint64_t>(ch.last_seq, static_cast<uint64_t>(sq->as_int()));
+      ch.stored(*found, m->body);
       continue;
     }
-    if (sec != secrets->end() && m->body.is_object()) {
-      std::string pre = json::canonical_without(m->body.as_object(), "hmac");
-      if (hmac_sha256_hex(sec->second, pre) != json::string_field(m->body, "hmac")) {
-        const json::Value* sq = m->body.get("seq");
-        ch.problems.emplace_back(
-            json::Object{{"problem", "hmac_mismatch"},
-                         {"seq", sq != nullptr && sq->is_int() ? sq->as_int() : 0}});
-        continue;  // a tampered record is not kept
-      }
-    }
-    const json::Value* seq = m->body.get("seq");
-    std::string prev = json::string_field(m->body, "prev_hash");
-    // The chain links each record to the SHA-256 of its predecessor's canonical form without hmac.
-    std::string hash =
-        m->body.is_object() ? sha256_hex(json::canonical_without(m->body.as_object(), "hmac")) : "";
-    if (seq == nullptr || !seq->is_int() || seq->as_int() < 1) {
-      ch.problems.emplace_back(json::Object{{"problem", "malformed"}});
-      continue;
-    }
-    uint64_t n = static_cast<uint64_t>(seq->as_int());
-    if (ch.records > 0) {
-      if (n <= ch.last_seq) {
-        ch.problems.emplace_back(
-            json::Object{{"problem", "duplicate_or_reordered"}, {"seq", static_cast<int64_t>(n)}});
-        continue;
-      }
-      if (n != ch.last_seq + 1)
-        ch.problems.emplace_back(json::Object{{"problem", "gap"},
-                                              {"after_seq", static_cast<int64_t>(ch.last_seq)},
-                                              {"seq", static_cast<int64_t>(n)}});
-      else if (!ch.last_hash.empty() && prev != ch.last_hash)
-        ch.problems.emplace_back(
-            json::Object{{"problem", "break"}, {"seq", static_cast<int64_t>(n)}});
-    }
-    ch.last_seq = n;
-    ch.last_hash = hash;
-    ++ch.records;
+    if (!ch.take(m->body, secret)) continue;
     std::ofstream f(o.get("out") + "/" + member + ".jsonl", std::ios::app);
     f << json::dump(m->body) << "\n";
   }

@@ -250,117 +250,112 @@ constexpr const char* kCommandHelp =
     "  Options: --ttl-ms N  --priority LOW|NORMAL|HIGH|SAFETY  --confidence X (§16 ai.confidence)\n"
     "           --scope S\n";
 
-int command_main(const Args& args) {
-  if (args.empty()) {
-    std::fputs(kCommandHelp, stderr);
-    return kExitUsage;
-  }
-  if (help_requested(args, (std::string(kCommandHelp) + kNetHelp).c_str())) return 0;
-  // Split: our options vs payload parameters.
-  const std::vector<std::string> own_valued{"url",        "token-file", "timeout",
-                                            "ca-file",    "ttl-ms",     "priority",
-                                            "confidence", "scope",      "registry"};
-  const std::vector<std::string> own_flags{"json", "insecure"};
+// `rcan command`'s words: its own options (`own`, for Options), the payload's --name value pairs
+// (dashes to underscores) and the rest. "" or the usage error.
+struct CommandWords {
   Args own;
   std::vector<std::pair<std::string, std::string>> params;
   std::vector<std::string> positional;
+};
+const std::vector<std::string> kCommandValued{"url",        "token-file", "timeout",
+                                              "ca-file",    "ttl-ms",     "priority",
+                                              "confidence", "scope",      "registry"};
+const std::vector<std::string> kCommandFlags{"json", "insecure"};
+
+std::string split_command_words(const Args& args, CommandWords& w) {
   for (size_t i = 0; i < args.size(); ++i) {
     const std::string& a = args[i];
-    if (a.size() > 2 && a.rfind("--", 0) == 0) {
-      std::string name = a.substr(2), value;
-      bool inline_value = false;
-      if (auto eq = name.find('='); eq != std::string::npos) {
-        value = name.substr(eq + 1);
-        name = name.substr(0, eq);
-        inline_value = true;
-      }
-      bool flag = std::find(own_flags.begin(), own_flags.end(), name) != own_flags.end();
-      bool valued = std::find(own_valued.begin(), own_valued.end(), name) != own_valued.end();
-      if (flag) {
-        own.push_back(a);
-        continue;
-      }
-      if (!inline_value) {
-        if (i + 1 >= args.size()) return usage_error("command", "--" + name + " needs a value");
-        value = args[++i];
-      }
-      if (valued) {
-        own.push_back("--" + name);
-        own.push_back(value);
-      } else {
-        for (auto& ch : name)
-          if (ch == '-') ch = '_';
-        params.emplace_back(name, value);
-      }
+    if (a.size() <= 2 || a.rfind("--", 0) != 0) {
+      w.positional.push_back(a);
+      continue;
+    }
+    std::string name = a.substr(2), value;
+    bool inline_value = false;
+    if (auto eq = name.find('='); eq != std::string::npos) {
+      value = name.substr(eq + 1);
+      name = name.substr(0, eq);
+      inline_value = true;
+    }
+    if (std::find(kCommandFlags.begin(), kCommandFlags.end(), name) != kCommandFlags.end()) {
+      w.own.push_back(a);
+      continue;
+    }
+    if (!inline_value) {
+      if (i + 1 >= args.size()) return "--" + name + " needs a value";
+      value = args[++i];
+    }
+    if (std::find(kCommandValued.begin(), kCommandValued.end(), name) != kCommandValued.end()) {
+      w.own.push_back("--" + name);
+      w.own.push_back(value);
     } else {
-      positional.push_back(a);
+      for (auto& ch : name)
+        if (ch == '-') ch = '_';
+      w.params.emplace_back(name, value);
     }
   }
-  Options o(own, own_flags, own_valued);
-  if (!o.ok()) return usage_error("command", o.error());
-  if (positional.size() != 1)
-    return usage_error("command", "give one ACTION, a JSON object, or - (see --help)");
-  std::string err;
-  client::ClientOptions co = client_options(o, true, err);
-  if (!err.empty()) return usage_error("command", err);
+  return "";
+}
 
-  json::Value message;
-  std::string first = positional[0];
-  if (first == "-" || (!first.empty() && first[0] == '{')) {
-    if (!params.empty())
-      return usage_error("command", "parameters go inside the JSON when JSON is given");
-    std::string text = first == "-" ? read_stdin() : first;
-    auto v = json::parse(text, {.max_depth = 64, .max_bytes = 1u << 20});
-    if (!v.ok()) return usage_error("command", "not JSON: " + v.error().message);
-    if (!v->is_object()) return usage_error("command", "the JSON must be an object");
-    bool whole = v->get("type") || v->get("message_type") || v->get("cmd");
-    if (!whole) {
-      const json::Value* act = v->get("action");
-      if (!act || !act->is_string())
-        return usage_error("command", "a payload object needs an \"action\"");
-      client::Command c;
-      c.action = act->as_string();
-      for (const auto& [k, val] : v->as_object())
-        if (k != "action") c.params.set(k, val);
-      message = client::command_message(c, now_ms());
-    } else {
-      json::Object m = v->as_object();
-      bool rcanpy = v->get("cmd") != nullptr;
-      if (!rcanpy) {
-        if (!m.contains("message_id")) m.set("message_id", new_uuid_v4());
-        if (!m.contains("timestamp_ms")) m.set("timestamp_ms", now_ms());
-        if (!m.contains("version")) m.set("version", "1.0.0");
-      }
-      message = json::Value(std::move(m));
-    }
-  } else {
+// A whole message's missing message_id, timestamp_ms and version (not for rcan-py's `cmd` shape).
+void fill_envelope(json::Object& m) {
+  if (!m.contains("message_id")) m.set("message_id", new_uuid_v4());
+  if (!m.contains("timestamp_ms")) m.set("timestamp_ms", now_ms());
+  if (!m.contains("version")) m.set("version", "1.0.0");
+}
+
+// The message of a JSON argument (or stdin): a whole message, its missing envelope fields filled
+// in (not for rcan-py's `cmd` shape), or a payload object with an "action".
+std::string message_from_json(const std::string& text, json::Value& message) {
+  auto v = json::parse(text, {.max_depth = 64, .max_bytes = 1u << 20});
+  if (!v.ok()) return "not JSON: " + v.error().message;
+  if (!v->is_object()) return "the JSON must be an object";
+  const bool whole = v->get("type") || v->get("message_type") || v->get("cmd");
+  if (!whole) {
+    const json::Value* act = v->get("action");
+    if (!act || !act->is_string()) return "a payload object needs an \"action\"";
     client::Command c;
-    c.action = first;
-    for (const auto& [k, val] : params) {
-      auto v = json::parse(val, {.max_depth = 16, .max_bytes = 65536});
-      if (v.ok())
-        c.params.set(k, *v);
-      else
-        c.params.set(k, val);
-    }
-    if (first == "heartbeat") {
-      json::Object m{{"version", "1.0.0"},
-                     {"message_id", new_uuid_v4()},
-                     {"type", "HEARTBEAT"},
-                     {"timestamp_ms", now_ms()},
-                     {"payload", json::Object{}}};
-      message = json::Value(std::move(m));
-    } else {
-      message = client::command_message(c, now_ms());
-    }
+    c.action = act->as_string();
+    for (const auto& [k, val] : v->as_object())
+      if (k != "action") c.params.set(k, val);
+    message = client::command_message(c, now_ms());
+    return "";
   }
-  json::Object& m = message.as_object();
+  json::Object m = v->as_object();
+  if (v->get("cmd") == nullptr) fill_envelope(m);
+  message = json::Value(std::move(m));
+  return "";
+}
+
+// The message of an ACTION and its parameters (each parsed as JSON when it is, else a string);
+// `heartbeat` is a HEARTBEAT message.
+json::Value message_from_action(const std::string& action,
+                                const std::vector<std::pair<std::string, std::string>>& params) {
+  if (action == "heartbeat") {
+    return json::Value(json::Object{{"version", "1.0.0"},
+                                    {"message_id", new_uuid_v4()},
+                                    {"type", "HEARTBEAT"},
+                                    {"timestamp_ms", now_ms()},
+                                    {"payload", json::Object{}}});
+  }
+  client::Command c;
+  c.action = action;
+  for (const auto& [k, val] : params) {
+    auto v = json::parse(val, {.max_depth = 16, .max_bytes = 65536});
+    if (v.ok())
+      c.params.set(k, *v);
+    else
+      c.params.set(k, val);
+  }
+  return client::command_message(c, now_ms());
+}
+
+// --ttl-ms, --priority, --scope and --confidence onto the message; "" or the usage error.
+std::string apply_envelope_options(const Options& o, json::Object& m) {
   if (o.has("ttl-ms")) {
     char* end = nullptr;
     const std::string value_text = o.get("ttl-ms");  // outlives `end`
     long long v = std::strtoll(value_text.c_str(), &end, 10);
-    if (!end || *end || v < 0)
-      return usage_error("command", "--ttl-ms must be a non-negative integer");
+    if (!end || *end || v < 0) return "--ttl-ms must be a non-negative integer";
     m.set("ttl_ms", static_cast<int64_t>(v));
   }
   if (o.has("priority")) m.set("priority", o.get("priority"));
@@ -369,32 +364,67 @@ int command_main(const Args& args) {
     char* end = nullptr;
     const std::string value_text = o.get("confidence");  // outlives `end`
     double c = std::strtod(value_text.c_str(), &end);
-    if (!end || *end || !(c >= 0 && c <= 1))
-      return usage_error("command", "--confidence must be within 0..1");
+    if (!end || *end || !(c >= 0 && c <= 1)) return "--confidence must be within 0..1";
     m.set("ai", json::Object{{"confidence", c}});
   }
-  client::Client c(co);
-  auto r = c.send(message);
-  if (!r.ok()) return report_error("command", r.error(), want_json(o));
-  if (want_json(o)) {
-    std::cout << json::dump(r->raw) << "\n";
-  } else if (r->pending()) {
-    std::string id = r->payload.is_object() && r->payload.get("message_id")
-                         ? brief(*r->payload.get("message_id"))
-                         : r->reply_to;
+  return "";
+}
+
+void print_command_answer(const json::Value& message, const client::Reply& r) {
+  if (r.pending()) {
+    std::string id = r.payload.is_object() && r.payload.get("message_id")
+                         ? brief(*r.payload.get("message_id"))
+                         : r.reply_to;
     std::printf(
         "%s the command waits for a human authorization (message %s)\n"
         "  approve: rcan authorize %s --approve   deny: rcan authorize %s --deny\n",
         yellow("PENDING_AUTH").c_str(), id.c_str(), id.c_str(), id.c_str());
-  } else {
-    std::printf("%s", green(r->type.empty() ? "OK" : r->type).c_str());
-    if (const json::Value* mid = message.get("message_id"); mid && mid->is_string())
-      std::printf(" %s", dim(mid->as_string()).c_str());
-    std::printf("\n");
-    if (r->payload.is_object())
-      for (const auto& [k, v] : r->payload.as_object())
-        std::printf("  %-14s %s\n", k.c_str(), brief(v, 100).c_str());
+    return;
   }
+  std::printf("%s", green(r.type.empty() ? "OK" : r.type).c_str());
+  if (const json::Value* mid = message.get("message_id"); mid && mid->is_string())
+    std::printf(" %s", dim(mid->as_string()).c_str());
+  std::printf("\n");
+  if (r.payload.is_object())
+    for (const auto& [k, v] : r.payload.as_object())
+      std::printf("  %-14s %s\n", k.c_str(), brief(v, 100).c_str());
+}
+
+int command_main(const Args& args) {
+  if (args.empty()) {
+    std::fputs(kCommandHelp, stderr);
+    return kExitUsage;
+  }
+  if (help_requested(args, (std::string(kCommandHelp) + kNetHelp).c_str())) return 0;
+  CommandWords w;
+  if (std::string e = split_command_words(args, w); !e.empty()) return usage_error("command", e);
+  Options o(w.own, kCommandFlags, kCommandValued);
+  if (!o.ok()) return usage_error("command", o.error());
+  if (w.positional.size() != 1)
+    return usage_error("command", "give one ACTION, a JSON object, or - (see --help)");
+  std::string err;
+  client::ClientOptions co = client_options(o, true, err);
+  if (!err.empty()) return usage_error("command", err);
+
+  json::Value message;
+  const std::string& first = w.positional[0];
+  if (first == "-" || (!first.empty() && first[0] == '{')) {
+    if (!w.params.empty())
+      return usage_error("command", "parameters go inside the JSON when JSON is given");
+    err = message_from_json(first == "-" ? read_stdin() : first, message);
+    if (!err.empty()) return usage_error("command", err);
+  } else {
+    message = message_from_action(first, w.params);
+  }
+  err = apply_envelope_options(o, message.as_object());
+  if (!err.empty()) return usage_error("command", err);
+  client::Client c(co);
+  auto r = c.send(message);
+  if (!r.ok()) return report_error("command", r.error(), want_json(o));
+  if (want_json(o))
+    std::cout << json::dump(r->raw) << "\n";
+  else
+    print_command_answer(message, *r);
   return r->pending() ? kExitPending : kExitOk;
 }
 
@@ -461,6 +491,63 @@ std::string render_frame(const json::Value& v) {
   return line;
 }
 
+// `rcan stream`'s numbers: --hz (0: no telemetry), --count, --seconds, --max-attempts (-1: not
+// given); "" or the usage error.
+struct StreamLimits {
+  double hz = 2;
+  long count = -1, seconds = -1, attempts = -1;
+};
+
+std::string stream_limits(const Options& o, StreamLimits& l) {
+  if (o.has("hz")) {
+    char* end = nullptr;
+    const std::string value_text = o.get("hz");  // outlives `end`
+    l.hz = std::strtod(value_text.c_str(), &end);
+    if (!end || *end || !(l.hz >= 0.2 && l.hz <= 50)) return "--hz must be within 0.2..50";
+  }
+  if (o.has("no-telemetry")) l.hz = 0;
+  for (auto [name, dst] : {std::pair<const char*, long*>{"count", &l.count},
+                           {"seconds", &l.seconds},
+                           {"max-attempts", &l.attempts}}) {
+    if (!o.has(name)) continue;
+    char* end = nullptr;
+    const std::string value_text = o.get(name);  // outlives `end`
+    *dst = std::strtol(value_text.c_str(), &end, 10);
+    if (!end || *end || *dst < 1) return std::string("--") + name + " must be a positive integer";
+  }
+  return "";
+}
+
+// --send-stdin: each stdin line, a whole message (envelope filled in) or a payload with an
+// "action", sent on the stream until `done` or the end of stdin; other lines are skipped, said.
+void relay_stdin(client::Stream& stream, const std::atomic<bool>& done) {
+  std::string line;
+  while (!done.load() && std::getline(std::cin, line)) {
+    if (line.empty()) continue;
+    auto v = json::parse(line, {.max_depth = 64, .max_bytes = 1u << 20});
+    if (!v.ok() || !v->is_object()) {
+      std::fprintf(stderr, "rcan stream: skipped a line that is not a JSON object\n");
+      continue;
+    }
+    if (!v->get("type") && !v->get("cmd")) {
+      const json::Value* act = v->get("action");
+      if (!act || !act->is_string()) {
+        std::fprintf(stderr, "rcan stream: skipped a payload without \"action\"\n");
+        continue;
+      }
+      client::Command c;
+      c.action = act->as_string();
+      for (const auto& [k, val] : v->as_object())
+        if (k != "action") c.params.set(k, val);
+      stream.send_command(c);
+    } else {
+      json::Object m = v->as_object();
+      if (!v->get("cmd")) fill_envelope(m);
+      stream.send(json::Value(std::move(m)));
+    }
+  }
+}
+
 int stream_main(const Args& args) {
   if (help_requested(args, (std::string(kStreamHelp) + kNetHelp).c_str())) return 0;
   Options* o;
@@ -469,39 +556,21 @@ int stream_main(const Args& args) {
   if (!setup("stream", args, {"no-telemetry", "send-stdin"},
              {"hz", "count", "seconds", "max-attempts"}, true, 0, o, co, rc))
     return rc;
-  double hz = 2;
-  if (o->has("hz")) {
-    char* end = nullptr;
-    const std::string value_text = o->get("hz");  // outlives `end`
-    hz = std::strtod(value_text.c_str(), &end);
-    if (!end || *end || !(hz >= 0.2 && hz <= 50))
-      return usage_error("stream", "--hz must be within 0.2..50");
-  }
-  if (o->has("no-telemetry")) hz = 0;
-  long count = -1, seconds = -1, attempts = -1;
-  for (auto [name, dst] : {std::pair<const char*, long*>{"count", &count},
-                           {"seconds", &seconds},
-                           {"max-attempts", &attempts}}) {
-    if (!o->has(name)) continue;
-    char* end = nullptr;
-    const std::string value_text = o->get(name);  // outlives `end`
-    *dst = std::strtol(value_text.c_str(), &end, 10);
-    if (!end || *end || *dst < 1)
-      return usage_error("stream", std::string("--") + name + " must be a positive integer");
-  }
+  StreamLimits lim;
+  if (std::string e = stream_limits(*o, lim); !e.empty()) return usage_error("stream", e);
   bool json_out = want_json(*o);
   std::atomic<long> frames{0};
   client::StreamOptions so;
   so.client = co;
-  so.telemetry_hz = hz;
-  so.max_attempts = static_cast<int>(attempts);
+  so.telemetry_hz = lim.hz;
+  so.max_attempts = static_cast<int>(lim.attempts);
   client::Stream* sp = nullptr;
   so.on_message = [&](const json::Value& v) {
     if (json_out)
       std::cout << json::dump(v) << "\n" << std::flush;
     else
       std::cout << render_frame(v) << "\n" << std::flush;
-    if (count > 0 && ++frames >= count && sp) sp->stop();
+    if (lim.count > 0 && ++frames >= lim.count && sp) sp->stop();
   };
   so.on_state = [&](const std::string& s) { std::fprintf(stderr, "rcan stream: %s\n", s.c_str()); };
   client::Stream stream(so);
@@ -516,46 +585,14 @@ int stream_main(const Args& args) {
     while (!done.load()) {
       std::this_thread::sleep_for(std::chrono::milliseconds(50));
       if (g_interrupted.load() ||
-          (seconds > 0 && steady_now() - started >= std::chrono::seconds(seconds))) {
+          (lim.seconds > 0 && steady_now() - started >= std::chrono::seconds(lim.seconds))) {
         stream.stop();
         return;
       }
     }
   });
   std::thread reader;
-  if (o->has("send-stdin")) {
-    reader = std::thread([&] {
-      std::string line;
-      while (!done.load() && std::getline(std::cin, line)) {
-        if (line.empty()) continue;
-        auto v = json::parse(line, {.max_depth = 64, .max_bytes = 1u << 20});
-        if (!v.ok() || !v->is_object()) {
-          std::fprintf(stderr, "rcan stream: skipped a line that is not a JSON object\n");
-          continue;
-        }
-        if (!v->get("type") && !v->get("cmd")) {
-          const json::Value* act = v->get("action");
-          if (!act || !act->is_string()) {
-            std::fprintf(stderr, "rcan stream: skipped a payload without \"action\"\n");
-            continue;
-          }
-          client::Command c;
-          c.action = act->as_string();
-          for (const auto& [k, val] : v->as_object())
-            if (k != "action") c.params.set(k, val);
-          stream.send_command(c);
-        } else {
-          json::Object m = v->as_object();
-          if (!v->get("cmd")) {
-            if (!m.contains("message_id")) m.set("message_id", new_uuid_v4());
-            if (!m.contains("timestamp_ms")) m.set("timestamp_ms", now_ms());
-            if (!m.contains("version")) m.set("version", "1.0.0");
-          }
-          stream.send(json::Value(std::move(m)));
-        }
-      }
-    });
-  }
+  if (o->has("send-stdin")) reader = std::thread([&] { relay_stdin(stream, done); });
   client::ClientError end = stream.run();
   done.store(true);
   watchdog.join();

@@ -272,6 +272,126 @@ void line(const char* what, const std::string& path, bool created) {
   std::printf("  %-8s %-13s %s\n", created ? "created" : "kept", what, path.c_str());
 }
 
+// The options of a robot that has no configuration yet, asked for when not given; 0, or the
+// exit code after saying what is wrong.
+int settle_new_robot_options(InitOptions& o) {
+  ask(o);
+  if (o.driver != "sim" && o.driver != "ros2" && o.driver != "process") {
+    std::fprintf(stderr, "rcand init: --driver is sim, ros2 or process (not %s)\n",
+                 o.driver.c_str());
+    return 2;
+  }
+  if (!o.join.empty() && (o.registry_key.empty() ||
+                          (o.join.rfind("http://", 0) != 0 && o.join.rfind("https://", 0) != 0) ||
+                          (!o.endpoint.empty() && o.endpoint.rfind("http://", 0) != 0 &&
+                           o.endpoint.rfind("https://", 0) != 0))) {
+    std::fprintf(stderr,
+                 "rcand init: --join needs an http(s) URL and --registry-key FILE; --endpoint "
+                 "an http(s) URL\n");
+    return 2;
+  }
+  if (!o.registry_key.empty()) o.registry_key = fs::absolute(o.registry_key).string();
+  if (!segment_ok(o.manufacturer) || !segment_ok(o.model) || !registry_ok(o.registry)) {
+    std::fprintf(stderr,
+                 "rcand init: --manufacturer and --model are RURI segments (lower-case letters, "
+                 "digits and '-', 1-64 characters); --registry a host name\n");
+    return 2;
+  }
+  return 0;
+}
+
+// A new robot's configuration file, with a RURI of its own (a random device id).
+int write_new_config(const InitOptions& o, const std::string& yaml_path) {
+  uint8_t b[4];
+  if (!random_bytes(b, sizeof b)) {
+    std::fprintf(stderr, "rcand init: no randomness\n");
+    return 1;
+  }
+  std::string ruri =
+      "rcan://" + o.registry + "/" + o.manufacturer + "/" + o.model + "/" + to_hex(b, sizeof b);
+  std::string text = template_yaml(o, ruri, yaml_path);
+  std::error_code ec;
+  fs::create_directories(fs::path(yaml_path).parent_path(), ec);
+  if (Status s = keys::write_new_file(
+          yaml_path, {reinterpret_cast<const uint8_t*>(text.data()), text.size()}, 0644);
+      !s.ok()) {
+    std::fprintf(stderr, "rcand init: %s\n", s.error().message.c_str());
+    return 1;
+  }
+  return 0;
+}
+
+// The identity files the configuration names: the robot's keys, the audit chain secret, the
+// local token issuer and the OWNER token (each created when missing, the token when expired).
+int make_identity_files(const InitOptions& o, const config::NodeConfig& cfg,
+                        rcand::LocalIdentity& id) {
+  const std::string key_dir = cfg.security.key_dir;
+  const bool have_keys = fs::exists(key_dir + "/" + std::string(keys::kMldsaSeedFile));
+  auto k = rcand::robot_keys(cfg, /*create=*/true);
+  if (!k.ok()) {
+    std::fprintf(stderr, "rcand init: %s\n", k.error().message.c_str());
+    return 1;
+  }
+  line("robot keys", key_dir + " (kid " + k->pub.kid() + ")", !have_keys);
+  const std::string& secret_file = cfg.security.audit.chain_secret_file;
+  const bool have_secret = fs::exists(secret_file);
+  if (auto s = rcand::chain_secret(cfg, /*create=*/true); !s.ok()) {
+    std::fprintf(stderr, "rcand init: %s\n", s.error().message.c_str());
+    return 1;
+  }
+  line("chain secret", secret_file, !have_secret);
+  id.issuer = o.issuer;
+  id.issuer_seed_file = join(cfg.data_dir, "issuer/" + std::string(keys::kIssuerSeedFile));
+  id.owner_token_file = join(cfg.data_dir, "owner.token");
+  const bool have_issuer = fs::exists(id.issuer_seed_file);
+  const bool had_token = fs::exists(id.owner_token_file);
+  jwt::TrustStore trust;
+  bool token_created = false;
+  if (Status s = rcand::ensure_issuer_and_token(id, cfg.ruri, trust, token_created); !s.ok()) {
+    std::fprintf(stderr, "rcand init: %s\n", s.error().message.c_str());
+    return 1;
+  }
+  line("token issuer", join(cfg.data_dir, "issuer") + " (" + o.issuer + ")", !have_issuer);
+  line("OWNER token",
+       id.owner_token_file + (token_created && had_token ? " (expired: renewed)" : ""),
+       token_created);
+  return 0;
+}
+
+// What init leaves to the user: a warning when the file does not trust the local issuer, the
+// audit log's first segment, and the commands to run next.
+void print_next_steps(const InitOptions& o, const config::NodeConfig& cfg,
+                      const std::string& yaml_path, const rcand::LocalIdentity& id) {
+  const std::string pub = join(cfg.data_dir, "issuer/" + std::string(keys::kIssuerPubFile));
+  bool trusted = false;
+  for (const auto& i : cfg.security.jwt.issuers)
+    if (i.issuer == o.issuer && fs::equivalent(i.key_file, pub)) trusted = true;
+  if (!trusted)
+    std::printf(
+        "\n  warning: %s does not trust the local issuer; add under security.jwt.issuers:\n"
+        "    - {issuer: %s, key_file: %s}\n",
+        yaml_path.c_str(), o.issuer.c_str(), pub.c_str());
+  const uint64_t seg = cfg.security.audit.max_segment_bytes;
+  std::printf(
+      "\nThe audit log (%s) starts as one zero-filled segment of %llu MiB; the next is prepared\n"
+      "once it is half full, so it holds at most %llu MiB before the first rotation\n"
+      "(security.audit.max_segment_bytes; retention bounds the total).\n",
+      cfg.security.audit.dir.c_str(), static_cast<unsigned long long>(seg >> 20),
+      static_cast<unsigned long long>((2 * seg) >> 20));
+  std::printf(
+      "\nNext:\n"
+      "  rcand --config %s\n"
+      "  export RCAN_URL=http://%s:%d RCAN_TOKEN_FILE=%s\n"
+      "  rcan status        # then: rcan claim, rcan command move --linear 0.3, rcan estop\n"
+      "The OWNER token is valid 24 h: `rcand init --dir %s` again replaces it once it has\n"
+      "expired (and changes nothing else); tokens for others: rcan token issue --key %s --iss %s\n"
+      "  --aud %s --sub NAME --role user --scope status,control\n",
+      yaml_path.c_str(),
+      cfg.server.bind_address == "0.0.0.0" ? "127.0.0.1" : cfg.server.bind_address.c_str(),
+      cfg.server.port, id.owner_token_file.c_str(), o.dir.c_str(), id.issuer_seed_file.c_str(),
+      o.issuer.c_str(), cfg.ruri.c_str());
+}
+
 int init(InitOptions o) {
   if (o.dir.empty()) {
     auto d = config::default_data_dir();
@@ -287,53 +407,15 @@ int init(InitOptions o) {
                                     ? o.dir + "/robot.rcan.yaml"
                                     : fs::absolute(o.config).lexically_normal().string();
   const bool have_yaml = fs::exists(yaml_path);
-  if (!have_yaml) {
-    ask(o);
-    if (o.driver != "sim" && o.driver != "ros2" && o.driver != "process") {
-      std::fprintf(stderr, "rcand init: --driver is sim, ros2 or process (not %s)\n",
-                   o.driver.c_str());
-      return 2;
-    }
-    if (!o.join.empty() && (o.registry_key.empty() ||
-                            (o.join.rfind("http://", 0) != 0 && o.join.rfind("https://", 0) != 0) ||
-                            (!o.endpoint.empty() && o.endpoint.rfind("http://", 0) != 0 &&
-                             o.endpoint.rfind("https://", 0) != 0))) {
-      std::fprintf(stderr,
-                   "rcand init: --join needs an http(s) URL and --registry-key FILE; --endpoint "
-                   "an http(s) URL\n");
-      return 2;
-    }
-    if (!o.registry_key.empty()) o.registry_key = fs::absolute(o.registry_key).string();
-    if (!segment_ok(o.manufacturer) || !segment_ok(o.model) || !registry_ok(o.registry)) {
-      std::fprintf(stderr,
-                   "rcand init: --manufacturer and --model are RURI segments (lower-case letters, "
-                   "digits and '-', 1-64 characters); --registry a host name\n");
-      return 2;
-    }
-  }
+  if (!have_yaml)
+    if (int rc = settle_new_robot_options(o); rc != 0) return rc;
   if (Status s = rcand::make_private_dir(o.dir); !s.ok()) {
     std::fprintf(stderr, "rcand init: %s\n", s.error().message.c_str());
     return 1;
   }
   std::printf("rcand init: a configured robot in %s\n", o.dir.c_str());
-  if (!have_yaml) {
-    uint8_t b[4];
-    if (!random_bytes(b, sizeof b)) {
-      std::fprintf(stderr, "rcand init: no randomness\n");
-      return 1;
-    }
-    std::string ruri =
-        "rcan://" + o.registry + "/" + o.manufacturer + "/" + o.model + "/" + to_hex(b, sizeof b);
-    std::string text = template_yaml(o, ruri, yaml_path);
-    std::error_code ec;
-    fs::create_directories(fs::path(yaml_path).parent_path(), ec);
-    if (Status s = keys::write_new_file(
-            yaml_path, {reinterpret_cast<const uint8_t*>(text.data()), text.size()}, 0644);
-        !s.ok()) {
-      std::fprintf(stderr, "rcand init: %s\n", s.error().message.c_str());
-      return 1;
-    }
-  }
+  if (!have_yaml)
+    if (int rc = write_new_config(o, yaml_path); rc != 0) return rc;
   line("config", yaml_path, !have_yaml);
   auto cfg = config::load_config(yaml_path);
   if (!cfg.ok()) {
@@ -342,67 +424,9 @@ int init(InitOptions o) {
                  e.field.empty() ? "" : (e.field + ": ").c_str(), e.message.c_str());
     return 1;
   }
-  // The identity files the configuration names.
-  const std::string key_dir = cfg->security.key_dir;
-  const bool have_keys = fs::exists(key_dir + "/" + std::string(keys::kMldsaSeedFile));
-  auto k = rcand::robot_keys(*cfg, /*create=*/true);
-  if (!k.ok()) {
-    std::fprintf(stderr, "rcand init: %s\n", k.error().message.c_str());
-    return 1;
-  }
-  line("robot keys", key_dir + " (kid " + k->pub.kid() + ")", !have_keys);
-  const std::string& secret_file = cfg->security.audit.chain_secret_file;
-  const bool have_secret = fs::exists(secret_file);
-  if (auto s = rcand::chain_secret(*cfg, /*create=*/true); !s.ok()) {
-    std::fprintf(stderr, "rcand init: %s\n", s.error().message.c_str());
-    return 1;
-  }
-  line("chain secret", secret_file, !have_secret);
   rcand::LocalIdentity id;
-  id.issuer = o.issuer;
-  id.issuer_seed_file = join(cfg->data_dir, "issuer/" + std::string(keys::kIssuerSeedFile));
-  id.owner_token_file = join(cfg->data_dir, "owner.token");
-  const bool have_issuer = fs::exists(id.issuer_seed_file);
-  const bool had_token = fs::exists(id.owner_token_file);
-  jwt::TrustStore trust;
-  bool token_created = false;
-  if (Status s = rcand::ensure_issuer_and_token(id, cfg->ruri, trust, token_created); !s.ok()) {
-    std::fprintf(stderr, "rcand init: %s\n", s.error().message.c_str());
-    return 1;
-  }
-  line("token issuer", join(cfg->data_dir, "issuer") + " (" + o.issuer + ")", !have_issuer);
-  line("OWNER token",
-       id.owner_token_file + (token_created && had_token ? " (expired: renewed)" : ""),
-       token_created);
-  // The file must trust the issuer the token came from.
-  const std::string pub = join(cfg->data_dir, "issuer/" + std::string(keys::kIssuerPubFile));
-  bool trusted = false;
-  for (const auto& i : cfg->security.jwt.issuers)
-    if (i.issuer == o.issuer && fs::equivalent(i.key_file, pub)) trusted = true;
-  if (!trusted)
-    std::printf(
-        "\n  warning: %s does not trust the local issuer; add under security.jwt.issuers:\n"
-        "    - {issuer: %s, key_file: %s}\n",
-        yaml_path.c_str(), o.issuer.c_str(), pub.c_str());
-  const uint64_t seg = cfg->security.audit.max_segment_bytes;
-  std::printf(
-      "\nThe audit log (%s) starts as one zero-filled segment of %llu MiB; the next is prepared\n"
-      "once it is half full, so it holds at most %llu MiB before the first rotation\n"
-      "(security.audit.max_segment_bytes; retention bounds the total).\n",
-      cfg->security.audit.dir.c_str(), static_cast<unsigned long long>(seg >> 20),
-      static_cast<unsigned long long>((2 * seg) >> 20));
-  std::printf(
-      "\nNext:\n"
-      "  rcand --config %s\n"
-      "  export RCAN_URL=http://%s:%d RCAN_TOKEN_FILE=%s\n"
-      "  rcan status        # then: rcan claim, rcan command move --linear 0.3, rcan estop\n"
-      "The OWNER token is valid 24 h: `rcand init --dir %s` again replaces it once it has\n"
-      "expired (and changes nothing else); tokens for others: rcan token issue --key %s --iss %s\n"
-      "  --aud %s --sub NAME --role user --scope status,control\n",
-      yaml_path.c_str(),
-      cfg->server.bind_address == "0.0.0.0" ? "127.0.0.1" : cfg->server.bind_address.c_str(),
-      cfg->server.port, id.owner_token_file.c_str(), o.dir.c_str(), id.issuer_seed_file.c_str(),
-      o.issuer.c_str(), cfg->ruri.c_str());
+  if (int rc = make_identity_files(o, *cfg, id); rc != 0) return rc;
+  print_next_steps(o, *cfg, yaml_path, id);
   return 0;
 }
 

@@ -357,10 +357,14 @@ TEST_F(FailoverTest, PublishersNodeDiesTheCliReportsIt) {
   EXPECT_LT(exit_after, 10000);  // not the 30 s timeout: it knew at once
 }
 
+// The fleet fixture over a list of brokers (a suite name of its own: fleet_mqtt_test's FleetTest
+// is in the same test program).
+class BrokerFailoverTest : public FleetTest {};
+
 // Two independent Mosquitto brokers share no state (no retained ESTOP crosses), so a failover
 // between them only keeps a live robot reachable: it moves to the second broker when the first
 // dies, and a fleet ESTOP through the second latches it.
-TEST_F(FleetTest, MosquittoFailoverKeepsTheRobotReachable) {
+TEST_F(BrokerFailoverTest, MosquittoFailoverKeepsTheRobotReachable) {
   fs::create_directories(tmp_.file("m2"));
   Broker second(tmp_.file("m2"));
   Robot& robot =
@@ -380,7 +384,7 @@ TEST_F(FleetTest, MosquittoFailoverKeepsTheRobotReachable) {
 
 // A fleet member left without any broker past mqtt.failover_ms stops moving (not latched: the
 // fleet's order comes back with the channel) and audits why.
-TEST_F(FleetTest, AMovingRobotWithoutItsBrokerStopsAfterFailoverMs) {
+TEST_F(BrokerFailoverTest, AMovingRobotWithoutItsBrokerStopsAfterFailoverMs) {
   Robot& robot = add_robot("robot-a", "0000000a", "", ", failover_ms: 1000");
   auto c = fleet({"command", "alpha", "move", "--params", R"({"linear":0.2,"duration_ms":30000})",
                   "--members", "robot-a"});
@@ -406,7 +410,7 @@ TEST_F(FleetTest, AMovingRobotWithoutItsBrokerStopsAfterFailoverMs) {
   EXPECT_EQ(audit_events(robot, fleet_token_, "MQTT_DISCONNECTED").size(), 1u);
 }
 
-TEST(FleetConfig, BrokerIsAUrlOrAListOfThem) {
+TEST(BrokerListConfig, BrokerIsAUrlOrAListOfThem) {
   const std::string base =
       "rcan_version: \"1.2\"\nruri: rcan://local.rcan/rcan/sim-rover/0000000a\nnode: {data_dir: "
       "/tmp/x}\n";
@@ -442,7 +446,7 @@ TEST(FleetConfig, BrokerIsAUrlOrAListOfThem) {
 // (same message_id) once more — the robot obeys it once — and exits 0 only on the broker's
 // acknowledgement and the robot's confirmation. A broker that drops every attempt gets three,
 // then NOT DELIVERED with the count, and nothing moved.
-TEST_F(FleetTest, ADropBeforeTheAcknowledgementIsPublishedAgain) {
+TEST_F(BrokerFailoverTest, ADropBeforeTheAcknowledgementIsPublishedAgain) {
   Robot& robot = *(robots_["robot-a"] = std::make_unique<Robot>(tmp_.path(), "robot-a", "0000000a",
                                                                 broker_->url(), secret_));
   Watcher seen(broker_->url(), {"rcan/fleet/alpha/robot/+/status"});
@@ -487,7 +491,7 @@ TEST_F(FleetTest, ADropBeforeTheAcknowledgementIsPublishedAgain) {
 // (NATS 2.9 acknowledges a retained publish it failed to store while its cluster elects leaders;
 // here the test deletes the copy): the CLI sends a new ESTOP to each member still silent every
 // 2 s, so the member latches as soon as it is back and the CLI exits 0, listing what it resent.
-TEST_F(FleetTest, AnEstopIsSentAgainToMembersThatHaveNotConfirmed) {
+TEST_F(BrokerFailoverTest, AnEstopIsSentAgainToMembersThatHaveNotConfirmed) {
   test::RunResult r;
   member_keys(tmp_.path(), "robot-a");  // the operator knows the member before it first runs
   std::thread operator_([&] {

@@ -562,7 +562,6 @@ void ProcessDriver::relay_line(int stream, const std::string& line, bool cut) {
 }
 
 void ProcessDriver::io_loop() {
-  char buf[16384];
   while (!quit_.load(std::memory_order_acquire)) {
     int64_t now = now_ms();
     reap_child(now);
@@ -580,29 +579,8 @@ void ProcessDriver::io_loop() {
         continue;
       }
       wait = std::min<int64_t>(wait, std::max<int64_t>(1, next_attempt_ms_ - now));
-    } else {
-      const bool handshaking = !described_ || !heartbeat_seen_;
-      const int64_t limit = handshaking ? opts_.startup_timeout_ms : opts_.heartbeat_timeout_ms;
-      const int64_t since = now - (handshaking ? connected_ms_ : last_rx_ms_);
-      if (since > limit) {
-        fault(handshaking
-                  ? "the driver process did not answer describe within " + std::to_string(limit) +
-                        " ms"
-                  : "no heartbeat from the driver process for " + std::to_string(since) + " ms",
-              now);
-        continue;
-      }
-      if (now - last_hb_tx_ms_ >= opts_.heartbeat_ms) {
-        MutexLock lock(wmu_);
-        if (queue_.size() < kMaxQueuedFrames)
-          queue_.push_back(
-              Out{encode_heartbeat(++seq_), stop_gen_.load(std::memory_order_acquire), false});
-        want_out = true;
-        last_hb_tx_ms_ = now;
-      }
-      wait =
-          std::min<int64_t>(wait, std::max<int64_t>(1, last_hb_tx_ms_ + opts_.heartbeat_ms - now));
-      wait = std::min<int64_t>(wait, std::max<int64_t>(1, limit - since + 1));
+    } else if (!keep_link(now, wait, want_out)) {
+      continue;
     }
     if (reaping_pid_ > 0) wait = std::min<int64_t>(wait, 20);
     // The driver's stdout and stderr (fd -1: poll ignores the entry).
@@ -630,31 +608,67 @@ void ProcessDriver::io_loop() {
       fault("writing to the driver process failed: " + errno_text(errno), now);
       continue;
     }
-    if (!(p[1].revents & (POLLIN | POLLHUP | POLLERR))) continue;
-    const ssize_t got = ::recv(fd, buf, sizeof buf, MSG_DONTWAIT);
-    if (got == 0) {
-      fault(closed_reason(), now);
-      continue;
-    }
-    if (got < 0) {
-      if (errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)
-        fault("reading from the driver process failed: " + errno_text(errno), now);
-      continue;
-    }
-    decoder_.feed(buf, static_cast<size_t>(got));
-    while (true) {
-      auto f = decoder_.next();
-      if (!f.ok()) {
-        fault("the driver process sent a bad frame: " + f.error().message, now);
-        break;
-      }
-      if (!*f) break;
-      on_frame(**f, now);
-      MutexLock lock(wmu_);
-      if (fd_ < 0) break;  // on_frame faulted
-    }
+    if (p[1].revents & (POLLIN | POLLHUP | POLLERR)) read_frames(fd, now);
   }
-  // Shutting down: a last stop, the socket closed, the process terminated and reaped.
+  finish_io();
+}
+
+// The link's timers: the describe (while handshaking) or heartbeat deadline, a fault when it
+// passed (false); our own heartbeat queued when due; `wait` shortened to the next of them.
+bool ProcessDriver::keep_link(int64_t now, int64_t& wait, bool& want_out) {
+  const bool handshaking = !described_ || !heartbeat_seen_;
+  const int64_t limit = handshaking ? opts_.startup_timeout_ms : opts_.heartbeat_timeout_ms;
+  const int64_t since = now - (handshaking ? connected_ms_ : last_rx_ms_);
+  if (since > limit) {
+    fault(handshaking
+              ? "the driver process did not answer describe within " + std::to_string(limit) + " ms"
+              : "no heartbeat from the driver process for " + std::to_string(since) + " ms",
+          now);
+    return false;
+  }
+  if (now - last_hb_tx_ms_ >= opts_.heartbeat_ms) {
+    MutexLock lock(wmu_);
+    if (queue_.size() < kMaxQueuedFrames)
+      queue_.push_back(
+          Out{encode_heartbeat(++seq_), stop_gen_.load(std::memory_order_acquire), false});
+    want_out = true;
+    last_hb_tx_ms_ = now;
+  }
+  wait = std::min<int64_t>(wait, std::max<int64_t>(1, last_hb_tx_ms_ + opts_.heartbeat_ms - now));
+  wait = std::min<int64_t>(wait, std::max<int64_t>(1, limit - since + 1));
+  return true;
+}
+
+// What the socket has: each whole frame to on_frame; a closed socket, a read error or a bad
+// frame is a fault.
+void ProcessDriver::read_frames(int fd, int64_t now) {
+  char buf[16384];
+  const ssize_t got = ::recv(fd, buf, sizeof buf, MSG_DONTWAIT);
+  if (got == 0) {
+    fault(closed_reason(), now);
+    return;
+  }
+  if (got < 0) {
+    if (errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)
+      fault("reading from the driver process failed: " + errno_text(errno), now);
+    return;
+  }
+  decoder_.feed(buf, static_cast<size_t>(got));
+  while (true) {
+    auto f = decoder_.next();
+    if (!f.ok()) {
+      fault("the driver process sent a bad frame: " + f.error().message, now);
+      return;
+    }
+    if (!*f) return;
+    on_frame(**f, now);
+    MutexLock lock(wmu_);
+    if (fd_ < 0) return;  // on_frame faulted
+  }
+}
+
+// Shutting down: a last stop, the socket closed, the process terminated and reaped.
+void ProcessDriver::finish_io() {
   {
     MutexLock lock(wmu_);
     if (fd_ >= 0 && head_off_ == 0) {

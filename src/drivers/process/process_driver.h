@@ -89,6 +89,10 @@ class ProcessDriver final : public node::Driver {
   };
 
   void io_loop();
+  // The steps of io_loop (process_driver.cpp); they run on its thread only.
+  bool keep_link(int64_t now, int64_t& wait, bool& want_out);
+  void read_frames(int fd, int64_t now);
+  void finish_io();
   // Reads what the driver wrote to its stdout (0) or stderr (1) and relays it line by line as
   // rcand's own "driver_output" log lines (its text escaped as a field, never a line of
   // rcand's log itself), cut at kMaxOutputLine bytes, at most kOutputLinesPerS lines a second

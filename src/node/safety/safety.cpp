@@ -587,25 +587,16 @@ void SafetyCore::enter_safe_stop(std::string reason, std::string session) {
 
 // ---- control loop ---------------------------------------------------------------------------
 
+// One pass of the control loop: the driver stepped to now, then each guard in turn (drive TTL,
+// workspace, driver health, deadman sessions, the watchdog); every stop is made before any event
+// is emitted.
 void SafetyCore::tick() {
   const int64_t t0 = steady_ns();
   const int64_t now = clock_.mono_ms();
   std::vector<SafetyEvent> events;
-  auto make_event = [&](std::string type, int64_t elapsed, int64_t timeout, std::string detail) {
-    SafetyEvent ev;
-    ev.type = std::move(type);
-    ev.elapsed_ms = elapsed;
-    ev.timeout_ms = timeout;
-    ev.detail = std::move(detail);
-    ev.wall_ms = clock_.wall_ms();
-    ev.mono_ms = now;
-    return ev;
-  };
-
   std::string owner;
   bool moving = false;
-  bool fault_started = false, fault_cleared = false;
-  std::string fault_detail;
+  HealthChange health;
   {
     MutexLock lock(apply_mu_);
     step_driver_to_locked(now);
@@ -613,94 +604,14 @@ void SafetyCore::tick() {
     // dispatch() still catches the driver up itself (see start()).
     resting_.store(false, std::memory_order_seq_cst);
     if (latched_.load(std::memory_order_acquire)) driver_->stop();  // belt and braces
-    RobotState st = driver_->state();
-
-    // Drive TTL on the monotonic clock.
-    if (drive_deadline_mono_ > 0 && now >= drive_deadline_mono_) {
-      const bool still_driving = st.target_linear_mps != 0.0 || st.target_angular_radps != 0.0;
-      if (!still_driving) {
-        drive_deadline_mono_ = 0;
-      } else if (now > drive_deadline_mono_ + cfg_.drive_ttl_grace_ms) {
-        driver_->stop();
-        events.push_back(make_event("DRIVE_TTL_SAFE_STOP", now - drive_deadline_mono_, 0,
-                                    "the driver kept driving past the command's duration"));
-        drive_deadline_mono_ = 0;
-      }
-    }
-
-    // Workspace guard: braking distance ahead must not take the base further out.
-    const Workspace& ws = limits_.workspace;
-    if (ws.enabled && st.linear_mps != 0.0) {
-      const double brake = driver_info_.brake_decel_mps2;
-      const double dist = brake > 0 ? st.linear_mps * std::abs(st.linear_mps) / (2.0 * brake) : 0.0;
-      const double px = st.x + dist * std::cos(st.theta);
-      const double py = st.y + dist * std::sin(st.theta);
-      const double here = ws.distance_outside(st.x, st.y);
-      const double ahead = ws.distance_outside(px, py);
-      if (ahead > 1e-3 && ahead > here) {
-        driver_->stop();
-        drive_deadline_mono_ = 0;
-        events.push_back(
-            make_event("WORKSPACE_SAFE_STOP", 0, 0, "the base was about to leave the workspace"));
-      }
-    }
-    // Driver health: a fault stops the driver at once and holds motion off until it clears.
-    const DriverHealth health = driver_->health();
-    if (!health.ok && !driver_faulted_.load(std::memory_order_acquire)) {
-      driver_->stop();
-      drive_deadline_mono_ = 0;
-      driver_faulted_.store(true, std::memory_order_release);
-      fault_started = true;
-      fault_detail =
-          health.fault.empty() ? std::string("the driver reports a fault") : health.fault;
-    } else if (health.ok && driver_faulted_.load(std::memory_order_acquire)) {
-      driver_faulted_.store(false, std::memory_order_release);
-      fault_cleared = true;
-    }
+    const RobotState st = driver_->state();
+    guard_motion_locked(now, st, events);
+    health = check_health_locked();
     owner = motion_owner_;
     moving = !st.stopped;
   }
-  if (fault_started) {
-    {
-      MutexLock lock(meta_mu_);
-      driver_fault_ = fault_detail;
-    }
-    enter_safe_stop("driver_fault", "");
-    events.push_back(make_event("DRIVER_FAULT", 0, 0, fault_detail));
-    if (cfg_.estop_on_driver_fault) (void)estop("driver", fault_detail);
-  } else if (fault_cleared) {
-    std::string was;
-    {
-      MutexLock lock(meta_mu_);
-      was.swap(driver_fault_);
-    }
-    events.push_back(
-        make_event("DRIVER_RECOVERED", 0, 0, "the driver is healthy again (was: " + was + ")"));
-  }
-
-  // Deadman.
-  bool watchdog_fired = false;
-  int64_t watchdog_elapsed = 0;
-  {
-    MutexLock lock(deadman_mu_);
-    for (auto& [id, s] : deadmen_) {
-      const int64_t elapsed = now - s.last_heartbeat_mono;
-      if (s.lost || elapsed <= s.timeout_ms) continue;
-      s.lost = true;
-      if (s.holds_control || (moving && id == owner)) {
-        SafetyEvent ev =
-            make_event("NETWORK_LOSS_SAFE_STOP", elapsed, s.timeout_ms, "heartbeat timeout");
-        ev.session_id = id;
-        events.push_back(std::move(ev));
-      }
-    }
-    if (cfg_.watchdog_timeout_ms > 0 && watchdog_last_feed_mono_ != 0 &&
-        now - watchdog_last_feed_mono_ > cfg_.watchdog_timeout_ms) {
-      watchdog_fired = true;
-      watchdog_elapsed = now - watchdog_last_feed_mono_;
-      watchdog_last_feed_mono_ = 0;
-    }
-  }
+  on_health_change(now, health, events);
+  const int64_t watchdog_elapsed = check_deadmen(now, owner, moving, events);
 
   for (const auto& ev : events) {
     if (ev.type == "DRIVER_FAULT" || ev.type == "DRIVER_RECOVERED") continue;  // handled above
@@ -717,16 +628,125 @@ void SafetyCore::tick() {
     MutexLock lock(apply_mu_);
     drive_deadline_mono_ = 0;
   }
-  if (watchdog_fired) {
+  if (watchdog_elapsed > 0) {
     (void)estop("watchdog", "brain watchdog timeout");
-    events.push_back(make_event("WATCHDOG_TIMEOUT", watchdog_elapsed, cfg_.watchdog_timeout_ms,
-                                "no watchdog feed; ESTOP latched"));
+    events.push_back(event_at(now, "WATCHDOG_TIMEOUT", watchdog_elapsed, cfg_.watchdog_timeout_ms,
+                              "no watchdog feed; ESTOP latched"));
   }
 
   expire_persist_waiters(now);
   loop_count_.fetch_add(1, std::memory_order_relaxed);
   loop_latency_us_.store((steady_ns() - t0) / 1000, std::memory_order_relaxed);
   for (const auto& ev : events) emit(ev);
+}
+
+SafetyEvent SafetyCore::event_at(int64_t now, std::string type, int64_t elapsed, int64_t timeout,
+                                 std::string detail) const {
+  SafetyEvent ev;
+  ev.type = std::move(type);
+  ev.elapsed_ms = elapsed;
+  ev.timeout_ms = timeout;
+  ev.detail = std::move(detail);
+  ev.wall_ms = clock_.wall_ms();
+  ev.mono_ms = now;
+  return ev;
+}
+
+// The drive's TTL on the monotonic clock, and the workspace guard: the braking distance ahead
+// must not take the base further out.
+void SafetyCore::guard_motion_locked(int64_t now, const RobotState& st,
+                                     std::vector<SafetyEvent>& events) {
+  if (drive_deadline_mono_ > 0 && now >= drive_deadline_mono_) {
+    const bool still_driving = st.target_linear_mps != 0.0 || st.target_angular_radps != 0.0;
+    if (!still_driving) {
+      drive_deadline_mono_ = 0;
+    } else if (now > drive_deadline_mono_ + cfg_.drive_ttl_grace_ms) {
+      driver_->stop();
+      events.push_back(event_at(now, "DRIVE_TTL_SAFE_STOP", now - drive_deadline_mono_, 0,
+                                "the driver kept driving past the command's duration"));
+      drive_deadline_mono_ = 0;
+    }
+  }
+  const Workspace& ws = limits_.workspace;
+  if (ws.enabled && st.linear_mps != 0.0) {
+    const double brake = driver_info_.brake_decel_mps2;
+    const double dist = brake > 0 ? st.linear_mps * std::abs(st.linear_mps) / (2.0 * brake) : 0.0;
+    const double px = st.x + dist * std::cos(st.theta);
+    const double py = st.y + dist * std::sin(st.theta);
+    const double here = ws.distance_outside(st.x, st.y);
+    const double ahead = ws.distance_outside(px, py);
+    if (ahead > 1e-3 && ahead > here) {
+      driver_->stop();
+      drive_deadline_mono_ = 0;
+      events.push_back(
+          event_at(now, "WORKSPACE_SAFE_STOP", 0, 0, "the base was about to leave the workspace"));
+    }
+  }
+}
+
+// Driver health: a fault stops the driver at once and holds motion off until it clears.
+SafetyCore::HealthChange SafetyCore::check_health_locked() {
+  HealthChange change;
+  const DriverHealth health = driver_->health();
+  if (!health.ok && !driver_faulted_.load(std::memory_order_acquire)) {
+    driver_->stop();
+    drive_deadline_mono_ = 0;
+    driver_faulted_.store(true, std::memory_order_release);
+    change.started = true;
+    change.detail = health.fault.empty() ? std::string("the driver reports a fault") : health.fault;
+  } else if (health.ok && driver_faulted_.load(std::memory_order_acquire)) {
+    driver_faulted_.store(false, std::memory_order_release);
+    change.cleared = true;
+  }
+  return change;
+}
+
+// A fault that began: safe stop, DRIVER_FAULT, and ESTOP when safety.estop_on_driver_fault; one
+// that cleared: DRIVER_RECOVERED naming it.
+void SafetyCore::on_health_change(int64_t now, const HealthChange& change,
+                                  std::vector<SafetyEvent>& events) {
+  if (change.started) {
+    {
+      MutexLock lock(meta_mu_);
+      driver_fault_ = change.detail;
+    }
+    enter_safe_stop("driver_fault", "");
+    events.push_back(event_at(now, "DRIVER_FAULT", 0, 0, change.detail));
+    if (cfg_.estop_on_driver_fault) (void)estop("driver", change.detail);
+  } else if (change.cleared) {
+    std::string was;
+    {
+      MutexLock lock(meta_mu_);
+      was.swap(driver_fault_);
+    }
+    events.push_back(
+        event_at(now, "DRIVER_RECOVERED", 0, 0, "the driver is healthy again (was: " + was + ")"));
+  }
+}
+
+// Deadman sessions past their timeout (a safe stop when the session holds control or owns the
+// motion), and the watchdog: returns how long it went unfed when it fired (disarming it), else 0.
+int64_t SafetyCore::check_deadmen(int64_t now, const std::string& owner, bool moving,
+                                  std::vector<SafetyEvent>& events) {
+  MutexLock lock(deadman_mu_);
+  for (auto& [id, s] : deadmen_) {
+    const int64_t elapsed = now - s.last_heartbeat_mono;
+    if (s.lost || elapsed <= s.timeout_ms) continue;
+    s.lost = true;
+    if (s.holds_control || (moving && id == owner)) {
+      SafetyEvent ev =
+          event_at(now, "NETWORK_LOSS_SAFE_STOP", elapsed, s.timeout_ms, "heartbeat timeout");
+      ev.session_id = id;
+      events.push_back(std::move(ev));
+    }
+  }
+  if (cfg_.watchdog_timeout_ms > 0 && watchdog_last_feed_mono_ != 0 &&
+      now - watchdog_last_feed_mono_ > cfg_.watchdog_timeout_ms) {
+    const int64_t elapsed = now - watchdog_last_feed_mono_;
+    watchdog_last_feed_mono_ = 0;
+    return elapsed;
+  }
+  return 0;
 }
 
 // Steps the driver from the last tick (or catch-up) to `now`; never backwards. Holds apply_mu_.

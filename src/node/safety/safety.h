@@ -302,6 +302,20 @@ class SafetyCore {
   void enter_safe_stop(std::string reason, std::string session);
   void record_latency(int64_t ns);
   void step_driver_to_locked(int64_t now) REQUIRES(apply_mu_);
+  // The steps of tick() (safety.cpp).
+  struct HealthChange {
+    bool started = false;  // a fault began (detail says which)
+    bool cleared = false;
+    std::string detail;
+  };
+  SafetyEvent event_at(int64_t now, std::string type, int64_t elapsed, int64_t timeout,
+                       std::string detail) const;
+  void guard_motion_locked(int64_t now, const RobotState& st, std::vector<SafetyEvent>& events)
+      REQUIRES(apply_mu_);
+  HealthChange check_health_locked() REQUIRES(apply_mu_);
+  void on_health_change(int64_t now, const HealthChange& change, std::vector<SafetyEvent>& events);
+  int64_t check_deadmen(int64_t now, const std::string& owner, bool moving,
+                        std::vector<SafetyEvent>& events) EXCLUDES(deadman_mu_);
   // Wakes a resting loop (new motion, session or watchdog deadline). Cheap when not resting.
   void wake_ticker();
   void persist_loop();

@@ -54,6 +54,118 @@ Error limit_error(const std::string& what, const std::string& field) {
   return Error(ErrorCode::kCommandRejected, what, field, "limit_exceeded");
 }
 
+// A limit passed: noted in the outcome when clamping (kClamp).
+void note(DispatchOutcome& out, const std::string& s) {
+  out.clamped = true;
+  out.clamps.push_back(s);
+}
+
+// A drive's duration and velocities within the limits: refused past them, or clamped.
+Status limit_drive(const SafetyLimits& lim, DriveCommand& d, bool clamp, DispatchOutcome& out) {
+  if (!std::isfinite(d.linear_mps) || !std::isfinite(d.angular_radps))
+    return Error(ErrorCode::kSchemaValidationFailed, "drive velocities must be finite numbers",
+                 "drive");
+  if (d.duration_ms <= 0) d.duration_ms = lim.max_drive_duration_ms;
+  if (d.duration_ms > lim.max_drive_duration_ms) {
+    if (!clamp)
+      return limit_error("duration_ms " + std::to_string(d.duration_ms) +
+                             " exceeds max_drive_duration_ms " +
+                             std::to_string(lim.max_drive_duration_ms),
+                         "drive.duration_ms");
+    note(out, "duration_ms " + std::to_string(d.duration_ms) + " -> " +
+                  std::to_string(lim.max_drive_duration_ms) + " (max_drive_duration_ms)");
+    d.duration_ms = lim.max_drive_duration_ms;
+  }
+  if (std::abs(d.linear_mps) > lim.max_linear_mps) {
+    if (!clamp)
+      return limit_error(
+          "linear_mps " + num(d.linear_mps) + " exceeds max_linear_mps " + num(lim.max_linear_mps),
+          "drive.linear_mps");
+    const double c = std::copysign(lim.max_linear_mps, d.linear_mps);
+    note(out, "linear_mps " + num(d.linear_mps) + " -> " + num(c) + " (max_linear_mps)");
+    d.linear_mps = c;
+  }
+  if (std::abs(d.angular_radps) > lim.max_angular_radps) {
+    if (!clamp)
+      return limit_error("angular_radps " + num(d.angular_radps) + " exceeds max_angular_radps " +
+                             num(lim.max_angular_radps),
+                         "drive.angular_radps");
+    const double c = std::copysign(lim.max_angular_radps, d.angular_radps);
+    note(out, "angular_radps " + num(d.angular_radps) + " -> " + num(c) + " (max_angular_radps)");
+    d.angular_radps = c;
+  }
+  return {};
+}
+
+// A drive whose path (with the deceleration) would leave the workspace: refused, or cut to the
+// longest duration that stays inside (a stop when none does).
+Status fit_workspace(const Workspace& ws, double accel, const RobotState& now, DriveCommand& d,
+                     bool clamp, DispatchOutcome& out) {
+  if (!ws.enabled || d.linear_mps == 0.0 ||
+      !leaves_workspace(ws, now, d.linear_mps, d.angular_radps, d.duration_ms, accel))
+    return {};
+  char rect[160];
+  std::snprintf(rect, sizeof rect, "[%g, %g] x [%g, %g]", ws.x_min, ws.x_max, ws.y_min, ws.y_max);
+  if (!clamp)
+    return limit_error(std::string("drive would leave the workspace ") + rect + " (workspace)",
+                       "drive");
+  int64_t lo = 0, hi = d.duration_ms;
+  while (lo < hi) {
+    const int64_t mid = lo + (hi - lo + 1) / 2;
+    if (leaves_workspace(ws, now, d.linear_mps, d.angular_radps, mid, accel)) {
+      hi = mid - 1;
+    } else {
+      lo = mid;
+    }
+  }
+  if (lo == 0 || leaves_workspace(ws, now, d.linear_mps, d.angular_radps, lo, accel)) {
+    note(out, "drive -> stop at the workspace boundary " + std::string(rect) + " (workspace)");
+    d = DriveCommand{0.0, 0.0, 0};
+  } else {
+    note(out, "duration_ms " + std::to_string(d.duration_ms) + " -> " + std::to_string(lo) +
+                  " to stop inside the workspace " + rect + " (workspace)");
+    d.duration_ms = lo;
+  }
+  return {};
+}
+
+// An arm's joint targets within their ranges and its joint speed within the limit (0: the
+// limit): refused past them, or clamped.
+Status limit_arm(const SafetyLimits& lim, ArmCommand& arm, bool clamp, DispatchOutcome& out) {
+  for (int i = 0; i < kArmJoints; ++i) {
+    const double t = arm.targets_rad[i];
+    const std::string j = "joint_" + std::to_string(i);
+    if (!std::isfinite(t))
+      return Error(ErrorCode::kSchemaValidationFailed, j + " target must be a finite number",
+                   "arm." + j);
+    if (t < lim.joint_min_rad[i] || t > lim.joint_max_rad[i]) {
+      const bool low = t < lim.joint_min_rad[i];
+      const double bound = low ? lim.joint_min_rad[i] : lim.joint_max_rad[i];
+      const std::string lname = low ? "joint_min_rad" : "joint_max_rad";
+      if (!clamp)
+        return limit_error(j + " target " + num(t) + " outside " + lname + " " + num(bound),
+                           "arm." + j);
+      note(out, j + " target " + num(t) + " -> " + num(bound) + " (" + lname + ")");
+      arm.targets_rad[i] = bound;
+    }
+  }
+  if (!std::isfinite(arm.max_joint_speed_radps) || arm.max_joint_speed_radps < 0)
+    return Error(ErrorCode::kSchemaValidationFailed, "max_joint_speed_radps must be >= 0",
+                 "arm.max_joint_speed_radps");
+  if (arm.max_joint_speed_radps == 0.0) {
+    arm.max_joint_speed_radps = lim.max_joint_speed_radps;
+  } else if (arm.max_joint_speed_radps > lim.max_joint_speed_radps) {
+    if (!clamp)
+      return limit_error("max_joint_speed_radps " + num(arm.max_joint_speed_radps) +
+                             " exceeds limit " + num(lim.max_joint_speed_radps),
+                         "arm.max_joint_speed_radps");
+    note(out, "max_joint_speed_radps " + num(arm.max_joint_speed_radps) + " -> " +
+                  num(lim.max_joint_speed_radps) + " (max_joint_speed_radps)");
+    arm.max_joint_speed_radps = lim.max_joint_speed_radps;
+  }
+  return {};
+}
+
 }  // namespace
 
 Result<ActuatorCommand> SafetyCore::limit_command(const ActuatorCommand& cmd, LimitPolicy policy,
@@ -61,113 +173,19 @@ Result<ActuatorCommand> SafetyCore::limit_command(const ActuatorCommand& cmd, Li
                                                   DispatchOutcome& out) const {
   ActuatorCommand a = cmd;
   const bool clamp = policy == LimitPolicy::kClamp;
-  auto note = [&](const std::string& s) {
-    out.clamped = true;
-    out.clamps.push_back(s);
-  };
-
   if (a.drive) {
     if (!driver_info_.has_base)
       return Error(ErrorCode::kCommandRejected, "this robot has no base", "drive", "unsupported");
-    auto& d = *a.drive;
-    if (!std::isfinite(d.linear_mps) || !std::isfinite(d.angular_radps))
-      return Error(ErrorCode::kSchemaValidationFailed, "drive velocities must be finite numbers",
-                   "drive");
-    if (d.duration_ms <= 0) d.duration_ms = limits_.max_drive_duration_ms;
-    if (d.duration_ms > limits_.max_drive_duration_ms) {
-      if (!clamp)
-        return limit_error("duration_ms " + std::to_string(d.duration_ms) +
-                               " exceeds max_drive_duration_ms " +
-                               std::to_string(limits_.max_drive_duration_ms),
-                           "drive.duration_ms");
-      note("duration_ms " + std::to_string(d.duration_ms) + " -> " +
-           std::to_string(limits_.max_drive_duration_ms) + " (max_drive_duration_ms)");
-      d.duration_ms = limits_.max_drive_duration_ms;
-    }
-    if (std::abs(d.linear_mps) > limits_.max_linear_mps) {
-      if (!clamp)
-        return limit_error("linear_mps " + num(d.linear_mps) + " exceeds max_linear_mps " +
-                               num(limits_.max_linear_mps),
-                           "drive.linear_mps");
-      const double c = std::copysign(limits_.max_linear_mps, d.linear_mps);
-      note("linear_mps " + num(d.linear_mps) + " -> " + num(c) + " (max_linear_mps)");
-      d.linear_mps = c;
-    }
-    if (std::abs(d.angular_radps) > limits_.max_angular_radps) {
-      if (!clamp)
-        return limit_error("angular_radps " + num(d.angular_radps) + " exceeds max_angular_radps " +
-                               num(limits_.max_angular_radps),
-                           "drive.angular_radps");
-      const double c = std::copysign(limits_.max_angular_radps, d.angular_radps);
-      note("angular_radps " + num(d.angular_radps) + " -> " + num(c) + " (max_angular_radps)");
-      d.angular_radps = c;
-    }
-    const Workspace& ws = limits_.workspace;
-    const double accel = driver_info_.linear_accel_mps2;
-    if (ws.enabled && d.linear_mps != 0.0 &&
-        leaves_workspace(ws, now, d.linear_mps, d.angular_radps, d.duration_ms, accel)) {
-      char rect[160];
-      std::snprintf(rect, sizeof rect, "[%g, %g] x [%g, %g]", ws.x_min, ws.x_max, ws.y_min,
-                    ws.y_max);
-      if (!clamp)
-        return limit_error(std::string("drive would leave the workspace ") + rect + " (workspace)",
-                           "drive");
-      // Longest duration whose path (including the deceleration) stays inside.
-      int64_t lo = 0, hi = d.duration_ms;
-      while (lo < hi) {
-        const int64_t mid = lo + (hi - lo + 1) / 2;
-        if (leaves_workspace(ws, now, d.linear_mps, d.angular_radps, mid, accel)) {
-          hi = mid - 1;
-        } else {
-          lo = mid;
-        }
-      }
-      if (lo == 0 || leaves_workspace(ws, now, d.linear_mps, d.angular_radps, lo, accel)) {
-        note("drive -> stop at the workspace boundary " + std::string(rect) + " (workspace)");
-        d = DriveCommand{0.0, 0.0, 0};
-      } else {
-        note("duration_ms " + std::to_string(d.duration_ms) + " -> " + std::to_string(lo) +
-             " to stop inside the workspace " + rect + " (workspace)");
-        d.duration_ms = lo;
-      }
-    }
+    if (Status s = limit_drive(limits_, *a.drive, clamp, out); !s.ok()) return s.error();
+    if (Status s = fit_workspace(limits_.workspace, driver_info_.linear_accel_mps2, now, *a.drive,
+                                 clamp, out);
+        !s.ok())
+      return s.error();
   }
-
   if (a.arm) {
     if (!driver_info_.has_arm)
       return Error(ErrorCode::kCommandRejected, "this robot has no arm", "arm", "unsupported");
-    auto& arm = *a.arm;
-    for (int i = 0; i < kArmJoints; ++i) {
-      const double t = arm.targets_rad[i];
-      const std::string j = "joint_" + std::to_string(i);
-      if (!std::isfinite(t))
-        return Error(ErrorCode::kSchemaValidationFailed, j + " target must be a finite number",
-                     "arm." + j);
-      if (t < limits_.joint_min_rad[i] || t > limits_.joint_max_rad[i]) {
-        const bool low = t < limits_.joint_min_rad[i];
-        const double bound = low ? limits_.joint_min_rad[i] : limits_.joint_max_rad[i];
-        const std::string lname = low ? "joint_min_rad" : "joint_max_rad";
-        if (!clamp)
-          return limit_error(j + " target " + num(t) + " outside " + lname + " " + num(bound),
-                             "arm." + j);
-        note(j + " target " + num(t) + " -> " + num(bound) + " (" + lname + ")");
-        arm.targets_rad[i] = bound;
-      }
-    }
-    if (!std::isfinite(arm.max_joint_speed_radps) || arm.max_joint_speed_radps < 0)
-      return Error(ErrorCode::kSchemaValidationFailed, "max_joint_speed_radps must be >= 0",
-                   "arm.max_joint_speed_radps");
-    if (arm.max_joint_speed_radps == 0.0) {
-      arm.max_joint_speed_radps = limits_.max_joint_speed_radps;
-    } else if (arm.max_joint_speed_radps > limits_.max_joint_speed_radps) {
-      if (!clamp)
-        return limit_error("max_joint_speed_radps " + num(arm.max_joint_speed_radps) +
-                               " exceeds limit " + num(limits_.max_joint_speed_radps),
-                           "arm.max_joint_speed_radps");
-      note("max_joint_speed_radps " + num(arm.max_joint_speed_radps) + " -> " +
-           num(limits_.max_joint_speed_radps) + " (max_joint_speed_radps)");
-      arm.max_joint_speed_radps = limits_.max_joint_speed_radps;
-    }
+    if (Status s = limit_arm(limits_, *a.arm, clamp, out); !s.ok()) return s.error();
   }
   if (a.gripper && !driver_info_.has_gripper)
     return Error(ErrorCode::kCommandRejected, "this robot has no gripper", "gripper",
