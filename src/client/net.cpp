@@ -150,6 +150,13 @@ Result<bool> Conn::open(const Endpoint& ep, int timeout_ms, const std::string& c
   ::setsockopt(fd_, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
   if (!ep.tls) return true;
 
+  return start_tls(ep, port, deadline, ca_file, insecure);
+}
+
+// TLS over the connected socket: TLS 1.2 or later; unless `insecure`, the peer's certificate
+// verified against `ca_file` (or the system's anchors) and the host name or IP address.
+Result<bool> Conn::start_tls(const Endpoint& ep, const std::string& port, int64_t deadline,
+                             const std::string& ca_file, bool insecure) {
   ctx_ = SSL_CTX_new(TLS_client_method());
   if (!ctx_) return fail(FailedAt::kTls, false, 0, "TLS_FAILED", ssl_error_text());
   SSL_CTX_set_min_proto_version(ctx_, TLS1_2_VERSION);

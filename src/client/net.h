@@ -68,6 +68,8 @@ class Conn {
   const ExchangeFailure& failure() const { return failure_; }
 
  private:
+  Result<bool> start_tls(const Endpoint& ep, const std::string& port, int64_t deadline,
+                         const std::string& ca_file, bool insecure);
   ClientError fail(FailedAt at, bool timed_out, int sys_error, const std::string& code,
                    const std::string& message);
 

@@ -89,6 +89,99 @@ Parse dechunk(std::string_view buf, size_t pos, std::string& body, size_t& end, 
   }
 }
 
+// A response head (no blank line): the status line and the header fields, names lower-cased.
+bool parse_head(std::string_view head, ParsedResponse& out, std::string& error) {
+  size_t line_end = head.find("\r\n");
+  std::string_view status_line = head.substr(0, line_end);
+  if (status_line.size() < 12 || status_line.substr(0, 7) != "HTTP/1." || status_line[8] != ' ') {
+    error = "not an HTTP/1.x status line";
+    return false;
+  }
+  uint64_t code = 0;
+  if (!parse_size(status_line.substr(9, 3), 10, code) || code < 100 || code > 599 ||
+      (status_line.size() > 12 && status_line[12] != ' ')) {
+    error = "bad status code";
+    return false;
+  }
+  out = ParsedResponse{};
+  out.status = static_cast<int>(code);
+  size_t pos = line_end == std::string_view::npos ? head.size() : line_end + 2;
+  while (pos < head.size()) {
+    size_t e = head.find("\r\n", pos);
+    std::string_view line =
+        head.substr(pos, e == std::string_view::npos ? std::string_view::npos : e - pos);
+    pos = e == std::string_view::npos ? head.size() : e + 2;
+    size_t colon = line.find(':');
+    if (colon == std::string_view::npos || colon == 0) {
+      error = "malformed header field";
+      return false;
+    }
+    out.headers.emplace_back(ascii_lower(line.substr(0, colon)),
+                             std::string(trim(line.substr(colon + 1))));
+  }
+  return true;
+}
+
+// The body after a final head: none (204, 304, 101), chunked, Content-Length, or up to the end
+// of the connection.
+Parse parse_body(std::string_view buf, bool eof, size_t body_start, ParsedResponse& out,
+                 size_t& consumed, std::string& error, size_t max_body) {
+  bool chunked = false;
+  bool have_length = false;
+  uint64_t length = 0;
+  for (const auto& [k, v] : out.headers) {
+    if (k == "transfer-encoding" && ascii_lower(v).find("chunked") != std::string::npos)
+      chunked = true;
+    if (k == "content-length") {
+      uint64_t n = 0;
+      if (!parse_size(trim(v), 10, n) || (have_length && n != length)) {
+        error = "bad Content-Length";
+        return Parse::kError;
+      }
+      have_length = true;
+      length = n;
+    }
+  }
+  if (out.status == 204 || out.status == 304 || out.status == 101) {
+    consumed = body_start;
+    return Parse::kComplete;
+  }
+  if (chunked) {
+    size_t end = 0;
+    Parse p = dechunk(buf, body_start, out.body, end, error, max_body);
+    if (p == Parse::kIncomplete && eof) {
+      error = "truncated chunked body";
+      return Parse::kError;
+    }
+    if (p == Parse::kComplete) consumed = end;
+    return p;
+  }
+  if (have_length) {
+    if (length > max_body) {
+      error = "body too large";
+      return Parse::kError;
+    }
+    if (buf.size() - body_start < length) {
+      if (eof) {
+        error = "truncated body";
+        return Parse::kError;
+      }
+      return Parse::kIncomplete;
+    }
+    out.body.assign(buf.substr(body_start, length));
+    consumed = body_start + length;
+    return Parse::kComplete;
+  }
+  if (buf.size() - body_start > max_body) {
+    error = "body too large";
+    return Parse::kError;
+  }
+  if (!eof) return Parse::kIncomplete;
+  out.body.assign(buf.substr(body_start));
+  consumed = buf.size();
+  return Parse::kComplete;
+}
+
 }  // namespace
 
 Parse parse_response(std::string_view buf, bool eof, ParsedResponse& out, size_t& consumed,
@@ -112,94 +205,13 @@ Parse parse_response(std::string_view buf, bool eof, ParsedResponse& out, size_t
       error = "response header too large";
       return Parse::kError;
     }
-    std::string_view head = buf.substr(start, head_end - start);
-    size_t line_end = head.find("\r\n");
-    std::string_view status_line = head.substr(0, line_end);
-    if (status_line.size() < 12 || status_line.substr(0, 7) != "HTTP/1." || status_line[8] != ' ') {
-      error = "not an HTTP/1.x status line";
-      return Parse::kError;
-    }
-    uint64_t code = 0;
-    if (!parse_size(status_line.substr(9, 3), 10, code) || code < 100 || code > 599 ||
-        (status_line.size() > 12 && status_line[12] != ' ')) {
-      error = "bad status code";
-      return Parse::kError;
-    }
-    out = ParsedResponse{};
-    out.status = static_cast<int>(code);
-    size_t pos = line_end == std::string_view::npos ? head.size() : line_end + 2;
-    while (pos < head.size()) {
-      size_t e = head.find("\r\n", pos);
-      std::string_view line =
-          head.substr(pos, e == std::string_view::npos ? std::string_view::npos : e - pos);
-      pos = e == std::string_view::npos ? head.size() : e + 2;
-      size_t colon = line.find(':');
-      if (colon == std::string_view::npos || colon == 0) {
-        error = "malformed header field";
-        return Parse::kError;
-      }
-      out.headers.emplace_back(ascii_lower(line.substr(0, colon)),
-                               std::string(trim(line.substr(colon + 1))));
-    }
+    if (!parse_head(buf.substr(start, head_end - start), out, error)) return Parse::kError;
     size_t body_start = head_end + 4;
-    if (code >= 100 && code < 200 && code != 101) {  // interim: skip it
+    if (out.status >= 100 && out.status < 200 && out.status != 101) {  // interim: skip it
       start = body_start;
       continue;
     }
-    bool chunked = false;
-    bool have_length = false;
-    uint64_t length = 0;
-    for (const auto& [k, v] : out.headers) {
-      if (k == "transfer-encoding" && ascii_lower(v).find("chunked") != std::string::npos)
-        chunked = true;
-      if (k == "content-length") {
-        uint64_t n = 0;
-        if (!parse_size(trim(v), 10, n) || (have_length && n != length)) {
-          error = "bad Content-Length";
-          return Parse::kError;
-        }
-        have_length = true;
-        length = n;
-      }
-    }
-    if (code == 204 || code == 304 || code == 101) {
-      consumed = body_start;
-      return Parse::kComplete;
-    }
-    if (chunked) {
-      size_t end = 0;
-      Parse p = dechunk(buf, body_start, out.body, end, error, max_body);
-      if (p == Parse::kIncomplete && eof) {
-        error = "truncated chunked body";
-        return Parse::kError;
-      }
-      if (p == Parse::kComplete) consumed = end;
-      return p;
-    }
-    if (have_length) {
-      if (length > max_body) {
-        error = "body too large";
-        return Parse::kError;
-      }
-      if (buf.size() - body_start < length) {
-        if (eof) {
-          error = "truncated body";
-          return Parse::kError;
-        }
-        return Parse::kIncomplete;
-      }
-      out.body.assign(buf.substr(body_start, length));
-      consumed = body_start + length;
-      return Parse::kComplete;
-    }
-    if (buf.size() - body_start > max_body) {
-      error = "body too large";
-      return Parse::kError;
-    }
-    if (!eof) return Parse::kIncomplete;
-    out.body.assign(buf.substr(body_start));
-    consumed = buf.size();
-    return Parse::kComplete;
+    return parse_body(buf, eof, body_start, out, consumed, error, max_body);
   }
 }
 

@@ -290,6 +290,51 @@ Status read_ai_blocks(const json::Object& o, Message& m) {
   return Status::Ok();
 }
 
+// The seed's type (or message_type): a name, or a number (0..7) under an explicit 1.0.x
+// `version` (null: none given).
+Status read_seed_type(const json::Object& o, const std::string* version, Message& m) {
+  const json::Value* t = o.find("type");
+  const json::Value* mt = o.find("message_type");
+  if (t && mt && !(*t == *mt)) return schema("type", "type and message_type disagree");
+  const json::Value* tv = t ? t : mt;
+  if (!tv) return missing("type", "type is required");
+  if (tv->is_string()) {
+    auto type = message_type_from_name(tv->as_string());
+    if (!type)
+      return schema("type", "unknown message type '" + tv->as_string().substr(0, 40) + "'");
+    m.type = *type;
+  } else if (tv->is_int()) {
+    if (!version || !is_version_1_0(*version))
+      return schema("type", "a numeric type needs an explicit version 1.0.x; send the type name");
+    int64_t n = tv->as_int();
+    if (n < 0 || n > 7) return schema("type", "numeric type must be 0..7 (seed table)");
+    m.type = static_cast<MessageType>(n);
+  } else {
+    return schema("type", "type must be a string name");
+  }
+  return Status::Ok();
+}
+
+// The seed's priority, when given: a name, or a number (0..3) under an explicit 1.0.x `version`.
+Status read_seed_priority(const json::Object& o, const std::string* version, Message& m) {
+  const json::Value* pr = o.find("priority");
+  if (!pr || pr->is_null()) return Status::Ok();
+  if (pr->is_string()) {
+    auto prio = priority_from_name(pr->as_string());
+    if (!prio) return schema("priority", "priority must be LOW, NORMAL, HIGH or SAFETY");
+    m.priority = *prio;
+  } else if (pr->is_int()) {
+    if (!version || !is_version_1_0(*version))
+      return schema("priority", "a numeric priority needs an explicit version 1.0.x");
+    if (pr->as_int() < 0 || pr->as_int() > 3)
+      return schema("priority", "numeric priority must be 0..3");
+    m.priority = static_cast<Priority>(pr->as_int());
+  } else {
+    return schema("priority", "priority must be a string name");
+  }
+  return Status::Ok();
+}
+
 Result<Message> decode_seed(const json::Object& o, const CodecLimits& lim) {
   Message m;
   m.shape = WireShape::kSeed;
@@ -307,25 +352,8 @@ Result<Message> decode_seed(const json::Object& o, const CodecLimits& lim) {
     m.version = **ver;
   }
   // 2. type (or message_type): a name, or a number under an explicit 1.0.x version.
-  const json::Value* t = o.find("type");
-  const json::Value* mt = o.find("message_type");
-  if (t && mt && !(*t == *mt)) return schema("type", "type and message_type disagree");
-  const json::Value* tv = t ? t : mt;
-  if (!tv) return missing("type", "type is required");
-  if (tv->is_string()) {
-    auto type = message_type_from_name(tv->as_string());
-    if (!type)
-      return schema("type", "unknown message type '" + tv->as_string().substr(0, 40) + "'");
-    m.type = *type;
-  } else if (tv->is_int()) {
-    if (!*ver || !is_version_1_0(**ver))
-      return schema("type", "a numeric type needs an explicit version 1.0.x; send the type name");
-    int64_t n = tv->as_int();
-    if (n < 0 || n > 7) return schema("type", "numeric type must be 0..7 (seed table)");
-    m.type = static_cast<MessageType>(n);
-  } else {
-    return schema("type", "type must be a string name");
-  }
+  const std::string* version = *ver ? &**ver : nullptr;
+  if (Status st = read_seed_type(o, version, m); !st.ok()) return st.error();
   // 3. payload: an object, required.
   const json::Value* p = o.find("payload");
   if (!p) return missing("payload", "payload is required");
@@ -348,21 +376,7 @@ Result<Message> decode_seed(const json::Object& o, const CodecLimits& lim) {
     m.ttl_ms = ttl->as_int();
   }
   // 5. priority.
-  if (const json::Value* pr = o.find("priority"); pr && !pr->is_null()) {
-    if (pr->is_string()) {
-      auto prio = priority_from_name(pr->as_string());
-      if (!prio) return schema("priority", "priority must be LOW, NORMAL, HIGH or SAFETY");
-      m.priority = *prio;
-    } else if (pr->is_int()) {
-      if (!*ver || !is_version_1_0(**ver))
-        return schema("priority", "a numeric priority needs an explicit version 1.0.x");
-      if (pr->as_int() < 0 || pr->as_int() > 3)
-        return schema("priority", "numeric priority must be 0..3");
-      m.priority = static_cast<Priority>(pr->as_int());
-    } else {
-      return schema("priority", "priority must be a string name");
-    }
-  }
+  if (Status st = read_seed_priority(o, version, m); !st.ok()) return st.error();
   if (m.type == MessageType::kSafety) m.priority = Priority::kSafety;
   // 6. addressing.
   for (auto [key, dest] :

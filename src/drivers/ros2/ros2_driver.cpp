@@ -231,6 +231,18 @@ Status Ros2Driver::apply(const node::ActuatorCommand& cmd) {
     return Status::Ok();
   }
   // Validate every part before anything reaches the wire.
+  if (Status s = check_command(cmd); !s.ok()) return s;
+  const int64_t now = now_ns();
+  bool ended = false;  // a stop() won the race: the rest of the command is not written
+  if (cmd.drive)
+    if (Status s = drive_locked(*cmd.drive, gen, now, ended); !s.ok() || ended) return s;
+  if (cmd.arm)
+    if (Status s = arm_locked(*cmd.arm, gen, now, ended); !s.ok() || ended) return s;
+  if (cmd.gripper) return gripper_locked(*cmd.gripper);
+  return Status::Ok();
+}
+
+Status Ros2Driver::check_command(const node::ActuatorCommand& cmd) const {
   if (cmd.drive) {
     const auto& d = *cmd.drive;
     if (!std::isfinite(d.linear_mps) || !std::isfinite(d.angular_radps) || d.duration_ms < 0)
@@ -250,86 +262,95 @@ Status Ros2Driver::apply(const node::ActuatorCommand& cmd) {
   if (cmd.gripper && gripper_writer_ <= 0)
     return Error(ErrorCode::kNotImplemented, "this ROS 2 robot has no gripper topic configured",
                  "gripper");
+  return Status::Ok();
+}
 
-  const int64_t now = now_ns();
-  if (cmd.drive) {
-    const auto& d = *cmd.drive;
-    double v = std::clamp(d.linear_mps, -cfg_.max_linear_mps, cfg_.max_linear_mps);
-    double w = std::clamp(d.angular_radps, -cfg_.max_angular_radps, cfg_.max_angular_radps);
-    if (d.duration_ms == 0) v = w = 0.0;
-    drive_v_ = v;
-    drive_w_ = w;
-    drive_gen_ = gen;
-    drive_end_ns_ = now + std::min<int64_t>(d.duration_ms, kMaxDriveMs) * 1'000'000;
-    next_repub_ns_ = now + period_ns_;
-    drive_active_ = d.duration_ms > 0;
-    const int wrote = write_twist(v, w, gen, now);
-    if (wrote == 0) {
-      absorb_stop_locked();  // a stop() won the race: nothing was written
-      return Status::Ok();
-    }
-    if (wrote < 0) {
-      drive_active_ = false;
-      return dds_error("cmd_vel write", wrote);
-    }
-    if (!drive_active_) last_stop_ns_.store(now, std::memory_order_release);
+// A drive: its Twist written now and again every period until its duration ends (a zero
+// duration: one zero Twist).
+Status Ros2Driver::drive_locked(const node::DriveCommand& d, uint64_t gen, int64_t now,
+                                bool& ended) {
+  double v = std::clamp(d.linear_mps, -cfg_.max_linear_mps, cfg_.max_linear_mps);
+  double w = std::clamp(d.angular_radps, -cfg_.max_angular_radps, cfg_.max_angular_radps);
+  if (d.duration_ms == 0) v = w = 0.0;
+  drive_v_ = v;
+  drive_w_ = w;
+  drive_gen_ = gen;
+  drive_end_ns_ = now + std::min<int64_t>(d.duration_ms, kMaxDriveMs) * 1'000'000;
+  next_repub_ns_ = now + period_ns_;
+  drive_active_ = d.duration_ms > 0;
+  const int wrote = write_twist(v, w, gen, now);
+  if (wrote == 0) {
+    absorb_stop_locked();  // a stop() won the race: nothing was written
+    ended = true;
+    return Status::Ok();
   }
-  if (cmd.arm) {
-    const auto& a = *cmd.arm;
-    const double speed = std::min(
-        a.max_joint_speed_radps > 0.0 ? a.max_joint_speed_radps : cfg_.max_joint_speed_radps,
-        cfg_.max_joint_speed_radps);
-    const node::DriverInfo info = describe();
-    std::vector<double> positions(arm_slots_);
-    double longest = 0.0;
-    for (size_t i = 0; i < arm_slots_; ++i) {
-      if (!(info.joint_min_rad[i] <= info.joint_max_rad[i]))
-        return Error(ErrorCode::kInternal, "joint limits: min above max", "arm");
-      positions[i] = std::clamp(a.targets_rad[i], info.joint_min_rad[i], info.joint_max_rad[i]);
-      st_.joint_targets_rad[i] = positions[i];
-      longest = std::max(longest, std::abs(positions[i] - st_.joints_rad[i]));
-    }
-    // At least 0.1 s; at most kMaxArmMoveS (a tiny speed must not overflow the Duration).
-    const double secs = std::clamp(longest / speed, 0.1, kMaxArmMoveS);
-    trajectory_msgs_msg_dds__JointTrajectoryPoint_ pt{};
-    pt.positions._maximum = pt.positions._length = static_cast<uint32_t>(positions.size());
-    pt.positions._buffer = positions.data();
-    pt.time_from_start.sec = static_cast<int32_t>(secs);
-    pt.time_from_start.nanosec =
-        static_cast<uint32_t>((secs - std::floor(secs)) * 1e9) % 1'000'000'000u;
-    trajectory_msgs_msg_dds__JointTrajectory_ m{};
-    m.header.frame_id = const_cast<char*>("");
-    m.joint_names._maximum = m.joint_names._length = static_cast<uint32_t>(joint_name_ptrs_.size());
-    m.joint_names._buffer = joint_name_ptrs_.data();
-    m.points._maximum = m.points._length = 1;
-    m.points._buffer = &pt;
-    if (stop_gen_.load(std::memory_order_acquire) != gen) {
-      absorb_stop_locked();
-      return Status::Ok();
-    }
-    if (dds_return_t rc = dds_write(arm_writer_, &m); rc < 0)
-      return dds_error("arm trajectory write", rc);
-    st_.joint_speed_radps = speed;
-    arm_until_ns_ = now + static_cast<int64_t>(secs * 1e9);
-    arm_moving_.store(true, std::memory_order_release);
-    // A stop() between the check and the store above did not see the arm moving: hold it.
-    if (stop_gen_.load(std::memory_order_acquire) != gen &&
-        arm_moving_.exchange(false, std::memory_order_acq_rel))
-      write_arm_hold();
+  if (wrote < 0) {
+    drive_active_ = false;
+    return dds_error("cmd_vel write", wrote);
   }
-  if (cmd.gripper) {
-    const bool close = *cmd.gripper == node::GripperAction::kClose;
-    dds_return_t rc = 0;
-    if (cfg_.gripper_type == "std_msgs/msg/Bool") {
-      std_msgs_msg_dds__Bool_ m{close};
-      rc = dds_write(gripper_writer_, &m);
-    } else {
-      std_msgs_msg_dds__Float64_ m{close ? cfg_.gripper_close : cfg_.gripper_open};
-      rc = dds_write(gripper_writer_, &m);
-    }
-    if (rc < 0) return dds_error("gripper write", rc);
-    st_.gripper_closed = close;
+  if (!drive_active_) last_stop_ns_.store(now, std::memory_order_release);
+  return Status::Ok();
+}
+
+// An arm move: one JointTrajectory point, the targets clamped to the joint limits, reached at
+// the requested (or configured) joint speed.
+Status Ros2Driver::arm_locked(const node::ArmCommand& a, uint64_t gen, int64_t now, bool& ended) {
+  const double speed =
+      std::min(a.max_joint_speed_radps > 0.0 ? a.max_joint_speed_radps : cfg_.max_joint_speed_radps,
+               cfg_.max_joint_speed_radps);
+  const node::DriverInfo info = describe();
+  std::vector<double> positions(arm_slots_);
+  double longest = 0.0;
+  for (size_t i = 0; i < arm_slots_; ++i) {
+    if (!(info.joint_min_rad[i] <= info.joint_max_rad[i]))
+      return Error(ErrorCode::kInternal, "joint limits: min above max", "arm");
+    positions[i] = std::clamp(a.targets_rad[i], info.joint_min_rad[i], info.joint_max_rad[i]);
+    st_.joint_targets_rad[i] = positions[i];
+    longest = std::max(longest, std::abs(positions[i] - st_.joints_rad[i]));
   }
+  // At least 0.1 s; at most kMaxArmMoveS (a tiny speed must not overflow the Duration).
+  const double secs = std::clamp(longest / speed, 0.1, kMaxArmMoveS);
+  trajectory_msgs_msg_dds__JointTrajectoryPoint_ pt{};
+  pt.positions._maximum = pt.positions._length = static_cast<uint32_t>(positions.size());
+  pt.positions._buffer = positions.data();
+  pt.time_from_start.sec = static_cast<int32_t>(secs);
+  pt.time_from_start.nanosec =
+      static_cast<uint32_t>((secs - std::floor(secs)) * 1e9) % 1'000'000'000u;
+  trajectory_msgs_msg_dds__JointTrajectory_ m{};
+  m.header.frame_id = const_cast<char*>("");
+  m.joint_names._maximum = m.joint_names._length = static_cast<uint32_t>(joint_name_ptrs_.size());
+  m.joint_names._buffer = joint_name_ptrs_.data();
+  m.points._maximum = m.points._length = 1;
+  m.points._buffer = &pt;
+  if (stop_gen_.load(std::memory_order_acquire) != gen) {
+    absorb_stop_locked();
+    ended = true;
+    return Status::Ok();
+  }
+  if (dds_return_t rc = dds_write(arm_writer_, &m); rc < 0)
+    return dds_error("arm trajectory write", rc);
+  st_.joint_speed_radps = speed;
+  arm_until_ns_ = now + static_cast<int64_t>(secs * 1e9);
+  arm_moving_.store(true, std::memory_order_release);
+  // A stop() between the check and the store above did not see the arm moving: hold it.
+  if (stop_gen_.load(std::memory_order_acquire) != gen &&
+      arm_moving_.exchange(false, std::memory_order_acq_rel))
+    write_arm_hold();
+  return Status::Ok();
+}
+
+Status Ros2Driver::gripper_locked(node::GripperAction g) {
+  const bool close = g == node::GripperAction::kClose;
+  dds_return_t rc = 0;
+  if (cfg_.gripper_type == "std_msgs/msg/Bool") {
+    std_msgs_msg_dds__Bool_ m{close};
+    rc = dds_write(gripper_writer_, &m);
+  } else {
+    std_msgs_msg_dds__Float64_ m{close ? cfg_.gripper_close : cfg_.gripper_open};
+    rc = dds_write(gripper_writer_, &m);
+  }
+  if (rc < 0) return dds_error("gripper write", rc);
+  st_.gripper_closed = close;
   return Status::Ok();
 }
 

@@ -81,6 +81,14 @@ class Ros2Driver final : public node::Driver {
   void write_arm_hold() noexcept;
   void take_samples_locked(int64_t now) REQUIRES(mu_);
   void absorb_stop_locked() REQUIRES(mu_);
+  // The parts of apply(): every part checked first, then each written in turn; `ended` when a
+  // stop() won the race and the rest of the command must not be written.
+  Status check_command(const node::ActuatorCommand& cmd) const REQUIRES(mu_);
+  Status drive_locked(const node::DriveCommand& d, uint64_t gen, int64_t now, bool& ended)
+      REQUIRES(mu_);
+  Status arm_locked(const node::ArmCommand& a, uint64_t gen, int64_t now, bool& ended)
+      REQUIRES(mu_);
+  Status gripper_locked(node::GripperAction g) REQUIRES(mu_);
 
   const config::Ros2DriverConfig cfg_;
   const int64_t period_ns_;
