@@ -8,6 +8,6 @@ target_include_directories(rcan_registry PUBLIC ${PROJECT_SOURCE_DIR}/src)
 target_link_libraries(rcan_registry PUBLIC rcan_registry_store rcan_transport rcan_runtime rcan)
 
 add_executable(rcan-registry ${PROJECT_SOURCE_DIR}/apps/rcan-registry/main.cpp
-  ${PROJECT_SOURCE_DIR}/apps/rcan-registry/setup.cpp)
+  ${PROJECT_SOURCE_DIR}/apps/rcan-registry/daemon.cpp ${PROJECT_SOURCE_DIR}/apps/rcan-registry/setup.cpp)
 set_target_properties(rcan-registry PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${PROJECT_BINARY_DIR}/bin)
 target_link_libraries(rcan-registry PRIVATE rcan_registry yaml-cpp rcan_warnings)
