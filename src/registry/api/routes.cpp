@@ -38,8 +38,8 @@ HttpResponse robot(Api& a, const HttpRequest& req, const std::string& tail) {
   return ref_error(405, "Method not allowed");
 }
 
-RegistryRoutes build() {
-  RegistryRoutes t;
+// Health, metrics, the manifest, the token authority's public endpoints and the device page.
+void add_public_routes(RegistryRoutes& t) {
   t.add("GET", "/healthz", &healthz);
   t.add("GET", "/metrics", &metrics);
   t.add("GET", "/.well-known/rcan-node.json", &manifest);
@@ -58,7 +58,10 @@ RegistryRoutes build() {
   };
   t.add("GET", "/device", device_page);
   t.add("GET", "/device/", device_page, "/device");
+}
 
+// Robots, resolution, registry nodes, registration challenges and API keys.
+void add_registry_routes(RegistryRoutes& t) {
   const std::string robots = "/api/v1/robots";
   t.add("GET", robots,
         [](Api& a, const HttpRequest& req, const std::string&) { return a.list_robots(req); });
@@ -95,6 +98,11 @@ RegistryRoutes build() {
       "DELETE", "/api/v1/keys/*",
       [](Api& a, const HttpRequest& req, const std::string& id) { return a.revoke_key(req, id); },
       "/api/v1/keys/{id}");
+}
+
+// The token authority (revocations, signing keys, clients, grants, device approvals),
+// federation sync and webhooks.
+void add_authority_routes(RegistryRoutes& t) {
   t.add("GET", "/api/v1/revocations",
         [](Api& a, const HttpRequest& req, const std::string&) { return a.list_revocations(req); });
   t.add("POST", "/api/v1/revocations",
@@ -140,13 +148,18 @@ RegistryRoutes build() {
         return a.device_request_route(req, code);
       },
       "/api/v1/device/requests/{user_code}");
-  return t;
 }
 
 }  // namespace
 
 const RegistryRoutes& registry_routes() {
-  static const RegistryRoutes table = build();
+  static const RegistryRoutes table = [] {
+    RegistryRoutes t;  // in this order: a path's route is its first matching pattern
+    add_public_routes(t);
+    add_registry_routes(t);
+    add_authority_routes(t);
+    return t;
+  }();
   return table;
 }
 
