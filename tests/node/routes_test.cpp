@@ -1,5 +1,6 @@
-// The HTTP route table in-process: RouteTable's matching and refusals, and the node's own table
-// (routes.cpp) answered through Node::handle, what every HTTP transport calls, without sockets.
+// The HTTP route table in-process: RouteTable's refusals and the node's own table (routes.cpp)
+// answered through Node::handle, what every HTTP transport calls, without sockets. The pattern
+// matching itself is tested with transport's Router (tests/transport/router_test.cpp).
 #include <gtest/gtest.h>
 
 #include <future>
@@ -7,7 +8,6 @@
 
 #include "in_process_node.h"
 #include "node/api/node.h"
-#include "node/api/route_table.h"
 
 namespace rcan::node {
 namespace {
@@ -26,30 +26,6 @@ std::string http_error_code(const HttpResponse& r) {
   if (!v.ok()) return {};
   const json::Value* p = v->get("payload");
   return p ? json::string_field(*p, "error_code") : std::string();
-}
-
-TEST(RoutePattern, LiteralsParametersAndTheRest) {
-  std::vector<std::string> p;
-  EXPECT_TRUE(RouteTable::match("/rcan/v1/leases", "/rcan/v1/leases", &p));
-  EXPECT_TRUE(p.empty());
-  EXPECT_FALSE(RouteTable::match("/rcan/v1/leases", "/rcan/v1/leases/", &p));
-  EXPECT_FALSE(RouteTable::match("/rcan/v1/leases", "/rcan/v1/leasesX", &p));
-  EXPECT_FALSE(RouteTable::match("/rcan/v1/leases", "/rcan/v1", &p));
-  EXPECT_TRUE(RouteTable::match("/rcan/v1/leases/{id}/grants", "/rcan/v1/leases/L-1/grants", &p));
-  EXPECT_EQ(p, std::vector<std::string>{"L-1"});
-  EXPECT_FALSE(RouteTable::match("/rcan/v1/leases/{id}", "/rcan/v1/leases/", &p))
-      << "a parameter is never empty";
-  EXPECT_FALSE(RouteTable::match("/rcan/v1/leases/{id}", "/rcan/v1/leases/a/b", &p));
-  EXPECT_FALSE(RouteTable::match("/x/{id}", "/x/" + std::string(129, 'a'), &p))
-      << "a parameter is at most 128 bytes";
-  EXPECT_TRUE(RouteTable::match("/ui/*", "/ui/js/main.js", &p));
-  EXPECT_EQ(p, std::vector<std::string>{"js/main.js"});
-  EXPECT_FALSE(RouteTable::match("/ui/*", "/ui/", &p));
-  EXPECT_FALSE(RouteTable::match("/ui/*", "/ui", &p));
-  EXPECT_TRUE(RouteTable::match("/", "/", &p));
-  EXPECT_FALSE(RouteTable::match("/", "/x", &p));
-  EXPECT_FALSE(RouteTable::match("/x", "", &p));
-  EXPECT_FALSE(RouteTable::match("/x", "x", &p));
 }
 
 class RoutesTest : public test_node::InProcessNode {

@@ -16,8 +16,7 @@ Result<Principal> bearer(NodeServices& svc, const transport::HttpRequest& req) {
 }
 
 void authorize_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req,
-                     const transport::HttpHandler::Respond& respond) {
-  const std::string route = "/rcan/v1/authorize";
+                     const transport::HttpHandler::Respond& respond, const std::string& route) {
   auto p = bearer(svc, req);
   if (!p.ok()) {
     svc.record("HITL_AUTHORIZE_REFUSED", "blocked")
@@ -34,8 +33,7 @@ void authorize_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& 
 }
 
 void pending_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req,
-                   const transport::HttpHandler::Respond& respond) {
-  const std::string route = "/rcan/v1/pending";
+                   const transport::HttpHandler::Respond& respond, const std::string& route) {
   auto p = bearer(svc, req);
   if (!p.ok()) return answer_error(svc, respond, route, p.error());
   json::Value list = ai.pending_list();
@@ -54,8 +52,7 @@ void pending_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& re
 }
 
 void thought_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req,
-                   const transport::HttpHandler::Respond& respond) {
-  const std::string route = "/api/thoughts";
+                   const transport::HttpHandler::Respond& respond, const std::string& route) {
   auto p = bearer(svc, req);
   if (!p.ok()) return answer_error(svc, respond, route, p.error());
   // `status` is the lowest scope (GUEST): every verified token holds it (docs/AI.md).
@@ -70,8 +67,7 @@ void thought_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& re
 }
 
 void verify_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req,
-                  const transport::HttpHandler::Respond& respond) {
-  const std::string route = "/api/v1/watermark/verify";
+                  const transport::HttpHandler::Respond& respond, const std::string& route) {
   auto seed_error = [&svc, respond, route](int status, const char* msg) {
     answer_json(svc, respond, route, status,
                 json::Object{{"error", msg}, {"code", "HTTP_" + std::to_string(status)}});
@@ -109,19 +105,23 @@ void verify_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& req
 
 void add_ai_routes(RouteTable& table, NodeServices& svc) {
   using Fn = void (*)(NodeServices&, AiServices&, transport::HttpRequest&,
-                      const transport::HttpHandler::Respond&);
-  auto row = [&](const char* method, const char* path, Fn fn) {
-    table.add(method, path, Body::kNone, [&svc, fn](RouteCall& c) {
-      if (!svc.ai)
-        return answer_error(
-            svc, c.respond, c.route,
-            Error(ErrorCode::kNotFound, "AI accountability is not enabled on this node"));
-      fn(svc, *svc.ai, c.req, c.respond);
-    });
+                      const transport::HttpHandler::Respond&, const std::string&);
+  // A thought answers under /api/thoughts; "not enabled" is counted under the row's pattern.
+  auto row = [&](const char* method, const char* path, Fn fn, std::string label = {}) {
+    table.add(
+        method, path, Body::kNone,
+        [&svc, fn](RouteCall& c) {
+          if (!svc.ai)
+            return answer_error(
+                svc, c.respond, c.pattern,
+                Error(ErrorCode::kNotFound, "AI accountability is not enabled on this node"));
+          fn(svc, *svc.ai, c.req, c.respond, c.route);
+        },
+        {}, std::move(label));
   };
   row("POST", "/rcan/v1/authorize", &authorize_route);
   row("GET", "/rcan/v1/pending", &pending_route);
-  row("GET", "/api/thoughts/{id}", &thought_route);
+  row("GET", "/api/thoughts/{id}", &thought_route, "/api/thoughts");
   row("GET", "/api/v1/watermark/verify", &verify_route);
 }
 

@@ -261,27 +261,27 @@ void Node::announce_control_changes() {
 // ---------------------------------------------------------------------------------------------
 
 // GET /rcan/v1/auth/queue: the control queue. DELETE: leave it.
-void Node::queue_route(transport::HttpRequest& req, Respond& respond, const json::Value& body) {
-  const std::string p = "/rcan/v1/auth/queue";
+void Node::queue_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                       const std::string& route) {
   const std::string& m = req.method;
-  auto pr = route_principal(req, body, p, "QUEUE_DENIED", Role::kGuest, "");
-  if (!pr.ok()) return answer_error(respond, p, pr.error());
+  auto pr = route_principal(req, body, route, "QUEUE_DENIED", Role::kGuest, "");
+  if (!pr.ok()) return answer_error(respond, route, pr.error());
   if (m == "DELETE") {
     bool left = svc_.sessions.leave_queue(*pr);
     if (left) {
       svc_.record("CLAIM_WITHDRAWN", "ok").by(*pr).write();
     }
-    answer_json(respond, p, left ? 200 : 404,
+    answer_json(respond, route, left ? 200 : 404,
                 left ? json::Value(json::Object{{"left", true}})
                      : svc_.error(Error(ErrorCode::kNotFound, "not in the control queue")));
   } else {
-    answer_json(respond, p, 200,
+    answer_json(respond, route, 200,
                 json::Object{{"queue", svc_.sessions.queue_json(svc_.clock.mono_ms())}});
   }
 }
 
-void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json::Value& body) {
-  const std::string route = "/rcan/v1/auth/claim";
+void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                       const std::string& route) {
   auto pr = route_principal(req, body, route, "CLAIM_DENIED", Role::kUser, "control");
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   std::optional<Role> requested;
@@ -391,8 +391,8 @@ void Node::claim_route(transport::HttpRequest& req, Respond& respond, const json
   });
 }
 
-void Node::renew_route(transport::HttpRequest& req, Respond& respond, const json::Value& body) {
-  const std::string route = "/rcan/v1/auth/renew";
+void Node::renew_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                       const std::string& route) {
   auto pr = route_principal(req, body, route, "RENEW_DENIED", Role::kUser, "control");
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   std::string session_id = str_field(body, "session_id");
@@ -434,8 +434,8 @@ void Node::renew_route(transport::HttpRequest& req, Respond& respond, const json
   });
 }
 
-void Node::release_route(transport::HttpRequest& req, Respond& respond, const json::Value& body) {
-  const std::string route = "/rcan/v1/auth/release";
+void Node::release_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                         const std::string& route) {
   auto pr = route_principal(req, body, route, "RELEASE_DENIED", Role::kGuest, "");
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   std::string session_id = str_field(body, "session_id");
@@ -461,8 +461,8 @@ void Node::release_route(transport::HttpRequest& req, Respond& respond, const js
               svc_.envelope(MessageType::kReleased, json::Object{{"session_id", session_id}}));
 }
 
-void Node::handoff_route(transport::HttpRequest& req, Respond& respond, const json::Value& body) {
-  const std::string route = "/rcan/v1/handoff";
+void Node::handoff_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                         const std::string& route) {
   auto pr = route_principal(req, body, route, "HANDOFF_DENIED", Role::kGuest, "");
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   std::string session_id = str_field(body, "session_id");
@@ -515,8 +515,7 @@ void Node::handoff_route(transport::HttpRequest& req, Respond& respond, const js
 // POST /rcan/v1/leases/<id>/grants {user_id, role, duration_s}, DELETE /rcan/v1/leases/<id>.
 // The route table (routes.cpp) has checked the method for the path.
 void Node::lease_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
-                       const std::string& lease_id, bool grants) {
-  const std::string route = "/rcan/v1/leases";
+                       const std::string& route, const std::string& lease_id, bool grants) {
   const std::string& m = req.method;
   int64_t now_wall = svc_.clock.wall_ms();
   if (lease_id.empty()) {
@@ -599,8 +598,8 @@ void Node::lease_route(transport::HttpRequest& req, Respond& respond, const json
 }
 
 // GET /rcan/v1/transfer: the ownership state. POST {action: request|accept|cancel, …}.
-void Node::transfer_route(transport::HttpRequest& req, Respond& respond, const json::Value& body) {
-  const std::string route = "/rcan/v1/transfer";
+void Node::transfer_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                          const std::string& route) {
   int64_t now_wall = svc_.clock.wall_ms();
   if (req.method == "GET") {
     auto pr = route_principal(req, body, route, "TRANSFER_DENIED", Role::kGuest, "");
@@ -673,8 +672,7 @@ void Node::transfer_route(transport::HttpRequest& req, Respond& respond, const j
 
 // GET /rcan/v1/consent: the pending requests (OWNER).
 void Node::consent_list_route(transport::HttpRequest& req, Respond& respond,
-                              const json::Value& body) {
-  const std::string route = "/rcan/v1/consent";
+                              const json::Value& body, const std::string& route) {
   auto pr = route_principal(req, body, route, "CONSENT_REFUSED", Role::kOwner, "config");
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   svc_.consent.expire(svc_.clock.wall_ms());
@@ -685,8 +683,7 @@ void Node::consent_list_route(transport::HttpRequest& req, Respond& respond,
 
 // POST /rcan/v1/consent: records a CONSENT_REQUEST (202) and notifies the owner.
 void Node::consent_request_route(transport::HttpRequest& req, Respond& respond,
-                                 const json::Value& body) {
-  const std::string route = "/rcan/v1/consent";
+                                 const json::Value& body, const std::string& route) {
   int64_t now_wall = svc_.clock.wall_ms();
   auto pr = route_principal(req, body, route, "CONSENT_REFUSED", Role::kGuest, "");
   if (!pr.ok()) return answer_error(respond, route, pr.error());
@@ -785,9 +782,8 @@ void Node::consent_request_route(transport::HttpRequest& req, Respond& respond,
 
 // POST /rcan/v1/consent/<id>/grant {kind: lease|grant, duration_s} or /<id>/deny {reason} (OWNER).
 void Node::consent_decision_route(transport::HttpRequest& req, Respond& respond,
-                                  const json::Value& body, const std::string& id,
-                                  const std::string& verb) {
-  const std::string route = "/rcan/v1/consent";
+                                  const json::Value& body, const std::string& route,
+                                  const std::string& id, const std::string& verb) {
   int64_t now_wall = svc_.clock.wall_ms();
   auto pr = route_principal(req, body, route, "CONSENT_REFUSED", Role::kOwner, "config");
   if (!pr.ok()) return answer_error(respond, route, pr.error());

@@ -627,8 +627,7 @@ void Node::record_read(const char* event, const Principal& p, const std::string&
           });
 }
 
-void Node::audit_listing(transport::HttpRequest& req, Respond& respond) {
-  const std::string route = "/api/audit";
+void Node::audit_listing(transport::HttpRequest& req, Respond& respond, const std::string& route) {
   auto pr = bearer_principal(req);
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   if (!audit_reader(*pr, route, "", respond)) return;
@@ -670,8 +669,7 @@ void Node::list_audit(Respond& respond, const std::string& route, const AuditQue
   answer_json(respond, route, 200, std::move(body));
 }
 
-void Node::audit_export(transport::HttpRequest& req, Respond& respond) {
-  const std::string route = "/api/v1/audit";
+void Node::audit_export(transport::HttpRequest& req, Respond& respond, const std::string& route) {
   auto pr = bearer_principal(req);
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   if (!audit_reader(*pr, route, "config", respond)) return;
@@ -714,8 +712,7 @@ void Node::audit_export(transport::HttpRequest& req, Respond& respond) {
                     respond, std::move(read));
 }
 
-void Node::node_log(transport::HttpRequest& req, Respond& respond) {
-  const std::string route = "/api/node/log";
+void Node::node_log(transport::HttpRequest& req, Respond& respond, const std::string& route) {
   auto pr = bearer_principal(req);
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   if (!owner_reader(*pr, route, "config", "LOG_READ",

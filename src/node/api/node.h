@@ -77,22 +77,30 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   void add_control_routes();
   // GET /api/robots and POST /api/robots/estop (robots_routes.cpp).
   void add_robots_routes();
-  void robots_estop(transport::HttpRequest& req, Respond& respond, const json::Value& body);
+  void robots_estop(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                    const std::string& route);
   // Control sessions, leases, ownership transfer, consent (control_routes.cpp).
-  void queue_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
-  void claim_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
-  void renew_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
-  void release_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
-  void handoff_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
+  void queue_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                   const std::string& route);
+  void claim_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                   const std::string& route);
+  void renew_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                   const std::string& route);
+  void release_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                     const std::string& route);
+  void handoff_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                     const std::string& route);
   void lease_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
-                   const std::string& lease_id, bool grants);
-  void transfer_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
-  void consent_list_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
-  void consent_request_route(transport::HttpRequest& req, Respond& respond,
-                             const json::Value& body);
+                   const std::string& route, const std::string& lease_id, bool grants);
+  void transfer_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                      const std::string& route);
+  void consent_list_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                          const std::string& route);
+  void consent_request_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                             const std::string& route);
   void consent_decision_route(transport::HttpRequest& req, Respond& respond,
-                              const json::Value& body, const std::string& id,
-                              const std::string& verb);
+                              const json::Value& body, const std::string& route,
+                              const std::string& id, const std::string& verb);
   Result<Principal> route_principal(const transport::HttpRequest& req, const json::Value& body,
                                     const std::string& route, const std::string& denied_event,
                                     Role min_role, std::string_view scope);
@@ -101,8 +109,8 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   void announce_control_changes();
   void save_control_state() EXCLUDES(save_mu_);
   void publish_to(const std::string& principal_key, json::Object ev);
-  void audit_listing(transport::HttpRequest& req, Respond& respond);
-  void audit_export(transport::HttpRequest& req, Respond& respond);
+  void audit_listing(transport::HttpRequest& req, Respond& respond, const std::string& route);
+  void audit_export(transport::HttpRequest& req, Respond& respond, const std::string& route);
   // Reading the audit log: OWNER (and `scope`, when not empty), else 403 recorded as
   // AUDIT_READ blocked. Answers the refusal itself and returns false.
   bool audit_reader(const Principal& p, const std::string& route, std::string_view scope,
@@ -118,7 +126,7 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   void list_audit(Respond& respond, const std::string& route, const AuditQuery& q);
   // GET /api/node/log: the newest lines of the process's log ring (runtime/log.h), for OWNER with
   // scope `config`; each read recorded as LOG_READ (a refused one as LOG_READ blocked).
-  void node_log(transport::HttpRequest& req, Respond& respond);
+  void node_log(transport::HttpRequest& req, Respond& respond, const std::string& route);
   // Records `event` (who, the route, the query) and runs `read` once the record is durable; if
   // it cannot be recorded, answers 503 AUDIT_UNAVAILABLE and reads nothing.
   void record_read(const char* event, const Principal& p, const std::string& route,
@@ -145,7 +153,8 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   void end_revoked_control();
   // Revocation routes (revocation_routes.cpp): GET and POST /rcan/v1/revocations, OWNER.
   void add_revocation_routes();
-  void revocations_route(transport::HttpRequest& req, Respond& respond, const json::Value& body);
+  void revocations_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                         const std::string& route);
 
   NodeServices& svc_;
   Pipeline pipeline_;

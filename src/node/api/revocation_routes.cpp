@@ -113,12 +113,11 @@ void Node::add_revocation_routes() {
   for (const char* method : {"GET", "POST"})
     routes_.add(
         method, "/rcan/v1/revocations", Body::kObjectOrEmpty,
-        [this](RouteCall& c) { revocations_route(c.req, c.respond, c.body); }, limits);
+        [this](RouteCall& c) { revocations_route(c.req, c.respond, c.body, c.route); }, limits);
 }
 
-void Node::revocations_route(transport::HttpRequest& req, Respond& respond,
-                             const json::Value& body) {
-  const std::string route = "/rcan/v1/revocations";
+void Node::revocations_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                             const std::string& route) {
   auto pr = route_principal(req, body, route, "REVOCATION_DENIED", Role::kOwner, "");
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   if (req.method == "GET") {

@@ -52,11 +52,11 @@ void Node::add_robots_routes() {
                              {"mdns", robots_ ? robots_->mdns_state() : std::string("off")}});
   });
   t.add("POST", "/api/robots/estop", Body::kObjectOrEmpty,
-        [this](RouteCall& c) { robots_estop(c.req, c.respond, c.body); });
+        [this](RouteCall& c) { robots_estop(c.req, c.respond, c.body, c.route); });
 }
 
-void Node::robots_estop(transport::HttpRequest& req, Respond& respond, const json::Value& body) {
-  const std::string route = "/api/robots/estop";
+void Node::robots_estop(transport::HttpRequest& req, Respond& respond, const json::Value& body,
+                        const std::string& route) {
   auto pr = bearer_principal(req);
   if (!pr.ok()) return answer_error(respond, route, pr.error());
   if (!robots_ || robots_->urls().empty())

@@ -1,16 +1,14 @@
-// RouteTable: every HTTP route of the node in one table. A row is a method, a path pattern, how
-// the body is read and the handler; the table finds the row, answers 404 for a path no row
-// has and 405 (with `Allow`) for a method the path does not serve, reads the body by the row's
-// rule and counts the answer under the row's pattern (so /metrics labels are bounded).
+// RouteTable: every HTTP route of the node in one table, the node's layer over transport's
+// Router (transport/router.h: patterns, matching, which row serves a method). A row adds how
+// its body is read; the table answers the node's 404 for a path no row has and 405 (with
+// `Allow`) for a method the path does not serve, reads the body by the row's rule and counts
+// those answers under the row's pattern (so /metrics labels are bounded).
 //
 //   RouteTable t(services);
 //   t.add("GET", "/rcan/v1/leases", Body::kNone, [](RouteCall& c) { … });
 //   t.add("POST", "/rcan/v1/leases/{id}/grants", Body::kObjectOrEmpty, [](RouteCall& c) {
-//     const std::string& lease_id = c.params[0];  … });
+//     const std::string& lease_id = c.params[0];  … }, {}, "/rcan/v1/leases");
 //   t.dispatch(request, respond);
-//
-// Patterns: literal segments, `{name}` for one non-empty segment (at most 128 bytes), and a
-// final `*` for one or more remaining segments. Rows are tried in the order they were added.
 #pragma once
 
 #include <functional>
@@ -22,6 +20,7 @@
 #include "rcan/errors.h"
 #include "rcan/json.h"
 #include "transport/http_api.h"
+#include "transport/router.h"
 
 namespace rcan::node {
 
@@ -37,7 +36,8 @@ enum class Body {
 struct RouteCall {
   transport::HttpRequest& req;
   transport::HttpHandler::Respond& respond;
-  const std::string& route;         // the row's pattern: the metrics label
+  const std::string& route;         // the row's label: what the handler counts and audits under
+  const std::string& pattern;       // the row's pattern: what the table counts its refusals under
   json::Value body;                 // as the row's Body rule read it (null for kNone)
   std::vector<std::string> params;  // the `{…}` and `*` segments, in order
 };
@@ -62,8 +62,9 @@ class RouteTable {
  public:
   explicit RouteTable(NodeServices& services) : svc_(services) {}
 
+  // `label` empty: the pattern.
   void add(std::string method, std::string pattern, Body body, RouteHandler handler,
-           BodyLimits limits = {});
+           BodyLimits limits = {}, std::string label = {});
 
   // Answers `req`: the handler of the matching row, or 404 / 405 / 400 as above.
   void dispatch(transport::HttpRequest& req, transport::HttpHandler::Respond& respond) const;
@@ -73,20 +74,21 @@ class RouteTable {
   static transport::HttpResponse method_not_allowed(const json::Value& error_body,
                                                     std::string_view allow);
 
-  // Does `pattern` match `path`? Fills `params` with the variable segments when it does.
-  static bool match(std::string_view pattern, std::string_view path,
-                    std::vector<std::string>* params);
-
  private:
   struct Row {
-    std::string method, pattern;
     Body body;
     BodyLimits limits;
     RouteHandler handler;
   };
+  using Router = transport::Router<Row>;
+
+  // Reads the body by the row's rule and calls its handler; answers 400 for a body that
+  // breaks the rule.
+  void run(transport::HttpRequest& req, transport::HttpHandler::Respond& respond,
+           const Router::Route& route, std::vector<std::string> params) const;
 
   NodeServices& svc_;
-  std::vector<Row> rows_;
+  Router router_;
 };
 
 }  // namespace rcan::node

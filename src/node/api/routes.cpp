@@ -84,10 +84,11 @@ void Node::add_routes() {
   add_robots_routes();
   add_ai_routes(t, svc_);
   t.add("GET", "/api/audit", Body::kNone,
-        [this](RouteCall& c) { audit_listing(c.req, c.respond); });
+        [this](RouteCall& c) { audit_listing(c.req, c.respond, c.route); });
   t.add("GET", "/api/v1/audit", Body::kNone,
-        [this](RouteCall& c) { audit_export(c.req, c.respond); });
-  t.add("GET", "/api/node/log", Body::kNone, [this](RouteCall& c) { node_log(c.req, c.respond); });
+        [this](RouteCall& c) { audit_export(c.req, c.respond, c.route); });
+  t.add("GET", "/api/node/log", Body::kNone,
+        [this](RouteCall& c) { node_log(c.req, c.respond, c.route); });
   // The operator dashboard (docs/DASHBOARD.md): its files answer with their security headers.
   for (const char* path : {"/", "/index.html", "/favicon.ico", "/ui", "/ui/", "/ui/*"})
     for (const char* method : {"GET", "HEAD"})
@@ -100,14 +101,17 @@ void Node::add_routes() {
 
 // Control sessions, the queue, handoff, leases, ownership transfer and consent requests.
 // Their bodies are JSON objects (or empty); each handler authenticates by route_principal().
+// A lease's and a consent request's own paths answer, and are audited, under the collection's
+// label (/rcan/v1/leases, /rcan/v1/consent).
 void Node::add_control_routes() {
   RouteTable& t = routes_;
   const BodyLimits limits{.max_bytes = 0, .max_depth = 16};
   auto row = [&](const char* method, const char* path,
-                 void (Node::*fn)(transport::HttpRequest&, Respond&, const json::Value&)) {
+                 void (Node::*fn)(transport::HttpRequest&, Respond&, const json::Value&,
+                                  const std::string&)) {
     t.add(
         method, path, Body::kObjectOrEmpty,
-        [this, fn](RouteCall& c) { (this->*fn)(c.req, c.respond, c.body); }, limits);
+        [this, fn](RouteCall& c) { (this->*fn)(c.req, c.respond, c.body, c.route); }, limits);
   };
   row("POST", "/rcan/v1/auth/claim", &Node::claim_route);
   row("DELETE", "/rcan/v1/auth/release", &Node::release_route);
@@ -120,9 +124,10 @@ void Node::add_control_routes() {
     t.add(
         method, path, Body::kObjectOrEmpty,
         [this, grants](RouteCall& c) {
-          lease_route(c.req, c.respond, c.body, c.params.empty() ? "" : c.params[0], grants);
+          lease_route(c.req, c.respond, c.body, c.route, c.params.empty() ? "" : c.params[0],
+                      grants);
         },
-        limits);
+        limits, "/rcan/v1/leases");
   };
   lease("GET", "/rcan/v1/leases", false);
   lease("POST", "/rcan/v1/leases", false);
@@ -136,9 +141,9 @@ void Node::add_control_routes() {
     t.add(
         "POST", std::string("/rcan/v1/consent/{id}/") + verb, Body::kObjectOrEmpty,
         [this, verb](RouteCall& c) {
-          consent_decision_route(c.req, c.respond, c.body, c.params[0], verb);
+          consent_decision_route(c.req, c.respond, c.body, c.route, c.params[0], verb);
         },
-        limits);
+        limits, "/rcan/v1/consent");
 }
 
 }  // namespace rcan::node

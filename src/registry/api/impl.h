@@ -13,6 +13,7 @@
 #include "registry/api/oauth_form.h"
 #include "registry/api/registry_api.h"
 #include "registry/api/sync.h"
+#include "transport/router.h"
 
 namespace rcan::registry::api {
 
@@ -43,7 +44,12 @@ class RegistryApi::Impl {
  public:
   Impl(Store& store, audit::AuditLog* audit, ApiOptions o);
 
-  HttpResponse serve(const HttpRequest& req);
+  // The rows' handler: the API, the request and the path's `*` segment (empty when none).
+  using RouteFn = HttpResponse (*)(Impl&, const HttpRequest&, const std::string&);
+  using Routes = transport::Router<RouteFn>;
+  // Answers `req`, whose route is `route` (registry_routes().find on routing_path()): OPTIONS
+  // and the rate limits first, then the route's handler, or 404 / 405.
+  HttpResponse serve(const HttpRequest& req, const Routes::Match& route);
 
   // ---- helpers (registry_api.cpp)
   std::string now() const { return iso_utc(now_ms()); }
@@ -186,6 +192,13 @@ class RegistryApi::Impl {
   std::unique_ptr<WebhookDispatcher> webhooks;
   std::unique_ptr<SyncPuller> puller;  // with o.sync_from or o.sync_delegations only
 };
+
+// Every route of the API (routes.cpp).
+using RegistryRoutes = RegistryApi::Impl::Routes;
+const RegistryRoutes& registry_routes();
+// The path the routes match: under /api/v1/ without trailing slashes, and /api/v1/api/v1/robots/
+// read as /api/v1/robots/.
+std::string routing_path(std::string_view path);
 
 // Answers.
 HttpResponse json_response(int status, const json::Value& body);

@@ -306,7 +306,7 @@ Result<std::string> RegistryApi::Impl::create_key(const std::string& role, const
   return "rcan_" + k.id + "_" + secret;
 }
 
-HttpResponse RegistryApi::Impl::serve(const HttpRequest& req) {
+HttpResponse RegistryApi::Impl::serve(const HttpRequest& req, const Routes::Match& route) {
   const std::string& m = req.method;
   const std::string& p = req.path;
   // A challenge is a row in the store whatever the method: it counts as a write.
@@ -326,141 +326,11 @@ HttpResponse RegistryApi::Impl::serve(const HttpRequest& req) {
   RateLimiter& bucket = !write ? read_addr : proves_credential(req) ? write_addr : anon_addr;
   if (int64_t wait = bucket.take(addr, steady_us()); wait > 0)
     return too_many(wait, &bucket == &anon_addr ? "anonymous" : "address");
-  auto not_allowed = [&] { return ref_error(405, "Method not allowed"); };
-  if (p == "/healthz") {
-    return m == "GET" ? json_response(200, json::Object{{"status", "ok"},
-                                                        {"backend", std::string(store.backend())}})
-                      : not_allowed();
-  }
-  if (p == "/metrics") {
-    if (m != "GET") return not_allowed();
-    HttpResponse r;
-    r.content_type = "text/plain; version=0.0.4";
-    r.body = metrics.render();
-    return r;
-  }
-  if (p == "/.well-known/rcan-node.json") {
-    if (m != "GET") return not_allowed();
-    HttpResponse r;
-    r.body = manifest;
-    r.headers.emplace_back("Cache-Control", "public, max-age=3600");
-    return r;
-  }
-  if (p == "/.well-known/jwks.json") return m == "GET" ? jwks() : not_allowed();
-  if (p == "/oauth/token") return oauth_token(req);
-  if (p == "/oauth/introspect") return introspect(req);
-  if (p == "/oauth/device_authorization") return device_authorization(req);
-  if (p == "/device" || p == "/device/") return m == "GET" ? device_page(req) : not_allowed();
-  constexpr std::string_view kApi = "/api/v1/";
-  if (p.rfind(kApi, 0) != 0) return ref_error(404, "Not found");
-  std::string_view rest = std::string_view(p).substr(kApi.size());
-  while (!rest.empty() && rest.back() == '/') rest.remove_suffix(1);
-  // rcan-py's NodeClient appends /api/v1/robots/<rrn> to a manifest's api_base, which already
-  // ends in /api/v1 (rcan-ts appends /robots/<rrn>): serve both.
-  if (rest.rfind("api/v1/robots/", 0) == 0) rest.remove_prefix(7);
-  if (rest == "robots") {
-    if (m == "GET") return list_robots(req);
-    if (m == "POST") return register_robot(req);
-    return not_allowed();
-  }
-  if (rest == "robots/search") return m == "GET" ? search_robots(req) : not_allowed();
-  if (rest.rfind("robots/", 0) == 0) {
-    auto rrn = parse_rrn(rest.substr(7));
-    if (!rrn) return ref_error(404, "Not found");
-    if (m == "GET") return get_robot(rrn->rrn);
-    if (m == "PATCH") return patch_robot(req, rrn->rrn);
-    if (m == "DELETE") return delete_robot(req, rrn->rrn);
-    return not_allowed();
-  }
-  if (rest == "resolve") return m == "GET" ? resolve_uri(req) : not_allowed();
-  if (rest.rfind("resolve/", 0) == 0)
-    return m == "GET" ? resolve(req, std::string(rest.substr(8))) : not_allowed();
-  if (rest == "nodes") {
-    if (m == "GET") return list_nodes(req);
-    if (m == "POST") return add_node(req);
-    return not_allowed();
-  }
-  if (rest.rfind("nodes/", 0) == 0)
-    return m == "GET" ? get_node(std::string(rest.substr(6))) : not_allowed();
-  if (rest == "challenge")
-    return m == "GET" || m == "POST" ? challenge(m == "POST") : not_allowed();
-  if (rest == "keys") {
-    if (m == "GET") return list_keys(req);
-    if (m == "POST") return create_key_route(req);
-    return not_allowed();
-  }
-  if (rest.rfind("keys/", 0) == 0)
-    return m == "DELETE" ? revoke_key(req, std::string(rest.substr(5))) : not_allowed();
-  if (rest == "revocations") {
-    if (m == "GET") return list_revocations(req);
-    if (m == "POST") return revoke(req);
-    return not_allowed();
-  }
-  if (rest == "authority/keys/rotate") return m == "POST" ? rotate_keys(req) : not_allowed();
-  if (rest == "clients") return m == "GET" || m == "POST" ? clients_route(req) : not_allowed();
-  if (rest.rfind("clients/", 0) == 0)
-    return m == "DELETE" ? delete_client(req, std::string(rest.substr(8))) : not_allowed();
-  if (rest == "grants") return m == "GET" || m == "POST" ? grants_route(req) : not_allowed();
-  if (rest.rfind("grants/", 0) == 0)
-    return m == "DELETE" ? delete_grant(req, std::string(rest.substr(7))) : not_allowed();
-  if (rest == "sync") return m == "GET" ? sync(req) : not_allowed();
-  if (rest == "webhooks" || rest == "webhooks/register") {
-    if (m == "GET" && rest == "webhooks") return list_webhooks(req);
-    if (m == "POST") return add_webhook(req);
-    return not_allowed();
-  }
-  if (rest.rfind("webhooks/", 0) == 0)
-    return m == "DELETE" ? delete_webhook(req, std::string(rest.substr(9))) : not_allowed();
-  if (rest == "device/approve") return m == "POST" ? device_approve(req) : not_allowed();
-  if (rest.rfind("device/requests/", 0) == 0)
-    return m == "GET" ? device_request_route(req, std::string(rest.substr(16))) : not_allowed();
+  if (route.found())
+    return route.route->handler(*this, req, route.params.empty() ? "" : route.params[0]);
+  if (route.method_not_allowed()) return ref_error(405, "Method not allowed");
   return ref_error(404, "Not found");
 }
-
-namespace {
-
-// The metrics label of a path: its route pattern, never the raw path (bounded label set).
-std::string route_label(std::string_view p) {
-  static constexpr std::string_view kFixed[] = {"/healthz",
-                                                "/metrics",
-                                                "/.well-known/rcan-node.json",
-                                                "/api/v1/robots",
-                                                "/api/v1/robots/search",
-                                                "/api/v1/nodes",
-                                                "/api/v1/resolve",
-                                                "/api/v1/challenge",
-                                                "/api/v1/keys",
-                                                "/.well-known/jwks.json",
-                                                "/oauth/token",
-                                                "/oauth/introspect",
-                                                "/oauth/device_authorization",
-                                                "/device",
-                                                "/api/v1/revocations",
-                                                "/api/v1/authority/keys/rotate",
-                                                "/api/v1/clients",
-                                                "/api/v1/grants",
-                                                "/api/v1/device/approve",
-                                                "/api/v1/webhooks",
-                                                "/api/v1/webhooks/register",
-                                                "/api/v1/sync"};
-  for (auto f : kFixed)
-    if (p == f) return std::string(f);
-  static constexpr std::pair<std::string_view, std::string_view> kPrefixes[] = {
-      {"/api/v1/api/v1/robots/", "/api/v1/robots/{rrn}"},
-      {"/api/v1/robots/", "/api/v1/robots/{rrn}"},
-      {"/api/v1/resolve/", "/api/v1/resolve/{rrn}"},
-      {"/api/v1/nodes/", "/api/v1/nodes/{prefix}"},
-      {"/api/v1/keys/", "/api/v1/keys/{id}"},
-      {"/api/v1/clients/", "/api/v1/clients/{id}"},
-      {"/api/v1/grants/", "/api/v1/grants/{id}"},
-      {"/api/v1/webhooks/", "/api/v1/webhooks/{id}"},
-      {"/api/v1/device/requests/", "/api/v1/device/requests/{user_code}"}};
-  for (auto [pre, label] : kPrefixes)
-    if (p.rfind(pre, 0) == 0) return std::string(label);
-  return "other";
-}
-
-}  // namespace
 
 RegistryApi::RegistryApi(Store& store, audit::AuditLog* audit, ApiOptions options)
     : impl_(std::make_unique<Impl>(store, audit, std::move(options))) {}
@@ -468,9 +338,12 @@ RegistryApi::RegistryApi(Store& store, audit::AuditLog* audit, ApiOptions option
 RegistryApi::~RegistryApi() = default;
 
 HttpResponse RegistryApi::serve(const HttpRequest& req) {
-  HttpResponse r = impl_->serve(req);
+  static const std::string kOther = "other";
+  const auto route = registry_routes().find(req.method, routing_path(req.path));
+  HttpResponse r = impl_->serve(req, route);
   add_cors(r);
-  impl_->metrics.count_request(route_label(req.path), r.status);
+  // The metrics label: the route's, never the raw path (a bounded label set).
+  impl_->metrics.count_request(route.label_or(kOther), r.status);
   return r;
 }
 
