@@ -658,6 +658,30 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     co_return ok;
   }
 
+  // Hands the request to the node, whose answer is posted back to this connection (deliver)
+  // from any thread. The handler's copies of the slot keep it; a respond dropped unanswered, or
+  // a handler that throws, answers 500.
+  void hand_to_node(HttpRequest req, uint64_t seq) {
+    auto slot = std::make_shared<ResponseSlot>(
+        srv_.weak_from_this(), [weak = this->weak_from_this(), seq](HttpResponse r) {
+          auto self = weak.lock();
+          if (!self) return;
+          asio::post(self->ex_,
+                     [self, seq, r = std::move(r)]() mutable { self->deliver(seq, std::move(r)); });
+        });
+    try {
+      srv_.http.handle(std::move(req), [slot](HttpResponse r) { slot->fire(std::move(r)); });
+    } catch (const std::exception& e) {
+      rcan::log(LogLevel::kError, "http.handler_exception", {{"error", e.what()}});
+      slot->fire(
+          error_response({500, ErrorCode::kInternal, "handler_exception", "internal error"}));
+    } catch (...) {
+      rcan::log(LogLevel::kError, "http.handler_exception");
+      slot->fire(
+          error_response({500, ErrorCode::kInternal, "handler_exception", "internal error"}));
+    }
+  }
+
   // Reads, handles and answers one request. Returns whether to keep the connection.
   asio::awaitable<bool> serve_one(SteadyClock::time_point request_start) {
     http::request_parser<http::string_body> parser;
@@ -728,25 +752,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     const uint64_t seq = ++seq_;
     phase_ = Phase::kHandling;
     response_timer_.expires_at(SteadyClock::time_point::max());
-    auto slot = std::make_shared<ResponseSlot>(
-        srv_.weak_from_this(), [weak = this->weak_from_this(), seq](HttpResponse r) {
-          auto self = weak.lock();
-          if (!self) return;
-          asio::post(self->ex_,
-                     [self, seq, r = std::move(r)]() mutable { self->deliver(seq, std::move(r)); });
-        });
-    try {
-      srv_.http.handle(std::move(req), [slot](HttpResponse r) { slot->fire(std::move(r)); });
-    } catch (const std::exception& e) {
-      rcan::log(LogLevel::kError, "http.handler_exception", {{"error", e.what()}});
-      slot->fire(
-          error_response({500, ErrorCode::kInternal, "handler_exception", "internal error"}));
-    } catch (...) {
-      rcan::log(LogLevel::kError, "http.handler_exception");
-      slot->fire(
-          error_response({500, ErrorCode::kInternal, "handler_exception", "internal error"}));
-    }
-    slot.reset();  // the handler's copies keep it; a dropped respond answers 500
+    hand_to_node(std::move(req), seq);
     if (!response_) co_await response_timer_.async_wait(kNoThrow);
     if (!response_) co_return false;  // force-closed while waiting
 
@@ -881,7 +887,9 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
 
   // ---- WebSocket -------------------------------------------------------------------------
 
-  asio::awaitable<void> serve_websocket(HttpRequest req, http::request<http::string_body> msg) {
+  // The stream's sink: frames the node sends, and a close it asks for, are posted to this
+  // connection's strand (pump, request_ws_close) for as long as the server lives.
+  void make_ws_sink() {
     auto weak = this->weak_from_this();
     auto srv_weak = srv_.weak_from_this();
     auto ex = ex_;
@@ -901,6 +909,43 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
             if (auto self = weak.lock()) self->request_ws_close(code, std::move(reason), overflow);
           });
         });
+  }
+
+  // The upgraded connection as a WebSocket stream: its own timeouts (a ping at half the idle
+  // timeout), the server's name, the message size limit, text frames.
+  void start_ws() {
+    ws_.emplace(std::move(stream_));
+    websocket::stream_base::timeout timeouts{};
+    timeouts.handshake_timeout = Ms(opt_.ws_handshake_timeout_ms);
+    timeouts.idle_timeout = Ms(opt_.idle_timeout_ms);
+    timeouts.keep_alive_pings = true;  // a ping at half the idle timeout detects dead peers
+    ws_->set_option(timeouts);
+    ws_->set_option(websocket::stream_base::decorator(
+        [](websocket::response_type& res) { res.set(http::field::server, kServerName); }));
+    ws_->read_message_max(opt_.ws_max_message_bytes);
+    ws_->text(true);
+  }
+
+  // The stream ended (`code`: the peer's close code, 0 when the handshake failed): the node is
+  // told once, the counters and the log say so.
+  void end_ws(int code) {
+    ws_open_ = false;
+    ws_done_ = true;
+    sink_->mark_closed(true);
+    close_timer_.cancel();
+    deadline_.cancel();
+    try {
+      receiver_->on_closed();
+    } catch (const std::exception& e) {
+      rcan::log(LogLevel::kError, "ws.stream_exception", {{"error", e.what()}});
+    }
+    receiver_.reset();
+    --srv_.ws_streams_open;
+    rcan::log(LogLevel::kInfo, "ws.closed", {{"remote", remote_}, {"peer_close_code", code}});
+  }
+
+  asio::awaitable<void> serve_websocket(HttpRequest req, http::request<http::string_body> msg) {
+    make_ws_sink();
 
     HttpResponse refusal = error_response(
         {403, ErrorCode::kInsufficientPrivileges, "websocket_refused", "WebSocket refused"});
@@ -926,17 +971,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
     ++srv_.ws_streams_total;
 
     lowest().expires_never();  // the websocket stream runs its own timeouts
-    ws_.emplace(std::move(stream_));
-    websocket::stream_base::timeout timeouts{};
-    timeouts.handshake_timeout = Ms(opt_.ws_handshake_timeout_ms);
-    timeouts.idle_timeout = Ms(opt_.idle_timeout_ms);
-    timeouts.keep_alive_pings = true;  // a ping at half the idle timeout detects dead peers
-    ws_->set_option(timeouts);
-    ws_->set_option(websocket::stream_base::decorator(
-        [](websocket::response_type& res) { res.set(http::field::server, kServerName); }));
-    ws_->read_message_max(opt_.ws_max_message_bytes);
-    ws_->text(true);
-
+    start_ws();
     auto [aec] = co_await ws_->async_accept(msg, kNoThrow);
     if (!aec) {
       ws_open_ = true;
@@ -971,20 +1006,7 @@ class Conn final : public ConnBase, public std::enable_shared_from_this<Conn<Str
         }
       }
     }
-    ws_open_ = false;
-    ws_done_ = true;
-    sink_->mark_closed(true);
-    close_timer_.cancel();
-    deadline_.cancel();
-    const int code = aec ? 0 : static_cast<int>(ws_->reason().code);
-    try {
-      receiver_->on_closed();
-    } catch (const std::exception& e) {
-      rcan::log(LogLevel::kError, "ws.stream_exception", {{"error", e.what()}});
-    }
-    receiver_.reset();
-    --srv_.ws_streams_open;
-    rcan::log(LogLevel::kInfo, "ws.closed", {{"remote", remote_}, {"peer_close_code", code}});
+    end_ws(aec ? 0 : static_cast<int>(ws_->reason().code));
   }
 
   // Writes queued frames one at a time, then the close frame once one is pending (strand).
