@@ -441,7 +441,8 @@ void AiServices::decide(const Principal& p, const AuthorizeRequest& request,
                                   p.role) != item->authorized_roles.end()
                       : role_level(p.role) >= role_level(Role::kOwner);
   auto record = [&](const std::string& event, const std::string& outcome) {
-    audit::AuditEntry e = std::move(svc_.trail.record(event, outcome).by(p).message(original).entry());
+    audit::AuditEntry e =
+        std::move(svc_.trail.record(event, outcome).by(p).message(original).entry());
     if (item) e.action = item->action_type;
     e.detail.set("authorize_message_id", req->authorize_id);
     e.detail.set("decision", req->approve ? "approve" : "deny");

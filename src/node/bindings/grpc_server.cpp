@@ -141,7 +141,11 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
       }
       principal_ = *p;
       armed_epoch_->store(svc.act.estop_epoch());
-      svc.trail.record("STREAM_OPEN").by(*p).message(stream_id_).detail("transport", "grpc").write();
+      svc.trail.record("STREAM_OPEN")
+          .by(*p)
+          .message(stream_id_)
+          .detail("transport", "grpc")
+          .write();
       std::weak_ptr<StreamLink> weak = link_;
       event_sub_ = svc.events.subscribe([weak, who = *p](const Event& ev) {
         if (!ev.audience.admits(&who)) return;  // another principal's event

@@ -119,7 +119,8 @@ class AuthStage final : public Stage {
       ctx->principal = std::move(p).value();
     }
     ctx->authenticated = true;
-    svc_.control.ownership().cap(ctx->principal);  // a former owner's token no longer carries ownership
+    svc_.control.ownership().cap(
+        ctx->principal);  // a former owner's token no longer carries ownership
     auto sig = svc_.auth.check_signature(*ctx->msg, ctx->principal, ctx->in.require_bound_key);
     if (!sig.ok()) {
       return refuse(svc_, ctx, sig.error(), "AUTH_FAILED");

@@ -113,8 +113,9 @@ class AuthorizeStage final : public Stage {
                   "the robot is controlled by another principal; claim it first", "session"),
             "COMMAND_REJECTED");
       } else if (NetMode nm = svc_.control.partition().mode();
-                 nm == NetMode::kLockdown || (nm == NetMode::kOfflineAutonomous &&
-                                              !svc_.control.partition().cached(p, svc_.clock.wall_ms()))) {
+                 nm == NetMode::kLockdown ||
+                 (nm == NetMode::kOfflineAutonomous &&
+                  !svc_.control.partition().cached(p, svc_.clock.wall_ms()))) {
         // Seed §6.1: partitioned, only sessions that already exist (or cached principals) act.
         return refuse(svc_, ctx,
                       Error(ErrorCode::kLockdown,

@@ -279,7 +279,8 @@ class DispatchStage final : public Stage {
       auto apply = [&] { result = svc_.act.apply(*cmd); };
       if (ctx->session_id.empty()) {
         apply();
-      } else if (!svc_.control.sessions().run_if_live(ctx->session_id, svc_.clock.mono_ms(), apply)) {
+      } else if (!svc_.control.sessions().run_if_live(ctx->session_id, svc_.clock.mono_ms(),
+                                                      apply)) {
         // Its control session ended (pre-empted, expired, revoked) while it was in flight.
         message_record(svc_, *ctx, "COMMAND_DROPPED", "blocked")
             .reason("session_ended")
