@@ -238,6 +238,46 @@ ControlAnswer ControlService::leave_queue(const Principal& p) {
   return a;
 }
 
+ControlAnswer ControlService::queued(const Principal& p, size_t position) {
+  trail_.record("CLAIM_QUEUED", "blocked")
+      .by(p)
+      .reason("CONTROL_CONFLICT")
+      .detail("queue_position", static_cast<int64_t>(position))
+      .write();
+  ControlAnswer a;
+  a.status = 409;
+  a.body = error_body(Error(ErrorCode::kControlConflict,
+                            "the robot is controlled by another principal of the same role; "
+                            "you are number " +
+                                std::to_string(position) + " in the queue",
+                            "session", "queued"),
+                      {}, clock_.wall_ms());
+  json::Object& payload = a.body.as_object().find("payload")->as_object();
+  payload.set("queue_position", static_cast<int64_t>(position));
+  payload.set("queued", true);
+  return a;
+}
+
+void ControlService::preempt(const Session& displaced, const Principal& by, Role by_role,
+                             int64_t now_wall) {
+  // The displaced holder loses control now: its motion stops, its in-flight commands are
+  // dropped at dispatch (their session is gone), and it is told on its stream.
+  act_.disarm_deadman(displaced.id);
+  act_.stop("pre-empted by " + by.display());
+  publish_to(displaced.principal_key, json::Object{{"type", "EVENT"},
+                                                   {"event", "PREEMPTED"},
+                                                   {"session_id", displaced.id},
+                                                   {"by_role", std::string(role_name(by_role))},
+                                                   {"timestamp_ms", now_wall}});
+  AuditRecord pe = trail_.record("SESSION_PREEMPTED", "ok");
+  pe.by(by).message(displaced.id);
+  pe.entry().sub = displaced.sub;
+  pe.detail("by", by.sub);
+  pe.detail("by_role", std::string(role_name(by_role)));
+  pe.detail("role", std::string(role_name(displaced.role)));
+  pe.write();
+}
+
 ControlAnswer ControlService::claim(const Principal& p, const ClaimRequest& r) {
   const bool fleet = !r.fleet_id.empty();
   int64_t now_mono = clock_.mono_ms(), now_wall = clock_.wall_ms();
@@ -273,44 +313,11 @@ ControlAnswer ControlService::claim(const Principal& p, const ClaimRequest& r) {
     return a;
   }
   if (c->outcome == ClaimOutcome::kQueued) {
-    trail_.record("CLAIM_QUEUED", "blocked")
-        .by(p)
-        .reason("CONTROL_CONFLICT")
-        .detail("queue_position", static_cast<int64_t>(c->queue_position))
-        .write();
-    ControlAnswer a;
-    a.status = 409;
-    a.body = error_body(Error(ErrorCode::kControlConflict,
-                              "the robot is controlled by another principal of the same role; "
-                              "you are number " +
-                                  std::to_string(c->queue_position) + " in the queue",
-                              "session", "queued"),
-                        {}, clock_.wall_ms());
-    json::Object& payload = a.body.as_object().find("payload")->as_object();
-    payload.set("queue_position", static_cast<int64_t>(c->queue_position));
-    payload.set("queued", true);
+    ControlAnswer a = queued(p, c->queue_position);
     announce();
     return a;
   }
-  if (c->preempted) {
-    // The displaced holder loses control now: its motion stops, its in-flight commands are
-    // dropped at dispatch (their session is gone), and it is told on its stream.
-    act_.disarm_deadman(c->preempted->id);
-    act_.stop("pre-empted by " + p.display());
-    publish_to(c->preempted->principal_key,
-               json::Object{{"type", "EVENT"},
-                            {"event", "PREEMPTED"},
-                            {"session_id", c->preempted->id},
-                            {"by_role", std::string(role_name(c->session.role))},
-                            {"timestamp_ms", now_wall}});
-    AuditRecord pe = trail_.record("SESSION_PREEMPTED", "ok");
-    pe.by(p).message(c->preempted->id);
-    pe.entry().sub = c->preempted->sub;
-    pe.detail("by", p.sub);
-    pe.detail("by_role", std::string(role_name(c->session.role)));
-    pe.detail("role", std::string(role_name(c->preempted->role)));
-    pe.write();
-  }
+  if (c->preempted) preempt(*c->preempted, p, c->session.role, now_wall);
   act_.arm_deadman(c->session.id, settings_.heartbeat_timeout_ms);
   const bool renewed = c->outcome == ClaimOutcome::kRenewed;
   ControlAnswer a;

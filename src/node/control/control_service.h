@@ -173,6 +173,10 @@ class ControlService {
   // change, and saves.
   void announce() EXCLUDES(state_mu_, save_mu_);
   void announce_change(const ControlChange& c);
+  // A claim queued behind a holder of the same role: recorded, answered 409 with its place.
+  ControlAnswer queued(const Principal& p, size_t position);
+  // A higher role's claim displaced `displaced`: stopped, told and recorded.
+  void preempt(const Session& displaced, const Principal& by, Role by_role, int64_t now_wall);
   void publish_to(const std::string& principal_key, json::Object ev);
   void publish(json::Object ev);
   // Publishes AVAILABLE when `released` left the robot free.
