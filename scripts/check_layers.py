@@ -24,7 +24,7 @@ import sys
 
 LIBRCAN = {"core", "crypto", "audit"}
 PRODUCT = LIBRCAN | {"base", "runtime", "http", "client", "mqtt", "transport", "config", "registry", "registry/api",
-                     "node/admission", "node/control", "node/safety", "node/services", "node/discovery",
+                     "node/admission", "node/vocabulary", "node/control", "node/safety", "node/services", "node/discovery",
                      "node/pipeline", "node/ai", "node/fleet", "node/api", "node/bindings", "grpc",
                      "drivers/process", "drivers/ros2", "testing"}
 NODE = {u for u in PRODUCT if u.startswith(("node/", "drivers/"))} | {"grpc", "apps/rcand"}
@@ -53,10 +53,13 @@ UNITS = {
     "registry/api": (["src/registry/api/"], {"registry", "transport", "core", "crypto", "audit"}),
     # the node, from the bottom
     "node/admission": (["src/node/admission/"], {"runtime", "core", "crypto", "audit"}),
-    "node/control": (["src/node/control/"], {"node/admission", "core"}),
+    # what every node service speaks (the audit trail, the event bus), under the services
+    "node/vocabulary": (["src/node/vocabulary/"], {"node/admission", "runtime", "core", "audit"}),
     "node/safety": (["src/node/safety/"], {"config", "core", "audit"}),
-    "node/services": (["src/node/services/"], {"node/admission", "node/control", "node/safety", "transport",
-                                               "config", "core", "audit"}),
+    "node/control": (["src/node/control/"], {"node/admission", "node/vocabulary", "node/safety", "runtime",
+                                             "core"}),
+    "node/services": (["src/node/services/"], {"node/admission", "node/vocabulary", "node/control",
+                                               "node/safety", "transport", "config", "core", "audit"}),
     "node/discovery": (["src/node/discovery/"], {"node/services", "config", "core"}),
     "node/pipeline": (["src/node/pipeline/"], {"node/services", "node/admission", "core"}),
     "node/ai": (["src/node/ai/"], {"node/pipeline", "node/services", "transport", "config", "core", "crypto",

@@ -50,7 +50,7 @@ std::unique_ptr<node::RegistryTrust> start_registry_trust(const config::NodeConf
   o.revocations_refresh_s = cfg.registry.revocations_refresh_s;
   o.max_key_age_s = cfg.registry.max_key_age_s;
   auto record = [&svc](node::TrustRecord r) {
-    auto rec = svc.record(r.event, r.outcome);
+    auto rec = svc.trail.record(r.event, r.outcome);
     rec.by_system();
     if (!r.reason.empty()) rec.reason(r.reason);
     for (const auto& [key, value] : r.detail) rec.detail(key, value);
@@ -246,7 +246,7 @@ Status Daemon::start_node() {
   ai_opts.watermark_key = robot_keys_->mldsa65_sk.clone();
   services_->ai = std::make_shared<node::AiServices>(*services_, std::move(ai_opts));
   // An ownership transfer clears personal data, the thought log included (docs/SESSIONS.md).
-  services_->ownership.on_clear([ai = services_->ai] { ai->clear_thoughts(); });
+  services_->control.ownership().on_clear([ai = services_->ai] { ai->clear_thoughts(); });
   node_ = std::make_unique<node::Node>(*services_);
   // The other robots of the dashboard's Robots view (dashboard.robots), read every poll_ms.
   robots_ = std::make_unique<node::RobotDirectory>(cfg_.dashboard, services_->clock);

@@ -146,9 +146,9 @@ void configure_control(node::NodeServices& services, const config::NodeConfig& c
       node::fleet_policy_from_name(cfg.control.fleet_policy).value_or(node::FleetPolicy::kRole);
   co.guest_session_s = services.settings.guest_limits.session_seconds;
   co.max_session_ms = int64_t{cfg.control.max_session_s} * 1000;
-  services.sessions.set_options(co);
-  services.ownership.set_window_ms(int64_t{cfg.control.transfer_window_s} * 1000);
-  services.consent.set_pending_ttl_ms(int64_t{cfg.control.consent_ttl_s} * 1000);
+  services.control.sessions().set_options(co);
+  services.control.ownership().set_window_ms(int64_t{cfg.control.transfer_window_s} * 1000);
+  services.control.consent().set_pending_ttl_ms(int64_t{cfg.control.consent_ttl_s} * 1000);
   node::PartitionOptions po;
   po.issuer_url = cfg.offline.issuer_url;
   po.poll_interval_ms = cfg.offline.issuer_poll_ms;
@@ -162,7 +162,7 @@ void configure_control(node::NodeServices& services, const config::NodeConfig& c
     po.key_ttl_ms = int64_t{cfg.registry.max_key_age_s} * 1000;
     po.keys_fetched_ms = std::move(registry_keys_fetched_ms);
   }
-  services.partition.configure(po);
+  services.control.partition().configure(po);
 }
 
 transport::ServerOptions server_options(const config::NodeConfig& cfg) {

@@ -17,7 +17,7 @@
 #include "node/control/control_machine.h"
 #include "node/control/ownership.h"
 #include "node/control/partition.h"
-#include "node/services/refusal_ledger.h"
+#include "node/vocabulary/refusal_ledger.h"
 #include "node_fixture.h"
 #include "rcan/errors.h"
 #include "runtime/http_client.h"

@@ -1,6 +1,6 @@
-// The event bus's audiences (node/services/event_bus.h): who may receive an event is decided by
+// The event bus's audiences (node/vocabulary/event_bus.h): who may receive an event is decided by
 // the publisher, once, and each subscriber sees the audience beside the body.
-#include "node/services/event_bus.h"
+#include "node/vocabulary/event_bus.h"
 
 #include <gtest/gtest.h>
 

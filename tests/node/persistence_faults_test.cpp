@@ -26,7 +26,7 @@
 #include "node/safety/safety.h"
 #include "node/safety/sim_robot.h"
 #include "node/services/node_services.h"
-#include "node/services/stop_backlog.h"
+#include "node/vocabulary/stop_backlog.h"
 #include "rcan/base/env.h"
 #include "rcan/errors.h"
 #include "runtime/state_file.h"
@@ -777,21 +777,21 @@ TEST(StopBacklog, EveryStopDuringAnAuditOutageIsRecordedAfterIt) {
   node::NodeServices svc(ns, Clock::system(), node::AuthOptions{}, act, **log);
   env.fail_after(1);
   const int n = 1200;
-  for (int i = 0; i < n; ++i) svc.write_audit(stop_entry(i));
+  for (int i = 0; i < n; ++i) svc.trail.write(stop_entry(i));
   auto settle = [&] {
-    for (int k = 0; k < 1000 && svc.audit_inflight.load() > 0; ++k)
+    for (int k = 0; k < 1000 && svc.trail.inflight.load() > 0; ++k)
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
   };
   settle();
   EXPECT_FALSE((*log)->available());
-  EXPECT_EQ(svc.stop_backlog.pending(), static_cast<uint64_t>(n));
+  EXPECT_EQ(svc.trail.stop_backlog.pending(), static_cast<uint64_t>(n));
   env.fail_after(0);  // the disk is back
   for (int k = 0; k < 500 && !(*log)->available(); ++k)
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   ASSERT_TRUE((*log)->available());
   audit::AuditEntry next = stop_entry(n);
   next.event = "COMMAND";
-  svc.write_audit(next);  // the first record after the outage brings the backlog with it
+  svc.trail.write(next);  // the first record after the outage brings the backlog with it
   settle();
   int late = 0;
   ASSERT_TRUE((*log)
@@ -806,8 +806,8 @@ TEST(StopBacklog, EveryStopDuringAnAuditOutageIsRecordedAfterIt) {
                                  })
                   .ok());
   EXPECT_EQ(late, n);
-  EXPECT_EQ(svc.stop_backlog.lost(), 0u);
-  EXPECT_TRUE(svc.stop_backlog.empty());
+  EXPECT_EQ(svc.trail.stop_backlog.lost(), 0u);
+  EXPECT_TRUE(svc.trail.stop_backlog.empty());
 }
 
 }  // namespace

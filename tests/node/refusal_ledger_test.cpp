@@ -1,6 +1,6 @@
 // The refusal ledger: one record per source and kind per window, the rest counted into a
 // summary; bounded keys with overflow counting; nothing lost (refusal_ledger.h).
-#include "node/services/refusal_ledger.h"
+#include "node/vocabulary/refusal_ledger.h"
 
 #include <gtest/gtest.h>
 

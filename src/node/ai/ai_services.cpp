@@ -57,7 +57,7 @@ Status AiServices::start(Pipeline& pipeline) {
       return Error(ErrorCode::kInternal, items.error().message + " (and it cannot be moved aside)");
     log(LogLevel::kError, "hitl_pending_unreadable",
         json::Object{{"error", items.error().message}, {"moved_to", aside}});
-    svc_.record("HITL_PENDING_LOST", "error")
+    svc_.trail.record("HITL_PENDING_LOST", "error")
         .by_system()
         .reason(items.error().message.substr(0, 256))
         .detail("moved_to", aside)
@@ -295,7 +295,7 @@ bool AiServices::hold(const std::shared_ptr<Context>& ctx, const config::HitlGat
       MutexLock lock(mu_);
       persist_locked();
     }
-    svc_.write_audit(std::move(e));
+    svc_.trail.write(std::move(e));
     notify_owners(event);
     post_webhooks(it, event);
     ctx->finish(Outcome{202, event, {}});
@@ -380,7 +380,7 @@ std::shared_ptr<Context> AiServices::rebuild(const PendingItem& item, Error& err
   }
   ctx->capability = ctx->action->capability;
   if (capability_scope(*ctx->capability) == "control") {
-    auto holder = svc_.sessions.controller(svc_.clock.mono_ms());
+    auto holder = svc_.control.sessions().controller(svc_.clock.mono_ms());
     if (holder) {
       if (holder->principal_key != ctx->principal.key()) {
         err = Error(ErrorCode::kControlConflict,
@@ -441,7 +441,8 @@ void AiServices::decide(const Principal& p, const AuthorizeRequest& request,
                                   p.role) != item->authorized_roles.end()
                       : role_level(p.role) >= role_level(Role::kOwner);
   auto record = [&](const std::string& event, const std::string& outcome) {
-    audit::AuditEntry e = std::move(svc_.record(event, outcome).by(p).message(original).entry());
+    audit::AuditEntry e =
+        std::move(svc_.trail.record(event, outcome).by(p).message(original).entry());
     if (item) e.action = item->action_type;
     e.detail.set("authorize_message_id", req->authorize_id);
     e.detail.set("decision", req->approve ? "approve" : "deny");
@@ -455,7 +456,7 @@ void AiServices::decide(const Principal& p, const AuthorizeRequest& request,
   if (!allowed) {
     auto e = record("HITL_AUTHORIZE_REFUSED", "blocked");
     e.reason = "INSUFFICIENT_PRIVILEGES";
-    svc_.write_audit(std::move(e));
+    svc_.trail.write(std::move(e));
     Error err(
         ErrorCode::kInsufficientPrivileges,
         std::string(role_name(p.role)) + " may not authorize held commands (OWNER or CREATOR only)",
@@ -478,7 +479,7 @@ void AiServices::decide(const Principal& p, const AuthorizeRequest& request,
   }
   std::string originator = item->principal_key();
   if (req->approve) {
-    svc_.write_audit(record("HITL_APPROVED", "ok"));
+    svc_.trail.write(record("HITL_APPROVED", "ok"));
     json::Object hitl{{"decision", "approve"},
                       {"authorized_by", p.display()},
                       {"authorize_message_id", req->authorize_id}};
@@ -488,7 +489,7 @@ void AiServices::decide(const Principal& p, const AuthorizeRequest& request,
     });
     return;
   }
-  svc_.write_audit(record("HITL_DENIED", "blocked"));
+  svc_.trail.write(record("HITL_DENIED", "blocked"));
   Error denied(ErrorCode::kHitlDenied,
                "the held " + item->action_type + " command was denied by " + p.display() +
                    (req->reason.empty() ? "" : ": " + req->reason),
@@ -547,7 +548,7 @@ void AiServices::timer_loop() {
 
 void AiServices::settle_timeout(PendingItem item) {
   std::string originator = item.principal_key();
-  AuditRecord r = svc_.record("HITL_TIMEOUT", item.allow_on_timeout ? "ok" : "blocked");
+  AuditRecord r = svc_.trail.record("HITL_TIMEOUT", item.allow_on_timeout ? "ok" : "blocked");
   r.by_subject(item.sub).sender(item.sender).message(item.message_id);
   r.entry().hitl_timeout_bypass = item.allow_on_timeout;
   r.action(item.action_type)

@@ -19,7 +19,7 @@ void authorize_route(NodeServices& svc, AiServices& ai, transport::HttpRequest& 
                      const transport::HttpHandler::Respond& respond, const std::string& route) {
   auto p = bearer(svc, req);
   if (!p.ok()) {
-    svc.record("HITL_AUTHORIZE_REFUSED", "blocked")
+    svc.trail.record("HITL_AUTHORIZE_REFUSED", "blocked")
         .reason(std::string(error_name(p.error().code)))
         .detail("route", route)
         .write();

@@ -98,8 +98,8 @@ void NodeStream::on_text(std::string text) {
     const std::string source = RefusalLedger::source_of(st->sink->remote_addr());
     auto p = svc.authenticate(token, source);
     if (!p.ok()) {
-      if (svc.record_refusal(source, "STREAM_REFUSED", p.error().code, "/ws"))
-        svc.record("STREAM_REFUSED", "blocked")
+      if (svc.trail.record_refusal(source, "STREAM_REFUSED", p.error().code, "/ws"))
+        svc.trail.record("STREAM_REFUSED", "blocked")
             .reason(std::string(error_name(p.error().code)))
             .detail("transport", "ws")
             .write();
@@ -112,7 +112,7 @@ void NodeStream::on_text(std::string text) {
       st->principal = *p;
     }
     st->armed_epoch->store(svc.act.estop_epoch());
-    svc.record("STREAM_OPEN").by(*p).message(st->stream_id).detail("transport", "ws").write();
+    svc.trail.record("STREAM_OPEN").by(*p).message(st->stream_id).detail("transport", "ws").write();
     json::Object ack{{"type", "CONNECT_ACK"},
                      {"session_id", st->stream_id},
                      {"server_version", svc.settings.rcan_version},
@@ -218,12 +218,12 @@ Node::Node(NodeServices& services)
   });
   revocation_sub_ = svc_.revocations.subscribe([this](const Revocation&) {
     close_revoked_streams();
-    end_revoked_control();
+    svc_.control.end_revoked(svc_.revocations);
   });
   svc_.metrics.add_gauge("rcan_estop_active", "1 while ESTOP is latched.",
                          [this] { return svc_.act.estop_active() ? 1.0 : 0.0; });
   svc_.metrics.add_gauge("rcan_audit_queue_depth", "Audit records waiting to be durable.",
-                         [this] { return static_cast<double>(svc_.audit_inflight.load()); });
+                         [this] { return static_cast<double>(svc_.trail.inflight.load()); });
   svc_.metrics.add_gauge("rcan_audit_available", "0 when the audit log cannot record.",
                          [this] { return svc_.audit.available() ? 1.0 : 0.0; });
   svc_.metrics.add_counter_fn(
@@ -240,11 +240,11 @@ Node::Node(NodeServices& services)
   svc_.metrics.add_counter_fn("rcan_audit_syncs_total", "fdatasync calls of the audit log.",
                               [this] { return static_cast<double>(svc_.audit.stats().syncs); });
   svc_.metrics.add_counter_fn("rcan_audit_failures_total", "Audit appends that failed.",
-                              [this] { return static_cast<double>(svc_.audit_failures.load()); });
+                              [this] { return static_cast<double>(svc_.trail.failures.load()); });
   svc_.metrics.add_gauge("rcan_streams_open", "Connected WebSocket streams.",
                          [this] { return static_cast<double>(stream_count()); });
   svc_.metrics.add_gauge("rcan_control_sessions", "Live control sessions.", [this] {
-    return svc_.sessions.controller(svc_.clock.mono_ms()) ? 1.0 : 0.0;
+    return svc_.control.sessions().controller(svc_.clock.mono_ms()) ? 1.0 : 0.0;
   });
   svc_.metrics.add_gauge("rcan_audit_last_seq", "Last durable audit seq.",
                          [this] { return static_cast<double>(svc_.audit.stats().last_seq); });
@@ -273,7 +273,7 @@ void Node::close_revoked_streams() {
       st->closed = true;  // nothing more goes through this stream
       who = *st->principal;
     }
-    svc_.record("STREAM_CLOSED", "blocked")
+    svc_.trail.record("STREAM_CLOSED", "blocked")
         .by(who)
         .reason("token_revoked")
         .message(st->stream_id)
@@ -286,7 +286,7 @@ void Node::close_revoked_streams() {
 
 void Node::start() {
   if (running_.exchange(true)) return;
-  svc_.record("SYSTEM_START")
+  svc_.trail.record("SYSTEM_START")
       .by_system()
       .detail("rcan_version", svc_.settings.rcan_version)
       .detail("estop_active", svc_.act.estop_active())
@@ -303,12 +303,8 @@ void Node::shutdown() {
   { MutexLock wake(pump_mu_); }
   pump_cv_.notify_all();
   if (pump_.joinable()) pump_.join();
-  svc_.sessions.on_change({});
-  svc_.ownership.on_change({});
-  svc_.consent.on_change({});
-  svc_.refusals.on_change({});
-  svc_.partition.stop();
-  save_control_state();
+  svc_.trail.refusals.on_change({});
+  svc_.control.stop();  // saves the control state
   std::vector<std::shared_ptr<StreamState>> copy;
   {
     MutexLock lock(streams_mu_);
@@ -317,9 +313,9 @@ void Node::shutdown() {
   for (auto& st : copy) st->sink->close(1001, "node shutting down");
   worker_.shutdown();
   relay_worker_.shutdown();
-  svc_.flush_refusals(true);  // the counts of refusals not recorded one by one
+  svc_.trail.flush_refusals(true);  // the counts of refusals not recorded one by one
   // Appended synchronously (blocks until durable): the last word of the run.
-  (void)svc_.audit.append(std::move(svc_.record("SYSTEM_STOP").by_system().entry()));
+  (void)svc_.audit.append(std::move(svc_.trail.record("SYSTEM_STOP").by_system().entry()));
 }
 
 size_t Node::stream_count() const {
@@ -355,9 +351,9 @@ void Node::unregister_stream(const std::shared_ptr<StreamState>& st) {
   }
 }
 
-void Node::drop_streamless_claims() {
+std::vector<std::string> Node::streamless_claimants() {
   const int64_t now = svc_.clock.mono_ms();
-  const int64_t grace = svc_.sessions.options().queue_stream_grace_ms;
+  const int64_t grace = svc_.control.sessions().options().queue_stream_grace_ms;
   std::vector<std::string> due;
   {
     MutexLock lock(streams_mu_);
@@ -369,14 +365,14 @@ void Node::drop_streamless_claims() {
       due.push_back(it->first);
       it = closed_streams_of_.erase(it);
     }
-    if (due.empty()) return;
+    if (due.empty()) return due;
     for (auto& st : streams_) {  // a stream of its own again (another tab, a reconnect)
       MutexLock sl(st->mu);
       if (st->closed || !st->principal) continue;
       std::erase(due, st->principal->key());
     }
   }
-  for (const auto& key : due) (void)svc_.sessions.drop_queued(key, "stream_closed");
+  return due;
 }
 
 void Node::wake_pump() {
@@ -390,8 +386,7 @@ bool Node::control_quiet() {
     MutexLock lock(streams_mu_);
     if (!closed_streams_of_.empty()) return false;
   }
-  return svc_.sessions.quiet() && svc_.ownership.quiet() && svc_.consent.quiet() &&
-         svc_.refusals.quiet();
+  return svc_.control.quiet() && svc_.trail.refusals.quiet();
 }
 
 void Node::pump() {
@@ -465,7 +460,7 @@ void Node::pump() {
 
 void Node::on_safety_event(const std::string& type, const std::string& session_id,
                            int64_t elapsed_ms, const std::string& detail) {
-  AuditRecord r = svc_.record(type);
+  AuditRecord r = svc_.trail.record(type);
   r.by_system().reason(type);
   if (!session_id.empty()) r.detail("session_id", session_id);
   r.detail("elapsed_ms", elapsed_ms);
@@ -598,7 +593,7 @@ bool Node::owner_reader(const Principal& p, const std::string& route, std::strin
             std::string(why) + ": reading it needs OWNER" +
                 (scope.empty() ? std::string() : " and scope " + std::string(scope)),
             "role");
-  svc_.record(event, "blocked")
+  svc_.trail.record(event, "blocked")
       .by(p)
       .reason(std::string(error_name(err.code)))
       .detail("route", route)
@@ -614,7 +609,7 @@ void Node::record_audit_read(const Principal& p, const std::string& route, json:
 
 void Node::record_read(const char* event, const Principal& p, const std::string& route,
                        json::Object query, Respond& respond, std::function<void()> read) {
-  svc_.record(event)
+  svc_.trail.record(event)
       .by(p)
       .detail("route", route)
       .detail("query", std::move(query))

@@ -104,11 +104,16 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   Result<Principal> route_principal(const transport::HttpRequest& req, const json::Value& body,
                                     const std::string& route, const std::string& denied_event,
                                     Role min_role, std::string_view scope);
-  void control_start() EXCLUDES(control_mu_);
-  void control_tick() EXCLUDES(control_mu_, save_mu_);
-  void announce_control_changes();
-  void save_control_state() EXCLUDES(save_mu_);
-  void publish_to(const std::string& principal_key, json::Object ev);
+  // Wakes the pump on every change to timed state, registers the control gauges and starts
+  // ControlService (control_routes.cpp).
+  void control_start();
+  // The refusal summaries due, then ControlService's tick (with the streamless claimants).
+  void control_tick() EXCLUDES(streams_mu_);
+  // Answers a control operation: its refusal, or its body once its audit record is durable.
+  void answer_control(Respond& respond, const std::string& route, ControlAnswer a);
+  // POSTs the owner's notification of a consent request to control.consent_webhook, on the
+  // worker, and records CONSENT_NOTIFIED.
+  void notify_consent_webhook(const ConsentRequest& c, const json::Value& note);
   void audit_listing(transport::HttpRequest& req, Respond& respond, const std::string& route);
   void audit_export(transport::HttpRequest& req, Respond& respond, const std::string& route);
   // Reading the audit log: OWNER (and `scope`, when not empty), else 403 recorded as
@@ -141,16 +146,13 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   void stream_text(const std::shared_ptr<StreamState>& st, std::string text);
   void register_stream(const std::shared_ptr<StreamState>& st) EXCLUDES(streams_mu_, pump_mu_);
   void unregister_stream(const std::shared_ptr<StreamState>& st) EXCLUDES(streams_mu_);
-  // A closed tab leaves the control queue: a principal whose last stream closed and who opened
-  // none again within control.queue_stream_grace_s loses its queued claim (CLAIM_DROPPED,
-  // docs/SESSIONS.md). Called by the control tick.
-  void drop_streamless_claims() EXCLUDES(streams_mu_);
+  // A closed tab leaves the control queue: the principals whose last stream closed and who
+  // opened none again within control.queue_stream_grace_s; the control tick drops their queued
+  // claims (CLAIM_DROPPED, docs/SESSIONS.md).
+  std::vector<std::string> streamless_claimants() EXCLUDES(streams_mu_);
   // Closes (1008, after an AUTH_INVALID `token_revoked` frame) every stream whose CONNECT
   // principal the revocation list now names.
   void close_revoked_streams() EXCLUDES(streams_mu_);
-  // Ends the control session, and drops the queued claims, of revoked tokens
-  // (revocation_routes.cpp).
-  void end_revoked_control();
   // Revocation routes (revocation_routes.cpp): GET and POST /rcan/v1/revocations, OWNER.
   void add_revocation_routes();
   void revocations_route(transport::HttpRequest& req, Respond& respond, const json::Value& body,
@@ -165,7 +167,7 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   Worker relay_worker_{2};  // relayed stops (they wait on other robots' answers)
   mutable Mutex streams_mu_;
   std::vector<std::shared_ptr<StreamState>> streams_ GUARDED_BY(streams_mu_);
-  // Principals (key) whose stream closed, and when: drop_streamless_claims looks at them.
+  // Principals (key) whose stream closed, and when: streamless_claimants() looks at them.
   std::map<std::string, int64_t> closed_streams_of_ GUARDED_BY(streams_mu_);
   std::atomic<bool> running_{false};
   std::thread pump_;
@@ -174,10 +176,6 @@ class Node final : public transport::HttpHandler, public transport::StreamHandle
   bool pump_woken_ GUARDED_BY(pump_mu_) = false;
   uint64_t event_sub_ = 0;
   uint64_t revocation_sub_ = 0;
-  Mutex control_mu_;
-  std::string last_control_state_ GUARDED_BY(control_mu_);
-  Mutex save_mu_;
-  uint64_t saved_versions_[4] GUARDED_BY(save_mu_) = {0, 0, 0, 0};
 };
 
 }  // namespace rcan::node

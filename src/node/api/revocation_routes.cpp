@@ -73,41 +73,8 @@ Result<Revocation> requested(const json::Value& body) {
 
 }  // namespace
 
-// A revocation also ends the control session of the token it names (by jti, header kid, or
-// subject for tokens issued up to it): the session remembers the token that claimed it or last
-// renewed it. Released as the holder would, its motion stopped: RELEASE recorded with reason
-// token_revoked, AVAILABLE or the next claimant promoted. A queued claim made with a revoked
-// token is dropped (CLAIM_DROPPED, token_revoked), so that it is never promoted to control.
-void Node::end_revoked_control() {
-  bool changed = false;
-  for (const QueuedClaim& q : svc_.sessions.queued())
-    if (svc_.revocations.revoked(q.as_principal()))
-      changed = svc_.sessions.drop_queued(q.principal_key, "token_revoked") || changed;
-  const int64_t mono = svc_.clock.mono_ms(), wall = svc_.clock.wall_ms();
-  auto holder = svc_.sessions.controller(mono);
-  const Principal p = holder ? holder->as_principal() : Principal{};
-  const auto why = holder ? svc_.revocations.revoked(p) : std::nullopt;
-  if (why && svc_.sessions.release(holder->id, p, mono, wall).ok()) {
-    // Nothing the revoked token commanded outlives it, as with a pre-empted holder
-    // (Revocation.ATokensJti… drives, then revokes).
-    svc_.act.disarm_deadman(holder->id);
-    svc_.act.stop("token revoked: " + p.display());
-    svc_.record("RELEASE", "ok")
-        .by(p)
-        .message(holder->id)
-        .reason("token_revoked")
-        .detail("revoked_by", *why)
-        .write();
-    if (svc_.sessions.state(mono) == ControlState::kAvailable)
-      svc_.events.publish(json::Value(json::Object{{"type", "AVAILABLE"},
-                                                   {"released_session", holder->id},
-                                                   {"window_ms", svc_.settings.handoff_window_ms},
-                                                   {"timestamp_ms", wall}}));
-    changed = true;
-  }
-  if (changed) announce_control_changes();
-}
-
+// A revocation also ends the control session of the token it names, and drops its queued
+// claim (ControlService::end_revoked, called by the node on every revocation).
 void Node::add_revocation_routes() {
   const BodyLimits limits{.max_bytes = 0, .max_depth = 16};
   for (const char* method : {"GET", "POST"})
@@ -137,7 +104,7 @@ void Node::revocations_route(transport::HttpRequest& req, Respond& respond, cons
   json::Value entry = r->to_json();
   auto added = svc_.revocations.add(*r, r->at_ms / 1000);  // closes the streams it names
   if (!added.ok()) {
-    svc_.record("TOKEN_REVOKED", "failed")
+    svc_.trail.record("TOKEN_REVOKED", "failed")
         .by(*pr)
         .reason(added.error().reason.empty() ? std::string(error_name(added.error().code))
                                              : added.error().reason)
@@ -145,7 +112,7 @@ void Node::revocations_route(transport::HttpRequest& req, Respond& respond, cons
         .write();
     return answer_error(respond, route, added.error());
   }
-  AuditRecord e = svc_.record("TOKEN_REVOKED", *added ? "ok" : "unchanged");
+  AuditRecord e = svc_.trail.record("TOKEN_REVOKED", *added ? "ok" : "unchanged");
   e.by(*pr)
       .detail("kind", std::string(revocation_kind_name(r->kind)))
       .detail(std::string(revocation_kind_name(r->kind)), r->value)

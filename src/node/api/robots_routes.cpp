@@ -108,7 +108,7 @@ void Node::robots_estop(transport::HttpRequest& req, Respond& respond, const jso
           out.emplace_back(std::move(o));
         }
         const bool all = confirmed == static_cast<int64_t>(results.size());
-        svc_.record("ROBOTS_ESTOP", all ? "ok" : "failed")
+        svc_.trail.record("ROBOTS_ESTOP", all ? "ok" : "failed")
             .by(p)
             .reason(reason)
             .detail("route", route)

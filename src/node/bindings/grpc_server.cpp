@@ -129,7 +129,7 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
     if (!bearer_.empty()) {
       auto p = svc.authenticate(bearer_, RefusalLedger::source_of(ctx->peer()));
       if (!p.ok()) {
-        svc.record("STREAM_REFUSED", "blocked")
+        svc.trail.record("STREAM_REFUSED", "blocked")
             .reason(std::string(error_name(p.error().code)))
             .detail("transport", "grpc")
             .write();
@@ -141,7 +141,11 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
       }
       principal_ = *p;
       armed_epoch_->store(svc.act.estop_epoch());
-      svc.record("STREAM_OPEN").by(*p).message(stream_id_).detail("transport", "grpc").write();
+      svc.trail.record("STREAM_OPEN")
+          .by(*p)
+          .message(stream_id_)
+          .detail("transport", "grpc")
+          .write();
       std::weak_ptr<StreamLink> weak = link_;
       event_sub_ = svc.events.subscribe([weak, who = *p](const Event& ev) {
         if (!ev.audience.admits(&who)) return;  // another principal's event
@@ -230,7 +234,7 @@ class StreamReactor final : public grpc::ServerBidiReactor<RCANMessage, RCANMess
     }
     impl_.streams_open.fetch_sub(1);
     if (principal_) {
-      impl_.svc.record("STREAM_CLOSED")
+      impl_.svc.trail.record("STREAM_CLOSED")
           .by(*principal_)
           .message(stream_id_)
           .detail("transport", "grpc")

@@ -241,7 +241,7 @@ void MqttNode::on_connection(bool up, int code) {
         json::Object{{"connects", static_cast<int64_t>(client_->connects())},
                      {"broker", url},
                      {"failover", failover}});
-    AuditRecord r = svc_.record(again ? "MQTT_RECONNECTED" : "MQTT_CONNECTED").by_system();
+    AuditRecord r = svc_.trail.record(again ? "MQTT_RECONNECTED" : "MQTT_CONNECTED").by_system();
     r.detail("broker", url).detail("connects", static_cast<int64_t>(client_->connects()));
     if (again)
       r.detail("previous_broker", last_url_)
@@ -257,7 +257,7 @@ void MqttNode::on_connection(bool up, int code) {
     if (!channel_up_) return;  // the same outage
     channel_up_ = false;
     lost_since_ms_.store(now);
-    svc_.record("MQTT_DISCONNECTED", "degraded")
+    svc_.trail.record("MQTT_DISCONNECTED", "degraded")
         .by_system()
         .reason(in_fleet_ ? "fleet_channel_lost" : "broker_lost")
         .detail("broker", url)
@@ -297,7 +297,7 @@ void MqttNode::tick_channel(int64_t now) {
   svc_.act.stop("fleet_channel_lost");
   log(LogLevel::kWarn, "fleet_channel_stop",
       json::Object{{"down_ms", now - deaf_since_ms_}, {"broker", client_->current_url()}});
-  svc_.record("STOP", "ok")
+  svc_.trail.record("STOP", "ok")
       .by_system()
       .reason("fleet_channel_lost")
       .detail("down_ms", now - deaf_since_ms_)

@@ -148,7 +148,7 @@ void UdpService::Impl::heartbeat(std::span<const uint8_t> bytes, const udp::Data
     session_id = it->second.session_id;
     first = !it->second.audited;
   }
-  auto session = svc.sessions.find(session_id, svc.clock.mono_ms());
+  auto session = svc.control.sessions().find(session_id, svc.clock.mono_ms());
   if (!session) {
     counters->hb_stale.fetch_add(1);
     MutexLock lock(mu);
@@ -164,7 +164,7 @@ void UdpService::Impl::heartbeat(std::span<const uint8_t> bytes, const udp::Data
       if (auto it = keys.find(d.key_id); it != keys.end()) it->second.audited = true;
     }
     // The first heartbeat of a key is audited; later ones are counted (rcan_udp_heartbeats_*).
-    svc.record("HEARTBEAT")
+    svc.trail.record("HEARTBEAT")
         .by_subject(session->sub)
         .detail("transport", "udp")
         .detail("route", "udp/heartbeat")
@@ -225,7 +225,7 @@ void UdpService::Impl::sweep() {
   }
   int64_t now = svc.clock.mono_ms();
   for (const auto& [id, sid] : all) {
-    if (svc.sessions.find(sid, now)) continue;
+    if (svc.control.sessions().find(sid, now)) continue;
     MutexLock lock(mu);
     keys.erase(id);
     if (auto it = by_session.find(sid); it != by_session.end() && it->second == id)
@@ -330,10 +330,10 @@ Result<uint16_t> UdpService::start() {
                    [c] { return static_cast<double>(c->disc_short.load()); });
   if (im.opt.heartbeat) {
     std::weak_ptr<Impl> weak = impl_;
-    im.svc.on_grant = [weak](const std::string& session_id, json::Object& payload) {
+    im.svc.control.set_on_grant([weak](const std::string& session_id, json::Object& payload) {
       if (auto i = weak.lock(); i && i->running.load())
         payload.set("udp_heartbeat", i->grant(session_id));
-    };
+    });
   }
   im.running.store(true);
   im.thread = std::thread([&im] {

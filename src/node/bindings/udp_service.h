@@ -1,7 +1,7 @@
 // UDP service of the node (docs/TRANSPORT.md §UDP): HEARTBEAT datagrams that keep a control
 // session's deadman alive, and DISCOVER → ANNOUNCE. One socket, one thread, POSIX sockets.
 //
-// Heartbeat keys: when heartbeats are on, start() installs NodeServices::on_grant, so every
+// Heartbeat keys: when heartbeats are on, start() installs ControlService's grant hook, so every
 // GRANTED claim answer carries `udp_heartbeat: {port, session_id, key_id, key_b64,
 // interval_ms}`. The key (32 random bytes) lives only in memory and dies with its session
 // (release, expiry, pre-emption, a new claim). A heartbeat is accepted only with a known key

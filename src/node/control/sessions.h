@@ -56,7 +56,7 @@ struct ControlOptions {
 };
 
 // The token a claim was made with: a revocation of it (by jti, header kid or subject) ends the
-// session it holds and drops its queued claim (Node::end_revoked_control).
+// session it holds and drops its queued claim (ControlService::end_revoked).
 struct ClaimToken {
   std::string jti;
   std::string kid;

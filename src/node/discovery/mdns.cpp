@@ -318,7 +318,7 @@ MdnsInfo mdns_info_for(NodeServices& services, bool tls) {
 
 std::string status_word(NodeServices& svc) {
   if (svc.act.estop_active()) return "estop";
-  if (svc.sessions.controller(svc.clock.mono_ms())) return "claimed";
+  if (svc.control.sessions().controller(svc.clock.mono_ms())) return "claimed";
   return "available";
 }
 

@@ -327,7 +327,7 @@ void SwarmAgent::tick(int64_t now, bool hearing) {
   if (next == cfg_.member_id) {
     ++epoch_;
     announce_locked("leader_silent", previous);
-    svc_.record("SWARM_LEADER_CHANGE")
+    svc_.trail.record("SWARM_LEADER_CHANGE")
         .by_system()
         .detail("swarm_id", cfg_.swarm_id)
         .detail("previous_leader", previous)
@@ -364,7 +364,7 @@ void SwarmAgent::handle_join(const json::Value& body) {
     return;
   auto record = [&](const std::string& event, const std::string& outcome,
                     const Principal* principal, const std::string& reason) {
-    AuditRecord r = svc_.record(event, outcome);
+    AuditRecord r = svc_.trail.record(event, outcome);
     if (principal) r.by(*principal);
     r.message(id)
         .reason(reason)

@@ -6,7 +6,7 @@
 #include "base/clock.h"
 #include "node/pipeline/stages.h"
 #include "node/services/node_services.h"
-#include "node/services/refusal_ledger.h"
+#include "node/vocabulary/refusal_ledger.h"
 #include "rcan/errors.h"
 #include "runtime/log.h"
 
@@ -119,7 +119,8 @@ class AuthStage final : public Stage {
       ctx->principal = std::move(p).value();
     }
     ctx->authenticated = true;
-    svc_.ownership.cap(ctx->principal);  // a former owner's token no longer carries ownership
+    svc_.control.ownership().cap(
+        ctx->principal);  // a former owner's token no longer carries ownership
     auto sig = svc_.auth.check_signature(*ctx->msg, ctx->principal, ctx->in.require_bound_key);
     if (!sig.ok()) {
       return refuse(svc_, ctx, sig.error(), "AUTH_FAILED");

@@ -88,21 +88,21 @@ class DispatchStage final : public Stage {
     if (m.type == MessageType::kStatus) {
       json::Object payload = svc_.status(true).as_object();
       auto e = accepted_entry(*ctx, "STATUS");
-      svc_.write_audit(std::move(e));
+      svc_.trail.write(std::move(e));
       ctx->finish(
           Outcome{200, svc_.envelope(MessageType::kStatus, std::move(payload), m.message_id), {}});
       return Result::kAnswered;
     }
     if (m.type == MessageType::kHeartbeat) {
       // Keeps the sender's control session alive (deadman). Only its holder can feed it.
-      auto holder = svc_.sessions.controller(svc_.clock.mono_ms());
+      auto holder = svc_.control.sessions().controller(svc_.clock.mono_ms());
       bool fed = false;
       if (holder && holder->principal_key == ctx->principal.key()) {
         svc_.act.feed_deadman(holder->id);
         fed = true;
       }
       auto e = accepted_entry(*ctx, "HEARTBEAT");
-      svc_.write_audit(std::move(e));
+      svc_.trail.write(std::move(e));
       json::Object payload{{"ok", true}, {"session_alive", fed}};
       if (fed) payload.set("session_id", holder->id);
       ctx->finish(Outcome{200, svc_.envelope(MessageType::kAck, payload, m.message_id), {}});
@@ -168,7 +168,7 @@ class DispatchStage final : public Stage {
     svc_.events.publish(json::Value(ev));
     // Seed §5.3 safety conflict: a stop from someone other than the holder. The stop always
     // wins (it already happened); every session is alerted.
-    auto holder = svc_.sessions.controller(svc_.clock.mono_ms());
+    auto holder = svc_.control.sessions().controller(svc_.clock.mono_ms());
     if (holder && holder->principal_key != ctx->principal.key()) {
       svc_.events.publish(json::Value(json::Object{{"type", "EVENT"},
                                                    {"event", "SAFETY_CONFLICT"},
@@ -183,7 +183,7 @@ class DispatchStage final : public Stage {
     // The stop already happened; the answer waits for the record (or its failure). A transport
     // thread that may wait for the disk commits it itself: a message after a stop waits one
     // fdatasync at most, and the robot is stopped meanwhile.
-    svc_.write_audit(
+    svc_.trail.write(
         std::move(e), [answer](rcan::Result<audit::Receipt> r) { answer->audited(r.ok()); },
         ctx->in.may_commit_audit ? audit::Commit::kHereIfIdle : audit::Commit::kWriter);
     answer->ready(json::Object{{"command", safety_action_name(ctx->safety)},
@@ -210,7 +210,7 @@ class DispatchStage final : public Stage {
                                                  {"timestamp_ms", svc_.clock.wall_ms()}}));
     auto e = accepted_entry(*ctx, "RESUME");
     std::string id = ctx->msg->message_id;
-    svc_.write_audit(std::move(e), [this, ctx, id](rcan::Result<audit::Receipt>) {
+    svc_.trail.write(std::move(e), [this, ctx, id](rcan::Result<audit::Receipt>) {
       ctx->finish(Outcome{
           200,
           svc_.envelope(MessageType::kAck,
@@ -264,7 +264,7 @@ class DispatchStage final : public Stage {
     e.detail.set("applied", prepared->action);
     auto cmd = std::make_shared<PreparedCommand>(std::move(prepared).value());
     int64_t audit_start = steady_us();
-    svc_.write_audit(std::move(e), [this, ctx, cmd, audit_start](rcan::Result<audit::Receipt> r) {
+    svc_.trail.write(std::move(e), [this, ctx, cmd, audit_start](rcan::Result<audit::Receipt> r) {
       audit_timer_.observe_us(static_cast<double>(steady_us() - audit_start));
       const std::string& id = ctx->msg->message_id;
       if (!r.ok()) {
@@ -279,7 +279,8 @@ class DispatchStage final : public Stage {
       auto apply = [&] { result = svc_.act.apply(*cmd); };
       if (ctx->session_id.empty()) {
         apply();
-      } else if (!svc_.sessions.run_if_live(ctx->session_id, svc_.clock.mono_ms(), apply)) {
+      } else if (!svc_.control.sessions().run_if_live(ctx->session_id, svc_.clock.mono_ms(),
+                                                      apply)) {
         // Its control session ended (pre-empted, expired, revoked) while it was in flight.
         message_record(svc_, *ctx, "COMMAND_DROPPED", "blocked")
             .reason("session_ended")

@@ -144,7 +144,7 @@ Stage::Result refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, con
     const std::string source = ctx->principal.authenticated
                                    ? ctx->principal.key()
                                    : RefusalLedger::source_of(ctx->in.remote);
-    if (!svc.record_refusal(source, event, err.code, ctx->in.route)) {
+    if (!svc.trail.record_refusal(source, event, err.code, ctx->in.route)) {
       ctx->finish(std::move(out));
       return Stage::Result::kAnswered;
     }
@@ -180,7 +180,7 @@ Stage::Result refuse(NodeServices& svc, const std::shared_ptr<Context>& ctx, con
 
 AuditRecord message_record(NodeServices& svc, const Context& ctx, const std::string& event,
                            const std::string& outcome) {
-  AuditRecord r = svc.record(event, outcome);
+  AuditRecord r = svc.trail.record(event, outcome);
   if (ctx.principal.authenticated) r.by(ctx.principal);
   r.sender(ctx.sender);
   if (ctx.msg) r.message(ctx.msg->message_id);

@@ -26,7 +26,7 @@
 #include <vector>
 
 #include "node/admission/authenticator.h"
-#include "node/services/audit_record.h"
+#include "node/vocabulary/audit_record.h"
 #include "rcan/actions.h"
 #include "rcan/json.h"
 #include "rcan/message.h"

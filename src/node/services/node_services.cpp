@@ -21,83 +21,13 @@ NodeServices::NodeServices(NodeSettings s, Clock& c, AuthOptions a, Actuation& a
       injection(settings.injection_patterns),
       act(actuation),
       audit(log),
-      stop_backlog(settings.state_dir.empty() ? std::string()
-                                              : settings.state_dir + "/stops-unrecorded.jsonl") {}
-
-AuditRecord NodeServices::record(const std::string& event, const std::string& outcome) {
-  audit::AuditEntry e;
-  e.principal = "anonymous";
-  e.ruri = settings.ruri;
-  e.timestamp_ms = clock.wall_ms();
-  e.message_id = new_uuid_v4();
-  e.event = event;
-  e.outcome = outcome;
-  return AuditRecord(*this, std::move(e));
-}
-
-void AuditRecord::write(std::function<void(Result<audit::Receipt>)> cb) {
-  svc_.write_audit(std::move(e_), std::move(cb));
-}
-
-void NodeServices::write_audit(audit::AuditEntry e, std::function<void(Result<audit::Receipt>)> cb,
-                               audit::Commit commit) {
-  if (NetMode m = partition.mode(); m != NetMode::kNormal) {  // seed §6.1 log_for_sync()
-    e.detail.set("partition_mode", std::string(net_mode_name(m)));
-    e.detail.set("sync_pending", true);
-  }
-  metrics.count_audit(e.event);
-  std::vector<audit::AuditEntry> late;
-  if (!stop_backlog.empty() && audit.available()) late = stop_backlog.take();
-  for (auto& d : late) {  // stops the log could not record while it was failed: recorded now
-    d.detail.set("recorded_after_audit_outage", true);
-    write_audit(std::move(d));
-  }
-  std::optional<audit::AuditEntry> stop_copy;
-  if (e.event == "ESTOP" || e.event == "STOP") stop_copy = e;
-  audit_inflight.fetch_add(1, std::memory_order_relaxed);
-  audit.append_async(
-      std::move(e),
-      [this, cb = std::move(cb),
-       stop_copy = std::move(stop_copy)](Result<audit::Receipt> r) mutable {
-        if (!r.ok()) {
-          audit_failures.fetch_add(1, std::memory_order_relaxed);
-          if (r.error().code == ErrorCode::kAuditUnavailable) {
-            audit_unavailable.store(true);
-            if (stop_copy) stop_backlog.keep(*stop_copy);
-          }
-        } else {
-          audit_unavailable.store(
-              false);  // the log recovered (AuditLog::available() is the live state)
-        }
-        // Out of flight only once a failed stop is in the backlog: whoever waits for no write in
-        // flight then finds every stop either recorded or kept.
-        audit_inflight.fetch_sub(1, std::memory_order_release);
-        if (cb) cb(std::move(r));
-      },
-      commit);
-}
-
-bool NodeServices::record_refusal(const std::string& source, const std::string& event,
-                                  ErrorCode code, const std::string& route) {
-  return refusals.admit(RefusalKey{source, event, std::string(error_name(code)), route},
-                        clock.wall_ms());
-}
-
-void NodeServices::flush_refusals(bool all) {
-  for (const RefusalSummary& s : refusals.due(clock.wall_ms(), all)) {
-    record("REFUSALS_SUMMARY", "blocked")
-        .by_system()
-        .reason(s.key.code)
-        .detail("source", s.key.source)
-        .detail("event", s.key.event)
-        .detail("error_code", s.key.code)
-        .detail("route", s.key.route)
-        .detail("count", static_cast<int64_t>(s.suppressed))
-        .detail("first_ms", s.first_ms)
-        .detail("last_ms", s.last_ms)
-        .write();
-  }
-}
+      trail(settings.ruri, clock, log, metrics, settings.state_dir),
+      control(ControlSettings{.robot_name = settings.name,
+                              .state_dir = settings.state_dir,
+                              .role_policy = settings.role_policy,
+                              .heartbeat_timeout_ms = settings.heartbeat_timeout_ms,
+                              .handoff_window_ms = settings.handoff_window_ms},
+              clock, trail, events, actuation) {}
 
 Result<Principal> NodeServices::authenticate(std::string_view token,
                                              const std::string& source) const {
@@ -117,7 +47,7 @@ Result<Principal> NodeServices::authenticate(std::string_view token,
     return p;
   }
   if (Status s = check_revoked(*p); !s.ok()) return s.error();
-  ownership.cap(*p);
+  control.ownership().cap(*p);
   return p;
 }
 
@@ -170,19 +100,20 @@ json::Value NodeServices::status(bool detailed) {
   for (const auto& e : settings.extensions) ext.emplace_back(e);
   o.set("extensions", ext);
   o.set("estop_active", act.estop_active());
-  o.set("mode", std::string(net_mode_name(partition.mode())));
+  SessionTable& sessions = control.sessions();
+  o.set("mode", std::string(net_mode_name(control.partition().mode())));
   o.set("control", std::string(control_state_name(sessions.state(now))));
   if (detailed) {
     o.set("software", json::Object{{"name", "rcand"}, {"version", std::string(kSoftwareVersion)}});
-    o.set("partition", partition.status_json(clock.wall_ms()));
+    o.set("partition", control.partition().status_json(clock.wall_ms()));
     if (registry_status) o.set("registry", registry_status());
-    o.set("ownership", ownership.to_json(clock.wall_ms(), false));
+    o.set("ownership", control.ownership().to_json(clock.wall_ms(), false));
     o.set("control_queue", sessions.queue_json(now));
   }
   o.set("audit_available", audit.available());
   if (detailed) {
-    o.set("audit_stop_backlog", stop_backlog.to_json());
-    o.set("refusals_coalesced", static_cast<int64_t>(refusals.suppressed_total()));
+    o.set("audit_stop_backlog", trail.stop_backlog.to_json());
+    o.set("refusals_coalesced", static_cast<int64_t>(trail.refusals.suppressed_total()));
   }
   json::Value session_list = sessions.to_json(now, detailed);
   o.set("active_sessions", static_cast<int64_t>(session_list.as_array().size()));

@@ -1,6 +1,6 @@
 // NodeServices — everything the pipeline stages and routes share: settings, clock,
 // authenticator, replay guard, rate limiter, injection screen, the safety core (through
-// Actuation), the audit log, control sessions, the event bus and metrics.
+// Actuation), the audit log and its trail, the event bus, metrics and control (ControlService).
 #pragma once
 
 #include <array>
@@ -20,15 +20,11 @@
 #include "node/admission/rate_limit.h"
 #include "node/admission/replay.h"
 #include "node/admission/revocation.h"
-#include "node/control/consent.h"
-#include "node/control/ownership.h"
-#include "node/control/partition.h"
-#include "node/control/sessions.h"
+#include "node/control/control_service.h"
 #include "node/safety/actuation.h"
-#include "node/services/audit_record.h"
-#include "node/services/event_bus.h"
-#include "node/services/refusal_ledger.h"
-#include "node/services/stop_backlog.h"
+#include "node/vocabulary/audit_record.h"
+#include "node/vocabulary/audit_trail.h"
+#include "node/vocabulary/event_bus.h"
 #include "rcan/actions.h"
 #include "rcan/audit/audit_log.h"
 #include "rcan/message.h"
@@ -112,48 +108,18 @@ class NodeServices {
   // that offers skills of its own will extend it.
   const ActionTable& actions = ActionTable::builtin();
   audit::AuditLog& audit;
-  SessionTable sessions;
-  Ownership ownership;
-  ConsentBook consent;
-  PartitionMonitor partition;
   // The link to the registry whose tokens the node trusts, for the detailed status (set by
   // rcand before the node serves; empty: no such link).
   std::function<json::Value()> registry_status;
   EventBus events;
   Metrics metrics;
+  // Every audit record goes through it (audit_trail.h): records, the stop backlog, refusals.
+  AuditTrail trail;
+  // Who holds the robot: sessions, leases, ownership, consent, partition (control_service.h).
+  ControlService control;
   // The robot's fleet membership (fleet.h); null when it is in no fleet.
   std::shared_ptr<const FleetMembership> fleet;
-  std::atomic<uint64_t> audit_inflight{0};
-  std::atomic<uint64_t> audit_failures{0};
-  std::atomic<bool> audit_unavailable{false};
   std::shared_ptr<AiServices> ai;  // set by the daemon before the node starts; may be null
-  // Transports that add to a GRANTED claim answer (the UDP heartbeat key,
-  // src/node/bindings/udp_service.h): called with the new session's id and the answer's payload.
-  // Set once, before serving.
-  std::function<void(const std::string& session_id, json::Object& payload)> on_grant;
-
-  // Whether a refusal from `source` (an address, or a principal's key) of this kind gets a
-  // record of its own now; false: it is counted into a REFUSALS_SUMMARY record instead.
-  bool record_refusal(const std::string& source, const std::string& event, ErrorCode code,
-                      const std::string& route);
-  // Writes the summaries of closed windows (all of them with `all`, at shutdown).
-  void flush_refusals(bool all = false);
-
-  // A new audit record of `event` (audit_record.h): anonymous until `by…` says who.
-  AuditRecord record(const std::string& event, const std::string& outcome = "ok");
-  // Appends asynchronously; `cb` (optional) runs once the record is durable or failed (with
-  // Commit::kHereIfIdle possibly on this thread, before this returns: audit::Commit).
-  void write_audit(audit::AuditEntry e, std::function<void(Result<audit::Receipt>)> cb = {},
-                   audit::Commit commit = audit::Commit::kWriter);
-
-  // ESTOP/STOP records that could not be written while the audit log was failed (the stop
-  // itself happened): spilled to `<state_dir>/stops-unrecorded.jsonl` (else memory) and
-  // written, marked `recorded_after_audit_outage`, by the first write_audit once the log is
-  // back — also after a restart. Never dropped silently (stop_backlog.h).
-  StopBacklog stop_backlog;
-  // Refusals without a verified principal (and rate-limit refusals), coalesced per source and
-  // kind into summary records (refusal_ledger.h).
-  RefusalLedger refusals;
 
   uint32_t rate_limit(Role r) const {
     return settings.rate_per_minute[static_cast<size_t>(role_level(r))];

@@ -1,5 +1,5 @@
 // The stop backlog (stop_backlog.h).
-#include "node/services/stop_backlog.h"
+#include "node/vocabulary/stop_backlog.h"
 
 #include "runtime/log.h"
 

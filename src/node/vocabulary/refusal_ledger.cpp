@@ -1,5 +1,5 @@
 // The refusal ledger (refusal_ledger.h).
-#include "node/services/refusal_ledger.h"
+#include "node/vocabulary/refusal_ledger.h"
 
 namespace rcan::node {
 

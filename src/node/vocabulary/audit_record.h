@@ -1,13 +1,13 @@
-// AuditRecord: the one way the node writes an audit record. Start it from NodeServices with the
-// event and its outcome, say who (a principal, the system, or nobody authenticated), add what
-// the record needs, then write it:
+// AuditRecord: the one way the node writes an audit record. Start it from the AuditTrail
+// (audit_trail.h) with the event and its outcome, say who (a principal, the system, or nobody
+// authenticated), add what the record needs, then write it:
 //
-//   svc.record("STREAM_OPEN").by(principal).message(stream_id).detail("transport", "ws").write();
-//   svc.record("PARTITION_MODE").by_system().reason("degraded").write();
-//   svc.record("AUTH_FAILED", "blocked").reason("AUTH_INVALID").write();   // anonymous
+//   trail.record("STREAM_OPEN").by(principal).message(stream_id).detail("transport", "ws").write();
+//   trail.record("PARTITION_MODE").by_system().reason("degraded").write();
+//   trail.record("AUTH_FAILED", "blocked").reason("AUTH_INVALID").write();   // anonymous
 //
 // The robot's RURI, the time and a message id (a fresh one unless given) are filled in; the
-// record is appended asynchronously (NodeServices::write_audit), and `write(cb)` calls `cb` once
+// record is appended asynchronously (AuditTrail::write), and `write(cb)` calls `cb` once
 // it is durable or has failed. `entry()` reaches the rarer fields (ai, gate flags).
 #pragma once
 
@@ -21,11 +21,11 @@
 
 namespace rcan::node {
 
-class NodeServices;
+class AuditTrail;
 
 class AuditRecord {
  public:
-  AuditRecord(NodeServices& svc, audit::AuditEntry e) : svc_(svc), e_(std::move(e)) {}
+  AuditRecord(AuditTrail& trail, audit::AuditEntry e) : trail_(trail), e_(std::move(e)) {}
 
   // The principal of a verified token: `principal` is its display name, `sub` its subject.
   AuditRecord& by(const Principal& p) {
@@ -75,7 +75,7 @@ class AuditRecord {
   void write(std::function<void(Result<audit::Receipt>)> cb = {});
 
  private:
-  NodeServices& svc_;
+  AuditTrail& trail_;
   audit::AuditEntry e_;
 };
 

@@ -3,7 +3,7 @@
 // not be lost. A record goes first to a spill file beside the node's state, appended and synced
 // (so it survives a restart), and to memory when the spill file cannot be written either. Only
 // when both are full is a record lost — and then it is counted, logged and shown in the status,
-// never dropped silently. NodeServices::write_audit hands the backlog to the log, oldest first,
+// never dropped silently. AuditTrail::write hands the backlog to the log, oldest first,
 // as soon as the log writes again (marked `recorded_after_audit_outage`).
 #pragma once
 
