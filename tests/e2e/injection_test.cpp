@@ -12,7 +12,7 @@
 namespace rcan {
 namespace {
 
-using test::ConfiguredNode;
+using test::ControlNode;
 using test::HttpReply;
 using test::parse_json;
 
@@ -20,7 +20,7 @@ std::string chat(const std::string& text) { return test::command_msg("chat", {{"
 
 TEST(InjectionConfig, ConfiguredRegularExpressionsAreEvaluatedNotMatchedAsText) {
   test::TempDir dir;
-  ConfiguredNode n(dir.path() + "/n", R"(  injection:
+  ControlNode n(dir.path() + "/n", R"(  injection:
     use_defaults: false
     patterns:
       - "open the pod bay doors"
@@ -56,7 +56,7 @@ TEST(InjectionConfig, ConfiguredRegularExpressionsAreEvaluatedNotMatchedAsText) 
 
 TEST(InjectionConfig, APatternThatIsNotARegularExpressionStopsStartUp) {
   test::TempDir dir;
-  ConfiguredNode n(dir.path() + "/n", "  injection:\n    patterns: [{regex: \"(unclosed\"}]\n");
+  ControlNode n(dir.path() + "/n", "  injection:\n    patterns: [{regex: \"(unclosed\"}]\n");
   test::Process p;
   p.start({RCAND_PATH, "--config", dir.path() + "/n/robot.rcan.yaml", "--port", "0", "--data-dir",
            dir.path() + "/n/data"});

@@ -13,7 +13,7 @@
 namespace rcan {
 namespace {
 
-using test::ConfiguredNode;
+using test::ControlNode;
 using test::HttpReply;
 using test::parse_json;
 
@@ -29,12 +29,12 @@ std::string write_token(const std::string& path, const std::string& token) {
 class OwnershipE2E : public ::testing::Test {
  protected:
   void start(const std::string& yaml = "") {
-    node_ = std::make_unique<ConfiguredNode>(dir_.path() + "/n", yaml);
+    node_ = std::make_unique<ControlNode>(dir_.path() + "/n", yaml);
     ASSERT_TRUE(node_->start());
     owner_ = node_->token("owner", "alice", {"control", "config", "status"});
     owner_file_ = write_token(dir_.file("owner.token"), owner_);
   }
-  ConfiguredNode& n() { return *node_; }
+  ControlNode& n() { return *node_; }
   std::string url() const { return "http://127.0.0.1:" + std::to_string(node_->port()); }
   test::RunResult cli(std::vector<std::string> args, const std::string& token_file) {
     args.insert(args.end(), {"--url", url(), "--token-file", token_file});
@@ -49,7 +49,7 @@ class OwnershipE2E : public ::testing::Test {
                : "(no mode: " + std::to_string(r.status) + " " + r.body + ")";
   }
   test::TempDir dir_;
-  std::unique_ptr<ConfiguredNode> node_;
+  std::unique_ptr<ControlNode> node_;
   std::string owner_, owner_file_;
 };
 
@@ -104,7 +104,7 @@ TEST_F(OwnershipE2E, LeaseExpiryMidCommandRevokesEverythingDerivedFromIt) {
   ASSERT_TRUE(revoked.has_value());
   EXPECT_EQ(revoked->get("session_id")->as_string(),
             g.get("payload")->get("session_id")->as_string());
-  ASSERT_TRUE(ConfiguredNode::eventually([&] {
+  ASSERT_TRUE(ControlNode::eventually([&] {
     json::Value st = parse_json(n().get("/rcan/v1/status", owner_).body);
     return st.get("robot")->get("robot")->get("base")->get("linear_mps")->to_double() == 0.0;
   }));
@@ -295,7 +295,7 @@ TEST_F(OwnershipE2E, TransferCancelAndATransferAcceptedAfterExpiryChangesNothing
   auto r2 = cli({"transfer", "request", "--to", "bob"}, owner_file_);
   ASSERT_EQ(r2.exit_code, 0);
   std::string tid = parse_json(r2.out).get("transfer_id")->as_string();
-  ASSERT_TRUE(ConfiguredNode::eventually(
+  ASSERT_TRUE(ControlNode::eventually(
       [&] { return !n().audit("TRANSFER_EXPIRED", owner_).empty(); }, 5000));
   HttpReply late = n().post(
       "/rcan/v1/transfer",
@@ -338,12 +338,12 @@ TEST_F(OwnershipE2E, ConsentFromACloudFunctionNotifiesTheOwnerWithItsIdentity) {
   EXPECT_EQ(ev->get("notification")->get("body")->as_string(), body);
   EXPECT_EQ(ev->get("notification")->get("highlight")->as_string(),
             "cloud_function: castor-bridge-v2 via firebase");
-  ASSERT_TRUE(ConfiguredNode::eventually([&] { return !hook.bodies().empty(); }));
+  ASSERT_TRUE(ControlNode::eventually([&] { return !hook.bodies().empty(); }));
   json::Value posted = parse_json(hook.bodies()[0]);
   EXPECT_EQ(posted.get("body")->as_string(), body);
   EXPECT_EQ(posted.get("highlight")->as_string(), "cloud_function: castor-bridge-v2 via firebase");
   ASSERT_TRUE(
-      ConfiguredNode::eventually([&] { return !n().audit("CONSENT_NOTIFIED", owner_).empty(); }));
+      ControlNode::eventually([&] { return !n().audit("CONSENT_NOTIFIED", owner_).empty(); }));
   // A cloud function cannot pass itself off as one without its identity.
   json::Object bad = msg;
   bad.erase("function_name");
@@ -395,7 +395,7 @@ TEST_F(OwnershipE2E, PartitionEnteringAndLeavingOfflineAutonomousAndLockdown) {
   uint16_t issuer_port = issuer.port();
   start("offline:\n  issuer_url: " + issuer.url("/jwks.json") +
         "\n  issuer_poll_ms: 50\n  issuer_timeout_ms: 200\n  max_key_ttl_s: 4\n");
-  ASSERT_TRUE(ConfiguredNode::eventually([&] { return issuer.hits() > 0; }));
+  ASSERT_TRUE(ControlNode::eventually([&] { return issuer.hits() > 0; }));
   EXPECT_EQ(mode(), "NORMAL");
   std::string a = n().token("user", "known"), b = n().token("user", "stranger");
   // `known` is validated while the issuer answers (and released again).
@@ -403,7 +403,7 @@ TEST_F(OwnershipE2E, PartitionEnteringAndLeavingOfflineAutonomousAndLockdown) {
   ASSERT_EQ(ca.status, 200);
   ASSERT_EQ(n().call("DELETE", "/rcan/v1/auth/release", "{}", a).status, 200);
   issuer.stop();
-  ASSERT_TRUE(ConfiguredNode::eventually([&] { return mode() == "OFFLINE_AUTONOMOUS"; }));
+  ASSERT_TRUE(ControlNode::eventually([&] { return mode() == "OFFLINE_AUTONOMOUS"; }));
   EXPECT_NE(n().get("/metrics").body.find("rcan_partition_mode 1"), std::string::npos);
   HttpReply cb = n().post("/rcan/v1/auth/claim", "{}", b);
   EXPECT_EQ(cb.status, 503);
@@ -419,7 +419,7 @@ TEST_F(OwnershipE2E, PartitionEnteringAndLeavingOfflineAutonomousAndLockdown) {
   EXPECT_EQ(claims.back().get("detail")->get("partition_mode")->as_string(), "OFFLINE_AUTONOMOUS");
   EXPECT_TRUE(claims.back().get("detail")->get("sync_pending")->as_bool());
   // The cache runs out: LOCKDOWN. The existing session is kept; no new ones.
-  ASSERT_TRUE(ConfiguredNode::eventually([&] { return mode() == "LOCKDOWN"; }, 8000));
+  ASSERT_TRUE(ControlNode::eventually([&] { return mode() == "LOCKDOWN"; }, 8000));
   EXPECT_EQ(n().post("/rcan/v1/command",
                      test::command_msg("move", {{"linear", 0.1}, {"duration_ms", 100}}), a)
                 .status,
@@ -430,7 +430,7 @@ TEST_F(OwnershipE2E, PartitionEnteringAndLeavingOfflineAutonomousAndLockdown) {
   // The issuer comes back: NORMAL, and every change was recorded.
   test::TinyHttpServer again;
   ASSERT_TRUE(again.start(issuer_port));
-  ASSERT_TRUE(ConfiguredNode::eventually([&] { return mode() == "NORMAL"; }));
+  ASSERT_TRUE(ControlNode::eventually([&] { return mode() == "NORMAL"; }));
   EXPECT_EQ(n().post("/rcan/v1/auth/claim", "{}", b).status,
             409);  // a's session still holds: plain conflict
   auto modes = n().audit_eventually("PARTITION_MODE", owner_, 3);
@@ -471,7 +471,7 @@ TEST_F(OwnershipE2E, LeasesTransferConsentAndTheCredentialCacheSurviveARestart) 
   EXPECT_EQ(tr.get("pending")->get("to")->as_string(), "bob");
   EXPECT_NE(n().get("/rcan/v1/consent", owner_).body.find(cid), std::string::npos);
   // The credential cache came back: offline, the known principal still gets a session.
-  ASSERT_TRUE(ConfiguredNode::eventually([&] { return mode() == "OFFLINE_AUTONOMOUS"; }));
+  ASSERT_TRUE(ControlNode::eventually([&] { return mode() == "OFFLINE_AUTONOMOUS"; }));
   EXPECT_EQ(n().post("/rcan/v1/auth/claim", "{}", a).status, 200);
   EXPECT_EQ(n().post("/rcan/v1/auth/claim", "{}", n().token("user", "stranger")).status, 503);
 }

@@ -30,7 +30,7 @@ using node::ControlState;
 using node::Principal;
 using node::PrincipalId;
 using node::SessionTable;
-using test::ConfiguredNode;
+using test::ControlNode;
 using test::HttpReply;
 using test::parse_json;
 
@@ -447,13 +447,13 @@ std::string session_of(const HttpReply& r) {
 class SessionsE2E : public ::testing::Test {
  protected:
   void start(const std::string& yaml = "") {
-    node_ = std::make_unique<ConfiguredNode>(dir_.path() + "/n", yaml);
+    node_ = std::make_unique<ControlNode>(dir_.path() + "/n", yaml);
     ASSERT_TRUE(node_->start());
     owner_ = node_->token("owner", "owner-1", {"control", "config", "status"});
   }
-  ConfiguredNode& n() { return *node_; }
+  ControlNode& n() { return *node_; }
   test::TempDir dir_;
-  std::unique_ptr<ConfiguredNode> node_;
+  std::unique_ptr<ControlNode> node_;
   std::string owner_;
 };
 
@@ -526,7 +526,7 @@ TEST_F(SessionsE2E, AQueuedClaimantWhoseLastStreamClosesLeavesTheQueue) {
   EXPECT_EQ(queued(), (std::vector<std::string>{"tab-user", "cli-user"}));
   // The last one closes: the claim is dropped, audited and the CLI claimant moves up.
   second.reset();
-  ASSERT_TRUE(ConfiguredNode::eventually([&] { return queued().size() == 1; }, 5000));
+  ASSERT_TRUE(ControlNode::eventually([&] { return queued().size() == 1; }, 5000));
   EXPECT_EQ(queued(), (std::vector<std::string>{"cli-user"}));
   auto dropped = n().audit_eventually("CLAIM_DROPPED", owner_);
   ASSERT_EQ(dropped.size(), 1u);
@@ -554,7 +554,7 @@ TEST_F(SessionsE2E, ClaimDuringTheHandoffWindowIsDeniedUntilItCloses) {
   EXPECT_EQ(n().post("/rcan/v1/auth/claim", "{}", carol).status, 409);  // even a higher role waits
   EXPECT_EQ(parse_json(n().get("/rcan/v1/status").body).get("control")->as_string(), "RESERVED");
   // Nobody came: the window closes and the first claim wins again.
-  ASSERT_TRUE(ConfiguredNode::eventually(
+  ASSERT_TRUE(ControlNode::eventually(
       [&] {
         return parse_json(n().get("/rcan/v1/status").body).get("control")->as_string() ==
                "AVAILABLE";
@@ -602,11 +602,11 @@ TEST_F(SessionsE2E, PreemptionWhileCommandsAreInFlightDropsThemAndTellsTheHolder
       }
     }
   });
-  ConfiguredNode::eventually([&] { return sent.load() >= 10; });
+  ControlNode::eventually([&] { return sent.load() >= 10; });
   claiming = true;
   HttpReply o = n().post("/rcan/v1/auth/claim", "{}", owner_);
   ASSERT_EQ(o.status, 200) << o.body;
-  ConfiguredNode::eventually([&] { return conflicts.load() >= 1 || sent.load() >= 60; });
+  ControlNode::eventually([&] { return conflicts.load() >= 1 || sent.load() >= 60; });
   stop = true;
   burst.join();
   auto pre = us.wait_for("PREEMPTED");
@@ -619,7 +619,7 @@ TEST_F(SessionsE2E, PreemptionWhileCommandsAreInFlightDropsThemAndTellsTheHolder
   json::Value st = parse_json(n().get("/rcan/v1/status", owner_).body);
   json::Value robot = *st.get("robot");
   std::string dump = json::dump(robot);
-  ASSERT_TRUE(ConfiguredNode::eventually([&] {
+  ASSERT_TRUE(ControlNode::eventually([&] {
     json::Value r = *parse_json(n().get("/rcan/v1/status", owner_).body).get("robot");
     const json::Value* inner = r.get("robot");
     const json::Value* base = inner ? inner->get("base") : nullptr;

@@ -17,7 +17,7 @@ namespace {
 
 // The SDK form of the node's RURI (rcan-py's RobotURI carries a version segment).
 std::string sdk_target() {
-  std::string t = ConfiguredNode::kRuri;
+  std::string t = ControlNode::kRuri;
   size_t last = t.rfind('/');
   return t.substr(0, last) + "/v1" + t.substr(last);
 }
@@ -31,7 +31,7 @@ json::Object rcanpy_move(const std::string& sender_type) {
                  {"params", json::Object{{"linear", 0.1}, {"duration_ms", 100}}},
                  {"sender_type", sender_type}};
   if (sender_type == "robot")  // a robot acts for a human (§8.5 delegation chain)
-    m.set("delegation_chain", json::Array{json::Object{{"issuer_ruri", ConfiguredNode::kRuri},
+    m.set("delegation_chain", json::Array{json::Object{{"issuer_ruri", ControlNode::kRuri},
                                                        {"human_subject", "operator-1"},
                                                        {"timestamp", now_wall_ms() / 1000},
                                                        {"scope", "control"}}});
@@ -51,7 +51,7 @@ class SignedMessages : public ::testing::Test {
         "/operator/ed25519.pub}\n"
         "  trusted_robot_keys:\n    - {name: peer, mldsa65_pub_file: " +
         dir_->path() + "/peer/mldsa65.pub}\n";
-    node_ = std::make_unique<ConfiguredNode>(dir_->path() + "/node", extra);
+    node_ = std::make_unique<ControlNode>(dir_->path() + "/node", extra);
     ASSERT_TRUE(node_->start());
     token_ = node_->token("user", "operator-1", {"control", "status"});
   }
@@ -69,7 +69,7 @@ class SignedMessages : public ::testing::Test {
   // The audit record of a command by its message id ("" fields when absent).
   json::Value record_of(const std::string& msg_id) {
     json::Value found;
-    ConfiguredNode::eventually([&] {
+    ControlNode::eventually([&] {
       // The audit log is the OWNER's to read.
       HttpReply r =
           node_->get("/api/audit?limit=1000", node_->token("owner", "auditor", {"status"}));
@@ -85,7 +85,7 @@ class SignedMessages : public ::testing::Test {
   }
 
   std::unique_ptr<TempDir> dir_;
-  std::unique_ptr<ConfiguredNode> node_;
+  std::unique_ptr<ControlNode> node_;
   std::string token_;
 };
 

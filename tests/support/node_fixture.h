@@ -1,4 +1,5 @@
-// A configured rcand for the control-session tests: its own data directory, robot keys and
+// ControlNode: a configured rcand for the control-session tests (not configured_node.h's
+// ConfiguredNode, which the same test program holds): its own data directory, robot keys and
 // chain secret made with the library, a test token issuer, and YAML the test adds to. Header-only.
 #pragma once
 
@@ -11,6 +12,7 @@
 #include <functional>
 #include <thread>
 
+#include "configured_node.h"  // now_wall_ms, parse_json
 #include "rcan/crypto/ed25519.h"
 #include "rcan/crypto/jwt.h"
 #include "rcan/errors.h"
@@ -18,18 +20,6 @@
 #include "test_support.h"
 
 namespace rcan::test {
-
-inline int64_t now_wall_ms() {
-  return std::chrono::duration_cast<std::chrono::milliseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
-
-inline json::Value parse_json(const std::string& s) {
-  auto v = json::parse(s, {.max_depth = 128, .max_bytes = 64u << 20});
-  EXPECT_TRUE(v.ok()) << s.substr(0, 300);
-  return v.ok() ? *v : json::Value();
-}
 
 // payload.error_code of an error body ("" when absent).
 inline std::string error_code_of(const HttpReply& r) {
@@ -50,11 +40,11 @@ inline std::string command_msg(const std::string& action, json::Object params = 
   return json::dump(json::Value(m));
 }
 
-class ConfiguredNode {
+class ControlNode {
  public:
   static constexpr const char* kRuri = "rcan://local.rcan/acme/rover/0a1b2c3d";
 
-  ConfiguredNode(const std::string& dir, const std::string& extra_yaml) : dir_(dir) {
+  ControlNode(const std::string& dir, const std::string& extra_yaml) : dir_(dir) {
     namespace fs = std::filesystem;
     fs::create_directories(dir_);
     data_ = dir_ + "/data";
@@ -86,7 +76,7 @@ class ConfiguredNode {
         << dir_ << "/issuer.pub.pem\n"
         << extra_yaml;
   }
-  ~ConfiguredNode() { stop(); }
+  ~ControlNode() { stop(); }
 
   bool start() {
     proc_ = std::make_unique<Process>();
