@@ -185,44 +185,6 @@ struct RbacConfig {
   GuestLimitsConfig guest_limits;  // rbac.guest_limits | top-level guest_limits (seed shape)
 };
 
-struct WatchdogConfig {  // top-level `watchdog` (profile schema)
-  bool enabled = true;
-  uint32_t timeout_s = 10;  // 1..300
-};
-
-struct SafetyConfig {
-  bool local_safety_wins = true;             // must be true when present
-  double max_linear_speed_mps = 0.5;         // max_linear_speed_mps | max_linear_x
-  double max_angular_speed_radps = 1.0;      // max_angular_speed_radps | max_angular_z
-  std::optional<double> max_speed_override;  // 0..1, fraction applied on top of the caps
-  std::optional<double> estop_distance_m;    // emergency_stop_distance (m) | estop_distance_mm
-  std::optional<double> collision_monitor_stop_m;
-  std::optional<double> collision_monitor_slowdown_m;
-  std::optional<double> obstacle_stop_cm;  // OpenCastor
-  std::vector<JointLimit> joint_limits;    // sim arm default: 6 × ±3.14
-  Workspace workspace;
-  LimitPolicy speed_policy = LimitPolicy::kClamp;
-  LimitPolicy joint_policy = LimitPolicy::kReject;
-  LimitPolicy workspace_policy = LimitPolicy::kReject;
-  bool estop_on_startup = false;
-  bool estop_on_driver_fault = false;  // a driver fault also latches ESTOP
-  bool estop_clear_requires_presence = false;
-  // Default: agent.latency_budget_ms × 2 when that is set, else kDefaultHeartbeatTimeoutMs.
-  uint32_t heartbeat_timeout_ms = kDefaultHeartbeatTimeoutMs;
-  uint32_t command_ttl_default_ms = 0;  // 0: only the message's own ttl_ms applies
-  WatchdogConfig watchdog;
-  // Vendor keys from the profiles (kept; the simulated robot does not use them).
-  std::optional<double> max_walk_speed_mps;
-  std::optional<double> max_tcp_speed_mm_s;
-  std::optional<double> max_tcp_force_n;
-  std::optional<double> collision_threshold_scale;  // 0..1
-  std::optional<double> protective_stop_distance_mm;
-  std::optional<uint32_t> estop_heartbeat_interval_ms;
-  std::optional<uint32_t> estop_timeout_ms;
-  std::optional<uint32_t> fri_heartbeat_timeout_ms;
-  std::vector<double> max_joint_torques_nm;
-};
-
 enum class GateOnFail { kBlock, kEscalate, kAllow };  // "log" is read as kAllow
 enum class HitlOnTimeout { kBlock, kAllow };          // "escalate" is read as kBlock
 
