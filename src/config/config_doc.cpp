@@ -54,8 +54,10 @@ std::string type_text(const Schema& s) {
     case Schema::K::kObject:
       return "mapping";
     case Schema::K::kArray: {
-      std::string item = s.items ? type_text(*s.items) : "value";
-      return "list of " + (s.items && s.items->k == Schema::K::kObject ? "mappings" : item);
+      if (!s.items) return "list";
+      if (s.items->k == Schema::K::kObject) return "list of mappings";
+      if (s.items->k == Schema::K::kString && s.items->enums.empty()) return "list of strings";
+      return "list of " + type_text(*s.items);
     }
     case Schema::K::kFree:
       return "any";
