@@ -5,7 +5,7 @@
 #include <sstream>
 #include <vector>
 
-#include "config/blocks/blocks.h"
+#include "config/table.h"
 
 namespace rcan::config {
 namespace {

@@ -278,4 +278,7 @@ Table<T> lift(const Table<U>& rows, U T::*member) {
   return out;
 }
 
+// Every top-level row of the document, in the order build() walks them (blocks/document.cpp).
+const Table<NodeConfig>& document_rows();
+
 }  // namespace rcan::config::internal

@@ -18,7 +18,4 @@ Table<NodeConfig> control_blocks();   // offline, control, qos
 Table<NodeConfig> fleet_blocks();     // mqtt, fleet, swarm
 Table<NodeConfig> profile_blocks();   // the kept profile and OpenCastor blocks
 
-// All of them, in the order build() walks them (document.cpp).
-const Table<NodeConfig>& document_rows();
-
 }  // namespace rcan::config::internal
