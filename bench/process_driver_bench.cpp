@@ -364,7 +364,7 @@ int main(int argc, char** argv) {
   const std::string path = std::string(tmpl) + "/drv.sock";
   Peer peer(path);
   drivers::ProcessDriverOptions o;
-  o.socket = path;
+  o.file.socket = path;
   o.info.name = "process";
   o.info.has_base = true;
   o.info.max_linear_mps = 1.0;

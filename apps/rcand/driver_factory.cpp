@@ -11,13 +11,7 @@ namespace {
 
 drivers::ProcessDriverOptions process_options(const config::ProcessDriverConfig& p) {
   drivers::ProcessDriverOptions o;
-  o.command = p.command;
-  o.socket = p.socket;
-  o.heartbeat_ms = p.heartbeat_ms;
-  o.heartbeat_timeout_ms = p.heartbeat_timeout_ms;
-  o.startup_timeout_ms = p.startup_timeout_ms;
-  o.restart_backoff_ms = p.restart_backoff_ms;
-  o.restart_backoff_max_ms = p.restart_backoff_max_ms;
+  o.file = p;
   node::DriverInfo& i = o.info;
   i.name = "process";
   i.has_base = true;

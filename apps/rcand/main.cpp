@@ -32,8 +32,9 @@ const char* malloc_conf = "background_thread:true,max_background_threads:1";
 
 using namespace rcan;
 
-int sim_layer_main(int argc, char** argv);  // sim_layer.cpp: `rcand --sim-layer …`
-int init_main(int argc, char** argv);       // init.cpp: `rcand init …`
+int sim_layer_main(int argc, char** argv);   // sim_layer.cpp: `rcand --sim-layer …`
+int init_main(int argc, char** argv);        // init.cpp: `rcand init …`
+int config_doc_main(int argc, char** argv);  // config_doc.cpp: `rcand config-doc …`
 
 namespace {
 
@@ -41,6 +42,7 @@ constexpr const char* kUsage =
     "usage: rcand [--config FILE] [--port N] [--bind ADDR] [--data-dir DIR] [--log-level "
     "debug|info|warn|error]\n"
     "       rcand init [--dir D] [--name NAME] … (a configured robot; rcand init --help)\n"
+    "       rcand config-doc KEYS… | --check FILE | --write FILE (docs/CONFIG.md's key tables)\n"
     "       rcand --sim-layer [--port N] [--layer reactive|fast|planner] [--confidence C] "
     "[--delay-ms D]\n"
     "\n"
@@ -120,6 +122,7 @@ sigset_t block_signals() {
 int main(int argc, char** argv) {
   if (argc > 1 && std::strcmp(argv[1], "--sim-layer") == 0) return sim_layer_main(argc, argv);
   if (argc > 1 && std::strcmp(argv[1], "init") == 0) return init_main(argc, argv);
+  if (argc > 1 && std::strcmp(argv[1], "config-doc") == 0) return config_doc_main(argc, argv);
   int exit_code = 2;
   std::optional<std::string> log_level;
   auto options = parse_args(argc, argv, log_level, exit_code);

@@ -24,6 +24,9 @@ audit::AuditOptions audit_options(const config::NodeConfig& cfg, const std::stri
 
 node::SafetyConfig safety_config(const config::NodeConfig& cfg, const node::SimRobotConfig& sim) {
   node::SafetyConfig sc;
+  sc.file = cfg.safety;
+  // The limits the core enforces: the speed caps (under max_speed_override), the arm's speed,
+  // the configured joints in order onto the arm's fixed joint slots, the workspace.
   sc.limits.max_linear_mps = cfg.safety.max_linear_speed_mps;
   sc.limits.max_angular_radps = cfg.safety.max_angular_speed_radps;
   if (cfg.safety.max_speed_override) {
@@ -31,16 +34,11 @@ node::SafetyConfig safety_config(const config::NodeConfig& cfg, const node::SimR
     sc.limits.max_angular_radps *= *cfg.safety.max_speed_override;
   }
   sc.limits.max_joint_speed_radps = sim.max_joint_speed_radps;
-  // The configured joints, in order, onto the arm's fixed joint slots.
   for (size_t i = 0; i < cfg.safety.joint_limits.size() && i < node::kArmJoints; ++i) {
     sc.limits.joint_min_rad[i] = cfg.safety.joint_limits[i].min_rad;
     sc.limits.joint_max_rad[i] = cfg.safety.joint_limits[i].max_rad;
   }
   sc.limits.workspace = cfg.safety.workspace;
-  sc.policy = cfg.safety.speed_policy;
-  sc.estop_on_startup = cfg.safety.estop_on_startup;
-  sc.estop_on_driver_fault = cfg.safety.estop_on_driver_fault;
-  sc.default_heartbeat_ms = cfg.safety.heartbeat_timeout_ms;
   sc.tick_period_ms = cfg.driver.sim.tick_hz ? 1000 / cfg.driver.sim.tick_hz : 20;
   return sc;
 }

@@ -28,6 +28,7 @@
 #include <string_view>
 #include <vector>
 
+#include "config/driver_config.h"
 #include "config/fleet_config.h"
 #include "config/safety_types.h"
 #include "rcan/audit/audit_log.h"
@@ -185,44 +186,6 @@ struct RbacConfig {
   GuestLimitsConfig guest_limits;  // rbac.guest_limits | top-level guest_limits (seed shape)
 };
 
-struct WatchdogConfig {  // top-level `watchdog` (profile schema)
-  bool enabled = true;
-  uint32_t timeout_s = 10;  // 1..300
-};
-
-struct SafetyConfig {
-  bool local_safety_wins = true;             // must be true when present
-  double max_linear_speed_mps = 0.5;         // max_linear_speed_mps | max_linear_x
-  double max_angular_speed_radps = 1.0;      // max_angular_speed_radps | max_angular_z
-  std::optional<double> max_speed_override;  // 0..1, fraction applied on top of the caps
-  std::optional<double> estop_distance_m;    // emergency_stop_distance (m) | estop_distance_mm
-  std::optional<double> collision_monitor_stop_m;
-  std::optional<double> collision_monitor_slowdown_m;
-  std::optional<double> obstacle_stop_cm;  // OpenCastor
-  std::vector<JointLimit> joint_limits;    // sim arm default: 6 × ±3.14
-  Workspace workspace;
-  LimitPolicy speed_policy = LimitPolicy::kClamp;
-  LimitPolicy joint_policy = LimitPolicy::kReject;
-  LimitPolicy workspace_policy = LimitPolicy::kReject;
-  bool estop_on_startup = false;
-  bool estop_on_driver_fault = false;  // a driver fault also latches ESTOP
-  bool estop_clear_requires_presence = false;
-  // Default: agent.latency_budget_ms × 2 when that is set, else kDefaultHeartbeatTimeoutMs.
-  uint32_t heartbeat_timeout_ms = kDefaultHeartbeatTimeoutMs;
-  uint32_t command_ttl_default_ms = 0;  // 0: only the message's own ttl_ms applies
-  WatchdogConfig watchdog;
-  // Vendor keys from the profiles (kept; the simulated robot does not use them).
-  std::optional<double> max_walk_speed_mps;
-  std::optional<double> max_tcp_speed_mm_s;
-  std::optional<double> max_tcp_force_n;
-  std::optional<double> collision_threshold_scale;  // 0..1
-  std::optional<double> protective_stop_distance_mm;
-  std::optional<uint32_t> estop_heartbeat_interval_ms;
-  std::optional<uint32_t> estop_timeout_ms;
-  std::optional<uint32_t> fri_heartbeat_timeout_ms;
-  std::vector<double> max_joint_torques_nm;
-};
-
 enum class GateOnFail { kBlock, kEscalate, kAllow };  // "log" is read as kAllow
 enum class HitlOnTimeout { kBlock, kAllow };          // "escalate" is read as kBlock
 
@@ -266,68 +229,6 @@ struct BrainConfig {  // profile-style `brain`
   std::string api_key_env;
   std::optional<uint32_t> max_tokens;
   std::optional<double> temperature;
-};
-
-struct SimDriverConfig {
-  double wheel_base_m = 0.3;
-  double max_accel_mps2 = 1.0;
-  double max_angular_accel_radps2 = 2.0;
-  uint32_t tick_hz = 50;
-  uint32_t telemetry_hz = 5;
-  uint32_t arm_joints = 6;
-};
-
-// driver.type process: a driver process on a Unix socket (docs/DRIVERS.md).
-struct ProcessDriverConfig {
-  std::vector<std::string> command;  // argv to start; empty: connect to `socket`
-  std::string socket;                // an already-running driver process's socket
-  uint32_t heartbeat_ms = 100;
-  uint32_t heartbeat_timeout_ms = 500;
-  uint32_t startup_timeout_ms = 5000;
-  uint32_t restart_backoff_ms = 200;
-  uint32_t restart_backoff_max_ms = 5000;
-  // The hardware envelope (the safety core uses min(safety.*, these)).
-  double max_linear_mps = 1.0;
-  double max_angular_radps = 2.0;
-  double linear_accel_mps2 = 0.0;  // 0: unknown (the core predicts an instant change)
-  double brake_decel_mps2 = 0.0;
-  // An arm and a gripper behind the process (0 joints = no arm): the safety core checks arm
-  // targets against these ranges and speed before an apply frame carries them.
-  uint32_t arm_joints = 0;  // 0..6
-  double max_joint_speed_radps = 1.0;
-  std::vector<double> joint_min_rad;  // per arm joint; missing entries -pi
-  std::vector<double> joint_max_rad;  // missing entries +pi
-  bool gripper = false;
-};
-
-// driver.ros2: a ROS 2 robot over DDS (docs/DRIVERS.md §ROS 2).
-struct Ros2DriverConfig {
-  uint32_t domain_id = 0;                           // ROS_DOMAIN_ID
-  std::string ns;                                   // ROS namespace, e.g. "/robot1" ("" = none)
-  std::string cmd_vel_topic = "cmd_vel";            // geometry_msgs/msg/Twist, out
-  std::string odom_topic = "odom";                  // nav_msgs/msg/Odometry, in
-  std::string joint_states_topic = "joint_states";  // sensor_msgs/msg/JointState, in
-  std::string arm_topic;                // trajectory_msgs/msg/JointTrajectory, out ("" = no arm)
-  std::vector<std::string> arm_joints;  // joint names, in the arm's slot order (≤ 6)
-  std::string gripper_topic;            // "" = no gripper
-  std::string gripper_type = "std_msgs/msg/Float64";  // or std_msgs/msg/Bool (true = closed)
-  double gripper_open = 0.0;                          // Float64 value that opens
-  double gripper_close = 1.0;                         // Float64 value that closes
-  uint32_t cmd_rate_hz = 20;        // Twist republish rate (active drive, stop/ESTOP)
-  uint32_t odom_timeout_ms = 1000;  // no odometry this long → driver fault (0 = never)
-  uint32_t stop_repeat_ms = 1000;   // zero Twists keep coming this long after a stop
-  double max_linear_mps = 1.0;      // the hardware's envelope (describe())
-  double max_angular_radps = 2.0;
-  double max_joint_speed_radps = 1.0;
-  std::vector<double> joint_min_rad;  // per arm joint; missing entries -pi
-  std::vector<double> joint_max_rad;  // missing entries +pi
-};
-
-struct DriverConfig {
-  std::string type = "sim";  // "sim" | "ros2" | "process"
-  SimDriverConfig sim;
-  Ros2DriverConfig ros2;
-  ProcessDriverConfig process;
 };
 
 struct RobotInfo {

@@ -1,6 +1,6 @@
-// The safety value types the `safety` block is read into and the safety core runs with
+// The `safety` block and the value types it is read into, which the safety core runs with
 // (node/safety/safety.h uses these same types): the limit policy, a joint's range, the
-// workspace rectangle, and the default deadman timeout.
+// workspace rectangle, the default deadman timeout, and SafetyConfig itself.
 #pragma once
 
 #include <algorithm>
@@ -9,6 +9,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace rcan::config {
 
@@ -47,6 +48,46 @@ struct Workspace {
     const double dy = std::max({y_min - y, 0.0, y - y_max});
     return std::hypot(dx, dy);
   }
+};
+
+// The `safety` block and the top-level `watchdog`, as the file gives them; the node's safety
+// core runs with them (node::SafetyConfig::file). A member's initializer is its key's default;
+// what a key means, its type and range are its row's (blocks/safety.cpp, docs/CONFIG.md).
+struct WatchdogConfig {
+  bool enabled = true;
+  uint32_t timeout_s = 10;
+};
+
+struct SafetyConfig {
+  bool local_safety_wins = true;
+  double max_linear_speed_mps = 0.5;
+  double max_angular_speed_radps = 1.0;
+  std::optional<double> max_speed_override;
+  std::optional<double> estop_distance_m;
+  std::optional<double> collision_monitor_stop_m;
+  std::optional<double> collision_monitor_slowdown_m;
+  std::optional<double> obstacle_stop_cm;
+  std::vector<JointLimit> joint_limits;  // the row's default: the simulated arm's
+  Workspace workspace;
+  LimitPolicy speed_policy = LimitPolicy::kClamp;
+  LimitPolicy joint_policy = LimitPolicy::kReject;
+  LimitPolicy workspace_policy = LimitPolicy::kReject;
+  bool estop_on_startup = false;
+  bool estop_on_driver_fault = false;
+  bool estop_clear_requires_presence = false;
+  uint32_t heartbeat_timeout_ms = kDefaultHeartbeatTimeoutMs;  // or the row's computed default
+  uint32_t command_ttl_default_ms = 0;
+  WatchdogConfig watchdog;
+  // Vendor keys from the profiles (kept; the simulated robot does not use them).
+  std::optional<double> max_walk_speed_mps;
+  std::optional<double> max_tcp_speed_mm_s;
+  std::optional<double> max_tcp_force_n;
+  std::optional<double> collision_threshold_scale;
+  std::optional<double> protective_stop_distance_mm;
+  std::optional<uint32_t> estop_heartbeat_interval_ms;
+  std::optional<uint32_t> estop_timeout_ms;
+  std::optional<uint32_t> fri_heartbeat_timeout_ms;
+  std::vector<double> max_joint_torques_nm;
 };
 
 }  // namespace rcan::config

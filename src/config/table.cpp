@@ -116,6 +116,12 @@ std::string fmt_num(double d) {
   return buf;
 }
 
+template <>
+const NodeConfig& defaults<NodeConfig>() {
+  static const NodeConfig* d = new NodeConfig();
+  return *d;
+}
+
 std::string resolve_path(const std::string& p, const std::string& base_dir) {
   namespace fs = std::filesystem;
   if (p.empty()) return p;

@@ -36,12 +36,12 @@ using test::eventually;
 
 ProcessDriverOptions options(std::vector<std::string> command) {
   ProcessDriverOptions o;
-  o.command = std::move(command);
-  o.heartbeat_ms = 50;
-  o.heartbeat_timeout_ms = 400;
-  o.startup_timeout_ms = 10000;
-  o.restart_backoff_ms = 100;
-  o.restart_backoff_max_ms = 400;
+  o.file.command = std::move(command);
+  o.file.heartbeat_ms = 50;
+  o.file.heartbeat_timeout_ms = 400;
+  o.file.startup_timeout_ms = 10000;
+  o.file.restart_backoff_ms = 100;
+  o.file.restart_backoff_max_ms = 400;
   o.kill_grace_ms = 300;
   o.info.name = "process";
   o.info.has_base = true;
@@ -207,7 +207,7 @@ TEST(ProcessDriver, ReferenceDriverServesASocketForAnAlreadyRunningProcess) {
   ASSERT_TRUE(eventually([&] { return ::stat(path.c_str(), &st) == 0; }, 10000));
   EXPECT_EQ(st.st_mode & 0777, 0600u);  // only rcand's user may pose as the hardware
   ProcessDriverOptions o = options({});
-  o.socket = path;
+  o.file.socket = path;
   ProcessDriver d(o);
   ASSERT_TRUE(d.start().ok());
   ASSERT_TRUE(d.healthy()) << d.health().fault;
@@ -292,7 +292,7 @@ TEST(ProcessDriver, AStopJumpsTheQueueAndDropsTheAppliesBeforeIt) {
     }
   });
   ProcessDriverOptions o = options({});
-  o.socket = path;
+  o.file.socket = path;
   ProcessDriver d(o);
   ASSERT_TRUE(d.start().ok());
   ASSERT_TRUE(d.healthy());

@@ -416,7 +416,7 @@ TEST(SafetyEstop, ALatchFileFailingItsCheckComesUpLatchedOneWithoutACheckLoads) 
 TEST(SafetyEstop, EstopOnStartupConfig) {
   rcan::test::TempDir dir;
   SafetyConfig cfg;
-  cfg.estop_on_startup = true;
+  cfg.file.estop_on_startup = true;
   Rig r(cfg);
   ASSERT_TRUE(r.core->open(dir.path()).ok());
   EXPECT_TRUE(r.core->estop_active());
@@ -567,7 +567,7 @@ TEST(SafetyLimits, SpeedClampVsReject) {
 
 TEST(SafetyLimits, RejectPolicyFromConfig) {
   SafetyConfig cfg;
-  cfg.policy = LimitPolicy::kReject;
+  cfg.file.speed_policy = LimitPolicy::kReject;
   cfg.limits.max_drive_duration_ms = 1000;
   Rig r(cfg);
   auto e = r.core->dispatch(ActuatorCommand::make_drive(0.1, 0, 1500));
@@ -640,7 +640,7 @@ TEST(SafetyLimits, NonFiniteValuesAreSchemaErrors) {
 
 SafetyConfig small_workspace(LimitPolicy p) {
   SafetyConfig cfg;
-  cfg.policy = p;
+  cfg.file.speed_policy = p;
   cfg.limits.workspace = Workspace{true, -1.0, 1.0, -1.0, 1.0};
   return cfg;
 }
@@ -991,7 +991,7 @@ TEST(SafetyDriverHealth, AFaultStopsTheRobotRefusesMotionAndRecovers) {
 
 TEST(SafetyDriverHealth, EstopOnDriverFaultLatchesUntilResume) {
   SafetyConfig cfg;
-  cfg.estop_on_driver_fault = true;
+  cfg.file.estop_on_driver_fault = true;
   FaultRig r(cfg);
   r.drv->link_lost = true;
   r.run(20);

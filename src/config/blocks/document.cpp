@@ -6,9 +6,8 @@
 #include "config/blocks/blocks.h"
 
 namespace rcan::config::internal {
-namespace {
 
-const Table<NodeConfig>& document() {
+const Table<NodeConfig>& document_rows() {
   static const Table<NodeConfig> rows = [] {
     Table<NodeConfig> all;
     for (Table<NodeConfig> part :
@@ -20,6 +19,8 @@ const Table<NodeConfig>& document() {
   }();
   return rows;
 }
+
+namespace {
 
 // Blocks kept as they are for the profiles (NodeConfig::kept), in this order.
 void keep_blocks(const At& root, NodeConfig& c) {
@@ -33,14 +34,14 @@ void keep_blocks(const At& root, NodeConfig& c) {
 }  // namespace
 
 SP config_schema() {
-  static const SP schema = object_of(document());
+  static const SP schema = object_of(document_rows());
   return schema;
 }
 
 NodeConfig build(const json::Value& root_value, const ConfigOptions& opts) {
   NodeConfig c;
   Ctx x{At{&root_value, ""}, opts, c};
-  walk(document(), x.root, c, x);
+  walk(document_rows(), x.root, c, x);
   keep_blocks(x.root, c);
   derive_paths(c);
   return c;

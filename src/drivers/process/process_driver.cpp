@@ -89,7 +89,7 @@ pid_t spawn_driver(const std::vector<std::string>& command, int child_fd, int ou
 }  // namespace
 
 ProcessDriver::ProcessDriver(ProcessDriverOptions opts)
-    : opts_(std::move(opts)), backoff_ms_(opts_.restart_backoff_ms) {
+    : opts_(std::move(opts)), backoff_ms_(opts_.file.restart_backoff_ms) {
   wake_fd_ = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
 }
 
@@ -104,13 +104,13 @@ ProcessDriver::~ProcessDriver() {
 
 Status ProcessDriver::start() {
   if (wake_fd_ < 0) return Error(ErrorCode::kInternal, "driver: eventfd: " + errno_text(errno));
-  if (opts_.command.empty() && opts_.socket.empty())
+  if (opts_.file.command.empty() && opts_.file.socket.empty())
     return Error(ErrorCode::kInternal, "driver.process needs a command or a socket");
   io_ = std::thread([this] {
     pthread_setname_np(pthread_self(), "driver-io");
     io_loop();
   });
-  const auto deadline = steady_now() + std::chrono::milliseconds(opts_.startup_timeout_ms);
+  const auto deadline = steady_now() + std::chrono::milliseconds(opts_.file.startup_timeout_ms);
   MutexLock lock(rmu_);
   while (!ready_.load(std::memory_order_acquire) && faults_ == 0 && steady_now() < deadline)
     ready_cv_.wait_until(rmu_, deadline);
@@ -274,7 +274,7 @@ node::DriverHealth ProcessDriver::health() const {
 bool ProcessDriver::connect_or_spawn(int64_t now) {
   int fd = -1;
   pid_t pid = -1;
-  if (!opts_.command.empty()) {
+  if (!opts_.file.command.empty()) {
     int sv[2];
     if (socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, sv) != 0) {
       fault("cannot create the driver socket: " + errno_text(errno), now);
@@ -294,7 +294,7 @@ bool ProcessDriver::connect_or_spawn(int64_t now) {
       child_end = fcntl(sv[1], F_DUPFD_CLOEXEC, 4);
       ::close(sv[1]);
     }
-    pid = child_end < 0 ? -EMFILE : spawn_driver(opts_.command, child_end, out[1], err[1]);
+    pid = child_end < 0 ? -EMFILE : spawn_driver(opts_.file.command, child_end, out[1], err[1]);
     if (child_end >= 0) ::close(child_end);
     ::close(out[1]);
     ::close(err[1]);
@@ -302,7 +302,8 @@ bool ProcessDriver::connect_or_spawn(int64_t now) {
       ::close(sv[0]);
       ::close(out[0]);
       ::close(err[0]);
-      fault("cannot start the driver process " + opts_.command[0] + ": " + errno_text(-pid), now);
+      fault("cannot start the driver process " + opts_.file.command[0] + ": " + errno_text(-pid),
+            now);
       return false;
     }
     for (int i = 0; i < 2; ++i) {
@@ -319,16 +320,17 @@ bool ProcessDriver::connect_or_spawn(int64_t now) {
   } else {
     sockaddr_un addr{};
     addr.sun_family = AF_UNIX;
-    if (opts_.socket.size() >= sizeof addr.sun_path) {
+    if (opts_.file.socket.size() >= sizeof addr.sun_path) {
       fault("driver.process.socket is too long", now);
       return false;
     }
-    memcpy(addr.sun_path, opts_.socket.data(), opts_.socket.size());
+    memcpy(addr.sun_path, opts_.file.socket.data(), opts_.file.socket.size());
     fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
     if (fd < 0 || ::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) {
       const int e = errno;
       if (fd >= 0) ::close(fd);
-      fault("cannot connect to the driver process at " + opts_.socket + ": " + errno_text(e), now);
+      fault("cannot connect to the driver process at " + opts_.file.socket + ": " + errno_text(e),
+            now);
       return false;
     }
   }
@@ -342,16 +344,18 @@ bool ProcessDriver::connect_or_spawn(int64_t now) {
     head_off_ = 0;
     stop_served_gen_ = stop_gen_.load(std::memory_order_acquire);
     moved_since_stop_ = false;
-    queue_.push_back(Out{encode_describe(++seq_, opts_.heartbeat_ms, opts_.heartbeat_timeout_ms),
-                         stop_served_gen_, false});
+    queue_.push_back(
+        Out{encode_describe(++seq_, opts_.file.heartbeat_ms, opts_.file.heartbeat_timeout_ms),
+            stop_served_gen_, false});
     queue_.push_back(Out{encode_heartbeat(++seq_), stop_served_gen_, false});
     (void)flush_locked();
   }
   if (ever_connected_) restarts_.fetch_add(1, std::memory_order_relaxed);
   log(LogLevel::kInfo, ever_connected_ ? "driver_process_restarted" : "driver_process_started",
-      json::Object{{"pid", static_cast<int64_t>(pid)},
-                   {"target", opts_.command.empty() ? opts_.socket : opts_.command[0]},
-                   {"restarts", static_cast<int64_t>(restarts_.load())}});
+      json::Object{
+          {"pid", static_cast<int64_t>(pid)},
+          {"target", opts_.file.command.empty() ? opts_.file.socket : opts_.file.command[0]},
+          {"restarts", static_cast<int64_t>(restarts_.load())}});
   ever_connected_ = true;
   return true;
 }
@@ -391,10 +395,10 @@ void ProcessDriver::fault(const std::string& why, int64_t now) {
   decoder_ = FrameDecoder();
   described_ = heartbeat_seen_ = false;
   if (healthy_since_ms_ > 0 && now - healthy_since_ms_ >= kBackoffResetMs)
-    backoff_ms_ = opts_.restart_backoff_ms;
+    backoff_ms_ = opts_.file.restart_backoff_ms;
   healthy_since_ms_ = 0;
   next_attempt_ms_ = now + backoff_ms_;
-  backoff_ms_ = std::min<uint32_t>(backoff_ms_ * 2, opts_.restart_backoff_max_ms);
+  backoff_ms_ = std::min<uint32_t>(backoff_ms_ * 2, opts_.file.restart_backoff_max_ms);
 }
 
 void ProcessDriver::reap_child(int64_t now) {
@@ -617,7 +621,8 @@ void ProcessDriver::io_loop() {
 // passed (false); our own heartbeat queued when due; `wait` shortened to the next of them.
 bool ProcessDriver::keep_link(int64_t now, int64_t& wait, bool& want_out) {
   const bool handshaking = !described_ || !heartbeat_seen_;
-  const int64_t limit = handshaking ? opts_.startup_timeout_ms : opts_.heartbeat_timeout_ms;
+  const int64_t limit =
+      handshaking ? opts_.file.startup_timeout_ms : opts_.file.heartbeat_timeout_ms;
   const int64_t since = now - (handshaking ? connected_ms_ : last_rx_ms_);
   if (since > limit) {
     fault(handshaking
@@ -626,7 +631,7 @@ bool ProcessDriver::keep_link(int64_t now, int64_t& wait, bool& want_out) {
           now);
     return false;
   }
-  if (now - last_hb_tx_ms_ >= opts_.heartbeat_ms) {
+  if (now - last_hb_tx_ms_ >= opts_.file.heartbeat_ms) {
     MutexLock lock(wmu_);
     if (queue_.size() < kMaxQueuedFrames)
       queue_.push_back(
@@ -634,7 +639,8 @@ bool ProcessDriver::keep_link(int64_t now, int64_t& wait, bool& want_out) {
     want_out = true;
     last_hb_tx_ms_ = now;
   }
-  wait = std::min<int64_t>(wait, std::max<int64_t>(1, last_hb_tx_ms_ + opts_.heartbeat_ms - now));
+  wait =
+      std::min<int64_t>(wait, std::max<int64_t>(1, last_hb_tx_ms_ + opts_.file.heartbeat_ms - now));
   wait = std::min<int64_t>(wait, std::max<int64_t>(1, limit - since + 1));
   return true;
 }

@@ -40,19 +40,16 @@
 #include <vector>
 
 #include "base/thread_annotations.h"
+#include "config/driver_config.h"
 #include "drivers/process/frame.h"
 #include "node/safety/driver.h"
 
 namespace rcan::drivers {
 
 struct ProcessDriverOptions {
-  std::vector<std::string> command;  // argv of the process to start (argv[0] searched in PATH)
-  std::string socket;                // or: the path of an already-running driver's socket
-  uint32_t heartbeat_ms = 100;
-  uint32_t heartbeat_timeout_ms = 500;
-  uint32_t startup_timeout_ms = 5000;
-  uint32_t restart_backoff_ms = 200;
-  uint32_t restart_backoff_max_ms = 5000;
+  // driver.process as the file gives it: the command or socket, heartbeats, start-up and
+  // restart back-off (config/driver_config.h). Its envelope keys reach the core through `info`.
+  config::ProcessDriverConfig file;
   uint32_t kill_grace_ms = 500;
   // The hardware envelope describe() reports (the core uses min(config, these)).
   node::DriverInfo info;

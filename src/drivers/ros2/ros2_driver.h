@@ -36,7 +36,7 @@
 #include <vector>
 
 #include "base/thread_annotations.h"
-#include "config/config.h"
+#include "config/driver_config.h"
 #include "drivers/ros2/ros2_msgs.h"
 #include "node/safety/driver.h"
 #include "rcan/result.h"

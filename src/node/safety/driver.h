@@ -145,7 +145,7 @@ struct DriverInfo {
 // Driver health, polled by the SafetyCore on every control-loop tick. A driver that loses its
 // hardware (no odometry from a ROS 2 base, a driver process that died, missed its heartbeat or
 // answered garbage) reports a fault: the core stops it, enters safe stop ("driver_fault"),
-// emits DRIVER_FAULT once (audited), latches ESTOP when SafetyConfig::estop_on_driver_fault,
+// emits DRIVER_FAULT once (audited), latches ESTOP when SafetyConfig::file.estop_on_driver_fault,
 // and refuses motion until the driver is healthy again (DRIVER_RECOVERED).
 struct DriverHealth {
   bool ok = true;

@@ -145,7 +145,7 @@ SafetyCore::SafetyCore(std::unique_ptr<Driver> driver, SafetyConfig cfg, Clock& 
       limits_(effective_limits(cfg_.limits, driver_info_)) {
   latency_ring_.reserve(kLatencyRing);
   last_tick_mono_ = clock_.mono_ms();
-  if (cfg_.estop_on_startup) {
+  if (cfg_.file.estop_on_startup) {
     latched_.store(true);
     latch_ = LatchState{true, "startup", "estop_on_startup", clock_.wall_ms()};
     driver_->stop();
@@ -510,7 +510,7 @@ void SafetyCore::arm_deadman(const std::string& session_id, int64_t timeout_ms) 
     // A new session is armed at the current epoch; re-registering one (a renewing claim) keeps
     // its epoch: only rearm() re-arms after an ESTOP.
     if (fresh) s.armed_epoch = estop_epoch_.load(std::memory_order_acquire);
-    s.timeout_ms = timeout_ms > 0 ? timeout_ms : cfg_.default_heartbeat_ms;
+    s.timeout_ms = timeout_ms > 0 ? timeout_ms : int64_t{cfg_.file.heartbeat_timeout_ms};
     s.last_heartbeat_mono = clock_.mono_ms();
     s.lost = false;
   }
@@ -712,7 +712,7 @@ void SafetyCore::on_health_change(int64_t now, const HealthChange& change,
     }
     enter_safe_stop("driver_fault", "");
     events.push_back(event_at(now, "DRIVER_FAULT", 0, 0, change.detail));
-    if (cfg_.estop_on_driver_fault) (void)estop("driver", change.detail);
+    if (cfg_.file.estop_on_driver_fault) (void)estop("driver", change.detail);
   } else if (change.cleared) {
     std::string was;
     {
@@ -884,7 +884,7 @@ SafetyStatus SafetyCore::status() const {
   s.robot = robot_state();
   s.driver = driver_info_;
   s.limits = limits_;
-  s.policy = cfg_.policy;
+  s.policy = cfg_.file.speed_policy;
   s.estop_latency = estop_latency();
   {
     MutexLock lock(meta_mu_);

@@ -79,20 +79,20 @@ struct SafetyLimits {
 };
 
 struct SafetyConfig {
+  // The `safety` block as the file gives it (config/safety_types.h). The core reads from it
+  // estop_on_startup (always come up latched), estop_on_driver_fault (a driver fault latches
+  // ESTOP, source "driver", besides the safe stop, so that motion needs an explicit RESUME
+  // once the driver is back), heartbeat_timeout_ms (arm_deadman(id, 0)) and speed_policy
+  // (the policy of a dispatch that names none). Its speed caps and joint ranges reach the core
+  // through `limits`, which rcand computes from them and the driver's envelope.
+  config::SafetyConfig file;
   SafetyLimits limits;
-  LimitPolicy policy = LimitPolicy::kClamp;
-  bool estop_on_startup = false;  // safety.estop_on_startup: always come up latched
-  // safety.estop_on_driver_fault: a driver fault latches ESTOP (source "driver") besides the
-  // safe stop, so that motion needs an explicit RESUME once the driver is back.
-  bool estop_on_driver_fault = false;
   int64_t tick_period_ms = 20;  // 50 Hz control loop
   // While the driver is at rest (Driver::at_rest()) and no drive TTL is running, the loop
   // sleeps up to this long instead — woken early by a command, a session or watchdog feed,
   // and always on time for the next heartbeat or watchdog deadline. An idle robot then costs
   // one wake-up a second instead of fifty. 0 or ≤ tick_period_ms: always the full rate.
   int64_t idle_tick_ms = 1000;
-  // arm_deadman(id, 0) → this (rcand: safety.heartbeat_timeout_ms).
-  int64_t default_heartbeat_ms = config::kDefaultHeartbeatTimeoutMs;
   int64_t watchdog_timeout_ms = 0;  // brain watchdog; 0 = disabled
   // A drive still commanded this long after its deadline is stopped by tick() (safe-stop).
   int64_t drive_ttl_grace_ms = 100;
@@ -110,7 +110,7 @@ struct DispatchOptions {
   // A session-less command from a stream: the ESTOP epoch the stream is armed at; refused
   // (rearm_required) while it is older than the current epoch.
   std::optional<uint64_t> stream_epoch;
-  std::optional<LimitPolicy> policy;  // default: SafetyConfig::policy
+  std::optional<LimitPolicy> policy;  // default: SafetyConfig::file.speed_policy
 };
 
 struct DispatchOutcome {
@@ -259,7 +259,7 @@ class SafetyCore {
   // re-checks everything (the state may have changed in between).
   Result<DispatchOutcome> check(const ActuatorCommand& cmd, const DispatchOptions& opts = {}) const;
 
-  // Deadman. timeout_ms <= 0 → SafetyConfig::default_heartbeat_ms. Registering an existing
+  // Deadman. timeout_ms <= 0 → SafetyConfig::file.heartbeat_timeout_ms. Registering an existing
   // session refreshes it.
   void arm_deadman(const std::string& session_id, int64_t timeout_ms = 0);
   // Unknown session → NOT_FOUND. Revives a session whose heartbeat was lost.

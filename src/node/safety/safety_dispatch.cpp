@@ -248,7 +248,7 @@ Result<DispatchOutcome> SafetyCore::precheck(const ActuatorCommand& cmd,
     MutexLock lock(apply_mu_);
     snapshot = driver_->state();
   }
-  auto limited = limit_command(cmd, opts.policy.value_or(cfg_.policy), snapshot, out);
+  auto limited = limit_command(cmd, opts.policy.value_or(cfg_.file.speed_policy), snapshot, out);
   if (!limited.ok()) return std::move(limited).error();
   out.applied = std::move(limited).value();
   return out;
