@@ -80,7 +80,8 @@ constexpr const char* kUsage =
     "  --allow-private-webhooks  deliver webhooks to loopback, private and link-local\n"
     "                      addresses too (by default only to public ones)\n"
     "\n"
-    "The first start creates, in the data directory, an admin API key (admin.key, mode 0600),\n"
+    "The first start creates, in the data directory, an admin API key (admin.key, mode 0600;\n"
+    "only when the database has no live admin key: once per database),\n"
     "the node's Ed25519 key (node-ed25519.seed) and the audit chain secret (audit.secret).\n"
     "SIGTERM or Ctrl-C stops it gracefully.\n";
 

@@ -541,7 +541,7 @@ TEST(RegistryAuthority, TwoInstancesOnOnePostgresDatabase) {
   EXPECT_EQ(body_of(at_b).get("active")->as_bool(), true);
   EXPECT_EQ(str(body_of(at_b), "iss"), "https://reg.example");
   EXPECT_EQ(a.get("/.well-known/jwks.json").body, b.get("/.well-known/jwks.json").body);
-  auto rv = b.send("POST", "/api/v1/revocations", R"({"token":")" + tok + R"("})", b.admin_key());
+  auto rv = b.send("POST", "/api/v1/revocations", R"({"token":")" + tok + R"("})", a.admin_key());
   ASSERT_EQ(rv.status, 201) << rv.body;
   auto feed = body_of(a.get("/api/v1/revocations?since=0"));
   ASSERT_EQ(feed.get("revocations")->as_array().size(), 1u);
@@ -551,7 +551,7 @@ TEST(RegistryAuthority, TwoInstancesOnOnePostgresDatabase) {
                 ->as_bool(),
             false);
   // A key rotated at B is published by A.
-  ASSERT_EQ(b.send("POST", "/api/v1/authority/keys/rotate", "", b.admin_key()).status, 201);
+  ASSERT_EQ(b.send("POST", "/api/v1/authority/keys/rotate", "", a.admin_key()).status, 201);
   std::this_thread::sleep_for(std::chrono::milliseconds(1100));
   EXPECT_EQ(body_of(a.get("/.well-known/jwks.json")).get("keys")->as_array().size(), 2u);
 }

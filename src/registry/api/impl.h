@@ -76,8 +76,15 @@ class RegistryApi::Impl {
              json::Object detail);
   // 503 when the audit log does not take records (no change is made then).
   std::optional<HttpResponse> audit_unavailable();
+  // A fresh key: its stored form and the form presented once ("rcan_<id>_<secret>").
+  struct NewKey {
+    ApiKey key;
+    std::string presented;
+  };
+  Result<NewKey> new_key(const std::string& role, const std::string& rrn, const std::string& label);
   Result<std::string> create_key(const std::string& role, const std::string& rrn,
                                  const std::string& label, const std::string& by);
+  Result<std::optional<std::string>> create_first_admin_key();
   std::string registry_ruri() const { return "rcan://" + o.host + "/registry/rcan-registry/node"; }
   std::string uri_base() const { return "rcan://" + o.host; }
 

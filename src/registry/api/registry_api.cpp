@@ -287,23 +287,44 @@ void RegistryApi::Impl::audit(const std::string& event, const std::string& princ
   }
 }
 
+Result<RegistryApi::Impl::NewKey> RegistryApi::Impl::new_key(const std::string& role,
+                                                             const std::string& rrn,
+                                                             const std::string& label) {
+  NewKey n;
+  n.key.id = random_hex(8);
+  n.key.salt = random_hex(16);
+  std::string secret = random_hex(32);
+  if (n.key.id.empty() || n.key.salt.empty() || secret.empty())
+    return Error(ErrorCode::kInternal, "no randomness for a new API key");
+  n.key.hash = sha256_hex(n.key.salt + secret);
+  n.key.role = role;
+  n.key.rrn = rrn;
+  n.key.label = label;
+  n.key.created_at = now();
+  n.presented = "rcan_" + n.key.id + "_" + secret;
+  return n;
+}
+
 Result<std::string> RegistryApi::Impl::create_key(const std::string& role, const std::string& rrn,
                                                   const std::string& label, const std::string& by) {
-  ApiKey k;
-  k.id = random_hex(8);
-  k.salt = random_hex(16);
-  std::string secret = random_hex(32);
-  if (k.id.empty() || k.salt.empty() || secret.empty())
-    return Error(ErrorCode::kInternal, "no randomness for a new API key");
-  k.hash = sha256_hex(k.salt + secret);
-  k.role = role;
-  k.rrn = rrn;
-  k.label = label;
-  k.created_at = now();
-  if (Status s = store.put_api_key(k); !s.ok()) return s.error();
+  auto n = new_key(role, rrn, label);
+  if (!n.ok()) return n.error();
+  if (Status s = store.put_api_key(n->key); !s.ok()) return s.error();
   audit("REGISTRY_KEY_CREATED", by, registry_ruri(),
-        json::Object{{"key_id", k.id}, {"role", role}, {"rrn", rrn}, {"label", label}});
-  return "rcan_" + k.id + "_" + secret;
+        json::Object{{"key_id", n->key.id}, {"role", role}, {"rrn", rrn}, {"label", label}});
+  return n->presented;
+}
+
+Result<std::optional<std::string>> RegistryApi::Impl::create_first_admin_key() {
+  auto n = new_key("admin", "", "first start");
+  if (!n.ok()) return n.error();
+  auto put = store.put_first_admin_key(n->key);
+  if (!put.ok()) return put.error();
+  if (!*put) return std::optional<std::string>();
+  audit("REGISTRY_KEY_CREATED", "system:first-start", registry_ruri(),
+        json::Object{
+            {"key_id", n->key.id}, {"role", "admin"}, {"rrn", ""}, {"label", "first start"}});
+  return std::optional<std::string>(n->presented);
 }
 
 HttpResponse RegistryApi::Impl::serve(const HttpRequest& req, const Routes::Match& route) {
@@ -352,6 +373,10 @@ void RegistryApi::handle(HttpRequest req, Respond respond) { respond(serve(req))
 Result<std::string> RegistryApi::create_key(const std::string& role, const std::string& rrn,
                                             const std::string& label, const std::string& by) {
   return impl_->create_key(role, rrn, label, by);
+}
+
+Result<std::optional<std::string>> RegistryApi::create_first_admin_key() {
+  return impl_->create_first_admin_key();
 }
 
 const std::string& RegistryApi::manifest() const { return impl_->manifest; }

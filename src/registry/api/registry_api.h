@@ -81,6 +81,11 @@ class RegistryApi : public transport::HttpHandler {
   Result<std::string> create_key(const std::string& role, const std::string& rrn,
                                  const std::string& label, const std::string& by);
 
+  // The database's first admin key (by system:first-start), presented form; nullopt, and no key
+  // made, when the database holds a live admin key already (a restart without admin.key, or
+  // another instance on the same database).
+  Result<std::optional<std::string>> create_first_admin_key();
+
   // The signed node manifest (GET /.well-known/rcan-node.json).
   const std::string& manifest() const;
 
