@@ -138,6 +138,7 @@ void Daemon::build_api(const Flags& flags) {
   for (const std::string& c : flags.trusted_proxies)
     opts.trusted_proxies.push_back(*registry::api::parse_cidr(c));
   opts.webhooks.allow_private = flags.allow_private_webhooks;
+  opts.open_registration = flags.open_registration;
   opts.key_overlap_s = flags.key_overlap_s;
   opts.key_lifetime_s = flags.key_lifetime_s;
   opts.max_token_ttl_s = flags.max_token_ttl_s;

@@ -452,6 +452,49 @@ TEST(RegistryApi, NodesDelegationAndResolve) {
   EXPECT_EQ(d.get("/api/v1/api/v1/robots/" + rrn).status, 200);
 }
 
+// --open-registration (off by default: RegisterGetListSearchUpdateDelete's anonymous POST is 401)
+// takes a robot without credentials, as rcan.dev and rcan-ts's RegistryClient.register do: at the
+// community tier, with its own robot key, under a tight per-address limit; public keys need the
+// same proof of possession as with a key; a wrong key is still refused, never taken as anonymous.
+TEST(RegistryApi, OpenRegistrationTakesAnonymousRobotsAtTheCommunityTier) {
+  TempDir dir;
+  RegistryDaemon d(dir.path(), {"--open-registration"});
+  ASSERT_FALSE(d.url().empty());
+  auto r = d.send("POST", "/api/v1/robots", robot("open-1"));
+  ASSERT_EQ(r.status, 201) << r.body;
+  const json::Value b = body_of(r);
+  EXPECT_EQ(str(b, "verification_tier"), "community");
+  const std::string rrn = str(b, "rrn"), robot_key = str(b, "api_key");
+  ASSERT_FALSE(robot_key.empty());
+  EXPECT_EQ(d.send("PATCH", "/api/v1/robots/" + rrn, R"({"description":"mine"})", robot_key).status,
+            200);
+  // Names registered already are not an anonymous caller's to adopt.
+  EXPECT_EQ(d.send("POST", "/api/v1/robots", robot("open-1")).status, 409);
+  EXPECT_EQ(d.send("POST", "/api/v1/robots", robot("open-2"), "not-a-key").status, 401);
+  // Keys without a proof are refused; with one, the robot is registered as proven.
+  auto k = keys::generate();
+  ASSERT_TRUE(k.ok());
+  auto unproven = d.send(
+      "POST", "/api/v1/robots",
+      robot("open-3", R"(,"ed25519_public_key":")" + base64url_encode(k->pub.ed25519_pk) + "\""));
+  EXPECT_EQ(unproven.status, 400) << unproven.body;
+  EXPECT_NE(unproven.body.find("proof_required"), std::string::npos) << unproven.body;
+  auto proven = d.register_proven("", "acme", "arm", "v1", "open-4");
+  ASSERT_EQ(proven.status, 201) << proven.body;
+  EXPECT_TRUE(body_of(proven).get("identity_proven")->as_bool());
+  // Five anonymous attempts an address (these were four), then one a minute; a key is not held
+  // back by them.
+  EXPECT_EQ(d.send("POST", "/api/v1/robots", robot("open-5")).status, 201);
+  auto limited = d.send("POST", "/api/v1/robots", robot("open-6"));
+  EXPECT_EQ(limited.status, 429) << limited.body;
+  EXPECT_NE(limited.body.find("open_registration"), std::string::npos) << limited.body;
+  EXPECT_EQ(d.send("POST", "/api/v1/robots", robot("open-6"), d.admin_key()).status, 201);
+  std::string audit;
+  for (const auto& e : std::filesystem::directory_iterator(dir.file("audit")))
+    if (e.path().filename().string().rfind("seg-", 0) == 0) audit += read_file(e.path().string());
+  EXPECT_NE(audit.find("\"principal\":\"anonymous:127.0.0.1\""), std::string::npos);
+}
+
 TEST(RegistryApi, PrefixNodeMintsPrefixedRrns) {
   TempDir dir;
   RegistryDaemon d(dir.path(), {"--prefix", "ACME", "--public-url", "https://reg.acme.example"});

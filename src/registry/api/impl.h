@@ -63,6 +63,8 @@ class RegistryApi::Impl {
   bool proves_credential(const HttpRequest& req);
   // 429 when `key_id`'s write bucket is empty.
   std::optional<HttpResponse> limit_key(const std::string& key_id);
+  // The client's address (behind a trusted proxy: the one it forwarded for).
+  std::string client_of(const HttpRequest& req) const;
   // A write on /robots/{rrn}: the authenticated, rate-limited caller and the live robot, or
   // nullopt with the refusal (the reference's wording) in `refusal`.
   struct RobotWrite {
@@ -90,6 +92,18 @@ class RegistryApi::Impl {
 
   // ---- robots (robots_routes.cpp)
   HttpResponse register_robot(const HttpRequest& req);
+  // Who registers: an authenticated admin or registrant, or with open_registration anyone who
+  // sends no credentials at all (a wrong key is still refused) within the address's limit.
+  // nullopt with `err` set when refused.
+  struct Registrant {
+    std::optional<Caller> caller;  // nullopt: anonymous
+    std::string owner_key_id;      // the record's owner (kAnonymousOwner when anonymous)
+    std::string principal;         // for the audit record
+  };
+  std::optional<Registrant> registrant_of(const HttpRequest& req, HttpResponse& err);
+  // The owner of an anonymously registered robot: no key's id (ids are 16 hex digits), so no
+  // key owns it but its own robot key — and not "" (a synced copy's mark).
+  static constexpr const char* kAnonymousOwner = "anonymous";
   HttpResponse list_robots(const HttpRequest& req);
   HttpResponse search_robots(const HttpRequest& req);
   HttpResponse get_robot(const std::string& rrn);
@@ -189,6 +203,7 @@ class RegistryApi::Impl {
   std::string manifest;
   Metrics metrics;
   RateLimiter write_key, write_addr, anon_addr, read_addr;
+  RateLimiter open_register_addr;  // anonymous registrations (ApiOptions::open_registration)
   // Revocations by one non-admin API key (docs/THREATS.md T4): every robot that trusts this
   // registry keeps each one, so a registrant may not turn its own tokens into a flood of them.
   RateLimiter revoke_by_key{BucketConfig{kRevocationsPerKeyPerS, kRevocationBurstPerKey}};

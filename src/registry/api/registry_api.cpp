@@ -124,7 +124,8 @@ RegistryApi::Impl::Impl(Store& s, audit::AuditLog* a, ApiOptions opts)
       write_key(o.write_per_key),
       write_addr(o.write_per_address),
       anon_addr(o.anonymous_per_address),
-      read_addr(o.read_per_address) {
+      read_addr(o.read_per_address),
+      open_register_addr(o.open_registration_per_address) {
   while (!o.public_url.empty() && o.public_url.back() == '/') o.public_url.pop_back();
   if (o.node_seed.size() != ed25519::kSeedBytes) o.node_seed = ed25519::random_seed();
   auto pub = ed25519::public_key_from_seed(o.node_seed);
@@ -261,6 +262,34 @@ std::optional<HttpResponse> RegistryApi::Impl::limit_key(const std::string& key_
   return std::nullopt;
 }
 
+std::string RegistryApi::Impl::client_of(const HttpRequest& req) const {
+  return client_address(address_of(req.remote_addr), forwarded_for(req), o.trusted_proxies);
+}
+
+std::optional<RegistryApi::Impl::Registrant> RegistryApi::Impl::registrant_of(
+    const HttpRequest& req, HttpResponse& err) {
+  if (o.open_registration && req.header("authorization").empty()) {
+    const std::string addr = client_of(req);
+    if (int64_t wait = open_register_addr.take(addr, steady_us()); wait > 0) {
+      err = too_many(wait, "open_registration");
+      return std::nullopt;
+    }
+    return Registrant{std::nullopt, kAnonymousOwner, "anonymous:" + addr};
+  }
+  auto caller = authenticate(req, err);
+  if (!caller) return std::nullopt;
+  if (auto l = limit_key(caller->key.id)) {
+    err = *l;
+    return std::nullopt;
+  }
+  if (!caller->is("admin") && !caller->is("registrant")) {
+    err = project_error(ErrorCode::kInsufficientPrivileges,
+                        "registering needs a registrant or admin key", "authorization", "role");
+    return std::nullopt;
+  }
+  return Registrant{caller, caller->key.id, "apikey:" + caller->key.id};
+}
+
 std::optional<HttpResponse> RegistryApi::Impl::audit_unavailable() {
   if (audit_log == nullptr || audit_log->available()) return std::nullopt;
   return project_error(ErrorCode::kAuditUnavailable,
@@ -342,8 +371,7 @@ HttpResponse RegistryApi::Impl::serve(const HttpRequest& req, const Routes::Matc
   // The client's address (behind a trusted proxy: the one it forwarded for). A write is judged
   // by who proves to send it first: one that proves a credential spends its address's bucket of
   // such writes (and its key's, in the route), never the anonymous one a flood empties.
-  const std::string addr =
-      client_address(address_of(req.remote_addr), forwarded_for(req), o.trusted_proxies);
+  const std::string addr = client_of(req);
   RateLimiter& bucket = !write ? read_addr : proves_credential(req) ? write_addr : anon_addr;
   if (int64_t wait = bucket.take(addr, steady_us()); wait > 0)
     return too_many(wait, &bucket == &anon_addr ? "anonymous" : "address");

@@ -93,12 +93,8 @@ std::optional<HttpResponse> RegistryApi::Impl::check_proof(const Registration& r
 
 HttpResponse RegistryApi::Impl::register_robot(const HttpRequest& req) {
   HttpResponse err;
-  auto caller = authenticate(req, err);
-  if (!caller) return err;
-  if (auto l = limit_key(caller->key.id)) return *l;
-  if (!caller->is("admin") && !caller->is("registrant"))
-    return project_error(ErrorCode::kInsufficientPrivileges,
-                         "registering needs a registrant or admin key", "authorization", "role");
+  auto who = registrant_of(req, err);
+  if (!who) return err;
   std::string t = now();
   auto reg = parse_registration(req.body, t);
   if (!reg.ok()) return ref_error(400, reg.error().message);
@@ -117,7 +113,7 @@ HttpResponse RegistryApi::Impl::register_robot(const HttpRequest& req) {
   n.ed25519_pub = reg->ed25519_pub;
   n.mldsa65_pub = reg->mldsa65_pub;
   n.endpoints_json = reg->endpoints_json;
-  n.owner_key_id = caller->key.id;
+  n.owner_key_id = who->owner_key_id;
   n.now = t;
   if (reg->proof && !ruri_of(reg->metadata_json).empty()) {
     // The RURI its tokens will name (docs/THREATS.md T1): the robot the proof named, and no
@@ -136,7 +132,7 @@ HttpResponse RegistryApi::Impl::register_robot(const HttpRequest& req) {
   if (!done.ok()) return store_error(done.error());
   const Robot& r = done->robot;
   // Names registered by another registrant are not this caller's to adopt (docs/THREATS.md T3).
-  if (!done->created && !owns(*caller, r))
+  if (!done->created && (!who->caller || !owns(*who->caller, r)))
     return ref_error(409, "these names are registered as " + r.rrn +
                               " by another registrant: an admin must remove that record first");
   if (!done->created)
@@ -144,7 +140,7 @@ HttpResponse RegistryApi::Impl::register_robot(const HttpRequest& req) {
                                            {"rcan_uri", r.rcan_uri},
                                            {"message", "Robot already registered"},
                                            {"already_existed", true}});
-  std::string principal = "apikey:" + caller->key.id;
+  const std::string& principal = who->principal;
   auto key = create_key("robot", r.rrn, "robot " + r.rrn, principal);
   audit("REGISTRY_ROBOT_REGISTERED", principal, r.rcan_uri,
         json::Object{{"rrn", r.rrn}, {"proof_of_possession", reg->proof.has_value()}});
