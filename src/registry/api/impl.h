@@ -118,6 +118,9 @@ class RegistryApi::Impl {
   // canonical form names version v1, as rcand registers itself).
   HttpResponse resolve_uri(const HttpRequest& req);
   json::Object robot_json(const Robot& r) const;
+  // What a deleted robot is to anyone (sync, webhooks): its RRN, status, deleted and the time
+  // of the deletion — none of its content.
+  static json::Object tombstone_json(const Robot& r);
 
   // ---- keys, nodes, challenges, manifest (admin_routes.cpp)
   HttpResponse challenge(bool post);  // 200 on GET, 201 on POST
@@ -141,7 +144,7 @@ class RegistryApi::Impl {
   HttpResponse list_webhooks(const HttpRequest& req);
   HttpResponse add_webhook(const HttpRequest& req);
   HttpResponse delete_webhook(const HttpRequest& req, const std::string& id);
-  // Queues `event` about `r` for its namespace's subscriptions (record.deleted: `r` as it was).
+  // Queues `event` about `r` for its namespace's subscriptions (a deleted `r`: its tombstone).
   void notify(const char* event, const Robot& r);
 
   // ---- the token authority (authority.cpp, authority_routes.cpp)

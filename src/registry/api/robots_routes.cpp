@@ -63,6 +63,11 @@ json::Object RegistryApi::Impl::robot_json(const Robot& r) const {
   return j;
 }
 
+json::Object RegistryApi::Impl::tombstone_json(const Robot& r) {
+  return json::Object{
+      {"rrn", r.rrn}, {"status", "deleted"}, {"deleted", true}, {"updated_at", r.updated_at}};
+}
+
 std::optional<HttpResponse> RegistryApi::Impl::check_proof(const Registration& r) {
   bool keys = !r.ed25519_pub.empty() || !r.mldsa65_pub.empty();
   if (!keys && !r.proof) return std::nullopt;
@@ -341,12 +346,15 @@ HttpResponse RegistryApi::Impl::delete_robot(const HttpRequest& req, const std::
   const Robot& robot = w->robot;
   if (!owns(w->caller, robot)) return ref_error(403, "Invalid API key");
   if (auto a = audit_unavailable()) return *a;
-  auto done = store.delete_robot(robot.rrn, now());
+  Robot gone = robot;
+  gone.deleted = true;
+  gone.updated_at = now();
+  auto done = store.delete_robot(robot.rrn, gone.updated_at);
   if (!done.ok()) return store_error(done.error());
   if (!*done) return ref_error(404, "Robot not found: " + rrn);
   audit("REGISTRY_ROBOT_DELETED", "apikey:" + w->caller.key.id, robot.rcan_uri,
         json::Object{{"rrn", robot.rrn}});
-  notify("record.deleted", robot);
+  notify("record.deleted", gone);
   return json_response(200,
                        json::Object{{"message", "Robot registration removed"}, {"rrn", robot.rrn}});
 }

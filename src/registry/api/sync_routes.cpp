@@ -55,8 +55,7 @@ HttpResponse RegistryApi::Impl::sync(const HttpRequest& req) {
   json::Array records;
   for (const Robot& r : *rows) {
     if (r.deleted) {
-      records.emplace_back(json::Object{
-          {"rrn", r.rrn}, {"status", "deleted"}, {"deleted", true}, {"updated_at", r.updated_at}});
+      records.emplace_back(tombstone_json(r));
       continue;
     }
     json::Object j = robot_json(r);
