@@ -138,6 +138,7 @@ void Daemon::build_api(const Flags& flags) {
   for (const std::string& c : flags.trusted_proxies)
     opts.trusted_proxies.push_back(*registry::api::parse_cidr(c));
   opts.webhooks.allow_private = flags.allow_private_webhooks;
+  opts.open_registration = flags.open_registration;
   opts.key_overlap_s = flags.key_overlap_s;
   opts.key_lifetime_s = flags.key_lifetime_s;
   opts.max_token_ttl_s = flags.max_token_ttl_s;
@@ -155,9 +156,19 @@ void Daemon::build_api(const Flags& flags) {
 Status Daemon::create_first_admin_key() {
   std::string key_file = dir_ + "/admin.key";
   if (fs::exists(key_file)) return Status::Ok();
-  auto key = api_->create_key("admin", "", "first start", "system:first-start");
+  // Made once per database: a database with a live admin key (restored without admin.key, the
+  // key kept elsewhere, another instance's) gets none, and no file is written.
+  auto key = api_->create_first_admin_key();
   if (!key.ok()) return failed("admin key: ", key.error());
-  if (Status s = write_private_file(key_file, *key); !s.ok()) return s;
+  if (!key->has_value()) {
+    log(LogLevel::kInfo, "admin_key_exists",
+        json::Object{{"admin_key_file", key_file},
+                     {"message",
+                      "no admin.key here and the database has admin keys: using those (no new "
+                      "admin key is made)"}});
+    return Status::Ok();
+  }
+  if (Status s = write_private_file(key_file, **key); !s.ok()) return s;
   // The key stays in its file: a command line is visible to every local user (ps).
   std::fprintf(stderr,
                "\nrcan-registry: a new admin API key is in %s (mode 0600; shown only there).\n"

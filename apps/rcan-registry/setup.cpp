@@ -37,6 +37,7 @@ constexpr const char* kUsage =
     "                     [--webhook-timeout-ms MS] [--sync-from URL]… [--sync-delegations]\n"
     "                     [--sync-interval S]\n"
     "                     [--allow-http-node-urls] [--allow-private-webhooks]\n"
+    "                     [--open-registration]\n"
     "\n"
     "An RCAN robot registry (docs/REGISTRY.md): robots and their RRNs, resolve, federation\n"
     "nodes and the signed node manifest, compatible with rcan.dev and the official SDKs.\n"
@@ -79,8 +80,11 @@ constexpr const char* kUsage =
     "  --allow-http-node-urls  accept http:// node, webhook and sync URLs (local tests only)\n"
     "  --allow-private-webhooks  deliver webhooks to loopback, private and link-local\n"
     "                      addresses too (by default only to public ones)\n"
+    "  --open-registration  register robots without an API key too (as rcan.dev): at the\n"
+    "                      community tier, five an address, then one a minute\n"
     "\n"
-    "The first start creates, in the data directory, an admin API key (admin.key, mode 0600),\n"
+    "The first start creates, in the data directory, an admin API key (admin.key, mode 0600;\n"
+    "only when the database has no live admin key: once per database),\n"
     "the node's Ed25519 key (node-ed25519.seed) and the audit chain secret (audit.secret).\n"
     "SIGTERM or Ctrl-C stops it gracefully.\n";
 
@@ -121,7 +125,7 @@ bool database_has_password(std::string_view spec) {
 // Flags that take no value (true in a config file).
 bool is_switch(const std::string& flag) {
   return flag == "--allow-http-node-urls" || flag == "--sync-delegations" ||
-         flag == "--allow-private-webhooks";
+         flag == "--allow-private-webhooks" || flag == "--open-registration";
 }
 
 // A YAML scalar as the flag's value; a relative path (data-dir, a SQLite database) is the
@@ -267,6 +271,8 @@ std::optional<Flags> parse_args(const std::vector<std::string>& args, int& exit_
       f.sync_delegations = true;
     } else if (s == "--allow-private-webhooks") {
       f.allow_private_webhooks = true;
+    } else if (s == "--open-registration") {
+      f.open_registration = true;
     } else if (s == "--trusted-proxy") {
       if (!value(v)) return std::nullopt;
       if (auto c = registry::api::parse_cidr(v); !c.ok()) {

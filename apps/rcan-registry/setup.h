@@ -20,6 +20,7 @@ struct Flags {
   double write_rate = 10, write_burst = 20, addr_write_rate = 50, anon_rate = 20, read_rate = 2000;
   std::vector<std::string> trusted_proxies;  // --trusted-proxy CIDR, repeatable (checked)
   bool allow_private_webhooks = false;
+  bool open_registration = false;  // --open-registration: anonymous POST /api/v1/robots
   int io_threads = 2;
   int64_t key_overlap_s = 600, key_lifetime_s = 2592000, max_token_ttl_s = 3600;
   int64_t device_ttl_s = 600;

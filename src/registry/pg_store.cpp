@@ -23,6 +23,7 @@ using detail::db_error;
 constexpr int kSchemaVersion = 1;
 constexpr size_t kPoolSize = 8;
 constexpr long long kSchemaLock = 0x7263616e72656769;  // "rcanregi": serialises schema creation
+constexpr long long kAdminLock = 0x7263616e61646d6e;   // "rcanadmn": the first admin key
 
 const char* const kSchema = R"SQL(
 CREATE TABLE IF NOT EXISTS registry_meta (
@@ -411,6 +412,28 @@ class PgStore final : public Store {
             params(k.id, k.salt, k.hash, k.role, k.rrn, k.label, k.created_at, k.revoked_at));
     if (!rows) return rows.error();
     return Status::Ok();
+  }
+  Result<bool> put_first_admin_key(const ApiKey& k) override {
+    // The check and the insert in one transaction under an advisory lock: the insert's
+    // statement sees every admin key an instance that held the lock before committed.
+    auto lease = pool_.acquire();
+    if (!lease) return lease.error();
+    Conn& c = **lease;
+    if (Status s = c.script("BEGIN"); !s.ok()) return s.error();
+    auto lock = c.exec("SELECT pg_advisory_xact_lock(" + std::to_string(kAdminLock) + ")", {});
+    auto ins = lock ? c.exec(
+                          "INSERT INTO api_keys (id, salt, hash, role, rrn, label, created_at, "
+                          "revoked_at) SELECT $1, $2, $3, 'admin', $4, $5, $6, $7 WHERE NOT "
+                          "EXISTS (SELECT 1 FROM api_keys WHERE role = 'admin' AND "
+                          "revoked_at = '')",
+                          params(k.id, k.salt, k.hash, k.rrn, k.label, k.created_at, k.revoked_at))
+                    : Result<Rows>(lock.error());
+    if (!ins) {
+      (void)c.script("ROLLBACK");
+      return ins.error();
+    }
+    if (Status s = c.script("COMMIT"); !s.ok()) return s.error();
+    return ins->affected() > 0;
   }
   Result<std::optional<ApiKey>> get_api_key(std::string_view id) override {
     auto v = api_keys(

@@ -356,6 +356,14 @@ class SqliteStore final : public Store {
     if (!n) return n.error();
     return Status::Ok();
   }
+  Result<bool> put_first_admin_key(const ApiKey& k) override {
+    // One statement: SQLite takes the database's write lock for it whole.
+    return changed(
+        "INSERT INTO api_keys (id, salt, hash, role, rrn, label, created_at, revoked_at) "
+        "SELECT ?, ?, ?, 'admin', ?, ?, ?, ? WHERE NOT EXISTS "
+        "(SELECT 1 FROM api_keys WHERE role = 'admin' AND revoked_at = '')",
+        k.id, k.salt, k.hash, k.rrn, k.label, k.created_at, k.revoked_at);
+  }
   Result<std::optional<ApiKey>> get_api_key(std::string_view id) override {
     auto v = api_keys(
         "SELECT id, salt, hash, role, rrn, label, created_at, revoked_at "

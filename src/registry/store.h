@@ -203,6 +203,10 @@ class Store {
   virtual Result<std::optional<ApiKey>> get_api_key(std::string_view id) = 0;
   virtual Result<bool> revoke_api_key(std::string_view id, std::string_view now) = 0;
   virtual Result<std::vector<ApiKey>> list_api_keys() = 0;
+  // The database's first admin key: `k` (role admin, id new) is inserted only when the database
+  // holds no live admin key — one decision for every instance sharing the database. false (and
+  // nothing inserted) when it holds one.
+  virtual Result<bool> put_first_admin_key(const ApiKey& k) = 0;
 
   // ---- delegations
   // false when the prefix is already delegated.

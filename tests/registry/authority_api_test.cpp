@@ -7,8 +7,10 @@
 #include <sys/stat.h>
 
 #include <chrono>
+#include <filesystem>
 #include <fstream>
 #include <thread>
+#include <vector>
 
 #include "postgres.h"
 #include "rcan/crypto/ed25519.h"
@@ -50,6 +52,32 @@ bool write_file(const std::string& path, const std::string& text) {
   std::ofstream f(path, std::ios::binary);
   f << text;
   return static_cast<bool>(f);
+}
+
+// The registry's audit records (one JSON object a line in audit/seg-*), in no particular order.
+std::vector<json::Value> audit_records(const TempDir& dir) {
+  std::vector<json::Value> out;
+  for (const auto& e : std::filesystem::directory_iterator(dir.file("audit"))) {
+    if (e.path().filename().string().rfind("seg-", 0) != 0) continue;
+    std::string text = read_file(e.path().string());
+    size_t at = 0;
+    while (at < text.size()) {
+      size_t nl = text.find('\n', at);
+      if (nl == std::string::npos) nl = text.size();
+      auto v = json::parse(text.substr(at, nl - at));
+      if (v.ok()) out.push_back(std::move(*v));
+      at = nl + 1;
+    }
+  }
+  return out;
+}
+
+// The value of an unlabelled counter in the /metrics text (-1 when absent).
+double metric(const RegistryDaemon& d, const std::string& name) {
+  auto m = d.get("/metrics");
+  size_t at = m.body.find("\n" + name + " ");
+  if (at == std::string::npos) return -1;
+  return std::stod(m.body.substr(at + name.size() + 2));
 }
 
 std::string oauth_error_of(const HttpReply& r) { return str(body_of(r), "error"); }
@@ -347,6 +375,38 @@ TEST(RegistryAuthority, IntrospectionAndRevocationsFeed) {
   EXPECT_EQ(body_of(introspect(later, s.robot_key_a)).get("active")->as_bool(), true);
 }
 
+// Every revocation leaves a REGISTRY_TOKEN_REVOKED record naming it (its feed seq, jti, sub);
+// none of the appends fails.
+TEST(RegistryAuthority, RevocationsAreAudited) {
+  TempDir dir;
+  RegistryDaemon d(dir.path());
+  auto by_jti =
+      d.send("POST", "/api/v1/revocations", R"({"jti":"j-1","reason":"lost"})", d.admin_key());
+  ASSERT_EQ(by_jti.status, 201) << by_jti.body;
+  auto by_sub = d.send("POST", "/api/v1/revocations", R"({"sub":"client-9"})", d.admin_key());
+  ASSERT_EQ(by_sub.status, 201) << by_sub.body;
+  const int64_t seq_jti = num(body_of(by_jti), "seq"), seq_sub = num(body_of(by_sub), "seq");
+  std::vector<json::Value> revoked;
+  for (auto& r : audit_records(dir))
+    if (str(r, "event") == "REGISTRY_TOKEN_REVOKED") revoked.push_back(r);
+  ASSERT_EQ(revoked.size(), 2u);
+  bool saw_jti = false, saw_sub = false;
+  for (const auto& r : revoked) {
+    const json::Value* detail = r.get("detail");
+    ASSERT_NE(detail, nullptr);
+    if (str(*detail, "jti") == "j-1") {
+      saw_jti = true;
+      EXPECT_EQ(num(*detail, "revocation_seq"), seq_jti);
+      EXPECT_EQ(str(*detail, "reason"), "lost");
+    } else if (str(*detail, "sub") == "client-9") {
+      saw_sub = true;
+      EXPECT_EQ(num(*detail, "revocation_seq"), seq_sub);
+    }
+  }
+  EXPECT_TRUE(saw_jti && saw_sub);
+  EXPECT_EQ(metric(d, "rcan_registry_audit_failures_total"), 0);
+}
+
 TEST(RegistryAuthority, KeyRotationOverlap) {
   TempDir dir;
   RegistryDaemon d(dir.path(), {"--key-overlap", "2"});
@@ -481,7 +541,7 @@ TEST(RegistryAuthority, TwoInstancesOnOnePostgresDatabase) {
   EXPECT_EQ(body_of(at_b).get("active")->as_bool(), true);
   EXPECT_EQ(str(body_of(at_b), "iss"), "https://reg.example");
   EXPECT_EQ(a.get("/.well-known/jwks.json").body, b.get("/.well-known/jwks.json").body);
-  auto rv = b.send("POST", "/api/v1/revocations", R"({"token":")" + tok + R"("})", b.admin_key());
+  auto rv = b.send("POST", "/api/v1/revocations", R"({"token":")" + tok + R"("})", a.admin_key());
   ASSERT_EQ(rv.status, 201) << rv.body;
   auto feed = body_of(a.get("/api/v1/revocations?since=0"));
   ASSERT_EQ(feed.get("revocations")->as_array().size(), 1u);
@@ -491,7 +551,7 @@ TEST(RegistryAuthority, TwoInstancesOnOnePostgresDatabase) {
                 ->as_bool(),
             false);
   // A key rotated at B is published by A.
-  ASSERT_EQ(b.send("POST", "/api/v1/authority/keys/rotate", "", b.admin_key()).status, 201);
+  ASSERT_EQ(b.send("POST", "/api/v1/authority/keys/rotate", "", a.admin_key()).status, 201);
   std::this_thread::sleep_for(std::chrono::milliseconds(1100));
   EXPECT_EQ(body_of(a.get("/.well-known/jwks.json")).get("keys")->as_array().size(), 2u);
 }

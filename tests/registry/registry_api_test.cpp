@@ -35,6 +35,17 @@ int64_t num(const json::Value& v, std::string_view key) {
   return m != nullptr && m->is_int() ? m->as_int() : -1;
 }
 
+// The admin keys (live or revoked) the registry holds, as GET /api/v1/keys lists them.
+int admin_keys(const RegistryDaemon& d, const std::string& admin) {
+  auto r = d.get("/api/v1/keys", admin);
+  EXPECT_EQ(r.status, 200) << r.body;
+  const json::Value v = body_of(r);
+  int n = 0;
+  if (const json::Value* keys = v.get("keys"); keys != nullptr && keys->is_array())
+    for (const auto& k : keys->as_array()) n += str(k, "role") == "admin";
+  return n;
+}
+
 std::string robot(const std::string& device, const std::string& extra = {}) {
   return R"({"manufacturer":"Acme Robotics","model":"arm","version":"v2","device_id":")" + device +
          "\"" + extra + "}";
@@ -441,6 +452,49 @@ TEST(RegistryApi, NodesDelegationAndResolve) {
   EXPECT_EQ(d.get("/api/v1/api/v1/robots/" + rrn).status, 200);
 }
 
+// --open-registration (off by default: RegisterGetListSearchUpdateDelete's anonymous POST is 401)
+// takes a robot without credentials, as rcan.dev and rcan-ts's RegistryClient.register do: at the
+// community tier, with its own robot key, under a tight per-address limit; public keys need the
+// same proof of possession as with a key; a wrong key is still refused, never taken as anonymous.
+TEST(RegistryApi, OpenRegistrationTakesAnonymousRobotsAtTheCommunityTier) {
+  TempDir dir;
+  RegistryDaemon d(dir.path(), {"--open-registration"});
+  ASSERT_FALSE(d.url().empty());
+  auto r = d.send("POST", "/api/v1/robots", robot("open-1"));
+  ASSERT_EQ(r.status, 201) << r.body;
+  const json::Value b = body_of(r);
+  EXPECT_EQ(str(b, "verification_tier"), "community");
+  const std::string rrn = str(b, "rrn"), robot_key = str(b, "api_key");
+  ASSERT_FALSE(robot_key.empty());
+  EXPECT_EQ(d.send("PATCH", "/api/v1/robots/" + rrn, R"({"description":"mine"})", robot_key).status,
+            200);
+  // Names registered already are not an anonymous caller's to adopt.
+  EXPECT_EQ(d.send("POST", "/api/v1/robots", robot("open-1")).status, 409);
+  EXPECT_EQ(d.send("POST", "/api/v1/robots", robot("open-2"), "not-a-key").status, 401);
+  // Keys without a proof are refused; with one, the robot is registered as proven.
+  auto k = keys::generate();
+  ASSERT_TRUE(k.ok());
+  auto unproven = d.send(
+      "POST", "/api/v1/robots",
+      robot("open-3", R"(,"ed25519_public_key":")" + base64url_encode(k->pub.ed25519_pk) + "\""));
+  EXPECT_EQ(unproven.status, 400) << unproven.body;
+  EXPECT_NE(unproven.body.find("proof_required"), std::string::npos) << unproven.body;
+  auto proven = d.register_proven("", "acme", "arm", "v1", "open-4");
+  ASSERT_EQ(proven.status, 201) << proven.body;
+  EXPECT_TRUE(body_of(proven).get("identity_proven")->as_bool());
+  // Five anonymous attempts an address (these were four), then one a minute; a key is not held
+  // back by them.
+  EXPECT_EQ(d.send("POST", "/api/v1/robots", robot("open-5")).status, 201);
+  auto limited = d.send("POST", "/api/v1/robots", robot("open-6"));
+  EXPECT_EQ(limited.status, 429) << limited.body;
+  EXPECT_NE(limited.body.find("open_registration"), std::string::npos) << limited.body;
+  EXPECT_EQ(d.send("POST", "/api/v1/robots", robot("open-6"), d.admin_key()).status, 201);
+  std::string audit;
+  for (const auto& e : std::filesystem::directory_iterator(dir.file("audit")))
+    if (e.path().filename().string().rfind("seg-", 0) == 0) audit += read_file(e.path().string());
+  EXPECT_NE(audit.find("\"principal\":\"anonymous:127.0.0.1\""), std::string::npos);
+}
+
 TEST(RegistryApi, PrefixNodeMintsPrefixedRrns) {
   TempDir dir;
   RegistryDaemon d(dir.path(), {"--prefix", "ACME", "--public-url", "https://reg.acme.example"});
@@ -493,6 +547,41 @@ TEST(RegistryApi, RestartKeepsDataAndAuditsChanges) {
     EXPECT_NE(audit.find(ev), std::string::npos) << ev;
 }
 
+// The first admin key is made once per database: a start that finds no admin.key in its data
+// directory (restored from a backup, or the key moved to a vault) but admin keys in the database
+// mints none — it says so and the old key goes on working.
+TEST(RegistryApi, MissingAdminKeyFileMintsNoNewAdminKey) {
+  TempDir dir;
+  std::string admin;
+  {
+    RegistryDaemon d(dir.path());
+    admin = d.admin_key();
+    ASSERT_FALSE(admin.empty());
+    EXPECT_EQ(admin_keys(d, admin), 1);
+    EXPECT_EQ(d.proc().stop(SIGTERM, 10000), 0);
+  }
+  ASSERT_TRUE(std::filesystem::remove(dir.file("admin.key")));
+  RegistryDaemon d(dir.path());
+  EXPECT_FALSE(std::filesystem::exists(dir.file("admin.key")));
+  EXPECT_EQ(d.proc().err().find("a new admin API key"), std::string::npos);
+  EXPECT_NE(d.proc().err().find("\"event\":\"admin_key_exists\""), std::string::npos)
+      << d.proc().err();
+  EXPECT_EQ(admin_keys(d, admin), 1);
+  EXPECT_EQ(d.send("POST", "/api/v1/robots", robot("after-restore"), admin).status, 201);
+}
+
+// Instances on one PostgreSQL database share its one first admin key: only the first start
+// writes admin.key; the others mint none.
+TEST(RegistryApi, InstancesOnOnePostgresDatabaseMintOneAdminKey) {
+  Postgres pg;
+  TempDir a_dir, b_dir;
+  RegistryDaemon a(a_dir.path(), {"--database", pg.url()});
+  RegistryDaemon b(b_dir.path(), {"--database", pg.url()});
+  ASSERT_FALSE(a.admin_key().empty());
+  EXPECT_TRUE(b.admin_key().empty());
+  EXPECT_EQ(admin_keys(b, a.admin_key()), 1);
+}
+
 // Two stateless instances on one PostgreSQL database (--database postgresql://…): what one
 // registers, the other serves; keys made on one work on the other; concurrent registrations of
 // one robot through both mint one RRN.
@@ -519,7 +608,7 @@ TEST(RegistryApi, TwoInstancesOnOnePostgresDatabase) {
   for (int i = 0; i < 8; ++i)
     threads.emplace_back([&, i] {
       const RegistryDaemon& d = i % 2 == 0 ? a : b;
-      auto x = d.send("POST", "/api/v1/robots", robot("same"), d.admin_key());
+      auto x = d.send("POST", "/api/v1/robots", robot("same"), a.admin_key());  // one database
       rrns[static_cast<size_t>(i)] = str(body_of(x), "rrn");
     });
   for (auto& t : threads) t.join();

@@ -1,9 +1,11 @@
 // A real rcan-registry started by a test (RCAN_REGISTRY_PATH) on an ephemeral loopback port,
-// with its data directory, URL and the admin key it wrote on first start. Header-only.
+// with its data directory, URL and the admin key it wrote on first start (empty when the
+// database had admin keys already). Header-only.
 #pragma once
 
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <unistd.h>
 
 #include <string>
 #include <vector>
@@ -36,7 +38,8 @@ class RegistryDaemon {
     }
     url_ = v->get("url")->as_string();
     port_ = static_cast<uint16_t>(std::stoi(url_.substr(url_.rfind(':') + 1)));
-    admin_ = read_file(dir_ + "/admin.key");
+    // Only a start that made the database's first admin key writes admin.key.
+    if (::access((dir_ + "/admin.key").c_str(), F_OK) == 0) admin_ = read_file(dir_ + "/admin.key");
   }
   ~RegistryDaemon() {
     if (proc_.running()) proc_.stop(SIGTERM, 10000);

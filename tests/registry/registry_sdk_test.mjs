@@ -1,8 +1,10 @@
 // rcan-ts 3.4.2 (third_party/rcan-ts, built by scripts/install-deps.sh) as a real client of a live
 // rcan-registry (docs/REGISTRY.md): RegistryClient get/list/search/patch/delete and NodeClient
 // getNodeManifest/verifyNode/listNodes/discover/resolve. rcan-ts's register() sends no
-// Authorization header, so the registry refuses it (401, shown as RCANRegistryError); robots are
-// registered with the admin key over fetch and then handled through the SDK with their own key.
+// Authorization header, so the registry refuses it (401, shown as RCANRegistryError) unless it
+// runs with --open-registration (then it registers a community robot, as rcan.dev does); robots
+// are registered with the admin key over fetch and then handled through the SDK with their own
+// key.
 //
 // Exit 0 pass, 1 fail, 77 skip (CTest SKIP_RETURN_CODE): RCAN_REGISTRY_PATH missing, or the SDK
 // not built (dist/index.mjs).
@@ -150,10 +152,32 @@ async function federation() {
   }
 }
 
+// --open-registration: RegistryClient.register without a key registers a community robot and
+// returns its key. On SQLite in both runs (the four PostgreSQL databases are the others').
+async function openRegistration() {
+  const reg = await start(['--open-registration']);
+  try {
+    const anon = new sdk.RegistryClient({ baseUrl: reg.url });
+    const r = await anon.register({ manufacturer: 'acme', model: 'arm', version: 'v2', device_id: 'ts-open' });
+    check(/^RRN-/.test(r.rrn) && /^rcan_/.test(r.api_key) && r.verification_tier === 'community',
+      'with --open-registration, RegistryClient.register without a key → a community robot and its key');
+    const mine = new sdk.RegistryClient({ baseUrl: reg.url, apiKey: r.api_key });
+    const patched = await mine.patch(r.rrn, { description: 'registered by rcan-ts' });
+    check(patched.description === 'registered by rcan-ts', 'the anonymously registered robot patches itself with its key');
+  } finally {
+    await reg.stop();
+  }
+}
+
 try {
   await federation();
 } catch (e) {
   check(false, `federation: ${e.stack ?? e}`);
+}
+try {
+  await openRegistration();
+} catch (e) {
+  check(false, `open registration: ${e.stack ?? e}`);
 }
 const database = process.env.RCAN_REGISTRY_DATABASE ?? '';
 const insecure = await start(onDatabase());

@@ -100,7 +100,9 @@ TEST(RegistrySync, RootPullsTheDelegatedNodeAndResolvesItsRobotsItself) {
   EXPECT_EQ(str(v, "resolved_by"), bd.url());
   EXPECT_EQ(str(v, "cache_status"), "SYNCED");
   EXPECT_EQ(str(*v.get("record"), "device_id"), "real-one");
-  EXPECT_GE(metric_value(metrics(), "rcan_registry_sync_imported_total"), 1);
+  // The counter goes up just after the write the resolve saw.
+  EXPECT_TRUE(wait_for(
+      [&] { return metric_value(metrics(), "rcan_registry_sync_imported_total") >= 1; }, 5000));
 
   // An update at the authoritative node reaches the root's copy; a delete removes it.
   ASSERT_EQ(bd.send("PATCH", "/api/v1/robots/" + rrn, R"({"description":"moved"})", bd.admin_key())
@@ -131,6 +133,54 @@ TEST(RegistrySync, RootPullsTheDelegatedNodeAndResolvesItsRobotsItself) {
   }
   EXPECT_GE(imports, 3) << exported.out;
   EXPECT_EQ(deletes, 1) << exported.out;
+}
+
+// A deleted robot is a tombstone in every sync answer — its RRN, deleted, status and the time —
+// to anyone who asks (no credentials, as a federation peer pulls, or an admin key): never its
+// description, contact, metadata, endpoints or keys. A root that pulled the robot learns of the
+// deletion from the tombstone and keeps no content either.
+TEST(RegistrySync, DeletedRobotIsATombstoneInSync) {
+  TempDir d1, d2;
+  RegistryDaemon bd(d1.path(), {"--prefix", "BD"});
+  auto r = bd.send("POST", "/api/v1/robots",
+                   R"({"manufacturer":"acme","model":"arm","version":"v2","device_id":"gone-1",)"
+                   R"("description":"secret plans","contact_email":"ops@acme.example",)"
+                   R"("metadata":{"site":"lab-7"},"endpoints":["https://r1.acme.example/rcan"]})",
+                   bd.admin_key());
+  ASSERT_EQ(r.status, 201) << r.body;
+  const std::string rrn = str(body_of(r), "rrn");
+  RegistryDaemon root(
+      d2.path(), {"--allow-http-node-urls", "--sync-from", bd.url(), "--sync-interval", "0.3"});
+  ASSERT_EQ(root.send("POST", "/api/v1/nodes",
+                      R"({"prefix":"BD","operator":"BD","node_url":")" + bd.url() + R"("})",
+                      root.admin_key())
+                .status,
+            201);
+  auto at_root = [&] { return root.get("/api/v1/resolve/" + rrn).status; };
+  ASSERT_TRUE(wait_for([&] { return at_root() == 200; }, 15000));
+  ASSERT_EQ(bd.send("DELETE", "/api/v1/robots/" + rrn, "", bd.admin_key()).status, 200);
+  ASSERT_TRUE(wait_for([&] { return at_root() != 200; }, 10000));
+
+  auto tombstone_only = [&](const RegistryDaemon& d, const std::string& key) {
+    auto a = d.get("/api/v1/sync?since=1970-01-01T00:00:00Z", key);
+    ASSERT_EQ(a.status, 200) << a.body;
+    EXPECT_EQ(a.body.find("secret plans"), std::string::npos) << a.body;
+    EXPECT_EQ(a.body.find("lab-7"), std::string::npos) << a.body;
+    EXPECT_EQ(a.body.find("r1.acme.example"), std::string::npos) << a.body;
+    EXPECT_EQ(a.body.find("ops@acme.example"), std::string::npos) << a.body;
+    const json::Value v = body_of(a);
+    const auto& recs = v.get("records")->as_array();
+    ASSERT_EQ(recs.size(), 1u) << a.body;
+    EXPECT_EQ(str(recs[0], "rrn"), rrn);
+    EXPECT_TRUE(recs[0].get("deleted")->as_bool());
+    EXPECT_EQ(str(recs[0], "status"), "deleted");
+    for (const char* k : {"description", "metadata", "endpoints", "contact_email", "source",
+                          "ed25519_public_key", "mldsa65_public_key"})
+      EXPECT_EQ(recs[0].get(k), nullptr) << k << ": " << a.body;
+  };
+  tombstone_only(bd, "");
+  tombstone_only(bd, bd.admin_key());
+  tombstone_only(root, "");
 }
 
 TEST(RegistrySync, SyncDelegationsPullsEveryDelegatedNode) {

@@ -267,6 +267,13 @@ TEST_F(RegistryWebhooks, SignedDeliveriesForCreatedUpdatedAndDeletedRecords) {
   EXPECT_EQ(ids.size(), 3u);
   json::Value updated = body_of(got[1].body);
   EXPECT_EQ(str(*updated.get("record"), "description"), "moved");
+  // A deletion tells the tombstone only (as GET /api/v1/sync): none of the robot's content.
+  const json::Value deleted = body_of(got[2].body);
+  const json::Value* gone = deleted.get("record");
+  ASSERT_NE(gone, nullptr);
+  const json::Value* flag = gone->get("deleted");
+  EXPECT_TRUE(flag != nullptr && flag->is_bool() && flag->as_bool()) << got[2].body;
+  EXPECT_EQ(gone->get("description"), nullptr) << got[2].body;
   json::Value h = hook(*d, id);
   EXPECT_EQ(num(h, "failure_count"), 0);
   EXPECT_FALSE(str(h, "last_delivered_at").empty());

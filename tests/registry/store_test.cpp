@@ -319,6 +319,40 @@ TEST_P(StoreTest, ChangesSinceAndSyncedRobots) {
   EXPECT_EQ(local.robot.rrn, rrns[0]);
 }
 
+// The first admin key is made once per database: only while it holds no live admin key, one
+// insert among concurrent callers (on PostgreSQL, each on a connection of its own).
+TEST_P(StoreTest, FirstAdminKeyOnlyWhileNoLiveAdminKey) {
+  auto key = [&](int i, const std::string& role) {
+    std::string id = "00000000000000" + std::to_string(10 + i);
+    return ApiKey{id, std::string(32, 'a'), std::string(64, 'b'), role, "", "k", at(i), ""};
+  };
+  ASSERT_TRUE(store_->put_api_key(key(0, "registrant")).ok());
+  std::vector<std::thread> threads;
+  std::atomic<int> inserted{0};
+  for (int i = 1; i <= 8; ++i)
+    threads.emplace_back([&, i] {
+      auto r = store_->put_first_admin_key(key(i, "admin"));
+      EXPECT_TRUE(r.ok()) << r.error().message;
+      if (r.ok() && *r) inserted.fetch_add(1);
+    });
+  for (auto& t : threads) t.join();
+  EXPECT_EQ(inserted.load(), 1);
+  auto admins = [&] {
+    int n = 0;
+    for (const ApiKey& k : must(store_->list_api_keys())) n += k.role == "admin";
+    return n;
+  };
+  EXPECT_EQ(admins(), 1);
+  // With every admin key revoked, a first admin key is made again.
+  for (const ApiKey& k : must(store_->list_api_keys()))
+    if (k.role == "admin") {
+      EXPECT_TRUE(must(store_->revoke_api_key(k.id, at(20))));
+    }
+  EXPECT_TRUE(must(store_->put_first_admin_key(key(30, "admin"))));
+  EXPECT_FALSE(must(store_->put_first_admin_key(key(31, "admin"))));
+  EXPECT_EQ(admins(), 2);
+}
+
 TEST_P(StoreTest, ApiKeys) {
   ApiKey k{"0123456789abcdef",
            std::string(32, 'a'),

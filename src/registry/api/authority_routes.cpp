@@ -334,8 +334,11 @@ HttpResponse RegistryApi::Impl::revoke(const HttpRequest& req) {
   r.revoked_by = "apikey:" + caller->key.id;
   auto seq = store.add_revocation(r);
   if (!seq) return store_error(seq.error());
-  audit("REGISTRY_TOKEN_REVOKED", r.revoked_by, registry_ruri(),
-        json::Object{{"seq", *seq}, {"jti", r.jti}, {"sub", r.sub}, {"reason", r.reason}});
+  // The feed's seq is "revocation_seq" in the record: the audit log reserves "seq" (with
+  // prev_hash and hmac) for its own chain.
+  audit(
+      "REGISTRY_TOKEN_REVOKED", r.revoked_by, registry_ruri(),
+      json::Object{{"revocation_seq", *seq}, {"jti", r.jti}, {"sub", r.sub}, {"reason", r.reason}});
   return json_response(201,
                        json::Object{{"seq", *seq},
                                     {"jti", r.jti.empty() ? json::Value() : json::Value(r.jti)},

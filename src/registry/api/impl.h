@@ -63,6 +63,8 @@ class RegistryApi::Impl {
   bool proves_credential(const HttpRequest& req);
   // 429 when `key_id`'s write bucket is empty.
   std::optional<HttpResponse> limit_key(const std::string& key_id);
+  // The client's address (behind a trusted proxy: the one it forwarded for).
+  std::string client_of(const HttpRequest& req) const;
   // A write on /robots/{rrn}: the authenticated, rate-limited caller and the live robot, or
   // nullopt with the refusal (the reference's wording) in `refusal`.
   struct RobotWrite {
@@ -76,13 +78,32 @@ class RegistryApi::Impl {
              json::Object detail);
   // 503 when the audit log does not take records (no change is made then).
   std::optional<HttpResponse> audit_unavailable();
+  // A fresh key: its stored form and the form presented once ("rcan_<id>_<secret>").
+  struct NewKey {
+    ApiKey key;
+    std::string presented;
+  };
+  Result<NewKey> new_key(const std::string& role, const std::string& rrn, const std::string& label);
   Result<std::string> create_key(const std::string& role, const std::string& rrn,
                                  const std::string& label, const std::string& by);
+  Result<std::optional<std::string>> create_first_admin_key();
   std::string registry_ruri() const { return "rcan://" + o.host + "/registry/rcan-registry/node"; }
   std::string uri_base() const { return "rcan://" + o.host; }
 
   // ---- robots (robots_routes.cpp)
   HttpResponse register_robot(const HttpRequest& req);
+  // Who registers: an authenticated admin or registrant, or with open_registration anyone who
+  // sends no credentials at all (a wrong key is still refused) within the address's limit.
+  // nullopt with `err` set when refused.
+  struct Registrant {
+    std::optional<Caller> caller;  // nullopt: anonymous
+    std::string owner_key_id;      // the record's owner (kAnonymousOwner when anonymous)
+    std::string principal;         // for the audit record
+  };
+  std::optional<Registrant> registrant_of(const HttpRequest& req, HttpResponse& err);
+  // The owner of an anonymously registered robot: no key's id (ids are 16 hex digits), so no
+  // key owns it but its own robot key — and not "" (a synced copy's mark).
+  static constexpr const char* kAnonymousOwner = "anonymous";
   HttpResponse list_robots(const HttpRequest& req);
   HttpResponse search_robots(const HttpRequest& req);
   HttpResponse get_robot(const std::string& rrn);
@@ -97,6 +118,9 @@ class RegistryApi::Impl {
   // canonical form names version v1, as rcand registers itself).
   HttpResponse resolve_uri(const HttpRequest& req);
   json::Object robot_json(const Robot& r) const;
+  // What a deleted robot is to anyone (sync, webhooks): its RRN, status, deleted and the time
+  // of the deletion — none of its content.
+  static json::Object tombstone_json(const Robot& r);
 
   // ---- keys, nodes, challenges, manifest (admin_routes.cpp)
   HttpResponse challenge(bool post);  // 200 on GET, 201 on POST
@@ -120,7 +144,7 @@ class RegistryApi::Impl {
   HttpResponse list_webhooks(const HttpRequest& req);
   HttpResponse add_webhook(const HttpRequest& req);
   HttpResponse delete_webhook(const HttpRequest& req, const std::string& id);
-  // Queues `event` about `r` for its namespace's subscriptions (record.deleted: `r` as it was).
+  // Queues `event` about `r` for its namespace's subscriptions (a deleted `r`: its tombstone).
   void notify(const char* event, const Robot& r);
 
   // ---- the token authority (authority.cpp, authority_routes.cpp)
@@ -182,6 +206,7 @@ class RegistryApi::Impl {
   std::string manifest;
   Metrics metrics;
   RateLimiter write_key, write_addr, anon_addr, read_addr;
+  RateLimiter open_register_addr;  // anonymous registrations (ApiOptions::open_registration)
   // Revocations by one non-admin API key (docs/THREATS.md T4): every robot that trusts this
   // registry keeps each one, so a registrant may not turn its own tokens into a flood of them.
   RateLimiter revoke_by_key{BucketConfig{kRevocationsPerKeyPerS, kRevocationBurstPerKey}};

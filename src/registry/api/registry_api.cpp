@@ -124,7 +124,8 @@ RegistryApi::Impl::Impl(Store& s, audit::AuditLog* a, ApiOptions opts)
       write_key(o.write_per_key),
       write_addr(o.write_per_address),
       anon_addr(o.anonymous_per_address),
-      read_addr(o.read_per_address) {
+      read_addr(o.read_per_address),
+      open_register_addr(o.open_registration_per_address) {
   while (!o.public_url.empty() && o.public_url.back() == '/') o.public_url.pop_back();
   if (o.node_seed.size() != ed25519::kSeedBytes) o.node_seed = ed25519::random_seed();
   auto pub = ed25519::public_key_from_seed(o.node_seed);
@@ -261,6 +262,34 @@ std::optional<HttpResponse> RegistryApi::Impl::limit_key(const std::string& key_
   return std::nullopt;
 }
 
+std::string RegistryApi::Impl::client_of(const HttpRequest& req) const {
+  return client_address(address_of(req.remote_addr), forwarded_for(req), o.trusted_proxies);
+}
+
+std::optional<RegistryApi::Impl::Registrant> RegistryApi::Impl::registrant_of(
+    const HttpRequest& req, HttpResponse& err) {
+  if (o.open_registration && req.header("authorization").empty()) {
+    const std::string addr = client_of(req);
+    if (int64_t wait = open_register_addr.take(addr, steady_us()); wait > 0) {
+      err = too_many(wait, "open_registration");
+      return std::nullopt;
+    }
+    return Registrant{std::nullopt, kAnonymousOwner, "anonymous:" + addr};
+  }
+  auto caller = authenticate(req, err);
+  if (!caller) return std::nullopt;
+  if (auto l = limit_key(caller->key.id)) {
+    err = *l;
+    return std::nullopt;
+  }
+  if (!caller->is("admin") && !caller->is("registrant")) {
+    err = project_error(ErrorCode::kInsufficientPrivileges,
+                        "registering needs a registrant or admin key", "authorization", "role");
+    return std::nullopt;
+  }
+  return Registrant{caller, caller->key.id, "apikey:" + caller->key.id};
+}
+
 std::optional<HttpResponse> RegistryApi::Impl::audit_unavailable() {
   if (audit_log == nullptr || audit_log->available()) return std::nullopt;
   return project_error(ErrorCode::kAuditUnavailable,
@@ -287,23 +316,44 @@ void RegistryApi::Impl::audit(const std::string& event, const std::string& princ
   }
 }
 
+Result<RegistryApi::Impl::NewKey> RegistryApi::Impl::new_key(const std::string& role,
+                                                             const std::string& rrn,
+                                                             const std::string& label) {
+  NewKey n;
+  n.key.id = random_hex(8);
+  n.key.salt = random_hex(16);
+  std::string secret = random_hex(32);
+  if (n.key.id.empty() || n.key.salt.empty() || secret.empty())
+    return Error(ErrorCode::kInternal, "no randomness for a new API key");
+  n.key.hash = sha256_hex(n.key.salt + secret);
+  n.key.role = role;
+  n.key.rrn = rrn;
+  n.key.label = label;
+  n.key.created_at = now();
+  n.presented = "rcan_" + n.key.id + "_" + secret;
+  return n;
+}
+
 Result<std::string> RegistryApi::Impl::create_key(const std::string& role, const std::string& rrn,
                                                   const std::string& label, const std::string& by) {
-  ApiKey k;
-  k.id = random_hex(8);
-  k.salt = random_hex(16);
-  std::string secret = random_hex(32);
-  if (k.id.empty() || k.salt.empty() || secret.empty())
-    return Error(ErrorCode::kInternal, "no randomness for a new API key");
-  k.hash = sha256_hex(k.salt + secret);
-  k.role = role;
-  k.rrn = rrn;
-  k.label = label;
-  k.created_at = now();
-  if (Status s = store.put_api_key(k); !s.ok()) return s.error();
+  auto n = new_key(role, rrn, label);
+  if (!n.ok()) return n.error();
+  if (Status s = store.put_api_key(n->key); !s.ok()) return s.error();
   audit("REGISTRY_KEY_CREATED", by, registry_ruri(),
-        json::Object{{"key_id", k.id}, {"role", role}, {"rrn", rrn}, {"label", label}});
-  return "rcan_" + k.id + "_" + secret;
+        json::Object{{"key_id", n->key.id}, {"role", role}, {"rrn", rrn}, {"label", label}});
+  return n->presented;
+}
+
+Result<std::optional<std::string>> RegistryApi::Impl::create_first_admin_key() {
+  auto n = new_key("admin", "", "first start");
+  if (!n.ok()) return n.error();
+  auto put = store.put_first_admin_key(n->key);
+  if (!put.ok()) return put.error();
+  if (!*put) return std::optional<std::string>();
+  audit("REGISTRY_KEY_CREATED", "system:first-start", registry_ruri(),
+        json::Object{
+            {"key_id", n->key.id}, {"role", "admin"}, {"rrn", ""}, {"label", "first start"}});
+  return std::optional<std::string>(n->presented);
 }
 
 HttpResponse RegistryApi::Impl::serve(const HttpRequest& req, const Routes::Match& route) {
@@ -321,8 +371,7 @@ HttpResponse RegistryApi::Impl::serve(const HttpRequest& req, const Routes::Matc
   // The client's address (behind a trusted proxy: the one it forwarded for). A write is judged
   // by who proves to send it first: one that proves a credential spends its address's bucket of
   // such writes (and its key's, in the route), never the anonymous one a flood empties.
-  const std::string addr =
-      client_address(address_of(req.remote_addr), forwarded_for(req), o.trusted_proxies);
+  const std::string addr = client_of(req);
   RateLimiter& bucket = !write ? read_addr : proves_credential(req) ? write_addr : anon_addr;
   if (int64_t wait = bucket.take(addr, steady_us()); wait > 0)
     return too_many(wait, &bucket == &anon_addr ? "anonymous" : "address");
@@ -352,6 +401,10 @@ void RegistryApi::handle(HttpRequest req, Respond respond) { respond(serve(req))
 Result<std::string> RegistryApi::create_key(const std::string& role, const std::string& rrn,
                                             const std::string& label, const std::string& by) {
   return impl_->create_key(role, rrn, label, by);
+}
+
+Result<std::optional<std::string>> RegistryApi::create_first_admin_key() {
+  return impl_->create_first_admin_key();
 }
 
 const std::string& RegistryApi::manifest() const { return impl_->manifest; }

@@ -39,6 +39,11 @@ struct ApiOptions {
   BucketConfig write_per_address{50, 100};
   BucketConfig anonymous_per_address{20, 40};
   BucketConfig read_per_address{2000, 4000};
+  // Anonymous registration (POST /api/v1/robots without credentials, as rcan.dev takes it): off
+  // unless set; then a robot is registered at the community tier, its public keys proven as with
+  // a key, and an address registers five, then one a minute (over the anonymous write bucket).
+  bool open_registration = false;
+  BucketConfig open_registration_per_address{1.0 / 60, 5};
   // Peers whose X-Forwarded-For names the client (the TLS proxy in front of the registry);
   // from any other peer the header is ignored.
   std::vector<Cidr> trusted_proxies;
@@ -80,6 +85,11 @@ class RegistryApi : public transport::HttpHandler {
   // never stored. `by` names who asked, for the audit record.
   Result<std::string> create_key(const std::string& role, const std::string& rrn,
                                  const std::string& label, const std::string& by);
+
+  // The database's first admin key (by system:first-start), presented form; nullopt, and no key
+  // made, when the database holds a live admin key already (a restart without admin.key, or
+  // another instance on the same database).
+  Result<std::optional<std::string>> create_first_admin_key();
 
   // The signed node manifest (GET /.well-known/rcan-node.json).
   const std::string& manifest() const;

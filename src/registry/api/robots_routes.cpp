@@ -63,6 +63,11 @@ json::Object RegistryApi::Impl::robot_json(const Robot& r) const {
   return j;
 }
 
+json::Object RegistryApi::Impl::tombstone_json(const Robot& r) {
+  return json::Object{
+      {"rrn", r.rrn}, {"status", "deleted"}, {"deleted", true}, {"updated_at", r.updated_at}};
+}
+
 std::optional<HttpResponse> RegistryApi::Impl::check_proof(const Registration& r) {
   bool keys = !r.ed25519_pub.empty() || !r.mldsa65_pub.empty();
   if (!keys && !r.proof) return std::nullopt;
@@ -93,12 +98,8 @@ std::optional<HttpResponse> RegistryApi::Impl::check_proof(const Registration& r
 
 HttpResponse RegistryApi::Impl::register_robot(const HttpRequest& req) {
   HttpResponse err;
-  auto caller = authenticate(req, err);
-  if (!caller) return err;
-  if (auto l = limit_key(caller->key.id)) return *l;
-  if (!caller->is("admin") && !caller->is("registrant"))
-    return project_error(ErrorCode::kInsufficientPrivileges,
-                         "registering needs a registrant or admin key", "authorization", "role");
+  auto who = registrant_of(req, err);
+  if (!who) return err;
   std::string t = now();
   auto reg = parse_registration(req.body, t);
   if (!reg.ok()) return ref_error(400, reg.error().message);
@@ -117,7 +118,7 @@ HttpResponse RegistryApi::Impl::register_robot(const HttpRequest& req) {
   n.ed25519_pub = reg->ed25519_pub;
   n.mldsa65_pub = reg->mldsa65_pub;
   n.endpoints_json = reg->endpoints_json;
-  n.owner_key_id = caller->key.id;
+  n.owner_key_id = who->owner_key_id;
   n.now = t;
   if (reg->proof && !ruri_of(reg->metadata_json).empty()) {
     // The RURI its tokens will name (docs/THREATS.md T1): the robot the proof named, and no
@@ -136,7 +137,7 @@ HttpResponse RegistryApi::Impl::register_robot(const HttpRequest& req) {
   if (!done.ok()) return store_error(done.error());
   const Robot& r = done->robot;
   // Names registered by another registrant are not this caller's to adopt (docs/THREATS.md T3).
-  if (!done->created && !owns(*caller, r))
+  if (!done->created && (!who->caller || !owns(*who->caller, r)))
     return ref_error(409, "these names are registered as " + r.rrn +
                               " by another registrant: an admin must remove that record first");
   if (!done->created)
@@ -144,7 +145,7 @@ HttpResponse RegistryApi::Impl::register_robot(const HttpRequest& req) {
                                            {"rcan_uri", r.rcan_uri},
                                            {"message", "Robot already registered"},
                                            {"already_existed", true}});
-  std::string principal = "apikey:" + caller->key.id;
+  const std::string& principal = who->principal;
   auto key = create_key("robot", r.rrn, "robot " + r.rrn, principal);
   audit("REGISTRY_ROBOT_REGISTERED", principal, r.rcan_uri,
         json::Object{{"rrn", r.rrn}, {"proof_of_possession", reg->proof.has_value()}});
@@ -345,12 +346,15 @@ HttpResponse RegistryApi::Impl::delete_robot(const HttpRequest& req, const std::
   const Robot& robot = w->robot;
   if (!owns(w->caller, robot)) return ref_error(403, "Invalid API key");
   if (auto a = audit_unavailable()) return *a;
-  auto done = store.delete_robot(robot.rrn, now());
+  Robot gone = robot;
+  gone.deleted = true;
+  gone.updated_at = now();
+  auto done = store.delete_robot(robot.rrn, gone.updated_at);
   if (!done.ok()) return store_error(done.error());
   if (!*done) return ref_error(404, "Robot not found: " + rrn);
   audit("REGISTRY_ROBOT_DELETED", "apikey:" + w->caller.key.id, robot.rcan_uri,
         json::Object{{"rrn", robot.rrn}});
-  notify("record.deleted", robot);
+  notify("record.deleted", gone);
   return json_response(200,
                        json::Object{{"message", "Robot registration removed"}, {"rrn", robot.rrn}});
 }

@@ -65,6 +65,20 @@ std::optional<Robot> robot_from_sync(const json::Value& rec) {
   return r;
 }
 
+std::optional<std::string> deletion_from_sync(const json::Value& rec) {
+  if (!rec.is_object()) return std::nullopt;
+  const json::Value* del = rec.get("deleted");
+  const json::Value* status = rec.get("status");
+  const bool deleted =
+      (del != nullptr && del->is_bool() && del->as_bool()) ||
+      (status != nullptr && status->is_string() && status->as_string() == "deleted");
+  if (!deleted) return std::nullopt;
+  bool ok = true;
+  auto rrn = parse_rrn(text(rec, "rrn", 64, ok));
+  if (!ok || !rrn) return std::nullopt;
+  return rrn->rrn;
+}
+
 SyncPuller::SyncPuller(Store& store, std::vector<std::string> urls, int interval_ms,
                        bool allow_http, bool delegations, Imported on_imported)
     : store_(store),
@@ -122,6 +136,28 @@ Result<std::string> SyncPuller::judge(Robot& r, const std::string& node_host) {
   const std::string now = iso_utc(unix_ms());
   r.registered_at = *existing ? (*existing)->registered_at : now;
   r.updated_at = now;
+  return std::string();
+}
+
+Result<std::string> SyncPuller::forget(const std::string& rrn, const std::string& node_host,
+                                       const std::string& url) {
+  auto existing = store_.get_robot(rrn);
+  if (!existing.ok()) return existing.error();
+  if (!*existing) return std::string();  // never pulled here, or deleted already
+  Robot gone = **existing;
+  auto why = judge(gone, node_host);
+  if (!why.ok() || !why->empty()) return why;
+  gone.description.clear();
+  gone.contact_email.clear();
+  gone.source.clear();
+  gone.metadata_json = "{}";
+  gone.endpoints_json = "[]";
+  gone.ed25519_pub.clear();
+  gone.mldsa65_pub.clear();
+  gone.deleted = true;
+  if (Status s = store_.upsert_synced_robot(gone); !s.ok()) return s.error();
+  imported.fetch_add(1);
+  if (on_imported_) on_imported_(gone, url);
   return std::string();
 }
 
@@ -186,6 +222,20 @@ void SyncPuller::pull(const std::string& url) {
       if (!((c >= '0' && c <= '9') || c == '-' || c == ':' || c == '.' || c == 'T' || c == 'Z'))
         return fail("next_since is not an ISO time");
     for (const json::Value& rec : recs->as_array()) {
+      if (auto gone = deletion_from_sync(rec)) {
+        auto p = parse_rrn(*gone);
+        if (p->prefix.empty() || allowed.count(p->prefix) == 0) {
+          refused.fetch_add(1);
+          continue;
+        }
+        auto why = forget(*gone, node_host, url);
+        if (!why.ok()) return fail(why.error().message);
+        if (!why->empty()) {
+          refused.fetch_add(1);
+          refusals[*why].push_back(*gone);
+        }
+        continue;
+      }
       auto r = robot_from_sync(rec);
       auto p = r ? parse_rrn(r->rrn) : std::nullopt;
       if (!r || !p || p->prefix.empty() || allowed.count(p->prefix) == 0) {

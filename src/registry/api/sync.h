@@ -27,6 +27,10 @@ std::optional<std::string> normalize_iso(std::string_view s);
 // A record of a sync answer → a robot (nullopt when a field is missing, malformed or oversized).
 std::optional<Robot> robot_from_sync(const json::Value& record);
 
+// A deletion in a sync answer (`deleted: true` or `status: "deleted"`, as a tombstone or as a
+// whole record from an older node) → its RRN; nullopt for a live record or a malformed one.
+std::optional<std::string> deletion_from_sync(const json::Value& record);
+
 class SyncPuller {
  public:
   // `store` must outlive the puller. The first pull is one interval after start.
@@ -48,6 +52,11 @@ class SyncPuller {
   // T2): "" when it may (its tier and times then set to this registry's own), else the reason
   // it is refused (uri_not_under_node, rrn_is_local, uri_taken).
   Result<std::string> judge(Robot& r, const std::string& node_host);
+  // Applies the deletion of `rrn` told by the node at `url`: this registry's copy of it (pulled
+  // before from that node, judged as above) is marked deleted and keeps none of its content.
+  // "" when done or when there is no copy here, else the reason it is refused.
+  Result<std::string> forget(const std::string& rrn, const std::string& node_host,
+                             const std::string& url);
 
   Store& store_;
   std::vector<std::string> urls_;

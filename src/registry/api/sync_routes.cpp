@@ -1,6 +1,8 @@
 // GET /api/v1/sync (docs/REGISTRY.md "Federation sync"): the robots changed here since a time,
 // oldest first, in the reference's rcan-sync/1.0 answer. The records are the public ones
-// GET /api/v1/robots serves, plus deletions.
+// GET /api/v1/robots serves; a deleted robot is a tombstone (its RRN, deleted, status and the
+// time of the deletion), never its content: peers pull without credentials, and a deletion
+// takes the robot's description, metadata, endpoints and keys out of every answer.
 #include <charconv>
 
 #include "registry/api/impl.h"
@@ -52,8 +54,12 @@ HttpResponse RegistryApi::Impl::sync(const HttpRequest& req) {
   if (has_more) rows->resize(static_cast<size_t>(limit));
   json::Array records;
   for (const Robot& r : *rows) {
+    if (r.deleted) {
+      records.emplace_back(tombstone_json(r));
+      continue;
+    }
     json::Object j = robot_json(r);
-    j.set("deleted", r.deleted);
+    j.set("deleted", false);
     records.emplace_back(std::move(j));
   }
   std::string next = rows->empty() ? until : rows->back().updated_at;

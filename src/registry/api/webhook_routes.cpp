@@ -28,7 +28,7 @@ json::Object webhook_json(const Webhook& w) {
 void RegistryApi::Impl::notify(const char* event, const Robot& r) {
   auto parsed = parse_rrn(r.rrn);
   std::string prefix = parsed && !parsed->prefix.empty() ? parsed->prefix : "RRN";
-  webhooks->publish(event, r.rrn, prefix, robot_json(r));
+  webhooks->publish(event, r.rrn, prefix, r.deleted ? tombstone_json(r) : robot_json(r));
 }
 
 HttpResponse RegistryApi::Impl::list_webhooks(const HttpRequest& req) {
