@@ -231,6 +231,79 @@ Table<NodeConfig> rcan_protocol_rows() {
 
 }  // namespace
 
+// registry: the registry the robot joins (its URL, the key it registers with, what it
+// refreshes) and whether it trusts the registry's tokens.
+Table<NodeConfig> registry_rows() {
+  return {
+      R::schema_only("rrn", Str(64)),  // read by `rrn`
+      R::read("registry_url", Str(),
+              [](const At& reg_url, NodeConfig& c, Ctx& x) {
+                At proto_reg = x.root["rcan_protocol"]["registry"];
+                same_or_fail(reg_url, reg_url.str(), proto_reg, proto_reg.str());
+                c.registry_url = reg_url ? reg_url.str() : proto_reg.str();
+              }),
+      R::read("key_file", Str(),
+              [](const At& a, NodeConfig& c, Ctx& x) {
+                if (!a) return;
+                if (a.str().empty()) fail(a.path, "must not be empty", "invalid_value");
+                At url = x.root["registry"]["registry_url"];
+                if (!url) url = x.root["rcan_protocol"]["registry"];
+                if (!url || !parse_web_url(url.str()).ok())
+                  fail(a.path,
+                       "joining a registry needs registry.registry_url, an http:// "
+                       "or https:// URL",
+                       "invalid_value");
+                c.registry.key_file = resolve_path(a.str(), x.opts.base_dir);
+              }),
+      R::read(
+          "register", Bool(),
+          [](const At& a, NodeConfig& c, Ctx&) { c.registry.register_at_start = a.flag(true); }),
+      R::read("endpoint", Str(2048),
+              [](const At& a, NodeConfig& c, Ctx&) {
+                if (!a) return;
+                const std::string& u = a.str();
+                if (u.rfind("http://", 0) != 0 && u.rfind("https://", 0) != 0)
+                  fail(a.path, "must be an http:// or https:// URL", "invalid_value");
+                c.registry.endpoint = u;
+              }),
+      R::read("refresh_s", Int(10, 86'400),
+              [](const At& a, NodeConfig& c, Ctx&) { c.registry.refresh_s = a.u32(300); }),
+      R::read("ca_file", Str(),
+              [](const At& a, NodeConfig& c, Ctx& x) {
+                if (a) c.registry.ca_file = resolve_path(a.str(), x.opts.base_dir);
+              }),
+      R::read("trust_tokens", Bool(),
+              [](const At& a, NodeConfig& c, Ctx& x) {
+                c.registry.trust_tokens = a.flag(false);
+                if (!c.registry.trust_tokens) return;
+                At url = x.root["registry"]["registry_url"];
+                if (!url) url = x.root["rcan_protocol"]["registry"];
+                if (!url || !parse_web_url(url.str()).ok())
+                  fail(a.path,
+                       "trusting the registry's tokens needs registry.registry_url, "
+                       "an http:// or https:// URL",
+                       "invalid_value");
+                At iss = x.root["registry"]["issuer"];
+                c.registry.issuer = iss ? iss.str() : url.str();
+              }),
+      R::read("issuer", Str(2048),
+              [](const At& a, NodeConfig&, Ctx&) {
+                if (a && a.str().empty()) fail(a.path, "must not be empty", "invalid_value");
+              }),
+      R::read("jwks_refresh_s", Int(1, 86'400),
+              [](const At& a, NodeConfig& c, Ctx&) { c.registry.jwks_refresh_s = a.u32(300); }),
+      R::read(
+          "revocations_refresh_s", Int(1, 86'400),
+          [](const At& a, NodeConfig& c, Ctx&) { c.registry.revocations_refresh_s = a.u32(30); }),
+      R::read("max_feed_revocations", Int(1, 100'000),
+              [](const At& a, NodeConfig& c, Ctx&) {
+                c.registry.max_feed_revocations = a.u32(10'000);
+              }),
+      R::read("max_key_age_s", Int(1, 30 * 86'400),
+              [](const At& a, NodeConfig& c, Ctx&) { c.registry.max_key_age_s = a.u32(86400); }),
+  };
+}
+
 Table<NodeConfig> identity_blocks() {
   return {
       R::read("rcan_version", Str(32),
@@ -257,82 +330,7 @@ Table<NodeConfig> identity_blocks() {
                   c.rrn = rrn->str();
                 }
               }),
-      R::block(
-          "registry",
-          Table<NodeConfig>{
-              R::schema_only("rrn", Str(64)),  // read by `rrn`
-              R::read("registry_url", Str(),
-                      [](const At& reg_url, NodeConfig& c, Ctx& x) {
-                        At proto_reg = x.root["rcan_protocol"]["registry"];
-                        same_or_fail(reg_url, reg_url.str(), proto_reg, proto_reg.str());
-                        c.registry_url = reg_url ? reg_url.str() : proto_reg.str();
-                      }),
-              R::read("key_file", Str(),
-                      [](const At& a, NodeConfig& c, Ctx& x) {
-                        if (!a) return;
-                        if (a.str().empty()) fail(a.path, "must not be empty", "invalid_value");
-                        At url = x.root["registry"]["registry_url"];
-                        if (!url) url = x.root["rcan_protocol"]["registry"];
-                        if (!url || !parse_web_url(url.str()).ok())
-                          fail(a.path,
-                               "joining a registry needs registry.registry_url, an http:// "
-                               "or https:// URL",
-                               "invalid_value");
-                        c.registry.key_file = resolve_path(a.str(), x.opts.base_dir);
-                      }),
-              R::read("register", Bool(),
-                      [](const At& a, NodeConfig& c, Ctx&) {
-                        c.registry.register_at_start = a.flag(true);
-                      }),
-              R::read("endpoint", Str(2048),
-                      [](const At& a, NodeConfig& c, Ctx&) {
-                        if (!a) return;
-                        const std::string& u = a.str();
-                        if (u.rfind("http://", 0) != 0 && u.rfind("https://", 0) != 0)
-                          fail(a.path, "must be an http:// or https:// URL", "invalid_value");
-                        c.registry.endpoint = u;
-                      }),
-              R::read("refresh_s", Int(10, 86'400),
-                      [](const At& a, NodeConfig& c, Ctx&) { c.registry.refresh_s = a.u32(300); }),
-              R::read("ca_file", Str(),
-                      [](const At& a, NodeConfig& c, Ctx& x) {
-                        if (a) c.registry.ca_file = resolve_path(a.str(), x.opts.base_dir);
-                      }),
-              R::read("trust_tokens", Bool(),
-                      [](const At& a, NodeConfig& c, Ctx& x) {
-                        c.registry.trust_tokens = a.flag(false);
-                        if (!c.registry.trust_tokens) return;
-                        At url = x.root["registry"]["registry_url"];
-                        if (!url) url = x.root["rcan_protocol"]["registry"];
-                        if (!url || !parse_web_url(url.str()).ok())
-                          fail(a.path,
-                               "trusting the registry's tokens needs registry.registry_url, "
-                               "an http:// or https:// URL",
-                               "invalid_value");
-                        At iss = x.root["registry"]["issuer"];
-                        c.registry.issuer = iss ? iss.str() : url.str();
-                      }),
-              R::read("issuer", Str(2048),
-                      [](const At& a, NodeConfig&, Ctx&) {
-                        if (a && a.str().empty())
-                          fail(a.path, "must not be empty", "invalid_value");
-                      }),
-              R::read(
-                  "jwks_refresh_s", Int(1, 86'400),
-                  [](const At& a, NodeConfig& c, Ctx&) { c.registry.jwks_refresh_s = a.u32(300); }),
-              R::read("revocations_refresh_s", Int(1, 86'400),
-                      [](const At& a, NodeConfig& c, Ctx&) {
-                        c.registry.revocations_refresh_s = a.u32(30);
-                      }),
-              R::read("max_feed_revocations", Int(1, 100'000),
-                      [](const At& a, NodeConfig& c, Ctx&) {
-                        c.registry.max_feed_revocations = a.u32(10'000);
-                      }),
-              R::read("max_key_age_s", Int(1, 30 * 86'400),
-                      [](const At& a, NodeConfig& c, Ctx&) {
-                        c.registry.max_key_age_s = a.u32(86400);
-                      }),
-          }),
+      R::block("registry", registry_rows()),
       R::block("robot", robot_rows(), &NodeConfig::robot),
       R::block("metadata", metadata_rows(), &NodeConfig::robot),
       R::read("capabilities", Either({Arr(Str(64)), object_of(hardware_capability_rows())}),

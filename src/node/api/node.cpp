@@ -42,6 +42,11 @@ struct StreamState {
 struct NodeStream final : public transport::StreamReceiver {
   NodeStream(Node& n, std::shared_ptr<StreamState> s) : node(n), st(std::move(s)) {}
   void on_text(std::string text) override;
+  // The frames on_text answers itself (node.cpp).
+  void connect(const json::Value& v);
+  void subscribe(bool on, const json::Value& v);
+  void pong(const json::Value& v);
+  void submit(json::Value message, int64_t received_us);
   void on_binary() override { st->sink->close(1003, "binary frames are not supported"); }
   void on_closed() override {
     {
@@ -90,35 +95,7 @@ void NodeStream::on_text(std::string text) {
       st->sink->close(1002, "the first frame must be a CONNECT message");
       return;
     }
-    std::string token = st->upgrade_token;
-    for (const char* k : {"token", "auth_token"}) {
-      const json::Value* tk = v->get(k);
-      if (tk && tk->is_string() && !tk->as_string().empty()) token = tk->as_string();
-    }
-    const std::string source = RefusalLedger::source_of(st->sink->remote_addr());
-    auto p = svc.authenticate(token, source);
-    if (!p.ok()) {
-      if (svc.trail.record_refusal(source, "STREAM_REFUSED", p.error().code, "/ws"))
-        svc.trail.record("STREAM_REFUSED", "blocked")
-            .reason(std::string(error_name(p.error().code)))
-            .detail("transport", "ws")
-            .write();
-      refuse_connect(p.error().message);
-      return;
-    }
-    {
-      MutexLock lock(st->mu);
-      st->connected = true;
-      st->principal = *p;
-    }
-    st->armed_epoch->store(svc.act.estop_epoch());
-    svc.trail.record("STREAM_OPEN").by(*p).message(st->stream_id).detail("transport", "ws").write();
-    json::Object ack{{"type", "CONNECT_ACK"},
-                     {"session_id", st->stream_id},
-                     {"server_version", svc.settings.rcan_version},
-                     {"ruri", svc.settings.ruri},
-                     {"role", std::string(role_name(p->role))}};
-    st->sink->send_text(json::dump(json::Value(ack)));
+    connect(*v);
     return;
   }
   std::optional<Principal> who;
@@ -132,30 +109,11 @@ void NodeStream::on_text(std::string text) {
     return;
   }
   if (t == "PING") {
-    json::Object pong{{"type", "PONG"}};
-    const json::Value* id = v->get("msg_id");
-    pong.set("reply_to", id ? *id : json::Value());
-    pong.set("timestamp_us", svc.clock.wall_ms() * 1000);
-    st->sink->send_text(json::dump(json::Value(pong)));
+    pong(*v);
     return;
   }
   if (t == "SUBSCRIBE" || t == "UNSUBSCRIBE") {
-    bool on = t == "SUBSCRIBE";
-    double hz = svc.settings.telemetry_hz;
-    if (const json::Value* h = v->get("hz"); h && h->is_number()) hz = h->to_double();
-    if (!(hz >= 0.2 && hz <= 50)) {
-      st->sink->send_text(json::dump(
-          svc.error(Error(ErrorCode::kSchemaValidationFailed, "hz must be within 0.2..50", "hz"))));
-      return;
-    }
-    {
-      MutexLock lock(st->mu);
-      st->telemetry = on;
-      st->telemetry_period_ms = static_cast<int64_t>(1000.0 / hz);
-      st->next_telemetry_mono = 0;
-    }
-    st->sink->send_text(json::dump(svc.envelope(
-        MessageType::kAck, json::Object{{"subscribed", on}, {"topic", "telemetry"}, {"hz", hz}})));
+    subscribe(t == "SUBSCRIBE", *v);
     return;
   }
   if (t == "AUTHORIZE") {  // §16.4, answered on this stream (ai_routes.cpp)
@@ -172,9 +130,77 @@ void NodeStream::on_text(std::string text) {
     st->sink->close(1008, "reserved connection: SAFETY messages only");
     return;
   }
-  // Everything else is an RCAN message through the pipeline, as this stream's principal.
+  submit(std::move(v).value(), received_us);
+}
+
+// The first frame, CONNECT: its token (else the upgrade's) verified, or the stream refused
+// (4001, STREAM_REFUSED recorded unless coalesced); then CONNECT_ACK and STREAM_OPEN.
+void NodeStream::connect(const json::Value& v) {
+  NodeServices& svc = node.svc_;
+  std::string token = st->upgrade_token;
+  for (const char* k : {"token", "auth_token"}) {
+    const json::Value* tk = v.get(k);
+    if (tk && tk->is_string() && !tk->as_string().empty()) token = tk->as_string();
+  }
+  const std::string source = RefusalLedger::source_of(st->sink->remote_addr());
+  auto p = svc.authenticate(token, source);
+  if (!p.ok()) {
+    if (svc.trail.record_refusal(source, "STREAM_REFUSED", p.error().code, "/ws"))
+      svc.trail.record("STREAM_REFUSED", "blocked")
+          .reason(std::string(error_name(p.error().code)))
+          .detail("transport", "ws")
+          .write();
+    refuse_connect(p.error().message);
+    return;
+  }
+  {
+    MutexLock lock(st->mu);
+    st->connected = true;
+    st->principal = *p;
+  }
+  st->armed_epoch->store(svc.act.estop_epoch());
+  svc.trail.record("STREAM_OPEN").by(*p).message(st->stream_id).detail("transport", "ws").write();
+  json::Object ack{{"type", "CONNECT_ACK"},
+                   {"session_id", st->stream_id},
+                   {"server_version", svc.settings.rcan_version},
+                   {"ruri", svc.settings.ruri},
+                   {"role", std::string(role_name(p->role))}};
+  st->sink->send_text(json::dump(json::Value(ack)));
+}
+
+// SUBSCRIBE / UNSUBSCRIBE to telemetry at `hz` (0.2..50, else the node's rate), ACKed.
+void NodeStream::subscribe(bool on, const json::Value& v) {
+  NodeServices& svc = node.svc_;
+  double hz = svc.settings.telemetry_hz;
+  if (const json::Value* h = v.get("hz"); h && h->is_number()) hz = h->to_double();
+  if (!(hz >= 0.2 && hz <= 50)) {
+    st->sink->send_text(json::dump(
+        svc.error(Error(ErrorCode::kSchemaValidationFailed, "hz must be within 0.2..50", "hz"))));
+    return;
+  }
+  {
+    MutexLock lock(st->mu);
+    st->telemetry = on;
+    st->telemetry_period_ms = static_cast<int64_t>(1000.0 / hz);
+    st->next_telemetry_mono = 0;
+  }
+  st->sink->send_text(json::dump(svc.envelope(
+      MessageType::kAck, json::Object{{"subscribed", on}, {"topic", "telemetry"}, {"hz", hz}})));
+}
+
+void NodeStream::pong(const json::Value& v) {
+  NodeServices& svc = node.svc_;
+  json::Object pong{{"type", "PONG"}};
+  const json::Value* id = v.get("msg_id");
+  pong.set("reply_to", id ? *id : json::Value());
+  pong.set("timestamp_us", svc.clock.wall_ms() * 1000);
+  st->sink->send_text(json::dump(json::Value(pong)));
+}
+
+// Everything else is an RCAN message through the pipeline, as this stream's principal.
+void NodeStream::submit(json::Value message, int64_t received_us) {
   Ingress in;
-  in.body = std::move(v).value();
+  in.body = std::move(message);
   in.transport = "ws";
   in.route = "/rcan/v1/stream";
   in.remote = st->sink->remote_addr();

@@ -93,35 +93,38 @@ class AuthorizeStage final : public Stage {
     if (!st.ok()) {
       return refuse(svc_, ctx, st.error(), "COMMAND_REJECTED");
     }
-    // A held control session reserves motion for its holder; a session that expired needs an
-    // explicit renewal (a new claim) before its principal drives again.
-    if (capability_scope(cap) == "control") {
-      auto holder = svc_.control.sessions().controller(svc_.clock.mono_ms());
-      if (holder && holder->principal_key == p.key()) {
-        ctx->session_id = holder->id;
-        svc_.act.feed_deadman(holder->id);
-      } else if (auto gone = svc_.control.sessions().expired_session_of(p.key())) {
-        ctx->audit_detail.set("session_id", *gone);
-        return refuse(svc_, ctx,
-                      Error(ErrorCode::kSessionExpired,
-                            "the control session expired; claim control again", "session"),
-                      "COMMAND_REJECTED");
-      } else if (holder) {
-        return refuse(
-            svc_, ctx,
-            Error(ErrorCode::kControlConflict,
-                  "the robot is controlled by another principal; claim it first", "session"),
-            "COMMAND_REJECTED");
-      } else if (NetMode nm = svc_.control.partition().mode();
-                 nm == NetMode::kLockdown ||
-                 (nm == NetMode::kOfflineAutonomous &&
-                  !svc_.control.partition().cached(p, svc_.clock.wall_ms()))) {
-        // Seed §6.1: partitioned, only sessions that already exist (or cached principals) act.
-        return refuse(svc_, ctx,
-                      Error(ErrorCode::kLockdown,
-                            std::string(net_mode_name(nm)) + ": no new control without a session"),
-                      "COMMAND_REJECTED");
-      }
+    if (capability_scope(cap) == "control") return hold_control(ctx, p);
+    return Result::kContinue;
+  }
+
+  // A held control session reserves motion for its holder; a session that expired needs an
+  // explicit renewal (a new claim) before its principal drives again.
+  Result hold_control(const std::shared_ptr<Context>& ctx, const Principal& p) {
+    auto holder = svc_.control.sessions().controller(svc_.clock.mono_ms());
+    if (holder && holder->principal_key == p.key()) {
+      ctx->session_id = holder->id;
+      svc_.act.feed_deadman(holder->id);
+    } else if (auto gone = svc_.control.sessions().expired_session_of(p.key())) {
+      ctx->audit_detail.set("session_id", *gone);
+      return refuse(svc_, ctx,
+                    Error(ErrorCode::kSessionExpired,
+                          "the control session expired; claim control again", "session"),
+                    "COMMAND_REJECTED");
+    } else if (holder) {
+      return refuse(
+          svc_, ctx,
+          Error(ErrorCode::kControlConflict,
+                "the robot is controlled by another principal; claim it first", "session"),
+          "COMMAND_REJECTED");
+    } else if (NetMode nm = svc_.control.partition().mode();
+               nm == NetMode::kLockdown ||
+               (nm == NetMode::kOfflineAutonomous &&
+                !svc_.control.partition().cached(p, svc_.clock.wall_ms()))) {
+      // Seed §6.1: partitioned, only sessions that already exist (or cached principals) act.
+      return refuse(svc_, ctx,
+                    Error(ErrorCode::kLockdown,
+                          std::string(net_mode_name(nm)) + ": no new control without a session"),
+                    "COMMAND_REJECTED");
     }
     return Result::kContinue;
   }
