@@ -14,6 +14,7 @@
 #include <thread>
 #include <vector>
 
+#include "audit_util.h"
 #include "base/clock.h"
 #include "base/metrics.h"
 #include "in_process_node.h"
@@ -76,20 +77,7 @@ class ControlServiceTest : public ::testing::Test {
 
   // The durable records of `event`, once there are `expected` of them (or after 5 s).
   std::vector<json::Value> audited(const std::string& event, size_t expected = 1) {
-    std::vector<json::Value> out;
-    for (int i = 0; i < 500; ++i) {
-      out.clear();
-      const audit::AuditStats st = log_->stats();
-      for (uint64_t seq = st.first_seq; seq != 0 && seq <= st.last_seq; ++seq) {
-        auto line = log_->get(seq);
-        if (!line.ok()) continue;
-        auto v = json::parse(*line);
-        if (v.ok() && json::string_field(*v, "event") == event) out.push_back(*v);
-      }
-      if (out.size() >= expected) break;
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    return out;
+    return audit::testutil::records_of(*log_, event, expected);
   }
 
   // The answer's record written and durable, as a route does before answering.

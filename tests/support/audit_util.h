@@ -1,11 +1,13 @@
-// Shared helpers for the audit tests (header-only; each *_test.cpp is its own program).
+// Shared helpers for the audit tests (header-only).
 #pragma once
 
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
+#include <chrono>
 #include <fstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "rcan/audit/audit_log.h"
@@ -90,6 +92,26 @@ inline std::string kind_of(const std::string& line) {
 inline void write_file(const std::string& path, const std::string& data, mode_t mode = 0600) {
   std::ofstream(path, std::ios::binary | std::ios::trunc) << data;
   ::chmod(path.c_str(), mode);
+}
+
+// The durable records of `event` in `log`, oldest first, once there are `expected` of them
+// (records are written asynchronously) or 5 s have passed.
+inline std::vector<json::Value> records_of(AuditLog& log, const std::string& event,
+                                           size_t expected) {
+  std::vector<json::Value> out;
+  for (int i = 0; i < 500; ++i) {
+    out.clear();
+    const AuditStats st = log.stats();
+    for (uint64_t seq = st.first_seq; seq != 0 && seq <= st.last_seq; ++seq) {
+      auto line = log.get(seq);
+      if (!line.ok()) continue;
+      auto v = json::parse(*line);
+      if (v.ok() && json::string_field(*v, "event") == event) out.push_back(*v);
+    }
+    if (out.size() >= expected) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return out;
 }
 
 }  // namespace rcan::audit::testutil

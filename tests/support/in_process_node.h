@@ -15,6 +15,7 @@
 #include <thread>
 #include <vector>
 
+#include "audit_util.h"
 #include "base/clock.h"
 #include "node/api/stage_order.h"
 #include "node/pipeline/pipeline.h"
@@ -191,20 +192,7 @@ class InProcessNode : public ::testing::Test {
   // The durable audit records of `event`, oldest first, once there are `expected` of them
   // (refusals are recorded asynchronously) or 5 s have passed.
   std::vector<json::Value> audited(const std::string& event, size_t expected) {
-    std::vector<json::Value> out;
-    for (int i = 0; i < 500; ++i) {
-      out.clear();
-      const audit::AuditStats st = audit_->stats();
-      for (uint64_t seq = st.first_seq; seq != 0 && seq <= st.last_seq; ++seq) {
-        auto line = audit_->get(seq);
-        if (!line.ok()) continue;
-        auto v = json::parse(*line);
-        if (v.ok() && json::string_field(*v, "event") == event) out.push_back(*v);
-      }
-      if (out.size() >= expected) break;
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    return out;
+    return audit::testutil::records_of(*audit_, event, expected);
   }
 
   test::TempDir dir_;
