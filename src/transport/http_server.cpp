@@ -338,7 +338,7 @@ class HttpServer::Impl : public std::enable_shared_from_this<HttpServer::Impl> {
 
   Result<uint16_t> start() EXCLUDES(lifecycle_mu, mu);
   void stop(int drain_ms) EXCLUDES(lifecycle_mu, mu);
-  ServerStats stats() const;
+  ServerStats stats() const EXCLUDES(mu);
 
   detail::asio::awaitable<void> accept_loop();
   detail::asio::awaitable<void> reject(detail::tcp::socket sock, detail::TransportError err);
@@ -479,7 +479,7 @@ class HttpServer::Impl : public std::enable_shared_from_this<HttpServer::Impl> {
   std::atomic<uint64_t> bad_requests{0};
   std::atomic<int> rejecting{0};
 
-  Mutex mu;
+  mutable Mutex mu;
   CondVar cv;  // signalled when a connection or an I/O thread ends
   struct ConnEntry {
     std::weak_ptr<detail::ConnBase> conn;
@@ -1364,6 +1364,10 @@ ServerStats HttpServer::Impl::stats() const {
   s.evicted_idle = evicted_idle.load();
   s.rejected_limits = rejected_limits.load();
   s.bad_requests = bad_requests.load();
+  {
+    MutexLock lock(mu);
+    s.evictable_now = idle.size();
+  }
   return s;
 }
 

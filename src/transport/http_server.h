@@ -66,6 +66,7 @@ struct ServerStats {
   uint64_t reserve_connections = 0;   // accepted from the reserve over max_connections
   uint64_t reserve_refused = 0;       // requests on a reserve connection answered 503 (not a stop)
   uint64_t evicted_idle = 0;          // never-authenticated idle connections closed for a new one
+  uint64_t evictable_now = 0;         // never-authenticated connections waiting for a request now
   uint64_t rejected_limits = 0;       // 413, 431, 408 answers and WS queue/size closes
   uint64_t bad_requests = 0;          // 400 answers for unparsable HTTP or bad percent-encoding
 };

@@ -970,6 +970,11 @@ TEST_F(HttpServerTest, OverTheConnectionLimitTheOldestUnauthenticatedIdleConnect
   ASSERT_TRUE(anon.read_response());
   ASSERT_TRUE(authed.send(get("/auth")));
   ASSERT_TRUE(authed.read_response());
+  // anon's answer reached it before its connection went back to waiting for a request, the
+  // moment it becomes evictable: wait for that (on a loaded machine the next client was faster).
+  for (int i = 0; i < 300 && server_->stats().evictable_now == 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  ASSERT_EQ(server_->stats().evictable_now, 1u);
   Client next(port_, 0, "127.0.0.4");
   ASSERT_TRUE(next.send(get("/auth")));
   auto r = next.read_response(3000);
